@@ -1,0 +1,3 @@
+from wmrid.cli import main
+
+main()

@@ -1,0 +1,350 @@
+"""Identification of a whole log: settings from the robot or the data, the compiled replay, the result.
+
+Pure with respect to files: takes arrays (a :class:`WheelLog`-like object) and returns a frozen
+:class:`IdentificationResult`; the CLI does the reading and printing.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from collections.abc import Callable
+from typing import Any, Literal, Protocol
+
+import numpy as np
+
+from wmrid import model
+from wmrid.base_params import derived_with_std, fit_base_parameters
+from wmrid.errors import NotIdentifiableError, UsageError
+from wmrid.model import THETA0_NAMES, THETA0_UNITS, RegressorForm
+from wmrid.observer import ObserverSettings, project_to_box
+from wmrid.replay import replay
+from wmrid.robot import Robot
+from wmrid.uncertainty import sandwich_covariance
+
+#: Reported parameter names, in report order.
+REPORTED = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
+
+#: A base parameter whose standard error exceeds this fraction of its magnitude is called poorly determined.
+POORLY_DETERMINED = 0.1
+#: Two base parameters whose estimates correlate beyond this are called not separable.
+NOT_SEPARABLE = 0.98
+
+
+class LogLike(Protocol):
+    t: np.ndarray
+    eta: np.ndarray
+    tau: np.ndarray
+    source: str
+    notes: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class History:
+    """Decimated per-sample record: t (m,) s, theta (m, 2, p) projected estimate, e (m, 2) rad/s prior
+    prediction error, lambda_min (m,) smallest eigenvalue of Gamma."""
+
+    t: np.ndarray
+    theta: np.ndarray
+    e: np.ndarray
+    lambda_min: np.ndarray
+
+
+@dataclass(frozen=True)
+class IdentificationResult:
+    """Everything identify found, immutable.  ``to_dict`` gives the JSON form."""
+
+    source: str
+    form: RegressorForm
+    settings: ObserverSettings
+    start_source: str
+    theta: np.ndarray  # (2, p) projected onto the box
+    theta_unconstrained: np.ndarray  # (2, p)
+    theta_cov: np.ndarray  # (2p, 2p)
+    parameters: dict[str, tuple[float, float]]  # name -> (value, std), REPORTED names, SI units
+    theta0_cov: np.ndarray  # (8, 8)
+    history: History
+    diagnostics: dict[str, Any]
+    warnings: tuple[str, ...]
+    log_info: dict[str, Any]
+    nominal: dict[str, float] | None = None
+    reference: dict[str, float] | None = None
+    units: dict[str, str] = field(default_factory=lambda: dict(THETA0_UNITS))
+
+    def theta_dict(self) -> dict[str, Any]:
+        names = self.form.theta_names()
+        std = np.sqrt(np.clip(np.diag(self.theta_cov), 0, None))
+        return {
+            "form": self.form.to_dict(),
+            "values": {n: float(v) for n, v in zip(names, self.theta.ravel())},
+            "std": {n: _finite_or_none(s) for n, s in zip(names, std)},
+            "unconstrained": {n: float(v) for n, v in zip(names, self.theta_unconstrained.ravel())},
+            "start": {n: float(v) for n, v in zip(names, self.settings.theta_init.ravel())},
+            "box_min": {n: _finite_or_none(v) for n, v in zip(names, self.settings.theta_min.ravel())},
+            "box_max": {n: _finite_or_none(v) for n, v in zip(names, self.settings.theta_max.ravel())},
+        }
+
+    def to_dict(self) -> dict[str, Any]:
+        params = {
+            name: {"value": value, "std": _finite_or_none(std), "unit": self.units[name]}
+            for name, (value, std) in self.parameters.items()
+        }
+        out: dict[str, Any] = {
+            "source": self.source,
+            "parameters": params,
+            "theta": self.theta_dict(),
+            "settings": {"k": self.settings.k, "alpha": self.settings.alpha, "start": self.start_source},
+            "diagnostics": self.diagnostics,
+            "warnings": list(self.warnings),
+            "log": self.log_info,
+        }
+        if self.nominal is not None:
+            out["nominal"] = self.nominal
+        if self.reference is not None:
+            out["reference"] = self.reference
+        return out
+
+
+def _finite_or_none(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def resolve_form(eta: np.ndarray, choice: Literal["auto", "paper", "general"]) -> RegressorForm:
+    """The regressor form: ``auto`` picks the paper form when each wheel keeps one sign."""
+    auto = model.choose_form(eta)
+    if choice == "auto":
+        return auto
+    if choice == "paper":
+        if auto.kind != "paper":
+            raise UsageError(
+                "--form paper needs each wheel to keep one strict sign over the log, but a wheel stops or "
+                "reverses; use --form general (or auto)"
+            )
+        return auto
+    if choice == "general":
+        return RegressorForm("general")
+    raise UsageError(f"--form must be auto, paper or general, got {choice!r}")
+
+
+def default_box(theta_init: np.ndarray, form: RegressorForm, width: float, from_robot: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The parameter box [theta_min, theta_max], (2, p) each.
+
+    Physics first: the diagonal of m = M^-1 is positive, and so are m_11 F_v1, m_22 F_v2 (and, in the
+    general form, m_11 F_d1, m_22 F_d2).  With a robot file the box is also centred on the nominal
+    intermediate parameters with half-width ``width`` times max(|theta_ij|, m_ii) -- a sanity box, wide
+    enough never to bind on a robot near its description.  Without one, only the signs are bounded.
+    """
+    lo = np.full(theta_init.shape, -np.inf)
+    hi = np.full(theta_init.shape, np.inf)
+    if from_robot and math.isfinite(width):
+        for i in range(2):
+            floor = abs(theta_init[i, i])
+            half = width * np.maximum(np.abs(theta_init[i]), floor)
+            lo[i] = theta_init[i] - half
+            hi[i] = theta_init[i] + half
+    lo[0, 0] = max(lo[0, 0], 0.0)
+    lo[1, 1] = max(lo[1, 1], 0.0)
+    lo[0, 4] = max(lo[0, 4], 0.0)
+    lo[1, 5] = max(lo[1, 5], 0.0)
+    if form.kind == "general":
+        lo[0, 6] = max(lo[0, 6], 0.0)
+        lo[1, 7] = max(lo[1, 7], 0.0)
+    return lo, hi
+
+
+def data_start(eta: np.ndarray, tau: np.ndarray, t: np.ndarray, form: RegressorForm) -> np.ndarray:
+    """A start for an unknown robot: m11 = m22 = a robust acceleration-per-torque ratio, all else 0.
+
+    The ratio (95th percentile of |eta_dot| over that of |tau|, eta_dot by differences over ~50 ms)
+    only sets the order of magnitude; with the default small alpha the start is forgotten within the
+    first seconds of an exciting log.
+    """
+    p = form.n_columns
+    theta = np.zeros((2, p))
+    stride = max(1, int(round(0.05 / max(np.median(np.diff(t)), 1e-9))))
+    if len(t) > stride:
+        acc = np.abs(np.diff(eta[::stride], axis=0) / np.diff(t[::stride])[:, None])
+        for i in range(2):
+            a95 = float(np.percentile(acc[:, i], 95))
+            t95 = float(np.percentile(np.abs(tau[:, i]), 95))
+            if a95 > 0 and t95 > 0:
+                theta[i, i] = a95 / t95
+    return theta
+
+
+def identify(
+    log: LogLike,
+    robot: Robot | None = None,
+    *,
+    form: Literal["auto", "paper", "general"] = "auto",
+    k: float = 1.0,
+    alpha: float = 1e-6,
+    box_width: float = 10.0,
+    max_history: int = 20000,
+    progress: Callable[[int], None] | None = None,
+) -> IdentificationResult:
+    """Identify the base parameters of the robot that recorded ``log``.
+
+    log.t (n,) s strictly increasing; log.eta (n, 2) rad/s [right, left]; log.tau (n, 2) N m.
+    ``robot`` gives the nominal values that start the estimate and centre the box (as in the paper);
+    without it the start and box come from the data and physics (see :func:`data_start`, :func:`default_box`).
+    """
+    t = np.ascontiguousarray(log.t, dtype=np.float64)
+    eta = np.ascontiguousarray(log.eta, dtype=np.float64)
+    tau = np.ascontiguousarray(log.tau, dtype=np.float64)
+    n = len(t)
+    if n < 10:
+        raise NotIdentifiableError(f"{log.source}: only {n} samples; identification needs at least 10")
+    chosen = resolve_form(eta, form)
+    if robot is not None:
+        theta_init = model.intermediate_parameters(model.base_parameters(robot.nominal), chosen)
+        start_source = f"nominal parameters of robot '{robot.name}'"
+    else:
+        theta_init = data_start(eta, tau, t, chosen)
+        start_source = "from the data (unknown robot): m11 = m22 = robust |eta_dot|/|tau| ratio, all else 0"
+    lo, hi = default_box(theta_init, chosen, box_width, robot is not None)
+    settings = ObserverSettings(form=chosen, theta_init=theta_init, theta_min=lo, theta_max=hi, k=k, alpha=alpha)
+
+    out = replay(t, eta, tau, settings, max_history=max_history, progress=progress)
+    theta_u, gamma, gamma_inv = out.theta, out.gamma, out.gamma_inv
+    if not np.all(np.isfinite(theta_u)):
+        raise NotIdentifiableError(f"{log.source}: the estimate diverged to non-finite values; check the log's units")
+
+    theta = project_to_box(theta_u, gamma, lo, hi)
+    theta_cov, bandwidth = sandwich_covariance(gamma_inv, out.blk_a, out.blk_c, theta_u)
+    fit = fit_base_parameters(theta, theta_cov, chosen)
+    parameters = derived_with_std(fit.theta0, fit.cov)
+    parameters = {name: parameters[name] for name in REPORTED}
+
+    lam_hist = np.linalg.eigvalsh(out.hist_gamma)[:, 0]
+    h_theta = out.hist_theta.copy()
+    outside = np.any((h_theta < lo) | (h_theta > hi), axis=(1, 2))
+    for idx in np.flatnonzero(outside):
+        h_theta[idx] = project_to_box(h_theta[idx], out.hist_gamma[idx], lo, hi)
+    history = History(t=t[out.hist_idx] - t[0], theta=h_theta, e=out.hist_e, lambda_min=lam_hist)
+
+    diagnostics, warnings = _diagnose(
+        gamma, alpha, chosen, fit, parameters, theta, theta_u, theta_cov, theta_init, lo, hi
+    )
+    diagnostics["uncertainty"] = {
+        "method": "sandwich P S P, S = Bartlett long-run covariance of block scores (Andrews AR(1) bandwidth)",
+        "blocks": int(len(out.block_end)),
+        "bandwidth_blocks": bandwidth,
+        "block_seconds": float((t[-1] - t[0]) / len(out.block_end)),
+    }
+    duration = float(t[-1] - t[0])
+    rms_e = np.sqrt(out.blk_ee.sum(axis=0) / duration) if duration > 0 else np.zeros(2)
+    diagnostics["prediction_error_rms"] = {"eta_r": float(rms_e[0]), "eta_l": float(rms_e[1]), "unit": "rad/s"}
+    steps = np.diff(t)
+    log_info = {
+        "samples": n,
+        "duration_s": duration,
+        "rate_hz": float(1.0 / np.median(steps)),
+        "uneven_steps": bool(np.ptp(steps) > 1e-6 * np.median(steps)),
+        "notes": list(log.notes),
+    }
+    nominal = reference = None
+    if robot is not None:
+        nominal = model.named_base(model.base_parameters(robot.nominal))
+        if robot.cad is not None:
+            reference = model.named_base(model.base_parameters(robot.cad))
+    return IdentificationResult(
+        source=log.source, form=chosen, settings=settings, start_source=start_source, theta=theta,
+        theta_unconstrained=theta_u, theta_cov=theta_cov, parameters=parameters, theta0_cov=fit.cov,
+        history=history, diagnostics=diagnostics, warnings=tuple(warnings), log_info=log_info,
+        nominal=nominal, reference=reference,
+    )  # fmt: skip
+
+
+def _diagnose(
+    gamma, alpha, form, fit, parameters, theta, theta_u, theta_cov, settings_init, lo, hi
+) -> tuple[dict[str, Any], list[str]]:
+    """Excitation and consistency diagnostics, and the warnings they call for.
+
+    Warnings follow from what the log does to the *answer*: a base parameter whose standard error
+    exceeds 10 % of its value is poorly determined, and the partner it cannot be told apart from
+    (correlation above 0.98) is named.  Eigen-directions of the column-scaled information matrix are
+    reported as diagnostics (they say which regressor columns the log does not separate).
+    """
+    warnings: list[str] = []
+    p = form.n_columns
+    info = gamma - alpha * np.eye(p)
+    scale = np.sqrt(np.clip(np.diag(info), 0, None))
+    safe = np.where(scale > 0, scale, 1.0)
+    evals, evecs = np.linalg.eigh(info / np.outer(safe, safe))
+    lam = np.linalg.eigvalsh(gamma)
+    cond = float(evals[-1] / evals[0]) if evals[0] > 0 else math.inf
+    columns = form.column_names
+    weakest = []
+    for idx in range(min(2, p)):
+        vec = evecs[:, idx]
+        involved = [columns[j] for j in np.argsort(-np.abs(vec)) if abs(vec[j]) > 0.3]
+        weakest.append({"relative_eigenvalue": float(evals[idx] / evals[-1]) if evals[-1] > 0 else 0.0,
+                        "columns": involved})
+    dead = [columns[j] for j in range(p) if scale[j] == 0]
+    if dead:
+        warnings.append(
+            f"the log never excites regressor column(s) {', '.join(dead)}: their parameters stay at the start value"
+        )
+    std0 = np.sqrt(np.clip(np.diag(fit.cov), 0, None))
+    safe0 = np.where(std0 > 0, std0, 1.0)
+    corr = fit.cov / np.outer(safe0, safe0)
+    poorly = []
+    pairs = []
+    for idx, name in enumerate(THETA0_NAMES):
+        value, std = parameters[name]
+        if math.isfinite(std) and std <= POORLY_DETERMINED * abs(value):
+            continue
+        poorly.append(name)
+        partners = [
+            f"{THETA0_NAMES[j]} (correlation {corr[idx, j]:+.3f})"
+            for j in np.argsort(-np.abs(corr[idx]))
+            if j != idx and abs(corr[idx, j]) > NOT_SEPARABLE
+        ]
+        pairs += [[name, THETA0_NAMES[j], float(corr[idx, j])] for j in range(8) if j != idx and abs(corr[idx, j]) > NOT_SEPARABLE]
+        why = f"; it is not separable from {', '.join(partners)}" if partners else ""
+        warnings.append(f"{name} is poorly determined by this log: {value:.6g} +/- {std:.2g} {THETA0_UNITS[name]}{why}")
+    at_bound = [
+        n for n, v, a, b in zip(form.theta_names(), theta.ravel(), lo.ravel(), hi.ravel()) if v <= a or v >= b
+    ]
+    if at_bound:
+        warnings.append(f"estimate held on the box boundary for {', '.join(at_bound)}")
+    # With no disturbance the estimate is exactly theta + alpha Gamma^-1 (theta_init - theta) (see
+    # wmrid.observer), so the start's remaining pull is -alpha Gamma_data^-1 (theta_hat - theta_init).
+    try:
+        pull = -alpha * np.linalg.solve(info, (theta_u - settings_init).T).T
+    except np.linalg.LinAlgError:
+        pull = np.full_like(theta_u, np.inf)
+    theta_std = np.sqrt(np.clip(np.diag(theta_cov), 0, None)).reshape(theta_u.shape)
+    dominated = [
+        n for n, b, s, v in zip(form.theta_names(), pull.ravel(), theta_std.ravel(), theta_u.ravel())
+        if not math.isfinite(b) or abs(b) > max(s, 1e-3 * abs(v))
+    ]
+    if dominated:
+        warnings.append(
+            f"the start value still pulls the estimate (alpha = {alpha:g} is not small against what the log "
+            f"tells about {', '.join(dominated)}): lower --alpha or use a longer, more exciting log"
+        )
+    fitted = model.intermediate_parameters(fit.theta0, form)
+    rel_mismatch = float(np.max(np.abs(fitted - theta)) / max(np.max(np.abs(theta)), 1e-300))
+    if fit.dof > 0 and fit.p_value < 1e-3 and rel_mismatch > 1e-3:
+        warnings.append(
+            f"the intermediate parameters are not consistent with one set of base parameters "
+            f"(chi-square {fit.chi2:.3g} on {fit.dof} dof, largest misfit {100 * rel_mismatch:.2g} % of max |theta|): "
+            "the log departs from the model (slip, other friction, a wrong sign or unit)"
+        )
+    diagnostics = {
+        "lambda_min_gamma": float(lam[0]),
+        "lambda_max_gamma": float(lam[-1]),
+        "condition_number_scaled": cond,
+        "weakest_directions": weakest,
+        "poorly_determined": poorly,
+        "not_separable": pairs,
+        "at_box_boundary": at_bound,
+        "start_pull_max_relative": float(np.max(np.abs(pull)) / max(np.max(np.abs(theta_u)), 1e-300)),
+        "structural_mismatch": {
+            "chi2": fit.chi2, "dof": fit.dof, "p_value": fit.p_value, "relative_misfit": rel_mismatch,
+            "meaning": "minimum-distance fit of theta0 to theta; large chi2 = theta not of the model's form",
+        },
+    }  # fmt: skip
+    return diagnostics, warnings

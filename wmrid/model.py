@@ -1,0 +1,179 @@
+"""The paper's reduced wheel-space dynamics and its linear parameterisation (Eqs. 9-25).
+
+Conventions (the paper's): eta = [eta_1, eta_2] = [right, left] wheel angular velocity (rad/s),
+tau = [tau_1, tau_2] the wheel torques (N m).  Pure functions on numpy arrays; no I/O.
+
+    M eta_dot + V(eta) + F_v eta + F_d sgn(eta) + tau_d = tau                        (9)
+    V = V_c [eta_1 eta_2 - eta_2^2, eta_1 eta_2 - eta_1^2]                           (13-14)
+    eta_dot = m (tau - V - F_v eta - F_d sgn(eta)),  m = M^-1                        (19-20)
+    eta_dot_i = g(eta, tau) theta_i                                                  (22)
+
+Base parameters (Eq. 21), in this order everywhere: ``theta0 = [m11, m12, m22, Vc, Fv1, Fv2, Fd1, Fd2]``.
+
+Two regressor forms:
+
+* ``paper`` (7 columns, Eq. 25): valid while each wheel keeps one sign s_j; the last column is -1 and
+  theta_i7 = m_i1 F_d1 s_1 + m_i2 F_d2 s_2 (the paper has s = (+1, +1)).
+* ``general`` (8 columns): one Coulomb column per wheel, -sgn(eta_1), -sgn(eta_2), with
+  theta_i = [..., m_i1 F_d1, m_i2 F_d2]; needed when a wheel reverses.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from wmrid.robot import PhysicalParameters
+
+THETA0_NAMES = ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
+THETA0_UNITS = {
+    "m11": "1/(kg m^2)", "m12": "1/(kg m^2)", "m22": "1/(kg m^2)", "Vc": "kg m^2",
+    "Fv1": "N m s/rad", "Fv2": "N m s/rad", "Fd1": "N m", "Fd2": "N m",
+    "M11": "kg m^2", "M12": "kg m^2", "M22": "kg m^2",
+}  # fmt: skip
+
+_COMMON_COLUMNS = ("tau_1", "tau_2", "eta_2^2-eta_1*eta_2", "eta_1^2-eta_1*eta_2", "-eta_1", "-eta_2")
+
+
+@dataclass(frozen=True)
+class RegressorForm:
+    """Which regressor g(eta, tau) is used: the paper's 7 columns or the general 8."""
+
+    kind: Literal["paper", "general"] = "paper"
+    signs: tuple[int, int] = (1, 1)  # paper form only: the constant sign of eta_1 and eta_2
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("paper", "general"):
+            raise ValueError(f"unknown regressor form {self.kind!r}")
+        if any(s not in (1, -1) for s in self.signs):
+            raise ValueError(f"wheel signs must be +1 or -1, got {self.signs}")
+
+    @property
+    def n_columns(self) -> int:
+        return 7 if self.kind == "paper" else 8
+
+    @property
+    def column_names(self) -> tuple[str, ...]:
+        if self.kind == "paper":
+            return (*_COMMON_COLUMNS, "-1")
+        return (*_COMMON_COLUMNS, "-sgn(eta_1)", "-sgn(eta_2)")
+
+    def theta_names(self) -> list[str]:
+        """Names theta_1k, theta_2k (k from 1) in row-major order, as in Table 2."""
+        return [f"theta{i}{k}" for i in (1, 2) for k in range(1, self.n_columns + 1)]
+
+    def to_dict(self) -> dict[str, object]:
+        return {"kind": self.kind, "signs": list(self.signs), "columns": list(self.column_names)}
+
+
+def choose_form(eta: np.ndarray) -> RegressorForm:
+    """The paper's 7-column form when each wheel keeps one strict sign over the log, else general.
+
+    eta : (n, 2) float, rad/s.  A wheel that is ever exactly 0 or changes sign needs the general form
+    (sgn(0) = 0 would break the paper form's constant column).
+    """
+    signs = []
+    for j in range(2):
+        col = eta[:, j]
+        if np.all(col > 0):
+            signs.append(1)
+        elif np.all(col < 0):
+            signs.append(-1)
+        else:
+            return RegressorForm("general")
+    return RegressorForm("paper", (signs[0], signs[1]))
+
+
+def inertia_matrix(p: PhysicalParameters) -> np.ndarray:
+    """M (2, 2), kg m^2, Eqs. (10)-(12)."""
+    inertia = (
+        p.I_p
+        + p.m_p * (p.d_x**2 + p.d_y**2)
+        + 2.0 * (p.I_wm + p.m_w * p.a**2)
+        + 2.0 * (p.I_rm + p.m_r * (p.c_x**2 + p.c_y**2))
+    )
+    mass = p.m_p + 2.0 * p.m_w + 2.0 * p.m_r
+    scale = p.r**2 / (4.0 * p.b**2)
+    spin = p.I_w + p.k_r**2 * p.I_r
+    m11 = spin + (mass * p.b**2 + inertia - 2.0 * p.m_p * p.b * p.d_y) * scale
+    m22 = spin + (mass * p.b**2 + inertia + 2.0 * p.m_p * p.b * p.d_y) * scale
+    m12 = (mass * p.b**2 - inertia) * scale
+    return np.array([[m11, m12], [m12, m22]])
+
+
+def coriolis_coefficient(p: PhysicalParameters) -> float:
+    """V_c (kg m^2) = (m_p d_x + 2 m_r c_x) r^3 / (4 b^2), below Eq. (14)."""
+    return (p.m_p * p.d_x + 2.0 * p.m_r * p.c_x) * p.r**3 / (4.0 * p.b**2)
+
+
+def base_parameters(p: PhysicalParameters) -> np.ndarray:
+    """theta0 (8,) = [m11, m12, m22, Vc, Fv1, Fv2, Fd1, Fd2] of Eq. (21), with m = M^-1."""
+    m = np.linalg.inv(inertia_matrix(p))
+    return np.array([m[0, 0], m[0, 1], m[1, 1], coriolis_coefficient(p), p.F_v1, p.F_v2, p.F_d1, p.F_d2])
+
+
+def inverse_inertia(theta0: np.ndarray) -> np.ndarray:
+    """m = M^-1 (2, 2) from theta0."""
+    return np.array([[theta0[0], theta0[1]], [theta0[1], theta0[2]]])
+
+
+def named_base(theta0: np.ndarray) -> dict[str, float]:
+    """theta0 plus M = m^-1 as a name -> value map (M11, M12, M22 in kg m^2)."""
+    out = {name: float(v) for name, v in zip(THETA0_NAMES, theta0)}
+    big_m = np.linalg.inv(inverse_inertia(theta0))
+    out.update(M11=float(big_m[0, 0]), M12=float(big_m[0, 1]), M22=float(big_m[1, 1]))
+    return out
+
+
+def intermediate_parameters(theta0: np.ndarray, form: RegressorForm) -> np.ndarray:
+    """theta (2, p): rows theta_1, theta_2 of Eqs. (23)-(24) (paper form) or the general form."""
+    m = inverse_inertia(theta0)
+    vc, fv1, fv2, fd1, fd2 = theta0[3:]
+    rows = []
+    for i in range(2):
+        mi1, mi2 = m[i]
+        common = [mi1, mi2, mi1 * vc, mi2 * vc, mi1 * fv1, mi2 * fv2]
+        if form.kind == "paper":
+            s1, s2 = form.signs
+            rows.append([*common, mi1 * fd1 * s1 + mi2 * fd2 * s2])
+        else:
+            rows.append([*common, mi1 * fd1, mi2 * fd2])
+    return np.array(rows)
+
+
+def regressor(eta: np.ndarray, tau: np.ndarray, form: RegressorForm) -> np.ndarray:
+    """g(eta, tau) (n, p) of Eq. (25) for eta (n, 2) rad/s and tau (n, 2) N m."""
+    e1, e2 = eta[:, 0], eta[:, 1]
+    cols = [tau[:, 0], tau[:, 1], e2 * e2 - e1 * e2, e1 * e1 - e1 * e2, -e1, -e2]
+    if form.kind == "paper":
+        cols.append(-np.ones_like(e1))
+    else:
+        cols += [-np.sign(e1), -np.sign(e2)]
+    return np.stack(cols, axis=1)
+
+
+def coriolis_torque(eta: np.ndarray, vc: float) -> np.ndarray:
+    """V(eta) (n, 2), N m, Eqs. (13)-(14)."""
+    e1, e2 = eta[..., 0], eta[..., 1]
+    return vc * np.stack([e1 * e2 - e2 * e2, e1 * e2 - e1 * e1], axis=-1)
+
+
+def friction_torque(eta: np.ndarray, theta0: np.ndarray) -> np.ndarray:
+    """F_v eta + F_d sgn(eta) (n, 2), N m, Eqs. (15)-(17)."""
+    fv = theta0[4:6]
+    fd = theta0[6:8]
+    return fv * eta + fd * np.sign(eta)
+
+
+def wheel_acceleration(eta: np.ndarray, tau: np.ndarray, theta0: np.ndarray) -> np.ndarray:
+    """The direct model eta_dot (n, 2), rad/s^2, Eq. (20) without disturbance."""
+    rhs = tau - coriolis_torque(eta, theta0[3]) - friction_torque(eta, theta0)
+    return rhs @ inverse_inertia(theta0).T
+
+
+def wheel_torque(eta: np.ndarray, eta_dot: np.ndarray, theta0: np.ndarray) -> np.ndarray:
+    """The inverse model tau (n, 2), N m, Eq. (9) without disturbance."""
+    big_m = np.linalg.inv(inverse_inertia(theta0))
+    return eta_dot @ big_m.T + coriolis_torque(eta, theta0[3]) + friction_torque(eta, theta0)

@@ -1,0 +1,75 @@
+"""Presenting results: rich tables for people, JSON for pipes.  No computation happens here."""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+from wmrid.identify import IdentificationResult
+
+
+def to_json(obj: Any) -> str:
+    """Strict JSON (no NaN/Infinity: they become null)."""
+    return json.dumps(_clean(obj), indent=2, allow_nan=False)
+
+
+def _clean(obj: Any) -> Any:
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if hasattr(obj, "item") and callable(obj.item):  # numpy scalars
+        return _clean(obj.item())
+    return obj
+
+
+def _fmt(x: float | None, digits: int = 6) -> str:
+    if x is None or not math.isfinite(x):
+        return "-"
+    return f"{x:.{digits}g}"
+
+
+def print_identification(result: IdentificationResult, console: Any) -> None:
+    """A rich table of the base parameters with their standard errors, nominal and CAD values."""
+    from rich.table import Table
+
+    table = Table(title=f"wmrid identify: {result.source}", title_justify="left")
+    table.add_column("parameter")
+    table.add_column("estimate", justify="right")
+    table.add_column("std", justify="right")
+    table.add_column("unit")
+    if result.nominal is not None:
+        table.add_column("nominal", justify="right")
+    if result.reference is not None:
+        table.add_column("CAD", justify="right")
+        table.add_column("est - CAD", justify="right")
+    for name, (value, std) in result.parameters.items():
+        row = [name, _fmt(value), _fmt(std, 2), result.units[name]]
+        if result.nominal is not None:
+            row.append(_fmt(result.nominal[name]))
+        if result.reference is not None:
+            ref = result.reference[name]
+            row.append(_fmt(ref))
+            diff = value - ref
+            sig = f" ({diff / std:+.1f} std)" if std and math.isfinite(std) and std > 0 else ""
+            row.append(f"{diff:+.3g}{sig}")
+        table.add_row(*row)
+    console.print(table)
+    info = result.log_info
+    console.print(
+        f"{info['samples']} samples, {info['duration_s']:.3f} s at {info['rate_hz']:.6g} Hz; "
+        f"regressor: {result.form.kind} form ({result.form.n_columns} columns); "
+        f"k = {result.settings.k:g} 1/s, alpha = {result.settings.alpha:g}; start: {result.start_source}"
+    )
+    diag = result.diagnostics
+    console.print(
+        f"lambda_min(Gamma) = {diag['lambda_min_gamma']:.3g}; structural mismatch chi2 = "
+        f"{diag['structural_mismatch']['chi2']:.3g} on {diag['structural_mismatch']['dof']} dof"
+    )
+    for note in info["notes"]:
+        console.print(f"note: {note}")
+    for warning in result.warnings:
+        console.print(f"[yellow]warning:[/yellow] {warning}")
