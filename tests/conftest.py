@@ -1,0 +1,50 @@
+"""Shared fixtures: small logs with a known truth, made here (no files needed)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from wmrid import model
+from wmrid.robot import PAPER_CAD
+
+
+def open_loop_log(duration: float = 5.0, dt: float = 1e-3, reversing: bool = False, uneven: bool = False):
+    """The CAD robot driven open-loop by smooth torques, integrated by DOP853 at rtol 1e-11.
+
+    Returns an object with t (n,) s, eta (n, 2) rad/s, tau (n, 2) N m, source, notes, theta0 (8,).
+    """
+    theta0 = model.base_parameters(PAPER_CAD)
+    if reversing:
+        def torque(t):
+            return np.array([2.0 * np.sin(1.3 * t) + 0.5 * np.sin(3.1 * t), 2.0 * np.sin(0.9 * t + 1) + 0.4 * np.sin(2.3 * t)])
+        eta0 = [0.5, -0.3]
+    else:
+        def torque(t):
+            return np.array([1.2 + 0.8 * np.sin(1.3 * t) + 0.3 * np.sin(3.1 * t), 1.0 + 0.7 * np.sin(0.9 * t + 1) + 0.3 * np.sin(2.3 * t)])
+        eta0 = [3.0, 3.0]
+
+    def rhs(t, y):
+        return model.wheel_acceleration(y[None, :], torque(t)[None, :], theta0)[0]
+
+    if uneven:
+        rng = np.random.default_rng(5)
+        t = np.concatenate([[0.0], np.cumsum(rng.uniform(0.5 * dt, 1.5 * dt, int(duration / dt)))])
+    else:
+        t = np.arange(int(round(duration / dt)) + 1) * dt
+    sol = solve_ivp(rhs, (t[0], t[-1]), eta0, t_eval=t, rtol=1e-11, atol=1e-12, method="DOP853")
+    tau = np.array([torque(x) for x in t])
+    return SimpleNamespace(t=t, eta=sol.y.T.copy(), tau=tau, source="open-loop", notes=(), theta0=theta0)
+
+
+@pytest.fixture(scope="session")
+def smooth_log():
+    return open_loop_log()
+
+
+@pytest.fixture(scope="session")
+def long_smooth_log():
+    return open_loop_log(duration=40.0)
