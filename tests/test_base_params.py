@@ -1,0 +1,72 @@
+"""Recovering theta0 from theta (Eq. 21 from Eqs. 23-24)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wmrid import model
+from wmrid.base_params import derived_with_std, direct_recovery, fit_base_parameters, jacobian_intermediate
+from wmrid.model import RegressorForm
+from wmrid.robot import PAPER_CAD
+
+FORMS = [RegressorForm("paper"), RegressorForm("paper", (-1, 1)), RegressorForm("general")]
+
+
+@pytest.mark.parametrize("form", FORMS, ids=["paper", "paper-left-backwards", "general"])
+def test_exact_theta_gives_exact_theta0(form):
+    theta0 = model.base_parameters(PAPER_CAD)
+    theta = model.intermediate_parameters(theta0, form)
+    np.testing.assert_allclose(direct_recovery(theta, form), theta0, rtol=1e-13)
+    cov = np.diag((1e-4 * np.abs(theta.ravel()) + 1e-9) ** 2)
+    fit = fit_base_parameters(theta, cov, form)
+    np.testing.assert_allclose(fit.theta0, theta0, rtol=1e-10)
+    assert fit.chi2 < 1e-12
+    assert fit.dof == 2 * form.n_columns - 8
+
+
+@pytest.mark.parametrize("form", FORMS, ids=["paper", "paper-left-backwards", "general"])
+def test_jacobian_against_central_differences(form):
+    theta0 = model.base_parameters(PAPER_CAD)
+    jac = jacobian_intermediate(theta0, form)
+    num = np.empty_like(jac)
+    for j in range(8):
+        step = 1e-6 * max(abs(theta0[j]), 1e-3)
+        up, down = theta0.copy(), theta0.copy()
+        up[j] += step
+        down[j] -= step
+        num[:, j] = (model.intermediate_parameters(up, form) - model.intermediate_parameters(down, form)).ravel() / (2 * step)
+    # f is bilinear, so central differences are exact up to rounding (~1e-10 relative at this step).
+    np.testing.assert_allclose(jac, num, rtol=1e-7, atol=1e-10)
+
+
+def test_covariance_matches_monte_carlo():
+    """Delta-method std of theta0 and of M = m^-1 against the spread of refits of perturbed theta."""
+    form = RegressorForm("paper")
+    theta0 = model.base_parameters(PAPER_CAD)
+    theta = model.intermediate_parameters(theta0, form)
+    rng = np.random.default_rng(11)
+    sd = 1e-4 * np.abs(theta.ravel()) + 1e-7
+    cov = np.diag(sd**2)
+    fit = fit_base_parameters(theta, cov, form)
+    derived = derived_with_std(fit.theta0, fit.cov)
+    draws = []
+    for _ in range(400):
+        noisy = theta + (rng.normal(size=theta.size) * sd).reshape(theta.shape)
+        refit = fit_base_parameters(noisy, cov, form)
+        d = derived_with_std(refit.theta0, refit.cov)
+        draws.append([d[n][0] for n in ("m11", "m12", "m22", "Vc", "Fv1", "Fd2", "M11", "M12", "M22")])
+    spread = np.std(draws, axis=0, ddof=1)
+    predicted = np.array([derived[n][1] for n in ("m11", "m12", "m22", "Vc", "Fv1", "Fd2", "M11", "M12", "M22")])
+    # 400 draws: the sample std has a relative standard error of 1/sqrt(2 * 399) = 3.5 %; allow 4 of them.
+    np.testing.assert_allclose(spread, predicted, rtol=0.14)
+
+
+def test_inconsistent_theta_gives_large_mismatch():
+    form = RegressorForm("paper")
+    theta = model.intermediate_parameters(model.base_parameters(PAPER_CAD), form)
+    bad = theta.copy()
+    bad[1, 0] *= 1.2  # m21 != m12
+    cov = np.diag((1e-4 * np.abs(theta.ravel())) ** 2)
+    fit = fit_base_parameters(bad, cov, form)
+    assert fit.p_value < 1e-6
