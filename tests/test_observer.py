@@ -14,10 +14,12 @@ from wmrid.replay import replay
 from wmrid.robot import PAPER_NOMINAL
 
 
-def _settings(form: RegressorForm, alpha: float = 1e-3, k: float = 1.0) -> ObserverSettings:
+def _settings(form: RegressorForm, alpha: float = 1e-3, k: float = 1.0, hold: str = "zoh") -> ObserverSettings:
     theta_init = model.intermediate_parameters(model.base_parameters(PAPER_NOMINAL), form)
     inf = np.full(theta_init.shape, np.inf)
-    return ObserverSettings(form=form, theta_init=theta_init, theta_min=-inf, theta_max=inf, k=k, alpha=alpha)
+    return ObserverSettings(
+        form=form, theta_init=theta_init, theta_min=-inf, theta_max=inf, k=k, alpha=alpha, torque_hold=hold
+    )
 
 
 def _reference_run(log, settings: ObserverSettings):
@@ -44,13 +46,15 @@ def test_foh_weights_against_quadrature(x):
 
 
 @pytest.mark.parametrize(
-    ("reversing", "uneven"), [(False, False), (False, True), (True, False)], ids=["paper-form", "uneven-steps", "general"]
+    ("reversing", "uneven", "hold"),
+    [(False, False, "zoh"), (False, True, "zoh"), (True, False, "zoh"), (True, True, "foh")],
+    ids=["paper-form", "uneven-steps", "general", "general-uneven-foh"],
 )
-def test_kernel_agrees_with_readable_step(reversing, uneven):
+def test_kernel_agrees_with_readable_step(reversing, uneven, hold):
     log = open_loop_log(duration=2.0, reversing=reversing, uneven=uneven)
     form = model.choose_form(log.eta)
     assert form.kind == ("general" if reversing else "paper")
-    settings = _settings(form)
+    settings = _settings(form, hold=hold)
     ref_state, ref_e = _reference_run(log, settings)
     out = replay(log.t, log.eta, log.tau, settings, max_history=len(log.t), chunk=777)
     # Same arithmetic, different order of a few sums: agreement to 1e-12 relative to the parameter scale.
@@ -69,19 +73,24 @@ def test_chunk_size_does_not_change_the_result(smooth_log):
     np.testing.assert_array_equal(a.blk_c, b.blk_c)
 
 
-def test_estimator_is_recursive_least_squares_in_closed_form(smooth_log):
+@pytest.mark.parametrize("hold", ["zoh", "foh"])
+def test_estimator_is_recursive_least_squares_in_closed_form(smooth_log, hold):
     """Gamma_N theta_N = alpha theta_0 + sum h w^T u with w, u built independently by scipy.signal.lsim.
 
-    w = g filtered by 1/(s + k) and u = eta - eta_f, eta_f = eta filtered by k/(s + k), both with
-    first-order-hold input (lsim's interpolation), zero initial state except eta_f(0) = eta(0).
+    w = g filtered by 1/(s + k) and u = eta - eta_f, eta_f = eta filtered by k/(s + k), with
+    first-order-hold input (lsim's interp=True), the torque columns zero-order hold (interp=False) under
+    "zoh", zero initial state except eta_f(0) = eta(0).
     """
     log = smooth_log
     k, alpha = 1.0, 1e-3
     form = model.choose_form(log.eta)
-    settings = _settings(form, alpha=alpha, k=k)
+    settings = _settings(form, alpha=alpha, k=k, hold=hold)
     g = model.regressor(log.eta, log.tau, form)
     lowpass = signal.lti([1.0], [1.0, k])
-    w = np.stack([signal.lsim(lowpass, g[:, j], log.t, interp=True)[1] for j in range(g.shape[1])], axis=1)
+    w = np.stack(
+        [signal.lsim(lowpass, g[:, j], log.t, interp=not (hold == "zoh" and j < 2))[1] for j in range(g.shape[1])],
+        axis=1,
+    )
     eta_f = np.stack(
         [signal.lsim(signal.StateSpace(-k, k, 1.0, 0.0), log.eta[:, r], log.t, X0=[log.eta[0, r]], interp=True)[1] for r in range(2)],
         axis=1,
@@ -100,13 +109,14 @@ def test_estimator_is_recursive_least_squares_in_closed_form(smooth_log):
 def test_error_decays_as_alpha_over_gamma(long_smooth_log):
     """Without disturbance theta_hat - theta = alpha Gamma^-1 (theta_0 - theta) (up to the O(h^2) hold error).
 
-    This is why the paper's alpha = 5000 barely moves from the start on a 40 s log.
+    This is why the paper's alpha = 5000 barely moves from the start on a 40 s log.  The open-loop log's
+    torques are smooth functions of time, so they vary linearly between samples to O(h^2): "foh".
     """
     log = long_smooth_log
     form = model.choose_form(log.eta)
     truth = model.intermediate_parameters(log.theta0, form)
     for alpha in (1e-6, 1.0, 5000.0):
-        settings = _settings(form, alpha=alpha)
+        settings = _settings(form, alpha=alpha, hold="foh")
         out = replay(log.t, log.eta, log.tau, settings)
         predicted = truth + alpha * np.linalg.solve(out.gamma, (settings.theta_init - truth).T).T
         # The first-order-hold error of the filters is O(h^2): measured 3.9e-7 of the parameter scale at

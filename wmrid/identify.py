@@ -93,7 +93,10 @@ class IdentificationResult:
             "source": self.source,
             "parameters": params,
             "theta": self.theta_dict(),
-            "settings": {"k": self.settings.k, "alpha": self.settings.alpha, "start": self.start_source},
+            "settings": {
+                "k": self.settings.k, "alpha": self.settings.alpha, "torque_hold": self.settings.torque_hold,
+                "start": self.start_source,
+            },  # fmt: skip
             "diagnostics": self.diagnostics,
             "warnings": list(self.warnings),
             "log": self.log_info,
@@ -181,6 +184,7 @@ def identify(
     alpha: float = 1e-6,
     box_width: float = 10.0,
     max_history: int = 20000,
+    torque_hold: Literal["zoh", "foh"] = "zoh",
     progress: Callable[[int], None] | None = None,
 ) -> IdentificationResult:
     """Identify the base parameters of the robot that recorded ``log``.
@@ -203,7 +207,9 @@ def identify(
         theta_init = data_start(eta, tau, t, chosen)
         start_source = "from the data (unknown robot): m11 = m22 = robust |eta_dot|/|tau| ratio, all else 0"
     lo, hi = default_box(theta_init, chosen, box_width, robot is not None)
-    settings = ObserverSettings(form=chosen, theta_init=theta_init, theta_min=lo, theta_max=hi, k=k, alpha=alpha)
+    settings = ObserverSettings(
+        form=chosen, theta_init=theta_init, theta_min=lo, theta_max=hi, k=k, alpha=alpha, torque_hold=torque_hold
+    )
 
     out = replay(t, eta, tau, settings, max_history=max_history, progress=progress)
     theta_u, gamma, gamma_inv = out.theta, out.gamma, out.gamma_inv

@@ -14,6 +14,10 @@ Discretisation at the log's own (possibly uneven) stamps t_n, h = t_{n+1} - t_n:
 * Eqs. (26), (27), (30) are linear filters; they are solved EXACTLY over each step for inputs that vary
   linearly between samples (first-order hold), with theta_hat held over the step:
   x_{n+1} = a x_n + beta0 f_n + beta1 f_{n+1}, a = exp(-k h), beta_j = h phi_j(k h) (:func:`foh_weights`).
+  The torque columns of g may instead be held from each sample to the next (zero-order hold,
+  ``torque_hold="zoh"``, x_{n+1} = a x_n + (beta0 + beta1) f_n): that is what a digital controller
+  applies, and it is exact for logs of commanded torque such as the paper's virtual prototype.  A
+  measured, continuous effort (a filtered current) calls for ``"foh"``.
 * theta_hat then jumps at t_{n+1}; the term w theta_hat' of (26) integrates that jump exactly:
   eta_hat += w_{n+1} (theta_hat_{n+1} - theta_hat_n).
 * Eqs. (33)-(36) are integrated implicitly (rectangle rule at t_{n+1}): Gamma_{n+1} = Gamma_n + h w^T w,
@@ -79,7 +83,8 @@ class ObserverSettings:
 
     k : 1/s, filter and predictor gain (> 0).  alpha : initial Gamma = alpha I (> 0), the weight of the
     start value.  theta_init, theta_min, theta_max : (2, p) intermediate parameters (units of the
-    regressor columns: see :class:`wmrid.model.RegressorForm`).
+    regressor columns: see :class:`wmrid.model.RegressorForm`).  torque_hold : "zoh" or "foh", how the
+    torque varies between samples.
     """
 
     form: RegressorForm
@@ -88,9 +93,12 @@ class ObserverSettings:
     theta_max: np.ndarray
     k: float = 1.0
     alpha: float = 1e-6
+    torque_hold: str = "zoh"
 
     def __post_init__(self) -> None:
         p = self.form.n_columns
+        if self.torque_hold not in ("zoh", "foh"):
+            raise UsageError(f"--torque-hold must be zoh or foh, got {self.torque_hold!r}")
         if not (math.isfinite(self.k) and self.k > 0):
             raise UsageError(f"--k must be a finite number > 0 (1/s), got {self.k}")
         if not (math.isfinite(self.alpha) and self.alpha > 0):
@@ -156,8 +164,11 @@ def observer_step(
     g = regressor(eta[None, :], np.asarray(tau, dtype=float)[None, :], settings.form)[0]
     theta = state.theta
 
-    w = a * state.w + b0 * state.g + b1 * g  # (27)
-    eta_hat = a * state.eta_hat + b0 * (theta @ state.g + k * state.eta) + b1 * (theta @ g + k * eta)  # (26)
+    g_in = b0 * state.g + b1 * g  # the filters' input over the step (first-order hold) ...
+    if settings.torque_hold == "zoh":
+        g_in[:2] = (b0 + b1) * state.g[:2]  # ... with the torques held
+    w = a * state.w + g_in  # (27)
+    eta_hat = a * state.eta_hat + theta @ g_in + k * (b0 * state.eta + b1 * eta)  # (26)
     xi_hat = a * state.xi_hat  # (30)
     e_prior = eta - eta_hat
 

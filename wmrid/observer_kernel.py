@@ -61,12 +61,13 @@ def _foh(x):
 
 
 @numba.njit(cache=True, nogil=True)
-def observer_chunk(t, eta, tau, offset, kind, k, st, w, g_prev, theta, gamma, gamma_inv,
+def observer_chunk(t, eta, tau, offset, kind, zoh, k, st, w, g_prev, theta, gamma, gamma_inv,
                    hist_idx, hist_theta, hist_e, hist_gamma, block_end, blk_a, blk_c, blk_uu, blk_ee, cursor):
     """Advance the estimator over one chunk of samples; every state array is updated in place.
 
     t (c,) s, eta and tau (c, 2): samples with global indices offset .. offset + c - 1 (offset >= 1; the
-    first sample of the log is the initial state).  kind 0 paper / 1 general.
+    first sample of the log is the initial state).  kind 0 paper / 1 general.  zoh 1: the torque columns
+    of g are held from each sample to the next (zero-order hold); 0: they vary linearly like the others.
     st (7,) = [t_prev, eta_prev (2), eta_hat (2), xi_hat (2)]; w, g_prev (p,); theta (2, p) unconstrained
     estimate; gamma, gamma_inv (p, p).
     hist_idx (m,) increasing global sample indices to record into hist_theta (m, 2, p), hist_e (m, 2)
@@ -80,6 +81,7 @@ def observer_chunk(t, eta, tau, offset, kind, k, st, w, g_prev, theta, gamma, ga
     p = theta.shape[1]
     m = hist_idx.shape[0]
     g = np.empty(p)
+    gin = np.empty(p)
     pw = np.empty(p)
     e_prior = np.empty(2)
     eta_hat = st[3:5]
@@ -95,16 +97,20 @@ def observer_chunk(t, eta, tau, offset, kind, k, st, w, g_prev, theta, gamma, ga
         e1 = eta[i, 0]
         e2 = eta[i, 1]
         _regressor_into(g, e1, e2, tau[i, 0], tau[i, 1], kind)
+        # the input of the filters over the step: first-order hold, the torques held when zoh
+        for j in range(p):
+            gin[j] = b0 * g_prev[j] + b1 * g[j]
+        if zoh:
+            gin[0] = (b0 + b1) * g_prev[0]
+            gin[1] = (b0 + b1) * g_prev[1]
         # (27) w and (26) eta_hat with theta held over the step
         for j in range(p):
-            w[j] = a * w[j] + b0 * g_prev[j] + b1 * g[j]
+            w[j] = a * w[j] + gin[j]
         for r in range(2):
-            gp = 0.0
-            gn = 0.0
+            gt = 0.0
             for j in range(p):
-                gp += theta[r, j] * g_prev[j]
-                gn += theta[r, j] * g[j]
-            eta_hat[r] = a * eta_hat[r] + b0 * (gp + k * st[1 + r]) + b1 * (gn + k * eta[i, r])
+                gt += theta[r, j] * gin[j]
+            eta_hat[r] = a * eta_hat[r] + gt + k * (b0 * st[1 + r] + b1 * eta[i, r])
             xi_hat[r] = a * xi_hat[r]  # (30)
         e_prior[0] = e1 - eta_hat[0]
         e_prior[1] = e2 - eta_hat[1]

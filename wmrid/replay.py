@@ -101,7 +101,8 @@ def replay(
     for start in range(1, n, chunk):
         stop = min(n, start + chunk)
         observer_chunk(
-            t[start:stop], eta[start:stop], tau[start:stop], start, kind, float(settings.k), st, w, g_prev,
+            t[start:stop], eta[start:stop], tau[start:stop], start, kind, int(settings.torque_hold == "zoh"),
+            float(settings.k), st, w, g_prev,
             theta, gamma, gamma_inv, hist_idx, hist_theta, hist_e, hist_gamma, block_end, blk_a, blk_c,
             blk_uu, blk_ee, cursor,
         )  # fmt: skip
