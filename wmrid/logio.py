@@ -1,0 +1,753 @@
+"""Reading and writing wheel logs (CSV and Parquet) as one log type, :class:`WheelLog`.
+
+Canonical columns: ``t`` (s), ``eta_r``, ``eta_l`` (rad/s; right wheel = eta_1, left = eta_2),
+``tau_r``, ``tau_l`` (N m); optional pose ``x``, ``y`` (m), ``phi`` (rad).  Other columns are ignored.
+``--columns t=time,eta_r=vel_right`` maps canonical names to the names in a file.
+
+Format: by suffix (``.csv .txt .tsv`` -> CSV, ``.parquet .pq`` -> Parquet, ``.mcap`` -> MCAP); any other
+suffix, and standard input (``-``), by the first bytes (:func:`detect_format`).
+
+CSV delimiter (:func:`sniff_delimiter`): among the first 20 non-blank lines, the first of tab, ``;``, ``,``
+that occurs equally often (at least once) on every line; else the first that occurs in the header;
+else runs of whitespace when the header splits into several words.  A ``;``-delimited file whose data
+rows hold ``digit,digit`` is read with decimal commas (and a note says so).  Comma/tab/semicolon files
+are parsed by the multithreaded pyarrow engine; whitespace, decimal-comma and ``", "``-spaced files, and
+any file pyarrow refuses, by pandas' C engine with round-trip-exact float parsing.
+
+Time (:func:`seconds_from_stamps`): ``time_unit="auto"`` reads a floating-point column as seconds and an
+INTEGER column as integer nanoseconds (the ROS convention), with a note.  Stamps are converted to
+float64 seconds once, here.  They keep their absolute value (as in the file) while float64 resolves
+them to 1 ns or better, i.e. while the largest |t| < 2**23 s (about 97 days; float64 spacing there is
+2**-30 s < 1 ns).  Converted stamps beyond that (epoch stamps such as 1.7e18 ns) are stored relative to
+the first stamp — subtracted in exact integer arithmetic for integer columns, before any rounding —
+and a note gives the first stamp.  A float column already in seconds is kept exactly as in the file
+whatever its size: converting it loses nothing.
+
+Row numbers in messages: for CSV the line of the file as an editor counts it (header = line 1); for
+Parquet the 1-based data row.
+"""
+
+from __future__ import annotations
+
+import difflib
+import io
+import os
+import re
+import sys
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from wmrid.errors import LogFormatError, UsageError
+
+if TYPE_CHECKING:
+    import pandas
+
+__all__ = [
+    "CANONICAL",
+    "MIN_SAMPLES",
+    "REQUIRED",
+    "WheelLog",
+    "detect_format",
+    "parse_column_mapping",
+    "read_log",
+    "read_metadata",
+    "seconds_from_stamps",
+    "sniff_delimiter",
+    "write_log",
+]
+
+REQUIRED = ("t", "eta_r", "eta_l", "tau_r", "tau_l")
+POSE = ("x", "y", "phi")
+CANONICAL = REQUIRED + POSE
+TIME_UNITS = ("auto", "s", "ms", "us", "ns")
+MIN_SAMPLES = 10
+_NS_PER_UNIT = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
+_PER_SECOND = {"s": 1.0, "ms": 1e3, "us": 1e6, "ns": 1e9}
+ABSOLUTE_LIMIT_S = float(2**23)  # float64 spacing below this is <= 2**-30 s < 1 ns
+_CSV_SUFFIXES = (".csv", ".txt", ".tsv")
+_PARQUET_SUFFIXES = (".parquet", ".pq")
+_MCAP_SUFFIXES = (".mcap",)
+_PARQUET_MAGIC = b"PAR1"
+_MCAP_MAGIC = b"\x89MCAP"
+_SNIFF_BYTES = 65536
+_STDIN_NAME = "<stdin>"
+
+
+@dataclass(frozen=True)
+class WheelLog:
+    """One wheel log in SI units.
+
+    t : (n,) float64, s, strictly increasing (as in the file; relative to the first stamp only when
+        the notes say so).
+    eta : (n, 2) float64, rad/s, columns [right, left].
+    tau : (n, 2) float64, N m, columns [right, left].
+    source : the file name as the user gave it (``"<stdin>"`` for ``-``).
+    notes : plain-English statements of what was assumed while reading.
+    pose : (n, 3) float64 [x m, y m, phi rad] when the log has x, y, phi; else None.
+    """
+
+    t: np.ndarray
+    eta: np.ndarray
+    tau: np.ndarray
+    source: str
+    notes: tuple[str, ...] = ()
+    pose: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        n = np.shape(self.t)[0] if np.ndim(self.t) == 1 else -1
+        if n < 0:
+            raise ValueError(f"WheelLog.t must be 1-D, got shape {np.shape(self.t)}")
+        for name, arr, width in (("eta", self.eta, 2), ("tau", self.tau, 2), ("pose", self.pose, 3)):
+            if arr is not None and np.shape(arr) != (n, width):
+                raise ValueError(f"WheelLog.{name} must have shape ({n}, {width}), got {np.shape(arr)}")
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def duration(self) -> float:
+        """Time from the first to the last sample, s."""
+        return float(self.t[-1] - self.t[0]) if len(self) else 0.0
+
+
+# --------------------------------------------------------------------------------------------------
+# Column mapping
+
+
+def _suggest(name: str, candidates: list[str] | tuple[str, ...], cutoff: float = 0.6) -> str | None:
+    """The closest candidate to ``name`` (case-insensitive difflib match), if any is close."""
+    lowered = {c.lower(): c for c in candidates}
+    hit = difflib.get_close_matches(name.lower(), list(lowered), n=1, cutoff=cutoff)
+    return lowered[hit[0]] if hit else None
+
+
+def parse_column_mapping(text: str) -> dict[str, str]:
+    """Parse the ``--columns`` option: ``"t=time,eta_r=vel_right,tau_l=effort_left"``.
+
+    Keys are canonical names (t, eta_r, eta_l, tau_r, tau_l, x, y, phi); values are column names in the
+    log.  Returns {canonical: source name}.  Raises :class:`UsageError` on anything else.
+    """
+    mapping: dict[str, str] = {}
+    example = "t=time,eta_r=vel_right,tau_l=effort_left"
+    for item in text.split(","):
+        item = item.strip()
+        if not item:
+            continue
+        key, sep, value = item.partition("=")
+        key, value = key.strip(), value.strip()
+        if not sep or not key or not value:
+            raise UsageError(f"--columns: {item!r} is not NAME=COLUMN; write e.g. --columns {example}")
+        _check_key(key, "--columns")
+        if key in mapping:
+            raise UsageError(f"--columns: {key!r} is given twice ({mapping[key]!r} and {value!r})")
+        mapping[key] = value
+    if not mapping:
+        raise UsageError(f"--columns is empty; write e.g. --columns {example}")
+    return mapping
+
+
+def _check_key(key: str, what: str) -> None:
+    if key not in CANONICAL:
+        close = _suggest(key, CANONICAL)
+        hint = f" (did you mean {close!r}?)" if close else ""
+        raise UsageError(f"{what}: {key!r} is not a column wmrid knows{hint}; use one of {', '.join(CANONICAL)}")
+
+
+# --------------------------------------------------------------------------------------------------
+# Format detection
+
+
+def detect_format(path: str, head_bytes: bytes) -> str:
+    """``"csv"``, ``"parquet"`` or ``"mcap"``: from the suffix of ``path``, else from the magic bytes.
+
+    ``path`` ``"-"`` (standard input) or an unknown suffix: ``PAR1`` -> parquet, ``\\x89MCAP`` -> mcap,
+    anything else -> csv.
+    """
+    suffix = os.path.splitext(path)[1].lower() if path != "-" else ""
+    if suffix in _CSV_SUFFIXES:
+        return "csv"
+    if suffix in _PARQUET_SUFFIXES:
+        return "parquet"
+    if suffix in _MCAP_SUFFIXES:
+        return "mcap"
+    if head_bytes.startswith(_PARQUET_MAGIC):
+        return "parquet"
+    if head_bytes.startswith(_MCAP_MAGIC):
+        return "mcap"
+    return "csv"
+
+
+# --------------------------------------------------------------------------------------------------
+# Reading
+
+
+@dataclass
+class _Source:
+    """Where the log's bytes are: a regular file (``path``) or bytes already read (``data``)."""
+
+    name: str  # for messages
+    path: str | None
+    data: bytes | None
+
+    def head(self, size: int = _SNIFF_BYTES) -> bytes:
+        if self.data is not None:
+            return self.data[:size]
+        with open(self.path, "rb") as fh:  # type: ignore[arg-type]
+            return fh.read(size)
+
+    def opener(self) -> Any:
+        """What pandas/pyarrow read from: the path, or a fresh in-memory stream."""
+        return self.path if self.data is None else io.BytesIO(self.data)
+
+
+def _open_source(path: str) -> _Source:
+    if path == "-":
+        if sys.stdin is None or sys.stdin.isatty():
+            raise UsageError("log '-' means standard input, but nothing is piped in; give a file or pipe one in")
+        data = sys.stdin.buffer.read()
+        if not data:
+            raise LogFormatError(f"{_STDIN_NAME}: standard input is empty; pipe a CSV or Parquet log into it")
+        return _Source(_STDIN_NAME, None, data)
+    if not os.path.exists(path):
+        folder = os.path.dirname(path) or "."
+        hint = ""
+        if os.path.isdir(folder):
+            close = _suggest(os.path.basename(path), sorted(os.listdir(folder)), cutoff=0.8)
+            hint = f" (did you mean {os.path.join(os.path.dirname(path), close)!r}?)" if close else ""
+        raise LogFormatError(f"{path}: no such file{hint}; check the path")
+    if os.path.isdir(path):
+        raise LogFormatError(f"{path}: is a folder, not a log file; give the CSV or Parquet file inside it")
+    try:
+        if not os.path.isfile(path):  # a pipe such as <(command): read it once
+            with open(path, "rb") as fh:
+                data = fh.read()
+            source = _Source(path, None, data)
+            size = len(data)
+        else:
+            with open(path, "rb"):
+                pass  # fail here, with a clear message, if it cannot be read
+            source = _Source(path, path, None)
+            size = os.path.getsize(path)
+    except OSError as err:
+        raise LogFormatError(f"{path}: cannot be read ({err.strerror or err}); check its permissions") from err
+    if size == 0:
+        raise LogFormatError(f"{path}: the file is empty (0 bytes); give a log with a header and data rows")
+    return source
+
+
+def read_log(path: str, *, columns: Mapping[str, str] | None = None, time_unit: str = "auto") -> WheelLog:
+    """Read a wheel log from a CSV or Parquet file, or from standard input for ``"-"``.
+
+    columns : {canonical name: name in the file} for columns not named canonically.
+    time_unit : ``"auto"`` (float -> s, integer -> ns), ``"s"``, ``"ms"``, ``"us"`` or ``"ns"``.
+
+    The file is opened read-only.  Raises :class:`LogFormatError` (one line naming the file, the row or
+    column at fault and the fix) for anything that is not a usable log.
+    """
+    if time_unit not in TIME_UNITS:
+        raise UsageError(f"--time-unit {time_unit!r} is not one of {', '.join(TIME_UNITS)}")
+    mapping = {key: key for key in CANONICAL}
+    for key, value in (columns or {}).items():
+        _check_key(key, "--columns")
+        mapping[key] = value
+    explicit = set(columns or ())
+
+    source = _open_source(path)
+    kind = detect_format(path, source.head(8))
+    if kind == "mcap":
+        raise LogFormatError(
+            f"{source.name}: MCAP input is not supported yet; export the wheel topics to CSV or Parquet first"
+        )
+    raw = _read_parquet(source, mapping, explicit) if kind == "parquet" else _read_csv(source, mapping, explicit)
+    return _assemble(raw, source.name, mapping, time_unit)
+
+
+@dataclass
+class _Raw:
+    """Columns as read, before validation: canonical name -> array or Series; how to name a row."""
+
+    values: dict[str, Any]
+    where: Callable[[int], str]  # data index (0-based) -> "line 7" / "row 6"
+    notes: list[str]
+    time_unit_hint: str | None = None  # unit carried by a typed time column (Parquet timestamps)
+
+
+def _select(present: list[str], mapping: dict[str, str], explicit: set[str], name: str) -> dict[str, str]:
+    """{canonical: column in the file} for the required columns and, when all three exist, the pose.
+
+    Raises one :class:`LogFormatError` naming every missing column, the columns there are, close
+    matches, and the ``--columns`` option that would fix it.
+    """
+    needed = list(REQUIRED) + [k for k in POSE if k in explicit]
+    missing = [k for k in needed if mapping[k] not in present]
+    if missing:
+        parts, fixes = [], []
+        taken = {mapping[k] for k in needed if k not in missing}
+        free = [c for c in present if c not in taken]
+        for key in missing:
+            col = mapping[key]
+            close = _suggest(col, free, cutoff=0.7)
+            if close:
+                free.remove(close)
+            origin = f" (given for {key} by --columns)" if key in explicit else ""
+            parts.append(f"{col!r}{origin}" + (f" (did you mean {close!r}?)" if close else ""))
+            fixes.append(f"{key}={close or '...'}")
+        shown = ", ".join(repr(c) for c in present[:20])
+        if len(present) > 20:
+            shown += f", ... ({len(present)} in all)"
+        label = "column" if len(missing) == 1 else "columns"
+        raise LogFormatError(
+            f"{name}: no {label} {', '.join(parts)}; the columns are {shown or 'none'}; "
+            f"name the log's columns with --columns {','.join(fixes)}"
+        )
+    chosen = {key: mapping[key] for key in REQUIRED}
+    if all(mapping[k] in present for k in POSE):
+        chosen.update({key: mapping[key] for key in POSE})
+    return chosen
+
+
+# ---- Parquet
+
+
+def _read_parquet(source: _Source, mapping: dict[str, str], explicit: set[str]) -> _Raw:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    name = source.name
+    try:
+        stream = pa.OSFile(source.path, "r") if source.path is not None else pa.BufferReader(source.data)
+    except (pa.ArrowException, OSError) as err:
+        raise LogFormatError(f"{name}: cannot be opened ({_one_line(err)})") from err
+    with stream:
+        try:
+            pf = pq.ParquetFile(stream)
+            present = list(pf.schema_arrow.names)
+            if pf.metadata.num_rows == 0:
+                raise LogFormatError(f"{name}: the Parquet file has no rows; give a log with {MIN_SAMPLES}+ samples")
+            chosen = _select(present, mapping, explicit, name)
+            wanted = list(dict.fromkeys(chosen.values()))
+            table = pf.read(columns=wanted, use_threads=True)
+        except (pa.ArrowException, OSError) as err:
+            raise LogFormatError(
+                f"{name}: not a readable Parquet file ({_one_line(err)}); it may be truncated or corrupt — "
+                "write it again or export the log as CSV"
+            ) from err
+
+    values: dict[str, Any] = {}
+    notes: list[str] = []
+    hint = None
+    for key, col in chosen.items():
+        arr = table.column(col).combine_chunks() if table.column(col).num_chunks != 1 else table.column(col).chunk(0)
+        typ = arr.type
+        if key == "t" and (pa.types.is_timestamp(typ) or pa.types.is_duration(typ)):
+            hint = typ.unit
+            notes.append(f"time column {col!r} is a Parquet {typ} column; read in its own unit, {typ.unit}")
+            arr = arr.cast(pa.int64())
+        if pa.types.is_integer(arr.type) or pa.types.is_floating(arr.type):
+            if arr.null_count:
+                values[key] = arr.to_numpy(zero_copy_only=False).astype(np.float64)  # nulls -> NaN
+            else:
+                values[key] = arr.to_numpy(zero_copy_only=False)
+        else:
+            values[key] = arr.to_pandas()  # strings, bools, decimals...: checked cell by cell below
+    return _Raw(values, lambda i: f"row {i + 1}", notes, hint)
+
+
+# ---- CSV
+
+
+def sniff_delimiter(text: str) -> tuple[str, str]:
+    """(delimiter, decimal) for CSV text; delimiter ``"\\s+"`` means runs of whitespace.
+
+    See the module docstring for the rule.
+    """
+    lines = [ln for ln in text.splitlines() if ln.strip()][:20]
+    if not lines:
+        return ",", "."
+    header, data = lines[0], lines[1:]
+    chosen = None
+    for cand in ("\t", ";", ","):
+        counts = {ln.count(cand) for ln in lines}
+        if len(counts) == 1 and counts.pop() > 0:
+            chosen = cand
+            break
+    if chosen is None:
+        chosen = next((c for c in ("\t", ";", ",") if c in header), None)
+    if chosen is None:
+        chosen = r"\s+" if len(header.split()) > 1 else ","
+    decimal = "."
+    if chosen == ";" and any(re.search(r"\d,\d", ln) for ln in data):
+        decimal = ","
+    return chosen, decimal
+
+
+def _text_head(source: _Source) -> tuple[str, str, list[str]]:
+    """The first bytes decoded; (text, encoding, notes).  Raises for binary or undecodable input."""
+    head = source.head()
+    name = source.name
+    for magic, kind in ((_PARQUET_MAGIC, "parquet"), (_MCAP_MAGIC, "mcap")):
+        if head.startswith(magic):
+            raise LogFormatError(f"{name}: holds {kind.upper()} data, not CSV text; rename it with a .{kind} suffix")
+    nul = head.find(b"\0")
+    if nul >= 0:
+        raise LogFormatError(f"{name}: not a CSV text file (byte {nul} is a NUL byte); give a CSV or Parquet log")
+    try:
+        return head.decode("utf-8-sig"), "utf-8", []
+    except UnicodeDecodeError as err:
+        if len(head) == _SNIFF_BYTES and err.start >= len(head) - 3 and "end of data" in err.reason:
+            return head[: err.start].decode("utf-8-sig"), "utf-8", []  # a character cut by the sniff window
+        text = head.decode("latin-1")
+        if any((ord(ch) < 32 and ch not in "\t\r\n\f") or 0x7F <= ord(ch) < 0xA0 for ch in text):
+            raise LogFormatError(
+                f"{name}: not a CSV text file (byte {err.start} is not UTF-8 text); give a CSV or Parquet log"
+            ) from err
+        return text, "latin-1", [f"{name} is not UTF-8; read as Latin-1 text"]
+
+
+def _csv_line_finder(source: _Source) -> Callable[[int], str]:
+    """Data index (0-based) -> ``"line N"``, counting every line of the file (header = line 1)."""
+
+    def where(index: int) -> str:
+        fh = open(source.path, "rb") if source.data is None else io.BytesIO(source.data)  # noqa: SIM115
+        with fh:
+            seen_header = False
+            count = -1
+            for lineno, raw in enumerate(fh, start=1):
+                if not raw.strip():
+                    continue  # blank lines are skipped by both parsers
+                if not seen_header:
+                    seen_header = True
+                    continue
+                count += 1
+                if count == index:
+                    return f"line {lineno}"
+        return f"data row {index + 1}"
+
+    return where
+
+
+def _read_csv(source: _Source, mapping: dict[str, str], explicit: set[str]) -> _Raw:
+    import pandas as pd
+
+    name = source.name
+    text, encoding, notes = _text_head(source)
+    if not text.strip():
+        raise LogFormatError(f"{name}: the file holds only blank lines; give a log with a header and data rows")
+    sep, decimal = sniff_delimiter(text)
+    header_line = next(ln for ln in text.splitlines() if ln.strip())
+    spaced = sep != r"\s+" and any(f != f.strip() for f in header_line.split(sep))
+    if sep == "\t":
+        notes.append("columns separated by tabs")
+    elif sep == ";":
+        notes.append("columns separated by ';'")
+    elif sep == r"\s+":
+        notes.append("columns separated by whitespace")
+    if decimal == ",":
+        notes.append("decimal commas (e.g. 1,5) read as decimal points")
+
+    def fail(err: BaseException) -> LogFormatError:
+        if isinstance(err, UnicodeDecodeError):
+            return LogFormatError(
+                f"{name}: not a CSV text file (byte {err.start} of a block is not {encoding} text); "
+                "give a CSV or Parquet log"
+            )
+        if isinstance(err, pd.errors.EmptyDataError):
+            return LogFormatError(f"{name}: the file holds no header or data; give a log with a header and data rows")
+        msg = _one_line(err).replace("Error tokenizing data. C error: ", "")
+        return LogFormatError(f"{name}: cannot be parsed as CSV ({msg}); every row needs one value per header column")
+
+    c_options: dict[str, Any] = {
+        "sep": sep,
+        "decimal": decimal,
+        "encoding": encoding,
+        "skipinitialspace": spaced,
+        "engine": "c",
+    }
+    if int(pd.__version__.split(".")[0]) < 3:  # pandas 3 parses floats exactly by default (and warns on this)
+        c_options["float_precision"] = "round_trip"
+    try:
+        header = pd.read_csv(source.opener(), nrows=0, **c_options)
+    except (ValueError, UnicodeDecodeError) as err:
+        raise fail(err) from err
+    present = [str(c).strip() for c in header.columns]
+    if spaced:
+        notes.append("spaces around column names and values ignored")
+    chosen = _select(present, mapping, explicit, name)
+    actual = {str(c).strip(): c for c in header.columns}
+    usecols = list(dict.fromkeys(actual[c] for c in chosen.values()))
+
+    frame = None
+    if sep in (",", "\t", ";") and decimal == "." and not spaced:
+        try:
+            frame = pd.read_csv(source.opener(), sep=sep, encoding=encoding, usecols=usecols, engine="pyarrow")
+        except Exception:  # pyarrow refuses some valid files; the C engine then decides and explains
+            frame = None
+    if frame is None:
+        try:
+            frame = pd.read_csv(source.opener(), **c_options)  # all columns: usecols would hide ragged rows
+        except (ValueError, UnicodeDecodeError) as err:
+            raise fail(err) from err
+    if len(frame) == 0:
+        raise LogFormatError(f"{name}: has a header but no data rows; give a log with at least {MIN_SAMPLES} samples")
+    frame.columns = [str(c).strip() for c in frame.columns]
+    values = {key: _series_values(frame[col]) for key, col in chosen.items()}
+    return _Raw(values, _csv_line_finder(source), notes)
+
+
+def _series_values(series: pandas.Series) -> Any:
+    """A numeric numpy array when pandas parsed the column as numbers, else the Series itself."""
+    numeric = isinstance(series.dtype, np.dtype) and series.dtype.kind in ("i", "u", "f")
+    return series.to_numpy() if numeric else series
+
+
+# ---- Validation and assembly
+
+
+def _numeric(values: Any, key: str, col: str, name: str, where: Callable[[int], str]) -> np.ndarray:
+    """A numeric numpy array (int or float) or a LogFormatError naming the first non-numeric cell."""
+    import pandas as pd
+
+    if isinstance(values, np.ndarray) and values.dtype.kind in "iuf":
+        return values
+    series = pd.Series(values)
+    if series.dtype.kind == "b":
+        raise LogFormatError(f"{name}: column {col!r} holds true/false values; map {key} to a numeric column")
+    coerced = pd.to_numeric(series, errors="coerce")
+    bad = coerced.isna().to_numpy() & series.notna().to_numpy()
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise LogFormatError(
+            f"{name}: {where(i)}, column {col!r}: {str(series.iloc[i])[:40]!r} is not a number; fix or delete that row"
+        )
+    out = coerced.to_numpy()
+    return out if out.dtype.kind in "iuf" else out.astype(np.float64)
+
+
+def _first_nonfinite(arr: np.ndarray) -> int | None:
+    """Index of the first NaN/inf in ``arr`` (None if all finite or not floating point)."""
+    if arr.dtype.kind != "f":
+        return None
+    ok = np.isfinite(arr)
+    return None if ok.all() else int(np.argmin(ok))
+
+
+def _nonfinite_message(arr: np.ndarray, i: int, col: str, name: str, where: Callable[[int], str]) -> str:
+    what = "empty or NaN" if np.isnan(arr[i]) else f"{float(arr[i])}"
+    return f"{name}: {where(i)}, column {col!r} is {what}; fill or delete that row"
+
+
+def seconds_from_stamps(stamps: np.ndarray, unit: str) -> tuple[np.ndarray, int | float | None]:
+    """(t float64 s, offset) from stamps in ``unit`` ("s", "ms", "us", "ns"); offset is the stamp subtracted.
+
+    Integer stamps are converted exactly relative to their first value when the absolute seconds would
+    reach 2**23 s (float64 spacing > 1 ns), else absolutely; the division by 10**k is correctly rounded
+    because the integer fits in 53 bits.  Float stamps in seconds are returned unchanged; other float
+    stamps follow the same relative rule (the subtraction of nearby floats is exact).
+    """
+    if stamps.dtype.kind in "iu":
+        ints = stamps.astype(np.int64) if stamps.dtype.kind == "u" else stamps
+        per_s = _NS_PER_UNIT["s"] // _NS_PER_UNIT[unit]  # stamps per second
+        largest = max(abs(int(ints[0])), abs(int(ints[-1])))
+        if largest >= ABSOLUTE_LIMIT_S * per_s:
+            offset = int(ints[0])
+            return (ints - ints[0]).astype(np.float64) / float(per_s), offset
+        return ints.astype(np.float64) / float(per_s), None
+    floats = stamps.astype(np.float64, copy=False)
+    if unit == "s":
+        return floats, None
+    per_s = _PER_SECOND[unit]
+    if max(abs(floats[0]), abs(floats[-1])) >= ABSOLUTE_LIMIT_S * per_s:
+        return (floats - floats[0]) / per_s, float(floats[0])
+    return floats / per_s, None
+
+
+def _assemble(raw: _Raw, name: str, mapping: dict[str, str], time_unit: str) -> WheelLog:
+    where = raw.where
+    notes = list(raw.notes)
+    keys = list(raw.values)
+    arrays = {key: _numeric(raw.values[key], key, mapping[key], name, where) for key in keys if key in REQUIRED}
+
+    # The first non-finite cell in file order among the required columns.
+    bad = [(i, key) for key in REQUIRED if (i := _first_nonfinite(arrays[key])) is not None]
+    if bad:
+        i, key = min(bad, key=lambda b: (b[0], REQUIRED.index(b[1])))
+        raise LogFormatError(_nonfinite_message(arrays[key], i, mapping[key], name, where))
+
+    n = len(arrays["t"])
+    stamps = arrays["t"]
+    tcol = mapping["t"]
+    unit = time_unit
+    if raw.time_unit_hint is not None:
+        if time_unit not in ("auto", raw.time_unit_hint):
+            notes.append(f"--time-unit {time_unit} ignored: the column's type says {raw.time_unit_hint}")
+        unit = raw.time_unit_hint
+    elif time_unit == "auto":
+        if stamps.dtype.kind in "iu":
+            unit = "ns"
+            notes.append(
+                f"time column {tcol!r} holds integers: read as integer nanoseconds "
+                "(use --time-unit s, ms or us if it counts other units)"
+            )
+        else:
+            unit = "s"
+
+    steps = np.diff(stamps) if stamps.dtype.kind == "f" else np.diff(stamps.astype(np.int64))
+    if n > 1 and not (steps > 0).all():
+        i = int(np.argmin(steps > 0)) + 1
+        raise LogFormatError(
+            f"{name}: time is not strictly increasing at {where(i)}: {tcol!r} = {stamps[i].item()!r} follows "
+            f"{stamps[i - 1].item()!r} on the row before; sort the log by time and drop repeated stamps"
+        )
+    if n < MIN_SAMPLES:
+        raise LogFormatError(
+            f"{name}: only {n} samples; identification needs at least {MIN_SAMPLES}, so record a longer log"
+        )
+
+    t, offset = seconds_from_stamps(stamps, unit)
+    if offset is not None:
+        notes.append(
+            f"time stored relative to the first stamp {offset!r} {unit} (t = 0 there) so that float64 seconds keep "
+            "1 ns resolution"
+        )
+    if not (np.diff(t) > 0).all():  # distinct stamps that float64 cannot tell apart
+        i = int(np.argmin(np.diff(t) > 0)) + 1
+        raise LogFormatError(
+            f"{name}: {where(i)}: stamps {stamps[i - 1].item()!r} and {stamps[i].item()!r} are equal "
+            "in float64 seconds; give the time column in a coarser unit"
+        )
+    if unit == "s" and stamps.dtype.kind == "f" and abs(float(t[-1])) >= 1e11:
+        notes.append(
+            f"time column {tcol!r} reaches {float(t[-1]):.3g} s (over 3000 years): if it counts ms, us or ns, "
+            "say so with --time-unit"
+        )
+    elif unit == "ns" and time_unit == "auto" and raw.time_unit_hint is None and float(np.median(np.diff(t))) < 1e-6:
+        notes.append(
+            f"as nanoseconds the samples are only {float(np.median(np.diff(t))) * 1e9:.3g} ns apart: "
+            "if the column counts s, ms or us, say so with --time-unit"
+        )
+
+    eta = np.column_stack([arrays["eta_r"], arrays["eta_l"]]).astype(np.float64, copy=False)
+    tau = np.column_stack([arrays["tau_r"], arrays["tau_l"]]).astype(np.float64, copy=False)
+    pose = _pose(raw, name, mapping, notes)
+    if any(mapping[k] != k for k in REQUIRED):
+        notes.append("columns read as " + ", ".join(f"{k} = {mapping[k]!r}" for k in REQUIRED if mapping[k] != k))
+    return WheelLog(t=t, eta=eta, tau=tau, source=name, notes=tuple(notes), pose=pose)
+
+
+def _pose(raw: _Raw, name: str, mapping: dict[str, str], notes: list[str]) -> np.ndarray | None:
+    """The optional (n, 3) pose, or None with a note when a pose cell is unusable (the pose is optional)."""
+    if not all(k in raw.values for k in POSE):
+        return None
+    cols = []
+    for key in POSE:
+        try:
+            arr = _numeric(raw.values[key], key, mapping[key], name, raw.where).astype(np.float64, copy=False)
+        except LogFormatError as err:
+            notes.append(f"pose columns ignored: {str(err).removeprefix(name + ': ')}")
+            return None
+        i = _first_nonfinite(arr)
+        if i is not None:
+            problem = _nonfinite_message(arr, i, mapping[key], name, raw.where)
+            notes.append(f"pose columns ignored: {problem.removeprefix(name + ': ').split(';')[0]}")
+            return None
+        cols.append(arr)
+    return np.column_stack(cols)
+
+
+def _one_line(err: BaseException | str) -> str:
+    return " ".join(str(err).split())[:300]
+
+
+def read_metadata(path: str) -> dict[str, str]:
+    """The key/value metadata of a Parquet log's schema (without pandas' own), {} for other formats."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    source = _open_source(path)
+    if detect_format(path, source.head(8)) != "parquet":
+        return {}
+    try:
+        with pa.OSFile(source.path, "r") if source.path is not None else pa.BufferReader(source.data) as stream:
+            meta = pq.ParquetFile(stream).schema_arrow.metadata or {}
+    except (pa.ArrowException, OSError) as err:
+        raise LogFormatError(f"{source.name}: not a readable Parquet file ({_one_line(err)})") from err
+    return {k.decode(): v.decode() for k, v in meta.items() if k != b"pandas"}
+
+
+# --------------------------------------------------------------------------------------------------
+# Writing
+
+
+def write_log(
+    frame: pandas.DataFrame, path: str, *, force: bool = False, metadata: dict[str, str] | None = None
+) -> None:
+    """Write ``frame`` as a log: ``.csv`` (or ``-`` for CSV on standard output) or ``.parquet``/``.pq``.
+
+    CSV floats are written with repr precision (read back exactly); CSV has no place for ``metadata``,
+    so it is dropped there.  Parquet keeps ``metadata`` in the schema's key/value metadata.  Files are
+    written atomically (:mod:`wmrid.atomic`); an existing file is replaced only with ``force``.
+    """
+    from wmrid.atomic import atomic_output
+
+    if path == "-":
+        out = getattr(sys.stdout, "buffer", None)
+        if out is None:  # a text-only stream (e.g. a test harness)
+            frame.to_csv(sys.stdout, index=False, float_format=None, lineterminator="\n")
+        else:
+            sys.stdout.flush()
+            _write_csv(frame, out, ",")
+            out.flush()
+        return
+    suffix = os.path.splitext(path)[1].lower()
+    if suffix in _CSV_SUFFIXES:
+        with atomic_output(path, force=force, mode="wb") as fh:
+            _write_csv(frame, fh, "\t" if suffix == ".tsv" else ",")
+    elif suffix in _PARQUET_SUFFIXES:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        table = pa.Table.from_pandas(frame, preserve_index=False)
+        merged = dict(table.schema.metadata or {})
+        merged.update({str(k).encode(): str(v).encode() for k, v in (metadata or {}).items()})
+        table = table.replace_schema_metadata(merged)
+        with atomic_output(path, force=force, mode="wb") as fh:
+            pq.write_table(table, fh)
+    else:
+        raise UsageError(f"cannot tell the log format from {path!r}; name it .csv or .parquet")
+
+
+def _write_csv(frame: pandas.DataFrame, fh: Any, sep: str) -> None:
+    """CSV whose floats read back bit for bit (shortest round-trip repr, as ``repr(float)``).
+
+    All-numeric frames go through pyarrow (about 15x faster than ``DataFrame.to_csv``): floats are
+    formatted by Arrow's shortest round-trip formatter and integral ones get ``.0`` appended, so a float
+    column never reads back as integers (which would change the meaning of a time column).  Anything
+    else (strings, awkward names) goes through pandas with ``float_format=None`` (repr precision).
+    """
+    names = [str(c) for c in frame.columns]
+    plain = all(isinstance(dt, np.dtype) and dt.kind in ("i", "u", "f") for dt in frame.dtypes) and not any(
+        set(n) & {sep, '"', "\n", "\r"} or n != n.strip() for n in names
+    )
+    if not plain or len(set(names)) != len(names):
+        frame.to_csv(fh, index=False, sep=sep, float_format=None, lineterminator="\n", encoding="utf-8")
+        return
+    import pyarrow as pa
+    import pyarrow.compute as pc
+    import pyarrow.csv as pcsv
+
+    arrays = []
+    for col in frame.columns:
+        values = frame[col].to_numpy()
+        if values.dtype.kind == "f":
+            text = pc.cast(pa.array(values.astype(np.float64, copy=False)), pa.string())
+            integral = pc.match_substring_regex(text, r"^-?[0-9]+$")
+            text = pc.if_else(integral, pc.binary_join_element_wise(text, pa.scalar(".0"), ""), text)
+            arrays.append(text)
+        else:
+            arrays.append(pa.array(values))
+    table = pa.Table.from_arrays(arrays, names=names)
+    fh.write((sep.join(names) + "\n").encode("utf-8"))  # unquoted, whatever the pyarrow version
+    pcsv.write_csv(table, fh, pcsv.WriteOptions(include_header=False, delimiter=sep, quoting_style="none"))
