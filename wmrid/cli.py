@@ -10,7 +10,7 @@ import os
 import sys
 from enum import Enum
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -48,6 +48,11 @@ class TimeUnit(str, Enum):
     ns = "ns"
 
 
+class TorqueHold(str, Enum):
+    zoh = "zoh"
+    foh = "foh"
+
+
 class Trajectory(str, Enum):
     sinusoid = "sinusoid"
     reversing = "reversing"
@@ -77,15 +82,17 @@ def _stderr_console():
 
 @app.command()
 def identify(
-    log: Annotated[str, typer.Argument(help="Log file (.csv, .parquet) or - for standard input.")],
+    log: Annotated[str, typer.Argument(metavar="LOG", help="Log file (.csv, .parquet) or - for standard input.")],
     robot: Annotated[
-        Optional[str],
+        str | None,
         typer.Option(help="Robot TOML file or built-in name ('paper'): nominal values start the estimate."),
     ] = None,
     columns: Annotated[
-        Optional[str], typer.Option(help="Column mapping, e.g. t=time,eta_r=vel_right,tau_l=effort_left.")
+        str | None, typer.Option(help="Column mapping, e.g. t=time,eta_r=vel_right,tau_l=effort_left.")
     ] = None,
-    time_unit: Annotated[TimeUnit, typer.Option(help="Unit of the time column (auto: float s, integer ns).")] = TimeUnit.auto,
+    time_unit: Annotated[
+        TimeUnit, typer.Option(help="Unit of the time column (auto: float s, integer ns).")
+    ] = TimeUnit.auto,
     form: Annotated[
         FormChoice, typer.Option(help="Regressor: paper (7 columns, wheels keep one sign), general (8), auto.")
     ] = FormChoice.auto,
@@ -94,12 +101,19 @@ def identify(
         float, typer.Option(help="Initial Gamma = alpha I (Eq. 33): weight of the start value (paper: 5000).")
     ] = 1e-6,
     box_width: Annotated[
-        float, typer.Option(help="Half-width of the parameter box around the nominal values, in units of max(|theta|, m_ii).")
+        float,
+        typer.Option(help="Half-width of the parameter box around the nominal values, in units of max(|theta|, m_ii)."),
     ] = 10.0,
+    torque_hold: Annotated[
+        TorqueHold,
+        typer.Option(help="Torque between samples: zoh (held, as a digital controller applies it) or foh (linear)."),
+    ] = TorqueHold.zoh,
     output_format: Annotated[
         OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
     ] = OutputFormat.auto,
-    output: Annotated[Optional[Path], typer.Option("--output", "-o", help="Write the JSON result to this file.")] = None,
+    output: Annotated[
+        Path | None, typer.Option("--output", "-o", help="Write the JSON result to this file.")
+    ] = None,
     force: Annotated[bool, typer.Option(help="Overwrite an existing output file.")] = False,
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
@@ -115,7 +129,8 @@ def identify(
     progress_cb, finish = _progress(len(wheel_log), "identify")
     try:
         result = run_identify(
-            wheel_log, robot_obj, form=form.value, k=k, alpha=alpha, box_width=box_width, progress=progress_cb
+            wheel_log, robot_obj, form=form.value, k=k, alpha=alpha, box_width=box_width,
+            torque_hold=torque_hold.value, progress=progress_cb,
         )
     finally:
         finish()
@@ -147,16 +162,20 @@ def _progress(total: int, label: str):
 
 @app.command()
 def simulate(
-    output: Annotated[str, typer.Option("--output", "-o", help="Log to write: .csv or .parquet (- for CSV on stdout).")],
+    output: Annotated[
+        str, typer.Option("--output", "-o", help="Log to write: .csv or .parquet (- for CSV on stdout).")
+    ],
     robot: Annotated[str, typer.Option(help="Robot TOML file or built-in name; its CAD set is the truth.")] = "paper",
     trajectory: Annotated[Trajectory, typer.Option(help="Reference trajectory.")] = Trajectory.sinusoid,
     duration: Annotated[float, typer.Option(help="Duration, s.")] = 40.0,
     rate: Annotated[float, typer.Option(help="Log rate, Hz (control runs at 1 kHz).")] = 1000.0,
     seed: Annotated[int, typer.Option(help="Seed of every random number.")] = 0,
     payload: Annotated[
-        Optional[str], typer.Option(help="Rigid payload MASS[@X,Y] (kg, m in the platform frame), e.g. 25@0.1,-0.05.")
+        str | None, typer.Option(help="Rigid payload MASS[@X,Y] (kg, m in the platform frame), e.g. 25@0.1,-0.05.")
     ] = None,
-    payload_inertia: Annotated[float, typer.Option(help="Payload yaw inertia about its own centre of mass, kg m^2.")] = 0.0,
+    payload_inertia: Annotated[
+        float, typer.Option(help="Payload yaw inertia about its own centre of mass, kg m^2.")
+    ] = 0.0,
     eta_noise: Annotated[float, typer.Option(help="Std of white noise on logged wheel speeds, rad/s.")] = 0.0,
     tau_noise: Annotated[float, typer.Option(help="Std of white noise on logged torques, N m.")] = 0.0,
     caster: Annotated[float, typer.Option(help="Std of the coloured caster disturbance torque, N m.")] = 0.0,
@@ -165,7 +184,7 @@ def simulate(
     force: Annotated[bool, typer.Option(help="Overwrite existing output files.")] = False,
 ) -> None:
     """Simulate the paper's virtual prototype and write a log plus its ground truth (<log>.truth.json)."""
-    from wmrid.atomic import write_json
+    from wmrid.atomic import to_json_text, write_json
     from wmrid.logio import write_log
     from wmrid.robot import Payload, load_robot
     from wmrid.simulate import NoiseSettings
@@ -183,7 +202,8 @@ def simulate(
         eta_std=eta_noise, tau_std=tau_noise, caster_std=caster, caster_time=caster_time, encoder_cpr=encoder_cpr
     )
     sim = run_simulate(
-        truth_params, robot_obj.nominal, trajectory=trajectory.value, duration=duration, rate=rate, noise=noise, seed=seed
+        truth_params, robot_obj.nominal, trajectory=trajectory.value, duration=duration, rate=rate, noise=noise,
+        seed=seed,
     )
     truth = sim.truth()
     truth["robot"] = robot_obj.name
@@ -196,12 +216,6 @@ def simulate(
     if truth_path is not None:
         write_json(truth_path, truth, force=force)
         _stderr_console().print(f"wrote {output} ({len(sim.t)} samples) and {truth_path}")
-
-
-def to_json_text(obj) -> str:
-    from wmrid.render import to_json
-
-    return to_json(obj)
 
 
 def main(argv: list[str] | None = None) -> None:

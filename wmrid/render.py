@@ -2,28 +2,16 @@
 
 from __future__ import annotations
 
-import json
 import math
 from typing import Any
 
+from wmrid.atomic import to_json_text
 from wmrid.identify import IdentificationResult
 
 
 def to_json(obj: Any) -> str:
-    """Strict JSON (no NaN/Infinity: they become null)."""
-    return json.dumps(_clean(obj), indent=2, allow_nan=False)
-
-
-def _clean(obj: Any) -> Any:
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {str(k): _clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if hasattr(obj, "item") and callable(obj.item):  # numpy scalars
-        return _clean(obj.item())
-    return obj
+    """Strict JSON (NaN/inf become null), without a trailing newline."""
+    return to_json_text(obj).rstrip("\n")
 
 
 def _fmt(x: float | None, digits: int = 6) -> str:
@@ -34,18 +22,19 @@ def _fmt(x: float | None, digits: int = 6) -> str:
 
 def print_identification(result: IdentificationResult, console: Any) -> None:
     """A rich table of the base parameters with their standard errors, nominal and CAD values."""
+    from rich import box
     from rich.table import Table
 
-    table = Table(title=f"wmrid identify: {result.source}", title_justify="left")
-    table.add_column("parameter")
-    table.add_column("estimate", justify="right")
-    table.add_column("std", justify="right")
-    table.add_column("unit")
+    table = Table(title=f"wmrid identify: {result.source}", title_justify="left", box=box.SIMPLE_HEAD)
+    table.add_column("param", no_wrap=True)
+    table.add_column("estimate", justify="right", no_wrap=True)
+    table.add_column("std", justify="right", no_wrap=True)
+    table.add_column("unit", no_wrap=True)
     if result.nominal is not None:
-        table.add_column("nominal", justify="right")
+        table.add_column("nominal", justify="right", no_wrap=True)
     if result.reference is not None:
-        table.add_column("CAD", justify="right")
-        table.add_column("est - CAD", justify="right")
+        table.add_column("CAD", justify="right", no_wrap=True)
+        table.add_column("Δ/std", justify="right", no_wrap=True)
     for name, (value, std) in result.parameters.items():
         row = [name, _fmt(value), _fmt(std, 2), result.units[name]]
         if result.nominal is not None:
@@ -53,9 +42,8 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         if result.reference is not None:
             ref = result.reference[name]
             row.append(_fmt(ref))
-            diff = value - ref
-            sig = f" ({diff / std:+.1f} std)" if std and math.isfinite(std) and std > 0 else ""
-            row.append(f"{diff:+.3g}{sig}")
+            z = (value - ref) / std if std and math.isfinite(std) and std > 0 else math.nan
+            row.append(f"{z:+.1f}" if math.isfinite(z) else "")
         table.add_row(*row)
     console.print(table)
     info = result.log_info

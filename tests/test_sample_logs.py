@@ -1,0 +1,60 @@
+"""The bundled sample logs are exactly what ``sample_logs/make_samples.py`` produces."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLES = ROOT / "sample_logs"
+NAMES = ["paper_sinusoid.csv", "paper_sinusoid.parquet", "paper_sinusoid.csv.truth.json", "paper_sinusoid.parquet.truth.json"]
+
+
+@pytest.fixture(scope="module")
+def regenerated(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("samples")
+    subprocess.run([sys.executable, str(SAMPLES / "make_samples.py"), str(out)], check=True, capture_output=True)
+    return out
+
+
+def test_regenerated_files_are_the_same_set(regenerated):
+    assert sorted(p.name for p in regenerated.iterdir()) == sorted(NAMES)
+    for name in NAMES:
+        assert (SAMPLES / name).is_file(), name
+
+
+def test_parquet_sample_is_unchanged(regenerated):
+    # Full precision.  The simulator is deterministic (seeded, fixed-step RK4); 1e-12 relative allows
+    # only for a different CPU's last-bit rounding in the compiled kernel.
+    new = pq.read_table(regenerated / "paper_sinusoid.parquet")
+    old = pq.read_table(SAMPLES / "paper_sinusoid.parquet")
+    assert new.column_names == old.column_names
+    for col in old.column_names:
+        np.testing.assert_allclose(new[col].to_numpy(), old[col].to_numpy(), rtol=1e-12, atol=1e-12, err_msg=col)
+    assert json.loads(new.schema.metadata[b"wmrid_truth"]) == json.loads(old.schema.metadata[b"wmrid_truth"])
+
+
+def test_csv_sample_is_unchanged(regenerated):
+    # Values rounded to 10 significant digits: a last-bit difference upstream can move the 10th digit by
+    # one unit, i.e. 1e-9 relative at most.
+    new = pd.read_csv(regenerated / "paper_sinusoid.csv")
+    old = pd.read_csv(SAMPLES / "paper_sinusoid.csv")
+    assert list(new.columns) == list(old.columns) == ["t", "eta_r", "eta_l", "tau_r", "tau_l"]
+    np.testing.assert_allclose(new.to_numpy(), old.to_numpy(), rtol=1e-9, atol=0)
+
+
+@pytest.mark.parametrize("name", ["paper_sinusoid.csv.truth.json", "paper_sinusoid.parquet.truth.json"])
+def test_truth_is_unchanged(regenerated, name):
+    new = json.loads((regenerated / name).read_text())
+    old = json.loads((SAMPLES / name).read_text())
+    assert new.keys() == old.keys()
+    for key, value in old["parameters"].items():
+        assert new["parameters"][key] == pytest.approx(value, rel=1e-14), key
+    assert new["physical"] == old["physical"]
