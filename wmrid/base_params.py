@@ -7,10 +7,16 @@ estimate's own covariance C,
 
     theta0* = argmin (theta_hat - f(theta0))^T C^-1 (theta_hat - f(theta0)),
 
-which weighs each relation by how well the log pins it.  The minimum is the structural mismatch: a
-chi-square statistic with 2p - 8 degrees of freedom when the model holds and C is honest.  A large
-value says the log violates the model (slip, unmodelled friction, wrong sign convention...).
-Standard errors follow from the Jacobian at the optimum, (J^T C^-1 J)^-1.
+which weighs each relation by how well the log pins it.  The fit is linear to first order,
+theta0* - theta0 = G (theta_hat - theta), G = (J^T W J)^-1 J^T W with W = C^-1 and J the Jacobian at the
+optimum, so the covariance of theta0* is G C_r G^T for whatever covariance C_r of theta_hat is reported
+(the sandwich: valid even when the weights C are not the best estimate of the spread).
+
+The misfit rho = theta_hat - f(theta0*) is the structural mismatch.  With the reported covariance a
+jackknife estimate on B degrees of freedom (:mod:`wmrid.uncertainty`), T^2 = rho^T pinv(C_rho) rho over the
+d = rank(C_rho) <= 2p - 8 directions the fit leaves is Hotelling's statistic, and
+(B - d + 1) T^2 / (B d) ~ F(d, B - d + 1) when the model holds.  A small p-value says the log violates the
+model (slip, unmodelled friction, a wrong sign convention...).
 """
 
 from __future__ import annotations
@@ -18,14 +24,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import optimize
 
 from wmrid.model import RegressorForm, intermediate_parameters, inverse_inertia
 
 
 @dataclass(frozen=True)
 class BaseFit:
-    """theta0 (8,), its covariance (8, 8), the mismatch chi-square, its degrees of freedom and p-value."""
+    """theta0 (8,), its covariance (8, 8), and the structural-mismatch test.
+
+    chi2 is the misfit in the metric of the weights (Hotelling's T^2 when a reported covariance with
+    ``report_dof`` is given), dof its number of directions d, p_value its p-value (nan when d = 0).
+    """
 
     theta0: np.ndarray
     cov: np.ndarray
@@ -59,8 +69,21 @@ def _whitener(cov: np.ndarray) -> np.ndarray:
     return (vecs[:, keep] / np.sqrt(vals[keep])).T
 
 
-def fit_base_parameters(theta: np.ndarray, cov: np.ndarray, form: RegressorForm) -> BaseFit:
-    """Minimum-distance theta0 from theta (2, p) with covariance cov (2p, 2p) of theta.ravel()."""
+def fit_base_parameters(
+    theta: np.ndarray,
+    cov: np.ndarray,
+    form: RegressorForm,
+    *,
+    report_cov: np.ndarray | None = None,
+    report_dof: int | None = None,
+) -> BaseFit:
+    """Minimum-distance theta0 from theta (2, p), weighted by ``cov`` (2p, 2p) of theta.ravel().
+
+    ``report_cov`` (default ``cov``) is the covariance of theta.ravel() to propagate; ``report_dof``
+    its degrees of freedom when it is a jackknife estimate (None: a chi-square test in the weights' metric).
+    """
+    from scipy.special import chdtrc, fdtrc
+
     theta = np.asarray(theta, dtype=float)
     start = direct_recovery(theta, form)
     whiten = _whitener(cov)
@@ -74,12 +97,38 @@ def fit_base_parameters(theta: np.ndarray, cov: np.ndarray, form: RegressorForm)
     sol = optimize.least_squares(residual, start, x_scale=x_scale, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
     theta0 = sol.x
     jac = jacobian_intermediate(theta0, form)
-    info = jac.T @ (whiten.T @ whiten) @ jac
-    cov0 = np.linalg.pinv(info, rcond=1e-15, hermitian=True)
-    chi2 = float(np.sum(residual(theta0) ** 2))
-    dof = max(whiten.shape[0] - 8, 0)
-    p_value = float(stats.chi2.sf(chi2, dof)) if dof > 0 else float("nan")
+    weight = whiten.T @ whiten
+    info = jac.T @ weight @ jac
+    info_inv = np.linalg.pinv(info, rcond=1e-15, hermitian=True)
+    gain = info_inv @ jac.T @ weight  # (8, 2p): d theta0* / d theta_hat
+    reported = cov if report_cov is None else report_cov
+    cov0 = gain @ reported @ gain.T
+    misfit = target - intermediate_parameters(theta0, form).ravel()
+    if report_dof is None:
+        chi2 = float(np.sum((whiten @ misfit) ** 2))
+        dof = max(whiten.shape[0] - 8, 0)
+        p_value = float(chdtrc(dof, chi2)) if dof > 0 else float("nan")
+    else:
+        leave = np.eye(len(target)) - jac @ gain  # misfit = leave @ (theta_hat - theta) to first order
+        cov_misfit = leave @ reported @ leave.T
+        chi2, dof = _hotelling(misfit, cov_misfit, max_rank=min(len(target) - 8, report_dof))
+        big_b = report_dof
+        if dof > 0 and big_b - dof + 1 > 0:
+            p_value = float(fdtrc(dof, big_b - dof + 1, (big_b - dof + 1) * chi2 / (big_b * dof)))
+        else:
+            p_value = float("nan")
     return BaseFit(theta0=theta0, cov=0.5 * (cov0 + cov0.T), chi2=chi2, dof=dof, p_value=p_value)
+
+
+def _hotelling(misfit: np.ndarray, cov: np.ndarray, max_rank: int) -> tuple[float, int]:
+    """rho^T pinv(C) rho over the leading ``max_rank`` eigen-directions of C above 1e-12 of the largest."""
+    vals, vecs = np.linalg.eigh(0.5 * (cov + cov.T))
+    order = np.argsort(vals)[::-1][: max(max_rank, 0)]
+    keep = [i for i in order if vals[i] > max(vals.max(), 0.0) * 1e-12]
+    if not keep:
+        return 0.0, 0
+    proj = vecs[:, keep].T @ misfit
+    return float(np.sum(proj**2 / vals[keep])), len(keep)
 
 
 def jacobian_intermediate(theta0: np.ndarray, form: RegressorForm) -> np.ndarray:

@@ -96,7 +96,9 @@ def identify(
     form: Annotated[
         FormChoice, typer.Option(help="Regressor: paper (7 columns, wheels keep one sign), general (8), auto.")
     ] = FormChoice.auto,
-    k: Annotated[float, typer.Option("--k", help="Observer/filter gain k of Eqs. 26-30, 1/s (paper: 1).")] = 1.0,
+    k: Annotated[
+        float, typer.Option("--k", help="Observer/filter gain k of Eqs. 26-30, 1/s (paper: 1; see README).")
+    ] = 10.0,
     alpha: Annotated[
         float, typer.Option(help="Initial Gamma = alpha I (Eq. 33): weight of the start value (paper: 5000).")
     ] = 1e-6,

@@ -17,10 +17,11 @@ from wmrid import model
 from wmrid.base_params import derived_with_std, fit_base_parameters
 from wmrid.errors import NotIdentifiableError, UsageError
 from wmrid.model import THETA0_NAMES, THETA0_UNITS, RegressorForm
-from wmrid.observer import ObserverSettings, project_to_box
+from wmrid.observer import ObserverSettings
+from wmrid.observer_kernel import project_history_box
 from wmrid.replay import replay
 from wmrid.robot import Robot
-from wmrid.uncertainty import sandwich_covariance
+from wmrid.uncertainty import estimate_covariances, interval_factor
 
 #: Reported parameter names, in report order.
 REPORTED = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
@@ -180,7 +181,7 @@ def identify(
     robot: Robot | None = None,
     *,
     form: Literal["auto", "paper", "general"] = "auto",
-    k: float = 1.0,
+    k: float = 10.0,
     alpha: float = 1e-6,
     box_width: float = 10.0,
     max_history: int = 20000,
@@ -216,29 +217,35 @@ def identify(
     if not np.all(np.isfinite(theta_u)):
         raise NotIdentifiableError(f"{log.source}: the estimate diverged to non-finite values; check the log's units")
 
-    theta = project_to_box(theta_u, gamma, lo, hi)
-    theta_cov, bandwidth = sandwich_covariance(gamma_inv, out.blk_a, out.blk_c, theta_u)
-    fit = fit_base_parameters(theta, theta_cov, chosen)
+    theta = np.empty_like(theta_u)
+    project_history_box(theta_u[None], gamma[None], lo, hi, theta[None])
+    duration = float(t[-1] - t[0])
+    block_mid = 0.5 * (t[np.concatenate(([0], out.block_end[:-1]))] + t[out.block_end]) - t[0]
+    theta_cov, weight_cov, unc = estimate_covariances(
+        gamma, gamma_inv, theta_u, out.blk_a, out.blk_c, block_mid / max(duration, 1e-300), duration
+    )
+    fit = fit_base_parameters(theta, weight_cov, chosen, report_cov=theta_cov, report_dof=unc["dof"])
     parameters = derived_with_std(fit.theta0, fit.cov)
     parameters = {name: parameters[name] for name in REPORTED}
 
     lam_hist = np.linalg.eigvalsh(out.hist_gamma)[:, 0]
-    h_theta = out.hist_theta.copy()
-    outside = np.any((h_theta < lo) | (h_theta > hi), axis=(1, 2))
-    for idx in np.flatnonzero(outside):
-        h_theta[idx] = project_to_box(h_theta[idx], out.hist_gamma[idx], lo, hi)
+    h_theta = np.empty_like(out.hist_theta)
+    project_history_box(out.hist_theta, out.hist_gamma, lo, hi, h_theta)
     history = History(t=t[out.hist_idx] - t[0], theta=h_theta, e=out.hist_e, lambda_min=lam_hist)
 
     diagnostics, warnings = _diagnose(
         gamma, alpha, chosen, fit, parameters, theta, theta_u, theta_cov, theta_init, lo, hi
     )
+    dof = unc["dof"]
     diagnostics["uncertainty"] = {
-        "method": "sandwich P S P, S = Bartlett long-run covariance of block scores (Andrews AR(1) bandwidth)",
+        "method": "delete-a-segment jackknife over contiguous segments of the log",
+        "segments": unc["segments"],
+        "dof": dof,
+        "interval_factor": {"95%": interval_factor(0.95, dof), "99.7%": interval_factor(0.9973, dof)},
+        "meaning": "value +/- interval_factor * std covers the truth with that probability (Student t, dof)",
         "blocks": int(len(out.block_end)),
-        "bandwidth_blocks": bandwidth,
-        "block_seconds": float((t[-1] - t[0]) / len(out.block_end)),
+        "block_seconds": float(duration / len(out.block_end)),
     }
-    duration = float(t[-1] - t[0])
     rms_e = np.sqrt(out.blk_ee.sum(axis=0) / duration) if duration > 0 else np.zeros(2)
     diagnostics["prediction_error_rms"] = {"eta_r": float(rms_e[0]), "eta_l": float(rms_e[1]), "unit": "rad/s"}
     steps = np.diff(t)

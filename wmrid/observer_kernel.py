@@ -173,3 +173,124 @@ def observer_chunk(t, eta, tau, offset, kind, zoh, k, st, w, g_prev, theta, gamm
             hi += 1
     cursor[0] = hi
     cursor[1] = bj
+
+
+@numba.njit(cache=True, nogil=True)
+def project_row_box(x0, gamma, lo, hi, out):
+    """argmin over lo <= x <= hi of (x - x0)^T gamma (x - x0) into ``out`` (p,); gamma SPD (p, p).
+
+    The primal active-set method for a convex quadratic with bounds (Nocedal & Wright, Alg. 16.3):
+    start at the clipped point, solve the equality-constrained problem on the free set, step to the
+    first blocking bound or release the bound whose multiplier has the wrong sign.  Finite and exact
+    (to rounding) for the p <= 8 of the regressor; returns x0 itself when it lies inside the box.
+    Returns the number of iterations (-1 if the iteration cap was hit).
+    """
+    p = x0.shape[0]
+    inside = True
+    for j in range(p):
+        if x0[j] < lo[j] or x0[j] > hi[j]:
+            inside = False
+    if inside:
+        for j in range(p):
+            out[j] = x0[j]
+        return 0
+    # state: 0 free, -1 at lower bound, +1 at upper bound
+    state = np.zeros(p, dtype=np.int64)
+    x = np.empty(p)
+    for j in range(p):
+        if x0[j] < lo[j]:
+            x[j] = lo[j]
+            state[j] = -1
+        elif x0[j] > hi[j]:
+            x[j] = hi[j]
+            state[j] = 1
+        else:
+            x[j] = x0[j]
+    target = np.empty(p)
+    for it in range(1, 20 * p + 20):
+        # Equality-constrained minimiser on the free set F: gamma_FF (y_F - x0_F) = -gamma_FA (x_A - x0_A)
+        nf = 0
+        for j in range(p):
+            if state[j] == 0:
+                nf += 1
+        for j in range(p):
+            target[j] = x[j]
+        if nf > 0:
+            free = np.empty(nf, dtype=np.int64)
+            c = 0
+            for j in range(p):
+                if state[j] == 0:
+                    free[c] = j
+                    c += 1
+            a = np.empty((nf, nf))
+            rhs = np.empty(nf)
+            for r in range(nf):
+                s = 0.0
+                for j in range(p):
+                    if state[j] != 0:
+                        s -= gamma[free[r], j] * (x[j] - x0[j])
+                rhs[r] = s
+                for q in range(nf):
+                    a[r, q] = gamma[free[r], free[q]]
+            sol = np.linalg.solve(a, rhs)
+            for r in range(nf):
+                target[free[r]] = x0[free[r]] + sol[r]
+        # Step from x towards target, stopped by the first free variable that would leave the box.
+        step = 1.0
+        block = -1
+        for j in range(p):
+            if state[j] != 0:
+                continue
+            d = target[j] - x[j]
+            if d < 0.0 and target[j] < lo[j]:
+                frac = (lo[j] - x[j]) / d
+                if frac < step:
+                    step, block = frac, j
+            elif d > 0.0 and target[j] > hi[j]:
+                frac = (hi[j] - x[j]) / d
+                if frac < step:
+                    step, block = frac, j
+        for j in range(p):
+            if state[j] == 0:
+                x[j] = x[j] + step * (target[j] - x[j])
+        if block >= 0:
+            if target[block] < lo[block]:
+                x[block] = lo[block]
+                state[block] = -1
+            else:
+                x[block] = hi[block]
+                state[block] = 1
+            continue
+        # At the minimiser on this active set: release the bound with the most negative multiplier.
+        worst = 0.0
+        release = -1
+        for j in range(p):
+            if state[j] == 0:
+                continue
+            grad = 0.0
+            for q in range(p):
+                grad += gamma[j, q] * (x[q] - x0[q])
+            # multiplier >= 0 means the bound holds the point: grad >= 0 at a lower, <= 0 at an upper bound
+            mult = grad if state[j] == -1 else -grad
+            if mult < worst:
+                worst, release = mult, j
+        if release < 0:
+            for j in range(p):
+                out[j] = min(max(x[j], lo[j]), hi[j])
+            return it
+        state[release] = 0
+    for j in range(p):
+        out[j] = min(max(x[j], lo[j]), hi[j])
+    return -1
+
+
+@numba.njit(cache=True, nogil=True)
+def project_history_box(theta, gamma, lo, hi, out):
+    """Project each history entry theta (m, 2, p) with its gamma (m, p, p) onto the box, into ``out``."""
+    worst = 0
+    for i in range(theta.shape[0]):
+        for r in range(theta.shape[1]):
+            it = project_row_box(theta[i, r], gamma[i], lo[r], hi[r], out[i, r])
+            if it < 0:
+                worst = -1
+    return worst

@@ -2,17 +2,37 @@
 
 The estimator is a least-squares fit of u = w theta (see :mod:`wmrid.observer`), so at the end
 theta_hat = P (alpha theta_0 + sum h w^T u), P = Gamma^-1, and theta_hat - theta = P sum h w^T r
-with r the residual.  The residual is filtered by 1/(s + k) and carries coloured disturbances (a
-caster, slip), so successive terms are strongly correlated and the textbook sigma^2 P understates
-the spread.  wmrid uses the sandwich P S P with S the long-run covariance of the score
-z = h w^T r, estimated by the Bartlett (Newey-West) kernel over short blocks of the log, with the
-bandwidth chosen by Andrews' (1991) AR(1) plug-in rule.  The block sums come from the compiled
-kernel, so nothing here scales with the number of samples.
+with r the residual.  The residual carries coloured disturbances (a caster, slip) and, in closed
+loop, the regressor responds to them, so successive terms are correlated over seconds and the
+textbook sigma^2 P understates the spread many times over.
+
+wmrid reports the delete-a-group jackknife over G contiguous segments of the log: the estimate is
+recomputed with each segment left out, theta_(g) = (Gamma - A_g)^-1 (b - c_g), exactly and without a
+second pass, from the per-block sums A_g = sum h w^T w and c_g = sum h w^T u that the compiled kernel
+keeps; then Cov = (G - 1)/G sum_g (theta_(g) - mean)(theta_(g) - mean)^T.  Segments of 2 s (at least 10,
+at most 40 of them) are long against the memory of the scores, and the t-statistic built on the
+jackknife follows Student's t with G - 1 degrees of freedom, so intervals have a stated coverage
+(:func:`interval_factor`).  Unlike a kernel (Newey-West) estimate of the score's long-run covariance,
+the jackknife also sees how much the fit itself absorbs of a persistent disturbance, which matters on
+short logs: on simulated noisy 40 s logs with a coloured caster disturbance in closed loop
+(``bench/coverage.py``), Newey-West with Andrews' bandwidth understated the spread 2-4 times, an
+equal-weighted-cosine estimate 1.2-1.6 times, the jackknife 1.0-1.4 times.
+
+The Newey-West estimate (Bartlett kernel, Andrews' AR(1) bandwidth) is still used, for the weights of
+the minimum-distance recovery of theta0 (:mod:`wmrid.base_params`): it is full rank, whereas the
+jackknife has rank G - 1, and weights only affect efficiency, not the validity of the reported errors.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+#: Jackknife segment length (s) and bounds on the number of segments.
+SEGMENT_SECONDS = 2.0
+MIN_SEGMENTS = 10
+MAX_SEGMENTS = 40
 
 
 def block_scores(blk_a: np.ndarray, blk_c: np.ndarray, theta: np.ndarray) -> np.ndarray:
@@ -57,13 +77,57 @@ def long_run_covariance(z: np.ndarray, bandwidth: float) -> np.ndarray:
     return s * dof_scale
 
 
-def sandwich_covariance(
-    gamma_inv: np.ndarray, blk_a: np.ndarray, blk_c: np.ndarray, theta: np.ndarray
-) -> tuple[np.ndarray, float]:
-    """Covariance (2p, 2p) of theta.ravel() (theta (2, p)) and the bandwidth used (blocks)."""
+def segment_count(duration: float, n_blocks: int) -> int:
+    """Number G of jackknife segments for a log of ``duration`` s cut into ``n_blocks`` blocks."""
+    g = int(math.floor(duration / SEGMENT_SECONDS))
+    g = min(max(g, MIN_SEGMENTS), MAX_SEGMENTS)
+    return max(2, min(g, n_blocks))
+
+
+def jackknife_covariance(
+    gamma: np.ndarray, theta: np.ndarray, blk_a: np.ndarray, blk_c: np.ndarray, segment: np.ndarray, n_segments: int
+) -> np.ndarray:
+    """Delete-a-group jackknife covariance (2p, 2p) of theta.ravel().
+
+    gamma (p, p) the final Gamma, theta (2, p) the final unconstrained estimate (so gamma theta^T is the
+    right-hand side of the normal equations), blk_a (J, p, p), blk_c (J, 2, p) per-block sums,
+    segment (J,) the segment index of each block in [0, n_segments).
+    """
+    rhs = gamma @ theta.T  # (p, 2)
+    deltas = np.empty((n_segments, theta.size))
+    for g in range(n_segments):
+        sel = segment == g
+        a_g = blk_a[sel].sum(axis=0)
+        c_g = blk_c[sel].sum(axis=0)
+        theta_g = np.linalg.solve(gamma - a_g, rhs - c_g.T).T
+        deltas[g] = (theta_g - theta).ravel()
+    centred = deltas - deltas.mean(axis=0)
+    return (n_segments - 1) / n_segments * (centred.T @ centred)
+
+
+def interval_factor(coverage: float, dof: int) -> float:
+    """Half-width of a central ``coverage`` interval in standard errors: Student's t quantile with ``dof``."""
+    from scipy.special import stdtrit
+
+    return float(stdtrit(dof, 0.5 + coverage / 2.0))
+
+
+def estimate_covariances(
+    gamma: np.ndarray, gamma_inv: np.ndarray, theta: np.ndarray, blk_a: np.ndarray, blk_c: np.ndarray,
+    block_mid: np.ndarray, duration: float,
+) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Covariances (2p, 2p) of theta.ravel() (theta (2, p), unconstrained): (reported, weighting, details).
+
+    reported: the jackknife over segments; weighting: the Newey-West sandwich P S P (full rank);
+    details: ``dof`` = G - 1, ``segments`` = G, ``bandwidth_blocks``.  block_mid (J,) are the blocks'
+    mid-times in [0, 1] of the log.
+    """
+    n_seg = segment_count(duration, len(block_mid))
+    segment = np.minimum((np.asarray(block_mid) * n_seg).astype(np.int64), n_seg - 1)
+    reported = jackknife_covariance(gamma, theta, blk_a, blk_c, segment, n_seg)
     z = block_scores(blk_a, blk_c, theta)
     bandwidth = andrews_bandwidth(z)
-    s = long_run_covariance(z, bandwidth)
     big_p = np.kron(np.eye(2), gamma_inv)
-    cov = big_p @ s @ big_p
-    return 0.5 * (cov + cov.T), bandwidth
+    weighting = big_p @ long_run_covariance(z, bandwidth) @ big_p
+    details = {"dof": n_seg - 1, "segments": n_seg, "bandwidth_blocks": bandwidth}
+    return 0.5 * (reported + reported.T), 0.5 * (weighting + weighting.T), details
