@@ -70,3 +70,25 @@ def test_inconsistent_theta_gives_large_mismatch():
     cov = np.diag((1e-4 * np.abs(theta.ravel())) ** 2)
     fit = fit_base_parameters(bad, cov, form)
     assert fit.p_value < 1e-6
+
+
+@pytest.mark.parametrize("form", FORMS, ids=["paper", "paper-left-backwards", "general"])
+def test_gauss_newton_matches_scipy_least_squares(form):
+    from scipy.optimize import least_squares
+
+    from wmrid.base_params import _whitener, gauss_newton
+
+    rng = np.random.default_rng(11)
+    theta = model.intermediate_parameters(model.base_parameters(PAPER_CAD), form)
+    noisy = theta * (1 + 0.01 * rng.standard_normal(theta.shape))  # not of the model's form
+    cov = np.diag((1e-3 * np.abs(theta.ravel()) + 1e-6) ** 2)
+    whiten = _whitener(cov)
+    start = direct_recovery(noisy, form)
+    got = gauss_newton(start, whiten, noisy.ravel(), form)
+
+    def residual(x):
+        return whiten @ (model.intermediate_parameters(x, form).ravel() - noisy.ravel())
+
+    ref = least_squares(residual, start, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+    np.testing.assert_allclose(got, ref, rtol=1e-9)
+    assert np.sum(residual(got) ** 2) <= np.sum(residual(ref) ** 2) * (1 + 1e-12)

@@ -350,10 +350,23 @@ def _read_parquet(source: _Source, mapping: dict[str, str], explicit: set[str]) 
             if arr.null_count:
                 values[key] = arr.to_numpy(zero_copy_only=False).astype(np.float64)  # nulls -> NaN
             else:
-                values[key] = arr.to_numpy(zero_copy_only=False)
+                values[key] = _primitive_to_numpy(arr)
         else:
             values[key] = arr.to_pandas()  # strings, bools, decimals...: checked cell by cell below
     return _Raw(values, lambda i: f"row {i + 1}", notes, hint)
+
+
+def _primitive_to_numpy(arr: Any) -> np.ndarray:
+    """A numeric Arrow array without nulls as a numpy view of its data buffer.
+
+    ``pyarrow.Array.to_numpy`` imports pandas (a third of a second); the data buffer of a primitive
+    array is already the numpy layout.
+    """
+    import pyarrow as pa
+
+    kind = "f" if pa.types.is_floating(arr.type) else "i" if pa.types.is_signed_integer(arr.type) else "u"
+    dtype = np.dtype(f"{kind}{arr.type.bit_width // 8}")
+    return np.frombuffer(arr.buffers()[1], dtype=dtype, count=len(arr), offset=arr.offset * dtype.itemsize)
 
 
 # ---- CSV
@@ -508,10 +521,10 @@ def _series_values(series: pandas.Series) -> Any:
 
 def _numeric(values: Any, key: str, col: str, name: str, where: Callable[[int], str]) -> np.ndarray:
     """A numeric numpy array (int or float) or a LogFormatError naming the first non-numeric cell."""
-    import pandas as pd
-
     if isinstance(values, np.ndarray) and values.dtype.kind in "iuf":
         return values
+    import pandas as pd  # only for non-numeric columns: keeps a numeric Parquet read free of pandas
+
     series = pd.Series(values)
     if series.dtype.kind == "b":
         raise LogFormatError(f"{name}: column {col!r} holds true/false values; map {key} to a numeric column")

@@ -54,8 +54,14 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
     )
     diag = result.diagnostics
     console.print(
-        f"lambda_min(Gamma) = {diag['lambda_min_gamma']:.3g}; structural mismatch chi2 = "
-        f"{diag['structural_mismatch']['chi2']:.3g} on {diag['structural_mismatch']['dof']} dof"
+        f"lambda_min(Gamma) = {diag['lambda_min_gamma']:.3g}; structural mismatch p = "
+        f"{diag['structural_mismatch']['p_value']:.2g} ({diag['structural_mismatch']['dof']} directions)"
+    )
+    unc = diag["uncertainty"]
+    console.print(
+        f"std: jackknife over {unc['segments']} segments of the log ({unc['dof']} dof); "
+        f"estimate ± {unc['interval_factor']['95%']:.2f} std covers the truth with 95 % probability, "
+        f"± {unc['interval_factor']['99.7%']:.2f} std with 99.7 %"
     )
     for note in info["notes"]:
         console.print(f"note: {note}")

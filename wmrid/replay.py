@@ -46,13 +46,13 @@ def layout(t: np.ndarray, k: float, max_history: int) -> tuple[np.ndarray, np.nd
     """History sample indices (m,) and block end indices (J,).
 
     Blocks last about min(0.1 s, 0.1/k): well below the residual correlation time 1/k, so the long-run
-    covariance sees the correlation; at most 65536 blocks.
+    covariance sees the correlation; at most 16384 blocks.
     """
     n = len(t)
     hist = np.unique(np.linspace(0, n - 1, max(1, min(n, max_history))).round().astype(np.int64))
     duration = float(t[-1] - t[0])
     block_time = min(0.1, 0.1 / k)
-    n_blocks = int(min(max(duration / block_time, 1), 65536, max(n - 1, 1)))
+    n_blocks = int(min(max(duration / block_time, 1), 16384, max(n - 1, 1)))
     ends = np.unique(np.linspace(0, n - 1, n_blocks + 1).round().astype(np.int64)[1:])
     return hist, ends
 

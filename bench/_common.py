@@ -1,0 +1,77 @@
+"""Shared helpers for the bench/ scripts (not a benchmark itself).
+
+Paths, the command that runs the installed ``wmrid`` CLI, subprocess timing under ``/usr/bin/time -v``
+(for peak RSS), and generation of seeded simulated logs through the wmrid API.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import statistics
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+BENCH = Path(__file__).resolve().parent
+ROOT = BENCH.parent
+OUT = BENCH / "out"
+GNU_TIME = "/usr/bin/time" if os.access("/usr/bin/time", os.X_OK) else None
+
+
+def wmrid_cmd() -> list[str]:
+    """The console script next to this interpreter (the venv's ``wmrid``), else ``python -m wmrid``."""
+    exe = Path(sys.executable).with_name("wmrid")
+    return [str(exe)] if exe.exists() else [sys.executable, "-m", "wmrid"]
+
+
+@dataclass
+class Run:
+    wall: float  # s, measured by this process around the subprocess (process start included)
+    rss_mb: float | None  # peak resident set size of the child, MB (None without /usr/bin/time)
+    stdout: str
+
+
+def run_timed(cmd: list[str], *, cwd: Path = ROOT) -> Run:
+    """Run ``cmd`` once, under ``/usr/bin/time -v`` when available; raise with its stderr if it fails."""
+    full = [GNU_TIME, "-v", *cmd] if GNU_TIME else cmd
+    t0 = time.perf_counter()
+    proc = subprocess.run(full, cwd=cwd, capture_output=True, text=True, stdin=subprocess.DEVNULL)
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise SystemExit(f"command failed ({proc.returncode}): {' '.join(cmd)}\n{proc.stderr[-2000:]}")
+    rss = None
+    m = re.search(r"Maximum resident set size \(kbytes\): (\d+)", proc.stderr)
+    if m:
+        rss = int(m.group(1)) / 1024
+    return Run(wall, rss, proc.stdout)
+
+
+def median(xs: list[float]) -> float:
+    return statistics.median(xs)
+
+
+def fmt_rss(rss: float | None) -> str:
+    return "n/a" if rss is None else f"{rss:,.0f}"
+
+
+def sim_log(duration: float, rate: float = 1000.0, seed: int = 1, suffix: str = ".parquet") -> Path:
+    """A noisy ``paper`` sinusoid log (t, eta_r, eta_l, tau_r, tau_l) in bench/out/, generated if missing."""
+    path = OUT / f"paper_sinusoid_{duration:g}s_{rate:g}hz_seed{seed}{suffix}"
+    if path.exists():
+        return path
+    from wmrid.logio import write_log
+    from wmrid.robot import BUILTIN_ROBOTS
+    from wmrid.simulate import NoiseSettings, simulate
+
+    OUT.mkdir(parents=True, exist_ok=True)
+    print(f"generating {path.relative_to(ROOT)} ...", end=" ", flush=True)
+    t0 = time.perf_counter()
+    r = BUILTIN_ROBOTS["paper"]
+    noise = NoiseSettings(eta_std=0.01, tau_std=0.02, caster_std=0.05)
+    sim = simulate(r.reference, r.nominal, trajectory="sinusoid", duration=duration, rate=rate, noise=noise, seed=seed)
+    write_log(sim.to_frame()[["t", "eta_r", "eta_l", "tau_r", "tau_l"]], str(path), force=True)
+    print(f"{len(sim.t):,} samples in {time.perf_counter() - t0:.1f} s", flush=True)
+    return path
