@@ -99,7 +99,7 @@ def test_identify_writes_json_file_atomically_and_refuses_to_overwrite(tmp_path)
 def test_paper_settings_are_reproducible_by_flags_and_warn_when_they_do_not_converge():
     out = identify_json(str(SAMPLE_CSV), "--robot", "paper", "--k", "1", "--alpha", "5000")
     assert out["settings"]["alpha"] == 5000 and out["settings"]["k"] == 1
-    assert any("start value still pulls" in w for w in out["warnings"])
+    assert any("start value, not the data, sets them" in w for w in out["warnings"])
 
 
 def test_missing_column_is_a_one_line_error(tmp_path):

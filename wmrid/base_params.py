@@ -21,6 +21,7 @@ model (slip, unmodelled friction, a wrong sign convention...).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,6 +41,7 @@ class BaseFit:
     chi2: float
     dof: int
     p_value: float
+    gain: np.ndarray  # (8, 2p): d theta0* / d theta_hat.ravel() at the optimum
 
 
 def direct_recovery(theta: np.ndarray, form: RegressorForm) -> np.ndarray:
@@ -109,7 +111,7 @@ def fit_base_parameters(
             p_value = float(fdtrc(dof, big_b - dof + 1, (big_b - dof + 1) * chi2 / (big_b * dof)))
         else:
             p_value = float("nan")
-    return BaseFit(theta0=theta0, cov=0.5 * (cov0 + cov0.T), chi2=chi2, dof=dof, p_value=p_value)
+    return BaseFit(theta0=theta0, cov=0.5 * (cov0 + cov0.T), chi2=chi2, dof=dof, p_value=p_value, gain=gain)
 
 
 def gauss_newton(start: np.ndarray, whiten: np.ndarray, target: np.ndarray, form: RegressorForm) -> np.ndarray:
@@ -185,7 +187,7 @@ def jacobian_intermediate(theta0: np.ndarray, form: RegressorForm) -> np.ndarray
 def derived_with_std(theta0: np.ndarray, cov0: np.ndarray) -> dict[str, tuple[float, float]]:
     """Named base parameters plus M = m^-1, each (value, std) by the delta method (exact Jacobian of M)."""
     names = ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
-    std0 = np.sqrt(np.clip(np.diag(cov0), 0.0, None))
+    std0 = np.sqrt(np.clip(np.diag(cov0), 0.0, None))  # inf stays inf: a parameter the log does not determine
     out = {n: (float(v), float(s)) for n, v, s in zip(names, theta0, std0)}
     m = inverse_inertia(theta0)
     big_m = np.linalg.inv(m)
@@ -195,7 +197,9 @@ def derived_with_std(theta0: np.ndarray, cov0: np.ndarray) -> dict[str, tuple[fl
     for q, d in enumerate(basis):
         dbig = -big_m @ d @ big_m
         jac[:, q] = [dbig[0, 0], dbig[0, 1], dbig[1, 1]]
-    cov_m = jac @ cov0 @ jac.T
+    finite = np.all(np.isfinite(cov0[:3, :3]))
+    cov_m = jac @ np.where(np.isfinite(cov0), cov0, 0.0) @ jac.T
     for idx, (name, value) in enumerate((("M11", big_m[0, 0]), ("M12", big_m[0, 1]), ("M22", big_m[1, 1]))):
-        out[name] = (float(value), float(np.sqrt(max(cov_m[idx, idx], 0.0))))
+        std = float(np.sqrt(max(cov_m[idx, idx], 0.0))) if finite else math.inf
+        out[name] = (float(value), std)
     return out

@@ -101,7 +101,7 @@ def identify(
     ] = 10.0,
     alpha: Annotated[
         float, typer.Option(help="Initial Gamma = alpha I (Eq. 33): weight of the start value (paper: 5000).")
-    ] = 1e-6,
+    ] = 1e-10,
     box_width: Annotated[
         float,
         typer.Option(help="Half-width of the parameter box around the nominal values, in units of max(|theta|, m_ii)."),

@@ -32,6 +32,9 @@ POORLY_DETERMINED = 0.1
 #: MISMATCH_RELEVANT of max |theta|.
 MISMATCH_P = 1e-3
 MISMATCH_RELEVANT = 1e-5
+#: A base parameter is not determined by the log when the start value sets it (start_sensitivity) more
+#: than the data's standard error and more than this fraction of its value.
+START_RELEVANT = 1e-4
 #: Two base parameters whose estimates correlate beyond this are called not separable.
 NOT_SEPARABLE = 0.98
 
@@ -186,7 +189,7 @@ def identify(
     *,
     form: Literal["auto", "paper", "general"] = "auto",
     k: float = 10.0,
-    alpha: float = 1e-6,
+    alpha: float = 1e-10,
     box_width: float = 10.0,
     max_history: int = 20000,
     torque_hold: Literal["zoh", "foh"] = "zoh",
@@ -229,7 +232,16 @@ def identify(
         gamma, gamma_inv, theta_u, out.blk_a, out.blk_c, block_mid / max(duration, 1e-300), duration
     )
     fit = fit_base_parameters(theta, weight_cov, chosen, report_cov=theta_cov, report_dof=unc["dof"])
-    parameters = derived_with_std(fit.theta0, fit.cov)
+    sens = start_sensitivity(gamma, gamma_inv, alpha, theta_init, theta_u, fit.gain)
+    std_data = np.sqrt(np.clip(np.diag(fit.cov), 0.0, None))
+    undetermined = [
+        j for j in range(8) if sens[j] > std_data[j] and sens[j] > START_RELEVANT * abs(fit.theta0[j])
+    ]  # fmt: skip
+    cov0 = fit.cov + np.diag(sens**2)
+    for j in undetermined:
+        cov0[j, :] = cov0[:, j] = np.nan
+        cov0[j, j] = np.inf
+    parameters = derived_with_std(fit.theta0, cov0)
     parameters = {name: parameters[name] for name in REPORTED}
 
     lam_hist = np.linalg.eigvalsh(out.hist_gamma)[:, 0]
@@ -238,7 +250,7 @@ def identify(
     history = History(t=t[out.hist_idx] - t[0], theta=h_theta, e=out.hist_e, lambda_min=lam_hist)
 
     diagnostics, warnings = _diagnose(
-        gamma, alpha, chosen, fit, parameters, theta, theta_u, theta_cov, theta_init, lo, hi
+        gamma, alpha, chosen, fit, parameters, theta, theta_cov, sens, undetermined, lo, hi
     )
     dof = unc["dof"]
     diagnostics["uncertainty"] = {
@@ -273,8 +285,38 @@ def identify(
     )  # fmt: skip
 
 
+#: A base parameter is not determined by the log when the start value moves it by more than its
+#: standard error and by more than this fraction of its value.
+START_RELEVANT = 1e-4
+
+
+def start_sensitivity(
+    gamma: np.ndarray, gamma_inv: np.ndarray, alpha: float, theta_init: np.ndarray, theta_u: np.ndarray,
+    gain: np.ndarray,
+) -> np.ndarray:
+    """How much the start value sets each base parameter, (8,) in its units.
+
+    The final estimate is exactly Gamma^-1 (alpha theta_init + data) (see wmrid.observer), so its
+    sensitivity to the start is alpha Gamma^-1: about 0 along directions the log excites, the identity
+    along directions it does not (where Gamma's data part is 0 and the estimate IS the start).  A start
+    wrong by 100 % of max(|theta_init|, |theta_hat|) in each entry, independently, then moves theta0 by
+    the returned standard deviation (propagated with the minimum-distance gain (8, 2p)).
+    """
+    sens_theta = alpha * gamma_inv  # (p, p)
+    if not np.all(np.isfinite(sens_theta)):
+        return np.full(8, np.inf)
+    plausible = np.maximum(np.abs(theta_init), np.abs(theta_u))  # (2, p)
+    per_row = [sens_theta * plausible[i][None, :] for i in range(2)]  # (p, p) each: d theta_i / d start_i
+    big = np.zeros((2 * gamma.shape[0], 2 * gamma.shape[0]))
+    p = gamma.shape[0]
+    big[:p, :p] = per_row[0]
+    big[p:, p:] = per_row[1]
+    effect = gain @ big  # (8, 2p)
+    return np.sqrt(np.sum(effect**2, axis=1))
+
+
 def _diagnose(
-    gamma, alpha, form, fit, parameters, theta, theta_u, theta_cov, settings_init, lo, hi
+    gamma, alpha, form, fit, parameters, theta, theta_cov, sens, undetermined, lo, hi
 ) -> tuple[dict[str, Any], list[str]]:
     """Excitation and consistency diagnostics, and the warnings they call for.
 
@@ -310,7 +352,7 @@ def _diagnose(
     pairs = []
     for idx, name in enumerate(THETA0_NAMES):
         value, std = parameters[name]
-        if math.isfinite(std) and std <= POORLY_DETERMINED * abs(value):
+        if idx in undetermined or (math.isfinite(std) and std <= POORLY_DETERMINED * abs(value)):
             continue
         poorly.append(name)
         partners = [
@@ -326,21 +368,12 @@ def _diagnose(
     ]
     if at_bound:
         warnings.append(f"estimate held on the box boundary for {', '.join(at_bound)}")
-    # With no disturbance the estimate is exactly theta + alpha Gamma^-1 (theta_init - theta) (see
-    # wmrid.observer), so the start's remaining pull is -alpha Gamma_data^-1 (theta_hat - theta_init).
-    try:
-        pull = -alpha * np.linalg.solve(info, (theta_u - settings_init).T).T
-    except np.linalg.LinAlgError:
-        pull = np.full_like(theta_u, np.inf)
-    theta_std = np.sqrt(np.clip(np.diag(theta_cov), 0, None)).reshape(theta_u.shape)
-    dominated = [
-        n for n, b, s, v in zip(form.theta_names(), pull.ravel(), theta_std.ravel(), theta_u.ravel())
-        if not math.isfinite(b) or abs(b) > max(s, 1e-3 * abs(v))
-    ]
-    if dominated:
-        warnings.append(
-            f"the start value still pulls the estimate (alpha = {alpha:g} is not small against what the log "
-            f"tells about {', '.join(dominated)}): lower --alpha or use a longer, more exciting log"
+    if undetermined:
+        names = ", ".join(THETA0_NAMES[j] for j in undetermined)
+        warnings.insert(
+            0,
+            f"this log does not determine {names}: the start value, not the data, sets them (alpha = {alpha:g}), "
+            "so their std is null; record a longer log that varies speeds and turning more, or lower --alpha",
         )
     fitted = model.intermediate_parameters(fit.theta0, form)
     rel_mismatch = float(np.max(np.abs(fitted - theta)) / max(np.max(np.abs(theta)), 1e-300))
@@ -359,9 +392,10 @@ def _diagnose(
         "condition_number_scaled": cond,
         "weakest_directions": weakest,
         "poorly_determined": poorly,
+        "undetermined": [THETA0_NAMES[j] for j in undetermined],
         "not_separable": pairs,
         "at_box_boundary": at_bound,
-        "start_pull_max_relative": float(np.max(np.abs(pull)) / max(np.max(np.abs(theta_u)), 1e-300)),
+        "start_sensitivity": {name: float(v) for name, v in zip(THETA0_NAMES, sens, strict=True)},
         "structural_mismatch": {
             "statistic": fit.chi2, "dof": fit.dof, "p_value": fit.p_value, "relative_misfit": rel_mismatch,
             "meaning": "Hotelling T2 of the misfit of theta to the model's form (Eqs. 23-24) on dof directions; "

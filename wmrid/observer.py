@@ -92,7 +92,7 @@ class ObserverSettings:
     theta_min: np.ndarray
     theta_max: np.ndarray
     k: float = 1.0
-    alpha: float = 1e-6
+    alpha: float = 1e-10
     torque_hold: str = "zoh"
 
     def __post_init__(self) -> None:
