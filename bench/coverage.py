@@ -31,8 +31,12 @@ from wmrid.simulate import NoiseSettings, simulate
 
 def one_seed(seed: int, args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     robot = BUILTIN_ROBOTS["paper"]
-    noise = NoiseSettings(eta_std=args.eta_noise, tau_std=args.tau_noise, caster_std=args.caster, caster_time=args.caster_time)
-    sim = simulate(robot.reference, robot.nominal, trajectory=args.trajectory, duration=args.duration, noise=noise, seed=seed)
+    noise = NoiseSettings(
+        eta_std=args.eta_noise, tau_std=args.tau_noise, caster_std=args.caster, caster_time=args.caster_time
+    )
+    sim = simulate(
+        robot.reference, robot.nominal, trajectory=args.trajectory, duration=args.duration, noise=noise, seed=seed
+    )
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source=f"seed {seed}", notes=())
     kwargs = {} if args.k is None else {"k": args.k}
     result = identify(log, robot, **kwargs)
@@ -70,10 +74,9 @@ def main() -> None:
         f"{args.seeds} seeds, {args.trajectory}, {args.duration:g} s at 1 kHz, eta noise {args.eta_noise} rad/s, "
         f"tau noise {args.tau_noise} N m, caster {args.caster} N m / {args.caster_time} s; {wall:.1f} s wall"
     )
-    print(
-        f"nominal coverage with t({dof}): +/-2 std {2 * stdtr(dof, 2.0) - 1:.3f}, +/-3 std {2 * stdtr(dof, 3.0) - 1:.3f}"
-    )
-    print(f"| param | within 2 std | within 3 std | mean z | std z | rms rel err % | worst rel err % |")
+    two, three = 2 * stdtr(dof, 2.0) - 1, 2 * stdtr(dof, 3.0) - 1
+    print(f"nominal coverage with t({dof}): +/-2 std {two:.3f}, +/-3 std {three:.3f}")
+    print("| param | within 2 std | within 3 std | mean z | std z | rms rel err % | worst rel err % |")
     print("|---|---|---|---|---|---|---|")
     for j, name in enumerate(THETA0_NAMES):
         zz = z[:, j]
@@ -81,9 +84,7 @@ def main() -> None:
             f"| {name} | {np.mean(np.abs(zz) < 2):.2f} | {np.mean(np.abs(zz) < 3):.2f} | {zz.mean():+.2f} | "
             f"{zz.std():.2f} | {100 * np.sqrt(np.mean(rel[:, j] ** 2)):.3g} | {100 * np.max(np.abs(rel[:, j])):.3g} |"
         )
-    print(
-        f"| all | {np.mean(np.abs(z) < 2):.3f} | {np.mean(np.abs(z) < 3):.3f} | | | | |"
-    )
+    print(f"| all | {np.mean(np.abs(z) < 2):.3f} | {np.mean(np.abs(z) < 3):.3f} | | | | |")
 
 
 if __name__ == "__main__":

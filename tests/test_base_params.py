@@ -35,7 +35,9 @@ def test_jacobian_against_central_differences(form):
         up, down = theta0.copy(), theta0.copy()
         up[j] += step
         down[j] -= step
-        num[:, j] = (model.intermediate_parameters(up, form) - model.intermediate_parameters(down, form)).ravel() / (2 * step)
+        num[:, j] = (model.intermediate_parameters(up, form) - model.intermediate_parameters(down, form)).ravel() / (
+            2 * step
+        )
     # f is bilinear, so central differences are exact up to rounding (~1e-10 relative at this step).
     np.testing.assert_allclose(jac, num, rtol=1e-7, atol=1e-10)
 

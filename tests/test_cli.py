@@ -54,7 +54,8 @@ def test_identify_sample_log_json_recovers_the_truth():
     assert list(out["parameters"]) == REPORTED
     for name in REPORTED:
         entry = out["parameters"][name]
-        assert isinstance(entry["value"], float) and isinstance(entry["std"], float), name
+        assert isinstance(entry["value"], float), name
+        assert isinstance(entry["std"], float), name
         # The paper's worst is 0.234 %; this noise-free log is recovered far better (see README).
         assert entry["value"] == pytest.approx(truth[name], rel=5e-4), name
     assert {"theta", "diagnostics"} <= out.keys()
@@ -98,7 +99,8 @@ def test_identify_writes_json_file_atomically_and_refuses_to_overwrite(tmp_path)
 
 def test_paper_settings_are_reproducible_by_flags_and_warn_when_they_do_not_converge():
     out = identify_json(str(SAMPLE_CSV), "--robot", "paper", "--k", "1", "--alpha", "5000")
-    assert out["settings"]["alpha"] == 5000 and out["settings"]["k"] == 1
+    assert out["settings"]["alpha"] == 5000
+    assert out["settings"]["k"] == 1
     assert any("start value, not the data, sets them" in w for w in out["warnings"])
 
 
@@ -147,7 +149,8 @@ def test_debug_shows_the_traceback(tmp_path):
 def test_help_and_version():
     proc = wmrid("--help")
     assert proc.returncode == 0
-    assert b"identify" in proc.stdout and b"simulate" in proc.stdout
+    assert b"identify" in proc.stdout
+    assert b"simulate" in proc.stdout
     assert wmrid("--version").stdout.startswith(b"wmrid ")
 
 
@@ -166,7 +169,9 @@ def test_simulate_writes_log_and_truth_then_identify_recovers_it(tmp_path):
 
 def test_simulate_with_payload_changes_the_truth(tmp_path):
     log = tmp_path / "loaded.csv"
-    proc = wmrid("simulate", "-o", str(log), "--duration", "20", "--payload", "25@0.1,-0.05", "--payload-inertia", "0.4")
+    proc = wmrid(
+        "simulate", "-o", str(log), "--duration", "20", "--payload", "25@0.1,-0.05", "--payload-inertia", "0.4"
+    )
     assert proc.returncode == 0, proc.stderr.decode()
     sidecar = json.loads(Path(str(log) + ".truth.json").read_text())
     loaded = BUILTIN_ROBOTS["paper"].cad.with_payload(Payload(25.0, 0.1, -0.05, 0.4))

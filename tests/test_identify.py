@@ -72,7 +72,7 @@ def test_history_is_decimated_projected_and_ends_at_the_result(smooth_log):
     hist = result.history
     assert len(hist.t) == 500
     assert hist.theta.shape == (500, 2, result.form.n_columns)
-    lo, hi = result.diagnostics_box if hasattr(result, "diagnostics_box") else (None, None)
+    lo, _hi = result.diagnostics_box if hasattr(result, "diagnostics_box") else (None, None)
     assert np.all(np.diff(hist.t) > 0)
     # Gamma only grows; eigvalsh is accurate to about eps * lambda_max
     assert np.all(np.diff(hist.lambda_min) >= -1e-13 * result.diagnostics["lambda_max_gamma"])

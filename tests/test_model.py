@@ -35,7 +35,9 @@ def test_dx_is_in_metres_not_cm():
 def test_cad_column_by_hand():
     # Eqs. (10)-(14) evaluated by hand from Table 1's CAD ("true") column, digit by digit:
     # I = 4.98 + 60.9 (0.1781^2 + 0.0119^2) + 2 (0.03755 + 4.98 * 0.2286^2) + 2 (3.74e-5 + 0.0442 (0.075^2 + 0.107^2))
-    inertia = 4.98 + 60.9 * (0.03171961 + 0.00014161) + 2 * (0.03755 + 4.98 * 0.05225796) + 2 * (3.74e-5 + 0.0442 * 0.017074)
+    inertia = (
+        4.98 + 60.9 * (0.03171961 + 0.00014161) + 2 * (0.03755 + 4.98 * 0.05225796) + 2 * (3.74e-5 + 0.0442 * 0.017074)
+    )
     assert inertia == pytest.approx(7.5175217212, rel=1e-12)
     mass = 60.9 + 2 * 4.98 + 2 * 0.0442  # 70.9484
     c = 0.16**2 / (4 * 0.23**2)  # r^2 / 4b^2 = 0.0256 / 0.2116
@@ -60,11 +62,11 @@ def test_paper_true_values_disagree_with_its_table1():
     # V_c agrees to rounding of Table 1's inputs (3.4e-5 relative).
     assert abs(0.210090 / theta0[3] - 1) < 5e-5
     # Table 2's "true" theta_16, theta_26 use F_v1 = 0.01 where Eq. 23-24 need F_v2 = 0.015 ...
-    assert 0.246692 * 0.010 == pytest.approx(0.002467, abs=5e-7)
-    assert 0.754828 * 0.010 == pytest.approx(0.007549, abs=1e-6)  # one unit of the printed last digit
+    assert pytest.approx(0.002467, abs=5e-7) == 0.246692 * 0.010
+    assert pytest.approx(0.007549, abs=1e-6) == 0.754828 * 0.010  # one unit of the printed last digit
     # ... and theta_17, theta_27 use F_d = 0.04 for both wheels where F_d1 = 0.045.
-    assert (0.798475 + 0.246692) * 0.04 == pytest.approx(0.041807, abs=5e-7)
-    assert (0.246692 + 0.754828) * 0.04 == pytest.approx(0.040061, abs=5e-7)
+    assert pytest.approx(0.041807, abs=5e-7) == (0.798475 + 0.246692) * 0.04
+    assert pytest.approx(0.040061, abs=5e-7) == (0.246692 + 0.754828) * 0.04
     # Its own estimates follow Eqs. 23-24: 0.003696 is 0.1 % from m12 F_v2, not m12 F_v1.
     assert abs(0.003696 / (0.246692 * 0.015) - 1) < 2e-3
 
@@ -113,10 +115,14 @@ def test_coriolis_torque_matches_newton_euler():
     sx = p.m_p * p.d_x + 2 * p.m_r * p.c_x
     force, moment = -sx * w**2, sx * v * w
     expected = np.stack([p.r / 2 * force + p.r / (2 * p.b) * moment, p.r / 2 * force - p.r / (2 * p.b) * moment], 1)
-    np.testing.assert_allclose(model.coriolis_torque(eta, model.coriolis_coefficient(p)), expected, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(
+        model.coriolis_torque(eta, model.coriolis_coefficient(p)), expected, rtol=1e-12, atol=1e-12
+    )
 
 
-@pytest.mark.parametrize("form", [RegressorForm("paper", (1, 1)), RegressorForm("paper", (1, -1)), RegressorForm("general")])
+@pytest.mark.parametrize(
+    "form", [RegressorForm("paper", (1, 1)), RegressorForm("paper", (1, -1)), RegressorForm("general")]
+)
 def test_regressor_times_theta_is_the_direct_model(form):
     theta0 = model.base_parameters(PAPER_CAD)
     rng = np.random.default_rng(2)
@@ -134,7 +140,9 @@ def test_inverse_and_direct_models_agree():
     theta0 = model.base_parameters(PAPER_CAD)
     rng = np.random.default_rng(3)
     eta, acc = rng.normal(0, 3, (20, 2)), rng.normal(0, 1, (20, 2))
-    np.testing.assert_allclose(model.wheel_acceleration(eta, model.wheel_torque(eta, acc, theta0), theta0), acc, atol=1e-12)
+    np.testing.assert_allclose(
+        model.wheel_acceleration(eta, model.wheel_torque(eta, acc, theta0), theta0), acc, atol=1e-12
+    )
 
 
 def test_choose_form():
@@ -155,5 +163,8 @@ def test_named_base_inverts_m():
 
 def test_builtin_paper_robot():
     robot = BUILTIN_ROBOTS["paper"]
-    assert robot.cad.F_v1 == 0.01 and robot.cad.F_v2 == 0.015 and robot.cad.F_d1 == 0.045 and robot.cad.F_d2 == 0.04
+    assert robot.cad.F_v1 == 0.01
+    assert robot.cad.F_v2 == 0.015
+    assert robot.cad.F_d1 == 0.045
+    assert robot.cad.F_d2 == 0.04
     assert robot.nominal.F_v1 == 0.0  # Table 2's nominal friction entries are 0

@@ -61,7 +61,9 @@ def test_kernel_agrees_with_readable_step(reversing, uneven, hold):
     scale = np.max(np.abs(ref_state.theta))
     np.testing.assert_allclose(out.theta, ref_state.theta, rtol=0, atol=1e-12 * scale)
     np.testing.assert_allclose(out.gamma, ref_state.gamma, rtol=1e-12)
-    np.testing.assert_allclose(out.gamma_inv, ref_state.gamma_inv, rtol=0, atol=1e-12 * np.max(np.abs(ref_state.gamma_inv)))
+    np.testing.assert_allclose(
+        out.gamma_inv, ref_state.gamma_inv, rtol=0, atol=1e-12 * np.max(np.abs(ref_state.gamma_inv))
+    )
     np.testing.assert_allclose(out.hist_e, ref_e, rtol=0, atol=1e-12 * np.max(np.abs(log.eta)))
 
 
@@ -92,7 +94,10 @@ def test_estimator_is_recursive_least_squares_in_closed_form(smooth_log, hold):
         axis=1,
     )
     eta_f = np.stack(
-        [signal.lsim(signal.StateSpace(-k, k, 1.0, 0.0), log.eta[:, r], log.t, X0=[log.eta[0, r]], interp=True)[1] for r in range(2)],
+        [
+            signal.lsim(signal.StateSpace(-k, k, 1.0, 0.0), log.eta[:, r], log.t, X0=[log.eta[0, r]], interp=True)[1]
+            for r in range(2)
+        ],
         axis=1,
     )
     u = log.eta - eta_f
@@ -132,10 +137,11 @@ def test_projection_is_the_box_constrained_quadratic_minimum():
         theta = rng.normal(size=(2, 7))
         lo, hi = -0.5 * np.ones((2, 7)), 0.5 * np.ones((2, 7))
         got = project_to_box(theta, gamma, lo, hi)
-        assert np.all(got >= lo) and np.all(got <= hi)
+        assert np.all(got >= lo)
+        assert np.all(got <= hi)
         for i in range(2):
             res = optimize.minimize(
-                lambda x, i=i: (x - theta[i]) @ gamma @ (x - theta[i]), np.zeros(7), bounds=[(-0.5, 0.5)] * 7,
+                lambda x, i=i, th=theta, g=gamma: (x - th[i]) @ g @ (x - th[i]), np.zeros(7), bounds=[(-0.5, 0.5)] * 7,
                 method="L-BFGS-B", options={"ftol": 1e-15, "gtol": 1e-12, "maxiter": 10_000},
             )  # fmt: skip
             cost = (got[i] - theta[i]) @ gamma @ (got[i] - theta[i])
@@ -157,11 +163,17 @@ def test_settings_are_validated():
     form = RegressorForm("paper")
     good = _settings(form)
     with pytest.raises(ValueError, match="k"):
-        ObserverSettings(form=form, theta_init=good.theta_init, theta_min=good.theta_min, theta_max=good.theta_max, k=0.0)
+        ObserverSettings(
+            form=form, theta_init=good.theta_init, theta_min=good.theta_min, theta_max=good.theta_max, k=0.0
+        )
     with pytest.raises(ValueError, match="alpha"):
-        ObserverSettings(form=form, theta_init=good.theta_init, theta_min=good.theta_min, theta_max=good.theta_max, alpha=-1)
+        ObserverSettings(
+            form=form, theta_init=good.theta_init, theta_min=good.theta_min, theta_max=good.theta_max, alpha=-1
+        )
     with pytest.raises(ValueError, match="outside the box"):
-        ObserverSettings(form=form, theta_init=good.theta_init, theta_min=good.theta_init + 1, theta_max=good.theta_init + 2)
+        ObserverSettings(
+            form=form, theta_init=good.theta_init, theta_min=good.theta_init + 1, theta_max=good.theta_init + 2
+        )
 
 
 def test_compiled_projection_matches_the_bounded_least_squares_reference():

@@ -14,7 +14,12 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLES = ROOT / "sample_logs"
-NAMES = ["paper_sinusoid.csv", "paper_sinusoid.parquet", "paper_sinusoid.csv.truth.json", "paper_sinusoid.parquet.truth.json"]
+NAMES = [
+    "paper_sinusoid.csv",
+    "paper_sinusoid.parquet",
+    "paper_sinusoid.csv.truth.json",
+    "paper_sinusoid.parquet.truth.json",
+]
 
 
 @pytest.fixture(scope="module")

@@ -54,7 +54,7 @@ def test_jackknife_standard_errors_match_the_spread_over_seeds():
     # memory / segment length leaves a downward bias of about 10 %.
     ests, stds = [], []
     for seed in range(200):
-        w, u, blk, blk_a, blk_c, h, truth = blocked_regression(seed, n_blocks=200, per_block=5, p=3, rho=0.7)
+        _w, _u, _blk, blk_a, blk_c, _h, truth = blocked_regression(seed, n_blocks=200, per_block=5, p=3, rho=0.7)
         gamma = 1e-9 * np.eye(3) + blk_a.sum(axis=0)
         theta = np.linalg.solve(gamma, blk_c.sum(axis=0).T).T
         segment = np.repeat(np.arange(20), 10)

@@ -25,6 +25,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
 from wmrid.model import RegressorForm, intermediate_parameters, inverse_inertia
 
 
@@ -164,7 +165,11 @@ def jacobian_intermediate(theta0: np.ndarray, form: RegressorForm) -> np.ndarray
     m = inverse_inertia(theta0)
     vc, fv1, fv2, fd1, fd2 = theta0[3:]
     # d m_ij / d (m11, m12, m22)
-    dm = {0: np.array([[1.0, 0.0], [0.0, 0.0]]), 1: np.array([[0.0, 1.0], [1.0, 0.0]]), 2: np.array([[0.0, 0.0], [0.0, 1.0]])}
+    dm = {
+        0: np.array([[1.0, 0.0], [0.0, 0.0]]),
+        1: np.array([[0.0, 1.0], [1.0, 0.0]]),
+        2: np.array([[0.0, 0.0], [0.0, 1.0]]),
+    }
     s1, s2 = form.signs if form.kind == "paper" else (1, 1)
     for i in range(2):
         row = i * p
@@ -188,7 +193,7 @@ def derived_with_std(theta0: np.ndarray, cov0: np.ndarray) -> dict[str, tuple[fl
     """Named base parameters plus M = m^-1, each (value, std) by the delta method (exact Jacobian of M)."""
     names = ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
     std0 = np.sqrt(np.clip(np.diag(cov0), 0.0, None))  # inf stays inf: a parameter the log does not determine
-    out = {n: (float(v), float(s)) for n, v, s in zip(names, theta0, std0)}
+    out = {n: (float(v), float(s)) for n, v, s in zip(names, theta0, std0, strict=True)}
     m = inverse_inertia(theta0)
     big_m = np.linalg.inv(m)
     # dM = -M dm M for each of the three m entries

@@ -113,9 +113,7 @@ def identify(
     output_format: Annotated[
         OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
     ] = OutputFormat.auto,
-    output: Annotated[
-        Path | None, typer.Option("--output", "-o", help="Write the JSON result to this file.")
-    ] = None,
+    output: Annotated[Path | None, typer.Option("--output", "-o", help="Write the JSON result to this file.")] = None,
     force: Annotated[bool, typer.Option(help="Overwrite an existing output file.")] = False,
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
@@ -131,8 +129,14 @@ def identify(
     progress_cb, finish = _progress(len(wheel_log), "identify")
     try:
         result = run_identify(
-            wheel_log, robot_obj, form=form.value, k=k, alpha=alpha, box_width=box_width,
-            torque_hold=torque_hold.value, progress=progress_cb,
+            wheel_log,
+            robot_obj,
+            form=form.value,
+            k=k,
+            alpha=alpha,
+            box_width=box_width,
+            torque_hold=torque_hold.value,
+            progress=progress_cb,
         )
     finally:
         finish()
@@ -204,7 +208,12 @@ def simulate(
         eta_std=eta_noise, tau_std=tau_noise, caster_std=caster, caster_time=caster_time, encoder_cpr=encoder_cpr
     )
     sim = run_simulate(
-        truth_params, robot_obj.nominal, trajectory=trajectory.value, duration=duration, rate=rate, noise=noise,
+        truth_params,
+        robot_obj.nominal,
+        trajectory=trajectory.value,
+        duration=duration,
+        rate=rate,
+        noise=noise,
         seed=seed,
     )
     truth = sim.truth()

@@ -7,8 +7,8 @@ Pure with respect to files: takes arrays (a :class:`WheelLog`-like object) and r
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
 import numpy as np
@@ -84,12 +84,12 @@ class IdentificationResult:
         std = np.sqrt(np.clip(np.diag(self.theta_cov), 0, None))
         return {
             "form": self.form.to_dict(),
-            "values": {n: float(v) for n, v in zip(names, self.theta.ravel())},
-            "std": {n: _finite_or_none(s) for n, s in zip(names, std)},
-            "unconstrained": {n: float(v) for n, v in zip(names, self.theta_unconstrained.ravel())},
-            "start": {n: float(v) for n, v in zip(names, self.settings.theta_init.ravel())},
-            "box_min": {n: _finite_or_none(v) for n, v in zip(names, self.settings.theta_min.ravel())},
-            "box_max": {n: _finite_or_none(v) for n, v in zip(names, self.settings.theta_max.ravel())},
+            "values": {n: float(v) for n, v in zip(names, self.theta.ravel(), strict=True)},
+            "std": {n: _finite_or_none(s) for n, s in zip(names, std, strict=True)},
+            "unconstrained": {n: float(v) for n, v in zip(names, self.theta_unconstrained.ravel(), strict=True)},
+            "start": {n: float(v) for n, v in zip(names, self.settings.theta_init.ravel(), strict=True)},
+            "box_min": {n: _finite_or_none(v) for n, v in zip(names, self.settings.theta_min.ravel(), strict=True)},
+            "box_max": {n: _finite_or_none(v) for n, v in zip(names, self.settings.theta_max.ravel(), strict=True)},
         }
 
     def to_dict(self) -> dict[str, Any]:
@@ -102,9 +102,11 @@ class IdentificationResult:
             "parameters": params,
             "theta": self.theta_dict(),
             "settings": {
-                "k": self.settings.k, "alpha": self.settings.alpha, "torque_hold": self.settings.torque_hold,
+                "k": self.settings.k,
+                "alpha": self.settings.alpha,
+                "torque_hold": self.settings.torque_hold,
                 "start": self.start_source,
-            },  # fmt: skip
+            },
             "diagnostics": self.diagnostics,
             "warnings": list(self.warnings),
             "log": self.log_info,
@@ -137,7 +139,9 @@ def resolve_form(eta: np.ndarray, choice: Literal["auto", "paper", "general"]) -
     raise UsageError(f"--form must be auto, paper or general, got {choice!r}")
 
 
-def default_box(theta_init: np.ndarray, form: RegressorForm, width: float, from_robot: bool) -> tuple[np.ndarray, np.ndarray]:
+def default_box(
+    theta_init: np.ndarray, form: RegressorForm, width: float, from_robot: bool
+) -> tuple[np.ndarray, np.ndarray]:
     """The parameter box [theta_min, theta_max], (2, p) each.
 
     Physics first: the diagonal of m = M^-1 is positive, and so are m_11 F_v1, m_22 F_v2 (and, in the
@@ -172,7 +176,7 @@ def data_start(eta: np.ndarray, tau: np.ndarray, t: np.ndarray, form: RegressorF
     """
     p = form.n_columns
     theta = np.zeros((2, p))
-    stride = max(1, int(round(0.05 / max(np.median(np.diff(t)), 1e-9))))
+    stride = max(1, round(0.05 / max(np.median(np.diff(t)), 1e-9)))
     if len(t) > stride:
         acc = np.abs(np.diff(eta[::stride], axis=0) / np.diff(t[::stride])[:, None])
         for i in range(2):
@@ -259,7 +263,7 @@ def identify(
         "dof": dof,
         "interval_factor": {"95%": interval_factor(0.95, dof), "99.7%": interval_factor(0.9973, dof)},
         "meaning": "value +/- interval_factor * std covers the truth with that probability (Student t, dof)",
-        "blocks": int(len(out.block_end)),
+        "blocks": len(out.block_end),
         "block_seconds": float(duration / len(out.block_end)),
     }
     rms_e = np.sqrt(out.blk_ee.sum(axis=0) / duration) if duration > 0 else np.zeros(2)
@@ -291,7 +295,11 @@ START_RELEVANT = 1e-4
 
 
 def start_sensitivity(
-    gamma: np.ndarray, gamma_inv: np.ndarray, alpha: float, theta_init: np.ndarray, theta_u: np.ndarray,
+    gamma: np.ndarray,
+    gamma_inv: np.ndarray,
+    alpha: float,
+    theta_init: np.ndarray,
+    theta_u: np.ndarray,
     gain: np.ndarray,
 ) -> np.ndarray:
     """How much the start value sets each base parameter, (8,) in its units.
@@ -338,8 +346,9 @@ def _diagnose(
     for idx in range(min(2, p)):
         vec = evecs[:, idx]
         involved = [columns[j] for j in np.argsort(-np.abs(vec)) if abs(vec[j]) > 0.3]
-        weakest.append({"relative_eigenvalue": float(evals[idx] / evals[-1]) if evals[-1] > 0 else 0.0,
-                        "columns": involved})
+        weakest.append(
+            {"relative_eigenvalue": float(evals[idx] / evals[-1]) if evals[-1] > 0 else 0.0, "columns": involved}
+        )
     dead = [columns[j] for j in range(p) if scale[j] == 0]
     if dead:
         warnings.append(
@@ -360,11 +369,17 @@ def _diagnose(
             for j in np.argsort(-np.abs(corr[idx]))
             if j != idx and abs(corr[idx, j]) > NOT_SEPARABLE
         ]
-        pairs += [[name, THETA0_NAMES[j], float(corr[idx, j])] for j in range(8) if j != idx and abs(corr[idx, j]) > NOT_SEPARABLE]
+        pairs += [
+            [name, THETA0_NAMES[j], float(corr[idx, j])]
+            for j in range(8)
+            if j != idx and abs(corr[idx, j]) > NOT_SEPARABLE
+        ]
         why = f"; it is not separable from {', '.join(partners)}" if partners else ""
         warnings.append(f"{name} is poorly determined by this log: {value:.6g} +/- {std:.2g} {THETA0_UNITS[name]}{why}")
     at_bound = [
-        n for n, v, a, b in zip(form.theta_names(), theta.ravel(), lo.ravel(), hi.ravel()) if v <= a or v >= b
+        n
+        for n, v, a, b in zip(form.theta_names(), theta.ravel(), lo.ravel(), hi.ravel(), strict=True)
+        if v <= a or v >= b
     ]
     if at_bound:
         warnings.append(f"estimate held on the box boundary for {', '.join(at_bound)}")

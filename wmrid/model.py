@@ -121,7 +121,7 @@ def inverse_inertia(theta0: np.ndarray) -> np.ndarray:
 
 def named_base(theta0: np.ndarray) -> dict[str, float]:
     """theta0 plus M = m^-1 as a name -> value map (M11, M12, M22 in kg m^2)."""
-    out = {name: float(v) for name, v in zip(THETA0_NAMES, theta0)}
+    out = {name: float(v) for name, v in zip(THETA0_NAMES, theta0, strict=True)}
     big_m = np.linalg.inv(inverse_inertia(theta0))
     out.update(M11=float(big_m[0, 0]), M12=float(big_m[0, 1]), M22=float(big_m[1, 1]))
     return out

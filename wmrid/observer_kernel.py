@@ -61,8 +61,31 @@ def _foh(x):
 
 
 @numba.njit(cache=True, nogil=True)
-def observer_chunk(t, eta, tau, offset, kind, zoh, k, st, w, g_prev, theta, gamma, gamma_inv,
-                   hist_idx, hist_theta, hist_e, hist_gamma, block_end, blk_a, blk_c, blk_uu, blk_ee, cursor):
+def observer_chunk(
+    t,
+    eta,
+    tau,
+    offset,
+    kind,
+    zoh,
+    k,
+    st,
+    w,
+    g_prev,
+    theta,
+    gamma,
+    gamma_inv,
+    hist_idx,
+    hist_theta,
+    hist_e,
+    hist_gamma,
+    block_end,
+    blk_a,
+    blk_c,
+    blk_uu,
+    blk_ee,
+    cursor,
+):
     """Advance the estimator over one chunk of samples; every state array is updated in place.
 
     t (c,) s, eta and tau (c, 2): samples with global indices offset .. offset + c - 1 (offset >= 1; the

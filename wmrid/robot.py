@@ -152,9 +152,7 @@ class Payload:
             mass = float(mass_text)
             x, y = (float(v) for v in where.split(",")) if where else (0.0, 0.0)
         except ValueError:
-            raise UsageError(
-                f"--payload {text!r}: expected MASS[@X,Y] in kg and metres, e.g. 25@0.1,-0.05"
-            ) from None
+            raise UsageError(f"--payload {text!r}: expected MASS[@X,Y] in kg and metres, e.g. 25@0.1,-0.05") from None
         return cls(mass=mass, x=x, y=y, inertia=inertia)
 
 

@@ -79,7 +79,7 @@ def long_run_covariance(z: np.ndarray, bandwidth: float) -> np.ndarray:
 
 def segment_count(duration: float, n_blocks: int) -> int:
     """Number G of jackknife segments for a log of ``duration`` s cut into ``n_blocks`` blocks."""
-    g = int(math.floor(duration / SEGMENT_SECONDS))
+    g = math.floor(duration / SEGMENT_SECONDS)
     g = min(max(g, MIN_SEGMENTS), MAX_SEGMENTS)
     return max(2, min(g, n_blocks))
 
@@ -113,8 +113,13 @@ def interval_factor(coverage: float, dof: int) -> float:
 
 
 def estimate_covariances(
-    gamma: np.ndarray, gamma_inv: np.ndarray, theta: np.ndarray, blk_a: np.ndarray, blk_c: np.ndarray,
-    block_mid: np.ndarray, duration: float,
+    gamma: np.ndarray,
+    gamma_inv: np.ndarray,
+    theta: np.ndarray,
+    blk_a: np.ndarray,
+    blk_c: np.ndarray,
+    block_mid: np.ndarray,
+    duration: float,
 ) -> tuple[np.ndarray, np.ndarray, dict]:
     """Covariances (2p, 2p) of theta.ravel() (theta (2, p), unconstrained): (reported, weighting, details).
 
