@@ -189,7 +189,7 @@ def test_read_from_stdin(tmp_path, suffix):
 
 @pytest.mark.parametrize(
     ("stdin", "expected"),
-    [(b"", "standard input is empty"), (b"\x89MCAP0\r\n" + b"\0" * 64, "MCAP input is not supported yet")],
+    [(b"", "standard input is empty"), (b"\x89MCAP0\r\n" + b"\0" * 64, "no Header record follows")],
 )
 def test_stdin_errors(tmp_path, stdin, expected):
     code = (
@@ -603,9 +603,9 @@ def test_parquet_bytes_named_csv(tmp_path):
     assert "holds PARQUET data, not CSV text; rename it with a .parquet suffix" in log_error(tmp_path / "log.csv")
 
 
-def test_mcap_file_is_not_supported_yet(tmp_path):
+def test_mcap_magic_without_a_header_record_is_a_clear_error(tmp_path):
     (tmp_path / "run.mcap").write_bytes(b"\x89MCAP0\r\n" + bytes(100))
-    assert "run.mcap: MCAP input is not supported yet" in log_error(tmp_path / "run.mcap")
+    assert "run.mcap: starts like an MCAP file but no Header record follows" in log_error(tmp_path / "run.mcap")
 
 
 # ---- Inputs are never modified

@@ -58,6 +58,157 @@ class Trajectory(str, Enum):
     reversing = "reversing"
 
 
+class TimeSource(str, Enum):
+    auto = "auto"
+    header = "header"
+    log = "log"
+
+
+class AlignRule(str, Enum):
+    zoh = "zoh"
+    linear = "linear"
+
+
+class VelocityFrom(str, Enum):
+    auto = "auto"
+    velocity = "velocity"
+    position = "position"
+
+
+class SpeedUnit(str, Enum):
+    rad_s = "rad/s"
+    rpm = "rpm"
+    deg_s = "deg/s"
+    m_s = "m/s"
+
+
+class EffortKind(str, Enum):
+    torque = "torque"
+    current = "current"
+    pwm = "pwm"
+    voltage = "voltage"
+
+
+_LOG_PANEL = "Log input (MCAP topics, units, effort)"
+TopicOpt = Annotated[
+    str | None,
+    typer.Option(help="MCAP: the JointState (or JSON) topic holding speed and effort.", rich_help_panel=_LOG_PANEL),
+]
+VelocityTopicOpt = Annotated[
+    str | None,
+    typer.Option(help="MCAP: the JointState topic with the wheel speeds (or positions).", rich_help_panel=_LOG_PANEL),
+]
+EffortTopicOpt = Annotated[
+    str | None, typer.Option(help="MCAP: the JointState topic with the wheel efforts.", rich_help_panel=_LOG_PANEL)
+]
+RightJointOpt = Annotated[
+    str | None, typer.Option(help="MCAP: name of the right wheel joint.", rich_help_panel=_LOG_PANEL)
+]
+LeftJointOpt = Annotated[
+    str | None, typer.Option(help="MCAP: name of the left wheel joint.", rich_help_panel=_LOG_PANEL)
+]
+TimeSourceOpt = Annotated[
+    TimeSource,
+    typer.Option(
+        help="MCAP: header stamps, log time, or auto (header when all set and in order).", rich_help_panel=_LOG_PANEL
+    ),
+]
+AlignOpt = Annotated[
+    AlignRule,
+    typer.Option(
+        help="Split topics: effort held from the latest message (zoh) or interpolated (linear).",
+        rich_help_panel=_LOG_PANEL,
+    ),
+]
+VelocityFromOpt = Annotated[
+    VelocityFrom,
+    typer.Option(
+        help="Wheel speed from the velocity field, from positions, or auto (positions when no speeds).",
+        rich_help_panel=_LOG_PANEL,
+    ),
+]
+SpeedUnitOpt = Annotated[
+    SpeedUnit,
+    typer.Option(
+        help="Unit of the logged wheel speeds (m/s: at the rim, needs the radius).", rich_help_panel=_LOG_PANEL
+    ),
+]
+WheelRadiusOpt = Annotated[
+    float | None,
+    typer.Option(help="Wheel radius, m (for m/s speeds; default: the robot's r).", rich_help_panel=_LOG_PANEL),
+]
+EffortOpt = Annotated[
+    EffortKind,
+    typer.Option(
+        help="What the effort is: wheel torque, motor current (A), or a PWM/voltage command.",
+        rich_help_panel=_LOG_PANEL,
+    ),
+]
+EffortUnitOpt = Annotated[
+    str | None, typer.Option(help="Label of a PWM/voltage effort's unit (default PWM, V).", rich_help_panel=_LOG_PANEL)
+]
+TorqueConstantOpt = Annotated[
+    float | None,
+    typer.Option(help="Motor torque constant k_t, N m/A (for --effort current).", rich_help_panel=_LOG_PANEL),
+]
+GearRatioOpt = Annotated[
+    float | None,
+    typer.Option(help="Gear ratio k_r (for --effort current; default: the robot's k_r).", rich_help_panel=_LOG_PANEL),
+]
+EfficiencyOpt = Annotated[
+    float, typer.Option(help="Gearbox efficiency in (0, 1] (for --effort current).", rich_help_panel=_LOG_PANEL)
+]
+MirrorLeftOpt = Annotated[
+    bool,
+    typer.Option(
+        help="The left motor is mirrored: change the sign of its speed and effort.", rich_help_panel=_LOG_PANEL
+    ),
+]
+
+
+def _read_wheel_log(
+    log: str,
+    columns: str | None,
+    time_unit: str,
+    robot_obj,
+    *,
+    topic,
+    velocity_topic,
+    effort_topic,
+    right_joint,
+    left_joint,
+    time_source,
+    align,
+    velocity_from,
+    speed_unit,
+    wheel_radius,
+    effort,
+    effort_unit,
+    torque_constant,
+    gear_ratio,
+    efficiency,
+    mirror_left,
+):
+    """Read LOG with the log-input options (shared by the commands that read logs)."""
+    from wmrid.joints import TopicSelection
+    from wmrid.logio import parse_column_mapping, read_log
+    from wmrid.signals import SignalOptions
+
+    if wheel_radius is None and speed_unit == "m/s" and robot_obj is not None:
+        wheel_radius = robot_obj.nominal.r
+    selection = TopicSelection(
+        topic=topic, velocity_topic=velocity_topic, effort_topic=effort_topic, right_joint=right_joint,
+        left_joint=left_joint, time_source=time_source, align=align, velocity_from=velocity_from,
+    )  # fmt: skip
+    signals = SignalOptions(
+        speed_unit=speed_unit, wheel_radius=wheel_radius, effort=effort, effort_unit=effort_unit,
+        torque_constant=torque_constant, gear_ratio=gear_ratio, efficiency=efficiency, mirror_left=mirror_left,
+    )  # fmt: skip
+    mapping = parse_column_mapping(columns) if columns else None
+    k_r = robot_obj.nominal.k_r if robot_obj is not None else None
+    return read_log(log, columns=mapping, time_unit=time_unit, selection=selection, signals=signals, gear_ratio=k_r)
+
+
 def _version(value: bool) -> None:
     if value:
         typer.echo(f"wmrid {__version__}")
@@ -82,7 +233,9 @@ def _stderr_console():
 
 @app.command()
 def identify(
-    log: Annotated[str, typer.Argument(metavar="LOG", help="Log file (.csv, .parquet) or - for standard input.")],
+    log: Annotated[
+        str, typer.Argument(metavar="LOG", help="Log file (.csv, .parquet, .mcap) or - for standard input.")
+    ],
     robot: Annotated[
         str | None,
         typer.Option(help="Robot TOML file or built-in name ('paper'): nominal values start the estimate."),
@@ -114,18 +267,42 @@ def identify(
         OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
     ] = OutputFormat.auto,
     output: Annotated[Path | None, typer.Option("--output", "-o", help="Write the JSON result to this file.")] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", help="Write the estimates over time and the prediction errors as an MCAP (JSON topic)."),
+    ] = None,
     force: Annotated[bool, typer.Option(help="Overwrite an existing output file.")] = False,
+    topic: TopicOpt = None,
+    velocity_topic: VelocityTopicOpt = None,
+    effort_topic: EffortTopicOpt = None,
+    right_joint: RightJointOpt = None,
+    left_joint: LeftJointOpt = None,
+    time_source: TimeSourceOpt = TimeSource.auto,
+    align: AlignOpt = AlignRule.linear,
+    velocity_from: VelocityFromOpt = VelocityFrom.auto,
+    speed_unit: SpeedUnitOpt = SpeedUnit.rad_s,
+    wheel_radius: WheelRadiusOpt = None,
+    effort: EffortOpt = EffortKind.torque,
+    effort_unit: EffortUnitOpt = None,
+    torque_constant: TorqueConstantOpt = None,
+    gear_ratio: GearRatioOpt = None,
+    efficiency: EfficiencyOpt = 1.0,
+    mirror_left: MirrorLeftOpt = False,
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
     from wmrid.atomic import write_json
     from wmrid.identify import identify as run_identify
-    from wmrid.logio import parse_column_mapping, read_log
     from wmrid.render import print_identification, to_json
     from wmrid.robot import load_robot
 
     robot_obj = load_robot(robot) if robot is not None else None
-    mapping = parse_column_mapping(columns) if columns else None
-    wheel_log = read_log(log, columns=mapping, time_unit=time_unit.value)
+    wheel_log = _read_wheel_log(
+        log, columns, time_unit.value, robot_obj, topic=topic, velocity_topic=velocity_topic,
+        effort_topic=effort_topic, right_joint=right_joint, left_joint=left_joint, time_source=time_source.value,
+        align=align.value, velocity_from=velocity_from.value, speed_unit=speed_unit.value, wheel_radius=wheel_radius,
+        effort=effort.value, effort_unit=effort_unit, torque_constant=torque_constant, gear_ratio=gear_ratio,
+        efficiency=efficiency, mirror_left=mirror_left,
+    )  # fmt: skip
     progress_cb, finish = _progress(len(wheel_log), "identify")
     try:
         result = run_identify(
@@ -143,6 +320,8 @@ def identify(
     payload = result.to_dict()
     if output is not None:
         write_json(str(output), payload, force=force)
+    if out is not None:
+        _write_estimates(result, out, force)
     fmt = output_format.value
     if fmt == "auto":
         fmt = "table" if sys.stdout.isatty() else "json"
@@ -152,6 +331,47 @@ def identify(
         from rich.console import Console
 
         print_identification(result, Console())
+
+
+@app.command()
+def inspect(
+    log: Annotated[
+        str, typer.Argument(metavar="LOG", help="Log file (.mcap, .csv, .parquet) or - for standard input.")
+    ],
+    output_format: Annotated[
+        OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
+    ] = OutputFormat.auto,
+) -> None:
+    """What LOG holds: topics, types, counts, rates, time range and JointState joints (MCAP), or columns."""
+    from wmrid.inspect import inspect_log
+    from wmrid.render import print_inspection, to_json
+
+    info = inspect_log(log)
+    fmt = output_format.value
+    if fmt == "auto":
+        fmt = "table" if sys.stdout.isatty() else "json"
+    if fmt == "json":
+        sys.stdout.write(to_json(info) + "\n")
+    else:
+        from rich.console import Console
+
+        print_inspection(info, Console())
+
+
+def _write_estimates(result, path: Path, force: bool) -> None:
+    """The decimated history of an identification as an MCAP JSON topic /wmrid/estimates."""
+    from wmrid.atomic import to_json_text
+    from wmrid.mcap_write import write_series_mcap
+
+    if path.suffix.lower() != ".mcap":
+        raise UsageError(f"--out {path}: the estimates are written as MCAP; name the file .mcap")
+    hist = result.history
+    series = {name: hist.theta[:, i // hist.theta.shape[2], i % hist.theta.shape[2]] for i, name in
+              enumerate(result.form.theta_names())}  # fmt: skip
+    series["e_r"] = hist.e[:, 0]
+    series["e_l"] = hist.e[:, 1]
+    series["lambda_min"] = hist.lambda_min
+    write_series_mcap(str(path), hist.t, series, force=force, metadata={"result": to_json_text(result.to_dict())})
 
 
 def _progress(total: int, label: str):
@@ -169,7 +389,7 @@ def _progress(total: int, label: str):
 @app.command()
 def simulate(
     output: Annotated[
-        str, typer.Option("--output", "-o", help="Log to write: .csv or .parquet (- for CSV on stdout).")
+        str, typer.Option("--output", "-o", help="Log to write: .csv, .parquet or .mcap (- for CSV on stdout).")
     ],
     robot: Annotated[str, typer.Option(help="Robot TOML file or built-in name; its CAD set is the truth.")] = "paper",
     trajectory: Annotated[Trajectory, typer.Option(help="Reference trajectory.")] = Trajectory.sinusoid,
@@ -223,7 +443,12 @@ def simulate(
     truth_path = None if output == "-" else output + ".truth.json"
     if truth_path is not None and not force and os.path.exists(truth_path):
         raise UsageError(f"{truth_path} exists; use --force to overwrite it")
-    write_log(sim.to_frame(), output, force=force, metadata={"wmrid_truth": to_json_text(truth)})
+    if output.lower().endswith(".mcap"):
+        from wmrid.mcap_write import write_joint_state_mcap
+
+        write_joint_state_mcap(output, sim.to_frame(), force=force, metadata={"truth": to_json_text(truth)})
+    else:
+        write_log(sim.to_frame(), output, force=force, metadata={"wmrid_truth": to_json_text(truth)})
     if truth_path is not None:
         write_json(truth_path, truth, force=force)
         _stderr_console().print(f"wrote {output} ({len(sim.t)} samples) and {truth_path}")

@@ -99,6 +99,7 @@ class IdentificationResult:
         }
         out: dict[str, Any] = {
             "source": self.source,
+            "effort_unit": self.log_info.get("effort_unit", "N m"),
             "parameters": params,
             "theta": self.theta_dict(),
             "settings": {
@@ -212,6 +213,15 @@ def identify(
     if n < 10:
         raise NotIdentifiableError(f"{log.source}: only {n} samples; identification needs at least 10")
     chosen = resolve_form(eta, form)
+    effort_unit = getattr(log, "effort_unit", "N m")
+    units = model.base_units(effort_unit)
+    early_warnings = []
+    if robot is not None and effort_unit != "N m":
+        early_warnings.append(
+            f"the effort is in {effort_unit}, not N m, so robot '{robot.name}' (in SI units) neither starts the "
+            "estimate nor is compared with it; the start comes from the data"
+        )
+        robot = None
     if robot is not None:
         theta_init = model.intermediate_parameters(model.base_parameters(robot.nominal), chosen)
         start_source = f"nominal parameters of robot '{robot.name}'"
@@ -254,8 +264,9 @@ def identify(
     history = History(t=t[out.hist_idx] - t[0], theta=h_theta, e=out.hist_e, lambda_min=lam_hist)
 
     diagnostics, warnings = _diagnose(
-        gamma, alpha, chosen, fit, parameters, theta, theta_cov, sens, undetermined, lo, hi
+        gamma, alpha, chosen, fit, parameters, theta, theta_cov, sens, undetermined, lo, hi, units
     )
+    warnings = early_warnings + warnings
     dof = unc["dof"]
     diagnostics["uncertainty"] = {
         "method": "delete-a-segment jackknife over contiguous segments of the log",
@@ -275,6 +286,7 @@ def identify(
         "rate_hz": float(1.0 / np.median(steps)),
         "uneven_steps": bool(np.ptp(steps) > 1e-6 * np.median(steps)),
         "notes": list(log.notes),
+        "effort_unit": effort_unit,
     }
     nominal = reference = None
     if robot is not None:
@@ -285,7 +297,7 @@ def identify(
         source=log.source, form=chosen, settings=settings, start_source=start_source, theta=theta,
         theta_unconstrained=theta_u, theta_cov=theta_cov, parameters=parameters, theta0_cov=fit.cov,
         history=history, diagnostics=diagnostics, warnings=tuple(warnings), log_info=log_info,
-        nominal=nominal, reference=reference,
+        nominal=nominal, reference=reference, units=units,
     )  # fmt: skip
 
 
@@ -324,7 +336,7 @@ def start_sensitivity(
 
 
 def _diagnose(
-    gamma, alpha, form, fit, parameters, theta, theta_cov, sens, undetermined, lo, hi
+    gamma, alpha, form, fit, parameters, theta, theta_cov, sens, undetermined, lo, hi, units
 ) -> tuple[dict[str, Any], list[str]]:
     """Excitation and consistency diagnostics, and the warnings they call for.
 
@@ -375,7 +387,7 @@ def _diagnose(
             if j != idx and abs(corr[idx, j]) > NOT_SEPARABLE
         ]
         why = f"; it is not separable from {', '.join(partners)}" if partners else ""
-        warnings.append(f"{name} is poorly determined by this log: {value:.6g} +/- {std:.2g} {THETA0_UNITS[name]}{why}")
+        warnings.append(f"{name} is poorly determined by this log: {value:.6g} +/- {std:.2g} {units[name]}{why}")
     at_bound = [
         n
         for n, v, a, b in zip(form.theta_names(), theta.ravel(), lo.ravel(), hi.ravel(), strict=True)

@@ -41,6 +41,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from wmrid.errors import LogFormatError, UsageError
+from wmrid.joints import TopicSelection
+from wmrid.signals import SignalOptions, effort_to_torque, mirror_left, speed_to_rad_s
 
 if TYPE_CHECKING:
     import pandas
@@ -87,6 +89,8 @@ class WheelLog:
     source : the file name as the user gave it (``"<stdin>"`` for ``-``).
     notes : plain-English statements of what was assumed while reading.
     pose : (n, 3) float64 [x m, y m, phi rad] when the log has x, y, phi; else None.
+    effort_unit : "N m" for a torque; else the unit of a PWM or voltage effort that could not be
+        converted (tau then holds that effort, and the parameters come out in its units).
     """
 
     t: np.ndarray
@@ -95,6 +99,7 @@ class WheelLog:
     source: str
     notes: tuple[str, ...] = ()
     pose: np.ndarray | None = None
+    effort_unit: str = "N m"
 
     def __post_init__(self) -> None:
         n = np.shape(self.t)[0] if np.ndim(self.t) == 1 else -1
@@ -238,11 +243,23 @@ def _open_source(path: str) -> _Source:
     return source
 
 
-def read_log(path: str, *, columns: Mapping[str, str] | None = None, time_unit: str = "auto") -> WheelLog:
-    """Read a wheel log from a CSV or Parquet file, or from standard input for ``"-"``.
+def read_log(
+    path: str,
+    *,
+    columns: Mapping[str, str] | None = None,
+    time_unit: str = "auto",
+    selection: TopicSelection | None = None,
+    signals: SignalOptions | None = None,
+    gear_ratio: float | None = None,
+) -> WheelLog:
+    """Read a wheel log from a CSV, Parquet or MCAP file, or from standard input for ``"-"``.
 
-    columns : {canonical name: name in the file} for columns not named canonically.
+    columns : {canonical name: name in the file} for columns not named canonically (for a JSON topic
+        of an MCAP: {key: dotted field path}).
     time_unit : ``"auto"`` (float -> s, integer -> ns), ``"s"``, ``"ms"``, ``"us"`` or ``"ns"``.
+    selection : MCAP topics, joints, time source and alignment (:mod:`wmrid.joints`).
+    signals : what the speed and effort columns hold (:mod:`wmrid.signals`); gear_ratio : the robot's
+        k_r, used to turn a motor current into a wheel torque when --gear-ratio is not given.
 
     The file is opened read-only.  Raises :class:`LogFormatError` (one line naming the file, the row or
     column at fault and the fix) for anything that is not a usable log.
@@ -257,12 +274,73 @@ def read_log(path: str, *, columns: Mapping[str, str] | None = None, time_unit: 
 
     source = _open_source(path)
     kind = detect_format(path, source.head(8))
+    signals = signals or SignalOptions()
     if kind == "mcap":
-        raise LogFormatError(
-            f"{source.name}: MCAP input is not supported yet; export the wheel topics to CSV or Parquet first"
-        )
+        return _read_mcap_log(source, columns or {}, selection or TopicSelection(), signals, gear_ratio)
     raw = _read_parquet(source, mapping, explicit) if kind == "parquet" else _read_csv(source, mapping, explicit)
-    return _assemble(raw, source.name, mapping, time_unit)
+    return _apply_signals(_assemble(raw, source.name, mapping, time_unit), signals, gear_ratio)
+
+
+def _apply_signals(log: WheelLog, signals: SignalOptions, gear_ratio: float | None) -> WheelLog:
+    """Convert a table log's speed and effort columns as ``signals`` says (nothing for the defaults)."""
+    if signals == SignalOptions():
+        return log
+    notes = list(log.notes)
+    eta, note = speed_to_rad_s(log.eta.copy(), signals)
+    if note:
+        notes.append(note)
+    tau, note = effort_to_torque(log.tau.copy(), signals, gear_ratio)
+    if note:
+        notes.append(note)
+    if signals.mirror_left:
+        mirror_left(eta, tau)
+        notes.append("left wheel mirrored: its speed and effort changed sign (--mirror-left)")
+    return WheelLog(
+        t=log.t, eta=eta, tau=tau, source=log.source, notes=tuple(notes), pose=log.pose,
+        effort_unit=signals.effort_label,
+    )  # fmt: skip
+
+
+def _read_mcap_log(
+    source: _Source,
+    columns: Mapping[str, str],
+    selection: TopicSelection,
+    signals: SignalOptions,
+    gear_ratio: float | None,
+) -> WheelLog:
+    """An MCAP recording as a WheelLog: JointState topics (or a JSON topic with field paths)."""
+    from wmrid.joints import signals_from_json, signals_from_mcap
+    from wmrid.mcap_read import read_mcap
+
+    json_fields = {}
+    if columns and selection.topic:
+        missing = [k for k in REQUIRED[1:] if k not in columns]
+        if missing:
+            raise UsageError(f"a JSON topic needs field paths for {', '.join(missing)} in --columns")
+        json_fields = {selection.topic: dict(columns)}
+    contents = read_mcap(source.path or source.name, data=source.data, json_fields=json_fields)
+    if selection.topic in contents.json:
+        sig = signals_from_json(contents, selection.topic, signals, gear_ratio)
+    else:
+        sig = signals_from_mcap(contents, selection, signals, gear_ratio)
+    notes = list(contents.notes) + list(sig.notes)
+    if len(sig.t_ns) < MIN_SAMPLES:
+        raise LogFormatError(
+            f"{source.name}: only {len(sig.t_ns)} usable samples after reading the topics; identification needs "
+            f"at least {MIN_SAMPLES}"
+        )
+    t, offset = seconds_from_stamps(sig.t_ns, "ns")
+    if offset is not None:
+        notes.append(f"time relative to the first stamp, {offset} ns")
+    for arr, what in ((sig.speed, "speed"), (sig.effort, "effort")):
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            raise LogFormatError(
+                f"{source.name}: a wheel {what} is not a finite number at t = {t[np.argmax(bad.any(axis=1))]:.6g} s"
+            )
+    eta = np.ascontiguousarray(sig.speed, dtype=np.float64)
+    tau = np.ascontiguousarray(sig.effort, dtype=np.float64)
+    return WheelLog(t=t, eta=eta, tau=tau, source=source.name, notes=tuple(notes), effort_unit=sig.effort_unit)
 
 
 @dataclass

@@ -34,6 +34,23 @@ THETA0_UNITS = {
     "M11": "kg m^2", "M12": "kg m^2", "M22": "kg m^2",
 }  # fmt: skip
 
+
+def base_units(effort_unit: str = "N m") -> dict[str, str]:
+    """Units of the base parameters and M when the effort is in ``effort_unit`` (SI for "N m").
+
+    With a PWM or voltage effort the model keeps its form, M eta' + ... = u, so each parameter is in
+    units of u: m = M^-1 in (rad/s^2)/u, Vc in u s^2/rad^2, F_v in u s/rad, F_d in u.
+    """
+    if effort_unit == "N m":
+        return dict(THETA0_UNITS)
+    u = effort_unit
+    inv, big = f"(rad/s^2)/{u}", f"{u} s^2/rad"
+    return {
+        "m11": inv, "m12": inv, "m22": inv, "Vc": f"{u} s^2/rad^2", "Fv1": f"{u} s/rad", "Fv2": f"{u} s/rad",
+        "Fd1": u, "Fd2": u, "M11": big, "M12": big, "M22": big,
+    }  # fmt: skip
+
+
 _COMMON_COLUMNS = ("tau_1", "tau_2", "eta_2^2-eta_1*eta_2", "eta_1^2-eta_1*eta_2", "-eta_1", "-eta_2")
 
 

@@ -63,7 +63,66 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         f"estimate ± {unc['interval_factor']['95%']:.2f} std covers the truth with 95 % probability, "
         f"± {unc['interval_factor']['99.7%']:.2f} std with 99.7 %"
     )
+    if info.get("effort_unit", "N m") != "N m":
+        console.print(
+            f"[bold]units: the effort is in {info['effort_unit']}, not N m, so every parameter is in "
+            f"{info['effort_unit']}-based units (see the unit column)[/bold]"
+        )
     for note in info["notes"]:
         console.print(f"note: {note}")
     for warning in result.warnings:
         console.print(f"[yellow]warning:[/yellow] {warning}")
+
+
+def print_inspection(info: dict, console: Any) -> None:
+    """Tables of what a log holds (:func:`wmrid.inspect.inspect_log`)."""
+    from rich import box
+    from rich.table import Table
+
+    if info["format"] != "mcap":
+        table = Table(
+            title=f"wmrid inspect: {info['source']} ({info['format']})", title_justify="left", box=box.SIMPLE_HEAD
+        )
+        table.add_column("column", no_wrap=True)
+        table.add_column("type", no_wrap=True)
+        for col in info["columns"]:
+            table.add_row(col["name"], col["type"])
+        console.print(table)
+        if info.get("rows") is not None:
+            console.print(f"{info['rows']} rows")
+        missing = info["canonical_missing"]
+        console.print(
+            "canonical columns: all of t, eta_r, eta_l, tau_r, tau_l found"
+            if not missing
+            else f"canonical columns missing: {', '.join(missing)} (map them with --columns)"
+        )
+        return
+    span = f"{info['duration_s']:.3f} s" if info.get("start_s") is not None else "no messages"
+    console.print(
+        f"wmrid inspect: {info['source']} (MCAP, profile {info['profile'] or '-'}, {info['size_bytes']} bytes, {span})"
+    )
+    table = Table(box=box.SIMPLE_HEAD)
+    for name in ("topic", "type", "encoding", "messages", "rate Hz", "start s", "end s"):
+        table.add_column(name, no_wrap=name != "type", justify="right" if name in ("messages", "rate Hz") else "left")
+    t0 = info.get("start_s") or 0.0
+    for entry in info["topics"]:
+        rate = f"{entry['rate_hz']:.4g}" if entry["rate_hz"] else "-"
+        start = "-" if entry["start_s"] is None else f"{entry['start_s'] - t0:.3f}"
+        end = "-" if entry["end_s"] is None else f"{entry['end_s'] - t0:.3f}"
+        table.add_row(entry["topic"], entry["type"], entry["encoding"], str(entry["messages"]), rate, start, end)
+    console.print(table)
+    joints = [e for e in info["topics"] if "joints" in e]
+    if joints:
+        jt = Table(title="JointState topics", title_justify="left", box=box.SIMPLE_HEAD)
+        for name in ("topic", "joints", "position", "velocity", "effort", "header stamps"):
+            jt.add_column(name)
+        for e in joints:
+            f = e["fields"]
+            jt.add_row(
+                e["topic"], ", ".join(e["joints"]), f["position"], f["velocity"], f["effort"], e["header_stamps"]
+            )
+        console.print(jt)
+    else:
+        console.print("no sensor_msgs/msg/JointState topic: wmrid identify needs one (or a JSON topic with --columns)")
+    for note in info["notes"]:
+        console.print(f"note: {note}")
