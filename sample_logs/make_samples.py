@@ -10,8 +10,11 @@ sinusoid for 40 s under backstepping + computed torque built on the NOMINAL para
   to keep the file small;
 * ``paper_sinusoid.parquet``: full precision, with the pose (x, y, phi; for path plots), and the truth
   in the schema metadata (key ``wmrid_truth``);
-* ``paper_sinusoid.csv.truth.json`` and ``paper_sinusoid.parquet.truth.json``: the ground truth, of
-  the form ``{"parameters": {"m11": ..., ...}, "physical": {...}, ...}``.
+* ``paper_sinusoid.mcap``: a ROS 2 bag (zstd) with ``sensor_msgs/msg/JointState`` on ``/joint_states``
+  (joints ``left_wheel_joint``, ``right_wheel_joint``: wheel angle, speed and torque, full precision) and
+  the truth in an MCAP metadata record ``wmrid`` (key ``truth``);
+* ``<log>.truth.json`` for each: the ground truth, of the form
+  ``{"parameters": {"m11": ..., ...}, "physical": {...}, ...}``.
 
 ``tests/test_sample_logs.py`` regenerates them and checks they are unchanged.
 """
@@ -25,6 +28,7 @@ import numpy as np
 
 from wmrid.atomic import to_json_text, write_json
 from wmrid.logio import write_log
+from wmrid.mcap_write import write_joint_state_mcap
 from wmrid.robot import BUILTIN_ROBOTS
 from wmrid.simulate import simulate
 
@@ -56,8 +60,13 @@ def build(outdir: Path) -> list[Path]:
     parquet_path = outdir / f"{NAME}.parquet"
     write_log(csv_frame, str(csv_path), force=True)
     write_log(frame[WITH_POSE], str(parquet_path), force=True, metadata={"wmrid_truth": to_json_text(truth)})
-    written = [csv_path, parquet_path]
-    for path in (csv_path, parquet_path):
+    mcap_path = outdir / f"{NAME}.mcap"
+    with_angles = [*CANONICAL, "theta_r", "theta_l"]
+    write_joint_state_mcap(
+        mcap_path, frame[with_angles], force=True, odom_topic=None, metadata={"truth": to_json_text(truth)}
+    )
+    written = [csv_path, parquet_path, mcap_path]
+    for path in written[:]:
         truth_path = Path(str(path) + ".truth.json")
         write_json(truth_path, truth, force=True)
         written.append(truth_path)

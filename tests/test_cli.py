@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from wmrid import model
@@ -190,3 +191,24 @@ def test_simulate_reversing_selects_the_general_form(tmp_path):
     with pytest.raises(AssertionError):
         identify_json(str(log), "--form", "paper")
     assert_clean_error(wmrid("identify", str(log), "--form", "paper"), 2, "--form general")
+
+
+def test_identify_out_writes_the_estimates_as_mcap(tmp_path):
+    from wmrid.mcap_read import read_mcap
+
+    target = tmp_path / "estimates.mcap"
+    out = identify_json(str(SAMPLE_PARQUET), "--robot", "paper", "--out", str(target))
+    contents = read_mcap(str(target), json_fields={"/wmrid/estimates": {"theta11": "theta11", "e_r": "e_r", "t": "t"}})
+    series = contents.json["/wmrid/estimates"]
+    assert len(series.log_ns) > 1000
+    assert series.values["theta11"][-1] == pytest.approx(out["theta"]["values"]["theta11"], rel=1e-12)
+    assert np.all(np.diff(series.values["t"]) > 0)
+    assert json.loads(contents.metadata["wmrid"]["result"])["parameters"] == out["parameters"]
+    assert_clean_error(wmrid("identify", str(SAMPLE_PARQUET), "--out", str(tmp_path / "x.json")), 2, "--out", ".mcap")
+
+
+def test_identify_reads_an_mcap_from_a_pipe():
+    bag = ROOT / "sample_logs" / "paper_sinusoid.mcap"
+    from_pipe = identify_json("-", "--robot", "paper", stdin=bag.read_bytes())
+    from_file = identify_json(str(bag), "--robot", "paper")
+    assert from_pipe["parameters"] == from_file["parameters"]
