@@ -634,3 +634,20 @@ def test_wheel_log_checks_shapes():
     assert len(log) == 3
     assert log.duration == 2.0
     assert log.pose is None
+
+
+def test_leading_comment_lines_and_headerless_columns(tmp_path):
+    # The REGBOT layout: '%' lines describe the columns by number; the data rows have no header.
+    lines = ["%% logfile from robot", "%  1    time 0.003 sec", "%  2  3 Wheel velocity left, right"]
+    lines += [f"{0.01 * i:.3f} {1.0 + i:.4f} {2.0 + i:.4f} {0.5:.3f} {0.25:.3f} " for i in range(20)]
+    path = tmp_path / "robot.txt"
+    path.write_text("\n".join(lines) + "\n")
+    log = read_log(str(path), columns={"t": "1", "eta_l": "2", "eta_r": "3", "tau_l": "4", "tau_r": "5"})
+    np.testing.assert_array_equal(log.eta[:2], [[2.0, 1.0], [3.0, 2.0]])
+    np.testing.assert_array_equal(log.tau[0], [0.25, 0.5])
+    assert any("first 3 lines are comments" in n for n in log.notes)
+    assert any("no header row" in n for n in log.notes)
+    # Errors point at the file's own line numbers, comments counted.
+    bad = lines[:10] + ["0.070 x 2 3 4"] + lines[11:]
+    path.write_text("\n".join(bad) + "\n")
+    assert "line 11" in log_error(path, columns={"t": "1", "eta_l": "2", "eta_r": "3", "tau_l": "4", "tau_r": "5"})

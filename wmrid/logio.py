@@ -75,6 +75,7 @@ _MCAP_SUFFIXES = (".mcap",)
 _PARQUET_MAGIC = b"PAR1"
 _MCAP_MAGIC = b"\x89MCAP"
 _SNIFF_BYTES = 65536
+_COMMENT_MARKS = ("%", "#")
 _STDIN_NAME = "<stdin>"
 
 
@@ -498,17 +499,20 @@ def _text_head(source: _Source) -> tuple[str, str, list[str]]:
         return text, "latin-1", [f"{name} is not UTF-8; read as Latin-1 text"]
 
 
-def _csv_line_finder(source: _Source) -> Callable[[int], str]:
-    """Data index (0-based) -> ``"line N"``, counting every line of the file (header = line 1)."""
+def _csv_line_finder(source: _Source, skip: int = 0, has_header: bool = True) -> Callable[[int], str]:
+    """Data index (0-based) -> ``"line N"``, counting every line of the file (line 1 is the first).
+
+    skip : leading comment lines; has_header : whether a header line follows them.
+    """
 
     def where(index: int) -> str:
         fh = open(source.path, "rb") if source.data is None else io.BytesIO(source.data)  # noqa: SIM115
         with fh:
-            seen_header = False
+            seen_header = not has_header
             count = -1
             for lineno, raw in enumerate(fh, start=1):
-                if not raw.strip():
-                    continue  # blank lines are skipped by both parsers
+                if lineno <= skip or not raw.strip():
+                    continue  # comments, and blank lines (skipped by both parsers)
                 if not seen_header:
                     seen_header = True
                     continue
@@ -525,10 +529,24 @@ def _read_csv(source: _Source, mapping: dict[str, str], explicit: set[str]) -> _
 
     name = source.name
     text, encoding, notes = _text_head(source)
+    lines = text.splitlines()
+    skip = 0
+    while skip < len(lines) and lines[skip].lstrip().startswith(_COMMENT_MARKS):
+        skip += 1
+    if skip:
+        notes.append(f"the first {skip} lines are comments (starting with % or #) and were skipped")
+        text = "\n".join(lines[skip:])
     if not text.strip():
         raise LogFormatError(f"{name}: the file holds only blank lines; give a log with a header and data rows")
     sep, decimal = sniff_delimiter(text)
     header_line = next(ln for ln in text.splitlines() if ln.strip())
+    has_header = not _all_numbers(header_line, sep, decimal)
+    if not has_header:
+        n_fields = len(header_line.split() if sep == r"\s+" else header_line.split(sep))
+        notes.append(
+            f"no header row: the {n_fields} columns are named by position, 1 to {n_fields}; map them with "
+            "--columns, e.g. t=1,eta_r=3"
+        )
     spaced = sep != r"\s+" and any(f != f.strip() for f in header_line.split(sep))
     if sep == "\t":
         notes.append("columns separated by tabs")
@@ -556,13 +574,19 @@ def _read_csv(source: _Source, mapping: dict[str, str], explicit: set[str]) -> _
         "encoding": encoding,
         "skipinitialspace": spaced,
         "engine": "c",
+        "skiprows": skip,
     }
+    if not has_header:
+        c_options["header"] = None
     if int(pd.__version__.split(".")[0]) < 3:  # pandas 3 parses floats exactly by default (and warns on this)
         c_options["float_precision"] = "round_trip"
     try:
-        header = pd.read_csv(source.opener(), nrows=0, **c_options)
+        header = pd.read_csv(source.opener(), nrows=0 if has_header else 1, **c_options)
     except (ValueError, UnicodeDecodeError) as err:
         raise fail(err) from err
+    if not has_header:
+        c_options["names"] = [str(i + 1) for i in range(len(header.columns))]
+        header = header.set_axis(c_options["names"], axis=1)
     present = [str(c).strip() for c in header.columns]
     if spaced:
         notes.append("spaces around column names and values ignored")
@@ -571,7 +595,7 @@ def _read_csv(source: _Source, mapping: dict[str, str], explicit: set[str]) -> _
     usecols = list(dict.fromkeys(actual[c] for c in chosen.values()))
 
     frame = None
-    if sep in (",", "\t", ";") and decimal == "." and not spaced:
+    if sep in (",", "\t", ";") and decimal == "." and not spaced and not skip and has_header:
         try:
             frame = pd.read_csv(source.opener(), sep=sep, encoding=encoding, usecols=usecols, engine="pyarrow")
         except Exception:  # pyarrow refuses some valid files; the C engine then decides and explains
@@ -585,7 +609,19 @@ def _read_csv(source: _Source, mapping: dict[str, str], explicit: set[str]) -> _
         raise LogFormatError(f"{name}: has a header but no data rows; give a log with at least {MIN_SAMPLES} samples")
     frame.columns = [str(c).strip() for c in frame.columns]
     values = {key: _series_values(frame[col]) for key, col in chosen.items()}
-    return _Raw(values, _csv_line_finder(source), notes)
+    return _Raw(values, _csv_line_finder(source, skip, has_header), notes)
+
+
+def _all_numbers(line: str, sep: str, decimal: str) -> bool:
+    """True when every field of ``line`` reads as a number (a data row, not a header)."""
+    fields = line.split() if sep == r"\s+" else line.split(sep)
+    try:
+        for f in fields:
+            if f.strip():
+                float(f.strip().replace(decimal, ".") if decimal != "." else f.strip())
+    except ValueError:
+        return False
+    return any(f.strip() for f in fields)
 
 
 def _series_values(series: pandas.Series) -> Any:
