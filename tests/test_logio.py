@@ -648,6 +648,6 @@ def test_leading_comment_lines_and_headerless_columns(tmp_path):
     assert any("first 3 lines are comments" in n for n in log.notes)
     assert any("no header row" in n for n in log.notes)
     # Errors point at the file's own line numbers, comments counted.
-    bad = lines[:10] + ["0.070 x 2 3 4"] + lines[11:]
+    bad = [*lines[:10], "0.070 x 2 3 4", *lines[11:]]
     path.write_text("\n".join(bad) + "\n")
     assert "line 11" in log_error(path, columns={"t": "1", "eta_l": "2", "eta_r": "3", "tau_l": "4", "tau_r": "5"})
