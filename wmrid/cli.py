@@ -194,15 +194,21 @@ def _read_wheel_log(
     from wmrid.logio import parse_column_mapping, read_log
     from wmrid.signals import SignalOptions
 
-    if wheel_radius is None and speed_unit == "m/s" and robot_obj is not None:
-        wheel_radius = robot_obj.nominal.r
+    if robot_obj is not None:
+        if wheel_radius is None and speed_unit == "m/s":
+            wheel_radius = robot_obj.nominal.r
+        if effort == "current" and torque_constant is None:
+            torque_constant = robot_obj.torque_constant
+        if effort == "current" and efficiency is None:
+            efficiency = robot_obj.efficiency
     selection = TopicSelection(
         topic=topic, velocity_topic=velocity_topic, effort_topic=effort_topic, right_joint=right_joint,
         left_joint=left_joint, time_source=time_source, align=align, velocity_from=velocity_from,
     )  # fmt: skip
     signals = SignalOptions(
         speed_unit=speed_unit, wheel_radius=wheel_radius, effort=effort, effort_unit=effort_unit,
-        torque_constant=torque_constant, gear_ratio=gear_ratio, efficiency=efficiency, mirror_left=mirror_left,
+        torque_constant=torque_constant, gear_ratio=gear_ratio, efficiency=1.0 if efficiency is None else efficiency,
+        mirror_left=mirror_left,
     )  # fmt: skip
     mapping = parse_column_mapping(columns) if columns else None
     k_r = robot_obj.nominal.k_r if robot_obj is not None else None
@@ -286,7 +292,7 @@ def identify(
     effort_unit: EffortUnitOpt = None,
     torque_constant: TorqueConstantOpt = None,
     gear_ratio: GearRatioOpt = None,
-    efficiency: EfficiencyOpt = 1.0,
+    efficiency: EfficiencyOpt = None,
     mirror_left: MirrorLeftOpt = False,
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""

@@ -8,6 +8,9 @@ A robot file is TOML::
     ...
     [cad]              # optional: the CAD ("Solidworks") values, taken as the reference truth
     ...
+    [motor]            # optional: to turn a logged motor current into a wheel torque
+    torque_constant = 0.0105   # N m/A (k_t); the gear ratio is k_r of [nominal]
+    efficiency = 0.9           # of the gearbox, in (0, 1]
 
 All values are SI: kg, m, kg m^2, N m s/rad (viscous), N m (Coulomb). Every key of
 :data:`PARAMETER_UNITS` must be present in each set.
@@ -163,6 +166,8 @@ class Robot:
     name: str
     nominal: PhysicalParameters
     cad: PhysicalParameters | None = None
+    torque_constant: float | None = None  # N m/A, of each motor ([motor] table)
+    efficiency: float | None = None  # of the gearbox ([motor] table)
 
     @property
     def reference(self) -> PhysicalParameters:
@@ -212,7 +217,17 @@ def robot_from_toml_text(text: str, source: str) -> Robot:
     nominal = _parse_set(data["nominal"], f"{source} [nominal]")
     cad = _parse_set(data["cad"], f"{source} [cad]") if "cad" in data else None
     name = str(data.get("name", Path(source).stem))
-    return Robot(name=name, nominal=nominal, cad=cad)
+    motor = data.get("motor", {})
+    if not isinstance(motor, dict) or set(motor) - {"torque_constant", "efficiency"}:
+        raise RobotFileError(f"{source} [motor]: only torque_constant (N m/A) and efficiency may be given")
+    for key, value in motor.items():
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > 0
+        if not ok or (key == "efficiency" and value > 1):
+            raise RobotFileError(f"{source} [motor]: {key} must be a number > 0 (efficiency <= 1), got {value!r}")
+    return Robot(
+        name=name, nominal=nominal, cad=cad, torque_constant=motor.get("torque_constant"),
+        efficiency=motor.get("efficiency"),
+    )  # fmt: skip
 
 
 def robot_to_toml(robot: Robot) -> str:
@@ -224,6 +239,12 @@ def robot_to_toml(robot: Robot) -> str:
         for key, value in params.to_dict().items():
             unit = PARAMETER_UNITS[key][0]
             lines.append(f"{key} = {value!r}  # {unit}")
+    if robot.torque_constant is not None or robot.efficiency is not None:
+        lines.append("\n[motor]")
+        if robot.torque_constant is not None:
+            lines.append(f"torque_constant = {robot.torque_constant!r}  # N m/A")
+        if robot.efficiency is not None:
+            lines.append(f"efficiency = {robot.efficiency!r}")
     return "\n".join(lines) + "\n"
 
 
