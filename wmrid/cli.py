@@ -278,6 +278,13 @@ def identify(
         typer.Option("--out", help="Write the estimates over time and the prediction errors as an MCAP (JSON topic)."),
     ] = None,
     force: Annotated[bool, typer.Option(help="Overwrite an existing output file.")] = False,
+    payload: Annotated[
+        bool,
+        typer.Option(
+            "--payload",
+            help="Also estimate the payload carried (mass, x, y, inertia) against --robot's unloaded parameters.",
+        ),
+    ] = False,
     topic: TopicOpt = None,
     velocity_topic: VelocityTopicOpt = None,
     effort_topic: EffortTopicOpt = None,
@@ -320,6 +327,7 @@ def identify(
             box_width=box_width,
             torque_hold=torque_hold.value,
             progress=progress_cb,
+            payload=payload,
         )
     finally:
         finish()

@@ -78,6 +78,7 @@ class IdentificationResult:
     nominal: dict[str, float] | None = None
     reference: dict[str, float] | None = None
     units: dict[str, str] = field(default_factory=lambda: dict(THETA0_UNITS))
+    payload: dict[str, tuple[float, float]] | None = None  # mass kg, x m, y m, inertia kg m^2: (value, std)
 
     def theta_dict(self) -> dict[str, Any]:
         names = self.form.theta_names()
@@ -112,6 +113,13 @@ class IdentificationResult:
             "warnings": list(self.warnings),
             "log": self.log_info,
         }
+        if self.payload is not None:
+            from wmrid.payload import PAYLOAD_UNITS
+
+            out["payload"] = {
+                name: {"value": v, "std": _finite_or_none(e), "unit": PAYLOAD_UNITS[name]}
+                for name, (v, e) in self.payload.items()
+            }
         if self.nominal is not None:
             out["nominal"] = self.nominal
         if self.reference is not None:
@@ -199,13 +207,18 @@ def identify(
     max_history: int = 20000,
     torque_hold: Literal["zoh", "foh"] = "zoh",
     progress: Callable[[int], None] | None = None,
+    payload: bool = False,
 ) -> IdentificationResult:
     """Identify the base parameters of the robot that recorded ``log``.
 
     log.t (n,) s strictly increasing; log.eta (n, 2) rad/s [right, left]; log.tau (n, 2) N m.
     ``robot`` gives the nominal values that start the estimate and centre the box (as in the paper);
     without it the start and box come from the data and physics (see :func:`data_start`, :func:`default_box`).
+    ``payload``: also estimate the payload the robot carries, against the robot's unloaded parameters
+    (its CAD set, else nominal; :mod:`wmrid.payload`).
     """
+    if payload and robot is None:
+        raise UsageError("--payload needs --robot: the payload is what the log shows beyond the unloaded robot")
     t = np.ascontiguousarray(log.t, dtype=np.float64)
     eta = np.ascontiguousarray(log.eta, dtype=np.float64)
     tau = np.ascontiguousarray(log.tau, dtype=np.float64)
@@ -288,6 +301,11 @@ def identify(
         "notes": list(log.notes),
         "effort_unit": effort_unit,
     }
+    payload_est = None
+    if payload and robot is not None:
+        from wmrid.payload import payload_with_std
+
+        payload_est = payload_with_std(fit.theta0, cov0, robot.reference)
     nominal = reference = None
     if robot is not None:
         nominal = model.named_base(model.base_parameters(robot.nominal))
@@ -297,7 +315,7 @@ def identify(
         source=log.source, form=chosen, settings=settings, start_source=start_source, theta=theta,
         theta_unconstrained=theta_u, theta_cov=theta_cov, parameters=parameters, theta0_cov=fit.cov,
         history=history, diagnostics=diagnostics, warnings=tuple(warnings), log_info=log_info,
-        nominal=nominal, reference=reference, units=units,
+        nominal=nominal, reference=reference, units=units, payload=payload_est,
     )  # fmt: skip
 
 

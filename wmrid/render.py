@@ -46,6 +46,15 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
             row.append(f"{z:+.1f}" if math.isfinite(z) else "")
         table.add_row(*row)
     console.print(table)
+    if result.payload is not None:
+        from wmrid.payload import PAYLOAD_UNITS
+
+        pt = Table(title="payload (against the unloaded robot)", title_justify="left", box=box.SIMPLE_HEAD)
+        for col in ("quantity", "estimate", "std", "unit"):
+            pt.add_column(col, no_wrap=True, justify="right" if col in ("estimate", "std") else "left")
+        for name, (value, std) in result.payload.items():
+            pt.add_row(name, _fmt(value), _fmt(std, 2), PAYLOAD_UNITS[name])
+        console.print(pt)
     info = result.log_info
     console.print(
         f"{info['samples']} samples, {info['duration_s']:.3f} s at {info['rate_hz']:.6g} Hz; "
