@@ -39,7 +39,6 @@ def test_current_to_torque_and_pwm_label():
     ("kwargs", "message"),
     [
         ({"speed_unit": "m/s"}, "--wheel-radius"),
-        ({"effort": "current"}, "--torque-constant"),
         ({"efficiency": 1.5}, "--efficiency"),
         ({"speed_unit": "furlong/fortnight"}, "--speed-unit"),
         ({"wheel_radius": -1.0}, "--wheel-radius"),
@@ -48,6 +47,15 @@ def test_current_to_torque_and_pwm_label():
 def test_options_are_validated(kwargs, message):
     with pytest.raises(UsageError, match=message):
         SignalOptions(**kwargs)
+
+
+def test_current_without_a_torque_constant_is_identified_in_amperes():
+    opts = SignalOptions(effort="current")
+    assert opts.effort_label == "A"
+    assert not opts.is_torque
+    same, note = effort_to_torque(np.ones((1, 2)), opts, None)
+    np.testing.assert_array_equal(same, 1.0)
+    assert "identified in A units" in note
 
 
 def test_current_needs_a_gear_ratio():

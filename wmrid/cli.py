@@ -158,6 +158,12 @@ GearRatioOpt = Annotated[
 EfficiencyOpt = Annotated[
     float, typer.Option(help="Gearbox efficiency in (0, 1] (for --effort current).", rich_help_panel=_LOG_PANEL)
 ]
+FlipEffortOpt = Annotated[
+    bool,
+    typer.Option(
+        help="The effort's sign is opposite to the speed's on both wheels: change it.", rich_help_panel=_LOG_PANEL
+    ),
+]
 MirrorLeftOpt = Annotated[
     bool,
     typer.Option(
@@ -188,6 +194,7 @@ def _read_wheel_log(
     gear_ratio,
     efficiency,
     mirror_left,
+    flip_effort=False,
 ):
     """Read LOG with the log-input options (shared by the commands that read logs)."""
     from wmrid.joints import TopicSelection
@@ -208,7 +215,7 @@ def _read_wheel_log(
     signals = SignalOptions(
         speed_unit=speed_unit, wheel_radius=wheel_radius, effort=effort, effort_unit=effort_unit,
         torque_constant=torque_constant, gear_ratio=gear_ratio, efficiency=1.0 if efficiency is None else efficiency,
-        mirror_left=mirror_left,
+        mirror_left=mirror_left, flip_effort=flip_effort,
     )  # fmt: skip
     mapping = parse_column_mapping(columns) if columns else None
     k_r = robot_obj.nominal.k_r if robot_obj is not None else None
@@ -301,6 +308,7 @@ def identify(
     gear_ratio: GearRatioOpt = None,
     efficiency: EfficiencyOpt = None,
     mirror_left: MirrorLeftOpt = False,
+    flip_effort: FlipEffortOpt = False,
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
     from wmrid.atomic import write_json
@@ -314,7 +322,7 @@ def identify(
         effort_topic=effort_topic, right_joint=right_joint, left_joint=left_joint, time_source=time_source.value,
         align=align.value, velocity_from=velocity_from.value, speed_unit=speed_unit.value, wheel_radius=wheel_radius,
         effort=effort.value, effort_unit=effort_unit, torque_constant=torque_constant, gear_ratio=gear_ratio,
-        efficiency=efficiency, mirror_left=mirror_left,
+        efficiency=efficiency, mirror_left=mirror_left, flip_effort=flip_effort,
     )  # fmt: skip
     progress_cb, finish = _progress(len(wheel_log), "identify")
     try:
@@ -472,6 +480,8 @@ def main(argv: list[str] | None = None) -> None:
     """Entry point: run the app and map every outcome to one exit code and at most one stderr line."""
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
+    if debug:  # accepted anywhere on the line, not only before the command
+        args = ["--debug", *[a for a in args if a != "--debug"]]
     try:
         rv = app(args=args, prog_name="wmrid", standalone_mode=False)
         code = rv if isinstance(rv, int) else ExitStatus.OK

@@ -219,6 +219,18 @@ def identify(
     """
     if payload and robot is None:
         raise UsageError("--payload needs --robot: the payload is what the log shows beyond the unloaded robot")
+    try:
+        return _identify(log, robot, form, k, alpha, box_width, max_history, torque_hold, progress, payload)
+    except np.linalg.LinAlgError as err:
+        raise NotIdentifiableError(
+            f"{log.source}: the log does not support an estimate (a singular system: {err}); it is too short, "
+            "not exciting enough, or its units or time stamps are wrong (check the notes of wmrid inspect)"
+        ) from err
+
+
+def _identify(
+    log, robot, form, k, alpha, box_width, max_history, torque_hold, progress, payload
+) -> IdentificationResult:
     t = np.ascontiguousarray(log.t, dtype=np.float64)
     eta = np.ascontiguousarray(log.eta, dtype=np.float64)
     tau = np.ascontiguousarray(log.tau, dtype=np.float64)
@@ -279,7 +291,7 @@ def identify(
     diagnostics, warnings = _diagnose(
         gamma, alpha, chosen, fit, parameters, theta, theta_cov, sens, undetermined, lo, hi, units
     )
-    warnings = early_warnings + warnings
+    warnings = early_warnings + signal_warnings(eta, tau, effort_unit) + physics_warnings(parameters) + warnings
     dof = unc["dof"]
     diagnostics["uncertainty"] = {
         "method": "delete-a-segment jackknife over contiguous segments of the log",
@@ -317,6 +329,47 @@ def identify(
         history=history, diagnostics=diagnostics, warnings=tuple(warnings), log_info=log_info,
         nominal=nominal, reference=reference, units=units, payload=payload_est,
     )  # fmt: skip
+
+
+def signal_warnings(eta: np.ndarray, tau: np.ndarray, effort_unit: str) -> list[str]:
+    """Warnings about the signals themselves: an effort that never changes sign while the speed does (a
+    magnitude, not a signed effort), and an effort that mostly opposes the speed (a sign convention)."""
+    out = []
+    for i, wheel in enumerate(("right", "left")):
+        speed_neg = float(np.mean(eta[:, i] < 0))
+        speed_pos = float(np.mean(eta[:, i] > 0))
+        if min(speed_neg, speed_pos) > 0.05 and (np.all(tau[:, i] >= 0) or np.all(tau[:, i] <= 0)):
+            out.append(
+                f"the {wheel} wheel's effort never changes sign while its speed does "
+                f"({100 * min(speed_neg, speed_pos):.0f} % of samples the other way): the log holds a magnitude "
+                "(e.g. an unsigned current), not a signed effort, so the model does not apply; give it the sign of "
+                "the motor's drive"
+            )
+        power = float(np.mean(tau[:, i] * eta[:, i]))
+        scale = float(np.mean(np.abs(tau[:, i] * eta[:, i])))
+        if scale > 0 and power < -0.2 * scale:
+            out.append(
+                f"the {wheel} wheel's effort mostly opposes its speed (mean power {power:.3g} {effort_unit} rad/s "
+                "< 0): its sign convention is probably reversed; try --mirror-left or --flip-effort"
+            )
+    return out
+
+
+def physics_warnings(parameters: dict[str, tuple[float, float]]) -> list[str]:
+    """Warnings for base parameters that no physical robot has: M not positive definite, negative friction
+    (each beyond 3 standard errors, so that noise alone does not trigger it)."""
+    out = []
+    m11, m12, m22 = (parameters[n][0] for n in ("m11", "m12", "m22"))
+    if m11 <= 0 or m22 <= 0 or m11 * m22 - m12 * m12 <= 0:
+        out.append(
+            f"the identified inverse inertia [m11 m12; m12 m22] = [{m11:.4g} {m12:.4g}; {m12:.4g} {m22:.4g}] is not "
+            "positive definite, which no robot has: the log departs from the model or does not excite it"
+        )
+    for name in ("Fv1", "Fv2", "Fd1", "Fd2"):
+        value, std = parameters[name]
+        if value < 0 and math.isfinite(std) and value < -3 * std:
+            out.append(f"{name} = {value:.4g} is negative beyond 3 std ({std:.2g}): friction cannot push; check signs")
+    return out
 
 
 #: A base parameter is not determined by the log when the start value moves it by more than its

@@ -34,6 +34,7 @@ from wmrid.mcap_read import JOINT_STATE, JointSeries, JsonSeries, McapContents
 from wmrid.signals import (
     SignalOptions,
     effort_to_torque,
+    flip_effort,
     mirror_left,
     position_to_rad,
     speed_from_position,
@@ -273,6 +274,9 @@ def signals_from_mcap(
     if opts.mirror_left:
         mirror_left(speed, effort)
         notes.append("left wheel mirrored: its speed and effort changed sign (--mirror-left)")
+    if opts.flip_effort:
+        flip_effort(effort)
+        notes.append("both efforts changed sign (--flip-effort)")
     return Signals(t_ns=t_out, speed=speed, effort=effort, notes=tuple(notes), effort_unit=opts.effort_label)
 
 
@@ -343,4 +347,7 @@ def signals_from_json(contents: McapContents, topic: str, opts: SignalOptions, g
     if opts.mirror_left:
         mirror_left(speed, effort)
         notes.append("left wheel mirrored: its speed and effort changed sign (--mirror-left)")
+    if opts.flip_effort:
+        flip_effort(effort)
+        notes.append("both efforts changed sign (--flip-effort)")
     return Signals(t_ns=t_ns, speed=speed, effort=effort, notes=tuple(notes), effort_unit=opts.effort_label)

@@ -15,13 +15,15 @@ are parsed by the multithreaded pyarrow engine; whitespace, decimal-comma and ``
 any file pyarrow refuses, by pandas' C engine with round-trip-exact float parsing.
 
 Time (:func:`seconds_from_stamps`): ``time_unit="auto"`` reads a floating-point column as seconds and an
-INTEGER column as integer nanoseconds (the ROS convention), with a note.  Stamps are converted to
-float64 seconds once, here.  They keep their absolute value (as in the file) while float64 resolves
-them to 1 ns or better, i.e. while the largest |t| < 2**23 s (about 97 days; float64 spacing there is
-2**-30 s < 1 ns).  Converted stamps beyond that (epoch stamps such as 1.7e18 ns) are stored relative to
-the first stamp — subtracted in exact integer arithmetic for integer columns, before any rounding —
-and a note gives the first stamp.  A float column already in seconds is kept exactly as in the file
-whatever its size: converting it loses nothing.
+INTEGER column as integer nanoseconds (the ROS convention), with a note; a floating-point column
+reaching 1e16 (1e13) is read as nanoseconds (microseconds) since the epoch, since as seconds it would
+span 300,000 years, with a note. Rows stamped 0 among epoch times (a clock not yet set) are dropped,
+with a note. Stamps are converted to float64 seconds once, here. They keep their absolute value (as in
+the file) while float64 resolves them to 1 ns or better, i.e. while the largest |t| < 2**23 s (about 97
+days; float64 spacing there is 2**-30 s < 1 ns). Converted stamps beyond that (epoch stamps such as
+1.7e18 ns) are stored relative to the first stamp — subtracted in exact integer arithmetic for integer
+columns, before any rounding — and a note gives the first stamp. A float column already in seconds is
+kept exactly as in the file whatever its size: converting it loses nothing.
 
 Row numbers in messages: for CSV the line of the file as an editor counts it (header = line 1); for
 Parquet the 1-based data row.
@@ -42,7 +44,7 @@ import numpy as np
 
 from wmrid.errors import LogFormatError, UsageError
 from wmrid.joints import TopicSelection
-from wmrid.signals import SignalOptions, effort_to_torque, mirror_left, speed_to_rad_s
+from wmrid.signals import SignalOptions, effort_to_torque, flip_effort, mirror_left, speed_to_rad_s
 
 if TYPE_CHECKING:
     import pandas
@@ -76,6 +78,7 @@ _PARQUET_MAGIC = b"PAR1"
 _MCAP_MAGIC = b"\x89MCAP"
 _SNIFF_BYTES = 65536
 _COMMENT_MARKS = ("%", "#")
+_EPOCH_LIKE_S = 1e9  # stamps beyond this (2001 in s since the epoch; any ms/us/ns epoch time) are clock times
 _STDIN_NAME = "<stdin>"
 
 
@@ -296,6 +299,9 @@ def _apply_signals(log: WheelLog, signals: SignalOptions, gear_ratio: float | No
     if signals.mirror_left:
         mirror_left(eta, tau)
         notes.append("left wheel mirrored: its speed and effort changed sign (--mirror-left)")
+    if signals.flip_effort:
+        flip_effort(tau)
+        notes.append("both efforts changed sign (--flip-effort)")
     return WheelLog(
         t=log.t, eta=eta, tau=tau, source=log.source, notes=tuple(notes), pose=log.pose,
         effort_unit=signals.effort_label,
@@ -703,9 +709,23 @@ def _assemble(raw: _Raw, name: str, mapping: dict[str, str], time_unit: str) -> 
         i, key = min(bad, key=lambda b: (b[0], REQUIRED.index(b[1])))
         raise LogFormatError(_nonfinite_message(arrays[key], i, mapping[key], name, where))
 
-    n = len(arrays["t"])
     stamps = arrays["t"]
     tcol = mapping["t"]
+    # Zero stamps among epoch times (a clock not yet set, a dropped header): those rows are dropped.
+    zero = stamps == 0
+    if zero.any() and not zero.all() and np.min(np.abs(stamps[~zero])) > _EPOCH_LIKE_S:
+        rows = np.flatnonzero(zero)
+        notes.append(
+            f"{len(rows)} rows with time stamp 0 among epoch times were dropped as bad stamps "
+            f"(first: {where(int(rows[0]))})"
+        )
+        kept = np.flatnonzero(~zero)
+        arrays = {key: arr[kept] for key, arr in arrays.items()}
+        stamps = arrays["t"]
+        values = {key: _take(val, kept) for key, val in raw.values.items()}
+        raw = _Raw(values, lambda i, f=raw.where: f(int(kept[i])), raw.notes, raw.time_unit_hint)
+        where = raw.where
+    n = len(stamps)
     unit = time_unit
     if raw.time_unit_hint is not None:
         if time_unit not in ("auto", raw.time_unit_hint):
@@ -720,6 +740,15 @@ def _assemble(raw: _Raw, name: str, mapping: dict[str, str], time_unit: str) -> 
             )
         else:
             unit = "s"
+            largest = float(np.max(np.abs(stamps))) if len(stamps) else 0.0
+            for candidate, low in (("ns", 1e16), ("us", 1e13)):
+                if largest >= low:  # as seconds: over 300,000 years; as ns or us since the epoch: today
+                    unit = candidate
+                    notes.append(
+                        f"time column {tcol!r} holds floats up to {largest:.4g}: too large for seconds, read as "
+                        f"{candidate} since the Unix epoch (use --time-unit to say otherwise)"
+                    )
+                    break
 
     steps = np.diff(stamps) if stamps.dtype.kind == "f" else np.diff(stamps.astype(np.int64))
     if n > 1 and not (steps > 0).all():
@@ -762,6 +791,13 @@ def _assemble(raw: _Raw, name: str, mapping: dict[str, str], time_unit: str) -> 
     if any(mapping[k] != k for k in REQUIRED):
         notes.append("columns read as " + ", ".join(f"{k} = {mapping[k]!r}" for k in REQUIRED if mapping[k] != k))
     return WheelLog(t=t, eta=eta, tau=tau, source=name, notes=tuple(notes), pose=pose)
+
+
+def _take(values: Any, rows: np.ndarray) -> Any:
+    """Rows of a column as read (a numpy array or a pandas Series), renumbered from 0."""
+    if isinstance(values, np.ndarray):
+        return values[rows]
+    return values.iloc[rows].reset_index(drop=True)
 
 
 def _pose(raw: _Raw, name: str, mapping: dict[str, str], notes: list[str]) -> np.ndarray | None:

@@ -37,6 +37,8 @@ class SignalOptions:
     effort : one of EFFORT_KINDS.  effort_unit : the label of a PWM/voltage effort (default "PWM", "V").
     torque_constant : N m/A of the motor; gear_ratio : motor turns per wheel turn (k_r); efficiency : of
     the gearbox, in (0, 1].  mirror_left : the left motor is mounted mirrored (its signals change sign).
+    flip_effort : the effort's sign convention is opposite to the speed's on both wheels.
+    A current without a torque constant is identified in amperes (like a PWM effort, in its own units).
     """
 
     speed_unit: str = "rad/s"
@@ -47,6 +49,7 @@ class SignalOptions:
     gear_ratio: float | None = None
     efficiency: float = 1.0
     mirror_left: bool = False
+    flip_effort: bool = False
 
     def __post_init__(self) -> None:
         if self.speed_unit not in SPEED_UNITS:
@@ -61,23 +64,18 @@ class SignalOptions:
             raise UsageError(f"--efficiency must be in (0, 1], got {self.efficiency!r}")
         if self.speed_unit == "m/s" and self.wheel_radius is None:
             raise UsageError("speeds in m/s at the rim need the wheel radius: give --wheel-radius R (m) or --robot")
-        if self.effort == "current" and self.torque_constant is None:
-            raise UsageError(
-                "--effort current needs the motor torque constant: give --torque-constant KT (N m/A) "
-                "(and --gear-ratio, else the robot's k_r)"
-            )
 
     @property
     def is_torque(self) -> bool:
-        """True when the effort becomes a torque in N m (torque or current)."""
-        return self.effort in ("torque", "current")
+        """True when the effort becomes a torque in N m (a torque, or a current with its torque constant)."""
+        return self.effort == "torque" or (self.effort == "current" and self.torque_constant is not None)
 
     @property
     def effort_label(self) -> str:
-        """The unit of the effort after conversion: "N m" for torque and current, else the given label."""
+        """The unit of the effort after conversion: "N m" for a torque, else the given label (PWM, V, A)."""
         if self.is_torque:
             return "N m"
-        return self.effort_unit or ("PWM" if self.effort == "pwm" else "V")
+        return self.effort_unit or {"pwm": "PWM", "voltage": "V", "current": "A"}[self.effort]
 
 
 def speed_to_rad_s(values: np.ndarray, opts: SignalOptions) -> tuple[np.ndarray, str | None]:
@@ -108,6 +106,11 @@ def effort_to_torque(
     (None for a torque, which needs no conversion)."""
     if opts.effort == "torque":
         return values, None
+    if opts.effort == "current" and opts.torque_constant is None:
+        return values, (
+            f"effort read as motor current in {opts.effort_label} with no torque constant given: the parameters are "
+            f"identified in {opts.effort_label} units (give --torque-constant, or a robot [motor] table, for N m)"
+        )
     if opts.effort == "current":
         k_r = opts.gear_ratio if opts.gear_ratio is not None else robot_gear_ratio
         if k_r is None:
@@ -122,6 +125,11 @@ def effort_to_torque(
         f"effort is a {opts.effort} command in {label}, not a torque: there is no known conversion, so the "
         f"parameters are identified in {label} units (they absorb the drive's gain and back-EMF)"
     )
+
+
+def flip_effort(effort: np.ndarray) -> None:
+    """Change the sign of both wheels' efforts in place (an effort convention opposite to the speed's)."""
+    effort *= -1.0
 
 
 def mirror_left(speed: np.ndarray | None, effort: np.ndarray | None, position: np.ndarray | None = None) -> None:

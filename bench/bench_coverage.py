@@ -1,8 +1,8 @@
 """Coverage of wmrid's standard errors over many seeds of noisy simulated logs.
 
-    python bench/coverage.py                       # 50 seeds, paper sinusoid, 40 s, default noise
-    python bench/coverage.py --trajectory reversing --seeds 50
-    python bench/coverage.py --caster 0 --seeds 100  # sensor noise only
+    python bench/bench_coverage.py                       # 50 seeds, paper sinusoid, 40 s, default noise
+    python bench/bench_coverage.py --trajectory reversing --seeds 50
+    python bench/bench_coverage.py --caster 0 --seeds 100  # sensor noise only
 
 For each seed: ``wmrid simulate`` (in-process) with velocity noise, torque noise and a coloured caster
 disturbance (an Ornstein-Uhlenbeck torque, 0.3 s correlation, in closed loop), then ``identify`` with
