@@ -212,3 +212,18 @@ def test_identify_reads_an_mcap_from_a_pipe():
     from_pipe = identify_json("-", "--robot", "paper", stdin=bag.read_bytes())
     from_file = identify_json(str(bag), "--robot", "paper")
     assert from_pipe["parameters"] == from_file["parameters"]
+
+
+def test_inspect_csv_and_parquet(tmp_path):
+    for path in (SAMPLE_CSV, SAMPLE_PARQUET):
+        proc = wmrid("inspect", str(path), "--format", "json")
+        assert proc.returncode == 0, proc.stderr.decode()
+        assert proc.stderr == b""
+        info = json.loads(proc.stdout)
+        assert [c["name"] for c in info["columns"]][:5] == ["t", "eta_r", "eta_l", "tau_r", "tau_l"]
+        assert info["canonical_missing"] == []
+    commented = tmp_path / "robot.txt"
+    commented.write_text("% 1 time\n% 2 3 wheel velocity left right\n0.0 1 2\n0.1 1 2\n")
+    info = json.loads(wmrid("inspect", str(commented), "--format", "json").stdout)
+    assert [c["name"] for c in info["columns"]] == ["1", "2", "3"]
+    assert info["comments"] == ["% 1 time", "% 2 3 wheel velocity left right"]

@@ -71,23 +71,28 @@ def _inspect_table(source, kind: str) -> dict[str, Any]:
                 pf = pq.ParquetFile(stream)
                 columns = [{"name": f.name, "type": str(f.type)} for f in pf.schema_arrow]
                 rows = pf.metadata.num_rows
+                notes, comments = [], []
         except (pa.ArrowException, OSError) as err:
             raise LogFormatError(f"{source.name}: not a readable Parquet file ({err})") from err
     else:
         import pandas as pd
 
-        from wmrid.logio import _text_head
+        from wmrid.logio import _csv_layout
 
-        _, sep, _ = _text_head(source)
+        layout = _csv_layout(source)
         try:
-            frame = pd.read_csv(source.opener(), sep=sep if sep != "whitespace" else r"\s+", nrows=5)
-        except (ValueError, pd.errors.ParserError) as err:
-            raise LogFormatError(f"{source.name}: not readable as CSV ({err})") from err
-        columns = [{"name": str(c), "type": str(t)} for c, t in frame.dtypes.items()]
+            frame = pd.read_csv(source.opener(), nrows=5, **layout.c_options)
+        except (ValueError, UnicodeDecodeError) as err:
+            raise layout.fail(err) from err
+        columns = [{"name": str(c).strip(), "type": str(t)} for c, t in frame.dtypes.items()]
         rows = None
+        notes = layout.notes
+        comments = layout.comments[:40]
     names = [c["name"] for c in columns]
     return {
         "source": source.name, "format": kind, "rows": rows, "columns": columns,
         "canonical_found": [c for c in CANONICAL if c in names],
         "canonical_missing": [c for c in CANONICAL[:5] if c not in names],
+        "notes": notes,
+        "comments": comments,
     }  # fmt: skip

@@ -530,7 +530,23 @@ def _csv_line_finder(source: _Source, skip: int = 0, has_header: bool = True) ->
     return where
 
 
-def _read_csv(source: _Source, mapping: dict[str, str], explicit: set[str]) -> _Raw:
+@dataclass
+class _CsvLayout:
+    """How a CSV file is laid out: options for pandas, its columns, notes, and a parse-error mapper."""
+
+    c_options: dict[str, Any]
+    header_columns: list[Any]
+    present: list[str]
+    notes: list[str]
+    skip: int
+    has_header: bool
+    spaced: bool
+    fail: Callable[[BaseException], LogFormatError]
+    comments: list[str]
+
+
+def _csv_layout(source: _Source) -> _CsvLayout:
+    """Comments, delimiter, decimal mark, header (or positional names) of a CSV file; see the module docstring."""
     import pandas as pd
 
     name = source.name
@@ -596,6 +612,26 @@ def _read_csv(source: _Source, mapping: dict[str, str], explicit: set[str]) -> _
     present = [str(c).strip() for c in header.columns]
     if spaced:
         notes.append("spaces around column names and values ignored")
+    comments = lines[:skip]
+    return _CsvLayout(c_options, list(header.columns), present, notes, skip, has_header, spaced, fail, comments)
+
+
+def _read_csv(source: _Source, mapping: dict[str, str], explicit: set[str]) -> _Raw:
+    import pandas as pd
+
+    name = source.name
+    layout = _csv_layout(source)
+    c_options, present, notes, skip, has_header, spaced, fail = (
+        layout.c_options,
+        layout.present,
+        layout.notes,
+        layout.skip,
+        layout.has_header,
+        layout.spaced,
+        layout.fail,
+    )
+    sep, decimal, encoding = c_options["sep"], c_options["decimal"], c_options["encoding"]
+    header = pd.DataFrame(columns=layout.header_columns)
     chosen = _select(present, mapping, explicit, name)
     actual = {str(c).strip(): c for c in header.columns}
     usecols = list(dict.fromkeys(actual[c] for c in chosen.values()))

@@ -105,6 +105,12 @@ def print_inspection(info: dict, console: Any) -> None:
             if not missing
             else f"canonical columns missing: {', '.join(missing)} (map them with --columns)"
         )
+        if info.get("comments"):
+            console.print("comment lines (they often say what the columns are):")
+            for line in info["comments"]:
+                console.print(f"  {line}", markup=False, highlight=False)
+        for note in info.get("notes", []):
+            console.print(f"note: {note}")
         return
     span = f"{info['duration_s']:.3f} s" if info.get("start_s") is not None else "no messages"
     console.print(
