@@ -222,6 +222,30 @@ def _read_wheel_log(
     return read_log(log, columns=mapping, time_unit=time_unit, selection=selection, signals=signals, gear_ratio=k_r)
 
 
+RotorInertiaOpt = Annotated[
+    float | None,
+    typer.Option(help="URDF robots: motor rotor inertia I_r, kg m^2 (when the URDF has no rotor links)."),
+]
+
+
+def _load_robot(spec: str, gear_ratio: float | None, rotor_inertia: float | None, wheel_radius: float | None = None):
+    """A robot from a built-in name, a TOML file, or a URDF (which needs the gear ratio from --gear-ratio)."""
+    from wmrid.robot import load_robot
+
+    if spec.lower().endswith(".urdf"):
+        from wmrid.urdf import load_robot_urdf
+
+        if gear_ratio is None:
+            raise UsageError(
+                f"--robot {spec}: a URDF does not give the gear ratio; add --gear-ratio KR (and --rotor-inertia "
+                "when the URDF has no rotor links)"
+            )
+        return load_robot_urdf(spec, gear_ratio=gear_ratio, rotor_inertia=rotor_inertia, wheel_radius=wheel_radius)
+    if rotor_inertia is not None:
+        raise UsageError("--rotor-inertia applies to a URDF robot only; a robot TOML file gives I_r itself")
+    return load_robot(spec)
+
+
 def _version(value: bool) -> None:
     if value:
         typer.echo(f"wmrid {__version__}")
@@ -251,7 +275,9 @@ def identify(
     ],
     robot: Annotated[
         str | None,
-        typer.Option(help="Robot TOML file or built-in name ('paper'): nominal values start the estimate."),
+        typer.Option(
+            help="Robot: built-in name ('paper'), TOML file, or URDF (with --gear-ratio); starts the estimate."
+        ),
     ] = None,
     columns: Annotated[
         str | None, typer.Option(help="Column mapping, e.g. t=time,eta_r=vel_right,tau_l=effort_left.")
@@ -309,14 +335,14 @@ def identify(
     efficiency: EfficiencyOpt = None,
     mirror_left: MirrorLeftOpt = False,
     flip_effort: FlipEffortOpt = False,
+    rotor_inertia: RotorInertiaOpt = None,
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
     from wmrid.atomic import write_json
     from wmrid.identify import identify as run_identify
     from wmrid.render import print_identification, to_json
-    from wmrid.robot import load_robot
 
-    robot_obj = load_robot(robot) if robot is not None else None
+    robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
     wheel_log = _read_wheel_log(
         log, columns, time_unit.value, robot_obj, topic=topic, velocity_topic=velocity_topic,
         effort_topic=effort_topic, right_joint=right_joint, left_joint=left_joint, time_source=time_source.value,
@@ -430,15 +456,17 @@ def simulate(
     caster_time: Annotated[float, typer.Option(help="Correlation time of the caster disturbance, s.")] = 0.3,
     encoder_cpr: Annotated[int, typer.Option(help="Encoder counts per wheel revolution (0: no quantisation).")] = 0,
     force: Annotated[bool, typer.Option(help="Overwrite existing output files.")] = False,
+    gear_ratio: Annotated[float | None, typer.Option(help="URDF robots: gear ratio k_r.")] = None,
+    rotor_inertia: RotorInertiaOpt = None,
 ) -> None:
     """Simulate the paper's virtual prototype and write a log plus its ground truth (<log>.truth.json)."""
     from wmrid.atomic import to_json_text, write_json
     from wmrid.logio import write_log
-    from wmrid.robot import Payload, load_robot
+    from wmrid.robot import Payload
     from wmrid.simulate import NoiseSettings
     from wmrid.simulate import simulate as run_simulate
 
-    robot_obj = load_robot(robot)
+    robot_obj = _load_robot(robot, gear_ratio, rotor_inertia)
     truth_params = robot_obj.reference
     load = None
     if payload is not None:
