@@ -406,6 +406,142 @@ def inspect(
         print_inspection(info, Console())
 
 
+@app.command()
+def report(
+    input_: Annotated[
+        str,
+        typer.Argument(
+            metavar="INPUT", help="A log (identified on the fly) or an `identify --format json` result; - for stdin."
+        ),
+    ],
+    output: Annotated[
+        Path | None, typer.Option("--output", "-o", help="Write the report: .html (self-contained), .md or .json.")
+    ] = None,
+    truth: Annotated[
+        Path | None, typer.Option(help='Ground truth JSON {"parameters": {"m11": ...}} (the simulator\'s sidecar).')
+    ] = None,
+    residuals: Annotated[
+        Path | None, typer.Option(help="Export the prediction errors over time (t, e_r, e_l) as .csv or .parquet.")
+    ] = None,
+    robot: Annotated[str | None, typer.Option(help="Robot (name, TOML or URDF), as for identify.")] = None,
+    columns: Annotated[str | None, typer.Option(help="Column mapping, as for identify.")] = None,
+    time_unit: Annotated[TimeUnit, typer.Option(help="Unit of the time column.")] = TimeUnit.auto,
+    form: Annotated[FormChoice, typer.Option(help="Regressor form, as for identify.")] = FormChoice.auto,
+    k: Annotated[float, typer.Option("--k", help="Observer gain, 1/s.")] = 10.0,
+    alpha: Annotated[float, typer.Option(help="Initial Gamma = alpha I.")] = 1e-10,
+    torque_hold: Annotated[TorqueHold, typer.Option(help="zoh or foh.")] = TorqueHold.zoh,
+    payload: Annotated[bool, typer.Option("--payload", help="Also estimate the payload (needs --robot).")] = False,
+    force: Annotated[bool, typer.Option(help="Overwrite existing output files.")] = False,
+    topic: TopicOpt = None,
+    velocity_topic: VelocityTopicOpt = None,
+    effort_topic: EffortTopicOpt = None,
+    right_joint: RightJointOpt = None,
+    left_joint: LeftJointOpt = None,
+    time_source: TimeSourceOpt = TimeSource.auto,
+    align: AlignOpt = AlignRule.linear,
+    velocity_from: VelocityFromOpt = VelocityFrom.auto,
+    speed_unit: SpeedUnitOpt = SpeedUnit.rad_s,
+    wheel_radius: WheelRadiusOpt = None,
+    effort: EffortOpt = EffortKind.torque,
+    effort_unit: EffortUnitOpt = None,
+    torque_constant: TorqueConstantOpt = None,
+    gear_ratio: GearRatioOpt = None,
+    efficiency: EfficiencyOpt = None,
+    mirror_left: MirrorLeftOpt = False,
+    flip_effort: FlipEffortOpt = False,
+    rotor_inertia: RotorInertiaOpt = None,
+) -> None:
+    """Tables (paper Tables 2 and 3), comparison with nominal/CAD/truth, diagnostics and figures for INPUT."""
+    import json
+
+    from wmrid.atomic import atomic_write_text, write_json
+    from wmrid.logio import _open_source
+    from wmrid.report import build_report, to_html, to_json_dict, to_markdown
+
+    suffix = output.suffix.lower() if output is not None else None
+    if suffix not in (None, ".html", ".htm", ".md", ".json"):
+        raise UsageError(f"-o {output}: the report format comes from the suffix: .html, .md or .json")
+    truth_params = None
+    if truth is not None:
+        try:
+            truth_params = json.loads(truth.read_text(encoding="utf-8"))["parameters"]
+        except (OSError, ValueError, KeyError, TypeError) as err:
+            raise UsageError(f"--truth {truth}: not a truth file {{'parameters': {{'m11': ...}}}} ({err})") from err
+    source = _open_source(input_)
+    head = source.head(64).lstrip()
+    result = log = None
+    if head.startswith(b"{"):
+        raw = source.data if source.data is not None else Path(source.path).read_bytes()
+        try:
+            data = json.loads(raw)
+        except ValueError as err:
+            raise UsageError(f"{source.name}: starts like JSON but is not valid JSON ({err})") from err
+    else:
+        from wmrid.identify import identify as run_identify
+
+        robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
+        log = _read_wheel_log(
+            input_ if source.data is None else "-", columns, time_unit.value, robot_obj, topic=topic,
+            velocity_topic=velocity_topic, effort_topic=effort_topic, right_joint=right_joint, left_joint=left_joint,
+            time_source=time_source.value, align=align.value, velocity_from=velocity_from.value,
+            speed_unit=speed_unit.value, wheel_radius=wheel_radius, effort=effort.value, effort_unit=effort_unit,
+            torque_constant=torque_constant, gear_ratio=gear_ratio, efficiency=efficiency, mirror_left=mirror_left,
+            flip_effort=flip_effort,
+        ) if source.data is None else _log_from_bytes(source, columns, time_unit.value)  # fmt: skip
+        result = run_identify(
+            log, robot_obj, form=form.value, k=k, alpha=alpha, torque_hold=torque_hold.value, payload=payload
+        )
+        data = result.to_dict()
+    rep = build_report(data, result=result, log=log, truth=truth_params, figures=suffix in (".html", ".htm", ".md"))
+    if residuals is not None:
+        _write_residuals(rep, result, data, residuals, force)
+    if suffix in (".html", ".htm"):
+        atomic_write_text(output, to_html(rep), force=force)
+    elif suffix == ".md":
+        atomic_write_text(output, to_markdown(rep), force=force)
+    elif suffix == ".json":
+        write_json(str(output), to_json_dict(rep), force=force)
+    else:
+        from rich.console import Console
+
+        from wmrid.render import print_report
+
+        print_report(rep, Console())
+    if output is not None:
+        _stderr_console().print(f"wrote {output}")
+
+
+def _log_from_bytes(source, columns, time_unit):
+    """A log piped on stdin (its bytes already read to sniff JSON): parse them as identify would."""
+    import io
+    import sys as _sys
+
+    from wmrid.logio import parse_column_mapping, read_log
+
+    saved = _sys.stdin
+    try:
+        _sys.stdin = io.TextIOWrapper(io.BytesIO(source.data))
+        return read_log("-", columns=parse_column_mapping(columns) if columns else None, time_unit=time_unit)
+    finally:
+        _sys.stdin = saved
+
+
+def _write_residuals(rep, result, data, path: Path, force: bool) -> None:
+    import pandas as pd
+
+    from wmrid.logio import write_log
+
+    if result is not None:
+        hist = result.history
+        frame = pd.DataFrame({"t": hist.t, "e_r": hist.e[:, 0], "e_l": hist.e[:, 1], "lambda_min": hist.lambda_min})
+    elif "history" in data:
+        h = data["history"]
+        frame = pd.DataFrame({"t": h["t"], "e_r": h["e_r"], "e_l": h["e_l"], "lambda_min": h["lambda_min"]})
+    else:
+        raise UsageError("--residuals: this result holds no history; give the log itself")
+    write_log(frame, str(path), force=force)
+
+
 def _write_estimates(result, path: Path, force: bool) -> None:
     """The decimated history of an identification as an MCAP JSON topic /wmrid/estimates."""
     from wmrid.atomic import to_json_text

@@ -113,6 +113,9 @@ class IdentificationResult:
             "warnings": list(self.warnings),
             "log": self.log_info,
         }
+        from wmrid.report import history_dict
+
+        out["history"] = history_dict(self, max_points=300)
         if self.payload is not None:
             from wmrid.payload import PAYLOAD_UNITS
 

@@ -141,3 +141,26 @@ def print_inspection(info: dict, console: Any) -> None:
         console.print("no sensor_msgs/msg/JointState topic: wmrid identify needs one (or a JSON topic with --columns)")
     for note in info["notes"]:
         console.print(f"note: {note}")
+
+
+def print_report(report: Any, console: Any) -> None:
+    """The report's tables and statements on a terminal (figures need -o report.html or .md)."""
+    from rich import box
+    from rich.table import Table
+
+    console.print(report.title)
+    for line in report.summary:
+        console.print(line)
+    for title, table in (("Base parameters (paper Table 3)", report.base),
+                         ("Intermediate parameters (paper Table 2)", report.intermediate),
+                         ("Payload", report.payload)):  # fmt: skip
+        if not table:
+            continue
+        t = Table(title=title, title_justify="left", box=box.SIMPLE_HEAD)
+        for h in table["header"]:
+            t.add_column(str(h), no_wrap=True)
+        for row in table["rows"]:
+            t.add_row(*[str(c) for c in row])
+        console.print(t)
+    for statement in report.diagnostics:
+        console.print(f"- {statement}", markup=False)

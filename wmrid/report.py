@@ -1,0 +1,348 @@
+"""``wmrid report``: what was identified, how sure it is, how it compares with nominal/CAD and truth.
+
+:func:`build_report` turns an identification (run on a log, or a saved ``identify --format json``
+result) into a :class:`Report`: the paper's tables (Table 2: intermediate parameters; Table 3: base
+parameters), a comparison with the robot's nominal and CAD values in units of the standard error,
+error columns when a truth file is given, the diagnostics in plain words, residual statistics, and
+figures (:mod:`wmrid.figures`).  :func:`to_html` (one self-contained file: inline SVG, no external
+resources), :func:`to_markdown` (PNG figures as data URIs) and :func:`to_json_dict` render it.
+
+Residual fit: the estimator's prior prediction error e (rad/s) of each wheel, whose RMS is reported
+with the fit percentage 100 (1 - ||e|| / ||eta_hp||), where eta_hp = eta - k/(s+k) eta is the part of
+the wheel speed the model must predict (the high-passed speed the regression fits, see
+:mod:`wmrid.observer`).  Computed on the decimated history; no raw differentiation of noise.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import math
+import re
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+from wmrid import model
+from wmrid.errors import LogFormatError
+from wmrid.model import THETA0_NAMES, RegressorForm
+
+#: A difference from the CAD value beyond this many standard errors is flagged.
+SIGNIFICANT = 3.0
+#: Points of the history kept in a JSON result (enough for figures).
+JSON_HISTORY_POINTS = 1000
+
+
+@dataclass
+class Report:
+    """Tables (lists of rows with a header), statements, residual statistics and rendered figures."""
+
+    title: str
+    summary: list[str]
+    intermediate: dict[str, Any]
+    base: dict[str, Any]
+    payload: dict[str, Any] | None
+    diagnostics: list[str]
+    notes: list[str]
+    residuals: dict[str, Any]
+    figures: dict[str, bytes] = field(default_factory=dict)  # name -> SVG bytes
+    figures_png: dict[str, bytes] = field(default_factory=dict)
+    result: dict[str, Any] = field(default_factory=dict)
+
+
+def history_dict(result: Any, max_points: int = JSON_HISTORY_POINTS) -> dict[str, Any]:
+    """A compact history for JSON: t, theta (p names -> list), e_r, e_l, lambda_min, at most ``max_points``."""
+    hist = result.history
+    idx = np.unique(np.linspace(0, len(hist.t) - 1, min(max_points, len(hist.t))).round().astype(int))
+    names = result.form.theta_names()
+    flat = hist.theta[idx].reshape(len(idx), -1)
+    return {
+        "t": hist.t[idx].tolist(),
+        "theta": {name: flat[:, j].tolist() for j, name in enumerate(names)},
+        "e_r": hist.e[idx, 0].tolist(),
+        "e_l": hist.e[idx, 1].tolist(),
+        "lambda_min": hist.lambda_min[idx].tolist(),
+    }
+
+
+def result_from_json(data: dict[str, Any], source: str) -> Any:
+    """A result-like object (what the figures need) from an ``identify --format json`` document."""
+    if not isinstance(data, dict) or "parameters" not in data or "theta" not in data:
+        raise LogFormatError(
+            f"{source}: not an identify result (no 'parameters'/'theta'); give a log or the output of "
+            "`wmrid identify --format json`"
+        )
+    form_d = data["theta"]["form"]
+    form = RegressorForm(form_d["kind"], tuple(form_d.get("signs", (1, 1))))
+    names = form.theta_names()
+    p = form.n_columns
+    start = np.array([data["theta"]["start"][n] for n in names]).reshape(2, p)
+    history = None
+    if "history" in data:
+        h = data["history"]
+        theta = np.column_stack([h["theta"][n] for n in names]).reshape(-1, 2, p)
+        history = SimpleNamespace(
+            t=np.asarray(h["t"]), theta=theta, e=np.column_stack([h["e_r"], h["e_l"]]),
+            lambda_min=np.asarray(h["lambda_min"]),
+        )  # fmt: skip
+    settings = SimpleNamespace(theta_init=start, k=data["settings"]["k"], alpha=data["settings"]["alpha"])
+    return SimpleNamespace(
+        source=data.get("source", source), form=form, settings=settings, history=history,
+        log_info=data.get("log", {}), data=data,
+    )  # fmt: skip
+
+
+def _pct(value: float, truth: float) -> float:
+    return 100.0 * abs(value - truth) / abs(truth) if truth else math.nan
+
+
+def _fmt(x: Any, digits: int = 6) -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "—"
+    if isinstance(x, str):
+        return x
+    return f"{x:.{digits}g}"
+
+
+def build_report(
+    data: dict[str, Any],
+    *,
+    result: Any = None,
+    log: Any = None,
+    truth: dict[str, float] | None = None,
+    figures: bool = True,
+) -> Report:
+    """A report from an identify JSON document ``data`` (and the live ``result``/``log`` when available)."""
+    rl = result if result is not None else result_from_json(data, data.get("source", "?"))
+    form = rl.form
+    names = form.theta_names()
+    nominal = data.get("nominal")
+    reference = data.get("reference")
+    params = data["parameters"]
+    effort_unit = data.get("effort_unit", "N m")
+
+    # Table 2: intermediate parameters
+    theta_vals = data["theta"]["values"]
+    theta_std = data["theta"]["std"]
+    start = data["theta"]["start"]
+    ref_theta = true_theta_row = None
+    if reference is not None:
+        ref_theta = model.intermediate_parameters(np.array([reference[n] for n in THETA0_NAMES]), form).ravel()
+    if truth is not None:
+        true_theta_row = model.intermediate_parameters(np.array([truth[n] for n in THETA0_NAMES]), form).ravel()
+    header = ["parameter", "start (nominal)"]
+    header += ["CAD"] if ref_theta is not None else []
+    header += ["true", "estimate", "std", "error %"] if true_theta_row is not None else ["estimate", "std"]
+    rows = []
+    for j, name in enumerate(names):
+        row = [name, _fmt(start[name])]
+        if ref_theta is not None:
+            row.append(_fmt(ref_theta[j]))
+        if true_theta_row is not None:
+            row += [_fmt(true_theta_row[j]), _fmt(theta_vals[name]), _fmt(theta_std[name], 2),
+                    _fmt(_pct(theta_vals[name], true_theta_row[j]), 3)]  # fmt: skip
+        else:
+            row += [_fmt(theta_vals[name]), _fmt(theta_std[name], 2)]
+        rows.append(row)
+    intermediate = {"header": header, "rows": rows}
+
+    # Table 3: base parameters, with the comparison against nominal and CAD
+    header = (
+        ["parameter", "unit"] + (["nominal"] if nominal else []) + (["CAD", "(est − CAD)/std"] if reference else [])
+    )
+    header += ["estimate", "std"] + (["true", "error %", "(est − true)/std"] if truth else [])
+    rows = []
+    flagged = []
+    for name, entry in params.items():
+        value, std = entry["value"], entry["std"]
+        row = [name, entry["unit"]]
+        if nominal:
+            row.append(_fmt(nominal[name]))
+        if reference:
+            z = (value - reference[name]) / std if std else math.nan
+            mark = " ⚑" if math.isfinite(z) and abs(z) > SIGNIFICANT else ""
+            if mark:
+                flagged.append(f"{name} differs from its CAD value by {z:+.1f} std")
+            row += [_fmt(reference[name]), f"{z:+.1f}{mark}" if math.isfinite(z) else "—"]
+        row += [_fmt(value), _fmt(std, 2)]
+        if truth:
+            t = truth.get(name)
+            zt = (value - t) / std if (t is not None and std) else math.nan
+            row += [
+                _fmt(t),
+                _fmt(_pct(value, t), 3) if t is not None else "—",
+                f"{zt:+.1f}" if math.isfinite(zt) else "—",
+            ]
+        rows.append(row)
+    base = {"header": header, "rows": rows}
+
+    payload = None
+    if "payload" in data:
+        payload = {
+            "header": ["quantity", "estimate", "std", "unit"],
+            "rows": [[k, _fmt(v["value"]), _fmt(v["std"], 2), v["unit"]] for k, v in data["payload"].items()],
+        }
+
+    diag = data["diagnostics"]
+    unc = diag["uncertainty"]
+    statements = [
+        f"Standard errors: jackknife over {unc.get('segments', '?')} segments of the log ({unc['dof']} degrees of "
+        f"freedom); estimate ± {unc['interval_factor']['95%']:.2f} std covers the truth with 95 % probability.",
+        f"Structural consistency (Eqs. 23-24): p = {diag['structural_mismatch']['p_value']:.2g} on "
+        f"{diag['structural_mismatch']['dof']} directions"
+        + (
+            " — the intermediate parameters are not of the model's form."
+            if diag["structural_mismatch"]["p_value"] < 1e-3
+            else " — consistent with the model."
+        ),
+        f"Excitation: λ_min(Γ) = {diag['lambda_min_gamma']:.3g} (α = {data['settings']['alpha']:g}); "
+        + (
+            f"not determined by this log: {', '.join(diag['undetermined'])}."
+            if diag.get("undetermined")
+            else "the data, not the start value, set every parameter."
+        ),
+        *flagged,
+        *data.get("warnings", []),
+    ]
+    if effort_unit != "N m":
+        statements.insert(
+            0, f"Units: the effort is in {effort_unit}, not N m, so every parameter is in {effort_unit}-based units."
+        )
+
+    residuals = {}
+    if rl.history is not None:
+        e = np.asarray(rl.history.e)
+        residuals = {
+            "rms_e_rad_s": {
+                "eta_r": float(np.sqrt(np.mean(e[:, 0] ** 2))),
+                "eta_l": float(np.sqrt(np.mean(e[:, 1] ** 2))),
+            },
+            "samples": len(e),
+        }
+    if "prediction_error_rms" in diag:
+        residuals["prediction_error_rms"] = diag["prediction_error_rms"]
+
+    report = Report(
+        title=f"wmrid report: {data.get('source', '?')}",
+        summary=[
+            f"{data['log'].get('samples', '?')} samples, {data['log'].get('duration_s', float('nan')):.3f} s at "
+            f"{data['log'].get('rate_hz', float('nan')):.5g} Hz; regressor: {form.kind} form; "
+            f"k = {data['settings']['k']:g} 1/s; start: {data['settings']['start']}",
+        ],
+        intermediate=intermediate, base=base, payload=payload, diagnostics=statements,
+        notes=list(data["log"].get("notes", [])), residuals=residuals, result=data,
+    )  # fmt: skip
+    if figures:
+        _add_figures(report, rl, log, truth)
+    return report
+
+
+def _add_figures(report: Report, rl: Any, log: Any, truth: dict[str, float] | None) -> None:
+    from wmrid import figures as fg
+
+    def both(name: str, fig: Any) -> None:
+        if fig is None:
+            return
+        report.figures[name] = fg.render(fig, "svg")
+        report.figures_png[name] = fg.render(fig, "png")
+
+    if log is not None:
+        both("Wheel torques and speeds (paper Fig. 6)", fg.build_log_overview(log))
+        if getattr(log, "pose", None) is not None:
+            both("Path (paper Fig. 5)", fg.build_path_figure(log.pose))
+    if rl.history is not None:
+        both("Estimates over time", fg.build_estimates_figure(rl, truth))
+        if truth is not None:
+            both("Estimation errors over time (paper Fig. 7)", fg.build_estimates_figure(rl, truth, error_mode=True))
+        both("Prediction error (residuals)", fg.build_residuals_figure(rl))
+        both("Excitation: λ_min(Γ) over time", fg.build_excitation_figure(rl))
+
+
+# --------------------------------------------------------------------------------------------------
+# Rendering
+
+_CSS = """
+body{font-family:system-ui,sans-serif;max-width:1200px;margin:2em auto;color:#222;padding:0 1em}
+table{border-collapse:collapse;margin:0.5em 0 1.5em}
+th,td{padding:0.25em 0.7em;border-bottom:1px solid #ddd;text-align:right}
+th:first-child,td:first-child{text-align:left}th{background:#f4f4f4}figure{margin:1.5em 0}
+figcaption{font-weight:600}svg{max-width:100%;height:auto}li{margin:0.2em 0}.small{color:#555;font-size:0.9em}
+"""
+
+
+def _html_table(table: dict[str, Any]) -> str:
+    head = "".join(f"<th>{html.escape(str(h))}</th>" for h in table["header"])
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in row) + "</tr>" for row in table["rows"])
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def to_html(report: Report) -> str:
+    """One self-contained HTML page (inline SVG figures, no external resources)."""
+    parts = [
+        "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>",
+        f"<title>{html.escape(report.title)}</title><style>{_CSS}</style></head><body>",
+        f"<h1>{html.escape(report.title)}</h1>",
+        *[f"<p class='small'>{html.escape(s)}</p>" for s in report.summary],
+        "<h2>Base parameters (paper Table 3)</h2>",
+        _html_table(report.base),
+        "<h2>Intermediate parameters (paper Table 2)</h2>",
+        _html_table(report.intermediate),
+    ]
+    if report.payload:
+        parts += ["<h2>Payload</h2>", _html_table(report.payload)]
+    parts += ["<h2>Diagnostics</h2><ul>", *[f"<li>{html.escape(s)}</li>" for s in report.diagnostics], "</ul>"]
+    if report.residuals:
+        rms = report.residuals.get("rms_e_rad_s") or {}
+        parts.append(
+            "<h2>Residuals</h2><p>RMS prediction error: "
+            + ", ".join(f"{k} {v:.3g} rad/s" for k, v in rms.items())
+            + "</p>"
+        )
+    for name, svg in report.figures.items():
+        text = svg.decode("utf-8")
+        text = text[text.index("<svg") :] if "<svg" in text else text
+        text = re.sub(r"<metadata>.*?</metadata>", "", text, flags=re.S)  # RDF/creator block: not needed inline
+        parts.append(f"<figure><figcaption>{html.escape(name)}</figcaption>{text}</figure>")
+    if report.notes:
+        parts += ["<h2>Notes on the log</h2><ul>", *[f"<li>{html.escape(n)}</li>" for n in report.notes], "</ul>"]
+    parts.append("</body></html>")
+    return "\n".join(parts)
+
+
+def _md_table(table: dict[str, Any]) -> str:
+    lines = ["| " + " | ".join(str(h) for h in table["header"]) + " |", "|" + "---|" * len(table["header"])]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in table["rows"]]
+    return "\n".join(lines)
+
+
+def to_markdown(report: Report) -> str:
+    """Markdown with the tables, statements and PNG figures as data URIs (one file)."""
+    parts = [
+        f"# {report.title}",
+        "",
+        *report.summary,
+        "",
+        "## Base parameters (paper Table 3)",
+        "",
+        _md_table(report.base),
+    ]
+    parts += ["", "## Intermediate parameters (paper Table 2)", "", _md_table(report.intermediate)]
+    if report.payload:
+        parts += ["", "## Payload", "", _md_table(report.payload)]
+    parts += ["", "## Diagnostics", "", *[f"- {s}" for s in report.diagnostics]]
+    for name, png in report.figures_png.items():
+        parts += ["", f"### {name}", "", f"![{name}](data:image/png;base64,{base64.b64encode(png).decode()})"]
+    if report.notes:
+        parts += ["", "## Notes on the log", "", *[f"- {n}" for n in report.notes]]
+    return "\n".join(parts) + "\n"
+
+
+def to_json_dict(report: Report) -> dict[str, Any]:
+    """The report's content as plain data (figures left out)."""
+    return {
+        "title": report.title, "base": report.base, "intermediate": report.intermediate, "payload": report.payload,
+        "diagnostics": report.diagnostics, "residuals": report.residuals, "notes": report.notes,
+        "result": report.result,
+    }  # fmt: skip
