@@ -39,8 +39,10 @@ def test_html_report_from_a_log_is_self_contained_with_tables_and_figures(tmp_pa
     assert page.count("<svg") >= 6
     for external in ('src="http', 'href="http', "url(http", "<script", "<link "):
         assert external not in page  # nothing is fetched (SVG namespace URIs are names, not fetched)
-    header = res.read_text().splitlines()[0]
-    assert header == "t,e_r,e_l,lambda_min"
+    lines = res.read_text().splitlines()
+    assert lines[0] == "t,tau_res_r,tau_res_l,e_r,e_l,lambda_min"
+    assert len(lines) == 40001 + 1  # every sample of the log
+    assert "fit tau_r" in page
 
 
 def test_report_from_a_saved_json_result_through_a_pipe(tmp_path):

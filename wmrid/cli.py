@@ -494,7 +494,7 @@ def report(
         data = result.to_dict()
     rep = build_report(data, result=result, log=log, truth=truth_params, figures=suffix in (".html", ".htm", ".md"))
     if residuals is not None:
-        _write_residuals(rep, result, data, residuals, force)
+        _write_residuals(rep, result, log, data, residuals, force)
     if suffix in (".html", ".htm"):
         atomic_write_text(output, to_html(rep), force=force)
     elif suffix == ".md":
@@ -526,12 +526,20 @@ def _log_from_bytes(source, columns, time_unit):
         _sys.stdin = saved
 
 
-def _write_residuals(rep, result, data, path: Path, force: bool) -> None:
+def _write_residuals(rep, result, log, data, path: Path, force: bool) -> None:
+    """Residuals over time: with the log, every sample's torque residual (N m) plus the nearest recorded
+    prediction error (rad/s) and lambda_min; from a saved result, its history only."""
     import pandas as pd
 
     from wmrid.logio import write_log
 
-    if result is not None:
+    if result is not None and "torque" in rep.residuals:
+        log_t = rep.residuals["torque"]["residual"]
+        hist = result.history
+        frame = pd.DataFrame({"t": hist.t, "e_r": hist.e[:, 0], "e_l": hist.e[:, 1], "lambda_min": hist.lambda_min})
+        full = pd.DataFrame({"t": log.t - log.t[0], "tau_res_r": log_t[:, 0], "tau_res_l": log_t[:, 1]})
+        frame = pd.merge_asof(full, frame, on="t", direction="nearest")
+    elif result is not None:
         hist = result.history
         frame = pd.DataFrame({"t": hist.t, "e_r": hist.e[:, 0], "e_l": hist.e[:, 1], "lambda_min": hist.lambda_min})
     elif "history" in data:

@@ -139,11 +139,11 @@ def mirror_left(speed: np.ndarray | None, effort: np.ndarray | None, position: n
             arr[:, 1] *= -1.0
 
 
-def speed_from_position(t: np.ndarray, position: np.ndarray) -> tuple[np.ndarray, str]:
+def speed_from_position(t: np.ndarray, position: np.ndarray, window_s: float = SMOOTHING_S) -> tuple[np.ndarray, str]:
     """Wheel speeds (n, 2) rad/s from wheel angles (n, 2) rad at times t (n,) s, with a note.
 
     Angles are unwrapped first (a position that wraps at +/-pi or 2 pi is common).  On a uniform grid
-    (steps within 1 % of their median) a Savitzky-Golay cubic over SMOOTHING_S seconds (an odd number
+    (steps within 1 % of their median) a Savitzky-Golay cubic over ``window_s`` seconds (an odd number
     of samples, at least 5) gives the derivative at each sample, zero-phase; otherwise second-order
     finite differences on the uneven grid (numpy.gradient).
     """
@@ -153,7 +153,7 @@ def speed_from_position(t: np.ndarray, position: np.ndarray) -> tuple[np.ndarray
     dt = np.diff(t)
     h = float(np.median(dt))
     if len(t) >= 5 and np.all(np.abs(dt - h) <= 0.01 * h):
-        window = max(5, round(SMOOTHING_S / h) | 1)
+        window = max(5, round(window_s / h) | 1)
         window = min(window, len(t) if len(t) % 2 else len(t) - 1)
         speed = savgol_filter(angle, window, polyorder=3, deriv=1, delta=h, axis=0, mode="interp")
         how = f"a Savitzky-Golay cubic derivative over {window} samples ({window * h * 1e3:.3g} ms)"
