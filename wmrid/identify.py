@@ -26,6 +26,8 @@ from wmrid.uncertainty import estimate_covariances, interval_factor
 #: Reported parameter names, in report order.
 REPORTED = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
 
+#: Speeds (rad/s) or efforts beyond this magnitude are not what a robot logs (a unit or column error).
+PLAUSIBLE_LIMIT = 1e12
 #: A base parameter whose standard error exceeds this fraction of its magnitude is called poorly determined.
 POORLY_DETERMINED = 0.1
 #: Structural mismatch is reported when its p-value is below MISMATCH_P and the misfit exceeds
@@ -240,6 +242,14 @@ def _identify(
     n = len(t)
     if n < 10:
         raise NotIdentifiableError(f"{log.source}: only {n} samples; identification needs at least 10")
+    for arr, what, unit in ((eta, "wheel speed", "rad/s"), (tau, "effort", getattr(log, "effort_unit", "N m"))):
+        bad = ~np.isfinite(arr) | (np.abs(arr) > PLAUSIBLE_LIMIT)
+        if bad.any():
+            i = int(np.argmax(bad.any(axis=1)))
+            raise NotIdentifiableError(
+                f"{log.source}: a {what} of {arr[i][bad[i]][0]:.3g} {unit} at t = {t[i]:.6g} s is not a number a robot "
+                "logs; check the log's units and columns"
+            )
     chosen = resolve_form(eta, form)
     effort_unit = getattr(log, "effort_unit", "N m")
     units = model.base_units(effort_unit)
@@ -261,9 +271,11 @@ def _identify(
         form=chosen, theta_init=theta_init, theta_min=lo, theta_max=hi, k=k, alpha=alpha, torque_hold=torque_hold
     )
 
-    out = replay(t, eta, tau, settings, max_history=max_history, progress=progress)
+    with np.errstate(over="ignore", invalid="ignore"):
+        out = replay(t, eta, tau, settings, max_history=max_history, progress=progress)
     theta_u, gamma, gamma_inv = out.theta, out.gamma, out.gamma_inv
-    if not np.all(np.isfinite(theta_u)):
+    finite = all(np.all(np.isfinite(a)) for a in (theta_u, gamma, gamma_inv, out.blk_a, out.blk_c))
+    if not finite:
         raise NotIdentifiableError(f"{log.source}: the estimate diverged to non-finite values; check the log's units")
 
     theta = np.empty_like(theta_u)

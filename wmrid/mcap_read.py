@@ -26,6 +26,7 @@ Times stay integer nanoseconds here; conversion to seconds happens once, when a 
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import mmap
@@ -445,21 +446,28 @@ class _ReadState:
         # Non-message records are few; handle them in order relative to the messages around them:
         # a Channel always precedes its messages, so handling all of them first is equivalent.
         footer = False
+        handlers = {OP_CHUNK: self._chunk, OP_SCHEMA: self._schema, OP_CHANNEL: self._channel,
+                    OP_METADATA: self._metadata, OP_HEADER: self._header}  # fmt: skip
         for i in other:
             op = int(ops[i])
-            body = bytes(buf[starts[i] : starts[i] + lengths[i]])
-            if op == OP_CHUNK:
-                self._chunk(body)
-            elif op == OP_SCHEMA:
-                self._schema(body)
-            elif op == OP_CHANNEL:
-                self._channel(body)
-            elif op == OP_METADATA:
-                self._metadata(body)
-            elif op == OP_HEADER:
-                self._header(body)
-            elif op == OP_FOOTER and top_level:
+            if op == OP_FOOTER and top_level:
                 footer = True
+                continue
+            handler = handlers.get(op)
+            if handler is None:
+                continue  # index and summary records: not needed
+            body = bytes(buf[starts[i] : starts[i] + lengths[i]])
+            try:
+                handler(body)
+            except LogFormatError:
+                raise
+            except Exception as err:  # a damaged record: skip it, say so, keep the rest
+                what = {OP_CHUNK: "chunk", OP_SCHEMA: "schema", OP_CHANNEL: "channel", OP_METADATA: "metadata",
+                        OP_HEADER: "header"}[op]  # fmt: skip
+                self.notes.append(
+                    f"a damaged {what} record ({type(err).__name__}) was skipped"
+                    + ("; its messages are lost" if op == OP_CHUNK else "")
+                )
         if is_msg.any():
             self._messages(buf, starts[is_msg], lengths[is_msg])
         return footer
@@ -637,7 +645,9 @@ class _ReadState:
                 return None
             schema = Schema(id=acc.info["schema_id"], name=s["name"], encoding=s["encoding"], data=s["data"])
             try:
-                decoder = DecoderFactory().decoder_for("cdr", schema)
+                # mcap_ros2 prints parse problems of a damaged schema; keep them off wmrid's stdout/stderr.
+                with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+                    decoder = DecoderFactory().decoder_for("cdr", schema)
             except Exception as err:
                 self.notes.append(f"topic {acc.info['topic']}: its schema cannot be parsed ({err}); skipped")
                 return None
