@@ -657,6 +657,8 @@ def main(argv: list[str] | None = None) -> None:
     try:
         rv = app(args=args, prog_name="wmrid", standalone_mode=False)
         code = rv if isinstance(rv, int) else ExitStatus.OK
+        if code == ExitStatus.INTERRUPTED:  # Typer turns Ctrl-C into an exit code of 130
+            sys.stderr.write("wmrid: interrupted; no output was written\n")
     except KeyboardInterrupt:
         sys.stderr.write("wmrid: interrupted\n")
         code = ExitStatus.INTERRUPTED

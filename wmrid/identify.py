@@ -26,6 +26,12 @@ from wmrid.uncertainty import estimate_covariances, interval_factor
 #: Reported parameter names, in report order.
 REPORTED = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
 
+#: A time step longer than GAP_FACTOR median steps (and GAP_MIN_S) is a hole the estimator cannot bridge.
+GAP_FACTOR = 1000.0
+GAP_MIN_S = 1.0
+#: A direction of the column-scaled information whose eigenvalue is below this fraction of the largest is
+#: not excited at all (double precision resolves about 1e-16; real logs' weakest directions are ~1e-8).
+UNEXCITED = 1e-12
 #: Speeds (rad/s) or efforts beyond this magnitude are not what a robot logs (a unit or column error).
 PLAUSIBLE_LIMIT = 1e12
 #: A base parameter whose standard error exceeds this fraction of its magnitude is called poorly determined.
@@ -250,6 +256,15 @@ def _identify(
                 f"{log.source}: a {what} of {arr[i][bad[i]][0]:.3g} {unit} at t = {t[i]:.6g} s is not a number a robot "
                 "logs; check the log's units and columns"
             )
+    steps = np.diff(t)
+    median_step = float(np.median(steps))
+    worst = int(np.argmax(steps))
+    if steps[worst] > max(GAP_FACTOR * median_step, GAP_MIN_S):
+        raise NotIdentifiableError(
+            f"{log.source}: the log has a hole: time jumps by {steps[worst]:.6g} s after t = {t[worst]:.6g} s "
+            f"(the median step is {median_step:.3g} s), and the estimator cannot bridge it; cut the log into its "
+            "continuous parts and identify each"
+        )
     chosen = resolve_form(eta, form)
     effort_unit = getattr(log, "effort_unit", "N m")
     units = model.base_units(effort_unit)
@@ -291,6 +306,13 @@ def _identify(
     undetermined = [
         j for j in range(8) if sens[j] > std_data[j] and sens[j] > START_RELEVANT * abs(fit.theta0[j])
     ]  # fmt: skip
+    unexcited = unexcited_parameters(gamma, alpha, theta_u, fit)
+    undetermined = sorted(set(undetermined) | set(unexcited))
+    if len(unexcited) == 8 or torque_unexcited(gamma, alpha):
+        raise NotIdentifiableError(
+            f"{log.source}: the log does not excite the dynamics (no base parameter is determined by it: the wheel "
+            "speeds and efforts barely vary); record a log that accelerates, brakes and turns"
+        )
     cov0 = fit.cov + np.diag(sens**2)
     for j in undetermined:
         cov0[j, :] = cov0[:, j] = np.nan
@@ -360,9 +382,11 @@ def signal_warnings(eta: np.ndarray, tau: np.ndarray, effort_unit: str) -> list[
                 "(e.g. an unsigned current), not a signed effort, so the model does not apply; give it the sign of "
                 "the motor's drive"
             )
-        power = float(np.mean(tau[:, i] * eta[:, i]))
-        scale = float(np.mean(np.abs(tau[:, i] * eta[:, i])))
-        if scale > 0 and power < -0.2 * scale:
+        prod = tau[:, i] * eta[:, i]
+        power = float(np.mean(prod))
+        scale = float(np.mean(np.abs(prod)))
+        # Braking makes the power negative for a while; a reversed sign makes it negative almost always.
+        if scale > 0 and power < -0.5 * scale and float(np.mean(prod < 0)) > 0.75:
             out.append(
                 f"the {wheel} wheel's effort mostly opposes its speed (mean power {power:.3g} {effort_unit} rad/s "
                 "< 0): its sign convention is probably reversed; try --mirror-left or --flip-effort"
@@ -390,6 +414,51 @@ def physics_warnings(parameters: dict[str, tuple[float, float]]) -> list[str]:
 #: A base parameter is not determined by the log when the start value moves it by more than its
 #: standard error and by more than this fraction of its value.
 START_RELEVANT = 1e-4
+
+
+def torque_unexcited(gamma: np.ndarray, alpha: float) -> bool:
+    """True when a direction the log does not excite at all involves the torque columns.
+
+    Then the inverse inertia m (the coefficients of the torques) is not determined, and every other base
+    parameter, read through M = m^-1, is meaningless: e.g. constant torques alongside the constant
+    Coulomb column, or a log whose signals do not vary at all.
+    """
+    p = gamma.shape[0]
+    info = gamma - alpha * np.eye(p)
+    scale = np.sqrt(np.clip(np.diag(info), 0.0, None))
+    if scale[0] == 0 or scale[1] == 0:
+        return True
+    safe = np.where(scale > 0, scale, 1.0)
+    evals, evecs = np.linalg.eigh(info / np.outer(safe, safe))
+    null = evals < UNEXCITED * max(float(evals[-1]), 1e-300)
+    return bool(np.any(np.abs(evecs[:2, null]) > 0.1))
+
+
+def unexcited_parameters(gamma: np.ndarray, alpha: float, theta_u: np.ndarray, fit) -> list[int]:
+    """Base parameters that move along regressor directions the log does not excite at all.
+
+    Directions of the column-scaled data information Gamma - alpha I whose eigenvalue is below
+    UNEXCITED of the largest carry no information (columns that are constant together, e.g. a constant
+    torque and the Coulomb column).  Moving theta along such a direction by the size of theta itself
+    changes theta0 through the minimum-distance gain; a parameter that changes by more than
+    1e-6 of its value is not determined by the log.
+    """
+    p = gamma.shape[0]
+    info = gamma - alpha * np.eye(p)
+    scale = np.sqrt(np.clip(np.diag(info), 0.0, None))
+    safe = np.where(scale > 0, scale, 1.0)
+    evals, evecs = np.linalg.eigh(info / np.outer(safe, safe))
+    top = max(float(evals[-1]), 1e-300)
+    out: set[int] = set()
+    for idx in np.flatnonzero(evals < UNEXCITED * top):
+        u = evecs[:, idx] / safe
+        u = u / max(np.linalg.norm(u), 1e-300)
+        for row in range(2):
+            step = np.zeros((2, p))
+            step[row] = u * max(np.linalg.norm(theta_u[row]), 1e-300)
+            moved = np.abs(fit.gain @ step.ravel())
+            out |= {j for j in range(8) if moved[j] > 1e-6 * max(abs(fit.theta0[j]), 1e-300)}
+    return sorted(out)
 
 
 def start_sensitivity(
