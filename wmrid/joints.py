@@ -31,15 +31,7 @@ import numpy as np
 
 from wmrid.errors import LogFormatError, UsageError
 from wmrid.mcap_read import JOINT_STATE, JointSeries, JsonSeries, McapContents
-from wmrid.signals import (
-    SignalOptions,
-    effort_to_torque,
-    flip_effort,
-    mirror_left,
-    position_to_rad,
-    speed_from_position,
-    speed_to_rad_s,
-)
+from wmrid.signals import SignalOptions, convert, position_to_rad, speed_from_position
 
 TIME_SOURCES = ("auto", "header", "log")
 ALIGN_RULES = ("zoh", "linear")
@@ -265,18 +257,8 @@ def signals_from_mcap(
         )
         notes.append(note)
 
-    speed, note = speed_to_rad_s(speed, opts) if not use_position else (speed, None)
-    if note:
-        notes.append(note)
-    effort, note = effort_to_torque(effort, opts, gear_ratio)
-    if note:
-        notes.append(note)
-    if opts.mirror_left:
-        mirror_left(speed, effort)
-        notes.append("left wheel mirrored: its speed and effort changed sign (--mirror-left)")
-    if opts.flip_effort:
-        flip_effort(effort)
-        notes.append("both efforts changed sign (--flip-effort)")
+    speed, effort, more = convert(speed, effort, opts, gear_ratio, speed_in_rad_s=use_position)
+    notes += more
     return Signals(t_ns=t_out, speed=speed, effort=effort, notes=tuple(notes), effort_unit=opts.effort_label)
 
 
@@ -337,17 +319,6 @@ def signals_from_json(contents: McapContents, topic: str, opts: SignalOptions, g
     both = np.column_stack([v["eta_r"], v["eta_l"], v["tau_r"], v["tau_l"]])
     t_ns, both, more = _clean(t_ns, both, topic, "speed or effort")
     notes += more
-    speed, effort = both[:, :2].copy(), both[:, 2:].copy()
-    speed, note = speed_to_rad_s(speed, opts)
-    if note:
-        notes.append(note)
-    effort, note = effort_to_torque(effort, opts, gear_ratio)
-    if note:
-        notes.append(note)
-    if opts.mirror_left:
-        mirror_left(speed, effort)
-        notes.append("left wheel mirrored: its speed and effort changed sign (--mirror-left)")
-    if opts.flip_effort:
-        flip_effort(effort)
-        notes.append("both efforts changed sign (--flip-effort)")
+    speed, effort, more = convert(both[:, :2], both[:, 2:], opts, gear_ratio)
+    notes += more
     return Signals(t_ns=t_ns, speed=speed, effort=effort, notes=tuple(notes), effort_unit=opts.effort_label)

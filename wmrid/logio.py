@@ -44,7 +44,7 @@ import numpy as np
 
 from wmrid.errors import LogFormatError, UsageError
 from wmrid.joints import TopicSelection
-from wmrid.signals import SignalOptions, effort_to_torque, flip_effort, mirror_left, speed_to_rad_s
+from wmrid.signals import SignalOptions, convert
 
 if TYPE_CHECKING:
     import pandas
@@ -289,19 +289,8 @@ def _apply_signals(log: WheelLog, signals: SignalOptions, gear_ratio: float | No
     """Convert a table log's speed and effort columns as ``signals`` says (nothing for the defaults)."""
     if signals == SignalOptions():
         return log
-    notes = list(log.notes)
-    eta, note = speed_to_rad_s(log.eta.copy(), signals)
-    if note:
-        notes.append(note)
-    tau, note = effort_to_torque(log.tau.copy(), signals, gear_ratio)
-    if note:
-        notes.append(note)
-    if signals.mirror_left:
-        mirror_left(eta, tau)
-        notes.append("left wheel mirrored: its speed and effort changed sign (--mirror-left)")
-    if signals.flip_effort:
-        flip_effort(tau)
-        notes.append("both efforts changed sign (--flip-effort)")
+    eta, tau, more = convert(log.eta, log.tau, signals, gear_ratio)
+    notes = [*log.notes, *more]
     return WheelLog(
         t=log.t, eta=eta, tau=tau, source=log.source, notes=tuple(notes), pose=log.pose,
         effort_unit=signals.effort_label,

@@ -161,3 +161,35 @@ def speed_from_position(t: np.ndarray, position: np.ndarray, window_s: float = S
         speed = np.gradient(angle, t, axis=0)
         how = "second-order finite differences (uneven time steps)"
     return speed, f"wheel speeds derived from wheel positions by {how}"
+
+
+def convert(
+    speed: np.ndarray,
+    effort: np.ndarray,
+    opts: SignalOptions,
+    gear_ratio: float | None,
+    *,
+    speed_in_rad_s: bool = False,
+) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Speeds and efforts (n, 2) as the model needs them (rad/s; N m or the given units), with notes.
+
+    The one place that applies ``opts`` to a log's signals: speed unit (unless ``speed_in_rad_s``, e.g.
+    speeds derived from positions already in rad), effort conversion, mirrored left motor, flipped efforts.
+    The inputs are not modified.
+    """
+    notes: list[str] = []
+    speed, effort = speed.copy(), effort.copy()
+    if not speed_in_rad_s:
+        speed, note = speed_to_rad_s(speed, opts)
+        if note:
+            notes.append(note)
+    effort, note = effort_to_torque(effort, opts, gear_ratio)
+    if note:
+        notes.append(note)
+    if opts.mirror_left:
+        mirror_left(speed, effort)
+        notes.append("left wheel mirrored: its speed and effort changed sign (--mirror-left)")
+    if opts.flip_effort:
+        flip_effort(effort)
+        notes.append("both efforts changed sign (--flip-effort)")
+    return speed, effort, notes
