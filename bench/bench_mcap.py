@@ -31,7 +31,7 @@ import sys
 import time
 from pathlib import Path
 
-from _common import BENCH, OUT, ROOT, fmt_rss, median, run_timed, wmrid_cmd
+from _common import BENCH, OUT, ROOT, cached_log, fmt_rss, median, run_timed, wmrid_cmd
 
 # bench/ is sys.path[0] when run as a script, and bench/coverage.py would then shadow the ``coverage``
 # module that numba imports (numba.misc.coverage_support): drop it now that _common is imported.
@@ -55,22 +55,12 @@ print(n)
 
 def mcap_log(duration: float, seed: int) -> Path:
     """The JointState-only zstd MCAP in bench/out/, made if missing."""
-    path = OUT / f"paper_jointstate_{duration:g}s_seed{seed}.mcap"
-    if path.exists():
-        return path
     from wmrid.mcap_write import write_joint_state_mcap
-    from wmrid.robot import BUILTIN_ROBOTS
-    from wmrid.simulate import NoiseSettings, simulate
 
-    OUT.mkdir(parents=True, exist_ok=True)
-    print(f"generating {path.relative_to(ROOT)} ...", end=" ", flush=True)
-    t0 = time.perf_counter()
-    r = BUILTIN_ROBOTS["paper"]
-    noise = NoiseSettings(eta_std=0.01, tau_std=0.02, caster_std=0.05)
-    sim = simulate(r.reference, r.nominal, duration=duration, noise=noise, seed=seed)
-    write_joint_state_mcap(path, sim.to_frame(), odom_topic=None, force=True)
-    print(f"{len(sim.t):,} messages in {time.perf_counter() - t0:.1f} s", flush=True)
-    return path
+    def write(frame, path):
+        write_joint_state_mcap(path, frame, odom_topic=None, force=True)
+
+    return cached_log(OUT / f"paper_jointstate_{duration:g}s_seed{seed}.mcap", duration, write, seed=seed)
 
 
 def generic_decode(path, repeat: int) -> dict:

@@ -249,10 +249,6 @@ class Case:
     absent: tuple[str, ...] = ()  # on success: none of these in any log note or warning
 
 
-def _xfail(case: Case, case_id: str, reason: str):
-    return pytest.param(case, id=case_id, marks=pytest.mark.xfail(strict=True, reason=reason))
-
-
 def good_excerpt(tmp: Path) -> str:
     header, rows = _base()
     return _write_csv(tmp / "good.csv", header, rows)

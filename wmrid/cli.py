@@ -195,8 +195,9 @@ def _read_wheel_log(
     efficiency,
     mirror_left,
     flip_effort=False,
+    data: bytes | None = None,
 ):
-    """Read LOG with the log-input options (shared by the commands that read logs)."""
+    """Read LOG with the log-input options (shared by the commands that read logs; Enum values accepted)."""
     from wmrid.joints import TopicSelection
     from wmrid.logio import parse_column_mapping, read_log
     from wmrid.signals import SignalOptions
@@ -219,7 +220,22 @@ def _read_wheel_log(
     )  # fmt: skip
     mapping = parse_column_mapping(columns) if columns else None
     k_r = robot_obj.nominal.k_r if robot_obj is not None else None
-    return read_log(log, columns=mapping, time_unit=time_unit, selection=selection, signals=signals, gear_ratio=k_r)
+    return read_log(
+        log, columns=mapping, time_unit=time_unit, selection=selection, signals=signals, gear_ratio=k_r, data=data
+    )
+
+
+#: The log-input options every log-reading command takes (names of its parameters).
+_LOG_OPTIONS = (
+    "topic", "velocity_topic", "effort_topic", "right_joint", "left_joint", "time_source", "align", "velocity_from",
+    "speed_unit", "wheel_radius", "effort", "effort_unit", "torque_constant", "gear_ratio", "efficiency",
+    "mirror_left", "flip_effort",
+)  # fmt: skip
+
+
+def _log_options(params: dict) -> dict:
+    """The log-input options out of a command's parameters, Enum choices as their plain values."""
+    return {name: params[name].value if isinstance(params[name], Enum) else params[name] for name in _LOG_OPTIONS}
 
 
 RotorInertiaOpt = Annotated[
@@ -343,13 +359,7 @@ def identify(
     from wmrid.render import print_identification, to_json
 
     robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
-    wheel_log = _read_wheel_log(
-        log, columns, time_unit.value, robot_obj, topic=topic, velocity_topic=velocity_topic,
-        effort_topic=effort_topic, right_joint=right_joint, left_joint=left_joint, time_source=time_source.value,
-        align=align.value, velocity_from=velocity_from.value, speed_unit=speed_unit.value, wheel_radius=wheel_radius,
-        effort=effort.value, effort_unit=effort_unit, torque_constant=torque_constant, gear_ratio=gear_ratio,
-        efficiency=efficiency, mirror_left=mirror_left, flip_effort=flip_effort,
-    )  # fmt: skip
+    wheel_log = _read_wheel_log(log, columns, time_unit.value, robot_obj, **_log_options(locals()))
     progress_cb, finish = _progress(len(wheel_log), "identify")
     try:
         result = run_identify(
@@ -480,14 +490,7 @@ def report(
         from wmrid.identify import identify as run_identify
 
         robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
-        log = _read_wheel_log(
-            input_ if source.data is None else "-", columns, time_unit.value, robot_obj, topic=topic,
-            velocity_topic=velocity_topic, effort_topic=effort_topic, right_joint=right_joint, left_joint=left_joint,
-            time_source=time_source.value, align=align.value, velocity_from=velocity_from.value,
-            speed_unit=speed_unit.value, wheel_radius=wheel_radius, effort=effort.value, effort_unit=effort_unit,
-            torque_constant=torque_constant, gear_ratio=gear_ratio, efficiency=efficiency, mirror_left=mirror_left,
-            flip_effort=flip_effort,
-        ) if source.data is None else _log_from_bytes(source, columns, time_unit.value)  # fmt: skip
+        log = _read_wheel_log(input_, columns, time_unit.value, robot_obj, **_log_options(locals()), data=source.data)
         result = run_identify(
             log, robot_obj, form=form.value, k=k, alpha=alpha, torque_hold=torque_hold.value, payload=payload
         )
@@ -509,21 +512,6 @@ def report(
         print_report(rep, Console())
     if output is not None:
         _stderr_console().print(f"wrote {output}")
-
-
-def _log_from_bytes(source, columns, time_unit):
-    """A log piped on stdin (its bytes already read to sniff JSON): parse them as identify would."""
-    import io
-    import sys as _sys
-
-    from wmrid.logio import parse_column_mapping, read_log
-
-    saved = _sys.stdin
-    try:
-        _sys.stdin = io.TextIOWrapper(io.BytesIO(source.data))
-        return read_log("-", columns=parse_column_mapping(columns) if columns else None, time_unit=time_unit)
-    finally:
-        _sys.stdin = saved
 
 
 def _write_residuals(rep, result, log, data, path: Path, force: bool) -> None:

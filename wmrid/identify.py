@@ -26,6 +26,8 @@ from wmrid.uncertainty import estimate_covariances, interval_factor
 #: Reported parameter names, in report order.
 REPORTED = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
 
+#: Points of the history kept in a JSON result (enough for the report's figures).
+JSON_HISTORY_POINTS = 300
 #: A time step longer than GAP_FACTOR median steps (and GAP_MIN_S) is a hole the estimator cannot bridge.
 GAP_FACTOR = 1000.0
 GAP_MIN_S = 1.0
@@ -121,9 +123,7 @@ class IdentificationResult:
             "warnings": list(self.warnings),
             "log": self.log_info,
         }
-        from wmrid.report import history_dict
-
-        out["history"] = history_dict(self, max_points=300)
+        out["history"] = history_dict(self)
         if self.payload is not None:
             from wmrid.payload import PAYLOAD_UNITS
 
@@ -136,6 +136,21 @@ class IdentificationResult:
         if self.reference is not None:
             out["reference"] = self.reference
         return out
+
+
+def history_dict(result: Any, max_points: int = JSON_HISTORY_POINTS) -> dict[str, Any]:
+    """A compact history for JSON: t, theta (p names -> list), e_r, e_l, lambda_min, at most ``max_points``."""
+    hist = result.history
+    idx = np.unique(np.linspace(0, len(hist.t) - 1, min(max_points, len(hist.t))).round().astype(int))
+    names = result.form.theta_names()
+    flat = hist.theta[idx].reshape(len(idx), -1)
+    return {
+        "t": hist.t[idx].tolist(),
+        "theta": {name: flat[:, j].tolist() for j, name in enumerate(names)},
+        "e_r": hist.e[idx, 0].tolist(),
+        "e_l": hist.e[idx, 1].tolist(),
+        "lambda_min": hist.lambda_min[idx].tolist(),
+    }
 
 
 def _finite_or_none(x: float) -> float | None:

@@ -255,12 +255,15 @@ def read_log(
     selection: TopicSelection | None = None,
     signals: SignalOptions | None = None,
     gear_ratio: float | None = None,
+    data: bytes | None = None,
 ) -> WheelLog:
     """Read a wheel log from a CSV, Parquet or MCAP file, or from standard input for ``"-"``.
 
     columns : {canonical name: name in the file} for columns not named canonically (for a JSON topic
         of an MCAP: {key: dotted field path}).
     time_unit : ``"auto"`` (float -> s, integer -> ns), ``"s"``, ``"ms"``, ``"us"`` or ``"ns"``.
+    data : the log's bytes when the caller has already read them (e.g. standard input it had to peek
+        at); ``path`` then only names the log.
     selection : MCAP topics, joints, time source and alignment (:mod:`wmrid.joints`).
     signals : what the speed and effort columns hold (:mod:`wmrid.signals`); gear_ratio : the robot's
         k_r, used to turn a motor current into a wheel torque when --gear-ratio is not given.
@@ -276,7 +279,7 @@ def read_log(
         mapping[key] = value
     explicit = set(columns or ())
 
-    source = _open_source(path)
+    source = _open_source(path) if data is None else _Source(_STDIN_NAME if path == "-" else path, None, data)
     kind = detect_format(path, source.head(8))
     signals = signals or SignalOptions()
     if kind == "mcap":

@@ -37,8 +37,6 @@ from wmrid.model import THETA0_NAMES, RegressorForm
 SIGNIFICANT = 3.0
 #: Window of the Savitzky-Golay differentiator for the accelerations of the torque residual, s.
 ACCEL_WINDOW_S = 0.1
-#: Points of the history kept in a JSON result (enough for figures).
-JSON_HISTORY_POINTS = 1000
 
 
 @dataclass
@@ -56,21 +54,6 @@ class Report:
     figures: dict[str, bytes] = field(default_factory=dict)  # name -> SVG bytes
     figures_png: dict[str, bytes] = field(default_factory=dict)
     result: dict[str, Any] = field(default_factory=dict)
-
-
-def history_dict(result: Any, max_points: int = JSON_HISTORY_POINTS) -> dict[str, Any]:
-    """A compact history for JSON: t, theta (p names -> list), e_r, e_l, lambda_min, at most ``max_points``."""
-    hist = result.history
-    idx = np.unique(np.linspace(0, len(hist.t) - 1, min(max_points, len(hist.t))).round().astype(int))
-    names = result.form.theta_names()
-    flat = hist.theta[idx].reshape(len(idx), -1)
-    return {
-        "t": hist.t[idx].tolist(),
-        "theta": {name: flat[:, j].tolist() for j, name in enumerate(names)},
-        "e_r": hist.e[idx, 0].tolist(),
-        "e_l": hist.e[idx, 1].tolist(),
-        "lambda_min": hist.lambda_min[idx].tolist(),
-    }
 
 
 def result_from_json(data: dict[str, Any], source: str) -> Any:

@@ -50,7 +50,7 @@ import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -584,24 +584,9 @@ def read_urdf(
     )
 
 
-def robot_from_urdf(
-    path_or_text: str | Path,
-    *,
-    gear_ratio: float,
-    rotor_inertia: float | None = None,
-    viscous_friction: Sequence[float] = (0.0, 0.0),
-    coulomb_friction: Sequence[float] = (0.0, 0.0),
-    wheel_radius: float | None = None,
-    wheel_joints: Sequence[str] | None = None,
-    rotor_joints: Sequence[str] | None = None,
-    symmetry_tolerance: float = 0.02,
-) -> PhysicalParameters:
-    """The paper's physical parameters (SI) from a URDF; the arguments are those of :func:`read_urdf`."""
-    return read_urdf(
-        path_or_text, gear_ratio=gear_ratio, rotor_inertia=rotor_inertia, viscous_friction=viscous_friction,
-        coulomb_friction=coulomb_friction, wheel_radius=wheel_radius, wheel_joints=wheel_joints,
-        rotor_joints=rotor_joints, symmetry_tolerance=symmetry_tolerance,
-    ).params  # fmt: skip
+def robot_from_urdf(path_or_text: str | Path, **options: Any) -> PhysicalParameters:
+    """The paper's physical parameters (SI) from a URDF; ``options`` are the keyword arguments of :func:`read_urdf`."""
+    return read_urdf(path_or_text, **options).params
 
 
 def load_robot_urdf(
