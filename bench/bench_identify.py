@@ -72,7 +72,7 @@ def in_process(path, repeat: int) -> dict:
     t, eta, tau = log.t, log.eta, log.tau
     # settings as identify() builds them for --robot paper, with identify()'s own defaults
     d = {name: p.default for name, p in inspect.signature(identify).parameters.items()}
-    form = resolve_form(eta, d["form"])
+    form = resolve_form(model.choose_form(eta), d["form"])
     theta_init = model.intermediate_parameters(model.base_parameters(robot.nominal), form)
     lo, hi = default_box(theta_init, form, d["box_width"], True)
     settings = ObserverSettings(

@@ -196,10 +196,14 @@ def _read_wheel_log(
     mirror_left,
     flip_effort=False,
     data: bytes | None = None,
+    whole: bool = True,
 ):
-    """Read LOG with the log-input options (shared by the commands that read logs; Enum values accepted)."""
+    """Read LOG with the log-input options (shared by the commands that read logs; Enum values accepted).
+
+    whole : the log in memory (a WheelLog); else a LogStream, read piece by piece when iterated.
+    """
     from wmrid.joints import TopicSelection
-    from wmrid.logio import parse_column_mapping, read_log
+    from wmrid.logio import open_log, parse_column_mapping
     from wmrid.signals import SignalOptions
 
     if robot_obj is not None:
@@ -220,9 +224,10 @@ def _read_wheel_log(
     )  # fmt: skip
     mapping = parse_column_mapping(columns) if columns else None
     k_r = robot_obj.nominal.k_r if robot_obj is not None else None
-    return read_log(
+    stream = open_log(
         log, columns=mapping, time_unit=time_unit, selection=selection, signals=signals, gear_ratio=k_r, data=data
     )
+    return stream.read() if whole else stream
 
 
 #: The log-input options every log-reading command takes (names of its parameters).
@@ -359,8 +364,8 @@ def identify(
     from wmrid.render import print_identification, to_json
 
     robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
-    wheel_log = _read_wheel_log(log, columns, time_unit.value, robot_obj, **_log_options(locals()))
-    progress_cb, finish = _progress(len(wheel_log), "identify")
+    wheel_log = _read_wheel_log(log, columns, time_unit.value, robot_obj, **_log_options(locals()), whole=False)
+    progress_cb, finish = _progress("identify")
     try:
         result = run_identify(
             wheel_log,
@@ -554,16 +559,70 @@ def _write_estimates(result, path: Path, force: bool) -> None:
     write_series_mcap(str(path), hist.t, series, force=force, metadata={"result": to_json_text(result.to_dict())})
 
 
-def _progress(total: int, label: str):
-    """A rich progress bar on stderr for long logs when stderr is a terminal; else no-ops."""
-    if total < 1_000_000 or not sys.stderr.isatty():
+def _progress(label: str):
+    """(callback(done, total), finish): a rich progress bar on stderr, shown for logs of a million samples
+    or more when stderr is a terminal; else no-ops."""
+    if not sys.stderr.isatty():
         return None, lambda: None
-    from rich.progress import Progress
+    state: dict = {}
 
-    bar = Progress(console=_stderr_console(), transient=True)
-    task = bar.add_task(label, total=total)
-    bar.start()
-    return (lambda done: bar.update(task, completed=done)), bar.stop
+    def update(done: int, total: int) -> None:
+        if total < 1_000_000:
+            return
+        if not state:
+            from rich.progress import Progress
+
+            bar = Progress(console=_stderr_console(), transient=True)
+            state["bar"], state["task"] = bar, bar.add_task(label, total=total)
+            bar.start()
+        state["bar"].update(state["task"], completed=done)
+
+    def finish() -> None:
+        if state:
+            state["bar"].stop()
+
+    return update, finish
+
+
+_CHANGE_PANEL = "Change of the dynamics during the run (one per run)"
+LoadAtOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--load-at",
+        metavar="T",
+        help="Load the --payload at T s: unloaded before, loaded from the first 1 ms control period starting at "
+        "or after T.",
+        rich_help_panel=_CHANGE_PANEL,
+    ),
+]
+DropAtOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--drop-at",
+        metavar="T",
+        help="Drop the --payload at T s: loaded before, unloaded from the first control period at or after T.",
+        rich_help_panel=_CHANGE_PANEL,
+    ),
+]
+FrictionFaultOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--friction-fault",
+        metavar="WHEEL:FACTOR[:TERMS]",
+        help="Multiply one wheel's true friction by FACTOR from --fault-at on: WHEEL right or left, TERMS both "
+        "(default, F_v and F_d), viscous (F_v) or coulomb (F_d); e.g. right:3.",
+        rich_help_panel=_CHANGE_PANEL,
+    ),
+]
+FaultAtOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--fault-at",
+        metavar="T",
+        help="Time of the --friction-fault, s (from the first control period starting at or after T).",
+        rich_help_panel=_CHANGE_PANEL,
+    ),
+]
 
 
 @app.command()
@@ -577,7 +636,11 @@ def simulate(
     rate: Annotated[float, typer.Option(help="Log rate, Hz (control runs at 1 kHz).")] = 1000.0,
     seed: Annotated[int, typer.Option(help="Seed of every random number.")] = 0,
     payload: Annotated[
-        str | None, typer.Option(help="Rigid payload MASS[@X,Y] (kg, m in the platform frame), e.g. 25@0.1,-0.05.")
+        str | None,
+        typer.Option(
+            help="Rigid payload MASS[@X,Y] (kg, m in the platform frame), e.g. 25@0.1,-0.05; carried throughout "
+            "unless --load-at or --drop-at says when."
+        ),
     ] = None,
     payload_inertia: Annotated[
         float, typer.Option(help="Payload yaw inertia about its own centre of mass, kg m^2.")
@@ -590,12 +653,23 @@ def simulate(
     force: Annotated[bool, typer.Option(help="Overwrite existing output files.")] = False,
     gear_ratio: Annotated[float | None, typer.Option(help="URDF robots: gear ratio k_r.")] = None,
     rotor_inertia: RotorInertiaOpt = None,
+    load_at: LoadAtOpt = None,
+    drop_at: DropAtOpt = None,
+    friction_fault: FrictionFaultOpt = None,
+    fault_at: FaultAtOpt = None,
 ) -> None:
-    """Simulate the paper's virtual prototype and write a log plus its ground truth (<log>.truth.json)."""
+    """Simulate the paper's virtual prototype and write a log plus its ground truth (<log>.truth.json).
+
+    The dynamics may change once during the run, the controller keeping the nominal parameters:
+    --payload 25@0.1,-0.05 --load-at 30 loads the payload at 30 s, --payload 25 --drop-at 30 drops it,
+    --friction-fault right:3 --fault-at 30 triples the right wheel's friction.  The truth's "parameters"
+    are those at t = 0; its settings.change holds both parameter sets ("before", "after", base and
+    physical), the requested time t and the switch time t_switch (s).
+    """
     from wmrid.atomic import to_json_text, write_json
     from wmrid.logio import write_log
     from wmrid.robot import Payload
-    from wmrid.simulate import NoiseSettings
+    from wmrid.simulate import NoiseSettings, PlantChange, parse_friction_fault, parse_time
     from wmrid.simulate import simulate as run_simulate
 
     robot_obj = _load_robot(robot, gear_ratio, rotor_inertia)
@@ -603,9 +677,38 @@ def simulate(
     load = None
     if payload is not None:
         load = Payload.parse(payload, inertia=payload_inertia)
-        truth_params = truth_params.with_payload(load)
     elif payload_inertia:
         raise UsageError("--payload-inertia needs --payload MASS[@X,Y]")
+    times = {"--load-at": load_at, "--drop-at": drop_at, "--fault-at": fault_at}
+    given = [option for option, text in times.items() if text is not None]
+    if len(given) > 1:
+        raise UsageError(f"{' and '.join(given)}: one change per run; give only one of them")
+    if (load_at is not None or drop_at is not None) and load is None:
+        raise UsageError(f"{given[0]} needs --payload MASS[@X,Y] (the payload loaded or dropped)")
+    if (friction_fault is None) != (fault_at is None):
+        raise UsageError("--friction-fault WHEEL:FACTOR and --fault-at T go together; give both")
+    change = None
+    if given:
+        option = given[0]
+        when = parse_time(times[option], option)
+        if when >= duration:
+            raise UsageError(
+                f"{option} {times[option]}: the change must come before the end of the run ({duration:g} s)"
+            )
+        if load_at is not None:
+            change = PlantChange.payload_load(when, truth_params, load)
+        elif drop_at is not None:
+            change = PlantChange.payload_drop(when, truth_params, load)
+        else:
+            wheel, factor, terms = parse_friction_fault(friction_fault)
+            base = truth_params if load is None else truth_params.with_payload(load)
+            try:
+                change = PlantChange.friction_fault(when, base, wheel, factor, terms)
+            except UsageError as err:
+                raise UsageError(f"--friction-fault {friction_fault}: {err}") from None
+        truth_params = change.before
+    elif load is not None:
+        truth_params = truth_params.with_payload(load)
     noise = NoiseSettings(
         eta_std=eta_noise, tau_std=tau_noise, caster_std=caster, caster_time=caster_time, encoder_cpr=encoder_cpr
     )
@@ -617,6 +720,7 @@ def simulate(
         rate=rate,
         noise=noise,
         seed=seed,
+        change=change,
     )
     truth = sim.truth()
     truth["robot"] = robot_obj.name
@@ -633,7 +737,8 @@ def simulate(
         write_log(sim.to_frame(), output, force=force, metadata={"wmrid_truth": to_json_text(truth)})
     if truth_path is not None:
         write_json(truth_path, truth, force=force)
-        _stderr_console().print(f"wrote {output} ({len(sim.t)} samples) and {truth_path}")
+        what = "" if change is None else f", {change.kind} at {sim.settings['change']['t_switch']:g} s"
+        _stderr_console().print(f"wrote {output} ({len(sim.t)} samples{what}) and {truth_path}")
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -27,6 +27,12 @@ kept exactly as in the file whatever its size: converting it loses nothing.
 
 Row numbers in messages: for CSV the line of the file as an editor counts it (header = line 1); for
 Parquet the 1-based data row.
+
+Pieces (:func:`open_log`, :class:`LogStream`): CSV and Parquet logs are read CHUNK_ROWS rows at a time
+(Parquet one row group at a time), so ``wmrid identify`` needs the same memory for a 4 h log as for a
+1 h one.  Every row is checked as when the log is read whole; the log-wide choices (time unit, offset,
+epoch-like stamps) are made on the first piece with rows.  MCAP recordings are decoded whole (their topics
+are aligned in time) and handed out in pieces.
 """
 
 from __future__ import annotations
@@ -36,7 +42,7 @@ import io
 import os
 import re
 import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Generator, Iterator, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -53,13 +59,16 @@ __all__ = [
     "CANONICAL",
     "MIN_SAMPLES",
     "REQUIRED",
+    "LogStream",
     "WheelLog",
     "detect_format",
+    "open_log",
     "parse_column_mapping",
     "read_log",
     "read_metadata",
     "seconds_from_stamps",
     "sniff_delimiter",
+    "stream_arrays",
     "write_log",
 ]
 
@@ -120,6 +129,90 @@ class WheelLog:
     def duration(self) -> float:
         """Time from the first to the last sample, s."""
         return float(self.t[-1] - self.t[0]) if len(self) else 0.0
+
+
+# --------------------------------------------------------------------------------------------------
+# Streams: a log read piece by piece
+
+
+#: Rows per piece when a log is read in pieces (about 10 MB of t, eta, tau).
+CHUNK_ROWS = 262_144
+#: A stream keeps its pieces after the first pass when the log has at most this many samples (40 MB),
+#: so that a second pass (identify's replay) does not read the file again; longer logs are re-read.
+CACHE_ROWS = 1_048_576
+
+
+class LogStream:
+    """A wheel log that yields :class:`WheelLog` pieces in time order and can be iterated again.
+
+    source : the file name for messages.  effort_unit : as in :class:`WheelLog`.
+    Iterating reads the file (or, for a log of at most CACHE_ROWS samples, the pieces kept from the first
+    pass).  A pass raises :class:`LogFormatError` at the first unusable row, as :func:`read_log` does, and
+    checks across pieces what :func:`read_log` checks across rows (time strictly increasing, one time
+    unit).  ``notes`` (what was assumed while reading) and ``samples`` are set when a pass ends.
+    Memory: one piece (at most CHUNK_ROWS samples) at a time, whatever the log's length.
+    """
+
+    def __init__(self, source: str, effort_unit: str, pieces: Callable[[], Generator[WheelLog, None, tuple[str, ...]]]):
+        self.source = source
+        self.effort_unit = effort_unit
+        self._pieces = pieces
+        self._cache: list[WheelLog] | None = None
+        self.notes: tuple[str, ...] = ()
+        self.samples: int | None = None
+
+    def __iter__(self) -> Iterator[WheelLog]:
+        if self._cache is not None:
+            yield from self._cache
+            return
+        kept: list[WheelLog] | None = []
+        count = 0
+        gen = self._pieces()
+        while True:
+            try:
+                piece = next(gen)
+            except StopIteration as stop:
+                notes = tuple(stop.value or ())
+                break
+            count += len(piece)
+            if kept is not None:
+                kept.append(piece)
+                if count > CACHE_ROWS:
+                    kept = None
+            yield piece
+        if self.samples is not None and count != self.samples:
+            raise LogFormatError(
+                f"{self.source}: the file changed while it was read ({self.samples} samples, then {count}); "
+                "identify a copy that is not being written"
+            )
+        self.samples, self.notes, self._cache = count, notes, kept
+
+    def read(self) -> WheelLog:
+        """The whole log as one :class:`WheelLog` (memory: the whole log)."""
+        pieces = list(self)
+        poses = [p.pose for p in pieces]
+        pose = np.concatenate(poses) if all(p is not None for p in poses) else None
+        return WheelLog(
+            t=np.concatenate([p.t for p in pieces]), eta=np.concatenate([p.eta for p in pieces]),
+            tau=np.concatenate([p.tau for p in pieces]), source=self.source, notes=self.notes, pose=pose,
+            effort_unit=self.effort_unit,
+        )  # fmt: skip
+
+
+def stream_arrays(log: Any, rows: int = CHUNK_ROWS) -> LogStream:
+    """A :class:`LogStream` over a log already in memory (t, eta, tau arrays; source, notes, effort_unit)."""
+    t, eta, tau = log.t, log.eta, log.tau
+    source = getattr(log, "source", "log")
+    unit = getattr(log, "effort_unit", "N m")
+    notes = tuple(getattr(log, "notes", ()))
+
+    def pieces() -> Generator[WheelLog, None, tuple[str, ...]]:
+        for start in range(0, len(t), rows):
+            stop = start + rows
+            yield WheelLog(t=t[start:stop], eta=eta[start:stop], tau=tau[start:stop], source=source, effort_unit=unit)
+        return notes
+
+    return LogStream(source, unit, pieces)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -269,7 +362,31 @@ def read_log(
         k_r, used to turn a motor current into a wheel torque when --gear-ratio is not given.
 
     The file is opened read-only.  Raises :class:`LogFormatError` (one line naming the file, the row or
-    column at fault and the fix) for anything that is not a usable log.
+    column at fault and the fix) for anything that is not a usable log.  :func:`open_log` reads the same
+    log piece by piece.
+    """
+    return open_log(
+        path, columns=columns, time_unit=time_unit, selection=selection, signals=signals, gear_ratio=gear_ratio,
+        data=data,
+    ).read()  # fmt: skip
+
+
+def open_log(
+    path: str,
+    *,
+    columns: Mapping[str, str] | None = None,
+    time_unit: str = "auto",
+    selection: TopicSelection | None = None,
+    signals: SignalOptions | None = None,
+    gear_ratio: float | None = None,
+    data: bytes | None = None,
+    rows: int = CHUNK_ROWS,
+) -> LogStream:
+    """The log of :func:`read_log` (same arguments) as a :class:`LogStream` of pieces of ``rows`` samples.
+
+    CSV and Parquet logs are read piece by piece (bounded memory); an MCAP recording is decoded whole
+    (its topics must be aligned in time) and then handed out in pieces.  The file's layout (format,
+    columns, delimiter) is checked here; the rows are checked as the pieces are read.
     """
     if time_unit not in TIME_UNITS:
         raise UsageError(f"--time-unit {time_unit!r} is not one of {', '.join(TIME_UNITS)}")
@@ -283,21 +400,30 @@ def read_log(
     kind = detect_format(path, source.head(8))
     signals = signals or SignalOptions()
     if kind == "mcap":
-        return _read_mcap_log(source, columns or {}, selection or TopicSelection(), signals, gear_ratio)
-    raw = _read_parquet(source, mapping, explicit) if kind == "parquet" else _read_csv(source, mapping, explicit)
-    return _apply_signals(_assemble(raw, source.name, mapping, time_unit), signals, gear_ratio)
+        log = _read_mcap_log(source, columns or {}, selection or TopicSelection(), signals, gear_ratio)
+        return stream_arrays(log, rows)
+    if kind == "parquet":
+        chunks, where, notes, hint = _parquet_chunks(source, mapping, explicit, rows)
+    else:
+        chunks, where, notes, hint = _csv_chunks(source, mapping, explicit, rows)
+    effort_unit = "N m" if signals == SignalOptions() else signals.effort_label
 
+    def pieces() -> Generator[WheelLog, None, tuple[str, ...]]:
+        assembler = _Assembler(source.name, mapping, time_unit, hint, where)
+        signal_notes: list[str] = []
+        for base, values in chunks():
+            piece = assembler.add(values, base)
+            if piece is None:
+                continue
+            if signals != SignalOptions():
+                eta, tau, signal_notes = convert(piece.eta, piece.tau, signals, gear_ratio)
+                piece = WheelLog(
+                    t=piece.t, eta=eta, tau=tau, source=piece.source, pose=piece.pose, effort_unit=effort_unit
+                )
+            yield piece
+        return (*notes, *assembler.finish(), *signal_notes)
 
-def _apply_signals(log: WheelLog, signals: SignalOptions, gear_ratio: float | None) -> WheelLog:
-    """Convert a table log's speed and effort columns as ``signals`` says (nothing for the defaults)."""
-    if signals == SignalOptions():
-        return log
-    eta, tau, more = convert(log.eta, log.tau, signals, gear_ratio)
-    notes = [*log.notes, *more]
-    return WheelLog(
-        t=log.t, eta=eta, tau=tau, source=log.source, notes=tuple(notes), pose=log.pose,
-        effort_unit=signals.effort_label,
-    )  # fmt: skip
+    return LogStream(source.name, effort_unit, pieces)
 
 
 def _read_mcap_log(
@@ -342,16 +468,6 @@ def _read_mcap_log(
     return WheelLog(t=t, eta=eta, tau=tau, source=source.name, notes=tuple(notes), effort_unit=sig.effort_unit)
 
 
-@dataclass
-class _Raw:
-    """Columns as read, before validation: canonical name -> array or Series; how to name a row."""
-
-    values: dict[str, Any]
-    where: Callable[[int], str]  # data index (0-based) -> "line 7" / "row 6"
-    notes: list[str]
-    time_unit_hint: str | None = None  # unit carried by a typed time column (Parquet timestamps)
-
-
 def _select(present: list[str], mapping: dict[str, str], explicit: set[str], name: str) -> dict[str, str]:
     """{canonical: column in the file} for the required columns and, when all three exist, the pose.
 
@@ -389,48 +505,75 @@ def _select(present: list[str], mapping: dict[str, str], explicit: set[str], nam
 # ---- Parquet
 
 
-def _read_parquet(source: _Source, mapping: dict[str, str], explicit: set[str]) -> _Raw:
+def _parquet_chunks(
+    source: _Source, mapping: dict[str, str], explicit: set[str], rows: int
+) -> tuple[Callable[[], Iterator[tuple[int, dict[str, Any]]]], Callable[[int], str], list[str], str | None]:
+    """(chunks, where, notes, time unit hint) of a Parquet log; ``chunks()`` yields (first row, columns)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     name = source.name
-    try:
-        stream = pa.OSFile(source.path, "r") if source.path is not None else pa.BufferReader(source.data)
-    except (pa.ArrowException, OSError) as err:
-        raise LogFormatError(f"{name}: cannot be opened ({_one_line(err)})") from err
-    with stream:
+
+    def opened() -> Any:
+        try:
+            return pa.OSFile(source.path, "r") if source.path is not None else pa.BufferReader(source.data)
+        except (pa.ArrowException, OSError) as err:
+            raise LogFormatError(f"{name}: cannot be opened ({_one_line(err)})") from err
+
+    def broken(err: BaseException) -> LogFormatError:
+        return LogFormatError(
+            f"{name}: not a readable Parquet file ({_one_line(err)}); it may be truncated or corrupt — "
+            "write it again or export the log as CSV"
+        )
+
+    with opened() as stream:
         try:
             pf = pq.ParquetFile(stream)
             present = list(pf.schema_arrow.names)
             if pf.metadata.num_rows == 0:
                 raise LogFormatError(f"{name}: the Parquet file has no rows; give a log with {MIN_SAMPLES}+ samples")
-            chosen = _select(present, mapping, explicit, name)
-            wanted = list(dict.fromkeys(chosen.values()))
-            table = pf.read(columns=wanted, use_threads=True)
+            schema = pf.schema_arrow
         except (pa.ArrowException, OSError) as err:
-            raise LogFormatError(
-                f"{name}: not a readable Parquet file ({_one_line(err)}); it may be truncated or corrupt — "
-                "write it again or export the log as CSV"
-            ) from err
-
-    values: dict[str, Any] = {}
+            raise broken(err) from err
+    chosen = _select(present, mapping, explicit, name)
+    wanted = list(dict.fromkeys(chosen.values()))
     notes: list[str] = []
     hint = None
-    for key, col in chosen.items():
-        arr = table.column(col).combine_chunks() if table.column(col).num_chunks != 1 else table.column(col).chunk(0)
-        typ = arr.type
-        if key == "t" and (pa.types.is_timestamp(typ) or pa.types.is_duration(typ)):
-            hint = typ.unit
-            notes.append(f"time column {col!r} is a Parquet {typ} column; read in its own unit, {typ.unit}")
-            arr = arr.cast(pa.int64())
-        if pa.types.is_integer(arr.type) or pa.types.is_floating(arr.type):
-            if arr.null_count:
-                values[key] = arr.to_numpy(zero_copy_only=False).astype(np.float64)  # nulls -> NaN
-            else:
-                values[key] = _primitive_to_numpy(arr)
-        else:
-            values[key] = arr.to_pandas()  # strings, bools, decimals...: checked cell by cell below
-    return _Raw(values, lambda i: f"row {i + 1}", notes, hint)
+    typ = schema.field(chosen["t"]).type
+    if pa.types.is_timestamp(typ) or pa.types.is_duration(typ):
+        hint = typ.unit
+        notes.append(f"time column {chosen['t']!r} is a Parquet {typ} column; read in its own unit, {typ.unit}")
+
+    def chunks() -> Iterator[tuple[int, dict[str, Any]]]:
+        base = 0
+        with opened() as stream:
+            try:
+                pf = pq.ParquetFile(stream)
+                # One row group at a time: iter_batches reads ahead and held ~40 % of a 4 h log at once.
+                for group in range(pf.num_row_groups):
+                    table = pf.read_row_group(group, columns=wanted, use_threads=True)
+                    for batch in table.to_batches(max_chunksize=rows):
+                        values = {key: _arrow_values(batch.column(col), key == "t") for key, col in chosen.items()}
+                        yield base, values
+                        base += batch.num_rows
+                    del table
+            except (pa.ArrowException, OSError) as err:
+                raise broken(err) from err
+
+    return chunks, lambda i: f"row {i + 1}", notes, hint
+
+
+def _arrow_values(arr: Any, is_time: bool = False) -> Any:
+    """A column of an Arrow batch as numpy (numbers; nulls -> NaN) or, for anything else, a pandas Series."""
+    import pyarrow as pa
+
+    if is_time and (pa.types.is_timestamp(arr.type) or pa.types.is_duration(arr.type)):
+        arr = arr.cast(pa.int64())
+    if pa.types.is_integer(arr.type) or pa.types.is_floating(arr.type):
+        if arr.null_count:
+            return arr.to_numpy(zero_copy_only=False).astype(np.float64)  # nulls -> NaN
+        return _primitive_to_numpy(arr)
+    return arr.to_pandas()  # strings, bools, decimals...: checked cell by cell
 
 
 def _primitive_to_numpy(arr: Any) -> np.ndarray:
@@ -608,42 +751,103 @@ def _csv_layout(source: _Source) -> _CsvLayout:
     return _CsvLayout(c_options, list(header.columns), present, notes, skip, has_header, spaced, fail, comments)
 
 
-def _read_csv(source: _Source, mapping: dict[str, str], explicit: set[str]) -> _Raw:
+def _csv_chunks(
+    source: _Source, mapping: dict[str, str], explicit: set[str], rows: int
+) -> tuple[Callable[[], Iterator[tuple[int, dict[str, Any]]]], Callable[[int], str], list[str], None]:
+    """(chunks, where, notes, None) of a CSV log; ``chunks()`` yields (first data row, columns) of ``rows`` rows.
+
+    Plain files (comma, tab or semicolon, no comments, a header) are parsed by pyarrow's streaming CSV
+    reader; anything it refuses, from the row it refused on, and all other files by pandas' C engine.
+    """
     import pandas as pd
 
     name = source.name
     layout = _csv_layout(source)
-    c_options, present, notes, skip, has_header, spaced, fail = (
-        layout.c_options,
-        layout.present,
-        layout.notes,
-        layout.skip,
-        layout.has_header,
-        layout.spaced,
-        layout.fail,
-    )
-    sep, decimal, encoding = c_options["sep"], c_options["decimal"], c_options["encoding"]
+    c_options, present, notes = layout.c_options, layout.present, layout.notes
     header = pd.DataFrame(columns=layout.header_columns)
     chosen = _select(present, mapping, explicit, name)
     actual = {str(c).strip(): c for c in header.columns}
     usecols = list(dict.fromkeys(actual[c] for c in chosen.values()))
+    plain = (
+        c_options["sep"] in (",", "\t", ";")
+        and c_options["decimal"] == "."
+        and c_options["encoding"] == "utf-8"
+        and not layout.spaced
+        and not layout.skip
+        and layout.has_header
+        and len(set(layout.header_columns)) == len(layout.header_columns)
+    )
 
-    frame = None
-    if sep in (",", "\t", ";") and decimal == "." and not spaced and not skip and has_header:
-        try:
-            frame = pd.read_csv(source.opener(), sep=sep, encoding=encoding, usecols=usecols, engine="pyarrow")
-        except Exception:  # pyarrow refuses some valid files; the C engine then decides and explains
-            frame = None
-    if frame is None:
-        try:
-            frame = pd.read_csv(source.opener(), **c_options)  # all columns: usecols would hide ragged rows
+    def c_engine(skip_rows: int) -> Iterator[tuple[int, dict[str, Any]]]:
+        base = 0
+        try:  # all columns: usecols would hide ragged rows
+            with pd.read_csv(source.opener(), chunksize=rows, **c_options) as reader:
+                for frame in reader:
+                    n = len(frame)
+                    if base + n > skip_rows:
+                        start = max(skip_rows - base, 0)
+                        frame = frame.iloc[start:]
+                        frame.columns = [str(c).strip() for c in frame.columns]
+                        yield base + start, {key: _series_values(frame[col]) for key, col in chosen.items()}
+                    base += n
         except (ValueError, UnicodeDecodeError) as err:
-            raise fail(err) from err
-    if len(frame) == 0:
-        raise LogFormatError(f"{name}: has a header but no data rows; give a log with at least {MIN_SAMPLES} samples")
-    frame.columns = [str(c).strip() for c in frame.columns]
-    values = {key: _series_values(frame[col]) for key, col in chosen.items()}
-    return _Raw(values, _csv_line_finder(source, skip, has_header), notes)
+            raise layout.fail(err) from err
+
+    def chunks() -> Iterator[tuple[int, dict[str, Any]]]:
+        done = 0
+        if plain:
+            try:
+                for values in _arrow_csv(source, c_options["sep"], usecols, chosen, actual, rows):
+                    n = len(values["t"])
+                    yield done, values
+                    done += n
+                return
+            except _ArrowCsvRefused:
+                pass  # the C engine decides, and explains, from the first row not yet handed out
+        yield from c_engine(done)
+
+    return chunks, _csv_line_finder(source, layout.skip, layout.has_header), notes, None
+
+
+class _ArrowCsvRefused(Exception):
+    """pyarrow's CSV reader cannot read (the rest of) a file the C engine may still read or explain."""
+
+
+def _arrow_csv(
+    source: _Source, sep: str, usecols: list[Any], chosen: dict[str, str], actual: dict[str, Any], rows: int
+) -> Iterator[dict[str, Any]]:
+    """Column values of ``rows``-row pieces read by pyarrow's streaming CSV reader (raises _ArrowCsvRefused)."""
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
+    try:
+        reader = pcsv.open_csv(
+            source.opener(),
+            read_options=pcsv.ReadOptions(block_size=1 << 24, use_threads=True),
+            parse_options=pcsv.ParseOptions(delimiter=sep),
+            convert_options=pcsv.ConvertOptions(include_columns=usecols),
+        )
+    except (pa.ArrowException, OSError, ValueError) as err:
+        raise _ArrowCsvRefused from err
+    pending: list[Any] = []
+    count = 0
+
+    def flush() -> dict[str, Any]:
+        table = pa.Table.from_batches(pending)
+        return {key: _arrow_values(table.column(actual[col]).combine_chunks()) for key, col in chosen.items()}
+
+    try:
+        with reader:
+            for batch in reader:
+                pending.append(batch)
+                count += batch.num_rows
+                if count >= rows:
+                    yield flush()
+                    pending, count = [], 0
+    except (pa.ArrowException, OSError, ValueError) as err:
+        raise _ArrowCsvRefused from err
+    if count:
+        yield flush()
 
 
 def _all_numbers(line: str, sep: str, decimal: str) -> bool:
@@ -725,100 +929,212 @@ def seconds_from_stamps(stamps: np.ndarray, unit: str) -> tuple[np.ndarray, int 
     return floats / per_s, None
 
 
-def _assemble(raw: _Raw, name: str, mapping: dict[str, str], time_unit: str) -> WheelLog:
-    where = raw.where
-    notes = list(raw.notes)
-    keys = list(raw.values)
-    arrays = {key: _numeric(raw.values[key], key, mapping[key], name, where) for key in keys if key in REQUIRED}
+class _Assembler:
+    """Turns the columns of successive pieces of a table log into :class:`WheelLog` pieces.
 
-    # The first non-finite cell in file order among the required columns.
-    bad = [(i, key) for key in REQUIRED if (i := _first_nonfinite(arrays[key])) is not None]
-    if bad:
-        i, key = min(bad, key=lambda b: (b[0], REQUIRED.index(b[1])))
-        raise LogFormatError(_nonfinite_message(arrays[key], i, mapping[key], name, where))
+    Checks each piece as :func:`read_log` checks a whole log (numbers, finite, time strictly increasing,
+    also across pieces) and makes the log-wide decisions (time unit, offset, epoch-like stamps) on the
+    first piece that has rows.  ``finish()`` returns the notes and raises for a log too short to use.
+    """
 
-    stamps = arrays["t"]
-    tcol = mapping["t"]
-    # Zero stamps among epoch times (a clock not yet set, a dropped header): those rows are dropped.
-    zero = stamps == 0
-    if zero.any() and not zero.all() and np.min(np.abs(stamps[~zero])) > _EPOCH_LIKE_S:
-        rows = np.flatnonzero(zero)
-        notes.append(
-            f"{len(rows)} rows with time stamp 0 among epoch times were dropped as bad stamps "
-            f"(first: {where(int(rows[0]))})"
-        )
-        kept = np.flatnonzero(~zero)
-        arrays = {key: arr[kept] for key, arr in arrays.items()}
-        stamps = arrays["t"]
-        values = {key: _take(val, kept) for key, val in raw.values.items()}
-        raw = _Raw(values, lambda i, f=raw.where: f(int(kept[i])), raw.notes, raw.time_unit_hint)
-        where = raw.where
-    n = len(stamps)
-    unit = time_unit
-    if raw.time_unit_hint is not None:
-        if time_unit not in ("auto", raw.time_unit_hint):
-            notes.append(f"--time-unit {time_unit} ignored: the column's type says {raw.time_unit_hint}")
-        unit = raw.time_unit_hint
-    elif time_unit == "auto":
-        if stamps.dtype.kind in "iu":
-            unit = "ns"
-            notes.append(
-                f"time column {tcol!r} holds integers: read as integer nanoseconds "
-                "(use --time-unit s, ms or us if it counts other units)"
+    def __init__(
+        self, name: str, mapping: dict[str, str], time_unit: str, hint: str | None, where: Callable[[int], str]
+    ):
+        self.name, self.mapping, self.time_unit, self.hint, self.where = name, mapping, time_unit, hint, where
+        self.notes: list[str] = []
+        self.unit: str | None = None
+        self.kind: str | None = None  # "i" or "f": the time column's kind in the first piece
+        self.offset: int | float | None = None
+        self.epoch: bool | None = None  # whether stamps are epoch times (zero stamps are then dropped)
+        self.zero_rows = 0
+        self.zero_first: str | None = None
+        self.prev_stamp: Any = None
+        self.prev_t: float | None = None
+        self.first_step: float | None = None
+        self.n = 0
+        self.pose_ok = True
+        self.last_t = 0.0
+
+    def add(self, values: dict[str, Any], base: int) -> WheelLog | None:
+        """The piece whose first row is data row ``base`` (0-based) of the file, or None if it has no rows left."""
+        name, mapping = self.name, self.mapping
+        kept = None
+
+        def where(i: int) -> str:
+            return self.where(base + (int(kept[i]) if kept is not None else i))
+
+        arrays = {key: _numeric(values[key], key, mapping[key], name, where) for key in REQUIRED}
+        bad = [(i, key) for key in REQUIRED if (i := _first_nonfinite(arrays[key])) is not None]
+        if bad:  # the first non-finite cell in file order among the required columns
+            i, key = min(bad, key=lambda b: (b[0], REQUIRED.index(b[1])))
+            raise LogFormatError(_nonfinite_message(arrays[key], i, mapping[key], name, where))
+        stamps = self._stamps(arrays["t"], where)
+
+        zero = stamps == 0
+        if self.epoch is None and not zero.all():  # decided by the first piece with a non-zero stamp
+            self.epoch = bool(np.min(np.abs(stamps[~zero])) > _EPOCH_LIKE_S)
+        if self.epoch and zero.any():
+            rows = np.flatnonzero(zero)
+            self.zero_rows += len(rows)
+            self.zero_first = self.zero_first or where(int(rows[0]))
+            kept = np.flatnonzero(~zero)
+            arrays = {key: arr[kept] for key, arr in arrays.items()}
+            values = {key: _take(val, kept) for key, val in values.items()}
+            stamps = arrays["t"]
+        if len(stamps) == 0:
+            return None
+        if self.unit is None:
+            self._decide_unit(stamps)
+
+        steps = np.diff(stamps, prepend=stamps[:1] if self.prev_stamp is None else [self.prev_stamp])
+        check = steps[1:] if self.prev_stamp is None else steps
+        if not (check > 0).all():
+            i = int(np.argmin(check > 0)) + (1 if self.prev_stamp is None else 0)
+            before = stamps[i - 1].item() if i > 0 else self.prev_stamp.item()
+            raise LogFormatError(
+                f"{name}: time is not strictly increasing at {where(i)}: {mapping['t']!r} = {stamps[i].item()!r} "
+                f"follows {before!r} on the row before; sort the log by time and drop repeated stamps"
             )
-        else:
-            unit = "s"
-            largest = float(np.max(np.abs(stamps))) if len(stamps) else 0.0
-            for candidate, low in (("ns", 1e16), ("us", 1e13)):
-                if largest >= low:  # as seconds: over 300,000 years; as ns or us since the epoch: today
-                    unit = candidate
-                    notes.append(
-                        f"time column {tcol!r} holds floats up to {largest:.4g}: too large for seconds, read as "
-                        f"{candidate} since the Unix epoch (use --time-unit to say otherwise)"
-                    )
-                    break
+        t = _seconds(stamps, self.unit, self.offset)  # type: ignore[arg-type]
+        t_steps = np.diff(t, prepend=t[:1] if self.prev_t is None else [self.prev_t])
+        t_check = t_steps[1:] if self.prev_t is None else t_steps
+        if not (t_check > 0).all():  # distinct stamps that float64 cannot tell apart
+            i = int(np.argmin(t_check > 0)) + (1 if self.prev_t is None else 0)
+            before = stamps[i - 1].item() if i > 0 else self.prev_stamp.item()
+            raise LogFormatError(
+                f"{name}: {where(i)}: stamps {before!r} and {stamps[i].item()!r} are equal "
+                "in float64 seconds; give the time column in a coarser unit"
+            )
+        if self.first_step is None and len(t) > 1:
+            self.first_step = float(np.median(np.diff(t)))
+        self.prev_stamp, self.prev_t, self.last_t = stamps[-1], float(t[-1]), float(t[-1])
+        self.n += len(t)
 
-    steps = np.diff(stamps) if stamps.dtype.kind == "f" else np.diff(stamps.astype(np.int64))
-    if n > 1 and not (steps > 0).all():
-        i = int(np.argmin(steps > 0)) + 1
-        raise LogFormatError(
-            f"{name}: time is not strictly increasing at {where(i)}: {tcol!r} = {stamps[i].item()!r} follows "
-            f"{stamps[i - 1].item()!r} on the row before; sort the log by time and drop repeated stamps"
-        )
-    if n < MIN_SAMPLES:
-        raise LogFormatError(
-            f"{name}: only {n} samples; identification needs at least {MIN_SAMPLES}, so record a longer log"
-        )
+        eta = np.column_stack([arrays["eta_r"], arrays["eta_l"]]).astype(np.float64, copy=False)
+        tau = np.column_stack([arrays["tau_r"], arrays["tau_l"]]).astype(np.float64, copy=False)
+        pose = self._pose(values, where) if self.pose_ok else None
+        return WheelLog(t=t, eta=eta, tau=tau, source=name, pose=pose)
 
-    t, offset = seconds_from_stamps(stamps, unit)
+    def _stamps(self, stamps: np.ndarray, where: Callable[[int], str]) -> np.ndarray:
+        """The time column in the kind (integer or float) of the first piece's."""
+        kind = "i" if stamps.dtype.kind in "iu" else "f"
+        if self.kind is None:
+            self.kind = kind
+        elif kind != self.kind:
+            if self.kind == "f":
+                return stamps.astype(np.float64)
+            whole = stamps == np.round(stamps)
+            if not whole.all():
+                i = int(np.argmin(whole))
+                raise LogFormatError(
+                    f"{self.name}: {where(i)}: time stamp {stamps[i].item()!r} has decimals where the rows before "
+                    "hold whole numbers; give the time column one kind of number (or --time-unit s with decimals)"
+                )
+            return stamps.astype(np.int64)
+        return stamps.astype(np.int64) if stamps.dtype.kind == "u" else stamps
+
+    def _decide_unit(self, stamps: np.ndarray) -> None:
+        tcol = self.mapping["t"]
+        unit = self.time_unit
+        if self.hint is not None:
+            if self.time_unit not in ("auto", self.hint):
+                self.notes.append(f"--time-unit {self.time_unit} ignored: the column's type says {self.hint}")
+            unit = self.hint
+        elif self.time_unit == "auto":
+            if stamps.dtype.kind in "iu":
+                unit = "ns"
+                self.notes.append(
+                    f"time column {tcol!r} holds integers: read as integer nanoseconds "
+                    "(use --time-unit s, ms or us if it counts other units)"
+                )
+            else:
+                unit = "s"
+                largest = float(np.max(np.abs(stamps)))
+                for candidate, low in (("ns", 1e16), ("us", 1e13)):
+                    if largest >= low:  # as seconds: over 300,000 years; as ns or us since the epoch: today
+                        unit = candidate
+                        self.notes.append(
+                            f"time column {tcol!r} holds floats up to {largest:.4g}: too large for seconds, read "
+                            f"as {candidate} since the Unix epoch (use --time-unit to say otherwise)"
+                        )
+                        break
+        self.unit = unit
+        _, self.offset = seconds_from_stamps(stamps, unit)
+
+    def _pose(self, values: dict[str, Any], where: Callable[[int], str]) -> np.ndarray | None:
+        """The optional (n, 3) pose, or None with a note when a pose cell is unusable (the pose is optional)."""
+        if not all(k in values for k in POSE):
+            self.pose_ok = False
+            return None
+        cols = []
+        for key in POSE:
+            try:
+                arr = _numeric(values[key], key, self.mapping[key], self.name, where).astype(np.float64, copy=False)
+            except LogFormatError as err:
+                self.notes.append(f"pose columns ignored: {str(err).removeprefix(self.name + ': ')}")
+                self.pose_ok = False
+                return None
+            i = _first_nonfinite(arr)
+            if i is not None:
+                problem = _nonfinite_message(arr, i, self.mapping[key], self.name, where)
+                self.notes.append(f"pose columns ignored: {problem.removeprefix(self.name + ': ').split(';')[0]}")
+                self.pose_ok = False
+                return None
+            cols.append(arr)
+        return np.column_stack(cols)
+
+    def finish(self) -> list[str]:
+        """The notes of the whole log; raises LogFormatError for a log with fewer than MIN_SAMPLES samples."""
+        name, tcol, notes = self.name, self.mapping["t"], list(self.notes)
+        if self.n == 0 and self.zero_rows == 0:
+            raise LogFormatError(
+                f"{name}: has a header but no data rows; give a log with at least {MIN_SAMPLES} samples"
+            )
+        if self.n < MIN_SAMPLES:
+            raise LogFormatError(
+                f"{name}: only {self.n} samples; identification needs at least {MIN_SAMPLES}, so record a longer log"
+            )
+        if self.zero_rows:
+            notes.insert(
+                0,
+                f"{self.zero_rows} rows with time stamp 0 among epoch times were dropped as bad stamps "
+                f"(first: {self.zero_first})",
+            )
+        if self.offset is not None:
+            notes.append(
+                f"time stored relative to the first stamp {self.offset!r} {self.unit} (t = 0 there) so that float64 "
+                "seconds keep 1 ns resolution"
+            )
+        if self.unit == "s" and self.kind == "f" and abs(self.last_t) >= 1e11:
+            notes.append(
+                f"time column {tcol!r} reaches {self.last_t:.3g} s (over 3000 years): if it counts ms, us or ns, "
+                "say so with --time-unit"
+            )
+        elif self.unit == "ns" and self.time_unit == "auto" and self.hint is None and (self.first_step or 1.0) < 1e-6:
+            notes.append(
+                f"as nanoseconds the samples are only {self.first_step * 1e9:.3g} ns apart: "  # type: ignore[operator]
+                "if the column counts s, ms or us, say so with --time-unit"
+            )
+        if any(self.mapping[k] != k for k in REQUIRED):
+            notes.append(
+                "columns read as " + ", ".join(f"{k} = {self.mapping[k]!r}" for k in REQUIRED if self.mapping[k] != k)
+            )
+        return notes
+
+
+def _seconds(stamps: np.ndarray, unit: str, offset: int | float | None) -> np.ndarray:
+    """Stamps in ``unit`` as float64 seconds, less ``offset`` (a stamp) when given; see :func:`seconds_from_stamps`."""
+    if stamps.dtype.kind in "iu":
+        per_s = _NS_PER_UNIT["s"] // _NS_PER_UNIT[unit]
+        if offset is not None:
+            return (stamps - int(offset)).astype(np.float64) / float(per_s)
+        return stamps.astype(np.float64) / float(per_s)
+    floats = stamps.astype(np.float64, copy=False)
+    if unit == "s":
+        return floats
     if offset is not None:
-        notes.append(
-            f"time stored relative to the first stamp {offset!r} {unit} (t = 0 there) so that float64 seconds keep "
-            "1 ns resolution"
-        )
-    if not (np.diff(t) > 0).all():  # distinct stamps that float64 cannot tell apart
-        i = int(np.argmin(np.diff(t) > 0)) + 1
-        raise LogFormatError(
-            f"{name}: {where(i)}: stamps {stamps[i - 1].item()!r} and {stamps[i].item()!r} are equal "
-            "in float64 seconds; give the time column in a coarser unit"
-        )
-    if unit == "s" and stamps.dtype.kind == "f" and abs(float(t[-1])) >= 1e11:
-        notes.append(
-            f"time column {tcol!r} reaches {float(t[-1]):.3g} s (over 3000 years): if it counts ms, us or ns, "
-            "say so with --time-unit"
-        )
-    elif unit == "ns" and time_unit == "auto" and raw.time_unit_hint is None and float(np.median(np.diff(t))) < 1e-6:
-        notes.append(
-            f"as nanoseconds the samples are only {float(np.median(np.diff(t))) * 1e9:.3g} ns apart: "
-            "if the column counts s, ms or us, say so with --time-unit"
-        )
-
-    eta = np.column_stack([arrays["eta_r"], arrays["eta_l"]]).astype(np.float64, copy=False)
-    tau = np.column_stack([arrays["tau_r"], arrays["tau_l"]]).astype(np.float64, copy=False)
-    pose = _pose(raw, name, mapping, notes)
-    if any(mapping[k] != k for k in REQUIRED):
-        notes.append("columns read as " + ", ".join(f"{k} = {mapping[k]!r}" for k in REQUIRED if mapping[k] != k))
-    return WheelLog(t=t, eta=eta, tau=tau, source=name, notes=tuple(notes), pose=pose)
+        return (floats - float(offset)) / _PER_SECOND[unit]
+    return floats / _PER_SECOND[unit]
 
 
 def _take(values: Any, rows: np.ndarray) -> Any:
@@ -826,26 +1142,6 @@ def _take(values: Any, rows: np.ndarray) -> Any:
     if isinstance(values, np.ndarray):
         return values[rows]
     return values.iloc[rows].reset_index(drop=True)
-
-
-def _pose(raw: _Raw, name: str, mapping: dict[str, str], notes: list[str]) -> np.ndarray | None:
-    """The optional (n, 3) pose, or None with a note when a pose cell is unusable (the pose is optional)."""
-    if not all(k in raw.values for k in POSE):
-        return None
-    cols = []
-    for key in POSE:
-        try:
-            arr = _numeric(raw.values[key], key, mapping[key], name, raw.where).astype(np.float64, copy=False)
-        except LogFormatError as err:
-            notes.append(f"pose columns ignored: {str(err).removeprefix(name + ': ')}")
-            return None
-        i = _first_nonfinite(arr)
-        if i is not None:
-            problem = _nonfinite_message(arr, i, mapping[key], name, raw.where)
-            notes.append(f"pose columns ignored: {problem.removeprefix(name + ': ').split(';')[0]}")
-            return None
-        cols.append(arr)
-    return np.column_stack(cols)
 
 
 def _one_line(err: BaseException | str) -> str:

@@ -70,7 +70,8 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
     console.print(
         f"std: jackknife over {unc['segments']} segments of the log ({unc['dof']} dof); "
         f"estimate ± {unc['interval_factor']['95%']:.2f} std covers the truth with 95 % probability, "
-        f"± {unc['interval_factor']['99.7%']:.2f} std with 99.7 %"
+        f"± {unc['interval_factor']['99.7%']:.2f} std with 99.7 %, if disturbances do not feed back into the "
+        "efforts (in closed loop, about 87 % and 97 %: see the JSON's diagnostics.uncertainty.caveat)"
     )
     if info.get("effort_unit", "N m") != "N m":
         console.print(

@@ -6,7 +6,7 @@ the chunk size (tests check this).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,6 +23,7 @@ class ReplayOutput:
 
     theta (2, p) unconstrained estimate; gamma, gamma_inv (p, p); eta_hat (2,) rad/s;
     hist_idx (m,) sample indices with hist_theta (m, 2, p), hist_e (m, 2) rad/s, hist_gamma (m, p, p);
+    hist_t (m,) and block_t (J,) the times (s) of the history samples and of the block ends;
     block_end (J,) and per-block sums blk_a (J, p, p), blk_c (J, 2, p), blk_uu (J, 2), blk_ee (J, 2)
     (see :func:`wmrid.observer_kernel.observer_chunk`).
     """
@@ -40,17 +41,17 @@ class ReplayOutput:
     blk_c: np.ndarray
     blk_uu: np.ndarray
     blk_ee: np.ndarray
+    hist_t: np.ndarray
+    block_t: np.ndarray
 
 
-def layout(t: np.ndarray, k: float, max_history: int) -> tuple[np.ndarray, np.ndarray]:
-    """History sample indices (m,) and block end indices (J,).
+def layout(n: int, duration: float, k: float, max_history: int) -> tuple[np.ndarray, np.ndarray]:
+    """History sample indices (m,) and block end indices (J,) for a log of n samples over ``duration`` s.
 
     Blocks last about min(0.1 s, 0.1/k): well below the residual correlation time 1/k, so the long-run
     covariance sees the correlation; at most 16384 blocks.
     """
-    n = len(t)
     hist = np.unique(np.linspace(0, n - 1, max(1, min(n, max_history))).round().astype(np.int64))
-    duration = float(t[-1] - t[0])
     block_time = min(0.1, 0.1 / k)
     n_blocks = int(min(max(duration / block_time, 1), 16384, max(n - 1, 1)))
     ends = np.unique(np.linspace(0, n - 1, n_blocks + 1).round().astype(np.int64)[1:])
@@ -68,48 +69,84 @@ def replay(
     progress: Callable[[int], None] | None = None,
 ) -> ReplayOutput:
     """Run the estimator over t (n,) s, eta (n, 2) rad/s, tau (n, 2) N m; ``progress(samples_done)``."""
-    from wmrid.observer_kernel import KIND_GENERAL, KIND_PAPER, observer_chunk
-
     t = np.ascontiguousarray(t, dtype=np.float64)
     eta = np.ascontiguousarray(eta, dtype=np.float64)
     tau = np.ascontiguousarray(tau, dtype=np.float64)
+    pieces = ((t[i : i + chunk], eta[i : i + chunk], tau[i : i + chunk]) for i in range(0, len(t), chunk))
+    return replay_pieces(pieces, len(t), float(t[-1] - t[0]), settings, max_history=max_history, progress=progress)
+
+
+def replay_pieces(
+    pieces: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray]],
+    n: int,
+    duration: float,
+    settings: ObserverSettings,
+    *,
+    max_history: int = 20000,
+    progress: Callable[[int], None] | None = None,
+) -> ReplayOutput:
+    """Run the estimator over a log given as consecutive pieces (t (k,) s, eta (k, 2) rad/s, tau (k, 2)).
+
+    n : the log's samples (the pieces must add up to it); duration : t_last - t_first, s.  Memory: one
+    piece plus the history and block sums, whatever n.  ``progress(samples_done)`` after each piece.
+    """
+    from wmrid.observer_kernel import KIND_GENERAL, KIND_PAPER, observer_chunk
+
     form = settings.form
     p = form.n_columns
     kind = KIND_PAPER if form.kind == "paper" else KIND_GENERAL
-    hist_idx, block_end = layout(t, settings.k, max_history)
+    hist_idx, block_end = layout(n, duration, settings.k, max_history)
     m, nb = len(hist_idx), len(block_end)
 
-    st = np.array([t[0], eta[0, 0], eta[0, 1], eta[0, 0], eta[0, 1], 0.0, 0.0])
+    st = np.zeros(7)
     w = np.zeros(p)
-    g_prev = regressor(eta[:1], tau[:1], form)[0].copy()
+    g_prev = np.zeros(p)
     theta = np.array(settings.theta_init, dtype=float)
     gamma = settings.alpha * np.eye(p)
     gamma_inv = np.eye(p) / settings.alpha
     hist_theta = np.empty((m, 2, p))
     hist_e = np.empty((m, 2))
     hist_gamma = np.empty((m, p, p))
+    hist_t = np.empty(m)
+    block_t = np.empty(nb)
     blk_a = np.zeros((nb, p, p))
     blk_c = np.zeros((nb, 2, p))
     blk_uu = np.zeros((nb, 2))
     blk_ee = np.zeros((nb, 2))
     cursor = np.zeros(2, dtype=np.int64)
-    if hist_idx[0] == 0:
-        hist_theta[0], hist_e[0], hist_gamma[0] = theta, 0.0, gamma
-        cursor[0] = 1
+    hold = int(settings.torque_hold == "zoh")
 
-    n = len(t)
-    for start in range(1, n, chunk):
-        stop = min(n, start + chunk)
+    done = 0
+    for t, eta, tau in pieces:
+        k = len(t)
+        if k == 0:
+            continue
+        t = np.ascontiguousarray(t, dtype=np.float64)
+        eta = np.ascontiguousarray(eta, dtype=np.float64)
+        tau = np.ascontiguousarray(tau, dtype=np.float64)
+        for idx, out in ((hist_idx, hist_t), (block_end, block_t)):
+            lo, hi = np.searchsorted(idx, [done, done + k])
+            out[lo:hi] = t[idx[lo:hi] - done]
+        skip = 0
+        if done == 0:  # the first sample starts the predictor and the filter
+            st[:] = [t[0], eta[0, 0], eta[0, 1], eta[0, 0], eta[0, 1], 0.0, 0.0]
+            g_prev[:] = regressor(eta[:1], tau[:1], form)[0]
+            if hist_idx[0] == 0:
+                hist_theta[0], hist_e[0], hist_gamma[0] = theta, 0.0, gamma
+                cursor[0] = 1
+            skip = 1
         observer_chunk(
-            t[start:stop], eta[start:stop], tau[start:stop], start, kind, int(settings.torque_hold == "zoh"),
-            float(settings.k), st, w, g_prev,
+            t[skip:], eta[skip:], tau[skip:], done + skip, kind, hold, float(settings.k), st, w, g_prev,
             theta, gamma, gamma_inv, hist_idx, hist_theta, hist_e, hist_gamma, block_end, blk_a, blk_c,
             blk_uu, blk_ee, cursor,
         )  # fmt: skip
+        done += k
         if progress is not None:
-            progress(stop)
+            progress(done)
+    if done != n:
+        raise ValueError(f"replay_pieces: the pieces hold {done} samples, not n = {n}")
     return ReplayOutput(
         theta=theta, gamma=gamma, gamma_inv=gamma_inv, eta_hat=st[3:5].copy(), hist_idx=hist_idx,
         hist_theta=hist_theta, hist_e=hist_e, hist_gamma=hist_gamma, block_end=block_end, blk_a=blk_a,
-        blk_c=blk_c, blk_uu=blk_uu, blk_ee=blk_ee,
+        blk_c=blk_c, blk_uu=blk_uu, blk_ee=blk_ee, hist_t=hist_t, block_t=block_t,
     )  # fmt: skip

@@ -63,6 +63,15 @@ always (so each stream depends on the seed and sizes only), standard normals for
 is an Ornstein-Uhlenbeck process per wheel, sampled exactly on the control grid
 (d_{k+1} = a d_k + sigma sqrt(1 - a^2) z_{k+1}, a = exp(-T / caster_time), d_0 = sigma z_0, so it is
 stationary from t = 0) and held over each control period; it enters the plant only.
+
+Plant change (:class:`PlantChange`, optional): the plant's parameters switch once during the run, from
+``change.before`` (= ``true``) to ``change.after`` -- a payload loaded or dropped, a wheel's friction
+multiplied by a factor.  Rule: the switch happens at the start of control period k_s, the first one whose
+start time k T is >= the requested time t_c, i.e. k_s = ceil(t_c / T) (t_c / T within 1e-9 of a whole
+number counts as that number, so a t_c on the control grid switches exactly there); the plant integrates
+[k T, (k + 1) T] with ``before`` for k < k_s and with ``after`` for k >= k_s.  The state (and so every
+logged value) at t <= k_s T is bit for bit that of the run without the change; the controller keeps its
+NOMINAL parameters throughout, and the random streams are drawn as without a change.
 """
 
 from __future__ import annotations
@@ -77,7 +86,7 @@ import numpy as np
 
 from wmrid import model
 from wmrid.errors import UsageError
-from wmrid.robot import PhysicalParameters
+from wmrid.robot import Payload, PhysicalParameters
 
 if TYPE_CHECKING:
     import pandas
@@ -98,6 +107,18 @@ TRAJECTORY_PARAMETERS: dict[str, dict[str, float]] = {
 GAINS: dict[str, float] = {"k1": 3.0, "k2": 25.0, "k3": 10.0, "K": 50.0}
 
 _KIND = {"sinusoid": 0, "reversing": 1}
+
+#: Kinds of :class:`PlantChange` (``settings["change"]["kind"]``).
+CHANGE_KINDS = ("payload-load", "payload-drop", "friction-fault", "custom")
+
+#: Wheel name -> index of its friction parameters (F_v1, F_d1: right; F_v2, F_d2: left).
+WHEELS = {"right": 1, "left": 2}
+
+#: Which friction terms a friction fault multiplies.
+FRICTION_TERMS = {"both": ("F_v", "F_d"), "viscous": ("F_v",), "coulomb": ("F_d",)}
+
+#: Keys of ``settings["change"]`` that a change's ``detail`` may not use.
+_CHANGE_KEYS = ("kind", "t", "t_switch", "switch_period", "before", "after", "physical_before", "physical_after")
 
 
 @dataclass(frozen=True)
@@ -138,6 +159,119 @@ class NoiseSettings:
         return dataclasses.asdict(self)
 
 
+def _time(name: str, value: object) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise UsageError(f"{name} must be a number of seconds, got {value!r}")
+    value = float(value)
+    if not math.isfinite(value) or value <= 0:
+        raise UsageError(f"{name} must be a finite time > 0 s, got {value}")
+    return value
+
+
+@dataclass(frozen=True, eq=False)
+class PlantChange:
+    """One change of the plant during a run: ``before`` until time t (s), ``after`` from then on.
+
+    The switch happens at the first control period starting at or after t (see the module docstring and
+    :meth:`switch_period`).  kind : one of :data:`CHANGE_KINDS`; detail : a JSON-serialisable description
+    (the payload, or the wheel and factor of a friction fault), copied into ``settings["change"]``.
+    Build one with :meth:`payload_load`, :meth:`payload_drop` or :meth:`friction_fault`, or directly
+    (kind ``custom``).
+    """
+
+    t: float
+    before: PhysicalParameters
+    after: PhysicalParameters
+    kind: str = "custom"
+    detail: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "t", _time("change time", self.t))
+        if not isinstance(self.before, PhysicalParameters) or not isinstance(self.after, PhysicalParameters):
+            raise UsageError("a plant change needs PhysicalParameters before and after")
+        if self.kind not in CHANGE_KINDS:
+            raise UsageError(f"unknown plant change kind {self.kind!r}; choose one of {', '.join(CHANGE_KINDS)}")
+        if not isinstance(self.detail, dict) or set(self.detail) & set(_CHANGE_KEYS):
+            raise UsageError(f"plant change detail must be a dict without the keys {', '.join(_CHANGE_KEYS)}")
+        if self.before == self.after:
+            raise UsageError("the plant change changes nothing: before and after are the same parameters")
+
+    @classmethod
+    def payload_load(cls, t: float, robot: PhysicalParameters, payload: Payload) -> PlantChange:
+        """``robot`` until t, then ``robot`` carrying ``payload``."""
+        if not isinstance(payload, Payload):
+            raise UsageError(f"payload must be a Payload, got {type(payload).__name__}")
+        return cls(t, robot, robot.with_payload(payload), "payload-load", {"payload": dataclasses.asdict(payload)})
+
+    @classmethod
+    def payload_drop(cls, t: float, robot: PhysicalParameters, payload: Payload) -> PlantChange:
+        """``robot`` carrying ``payload`` until t, then ``robot`` alone."""
+        if not isinstance(payload, Payload):
+            raise UsageError(f"payload must be a Payload, got {type(payload).__name__}")
+        return cls(t, robot.with_payload(payload), robot, "payload-drop", {"payload": dataclasses.asdict(payload)})
+
+    @classmethod
+    def friction_fault(
+        cls, t: float, robot: PhysicalParameters, wheel: str, factor: float, terms: str = "both"
+    ) -> PlantChange:
+        """``robot`` until t, then with one wheel's friction multiplied by ``factor`` (>= 0, != 1).
+
+        wheel : ``right`` (F_v1, F_d1) or ``left`` (F_v2, F_d2); terms : ``both``, ``viscous`` (F_v only)
+        or ``coulomb`` (F_d only).
+        """
+        if wheel not in WHEELS:
+            raise UsageError(f"friction fault: unknown wheel {wheel!r}; choose one of {', '.join(WHEELS)}")
+        if terms not in FRICTION_TERMS:
+            raise UsageError(f"friction fault: unknown terms {terms!r}; choose one of {', '.join(FRICTION_TERMS)}")
+        if isinstance(factor, bool) or not isinstance(factor, (int, float, np.integer, np.floating)):
+            raise UsageError(f"friction fault factor must be a number, got {factor!r}")
+        factor = float(factor)
+        if not math.isfinite(factor) or factor < 0 or factor == 1:
+            raise UsageError(f"friction fault factor must be a finite number >= 0 other than 1, got {factor}")
+        names = [f"{term}{WHEELS[wheel]}" for term in FRICTION_TERMS[terms]]
+        if all(getattr(robot, name) == 0 for name in names):
+            raise UsageError(
+                f"friction fault: {' and '.join(names)} of the {wheel} wheel are 0 in the plant, so a factor changes "
+                "nothing"
+            )
+        after = robot.replace(**{name: getattr(robot, name) * factor for name in names})
+        detail = {"wheel": wheel, "factor": factor, "terms": terms, "parameters": names}
+        return cls(t, robot, after, "friction-fault", detail)
+
+    def switch_period(self, period: float) -> int:
+        """k_s: the first control period whose start k_s T is >= t, i.e. ceil(t / T), with t / T within 1e-9
+        (relative) of a whole number taken as that number."""
+        ratio = self.t / period
+        near = round(ratio)
+        if abs(ratio - near) <= 1e-9 * max(1.0, ratio):
+            return int(near)
+        return math.ceil(ratio)
+
+    def to_dict(self, period: float) -> dict:
+        """The change as recorded in ``settings["change"]`` for control period T = ``period`` (s)."""
+        k = self.switch_period(period)
+        return {
+            "kind": self.kind,
+            "t": self.t,
+            "t_switch": k * period,
+            "switch_period": k,
+            "before": model.named_base(model.base_parameters(self.before)),
+            "after": model.named_base(model.base_parameters(self.after)),
+            "physical_before": self.before.to_dict(),
+            "physical_after": self.after.to_dict(),
+            **self.detail,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict) -> PlantChange:
+        """The change back from ``settings["change"]`` (to reproduce a run)."""
+        detail = {key: value for key, value in data.items() if key not in _CHANGE_KEYS}
+        return cls(
+            data["t"], PhysicalParameters(**data["physical_before"]), PhysicalParameters(**data["physical_after"]),
+            data["kind"], detail,
+        )  # fmt: skip
+
+
 @dataclass(frozen=True, eq=False)
 class SimulatedLog:
     """A simulated log (read-only arrays) with the truth it was generated from.
@@ -147,12 +281,17 @@ class SimulatedLog:
     tau : (n, 2) N m, logged torques: the torque applied over the control period starting at t (with noise).
     pose : (n, 3) true x (m), y (m), phi (rad, unwrapped) of the axle midpoint.
     wheel_angle : (n, 2) rad, true wheel angles theta [right, left], 0 at t = 0.
-    true, nominal : the plant's and the controller's parameters.
-    settings : everything needed to reproduce the run (JSON-serialisable).
+    true, nominal : the plant's parameters (at t = 0, before any change) and the controller's.
+    settings : everything needed to reproduce the run (JSON-serialisable); with a plant change, its
+        ``"change"`` entry holds kind, requested time t, actual switch time t_switch (s) and control period
+        switch_period, the base parameters ``before`` and ``after`` (as ``truth()["parameters"]``), the
+        physical sets ``physical_before`` and ``physical_after``, and the change's detail (payload, or
+        wheel, factor, terms, parameters).
     reference : (n, 3) reference pose x_r (m), y_r (m), phi_r (rad) at t.
     disturbance : (n, 2) N m, caster torque tau_d applied over the control period starting at t (unlogged
         in a real log; kept for tests and diagnostics).
     eta_true : (n, 2) rad/s, true wheel velocities at t (the clean counterpart of ``eta``).
+    change : the plant change of the run, or None.
     """
 
     t: np.ndarray
@@ -166,6 +305,15 @@ class SimulatedLog:
     reference: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
     disturbance: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
     eta_true: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
+    change: PlantChange | None = field(repr=False, default=None)
+
+    def plant_at(self, t: float) -> PhysicalParameters:
+        """The plant's parameters over the control period starting at t (s): ``true`` before the switch time,
+        the change's ``after`` from it on."""
+        if self.change is None:
+            return self.true
+        t_switch = self.settings["change"]["t_switch"]
+        return self.change.after if t >= t_switch - 1e-9 * self.settings["control_period"] else self.true
 
     def to_frame(self) -> pandas.DataFrame:
         """Columns t, eta_r, eta_l, tau_r, tau_l, x, y, phi, theta_r, theta_l (SI units; r = right)."""
@@ -199,7 +347,7 @@ class SimulatedLog:
 # --------------------------------------------------------------------------------------------------
 # Compiled kernel.  Parameter vectors (float64):
 #   traj   sinusoid: [A, wavelength, v0, dv, speed_period]; reversing: [V, v_period, W, w_period]
-#   plant  [m11, m12, m22, Vc, Fv1, Fv2, Fd1, Fd2, r, b]   (m = M^-1 of the TRUE robot)
+#   plant  [m11, m12, m22, Vc, Fv1, Fv2, Fd1, Fd2, r, b]   (m = M^-1 of the TRUE robot; plant_after alike)
 #   ctrl   [M11, M12, M22, Vc, Fv1, Fv2, Fd1, Fd2, r, b]   (NOMINAL robot, M itself)
 #   gains  [k1, k2, k3, K]
 # State s (7,): x, y, phi, theta_1, theta_2, eta_1, eta_2.
@@ -319,19 +467,23 @@ def _control(s, ref, ctrl, gains):
 
 @numba.njit(cache=True, nogil=True)
 def closed_loop_kernel(kind, traj, plant, ctrl, gains, period, substeps, n_log, every, caster_z, caster_std,
-                       caster_time):  # fmt: skip
+                       caster_time, plant_after=None, switch=-1):  # fmt: skip
     """Run the closed loop; all arguments plain scalars / float64 arrays.
 
     kind 0 sinusoid / 1 reversing; traj, plant (10,), ctrl (10,), gains (4,) as documented above;
     period: control period T (s); substeps: RK4 steps per control period; n_log: number of log samples;
     every: control periods per log period; caster_z (n_ctrl, 2) standard normals, n_ctrl = (n_log-1)*every+1;
     caster_std (N m), caster_time (s) of the Ornstein-Uhlenbeck disturbance.
+    plant_after (10,), switch: the plant integrates control period k (from k T to (k + 1) T) with ``plant``
+    for k < switch and with ``plant_after`` for k >= switch; switch < 0 (the default): ``plant`` throughout.
+    The initial state uses ``plant``'s r, b.
 
     Returns pose (n_log, 3), wheel_angle (n_log, 2), eta (n_log, 2) true, tau (n_log, 2) applied,
     reference (n_log, 3), disturbance (n_log, 2) -- all at the log samples, the torque and disturbance
     being those held over the control period that starts at the sample.
     """
     n_ctrl = (n_log - 1) * every + 1
+    after = plant if plant_after is None else plant_after
     pose = np.empty((n_log, 3))
     angle = np.empty((n_log, 2))
     eta = np.empty((n_log, 2))
@@ -373,17 +525,18 @@ def closed_loop_kernel(kind, traj, plant, ctrl, gains, period, substeps, n_log, 
             dist[i, 0], dist[i, 1] = d1, d2
         if k == n_ctrl - 1:
             break
+        p = plant if (switch < 0 or k < switch) else after
         for j in range(substeps):
-            _plant_rhs(s, tau1, tau2, d1, d2, plant, k1)
+            _plant_rhs(s, tau1, tau2, d1, d2, p, k1)
             for m in range(7):
                 tmp[m] = s[m] + 0.5 * h * k1[m]
-            _plant_rhs(tmp, tau1, tau2, d1, d2, plant, k2)
+            _plant_rhs(tmp, tau1, tau2, d1, d2, p, k2)
             for m in range(7):
                 tmp[m] = s[m] + 0.5 * h * k2[m]
-            _plant_rhs(tmp, tau1, tau2, d1, d2, plant, k3)
+            _plant_rhs(tmp, tau1, tau2, d1, d2, p, k3)
             for m in range(7):
                 tmp[m] = s[m] + h * k3[m]
-            _plant_rhs(tmp, tau1, tau2, d1, d2, plant, k4)
+            _plant_rhs(tmp, tau1, tau2, d1, d2, p, k4)
             for m in range(7):
                 s[m] += h / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
             if kind == 1:  # RK4 on x_r' = f(t) alone: Simpson's rule over the substep
@@ -429,6 +582,47 @@ def timing(rate: float) -> tuple[float, int]:
     return CONTROL_PERIOD, int(every)
 
 
+def parse_time(text: str, option: str) -> float:
+    """A time in seconds (> 0, finite) from an option's text; UsageError naming ``option`` otherwise."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise UsageError(f"{option} {text!r}: expected a time in seconds, e.g. 30") from None
+    if not math.isfinite(value) or value <= 0:
+        raise UsageError(f"{option} {text!r}: the time must be a finite number of seconds > 0")
+    return value
+
+
+def parse_friction_fault(text: str) -> tuple[str, float, str]:
+    """(wheel, factor, terms) from ``WHEEL:FACTOR[:TERMS]``, e.g. ``right:3`` or ``left:0.5:coulomb``.
+
+    WHEEL is right or left, FACTOR a number, TERMS one of :data:`FRICTION_TERMS` (default both); the
+    factor's range is checked by :meth:`PlantChange.friction_fault`.
+    """
+    parts = [part.strip() for part in text.split(":")]
+    usage = (
+        f"--friction-fault {text!r}: expected WHEEL:FACTOR[:TERMS] with WHEEL right or left and TERMS both, "
+        "viscous or coulomb, e.g. right:3"
+    )
+    if len(parts) not in (2, 3) or parts[0].lower() not in WHEELS:
+        raise UsageError(usage)
+    terms = parts[2].lower() if len(parts) == 3 else "both"
+    if terms not in FRICTION_TERMS:
+        raise UsageError(usage)
+    try:
+        factor = float(parts[1])
+    except ValueError:
+        raise UsageError(usage) from None
+    return parts[0].lower(), factor, terms
+
+
+def _plant_vector(p: PhysicalParameters) -> np.ndarray:
+    """The kernel's plant vector [m11, m12, m22, Vc, Fv1, Fv2, Fd1, Fd2, r, b] of parameters p."""
+    theta = model.base_parameters(p)
+    m = model.inverse_inertia(theta)
+    return np.array([m[0, 0], m[0, 1], m[1, 1], *theta[3:8], p.r, p.b])
+
+
 def _encoder_velocity(theta: np.ndarray, eta: np.ndarray, cpr: int, dt: float) -> np.ndarray:
     """Velocity (n, 2) rad/s an encoder driver reports: difference of quantised angles over one log period.
 
@@ -452,14 +646,18 @@ def simulate(
     noise: NoiseSettings = NoiseSettings(),
     seed: int = 0,
     substeps: int = 4,
+    change: PlantChange | None = None,
 ) -> SimulatedLog:
     """Simulate the closed loop and return its log.
 
-    true : plant parameters; nominal : what the controller believes.
+    true : plant parameters (at t = 0); nominal : what the controller believes.
     trajectory : one of :data:`TRAJECTORIES`.  duration : s (> 0); the log has n = floor(duration * rate) + 1
     samples at t = 0, 1/rate, ...  rate : log rate in Hz (see :func:`timing`).  noise : see
     :class:`NoiseSettings`.  seed : non-negative int for ``numpy.random.PCG64``; same seed, same output
-    bit for bit.  substeps : RK4 steps per control period (>= 1).
+    bit for bit.  substeps : RK4 steps per control period (>= 1).  change : a :class:`PlantChange` whose
+    ``before`` is ``true``, switching the plant to ``change.after`` at the first control period starting
+    at or after ``change.t``, which must come before the last sample; None (default): no change, and the
+    output is exactly that of a simulator without this option.
     """
     if trajectory not in TRAJECTORIES:
         raise UsageError(f"unknown trajectory {trajectory!r}; choose one of {', '.join(TRAJECTORIES)}")
@@ -478,6 +676,19 @@ def simulate(
     if n < 2:
         raise UsageError(f"duration {duration:g} s at {rate:g} Hz gives fewer than 2 samples")
     n_ctrl = (n - 1) * every + 1
+    switch = -1
+    if change is not None:
+        if not isinstance(change, PlantChange):
+            raise UsageError(f"change must be a PlantChange, got {type(change).__name__}")
+        if change.before != true:
+            raise UsageError("change.before must be the plant's parameters at t = 0 (the argument true)")
+        switch = change.switch_period(period)
+        if switch < 1 or switch >= n_ctrl - 1:
+            raise UsageError(
+                f"change time {change.t:g} s: the plant would switch at {switch * period:g} s (the first control "
+                f"period starting at or after it), which must come after 0 and before the last sample at "
+                f"{(n_ctrl - 1) * period:g} s"
+            )
 
     rng = np.random.Generator(np.random.PCG64(int(seed)))
     eta_z = rng.standard_normal((n, 2))
@@ -486,9 +697,7 @@ def simulate(
 
     params = TRAJECTORY_PARAMETERS[trajectory]
     traj = np.array(list(params.values()), dtype=np.float64)
-    theta_true = model.base_parameters(true)
-    m_true = model.inverse_inertia(theta_true)
-    plant = np.array([m_true[0, 0], m_true[0, 1], m_true[1, 1], *theta_true[3:8], true.r, true.b])
+    plant = _plant_vector(true)
     big_nom = model.inertia_matrix(nominal)
     ctrl = np.array(
         [big_nom[0, 0], big_nom[0, 1], big_nom[1, 1], model.coriolis_coefficient(nominal),
@@ -496,10 +705,14 @@ def simulate(
     )  # fmt: skip
     gains = np.array([GAINS["k1"], GAINS["k2"], GAINS["k3"], GAINS["K"]])
 
-    pose, angle, eta_true, tau_applied, refpose, dist = closed_loop_kernel(
-        _KIND[trajectory], traj, plant, ctrl, gains, period, int(substeps), n, every, caster_z,
-        noise.caster_std, noise.caster_time,
-    )  # fmt: skip
+    args = (_KIND[trajectory], traj, plant, ctrl, gains, period, int(substeps), n, every, caster_z,
+            noise.caster_std, noise.caster_time)  # fmt: skip
+    if change is None:
+        pose, angle, eta_true, tau_applied, refpose, dist = closed_loop_kernel(*args)
+    else:
+        pose, angle, eta_true, tau_applied, refpose, dist = closed_loop_kernel(
+            *args, _plant_vector(change.after), switch
+        )
 
     dt = every * period
     cpr = noise.encoder_cpr
@@ -521,10 +734,12 @@ def simulate(
         "noise": noise.to_dict(),
         "gains": dict(GAINS),
     }
+    if change is not None:
+        settings["change"] = change.to_dict(period)
     arrays = [t, eta_log, tau_log, pose, angle, refpose, dist, eta_true]
     for a in arrays:
         a.setflags(write=False)
     return SimulatedLog(
         t=t, eta=eta_log, tau=tau_log, pose=pose, wheel_angle=angle, true=true, nominal=nominal,
-        settings=settings, reference=refpose, disturbance=dist, eta_true=eta_true,
+        settings=settings, reference=refpose, disturbance=dist, eta_true=eta_true, change=change,
     )  # fmt: skip

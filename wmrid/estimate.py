@@ -1,0 +1,53 @@
+"""The result every identification method returns: base parameters with their covariance.
+
+The observer (:mod:`wmrid.identify`), IDIM least squares (:mod:`wmrid.idim`), recursive least squares
+(:mod:`wmrid.rls`) and output error (:mod:`wmrid.output_error`) all end in a :class:`BaseEstimate`, so
+that reports, ``wmrid compare`` and ``wmrid monitor`` are blind to the method.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from wmrid.model import THETA0_NAMES
+
+
+@dataclass(frozen=True)
+class BaseEstimate:
+    """Base parameters theta0 = [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] found by one method.
+
+    method : the method's name ("observer", "idim", "rls", "oe").
+    theta0 : (8,) in the model's units (SI for torque logs; see :func:`wmrid.model.base_units`).
+    cov : (8, 8) covariance of theta0; a row/column of NaN with +inf on the diagonal marks a parameter
+        the log does not determine.
+    dof : degrees of freedom of the standard errors (Student t intervals), or None for normal ones.
+    seconds : wall time the method took, s.
+    diagnostics : method-specific figures (JSON-ready).
+    warnings : plain-English warnings about this estimate.
+    """
+
+    method: str
+    theta0: np.ndarray
+    cov: np.ndarray
+    dof: int | None = None
+    seconds: float = 0.0
+    diagnostics: dict[str, Any] = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if np.shape(self.theta0) != (8,):
+            raise ValueError(f"BaseEstimate.theta0 must have shape (8,), got {np.shape(self.theta0)}")
+        if np.shape(self.cov) != (8, 8):
+            raise ValueError(f"BaseEstimate.cov must have shape (8, 8), got {np.shape(self.cov)}")
+
+    @property
+    def std(self) -> np.ndarray:
+        """(8,) standard errors (inf where the log does not determine the parameter)."""
+        return np.sqrt(np.clip(np.diag(self.cov), 0.0, None))
+
+    def named(self) -> dict[str, tuple[float, float]]:
+        """name -> (value, std) for the eight base parameters."""
+        return {n: (float(v), float(s)) for n, v, s in zip(THETA0_NAMES, self.theta0, self.std, strict=True)}

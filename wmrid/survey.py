@@ -1,0 +1,175 @@
+"""One pass over a log: what identification must know before the replay, in bounded memory.
+
+The replay needs, before its first sample, the regressor form (does each wheel keep one sign over the
+whole log?), the number of samples (for the history and block layout), a start value for an unknown
+robot, and the assurance that the log has no holes or impossible values.  :func:`survey` reads a
+:class:`wmrid.logio.LogStream` once, piece by piece, and keeps only running figures and a sparse sample.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from wmrid.errors import NotIdentifiableError
+from wmrid.model import RegressorForm
+
+#: Speeds (rad/s) or efforts beyond this magnitude are not what a robot logs (a unit or column error).
+PLAUSIBLE_LIMIT = 1e12
+#: Spacing (s) of the sparse sample kept for the data-driven start (differences over it give accelerations).
+START_SPACING_S = 0.05
+
+
+@dataclass
+class Survey:
+    """Figures of a whole log, gathered piece by piece.
+
+    n : samples.  t_first, t_last : s.  median_step : s, the median of the pieces' median steps (exact
+    for a log of one piece).  min_step, max_step : s; max_step_after : s, the time before the largest step.
+    positive, negative : (2,) bool, whether every speed of the wheel is > 0 (< 0).
+    sparse_t (m,) s, sparse_eta (m, 2) rad/s, sparse_tau (m, 2): every ``stride``-th sample (stride set
+    from the first piece's median step so that samples are about START_SPACING_S apart).
+    Per wheel (2,) counts and sums for :meth:`signal_warnings`.
+    """
+
+    source: str
+    effort_unit: str = "N m"
+    n: int = 0
+    t_first: float = 0.0
+    t_last: float = 0.0
+    median_step: float = 0.0
+    min_step: float = np.inf
+    max_step: float = 0.0
+    max_step_after: float = 0.0
+    positive: np.ndarray = field(default_factory=lambda: np.ones(2, dtype=bool))
+    negative: np.ndarray = field(default_factory=lambda: np.ones(2, dtype=bool))
+    sparse_t: np.ndarray = field(default_factory=lambda: np.empty(0))
+    sparse_eta: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
+    sparse_tau: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
+    speed_pos: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    speed_neg: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    effort_nonneg: np.ndarray = field(default_factory=lambda: np.ones(2, dtype=bool))
+    effort_nonpos: np.ndarray = field(default_factory=lambda: np.ones(2, dtype=bool))
+    power: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    abs_power: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    opposing: np.ndarray = field(default_factory=lambda: np.zeros(2))
+
+    @property
+    def duration(self) -> float:
+        return self.t_last - self.t_first
+
+    def form(self) -> RegressorForm:
+        """The paper's form when each wheel keeps one strict sign (as :func:`wmrid.model.choose_form`)."""
+        if all(self.positive | self.negative):
+            return RegressorForm("paper", tuple(1 if p else -1 for p in self.positive))  # type: ignore[arg-type]
+        return RegressorForm("general")
+
+    def data_start(self, form: RegressorForm) -> np.ndarray:
+        """A start for an unknown robot, (2, p): m11 = m22 = a robust acceleration-per-torque ratio, all else 0.
+
+        The ratio (95th percentile of |eta_dot| over that of |tau|, eta_dot by differences over about
+        START_SPACING_S, both over the sparse sample) only sets the order of magnitude; with the default
+        small alpha the start is forgotten within the first seconds of an exciting log.
+        """
+        theta = np.zeros((2, form.n_columns))
+        if len(self.sparse_t) > 1:
+            acc = np.abs(np.diff(self.sparse_eta, axis=0) / np.diff(self.sparse_t)[:, None])
+            for i in range(2):
+                a95 = float(np.percentile(acc[:, i], 95))
+                t95 = float(np.percentile(np.abs(self.sparse_tau[:, i]), 95))
+                if a95 > 0 and t95 > 0:
+                    theta[i, i] = a95 / t95
+        return theta
+
+    def signal_warnings(self) -> list[str]:
+        """Warnings about the signals themselves: an effort that never changes sign while the speed does (a
+        magnitude, not a signed effort), and an effort that mostly opposes the speed (a sign convention)."""
+        out = []
+        n = max(self.n, 1)
+        for i, wheel in enumerate(("right", "left")):
+            other_way = min(self.speed_neg[i], self.speed_pos[i]) / n
+            if other_way > 0.05 and (self.effort_nonneg[i] or self.effort_nonpos[i]):
+                out.append(
+                    f"the {wheel} wheel's effort never changes sign while its speed does "
+                    f"({100 * other_way:.0f} % of samples the other way): the log holds a magnitude "
+                    "(e.g. an unsigned current), not a signed effort, so the model does not apply; give it the sign "
+                    "of the motor's drive"
+                )
+            power, scale = self.power[i] / n, self.abs_power[i] / n
+            # Braking makes the power negative for a while; a reversed sign makes it negative almost always.
+            if scale > 0 and power < -0.5 * scale and self.opposing[i] / n > 0.75:
+                out.append(
+                    f"the {wheel} wheel's effort mostly opposes its speed (mean power {power:.3g} {self.effort_unit} "
+                    "rad/s < 0): its sign convention is probably reversed; try --mirror-left or --flip-effort"
+                )
+        return out
+
+
+def survey(pieces: Iterable, source: str, effort_unit: str = "N m") -> Survey:
+    """One pass over ``pieces`` (objects with t (k,) s, eta (k, 2) rad/s, tau (k, 2)), in time order.
+
+    Raises :class:`NotIdentifiableError` at the first sample that is not finite or beyond PLAUSIBLE_LIMIT.
+    """
+    sv = Survey(source=source, effort_unit=effort_unit)
+    medians: list[float] = []
+    weights: list[int] = []
+    stride = 0
+    prev_t = None
+    sparse_t, sparse_eta, sparse_tau = [], [], []
+    for piece in pieces:
+        t, eta, tau = piece.t, piece.eta, piece.tau
+        k = len(t)
+        if k == 0:
+            continue
+        for arr, what, unit in ((eta, "wheel speed", "rad/s"), (tau, "effort", effort_unit)):
+            with np.errstate(invalid="ignore"):
+                bad = ~np.isfinite(arr) | (np.abs(arr) > PLAUSIBLE_LIMIT)
+            if bad.any():
+                i = int(np.argmax(bad.any(axis=1)))
+                raise NotIdentifiableError(
+                    f"{source}: a {what} of {arr[i][bad[i]][0]:.3g} {unit} at t = {t[i]:.6g} s is not a number a "
+                    "robot logs; check the log's units and columns"
+                )
+        steps = np.diff(t) if prev_t is None else np.diff(t, prepend=prev_t)
+        if sv.n == 0:
+            sv.t_first = float(t[0])
+        if len(steps):
+            medians.append(float(np.median(steps)))
+            weights.append(len(steps))
+            j = int(np.argmax(steps))
+            if steps[j] > sv.max_step:
+                sv.max_step = float(steps[j])
+                sv.max_step_after = float(t[j] if prev_t is None else (prev_t if j == 0 else t[j - 1]))
+            sv.min_step = min(sv.min_step, float(steps.min()))
+        if stride == 0 and len(steps):
+            stride = max(1, round(START_SPACING_S / max(float(np.median(steps)), 1e-9)))
+        if stride:
+            first = (-sv.n) % stride
+            # copies: a strided view would keep the whole piece alive
+            sparse_t.append(t[first::stride].copy())
+            sparse_eta.append(eta[first::stride].copy())
+            sparse_tau.append(tau[first::stride].copy())
+        sv.positive &= np.all(eta > 0, axis=0)
+        sv.negative &= np.all(eta < 0, axis=0)
+        sv.speed_pos += np.count_nonzero(eta > 0, axis=0)
+        sv.speed_neg += np.count_nonzero(eta < 0, axis=0)
+        sv.effort_nonneg &= np.all(tau >= 0, axis=0)
+        sv.effort_nonpos &= np.all(tau <= 0, axis=0)
+        prod = tau * eta
+        sv.power += prod.sum(axis=0)
+        sv.abs_power += np.abs(prod).sum(axis=0)
+        sv.opposing += np.count_nonzero(prod < 0, axis=0)
+        sv.n += k
+        prev_t = float(t[-1])
+        sv.t_last = prev_t
+    if medians:
+        order = np.argsort(medians)
+        cum = np.cumsum(np.asarray(weights)[order])
+        sv.median_step = float(np.asarray(medians)[order][np.searchsorted(cum, cum[-1] / 2.0)])
+    if sparse_t:
+        sv.sparse_t = np.concatenate(sparse_t)
+        sv.sparse_eta = np.concatenate(sparse_eta)
+        sv.sparse_tau = np.concatenate(sparse_tau)
+    return sv
