@@ -89,15 +89,3 @@ def sim_log(duration: float, rate: float = 1000.0, seed: int = 1, suffix: str = 
 
     path = OUT / f"paper_sinusoid_{duration:g}s_{rate:g}hz_seed{seed}{suffix}"
     return cached_log(path, duration, write, rate, seed)
-    from wmrid.robot import BUILTIN_ROBOTS
-    from wmrid.simulate import NoiseSettings, simulate
-
-    OUT.mkdir(parents=True, exist_ok=True)
-    print(f"generating {path.relative_to(ROOT)} ...", end=" ", flush=True)
-    t0 = time.perf_counter()
-    r = BUILTIN_ROBOTS["paper"]
-    noise = NoiseSettings(eta_std=0.01, tau_std=0.02, caster_std=0.05)
-    sim = simulate(r.reference, r.nominal, trajectory="sinusoid", duration=duration, rate=rate, noise=noise, seed=seed)
-    write_log(sim.to_frame()[["t", "eta_r", "eta_l", "tau_r", "tau_l"]], str(path), force=True)
-    print(f"{len(sim.t):,} samples in {time.perf_counter() - t0:.1f} s", flush=True)
-    return path

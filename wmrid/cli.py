@@ -34,6 +34,13 @@ class OutputFormat(str, Enum):
     json = "json"
 
 
+class MethodChoice(str, Enum):
+    observer = "observer"
+    idim = "idim"
+    rls = "rls"
+    oe = "oe"
+
+
 class FormChoice(str, Enum):
     auto = "auto"
     paper = "paper"
@@ -289,6 +296,69 @@ def _stderr_console():
     return Console(stderr=True)
 
 
+_METHOD_PANEL = "Method (observer, or a classical rival; see wmrid compare)"
+MethodOpt = Annotated[
+    MethodChoice,
+    typer.Option(
+        help="observer (the paper's, default), idim (least squares on filtered accelerations), rls (recursive "
+        "least squares with forgetting), oe (output error from the observer's estimate).",
+        rich_help_panel=_METHOD_PANEL,
+    ),
+]
+CutoffOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--cutoff", help="idim/rls: low-pass cutoff of speeds and efforts, Hz (default: from the log).",
+        rich_help_panel=_METHOD_PANEL,
+    ),
+]  # fmt: skip
+WeightedOpt = Annotated[
+    bool, typer.Option("--weighted", help="idim: two-step weighted least squares.", rich_help_panel=_METHOD_PANEL)
+]
+ForgettingOpt = Annotated[
+    float,
+    typer.Option(help="rls: forgetting factor in (0, 1]; 1 = plain least squares.", rich_help_panel=_METHOD_PANEL),
+]
+ValidateOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--validate",
+        metavar="OTHER",
+        help="Also predict the wheel speeds of log OTHER (read with the same options) from its efforts with the "
+        "identified model, and report the fit % per wheel.",
+    ),
+]
+
+
+def _method_options(cutoff, weighted, forgetting, torque_hold):
+    from wmrid.methods import MethodOptions
+
+    return MethodOptions(cutoff_hz=cutoff, weighted=weighted, forgetting=forgetting, torque_hold=torque_hold.value)
+
+
+def _validate(result, other: str, columns, time_unit: str, robot_obj, log_options: dict, torque_hold: str):
+    """``result`` with ``validation``: the fit of its model on log ``other`` (read with the same options)."""
+    from dataclasses import replace
+
+    from wmrid.predict import validation_fit
+
+    other_log = _read_wheel_log(other, columns, time_unit, robot_obj, **log_options)
+    unit = result.log_info.get("effort_unit", "N m")
+    if other_log.effort_unit != unit:
+        raise UsageError(
+            f"--validate {other}: its effort is in {other_log.effort_unit}, the identified model's in {unit}; "
+            "give both logs in the same units"
+        )
+    theta0 = result.estimate.theta0
+    fit = validation_fit(other_log.t, other_log.eta, other_log.tau, theta0, torque_hold)
+    validation = {
+        "log": other_log.source, "samples": len(other_log),
+        "fit_percent": {"eta_r": fit["eta_r"], "eta_l": fit["eta_l"]}, "predictor": fit["predictor"],
+        "definition": "fit = 100 (1 - ||eta - eta_hat|| / ||eta - mean(eta)||) per wheel over the whole log",
+    }  # fmt: skip
+    return replace(result, validation=validation)
+
+
 @app.command()
 def identify(
     log: Annotated[
@@ -357,14 +427,23 @@ def identify(
     mirror_left: MirrorLeftOpt = False,
     flip_effort: FlipEffortOpt = False,
     rotor_inertia: RotorInertiaOpt = None,
+    method: MethodOpt = MethodChoice.observer,
+    cutoff: CutoffOpt = None,
+    weighted: WeightedOpt = False,
+    forgetting: ForgettingOpt = 1.0,
+    validate: ValidateOpt = None,
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
     from wmrid.atomic import write_json
     from wmrid.identify import identify as run_identify
     from wmrid.render import print_identification, to_json
 
+    options = _method_options(cutoff, weighted, forgetting, torque_hold)
     robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
-    wheel_log = _read_wheel_log(log, columns, time_unit.value, robot_obj, **_log_options(locals()), whole=False)
+    log_options = _log_options(locals())
+    wheel_log = _read_wheel_log(log, columns, time_unit.value, robot_obj, **log_options, whole=False)
+    if method != MethodChoice.observer:
+        wheel_log = wheel_log.read()  # the classical methods filter and simulate the whole log
     progress_cb, finish = _progress("identify")
     try:
         result = run_identify(
@@ -380,6 +459,12 @@ def identify(
         )
     finally:
         finish()
+    if method != MethodChoice.observer:
+        from wmrid.methods import run
+
+        result = run(method.value, wheel_log, result, options, robot_obj)
+    if validate is not None:
+        result = _validate(result, validate, columns, time_unit.value, robot_obj, log_options, torque_hold.value)
     payload = result.to_dict()
     if output is not None:
         write_json(str(output), payload, force=force)
@@ -476,12 +561,7 @@ def report(
     suffix = output.suffix.lower() if output is not None else None
     if suffix not in (None, ".html", ".htm", ".md", ".json"):
         raise UsageError(f"-o {output}: the report format comes from the suffix: .html, .md or .json")
-    truth_params = None
-    if truth is not None:
-        try:
-            truth_params = json.loads(truth.read_text(encoding="utf-8"))["parameters"]
-        except (OSError, ValueError, KeyError, TypeError) as err:
-            raise UsageError(f"--truth {truth}: not a truth file {{'parameters': {{'m11': ...}}}} ({err})") from err
+    truth_params = _load_truth(truth) if truth is not None else None
     source = _open_source(input_)
     head = source.head(64).lstrip()
     result = log = None
@@ -517,6 +597,102 @@ def report(
         print_report(rep, Console())
     if output is not None:
         _stderr_console().print(f"wrote {output}")
+
+
+def _load_truth(path: Path) -> dict[str, float]:
+    """The "parameters" of a truth file (the simulator's sidecar), name -> value."""
+    import json
+
+    try:
+        return {k: float(v) for k, v in json.loads(path.read_text(encoding="utf-8"))["parameters"].items()}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
+        raise UsageError(f"--truth {path}: not a truth file {{'parameters': {{'m11': ...}}}} ({err})") from err
+
+
+@app.command()
+def compare(
+    log: Annotated[
+        str, typer.Argument(metavar="LOG", help="Log file (.csv, .parquet, .mcap) or - for standard input.")
+    ],
+    robot: Annotated[
+        str | None, typer.Option(help="Robot (name, TOML or URDF): starts the observer and gives nominal/CAD values.")
+    ] = None,
+    truth: Annotated[
+        Path | None, typer.Option(help='Ground truth JSON {"parameters": {"m11": ...}} (the simulator\'s sidecar).')
+    ] = None,
+    validate: ValidateOpt = None,
+    methods: Annotated[
+        str, typer.Option(help="Comma-separated methods to run, of observer, idim, rls, oe.")
+    ] = "observer,idim,rls,oe",
+    columns: Annotated[str | None, typer.Option(help="Column mapping, as for identify.")] = None,
+    time_unit: Annotated[TimeUnit, typer.Option(help="Unit of the time column.")] = TimeUnit.auto,
+    torque_hold: Annotated[TorqueHold, typer.Option(help="zoh or foh (observer and oe).")] = TorqueHold.zoh,
+    cutoff: CutoffOpt = None,
+    weighted: WeightedOpt = False,
+    forgetting: ForgettingOpt = 1.0,
+    output_format: Annotated[
+        OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
+    ] = OutputFormat.auto,
+    output: Annotated[
+        Path | None, typer.Option("--output", "-o", help="Write the JSON comparison to this file.")
+    ] = None,
+    force: Annotated[bool, typer.Option(help="Overwrite an existing output file.")] = False,
+    topic: TopicOpt = None,
+    velocity_topic: VelocityTopicOpt = None,
+    effort_topic: EffortTopicOpt = None,
+    right_joint: RightJointOpt = None,
+    left_joint: LeftJointOpt = None,
+    time_source: TimeSourceOpt = TimeSource.auto,
+    align: AlignOpt = AlignRule.linear,
+    velocity_from: VelocityFromOpt = VelocityFrom.auto,
+    speed_unit: SpeedUnitOpt = SpeedUnit.rad_s,
+    wheel_radius: WheelRadiusOpt = None,
+    effort: EffortOpt = EffortKind.torque,
+    effort_unit: EffortUnitOpt = None,
+    torque_constant: TorqueConstantOpt = None,
+    gear_ratio: GearRatioOpt = None,
+    efficiency: EfficiencyOpt = None,
+    mirror_left: MirrorLeftOpt = False,
+    flip_effort: FlipEffortOpt = False,
+    rotor_inertia: RotorInertiaOpt = None,
+) -> None:
+    """Run every identification method on LOG: estimates, standard errors, errors against --truth, fit on
+    --validate OTHER, run time."""
+    from wmrid.atomic import write_json
+    from wmrid.identify import identify as run_identify
+    from wmrid.methods import check_method
+    from wmrid.methods import compare as run_compare
+    from wmrid.render import print_comparison, to_json
+
+    names = tuple(check_method(m.strip()) for m in methods.split(",") if m.strip())
+    if not names:
+        raise UsageError("--methods names no method; give e.g. observer,idim")
+    options = _method_options(cutoff, weighted, forgetting, torque_hold)
+    truth_params = _load_truth(truth) if truth is not None else None
+    robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
+    log_options = _log_options(locals())
+    wheel_log = _read_wheel_log(log, columns, time_unit.value, robot_obj, **log_options)
+    other = None
+    if validate is not None:
+        other = _read_wheel_log(validate, columns, time_unit.value, robot_obj, **log_options)
+        if other.effort_unit != wheel_log.effort_unit:
+            raise UsageError(
+                f"--validate {validate}: its effort is in {other.effort_unit}, LOG's in {wheel_log.effort_unit}; "
+                "give both logs in the same units"
+            )
+    observer = run_identify(wheel_log, robot_obj, torque_hold=torque_hold.value)
+    data = run_compare(wheel_log, observer, options, names, other=other, truth=truth_params)
+    if output is not None:
+        write_json(str(output), data, force=force)
+    fmt = output_format.value
+    if fmt == "auto":
+        fmt = "table" if sys.stdout.isatty() else "json"
+    if fmt == "json":
+        sys.stdout.write(to_json(data) + "\n")
+    else:
+        from rich.console import Console
+
+        print_comparison(data, Console())
 
 
 def _write_residuals(rep, result, log, data, path: Path, force: bool) -> None:

@@ -7,8 +7,9 @@ Pure with respect to files: takes arrays (a :class:`WheelLog`-like object) and r
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal, Protocol
 
 import numpy as np
@@ -16,6 +17,7 @@ import numpy as np
 from wmrid import model
 from wmrid.base_params import derived_with_std, fit_base_parameters
 from wmrid.errors import NotIdentifiableError, UsageError
+from wmrid.estimate import BaseEstimate
 from wmrid.logio import LogStream, stream_arrays
 from wmrid.model import THETA0_NAMES, THETA0_UNITS, RegressorForm
 from wmrid.observer import ObserverSettings
@@ -96,6 +98,9 @@ class IdentificationResult:
     reference: dict[str, float] | None = None
     units: dict[str, str] = field(default_factory=lambda: dict(THETA0_UNITS))
     payload: dict[str, tuple[float, float]] | None = None  # mass kg, x m, y m, inertia kg m^2: (value, std)
+    method: str = "observer"
+    estimate: BaseEstimate | None = None  # the reported theta0 and its covariance (undetermined: NaN/inf)
+    validation: dict[str, Any] | None = None  # fit on another log (wmrid.predict.validation_fit)
 
     def theta_dict(self) -> dict[str, Any]:
         names = self.form.theta_names()
@@ -117,6 +122,7 @@ class IdentificationResult:
         }
         out: dict[str, Any] = {
             "source": self.source,
+            "method": self.method,
             "effort_unit": self.log_info.get("effort_unit", "N m"),
             "parameters": params,
             "theta": self.theta_dict(),
@@ -131,6 +137,8 @@ class IdentificationResult:
             "log": self.log_info,
         }
         out["history"] = history_dict(self)
+        if self.validation is not None:
+            out["validation"] = self.validation
         if self.payload is not None:
             from wmrid.payload import PAYLOAD_UNITS
 
@@ -247,6 +255,7 @@ def identify(
 def _identify(
     stream: LogStream, robot, form, k, alpha, box_width, max_history, torque_hold, progress, payload
 ) -> IdentificationResult:
+    started = time.perf_counter()
     source = stream.source
     effort_unit = stream.effort_unit
     sv = survey(stream, source, effort_unit)
@@ -362,6 +371,59 @@ def _identify(
         theta_unconstrained=theta_u, theta_cov=theta_cov, parameters=parameters, theta0_cov=fit.cov,
         history=history, diagnostics=diagnostics, warnings=tuple(warnings), log_info=log_info,
         nominal=nominal, reference=reference, units=units, payload=payload_est,
+        estimate=BaseEstimate("observer", fit.theta0.copy(), cov0, dof=dof, seconds=time.perf_counter() - started),
+    )  # fmt: skip
+
+
+def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot | None = None) -> IdentificationResult:
+    """``result`` (the observer's run on a log) reporting another method's estimate ``est`` of the same log.
+
+    The parameters, their standard errors, the payload and the warnings about the estimate become the
+    method's; what describes the log (notes, excitation, the observer's history and intermediate
+    parameters, kept as the observer's) stays.  ``diagnostics["method"]`` holds the method's own
+    figures and ``diagnostics["observer_parameters"]`` the observer's estimate for comparison.
+    """
+    cov = np.array(est.cov, dtype=float)
+    parameters = derived_with_std(np.asarray(est.theta0, dtype=float), cov)
+    parameters = {name: parameters[name] for name in REPORTED}
+    diagnostics = dict(result.diagnostics)
+    diagnostics["observer_parameters"] = {name: {"value": v, "std": _finite_or_none(e)} for name, (v, e) in
+                                          result.parameters.items()}  # fmt: skip
+    diagnostics["method"] = {"name": est.method, "seconds": est.seconds, "dof": est.dof, **est.diagnostics}
+    dof = est.dof
+    diagnostics["uncertainty"] = {
+        "method": est.diagnostics.get("uncertainty", f"standard errors of method {est.method}"),
+        "segments": est.diagnostics.get("segments"),
+        "dof": dof,
+        "interval_factor": {
+            "95%": interval_factor(0.95, dof) if dof else 1.959964,
+            "99.7%": interval_factor(0.9973, dof) if dof else 2.999977,
+        },
+        "meaning": "value +/- interval_factor * std covers the truth with that probability when the disturbances "
+        "do not feed back into the efforts",
+        "caveat": CLOSED_LOOP_CAVEAT,
+    }
+    units = result.units
+    kept = [w for w in result.warnings if " is poorly determined by this log" not in w and "positive definite" not in w
+            and "friction cannot push" not in w]  # fmt: skip
+    poorly = []
+    for name in THETA0_NAMES:
+        value, std = parameters[name]
+        if not (math.isfinite(std) and std <= POORLY_DETERMINED * abs(value)):
+            poorly.append(name)
+            kept.append(
+                f"{name} is poorly determined by this log ({est.method}): {value:.6g} +/- {std:.2g} {units[name]}"
+            )
+    diagnostics["poorly_determined"] = poorly
+    warnings = [*kept, *est.warnings, *physics_warnings(parameters)]
+    payload_est = None
+    if result.payload is not None and robot is not None:
+        from wmrid.payload import payload_with_std
+
+        payload_est = payload_with_std(np.asarray(est.theta0, dtype=float), cov, robot.reference)
+    return replace(
+        result, parameters=parameters, theta0_cov=cov, diagnostics=diagnostics, warnings=tuple(warnings),
+        payload=payload_est, method=est.method, estimate=est,
     )  # fmt: skip
 
 

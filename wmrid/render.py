@@ -25,7 +25,9 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
     from rich import box
     from rich.table import Table
 
-    table = Table(title=f"wmrid identify: {result.source}", title_justify="left", box=box.SIMPLE_HEAD)
+    method = getattr(result, "method", "observer")
+    title = f"wmrid identify: {result.source}" + (f" (method {method})" if method != "observer" else "")
+    table = Table(title=title, title_justify="left", box=box.SIMPLE_HEAD)
     table.add_column("param", no_wrap=True)
     table.add_column("estimate", justify="right", no_wrap=True)
     table.add_column("std", justify="right", no_wrap=True)
@@ -68,7 +70,8 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
     )
     unc = diag["uncertainty"]
     console.print(
-        f"std: jackknife over {unc['segments']} segments of the log ({unc['dof']} dof); "
+        f"std: {unc['method']}" + (f", {unc['segments']} segments" if unc.get("segments") else "") + f" "
+        f"({unc['dof']} dof); "
         f"estimate ± {unc['interval_factor']['95%']:.2f} std covers the truth with 95 % probability, "
         f"± {unc['interval_factor']['99.7%']:.2f} std with 99.7 %, if disturbances do not feed back into the "
         "efforts (in closed loop, about 87 % and 97 %: see the JSON's diagnostics.uncertainty.caveat)"
@@ -77,6 +80,19 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         console.print(
             f"[bold]units: the effort is in {info['effort_unit']}, not N m, so every parameter is in "
             f"{info['effort_unit']}-based units (see the unit column)[/bold]"
+        )
+    if method != "observer":
+        console.print(
+            f"method {method}: {result.diagnostics['method']['seconds']:.3g} s; the excitation figures above and the "
+            "history are the observer's, run on the same log"
+        )
+    validation = getattr(result, "validation", None)
+    if validation is not None:
+        fit = validation["fit_percent"]
+        console.print(
+            f"validation on {validation['log']}: fit {fit['eta_r']:.1f} % (right), {fit['eta_l']:.1f} % (left) "
+            f"({validation['predictor']})",
+            markup=False,
         )
     for note in info["notes"]:
         console.print(f"note: {note}")
@@ -165,3 +181,44 @@ def print_report(report: Any, console: Any) -> None:
         console.print(t)
     for statement in report.diagnostics:
         console.print(f"- {statement}", markup=False)
+
+
+def print_comparison(data: dict, console: Any) -> None:
+    """A rich table of ``wmrid compare``'s result: one column per method (estimate ± std, error % with truth)."""
+    from rich import box
+    from rich.table import Table
+
+    methods = data["methods"]
+    truth = data.get("truth")
+    table = Table(title=f"wmrid compare: {data['source']}", title_justify="left", box=box.SIMPLE_HEAD, show_lines=True)
+    table.add_column("param", no_wrap=True)
+    if truth:
+        table.add_column("true", justify="right", no_wrap=True)
+    for name in methods:
+        table.add_column(name, justify="right", no_wrap=True)
+    first = next(iter(methods.values()))
+    for key, entry in first["parameters"].items():
+        row = [f"{key}\n{entry['unit']}"]
+        if truth:
+            row.append(_fmt(truth.get(key)))
+        for m in methods.values():
+            e = m["parameters"][key]
+            cell = f"{_fmt(e['value'])}\n± {_fmt(e['std'], 2)}"
+            if "error_percent" in e:
+                cell += f"\n{e['error_percent']:+.2g} %"
+            row.append(cell)
+        table.add_row(*row)
+    table.add_row(*(["run time (s)"] + ([""] if truth else []) + [f"{m['seconds']:.3g}" for m in methods.values()]))
+    if "validation" in data:
+        for wheel in ("eta_r", "eta_l"):
+            table.add_row(
+                *([f"fit {wheel} (%)"] + ([""] if truth else [])
+                  + [f"{m['validation']['fit_percent'][wheel]:.1f}" for m in methods.values()])
+            )  # fmt: skip
+    console.print(table)
+    if "validation" in data:
+        v = data["validation"]
+        console.print(f"fit on {v['log']}: {v['predictor']}", markup=False)
+    for name, m in methods.items():
+        for warning in m["warnings"]:
+            console.print(f"[yellow]warning ({name}):[/yellow] {warning}")

@@ -195,7 +195,9 @@ def build_report(
     diag = data["diagnostics"]
     unc = diag["uncertainty"]
     statements = [
-        f"Standard errors: jackknife over {unc.get('segments', '?')} segments of the log ({unc['dof']} degrees of "
+        f"Standard errors: {unc.get('method', 'jackknife')}"
+        + (f", {unc['segments']} segments" if unc.get("segments") else "")
+        + f" ({unc['dof']} degrees of "
         f"freedom); estimate ± {unc['interval_factor']['95%']:.2f} std covers the truth with 95 % probability when "
         "disturbances do not feed back into the efforts. " + (f"Caveat: {unc['caveat']}." if unc.get("caveat") else ""),
         f"Structural consistency (Eqs. 23-24): p = {diag['structural_mismatch']['p_value']:.2g} on "

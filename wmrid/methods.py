@@ -1,0 +1,136 @@
+"""The identification methods behind one interface: ``observer`` (the paper's), ``idim``, ``rls``, ``oe``.
+
+Every method takes a log in memory (t (n,) s, eta (n, 2) rad/s, tau (n, 2) N m) and returns a
+:class:`wmrid.estimate.BaseEstimate`.  The observer runs first in every case: it streams the log, checks
+its excitation and gives the start of ``oe`` (which removes the output-error method's initial-guess
+problem); :func:`run` then reports the chosen method's estimate through
+:func:`wmrid.identify.with_estimate`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from wmrid.errors import UsageError
+from wmrid.estimate import BaseEstimate
+from wmrid.identify import IdentificationResult, with_estimate
+from wmrid.robot import Robot
+
+METHODS = ("observer", "idim", "rls", "oe")
+DESCRIPTIONS = {
+    "observer": "the paper's observer-based adaptive estimator (Eqs. 26-37), no accelerations",
+    "idim": "inverse dynamic model, least squares on zero-phase low-pass filtered and differentiated speeds",
+    "rls": "recursive least squares with forgetting on the IDIM regression",
+    "oe": "output error: simulate the model on the log's torques and minimise the speed error, from the observer",
+}
+
+
+@dataclass(frozen=True)
+class MethodOptions:
+    """Options of the classical methods.
+
+    cutoff_hz : IDIM/RLS low-pass cutoff, Hz (None: from the log, see :func:`wmrid.idim.default_cutoff`).
+    weighted : IDIM two-step weighted least squares.  forgetting : RLS forgetting factor in (0, 1].
+    torque_hold : how OE holds the torque between samples ("zoh" or "foh").
+    """
+
+    cutoff_hz: float | None = None
+    weighted: bool = False
+    forgetting: float = 1.0
+    torque_hold: str = "zoh"
+
+    def __post_init__(self) -> None:
+        if self.cutoff_hz is not None and not (np.isfinite(self.cutoff_hz) and self.cutoff_hz > 0):
+            raise UsageError(f"--cutoff must be a positive frequency in Hz, got {self.cutoff_hz!r}")
+        if not (0.0 < self.forgetting <= 1.0):
+            raise UsageError(f"--forgetting must be in (0, 1], got {self.forgetting!r}")
+
+
+def check_method(name: str) -> str:
+    if name not in METHODS:
+        raise UsageError(f"--method must be one of {', '.join(METHODS)}, got {name!r}")
+    return name
+
+
+def estimate(name: str, log: Any, observer: IdentificationResult, options: MethodOptions) -> BaseEstimate:
+    """Method ``name``'s estimate on ``log`` (in memory); ``observer`` is the observer's result on the same log."""
+    check_method(name)
+    if name == "observer":
+        assert observer.estimate is not None
+        return observer.estimate
+    t = np.asarray(log.t, dtype=np.float64)
+    eta = np.asarray(log.eta, dtype=np.float64)
+    tau = np.asarray(log.tau, dtype=np.float64)
+    if name == "idim":
+        from wmrid.idim import identify_idim
+
+        return identify_idim(t, eta, tau, cutoff_hz=options.cutoff_hz, weighted=options.weighted)
+    if name == "rls":
+        from wmrid.rls import identify_rls
+
+        return identify_rls(t, eta, tau, forgetting=options.forgetting, cutoff_hz=options.cutoff_hz)
+    from wmrid.output_error import identify_oe
+
+    assert observer.estimate is not None
+    return identify_oe(t, eta, tau, np.asarray(observer.estimate.theta0), torque_hold=options.torque_hold)
+
+
+def run(
+    name: str, log: Any, observer: IdentificationResult, options: MethodOptions, robot: Robot | None = None
+) -> IdentificationResult:
+    """The observer's result on ``log`` reporting method ``name``'s estimate (itself for ``observer``)."""
+    if name == "observer":
+        return observer
+    return with_estimate(observer, estimate(name, log, observer, options), robot)
+
+
+def compare(
+    log: Any,
+    observer: IdentificationResult,
+    options: MethodOptions,
+    names: tuple[str, ...] = METHODS,
+    *,
+    other: Any = None,
+    truth: dict[str, float] | None = None,
+) -> dict[str, Any]:
+    """Every method in ``names`` on ``log`` (in memory; ``observer`` is the observer's result on it), JSON-ready.
+
+    {"methods": {name: {"description", "parameters": {n: {"value", "std", "unit"[, "error_percent"]}},
+    "seconds", "warnings"[, "validation": {"fit_percent": {"eta_r", "eta_l"}}]}}, ...}.  ``other`` : a second
+    log to validate each model on (:func:`wmrid.predict.validation_fit`); ``truth`` : true base parameters.
+    """
+    from wmrid.base_params import derived_with_std
+    from wmrid.identify import REPORTED
+    from wmrid.predict import validation_fit
+
+    out: dict[str, Any] = {"source": observer.source, "methods": {}}
+    predictor = None
+    for name in names:
+        est = estimate(name, log, observer, options)
+        values = derived_with_std(np.asarray(est.theta0, dtype=float), np.asarray(est.cov, dtype=float))
+        params = {}
+        for key in REPORTED:
+            value, std = values[key]
+            entry = {"value": value, "std": std if np.isfinite(std) else None, "unit": observer.units[key]}
+            if truth is not None and key in truth and truth[key]:
+                entry["error_percent"] = 100.0 * (value - truth[key]) / abs(truth[key])
+            params[key] = entry
+        row: dict[str, Any] = {
+            "description": DESCRIPTIONS[name],
+            "parameters": params,
+            "seconds": est.seconds,
+            "warnings": list(est.warnings) if name != "observer" else list(observer.warnings),
+        }
+        if other is not None:
+            fit = validation_fit(other.t, other.eta, other.tau, np.asarray(est.theta0), options.torque_hold)
+            row["validation"] = {"fit_percent": {"eta_r": fit["eta_r"], "eta_l": fit["eta_l"]}}
+            predictor = fit["predictor"]
+        out["methods"][name] = row
+    if other is not None:
+        out["validation"] = {"log": other.source, "samples": len(other.t), "predictor": predictor}
+    if truth is not None:
+        out["truth"] = {key: truth[key] for key in REPORTED if key in truth}
+    return out
