@@ -155,3 +155,16 @@ def test_bad_method_options_exit_2_with_one_line(args: tuple[str, ...], needle: 
     assert needle in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
     assert "Traceback" not in proc.stderr
+
+
+def test_report_shows_the_method_and_the_validation(tmp_path: Path) -> None:
+    out = tmp_path / "r.json"
+    proc = wmrid("report", str(SAMPLES / "paper_sinusoid.csv"), "--robot", "paper", "--method", "rls", "--validate",
+                 str(SAMPLES / "paper_sinusoid.parquet"), "-o", str(out))  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    text = out.read_text()
+    assert "Validation on" in text
+    assert "Method: rls" in text
+    proc = wmrid("report", str(out), "--validate", str(SAMPLES / "paper_sinusoid.parquet"))
+    assert proc.returncode == 2
+    assert "need a log as INPUT" in proc.stderr

@@ -550,6 +550,11 @@ def report(
     mirror_left: MirrorLeftOpt = False,
     flip_effort: FlipEffortOpt = False,
     rotor_inertia: RotorInertiaOpt = None,
+    method: MethodOpt = MethodChoice.observer,
+    cutoff: CutoffOpt = None,
+    weighted: WeightedOpt = False,
+    forgetting: ForgettingOpt = 1.0,
+    validate: ValidateOpt = None,
 ) -> None:
     """Tables (paper Tables 2 and 3), comparison with nominal/CAD/truth, diagnostics and figures for INPUT."""
     import json
@@ -566,6 +571,11 @@ def report(
     head = source.head(64).lstrip()
     result = log = None
     if head.startswith(b"{"):
+        if validate is not None or method != MethodChoice.observer:
+            raise UsageError(
+                f"{source.name}: --validate and --method need a log as INPUT, not a saved result; run "
+                "`wmrid identify LOG --method ... --validate OTHER --format json` and report its output"
+            )
         raw = source.data if source.data is not None else Path(source.path).read_bytes()
         try:
             data = json.loads(raw)
@@ -575,10 +585,18 @@ def report(
         from wmrid.identify import identify as run_identify
 
         robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
-        log = _read_wheel_log(input_, columns, time_unit.value, robot_obj, **_log_options(locals()), data=source.data)
+        options = _method_options(cutoff, weighted, forgetting, torque_hold)
+        log_options = _log_options(locals())
+        log = _read_wheel_log(input_, columns, time_unit.value, robot_obj, **log_options, data=source.data)
         result = run_identify(
             log, robot_obj, form=form.value, k=k, alpha=alpha, torque_hold=torque_hold.value, payload=payload
         )
+        if method != MethodChoice.observer:
+            from wmrid.methods import run
+
+            result = run(method.value, log, result, options, robot_obj)
+        if validate is not None:
+            result = _validate(result, validate, columns, time_unit.value, robot_obj, log_options, torque_hold.value)
         data = result.to_dict()
     rep = build_report(data, result=result, log=log, truth=truth_params, figures=suffix in (".html", ".htm", ".md"))
     if residuals is not None:

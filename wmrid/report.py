@@ -220,6 +220,20 @@ def build_report(
         statements.insert(
             0, f"Units: the effort is in {effort_unit}, not N m, so every parameter is in {effort_unit}-based units."
         )
+    method = data.get("method", "observer")
+    if method != "observer":
+        statements.insert(
+            0,
+            f"Method: {method} ({diag.get('method', {}).get('seconds', float('nan')):.3g} s). Table 3 holds its "
+            "estimate; Table 2, the excitation figures and the history are the observer's, run on the same log.",
+        )
+    if "validation" in data:
+        v = data["validation"]
+        statements.insert(
+            0,
+            f"Validation on {v['log']}: fit {v['fit_percent']['eta_r']:.1f} % (right wheel), "
+            f"{v['fit_percent']['eta_l']:.1f} % (left wheel): {v['definition']}; the prediction: {v['predictor']}.",
+        )
 
     residuals = {}
     if rl.history is not None:
