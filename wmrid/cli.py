@@ -6,6 +6,7 @@ answers at once.  :func:`main` is the one place that maps errors to exit codes a
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 from enum import Enum
@@ -353,7 +354,8 @@ def _validate(result, other: str, columns, time_unit: str, robot_obj, log_option
     fit = validation_fit(other_log.t, other_log.eta, other_log.tau, theta0, torque_hold)
     validation = {
         "log": other_log.source, "samples": len(other_log),
-        "fit_percent": {"eta_r": fit["eta_r"], "eta_l": fit["eta_l"]}, "predictor": fit["predictor"],
+        "fit_percent": {w: fit[w] if math.isfinite(fit[w]) else None for w in ("eta_r", "eta_l")},
+        "predictor": fit["predictor"],
         "definition": "fit = 100 (1 - ||eta - eta_hat|| / ||eta - mean(eta)||) per wheel over the whole log",
     }  # fmt: skip
     return replace(result, validation=validation)

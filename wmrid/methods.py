@@ -126,7 +126,8 @@ def compare(
         }
         if other is not None:
             fit = validation_fit(other.t, other.eta, other.tau, np.asarray(est.theta0), options.torque_hold)
-            row["validation"] = {"fit_percent": {"eta_r": fit["eta_r"], "eta_l": fit["eta_l"]}}
+            fit_percent = {w: fit[w] if np.isfinite(fit[w]) else None for w in ("eta_r", "eta_l")}
+            row["validation"] = {"fit_percent": fit_percent}
             predictor = fit["predictor"]
         out["methods"][name] = row
     if other is not None:

@@ -90,7 +90,8 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
     if validation is not None:
         fit = validation["fit_percent"]
         console.print(
-            f"validation on {validation['log']}: fit {fit['eta_r']:.1f} % (right), {fit['eta_l']:.1f} % (left) "
+            f"validation on {validation['log']}: fit {_fmt(fit['eta_r'], 3)} % (right), "
+            f"{_fmt(fit['eta_l'], 3)} % (left) "
             f"({validation['predictor']})",
             markup=False,
         )
@@ -213,7 +214,7 @@ def print_comparison(data: dict, console: Any) -> None:
         for wheel in ("eta_r", "eta_l"):
             table.add_row(
                 *([f"fit {wheel} (%)"] + ([""] if truth else [])
-                  + [f"{m['validation']['fit_percent'][wheel]:.1f}" for m in methods.values()])
+                  + [_fmt(m["validation"]["fit_percent"][wheel], 3) for m in methods.values()])
             )  # fmt: skip
     console.print(table)
     if "validation" in data:

@@ -231,8 +231,9 @@ def build_report(
         v = data["validation"]
         statements.insert(
             0,
-            f"Validation on {v['log']}: fit {v['fit_percent']['eta_r']:.1f} % (right wheel), "
-            f"{v['fit_percent']['eta_l']:.1f} % (left wheel): {v['definition']}; the prediction: {v['predictor']}.",
+            f"Validation on {v['log']}: fit {_fmt(v['fit_percent']['eta_r'], 3)} % (right wheel), "
+            f"{_fmt(v['fit_percent']['eta_l'], 3)} % (left wheel): {v['definition']}; "
+            f"the prediction: {v['predictor']}.",
         )
 
     residuals = {}
