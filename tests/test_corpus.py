@@ -364,3 +364,33 @@ def test_interrupt_exits_130(tmp_path):
     assert proc.returncode == 130, (proc.returncode, stderr)
     assert stdout == ""
     assert "interrupted" in stderr, stderr
+
+
+@pytest.mark.parametrize("delay", [0.5, 1.2, 2.0, 3.0, 4.5])
+def test_interrupt_leaves_no_partial_output(tmp_path, delay):
+    """Ctrl-C at some point of `simulate` writing a long log: afterwards the folder holds either nothing or the
+    complete log with its truth (they are renamed into place together), never a part or a temporary file."""
+    out = tmp_path / "long.parquet"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "wmrid", "simulate", "-o", str(out), "--duration", "600", "--eta-noise", "0.01"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=tmp_path,
+    )
+    try:
+        time.sleep(delay)  # the delays fall before, during and (on a fast machine) after the writing
+        proc.send_signal(signal.SIGINT)
+        _, stderr = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert "Traceback" not in stderr, stderr
+    assert proc.returncode in (0, 130), (proc.returncode, stderr)
+    left = sorted(p.name for p in tmp_path.iterdir())
+    if proc.returncode == 0 or left:
+        assert left == ["long.parquet", "long.parquet.truth.json"], left
+        from wmrid.logio import read_log
+
+        assert len(read_log(str(out))) == 600_001

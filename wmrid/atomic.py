@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import signal
 import sys
 import tempfile
 from collections.abc import Iterator
@@ -23,7 +24,7 @@ from typing import IO, Any
 
 from wmrid.errors import OutputExistsError, UsageError
 
-__all__ = ["atomic_output", "atomic_write_bytes", "atomic_write_text", "to_json_text", "write_json"]
+__all__ = ["atomic_output", "atomic_write_bytes", "atomic_write_text", "output_group", "to_json_text", "write_json"]
 
 
 def _exists_error(path: Path) -> OutputExistsError:
@@ -99,15 +100,66 @@ def atomic_output(path: str | Path, *, force: bool = False, mode: str = "wb") ->
         finally:
             handle.close()
         os.chmod(tmp, file_mode)
-        if force:
-            os.replace(tmp, path)
-        else:
-            _link_no_clobber(tmp, path)
+        if _GROUP is not None:  # inside output_group(): renamed with the other outputs at its end
+            _GROUP.append((tmp, path, force))
+            return
+        _commit(tmp, path, force)
     except BaseException:
         with suppress(OSError):
             os.unlink(tmp)
         raise
     _fsync_folder(folder)
+
+
+def _commit(tmp: Path, path: Path, force: bool) -> None:
+    if force:
+        os.replace(tmp, path)
+    else:
+        _link_no_clobber(tmp, path)
+
+
+_GROUP: list[tuple[Path, Path, bool]] | None = None
+
+
+@contextmanager
+def output_group() -> Iterator[None]:
+    """Outputs written inside appear together or not at all (e.g. a log and its truth file).
+
+    Each is written to its temporary file as usual; the renames into place all happen at the end, with
+    SIGINT held back (so Ctrl-C cannot fall between them); any exception before that (Ctrl-C included)
+    removes every temporary file and leaves the targets as they were.
+    """
+    global _GROUP
+    if _GROUP is not None:
+        yield
+        return
+    _GROUP = pending = []
+    try:
+        yield
+    except BaseException:
+        for tmp, _, _ in pending:
+            with suppress(OSError):
+                os.unlink(tmp)
+        raise
+    finally:
+        _GROUP = None
+    blocked = hasattr(signal, "pthread_sigmask")
+    if blocked:
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        for i, (tmp, path, force) in enumerate(pending):
+            try:
+                _commit(tmp, path, force)
+            except BaseException:
+                for later, _, _ in pending[i:]:
+                    with suppress(OSError):
+                        os.unlink(later)
+                raise
+        for folder in {path.parent for _, path, _ in pending}:
+            _fsync_folder(folder)
+    finally:
+        if blocked:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
 def _link_no_clobber(tmp: Path, path: Path) -> None:

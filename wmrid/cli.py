@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import os
+import signal
 import sys
 from enum import Enum
 from pathlib import Path
@@ -862,7 +863,7 @@ def simulate(
     are those at t = 0; its settings.change holds both parameter sets ("before", "after", base and
     physical), the requested time t and the switch time t_switch (s).
     """
-    from wmrid.atomic import to_json_text, write_json
+    from wmrid.atomic import output_group, to_json_text, write_json
     from wmrid.logio import write_log
     from wmrid.robot import Payload
     from wmrid.simulate import NoiseSettings, PlantChange, parse_friction_fault, parse_time
@@ -925,20 +926,117 @@ def simulate(
     truth_path = None if output == "-" else output + ".truth.json"
     if truth_path is not None and not force and os.path.exists(truth_path):
         raise UsageError(f"{truth_path} exists; use --force to overwrite it")
-    if output.lower().endswith(".mcap"):
-        from wmrid.mcap_write import write_joint_state_mcap
+    with output_group():  # the log and its truth appear together or not at all
+        if output.lower().endswith(".mcap"):
+            from wmrid.mcap_write import write_joint_state_mcap
 
-        write_joint_state_mcap(output, sim.to_frame(), force=force, metadata={"truth": to_json_text(truth)})
-    else:
-        write_log(sim.to_frame(), output, force=force, metadata={"wmrid_truth": to_json_text(truth)})
+            write_joint_state_mcap(output, sim.to_frame(), force=force, metadata={"truth": to_json_text(truth)})
+        else:
+            write_log(sim.to_frame(), output, force=force, metadata={"wmrid_truth": to_json_text(truth)})
+        if truth_path is not None:
+            write_json(truth_path, truth, force=force)
     if truth_path is not None:
-        write_json(truth_path, truth, force=force)
         what = "" if change is None else f", {change.kind} at {sim.settings['change']['t_switch']:g} s"
         _stderr_console().print(f"wrote {output} ({len(sim.t)} samples{what}) and {truth_path}")
 
 
+_MONITOR_PANEL = "Change detection"
+MonitorModelOpt = Annotated[
+    Path,
+    typer.Option(
+        "--model",
+        metavar="RESULT.json",
+        help="The model to replay LOG against: the JSON `wmrid identify LOG0 -o RESULT.json` wrote.",
+        rich_help_panel=_MONITOR_PANEL,
+    ),
+]
+CalibrationOpt = Annotated[
+    float,
+    typer.Option(
+        "--calibration",
+        help="Span at the start of LOG (and after each change) assumed unchanged, on which the residual's noise is "
+        "calibrated, s.",
+        rich_help_panel=_MONITOR_PANEL,
+    ),
+]
+FalseAlarmRateOpt = Annotated[
+    float,
+    typer.Option(
+        "--false-alarm-rate",
+        help="Stated false alarms per hour of log (Bonferroni bound over the tests); sets the threshold.",
+        rich_help_panel=_MONITOR_PANEL,
+    ),
+]
+
+
+@app.command()
+def monitor(
+    log: Annotated[
+        str, typer.Argument(metavar="LOG", help="Log file (.csv, .parquet, .mcap) or - for standard input.")
+    ],
+    model: MonitorModelOpt,
+    calibration: CalibrationOpt = 10.0,
+    false_alarm_rate: FalseAlarmRateOpt = 0.1,
+    columns: Annotated[str | None, typer.Option(help="Column mapping, as for identify.")] = None,
+    time_unit: Annotated[TimeUnit, typer.Option(help="Unit of the time column.")] = TimeUnit.auto,
+    output_format: Annotated[
+        OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
+    ] = OutputFormat.auto,
+    output: Annotated[Path | None, typer.Option("--output", "-o", help="Write the JSON result to this file.")] = None,
+    force: Annotated[bool, typer.Option(help="Overwrite an existing output file.")] = False,
+    topic: TopicOpt = None,
+    velocity_topic: VelocityTopicOpt = None,
+    effort_topic: EffortTopicOpt = None,
+    right_joint: RightJointOpt = None,
+    left_joint: LeftJointOpt = None,
+    time_source: TimeSourceOpt = TimeSource.auto,
+    align: AlignOpt = AlignRule.linear,
+    velocity_from: VelocityFromOpt = VelocityFrom.auto,
+    speed_unit: SpeedUnitOpt = SpeedUnit.rad_s,
+    wheel_radius: WheelRadiusOpt = None,
+    effort: EffortOpt = EffortKind.torque,
+    effort_unit: EffortUnitOpt = None,
+    torque_constant: TorqueConstantOpt = None,
+    gear_ratio: GearRatioOpt = None,
+    efficiency: EfficiencyOpt = None,
+    mirror_left: MirrorLeftOpt = False,
+    flip_effort: FlipEffortOpt = False,
+) -> None:
+    """Replay LOG against an identified model; report when the dynamics change, and the parameters after.
+
+    A windowed likelihood-ratio test on the model's torque residual, with a stated false-alarm rate, finds
+    changes such as a payload loaded or dropped or a wheel's friction rising; after each, the robot is
+    identified again and the test restarts.  JSON: {"changes": [{"t": s from the log's start,
+    "parameters": {...}, ...}], "detector": {..., "threshold", "false_alarm_rate_per_hour"}, ...}.
+    """
+    from wmrid.atomic import write_json
+    from wmrid.monitor import MonitorSettings, load_model, print_monitor
+    from wmrid.monitor import monitor as run_monitor
+    from wmrid.render import to_json
+
+    settings = MonitorSettings(calibration_s=calibration, false_alarm_rate=false_alarm_rate)
+    model_obj = load_model(model)
+    wheel_log = _read_wheel_log(log, columns, time_unit.value, None, **_log_options(locals()))
+    result = run_monitor(wheel_log, model_obj, settings)
+    payload = result.to_dict()
+    if output is not None:
+        write_json(str(output), payload, force=force)
+    fmt = output_format.value
+    if fmt == "auto":
+        fmt = "table" if sys.stdout.isatty() else "json"
+    if fmt == "json":
+        sys.stdout.write(to_json(payload) + "\n")
+    else:
+        from rich.console import Console
+
+        print_monitor(result, Console())
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point: run the app and map every outcome to one exit code and at most one stderr line."""
+    from wmrid.interrupts import install
+
+    install()  # Ctrl-C is deferred while numba compiles (an interrupt there crashes LLVM)
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
     if debug:  # accepted anywhere on the line, not only before the command
@@ -972,6 +1070,7 @@ def main(argv: list[str] | None = None) -> None:
                 "(run with --debug for the traceback)\n"
             )
             code = ExitStatus.NO_RESULT
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the outcome is decided: a late Ctrl-C must not change it
     sys.exit(int(code))
 
 
