@@ -9,17 +9,27 @@ from scipy import optimize, signal
 from tests.conftest import open_loop_log
 from wmrid import model
 from wmrid.model import RegressorForm
-from wmrid.observer import ObserverSettings, foh_weights, initial_state, observer_step, project_to_box
+from wmrid.observer import (
+    ObserverSettings,
+    foh_weights,
+    initial_state,
+    observer_step,
+    project_to_box,
+    substep_weights,
+)
 from wmrid.replay import replay
 from wmrid.robot import PAPER_NOMINAL
 
 
-def _settings(form: RegressorForm, alpha: float = 1e-3, k: float = 1.0, hold: str = "zoh") -> ObserverSettings:
+def _settings(
+    form: RegressorForm, alpha: float = 1e-3, k: float = 1.0, hold: str = "zoh", control_rate: float | None = None
+) -> ObserverSettings:
     theta_init = model.intermediate_parameters(model.base_parameters(PAPER_NOMINAL), form)
     inf = np.full(theta_init.shape, np.inf)
     return ObserverSettings(
-        form=form, theta_init=theta_init, theta_min=-inf, theta_max=inf, k=k, alpha=alpha, torque_hold=hold
-    )
+        form=form, theta_init=theta_init, theta_min=-inf, theta_max=inf, k=k, alpha=alpha, torque_hold=hold,
+        control_rate=control_rate,
+    )  # fmt: skip
 
 
 def _reference_run(log, settings: ObserverSettings):
@@ -45,16 +55,44 @@ def test_foh_weights_against_quadrature(x):
     assert phi1 == pytest.approx(q1, rel=1e-13)
 
 
+@pytest.mark.parametrize("x", [1e-6, 0.01, 0.7, 5.0])
+@pytest.mark.parametrize("m", [1, 2, 3, 10])
+def test_substep_weights_against_quadrature_and_the_holds(x, m):
+    # c0, c1 = int_0^h exp(-k (h - s)) (1 - j(s)/m, j(s)/m) ds with j(s) the sub-step index, by 60-point
+    # Gauss-Legendre on each sub-step (exact to rounding: the integrand is smooth there).
+    k, h = x / 1e-3, 1e-3
+    c0, c1 = substep_weights(k, h, m)
+    nodes, weights = np.polynomial.legendre.leggauss(60)
+    q0 = q1 = 0.0
+    for j in range(m):
+        lo, hi = j * h / m, (j + 1) * h / m
+        s = lo + (hi - lo) * 0.5 * (nodes + 1)
+        integral = 0.5 * (hi - lo) * np.sum(weights * np.exp(-k * (h - s)))
+        q0 += (1 - j / m) * integral
+        q1 += (j / m) * integral
+    assert c0 == pytest.approx(q0, rel=1e-12)
+    assert c1 == pytest.approx(q1, rel=1e-12, abs=1e-300)
+    _, phi0, phi1 = foh_weights(x)
+    assert c0 + c1 == pytest.approx(h * (phi0 + phi1), rel=1e-12)  # the total weight of any hold
+    if m == 1:
+        assert c1 == 0.0  # one sub-step: the zero-order hold
+    # m sub-steps approach the first-order hold as 1/m: the sub-step midpoints lag by h/(2m)
+    assert abs(c1 - h * phi1) <= h / m + 1e-15
+
+
 @pytest.mark.parametrize(
-    ("reversing", "uneven", "hold"),
-    [(False, False, "zoh"), (False, True, "zoh"), (True, False, "zoh"), (True, True, "foh")],
-    ids=["paper-form", "uneven-steps", "general", "general-uneven-foh"],
-)
-def test_kernel_agrees_with_readable_step(reversing, uneven, hold):
+    ("reversing", "uneven", "hold", "control_rate"),
+    [
+        (False, False, "zoh", None), (False, True, "zoh", None), (True, False, "zoh", None),
+        (True, True, "foh", None), (False, True, "zoh", 3300.0),
+    ],
+    ids=["paper-form", "uneven-steps", "general", "general-uneven-foh", "uneven-control-rate"],
+)  # fmt: skip
+def test_kernel_agrees_with_readable_step(reversing, uneven, hold, control_rate):
     log = open_loop_log(duration=2.0, reversing=reversing, uneven=uneven)
     form = model.choose_form(log.eta)
     assert form.kind == ("general" if reversing else "paper")
-    settings = _settings(form, hold=hold)
+    settings = _settings(form, hold=hold, control_rate=control_rate)
     ref_state, ref_e = _reference_run(log, settings)
     out = replay(log.t, log.eta, log.tau, settings, max_history=len(log.t), chunk=777)
     # Same arithmetic, different order of a few sums: agreement to 1e-12 relative to the parameter scale.

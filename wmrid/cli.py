@@ -321,6 +321,15 @@ ForgettingOpt = Annotated[
     float,
     typer.Option(help="rls: forgetting factor in (0, 1]; 1 = plain least squares.", rich_help_panel=_METHOD_PANEL),
 ]
+ControlRateOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--control-rate",
+        metavar="HZ",
+        help="The controller updated the (held) effort at HZ, faster than the log: each step is held over its "
+        "sub-steps, the unlogged values interpolated (e.g. a 1 kHz controller logged at 100 Hz).",
+    ),
+]
 ValidateOpt = Annotated[
     str | None,
     typer.Option(
@@ -435,6 +444,7 @@ def identify(
     weighted: WeightedOpt = False,
     forgetting: ForgettingOpt = 1.0,
     validate: ValidateOpt = None,
+    control_rate: ControlRateOpt = None,
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
     from wmrid.atomic import write_json
@@ -459,6 +469,7 @@ def identify(
             torque_hold=torque_hold.value,
             progress=progress_cb,
             payload=payload,
+            control_rate=control_rate,
         )
     finally:
         finish()
@@ -558,6 +569,7 @@ def report(
     weighted: WeightedOpt = False,
     forgetting: ForgettingOpt = 1.0,
     validate: ValidateOpt = None,
+    control_rate: ControlRateOpt = None,
 ) -> None:
     """Tables (paper Tables 2 and 3), comparison with nominal/CAD/truth, diagnostics and figures for INPUT."""
     import json
@@ -592,8 +604,9 @@ def report(
         log_options = _log_options(locals())
         log = _read_wheel_log(input_, columns, time_unit.value, robot_obj, **log_options, data=source.data)
         result = run_identify(
-            log, robot_obj, form=form.value, k=k, alpha=alpha, torque_hold=torque_hold.value, payload=payload
-        )
+            log, robot_obj, form=form.value, k=k, alpha=alpha, torque_hold=torque_hold.value, payload=payload,
+            control_rate=control_rate,
+        )  # fmt: skip
         if method != MethodChoice.observer:
             from wmrid.methods import run
 
@@ -642,6 +655,7 @@ def compare(
         Path | None, typer.Option(help='Ground truth JSON {"parameters": {"m11": ...}} (the simulator\'s sidecar).')
     ] = None,
     validate: ValidateOpt = None,
+    control_rate: ControlRateOpt = None,
     methods: Annotated[
         str, typer.Option(help="Comma-separated methods to run, of observer, idim, rls, oe.")
     ] = "observer,idim,rls,oe",
@@ -701,7 +715,7 @@ def compare(
                 f"--validate {validate}: its effort is in {other.effort_unit}, LOG's in {wheel_log.effort_unit}; "
                 "give both logs in the same units"
             )
-    observer = run_identify(wheel_log, robot_obj, torque_hold=torque_hold.value)
+    observer = run_identify(wheel_log, robot_obj, torque_hold=torque_hold.value, control_rate=control_rate)
     data = run_compare(wheel_log, observer, options, names, other=other, truth=truth_params)
     if output is not None:
         write_json(str(output), data, force=force)

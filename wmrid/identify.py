@@ -130,6 +130,7 @@ class IdentificationResult:
                 "k": self.settings.k,
                 "alpha": self.settings.alpha,
                 "torque_hold": self.settings.torque_hold,
+                "control_rate": self.settings.control_rate,
                 "start": self.start_source,
             },
             "diagnostics": self.diagnostics,
@@ -228,6 +229,7 @@ def identify(
     torque_hold: Literal["zoh", "foh"] = "zoh",
     progress: Callable[[int, int], None] | None = None,
     payload: bool = False,
+    control_rate: float | None = None,
 ) -> IdentificationResult:
     """Identify the base parameters of the robot that recorded ``log``.
 
@@ -239,12 +241,16 @@ def identify(
     :func:`default_box`).
     ``payload``: also estimate the payload the robot carries, against the robot's unloaded parameters
     (its CAD set, else nominal; :mod:`wmrid.payload`).  ``progress(samples_done, samples)`` during the replay.
+    ``control_rate`` : Hz, the rate of the controller that held the effort, when the log is slower
+    (see :class:`wmrid.observer.ObserverSettings`).
     """
     if payload and robot is None:
         raise UsageError("--payload needs --robot: the payload is what the log shows beyond the unloaded robot")
     stream = log if isinstance(log, LogStream) else stream_arrays(log)
     try:
-        return _identify(stream, robot, form, k, alpha, box_width, max_history, torque_hold, progress, payload)
+        return _identify(
+            stream, robot, form, k, alpha, box_width, max_history, torque_hold, progress, payload, control_rate
+        )
     except np.linalg.LinAlgError as err:
         raise NotIdentifiableError(
             f"{stream.source}: the log does not support an estimate (a singular system: {err}); it is too short, "
@@ -253,7 +259,7 @@ def identify(
 
 
 def _identify(
-    stream: LogStream, robot, form, k, alpha, box_width, max_history, torque_hold, progress, payload
+    stream: LogStream, robot, form, k, alpha, box_width, max_history, torque_hold, progress, payload, control_rate
 ) -> IdentificationResult:
     started = time.perf_counter()
     source = stream.source
@@ -285,8 +291,9 @@ def _identify(
         start_source = "from the data (unknown robot): m11 = m22 = robust |eta_dot|/|tau| ratio, all else 0"
     lo, hi = default_box(theta_init, chosen, box_width, robot is not None)
     settings = ObserverSettings(
-        form=chosen, theta_init=theta_init, theta_min=lo, theta_max=hi, k=k, alpha=alpha, torque_hold=torque_hold
-    )
+        form=chosen, theta_init=theta_init, theta_min=lo, theta_max=hi, k=k, alpha=alpha, torque_hold=torque_hold,
+        control_rate=control_rate,
+    )  # fmt: skip
 
     duration = sv.duration
     tick = None if progress is None else (lambda done: progress(done, n))

@@ -52,6 +52,18 @@ from wmrid.model import RegressorForm, regressor
 _SERIES_BELOW = 0.1
 
 
+def substep_weights(k: float, h: float, m: int) -> tuple[float, float]:
+    """(c0, c1): over a step of h s, the filter input int_0^h exp(-k (h - s)) tau(s) ds = c0 tau_n + c1 tau_{n+1}
+    for a torque held over m equal sub-steps (a controller m times faster than the log) at the values
+    tau_n + (j/m) (tau_{n+1} - tau_n), j = 0..m-1.  m = 1 is the zero-order hold; m -> inf tends to the
+    first-order hold.  Closed form of each sub-step's integral, summed."""
+    ends = h * np.arange(1, m + 1) / m
+    # each sub-step's exp(-k (h - end)) (1 - exp(-k h / m)) / k, with expm1 so that small k h does not cancel
+    weights = np.exp(-k * (h - ends)) * (-np.expm1(-k * h / m) / k) if k > 0 else np.full(m, h / m)
+    frac = np.arange(m) / m
+    return float(np.sum((1.0 - frac) * weights)), float(np.sum(frac * weights))
+
+
 def foh_weights(x: float) -> tuple[float, float, float]:
     """(a, phi0, phi1) for x = k h: exp(-x) and the first-order-hold weights divided by h.
 
@@ -84,7 +96,9 @@ class ObserverSettings:
     k : 1/s, filter and predictor gain (> 0).  alpha : initial Gamma = alpha I (> 0), the weight of the
     start value.  theta_init, theta_min, theta_max : (2, p) intermediate parameters (units of the
     regressor columns: see :class:`wmrid.model.RegressorForm`).  torque_hold : "zoh" or "foh", how the
-    torque varies between samples.
+    torque varies between samples.  control_rate : Hz, the rate at which a digital controller updated the
+    held (zoh) effort when the log is slower: each step is then round(h f) sub-steps whose unlogged values
+    are interpolated linearly between the logged ones (None: the log has every value the controller applied).
     """
 
     form: RegressorForm
@@ -94,11 +108,24 @@ class ObserverSettings:
     k: float = 1.0
     alpha: float = 1e-10
     torque_hold: str = "zoh"
+    control_rate: float | None = None
+
+    @property
+    def hold_code(self) -> float:
+        """The compiled kernel's ``hold``: -1 foh, 0 zoh, f > 0 zoh at control rate f Hz."""
+        if self.torque_hold == "foh":
+            return -1.0
+        return float(self.control_rate or 0.0)
 
     def __post_init__(self) -> None:
         p = self.form.n_columns
         if self.torque_hold not in ("zoh", "foh"):
             raise UsageError(f"--torque-hold must be zoh or foh, got {self.torque_hold!r}")
+        if self.control_rate is not None:
+            if not (math.isfinite(self.control_rate) and self.control_rate > 0):
+                raise UsageError(f"--control-rate must be a frequency > 0 in Hz, got {self.control_rate!r}")
+            if self.torque_hold != "zoh":
+                raise UsageError("--control-rate describes a held (zoh) effort; it cannot go with --torque-hold foh")
         if not (math.isfinite(self.k) and self.k > 0):
             raise UsageError(f"--k must be a finite number > 0 (1/s), got {self.k}")
         if not (math.isfinite(self.alpha) and self.alpha > 0):
@@ -165,8 +192,11 @@ def observer_step(
     theta = state.theta
 
     g_in = b0 * state.g + b1 * g  # the filters' input over the step (first-order hold) ...
-    if settings.torque_hold == "zoh":
+    if settings.torque_hold == "zoh" and settings.control_rate is None:
         g_in[:2] = (b0 + b1) * state.g[:2]  # ... with the torques held
+    elif settings.torque_hold == "zoh":  # ... held over the controller's sub-steps
+        c0, c1 = substep_weights(k, h, max(1, round(h * settings.control_rate)))
+        g_in[:2] = c0 * state.g[:2] + c1 * g[:2]
     w = a * state.w + g_in  # (27)
     eta_hat = a * state.eta_hat + theta @ g_in + k * (b0 * state.eta + b1 * eta)  # (26)
     xi_hat = a * state.xi_hat  # (30)

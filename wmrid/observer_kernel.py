@@ -61,13 +61,28 @@ def _foh(x):
 
 
 @numba.njit(cache=True, nogil=True)
+def _substep_weights(x, h, m):
+    """(c0, c1): the filter input over a step of h s (x = k h) of a torque held over m equal sub-steps at
+    values interpolated linearly from tau_n (sub-step 0) towards tau_{n+1}: sum_j (1 - j/m, j/m) W_j,
+    W_j = h int over the sub-step of exp(-x v) dv (v = remaining fraction of the step)."""
+    c0 = 0.0
+    c1 = 0.0
+    width = -math.expm1(-x / m) / x if x > 0.0 else 1.0 / m
+    for j in range(m):
+        w_j = h * math.exp(-x * (1.0 - (j + 1.0) / m)) * width
+        c0 += (1.0 - j / m) * w_j
+        c1 += (j / m) * w_j
+    return c0, c1
+
+
+@numba.njit(cache=True, nogil=True)
 def observer_chunk(
     t,
     eta,
     tau,
     offset,
     kind,
-    zoh,
+    hold,
     k,
     st,
     w,
@@ -89,8 +104,10 @@ def observer_chunk(
     """Advance the estimator over one chunk of samples; every state array is updated in place.
 
     t (c,) s, eta and tau (c, 2): samples with global indices offset .. offset + c - 1 (offset >= 1; the
-    first sample of the log is the initial state).  kind 0 paper / 1 general.  zoh 1: the torque columns
-    of g are held from each sample to the next (zero-order hold); 0: they vary linearly like the others.
+    first sample of the log is the initial state).  kind 0 paper / 1 general.  hold: how the torque
+    columns of g vary between samples: -1 linearly like the others (foh); 0 held from each sample to the
+    next (zoh); f > 0 held by a controller running at f Hz, round(h f) sub-steps per step, whose unlogged
+    values lie on the line between the logged ones (see :func:`_substep_weights`).
     st (7,) = [t_prev, eta_prev (2), eta_hat (2), xi_hat (2)]; w, g_prev (p,); theta (2, p) unconstrained
     estimate; gamma, gamma_inv (p, p).
     hist_idx (m,) increasing global sample indices to record into hist_theta (m, 2, p), hist_e (m, 2)
@@ -123,9 +140,14 @@ def observer_chunk(
         # the input of the filters over the step: first-order hold, the torques held when zoh
         for j in range(p):
             gin[j] = b0 * g_prev[j] + b1 * g[j]
-        if zoh:
+        if hold == 0.0:
             gin[0] = (b0 + b1) * g_prev[0]
             gin[1] = (b0 + b1) * g_prev[1]
+        elif hold > 0.0:
+            sub = max(1, round(h * hold))
+            c0, c1 = _substep_weights(k * h, h, sub)
+            gin[0] = c0 * g_prev[0] + c1 * g[0]
+            gin[1] = c0 * g_prev[1] + c1 * g[1]
         # (27) w and (26) eta_hat with theta held over the step
         for j in range(p):
             w[j] = a * w[j] + gin[j]

@@ -114,7 +114,7 @@ def replay_pieces(
     blk_uu = np.zeros((nb, 2))
     blk_ee = np.zeros((nb, 2))
     cursor = np.zeros(2, dtype=np.int64)
-    hold = int(settings.torque_hold == "zoh")
+    hold = settings.hold_code
 
     done = 0
     for t, eta, tau in pieces:
