@@ -20,6 +20,17 @@ How (bounded memory, no per-message Python objects on the fast path):
   decoder instead; tests check the fast path field for field against that decoder.
 * A file cut short (a recording that crashed) is read up to its last complete record and the notes
   say how much was lost; the ``mcap`` summary is never needed.
+* The mapped file's pages are handed back to the kernel (``madvise(MADV_DONTNEED)``) as the walk passes
+  them, so they do not pile up in the process's resident memory on a large file.
+
+Bounded memory for long recordings (:func:`scan_mcap`, :func:`iter_joint_parts`): a first pass keeps the
+decoded JointState arrays only while they hold at most ``keep`` messages; past that it keeps per topic
+only what the whole-log choices need (:class:`JointSummary`: joint names, which fields are populated
+for which joint, whether each time source is set and in order, its range, its repeated stamps and a
+histogram of its steps).  A second pass decodes the chosen topics again, handing out the arrays of each
+batch of records (a chunk, or the top-level messages of a 4 MiB stretch of an unchunked file) as it goes.
+Both passes walk the file exactly as :func:`read_mcap` does, so the arrays come out the same, in the same
+order.
 
 Times stay integer nanoseconds here; conversion to seconds happens once, when a log is assembled.
 """
@@ -31,7 +42,7 @@ import io
 import json
 import mmap
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Generator, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -199,6 +210,47 @@ def _joint_states(buf, starts, lengths, ref, ref_off, stamp, pos, vel, eff, stat
             status[i] = STATUS_MALFORMED
 
 
+@numba.njit(cache=True, nogil=True)
+def _field_stats(values, has_value, has_nonzero, has_nan, has_inf, max_abs):
+    """Per column of values (n, K): any non-NaN, any non-NaN non-zero, any NaN, any inf, largest finite |v|."""
+    n, k = values.shape
+    for i in range(n):
+        for j in range(k):
+            v = values[i, j]
+            if np.isnan(v):
+                has_nan[j] = True
+                continue
+            has_value[j] = True
+            if v != 0:
+                has_nonzero[j] = True
+            if np.isinf(v):
+                has_inf[j] = True
+            elif abs(v) > max_abs[j]:
+                max_abs[j] = abs(v)
+
+
+#: Buckets of the step histograms (:func:`step_buckets`): 1024 exact ones below 1024 ns, then 512 per octave.
+STEP_BUCKETS = 28160
+_POW2 = np.int64(1) << np.arange(63, dtype=np.int64)
+
+
+def step_buckets(steps: np.ndarray) -> np.ndarray:
+    """Histogram bucket of each positive int64 step: the step itself below 1024, else 512 buckets per octave
+    (relative width <= 1/512); buckets are ordered like the steps they hold."""
+    length = np.searchsorted(_POW2, steps, side="right")  # bit length, exactly
+    shift = np.maximum(length - 10, 0)
+    return shift * 512 + (steps >> shift)
+
+
+def bucket_range(bucket: int) -> tuple[int, int]:
+    """The steps (lowest, highest, both included) that fall into ``bucket`` of :func:`step_buckets`."""
+    if bucket < 1024:
+        return bucket, bucket
+    shift = bucket // 512 - 1
+    mantissa = bucket - shift * 512
+    return mantissa << shift, min(((mantissa + 1) << shift) - 1, 2**63 - 1)
+
+
 # --------------------------------------------------------------------------------------------------
 # Results
 
@@ -246,6 +298,12 @@ class JointSeries:
     def field(self, name: str) -> np.ndarray:
         return {"position": self.position, "velocity": self.velocity, "effort": self.effort}[name]
 
+    def any_nonzero(self, name: str, cols: list[int]) -> bool:
+        """Whether field ``name`` holds a non-NaN, non-zero value in one of the joint columns ``cols``."""
+        values = self.field(name)[:, cols]
+        finite = values[~np.isnan(values)]
+        return finite.size > 0 and bool(np.any(finite != 0))
+
     def populated(self, name: str) -> str:
         """'yes', 'zeros' (present but all zero), 'partly' (some NaN) or 'no' for field ``name``."""
         values = self.field(name)
@@ -255,6 +313,132 @@ class JointSeries:
         if np.all(finite == 0):
             return "zeros"
         return "partly" if np.any(np.isnan(values)) else "yes"
+
+
+FIELDS = ("position", "velocity", "effort")
+
+
+@dataclass(frozen=True)
+class TimeSummary:
+    """One time source (MCAP log time or header stamp) of a JointState topic, over the whole file in file order.
+
+    first, last, low, high : ns (None without messages).  ordered : never decreasing from one message to the
+    next.  steps_ok : every step fits in int64 (so ``hist`` holds them all).  all_positive : every value > 0.
+    repeats : steps of 0.  hist : (STEP_BUCKETS,) counts of the positive steps by :func:`step_buckets`.
+    """
+
+    first: int | None
+    last: int | None
+    low: int | None
+    high: int | None
+    ordered: bool
+    steps_ok: bool
+    all_positive: bool
+    repeats: int
+    hist: np.ndarray
+
+
+@dataclass(frozen=True)
+class JointSummary:
+    """What a JointState topic holds, without its arrays (the first pass over a long recording).
+
+    channel_id : the channel whose messages :class:`JointSeries` would hold.  names, count : as there.
+    has_value, has_nonzero, has_nan, has_inf : (3, K) bool per field (position, velocity, effort) and joint:
+    some value is not NaN, some non-NaN value is not 0, some value is NaN (or missing), some is infinite.
+    max_abs : (3, K) the largest finite |value| (0 when none).  times : {"log": ..., "header": ...}.
+    """
+
+    topic: str
+    channel_id: int
+    names: tuple[str, ...]
+    count: int
+    has_value: np.ndarray
+    has_nonzero: np.ndarray
+    has_nan: np.ndarray
+    has_inf: np.ndarray
+    max_abs: np.ndarray
+    times: dict[str, TimeSummary]
+
+    def populated(self, name: str) -> str:
+        """As :meth:`JointSeries.populated`."""
+        f = FIELDS.index(name)
+        if self.count == 0 or len(self.names) == 0 or not self.has_value[f].any():
+            return "no"
+        if not self.has_nonzero[f].any():
+            return "zeros"
+        return "partly" if self.has_nan[f].any() else "yes"
+
+    def any_nonzero(self, name: str, cols: list[int]) -> bool:
+        """Whether field ``name`` holds a non-NaN, non-zero value in one of the joint columns ``cols``."""
+        return bool(self.has_nonzero[FIELDS.index(name), cols].any())
+
+
+class _TimeStats:
+    """Builds a :class:`TimeSummary` batch by batch."""
+
+    def __init__(self) -> None:
+        self.first: int | None = None
+        self.prev: int | None = None
+        self.low: int | None = None
+        self.high: int | None = None
+        self.ordered = True
+        self.steps_ok = True
+        self.all_positive = True
+        self.repeats = 0
+        self.hist = np.zeros(STEP_BUCKETS, dtype=np.int64)
+
+    def add(self, values: np.ndarray) -> None:
+        if len(values) == 0:
+            return
+        if self.prev is None:
+            self.first = int(values[0])
+            steps = np.diff(values)
+            up = values[1:] >= values[:-1]
+        else:
+            steps = np.diff(values, prepend=np.int64(self.prev))
+            up = np.concatenate(([values[0] >= self.prev], values[1:] >= values[:-1]))
+        self.ordered = self.ordered and bool(up.all())
+        if self.ordered and self.steps_ok:
+            if (steps < 0).any():  # an int64 overflow: no histogram
+                self.steps_ok = False
+            else:
+                self.repeats += int(np.count_nonzero(steps == 0))
+                positive = steps[steps > 0]
+                if len(positive):
+                    self.hist += np.bincount(step_buckets(positive), minlength=STEP_BUCKETS)
+        self.all_positive = self.all_positive and bool((values > 0).all())
+        low, high = int(values.min()), int(values.max())
+        self.low = low if self.low is None else min(self.low, low)
+        self.high = high if self.high is None else max(self.high, high)
+        self.prev = int(values[-1])
+
+    def summary(self) -> TimeSummary:
+        return TimeSummary(
+            first=self.first, last=self.prev, low=self.low, high=self.high, ordered=self.ordered,
+            steps_ok=self.steps_ok, all_positive=self.all_positive, repeats=self.repeats, hist=self.hist,
+        )  # fmt: skip
+
+
+class _JointStats:
+    """Builds a :class:`JointSummary` part by part."""
+
+    def __init__(self, k: int) -> None:
+        self.count = 0
+        self.has_value = np.zeros((3, k), dtype=bool)
+        self.has_nonzero = np.zeros((3, k), dtype=bool)
+        self.has_nan = np.zeros((3, k), dtype=bool)
+        self.has_inf = np.zeros((3, k), dtype=bool)
+        self.max_abs = np.zeros((3, k))
+        self.times = {"log": _TimeStats(), "header": _TimeStats()}
+
+    def add(self, part: tuple[np.ndarray, ...]) -> None:
+        log_ns, stamp = part[0], part[1]
+        self.count += len(log_ns)
+        for f in range(3):
+            _field_stats(part[2 + f], self.has_value[f], self.has_nonzero[f], self.has_nan[f], self.has_inf[f],
+                         self.max_abs[f])  # fmt: skip
+        self.times["log"].add(log_ns)
+        self.times["header"].add(stamp)
 
 
 @dataclass(frozen=True)
@@ -268,18 +452,23 @@ class JsonSeries:
 
 @dataclass(frozen=True)
 class McapContents:
-    """What :func:`read_mcap` found."""
+    """What :func:`read_mcap` found.
+
+    complete : False when :func:`scan_mcap` stopped keeping the arrays: ``joints`` then holds a
+    :class:`JointSummary` per topic instead of a :class:`JointSeries`.
+    """
 
     source: str
     profile: str
     library: str
     channels: tuple[ChannelInfo, ...]
-    joints: dict[str, JointSeries]
+    joints: dict[str, Any]
     json: dict[str, JsonSeries]
     metadata: dict[str, dict[str, str]]
     notes: tuple[str, ...]
     size_bytes: int
     lost_bytes: int = 0
+    complete: bool = True
 
     def channel(self, topic: str) -> ChannelInfo | None:
         return next((c for c in self.channels if c.topic == topic), None)
@@ -303,6 +492,8 @@ class _Accumulator:
     parts: list[tuple[np.ndarray, ...]] = field(default_factory=list)
     skipped: int = 0
     json_rows: list[tuple[int, list[float]]] = field(default_factory=list)
+    batches: int = 0  # parts made (kept or not)
+    stats: _JointStats | None = None
 
 
 def read_mcap(
@@ -317,26 +508,86 @@ def read_mcap(
     json_fields : {topic: {key: dotted field path}} for JSON-encoded channels to read as numbers.
     decode_joint_states : False to take only the inventory (faster for ``inspect`` on huge files).
     """
-    name = path
+    buf, release = _map(path, data)
+    state = _ReadState(path, json_fields or {}, decode_joint_states, release=release)
+    return _read_buffer(state, buf)
+
+
+def scan_mcap(path: str, data: bytes | None = None, *, keep: int) -> McapContents:
+    """The first pass over a recording that may be long: :func:`read_mcap`'s contents (JointState only, no
+    JSON) while its JointState topics hold at most ``keep`` messages in all; past that, ``complete`` is
+    False and ``joints`` holds a :class:`JointSummary` per topic.  Notes and inventory as in :func:`read_mcap`.
+    """
+    buf, release = _map(path, data)
+    return _read_buffer(_ReadState(path, {}, True, release=release, keep=keep), buf)
+
+
+def iter_joint_parts(
+    path: str, data: bytes | None, channel_ids: Iterable[int]
+) -> Generator[dict[int, list[tuple[np.ndarray, ...]]], None, None]:
+    """The second pass: for the JointState channels ``channel_ids`` (as in :attr:`JointSummary.channel_id`),
+    the arrays decoded from each batch of records, {channel id: [(log_ns, stamp_ns, position, velocity,
+    effort), ...]}, in file order; concatenated they are the arrays of :class:`JointSeries`.  Other channels
+    are not decoded; notes are those of the first pass (the walk is the same).  Memory: one batch.
+    """
+    wanted = set(channel_ids)
+    buf, release = _map(path, data)
+    _check_start(path, buf)
+    state = _ReadState(path, {}, True, release=release, wanted=wanted)
+
+    def drain() -> dict[int, list[tuple[np.ndarray, ...]]]:
+        out = {}
+        for cid in wanted:
+            acc = state.channels.get(cid)
+            if acc is not None and acc.parts:
+                out[cid], acc.parts = acc.parts, []
+        return out
+
+    for _ in state.steps(buf, len(MAGIC), buf.shape[0], top_level=True):
+        parts = drain()
+        if parts:
+            yield parts
+    parts = drain()
+    if parts:
+        yield parts
+
+
+def _map(path: str, data: bytes | None) -> tuple[np.ndarray, Callable[[int], None] | None]:
+    """(the bytes as uint8, a function that hands the mapped pages below an offset back to the kernel)."""
     if data is not None:
-        buf = np.frombuffer(data, dtype=np.uint8)
-        return _read_buffer(name, buf, json_fields or {}, decode_joint_states)
+        return np.frombuffer(data, dtype=np.uint8), None
     try:
         with open(path, "rb") as fh:
             size = os.fstat(fh.fileno()).st_size
             if size == 0:
-                raise LogFormatError(f"{name}: the file is empty (0 bytes)")
+                raise LogFormatError(f"{path}: the file is empty (0 bytes)")
             # Not closed explicitly: numpy views of it may live on in a traceback; the map is released
             # when the last view goes (the file descriptor closes here, the map keeps its own).
             mapped = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
     except OSError as err:
-        raise LogFormatError(f"{name}: cannot be read ({err.strerror or err})") from err
-    return _read_buffer(name, np.frombuffer(mapped, dtype=np.uint8), json_fields or {}, decode_joint_states)
+        raise LogFormatError(f"{path}: cannot be read ({err.strerror or err})") from err
+    if not hasattr(mapped, "madvise") or not hasattr(mmap, "MADV_DONTNEED"):
+        return np.frombuffer(mapped, dtype=np.uint8), None
+    done = [0]
+
+    def release(offset: int) -> None:
+        # Pages of a read-only file mapping: dropping them loses nothing (they come back from the page
+        # cache if touched again); without this a long file's pages all count in the resident memory.
+        upto = offset // mmap.PAGESIZE * mmap.PAGESIZE
+        if upto - done[0] >= _RELEASE_BYTES:
+            mapped.madvise(mmap.MADV_DONTNEED, done[0], upto - done[0])
+            done[0] = upto
+
+    return np.frombuffer(mapped, dtype=np.uint8), release
 
 
-def _read_buffer(
-    name: str, buf: np.ndarray, json_fields: Mapping[str, Mapping[str, str]], decode_joint_states: bool
-) -> McapContents:
+#: Mapped pages are handed back in runs of at least this many bytes.
+_RELEASE_BYTES = 1 << 22
+#: Bytes of top-level records scanned at a time.
+_SCAN_WINDOW = 1 << 22
+
+
+def _check_start(name: str, buf: np.ndarray) -> None:
     size = buf.shape[0]
     if size < len(MAGIC) or bytes(buf[: len(MAGIC)]) != MAGIC:
         raise LogFormatError(
@@ -348,7 +599,12 @@ def _read_buffer(
             f"{name}: starts like an MCAP file but no Header record follows the magic bytes: it is damaged or "
             "not MCAP; check the file (mcap doctor) or record it again"
         )
-    state = _ReadState(name, json_fields, decode_joint_states)
+
+
+def _read_buffer(state: _ReadState, buf: np.ndarray) -> McapContents:
+    name, json_fields = state.name, state.json_fields
+    size = buf.shape[0]
+    _check_start(name, buf)
     end, lost = state.walk(buf, len(MAGIC), size, top_level=True)
     notes = list(state.notes)
     lost_bytes = 0
@@ -359,10 +615,10 @@ def _read_buffer(
             f"read everything up to there, {lost_bytes} bytes at the end are lost"
         )
     channels = tuple(state.channel_info())
-    joints = {}
+    joints: dict[str, Any] = {}
     for acc in state.channels.values():
-        if acc.ref is not None and acc.parts:
-            joints[acc.info["topic"]] = _join(acc)
+        if acc.ref is not None and acc.batches:
+            joints[acc.info["topic"]] = _join(acc) if state.complete else _summary(acc)
     json_out = {}
     for acc in state.channels.values():
         keys = json_fields.get(acc.info["topic"])
@@ -376,6 +632,16 @@ def _read_buffer(
     return McapContents(
         source=name, profile=state.profile, library=state.library, channels=channels, joints=joints,
         json=json_out, metadata=state.metadata, notes=tuple(notes), size_bytes=size, lost_bytes=lost_bytes,
+        complete=state.complete,
+    )  # fmt: skip
+
+
+def _summary(acc: _Accumulator) -> JointSummary:
+    stats = acc.stats or _JointStats(len(acc.names))
+    return JointSummary(
+        topic=acc.info["topic"], channel_id=acc.info["id"], names=tuple(acc.names), count=stats.count,
+        has_value=stats.has_value, has_nonzero=stats.has_nonzero, has_nan=stats.has_nan, has_inf=stats.has_inf,
+        max_abs=stats.max_abs, times={key: t.summary() for key, t in stats.times.items()},
     )  # fmt: skip
 
 
@@ -400,12 +666,32 @@ def _join(acc: _Accumulator) -> JointSeries:
 
 
 class _ReadState:
-    """Schemas, channels and accumulators while walking the records."""
+    """Schemas, channels and accumulators while walking the records.
 
-    def __init__(self, name: str, json_fields: Mapping[str, Mapping[str, str]], decode_joint_states: bool):
+    keep : None to keep every JointState array (:func:`read_mcap`); else keep them while they hold at most
+    ``keep`` messages, and past that only their statistics (``complete`` turns False).  wanted : decode only
+    these JointState channels (the second pass; the caller takes their parts as they come).  release : hands
+    the mapped pages below an offset back to the kernel.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        json_fields: Mapping[str, Mapping[str, str]],
+        decode_joint_states: bool,
+        *,
+        keep: int | None = None,
+        wanted: set[int] | None = None,
+        release: Callable[[int], None] | None = None,
+    ):
         self.name = name
         self.json_fields = json_fields
         self.decode = decode_joint_states
+        self.keep = keep
+        self.wanted = wanted
+        self.release = release
+        self.complete = True
+        self.kept = 0
         self.schemas: dict[int, dict[str, Any]] = {}
         self.channels: dict[int, _Accumulator] = {}
         self.metadata: dict[str, dict[str, str]] = {}
@@ -419,18 +705,33 @@ class _ReadState:
 
     def walk(self, buf: np.ndarray, start: int, end: int, top_level: bool) -> tuple[int, bool]:
         """Scan records in buf[start:end]; returns (offset reached, True if a record was cut short)."""
+        steps = self.steps(buf, start, end, top_level)
+        while True:
+            try:
+                next(steps)
+            except StopIteration as stop:
+                return stop.value
+
+    def steps(self, buf: np.ndarray, start: int, end: int, top_level: bool) -> Generator[None, None, tuple[int, bool]]:
+        """:meth:`walk` as a generator that pauses after each batch of messages it has decoded."""
         cap = 65536
         ops = np.empty(cap, dtype=np.uint8)
         starts = np.empty(cap, dtype=np.int64)
         lengths = np.empty(cap, dtype=np.int64)
         p = start
         while True:
-            n, q = _scan(buf, p, end, ops, starts, lengths)
+            # At top level, scan at most _SCAN_WINDOW bytes ahead: each record header read maps the pages
+            # around it, and over a whole file of chunks those would add up to a good part of the file.
+            stop = min(end, p + _SCAN_WINDOW) if top_level else end
+            n, q = _scan(buf, p, stop, ops, starts, lengths)
+            if n == 0 and stop < end:  # a record longer than the window
+                n, q = _scan(buf, p, end, ops[:1], starts[:1], lengths[:1])
+                stop = q if n else end
             if n:
-                done = self._handle(buf, ops[:n], starts[:n], lengths[:n], top_level)
+                done = yield from self._handle(buf, ops[:n], starts[:n], lengths[:n], top_level)
                 if done:
                     return end, False
-            if n < cap:
+            if n < cap and (stop >= end or n == 0):
                 return q, q < end and not self._only_padding(buf, q, end, top_level)
             p = q
 
@@ -439,8 +740,8 @@ class _ReadState:
         # The closing magic (8 bytes) follows the footer at top level; inside a chunk nothing may remain.
         return top_level and end - q == len(MAGIC) and bytes(buf[q:end]) == MAGIC
 
-    def _handle(self, buf, ops, starts, lengths, top_level: bool) -> bool:
-        """Process a batch of records; True once the footer has been read."""
+    def _handle(self, buf, ops, starts, lengths, top_level: bool) -> Generator[None, None, bool]:
+        """Process a batch of records (pausing after each batch of messages); True once the footer has been read."""
         is_msg = ops == OP_MESSAGE
         other = np.flatnonzero(~is_msg)
         # Non-message records are few; handle them in order relative to the messages around them:
@@ -458,7 +759,10 @@ class _ReadState:
                 continue  # index and summary records: not needed
             body = bytes(buf[starts[i] : starts[i] + lengths[i]])
             try:
-                handler(body)
+                if op == OP_CHUNK:
+                    yield from self._chunk(body)
+                else:
+                    handler(body)
             except LogFormatError:
                 raise
             except Exception as err:  # a damaged record: skip it, say so, keep the rest
@@ -468,11 +772,16 @@ class _ReadState:
                     f"a damaged {what} record ({type(err).__name__}) was skipped"
                     + ("; its messages are lost" if op == OP_CHUNK else "")
                 )
+            if top_level and self.release is not None:
+                self.release(int(starts[i] + lengths[i]))
         if is_msg.any():
             self._messages(buf, starts[is_msg], lengths[is_msg])
+            if top_level and self.release is not None:
+                self.release(int(starts[-1] + lengths[-1]))
+            yield
         return footer
 
-    def _chunk(self, body: bytes) -> None:
+    def _chunk(self, body: bytes) -> Generator[None, None, None]:
         from mcap.data_stream import ReadDataStream
         from mcap.records import Chunk
 
@@ -499,7 +808,7 @@ class _ReadState:
             self.notes.append(f"a chunk could not be decompressed ({type(err).__name__}: {err}); its messages are lost")
             return
         inner = np.frombuffer(raw, dtype=np.uint8)
-        reached, cut = self.walk(inner, 0, inner.shape[0], top_level=False)
+        reached, cut = yield from self.steps(inner, 0, inner.shape[0], top_level=False)
         if cut:
             self.notes.append(
                 f"a chunk's records end mid-record (byte {reached} of {inner.shape[0]}); the rest is lost"
@@ -588,7 +897,8 @@ class _ReadState:
             acc.last_ns = hi if acc.last_ns is None else max(acc.last_ns, hi)
             info = acc.info
             if self.decode and info["schema_name"] in JOINT_STATE_NAMES and info["message_encoding"] == "cdr":
-                self._joint_batch(acc, buf, data_start[sel], data_len[sel], times)
+                if self.wanted is None or int(cid) in self.wanted:
+                    self._joint_batch(acc, buf, data_start[sel], data_len[sel], times)
             elif info["message_encoding"] == "json" and info["topic"] in self.json_fields:
                 self._json_batch(acc, buf, data_start[sel], data_len[sel], times)
 
@@ -624,7 +934,32 @@ class _ReadState:
                     eff[i, kk] = msg.effort[j] if j < len(msg.effort) else np.nan
         if not keep.all():
             times, stamp, pos, vel, eff = times[keep], stamp[keep], pos[keep], vel[keep], eff[keep]
-        acc.parts.append((times.copy(), stamp, pos, vel, eff))
+        self._store(acc, (times.copy(), stamp, pos, vel, eff))
+
+    def _store(self, acc: _Accumulator, part: tuple[np.ndarray, ...]) -> None:
+        """Keep a channel's decoded part, or (past ``keep`` messages) only its statistics."""
+        acc.batches += 1
+        if self.keep is None:
+            acc.parts.append(part)
+            return
+        if self.complete:
+            acc.parts.append(part)
+            self.kept += len(part[0])
+            if self.kept <= self.keep:
+                return
+            self.complete = False  # too long to keep: statistics from here on
+            for other in self.channels.values():
+                for kept in other.parts:
+                    self._add_stats(other, kept)
+                other.parts = []
+            return
+        self._add_stats(acc, part)
+
+    @staticmethod
+    def _add_stats(acc: _Accumulator, part: tuple[np.ndarray, ...]) -> None:
+        if acc.stats is None:
+            acc.stats = _JointStats(len(acc.names))
+        acc.stats.add(part)
 
     def _set_names(self, acc: _Accumulator, names: list[str]) -> None:
         acc.names = names

@@ -1,0 +1,87 @@
+"""MCAP memory benchmark: peak RSS of ``wmrid identify BAG`` for a 1 h and a 4 h 1 kHz ROS 2 bag.
+
+The bags (``--short`` and ``--long`` s, default 3600 and 14400 s: 3.6 M and 14.4 M
+``sensor_msgs/msg/JointState`` messages, zstd chunks, no odometry) are noisy ``paper`` sinusoid
+simulations (:func:`_common.noisy_paper_sim`, seed ``--seed``) written by
+:func:`wmrid.mcap_write.write_joint_state_mcap`, made once into bench/out/ and reused.
+
+For each bag, ``wmrid identify BAG --robot paper --format json`` runs as a subprocess under
+``/usr/bin/time -v`` (one untimed warm-up for numba's cache and the page cache, then ``--repeat`` runs):
+wall time and peak RSS (the largest of the runs).  The JSON must parse.  Printed: both figures and the
+ratio long/short of the peak RSS.  Target: ratio <= 1.5 (the MCAP is decoded piece by piece, so memory
+should not grow with the length of the recording).
+
+    /work/venv/bin/python bench/bench_mcap_memory.py
+    /work/venv/bin/python bench/bench_mcap_memory.py --short 600 --long 2400 --repeat 1
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from _common import BENCH, GNU_TIME, OUT, ROOT, cached_log, fmt_rss, median, run_timed, wmrid_cmd
+
+# bench/ is sys.path[0] when run as a script; drop it (bench/ modules must not shadow installed ones).
+sys.path[:] = [p for p in sys.path if p and Path(p).resolve() != BENCH]
+
+RATIO_TARGET = 1.5  # peak RSS long / short
+
+
+def bag(duration: float, seed: int) -> Path:
+    """The JointState-only zstd MCAP of ``duration`` s in bench/out/, made if missing."""
+    from wmrid.mcap_write import write_joint_state_mcap
+
+    def write(frame, path):
+        write_joint_state_mcap(path, frame, odom_topic=None, force=True)
+
+    return cached_log(OUT / f"paper_jointstate_{duration:g}s_seed{seed}.mcap", duration, write, seed=seed)
+
+
+def measure(path: Path, repeat: int) -> dict:
+    cmd = [*wmrid_cmd(), "identify", str(path), "--robot", "paper", "--format", "json"]
+    run_timed(cmd)  # warm-up: numba cache, page cache
+    runs = [run_timed(cmd) for _ in range(repeat)]
+    for r in runs:
+        json.loads(r.stdout)  # must parse
+    rss = [r.rss_mb for r in runs if r.rss_mb is not None]
+    walls = [r.wall for r in runs]
+    return {"wall": median(walls), "rss": max(rss) if rss else None, "json": json.loads(runs[-1].stdout)}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--short", type=float, default=3600.0, help="short bag, s (default 3600)")
+    ap.add_argument("--long", type=float, default=14400.0, help="long bag, s (default 14400)")
+    ap.add_argument("--seed", type=int, default=1, help="simulation seed (default 1)")
+    ap.add_argument("--repeat", type=int, default=1, help="measured runs after the warm-up (default 1)")
+    args = ap.parse_args()
+    if GNU_TIME is None:
+        raise SystemExit("/usr/bin/time is needed for peak RSS (apt-get install time)")
+
+    rows = []
+    for duration in (args.short, args.long):
+        path = bag(duration, args.seed)
+        result = measure(path, args.repeat)
+        rows.append((duration, path, result))
+
+    print(f"\nwmrid identify BAG --robot paper --format json  (1 warm-up + {args.repeat} measured)")
+    print(f"{'bag':<44} {'MB':>8} {'messages':>12} {'wall s':>8} {'peak RSS MB':>12}")
+    for duration, path, r in rows:
+        size = path.stat().st_size / 1e6
+        n = round(duration * 1000) + 1
+        print(f"{path.relative_to(ROOT)!s:<44} {size:8.1f} {n:12,} {r['wall']:8.1f} {fmt_rss(r['rss']):>12}")
+    short, long_ = rows[0][2], rows[1][2]
+    for name in ("m11", "m22", "Vc"):
+        a, b = short["json"]["parameters"][name]["value"], long_["json"]["parameters"][name]["value"]
+        print(f"  {name}: {a:.6g} (short)  {b:.6g} (long)")
+    if short["rss"] and long_["rss"]:
+        ratio = long_["rss"] / short["rss"]
+        verdict = "MET" if ratio <= RATIO_TARGET else "NOT MET"
+        print(f"\ntarget: peak RSS long/short <= {RATIO_TARGET} -> ratio = {ratio:.3f} ({verdict})")
+
+
+if __name__ == "__main__":
+    main()
