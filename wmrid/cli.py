@@ -6,6 +6,7 @@ answers at once.  :func:`main` is the one place that maps errors to exit codes a
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import signal
@@ -1085,6 +1086,13 @@ def main(argv: list[str] | None = None) -> None:
             )
             code = ExitStatus.NO_RESULT
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the outcome is decided: a late Ctrl-C must not change it
+    if code == ExitStatus.INTERRUPTED:
+        # Python remembers a KeyboardInterrupt that went through an embedded interpreter call (even one caught
+        # later) and, at exit, kills itself with SIGINT instead of returning 130; leave at once instead.
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(int(code))
     sys.exit(int(code))
 
 
