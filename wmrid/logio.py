@@ -965,8 +965,7 @@ def _arrow_csv(
     pending: list[Any] = []
     count = 0
 
-    def flush() -> dict[str, Any]:
-        table = pa.Table.from_batches(pending)
+    def values(table: Any) -> dict[str, Any]:
         return {key: _arrow_values(table.column(actual[col]).combine_chunks()) for key, col in chosen.items()}
 
     try:
@@ -974,13 +973,15 @@ def _arrow_csv(
             for batch in reader:
                 pending.append(batch)
                 count += batch.num_rows
-                if count >= rows:
-                    yield flush()
-                    pending, count = [], 0
+                while count >= rows:  # pieces of exactly ``rows`` rows, whatever pyarrow's block size
+                    table = pa.Table.from_batches(pending)
+                    yield values(table.slice(0, rows))
+                    rest = table.slice(rows)
+                    pending, count = rest.to_batches(), rest.num_rows
     except (pa.ArrowException, OSError, ValueError) as err:
         raise _ArrowCsvRefused from err
     if count:
-        yield flush()
+        yield values(pa.Table.from_batches(pending))
 
 
 def _all_numbers(line: str, sep: str, decimal: str) -> bool:

@@ -20,17 +20,22 @@ from wmrid.model import RegressorForm
 PLAUSIBLE_LIMIT = 1e12
 #: Spacing (s) of the sparse sample kept for the data-driven start (differences over it give accelerations).
 START_SPACING_S = 0.05
+#: The median step is exact while the log has at most this many distinct step values (a regular log has a
+#: handful); beyond, it comes from a histogram of relative bucket width 2**-12 (0.024 %).
+EXACT_STEPS = 4096
+_BUCKETS_PER_OCTAVE = 4096
 
 
 @dataclass
 class Survey:
     """Figures of a whole log, gathered piece by piece.
 
-    n : samples.  t_first, t_last : s.  median_step : s, the median of the pieces' median steps (exact
-    for a log of one piece).  min_step, max_step : s; max_step_after : s, the time before the largest step.
+    n : samples.  t_first, t_last : s.  median_step : s, the median time step (exact while the log has at
+    most EXACT_STEPS distinct steps, else to 0.024 %; never dependent on how the log was cut into pieces).
+    min_step, max_step : s; max_step_after : s, the time before the largest step.
     positive, negative : (2,) bool, whether every speed of the wheel is > 0 (< 0).
-    sparse_t (m,) s, sparse_eta (m, 2) rad/s, sparse_tau (m, 2): every ``stride``-th sample (stride set
-    from the first piece's median step so that samples are about START_SPACING_S apart).
+    sparse_t (m,) s, sparse_eta (m, 2) rad/s, sparse_tau (m, 2): the first sample of each START_SPACING_S
+    interval of time from t_first.
     Per wheel (2,) counts and sums for :meth:`signal_warnings`.
     """
 
@@ -113,10 +118,10 @@ def survey(pieces: Iterable, source: str, effort_unit: str = "N m") -> Survey:
     Raises :class:`NotIdentifiableError` at the first sample that is not finite or beyond PLAUSIBLE_LIMIT.
     """
     sv = Survey(source=source, effort_unit=effort_unit)
-    medians: list[float] = []
-    weights: list[int] = []
-    stride = 0
+    exact: dict[float, int] | None = {}
+    hist: dict[int, int] = {}
     prev_t = None
+    last_bucket = -1
     sparse_t, sparse_eta, sparse_tau = [], [], []
     for piece in pieces:
         t, eta, tau = piece.t, piece.eta, piece.tau
@@ -136,21 +141,19 @@ def survey(pieces: Iterable, source: str, effort_unit: str = "N m") -> Survey:
         if sv.n == 0:
             sv.t_first = float(t[0])
         if len(steps):
-            medians.append(float(np.median(steps)))
-            weights.append(len(steps))
+            exact = _count_steps(steps, exact, hist)
             j = int(np.argmax(steps))
             if steps[j] > sv.max_step:
                 sv.max_step = float(steps[j])
                 sv.max_step_after = float(t[j] if prev_t is None else (prev_t if j == 0 else t[j - 1]))
             sv.min_step = min(sv.min_step, float(steps.min()))
-        if stride == 0 and len(steps):
-            stride = max(1, round(START_SPACING_S / max(float(np.median(steps)), 1e-9)))
-        if stride:
-            first = (-sv.n) % stride
-            # copies: a strided view would keep the whole piece alive
-            sparse_t.append(t[first::stride].copy())
-            sparse_eta.append(eta[first::stride].copy())
-            sparse_tau.append(tau[first::stride].copy())
+        # the first sample of each START_SPACING_S of time: the same samples however the log is cut
+        bucket = np.floor((t - sv.t_first) / START_SPACING_S)
+        keep = bucket != np.concatenate(([last_bucket], bucket[:-1]))
+        last_bucket = bucket[-1]
+        sparse_t.append(t[keep])  # boolean indexing copies: no view keeps the piece alive
+        sparse_eta.append(eta[keep])
+        sparse_tau.append(tau[keep])
         sv.positive &= np.all(eta > 0, axis=0)
         sv.negative &= np.all(eta < 0, axis=0)
         sv.speed_pos += np.count_nonzero(eta > 0, axis=0)
@@ -164,12 +167,51 @@ def survey(pieces: Iterable, source: str, effort_unit: str = "N m") -> Survey:
         sv.n += k
         prev_t = float(t[-1])
         sv.t_last = prev_t
-    if medians:
-        order = np.argsort(medians)
-        cum = np.cumsum(np.asarray(weights)[order])
-        sv.median_step = float(np.asarray(medians)[order][np.searchsorted(cum, cum[-1] / 2.0)])
+    sv.median_step = _median_step(exact, hist)
     if sparse_t:
         sv.sparse_t = np.concatenate(sparse_t)
         sv.sparse_eta = np.concatenate(sparse_eta)
         sv.sparse_tau = np.concatenate(sparse_tau)
     return sv
+
+
+def _count_steps(steps: np.ndarray, exact: dict[float, int] | None, hist: dict[int, int]) -> dict[float, int] | None:
+    """Count ``steps``: exactly while there are at most EXACT_STEPS distinct values, then (None is returned)
+    in the histogram ``hist``, into which the exact counts are moved when they overflow."""
+    if exact is not None:
+        for value, count in zip(*np.unique(steps, return_counts=True), strict=True):
+            exact[float(value)] = exact.get(float(value), 0) + int(count)
+        if len(exact) <= EXACT_STEPS:
+            return exact
+        values = np.fromiter(exact, dtype=float, count=len(exact))
+        counts = np.fromiter(exact.values(), dtype=np.int64, count=len(exact))
+        _add_to_histogram(values, counts, hist)
+        return None
+    _add_to_histogram(steps, np.ones(len(steps), dtype=np.int64), hist)
+    return None
+
+
+def _add_to_histogram(values: np.ndarray, counts: np.ndarray, hist: dict[int, int]) -> None:
+    mantissa, exponent = np.frexp(values)  # values = mantissa 2**exponent, mantissa in [0.5, 1)
+    keys = exponent.astype(np.int64) * _BUCKETS_PER_OCTAVE + np.floor((mantissa - 0.5) * 2 * _BUCKETS_PER_OCTAVE)
+    unique, where = np.unique(keys.astype(np.int64), return_inverse=True)
+    for key, count in zip(unique, np.bincount(where, weights=counts), strict=True):
+        hist[int(key)] = hist.get(int(key), 0) + int(count)
+
+
+def _median_step(exact: dict[float, int] | None, hist: dict[int, int]) -> float:
+    """The median of the counted steps (as numpy.median: the mean of the two middle ones for an even count)."""
+    if exact is not None:
+        if not exact:
+            return 0.0
+        values = np.array(sorted(exact))
+        cum = np.cumsum([exact[v] for v in values])
+        total = int(cum[-1])
+        lo = values[np.searchsorted(cum, (total - 1) // 2 + 1)]
+        hi = values[np.searchsorted(cum, total // 2 + 1)]
+        return float(0.5 * (lo + hi))
+    keys = np.array(sorted(hist))
+    cum = np.cumsum([hist[k] for k in keys])
+    key = int(keys[np.searchsorted(cum, cum[-1] / 2.0)])
+    exponent, sub = divmod(key, _BUCKETS_PER_OCTAVE)
+    return float(np.ldexp(0.5 + (sub + 0.5) / (2 * _BUCKETS_PER_OCTAVE), exponent))  # the bucket's middle
