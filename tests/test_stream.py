@@ -156,3 +156,52 @@ def test_a_file_that_changes_between_passes_is_refused(tmp_path: Path, monkeypat
     _frame(100, start=1.0).iloc[:90].to_csv(path, index=False)
     with pytest.raises(LogFormatError, match="changed while it was read"):
         list(stream)
+
+
+def _parquet_in_groups(frame: pd.DataFrame, path: Path, group_rows: int) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), path, row_group_size=group_rows)
+
+
+@pytest.mark.parametrize("group_rows", [4000, 1000])
+def test_the_time_offset_does_not_depend_on_the_row_groups(tmp_path: Path, group_rows: int) -> None:
+    # Integer ns stamps starting 2 s below 2**23 s: they cross the float64 1 ns limit within the log. Whatever
+    # the row groups, the stamps are stored relative to the first one and keep their exact 1 ms steps.
+    frame = _frame(4000)
+    frame["t"] = (2**23 - 2) * 10**9 + np.arange(4000, dtype=np.int64) * 1_000_000
+    path = tmp_path / "cross.parquet"
+    _parquet_in_groups(frame, path, group_rows)
+    log = read_log(str(path))
+    np.testing.assert_array_equal(log.t, np.arange(4000) * 1_000_000 / 1e9)  # exact, correctly rounded
+    assert any("relative to the first stamp" in n for n in log.notes)
+
+
+@pytest.mark.parametrize("group_rows", [1500, 400, 3000])
+def test_leading_zero_stamps_among_epoch_times_are_dropped_whatever_the_row_groups(tmp_path, group_rows):
+    frame = _frame(3000)
+    frame["t"] = 1_700_000_000.0 + np.arange(3000) * 1e-3
+    frame.loc[:1499, "t"] = 0.0  # a clock not yet set for the first 1500 rows
+    path = tmp_path / "zeros.parquet"
+    _parquet_in_groups(frame, path, group_rows)
+    log = read_log(str(path))
+    assert len(log) == 1500
+    assert any("1500 rows with time stamp 0" in n for n in log.notes)
+
+
+def test_the_survey_does_not_depend_on_the_pieces(tmp_path: Path) -> None:
+    # Uneven steps (1.0 ms then 1.3 ms, 5 % jitter): the median step, the start sample and so the result are
+    # the same for any cut of the log.
+    rng = np.random.default_rng(7)
+    steps = np.where(np.arange(20000) < 12000, 1e-3, 1.3e-3) * rng.uniform(0.95, 1.05, 20000)
+    frame = _frame(20001)
+    frame["t"] = np.concatenate(([0.0], np.cumsum(steps)))
+    path = tmp_path / "jitter.parquet"
+    frame.to_parquet(path)
+    whole = identify(read_log(str(path)))
+    for rows in (5000, 777):
+        cut = identify(open_log(str(path), rows=rows))
+        assert cut.log_info == whole.log_info
+        assert np.array_equal(cut.settings.theta_init, whole.settings.theta_init)
+        assert cut.parameters == whole.parameters

@@ -1082,6 +1082,8 @@ class _Assembler:
         self.epoch: bool | None = None  # whether stamps are epoch times (zero stamps are then dropped)
         self.zero_rows = 0
         self.zero_first: str | None = None
+        self.held_zeros = 0  # leading all-zero rows not yet known to be bad epoch stamps
+        self.held_first: str | None = None
         self.prev_stamp: Any = None
         self.prev_t: float | None = None
         self.first_step: float | None = None
@@ -1105,8 +1107,22 @@ class _Assembler:
         stamps = self._stamps(arrays["t"], where)
 
         zero = stamps == 0
+        if self.epoch is None and self.n == 0 and len(zero) > 1 and zero.all():
+            # undecided: hold the zero rows back until a stamp says whether they are a clock not yet set
+            self.held_zeros += len(zero)
+            self.held_first = self.held_first or where(0)
+            return None
         if self.epoch is None and not zero.all():  # decided by the first piece with a non-zero stamp
             self.epoch = bool(np.min(np.abs(stamps[~zero])) > _EPOCH_LIKE_S)
+            if self.held_zeros and self.epoch:
+                self.zero_rows += self.held_zeros
+                self.zero_first = self.held_first
+                self.held_zeros = 0
+            elif self.held_zeros:  # zeros, then times that are not epoch times: time stood still
+                raise LogFormatError(
+                    f"{name}: time is not strictly increasing at {self.held_first}: the log starts with "
+                    f"{self.held_zeros} rows stamped 0; sort the log by time and drop repeated stamps"
+                )
         if self.epoch and zero.any():
             rows = np.flatnonzero(zero)
             self.zero_rows += len(rows)
@@ -1193,7 +1209,14 @@ class _Assembler:
                         )
                         break
         self.unit = unit
-        _, self.offset = seconds_from_stamps(stamps, unit)
+        # Decided on the first piece, before the log's last stamp is known: relative already from
+        # ABSOLUTE_LIMIT_S / 2 (48 days) on, so that a log may run 48 more days and keep 1 ns resolution.
+        self.offset = None
+        if stamps.dtype.kind in "iu" or unit != "s":
+            per_s = _PER_SECOND[unit]
+            largest = max(abs(float(stamps[0])), abs(float(stamps[-1]))) / per_s
+            if largest >= ABSOLUTE_LIMIT_S / 2:
+                self.offset = int(stamps[0]) if stamps.dtype.kind in "iu" else float(stamps[0])
 
     def _pose(self, values: dict[str, Any], where: Callable[[int], str]) -> np.ndarray | None:
         """The optional (n, 3) pose, or None with a note when a pose cell is unusable (the pose is optional)."""
@@ -1220,7 +1243,12 @@ class _Assembler:
     def finish(self) -> list[str]:
         """The notes of the whole log; raises LogFormatError for a log with fewer than MIN_SAMPLES samples."""
         name, tcol, notes = self.name, self.mapping["t"], list(self.notes)
-        if self.n == 0 and self.zero_rows == 0:
+        if self.held_zeros > 1:  # only zeros: time stood still
+            raise LogFormatError(
+                f"{name}: time is not strictly increasing: all {self.held_zeros} rows are stamped 0; give the log "
+                "its time stamps"
+            )
+        if self.n == 0 and self.zero_rows == 0 and self.held_zeros == 0:
             raise LogFormatError(
                 f"{name}: has a header but no data rows; give a log with at least {MIN_SAMPLES} samples"
             )
