@@ -144,8 +144,13 @@ def test_compare_on_the_cli(tmp_path: Path) -> None:
     ("args", "needle"),
     [
         (("compare", "LOG", "--methods", "observer,magic"), "--method must be one of"),
-        (("identify", "LOG", "--method", "rls", "--forgetting", "1.5"), "--forgetting must be in (0, 1]"),
+        (("identify", "LOG", "--method", "rls", "--forgetting", "1.5"), "--forgetting must be in [0.98, 1]"),
         (("identify", "LOG", "--validate", "missing.csv"), "missing.csv: no such file"),
+        (("identify", "LOG", "--method", "oe", "--control-rate", "2000"), "modelled by the observer only"),
+        (("identify", "LOG", "--validate", "LOG", "--control-rate", "2000"), "--validate predictor"),
+        (("compare", "LOG", "--control-rate", "2000"), "modelled by the observer only"),
+        (("identify", "LOG", "--control-rate", "1e9"), "1,000,000 held sub-steps"),
+        (("identify", "-", "--validate", "-"), "cannot both be standard input"),
     ],
 )
 def test_bad_method_options_exit_2_with_one_line(args: tuple[str, ...], needle: str) -> None:
@@ -168,3 +173,9 @@ def test_report_shows_the_method_and_the_validation(tmp_path: Path) -> None:
     proc = wmrid("report", str(out), "--validate", str(SAMPLES / "paper_sinusoid.parquet"))
     assert proc.returncode == 2
     assert "need a log as INPUT" in proc.stderr
+
+
+def test_a_control_rate_no_faster_than_the_log_is_said_to_change_nothing() -> None:
+    proc = wmrid("identify", str(SAMPLES / "paper_sinusoid.csv"), "--control-rate", "1000", "--format", "json")
+    assert proc.returncode == 0, proc.stderr
+    assert any("not faster than the log" in w for w in json.loads(proc.stdout)["warnings"])

@@ -342,6 +342,21 @@ ValidateOpt = Annotated[
 ]
 
 
+def _check_control_rate(control_rate, methods: tuple[str, ...], validate) -> None:
+    """--control-rate is modelled by the observer only (the classical methods and the validation
+    predictor hold each logged effort over the whole step): refuse it where it would be ignored."""
+    if control_rate is None:
+        return
+    others = [m for m in methods if m != "observer"]
+    if others:
+        raise UsageError(
+            f"--control-rate is modelled by the observer only, not by {', '.join(others)}; drop it or use "
+            "--method observer"
+        )
+    if validate is not None:
+        raise UsageError("--control-rate is not modelled by the --validate predictor yet; validate without it")
+
+
 def _method_options(cutoff, weighted, forgetting, torque_hold):
     from wmrid.methods import MethodOptions
 
@@ -453,6 +468,9 @@ def identify(
     from wmrid.render import print_identification, to_json
 
     options = _method_options(cutoff, weighted, forgetting, torque_hold)
+    _check_control_rate(control_rate, (method.value,), validate)
+    if log == "-" and validate == "-":
+        raise UsageError("LOG and --validate cannot both be standard input; give one of them as a file")
     robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
     log_options = _log_options(locals())
     wheel_log = _read_wheel_log(log, columns, time_unit.value, robot_obj, **log_options, whole=False)
@@ -583,6 +601,8 @@ def report(
     if suffix not in (None, ".html", ".htm", ".md", ".json"):
         raise UsageError(f"-o {output}: the report format comes from the suffix: .html, .md or .json")
     truth_params = _load_truth(truth) if truth is not None else None
+    if input_ == "-" and validate == "-":
+        raise UsageError("INPUT and --validate cannot both be standard input; give one of them as a file")
     source = _open_source(input_)
     head = source.head(64).lstrip()
     result = log = None
@@ -602,6 +622,7 @@ def report(
 
         robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
         options = _method_options(cutoff, weighted, forgetting, torque_hold)
+        _check_control_rate(control_rate, (method.value,), validate)
         log_options = _log_options(locals())
         log = _read_wheel_log(input_, columns, time_unit.value, robot_obj, **log_options, data=source.data)
         result = run_identify(
@@ -704,6 +725,9 @@ def compare(
     if not names:
         raise UsageError("--methods names no method; give e.g. observer,idim")
     options = _method_options(cutoff, weighted, forgetting, torque_hold)
+    _check_control_rate(control_rate, names, validate)
+    if log == "-" and validate == "-":
+        raise UsageError("LOG and --validate cannot both be standard input; give one of them as a file")
     truth_params = _load_truth(truth) if truth is not None else None
     robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
     log_options = _log_options(locals())
@@ -1049,9 +1073,9 @@ def monitor(
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point: run the app and map every outcome to one exit code and at most one stderr line."""
-    from wmrid.interrupts import install
+    from wmrid.interrupts import install, restore
 
-    install()  # Ctrl-C is deferred while numba compiles (an interrupt there crashes LLVM)
+    previous = install()  # Ctrl-C is deferred while numba compiles (an interrupt there crashes LLVM)
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
     if debug:  # accepted anywhere on the line, not only before the command
@@ -1085,6 +1109,9 @@ def main(argv: list[str] | None = None) -> None:
                 "(run with --debug for the traceback)\n"
             )
             code = ExitStatus.NO_RESULT
+    if argv is not None:  # called in-process: leave the caller's signal handlers as they were
+        restore(previous)
+        sys.exit(int(code))
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the outcome is decided: a late Ctrl-C must not change it
     if code == ExitStatus.INTERRUPTED:
         # Python remembers a KeyboardInterrupt that went through an embedded interpreter call (even one caught

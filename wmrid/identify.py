@@ -274,6 +274,7 @@ def _identify(
             f"(the median step is {sv.median_step:.3g} s), and the estimator cannot bridge it; cut the log into its "
             "continuous parts and identify each"
         )
+    hold_warnings = _control_rate_check(control_rate, sv, source)
     chosen = resolve_form(sv.form(), form)
     units = model.base_units(effort_unit)
     early_warnings = []
@@ -340,7 +341,7 @@ def _identify(
     diagnostics, warnings = _diagnose(
         gamma, alpha, chosen, fit, parameters, theta, theta_cov, sens, undetermined, lo, hi, units
     )
-    warnings = early_warnings + sv.signal_warnings() + physics_warnings(parameters) + warnings
+    warnings = early_warnings + hold_warnings + sv.signal_warnings() + physics_warnings(parameters) + warnings
     dof = unc["dof"]
     diagnostics["uncertainty"] = {
         "method": "delete-a-segment jackknife over contiguous segments of the log",
@@ -382,6 +383,13 @@ def _identify(
     )  # fmt: skip
 
 
+#: Diagnostics that describe the observer's run on the log (kept, and listed as such, under another method).
+OBSERVER_DIAGNOSTICS = (
+    "lambda_min_gamma", "lambda_max_gamma", "condition_number_scaled", "weakest_directions", "undetermined",
+    "not_separable", "at_box_boundary", "start_sensitivity", "structural_mismatch", "prediction_error_rms",
+)  # fmt: skip
+
+
 def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot | None = None) -> IdentificationResult:
     """``result`` (the observer's run on a log) reporting another method's estimate ``est`` of the same log.
 
@@ -397,6 +405,7 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
     diagnostics["observer_parameters"] = {name: {"value": v, "std": _finite_or_none(e)} for name, (v, e) in
                                           result.parameters.items()}  # fmt: skip
     diagnostics["method"] = {"name": est.method, "seconds": est.seconds, "dof": est.dof, **est.diagnostics}
+    diagnostics["from_observer"] = [k for k in OBSERVER_DIAGNOSTICS if k in diagnostics]
     dof = est.dof
     diagnostics["uncertainty"] = {
         "method": est.diagnostics.get("uncertainty", f"standard errors of method {est.method}"),
@@ -454,6 +463,29 @@ def physics_warnings(parameters: dict[str, tuple[float, float]]) -> list[str]:
 #: A base parameter is not determined by the log when the start value moves it by more than its
 #: standard error and by more than this fraction of its value.
 START_RELEVANT = 1e-4
+
+
+#: Most sub-steps --control-rate may split one log step into (a 1 kHz controller under a 0.1 Hz log).
+MAX_SUBSTEPS = 10_000
+
+
+def _control_rate_check(control_rate: float | None, sv: Any, source: str) -> list[str]:
+    """Refuse a control rate that splits a step into absurdly many sub-steps; warn when it changes nothing."""
+    if control_rate is None or not (math.isfinite(control_rate) and control_rate > 0):
+        return []  # None, or refused by ObserverSettings with its own message
+    most = round(sv.max_step * control_rate)
+    if most > MAX_SUBSTEPS:
+        raise UsageError(
+            f"{source}: --control-rate {control_rate:g} Hz splits the longest step ({sv.max_step:.3g} s) into "
+            f"{most:,} held sub-steps (at most {MAX_SUBSTEPS:,}); give the controller's rate in Hz"
+        )
+    rate = 1.0 / sv.median_step if sv.median_step > 0 else math.inf
+    if control_rate < 1.5 * rate:
+        return [
+            f"--control-rate {control_rate:g} Hz is not faster than the log ({rate:.6g} Hz): each step keeps one "
+            "held effort, as without the option"
+        ]
+    return []
 
 
 def torque_unexcited(gamma: np.ndarray, alpha: float) -> bool:

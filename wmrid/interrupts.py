@@ -35,8 +35,20 @@ def _interrupt(signum: int, frame: FrameType | None) -> None:
     raise KeyboardInterrupt
 
 
-def install() -> None:
-    """Use the deferring handler for SIGINT (and SIGALRM, its retry); call once, from the main thread."""
-    signal.signal(signal.SIGINT, _interrupt)
+def install() -> dict[int, object]:
+    """Use the deferring handler for SIGINT (and SIGALRM, its retry); call from the main thread.
+
+    Returns the handlers it replaced, for :func:`restore`.
+    """
+    previous = {signal.SIGINT: signal.signal(signal.SIGINT, _interrupt)}
     if hasattr(signal, "SIGALRM"):
-        signal.signal(signal.SIGALRM, _interrupt)
+        previous[signal.SIGALRM] = signal.signal(signal.SIGALRM, _interrupt)
+    return previous
+
+
+def restore(previous: dict[int, object]) -> None:
+    """Put back the handlers :func:`install` replaced, and cancel a pending retry."""
+    if hasattr(signal, "setitimer"):
+        signal.setitimer(signal.ITIMER_REAL, 0)
+    for signum, handler in previous.items():
+        signal.signal(signum, handler)  # type: ignore[arg-type]

@@ -9,17 +9,19 @@ problem); :func:`run` then reports the chosen method's estimate through
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
-from wmrid.errors import UsageError
+from wmrid.errors import UsageError, WmridError
 from wmrid.estimate import BaseEstimate
 from wmrid.identify import IdentificationResult, with_estimate
 from wmrid.robot import Robot
 
 METHODS = ("observer", "idim", "rls", "oe")
+#: The smallest RLS forgetting factor: a memory of 1/(1 - lambda) = 50 samples, about six per parameter.
+MIN_FORGETTING = 0.98
 DESCRIPTIONS = {
     "observer": "the paper's observer-based adaptive estimator (Eqs. 26-37), no accelerations",
     "idim": "inverse dynamic model, least squares on zero-phase low-pass filtered and differentiated speeds",
@@ -45,8 +47,11 @@ class MethodOptions:
     def __post_init__(self) -> None:
         if self.cutoff_hz is not None and not (np.isfinite(self.cutoff_hz) and self.cutoff_hz > 0):
             raise UsageError(f"--cutoff must be a positive frequency in Hz, got {self.cutoff_hz!r}")
-        if not (0.0 < self.forgetting <= 1.0):
-            raise UsageError(f"--forgetting must be in (0, 1], got {self.forgetting!r}")
+        if not (MIN_FORGETTING <= self.forgetting <= 1.0):
+            raise UsageError(
+                f"--forgetting must be in [{MIN_FORGETTING}, 1], got {self.forgetting!r}: below, the recursion "
+                f"remembers fewer than {round(1 / (1 - MIN_FORGETTING))} samples for 8 parameters"
+            )
 
 
 def check_method(name: str) -> str:
@@ -56,7 +61,10 @@ def check_method(name: str) -> str:
 
 
 def estimate(name: str, log: Any, observer: IdentificationResult, options: MethodOptions) -> BaseEstimate:
-    """Method ``name``'s estimate on ``log`` (in memory); ``observer`` is the observer's result on the same log."""
+    """Method ``name``'s estimate on ``log`` (in memory); ``observer`` is the observer's result on the same log.
+
+    Errors of the methods are re-raised with the log's name in front, like every other wmrid error.
+    """
     check_method(name)
     if name == "observer":
         assert observer.estimate is not None
@@ -64,18 +72,30 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
     t = np.asarray(log.t, dtype=np.float64)
     eta = np.asarray(log.eta, dtype=np.float64)
     tau = np.asarray(log.tau, dtype=np.float64)
-    if name == "idim":
-        from wmrid.idim import identify_idim
+    source = getattr(log, "source", observer.source)
+    try:
+        if name == "idim":
+            from wmrid.idim import identify_idim
 
-        return identify_idim(t, eta, tau, cutoff_hz=options.cutoff_hz, weighted=options.weighted)
-    if name == "rls":
-        from wmrid.rls import identify_rls
+            return identify_idim(t, eta, tau, cutoff_hz=options.cutoff_hz, weighted=options.weighted)
+        if name == "rls":
+            from wmrid.rls import identify_rls
 
-        return identify_rls(t, eta, tau, forgetting=options.forgetting, cutoff_hz=options.cutoff_hz)
-    from wmrid.output_error import identify_oe
+            return identify_rls(t, eta, tau, forgetting=options.forgetting, cutoff_hz=options.cutoff_hz)
+        from wmrid.output_error import identify_oe
 
-    assert observer.estimate is not None
-    return identify_oe(t, eta, tau, np.asarray(observer.estimate.theta0), torque_hold=options.torque_hold)
+        assert observer.estimate is not None
+        est = identify_oe(t, eta, tau, np.asarray(observer.estimate.theta0), torque_hold=options.torque_hold)
+        diagnostics = {
+            **est.diagnostics,
+            "uncertainty": "cluster-robust sandwich over contiguous segments of the log",
+            "segments": est.diagnostics.get("clusters"),
+        }
+        return replace(est, diagnostics=diagnostics)
+    except WmridError as err:
+        if str(err).startswith(source):
+            raise
+        raise type(err)(f"{source}: {name}: {err}") from err
 
 
 def run(
