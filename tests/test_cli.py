@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cliutil import assert_clean_error, wmrid
 
 from wmrid import model
 from wmrid.robot import BUILTIN_ROBOTS, Payload
@@ -20,29 +18,10 @@ SAMPLE_PARQUET = ROOT / "sample_logs" / "paper_sinusoid.parquet"
 REPORTED = ["m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2"]
 
 
-def wmrid(*args: str, stdin: bytes | None = None, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    env = dict(os.environ, COLUMNS="100")
-    return subprocess.run(
-        [sys.executable, "-m", "wmrid", *args], input=stdin, capture_output=True, cwd=cwd, env=env, timeout=300
-    )
-
-
 def identify_json(*args: str, stdin: bytes | None = None) -> dict:
     proc = wmrid("identify", *args, "--format", "json", stdin=stdin)
     assert proc.returncode == 0, proc.stderr.decode()
     return json.loads(proc.stdout)  # exactly one JSON object on stdout, nothing else
-
-
-def assert_clean_error(proc: subprocess.CompletedProcess, code: int, *needles: str) -> str:
-    err = proc.stderr.decode()
-    assert proc.returncode == code, err
-    assert "Traceback" not in err
-    assert proc.stdout == b""
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    for needle in needles:
-        assert needle in lines[0], (needle, lines[0])
-    return lines[0]
 
 
 def truth_of(path: Path) -> dict:

@@ -9,14 +9,12 @@ user would: ``wmrid identify LOG0 --robot paper -o RESULT.json``.
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from cliutil import assert_clean_error, wmrid
 from scipy.stats import chi2
 
 from wmrid import model
@@ -261,24 +259,6 @@ def test_a_log_shorter_than_the_calibration_is_refused(unloaded) -> None:
 
 
 # ------------------------------------------------------------------------------------------------ CLI
-
-
-def wmrid(*args: str) -> subprocess.CompletedProcess:
-    """The real command line in a subprocess (as tests/test_cli.py runs it)."""
-    env = dict(os.environ, COLUMNS="100")
-    return subprocess.run([sys.executable, "-m", "wmrid", *args], capture_output=True, env=env, timeout=300)
-
-
-def assert_clean_error(proc: subprocess.CompletedProcess, code: int, *needles: str) -> str:
-    err = proc.stderr.decode()
-    assert proc.returncode == code, err
-    assert "Traceback" not in err
-    assert proc.stdout == b""
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    for needle in needles:
-        assert needle in lines[0], (needle, lines[0])
-    return lines[0]
 
 
 def write_sim(sim, path: Path) -> Path:

@@ -3,14 +3,12 @@
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from cliutil import assert_clean_error, wmrid
 
 from wmrid import model
 from wmrid.errors import UsageError
@@ -292,24 +290,6 @@ def test_option_parsers() -> None:
 
 
 # ------------------------------------------------------------------------------------------------- CLI
-
-
-def wmrid(*args: str) -> subprocess.CompletedProcess:
-    """The real command line in a subprocess (as tests/test_cli.py runs it)."""
-    env = dict(os.environ, COLUMNS="100")
-    return subprocess.run([sys.executable, "-m", "wmrid", *args], capture_output=True, env=env, timeout=300)
-
-
-def assert_clean_error(proc: subprocess.CompletedProcess, code: int, *needles: str) -> str:
-    err = proc.stderr.decode()
-    assert proc.returncode == code, err
-    assert "Traceback" not in err
-    assert proc.stdout == b""
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    for needle in needles:
-        assert needle in lines[0], (needle, lines[0])
-    return lines[0]
 
 
 def test_cli_payload_loaded_at_t_writes_log_and_truth_with_both_sets(tmp_path: Path) -> None:
