@@ -116,13 +116,19 @@ def test_identify_method_on_the_cli(method: str) -> None:
         assert "observer_parameters" in out["diagnostics"]
 
 
-def test_validate_on_the_cli_writes_the_fit() -> None:
-    proc = wmrid("identify", str(SAMPLES / "paper_sinusoid.csv"), "--robot", "paper", "--validate",
-                 str(SAMPLES / "paper_sinusoid.parquet"), "--format", "json")  # fmt: skip
+def test_validate_on_the_cli_writes_the_fit(tmp_path: Path) -> None:
+    # A second, noisy log of the same robot (another seed): the model of the sample log predicts it well.
+    other = tmp_path / "other.csv"
+    made = wmrid("simulate", "-o", str(other), "--duration", "20", "--seed", "5", "--eta-noise", "0.01",
+                 "--caster", "0.05")  # fmt: skip
+    assert made.returncode == 0, made.stderr
+    proc = wmrid("identify", str(SAMPLES / "paper_sinusoid.csv"), "--robot", "paper", "--validate", str(other),
+                 "--format", "json")  # fmt: skip
     assert proc.returncode == 0, proc.stderr
-    fit = json.loads(proc.stdout)["validation"]["fit_percent"]
-    assert set(fit) == {"eta_r", "eta_l"}
-    assert min(fit.values()) > 99.9  # the same noise-free log: the model predicts it to within the integration error
+    validation = json.loads(proc.stdout)["validation"]
+    assert set(validation["fit_percent"]) == {"eta_r", "eta_l"}
+    assert min(validation["fit_percent"].values()) >= 80.0
+    assert validation["log"] == str(other)
 
 
 def test_compare_on_the_cli(tmp_path: Path) -> None:
