@@ -139,9 +139,10 @@ class WheelLog:
 
 #: Rows per piece when a log is read in pieces (about 10 MB of t, eta, tau).
 CHUNK_ROWS = 262_144
-#: A stream keeps its pieces after the first pass when the log has at most this many samples (40 MB),
-#: so that a second pass (identify's replay) does not read the file again; longer logs are re-read.
-CACHE_ROWS = 1_048_576
+#: A stream keeps its pieces after the first pass when the log has at most this many samples (160 MB;
+#: about 70 min at 1 kHz), so that a second pass (identify's replay) does not read the file again; longer
+#: logs are re-read, so memory never exceeds this cache plus one piece.
+CACHE_ROWS = 4_194_304
 
 
 class LogStream:
@@ -430,7 +431,7 @@ def open_log(
 
 #: An MCAP whose JointState topics hold at most this many pieces' worth of messages is decoded whole, in one
 #: pass (a stream of that length keeps its samples in memory anyway); a longer one is streamed.
-_MCAP_WHOLE_PIECES = CACHE_ROWS // CHUNK_ROWS
+_MCAP_WHOLE_PIECES = 4  # pieces of CHUNK_ROWS: bags of up to ~1 M messages are decoded in one pass
 
 
 def _read_mcap_log(

@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from wmrid.errors import NotIdentifiableError
@@ -123,20 +124,14 @@ def survey(pieces: Iterable, source: str, effort_unit: str = "N m") -> Survey:
     prev_t = None
     last_bucket = -1
     sparse_t, sparse_eta, sparse_tau = [], [], []
+    acc = np.zeros(14)  # per wheel: speeds > 0, < 0; efforts < 0, > 0; power, |power|, opposing samples
     for piece in pieces:
         t, eta, tau = piece.t, piece.eta, piece.tau
         k = len(t)
         if k == 0:
             continue
-        for arr, what, unit in ((eta, "wheel speed", "rad/s"), (tau, "effort", effort_unit)):
-            with np.errstate(invalid="ignore"):
-                bad = ~np.isfinite(arr) | (np.abs(arr) > PLAUSIBLE_LIMIT)
-            if bad.any():
-                i = int(np.argmax(bad.any(axis=1)))
-                raise NotIdentifiableError(
-                    f"{source}: a {what} of {arr[i][bad[i]][0]:.3g} {unit} at t = {t[i]:.6g} s is not a number a "
-                    "robot logs; check the log's units and columns"
-                )
+        if _piece_stats(eta, tau, PLAUSIBLE_LIMIT, acc) >= 0:
+            _raise_implausible(t, eta, tau, source, effort_unit)
         steps = np.diff(t) if prev_t is None else np.diff(t, prepend=prev_t)
         if sv.n == 0:
             sv.t_first = float(t[0])
@@ -154,19 +149,13 @@ def survey(pieces: Iterable, source: str, effort_unit: str = "N m") -> Survey:
         sparse_t.append(t[keep])  # boolean indexing copies: no view keeps the piece alive
         sparse_eta.append(eta[keep])
         sparse_tau.append(tau[keep])
-        sv.positive &= np.all(eta > 0, axis=0)
-        sv.negative &= np.all(eta < 0, axis=0)
-        sv.speed_pos += np.count_nonzero(eta > 0, axis=0)
-        sv.speed_neg += np.count_nonzero(eta < 0, axis=0)
-        sv.effort_nonneg &= np.all(tau >= 0, axis=0)
-        sv.effort_nonpos &= np.all(tau <= 0, axis=0)
-        prod = tau * eta
-        sv.power += prod.sum(axis=0)
-        sv.abs_power += np.abs(prod).sum(axis=0)
-        sv.opposing += np.count_nonzero(prod < 0, axis=0)
         sv.n += k
         prev_t = float(t[-1])
         sv.t_last = prev_t
+    sv.speed_pos, sv.speed_neg = acc[0:2].copy(), acc[2:4].copy()
+    sv.positive, sv.negative = sv.speed_pos == sv.n, sv.speed_neg == sv.n
+    sv.effort_nonneg, sv.effort_nonpos = acc[4:6] == 0, acc[6:8] == 0
+    sv.power, sv.abs_power, sv.opposing = acc[8:10].copy(), acc[10:12].copy(), acc[12:14].copy()
     sv.median_step = _median_step(exact, hist)
     if sparse_t:
         sv.sparse_t = np.concatenate(sparse_t)
@@ -215,3 +204,41 @@ def _median_step(exact: dict[float, int] | None, hist: dict[int, int]) -> float:
     key = int(keys[np.searchsorted(cum, cum[-1] / 2.0)])
     exponent, sub = divmod(key, _BUCKETS_PER_OCTAVE)
     return float(np.ldexp(0.5 + (sub + 0.5) / (2 * _BUCKETS_PER_OCTAVE), exponent))  # the bucket's middle
+
+
+def _raise_implausible(t: np.ndarray, eta: np.ndarray, tau: np.ndarray, source: str, effort_unit: str) -> None:
+    for arr, what, unit in ((eta, "wheel speed", "rad/s"), (tau, "effort", effort_unit)):
+        with np.errstate(invalid="ignore"):
+            bad = ~np.isfinite(arr) | (np.abs(arr) > PLAUSIBLE_LIMIT)
+        if bad.any():
+            i = int(np.argmax(bad.any(axis=1)))
+            raise NotIdentifiableError(
+                f"{source}: a {what} of {arr[i][bad[i]][0]:.3g} {unit} at t = {t[i]:.6g} s is not a number a "
+                "robot logs; check the log's units and columns"
+            )
+
+
+@numba.njit(cache=True, nogil=True)
+def _piece_stats(eta, tau, limit, acc):
+    """One pass over a piece, eta and tau (k, 2): adds to acc (14,) the counts and sums of :class:`Survey`
+    (see survey()); returns the first row holding a non-finite or implausible value, or -1."""
+    for i in range(eta.shape[0]):
+        for w in range(2):
+            e = eta[i, w]
+            u = tau[i, w]
+            if not (abs(e) <= limit and abs(u) <= limit):  # also NaN
+                return i
+            if e > 0:
+                acc[w] += 1
+            elif e < 0:
+                acc[2 + w] += 1
+            if u < 0:
+                acc[4 + w] += 1
+            elif u > 0:
+                acc[6 + w] += 1
+            prod = u * e
+            acc[8 + w] += prod
+            acc[10 + w] += abs(prod)
+            if prod < 0:
+                acc[12 + w] += 1
+    return -1
