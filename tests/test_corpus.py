@@ -341,24 +341,32 @@ def test_broken_log_gets_a_clear_answer(tmp_path, case: Case):
     assert _finite_numbers([v for v in values if v is not None]), f"non-finite parameters: {values}"
 
 
-def test_interrupt_exits_130(tmp_path):
-    """Ctrl-C while wmrid waits for a log on standard input: exit 130, one short line, no traceback."""
+def _interrupted(args: list[str], delay: float, cwd: Path, timeout: float) -> subprocess.CompletedProcess:
+    """``wmrid ARGS`` in a subprocess, sent SIGINT after ``delay`` s (stdin a pipe, left open); its outcome."""
     proc = subprocess.Popen(
-        [sys.executable, "-m", "wmrid", "identify", "-", "--format", "json"],
+        [sys.executable, "-m", "wmrid", *args],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-        cwd=tmp_path,
+        cwd=cwd,
     )
     try:
-        time.sleep(3.0)  # past the imports: now blocked reading standard input
+        time.sleep(delay)
         proc.send_signal(signal.SIGINT)
-        stdout, stderr = proc.communicate(timeout=120)
+        stdout, stderr = proc.communicate(timeout=timeout)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+    return subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr)
+
+
+def test_interrupt_exits_130(tmp_path):
+    """Ctrl-C while wmrid waits for a log on standard input: exit 130, one short line, no traceback."""
+    # 3 s: past the imports, now blocked reading standard input
+    proc = _interrupted(["identify", "-", "--format", "json"], 3.0, tmp_path, timeout=120)
+    stdout, stderr = proc.stdout, proc.stderr
     assert "Traceback" not in stderr, stderr
     assert len(stderr.splitlines()) <= 3, stderr
     assert proc.returncode == 130, (proc.returncode, stderr)
@@ -371,21 +379,10 @@ def test_interrupt_leaves_no_partial_output(tmp_path, delay):
     """Ctrl-C at some point of `simulate` writing a long log: afterwards the folder holds either nothing or the
     complete log with its truth (they are renamed into place together), never a part or a temporary file."""
     out = tmp_path / "long.parquet"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "wmrid", "simulate", "-o", str(out), "--duration", "600", "--eta-noise", "0.01"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        cwd=tmp_path,
-    )
-    try:
-        time.sleep(delay)  # the delays fall before, during and (on a fast machine) after the writing
-        proc.send_signal(signal.SIGINT)
-        _, stderr = proc.communicate(timeout=300)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+    # the delays fall before, during and (on a fast machine) after the writing
+    args = ["simulate", "-o", str(out), "--duration", "600", "--eta-noise", "0.01"]
+    proc = _interrupted(args, delay, tmp_path, timeout=300)
+    stderr = proc.stderr
     assert "Traceback" not in stderr, stderr
     assert proc.returncode in (0, 130), (proc.returncode, stderr)
     left = sorted(p.name for p in tmp_path.iterdir())

@@ -1,7 +1,7 @@
 """Outputs are written atomically: a reader sees the old file or the complete new one, never half of it.
 
 Every file wmrid writes goes through :func:`atomic_output`: the data go to a hidden temporary file in the
-target's own folder (``.<name>.XXXX.tmp``), are flushed and fsynced, and only then take the target's
+target's own folder (``.<name>.<random suffix>.tmp``), are flushed and fsynced, and only then take the target's
 name with :func:`os.replace` (one rename on the same file system).  Any exception before that point —
 including ``KeyboardInterrupt`` — removes the temporary file and leaves the target as it was.
 

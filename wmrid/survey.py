@@ -34,10 +34,11 @@ class Survey:
     n : samples.  t_first, t_last : s.  median_step : s, the median time step (exact while the log has at
     most EXACT_STEPS distinct steps, else to 0.024 %; never dependent on how the log was cut into pieces).
     min_step, max_step : s; max_step_after : s, the time before the largest step.
-    positive, negative : (2,) bool, whether every speed of the wheel is > 0 (< 0).
+    positive, negative (properties) : (2,) bool, whether every speed of the wheel is > 0 (< 0).
     sparse_t (m,) s, sparse_eta (m, 2) rad/s, sparse_tau (m, 2): the first sample of each START_SPACING_S
     interval of time from t_first.
-    Per wheel (2,) counts and sums for :meth:`signal_warnings`.
+    Per wheel (2,): speed_pos, speed_neg, effort_pos, effort_neg counts of samples > 0 and < 0; power,
+    abs_power, opposing: sums of tau eta, |tau eta| and the count of tau eta < 0 (:meth:`signal_warnings`).
     """
 
     source: str
@@ -49,15 +50,13 @@ class Survey:
     min_step: float = np.inf
     max_step: float = 0.0
     max_step_after: float = 0.0
-    positive: np.ndarray = field(default_factory=lambda: np.ones(2, dtype=bool))
-    negative: np.ndarray = field(default_factory=lambda: np.ones(2, dtype=bool))
     sparse_t: np.ndarray = field(default_factory=lambda: np.empty(0))
     sparse_eta: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
     sparse_tau: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
     speed_pos: np.ndarray = field(default_factory=lambda: np.zeros(2))
     speed_neg: np.ndarray = field(default_factory=lambda: np.zeros(2))
-    effort_nonneg: np.ndarray = field(default_factory=lambda: np.ones(2, dtype=bool))
-    effort_nonpos: np.ndarray = field(default_factory=lambda: np.ones(2, dtype=bool))
+    effort_neg: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    effort_pos: np.ndarray = field(default_factory=lambda: np.zeros(2))
     power: np.ndarray = field(default_factory=lambda: np.zeros(2))
     abs_power: np.ndarray = field(default_factory=lambda: np.zeros(2))
     opposing: np.ndarray = field(default_factory=lambda: np.zeros(2))
@@ -65,6 +64,16 @@ class Survey:
     @property
     def duration(self) -> float:
         return self.t_last - self.t_first
+
+    @property
+    def positive(self) -> np.ndarray:
+        """(2,) bool: every speed of the wheel is > 0."""
+        return self.speed_pos == self.n
+
+    @property
+    def negative(self) -> np.ndarray:
+        """(2,) bool: every speed of the wheel is < 0."""
+        return self.speed_neg == self.n
 
     def form(self) -> RegressorForm:
         """The paper's form when each wheel keeps one strict sign (as :func:`wmrid.model.choose_form`)."""
@@ -96,7 +105,7 @@ class Survey:
         n = max(self.n, 1)
         for i, wheel in enumerate(("right", "left")):
             other_way = min(self.speed_neg[i], self.speed_pos[i]) / n
-            if other_way > 0.05 and (self.effort_nonneg[i] or self.effort_nonpos[i]):
+            if other_way > 0.05 and (self.effort_neg[i] == 0 or self.effort_pos[i] == 0):
                 out.append(
                     f"the {wheel} wheel's effort never changes sign while its speed does "
                     f"({100 * other_way:.0f} % of samples the other way): the log holds a magnitude "
@@ -153,8 +162,7 @@ def survey(pieces: Iterable, source: str, effort_unit: str = "N m") -> Survey:
         prev_t = float(t[-1])
         sv.t_last = prev_t
     sv.speed_pos, sv.speed_neg = acc[0:2].copy(), acc[2:4].copy()
-    sv.positive, sv.negative = sv.speed_pos == sv.n, sv.speed_neg == sv.n
-    sv.effort_nonneg, sv.effort_nonpos = acc[4:6] == 0, acc[6:8] == 0
+    sv.effort_neg, sv.effort_pos = acc[4:6].copy(), acc[6:8].copy()
     sv.power, sv.abs_power, sv.opposing = acc[8:10].copy(), acc[10:12].copy(), acc[12:14].copy()
     sv.median_step = _median_step(exact, hist)
     if sparse_t:
