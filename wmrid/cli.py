@@ -68,6 +68,11 @@ class Trajectory(str, Enum):
     reversing = "reversing"
 
 
+class Engine(str, Enum):
+    reduced = "reduced"
+    mujoco = "mujoco"
+
+
 class TimeSource(str, Enum):
     auto = "auto"
     header = "header"
@@ -893,6 +898,33 @@ def simulate(
     drop_at: DropAtOpt = None,
     friction_fault: FrictionFaultOpt = None,
     fault_at: FaultAtOpt = None,
+    engine: Annotated[
+        Engine,
+        typer.Option(
+            help="reduced: the paper's reduced model (Eqs. 9-14); mujoco: a multibody prototype (rigid bodies, "
+            "wheel-ground contact, casters) that knows nothing of those equations (pip install 'wmrid[physics]').",
+            rich_help_panel="Multibody prototype",
+        ),
+    ] = Engine.reduced,
+    floor_friction: Annotated[
+        float,
+        typer.Option(
+            help="mujoco: Coulomb friction of the wheels on the floor (low values let them slip).",
+            rich_help_panel="Multibody prototype",
+        ),
+    ] = 1.0,
+    caster_resistance: Annotated[
+        float | None,
+        typer.Option(
+            help="mujoco: rolling-resistance coefficient of every caster (drag / normal load; 0: frictionless); "
+            "default: the robot file's [[caster]] values, else 0.015 (polyurethane).",
+            rich_help_panel="Multibody prototype",
+        ),
+    ] = None,
+    torque_limit: Annotated[
+        float | None,
+        typer.Option(help="mujoco: clip each wheel torque to +-this, N m.", rich_help_panel="Multibody prototype"),
+    ] = None,
 ) -> None:
     """Simulate the paper's virtual prototype and write a log plus its ground truth (<log>.truth.json).
 
@@ -948,16 +980,33 @@ def simulate(
     noise = NoiseSettings(
         eta_std=eta_noise, tau_std=tau_noise, caster_std=caster, caster_time=caster_time, encoder_cpr=encoder_cpr
     )
-    sim = run_simulate(
-        truth_params,
-        robot_obj.nominal,
-        trajectory=trajectory.value,
-        duration=duration,
-        rate=rate,
-        noise=noise,
-        seed=seed,
-        change=change,
-    )
+    if engine == Engine.mujoco:
+        from wmrid.multibody import MultibodySettings, import_mujoco, simulate_multibody
+
+        import_mujoco()  # before anything else, so that a missing engine says how to install it
+        mb_settings = MultibodySettings(
+            floor_friction=floor_friction, caster_resistance=caster_resistance, torque_limit=torque_limit
+        )
+        sim = simulate_multibody(
+            robot_obj.reference, robot_obj.nominal, casters=robot_obj.casters, settings=mb_settings,
+            trajectory=trajectory.value, duration=duration, rate=rate, noise=noise, seed=seed, change=change,
+            payload=load,
+        )  # fmt: skip
+    else:
+        for name, value, default in (("--floor-friction", floor_friction, 1.0), ("--caster-resistance",
+                                     caster_resistance, None), ("--torque-limit", torque_limit, None)):  # fmt: skip
+            if value != default:
+                raise UsageError(f"{name} applies to --engine mujoco only; the reduced model has no floor or casters")
+        sim = run_simulate(
+            truth_params,
+            robot_obj.nominal,
+            trajectory=trajectory.value,
+            duration=duration,
+            rate=rate,
+            noise=noise,
+            seed=seed,
+            change=change,
+        )
     truth = sim.truth()
     truth["robot"] = robot_obj.name
     if load is not None:

@@ -159,6 +159,57 @@ class Payload:
         return cls(mass=mass, x=x, y=y, inertia=inertia)
 
 
+#: Kinds of caster the multibody prototype builds.
+CASTER_KINDS = ("ball", "swivel")
+#: Default rolling-resistance coefficient of a caster (force / normal load): polyurethane on a hard floor.
+DEFAULT_CASTER_RESISTANCE = 0.015
+
+
+@dataclass(frozen=True)
+class Caster:
+    """A passive caster under the platform (only the multibody prototype uses it).
+
+    x, y : m, its ground contact in the platform frame (for a swivel caster: its swivel axis);
+    radius : m, of the ball or caster wheel; kind : ``ball`` or ``swivel``;
+    resistance : rolling-resistance coefficient, the drag force over the normal load (>= 0);
+    trail : m, swivel casters only: how far the wheel's contact trails behind the swivel axis.
+    """
+
+    x: float
+    y: float = 0.0
+    radius: float = 0.025
+    kind: str = "ball"
+    resistance: float = DEFAULT_CASTER_RESISTANCE
+    trail: float = 0.03
+
+    def __post_init__(self) -> None:
+        for name in ("x", "y", "radius", "resistance", "trail"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
+                raise RobotFileError(f"caster {name} must be a finite number, got {value!r}")
+            object.__setattr__(self, name, float(value))
+        if self.kind not in CASTER_KINDS:
+            raise RobotFileError(f"caster kind must be one of {', '.join(CASTER_KINDS)}, got {self.kind!r}")
+        if self.radius <= 0:
+            raise RobotFileError(f"caster radius must be > 0 m, got {self.radius}")
+        if self.resistance < 0 or self.trail < 0:
+            raise RobotFileError("caster resistance and trail must be >= 0")
+
+    def to_dict(self) -> dict[str, float | str]:
+        return dataclasses.asdict(self)
+
+
+def default_casters(p: PhysicalParameters) -> tuple[Caster, ...]:
+    """Two ball casters on the centre line, in front of and behind the axle, at x = +-max(b, 3 |d_x|).
+
+    Far enough out that the centre of mass stays inside the support polygon; radius min(0.025 m, 0.4 r);
+    resistance :data:`DEFAULT_CASTER_RESISTANCE`.
+    """
+    reach = max(p.b, 3.0 * abs(p.d_x))
+    radius = min(0.025, 0.4 * p.r)
+    return (Caster(x=reach, radius=radius), Caster(x=-reach, radius=radius))
+
+
 @dataclass(frozen=True)
 class Robot:
     """A named robot: nominal parameters and, when known, CAD (reference) parameters."""
@@ -168,6 +219,7 @@ class Robot:
     cad: PhysicalParameters | None = None
     torque_constant: float | None = None  # N m/A, of each motor ([motor] table)
     efficiency: float | None = None  # of the gearbox ([motor] table)
+    casters: tuple[Caster, ...] | None = None  # [[caster]] tables; None: default_casters (multibody only)
 
     @property
     def reference(self) -> PhysicalParameters:
@@ -187,8 +239,31 @@ PAPER_CAD = PhysicalParameters(
     F_v1=0.01, F_v2=0.015, F_d1=0.045, F_d2=0.04,
 )  # fmt: skip
 
+# A light AMR (about 14 kg, 16 cm wheels, 20:1 gears) and a heavy base (about 170 kg, 30:1), for the
+# multibody prototype's benchmark: the nominal sets are round-number guesses 10-20 % off the CAD sets.
+AMR_CAD = PhysicalParameters(
+    I_p=0.32, m_p=12.0, d_x=-0.04, d_y=0.004, I_wm=0.0009, I_w=0.0016, m_w=0.6, a=0.185,
+    m_r=0.12, I_rm=2e-5, I_r=4e-6, c_x=0.03, c_y=0.11, k_r=20.0, r=0.08, b=0.2,
+    F_v1=0.004, F_v2=0.005, F_d1=0.02, F_d2=0.025,
+)  # fmt: skip
+AMR_NOMINAL = PhysicalParameters(
+    I_p=0.28, m_p=11.0, d_x=0.0, d_y=0.0, I_wm=0.001, I_w=0.0015, m_w=0.5, a=0.18,
+    m_r=0.1, I_rm=2e-5, I_r=5e-6, c_x=0.03, c_y=0.11, k_r=20.0, r=0.08, b=0.2,
+)  # fmt: skip
+HEAVY_CAD = PhysicalParameters(
+    I_p=14.0, m_p=160.0, d_x=0.06, d_y=-0.01, I_wm=0.02, I_w=0.035, m_w=3.5, a=0.3,
+    m_r=0.6, I_rm=3e-4, I_r=6e-5, c_x=0.08, c_y=0.18, k_r=30.0, r=0.1, b=0.3,
+    F_v1=0.08, F_v2=0.09, F_d1=0.5, F_d2=0.45,
+)  # fmt: skip
+HEAVY_NOMINAL = PhysicalParameters(
+    I_p=12.0, m_p=150.0, d_x=0.05, d_y=0.0, I_wm=0.02, I_w=0.03, m_w=3.0, a=0.3,
+    m_r=0.5, I_rm=3e-4, I_r=5e-5, c_x=0.08, c_y=0.18, k_r=30.0, r=0.1, b=0.3,
+)  # fmt: skip
+
 BUILTIN_ROBOTS: dict[str, Robot] = {
     "paper": Robot(name="paper", nominal=PAPER_NOMINAL, cad=PAPER_CAD),
+    "amr": Robot(name="amr", nominal=AMR_NOMINAL, cad=AMR_CAD),
+    "heavy": Robot(name="heavy", nominal=HEAVY_NOMINAL, cad=HEAVY_CAD),
 }
 
 
@@ -224,10 +299,34 @@ def robot_from_toml_text(text: str, source: str) -> Robot:
         ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > 0
         if not ok or (key == "efficiency" and value > 1):
             raise RobotFileError(f"{source} [motor]: {key} must be a number > 0 (efficiency <= 1), got {value!r}")
+    casters = _parse_casters(data.get("caster"), source)
     return Robot(
         name=name, nominal=nominal, cad=cad, torque_constant=motor.get("torque_constant"),
-        efficiency=motor.get("efficiency"),
+        efficiency=motor.get("efficiency"), casters=casters,
     )  # fmt: skip
+
+
+def _parse_casters(tables: object, source: str) -> tuple[Caster, ...] | None:
+    """[[caster]] tables -> casters (None when there are none)."""
+    if tables is None:
+        return None
+    if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
+        raise RobotFileError(f"{source}: casters are [[caster]] tables with x, y, radius, kind, resistance, trail")
+    known = {f.name for f in dataclasses.fields(Caster)}
+    out = []
+    for i, table in enumerate(tables):
+        unknown = sorted(set(table) - known)
+        if unknown or "x" not in table:
+            raise RobotFileError(
+                f"{source} [[caster]] {i + 1}: "
+                + (f"unknown key(s) {', '.join(unknown)}" if unknown else "needs x (m)")
+                + f"; known: {', '.join(sorted(known))}"
+            )
+        try:
+            out.append(Caster(**table))
+        except RobotFileError as err:
+            raise RobotFileError(f"{source} [[caster]] {i + 1}: {err}") from None
+    return tuple(out)
 
 
 def robot_to_toml(robot: Robot) -> str:
@@ -239,6 +338,10 @@ def robot_to_toml(robot: Robot) -> str:
         for key, value in params.to_dict().items():
             unit = PARAMETER_UNITS[key][0]
             lines.append(f"{key} = {value!r}  # {unit}")
+    for caster in robot.casters or ():
+        lines.append("\n[[caster]]")
+        for key, value in caster.to_dict().items():
+            lines.append(f"{key} = {value!r}" if not isinstance(value, str) else f'{key} = "{value}"')
     if robot.torque_constant is not None or robot.efficiency is not None:
         lines.append("\n[motor]")
         if robot.torque_constant is not None:
