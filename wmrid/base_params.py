@@ -43,6 +43,7 @@ class BaseFit:
     dof: int
     p_value: float
     gain: np.ndarray  # (8, 2p): d theta0* / d theta_hat.ravel() at the optimum
+    report_dof: int | None = None  # B, the reported covariance's degrees of freedom (None: chi-square test)
 
 
 def direct_recovery(theta: np.ndarray, form: RegressorForm) -> np.ndarray:
@@ -112,7 +113,9 @@ def fit_base_parameters(
             p_value = float(fdtrc(dof, big_b - dof + 1, (big_b - dof + 1) * chi2 / (big_b * dof)))
         else:
             p_value = float("nan")
-    return BaseFit(theta0=theta0, cov=0.5 * (cov0 + cov0.T), chi2=chi2, dof=dof, p_value=p_value, gain=gain)
+    return BaseFit(
+        theta0=theta0, cov=0.5 * (cov0 + cov0.T), chi2=chi2, dof=dof, p_value=p_value, gain=gain, report_dof=report_dof
+    )
 
 
 def gauss_newton(start: np.ndarray, whiten: np.ndarray, target: np.ndarray, form: RegressorForm) -> np.ndarray:

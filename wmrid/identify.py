@@ -54,6 +54,20 @@ CLOSED_LOOP_CAVEAT = (
     "closed-loop logs with such a disturbance, +/-2 std covered the truth 85-89 % of the time (nominal 94 %) and "
     "+/-3 std 97 % (nominal 99.3 %); with sensor noise only, 98 % and 99.5 %"
 )
+#: Model-error inflation (README "Uncertainty"): when the structural-mismatch test rejects at MISMATCH_P, every
+#: variance is multiplied by S^2 = max(1, F), F the test's F statistic (its expected value is 1 when the model
+#: holds) -- the Particle Data Group's scale factor for inconsistent measurements.  A scale at least
+#: INFLATION_MARK marks the parameters as inflated.
+INFLATION_MARK = 1.05
+MODEL_ERROR_NOTE = (
+    "the log departs from the model (Eqs. 9-25) beyond its noise, so every std was scaled by S = sqrt(F) of the "
+    "structural-mismatch test (the Particle Data Group's convention for inconsistent measurements): the std then "
+    "covers a model error as large as the misfit the test sees, not one hidden in the directions it cannot see"
+)
+DISCRETISATION_NOTE = (
+    "replaying every other sample moved the estimate by more than its noise, so that difference (a Richardson "
+    "bound on the error of turning samples into continuous-time filters) was added to the covariance"
+)
 #: Two base parameters whose estimates correlate beyond this are called not separable.
 NOT_SEPARABLE = 0.98
 
@@ -300,8 +314,9 @@ def _identify(
     tick = None if progress is None else (lambda done: progress(done, n))
     with np.errstate(over="ignore", invalid="ignore"):
         out = replay_pieces(
-            ((p.t, p.eta, p.tau) for p in stream), n, duration, settings, max_history=max_history, progress=tick
-        )
+            ((p.t, p.eta, p.tau) for p in stream), n, duration, settings, max_history=max_history, progress=tick,
+            half_rate=True,
+        )  # fmt: skip
     theta_u, gamma, gamma_inv = out.theta, out.gamma, out.gamma_inv
     finite = all(np.all(np.isfinite(a)) for a in (theta_u, gamma, gamma_inv, out.blk_a, out.blk_c))
     if not finite:
@@ -326,7 +341,14 @@ def _identify(
             f"{source}: the log does not excite the dynamics (no base parameter is determined by it: the wheel "
             "speeds and efforts barely vary); record a log that accelerates, brakes and turns"
         )
-    cov0 = fit.cov + np.diag(sens**2)
+    inflation = model_error_scale(fit)
+    cov0 = fit.cov * inflation["scale"] ** 2
+    discretisation = discretisation_error(out.theta_half, gamma, lo, hi, weight_cov, chosen, fit.theta0, cov0)
+    if discretisation["applied"]:
+        delta = np.asarray(discretisation["delta"])
+        cov0 = cov0 + np.outer(delta, delta)
+    inflation["discretisation"] = discretisation
+    cov0 = cov0 + np.diag(sens**2)
     for j in undetermined:
         cov0[j, :] = cov0[:, j] = np.nan
         cov0[j, j] = np.inf
@@ -354,6 +376,7 @@ def _identify(
         "blocks": len(out.block_end),
         "block_seconds": float(duration / len(out.block_end)),
     }
+    _record_inflation(diagnostics, inflation, parameters, undetermined)
     rms_e = np.sqrt(out.blk_ee.sum(axis=0) / duration) if duration > 0 else np.zeros(2)
     diagnostics["prediction_error_rms"] = {"eta_r": float(rms_e[0]), "eta_l": float(rms_e[1]), "unit": "rad/s"}
     log_info = {
@@ -383,6 +406,67 @@ def _identify(
     )  # fmt: skip
 
 
+#: The discretisation term is added when the half-rate estimate differs from the full-rate one by more than
+#: this many standard errors in some base parameter (noise alone: |delta_j| / std_j ~ N(0, 1), so 4 is passed
+#: by chance about once in 2,000 logs, for 8 parameters).
+DISCRETISATION_GATE = 4.0
+
+
+def discretisation_error(
+    theta_half: np.ndarray | None,
+    gamma: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    weight_cov: np.ndarray,
+    form: RegressorForm,
+    theta0: np.ndarray,
+    cov0: np.ndarray,
+) -> dict[str, Any]:
+    """A Richardson estimate of the replay's discretisation error, and whether it matters.
+
+    The estimator turns a sampled log into continuous-time filters; its error shrinks with the step h.
+    Replaying every other sample (step 2h) moves the estimate by delta = theta0(h) - theta0(2h) = e(h) - e(2h);
+    for an error of order q >= 1, |e(h)| = |delta| / (2^q - 1) <= |delta|, so delta bounds it.  On a noisy
+    log delta is mostly noise (of about one std); it is added, as the rank-one covariance delta delta^T,
+    only when some |delta_j| exceeds DISCRETISATION_GATE of its std: a noise-free log, or one logged so
+    slowly that the step itself biases the estimate.
+    Returns {"applied": bool, "delta": list (8,) or None, "largest_ratio": max_j |delta_j| / std_j}.
+    """
+    if theta_half is None or not np.all(np.isfinite(theta_half)):
+        return {"applied": False, "delta": None, "largest_ratio": None}
+    projected = np.empty_like(theta_half)
+    project_history_box(theta_half[None], gamma[None], lo, hi, projected[None])
+    half = fit_base_parameters(projected, weight_cov, form)
+    delta = theta0 - half.theta0
+    std = np.sqrt(np.clip(np.diag(cov0), 0.0, None))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(std > 0, np.abs(delta) / std, np.where(delta != 0, np.inf, 0.0))
+    largest = float(np.max(ratio))
+    return {"applied": bool(largest > DISCRETISATION_GATE), "delta": delta.tolist(), "largest_ratio": largest}
+
+
+def model_error_scale(fit: Any) -> dict[str, Any]:
+    """The model-error scale factor of a minimum-distance fit (README "Uncertainty").
+
+    With Hotelling's T^2 of the misfit on d directions and a jackknife on B degrees of freedom, the test's
+    statistic is F = (B - d + 1) T^2 / (B d) ~ F(d, B - d + 1), of mean about 1 when the model holds.
+    When the test rejects (p < MISMATCH_P), the log's own noise cannot explain the misfit, and the
+    standard errors are multiplied by S = sqrt(F) (>= 1): the misfit, measured in the units of the
+    estimate's own spread, is taken as the size of the model error in every direction.  Else S = 1.
+    Returns {"scale": S, "applied": bool, "F": F, "p_value": p}.
+    """
+    big_b = getattr(fit, "report_dof", None)
+    stat = float("nan")
+    if fit.dof > 0:
+        if big_b is not None and big_b - fit.dof + 1 > 0:
+            stat = (big_b - fit.dof + 1) * fit.chi2 / (big_b * fit.dof)
+        else:
+            stat = fit.chi2 / fit.dof
+    applied = bool(fit.dof > 0 and math.isfinite(fit.p_value) and fit.p_value < MISMATCH_P and stat > 1.0)
+    scale = math.sqrt(stat) if applied else 1.0
+    return {"scale": scale, "applied": applied, "F": stat, "p_value": float(fit.p_value)}
+
+
 #: Diagnostics that describe the observer's run on the log (kept, and listed as such, under another method).
 OBSERVER_DIAGNOSTICS = (
     "lambda_min_gamma", "lambda_max_gamma", "condition_number_scaled", "weakest_directions", "undetermined",
@@ -398,7 +482,9 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
     parameters, kept as the observer's) stays.  ``diagnostics["method"]`` holds the method's own
     figures and ``diagnostics["observer_parameters"]`` the observer's estimate for comparison.
     """
-    cov = np.array(est.cov, dtype=float)
+    inflation = dict(result.diagnostics.get("uncertainty", {}).get("model_error", {"scale": 1.0, "applied": False}))
+    inflation.pop("meaning", None)
+    cov = np.array(est.cov, dtype=float) * inflation["scale"] ** 2  # the same log departs from the same model
     parameters = derived_with_std(np.asarray(est.theta0, dtype=float), cov)
     parameters = {name: parameters[name] for name in REPORTED}
     diagnostics = dict(result.diagnostics)
@@ -431,6 +517,8 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
                 f"{name} is poorly determined by this log ({est.method}): {value:.6g} +/- {std:.2g} {units[name]}"
             )
     diagnostics["poorly_determined"] = poorly
+    undetermined = [j for j, name in enumerate(THETA0_NAMES) if not math.isfinite(parameters[name][1])]
+    _record_inflation(diagnostics, inflation, parameters, undetermined)
     warnings = [*kept, *est.warnings, *physics_warnings(parameters)]
     payload_est = None
     if result.payload is not None and robot is not None:
@@ -441,6 +529,31 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
         result, parameters=parameters, theta0_cov=cov, diagnostics=diagnostics, warnings=tuple(warnings),
         payload=payload_est, method=est.method, estimate=est,
     )  # fmt: skip
+
+
+def _record_inflation(
+    diagnostics: dict[str, Any], inflation: dict[str, Any], parameters: dict[str, Any], undetermined: list[int]
+) -> None:
+    """Put the model-error scale in ``diagnostics["uncertainty"]["model_error"]`` and list the parameters whose
+    std it widened (``diagnostics["inflated"]``) and every parameter the output warns about (``"flagged"``)."""
+    scale = inflation["scale"]
+    skip = {THETA0_NAMES[j] for j in undetermined}
+    disc = inflation.get("discretisation") or {}
+    widened = scale >= INFLATION_MARK or bool(disc.get("applied"))
+    inflated = [n for n in parameters if n not in skip] if widened else []
+    meaning = []
+    if inflation["applied"]:
+        meaning.append(MODEL_ERROR_NOTE)
+    if disc.get("applied"):
+        meaning.append(DISCRETISATION_NOTE)
+    diagnostics["uncertainty"]["model_error"] = {
+        **inflation,
+        "meaning": "; ".join(meaning)
+        or "the model holds within the log's noise, and the step is fine enough: no widening",
+    }
+    diagnostics["inflated"] = inflated
+    flagged = set(inflated) | set(diagnostics.get("poorly_determined", [])) | skip
+    diagnostics["flagged"] = [n for n in parameters if n in flagged]
 
 
 def physics_warnings(parameters: dict[str, tuple[float, float]]) -> list[str]:
@@ -634,11 +747,13 @@ def _diagnose(
     # A significant misfit (p < 1e-3) is reported unless it is below 1e-5 of max |theta|: the
     # discretisation error of a noise-free log (about 1e-7) is significant but irrelevant.
     if fit.dof > 0 and fit.p_value < MISMATCH_P and rel_mismatch > MISMATCH_RELEVANT:
+        scale = model_error_scale(fit)["scale"]
         warnings.append(
             f"the intermediate parameters are not consistent with one set of base parameters "
             f"(Hotelling T2 {fit.chi2:.3g} on {fit.dof} directions, p = {fit.p_value:.2g}; largest misfit "
-            f"{100 * rel_mismatch:.2g} % of max |theta|): the log departs from the model (slip, other friction, "
-            "a wrong sign or unit, or the wrong --torque-hold)"
+            f"{100 * rel_mismatch:.2g} % of max |theta|): the log departs from the model (slip, caster drag, other "
+            f"friction, a wrong sign or unit, or the wrong --torque-hold); every std is scaled by {scale:.3g} to "
+            "cover it, and the estimates are only as good as the model"
         )
     diagnostics = {
         "lambda_min_gamma": float(lam[0]),

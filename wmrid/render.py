@@ -37,8 +37,9 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
     if result.reference is not None:
         table.add_column("CAD", justify="right", no_wrap=True)
         table.add_column("Δ/std", justify="right", no_wrap=True)
+    inflated = set(result.diagnostics.get("inflated", []))
     for name, (value, std) in result.parameters.items():
-        row = [name, _fmt(value), _fmt(std, 2), result.units[name]]
+        row = [name, _fmt(value), _fmt(std, 2) + ("†" if name in inflated else ""), result.units[name]]
         if result.nominal is not None:
             row.append(_fmt(result.nominal[name]))
         if result.reference is not None:
@@ -76,6 +77,10 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         f"± {unc['interval_factor']['99.7%']:.2f} std with 99.7 %, if disturbances do not feed back into the "
         "efforts (in closed loop, about 87 % and 97 %: see the JSON's diagnostics.uncertainty.caveat)"
     )
+    model_error = unc.get("model_error")
+    if inflated and model_error:
+        scale = f" (S = {model_error['scale']:.3g})" if model_error.get("applied") else ""
+        console.print(f"† std widened{scale}: {model_error['meaning']}", markup=False)
     if info.get("effort_unit", "N m") != "N m":
         console.print(
             f"[bold]units: the effort is in {info['effort_unit']}, not N m, so every parameter is in "

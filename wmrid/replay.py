@@ -43,6 +43,7 @@ class ReplayOutput:
     blk_ee: np.ndarray
     hist_t: np.ndarray
     block_t: np.ndarray
+    theta_half: np.ndarray | None = None  # (2, p) the estimate from every other sample (twice the step), or None
 
 
 def layout(n: int, duration: float, k: float, max_history: int) -> tuple[np.ndarray, np.ndarray]:
@@ -76,6 +77,65 @@ def replay(
     return replay_pieces(pieces, len(t), float(t[-1] - t[0]), settings, max_history=max_history, progress=progress)
 
 
+class _HalfRate:
+    """A second estimator run on every other sample (global indices 0, 2, 4, ...): the same log at twice the step.
+
+    A held effort (zoh) is replayed as held by a controller at the log's rate, so that the half-rate run
+    makes the same assumption about the effort as the full-rate one and differs only by its step.
+
+    The difference between the two final estimates is a Richardson estimate of the replay's discretisation
+    error (:func:`wmrid.identify.discretisation_error`).  It keeps only its own state: no history, one block.
+    """
+
+    def __init__(self, n: int, duration: float, settings: ObserverSettings, kind: int) -> None:
+        p = settings.form.n_columns
+        self.n = (n + 1) // 2
+        self.kind = kind
+        self.form = settings.form
+        # An effort held over each step of the log is, at twice the step, an effort held by a controller at
+        # the log's rate: the dropped sample is interpolated (see ObserverSettings.control_rate).
+        self.hold = settings.hold_code
+        if self.hold == 0.0 and duration > 0:
+            self.hold = (n - 1) / duration
+        self.k = float(settings.k)
+        self.st = np.zeros(7)
+        self.w = np.zeros(p)
+        self.g_prev = np.zeros(p)
+        self.theta = np.array(settings.theta_init, dtype=float)
+        self.gamma = settings.alpha * np.eye(p)
+        self.gamma_inv = np.eye(p) / settings.alpha
+        last = np.array([max(self.n - 1, 1)], dtype=np.int64)
+        self.hist_idx, self.block_end = last, last.copy()
+        self.hist_theta = np.empty((1, 2, p))
+        self.hist_e = np.empty((1, 2))
+        self.hist_gamma = np.empty((1, p, p))
+        self.blk = (np.zeros((1, p, p)), np.zeros((1, 2, p)), np.zeros((1, 2)), np.zeros((1, 2)))
+        self.cursor = np.zeros(2, dtype=np.int64)
+        self.done = 0  # decimated samples consumed
+
+    def feed(self, t: np.ndarray, eta: np.ndarray, tau: np.ndarray, start: int) -> None:
+        """Samples with global indices start .. start + len(t) - 1; only the even ones are used."""
+        from wmrid.observer_kernel import observer_chunk
+
+        first = start % 2  # offset of the first even global index within this piece
+        t, eta, tau = t[first::2], eta[first::2], tau[first::2]
+        if len(t) == 0 or self.n < 2:
+            return
+        skip = 0
+        if self.done == 0:
+            self.st[:] = [t[0], eta[0, 0], eta[0, 1], eta[0, 0], eta[0, 1], 0.0, 0.0]
+            self.g_prev[:] = regressor(eta[:1], tau[:1], self.form)[0]
+            skip = 1
+        if len(t) > skip:
+            observer_chunk(
+                np.ascontiguousarray(t[skip:]), np.ascontiguousarray(eta[skip:]), np.ascontiguousarray(tau[skip:]),
+                self.done + skip, self.kind, self.hold, self.k, self.st, self.w, self.g_prev, self.theta, self.gamma,
+                self.gamma_inv, self.hist_idx, self.hist_theta, self.hist_e, self.hist_gamma, self.block_end,
+                *self.blk, self.cursor,
+            )  # fmt: skip
+        self.done += len(t)
+
+
 def replay_pieces(
     pieces: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray]],
     n: int,
@@ -84,11 +144,13 @@ def replay_pieces(
     *,
     max_history: int = 20000,
     progress: Callable[[int], None] | None = None,
+    half_rate: bool = False,
 ) -> ReplayOutput:
     """Run the estimator over a log given as consecutive pieces (t (k,) s, eta (k, 2) rad/s, tau (k, 2)).
 
     n : the log's samples (the pieces must add up to it); duration : t_last - t_first, s.  Memory: one
     piece plus the history and block sums, whatever n.  ``progress(samples_done)`` after each piece.
+    ``half_rate``: also run the estimator on every other sample (``ReplayOutput.theta_half``).
     """
     from wmrid.observer_kernel import KIND_GENERAL, KIND_PAPER, observer_chunk
 
@@ -115,6 +177,7 @@ def replay_pieces(
     blk_ee = np.zeros((nb, 2))
     cursor = np.zeros(2, dtype=np.int64)
     hold = settings.hold_code
+    half = _HalfRate(n, duration, settings, kind) if half_rate and n >= 20 else None
 
     done = 0
     for t, eta, tau in pieces:
@@ -140,6 +203,8 @@ def replay_pieces(
             theta, gamma, gamma_inv, hist_idx, hist_theta, hist_e, hist_gamma, block_end, blk_a, blk_c,
             blk_uu, blk_ee, cursor,
         )  # fmt: skip
+        if half is not None:
+            half.feed(t, eta, tau, done)
         done += k
         if progress is not None:
             progress(done)
@@ -149,4 +214,5 @@ def replay_pieces(
         theta=theta, gamma=gamma, gamma_inv=gamma_inv, eta_hat=st[3:5].copy(), hist_idx=hist_idx,
         hist_theta=hist_theta, hist_e=hist_e, hist_gamma=hist_gamma, block_end=block_end, blk_a=blk_a,
         blk_c=blk_c, blk_uu=blk_uu, blk_ee=blk_ee, hist_t=hist_t, block_t=block_t,
+        theta_half=None if half is None else half.theta.copy(),
     )  # fmt: skip

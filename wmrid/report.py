@@ -162,6 +162,7 @@ def build_report(
     header += ["estimate", "std"] + (["true", "error %", "(est − true)/std"] if truth else [])
     rows = []
     flagged = []
+    inflated = set(data["diagnostics"].get("inflated", []))
     for name, entry in params.items():
         value, std = entry["value"], entry["std"]
         row = [name, entry["unit"]]
@@ -173,7 +174,7 @@ def build_report(
             if mark:
                 flagged.append(f"{name} differs from its CAD value by {z:+.1f} std")
             row += [_fmt(reference[name]), f"{z:+.1f}{mark}" if math.isfinite(z) else "—"]
-        row += [_fmt(value), _fmt(std, 2)]
+        row += [_fmt(value), _fmt(std, 2) + (" †" if name in inflated else "")]
         if truth:
             t = truth.get(name)
             zt = (value - t) / std if (t is not None and std) else math.nan
@@ -200,6 +201,15 @@ def build_report(
         + f" ({unc['dof']} degrees of "
         f"freedom); estimate ± {unc['interval_factor']['95%']:.2f} std covers the truth with 95 % probability when "
         "disturbances do not feed back into the efforts. " + (f"Caveat: {unc['caveat']}." if unc.get("caveat") else ""),
+        *(
+            [
+                "† std widened"
+                + (f" (S = {unc['model_error']['scale']:.3g})" if unc["model_error"].get("applied") else "")
+                + f": {unc['model_error']['meaning']}."
+            ]
+            if inflated and unc.get("model_error")
+            else []
+        ),
         f"Structural consistency (Eqs. 23-24): p = {diag['structural_mismatch']['p_value']:.2g} on "
         f"{diag['structural_mismatch']['dof']} directions"
         + (
