@@ -907,12 +907,12 @@ def simulate(
         ),
     ] = Engine.reduced,
     floor_friction: Annotated[
-        float,
+        float | None,
         typer.Option(
-            help="mujoco: Coulomb friction of the wheels on the floor (low values let them slip).",
+            help="mujoco: Coulomb friction of the wheels on the floor (low values let them slip); default 1.0.",
             rich_help_panel="Multibody prototype",
         ),
-    ] = 1.0,
+    ] = None,
     caster_resistance: Annotated[
         float | None,
         typer.Option(
@@ -981,21 +981,23 @@ def simulate(
         eta_std=eta_noise, tau_std=tau_noise, caster_std=caster, caster_time=caster_time, encoder_cpr=encoder_cpr
     )
     if engine == Engine.mujoco:
-        from wmrid.multibody import MultibodySettings, import_mujoco, simulate_multibody
+        from wmrid.multibody import FLOOR_FRICTION, MultibodySettings, import_mujoco, simulate_multibody
 
         import_mujoco()  # before anything else, so that a missing engine says how to install it
         mb_settings = MultibodySettings(
-            floor_friction=floor_friction, caster_resistance=caster_resistance, torque_limit=torque_limit
-        )
+            floor_friction=FLOOR_FRICTION if floor_friction is None else floor_friction,
+            caster_resistance=caster_resistance, torque_limit=torque_limit,
+        )  # fmt: skip
         sim = simulate_multibody(
             robot_obj.reference, robot_obj.nominal, casters=robot_obj.casters, settings=mb_settings,
             trajectory=trajectory.value, duration=duration, rate=rate, noise=noise, seed=seed, change=change,
             payload=load,
         )  # fmt: skip
     else:
-        for name, value, default in (("--floor-friction", floor_friction, 1.0), ("--caster-resistance",
-                                     caster_resistance, None), ("--torque-limit", torque_limit, None)):  # fmt: skip
-            if value != default:
+        given = {"--floor-friction": floor_friction, "--caster-resistance": caster_resistance,
+                 "--torque-limit": torque_limit}  # fmt: skip
+        for name, value in given.items():
+            if value is not None:
                 raise UsageError(f"{name} applies to --engine mujoco only; the reduced model has no floor or casters")
         sim = run_simulate(
             truth_params,

@@ -13,10 +13,10 @@ dynamics from masses, inertias, joints and contacts, as the paper's SimMechanics
 * each rotor as a welded body of mass m_r and inertia I_rm at (c_x, +-c_y), its spin inertia reflected
   through the gear as the wheel joint's armature k_r^2 I_r;
 * joint friction: viscous F_v (joint damping) and Coulomb F_d (joint friction loss), per wheel;
-* the casters of :class:`wmrid.robot.Caster`: a ball caster is a sphere fixed under the platform whose
-  contact with the ground has Coulomb coefficient ``resistance``, so the ground pushes on it with
-  resistance x (its normal load) against the velocity of its contact point -- the rolling resistance of a
-  ball caster, with the normal load the engine computes (it moves with acceleration and payload); a swivel
+* the casters of :class:`wmrid.robot.Caster`: a ball caster is a sprung sphere fixed under the platform
+  with a frictionless contact, and a force of ``resistance`` x (its normal load) against the velocity of
+  its contact point -- the rolling resistance of a ball caster, with the normal load the engine computes
+  (it moves with acceleration and payload), applied before every engine step; a swivel
   caster is a fork on a vertical hinge trailing a small wheel (both on real joints), whose axle has
   friction loss resistance x (static load) x radius, so its drag points along the fork, which lags the motion;
 * a payload as a welded body.
@@ -33,8 +33,7 @@ of :mod:`wmrid.simulate`, drawn from the same streams.
 Before t = 0 the robot settles on its contacts for ``SETTLE_SECONDS`` at rest; then it is put on the
 reference with the reference's speeds, keeping the settled height and tilt, so no start-up transient is
 logged.  The truth is the base parameters the physical description implies (:func:`wmrid.model.base_parameters`),
-plus, under ``settings["multibody"]``, the mean normal load of each caster and the caster drag terms
-they imply (:mod:`wmrid.caster`) for logs where it applies.
+plus, under ``settings["multibody"]``, the mean normal load of each caster.
 """
 
 from __future__ import annotations
@@ -77,6 +76,8 @@ CONTACT_SOLREF = (0.002, 1.0)
 #: The casters' contacts are five times softer in time constant (25 times in stiffness): sprung casters, as
 #: most bases have, so the driven wheels keep most of the load and their traction.
 CASTER_SOLREF = (0.01, 1.0)
+#: Below this contact-point speed (m/s) a ball caster's Coulomb drag is regularised (smooth through a stop).
+DRAG_SPEED = 1e-3
 GRAVITY = 9.81
 
 
@@ -216,11 +217,8 @@ def build_mjcf(
         mu = settings.floor_friction
         parts.append(f'<pair geom1="tyre_{side}" geom2="floor" condim="3" friction="{mu!r} {mu!r}" {solref}/>')
     for i, caster in enumerate(casters):
-        c = caster_resistance(caster, settings)
-        if caster.kind == "ball" and c == 0:
+        if caster.kind == "ball":  # frictionless contact; the rolling drag is applied as a force (see _Plant)
             parts.append(f'<pair geom1="caster_{i}" geom2="floor" condim="1" {sprung}/>')
-        elif caster.kind == "ball":
-            parts.append(f'<pair geom1="caster_{i}" geom2="floor" condim="3" friction="{c!r} {c!r}" {sprung}/>')
         else:
             mu = max(settings.floor_friction, 0.5)
             parts.append(f'<pair geom1="caster_{i}" geom2="floor" condim="3" friction="{mu!r} {mu!r}" {sprung}/>')
@@ -270,11 +268,46 @@ class _Plant:
         self.base_q = int(m.jnt_qposadr[m.joint("base").id])
         self.base_v = int(m.jnt_dofadr[m.joint("base").id])
         self.caster_geoms = {int(m.geom(f"caster_{i}").id): i for i in range(len(casters))}
+        self.platform = int(m.body("platform").id)
         self.payload_body = int(m.body("payload").id) if payload is not None else -1
         self.swivel_axles = [
             (i, int(m.jnt_dofadr[m.joint(f"caster_axle_{i}").id])) for i, c in enumerate(casters) if c.kind == "swivel"
         ]
         self.force6 = np.zeros(6)
+
+    def apply_caster_drag(self, coefficients: np.ndarray) -> None:
+        """Set the platform's applied force to the ball casters' rolling drag at the current state.
+
+        Each ball caster in contact is pushed with coefficients[i] x its normal load (N) against the
+        horizontal velocity v of its contact point, as -c N v / sqrt(|v|^2 + DRAG_SPEED^2) (Coulomb drag,
+        regularised below DRAG_SPEED so that it is smooth through a stop).  An applied force rather than
+        contact friction: MuJoCo's soft friction on a sliding sphere feeds back into its normal force and
+        made two resisting balls chatter and lift the driven wheels.
+        """
+        mj, m, d = self.mujoco, self.model, self.data
+        body = self.platform
+        force = np.zeros(3)
+        torque = np.zeros(3)
+        lin = d.qvel[self.base_v : self.base_v + 3]
+        omega = d.xmat[body].reshape(3, 3) @ d.qvel[self.base_v + 3 : self.base_v + 6]
+        origin = d.xpos[body]
+        com = d.xipos[body]
+        for k in range(d.ncon):
+            con = d.contact[k]
+            i = self.caster_geoms.get(con.geom1, self.caster_geoms.get(con.geom2, -1))
+            if i < 0 or coefficients[i] == 0.0:
+                continue
+            mj.mj_contactForce(m, d, k, self.force6)
+            normal = self.force6[0]
+            point = con.pos
+            vel = lin + np.cross(omega, point - origin)
+            vx, vy = vel[0], vel[1]
+            scale = -coefficients[i] * normal / math.sqrt(vx * vx + vy * vy + DRAG_SPEED**2)
+            f = np.array([scale * vx, scale * vy, 0.0])
+            force += f
+            torque += np.cross(point - com, f)
+        d.xfrc_applied[body, :3] = force
+        d.xfrc_applied[body, 3:] = torque
 
     def set_joint_friction(self, p: PhysicalParameters) -> None:
         m = self.model
@@ -347,6 +380,11 @@ def simulate_multibody(
     if n_ctrl > 50_000_000:
         raise UsageError(f"duration {duration:g} s: at most {50_000_000 * period:g} s of multibody simulation")
     casters = default_casters(true) if casters is None else tuple(casters)
+    if not casters:
+        raise UsageError(
+            "the multibody prototype needs at least one caster to stand on (a robot file's [[caster]] tables); "
+            "omit them for the default two ball casters"
+        )
 
     # The plant at t = 0 and after a change, as physical parameter sets (for the truth) and as what the
     # engine switches: the payload's mass, or the joint friction.
@@ -419,6 +457,9 @@ def simulate_multibody(
     for i, adr in plant.swivel_axles:
         m.dof_frictionloss[adr] = caster_resistance(casters[i], settings) * max(loads[2 + i], 0.0) * casters[i].radius
 
+    drag = np.array([caster_resistance(c, settings) if c.kind == "ball" else 0.0 for c in casters])
+    any_drag = bool(np.any(drag > 0))
+    bad_qacc = int(mujoco.mjtWarning.mjWARN_BADQACC)
     pose = np.empty((n, 3))
     angle = np.empty((n, 2))
     eta = np.empty((n, 2))
@@ -475,7 +516,18 @@ def simulate_multibody(
             plant.set_joint_friction(after_friction)
         d.ctrl[0], d.ctrl[1] = tau1, tau2
         d.qfrc_applied[v1], d.qfrc_applied[v2] = -d1, -d2
-        mujoco.mj_step(m, d, settings.substeps)
+        if any_drag:
+            for _ in range(settings.substeps):
+                plant.apply_caster_drag(drag)
+                mujoco.mj_step(m, d)
+        else:
+            mujoco.mj_step(m, d, settings.substeps)
+        if d.warning[bad_qacc].number > 0 or abs(_tilt(qpos[bq + 3 : bq + 7])) > MAX_TILT:
+            raise UsageError(
+                f"the multibody simulation became unstable at t = {t:.3f} s (the platform tipped over or the "
+                "integration diverged); check the robot's parameters and its casters (the centre of mass must lie "
+                "inside the wheels' and casters' support)"
+            )
         if kind == 1:
             fa = _reversing_velocity(traj, t)
             fm = _reversing_velocity(traj, t + 0.5 * h)
@@ -484,11 +536,6 @@ def simulate_multibody(
             yr_int += h / 6.0 * (fa[1] + 4.0 * fm[1] + fb[1])
         d1 = a_ou * d1 + q_ou * caster_z[k + 1, 0]
         d2 = a_ou * d2 + q_ou * caster_z[k + 1, 1]
-        if not np.isfinite(qvel[v1]) or abs(qpos[bq + 2]) > 10.0 * r + 1.0:
-            raise UsageError(
-                f"the multibody simulation became unstable at t = {t:.3f} s (the robot left the ground or the "
-                "integration diverged); check the robot's parameters and casters"
-            )
 
     dt = every * period
     eta_meas = _encoder_velocity(angle, eta, noise.encoder_cpr, dt) if noise.encoder_cpr > 0 else eta.copy()
@@ -532,6 +579,17 @@ def simulate_multibody(
         t=t_arr, eta=eta_log, tau=tau_log, pose=pose, wheel_angle=angle, true=plant0, nominal=nominal,
         settings=settings_out, reference=refpose, disturbance=dist, eta_true=eta, change=change,
     )  # fmt: skip
+
+
+#: Largest roll or pitch of the platform (rad) before the run is called unstable (it has tipped over).
+MAX_TILT = 0.3
+
+
+def _tilt(q) -> float:
+    """The platform's tilt from the vertical (rad) for its orientation quaternion q = (w, x, y, z)."""
+    _, x, y, _ = q
+    cos_tilt = 1.0 - 2.0 * (x * x + y * y)  # z-axis of the body, z component
+    return math.acos(max(-1.0, min(1.0, cos_tilt)))
 
 
 def _quat_mul(a, b) -> list[float]:
