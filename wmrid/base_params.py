@@ -61,7 +61,14 @@ def direct_recovery(theta: np.ndarray, form: RegressorForm) -> np.ndarray:
         fd = (big_m @ theta[:, 6]) * np.asarray(form.signs, dtype=float)
     else:
         fd = np.diag(big_m @ theta[:, 6:8])
-    return np.array([m[0, 0], m[0, 1], m[1, 1], vc, fv[0], fv[1], fd[0], fd[1]])
+    base = [m[0, 0], m[0, 1], m[1, 1], vc, fv[0], fv[1], fd[0], fd[1]] + [0.0] * (form.n_base - 8)
+    counts = [0] * form.n_base
+    for col, param, pattern in form.caster_map:  # [theta_1c, theta_2c] = m [1, pattern]^T theta0[param]
+        base[param] += float(np.array([1.0, pattern]) @ big_m @ theta[:, col]) / 2.0
+        counts[param] += 1
+    for param in range(8, form.n_base):
+        base[param] /= max(counts[param], 1)
+    return np.array(base)
 
 
 def _whitener(cov: np.ndarray) -> np.ndarray:
@@ -91,6 +98,7 @@ def fit_base_parameters(
     whiten = _whitener(cov)
     target = theta.ravel()
 
+    n0 = form.n_base
     theta0 = gauss_newton(start, whiten, target, form)
     jac = jacobian_intermediate(theta0, form)
     weight = whiten.T @ whiten
@@ -102,12 +110,12 @@ def fit_base_parameters(
     misfit = target - intermediate_parameters(theta0, form).ravel()
     if report_dof is None:
         chi2 = float(np.sum((whiten @ misfit) ** 2))
-        dof = max(whiten.shape[0] - 8, 0)
+        dof = max(whiten.shape[0] - n0, 0)
         p_value = float(chdtrc(dof, chi2)) if dof > 0 else float("nan")
     else:
         leave = np.eye(len(target)) - jac @ gain  # misfit = leave @ (theta_hat - theta) to first order
         cov_misfit = leave @ reported @ leave.T
-        chi2, dof = _hotelling(misfit, cov_misfit, max_rank=min(len(target) - 8, report_dof))
+        chi2, dof = _hotelling(misfit, cov_misfit, max_rank=min(len(target) - n0, report_dof))
         big_b = report_dof
         if dof > 0 and big_b - dof + 1 > 0:
             p_value = float(fdtrc(dof, big_b - dof + 1, (big_b - dof + 1) * chi2 / (big_b * dof)))
@@ -162,11 +170,12 @@ def _hotelling(misfit: np.ndarray, cov: np.ndarray, max_rank: int) -> tuple[floa
 
 
 def jacobian_intermediate(theta0: np.ndarray, form: RegressorForm) -> np.ndarray:
-    """d vec(f(theta0)) / d theta0, (2p, 8), exact (f is bilinear in (m, [Vc, Fv, Fd]))."""
+    """d vec(f(theta0)) / d theta0, (2p, n0), exact (f is bilinear in (m, [Vc, Fv, Fd, Cv, Cw]))."""
     p = form.n_columns
-    jac = np.zeros((2 * p, 8))
+    jac = np.zeros((2 * p, form.n_base))
     m = inverse_inertia(theta0)
-    vc, fv1, fv2, fd1, fd2 = theta0[3:]
+    vc, fv1, fv2, fd1, fd2 = theta0[3:8]
+    caster_map = form.caster_map
     # d m_ij / d (m11, m12, m22)
     dm = {
         0: np.array([[1.0, 0.0], [0.0, 0.0]]),
@@ -180,6 +189,7 @@ def jacobian_intermediate(theta0: np.ndarray, form: RegressorForm) -> np.ndarray
             di1, di2 = d[i]
             col = [di1, di2, di1 * vc, di2 * vc, di1 * fv1, di2 * fv2]
             col += [di1 * fd1 * s1 + di2 * fd2 * s2] if form.kind == "paper" else [di1 * fd1, di2 * fd2]
+            col += [(di1 + pattern * di2) * theta0[param] for _, param, pattern in caster_map]
             jac[row : row + p, q] = col
         mi1, mi2 = m[i]
         jac[row + 2, 3], jac[row + 3, 3] = mi1, mi2
@@ -189,18 +199,25 @@ def jacobian_intermediate(theta0: np.ndarray, form: RegressorForm) -> np.ndarray
             jac[row + 6, 6], jac[row + 6, 7] = mi1 * s1, mi2 * s2
         else:
             jac[row + 6, 6], jac[row + 7, 7] = mi1, mi2
+        for c, param, pattern in caster_map:
+            jac[row + c, param] = mi1 + pattern * mi2
     return jac
 
 
-def derived_with_std(theta0: np.ndarray, cov0: np.ndarray) -> dict[str, tuple[float, float]]:
-    """Named base parameters plus M = m^-1, each (value, std) by the delta method (exact Jacobian of M)."""
-    names = ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
+def derived_with_std(
+    theta0: np.ndarray, cov0: np.ndarray, names: tuple[str, ...] | None = None
+) -> dict[str, tuple[float, float]]:
+    """Named base parameters plus M = m^-1, each (value, std) by the delta method (exact Jacobian of M).
+
+    ``names`` of theta0's entries (default: the eight base parameters, then Cv, Cw)."""
+    if names is None:
+        names = ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2", "Cv", "Cw")[: len(theta0)]
     std0 = np.sqrt(np.clip(np.diag(cov0), 0.0, None))  # inf stays inf: a parameter the log does not determine
     out = {n: (float(v), float(s)) for n, v, s in zip(names, theta0, std0, strict=True)}
     m = inverse_inertia(theta0)
     big_m = np.linalg.inv(m)
     # dM = -M dm M for each of the three m entries
-    jac = np.zeros((3, 8))
+    jac = np.zeros((3, len(theta0)))
     basis = (np.array([[1.0, 0.0], [0.0, 0.0]]), np.array([[0.0, 1.0], [1.0, 0.0]]), np.array([[0.0, 0.0], [0.0, 1.0]]))
     for q, d in enumerate(basis):
         dbig = -big_m @ d @ big_m

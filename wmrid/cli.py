@@ -336,6 +336,38 @@ ControlRateOpt = Annotated[
         "sub-steps, the unlogged values interpolated (e.g. a 1 kHz controller logged at 100 Hz).",
     ),
 ]
+
+
+class FrictionChoice(str, Enum):
+    wheel = "wheel"
+    wheel_caster = "wheel+caster"
+
+
+FrictionOpt = Annotated[
+    FrictionChoice,
+    typer.Option(
+        "--friction",
+        help="wheel: viscous and Coulomb friction per wheel (Eqs. 15-17); wheel+caster: also the casters' rolling "
+        "drag, one drag force per caster when --robot lists [[caster]] positions (else two terms, Cv against "
+        "speed and Cw against turning).  Observer only.",
+    ),
+]
+
+
+def _check_friction(friction, methods: tuple[str, ...], validate) -> None:
+    """Caster drag is modelled by the observer only so far: refuse it where it would be ignored."""
+    if friction != FrictionChoice.wheel_caster:
+        return
+    others = [m for m in methods if m != "observer"]
+    if others:
+        raise UsageError(
+            f"--friction wheel+caster is modelled by the observer only, not by {', '.join(others)} yet; drop it or "
+            "use --method observer"
+        )
+    if validate is not None:
+        raise UsageError("--friction wheel+caster is not modelled by the --validate predictor yet; validate without it")
+
+
 ValidateOpt = Annotated[
     str | None,
     typer.Option(
@@ -466,6 +498,7 @@ def identify(
     forgetting: ForgettingOpt = 1.0,
     validate: ValidateOpt = None,
     control_rate: ControlRateOpt = None,
+    friction: FrictionOpt = FrictionChoice.wheel,
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
     from wmrid.atomic import write_json
@@ -474,6 +507,7 @@ def identify(
 
     options = _method_options(cutoff, weighted, forgetting, torque_hold)
     _check_control_rate(control_rate, (method.value,), validate)
+    _check_friction(friction, (method.value,), validate)
     if log == "-" and validate == "-":
         raise UsageError("LOG and --validate cannot both be standard input; give one of them as a file")
     robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
@@ -494,6 +528,7 @@ def identify(
             progress=progress_cb,
             payload=payload,
             control_rate=control_rate,
+            friction=friction.value,
         )
     finally:
         finish()

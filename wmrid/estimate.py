@@ -12,16 +12,17 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.model import THETA0_NAMES
+from wmrid.model import CASTER_NAMES, THETA0_NAMES
 
 
 @dataclass(frozen=True)
 class BaseEstimate:
-    """Base parameters theta0 = [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] found by one method.
+    """Base parameters theta0 = [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2 (Cv Cw)] found by one method.
 
     method : the method's name ("observer", "idim", "rls", "oe").
-    theta0 : (8,) in the model's units (SI for torque logs; see :func:`wmrid.model.base_units`).
-    cov : (8, 8) covariance of theta0; a row/column of NaN with +inf on the diagonal marks a parameter
+    theta0 : (8,), or longer with the caster drag (Cv, Cw or D_1..D_K), in the model's units (SI for torque logs; see
+        :func:`wmrid.model.base_units`).
+    cov : (n0, n0) covariance of theta0; a row/column of NaN with +inf on the diagonal marks a parameter
         the log does not determine.
     dof : degrees of freedom of the standard errors (Student t intervals), or None for normal ones.
     seconds : wall time the method took, s.
@@ -38,16 +39,18 @@ class BaseEstimate:
     warnings: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
-        if np.shape(self.theta0) != (8,):
-            raise ValueError(f"BaseEstimate.theta0 must have shape (8,), got {np.shape(self.theta0)}")
-        if np.shape(self.cov) != (8, 8):
-            raise ValueError(f"BaseEstimate.cov must have shape (8, 8), got {np.shape(self.cov)}")
+        n0 = np.shape(self.theta0)[0] if np.ndim(self.theta0) == 1 else -1
+        if n0 < 8:
+            raise ValueError(f"BaseEstimate.theta0 must have shape (8,) or longer, got {np.shape(self.theta0)}")
+        if np.shape(self.cov) != (n0, n0):
+            raise ValueError(f"BaseEstimate.cov must have shape ({n0}, {n0}), got {np.shape(self.cov)}")
 
     @property
     def std(self) -> np.ndarray:
-        """(8,) standard errors (inf where the log does not determine the parameter)."""
+        """(n0,) standard errors (inf where the log does not determine the parameter)."""
         return np.sqrt(np.clip(np.diag(self.cov), 0.0, None))
 
     def named(self) -> dict[str, tuple[float, float]]:
-        """name -> (value, std) for the eight base parameters."""
-        return {n: (float(v), float(s)) for n, v, s in zip(THETA0_NAMES, self.theta0, self.std, strict=True)}
+        """name -> (value, std) for the base parameters."""
+        names = THETA0_NAMES + CASTER_NAMES if len(self.theta0) == 10 else THETA0_NAMES
+        return {n: (float(v), float(s)) for n, v, s in zip(names, self.theta0, self.std, strict=True)}

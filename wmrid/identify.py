@@ -19,16 +19,28 @@ from wmrid.base_params import derived_with_std, fit_base_parameters
 from wmrid.errors import NotIdentifiableError, UsageError
 from wmrid.estimate import BaseEstimate
 from wmrid.logio import LogStream, stream_arrays
-from wmrid.model import THETA0_NAMES, THETA0_UNITS, RegressorForm
+from wmrid.model import THETA0_UNITS, RegressorForm
 from wmrid.observer import ObserverSettings
 from wmrid.observer_kernel import project_history_box
 from wmrid.replay import replay_pieces
 from wmrid.robot import Robot
 from wmrid.survey import survey
-from wmrid.uncertainty import estimate_covariances, interval_factor
+from wmrid.uncertainty import (
+    FILTER_MEMORY,
+    estimate_covariances,
+    interval_factor,
+    segment_count,
+    slow_speed_difference,
+)
 
 #: Reported parameter names, in report order.
 REPORTED = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
+
+
+def reported_names(form: RegressorForm) -> tuple[str, ...]:
+    """The reported names for ``form``: REPORTED, then its caster-drag parameters."""
+    return REPORTED + form.base_names[8:]
+
 
 #: Points of the history kept in a JSON result (enough for the report's figures).
 JSON_HISTORY_POINTS = 300
@@ -55,18 +67,26 @@ CLOSED_LOOP_CAVEAT = (
     "+/-3 std 97 % (nominal 99.3 %); with sensor noise only, 98 % and 99.5 %"
 )
 #: Model-error inflation (README "Uncertainty"): when the structural-mismatch test rejects at MISMATCH_P, every
-#: variance is multiplied by S^2 = max(1, F), F the test's F statistic (its expected value is 1 when the model
-#: holds) -- the Particle Data Group's scale factor for inconsistent measurements.  A scale at least
-#: INFLATION_MARK marks the parameters as inflated.
+#: variance is multiplied by S^2 = 1 + T^2 (:func:`model_error_scale`).  A scale at least INFLATION_MARK marks
+#: the parameters as inflated.
 INFLATION_MARK = 1.05
 MODEL_ERROR_NOTE = (
-    "the log departs from the model (Eqs. 9-25) beyond its noise, so every std was scaled by S = sqrt(F) of the "
-    "structural-mismatch test (the Particle Data Group's convention for inconsistent measurements): the std then "
-    "covers a model error as large as the misfit the test sees, not one hidden in the directions it cannot see"
+    "the log departs from the model (Eqs. 9-25) beyond its noise, so every std was scaled by S = sqrt(1 + T2), T2 "
+    "the structural-mismatch statistic: the std then covers a model error that moves the estimate along the "
+    "model's surface as far as it visibly moves it off the surface"
 )
 DISCRETISATION_NOTE = (
     "replaying every other sample moved the estimate by more than its noise, so that difference (a Richardson "
     "bound on the error of turning samples into continuous-time filters) was added to the covariance"
+)
+SLOW_SPEED_NOTE = (
+    "leaving out the parts of the log where a wheel is slow or reverses moved the estimate by more than its noise "
+    "(friction near zero speed is not F_v eta + F_d sgn(eta): stiction, a smooth Coulomb law), so that "
+    "difference was added to the covariance"
+)
+FRAGILE_NOTE = (
+    "{} rest mostly on the parts of the log where a wheel is slow or reverses, where friction and caster drag are "
+    "least like the model, so they report the std they have without those parts"
 )
 #: Two base parameters whose estimates correlate beyond this are called not separable.
 NOT_SEPARABLE = 0.98
@@ -187,8 +207,33 @@ def _finite_or_none(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
-def resolve_form(auto: RegressorForm, choice: Literal["auto", "paper", "general"]) -> RegressorForm:
-    """The regressor form: ``auto`` picks ``auto`` (the paper form when each wheel keeps one sign)."""
+def caster_geometry(robot: Robot) -> tuple[float, ...]:
+    """(r, b, x_1, y_1, ...) for the geometric caster model of ``robot`` (nominal r, b; its casters).
+
+    Two casters at (x, y) and (-x, y) have the same drag columns (their contacts' velocities mirror each
+    other about the platform's x axis), so the log can only tell their total drag: they are merged into one
+    parameter, listed once (casters within 1 mm of such a pair count as one).
+    """
+    seen: list[tuple[float, float]] = []
+    for c in robot.casters or ():
+        key = (abs(c.x), c.y)
+        if not any(abs(key[0] - s[0]) < 1e-3 and abs(key[1] - s[1]) < 1e-3 for s in seen):
+            seen.append(key)
+    return (robot.nominal.r, robot.nominal.b, *[v for key in seen for v in key])
+
+
+def resolve_form(
+    auto: RegressorForm,
+    choice: Literal["auto", "paper", "general"],
+    caster: bool = False,
+    geometry: tuple[float, ...] = (),
+) -> RegressorForm:
+    """The regressor form: ``auto`` picks ``auto`` (the paper form when each wheel keeps one sign); caster drag
+    needs the general form (``geometry``: see :class:`wmrid.model.RegressorForm`)."""
+    if caster:
+        if choice == "paper":
+            raise UsageError("--friction wheel+caster needs the general form (--form general or auto), not paper")
+        return RegressorForm("general", caster=True, geometry=geometry)
     if choice == "auto":
         return auto
     if choice == "paper":
@@ -244,6 +289,7 @@ def identify(
     progress: Callable[[int, int], None] | None = None,
     payload: bool = False,
     control_rate: float | None = None,
+    friction: Literal["wheel", "wheel+caster"] = "wheel",
 ) -> IdentificationResult:
     """Identify the base parameters of the robot that recorded ``log``.
 
@@ -256,15 +302,20 @@ def identify(
     ``payload``: also estimate the payload the robot carries, against the robot's unloaded parameters
     (its CAD set, else nominal; :mod:`wmrid.payload`).  ``progress(samples_done, samples)`` during the replay.
     ``control_rate`` : Hz, the rate of the controller that held the effort, when the log is slower
-    (see :class:`wmrid.observer.ObserverSettings`).
+    (see :class:`wmrid.observer.ObserverSettings`).  ``friction``: ``wheel`` (Eqs. 15-17) or ``wheel+caster``
+    (also the casters' rolling drag, :func:`wmrid.model.caster_columns`: with the robot's casters
+    (``robot.casters``) one drag force D_k per caster, else the two-term Cv, Cw; general form only).
     """
+    if friction not in ("wheel", "wheel+caster"):
+        raise UsageError(f"--friction must be wheel or wheel+caster, got {friction!r}")
     if payload and robot is None:
         raise UsageError("--payload needs --robot: the payload is what the log shows beyond the unloaded robot")
     stream = log if isinstance(log, LogStream) else stream_arrays(log)
     try:
         return _identify(
-            stream, robot, form, k, alpha, box_width, max_history, torque_hold, progress, payload, control_rate
-        )
+            stream, robot, form, k, alpha, box_width, max_history, torque_hold, progress, payload, control_rate,
+            friction == "wheel+caster",
+        )  # fmt: skip
     except np.linalg.LinAlgError as err:
         raise NotIdentifiableError(
             f"{stream.source}: the log does not support an estimate (a singular system: {err}); it is too short, "
@@ -273,7 +324,18 @@ def identify(
 
 
 def _identify(
-    stream: LogStream, robot, form, k, alpha, box_width, max_history, torque_hold, progress, payload, control_rate
+    stream: LogStream,
+    robot,
+    form,
+    k,
+    alpha,
+    box_width,
+    max_history,
+    torque_hold,
+    progress,
+    payload,
+    control_rate,
+    caster=False,
 ) -> IdentificationResult:
     started = time.perf_counter()
     source = stream.source
@@ -289,7 +351,6 @@ def _identify(
             "continuous parts and identify each"
         )
     hold_warnings = _control_rate_check(control_rate, sv, source)
-    chosen = resolve_form(sv.form(), form)
     units = model.base_units(effort_unit)
     early_warnings = []
     if robot is not None and effort_unit != "N m":
@@ -298,8 +359,20 @@ def _identify(
             "estimate nor is compared with it; the start comes from the data"
         )
         robot = None
+    geometry: tuple[float, ...] = ()
+    if caster and robot is not None and robot.casters:
+        geometry = caster_geometry(robot)
+    if caster and sv.form().kind == "paper":
+        raise NotIdentifiableError(
+            f"{source}: neither wheel ever stops or reverses, so the casters' drag cannot be told from the wheels' "
+            "Coulomb friction (it adds to it); identify with --friction wheel, or record a log that reverses and "
+            "turns on the spot"
+        )
+    chosen = resolve_form(sv.form(), form, caster, geometry)
+    n0 = chosen.n_base
     if robot is not None:
-        theta_init = model.intermediate_parameters(model.base_parameters(robot.nominal), chosen)
+        start0 = np.concatenate([model.base_parameters(robot.nominal), np.zeros(n0 - 8)])  # no caster drag known
+        theta_init = model.intermediate_parameters(start0, chosen)
         start_source = f"nominal parameters of robot '{robot.name}'"
     else:
         theta_init = sv.data_start(chosen)
@@ -315,7 +388,7 @@ def _identify(
     with np.errstate(over="ignore", invalid="ignore"):
         out = replay_pieces(
             ((p.t, p.eta, p.tau) for p in stream), n, duration, settings, max_history=max_history, progress=tick,
-            half_rate=True,
+            half_rate=True, low_speed=sv.low_speed(),
         )  # fmt: skip
     theta_u, gamma, gamma_inv = out.theta, out.gamma, out.gamma_inv
     finite = all(np.all(np.isfinite(a)) for a in (theta_u, gamma, gamma_inv, out.blk_a, out.blk_c))
@@ -332,11 +405,11 @@ def _identify(
     sens = start_sensitivity(gamma, gamma_inv, alpha, theta_init, theta_u, fit.gain)
     std_data = np.sqrt(np.clip(np.diag(fit.cov), 0.0, None))
     undetermined = [
-        j for j in range(8) if sens[j] > std_data[j] and sens[j] > START_RELEVANT * abs(fit.theta0[j])
+        j for j in range(n0) if sens[j] > std_data[j] and sens[j] > START_RELEVANT * abs(fit.theta0[j])
     ]  # fmt: skip
     unexcited = unexcited_parameters(gamma, alpha, theta_u, fit)
     undetermined = sorted(set(undetermined) | set(unexcited))
-    if len(unexcited) == 8 or torque_unexcited(gamma, alpha):
+    if len(unexcited) == n0 or torque_unexcited(gamma, alpha):
         raise NotIdentifiableError(
             f"{source}: the log does not excite the dynamics (no base parameter is determined by it: the wheel "
             "speeds and efforts barely vary); record a log that accelerates, brakes and turns"
@@ -348,12 +421,23 @@ def _identify(
         delta = np.asarray(discretisation["delta"])
         cov0 = cov0 + np.outer(delta, delta)
     inflation["discretisation"] = discretisation
+    slow = slow_speed_term(out, gamma, theta_u, fit.gain, block_mid, duration, k, cov0)
+    if slow["applied"]:
+        delta = np.asarray(slow["delta"])
+        cov0 = cov0 + np.outer(delta, delta)
+    if slow["fragile"]:
+        grow = np.zeros(n0)
+        for j in slow["fragile"]:
+            grow[j] = max(slow["var_without"][j] * inflation["scale"] ** 2 - cov0[j, j], 0.0)
+        cov0 = cov0 + np.diag(grow)
+        slow["fragile"] = [chosen.base_names[j] for j in slow["fragile"]]
+    inflation["slow_speed"] = slow
     cov0 = cov0 + np.diag(sens**2)
     for j in undetermined:
         cov0[j, :] = cov0[:, j] = np.nan
         cov0[j, j] = np.inf
-    parameters = derived_with_std(fit.theta0, cov0)
-    parameters = {name: parameters[name] for name in REPORTED}
+    parameters = derived_with_std(fit.theta0, cov0, chosen.base_names)
+    parameters = {name: parameters[name] for name in reported_names(chosen)}
 
     lam_hist = np.linalg.eigvalsh(out.hist_gamma)[:, 0]
     h_theta = np.empty_like(out.hist_theta)
@@ -376,7 +460,7 @@ def _identify(
         "blocks": len(out.block_end),
         "block_seconds": float(duration / len(out.block_end)),
     }
-    _record_inflation(diagnostics, inflation, parameters, undetermined)
+    _record_inflation(diagnostics, inflation, parameters, [chosen.base_names[j] for j in undetermined])
     rms_e = np.sqrt(out.blk_ee.sum(axis=0) / duration) if duration > 0 else np.zeros(2)
     diagnostics["prediction_error_rms"] = {"eta_r": float(rms_e[0]), "eta_l": float(rms_e[1]), "unit": "rad/s"}
     log_info = {
@@ -445,15 +529,68 @@ def discretisation_error(
     return {"applied": bool(largest > DISCRETISATION_GATE), "delta": delta.tolist(), "largest_ratio": largest}
 
 
+#: A base parameter whose std without the slow parts of the log exceeds this many times its std is
+#: determined mostly by those parts, where friction is least like the model: it reports that larger std.
+FRAGILE_RATIO = 2.0
+
+
+def slow_speed_term(
+    out: Any,
+    gamma: np.ndarray,
+    theta_u: np.ndarray,
+    gain: np.ndarray,
+    block_mid: np.ndarray,
+    duration: float,
+    k: float,
+    cov0: np.ndarray,
+) -> dict[str, Any]:
+    """Whether friction near zero speed departs from the model enough to matter (README "Uncertainty").
+
+    The base parameters from the log without its slow-wheel parts (:func:`wmrid.uncertainty.slow_speed_difference`)
+    differ from the full estimate by delta0 = G delta (G the minimum-distance gain) with a jackknife std
+    per parameter.  When some |delta0_j| exceeds DISCRETISATION_GATE of that std (noise alone: about 1 in
+    1,300 per parameter under Student's t with 19 dof), delta0 delta0^T is added to the covariance.  A
+    parameter whose std without the slow parts exceeds FRAGILE_RATIO times its std is "fragile": the log
+    pins it mostly where the wheels are slow or reverse (Coulomb friction against caster drag, say, on a log
+    that never turns on the spot), and it reports the std it has without those parts.
+    Returns {"applied", "delta" (n0,) or None, "largest_ratio", "left_out_fraction", "fragile" (indices),
+    "var_without" (n0,)}.
+    """
+    none = {"applied": False, "delta": None, "largest_ratio": None, "left_out_fraction": 0.0, "fragile": []}
+    if out.blk_slow is None or duration <= 0:
+        return none
+    n_seg = segment_count(duration, len(block_mid))
+    segment = np.minimum((np.asarray(block_mid) / duration * n_seg).astype(np.int64), n_seg - 1)
+    block_seconds = duration / max(len(out.block_end), 1)
+    spill = math.ceil(FILTER_MEMORY / (k * block_seconds))
+    diff = slow_speed_difference(gamma, theta_u, out.blk_a, out.blk_c, out.blk_slow, segment, n_seg, spill)
+    if diff is None:
+        return none
+    delta0 = gain @ diff["delta"]
+    sd = np.sqrt(np.clip(np.diag(gain @ diff["cov"] @ gain.T), 0.0, None))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(sd > 0, np.abs(delta0) / sd, 0.0)
+    largest = float(np.max(ratio))
+    var_without = np.clip(np.diag(gain @ diff["cov_without"] @ gain.T), 0.0, None)
+    fragile = [j for j in range(len(delta0)) if var_without[j] > FRAGILE_RATIO**2 * max(cov0[j, j], 0.0)]
+    return {
+        "applied": bool(largest > DISCRETISATION_GATE), "delta": delta0.tolist(), "largest_ratio": largest,
+        "left_out_fraction": diff["fraction"], "fragile": fragile, "var_without": var_without.tolist(),
+    }  # fmt: skip
+
+
 def model_error_scale(fit: Any) -> dict[str, Any]:
     """The model-error scale factor of a minimum-distance fit (README "Uncertainty").
 
-    With Hotelling's T^2 of the misfit on d directions and a jackknife on B degrees of freedom, the test's
-    statistic is F = (B - d + 1) T^2 / (B d) ~ F(d, B - d + 1), of mean about 1 when the model holds.
-    When the test rejects (p < MISMATCH_P), the log's own noise cannot explain the misfit, and the
-    standard errors are multiplied by S = sqrt(F) (>= 1): the misfit, measured in the units of the
-    estimate's own spread, is taken as the size of the model error in every direction.  Else S = 1.
-    Returns {"scale": S, "applied": bool, "F": F, "p_value": p}.
+    theta (2p numbers) must lie on the n0-dimensional surface theta = f(theta0) (Eqs. 23-24).  A model error
+    moves it by a bias b; the fit sees only the part of b off the surface, the misfit rho, whose size in units
+    of the estimate's own spread is Hotelling's T^2 (d directions).  The part along the surface is invisible
+    and moves theta0: by at most |b_along| std_j for parameter j, in the same units.  Taking the invisible part
+    no larger than the visible one, |b_along|^2 <= T^2, each bias is at most sqrt(T^2) std_j; the variances
+    are multiplied by S^2 = 1 + T^2, which covers that bias and the noise together.  Applied only when the
+    structural-mismatch test rejects (p < MISMATCH_P, F = (B - d + 1) T^2 / (B d) ~ F(d, B - d + 1) with B
+    the jackknife's degrees of freedom): where the model holds, S = 1.
+    Returns {"scale": S, "applied": bool, "T2": T^2, "F": F, "p_value": p}.
     """
     big_b = getattr(fit, "report_dof", None)
     stat = float("nan")
@@ -462,9 +599,9 @@ def model_error_scale(fit: Any) -> dict[str, Any]:
             stat = (big_b - fit.dof + 1) * fit.chi2 / (big_b * fit.dof)
         else:
             stat = fit.chi2 / fit.dof
-    applied = bool(fit.dof > 0 and math.isfinite(fit.p_value) and fit.p_value < MISMATCH_P and stat > 1.0)
-    scale = math.sqrt(stat) if applied else 1.0
-    return {"scale": scale, "applied": applied, "F": stat, "p_value": float(fit.p_value)}
+    applied = bool(fit.dof > 0 and math.isfinite(fit.p_value) and fit.p_value < MISMATCH_P)
+    scale = math.sqrt(1.0 + fit.chi2) if applied else 1.0
+    return {"scale": scale, "applied": applied, "T2": float(fit.chi2), "F": stat, "p_value": float(fit.p_value)}
 
 
 #: Diagnostics that describe the observer's run on the log (kept, and listed as such, under another method).
@@ -484,9 +621,12 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
     """
     inflation = dict(result.diagnostics.get("uncertainty", {}).get("model_error", {"scale": 1.0, "applied": False}))
     inflation.pop("meaning", None)
+    if inflation.get("slow_speed"):  # the observer's own std without the slow parts do not apply to this method
+        inflation["slow_speed"] = {**inflation["slow_speed"], "fragile": []}
     cov = np.array(est.cov, dtype=float) * inflation["scale"] ** 2  # the same log departs from the same model
-    parameters = derived_with_std(np.asarray(est.theta0, dtype=float), cov)
-    parameters = {name: parameters[name] for name in REPORTED}
+    form = result.form if len(est.theta0) == result.form.n_base else RegressorForm("general")
+    parameters = derived_with_std(np.asarray(est.theta0, dtype=float), cov, form.base_names)
+    parameters = {name: parameters[name] for name in reported_names(form)}
     diagnostics = dict(result.diagnostics)
     diagnostics["observer_parameters"] = {name: {"value": v, "std": _finite_or_none(e)} for name, (v, e) in
                                           result.parameters.items()}  # fmt: skip
@@ -509,7 +649,8 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
     kept = [w for w in result.warnings if " is poorly determined by this log" not in w and "positive definite" not in w
             and "friction cannot push" not in w]  # fmt: skip
     poorly = []
-    for name in THETA0_NAMES:
+    base_names = form.base_names
+    for name in base_names:
         value, std = parameters[name]
         if not (math.isfinite(std) and std <= POORLY_DETERMINED * abs(value)):
             poorly.append(name)
@@ -517,8 +658,8 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
                 f"{name} is poorly determined by this log ({est.method}): {value:.6g} +/- {std:.2g} {units[name]}"
             )
     diagnostics["poorly_determined"] = poorly
-    undetermined = [j for j, name in enumerate(THETA0_NAMES) if not math.isfinite(parameters[name][1])]
-    _record_inflation(diagnostics, inflation, parameters, undetermined)
+    undetermined = [j for j, name in enumerate(base_names) if not math.isfinite(parameters[name][1])]
+    _record_inflation(diagnostics, inflation, parameters, [base_names[j] for j in undetermined])
     warnings = [*kept, *est.warnings, *physics_warnings(parameters)]
     payload_est = None
     if result.payload is not None and robot is not None:
@@ -532,20 +673,28 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
 
 
 def _record_inflation(
-    diagnostics: dict[str, Any], inflation: dict[str, Any], parameters: dict[str, Any], undetermined: list[int]
+    diagnostics: dict[str, Any], inflation: dict[str, Any], parameters: dict[str, Any], undetermined: list[str]
 ) -> None:
     """Put the model-error scale in ``diagnostics["uncertainty"]["model_error"]`` and list the parameters whose
     std it widened (``diagnostics["inflated"]``) and every parameter the output warns about (``"flagged"``)."""
     scale = inflation["scale"]
-    skip = {THETA0_NAMES[j] for j in undetermined}
+    skip = set(undetermined)
     disc = inflation.get("discretisation") or {}
-    widened = scale >= INFLATION_MARK or bool(disc.get("applied"))
-    inflated = [n for n in parameters if n not in skip] if widened else []
+    slow = inflation.get("slow_speed") or {}
+    widened = scale >= INFLATION_MARK or bool(disc.get("applied")) or bool(slow.get("applied"))
+    fragile = set(slow.get("fragile") or [])
+    inflated = [n for n in parameters if n not in skip and (widened or n in fragile)]
+    if fragile & {"m11", "m12", "m22"}:
+        inflated += [n for n in ("M11", "M12", "M22") if n not in inflated]
     meaning = []
     if inflation["applied"]:
         meaning.append(MODEL_ERROR_NOTE)
     if disc.get("applied"):
         meaning.append(DISCRETISATION_NOTE)
+    if slow.get("applied"):
+        meaning.append(SLOW_SPEED_NOTE)
+    if fragile:
+        meaning.append(FRAGILE_NOTE.format(", ".join(sorted(fragile))))
     diagnostics["uncertainty"]["model_error"] = {
         **inflation,
         "meaning": "; ".join(meaning)
@@ -642,7 +791,7 @@ def unexcited_parameters(gamma: np.ndarray, alpha: float, theta_u: np.ndarray, f
             step = np.zeros((2, p))
             step[row] = u * max(np.linalg.norm(theta_u[row]), 1e-300)
             moved = np.abs(fit.gain @ step.ravel())
-            out |= {j for j in range(8) if moved[j] > 1e-6 * max(abs(fit.theta0[j]), 1e-300)}
+            out |= {j for j in range(len(fit.theta0)) if moved[j] > 1e-6 * max(abs(fit.theta0[j]), 1e-300)}
     return sorted(out)
 
 
@@ -664,7 +813,7 @@ def start_sensitivity(
     """
     sens_theta = alpha * gamma_inv  # (p, p)
     if not np.all(np.isfinite(sens_theta)):
-        return np.full(8, np.inf)
+        return np.full(gain.shape[0], np.inf)
     plausible = np.maximum(np.abs(theta_init), np.abs(theta_u))  # (2, p)
     per_row = [sens_theta * plausible[i][None, :] for i in range(2)]  # (p, p) each: d theta_i / d start_i
     big = np.zeros((2 * gamma.shape[0], 2 * gamma.shape[0]))
@@ -687,6 +836,7 @@ def _diagnose(
     """
     warnings: list[str] = []
     p = form.n_columns
+    names0 = form.base_names
     info = gamma - alpha * np.eye(p)
     scale = np.sqrt(np.clip(np.diag(info), 0, None))
     safe = np.where(scale > 0, scale, 1.0)
@@ -711,19 +861,19 @@ def _diagnose(
     corr = fit.cov / np.outer(safe0, safe0)
     poorly = []
     pairs = []
-    for idx, name in enumerate(THETA0_NAMES):
+    for idx, name in enumerate(names0):
         value, std = parameters[name]
         if idx in undetermined or (math.isfinite(std) and std <= POORLY_DETERMINED * abs(value)):
             continue
         poorly.append(name)
         partners = [
-            f"{THETA0_NAMES[j]} (correlation {corr[idx, j]:+.3f})"
+            f"{names0[j]} (correlation {corr[idx, j]:+.3f})"
             for j in np.argsort(-np.abs(corr[idx]))
             if j != idx and abs(corr[idx, j]) > NOT_SEPARABLE
         ]
         pairs += [
-            [name, THETA0_NAMES[j], float(corr[idx, j])]
-            for j in range(8)
+            [name, names0[j], float(corr[idx, j])]
+            for j in range(len(names0))
             if j != idx and abs(corr[idx, j]) > NOT_SEPARABLE
         ]
         why = f"; it is not separable from {', '.join(partners)}" if partners else ""
@@ -736,7 +886,7 @@ def _diagnose(
     if at_bound:
         warnings.append(f"estimate held on the box boundary for {', '.join(at_bound)}")
     if undetermined:
-        names = ", ".join(THETA0_NAMES[j] for j in undetermined)
+        names = ", ".join(names0[j] for j in undetermined)
         warnings.insert(
             0,
             f"this log does not determine {names}: the start value, not the data, sets them (alpha = {alpha:g}), "
@@ -761,10 +911,10 @@ def _diagnose(
         "condition_number_scaled": cond,
         "weakest_directions": weakest,
         "poorly_determined": poorly,
-        "undetermined": [THETA0_NAMES[j] for j in undetermined],
+        "undetermined": [names0[j] for j in undetermined],
         "not_separable": pairs,
         "at_box_boundary": at_bound,
-        "start_sensitivity": {name: float(v) for name, v in zip(THETA0_NAMES, sens, strict=True)},
+        "start_sensitivity": {name: float(v) for name, v in zip(names0, sens, strict=True)},
         "structural_mismatch": {
             "statistic": fit.chi2, "dof": fit.dof, "p_value": fit.p_value, "relative_misfit": rel_mismatch,
             "meaning": "Hotelling T2 of the misfit of theta to the model's form (Eqs. 23-24) on dof directions; "

@@ -28,10 +28,13 @@ import numpy as np
 from wmrid.robot import PhysicalParameters
 
 THETA0_NAMES = ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
+#: The caster-drag base parameters of the ``wheel+caster`` friction model, appended to theta0.
+CASTER_NAMES = ("Cv", "Cw")
 THETA0_UNITS = {
     "m11": "1/(kg m^2)", "m12": "1/(kg m^2)", "m22": "1/(kg m^2)", "Vc": "kg m^2",
     "Fv1": "N m s/rad", "Fv2": "N m s/rad", "Fd1": "N m", "Fd2": "N m",
-    "M11": "kg m^2", "M12": "kg m^2", "M22": "kg m^2",
+    "M11": "kg m^2", "M12": "kg m^2", "M22": "kg m^2", "Cv": "N m", "Cw": "N m",
+    **{f"D{k}": "N" for k in range(1, 9)},
 }  # fmt: skip
 
 
@@ -47,7 +50,8 @@ def base_units(effort_unit: str = "N m") -> dict[str, str]:
     inv, big = f"(rad/s^2)/{u}", f"{u} s^2/rad"
     return {
         "m11": inv, "m12": inv, "m22": inv, "Vc": f"{u} s^2/rad^2", "Fv1": f"{u} s/rad", "Fv2": f"{u} s/rad",
-        "Fd1": u, "Fd2": u, "M11": big, "M12": big, "M22": big,
+        "Fd1": u, "Fd2": u, "M11": big, "M12": big, "M22": big, "Cv": u, "Cw": u,
+        **{f"D{k}": f"{u}/m" for k in range(1, 9)},
     }  # fmt: skip
 
 
@@ -56,33 +60,91 @@ _COMMON_COLUMNS = ("tau_1", "tau_2", "eta_2^2-eta_1*eta_2", "eta_1^2-eta_1*eta_2
 
 @dataclass(frozen=True)
 class RegressorForm:
-    """Which regressor g(eta, tau) is used: the paper's 7 columns or the general 8."""
+    """Which regressor g(eta, tau) is used: the paper's 7 columns or the general 8, and whether caster drag
+    adds columns (general form only; see :func:`caster_columns`).
+
+    caster : the ``wheel+caster`` friction model.  geometry : () for the two-term model (Cv, Cw: the drag's
+    limits driving straight and turning on the spot), or (r, b, x_1, y_1, ..., x_K, y_K) in m: the wheel
+    radius, half track and each caster's ground contact in the platform frame, for the exact drag direction
+    of each caster (one parameter per caster, its drag force D_k in N).
+    """
 
     kind: Literal["paper", "general"] = "paper"
     signs: tuple[int, int] = (1, 1)  # paper form only: the constant sign of eta_1 and eta_2
+    caster: bool = False  # the wheel+caster friction model
+    geometry: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         if self.kind not in ("paper", "general"):
             raise ValueError(f"unknown regressor form {self.kind!r}")
         if any(s not in (1, -1) for s in self.signs):
             raise ValueError(f"wheel signs must be +1 or -1, got {self.signs}")
+        if self.caster and self.kind != "general":
+            raise ValueError("caster drag needs the general form")
+        if self.geometry and (not self.caster or len(self.geometry) < 4 or len(self.geometry) % 2):
+            raise ValueError("caster geometry is (r, b, x_1, y_1, ...) with at least one caster, caster form only")
+        object.__setattr__(self, "geometry", tuple(float(v) for v in self.geometry))
+
+    @property
+    def n_casters(self) -> int:
+        """K, the casters of the geometric model (0 otherwise)."""
+        return (len(self.geometry) - 2) // 2 if self.geometry else 0
+
+    @property
+    def caster_map(self) -> tuple[tuple[int, int, int], ...]:
+        """(regressor column, base parameter, pattern) of each caster column: theta_i,column =
+        (m_i1 + pattern m_i2) theta0[parameter]."""
+        if not self.caster:
+            return ()
+        if not self.geometry:
+            return ((8, 8, 1), (9, 9, -1))
+        return tuple(item for k in range(self.n_casters) for item in ((8 + 2 * k, 8 + k, 1), (9 + 2 * k, 8 + k, -1)))
 
     @property
     def n_columns(self) -> int:
-        return 7 if self.kind == "paper" else 8
+        return (7 if self.kind == "paper" else 8) + len(self.caster_map)
+
+    @property
+    def n_base(self) -> int:
+        """Number of base parameters: 8, plus Cv, Cw (two-term caster model) or D_1..D_K (geometric)."""
+        if not self.caster:
+            return 8
+        return 8 + (self.n_casters if self.geometry else 2)
+
+    @property
+    def base_names(self) -> tuple[str, ...]:
+        if not self.caster:
+            return THETA0_NAMES
+        if not self.geometry:
+            return THETA0_NAMES + CASTER_NAMES
+        return THETA0_NAMES + tuple(f"D{k + 1}" for k in range(self.n_casters))
 
     @property
     def column_names(self) -> tuple[str, ...]:
         if self.kind == "paper":
             return (*_COMMON_COLUMNS, "-1")
-        return (*_COMMON_COLUMNS, "-sgn(eta_1)", "-sgn(eta_2)")
+        if self.caster and not self.geometry:
+            caster: tuple[str, ...] = ("-sgn(eta_1+eta_2)", "-sgn(eta_1-eta_2)")
+        else:
+            caster = tuple(f"-drag{k + 1}_{part}" for k in range(self.n_casters) for part in ("v", "w"))
+        return (*_COMMON_COLUMNS, "-sgn(eta_1)", "-sgn(eta_2)", *caster)
 
     def theta_names(self) -> list[str]:
         """Names theta_1k, theta_2k (k from 1) in row-major order, as in Table 2."""
         return [f"theta{i}{k}" for i in (1, 2) for k in range(1, self.n_columns + 1)]
 
+    @property
+    def friction(self) -> str:
+        return "wheel+caster" if self.caster else "wheel"
+
     def to_dict(self) -> dict[str, object]:
-        return {"kind": self.kind, "signs": list(self.signs), "columns": list(self.column_names)}
+        out: dict[str, object] = {
+            "kind": self.kind, "signs": list(self.signs), "columns": list(self.column_names), "friction": self.friction,
+        }  # fmt: skip
+        if self.geometry:
+            out["caster_geometry"] = {"r": self.geometry[0], "b": self.geometry[1], "casters": [
+                list(self.geometry[2 + 2 * k : 4 + 2 * k]) for k in range(self.n_casters)]}  # fmt: skip
+        return out
 
 
 def choose_form(eta: np.ndarray) -> RegressorForm:
@@ -136,9 +198,12 @@ def inverse_inertia(theta0: np.ndarray) -> np.ndarray:
     return np.array([[theta0[0], theta0[1]], [theta0[1], theta0[2]]])
 
 
-def named_base(theta0: np.ndarray) -> dict[str, float]:
-    """theta0 plus M = m^-1 as a name -> value map (M11, M12, M22 in kg m^2)."""
-    out = {name: float(v) for name, v in zip(THETA0_NAMES, theta0, strict=True)}
+def named_base(theta0: np.ndarray, names: tuple[str, ...] | None = None) -> dict[str, float]:
+    """theta0 plus M = m^-1 as a name -> value map (M11, M12, M22 in kg m^2); ``names`` default: the eight
+    base parameters, and Cv, Cw for ten."""
+    if names is None:
+        names = THETA0_NAMES + CASTER_NAMES if len(theta0) == 10 else THETA0_NAMES
+    out = {name: float(v) for name, v in zip(names, theta0, strict=True)}
     big_m = np.linalg.inv(inverse_inertia(theta0))
     out.update(M11=float(big_m[0, 0]), M12=float(big_m[0, 1]), M22=float(big_m[1, 1]))
     return out
@@ -147,7 +212,7 @@ def named_base(theta0: np.ndarray) -> dict[str, float]:
 def intermediate_parameters(theta0: np.ndarray, form: RegressorForm) -> np.ndarray:
     """theta (2, p): rows theta_1, theta_2 of Eqs. (23)-(24) (paper form) or the general form."""
     m = inverse_inertia(theta0)
-    vc, fv1, fv2, fd1, fd2 = theta0[3:]
+    vc, fv1, fv2, fd1, fd2 = theta0[3:8]
     rows = []
     for i in range(2):
         mi1, mi2 = m[i]
@@ -155,6 +220,9 @@ def intermediate_parameters(theta0: np.ndarray, form: RegressorForm) -> np.ndarr
         if form.kind == "paper":
             s1, s2 = form.signs
             rows.append([*common, mi1 * fd1 * s1 + mi2 * fd2 * s2])
+        elif form.caster:
+            extra = [(mi1 + pattern * mi2) * theta0[param] for _, param, pattern in form.caster_map]
+            rows.append([*common, mi1 * fd1, mi2 * fd2, *extra])
         else:
             rows.append([*common, mi1 * fd1, mi2 * fd2])
     return np.array(rows)
@@ -168,6 +236,8 @@ def regressor(eta: np.ndarray, tau: np.ndarray, form: RegressorForm) -> np.ndarr
         cols.append(-np.ones_like(e1))
     else:
         cols += [-np.sign(e1), -np.sign(e2)]
+        if form.caster:
+            cols += list(-caster_columns(eta, form).T)
     return np.stack(cols, axis=1)
 
 
@@ -177,11 +247,56 @@ def coriolis_torque(eta: np.ndarray, vc: float) -> np.ndarray:
     return vc * np.stack([e1 * e2 - e2 * e2, e1 * e2 - e1 * e1], axis=-1)
 
 
-def friction_torque(eta: np.ndarray, theta0: np.ndarray) -> np.ndarray:
-    """F_v eta + F_d sgn(eta) (n, 2), N m, Eqs. (15)-(17)."""
+def friction_torque(eta: np.ndarray, theta0: np.ndarray, form: RegressorForm | None = None) -> np.ndarray:
+    """F_v eta + F_d sgn(eta) (n, 2), N m, Eqs. (15)-(17), plus the caster drag when theta0 has more than 8
+    entries (``form`` says which caster model; None: the two-term one)."""
     fv = theta0[4:6]
     fd = theta0[6:8]
-    return fv * eta + fd * np.sign(eta)
+    out = fv * eta + fd * np.sign(eta)
+    if len(theta0) > 8:
+        form = form if form is not None else RegressorForm("general", caster=True)
+        cols = caster_columns(np.atleast_2d(eta), form)  # (n, q)
+        drag = np.zeros(np.atleast_2d(eta).shape)
+        for j, (_, param, pattern) in enumerate(form.caster_map):
+            drag += theta0[param] * cols[:, j : j + 1] * np.array([1.0, float(pattern)])
+        out = out + drag.reshape(np.shape(out))
+    return out
+
+
+#: Below this speed (m/s) of a caster's contact, its drag direction is regularised (smooth through a stop).
+DRAG_SPEED = 1e-3
+
+
+def caster_columns(eta: np.ndarray, form: RegressorForm) -> np.ndarray:
+    """The caster drag's columns (n, q) for eta (n, 2) rad/s, in the order of ``form.caster_map``.
+
+    A caster's rolling drag is a force D against the velocity of its contact with the ground.  Mapped to the
+    wheels through the kinematics (v = r (eta_1 + eta_2) / 2, w = r (eta_1 - eta_2) / (2 b), tau = J^T Q), a
+    drag needs the wheel torques a [1, 1] + c [1, -1], a the part against the platform's speed, c against its
+    turning.  Column j holds a (pattern +1) or c (pattern -1) per unit parameter; the wheels see
+    theta0[param] x column x [1, pattern].
+
+    * Two-term model (no geometry): driving straight the drag is a Coulomb force against v, turning on the spot
+      a Coulomb moment against w: a = sgn(eta_1 + eta_2), c = sgn(eta_1 - eta_2), with parameters Cv = (r/2) x
+      the force and Cw = (r/(2b)) x the moment, N m at each wheel (r and b need not be known).  In between,
+      the true drag turns smoothly with each caster's velocity, which this model leaves to the residual.
+    * Geometric model (r, b and each caster's contact (x_k, y_k) known): its contact moves at
+      u = (v - w y_k, w x_k), the drag is -D_k u/|u| (|u| regularised by DRAG_SPEED), so per newton of drag
+      a = (r/2) u_x/|u| and c = (r/(2b)) (x_k u_y - y_k u_x)/|u|: exact for a ball caster of constant load.
+    """
+    e1, e2 = eta[:, 0], eta[:, 1]
+    if not form.geometry:
+        return np.stack([np.sign(e1 + e2), np.sign(e1 - e2)], axis=1)
+    r, b = form.geometry[0], form.geometry[1]
+    v = 0.5 * r * (e1 + e2)
+    w = r / (2.0 * b) * (e1 - e2)
+    cols = []
+    for k in range(form.n_casters):
+        x, y = form.geometry[2 + 2 * k], form.geometry[3 + 2 * k]
+        ux, uy = v - w * y, w * x
+        norm = np.sqrt(ux * ux + uy * uy + DRAG_SPEED**2)
+        cols += [0.5 * r * ux / norm, r / (2.0 * b) * (x * uy - y * ux) / norm]
+    return np.stack(cols, axis=1)
 
 
 def wheel_acceleration(eta: np.ndarray, tau: np.ndarray, theta0: np.ndarray) -> np.ndarray:

@@ -14,6 +14,9 @@ import numpy as np
 
 KIND_PAPER = 0
 KIND_GENERAL = 1
+KIND_CASTER = 2  # general plus the caster-drag columns -sgn(eta_1 + eta_2), -sgn(eta_1 - eta_2)
+KIND_CASTER_GEOMETRY = 3  # general plus two columns per caster of known position (wmrid.model.caster_columns)
+DRAG_SPEED = 1e-3  # m/s, as wmrid.model.DRAG_SPEED
 
 
 @numba.njit(cache=True, nogil=True)
@@ -26,7 +29,7 @@ def _sign(x):
 
 
 @numba.njit(cache=True, nogil=True)
-def _regressor_into(out, e1, e2, t1, t2, kind):
+def _regressor_into(out, e1, e2, t1, t2, kind, geom):
     out[0] = t1
     out[1] = t2
     out[2] = e2 * e2 - e1 * e2
@@ -38,6 +41,20 @@ def _regressor_into(out, e1, e2, t1, t2, kind):
     else:
         out[6] = -_sign(e1)
         out[7] = -_sign(e2)
+        if kind == KIND_CASTER:
+            out[8] = -_sign(e1 + e2)
+            out[9] = -_sign(e1 - e2)
+        elif kind == KIND_CASTER_GEOMETRY:  # geom = [r, b, x_1, y_1, ...]
+            r, b = geom[0], geom[1]
+            v = 0.5 * r * (e1 + e2)
+            w = r / (2.0 * b) * (e1 - e2)
+            for k in range((len(geom) - 2) // 2):
+                x, y = geom[2 + 2 * k], geom[3 + 2 * k]
+                ux = v - w * y
+                uy = w * x
+                norm = math.sqrt(ux * ux + uy * uy + DRAG_SPEED * DRAG_SPEED)
+                out[8 + 2 * k] = -0.5 * r * ux / norm
+                out[9 + 2 * k] = -r / (2.0 * b) * (x * uy - y * ux) / norm
 
 
 @numba.njit(cache=True, nogil=True)
@@ -100,13 +117,15 @@ def observer_chunk(
     blk_uu,
     blk_ee,
     cursor,
+    geom,
 ):
     """Advance the estimator over one chunk of samples; every state array is updated in place.
 
     t (c,) s, eta and tau (c, 2): samples with global indices offset .. offset + c - 1 (offset >= 1; the
-    first sample of the log is the initial state).  kind 0 paper / 1 general.  hold: how the torque
-    columns of g vary between samples: -1 linearly like the others (foh); 0 held from each sample to the
-    next (zoh); f > 0 held by a controller running at f Hz, round(h f) sub-steps per step, whose unlogged
+    first sample of the log is the initial state).  kind 0 paper / 1 general / 2 general with caster drag.
+    hold: how the torque columns of g vary between samples: -1 linearly like the others (foh); 0 held
+    from each sample to the next (zoh); f > 0 held by a controller running at f Hz, round(h f) sub-steps
+    per step, whose unlogged
     values lie on the line between the logged ones (see :func:`_substep_weights`).
     st (7,) = [t_prev, eta_prev (2), eta_hat (2), xi_hat (2)]; w, g_prev (p,); theta (2, p) unconstrained
     estimate; gamma, gamma_inv (p, p).
@@ -116,6 +135,7 @@ def observer_chunk(
     blk_a (J, p, p) += h w^T w, blk_c (J, 2, p) += h u_i w, blk_uu (J, 2) += h u_i^2, blk_ee (J, 2) += h e_i^2,
     with u = e - xi_hat + w theta the filtered velocity the estimator regresses on.
     cursor (2,) int64 = [next history slot, current block].
+    geom (q,) float64: the caster geometry [r, b, x_1, y_1, ...] of kind 3 (empty otherwise).
     """
     c = t.shape[0]
     p = theta.shape[1]
@@ -136,7 +156,7 @@ def observer_chunk(
         b1 = h * phi1
         e1 = eta[i, 0]
         e2 = eta[i, 1]
-        _regressor_into(g, e1, e2, tau[i, 0], tau[i, 1], kind)
+        _regressor_into(g, e1, e2, tau[i, 0], tau[i, 1], kind, geom)
         # the input of the filters over the step: first-order hold, the torques held when zoh
         for j in range(p):
             gin[j] = b0 * g_prev[j] + b1 * g[j]

@@ -41,9 +41,9 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
     for name, (value, std) in result.parameters.items():
         row = [name, _fmt(value), _fmt(std, 2) + ("†" if name in inflated else ""), result.units[name]]
         if result.nominal is not None:
-            row.append(_fmt(result.nominal[name]))
+            row.append(_fmt(result.nominal.get(name)))
         if result.reference is not None:
-            ref = result.reference[name]
+            ref = result.reference.get(name, math.nan)
             row.append(_fmt(ref))
             z = (value - ref) / std if std and math.isfinite(std) and std > 0 else math.nan
             row.append(f"{z:+.1f}" if math.isfinite(z) else "")
@@ -61,7 +61,7 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
     info = result.log_info
     console.print(
         f"{info['samples']} samples, {info['duration_s']:.3f} s at {info['rate_hz']:.6g} Hz; "
-        f"regressor: {result.form.kind} form ({result.form.n_columns} columns); "
+        f"regressor: {result.form.kind} form ({result.form.n_columns} columns), {result.form.friction} friction; "
         f"k = {result.settings.k:g} 1/s, alpha = {result.settings.alpha:g}; start: {result.start_source}"
     )
     diag = result.diagnostics

@@ -44,6 +44,7 @@ class ReplayOutput:
     hist_t: np.ndarray
     block_t: np.ndarray
     theta_half: np.ndarray | None = None  # (2, p) the estimate from every other sample (twice the step), or None
+    blk_slow: np.ndarray | None = None  # (J,) bool: the block holds a sample where a wheel is slower than low_speed
 
 
 def layout(n: int, duration: float, k: float, max_history: int) -> tuple[np.ndarray, np.ndarray]:
@@ -77,26 +78,37 @@ def replay(
     return replay_pieces(pieces, len(t), float(t[-1] - t[0]), settings, max_history=max_history, progress=progress)
 
 
+def kernel_kind(form) -> int:
+    """The compiled kernel's regressor kind for ``form`` (:mod:`wmrid.observer_kernel`)."""
+    from wmrid.observer_kernel import KIND_CASTER, KIND_CASTER_GEOMETRY, KIND_GENERAL, KIND_PAPER
+
+    if form.kind == "paper":
+        return KIND_PAPER
+    if form.caster:
+        return KIND_CASTER_GEOMETRY if form.geometry else KIND_CASTER
+    return KIND_GENERAL
+
+
 class _HalfRate:
     """A second estimator run on every other sample (global indices 0, 2, 4, ...): the same log at twice the step.
 
-    A held effort (zoh) is replayed as held by a controller at the log's rate, so that the half-rate run
-    makes the same assumption about the effort as the full-rate one and differs only by its step.
+    It makes the same assumption about the effort between samples (held, linear, or held by a controller at
+    --control-rate) over its doubled step.
 
     The difference between the two final estimates is a Richardson estimate of the replay's discretisation
     error (:func:`wmrid.identify.discretisation_error`).  It keeps only its own state: no history, one block.
     """
 
-    def __init__(self, n: int, duration: float, settings: ObserverSettings, kind: int) -> None:
+    def __init__(self, n: int, settings: ObserverSettings, kind: int) -> None:
         p = settings.form.n_columns
         self.n = (n + 1) // 2
         self.kind = kind
         self.form = settings.form
-        # An effort held over each step of the log is, at twice the step, an effort held by a controller at
-        # the log's rate: the dropped sample is interpolated (see ObserverSettings.control_rate).
+        self.geom = np.array(settings.form.geometry, dtype=np.float64)
+        # The same assumption about the effort between samples, at twice the step: a plain hold (zoh) then
+        # spans two steps, so the difference also measures how much the hold itself costs when the effort
+        # really changes faster than the log (a controller faster than its log; see --control-rate).
         self.hold = settings.hold_code
-        if self.hold == 0.0 and duration > 0:
-            self.hold = (n - 1) / duration
         self.k = float(settings.k)
         self.st = np.zeros(7)
         self.w = np.zeros(p)
@@ -131,7 +143,7 @@ class _HalfRate:
                 np.ascontiguousarray(t[skip:]), np.ascontiguousarray(eta[skip:]), np.ascontiguousarray(tau[skip:]),
                 self.done + skip, self.kind, self.hold, self.k, self.st, self.w, self.g_prev, self.theta, self.gamma,
                 self.gamma_inv, self.hist_idx, self.hist_theta, self.hist_e, self.hist_gamma, self.block_end,
-                *self.blk, self.cursor,
+                *self.blk, self.cursor, self.geom,
             )  # fmt: skip
         self.done += len(t)
 
@@ -145,18 +157,21 @@ def replay_pieces(
     max_history: int = 20000,
     progress: Callable[[int], None] | None = None,
     half_rate: bool = False,
+    low_speed: np.ndarray | None = None,
 ) -> ReplayOutput:
     """Run the estimator over a log given as consecutive pieces (t (k,) s, eta (k, 2) rad/s, tau (k, 2)).
 
     n : the log's samples (the pieces must add up to it); duration : t_last - t_first, s.  Memory: one
     piece plus the history and block sums, whatever n.  ``progress(samples_done)`` after each piece.
     ``half_rate``: also run the estimator on every other sample (``ReplayOutput.theta_half``).
+    ``low_speed`` (2,) rad/s: mark the blocks where |eta_i| < low_speed[i] for a wheel (``ReplayOutput.blk_slow``).
     """
-    from wmrid.observer_kernel import KIND_GENERAL, KIND_PAPER, observer_chunk
+    from wmrid.observer_kernel import observer_chunk
 
     form = settings.form
     p = form.n_columns
-    kind = KIND_PAPER if form.kind == "paper" else KIND_GENERAL
+    kind = kernel_kind(form)
+    geom = np.array(form.geometry, dtype=np.float64)
     hist_idx, block_end = layout(n, duration, settings.k, max_history)
     m, nb = len(hist_idx), len(block_end)
 
@@ -177,7 +192,8 @@ def replay_pieces(
     blk_ee = np.zeros((nb, 2))
     cursor = np.zeros(2, dtype=np.int64)
     hold = settings.hold_code
-    half = _HalfRate(n, duration, settings, kind) if half_rate and n >= 20 else None
+    half = _HalfRate(n, settings, kind) if half_rate and n >= 20 else None
+    blk_slow = None if low_speed is None else np.zeros(nb, dtype=bool)
 
     done = 0
     for t, eta, tau in pieces:
@@ -201,10 +217,14 @@ def replay_pieces(
         observer_chunk(
             t[skip:], eta[skip:], tau[skip:], done + skip, kind, hold, float(settings.k), st, w, g_prev,
             theta, gamma, gamma_inv, hist_idx, hist_theta, hist_e, hist_gamma, block_end, blk_a, blk_c,
-            blk_uu, blk_ee, cursor,
+            blk_uu, blk_ee, cursor, geom,
         )  # fmt: skip
         if half is not None:
             half.feed(t, eta, tau, done)
+        if blk_slow is not None:
+            slow = np.flatnonzero(np.any(np.abs(eta) < low_speed, axis=1))
+            if len(slow):
+                blk_slow[np.minimum(np.searchsorted(block_end, done + slow), nb - 1)] = True
         done += k
         if progress is not None:
             progress(done)
@@ -214,5 +234,5 @@ def replay_pieces(
         theta=theta, gamma=gamma, gamma_inv=gamma_inv, eta_hat=st[3:5].copy(), hist_idx=hist_idx,
         hist_theta=hist_theta, hist_e=hist_e, hist_gamma=hist_gamma, block_end=block_end, blk_a=blk_a,
         blk_c=blk_c, blk_uu=blk_uu, blk_ee=blk_ee, hist_t=hist_t, block_t=block_t,
-        theta_half=None if half is None else half.theta.copy(),
+        theta_half=None if half is None else half.theta.copy(), blk_slow=blk_slow,
     )  # fmt: skip

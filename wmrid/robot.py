@@ -261,9 +261,9 @@ HEAVY_NOMINAL = PhysicalParameters(
 )  # fmt: skip
 
 BUILTIN_ROBOTS: dict[str, Robot] = {
-    "paper": Robot(name="paper", nominal=PAPER_NOMINAL, cad=PAPER_CAD),
-    "amr": Robot(name="amr", nominal=AMR_NOMINAL, cad=AMR_CAD),
-    "heavy": Robot(name="heavy", nominal=HEAVY_NOMINAL, cad=HEAVY_CAD),
+    "paper": Robot(name="paper", nominal=PAPER_NOMINAL, cad=PAPER_CAD, casters=default_casters(PAPER_CAD)),
+    "amr": Robot(name="amr", nominal=AMR_NOMINAL, cad=AMR_CAD, casters=default_casters(AMR_CAD)),
+    "heavy": Robot(name="heavy", nominal=HEAVY_NOMINAL, cad=HEAVY_CAD, casters=default_casters(HEAVY_CAD)),
 }
 
 

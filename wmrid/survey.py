@@ -25,6 +25,8 @@ START_SPACING_S = 0.05
 #: handful); beyond, it comes from a histogram of relative bucket width 2**-12 (0.024 %).
 EXACT_STEPS = 4096
 _BUCKETS_PER_OCTAVE = 4096
+#: A wheel slower than this fraction of its 90th-percentile speed counts as slow.
+LOW_SPEED_FRACTION = 0.1
 
 
 @dataclass
@@ -80,6 +82,13 @@ class Survey:
         if all(self.positive | self.negative):
             return RegressorForm("paper", tuple(1 if p else -1 for p in self.positive))  # type: ignore[arg-type]
         return RegressorForm("general")
+
+    def low_speed(self) -> np.ndarray:
+        """(2,) rad/s: per wheel, LOW_SPEED_FRACTION of the 90th percentile of |eta| over the sparse sample;
+        below it a wheel counts as slow (the friction check of :func:`wmrid.identify.slow_speed_term`)."""
+        if len(self.sparse_eta) == 0:
+            return np.zeros(2)
+        return LOW_SPEED_FRACTION * np.percentile(np.abs(self.sparse_eta), 90, axis=0)
 
     def data_start(self, form: RegressorForm) -> np.ndarray:
         """A start for an unknown robot, (2, p): m11 = m22 = a robust acceleration-per-torque ratio, all else 0.

@@ -136,3 +136,68 @@ def estimate_covariances(
     weighting = big_p @ long_run_covariance(z, bandwidth) @ big_p
     details = {"dof": n_seg - 1, "segments": n_seg, "bandwidth_blocks": bandwidth}
     return 0.5 * (reported + reported.T), 0.5 * (weighting + weighting.T), details
+
+
+#: The filter w forgets with exp(-k t): a block's samples still weigh 5 % after 3/k s.
+FILTER_MEMORY = 3.0
+
+
+def slow_speed_difference(
+    gamma: np.ndarray,
+    theta: np.ndarray,
+    blk_a: np.ndarray,
+    blk_c: np.ndarray,
+    blk_slow: np.ndarray,
+    segment: np.ndarray,
+    n_segments: int,
+    spill_blocks: int,
+) -> dict | None:
+    """The estimate without the slow-wheel parts of the log, its difference from the full one, and that
+    difference's jackknife covariance.
+
+    Friction near zero speed rarely follows F_v eta + F_d sgn(eta): real wheels stick, and friction rises
+    smoothly through zero.  Where the log's wheels slow down or reverse, that error biases the estimate
+    in the same way all along the log, so the jackknife cannot see it.  The estimate with those parts left
+    out (every block holding a sample below the low speed, ``blk_slow``, with the ``spill_blocks`` after it
+    in which the filter still remembers it) is exact from the block sums, as the jackknife is:
+    theta_x = (Gamma - A_x)^-1 (Gamma theta^T - c_x).  When the model holds, theta_x - theta is noise; its
+    covariance comes from the same delete-a-segment jackknife, applied to the difference.
+
+    Returns None when no block (or every block) is left out; else {"delta": (2p,), "cov": (2p, 2p),
+    "cov_without": (2p, 2p) the jackknife covariance of theta_x itself, "fraction": share of blocks left out}.
+    """
+    nb = len(blk_slow)
+    if not np.any(blk_slow):
+        return None
+    left_out = blk_slow.copy()
+    for lag in range(1, spill_blocks + 1):
+        left_out[lag:] |= blk_slow[:-lag]
+    if left_out.all() or left_out.sum() > 0.8 * nb:
+        return None
+    rhs = gamma @ theta.T
+    a_x = blk_a[left_out].sum(axis=0)
+    c_x = blk_c[left_out].sum(axis=0)
+    try:
+        theta_x = np.linalg.solve(gamma - a_x, rhs - c_x.T).T
+        deltas = np.empty((n_segments, theta.size))
+        xs = np.empty((n_segments, theta.size))
+        for g in range(n_segments):
+            sel = segment == g
+            keep = sel & ~left_out
+            a_g, c_g = blk_a[sel].sum(axis=0), blk_c[sel].sum(axis=0)
+            a_gk, c_gk = blk_a[keep].sum(axis=0), blk_c[keep].sum(axis=0)
+            full_g = np.linalg.solve(gamma - a_g, rhs - c_g.T).T
+            x_g = np.linalg.solve(gamma - a_x - a_gk, rhs - c_x.T - c_gk.T).T
+            deltas[g] = (x_g - full_g).ravel()
+            xs[g] = x_g.ravel()
+    except np.linalg.LinAlgError:
+        return None
+    scale = (n_segments - 1) / n_segments
+    centred = deltas - deltas.mean(axis=0)
+    cov = scale * (centred.T @ centred)
+    centred_x = xs - xs.mean(axis=0)
+    cov_x = scale * (centred_x.T @ centred_x)
+    return {
+        "delta": (theta_x - theta).ravel(), "cov": 0.5 * (cov + cov.T), "cov_without": 0.5 * (cov_x + cov_x.T),
+        "fraction": float(left_out.mean()),
+    }  # fmt: skip
