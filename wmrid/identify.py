@@ -62,14 +62,17 @@ START_RELEVANT = 1e-4
 #: What the standard errors do not cover, with the coverage measured in simulation (bench/bench_coverage.py).
 CLOSED_LOOP_CAVEAT = (
     "in closed loop a coloured disturbance (a caster, slip) reaches the efforts through the controller and biases "
-    "the inertia entries and Vc by up to about half a std, which the std does not include: on 50 simulated noisy "
-    "closed-loop logs with such a disturbance, +/-2 std covered the truth 85-89 % of the time (nominal 94 %) and "
-    "+/-3 std 97 % (nominal 99.3 %); with sensor noise only, 98 % and 99.5 %"
+    "the inertia entries and Vc by up to about half a std; the std is widened only when the structural-mismatch "
+    "test sees it (in about a fifth of such logs): on 50 simulated noisy closed-loop logs with such a disturbance, "
+    "+/-2 std covered the truth 89-90 % of the time (nominal 94 %) and +/-3 std 97-98 % (nominal 99.3 %); with "
+    "sensor noise only, 98 % and 99.5 %"
 )
-#: Model-error inflation (README "Uncertainty"): when the structural-mismatch test rejects at MISMATCH_P, every
+#: Model-error inflation (README "Uncertainty"): when the structural-mismatch test rejects at INFLATE_P, every
 #: variance is multiplied by S^2 = 1 + T^2 (:func:`model_error_scale`).  A scale at least INFLATION_MARK marks
 #: the parameters as inflated.
 INFLATION_MARK = 1.05
+#: The structural-mismatch test level at which the std are widened (the warning keeps MISMATCH_P).
+INFLATE_P = 0.05
 MODEL_ERROR_NOTE = (
     "the log departs from the model (Eqs. 9-25) beyond its noise, so every std was scaled by S = sqrt(1 + T2), T2 "
     "the structural-mismatch statistic: the std then covers a model error that moves the estimate along the "
@@ -587,9 +590,11 @@ def model_error_scale(fit: Any) -> dict[str, Any]:
     of the estimate's own spread is Hotelling's T^2 (d directions).  The part along the surface is invisible
     and moves theta0: by at most |b_along| std_j for parameter j, in the same units.  Taking the invisible part
     no larger than the visible one, |b_along|^2 <= T^2, each bias is at most sqrt(T^2) std_j; the variances
-    are multiplied by S^2 = 1 + T^2, which covers that bias and the noise together.  Applied only when the
-    structural-mismatch test rejects (p < MISMATCH_P, F = (B - d + 1) T^2 / (B d) ~ F(d, B - d + 1) with B
-    the jackknife's degrees of freedom): where the model holds, S = 1.
+    are multiplied by S^2 = 1 + T^2, which covers that bias and the noise together.  Applied when the
+    structural-mismatch test rejects at INFLATE_P (F = (B - d + 1) T^2 / (B d) ~ F(d, B - d + 1) with B the
+    jackknife's degrees of freedom): a lenient level, because a model error of the size of the noise already
+    biases the estimate by a few std (on multibody logs with sensor noise p was 0.005-0.03 while the
+    inertia entries sat 3-6 std off); where the model holds, S = 1 in 95 % of logs.
     Returns {"scale": S, "applied": bool, "T2": T^2, "F": F, "p_value": p}.
     """
     big_b = getattr(fit, "report_dof", None)
@@ -599,7 +604,7 @@ def model_error_scale(fit: Any) -> dict[str, Any]:
             stat = (big_b - fit.dof + 1) * fit.chi2 / (big_b * fit.dof)
         else:
             stat = fit.chi2 / fit.dof
-    applied = bool(fit.dof > 0 and math.isfinite(fit.p_value) and fit.p_value < MISMATCH_P)
+    applied = bool(fit.dof > 0 and math.isfinite(fit.p_value) and fit.p_value < INFLATE_P)
     scale = math.sqrt(1.0 + fit.chi2) if applied else 1.0
     return {"scale": scale, "applied": applied, "T2": float(fit.chi2), "F": stat, "p_value": float(fit.p_value)}
 

@@ -92,23 +92,26 @@ def kernel_kind(form) -> int:
 class _HalfRate:
     """A second estimator run on every other sample (global indices 0, 2, 4, ...): the same log at twice the step.
 
-    It makes the same assumption about the effort between samples (held, linear, or held by a controller at
-    --control-rate) over its doubled step.
+    It makes the same assumption about the effort between samples as the full-rate run (held over each step
+    of the log, linear, or held by a controller at --control-rate).
 
     The difference between the two final estimates is a Richardson estimate of the replay's discretisation
     error (:func:`wmrid.identify.discretisation_error`).  It keeps only its own state: no history, one block.
     """
 
-    def __init__(self, n: int, settings: ObserverSettings, kind: int) -> None:
+    def __init__(self, n: int, duration: float, settings: ObserverSettings, kind: int) -> None:
         p = settings.form.n_columns
         self.n = (n + 1) // 2
         self.kind = kind
         self.form = settings.form
         self.geom = np.array(settings.form.geometry, dtype=np.float64)
-        # The same assumption about the effort between samples, at twice the step: a plain hold (zoh) then
-        # spans two steps, so the difference also measures how much the hold itself costs when the effort
-        # really changes faster than the log (a controller faster than its log; see --control-rate).
+        # An effort held over each step of the log is, at twice the step, an effort held by a controller at
+        # the log's rate, the dropped sample interpolated (see ObserverSettings.control_rate): the same
+        # assumption about the effort, so the two runs differ by their step only.  Whether the effort really
+        # is held over a whole step of the log cannot be told from the log; --control-rate says when it is not.
         self.hold = settings.hold_code
+        if self.hold == 0.0 and duration > 0:
+            self.hold = (n - 1) / duration
         self.k = float(settings.k)
         self.st = np.zeros(7)
         self.w = np.zeros(p)
@@ -192,7 +195,7 @@ def replay_pieces(
     blk_ee = np.zeros((nb, 2))
     cursor = np.zeros(2, dtype=np.int64)
     hold = settings.hold_code
-    half = _HalfRate(n, settings, kind) if half_rate and n >= 20 else None
+    half = _HalfRate(n, duration, settings, kind) if half_rate and n >= 20 else None
     blk_slow = None if low_speed is None else np.zeros(nb, dtype=bool)
 
     done = 0
