@@ -8,6 +8,7 @@ wmrid.model, check those equations independently.  Every simulation here is at m
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -444,9 +445,14 @@ resistance = 0.02
 """
 
 
+#: The paper robot without its built-in casters, for robot files that list their own.
+BARE_PAPER = dataclasses.replace(PAPER, casters=None)
+
+
 def paper_file(extra: str) -> str:
-    """The paper robot's TOML with ``extra`` appended (after [cad]: so [[caster]] tables, not top-level keys)."""
-    return robot_to_toml(PAPER) + extra
+    """The paper robot's TOML (no casters) with ``extra`` appended (after [cad]: so [[caster]] tables, not
+    top-level keys)."""
+    return robot_to_toml(BARE_PAPER) + extra
 
 
 def test_robot_file_casters_parse_and_round_trip(tmp_path):
@@ -461,7 +467,8 @@ def test_robot_file_casters_parse_and_round_trip(tmp_path):
     path = tmp_path / "casters.toml"
     path.write_text(robot_to_toml(robot), encoding="utf-8")
     assert load_robot(str(path)) == robot
-    assert robot_from_toml_text(robot_to_toml(PAPER), "none.toml").casters is None
+    assert robot_from_toml_text(robot_to_toml(BARE_PAPER), "none.toml").casters is None
+    assert robot_from_toml_text(robot_to_toml(PAPER), "builtin.toml") == PAPER  # the built-in casters round-trip
 
 
 @pytest.mark.parametrize(
@@ -482,7 +489,7 @@ def test_robot_file_casters_parse_and_round_trip(tmp_path):
 def test_bad_caster_tables_are_one_line_robot_file_errors(tables, needles):
     with pytest.raises(RobotFileError) as exc:
         robot_from_toml_text(
-            paper_file("\n" + tables) if tables.startswith("[[") else tables + robot_to_toml(PAPER), "bad.toml"
+            paper_file("\n" + tables) if tables.startswith("[[") else tables + robot_to_toml(BARE_PAPER), "bad.toml"
         )
     message = str(exc.value)
     assert "\n" not in message

@@ -33,7 +33,8 @@ of :mod:`wmrid.simulate`, drawn from the same streams.
 Before t = 0 the robot settles on its contacts for ``SETTLE_SECONDS`` at rest; then it is put on the
 reference with the reference's speeds, keeping the settled height and tilt, so no start-up transient is
 logged.  The truth is the base parameters the physical description implies (:func:`wmrid.model.base_parameters`),
-plus, under ``settings["multibody"]``, the mean normal load of each caster.
+plus, under ``settings["multibody"]``, the mean normal load of each caster and (ball casters) its mean drag
+force, resistance x load: the truth of the drag D_k of ``identify --friction wheel+caster``.
 """
 
 from __future__ import annotations
@@ -550,7 +551,12 @@ def simulate_multibody(
         "settle_seconds": SETTLE_SECONDS,
         "contact_solref": list(CONTACT_SOLREF),
         "casters": [
-            {**c.to_dict(), "resistance_used": caster_resistance(c, settings), "mean_normal_load": float(nl)}
+            {
+                **c.to_dict(),
+                "resistance_used": caster_resistance(c, settings),
+                "mean_normal_load": float(nl),
+                "mean_drag_force": float(caster_resistance(c, settings) * nl) if c.kind == "ball" else None,
+            }
             for c, nl in zip(casters, mean_normals, strict=True)
         ],
         "max_slip_speed": float(slip_max),
