@@ -44,7 +44,7 @@ Each log is identified with the observer (``identify(log, robot)``, default sett
 
 A ``WmridError`` of the simulation or of a method makes a failure row; other exceptions are recorded as
 crashes (the run goes on and exits with status 1).  Simulated logs are cached as .npz under ``--cache``,
-keyed by the case settings, noise, seed, duration, MuJoCo version and the source of wmrid/multibody.py, so
+keyed by the case settings, noise, seed, duration, MuJoCo version and ``wmrid.multibody.PHYSICS_VERSION``, so
 a re-run after estimator changes only re-identifies.  Prints two Markdown tables (noisy seeds; clean
 runs), the offenders, the failures, wall time and samples/s; ``--json PATH`` dumps everything.
 """
@@ -142,13 +142,13 @@ def reference_case(robot: str) -> Case:
 
 
 def sim_version() -> str:
-    """MuJoCo's version and a hash of the prototype's source: a change of either invalidates the cache."""
+    """MuJoCo's version and the prototype's PHYSICS_VERSION (bumped with every change to the simulated motion):
+    a change of either invalidates the cache."""
     import mujoco
 
     import wmrid.multibody
 
-    source = Path(wmrid.multibody.__file__).read_bytes()
-    return f"mujoco {mujoco.__version__} multibody {hashlib.sha1(source).hexdigest()[:12]}"
+    return f"mujoco {mujoco.__version__} multibody physics {wmrid.multibody.PHYSICS_VERSION}"
 
 
 def cache_path(job: Job) -> Path:

@@ -63,6 +63,8 @@ from wmrid.simulate import (
     timing,
 )
 
+#: Bump when a change alters the simulated motion (not its docs or truth fields): benchmarks key their caches on it.
+PHYSICS_VERSION = 1
 #: Install hint for the optional engine.
 INSTALL_HINT = "--engine mujoco needs MuJoCo: pip install 'wmrid[physics]' (or pip install mujoco)"
 #: MuJoCo steps per control period by default (a 0.25 ms step at the 1 ms control period).
