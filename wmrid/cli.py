@@ -629,6 +629,7 @@ def report(
     forgetting: ForgettingOpt = 1.0,
     validate: ValidateOpt = None,
     control_rate: ControlRateOpt = None,
+    friction: FrictionOpt = FrictionChoice.wheel,
 ) -> None:
     """Tables (paper Tables 2 and 3), comparison with nominal/CAD/truth, diagnostics and figures for INPUT."""
     import json
@@ -663,11 +664,13 @@ def report(
         robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
         options = _method_options(cutoff, weighted, forgetting, torque_hold)
         _check_control_rate(control_rate, (method.value,), validate)
+        _check_friction(friction, (method.value,), validate)
         log_options = _log_options(locals())
         log = _read_wheel_log(input_, columns, time_unit.value, robot_obj, **log_options, data=source.data)
         result = run_identify(
             log, robot_obj, form=form.value, k=k, alpha=alpha, torque_hold=torque_hold.value, payload=payload,
             control_rate=control_rate,
+            friction=friction.value,
         )  # fmt: skip
         if method != MethodChoice.observer:
             from wmrid.methods import run

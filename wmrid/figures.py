@@ -223,7 +223,9 @@ def true_theta(truth: Mapping[str, Any], form: RegressorForm) -> np.ndarray:
     missing = [n for n in THETA0_NAMES if n not in table]
     if missing:
         raise UsageError(f"truth lacks base parameter(s) {', '.join(missing)}; it needs {', '.join(THETA0_NAMES)}")
-    return intermediate_parameters(np.array([float(table[n]) for n in THETA0_NAMES]), form)
+    # A caster's drag the truth does not give is NaN, and so are its intermediate parameters (not drawn).
+    values = [float(table[n]) if n in table else math.nan for n in form.base_names]
+    return intermediate_parameters(np.array(values), form)
 
 
 def _display_scale(values: np.ndarray) -> tuple[float, str]:

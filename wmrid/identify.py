@@ -626,8 +626,11 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
     """
     inflation = dict(result.diagnostics.get("uncertainty", {}).get("model_error", {"scale": 1.0, "applied": False}))
     inflation.pop("meaning", None)
-    if inflation.get("slow_speed"):  # the observer's own std without the slow parts do not apply to this method
-        inflation["slow_speed"] = {**inflation["slow_speed"], "fragile": []}
+    # The discretisation and low-speed terms are the observer's own replays; only the model-error scale, a
+    # property of the log and the model, carries over to another method.
+    for key in ("discretisation", "slow_speed"):
+        if inflation.get(key):
+            inflation[key] = {**inflation[key], "applied": False, "fragile": [], "observer_only": True}
     cov = np.array(est.cov, dtype=float) * inflation["scale"] ** 2  # the same log departs from the same model
     form = result.form if len(est.theta0) == result.form.n_base else RegressorForm("general")
     parameters = derived_with_std(np.asarray(est.theta0, dtype=float), cov, form.base_names)

@@ -299,13 +299,18 @@ def caster_columns(eta: np.ndarray, form: RegressorForm) -> np.ndarray:
     return np.stack(cols, axis=1)
 
 
-def wheel_acceleration(eta: np.ndarray, tau: np.ndarray, theta0: np.ndarray) -> np.ndarray:
-    """The direct model eta_dot (n, 2), rad/s^2, Eq. (20) without disturbance."""
-    rhs = tau - coriolis_torque(eta, theta0[3]) - friction_torque(eta, theta0)
+def wheel_acceleration(
+    eta: np.ndarray, tau: np.ndarray, theta0: np.ndarray, form: RegressorForm | None = None
+) -> np.ndarray:
+    """The direct model eta_dot (n, 2), rad/s^2, Eq. (20) without disturbance (``form``: the caster model of a
+    theta0 longer than 8, see :func:`friction_torque`)."""
+    rhs = tau - coriolis_torque(eta, theta0[3]) - friction_torque(eta, theta0, form)
     return rhs @ inverse_inertia(theta0).T
 
 
-def wheel_torque(eta: np.ndarray, eta_dot: np.ndarray, theta0: np.ndarray) -> np.ndarray:
-    """The inverse model tau (n, 2), N m, Eq. (9) without disturbance."""
+def wheel_torque(
+    eta: np.ndarray, eta_dot: np.ndarray, theta0: np.ndarray, form: RegressorForm | None = None
+) -> np.ndarray:
+    """The inverse model tau (n, 2), N m, Eq. (9) without disturbance (``form`` as :func:`wheel_acceleration`)."""
     big_m = np.linalg.inv(inverse_inertia(theta0))
-    return eta_dot @ big_m.T + coriolis_torque(eta, theta0[3]) + friction_torque(eta, theta0)
+    return eta_dot @ big_m.T + coriolis_torque(eta, theta0[3]) + friction_torque(eta, theta0, form)

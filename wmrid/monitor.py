@@ -211,6 +211,12 @@ def model_from_dict(data: Any, source: str) -> MonitoredModel:
     if not isinstance(data, dict) or not isinstance(data.get("parameters"), dict):
         raise UsageError(f'--model {source}: not a wmrid identify result (no "parameters" object); {hint}')
     params = data["parameters"]
+    form = data.get("theta", {}).get("form", {}) if isinstance(data.get("theta"), dict) else {}
+    if isinstance(form, dict) and form.get("friction") == "wheel+caster":
+        raise UsageError(
+            f"--model {source}: it models caster drag (identify --friction wheel+caster), which monitor does not "
+            "replay yet; identify the model with --friction wheel"
+        )
     values = []
     for name in THETA0_NAMES:
         entry = params.get(name)

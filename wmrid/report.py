@@ -31,7 +31,7 @@ import numpy as np
 
 from wmrid import model
 from wmrid.errors import LogFormatError
-from wmrid.model import THETA0_NAMES, RegressorForm
+from wmrid.model import RegressorForm
 
 #: A difference from the CAD value beyond this many standard errors is flagged.
 SIGNIFICANT = 3.0
@@ -56,6 +56,16 @@ class Report:
     result: dict[str, Any] = field(default_factory=dict)
 
 
+def form_from_json(form_d: dict[str, Any]) -> RegressorForm:
+    """The regressor form recorded in an identify result's ``theta.form`` (friction model included)."""
+    caster = form_d.get("friction") == "wheel+caster"
+    geometry: tuple[float, ...] = ()
+    if caster and form_d.get("caster_geometry"):
+        g = form_d["caster_geometry"]
+        geometry = (g["r"], g["b"], *[v for xy in g["casters"] for v in xy])
+    return RegressorForm(form_d["kind"], tuple(form_d.get("signs", (1, 1))), caster=caster, geometry=geometry)
+
+
 def result_from_json(data: dict[str, Any], source: str) -> Any:
     """A result-like object (what the figures need) from an ``identify --format json`` document."""
     if not isinstance(data, dict) or "parameters" not in data or "theta" not in data:
@@ -63,8 +73,7 @@ def result_from_json(data: dict[str, Any], source: str) -> Any:
             f"{source}: not an identify result (no 'parameters'/'theta'); give a log or the output of "
             "`wmrid identify --format json`"
         )
-    form_d = data["theta"]["form"]
-    form = RegressorForm(form_d["kind"], tuple(form_d.get("signs", (1, 1))))
+    form = form_from_json(data["theta"]["form"])
     names = form.theta_names()
     p = form.n_columns
     start = np.array([data["theta"]["start"][n] for n in names]).reshape(2, p)
@@ -83,12 +92,12 @@ def result_from_json(data: dict[str, Any], source: str) -> Any:
     )  # fmt: skip
 
 
-def torque_residual(log: Any, theta0: np.ndarray) -> dict[str, Any]:
+def torque_residual(log: Any, theta0: np.ndarray, form: RegressorForm | None = None) -> dict[str, Any]:
     """RMS (N m) and fit % per wheel of tau - tau_model(eta, eta_dot) on the whole log (see the module docstring)."""
     from wmrid.signals import speed_from_position
 
     eta_dot, how = speed_from_position(np.asarray(log.t) - log.t[0], np.asarray(log.eta), window_s=ACCEL_WINDOW_S)
-    predicted = model.wheel_torque(np.asarray(log.eta), eta_dot, theta0)
+    predicted = model.wheel_torque(np.asarray(log.eta), eta_dot, theta0, form)
     res = np.asarray(log.tau) - predicted
     spread = np.asarray(log.tau) - np.asarray(log.tau).mean(axis=0)
     rms = np.sqrt(np.mean(res**2, axis=0))
@@ -135,10 +144,15 @@ def build_report(
     theta_std = data["theta"]["std"]
     start = data["theta"]["start"]
     ref_theta = true_theta_row = None
+    # A caster-drag parameter the reference or truth does not give is NaN: its intermediate parameters show "—".
     if reference is not None:
-        ref_theta = model.intermediate_parameters(np.array([reference[n] for n in THETA0_NAMES]), form).ravel()
+        ref_theta = model.intermediate_parameters(
+            np.array([reference.get(n, math.nan) for n in form.base_names]), form
+        ).ravel()
     if truth is not None:
-        true_theta_row = model.intermediate_parameters(np.array([truth[n] for n in THETA0_NAMES]), form).ravel()
+        true_theta_row = model.intermediate_parameters(
+            np.array([truth.get(n, math.nan) for n in form.base_names]), form
+        ).ravel()
     header = ["parameter", "start (nominal)"]
     header += ["CAD"] if ref_theta is not None else []
     header += ["true", "estimate", "std", "error %"] if true_theta_row is not None else ["estimate", "std"]
@@ -167,13 +181,14 @@ def build_report(
         value, std = entry["value"], entry["std"]
         row = [name, entry["unit"]]
         if nominal:
-            row.append(_fmt(nominal[name]))
+            row.append(_fmt(nominal.get(name)))
         if reference:
-            z = (value - reference[name]) / std if std else math.nan
+            ref = reference.get(name, math.nan)  # no CAD value of a caster's drag
+            z = (value - ref) / std if std else math.nan
             mark = " ⚑" if math.isfinite(z) and abs(z) > SIGNIFICANT else ""
             if mark:
                 flagged.append(f"{name} differs from its CAD value by {z:+.1f} std")
-            row += [_fmt(reference[name]), f"{z:+.1f}{mark}" if math.isfinite(z) else "—"]
+            row += [_fmt(ref), f"{z:+.1f}{mark}" if math.isfinite(z) else "—"]
         row += [_fmt(value), _fmt(std, 2) + (" †" if name in inflated else "")]
         if truth:
             t = truth.get(name)
@@ -259,8 +274,8 @@ def build_report(
     if "prediction_error_rms" in diag:
         residuals["prediction_error_rms"] = diag["prediction_error_rms"]
     if log is not None and effort_unit == "N m":
-        theta0 = np.array([params[n]["value"] for n in THETA0_NAMES])
-        residuals["torque"] = torque_residual(log, theta0)
+        theta0 = np.array([params[n]["value"] for n in form.base_names])
+        residuals["torque"] = torque_residual(log, theta0, form)
 
     report = Report(
         title=f"wmrid report: {data.get('source', '?')}",
