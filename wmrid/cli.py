@@ -339,6 +339,7 @@ ControlRateOpt = Annotated[
 
 
 class FrictionChoice(str, Enum):
+    auto = "auto"
     wheel = "wheel"
     wheel_caster = "wheel+caster"
 
@@ -349,9 +350,19 @@ FrictionOpt = Annotated[
         "--friction",
         help="wheel: viscous and Coulomb friction per wheel (Eqs. 15-17); wheel+caster: also the casters' rolling "
         "drag, one drag force per caster when --robot lists [[caster]] positions (else two terms, Cv against "
-        "speed and Cw against turning).  Observer only.",
+        "speed and Cw against turning), observer only; auto: both, and the caster model when the log shows the "
+        "drag (a Wald test, p < 0.001; the output says which and why).",
     ),
 ]
+
+
+def _friction_for(friction, methods: tuple[str, ...], validate) -> str:
+    """The friction model to identify with: ``auto`` falls back to ``wheel`` where caster drag is not modelled
+    (another method, --validate); an explicit ``wheel+caster`` there is refused (:func:`_check_friction`)."""
+    _check_friction(friction, methods, validate)
+    if friction == FrictionChoice.auto and (any(m != "observer" for m in methods) or validate is not None):
+        return "wheel"
+    return friction.value
 
 
 def _check_friction(friction, methods: tuple[str, ...], validate) -> None:
@@ -498,7 +509,7 @@ def identify(
     forgetting: ForgettingOpt = 1.0,
     validate: ValidateOpt = None,
     control_rate: ControlRateOpt = None,
-    friction: FrictionOpt = FrictionChoice.wheel,
+    friction: FrictionOpt = FrictionChoice.auto,
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
     from wmrid.atomic import write_json
@@ -507,7 +518,7 @@ def identify(
 
     options = _method_options(cutoff, weighted, forgetting, torque_hold)
     _check_control_rate(control_rate, (method.value,), validate)
-    _check_friction(friction, (method.value,), validate)
+    friction_model = _friction_for(friction, (method.value,), validate)
     if log == "-" and validate == "-":
         raise UsageError("LOG and --validate cannot both be standard input; give one of them as a file")
     robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
@@ -528,7 +539,7 @@ def identify(
             progress=progress_cb,
             payload=payload,
             control_rate=control_rate,
-            friction=friction.value,
+            friction=friction_model,
         )
     finally:
         finish()
@@ -629,7 +640,7 @@ def report(
     forgetting: ForgettingOpt = 1.0,
     validate: ValidateOpt = None,
     control_rate: ControlRateOpt = None,
-    friction: FrictionOpt = FrictionChoice.wheel,
+    friction: FrictionOpt = FrictionChoice.auto,
 ) -> None:
     """Tables (paper Tables 2 and 3), comparison with nominal/CAD/truth, diagnostics and figures for INPUT."""
     import json
@@ -664,13 +675,13 @@ def report(
         robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
         options = _method_options(cutoff, weighted, forgetting, torque_hold)
         _check_control_rate(control_rate, (method.value,), validate)
-        _check_friction(friction, (method.value,), validate)
+        friction_model = _friction_for(friction, (method.value,), validate)
         log_options = _log_options(locals())
         log = _read_wheel_log(input_, columns, time_unit.value, robot_obj, **log_options, data=source.data)
         result = run_identify(
             log, robot_obj, form=form.value, k=k, alpha=alpha, torque_hold=torque_hold.value, payload=payload,
             control_rate=control_rate,
-            friction=friction.value,
+            friction=friction_model,
         )  # fmt: skip
         if method != MethodChoice.observer:
             from wmrid.methods import run

@@ -292,7 +292,7 @@ def identify(
     progress: Callable[[int, int], None] | None = None,
     payload: bool = False,
     control_rate: float | None = None,
-    friction: Literal["wheel", "wheel+caster"] = "wheel",
+    friction: Literal["wheel", "wheel+caster", "auto"] = "wheel",
 ) -> IdentificationResult:
     """Identify the base parameters of the robot that recorded ``log``.
 
@@ -307,23 +307,79 @@ def identify(
     ``control_rate`` : Hz, the rate of the controller that held the effort, when the log is slower
     (see :class:`wmrid.observer.ObserverSettings`).  ``friction``: ``wheel`` (Eqs. 15-17) or ``wheel+caster``
     (also the casters' rolling drag, :func:`wmrid.model.caster_columns`: with the robot's casters
-    (``robot.casters``) one drag force D_k per caster, else the two-term Cv, Cw; general form only).
+    (``robot.casters``) one drag force D_k per caster, else the two-term Cv, Cw; general form only), or
+    ``auto``: both, and the caster model when a Wald test puts its drag off zero at p < AUTO_P (never on a log
+    whose wheels keep one sign).  ``diagnostics["friction"]`` states the model and why.
     """
-    if friction not in ("wheel", "wheel+caster"):
-        raise UsageError(f"--friction must be wheel or wheel+caster, got {friction!r}")
+    if friction not in FRICTION_CHOICES:
+        raise UsageError(f"--friction must be one of {', '.join(FRICTION_CHOICES)}, got {friction!r}")
     if payload and robot is None:
         raise UsageError("--payload needs --robot: the payload is what the log shows beyond the unloaded robot")
     stream = log if isinstance(log, LogStream) else stream_arrays(log)
+
+    def run(caster: bool) -> IdentificationResult:
+        try:
+            return _identify(
+                stream, robot, form, k, alpha, box_width, max_history, torque_hold, progress, payload, control_rate,
+                caster,
+            )  # fmt: skip
+        except np.linalg.LinAlgError as err:
+            raise NotIdentifiableError(
+                f"{stream.source}: the log does not support an estimate (a singular system: {err}); it is too short, "
+                "not exciting enough, or its units or time stamps are wrong (check the notes of wmrid inspect)"
+            ) from err
+
+    if friction != "auto":
+        result = run(friction == "wheel+caster")
+        return _with_friction(result, {"model": friction, "chosen_by": "--friction"})
+    wheel = run(False)
+    if wheel.form.kind == "paper":
+        return _with_friction(wheel, {"model": "wheel", "chosen_by": "auto", "reason": AUTO_NO_REVERSAL})
     try:
-        return _identify(
-            stream, robot, form, k, alpha, box_width, max_history, torque_hold, progress, payload, control_rate,
-            friction == "wheel+caster",
-        )  # fmt: skip
-    except np.linalg.LinAlgError as err:
-        raise NotIdentifiableError(
-            f"{stream.source}: the log does not support an estimate (a singular system: {err}); it is too short, "
-            "not exciting enough, or its units or time stamps are wrong (check the notes of wmrid inspect)"
-        ) from err
+        caster = run(True)
+    except NotIdentifiableError as err:
+        return _with_friction(wheel, {"model": "wheel", "chosen_by": "auto", "reason": f"caster model failed: {err}"})
+    choice = caster_drag_test(caster)
+    chosen = caster if choice["p_value"] < AUTO_P else wheel
+    reason = f"the caster drag ({choice['text']}) differs from zero at p = {choice['p_value']:.2g}" + (
+        f" < {AUTO_P:g}" if chosen is caster else f" >= {AUTO_P:g}: not shown by this log"
+    )
+    return _with_friction(chosen, {"model": chosen.form.friction, "chosen_by": "auto", "reason": reason, **choice})
+
+
+#: Friction models of :func:`identify`: ``auto`` lets the log decide between the other two.
+FRICTION_CHOICES = ("wheel", "wheel+caster", "auto")
+#: ``--friction auto`` takes the caster model when a Wald test puts its drag parameters off zero at this level.
+AUTO_P = 1e-3
+AUTO_NO_REVERSAL = (
+    "neither wheel ever stops or reverses, so a caster's drag cannot be told from the wheels' Coulomb friction"
+)
+
+
+def caster_drag_test(result: IdentificationResult) -> dict[str, Any]:
+    """Wald test of the caster-drag parameters of a ``wheel+caster`` result against zero.
+
+    W = d^T C^-1 d over the q drag parameters d with their reported (widened) covariance C, chi-square on q
+    degrees of freedom.  Returns {"statistic", "dof", "p_value", "text"}."""
+    from scipy.special import chdtrc
+
+    names = result.form.base_names[8:]
+    idx = [result.form.base_names.index(n) for n in names]
+    values = np.array([result.parameters[n][0] for n in names])
+    cov = np.asarray(result.theta0_cov)[np.ix_(idx, idx)]
+    if not np.all(np.isfinite(cov)):
+        return {"statistic": 0.0, "dof": len(names), "p_value": 1.0, "text": "not determined by this log"}
+    stat = float(values @ np.linalg.pinv(cov, hermitian=True) @ values)
+    units = result.units
+    text = ", ".join(
+        f"{n} = {v:.4g} +/- {result.parameters[n][1]:.2g} {units[n]}" for n, v in zip(names, values, strict=True)
+    )
+    return {"statistic": stat, "dof": len(names), "p_value": float(chdtrc(len(names), stat)), "text": text}
+
+
+def _with_friction(result: IdentificationResult, friction: dict[str, Any]) -> IdentificationResult:
+    """``result`` with its friction model and how it was chosen in ``diagnostics["friction"]``."""
+    return replace(result, diagnostics={**result.diagnostics, "friction": friction})
 
 
 def _identify(

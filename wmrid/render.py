@@ -65,6 +65,9 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         f"k = {result.settings.k:g} 1/s, alpha = {result.settings.alpha:g}; start: {result.start_source}"
     )
     diag = result.diagnostics
+    friction = diag.get("friction")
+    if friction and friction.get("chosen_by") == "auto":
+        console.print(f"friction model: {friction['model']} (auto: {friction.get('reason', '')})", markup=False)
     console.print(
         f"lambda_min(Gamma) = {diag['lambda_min_gamma']:.3g}; structural mismatch p = "
         f"{diag['structural_mismatch']['p_value']:.2g} ({diag['structural_mismatch']['dof']} directions)"

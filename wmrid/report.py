@@ -225,6 +225,15 @@ def build_report(
             if inflated and unc.get("model_error")
             else []
         ),
+        *(
+            [
+                f"Friction model: {diag['friction']['model']} ({diag['friction']['chosen_by']}"
+                + (f": {diag['friction']['reason']}" if diag["friction"].get("reason") else "")
+                + ")."
+            ]
+            if diag.get("friction")
+            else []
+        ),
         f"Structural consistency (Eqs. 23-24): p = {diag['structural_mismatch']['p_value']:.2g} on "
         f"{diag['structural_mismatch']['dof']} directions"
         + (
