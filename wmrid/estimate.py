@@ -50,7 +50,9 @@ class BaseEstimate:
         """(n0,) standard errors (inf where the log does not determine the parameter)."""
         return np.sqrt(np.clip(np.diag(self.cov), 0.0, None))
 
-    def named(self) -> dict[str, tuple[float, float]]:
-        """name -> (value, std) for the base parameters."""
-        names = THETA0_NAMES + CASTER_NAMES if len(self.theta0) == 10 else THETA0_NAMES
+    def named(self, names: tuple[str, ...] | None = None) -> dict[str, tuple[float, float]]:
+        """name -> (value, std) for the base parameters; ``names`` default: the eight, then Cv, Cw (give a form's
+        ``base_names`` for a geometric caster model)."""
+        if names is None:
+            names = (THETA0_NAMES + CASTER_NAMES)[: len(self.theta0)]
         return {n: (float(v), float(s)) for n, v, s in zip(names, self.theta0, self.std, strict=True)}
