@@ -44,23 +44,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wmrid import model
 from wmrid.errors import UsageError
 from wmrid.robot import Caster, Payload, PhysicalParameters, default_casters
 from wmrid.simulate import (
     _KIND,
-    GAINS,
-    TRAJECTORIES,
-    TRAJECTORY_PARAMETERS,
     NoiseSettings,
     PlantChange,
     SimulatedLog,
     _control,
-    _encoder_velocity,
     _positive_number,
     _reference,
     _reversing_velocity,
-    timing,
+    plan_run,
 )
 
 #: Bump when a change alters the simulated motion (not its docs or truth fields): benchmarks key their caches on it.
@@ -368,20 +363,16 @@ def simulate_multibody(
     payload when it is carried from the start).
     """
     mujoco = import_mujoco()
-    if trajectory not in TRAJECTORIES:
-        raise UsageError(f"unknown trajectory {trajectory!r}; choose one of {', '.join(TRAJECTORIES)}")
     if not isinstance(settings, MultibodySettings):
         raise UsageError("settings must be MultibodySettings")
-    duration = _positive_number("duration", duration)
-    period, every = timing(rate)
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise UsageError(f"seed must be a whole number >= 0, got {seed!r}")
-    n = math.floor(duration * rate + 1e-9) + 1
-    if n < 2:
-        raise UsageError(f"duration {duration:g} s at {rate:g} Hz gives fewer than 2 samples")
-    n_ctrl = (n - 1) * every + 1
-    if n_ctrl > 50_000_000:
-        raise UsageError(f"duration {duration:g} s: at most {50_000_000 * period:g} s of multibody simulation")
+    if not isinstance(true, PhysicalParameters):
+        raise UsageError("true and nominal must be PhysicalParameters")
+    run = plan_run(nominal, trajectory=trajectory, duration=duration, rate=rate, noise=noise, seed=seed)
+    period, every, n, n_ctrl = run.period, run.every, run.n, run.n_ctrl
+    if n_ctrl > MAX_CONTROL_PERIODS:
+        raise UsageError(
+            f"duration {run.duration:g} s: at most {MAX_CONTROL_PERIODS * period:g} s of multibody simulation"
+        )
     casters = default_casters(true) if casters is None else tuple(casters)
     if not casters:
         raise UsageError(
@@ -411,10 +402,7 @@ def simulate_multibody(
         if payload is None and change.kind != "friction-fault":
             raise UsageError("a payload change needs the payload")
 
-    rng = np.random.Generator(np.random.PCG64(int(seed)))
-    eta_z = rng.standard_normal((n, 2))
-    tau_z = rng.standard_normal((n, 2))
-    caster_z = rng.standard_normal((n_ctrl, 2))
+    caster_z = run.caster_z
 
     plant = _Plant(mujoco, true, casters, settings, payload, period)
     plant.set_payload(payload if (carried or (change is not None and change.kind == "payload-drop")) else None)
@@ -422,14 +410,7 @@ def simulate_multibody(
     m, d = plant.model, plant.data
 
     kind = _KIND[trajectory]
-    params = TRAJECTORY_PARAMETERS[trajectory]
-    traj = np.array(list(params.values()), dtype=np.float64)
-    big_nom = model.inertia_matrix(nominal)
-    ctrl = np.array(
-        [big_nom[0, 0], big_nom[0, 1], big_nom[1, 1], model.coriolis_coefficient(nominal),
-         nominal.F_v1, nominal.F_v2, nominal.F_d1, nominal.F_d2, nominal.r, nominal.b]
-    )  # fmt: skip
-    gains = np.array([GAINS["k1"], GAINS["k2"], GAINS["k3"], GAINS["K"]])
+    traj, ctrl, gains = run.traj, run.ctrl, run.gains
 
     # Settle at rest on the contacts, then start on the reference with its speeds (true r, b).
     r, b = true.r, true.b
@@ -540,11 +521,6 @@ def simulate_multibody(
         d1 = a_ou * d1 + q_ou * caster_z[k + 1, 0]
         d2 = a_ou * d2 + q_ou * caster_z[k + 1, 1]
 
-    dt = every * period
-    eta_meas = _encoder_velocity(angle, eta, noise.encoder_cpr, dt) if noise.encoder_cpr > 0 else eta.copy()
-    eta_log = eta_meas + noise.eta_std * eta_z
-    tau_log = tau + noise.tau_std * tau_z
-    t_arr = np.arange(n) * dt
     mean_normals = normals / max(n_normals, 1)
     multibody = {
         **settings.to_dict(),
@@ -563,32 +539,12 @@ def simulate_multibody(
         ],
         "max_slip_speed": float(slip_max),
     }
-    settings_out = {
-        "engine": "mujoco",
-        "trajectory": trajectory,
-        "trajectory_parameters": dict(params),
-        "duration": duration,
-        "rate": float(rate),
-        "control_period": period,
-        "substeps": settings.substeps,
-        "n_samples": n,
-        "seed": int(seed),
-        "generator": "numpy PCG64",
-        "noise": noise.to_dict(),
-        "gains": dict(GAINS),
-        "multibody": multibody,
-    }
-    if change is not None:
-        settings_out["change"] = change.to_dict(period)
-    arrays = [t_arr, eta_log, tau_log, pose, angle, refpose, dist, eta]
-    for a in arrays:
-        a.setflags(write=False)
-    return SimulatedLog(
-        t=t_arr, eta=eta_log, tau=tau_log, pose=pose, wheel_angle=angle, true=plant0, nominal=nominal,
-        settings=settings_out, reference=refpose, disturbance=dist, eta_true=eta, change=change,
-    )  # fmt: skip
+    extra = {"engine": "mujoco", "substeps": settings.substeps, "multibody": multibody}
+    return run.log(plant0, pose, angle, eta, tau, refpose, dist, extra, change)
 
 
+#: Most control periods of one run (50,000 s at 1 kHz): a bound on the time and memory of a simulation.
+MAX_CONTROL_PERIODS = 50_000_000
 #: Largest roll or pitch of the platform (rad) before the run is called unstable (it has tipped over).
 MAX_TILT = 0.3
 

@@ -659,23 +659,12 @@ def simulate(
     at or after ``change.t``, which must come before the last sample; None (default): no change, and the
     output is exactly that of a simulator without this option.
     """
-    if trajectory not in TRAJECTORIES:
-        raise UsageError(f"unknown trajectory {trajectory!r}; choose one of {', '.join(TRAJECTORIES)}")
-    if not isinstance(true, PhysicalParameters) or not isinstance(nominal, PhysicalParameters):
+    if not isinstance(true, PhysicalParameters):
         raise UsageError("true and nominal must be PhysicalParameters")
-    if not isinstance(noise, NoiseSettings):
-        raise UsageError(f"noise must be a NoiseSettings, got {type(noise).__name__}")
-    duration = _positive_number("duration", duration)
-    period, every = timing(rate)
-    rate = float(rate)
     if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
         raise UsageError(f"substeps must be a whole number >= 1, got {substeps!r}")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise UsageError(f"seed must be a whole number >= 0, got {seed!r}")
-    n = math.floor(duration * rate + 1e-9) + 1
-    if n < 2:
-        raise UsageError(f"duration {duration:g} s at {rate:g} Hz gives fewer than 2 samples")
-    n_ctrl = (n - 1) * every + 1
+    run = plan_run(nominal, trajectory=trajectory, duration=duration, rate=rate, noise=noise, seed=seed)
+    period, every, n, n_ctrl = run.period, run.every, run.n, run.n_ctrl
     switch = -1
     if change is not None:
         if not isinstance(change, PlantChange):
@@ -689,21 +678,8 @@ def simulate(
                 f"period starting at or after it), which must come after 0 and before the last sample at "
                 f"{(n_ctrl - 1) * period:g} s"
             )
-
-    rng = np.random.Generator(np.random.PCG64(int(seed)))
-    eta_z = rng.standard_normal((n, 2))
-    tau_z = rng.standard_normal((n, 2))
-    caster_z = rng.standard_normal((n_ctrl, 2))
-
-    params = TRAJECTORY_PARAMETERS[trajectory]
-    traj = np.array(list(params.values()), dtype=np.float64)
     plant = _plant_vector(true)
-    big_nom = model.inertia_matrix(nominal)
-    ctrl = np.array(
-        [big_nom[0, 0], big_nom[0, 1], big_nom[1, 1], model.coriolis_coefficient(nominal),
-         nominal.F_v1, nominal.F_v2, nominal.F_d1, nominal.F_d2, nominal.r, nominal.b]
-    )  # fmt: skip
-    gains = np.array([GAINS["k1"], GAINS["k2"], GAINS["k3"], GAINS["K"]])
+    traj, ctrl, gains, caster_z = run.traj, run.ctrl, run.gains, run.caster_z
 
     args = (_KIND[trajectory], traj, plant, ctrl, gains, period, int(substeps), n, every, caster_z,
             noise.caster_std, noise.caster_time)  # fmt: skip
@@ -714,32 +690,106 @@ def simulate(
             *args, _plant_vector(change.after), switch
         )
 
-    dt = every * period
-    cpr = noise.encoder_cpr
-    eta_meas = _encoder_velocity(angle, eta_true, cpr, dt) if cpr > 0 else eta_true.copy()
-    eta_log = eta_meas + noise.eta_std * eta_z
-    tau_log = tau_applied + noise.tau_std * tau_z
-    t = np.arange(n) * dt
+    settings = {"substeps": int(substeps)}
+    return run.log(true, pose, angle, eta_true, tau_applied, refpose, dist, settings, change)
 
-    settings = {
-        "trajectory": trajectory,
-        "trajectory_parameters": dict(params),
-        "duration": duration,
-        "rate": rate,
-        "control_period": period,
-        "substeps": int(substeps),
-        "n_samples": n,
-        "seed": int(seed),
-        "generator": "numpy PCG64",
-        "noise": noise.to_dict(),
-        "gains": dict(GAINS),
-    }
-    if change is not None:
-        settings["change"] = change.to_dict(period)
-    arrays = [t, eta_log, tau_log, pose, angle, refpose, dist, eta_true]
-    for a in arrays:
-        a.setflags(write=False)
-    return SimulatedLog(
-        t=t, eta=eta_log, tau=tau_log, pose=pose, wheel_angle=angle, true=true, nominal=nominal,
-        settings=settings, reference=refpose, disturbance=dist, eta_true=eta_true, change=change,
+
+@dataclass(frozen=True, eq=False)
+class RunPlan:
+    """What every closed-loop simulator of wmrid shares: the checked run settings, the random streams and the
+    controller's vectors (see :func:`plan_run`), and the assembly of the log (:meth:`log`).
+
+    period : control period T, s; every : control periods per log period; n : log samples; n_ctrl : control
+    periods; eta_z, tau_z (n, 2) and caster_z (n_ctrl, 2): standard normals, drawn in that order from
+    PCG64(seed); traj, ctrl (10,), gains (4,): the kernel's reference, NOMINAL controller and gain vectors.
+    """
+
+    nominal: PhysicalParameters
+    trajectory: str
+    duration: float
+    rate: float
+    noise: NoiseSettings
+    seed: int
+    period: float
+    every: int
+    n: int
+    n_ctrl: int
+    eta_z: np.ndarray
+    tau_z: np.ndarray
+    caster_z: np.ndarray
+    traj: np.ndarray
+    ctrl: np.ndarray
+    gains: np.ndarray
+
+    def log(
+        self, true: PhysicalParameters, pose: np.ndarray, angle: np.ndarray, eta_true: np.ndarray,
+        tau_applied: np.ndarray, refpose: np.ndarray, dist: np.ndarray, extra: dict, change: PlantChange | None,
+    ) -> SimulatedLog:  # fmt: skip
+        """The SimulatedLog of a run: encoder quantisation and noise on the logged speeds and torques, the
+        settings (``extra`` merged in), read-only arrays."""
+        noise = self.noise
+        dt = self.every * self.period
+        cpr = noise.encoder_cpr
+        eta_meas = _encoder_velocity(angle, eta_true, cpr, dt) if cpr > 0 else eta_true.copy()
+        eta_log = eta_meas + noise.eta_std * self.eta_z
+        tau_log = tau_applied + noise.tau_std * self.tau_z
+        t = np.arange(self.n) * dt
+        settings = {
+            "trajectory": self.trajectory,
+            "trajectory_parameters": dict(TRAJECTORY_PARAMETERS[self.trajectory]),
+            "duration": self.duration,
+            "rate": self.rate,
+            "control_period": self.period,
+            "substeps": None,
+            "n_samples": self.n,
+            "seed": self.seed,
+            "generator": "numpy PCG64",
+            "noise": noise.to_dict(),
+            "gains": dict(GAINS),
+            **extra,
+        }
+        if change is not None:
+            settings["change"] = change.to_dict(self.period)
+        for a in (t, eta_log, tau_log, pose, angle, refpose, dist, eta_true):
+            a.setflags(write=False)
+        return SimulatedLog(
+            t=t, eta=eta_log, tau=tau_log, pose=pose, wheel_angle=angle, true=true, nominal=self.nominal,
+            settings=settings, reference=refpose, disturbance=dist, eta_true=eta_true, change=change,
+        )  # fmt: skip
+
+
+def plan_run(
+    nominal: PhysicalParameters, *, trajectory: str, duration: float, rate: float, noise: NoiseSettings, seed: int
+) -> RunPlan:
+    """Check a run's settings (UsageError naming the bad one) and draw its random streams; see :class:`RunPlan`."""
+    if trajectory not in TRAJECTORIES:
+        raise UsageError(f"unknown trajectory {trajectory!r}; choose one of {', '.join(TRAJECTORIES)}")
+    if not isinstance(nominal, PhysicalParameters):
+        raise UsageError("true and nominal must be PhysicalParameters")
+    if not isinstance(noise, NoiseSettings):
+        raise UsageError(f"noise must be a NoiseSettings, got {type(noise).__name__}")
+    duration = _positive_number("duration", duration)
+    period, every = timing(rate)
+    rate = float(rate)
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise UsageError(f"seed must be a whole number >= 0, got {seed!r}")
+    n = math.floor(duration * rate + 1e-9) + 1
+    if n < 2:
+        raise UsageError(f"duration {duration:g} s at {rate:g} Hz gives fewer than 2 samples")
+    n_ctrl = (n - 1) * every + 1
+    rng = np.random.Generator(np.random.PCG64(int(seed)))
+    eta_z = rng.standard_normal((n, 2))
+    tau_z = rng.standard_normal((n, 2))
+    caster_z = rng.standard_normal((n_ctrl, 2))
+    traj = np.array(list(TRAJECTORY_PARAMETERS[trajectory].values()), dtype=np.float64)
+    big_nom = model.inertia_matrix(nominal)
+    ctrl = np.array(
+        [big_nom[0, 0], big_nom[0, 1], big_nom[1, 1], model.coriolis_coefficient(nominal),
+         nominal.F_v1, nominal.F_v2, nominal.F_d1, nominal.F_d2, nominal.r, nominal.b]
+    )  # fmt: skip
+    gains = np.array([GAINS["k1"], GAINS["k2"], GAINS["k3"], GAINS["K"]])
+    return RunPlan(
+        nominal=nominal, trajectory=trajectory, duration=duration, rate=rate, noise=noise, seed=int(seed),
+        period=period, every=every, n=n, n_ctrl=n_ctrl, eta_z=eta_z, tau_z=tau_z, caster_z=caster_z, traj=traj,
+        ctrl=ctrl, gains=gains,
     )  # fmt: skip
