@@ -360,23 +360,31 @@ def _friction_for(friction, methods: tuple[str, ...], validate) -> str:
     """The friction model to identify with: ``auto`` falls back to ``wheel`` where caster drag is not modelled
     (another method, --validate); an explicit ``wheel+caster`` there is refused (:func:`_check_friction`)."""
     _check_friction(friction, methods, validate)
-    if friction == FrictionChoice.auto and (any(m != "observer" for m in methods) or validate is not None):
+    if friction == FrictionChoice.auto and (any(m not in CASTER_METHODS for m in methods) or validate is not None):
         return "wheel"
     return friction.value
 
 
+#: Methods that model caster drag (--friction wheel+caster).
+CASTER_METHODS = ("observer",)
+
+
 def _check_friction(friction, methods: tuple[str, ...], validate) -> None:
-    """Caster drag is modelled by the observer only so far: refuse it where it would be ignored."""
-    if friction != FrictionChoice.wheel_caster:
-        return
-    others = [m for m in methods if m != "observer"]
+    """Caster drag is modelled by some methods only so far: refuse it where it would be ignored."""
+    if friction == FrictionChoice.wheel_caster:
+        _refuse_unmodelled("--friction wheel+caster", methods, validate, CASTER_METHODS)
+
+
+def _refuse_unmodelled(option: str, methods: tuple[str, ...], validate, supported: tuple[str, ...]) -> None:
+    """UsageError when ``option`` would be ignored: by a method outside ``supported``, or by --validate's predictor."""
+    others = [m for m in methods if m not in supported]
     if others:
         raise UsageError(
-            f"--friction wheel+caster is modelled by the observer only, not by {', '.join(others)} yet; drop it or "
-            "use --method observer"
+            f"{option} is modelled by the {' and '.join(supported)} only, not by {', '.join(others)} yet; drop it or "
+            f"use --method {supported[0]}"
         )
     if validate is not None:
-        raise UsageError("--friction wheel+caster is not modelled by the --validate predictor yet; validate without it")
+        raise UsageError(f"{option} is not modelled by the --validate predictor yet; validate without it")
 
 
 ValidateOpt = Annotated[
@@ -393,16 +401,8 @@ ValidateOpt = Annotated[
 def _check_control_rate(control_rate, methods: tuple[str, ...], validate) -> None:
     """--control-rate is modelled by the observer only (the classical methods and the validation
     predictor hold each logged effort over the whole step): refuse it where it would be ignored."""
-    if control_rate is None:
-        return
-    others = [m for m in methods if m != "observer"]
-    if others:
-        raise UsageError(
-            f"--control-rate is modelled by the observer only, not by {', '.join(others)}; drop it or use "
-            "--method observer"
-        )
-    if validate is not None:
-        raise UsageError("--control-rate is not modelled by the --validate predictor yet; validate without it")
+    if control_rate is not None:
+        _refuse_unmodelled("--control-rate", methods, validate, ("observer",))
 
 
 def _method_options(cutoff, weighted, forgetting, torque_hold):

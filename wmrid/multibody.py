@@ -54,8 +54,8 @@ from wmrid.simulate import (
     _control,
     _positive_number,
     _reference,
-    _reversing_velocity,
     plan_run,
+    reversing_advance,
 )
 
 #: Bump when a change alters the simulated motion (not its docs or truth fields): benchmarks key their caches on it.
@@ -513,11 +513,9 @@ def simulate_multibody(
                 "inside the wheels' and casters' support)"
             )
         if kind == 1:
-            fa = _reversing_velocity(traj, t)
-            fm = _reversing_velocity(traj, t + 0.5 * h)
-            fb = _reversing_velocity(traj, t + h)
-            xr_int += h / 6.0 * (fa[0] + 4.0 * fm[0] + fb[0])
-            yr_int += h / 6.0 * (fa[1] + 4.0 * fm[1] + fb[1])
+            dx, dy = reversing_advance(traj, t, h)
+            xr_int += dx
+            yr_int += dy
         d1 = a_ou * d1 + q_ou * caster_z[k + 1, 0]
         d2 = a_ou * d2 + q_ou * caster_z[k + 1, 1]
 

@@ -411,6 +411,15 @@ def _reversing_velocity(traj, t):
 
 
 @numba.njit(cache=True, nogil=True)
+def reversing_advance(traj, t, h):
+    """(dx_r, dy_r) m: the reversing reference's advance from t to t + h s, by Simpson's rule (RK4 on x_r' = f(t))."""
+    fa = _reversing_velocity(traj, t)
+    fm = _reversing_velocity(traj, t + 0.5 * h)
+    fb = _reversing_velocity(traj, t + h)
+    return h / 6.0 * (fa[0] + 4.0 * fm[0] + fb[0]), h / 6.0 * (fa[1] + 4.0 * fm[1] + fb[1])
+
+
+@numba.njit(cache=True, nogil=True)
 def _plant_rhs(s, tau1, tau2, d1, d2, plant, out):
     """out (7,) = s' for state s (7,) under wheel torques tau and caster disturbance d (N m)."""
     m11, m12, m22, vc = plant[0], plant[1], plant[2], plant[3]
@@ -540,12 +549,9 @@ def closed_loop_kernel(kind, traj, plant, ctrl, gains, period, substeps, n_log, 
             for m in range(7):
                 s[m] += h / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
             if kind == 1:  # RK4 on x_r' = f(t) alone: Simpson's rule over the substep
-                ts = t + j * h
-                fa = _reversing_velocity(traj, ts)
-                fm = _reversing_velocity(traj, ts + 0.5 * h)
-                fb = _reversing_velocity(traj, ts + h)
-                xr_int += h / 6.0 * (fa[0] + 4.0 * fm[0] + fb[0])
-                yr_int += h / 6.0 * (fa[1] + 4.0 * fm[1] + fb[1])
+                dx, dy = reversing_advance(traj, t + j * h, h)
+                xr_int += dx
+                yr_int += dy
         d1 = a_ou * d1 + q_ou * caster_z[k + 1, 0]
         d2 = a_ou * d2 + q_ou * caster_z[k + 1, 1]
     return pose, angle, eta, tau, refpose, dist
