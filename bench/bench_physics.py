@@ -121,8 +121,11 @@ def normal_floor() -> float:
     return float(FLOOR_FRICTION)
 
 
-def case_set(robots: tuple[str, ...], quick: bool) -> list[Case]:
+def case_set(robots: tuple[str, ...], quick: bool, only: dict[str, Any] | None = None) -> list[Case]:
+    """The benchmark's cases; ``only`` = {"trajectory", "rate", "caster"} picks that single case per robot."""
     floor = normal_floor()
+    if only is not None:
+        return [Case(robot, only["trajectory"], only["rate"], only["caster"], floor) for robot in robots]
     cases: list[Case] = []
     for robot in robots:
         if quick:
@@ -430,6 +433,9 @@ def main() -> int:
     ap.add_argument("--cache", default="/tmp/wmrid-physics-cache", help="directory of cached .npz logs")
     ap.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
     ap.add_argument("--json", metavar="PATH", help="also write everything as JSON here")
+    ap.add_argument(
+        "--only", metavar="TRAJ:HZ:CASTER", help="one case per robot instead of the set, e.g. reversing:200:0.015"
+    )
     args = ap.parse_args()
     seeds = args.seeds if args.seeds is not None else (3 if args.quick else 20)
     if seeds < 1 or args.workers < 1 or not args.duration > 0:
@@ -441,7 +447,14 @@ def main() -> int:
     wall0 = time.perf_counter()
     version = sim_version()
     robots = tuple(args.robots)
-    cases = case_set(robots, args.quick)
+    only = None
+    if args.only:
+        try:
+            traj, hz, caster = args.only.split(":")
+            only = {"trajectory": traj, "rate": float(hz), "caster": float(caster)}
+        except ValueError:
+            ap.error(f"--only {args.only!r}: expected TRAJ:HZ:CASTER, e.g. reversing:200:0.015")
+    cases = case_set(robots, args.quick, only)
 
     def job(case: Case, seed: int, clean: bool, tau_std: float = 0.0) -> Job:
         eta_std = 0.0 if clean else ETA_STD

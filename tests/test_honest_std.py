@@ -119,16 +119,6 @@ def test_model_error_scale_only_when_the_test_rejects():
     assert out["F"] == pytest.approx((19 - 6 + 1) * 40.0 / (19 * 6))
 
 
-@pytest.fixture(scope="module")
-def amr_caster_log():
-    """The light AMR, ball casters with rolling resistance 0.015, reversing at 200 Hz, sensor noise."""
-    noise = NoiseSettings(eta_std=0.02, tau_std=0.002)
-    return simulate_multibody(
-        AMR.cad, AMR.nominal, casters=AMR.casters, settings=MultibodySettings(caster_resistance=0.015),
-        trajectory="reversing", rate=200, noise=noise, seed=0,
-    )  # fmt: skip
-
-
 def test_amr_with_caster_drag_in_the_model(amr_caster_log):
     """Issue 11's AMR figures on one seed: with the casters' drag in the model (their positions from the robot),
     the inertia entries and Vc within 3 % (measured <= 0.6 %), every parameter within 3 std (measured
@@ -158,13 +148,14 @@ def test_amr_without_caster_drag_is_honest_not_accurate(amr_caster_log):
 
 
 def test_cli_caster_drag_refusals(request, capsys):
-    """--friction wheel+caster: refused with another method (exit 2), and on a log whose wheels never reverse
+    """--friction wheel+caster: refused with a method that does not model it (exit 2), and on a log whose wheels
+    never reverse
     (exit 1: the drag cannot be told from Coulomb friction); both one line, no traceback."""
     sample = str(request.config.rootpath / SAMPLE)
     with pytest.raises(SystemExit) as err:
-        main(["identify", sample, "--robot", "paper", "--friction", "wheel+caster", "--method", "idim"])
+        main(["identify", sample, "--robot", "paper", "--friction", "wheel+caster", "--method", "rls"])
     assert err.value.code == 2
-    assert "observer only" in capsys.readouterr().err
+    assert "observer and idim only" in capsys.readouterr().err
     with pytest.raises(SystemExit) as err:
         main(["identify", sample, "--robot", "paper", "--friction", "wheel+caster"])
     assert err.value.code == 1

@@ -48,6 +48,15 @@ by differentiating low-pass filtered velocities, which is where its choices live
   passes 1 / (1 + 4^order) of the noise power) loses almost no information while thinning the strongly
   correlated residuals (the parallel decimation of Gautier's IDIM).
 
+Caster drag (``form`` with ``caster``, :class:`wmrid.model.RegressorForm`, the observer's ``wheel+caster``
+model): the casters' rolling drag adds to wheel i's torque sum_j theta0[p_j] col_j (1 if i = 1 else s_j)
+over the caster columns col_j of :func:`wmrid.model.caster_columns` ((column, p_j, s_j) from
+``form.caster_map``; several columns may share one parameter, as the geometric model's two per caster share
+D_k).  That is linear too: phi gains the caster parameters (Cv, Cw or D_1..D_K, the same in phi and theta0),
+and the caster columns, computed from the unfiltered speeds like sgn(eta_i), go through the same parallel
+filter, so the filtered regression stays exact.  Their excitation scale is the most a column can be per unit
+parameter (:func:`caster_scales`).  Without ``form`` (or with a form without caster) everything is as above.
+
 Least squares: both wheel equations stacked (2 rows per sample), solved by QR.  ``weighted=True``: two
 steps, the rows of wheel j weighted by 1 / s_j with s_j the rms residual of its equation in the
 ordinary fit.  Standard errors: the residuals are coloured (filtered; the caster disturbance; closed
@@ -55,7 +64,7 @@ loop), so sigma^2 (X^T X)^-1 would understate them many times; wmrid reports the
 jackknife over contiguous segments of the log exactly as :mod:`wmrid.uncertainty` does (same segment
 count rule), dof = G - 1.  Each leave-one-out solution comes from the per-segment QR factors
 R_g of [X_g y_g] (X_g^T X_g = R_g^T R_g), without refitting.  theta0 = [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2]
-with m = M^-1; its covariance by the delta method (:func:`theta0_jacobian`).
+(then the caster parameters) with m = M^-1; its covariance by the delta method (:func:`theta0_jacobian`).
 """
 
 from __future__ import annotations
@@ -69,6 +78,7 @@ import numpy as np
 
 from wmrid.errors import LogFormatError, NotIdentifiableError, UsageError
 from wmrid.estimate import BaseEstimate
+from wmrid.model import RegressorForm, caster_columns
 from wmrid.uncertainty import segment_count
 
 #: Names of the IDIM parameters phi, in order (SI: kg m^2 for M and Vc, N m s/rad, N m).
@@ -112,13 +122,17 @@ class IdimRegression:
     """The filtered IDIM regression of a log: rows X phi = y, two per sample.
 
     t : (N,) s, times of the samples kept (after edges and decimation).
-    features : (N, 8) the filtered regressor columns, :data:`FEATURE_NAMES`: accelerations a_1, a_2
+    features : (N, 8 + q) the filtered regressor columns, :data:`FEATURE_NAMES`: accelerations a_1, a_2
         (rad/s^2), Coriolis columns c_1 = eta_1 eta_2 - eta_2^2, c_2 = eta_1 eta_2 - eta_1^2 (rad^2/s^2),
-        speeds eta_1, eta_2 (rad/s) and Coulomb columns sgn(eta_1), sgn(eta_2) (1).
+        speeds eta_1, eta_2 (rad/s) and Coulomb columns sgn(eta_1), sgn(eta_2) (1); then the q caster
+        columns of ``form`` (:attr:`feature_names`), none without caster drag.
     tau : (N, 2) N m, the filtered torques (the right-hand side y).
     cutoff_hz, order : the Butterworth low-pass; ``cutoff_rule`` says where the cutoff came from.
     rate_hz : sample rate of the (resampled) log; ``resampled``: whether it was interpolated onto it.
     decimation : k, every k-th filtered sample kept.  edge_seconds : dropped at each end.
+    form : the caster-drag model (None: none); then ``features`` has the filtered caster columns
+        (:func:`wmrid.model.caster_columns`, in ``form.caster_map`` order) after the eight, and phi the caster
+        parameters after the eight (:attr:`phi_names`).
     """
 
     t: np.ndarray
@@ -131,10 +145,34 @@ class IdimRegression:
     resampled: bool
     decimation: int
     edge_seconds: float
+    form: RegressorForm | None = None
+
+    @property
+    def caster_map(self) -> tuple[tuple[int, int, int], ...]:
+        """(column, parameter, pattern) of each caster feature (``form.caster_map``), () without caster drag."""
+        return _caster_map(self.form)
+
+    @property
+    def phi_names(self) -> tuple[str, ...]:
+        """Names of phi: :data:`PHI_NAMES`, then the caster parameters (``form.base_names[8:]``)."""
+        return phi_names(self.form)
+
+    @property
+    def feature_names(self) -> tuple[str, ...]:
+        """Names of the columns of ``features``: :data:`FEATURE_NAMES`, then the caster columns."""
+        if not self.caster_map:
+            return FEATURE_NAMES
+        assert self.form is not None
+        return FEATURE_NAMES + tuple(name.lstrip("-") for name in self.form.column_names[8:])
 
     def rows(self, index: slice | np.ndarray = slice(None)) -> np.ndarray:
-        """Regressor X (m, 2, 8) of the selected samples: X[k, i] phi = tau[k, i]."""
-        return rows_from_features(self.features[index])
+        """Regressor X (m, 2, p) of the selected samples: X[k, i] phi = tau[k, i] (p = 8 + caster parameters)."""
+        return rows_from_features(self.features[index], self.caster_map)
+
+    def scales(self) -> np.ndarray:
+        """Physical scales (p,) of phi's regressor columns: :func:`phi_scales`, then :func:`caster_scales`."""
+        base = phi_scales(self.features, self.cutoff_hz)
+        return np.concatenate([base, caster_scales(self.form)]) if self.caster_map else base
 
     def info(self) -> dict[str, Any]:
         """The preprocessing choices, JSON-ready."""
@@ -150,23 +188,70 @@ class IdimRegression:
         }
 
 
-def rows_from_features(features: np.ndarray) -> np.ndarray:
-    """Regressor X (n, 2, 8) for phi from features (n, 8) ordered as :data:`FEATURE_NAMES`."""
-    x = np.zeros((features.shape[0], 2, 8))
+def _caster_map(form: RegressorForm | None) -> tuple[tuple[int, int, int], ...]:
+    return form.caster_map if form is not None and form.caster else ()
+
+
+def phi_names(form: RegressorForm | None = None) -> tuple[str, ...]:
+    """Names of phi for ``form``: :data:`PHI_NAMES`, then its caster parameters (none without caster drag)."""
+    if not _caster_map(form):
+        return PHI_NAMES
+    assert form is not None
+    return PHI_NAMES + tuple(form.base_names[8:])
+
+
+def caster_scales(form: RegressorForm | None) -> np.ndarray:
+    """Physical scales (q,) of the caster parameters' regressor columns: the most each can be per unit parameter.
+
+    Two-term model: 1 (a sign, like the Coulomb columns).  Geometric model: D_k's entry in either wheel's row
+    is a_k +/- c_k with |a_k| <= r/2 and |c_k| <= (r/(2b)) |(x_k, y_k)| (:func:`wmrid.model.caster_columns`),
+    so the scale is the sum of its columns' bounds.  Empty without caster drag.
+    """
+    cmap = _caster_map(form)
+    if not cmap:
+        return np.zeros(0)
+    assert form is not None
+    out = np.zeros(len(phi_names(form)) - 8)
+    for _, param, pattern in cmap:
+        if not form.geometry:
+            bound = 1.0
+        else:  # caster k = param - 8: a_k has pattern +1, c_k pattern -1
+            r, b = form.geometry[0], form.geometry[1]
+            x, y = form.geometry[2 * (param - 8) + 2], form.geometry[2 * (param - 8) + 3]
+            bound = 0.5 * r if pattern == 1 else r / (2.0 * b) * math.hypot(x, y)
+        out[param - 8] += bound
+    return out
+
+
+def rows_from_features(features: np.ndarray, caster_map: tuple[tuple[int, int, int], ...] = ()) -> np.ndarray:
+    """Regressor X (n, 2, p) for phi from features (n, 8 + q) ordered as :data:`FEATURE_NAMES`, then q caster
+    columns mapped by ``caster_map`` (``RegressorForm.caster_map``: column j adds to phi[param] in row 1 and
+    pattern x itself in row 2).  p = 8 + the caster parameters."""
+    n_phi = 8 + len({param for _, param, _ in caster_map})
+    x = np.zeros((features.shape[0], 2, n_phi))
     for row, col, feat in ROW_LAYOUT:
         x[:, row, col] = features[:, feat]
+    for j, (_, param, pattern) in enumerate(caster_map):
+        x[:, 0, param] += features[:, 8 + j]
+        x[:, 1, param] += pattern * features[:, 8 + j]
     return x
 
 
-def raw_features(eta: np.ndarray, eta_dot: np.ndarray) -> np.ndarray:
-    """Unfiltered features (n, 8) (:data:`FEATURE_NAMES`) from eta (n, 2) rad/s and eta_dot (n, 2) rad/s^2."""
+def raw_features(eta: np.ndarray, eta_dot: np.ndarray, form: RegressorForm | None = None) -> np.ndarray:
+    """Unfiltered features (n, 8 + q) (:data:`FEATURE_NAMES`, then ``form``'s q caster columns) from eta (n, 2)
+    rad/s and eta_dot (n, 2) rad/s^2."""
     e1, e2 = eta[:, 0], eta[:, 1]
-    return np.column_stack([eta_dot, e1 * e2 - e2 * e2, e1 * e2 - e1 * e1, eta, np.sign(eta)])
+    cols = [eta_dot, e1 * e2 - e2 * e2, e1 * e2 - e1 * e1, eta, np.sign(eta)]
+    if _caster_map(form):
+        assert form is not None
+        cols.append(caster_columns(eta, form))
+    return np.column_stack(cols)
 
 
-def regressor_rows(eta: np.ndarray, eta_dot: np.ndarray) -> np.ndarray:
-    """Exact (unfiltered) IDIM regressor X (n, 2, 8): Eq. (9) reads X[k] phi = tau[k], phi in :data:`PHI_NAMES`."""
-    return rows_from_features(raw_features(eta, eta_dot))
+def regressor_rows(eta: np.ndarray, eta_dot: np.ndarray, form: RegressorForm | None = None) -> np.ndarray:
+    """Exact (unfiltered) IDIM regressor X (n, 2, p): Eq. (9) (with ``form``'s caster drag) reads
+    X[k] phi = tau[k], phi named by :func:`phi_names`."""
+    return rows_from_features(raw_features(eta, eta_dot, form), _caster_map(form))
 
 
 def cutoff_bounds(rate_hz: float, duration: float, order: int = 4) -> tuple[float, float]:
@@ -259,12 +344,14 @@ def idim_regression(
     decimate: bool = True,
     *,
     order: int = 4,
+    form: RegressorForm | None = None,
 ) -> IdimRegression:
     """Preprocess a log into the filtered IDIM regression (see the module docstring for every choice).
 
     t : (n,) s strictly increasing (uneven steps are resampled); eta : (n, 2) rad/s [right, left];
     tau : (n, 2) N m.  cutoff_hz : low-pass cutoff, default :func:`default_cutoff`; must be below the
     Nyquist frequency.  decimate : keep every :func:`decimation_factor`-th sample.  order : Butterworth order.
+    form : with caster drag (``form.caster``), the caster columns are filtered alongside and appended.
     Raises UsageError for bad arguments, LogFormatError for unusable time stamps, NotIdentifiableError
     when the log is too short for the filter.
     """
@@ -316,14 +403,19 @@ def idim_regression(
     pad = min(edge, n - 1)
     e1, e2 = eta[:, 0], eta[:, 1]
     raw = (e1, e2, e1 * e2 - e2 * e2, e1 * e2 - e1 * e1, np.sign(e1), np.sign(e2), tau[:, 0], tau[:, 1])
+    form = form if _caster_map(form) else None
+    if form is not None:  # computed from the unfiltered speeds like sgn(eta_i), filtered like every column
+        raw = raw + tuple(caster_columns(eta, form).T)
     filt = np.empty((n, len(raw)))
     for j, col in enumerate(raw):  # one column at a time bounds the filter's temporary memory
         filt[:, j] = sosfiltfilt(sos, col, padlen=pad)
     acc = _five_point_derivative(filt[:, 0:2], dt)
     features = np.column_stack([acc[keep], filt[keep][:, [2, 3, 0, 1, 4, 5]]])
+    if form is not None:
+        features = np.column_stack([features, filt[keep][:, 8:]])
     return IdimRegression(
         t=t[keep], features=features, tau=filt[keep][:, 6:8], cutoff_hz=cutoff, order=int(order),
-        cutoff_rule=rule, rate_hz=rate, resampled=resampled, decimation=k, edge_seconds=edge_s,
+        cutoff_rule=rule, rate_hz=rate, resampled=resampled, decimation=k, edge_seconds=edge_s, form=form,
     )  # fmt: skip
 
 
@@ -357,35 +449,41 @@ def _qr_r(a: np.ndarray) -> np.ndarray:
 
 
 def _solve_r(r: np.ndarray) -> np.ndarray:
-    """phi (8,) from the stacked triangular factors (.., 9) of [X y]."""
+    """phi (p,) from the stacked triangular factors (.., p + 1) of [X y]."""
     from scipy.linalg import solve_triangular
 
+    p = r.shape[1] - 1
     big = _qr_r(r)
-    return solve_triangular(big[:8, :8], big[:8, 8])
+    return solve_triangular(big[:p, :p], big[:p, p])
 
 
-def not_identifiable_message(info_scaled: np.ndarray) -> str | None:
-    """None when the scaled information (8, 8) is well posed; else a one-line reason naming phi's parameters."""
+def not_identifiable_message(info_scaled: np.ndarray, names: tuple[str, ...] = PHI_NAMES) -> str | None:
+    """None when the scaled information (p, p) is well posed; else a one-line reason naming phi's parameters
+    (``names``, p of them)."""
+    p = info_scaled.shape[0]
     evals, evecs = np.linalg.eigh(info_scaled)
     top = max(float(evals[-1]), 0.0)
-    null = evals <= UNEXCITED * top if top > 0 else np.ones(8, dtype=bool)
+    null = evals <= UNEXCITED * top if top > 0 else np.ones(p, dtype=bool)
     if not np.any(null):
         return None
-    names = [PHI_NAMES[j] for j in range(8) if np.any(np.abs(evecs[j, null]) > 0.1)]
+    loose = [names[j] for j in range(p) if np.any(np.abs(evecs[j, null]) > 0.1)]
+    why = "the wheel speeds and torques barely vary, or a wheel never turns"
+    if any(name not in PHI_NAMES for name in loose):
+        why += "; caster drag is told from the wheels' Coulomb friction only where the wheels stop, reverse or turn"
+        why += " opposite ways"
     return (
-        "the log does not excite the dynamics: the regression leaves "
-        f"{', '.join(names)} undetermined (the wheel speeds and torques barely vary, or a wheel never turns); "
+        f"the log does not excite the dynamics: the regression leaves {', '.join(loose)} undetermined ({why}); "
         "record a log that accelerates, brakes and turns"
     )
 
 
 def jackknife_from_factors(factors: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Delete-a-segment jackknife from per-segment triangular factors R_g (9, 9) of [X_g y_g].
+    """Delete-a-segment jackknife from per-segment triangular factors R_g (p + 1, p + 1) of [X_g y_g].
 
-    Returns (leave-one-out solutions (G, 8), covariance (8, 8) = (G - 1) / G sum (phi_g - mean)(...)^T).
+    Returns (leave-one-out solutions (G, p), covariance (p, p) = (G - 1) / G sum (phi_g - mean)(...)^T).
     """
     g = len(factors)
-    loo = np.empty((g, 8))
+    loo = np.empty((g, factors[0].shape[1] - 1))
     with np.errstate(all="ignore"):
         for i in range(g):
             loo[i] = _solve_r(np.vstack(factors[:i] + factors[i + 1 :]))
@@ -395,7 +493,8 @@ def jackknife_from_factors(factors: list[np.ndarray]) -> tuple[np.ndarray, np.nd
 
 
 def phi_to_theta0(phi: np.ndarray) -> np.ndarray:
-    """theta0 (..., 8) = [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] from phi (..., 8) = [M11 M12 M22 Vc ...], m = M^-1."""
+    """theta0 (..., p) = [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2, caster...] from phi (..., p) = [M11 M12 M22 Vc ...],
+    m = M^-1; every entry after the third (the caster parameters too) is the same in both."""
     phi = np.asarray(phi, dtype=np.float64)
     big11, big12, big22 = phi[..., 0], phi[..., 1], phi[..., 2]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -408,10 +507,10 @@ def phi_to_theta0(phi: np.ndarray) -> np.ndarray:
 
 
 def theta0_jacobian(phi: np.ndarray) -> np.ndarray:
-    """d theta0 / d phi (8, 8): the 2x2 inverse, dm = -m dM m, in the top-left block; identity elsewhere."""
+    """d theta0 / d phi (p, p): the 2x2 inverse, dm = -m dM m, in the top-left block; identity elsewhere."""
     theta0 = phi_to_theta0(phi)
     m11, m12, m22 = theta0[0], theta0[1], theta0[2]
-    jac = np.eye(8)
+    jac = np.eye(len(theta0))
     jac[:3, :3] = -np.array(
         [
             [m11 * m11, 2.0 * m11 * m12, m12 * m12],
@@ -423,7 +522,7 @@ def theta0_jacobian(phi: np.ndarray) -> np.ndarray:
 
 
 def theta0_covariance(phi: np.ndarray, cov_phi: np.ndarray) -> np.ndarray:
-    """Covariance (8, 8) of theta0 from that of phi by the delta method."""
+    """Covariance (p, p) of theta0 from that of phi by the delta method."""
     jac = theta0_jacobian(phi)
     cov = jac @ cov_phi @ jac.T
     return 0.5 * (cov + cov.T)
@@ -440,14 +539,16 @@ def inertia_warnings(phi: np.ndarray) -> list[str]:
 def fit_regression(
     reg: IdimRegression, *, weighted: bool = False
 ) -> tuple[np.ndarray, np.ndarray, dict[str, Any], list[str]]:
-    """Least squares of phi on a regression: (phi (8,), jackknife covariance (8, 8), diagnostics, warnings).
+    """Least squares of phi on a regression: (phi (p,), jackknife covariance (p, p), diagnostics, warnings),
+    p = len(reg.phi_names) (8, plus the caster parameters of ``reg.form``).
 
     weighted : two-step weighted LS, wheel j's rows scaled by 1 / s_j (s_j its OLS rms residual, N m).
     Raises NotIdentifiableError when the regressor is rank deficient.
     """
     seg, g = segment_index(reg.t)
     bounds = np.searchsorted(seg, np.arange(g + 1))
-    scale = phi_scales(reg.features, reg.cutoff_hz)
+    scale = reg.scales()
+    p = len(scale)
 
     def factors(weights: np.ndarray) -> list[np.ndarray]:
         out = []
@@ -455,7 +556,7 @@ def fit_regression(
             sl = slice(bounds[i], bounds[i + 1])
             x = reg.rows(sl) * weights[None, :, None]
             y = reg.tau[sl] * weights[None, :]
-            out.append(_qr_r(np.column_stack([x.reshape(-1, 8), y.reshape(-1)])))
+            out.append(_qr_r(np.column_stack([x.reshape(-1, p), y.reshape(-1)])))
         return out
 
     def residual_rms(phi: np.ndarray) -> np.ndarray:
@@ -468,8 +569,8 @@ def fit_regression(
     ones = np.ones(2)
     fac = factors(ones)
     r_all = _qr_r(np.vstack(fac))
-    rs = r_all[:8, :8] / scale[None, :]
-    reason = not_identifiable_message(rs.T @ rs)
+    rs = r_all[:p, :p] / scale[None, :]
+    reason = not_identifiable_message(rs.T @ rs, reg.phi_names)
     if reason is not None:
         raise NotIdentifiableError(reason)
     sv = np.linalg.svd(rs, compute_uv=False)
@@ -512,25 +613,29 @@ def identify_idim(
     weighted: bool = False,
     order: int = 4,
     decimate: bool = True,
+    form: RegressorForm | None = None,
 ) -> BaseEstimate:
     """IDIM least-squares estimate of the base parameters from a log.
 
     t : (n,) s strictly increasing; eta : (n, 2) rad/s [right, left]; tau : (n, 2) N m.
     cutoff_hz : Butterworth cutoff (default :func:`default_cutoff`); order : its order; decimate :
-    parallel decimation; weighted : two-step weighted LS.  See the module docstring for each choice.
-    Returns a :class:`BaseEstimate` (method "idim"): theta0 in the m = M^-1 parameterisation, the jackknife
-    covariance through the delta method, dof = G - 1; diagnostics hold the preprocessing choices, the
-    residual rms per wheel (N m), phi = [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2] and its standard errors.
+    parallel decimation; weighted : two-step weighted LS.  form : the observer's regressor form; with caster
+    drag (``form.caster``) theta0 and phi gain its caster parameters (``form.base_names[8:]``), otherwise (or
+    None) it is ignored.  See the module docstring for each choice.
+    Returns a :class:`BaseEstimate` (method "idim"): theta0 in the m = M^-1 parameterisation (``form.n_base``
+    entries with caster drag, else 8), the jackknife covariance through the delta method, dof = G - 1;
+    diagnostics hold the preprocessing choices, the residual rms per wheel (N m),
+    phi = [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2, caster...] and its standard errors.
     Raises NotIdentifiableError when the log does not excite the dynamics.
     """
     start = time.perf_counter()
-    reg = idim_regression(t, eta, tau, cutoff_hz, decimate, order=order)
+    reg = idim_regression(t, eta, tau, cutoff_hz, decimate, order=order, form=form)
     phi, cov_phi, diagnostics, warnings = fit_regression(reg, weighted=weighted)
     theta0 = phi_to_theta0(phi)
     cov0 = theta0_covariance(phi, cov_phi)
     std_phi = np.sqrt(np.clip(np.diag(cov_phi), 0.0, None))
-    diagnostics["phi"] = {name: float(v) for name, v in zip(PHI_NAMES, phi, strict=True)}
-    diagnostics["phi_std"] = {name: float(v) for name, v in zip(PHI_NAMES, std_phi, strict=True)}
+    diagnostics["phi"] = {name: float(v) for name, v in zip(reg.phi_names, phi, strict=True)}
+    diagnostics["phi_std"] = {name: float(v) for name, v in zip(reg.phi_names, std_phi, strict=True)}
     return BaseEstimate(
         method="idim", theta0=theta0, cov=cov0, dof=diagnostics["segments"] - 1,
         seconds=time.perf_counter() - start, diagnostics=diagnostics, warnings=tuple(warnings),

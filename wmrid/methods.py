@@ -77,7 +77,10 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
         if name == "idim":
             from wmrid.idim import identify_idim
 
-            return identify_idim(t, eta, tau, cutoff_hz=options.cutoff_hz, weighted=options.weighted)
+            # the observer's form: IDIM models the casters' drag too when the observer does (wheel+caster)
+            return identify_idim(
+                t, eta, tau, cutoff_hz=options.cutoff_hz, weighted=options.weighted, form=observer.form
+            )
         if name == "rls":
             from wmrid.rls import identify_rls
 
@@ -130,7 +133,8 @@ def compare(
     predictor = None
     for name in names:
         est = estimate(name, log, observer, options)
-        values = derived_with_std(np.asarray(est.theta0, dtype=float), np.asarray(est.cov, dtype=float))
+        names = observer.form.base_names if len(est.theta0) == observer.form.n_base else None
+        values = derived_with_std(np.asarray(est.theta0, dtype=float), np.asarray(est.cov, dtype=float), names)
         params = {}
         for key in REPORTED:
             value, std = values[key]
