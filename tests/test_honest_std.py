@@ -80,7 +80,7 @@ def test_a_well_specified_noisy_log_keeps_its_std():
 
 def test_multibody_paper_robot_acceptance(paper_multibody):
     """Issue 11's first acceptance figure: inertia entries and Vc within 0.1 %, friction within 2 % or within its
-    reported 3 std; and every parameter within 3 std (the structural test rejects, S = sqrt(1 + T^2) widens).
+    reported 3 std; and every parameter within 3 std (the structural test rejects, S = sqrt(1 + T^2 - E0) widens).
     Measured: inertia <= 0.10 % (M12), Vc 0.04 %, friction <= 1.5 %, |z| <= 0.9."""
     result = identify(as_log(paper_multibody), PAPER)
     truth = model.named_base(model.base_parameters(paper_multibody.true))
@@ -93,7 +93,7 @@ def test_multibody_paper_robot_acceptance(paper_multibody):
     assert max(abs(v) for v in z.values()) < 3.0, z
     unc = result.diagnostics["uncertainty"]["model_error"]
     assert unc["applied"]
-    assert unc["scale"] == pytest.approx(math.sqrt(1 + unc["T2"]))
+    assert unc["scale"] == pytest.approx(math.sqrt(1 + unc["T2"] - unc["T2_expected"]))
     assert set(result.diagnostics["inflated"]) == set(BASE)
 
 
@@ -109,13 +109,16 @@ def test_other_methods_inherit_the_model_error_scale(paper_multibody):
 
 
 def test_model_error_scale_only_when_the_test_rejects():
-    """S = 1 at p >= 0.05; S = sqrt(1 + T^2) below (the worst-case bias along the model surface)."""
+    """S = 1 at p >= 0.05 or for a misfit below 1e-5 of max |theta| (discretisation, the Richardson term's);
+    else S = sqrt(1 + T^2 - E0), E0 = d B / (B - d - 1) = 9.5 the noise's part of Hotelling's T^2 (d = 6, B = 19)."""
     fit = SimpleNamespace(dof=6, chi2=5.0, p_value=0.3, report_dof=19)
     assert model_error_scale(fit)["scale"] == 1.0
     fit = SimpleNamespace(dof=6, chi2=40.0, p_value=0.01, report_dof=19)
-    out = model_error_scale(fit)
+    assert model_error_scale(fit, relative_misfit=1e-6)["scale"] == 1.0
+    out = model_error_scale(fit, relative_misfit=1e-3)
     assert out["applied"]
-    assert out["scale"] == pytest.approx(math.sqrt(41.0))
+    assert out["T2_expected"] == pytest.approx(6 * 19 / 12)
+    assert out["scale"] == pytest.approx(math.sqrt(1 + 40.0 - 9.5))
     assert out["F"] == pytest.approx((19 - 6 + 1) * 40.0 / (19 * 6))
 
 

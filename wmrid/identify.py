@@ -359,9 +359,10 @@ AUTO_NO_REVERSAL = (
 def caster_drag_test(result: IdentificationResult) -> dict[str, Any]:
     """Wald test of the caster-drag parameters of a ``wheel+caster`` result against zero.
 
-    W = d^T C^-1 d over the q drag parameters d with their reported (widened) covariance C, chi-square on q
-    degrees of freedom.  Returns {"statistic", "dof", "p_value", "text"}."""
-    from scipy.special import chdtrc
+    W = d^T C^-1 d over the q drag parameters d with their reported (widened) covariance C, a jackknife estimate
+    on B degrees of freedom, so Hotelling's (B - q + 1) W / (B q) ~ F(q, B - q + 1) (chi-square on q when B is
+    unknown).  Returns {"statistic", "dof", "p_value", "text"}."""
+    from scipy.special import chdtrc, fdtrc
 
     names = result.form.base_names[8:]
     idx = [result.form.base_names.index(n) for n in names]
@@ -374,7 +375,13 @@ def caster_drag_test(result: IdentificationResult) -> dict[str, Any]:
     text = ", ".join(
         f"{n} = {v:.4g} +/- {result.parameters[n][1]:.2g} {units[n]}" for n, v in zip(names, values, strict=True)
     )
-    return {"statistic": stat, "dof": len(names), "p_value": float(chdtrc(len(names), stat)), "text": text}
+    q = len(names)
+    big_b = result.diagnostics.get("uncertainty", {}).get("dof")
+    if big_b and big_b - q + 1 > 0:
+        p_value = float(fdtrc(q, big_b - q + 1, (big_b - q + 1) * stat / (big_b * q)))
+    else:
+        p_value = float(chdtrc(q, stat))
+    return {"statistic": stat, "dof": q, "p_value": p_value, "text": text}
 
 
 def _with_friction(result: IdentificationResult, friction: dict[str, Any]) -> IdentificationResult:
@@ -473,21 +480,23 @@ def _identify(
             f"{source}: the log does not excite the dynamics (no base parameter is determined by it: the wheel "
             "speeds and efforts barely vary); record a log that accelerates, brakes and turns"
         )
-    inflation = model_error_scale(fit)
+    fitted = model.intermediate_parameters(fit.theta0, chosen)
+    relative_misfit = float(np.max(np.abs(fitted - theta)) / max(np.max(np.abs(theta)), 1e-300))
+    inflation = model_error_scale(fit, relative_misfit)
     cov0 = fit.cov * inflation["scale"] ** 2
     discretisation = discretisation_error(out.theta_half, gamma, lo, hi, weight_cov, chosen, fit.theta0, cov0)
     if discretisation["applied"]:
         delta = np.asarray(discretisation["delta"])
         cov0 = cov0 + np.outer(delta, delta)
     inflation["discretisation"] = discretisation
-    slow = slow_speed_term(out, gamma, theta_u, fit.gain, block_mid, duration, k, cov0)
+    slow = slow_speed_term(out, gamma, theta_u, fit.gain, block_mid, duration, k, cov0, inflation["scale"] ** 2)
     if slow["applied"]:
         delta = np.asarray(slow["delta"])
         cov0 = cov0 + np.outer(delta, delta)
     if slow["fragile"]:
         grow = np.zeros(n0)
         for j in slow["fragile"]:
-            grow[j] = max(slow["var_without"][j] * inflation["scale"] ** 2 - cov0[j, j], 0.0)
+            grow[j] = max(slow["var_without"][j] - cov0[j, j], 0.0)
         cov0 = cov0 + np.diag(grow)
         slow["fragile"] = [chosen.base_names[j] for j in slow["fragile"]]
     inflation["slow_speed"] = slow
@@ -564,6 +573,7 @@ def discretisation_error(
     form: RegressorForm,
     theta0: np.ndarray,
     cov0: np.ndarray,
+    scale2: float = 1.0,
 ) -> dict[str, Any]:
     """A Richardson estimate of the replay's discretisation error, and whether it matters.
 
@@ -582,8 +592,8 @@ def discretisation_error(
     half = fit_base_parameters(projected, weight_cov, form)
     delta = theta0 - half.theta0
     std = np.sqrt(np.clip(np.diag(cov0), 0.0, None))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(std > 0, np.abs(delta) / std, np.where(delta != 0, np.inf, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):  # a zero or non-finite std: an entry the log leaves unset
+        ratio = np.where((std > 0) & np.isfinite(std), np.abs(delta) / std, 0.0)
     largest = float(np.max(ratio))
     return {"applied": bool(largest > DISCRETISATION_GATE), "delta": delta.tolist(), "largest_ratio": largest}
 
@@ -602,6 +612,7 @@ def slow_speed_term(
     duration: float,
     k: float,
     cov0: np.ndarray,
+    scale2: float = 1.0,
 ) -> dict[str, Any]:
     """Whether friction near zero speed departs from the model enough to matter (README "Uncertainty").
 
@@ -627,26 +638,35 @@ def slow_speed_term(
         return none
     delta0 = gain @ diff["delta"]
     sd = np.sqrt(np.clip(np.diag(gain @ diff["cov"] @ gain.T), 0.0, None))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(sd > 0, np.abs(delta0) / sd, 0.0)
+    std0 = np.sqrt(np.clip(np.diag(cov0), 0.0, None))
+    with np.errstate(divide="ignore", invalid="ignore"):  # undetermined (inf) or unset entries do not count
+        ratio = np.where((sd > 0) & np.isfinite(sd) & np.isfinite(std0), np.abs(delta0) / sd, 0.0)
     largest = float(np.max(ratio))
-    var_without = np.clip(np.diag(gain @ diff["cov_without"] @ gain.T), 0.0, None)
-    fragile = [j for j in range(len(delta0)) if var_without[j] > FRAGILE_RATIO**2 * max(cov0[j, j], 0.0)]
+    var_without = np.clip(np.diag(gain @ diff["cov_without"] @ gain.T), 0.0, None) * scale2
+    applied = bool(largest > DISCRETISATION_GATE)
+    # Only where the slow parts visibly depart from the model: on a reversing log the reversals carry much of
+    # the excitation whether or not the model holds there, so a larger std without them is no evidence alone.
+    fragile = (
+        [j for j in range(len(delta0)) if var_without[j] > FRAGILE_RATIO**2 * max(cov0[j, j], 0.0)] if applied else []
+    )
     return {
-        "applied": bool(largest > DISCRETISATION_GATE), "delta": delta0.tolist(), "largest_ratio": largest,
+        "applied": applied, "delta": delta0.tolist(), "largest_ratio": largest,
         "left_out_fraction": diff["fraction"], "fragile": fragile, "var_without": var_without.tolist(),
     }  # fmt: skip
 
 
-def model_error_scale(fit: Any) -> dict[str, Any]:
+def model_error_scale(fit: Any, relative_misfit: float = math.inf) -> dict[str, Any]:
     """The model-error scale factor of a minimum-distance fit (README "Uncertainty").
 
     theta (2p numbers) must lie on the n0-dimensional surface theta = f(theta0) (Eqs. 23-24).  A model error
     moves it by a bias b; the fit sees only the part of b off the surface, the misfit rho, whose size in units
     of the estimate's own spread is Hotelling's T^2 (d directions).  The part along the surface is invisible
     and moves theta0: by at most |b_along| std_j for parameter j, in the same units.  Taking the invisible part
-    no larger than the visible one, |b_along|^2 <= T^2, each bias is at most sqrt(T^2) std_j; the variances
-    are multiplied by S^2 = 1 + T^2, which covers that bias and the noise together.  Applied when the
+    no larger than the visible one, each bias is at most sqrt(T^2 - E0) std_j, E0 = d B / (B - d - 1) the part
+    of T^2 that noise alone gives (Hotelling's mean); the variances are multiplied by S^2 = 1 + max(T^2 - E0, 0),
+    which covers that bias and the noise together.  ``relative_misfit``: the largest misfit over max |theta|;
+    below MISMATCH_RELEVANT (1e-5, the discretisation of a noise-free log, which the Richardson term covers)
+    nothing is scaled.  Applied when the
     structural-mismatch test rejects at INFLATE_P (F = (B - d + 1) T^2 / (B d) ~ F(d, B - d + 1) with B the
     jackknife's degrees of freedom): a lenient level, because a model error of the size of the noise already
     biases the estimate by a few std (on multibody logs with sensor noise p was 0.005-0.03 while the
@@ -660,9 +680,15 @@ def model_error_scale(fit: Any) -> dict[str, Any]:
             stat = (big_b - fit.dof + 1) * fit.chi2 / (big_b * fit.dof)
         else:
             stat = fit.chi2 / fit.dof
-    applied = bool(fit.dof > 0 and math.isfinite(fit.p_value) and fit.p_value < INFLATE_P)
-    scale = math.sqrt(1.0 + fit.chi2) if applied else 1.0
-    return {"scale": scale, "applied": applied, "T2": float(fit.chi2), "F": stat, "p_value": float(fit.p_value)}
+    expected = fit.dof * big_b / (big_b - fit.dof - 1) if big_b is not None and big_b - fit.dof - 1 > 0 else fit.dof
+    applied = bool(
+        fit.dof > 0 and math.isfinite(fit.p_value) and fit.p_value < INFLATE_P and relative_misfit > MISMATCH_RELEVANT
+    )
+    scale = math.sqrt(1.0 + max(fit.chi2 - expected, 0.0)) if applied else 1.0
+    return {
+        "scale": scale, "applied": applied, "T2": float(fit.chi2), "T2_expected": float(expected), "F": stat,
+        "p_value": float(fit.p_value),
+    }  # fmt: skip
 
 
 #: Diagnostics that describe the observer's run on the log (kept, and listed as such, under another method).
@@ -961,7 +987,7 @@ def _diagnose(
     # A significant misfit (p < 1e-3) is reported unless it is below 1e-5 of max |theta|: the
     # discretisation error of a noise-free log (about 1e-7) is significant but irrelevant.
     if fit.dof > 0 and fit.p_value < MISMATCH_P and rel_mismatch > MISMATCH_RELEVANT:
-        scale = model_error_scale(fit)["scale"]
+        scale = model_error_scale(fit, rel_mismatch)["scale"]
         warnings.append(
             f"the intermediate parameters are not consistent with one set of base parameters "
             f"(Hotelling T2 {fit.chi2:.3g} on {fit.dof} directions, p = {fit.p_value:.2g}; largest misfit "

@@ -198,39 +198,55 @@ def replay_pieces(
     half = _HalfRate(n, duration, settings, kind) if half_rate and n >= 20 else None
     blk_slow = None if low_speed is None else np.zeros(nb, dtype=bool)
 
+    # The half-rate run goes on a second thread (its compiled kernel releases the GIL), one piece behind at most;
+    # the pieces reach it in order, so its result does not depend on the timing.
+    pool = None
+    pending = None
+    if half is not None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wmrid-half-rate")
     done = 0
-    for t, eta, tau in pieces:
-        k = len(t)
-        if k == 0:
-            continue
-        t = np.ascontiguousarray(t, dtype=np.float64)
-        eta = np.ascontiguousarray(eta, dtype=np.float64)
-        tau = np.ascontiguousarray(tau, dtype=np.float64)
-        for idx, out in ((hist_idx, hist_t), (block_end, block_t)):
-            lo, hi = np.searchsorted(idx, [done, done + k])
-            out[lo:hi] = t[idx[lo:hi] - done]
-        skip = 0
-        if done == 0:  # the first sample starts the predictor and the filter
-            st[:] = [t[0], eta[0, 0], eta[0, 1], eta[0, 0], eta[0, 1], 0.0, 0.0]
-            g_prev[:] = regressor(eta[:1], tau[:1], form)[0]
-            if hist_idx[0] == 0:
-                hist_theta[0], hist_e[0], hist_gamma[0] = theta, 0.0, gamma
-                cursor[0] = 1
-            skip = 1
-        observer_chunk(
-            t[skip:], eta[skip:], tau[skip:], done + skip, kind, hold, float(settings.k), st, w, g_prev,
-            theta, gamma, gamma_inv, hist_idx, hist_theta, hist_e, hist_gamma, block_end, blk_a, blk_c,
-            blk_uu, blk_ee, cursor, geom,
-        )  # fmt: skip
-        if half is not None:
-            half.feed(t, eta, tau, done)
-        if blk_slow is not None:
-            slow = np.flatnonzero(np.any(np.abs(eta) < low_speed, axis=1))
-            if len(slow):
-                blk_slow[np.minimum(np.searchsorted(block_end, done + slow), nb - 1)] = True
-        done += k
-        if progress is not None:
-            progress(done)
+    try:
+        for t, eta, tau in pieces:
+            k = len(t)
+            if k == 0:
+                continue
+            t = np.ascontiguousarray(t, dtype=np.float64)
+            eta = np.ascontiguousarray(eta, dtype=np.float64)
+            tau = np.ascontiguousarray(tau, dtype=np.float64)
+            for idx, out in ((hist_idx, hist_t), (block_end, block_t)):
+                lo, hi = np.searchsorted(idx, [done, done + k])
+                out[lo:hi] = t[idx[lo:hi] - done]
+            if half is not None:  # on its thread, while this one runs the full-rate kernel on the same piece
+                if pending is not None:
+                    pending.result()
+                pending = pool.submit(half.feed, t, eta, tau, done)
+            skip = 0
+            if done == 0:  # the first sample starts the predictor and the filter
+                st[:] = [t[0], eta[0, 0], eta[0, 1], eta[0, 0], eta[0, 1], 0.0, 0.0]
+                g_prev[:] = regressor(eta[:1], tau[:1], form)[0]
+                if hist_idx[0] == 0:
+                    hist_theta[0], hist_e[0], hist_gamma[0] = theta, 0.0, gamma
+                    cursor[0] = 1
+                skip = 1
+            observer_chunk(
+                t[skip:], eta[skip:], tau[skip:], done + skip, kind, hold, float(settings.k), st, w, g_prev,
+                theta, gamma, gamma_inv, hist_idx, hist_theta, hist_e, hist_gamma, block_end, blk_a, blk_c,
+                blk_uu, blk_ee, cursor, geom,
+            )  # fmt: skip
+            if blk_slow is not None:
+                slow = np.flatnonzero(np.any(np.abs(eta) < low_speed, axis=1))
+                if len(slow):
+                    blk_slow[np.minimum(np.searchsorted(block_end, done + slow), nb - 1)] = True
+            done += k
+            if progress is not None:
+                progress(done)
+        if pending is not None:
+            pending.result()
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True)
     if done != n:
         raise ValueError(f"replay_pieces: the pieces hold {done} samples, not n = {n}")
     return ReplayOutput(
