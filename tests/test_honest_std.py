@@ -156,9 +156,9 @@ def test_cli_caster_drag_refusals(request, capsys):
     (exit 1: the drag cannot be told from Coulomb friction); both one line, no traceback."""
     sample = str(request.config.rootpath / SAMPLE)
     with pytest.raises(SystemExit) as err:
-        main(["identify", sample, "--robot", "paper", "--friction", "wheel+caster", "--method", "rls"])
+        main(["identify", sample, "--robot", "paper", "--friction", "wheel+caster", "--method", "oe"])
     assert err.value.code == 2
-    assert "observer and idim only" in capsys.readouterr().err
+    assert "observer and idim and rls only" in capsys.readouterr().err
     with pytest.raises(SystemExit) as err:
         main(["identify", sample, "--robot", "paper", "--friction", "wheel+caster"])
     assert err.value.code == 1

@@ -350,7 +350,7 @@ FrictionOpt = Annotated[
         "--friction",
         help="wheel: viscous and Coulomb friction per wheel (Eqs. 15-17); wheel+caster: also the casters' rolling "
         "drag, one drag force per caster when --robot lists [[caster]] positions (else two terms, Cv against "
-        "speed and Cw against turning), observer and idim only; auto: both, and the caster model when the log "
+        "speed and Cw against turning), observer, idim and rls only; auto: both, and the caster model when the log "
         "shows the drag (a Wald test, p < 0.001; the output says which and why).",
     ),
 ]
@@ -366,7 +366,7 @@ def _friction_for(friction, methods: tuple[str, ...], validate) -> str:
 
 
 #: Methods that model caster drag (--friction wheel+caster).
-CASTER_METHODS = ("observer", "idim")
+CASTER_METHODS = ("observer", "idim", "rls")
 
 
 def _check_friction(friction, methods: tuple[str, ...], validate) -> None:

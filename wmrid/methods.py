@@ -84,7 +84,9 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
         if name == "rls":
             from wmrid.rls import identify_rls
 
-            return identify_rls(t, eta, tau, forgetting=options.forgetting, cutoff_hz=options.cutoff_hz)
+            return identify_rls(
+                t, eta, tau, forgetting=options.forgetting, cutoff_hz=options.cutoff_hz, form=observer.form
+            )
         from wmrid.output_error import identify_oe
 
         assert observer.estimate is not None

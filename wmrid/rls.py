@@ -2,12 +2,14 @@
 
 The regression is the one of :mod:`wmrid.idim` (:func:`wmrid.idim.idim_regression`: zero-phase parallel
 filtering, accelerations from the filtered velocities, edges dropped), two rows per sample,
-X_k phi = y_k with phi = [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2].  By default it is NOT decimated, so the
+X_k phi = y_k with phi = [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2] (then the caster parameters with a ``form`` that
+has caster drag, :func:`wmrid.idim.phi_names`: the caster columns are filtered and mapped exactly as IDIM
+does, so p = 8 + their number of parameters).  By default it is NOT decimated, so the
 forgetting factor lambda acts per log sample.  (The filter is zero-phase, hence non-causal: this is an
 offline analysis of how the parameters drift, not an online estimator.)
 
 The compiled kernel (:func:`rls_kernel`) runs the classical covariance-form update with a vector
-measurement (2 equations, 8 parameters) at each sample::
+measurement (2 equations, p parameters) at each sample::
 
     e = y_k - X_k phi                         (a priori prediction error, N m)
     K = P X_k^T (lambda I_2 + X_k P X_k^T)^-1
@@ -66,17 +68,16 @@ import numpy as np
 from wmrid.errors import NotIdentifiableError, UsageError
 from wmrid.estimate import BaseEstimate
 from wmrid.idim import (
-    PHI_NAMES,
     ROW_LAYOUT,
     IdimRegression,
     idim_regression,
     inertia_warnings,
     not_identifiable_message,
-    phi_scales,
     phi_to_theta0,
     segment_index,
     theta0_covariance,
 )
+from wmrid.model import RegressorForm
 from wmrid.uncertainty import SEGMENT_SECONDS
 
 #: Default number of history points.
@@ -94,9 +95,10 @@ _ROW_COL_FEAT = np.array(ROW_LAYOUT, dtype=np.int64)
 class RlsHistory:
     """The RLS estimate over time (at most ``history_points`` samples of the regression).
 
-    t : (m,) s.  phi : (m, 8) [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2]; theta0 : (m, 8) [m11 m12 m22 Vc Fv1 Fv2 Fd1
-    Fd2]; both NaN before the estimate is defined (see the module docstring, exact initialisation).
-    std : (m, 8) standard errors of theta0 (local sandwich; NaN before initialisation).
+    t : (m,) s.  phi : (m, p) [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2, caster...]; theta0 : (m, p) [m11 m12 m22 Vc Fv1
+    Fv2 Fd1 Fd2, caster...] (p = 8, plus the caster parameters of the form, :func:`wmrid.idim.phi_names`);
+    both NaN before the estimate is defined (see the module docstring, exact initialisation).
+    std : (m, p) standard errors of theta0 (local sandwich; NaN before initialisation).
     forgetting : lambda.
     """
 
@@ -109,7 +111,7 @@ class RlsHistory:
 
 @numba.njit(cache=True, nogil=True)
 def _cholesky_min_pivot(r, work):
-    """Cholesky of the diagonally equilibrated r (8, 8) into work; smallest pivot^2, or -1 on failure."""
+    """Cholesky of the diagonally equilibrated r (p, p) into work; smallest pivot^2, or -1 on failure."""
     n = r.shape[0]
     for i in range(n):
         if r[i, i] <= 0.0:
@@ -160,6 +162,7 @@ def rls_kernel(
     features,
     tau,
     scale,
+    caster,
     lam,
     init_pivot,
     segment,
@@ -176,23 +179,26 @@ def rls_kernel(
 ):
     """Covariance-form RLS over all samples (see the module docstring), in column-scaled coordinates.
 
-    features (N, 8) unscaled regression features (:data:`wmrid.idim.FEATURE_NAMES`); tau (N, 2) N m;
-    scale (8,) column scales d (phi_s = d phi); lam the forgetting factor; init_pivot the start test
-    (:data:`INIT_PIVOT`); segment (N,) the jackknife segment of each sample; block_len samples per batch
-    of the batch means.  Filled in place:
+    p, the size of phi, is that of ``scale``: 8, plus the caster parameters.
+    features (N, 8 + q) unscaled regression features (:data:`wmrid.idim.FEATURE_NAMES`, then the q caster
+    columns); tau (N, 2) N m; scale (p,) column scales d (phi_s = d phi); caster (q, 3) int64 rows (feature
+    index, phi index, pattern) of each caster column, which adds to phi's entry in row 1 and pattern x itself
+    in row 2 (:func:`wmrid.idim.rows_from_features`; (0, 3) without caster drag); lam the forgetting factor;
+    init_pivot the start test (:data:`INIT_PIVOT`); segment (N,) the jackknife segment of each sample;
+    block_len samples per batch of the batch means.  Filled in place:
 
-    * blk_a (G, 8, 8), blk_c (G, 8): per-segment scaled X^T X and X^T y;
-    * after every ``stride`` samples and at the last one: hist_idx (m,) the sample index, hist_phi (m, 8)
-      the scaled estimate, hist_p (m, 8, 8) P, hist_w2 (m,) sum lambda^(2(n-k)) (NaN before the start);
+    * blk_a (G, p, p), blk_c (G, p): per-segment scaled X^T X and X^T y;
+    * after every ``stride`` samples and at the last one: hist_idx (m,) the sample index, hist_phi (m, p)
+      the scaled estimate, hist_p (m, p, p) P, hist_w2 (m,) sum lambda^(2(n-k)) (NaN before the start);
     * stats (6,): start index (-1: never), trace cap, capped steps, local mean square a priori error of
       wheel 1 and 2 (N m^2, lambda-weighted), number of complete batches;
-    * scores (9, 8): rows 0-7 the sum of z_b z_b^T, row 8 the sum of z_b, over the batches, z_b the sum
-      over a batch of the scores x_k^T e_k (a priori errors).
+    * scores (p + 1, p): rows 0..p-1 the sum of z_b z_b^T, row p the sum of z_b, over the batches, z_b the
+      sum over a batch of the scores x_k^T e_k (a priori errors).
 
-    Returns phi_s (8,) and P (8, 8) at the last sample.
+    Returns phi_s (p,) and P (p, p) at the last sample.
     """
     n = features.shape[0]
-    p = 8
+    p = scale.shape[0]
     h = np.zeros((2, p))
     phi = np.zeros(p)
     pm = np.zeros((p, p))
@@ -219,6 +225,11 @@ def rls_kernel(
         for c in range(_ROW_COL_FEAT.shape[0]):
             col = _ROW_COL_FEAT[c, 1]
             h[_ROW_COL_FEAT[c, 0], col] = features[k, _ROW_COL_FEAT[c, 2]] / scale[col]
+        for c in range(caster.shape[0]):
+            col = caster[c, 1]
+            v = features[k, caster[c, 0]] / scale[col]
+            h[0, col] += v
+            h[1, col] += caster[c, 2] * v
         y0 = tau[k, 0]
         y1 = tau[k, 1]
         g = segment[k]
@@ -289,7 +300,7 @@ def rls_kernel(
             block_count += 1
             if block_count == block_len:
                 for a in range(p):
-                    scores[8, a] += zb[a]
+                    scores[p, a] += zb[a]
                     for b in range(p):
                         scores[a, b] += zb[a] * zb[b]
                 for a in range(p):
@@ -314,14 +325,15 @@ def rls_kernel(
 
 
 def long_run_scores(scores: np.ndarray, n_batches: int, block_len: int) -> np.ndarray:
-    """Long-run covariance (8, 8) per sample of the scores x_k^T e_k, by batch means (NaN under 2 batches).
+    """Long-run covariance (p, p) per sample of the scores x_k^T e_k, by batch means (NaN under 2 batches).
 
-    scores (9, 8) as :func:`rls_kernel` fills it: S = (sum z_b z_b^T - zbar zbar^T n_b) / (n_b - 1) / block_len.
+    scores (p + 1, p) as :func:`rls_kernel` fills it: S = (sum z_b z_b^T - zbar zbar^T n_b) / (n_b - 1) / block_len.
     """
+    p = scores.shape[1]
     if n_batches < 2:
-        return np.full((8, 8), np.nan)
-    mean = scores[8] / n_batches
-    cov = (scores[:8] - n_batches * np.outer(mean, mean)) / (n_batches - 1) / block_len
+        return np.full((p, p), np.nan)
+    mean = scores[p] / n_batches
+    cov = (scores[:p] - n_batches * np.outer(mean, mean)) / (n_batches - 1) / block_len
     return 0.5 * (cov + cov.T)
 
 
@@ -335,11 +347,11 @@ def _check_forgetting(forgetting: float) -> float:
 
 
 def _jackknife(blk_a: np.ndarray, blk_c: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, int]:
-    """Jackknife covariance (8, 8) of phi from per-segment scaled sums, and its dof G - 1."""
+    """Jackknife covariance (p, p) of phi from per-segment scaled sums (G, p, p) and (G, p), and its dof G - 1."""
     g = blk_a.shape[0]
     a = blk_a.sum(axis=0)
     c = blk_c.sum(axis=0)
-    loo = np.empty((g, 8))
+    loo = np.empty((g, blk_c.shape[1]))
     for i in range(g):
         try:
             loo[i] = np.linalg.solve(a - blk_a[i], c - blk_c[i]) / scale
@@ -374,30 +386,42 @@ def rls_on_regression(
     # rms of each phi column over both rows of every sample (a_1 and a_2 each enter two columns)
     col_feats = ([0], [1, 0], [1], [2, 3], [4], [5], [6], [7])
     ms = np.array([np.sum(feats[:, f] ** 2) / (2 * n) for f in col_feats])
+    # (feature index, phi index, pattern) of each caster feature, for the kernel
+    cmap = reg.caster_map
+    caster = np.array([(8 + j, param, pat) for j, (_, param, pat) in enumerate(cmap)], dtype=np.int64).reshape(-1, 3)
+    names = reg.phi_names
+    p = len(names)
+    if p > 8:  # a caster parameter's column: its features summed in row 1, with their patterns in row 2
+        row1 = np.zeros((n, p - 8))
+        row2 = np.zeros((n, p - 8))
+        for j, (_, param, pattern) in enumerate(cmap):
+            row1[:, param - 8] += feats[:, 8 + j]
+            row2[:, param - 8] += pattern * feats[:, 8 + j]
+        ms = np.concatenate([ms, (np.sum(row1**2, axis=0) + np.sum(row2**2, axis=0)) / (2 * n)])
     scale = np.where(ms > 0, np.sqrt(ms), 1.0)
     segment, g = segment_index(reg.t)
-    blk_a = np.zeros((g, 8, 8))
-    blk_c = np.zeros((g, 8))
+    blk_a = np.zeros((g, p, p))
+    blk_c = np.zeros((g, p))
     stride = max(1, math.ceil(n / history_points))
     m = math.ceil(n / stride)
     hist_idx = np.zeros(m, dtype=np.int64)
-    hist_phi = np.zeros((m, 8))
-    hist_p = np.zeros((m, 8, 8))
+    hist_phi = np.zeros((m, p))
+    hist_p = np.zeros((m, p, p))
     hist_w2 = np.zeros(m)
     stats = np.zeros(6)
-    scores = np.zeros((9, 8))
+    scores = np.zeros((p + 1, p))
     duration = float(reg.t[-1] - reg.t[0])
     dt = duration / max(n - 1, 1)
     block_len = max(1, round(min(SEGMENT_SECONDS, duration / MIN_BATCHES) / max(dt, 1e-300)))
     kernel_start = time.perf_counter()
     phi_s, pm = rls_kernel(
-        feats, tau, scale, lam, INIT_PIVOT, segment, blk_a, blk_c, stride, block_len,
+        feats, tau, scale, caster, lam, INIT_PIVOT, segment, blk_a, blk_c, stride, block_len,
         hist_idx, hist_phi, hist_p, hist_w2, stats, scores,
     )  # fmt: skip
     kernel_seconds = time.perf_counter() - kernel_start
 
-    phys = phi_scales(feats, reg.cutoff_hz)
-    reason = not_identifiable_message(blk_a.sum(axis=0) * np.outer(scale / phys, scale / phys))
+    phys = reg.scales()
+    reason = not_identifiable_message(blk_a.sum(axis=0) * np.outer(scale / phys, scale / phys), names)
     if reason is not None:
         raise NotIdentifiableError(reason)
     init = int(stats[0])
@@ -427,14 +451,14 @@ def rls_on_regression(
         sw = (1.0 - lam**n_after) / (1.0 - lam)
         sw2 = (1.0 - lam ** (2 * n_after)) / (1.0 - lam * lam)
         n_weighted = sw * sw / sw2
-        if n_weighted < 10 * 8:
-            warnings.append(
-                f"the forgetting window ({1 / (1 - lam):.3g} samples) is short for 8 parameters; the estimate is noisy"
-            )
+        if n_weighted < 10 * p:
+            window = 1 / (1 - lam)
+            short = f"the forgetting window ({window:.3g} samples) is short for {p} parameters"
+            warnings.append(f"{short}; the estimate is noisy")
     theta0 = phi_to_theta0(phi)
     cov0 = theta0_covariance(phi, cov_phi)
     if not np.all(np.isfinite(cov0)):
-        cov0 = np.full((8, 8), np.nan)
+        cov0 = np.full((p, p), np.nan)
         np.fill_diagonal(cov0, np.inf)
         warnings.append(
             "the standard errors could not be computed (the log is too short, or one segment holds all the excitation)"
@@ -457,8 +481,8 @@ def rls_on_regression(
         "uncertainty": std_method,
         "kernel_seconds": float(kernel_seconds),
         "history_points": int(m),
-        "phi": {name: float(v) for name, v in zip(PHI_NAMES, phi, strict=True)},
-        "phi_std": {name: float(v) for name, v in zip(PHI_NAMES, std_phi, strict=True)},
+        "phi": {name: float(v) for name, v in zip(names, phi, strict=True)},
+        "phi_std": {name: float(v) for name, v in zip(names, std_phi, strict=True)},
     }
     estimate = BaseEstimate(
         method="rls", theta0=theta0, cov=cov0, dof=dof, seconds=time.perf_counter() - start,
@@ -485,6 +509,7 @@ def rls_run(
     order: int = 4,
     decimate: bool = False,
     history_points: int = HISTORY_POINTS,
+    form: RegressorForm | None = None,
 ) -> tuple[BaseEstimate, RlsHistory]:
     """RLS over a log: (final estimate, history of the estimate).
 
@@ -493,12 +518,15 @@ def rls_run(
     effective window is 1 / (1 - lambda) samples; 1 is plain RLS (= batch least squares).
     cutoff_hz, order, decimate : the preprocessing of :func:`wmrid.idim.idim_regression`.
     history_points : at most this many points in the history.
+    form : the observer's regressor form; with caster drag (``form.caster``) the regression gains its caster
+    columns and phi, theta0 its caster parameters (``form.base_names[8:]``), as in :mod:`wmrid.idim`; otherwise
+    (or None) it is ignored.
     The estimate (method "rls") is the one at the end of the log; see the module docstring for what its
     standard errors mean.  Raises NotIdentifiableError when the log does not excite the dynamics.
     """
     start = time.perf_counter()
     lam = _check_forgetting(forgetting)
-    reg = idim_regression(t, eta, tau, cutoff_hz, decimate, order=order)
+    reg = idim_regression(t, eta, tau, cutoff_hz, decimate, order=order, form=form)
     estimate, history = rls_on_regression(reg, forgetting=lam, history_points=history_points)
     estimate = dataclasses.replace(estimate, seconds=time.perf_counter() - start)
     return estimate, history
@@ -513,9 +541,13 @@ def identify_rls(
     cutoff_hz: float | None = None,
     order: int = 4,
     decimate: bool = False,
+    form: RegressorForm | None = None,
 ) -> BaseEstimate:
     """The RLS estimate at the end of the log (see :func:`rls_run` for the arguments)."""
-    return rls_run(t, eta, tau, forgetting=forgetting, cutoff_hz=cutoff_hz, order=order, decimate=decimate)[0]
+    estimate, _ = rls_run(
+        t, eta, tau, forgetting=forgetting, cutoff_hz=cutoff_hz, order=order, decimate=decimate, form=form
+    )
+    return estimate
 
 
 def rls_history(
@@ -528,9 +560,10 @@ def rls_history(
     order: int = 4,
     decimate: bool = False,
     history_points: int = HISTORY_POINTS,
+    form: RegressorForm | None = None,
 ) -> RlsHistory:
     """theta0 over time: the tracking RLS estimate, at most ``history_points`` points (see :func:`rls_run`)."""
     return rls_run(
         t, eta, tau, forgetting=forgetting, cutoff_hz=cutoff_hz, order=order, decimate=decimate,
-        history_points=history_points,
+        history_points=history_points, form=form,
     )[1]  # fmt: skip
