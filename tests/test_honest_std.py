@@ -151,14 +151,14 @@ def test_amr_without_caster_drag_is_honest_not_accurate(amr_caster_log):
 
 
 def test_cli_caster_drag_refusals(request, capsys):
-    """--friction wheel+caster: refused with a method that does not model it (exit 2), and on a log whose wheels
-    never reverse
-    (exit 1: the drag cannot be told from Coulomb friction); both one line, no traceback."""
+    """--friction wheel+caster: refused where the drag must be simulated without the casters' positions (output
+    error with no robot: exit 2), and on a log whose wheels never reverse (exit 1: the drag cannot be told from
+    Coulomb friction); both one line, no traceback."""
     sample = str(request.config.rootpath / SAMPLE)
     with pytest.raises(SystemExit) as err:
-        main(["identify", sample, "--robot", "paper", "--friction", "wheel+caster", "--method", "oe"])
+        main(["identify", sample, "--friction", "wheel+caster", "--method", "oe"])
     assert err.value.code == 2
-    assert "observer and idim and rls only" in capsys.readouterr().err
+    assert "needs the casters' positions" in capsys.readouterr().err
     with pytest.raises(SystemExit) as err:
         main(["identify", sample, "--robot", "paper", "--friction", "wheel+caster"])
     assert err.value.code == 1

@@ -350,29 +350,52 @@ FrictionOpt = Annotated[
         "--friction",
         help="wheel: viscous and Coulomb friction per wheel (Eqs. 15-17); wheel+caster: also the casters' rolling "
         "drag, one drag force per caster when --robot lists [[caster]] positions (else two terms, Cv against "
-        "speed and Cw against turning), observer, idim and rls only; auto: both, and the caster model when the log "
-        "shows the drag (a Wald test, p < 0.001; the output says which and why).",
+        "speed and Cw against turning), for the observer, idim, rls and oe (oe and --validate need the positions); "
+        "auto: both, and the caster model when the log shows the drag (a Wald test, p < 0.001; the output says "
+        "which and why).",
     ),
 ]
 
 
-def _friction_for(friction, methods: tuple[str, ...], validate) -> str:
-    """The friction model to identify with: ``auto`` falls back to ``wheel`` where caster drag is not modelled
-    (another method, --validate); an explicit ``wheel+caster`` there is refused (:func:`_check_friction`)."""
-    _check_friction(friction, methods, validate)
-    if friction == FrictionChoice.auto and (any(m not in CASTER_METHODS for m in methods) or validate is not None):
+def _friction_for(friction, methods: tuple[str, ...], validate, robot) -> str:
+    """The friction model to identify with.
+
+    ``auto`` falls back to ``wheel`` where caster drag is not modelled: another method, or output error and
+    --validate's predictor without the casters' positions (they simulate the drag, which needs its direction).
+    An explicit ``wheel+caster`` there is refused (:func:`_check_friction`).
+    """
+    _check_friction(friction, methods, validate, robot)
+    if friction == FrictionChoice.auto and (
+        any(m not in CASTER_METHODS for m in methods) or (_simulates(methods, validate) and not _positions(robot))
+    ):
         return "wheel"
     return friction.value
 
 
-#: Methods that model caster drag (--friction wheel+caster).
-CASTER_METHODS = ("observer", "idim", "rls")
+#: Methods that model caster drag (--friction wheel+caster); output error only with the casters' positions.
+CASTER_METHODS = ("observer", "idim", "rls", "oe")
 
 
-def _check_friction(friction, methods: tuple[str, ...], validate) -> None:
-    """Caster drag is modelled by some methods only so far: refuse it where it would be ignored."""
-    if friction == FrictionChoice.wheel_caster:
-        _refuse_unmodelled("--friction wheel+caster", methods, validate, CASTER_METHODS)
+def _simulates(methods: tuple[str, ...], validate) -> bool:
+    """Whether the model is simulated (output error, --validate), which needs the casters' positions for the drag."""
+    return "oe" in methods or validate is not None
+
+
+def _positions(robot) -> bool:
+    return robot is not None and bool(robot.casters)
+
+
+def _check_friction(friction, methods: tuple[str, ...], validate, robot=None) -> None:
+    """Caster drag is modelled by some methods only so far: refuse it where it would be ignored or cannot be
+    simulated."""
+    if friction != FrictionChoice.wheel_caster:
+        return
+    _refuse_unmodelled("--friction wheel+caster", methods, None, CASTER_METHODS)
+    if _simulates(methods, validate) and not _positions(robot):
+        raise UsageError(
+            "--friction wheel+caster with --method oe or --validate needs the casters' positions to simulate their "
+            "drag: give --robot with [[caster]] tables, or drop the option"
+        )
 
 
 def _refuse_unmodelled(option: str, methods: tuple[str, ...], validate, supported: tuple[str, ...]) -> None:
@@ -425,7 +448,8 @@ def _validate(result, other: str, columns, time_unit: str, robot_obj, log_option
             "give both logs in the same units"
         )
     theta0 = result.estimate.theta0
-    fit = validation_fit(other_log.t, other_log.eta, other_log.tau, theta0, torque_hold)
+    form = result.form if len(theta0) == result.form.n_base else None
+    fit = validation_fit(other_log.t, other_log.eta, other_log.tau, theta0, torque_hold, form=form)
     validation = {
         "log": other_log.source, "samples": len(other_log),
         "fit_percent": {w: fit[w] if math.isfinite(fit[w]) else None for w in ("eta_r", "eta_l")},
@@ -518,10 +542,10 @@ def identify(
 
     options = _method_options(cutoff, weighted, forgetting, torque_hold)
     _check_control_rate(control_rate, (method.value,), validate)
-    friction_model = _friction_for(friction, (method.value,), validate)
     if log == "-" and validate == "-":
         raise UsageError("LOG and --validate cannot both be standard input; give one of them as a file")
     robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
+    friction_model = _friction_for(friction, (method.value,), validate, robot_obj)
     log_options = _log_options(locals())
     wheel_log = _read_wheel_log(log, columns, time_unit.value, robot_obj, **log_options, whole=False)
     if method != MethodChoice.observer:
@@ -675,7 +699,7 @@ def report(
         robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
         options = _method_options(cutoff, weighted, forgetting, torque_hold)
         _check_control_rate(control_rate, (method.value,), validate)
-        friction_model = _friction_for(friction, (method.value,), validate)
+        friction_model = _friction_for(friction, (method.value,), validate, robot_obj)
         log_options = _log_options(locals())
         log = _read_wheel_log(input_, columns, time_unit.value, robot_obj, **log_options, data=source.data)
         result = run_identify(

@@ -90,7 +90,9 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
         from wmrid.output_error import identify_oe
 
         assert observer.estimate is not None
-        est = identify_oe(t, eta, tau, np.asarray(observer.estimate.theta0), torque_hold=options.torque_hold)
+        est = identify_oe(
+            t, eta, tau, np.asarray(observer.estimate.theta0), torque_hold=options.torque_hold, form=observer.form
+        )
         diagnostics = {
             **est.diagnostics,
             "uncertainty": "cluster-robust sandwich over contiguous segments of the log",
@@ -151,7 +153,8 @@ def compare(
             "warnings": list(est.warnings) if name != "observer" else list(observer.warnings),
         }
         if other is not None:
-            fit = validation_fit(other.t, other.eta, other.tau, np.asarray(est.theta0), options.torque_hold)
+            form = observer.form if len(est.theta0) == observer.form.n_base else None
+            fit = validation_fit(other.t, other.eta, other.tau, np.asarray(est.theta0), options.torque_hold, form=form)
             fit_percent = {w: fit[w] if np.isfinite(fit[w]) else None for w in ("eta_r", "eta_l")}
             row["validation"] = {"fit_percent": fit_percent}
             predictor = fit["predictor"]

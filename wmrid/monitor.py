@@ -58,6 +58,15 @@ error and not an in-sample fit), and the test restarts, so that a second change 
 again) is found too.  When every change is found, each segment is identified on all of it, from its
 change to the next change or the end of the log (time re-based to 0): those are the parameters reported.
 
+Caster drag.  A model identified with ``--friction wheel+caster`` (its JSON ``theta.form``, read by
+:func:`wmrid.report.form_from_json`) adds its caster columns to Phi: column j of ``form.caster_map`` adds
+theta0[param_j] col_j [1, pattern_j] to the wheel torques (:func:`wmrid.model.friction_torque`), smoothed as the
+other speed columns; p's drag entries are theta0's (as in :func:`wmrid.idim.rows_from_features`), with their
+reported standard errors.  The test then has len(p) degrees of freedom, S / len(p) ~ F(len(p), dof).  After a
+change the segment is identified with ``friction="wheel+caster"`` but without a robot file, so with the two-term
+drag (Cv, Cw), not the casters' positions (where the wheels never reverse, with wheel friction only; a warning
+says so).
+
 Times: ``t`` of a change is s from the log's first sample; ``t_alarm`` is the time of the last log sample
 the alarming test used (its window's end plus the smoothing's half-width, 0.25 s), when a monitor
 running along the log would have raised the alarm.
@@ -82,11 +91,13 @@ import numpy as np
 
 from wmrid import model
 from wmrid.errors import NotIdentifiableError, UsageError
-from wmrid.model import THETA0_NAMES
+from wmrid.model import THETA0_NAMES, RegressorForm
+from wmrid.report import form_from_json
 
 #: Names of the columns of the inverse-dynamics regressor Phi (the parameters p it multiplies).
 REGRESSOR_NAMES = ("M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
-#: Degrees of freedom of the test: the number of regressor columns.
+#: Degrees of freedom of the test without caster drag: the number of regressor columns (a ``wheel+caster`` model
+#: adds its drag parameters: len(p)).
 DOF = len(REGRESSOR_NAMES)
 #: Shortest span after a change that is identified at all, s (shorter: the change is reported without
 #: parameters).
@@ -178,20 +189,35 @@ class MonitorSettings:
 
 @dataclass(frozen=True)
 class MonitoredModel:
-    """Base parameters theta0 (8,) [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] with their reported form, effort unit."""
+    """Base parameters theta0 (n,) [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2, then the caster drag's] with their reported
+    form, effort unit; ``form``: the regressor form of a ``wheel+caster`` model (its caster columns), None for
+    wheel friction (n = 8)."""
 
     theta0: np.ndarray
     parameters: dict[str, dict[str, Any]]
     effort_unit: str
     source: str
-    std: np.ndarray  # standard errors of p = [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2] (undetermined: 10 x the value)
+    std: np.ndarray  # standard errors of p = [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2, drag] (undetermined: 10 x the value)
+    form: RegressorForm | None = None
 
 
-def _std_vector(values: dict[str, float], stds: dict[str, float | None]) -> np.ndarray:
-    """Standard errors (8,) of p = [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2]; an undetermined one (null or infinite std)
-    counts as ten times its value (1 when 0): the test gives that direction no weight."""
+def _caster_form(form: RegressorForm | None) -> RegressorForm | None:
+    """``form`` when it models caster drag, else None (the eight wheel columns)."""
+    return form if form is not None and form.caster else None
+
+
+def _p_names(form: RegressorForm | None) -> tuple[str, ...]:
+    """Names of p: REGRESSOR_NAMES, then the caster drag's parameters of ``form`` (identical in theta0 and p)."""
+    return REGRESSOR_NAMES if form is None else REGRESSOR_NAMES + form.base_names[8:]
+
+
+def _std_vector(
+    values: dict[str, float], stds: dict[str, float | None], names: tuple[str, ...] = REGRESSOR_NAMES
+) -> np.ndarray:
+    """Standard errors of p = [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2] (``names``: then the caster drag's); an undetermined
+    one (null or infinite std) counts as ten times its value (1 when 0): the test gives that direction no weight."""
     out = []
-    for name in REGRESSOR_NAMES:
+    for name in names:
         std = stds.get(name)
         ok = isinstance(std, (int, float)) and not isinstance(std, bool) and math.isfinite(std) and std >= 0
         floor = 1e-9 * max(abs(values[name]), 1e-12)  # a std of 0 would make the prior singular
@@ -211,14 +237,11 @@ def model_from_dict(data: Any, source: str) -> MonitoredModel:
     if not isinstance(data, dict) or not isinstance(data.get("parameters"), dict):
         raise UsageError(f'--model {source}: not a wmrid identify result (no "parameters" object); {hint}')
     params = data["parameters"]
-    form = data.get("theta", {}).get("form", {}) if isinstance(data.get("theta"), dict) else {}
-    if isinstance(form, dict) and form.get("friction") == "wheel+caster":
-        raise UsageError(
-            f"--model {source}: it models caster drag (identify --friction wheel+caster), which monitor does not "
-            "replay yet; identify the model with --friction wheel"
-        )
+    form_d = data.get("theta", {}).get("form", {}) if isinstance(data.get("theta"), dict) else {}
+    form = _form_of(form_d, source, hint)
+    names = THETA0_NAMES if form is None else form.base_names
     values = []
-    for name in THETA0_NAMES:
+    for name in names:
         entry = params.get(name)
         value = entry.get("value") if isinstance(entry, dict) else None
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
@@ -236,10 +259,26 @@ def model_from_dict(data: Any, source: str) -> MonitoredModel:
             "robot's model; identify the robot again"
         )
     reported = {name: dict(entry) for name, entry in params.items() if isinstance(entry, dict)}
-    named = model.named_base(theta0)
-    stds = {name: (reported.get(name) or {}).get("std") for name in REGRESSOR_NAMES}
+    p_names = _p_names(form)
+    named = model.named_base(theta0, names)
+    stds = {name: (reported.get(name) or {}).get("std") for name in p_names}
     return MonitoredModel(theta0=theta0, parameters=reported, effort_unit=unit, source=source,
-                          std=_std_vector(named, stds))  # fmt: skip
+                          std=_std_vector(named, stds, p_names), form=form)  # fmt: skip
+
+
+def _form_of(form_d: Any, source: str, hint: str) -> RegressorForm | None:
+    """The caster model of a result's ``theta.form`` (:func:`wmrid.report.form_from_json`), None for wheel
+    friction (or no form recorded)."""
+    if not isinstance(form_d, dict) or form_d.get("friction") != "wheel+caster":
+        return None
+    try:
+        form = form_from_json(form_d)
+    except (KeyError, TypeError, ValueError, IndexError) as err:
+        raise UsageError(
+            f"--model {source}: its caster-drag form (theta.form) is malformed ({err.__class__.__name__}: {err}); "
+            f"{hint}"
+        ) from None
+    return _caster_form(form)
 
 
 def load_model(path: str | Path) -> MonitoredModel:
@@ -256,9 +295,10 @@ def load_model(path: str | Path) -> MonitoredModel:
 
 
 def _physical_vector(theta0: np.ndarray) -> np.ndarray:
-    """p = [M11, M12, M22, Vc, Fv1, Fv2, Fd1, Fd2]: what the regressor Phi multiplies."""
+    """p = [M11, M12, M22, Vc, Fv1, Fv2, Fd1, Fd2, then theta0's caster drag parameters unchanged]: what the
+    regressor Phi multiplies."""
     big_m = np.linalg.inv(model.inverse_inertia(theta0))
-    return np.array([big_m[0, 0], big_m[0, 1], big_m[1, 1], *theta0[3:8]])
+    return np.array([big_m[0, 0], big_m[0, 1], big_m[1, 1], *theta0[3:]])
 
 
 # --------------------------------------------------------------------------------------------------
@@ -271,7 +311,9 @@ class Signals:
 
     t : (m,) s from the log's first sample.  tau : (m, 2) smoothed efforts.  phi : (m, 2, 8) regressor of
     the residual (same smoothing), so that r = tau - phi @ p.  phi_test : (m, 2, 8) the test's smoother
-    regressor.  rate : Hz.  notes : what was done to the log.
+    regressor.  rate : Hz.  notes : what was done to the log.  smooth : (raw columns (n, q) at the log's
+    rate, which) -> (m, q), the same smoothing as phi's (which "res") or phi_test's ("test") columns: makes the
+    caster columns of a ``wheel+caster`` form (:meth:`phi_for`).
     """
 
     t: np.ndarray
@@ -282,10 +324,37 @@ class Signals:
     log_rate: float
     lookahead: float
     notes: tuple[str, ...]
+    eta: np.ndarray | None = field(default=None, repr=False, compare=False)  # (n, 2) the log's speeds (even grid)
+    smooth: Any = field(default=None, repr=False, compare=False)
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
-    def residual(self, theta0: np.ndarray, a: int = 0, b: int | None = None) -> np.ndarray:
-        """r (b - a, 2): torque residual of the model theta0 at samples [a, b)."""
-        return self.tau[a:b] - self.phi[a:b] @ _physical_vector(theta0)
+    def phi_for(self, form: RegressorForm | None, which: str = "res") -> np.ndarray:
+        """The regressor (m, 2, len(p)) of ``form``: phi (``which`` "res") or phi_test ("test"), with a
+        ``wheel+caster`` form's drag columns appended: column j of ``form.caster_map`` adds
+        col_j x [1, pattern_j] to the wheel torques, so it goes to p's entry of its parameter (as
+        :func:`wmrid.idim.rows_from_features` maps them), smoothed as the other speed columns."""
+        base = self.phi if which == "res" else self.phi_test
+        form = _caster_form(form)
+        if form is None:
+            return base
+        key = (form, which)
+        if key not in self._cache:
+            if self.eta is None or self.smooth is None:
+                raise ValueError("these signals were made without the log's speeds: no caster columns")
+            cols = self.smooth(model.caster_columns(self.eta, form), which)  # (m, q)
+            extra = np.zeros((len(base), 2, form.n_base - 8))
+            for j, (_, param, pattern) in enumerate(form.caster_map):
+                extra[:, 0, param - 8] += cols[:, j]
+                extra[:, 1, param - 8] += pattern * cols[:, j]
+            self._cache[key] = np.concatenate([base, extra], axis=2)
+        return self._cache[key]
+
+    def residual(
+        self, theta0: np.ndarray, a: int = 0, b: int | None = None, form: RegressorForm | None = None
+    ) -> np.ndarray:
+        """r (b - a, 2): torque residual of the model theta0 (of regressor form ``form``: its caster drag, if
+        any) at samples [a, b)."""
+        return self.tau[a:b] - self.phi_for(form)[a:b] @ _physical_vector(theta0)
 
 
 def _tidy(x: float) -> float:
@@ -367,11 +436,15 @@ def residual_signals(t: np.ndarray, eta: np.ndarray, tau: np.ndarray, settings: 
         phi[:, 0, 6], phi[:, 1, 7] = f["s1"], f["s2"]
         return phi
 
+    def smooth(raw: np.ndarray, which: str) -> np.ndarray:
+        window = w_res if which == "res" else w_reg
+        return np.column_stack([_savgol_at(raw[:, j], window, 0, step, centres) for j in range(raw.shape[1])])
+
     tau_f = np.column_stack([_savgol_at(tau[:, j], w_res, 0, step, centres) for j in range(2)])
     notes = (note,) if note else ()
     return Signals(
         t=t[centres] - t[0], tau=tau_f, phi=regressor(w_res), phi_test=regressor(w_reg), rate=log_rate / dec,
-        log_rate=log_rate, lookahead=half * step, notes=notes,
+        log_rate=log_rate, lookahead=half * step, notes=notes, eta=eta, smooth=smooth,
     )  # fmt: skip
 
 
@@ -453,14 +526,15 @@ class WindowGrid:
     tests_per_hour: float
     margin: float
 
-    def threshold(self, dof: float) -> float:
-        """h with P(S > h / margin) = p_test for S / 8 ~ F(8, dof): the chi2_8 law of S with a noise power
-        estimated on ``dof`` degrees of freedom (chi2_8 itself for dof = inf)."""
+    def threshold(self, dof: float, n_params: int = DOF) -> float:
+        """h with P(S > h / margin) = p_test for S / n ~ F(n, dof), n = ``n_params`` = len(p) (8 without caster
+        drag): the chi2_n law of S with a noise power estimated on ``dof`` degrees of freedom (chi2_n itself for
+        dof = inf)."""
         from scipy.stats import chi2, f
 
         if not math.isfinite(dof):
-            return self.margin * float(chi2.isf(self.p_test, DOF))
-        return self.margin * DOF * float(f.isf(self.p_test, DOF, dof))
+            return self.margin * float(chi2.isf(self.p_test, n_params))
+        return self.margin * n_params * float(f.isf(self.p_test, n_params, dof))
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -484,18 +558,19 @@ def window_grid(settings: MonitorSettings, rate: float) -> WindowGrid:
 
 @dataclass(frozen=True)
 class ModelError:
-    """What is known of the model's own error dp (p = [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2]) on a segment: normal with
-    mean ``mean`` (8,) and covariance ``cov`` (8, 8); the residual holds Phi dp even without a change."""
+    """What is known of the model's own error dp (p = [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2, caster drag]) on a segment:
+    normal with mean ``mean`` (n,) and covariance ``cov`` (n, n); the residual holds Phi dp even without a change."""
 
     mean: np.ndarray
     cov: np.ndarray
 
 
 def _glr(gram: np.ndarray, proj: np.ndarray, err: ModelError) -> np.ndarray:
-    """S = c' (G + G P G)^-1 c, c = b - G dp_mean, for stacks G (k, 8, 8), b (k, 8): the GLR statistic when the
+    """S = c' (G + G P G)^-1 c, c = b - G dp_mean, for stacks G (k, n, n), b (k, n): the GLR statistic when the
     model's own error, normal (dp_mean, P), is part of the null hypothesis (c = X'e + G (dp - dp_mean) then has
     covariance G + G P G); a relative ridge of 1e-10 for directions a window does not excite."""
-    ridge = 1e-10 * np.trace(gram, axis1=1, axis2=2)[:, None, None] * np.eye(DOF) + 1e-300 * np.eye(DOF)
+    n = gram.shape[-1]
+    ridge = 1e-10 * np.trace(gram, axis1=1, axis2=2)[:, None, None] * np.eye(n) + 1e-300 * np.eye(n)
     cov = gram + ridge + gram @ err.cov @ gram
     centred = proj - gram @ err.mean
     sol = np.linalg.solve(cov, centred[..., None])[..., 0]
@@ -504,7 +579,7 @@ def _glr(gram: np.ndarray, proj: np.ndarray, err: ModelError) -> np.ndarray:
 
 def window_statistics(z: np.ndarray, x: np.ndarray, err: ModelError, lo: int, grid: WindowGrid, after: int,
                       upto: int):  # fmt: skip
-    """The tests whose window lies in the whitened data z (m, 2), x (m, 2, 8) -- z[0] being sample ``lo`` of the
+    """The tests whose window lies in the whitened data z (m, 2), x (m, 2, n) -- z[0] being sample ``lo`` of the
     segment, a whole number of blocks -- and ends in (after, upto]: per window length, (width in samples,
     window ends (exclusive, segment samples), statistics S)."""
     first_block = lo // grid.block
@@ -513,10 +588,11 @@ def window_statistics(z: np.ndarray, x: np.ndarray, err: ModelError, lo: int, gr
     if usable < min(grid.windows):
         return out
     n = usable * grid.block
-    xb = x[:n].reshape(usable, grid.block, 2, DOF)
+    dim = x.shape[-1]
+    xb = x[:n].reshape(usable, grid.block, 2, dim)
     zb = z[:n].reshape(usable, grid.block, 2)
-    gram = np.concatenate([np.zeros((1, DOF, DOF)), np.cumsum(np.einsum("nbip,nbiq->npq", xb, xb), axis=0)])
-    proj = np.concatenate([np.zeros((1, DOF)), np.cumsum(np.einsum("nbip,nbi->np", xb, zb), axis=0)])
+    gram = np.concatenate([np.zeros((1, dim, dim)), np.cumsum(np.einsum("nbip,nbiq->npq", xb, xb), axis=0)])
+    proj = np.concatenate([np.zeros((1, dim)), np.cumsum(np.einsum("nbip,nbi->np", xb, zb), axis=0)])
     for width, step in zip(grid.windows, grid.steps, strict=True):
         ends = np.arange(width, usable + 1)  # in blocks from first_block
         absolute = (first_block + ends) * grid.block
@@ -591,24 +667,28 @@ class MonitorResult:
     def detector_dict(self) -> dict[str, Any]:
         g, st, order = self.grid, self.settings, self.noise_lags
         first_dof = (self.calibration_samples - order) / order
+        form = _caster_form(self.model.form)
+        names, dim = _p_names(form), len(_p_names(form))
+        drag = "" if form is None else f" + the caster drag of {form.friction} ({', '.join(names[DOF:])})"
         return {
             "method": "windowed generalised likelihood ratio (GLR) test on whitened torque residuals",
-            "residual": "r = tau - M eta_dot - V(eta) - F_v eta - F_d sgn(eta) of the model, every signal smoothed "
-            f"by a Savitzky-Golay cubic over {st.accel_window_s:g} s (eta_dot its derivative), at {_tidy(g.rate):g} Hz",
+            "residual": f"r = tau - M eta_dot - V(eta) - F_v eta - F_d sgn(eta){drag} of the model, every signal "
+            f"smoothed by a Savitzky-Golay cubic over {st.accel_window_s:g} s (eta_dot its derivative), at "
+            f"{_tidy(g.rate):g} Hz",
             "statistic": "S = c' (G + G P G)^-1 c over a window, c = b - G dp0, G = sum X'X, b = sum X'z, z the "
-            f"whitened residual, X the whitened regressor Phi (columns {', '.join(REGRESSOR_NAMES)}, smoothed over "
+            f"whitened residual, X the whitened regressor Phi (columns {', '.join(names)}, smoothed over "
             f"{st.regressor_window_s:g} s), dp0 and P the mean and covariance of the model's own error (from its "
             "standard errors x 2, updated on the calibration span); with P = 0 the explained sum of squares of a "
-            f"least-squares fit of z on X: chi-square with {DOF} degrees of freedom when nothing changed",
+            f"least-squares fit of z on X: chi-square with {dim} degrees of freedom when nothing changed",
             "settings": {**st.to_dict(), **g.to_dict(), "noise_lags": order},
             "threshold": {
-                "first_calibration": g.threshold(first_dof),
-                "limit": g.threshold(math.inf),
-                "rule": f"margin x {DOF} x the F({DOF}, dof) quantile at p_per_test, dof = the noise model's degrees "
+                "first_calibration": g.threshold(first_dof, dim),
+                "limit": g.threshold(math.inf, dim),
+                "rule": f"margin x {dim} x the F({dim}, dof) quantile at p_per_test, dof = the noise model's degrees "
                 "of freedom (samples / lags); it falls from 'first_calibration' towards 'limit' as the calibration "
                 "grows (each segment's thresholds are in segments[].calibrations)",
             },
-            "dof": DOF,
+            "dof": dim,
             "false_alarm_rate_per_hour": st.false_alarm_rate,
             "measured": MEASURED,
             "calibration": (
@@ -631,6 +711,7 @@ class MonitorResult:
                 "source": self.model.source,
                 "effort_unit": self.model.effort_unit,
                 "parameters": self.model.parameters,
+                **({} if self.model.form is None else {"form": self.model.form.to_dict()}),
             },
             "changes": [c.to_dict() for c in self.changes],
             "detector": self.detector_dict(),
@@ -661,8 +742,14 @@ def _segment_log(log: Any, t_start: float, t_end: float, unit: str) -> _Log:
     )  # fmt: skip
 
 
-def _identify_span(log: Any, t_start: float, t_end: float, unit: str):
-    """(identification of log[t_start, t_end] (s from the log's start), None) or (None, why not)."""
+def _identify_span(log: Any, t_start: float, t_end: float, unit: str, friction: str = "wheel",
+                   notes: list[str] | None = None):  # fmt: skip
+    """(identification of log[t_start, t_end] (s from the log's start), None) or (None, why not).
+
+    ``friction``: the given model's friction model.  ``wheel+caster`` is identified without a robot file, so
+    with the two-term caster model (Cv, Cw; :func:`wmrid.identify.identify` takes the casters' positions only
+    from a robot); where that is not identifiable (the wheels never stop or reverse: the drag then adds to the
+    Coulomb friction) the wheel friction model is used instead, and why is appended to ``notes``."""
     from wmrid.identify import identify
 
     seg = _segment_log(log, t_start, t_end, unit)
@@ -672,7 +759,17 @@ def _identify_span(log: Any, t_start: float, t_end: float, unit: str):
             f"only {span:.3g} s of log from {t_start:.3f} s: too little to identify (at least {MIN_IDENTIFY_S:g} s)"
         )
     try:
-        result = identify(seg, None)
+        try:
+            result = identify(seg, None, friction=friction)
+        except NotIdentifiableError as err:
+            if friction == "wheel":
+                raise
+            result = identify(seg, None, friction="wheel")
+            if notes is not None:
+                notes.append(
+                    f"the log from {t_start:.3f} s to {t_end:.3f} s was identified with wheel friction only: the "
+                    f"caster model was not identifiable there ({err})"
+                )
     except NotIdentifiableError as err:
         return None, f"the log from {t_start:.3f} s to {t_end:.3f} s could not be identified: {err}"
     theta0 = result.estimate.theta0
@@ -683,24 +780,28 @@ def _identify_span(log: Any, t_start: float, t_end: float, unit: str):
 
 @dataclass(frozen=True)
 class _Model:
-    """Base parameters theta0 (8,) and the prior covariance (8, 8) of the error of p = [M11 M12 M22 Vc Fv1 Fv2 Fd1
-    Fd2]; ``update``: refine it with the calibration span (a given model, from another log), or not (a model
-    identified on the calibration span itself, whose covariance already holds that data)."""
+    """Base parameters theta0 (n,) and the prior covariance (n, n) of the error of p = [M11 M12 M22 Vc Fv1 Fv2 Fd1
+    Fd2, caster drag]; ``update``: refine it with the calibration span (a given model, from another log), or not
+    (a model identified on the calibration span itself, whose covariance already holds that data); ``form``: its
+    caster model (None: wheel friction, n = 8)."""
 
     theta0: np.ndarray
     cov: np.ndarray
     update: bool
+    form: RegressorForm | None = None
 
 
 def _physical_jacobian(theta0: np.ndarray) -> np.ndarray:
-    """d p / d theta0 (8, 8): M = m^-1 gives dM = -M dm M; the other five are the same in both."""
+    """d p / d theta0 (n, n): M = m^-1 gives dM = -M dm M; the others (Vc, friction, caster drag) are the same in
+    both."""
+    n = len(theta0)
     big_m = np.linalg.inv(model.inverse_inertia(theta0))
-    jac = np.zeros((DOF, DOF))
+    jac = np.zeros((n, n))
     basis = (np.array([[1.0, 0.0], [0.0, 0.0]]), np.array([[0.0, 1.0], [1.0, 0.0]]), np.array([[0.0, 0.0], [0.0, 1.0]]))
     for j, dm in enumerate(basis):
         d_big = -big_m @ dm @ big_m
         jac[:3, j] = [d_big[0, 0], d_big[0, 1], d_big[1, 1]]
-    jac[3:, 3:] = np.eye(5)
+    jac[3:, 3:] = np.eye(n - 3)
     return jac
 
 
@@ -714,7 +815,7 @@ def _model_of_result(result: Any) -> _Model:
     cov0[bad, bad] = (10.0 * np.maximum(np.abs(theta0[bad]), 1e-3)) ** 2
     cov0 = np.where(np.isfinite(cov0), cov0, 0.0)
     jac = _physical_jacobian(theta0)
-    return _Model(theta0, PRIOR_STD_FACTOR**2 * (jac @ cov0 @ jac.T), update=False)
+    return _Model(theta0, PRIOR_STD_FACTOR**2 * (jac @ cov0 @ jac.T), update=False, form=_caster_form(result.form))
 
 
 class _Segment:
@@ -734,9 +835,11 @@ class _Segment:
         m = self.m
         a = self.start
         if self.fixed is not None:
-            return self.fixed, NoiseModel.fit([m.sig.residual(self.fixed.theta0, a, a + upto)], m.order)
+            return self.fixed, NoiseModel.fit(
+                [m.sig.residual(self.fixed.theta0, a, a + upto, self.fixed.form)], m.order
+            )
         t0, t1 = self._t(0), self._t(upto - 1)
-        result, problem = _identify_span(m.log, t0, t1, m.unit)
+        result, problem = _identify_span(m.log, t0, t1, m.unit, m.friction, m.notes)
         if result is None:
             raise _Stop(problem)
         fitted = _model_of_result(result)
@@ -744,13 +847,13 @@ class _Segment:
         # model sees the model's estimation error as the test will, not an in-sample fit.
         half = upto // 2
         tm = self._t(half)
-        first, _ = _identify_span(m.log, t0, tm, m.unit)
-        second, _ = _identify_span(m.log, tm, t1, m.unit)
+        first, _ = _identify_span(m.log, t0, tm, m.unit, m.friction, m.notes)
+        second, _ = _identify_span(m.log, tm, t1, m.unit, m.friction, m.notes)
         if first is not None and second is not None:
-            spans = [m.sig.residual(second.estimate.theta0, a, a + half),
-                     m.sig.residual(first.estimate.theta0, a + half, a + upto)]  # fmt: skip
+            spans = [m.sig.residual(second.estimate.theta0, a, a + half, _caster_form(second.form)),
+                     m.sig.residual(first.estimate.theta0, a + half, a + upto, _caster_form(first.form))]  # fmt: skip
         else:
-            spans = [m.sig.residual(fitted.theta0, a, a + upto)]
+            spans = [m.sig.residual(fitted.theta0, a, a + upto, fitted.form)]
         try:
             return fitted, NoiseModel.fit(spans, m.order)
         except NotIdentifiableError as err:
@@ -770,8 +873,8 @@ class _Segment:
         while upto < self.n:
             nxt = min(2 * upto, self.n)
             fitted, noise = self.calibrate(upto)
-            h = grid.threshold(noise.dof)
-            err = ModelError(np.zeros(DOF), fitted.cov)
+            h = grid.threshold(noise.dof, len(fitted.theta0))
+            err = ModelError(np.zeros(len(fitted.theta0)), fitted.cov)
             if fitted.update:  # what the calibration span says of the given model's error (Bayes, normal)
                 z, x = m.whitened(fitted, noise, self.start + noise.order, self.start + upto)
                 gram, proj = np.einsum("kip,kiq->pq", x, x), np.einsum("kip,ki->p", x, z)
@@ -817,19 +920,22 @@ class _Stop(Exception):
 
 
 class _Monitor:
-    def __init__(self, log: Any, sig: Signals, settings: MonitorSettings, unit: str) -> None:
+    def __init__(self, log: Any, sig: Signals, settings: MonitorSettings, unit: str, friction: str = "wheel") -> None:
         self.log, self.sig, self.settings, self.unit = log, sig, settings, unit
         self.grid = window_grid(settings, sig.rate)
         self.order = max(1, round(settings.noise_memory_s * sig.rate))
         self.n_cal = max(1, math.ceil(round(settings.calibration_s * sig.rate) / self.grid.block)) * self.grid.block
         self.after = round(settings.locate_s * sig.rate)
         self.duration = float(log.t[-1] - log.t[0])
+        self.friction = friction
+        self.notes: list[str] = []  # fallbacks of re-identification (see _identify_span)
 
     def whitened(self, fitted: _Model, noise: NoiseModel, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
-        """Whitened residual z (m, 2) and regressor x (m, 2, 8) of signal samples [a, b) (from a - q for the
+        """Whitened residual z (m, 2) and regressor x (m, 2, n) of signal samples [a, b) (from a - q for the
         filter's memory)."""
         q = noise.order
-        return noise.whiten(self.sig.residual(fitted.theta0, a - q, b)), noise.whiten(self.sig.phi_test[a - q : b])
+        residual = self.sig.residual(fitted.theta0, a - q, b, fitted.form)
+        return noise.whiten(residual), noise.whiten(self.sig.phi_for(fitted.form, "test")[a - q : b])
 
 
 def monitor(log: Any, model_: MonitoredModel, settings: MonitorSettings | None = None) -> MonitorResult:
@@ -845,7 +951,8 @@ def monitor(log: Any, model_: MonitoredModel, settings: MonitorSettings | None =
             f"is in {unit}; identify and monitor with the same effort options"
         )
     sig = residual_signals(log.t, log.eta, log.tau, settings, source)
-    mon = _Monitor(log, sig, settings, unit)
+    friction = "wheel" if model_.form is None else model_.form.friction
+    mon = _Monitor(log, sig, settings, unit, friction)
     duration = float(log.t[-1] - log.t[0])
     need = (MIN_ROWS_PER_COEFFICIENT * 2 + 2) * mon.order  # after a change the halves lose q samples each
     if mon.n_cal < need:
@@ -862,7 +969,8 @@ def monitor(log: Any, model_: MonitoredModel, settings: MonitorSettings | None =
     warnings: list[str] = []
     changes: list[Change] = []
     segments: list[dict[str, Any]] = []
-    seg = _Segment(mon, 0, _Model(model_.theta0, np.diag((PRIOR_STD_FACTOR * model_.std) ** 2), update=True))
+    prior = np.diag((PRIOR_STD_FACTOR * model_.std) ** 2)
+    seg = _Segment(mon, 0, _Model(model_.theta0, prior, update=True, form=_caster_form(model_.form)))
     while True:
         try:
             found = seg.run()
@@ -877,10 +985,12 @@ def monitor(log: Any, model_: MonitoredModel, settings: MonitorSettings | None =
         changes.append(change)
         seg = _Segment(mon, seg.start + j, None)
     # Each segment after a change, identified on all of it.
-    before = model_.theta0
+    before, before_form = model_.theta0, _caster_form(model_.form)
     for i, change in enumerate(changes):
         t_end = changes[i + 1].t if i + 1 < len(changes) else duration
-        result, problem = _identify_span(log, change.t, t_end, unit)
+        notes: list[str] = []
+        result, problem = _identify_span(log, change.t, t_end, unit, friction, notes)
+        change.warnings.extend(notes)
         if result is None:
             change.warnings.append(problem)
             continue
@@ -888,12 +998,27 @@ def monitor(log: Any, model_: MonitoredModel, settings: MonitorSettings | None =
         change.segment = (change.t, t_end)
         change.warnings.extend(result.warnings)
         change.theta0 = result.estimate.theta0
-        after_named, before_named = model.named_base(change.theta0), model.named_base(before)
+        after_form = _caster_form(result.form)
+        if after_form != before_form and before_form is not None:
+            change.warnings.append(
+                f"identified with friction model {'wheel' if after_form is None else after_form.friction} "
+                f"({', '.join((after_form.base_names if after_form else THETA0_NAMES)[8:]) or 'no caster drag'}), "
+                f"not the model's ({', '.join(before_form.base_names[8:])}; monitor identifies without a robot "
+                "file, so without the casters' positions): its friction and drag terms are not comparable"
+            )
+        after_named, before_named = _named(change.theta0, after_form), _named(before, before_form)
+        # the caster drag's parameters are compared when both models have them (same caster model)
+        drag = [name for name in after_named if name not in (*THETA0_NAMES, "M11", "M12", "M22")]
         change.relative_change = {
             name: (after_named[name] - before_named[name]) / abs(before_named[name]) if before_named[name] else None
-            for name in (*THETA0_NAMES, "M11", "M12", "M22")
+            for name in (*THETA0_NAMES, "M11", "M12", "M22", *(n for n in drag if n in before_named))
         }
-        before = change.theta0
+        before, before_form = change.theta0, after_form
+    seen = set(warnings)
+    for note in mon.notes:  # re-identifications that fell back to wheel friction (once each)
+        if note not in seen:
+            seen.add(note)
+            warnings.append(note)
     log_info = {
         "samples": len(log.t),
         "duration_s": duration,
@@ -910,6 +1035,11 @@ def monitor(log: Any, model_: MonitoredModel, settings: MonitorSettings | None =
 
 # --------------------------------------------------------------------------------------------------
 # Presenting
+
+
+def _named(theta0: np.ndarray, form: RegressorForm | None) -> dict[str, float]:
+    """theta0 and M by name (:func:`wmrid.model.named_base`), the caster drag's named by ``form``."""
+    return model.named_base(theta0) if form is None else model.named_base(theta0, form.base_names)
 
 
 def _fmt(x: Any, digits: int = 6) -> str:
@@ -951,7 +1081,10 @@ def print_monitor(result: MonitorResult, console: Any) -> None:
             pt.add_column("std", justify="right", no_wrap=True)
         pt.add_column("unit", no_wrap=True)
         units = model.base_units(result.model.effort_unit)
-        for name in (*THETA0_NAMES[:3], "M11", "M12", "M22", *THETA0_NAMES[3:]):
+        drag = list(dict.fromkeys(name for params in [result.model.parameters, *(c.parameters or {} for c in
+                                  result.changes)] for name in params if name in units and name not in
+                                  (*THETA0_NAMES, "M11", "M12", "M22")))  # fmt: skip
+        for name in (*THETA0_NAMES[:3], "M11", "M12", "M22", *THETA0_NAMES[3:], *drag):
             row = [name, _fmt((result.model.parameters.get(name) or {}).get("value"))]
             for c in result.changes:
                 entry = (c.parameters or {}).get(name) or {}
