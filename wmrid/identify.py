@@ -712,12 +712,18 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
     """
     inflation = dict(result.diagnostics.get("uncertainty", {}).get("model_error", {"scale": 1.0, "applied": False}))
     inflation.pop("meaning", None)
-    # The discretisation and low-speed terms are the observer's own replays; only the model-error scale, a
-    # property of the log and the model, carries over to another method.
-    for key in ("discretisation", "slow_speed"):
-        if inflation.get(key):
-            inflation[key] = {**inflation[key], "applied": False, "fragile": [], "observer_only": True}
+    # The model-error scale and the low-speed difference are evidence about the log and the model, so they carry
+    # over to another method: the log departs from the same model (and in the same slow parts) whichever method
+    # reads it.  The discretisation term is the observer's own replay and does not.
+    slow = inflation.get("slow_speed") or {}
+    if inflation.get("discretisation"):
+        inflation["discretisation"] = {**inflation["discretisation"], "applied": False, "observer_only": True}
+    if slow:
+        inflation["slow_speed"] = {**slow, "fragile": []}
     cov = np.array(est.cov, dtype=float) * inflation["scale"] ** 2  # the same log departs from the same model
+    if slow.get("applied") and slow.get("delta") is not None and len(slow["delta"]) == len(est.theta0):
+        delta = np.asarray(slow["delta"], dtype=float)
+        cov = cov + np.outer(delta, delta)
     form = result.form if len(est.theta0) == result.form.n_base else RegressorForm("general")
     parameters = derived_with_std(np.asarray(est.theta0, dtype=float), cov, form.base_names)
     parameters = {name: parameters[name] for name in reported_names(form)}
