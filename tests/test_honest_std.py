@@ -14,9 +14,10 @@ import pytest
 
 from wmrid import model
 from wmrid.cli import main
-from wmrid.identify import identify, model_error_scale
+from wmrid.identify import identify
 from wmrid.logio import read_log
 from wmrid.methods import MethodOptions, run
+from wmrid.model_error import model_error_scale
 from wmrid.multibody import MultibodySettings, simulate_multibody
 from wmrid.robot import BUILTIN_ROBOTS
 from wmrid.simulate import NoiseSettings, simulate

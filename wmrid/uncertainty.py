@@ -84,6 +84,13 @@ def segment_count(duration: float, n_blocks: int) -> int:
     return max(2, min(g, n_blocks))
 
 
+def segments_of(block_mid: np.ndarray, duration: float) -> tuple[np.ndarray, int]:
+    """(segment index (J,) of each block, G): the jackknife's G contiguous segments (:func:`segment_count`) of a
+    log of ``duration`` s whose J blocks have mid-times ``block_mid`` (J,) in [0, 1] of the log."""
+    n_seg = segment_count(duration, len(block_mid))
+    return np.minimum((np.asarray(block_mid) * n_seg).astype(np.int64), n_seg - 1), n_seg
+
+
 def jackknife_covariance(
     gamma: np.ndarray, theta: np.ndarray, blk_a: np.ndarray, blk_c: np.ndarray, segment: np.ndarray, n_segments: int
 ) -> np.ndarray:
@@ -127,8 +134,7 @@ def estimate_covariances(
     details: ``dof`` = G - 1, ``segments`` = G, ``bandwidth_blocks``.  block_mid (J,) are the blocks'
     mid-times in [0, 1] of the log.
     """
-    n_seg = segment_count(duration, len(block_mid))
-    segment = np.minimum((np.asarray(block_mid) * n_seg).astype(np.int64), n_seg - 1)
+    segment, n_seg = segments_of(block_mid, duration)
     reported = jackknife_covariance(gamma, theta, blk_a, blk_c, segment, n_seg)
     z = block_scores(blk_a, blk_c, theta)
     bandwidth = andrews_bandwidth(z)
