@@ -549,7 +549,9 @@ def test_wheel_only_model_is_biased_on_a_caster_log(caster_log, caster_robot):
     "diagnostics['inflated'] == []), while Fv1, Fv2, Fd1, Fd2 and Vc lie 6.2, 6.3, 4.0, 4.0 and 3.2 std from the "
     "truth.  The jackknife has B = 14 degrees of freedom, so the test is F(8, 7) = 1.67, of little power, and on "
     "a noise-free log its spread is made by the model error itself (10 of 11 random-phase variants of this "
-    "excitation were flagged, p = 2e-5..0.045).",
+    "excitation were flagged, p = 2e-5..0.045).  The other two checks miss it too: the low-speed difference "
+    "is 1.3 std (gate 3) and the half-rate one 0.007 std (gate 4).  Left for a more powerful test; the README "
+    "lists it among what the std does not yet cover.",
 )
 def test_wheel_only_model_std_is_honest_or_flagged(caster_log, caster_robot):
     """friction="wheel" on the caster log: the structural-mismatch diagnostics flag it (diagnostics["inflated"]

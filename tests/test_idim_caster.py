@@ -120,6 +120,20 @@ def caster_log():
     return SimpleNamespace(t=t, eta=sol.y.T.copy(), tau=torque(t), theta0=theta0)
 
 
+def assert_recovers_geometric(est, log, rtol=5e-4):
+    """The checks an IDIM-regression method's estimate on ``caster_log`` passes: every base parameter (D1, D2
+    included) and M within ``rtol``, phi named with the casters' drag forces, a finite positive covariance."""
+    assert len(est.theta0) == GEOMETRIC.n_base == 10
+    np.testing.assert_allclose(est.theta0, log.theta0, rtol=rtol)
+    named = model.named_base(est.theta0[:8])
+    np.testing.assert_allclose([named[n] for n in ("M11", "M12", "M22")], phi_of(log.theta0)[:3], rtol=rtol)
+    assert tuple(est.diagnostics["phi"]) == (*idim.PHI_NAMES, "D1", "D2")
+    assert tuple(est.diagnostics["phi_std"]) == (*idim.PHI_NAMES, "D1", "D2")
+    assert est.diagnostics["phi"]["D1"] == est.theta0[8]
+    assert np.all(np.isfinite(est.cov))
+    assert np.all(np.diag(est.cov) > 0)
+
+
 def test_recovers_the_geometric_caster_drag_on_a_noise_free_log(caster_log):
     """Every base parameter, D_1 and D_2 included, within 0.05 %.
 
@@ -130,15 +144,7 @@ def test_recovers_the_geometric_caster_drag_on_a_noise_free_log(caster_log):
     """
     log = caster_log
     est = idim.identify_idim(log.t, log.eta, log.tau, form=GEOMETRIC)
-    assert len(est.theta0) == GEOMETRIC.n_base == 10
-    np.testing.assert_allclose(est.theta0, log.theta0, rtol=5e-4)
-    named = model.named_base(est.theta0[:8])
-    np.testing.assert_allclose([named[n] for n in ("M11", "M12", "M22")], phi_of(log.theta0)[:3], rtol=5e-4)
-    assert tuple(est.diagnostics["phi"]) == (*idim.PHI_NAMES, "D1", "D2")
-    assert tuple(est.diagnostics["phi_std"]) == (*idim.PHI_NAMES, "D1", "D2")
-    assert est.diagnostics["phi"]["D1"] == est.theta0[8]
-    assert np.all(np.isfinite(est.cov))
-    assert np.all(np.diag(est.cov) > 0)
+    assert_recovers_geometric(est, log)
     reg = idim.idim_regression(log.t, log.eta, log.tau, form=GEOMETRIC)
     assert reg.features.shape[1] == 8 + 4
     assert reg.feature_names[8:] == ("drag1_v", "drag1_w", "drag2_v", "drag2_w")
