@@ -424,6 +424,39 @@ def run_all(pool: ProcessPoolExecutor, jobs: list[Job], what: str) -> list[dict[
     return [r for r in rows if r is not None]
 
 
+def print_case_table(cases: list[Case], summaries: dict, clean: bool) -> None:
+    """One Markdown row per case and method: errors, then coverage with the worst |z| (noisy seeds) or the
+    |z| alone (the clean run), and the unflagged offenders."""
+    groups = list(GROUPS)
+    counts = "fail" if clean else "logs | fail"
+    stats = (f"\\|z\\| {g}" for g in groups) if clean else (f"cov {g} (worst \\|z\\|)" for g in groups)
+    head = (
+        f"| robot | trajectory | Hz | caster | floor | method | {counts} | "
+        + " | ".join(f"err % {g}" for g in groups)
+        + " | "
+        + " | ".join(stats)
+        + " | unflagged >3σ |"
+    )
+    print(head)
+    print("|" + " --- |" * (head.replace("\\|", "").count("|") - 1))
+    for case in cases:
+        for m in METHOD_NAMES:
+            s = summaries[(case, clean, m)]
+            if not s["logs"]:
+                continue
+            errs = " | ".join(fmt(s["error_percent"][g]) for g in groups)
+            if clean:
+                cells = " | ".join(fmt(s["worst_z"][g]) for g in groups)
+                n = f"{s['failed']}"
+            else:
+                cells = " | ".join(f"{fmt(s['coverage'][g])} ({fmt(s['worst_z'][g])})" for g in groups)
+                n = f"{s['logs']} | {s['failed']}"
+            print(
+                f"| {case.robot} | {case.trajectory} | {case.rate:g} | {case.caster:g} | {case.floor:g} | {m} | "
+                f"{n} | {errs} | {cells} | {len(s['offenders'])} |"
+            )
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=None, help="noisy seeds per case (default 20; 3 with --quick)")
@@ -537,49 +570,9 @@ def main() -> int:
         f"Unflagged: (log, parameter) pairs over all {len(PARAMS)} reported parameters beyond {Z_LIMIT:g} std and "
         "not in diagnostics['flagged'].\n"
     )
-    groups = list(GROUPS)
-    head = (
-        "| robot | trajectory | Hz | caster | floor | method | logs | fail | "
-        + " | ".join(f"err % {g}" for g in groups)
-        + " | "
-        + " | ".join(f"cov {g} (worst \\|z\\|)" for g in groups)
-        + " | unflagged >3σ |"
-    )
-    print(head)
-    print("|" + " --- |" * (head.replace("\\|", "").count("|") - 1))
-    for case in cases:
-        for m in METHOD_NAMES:
-            s = summaries[(case, False, m)]
-            if not s["logs"]:
-                continue
-            errs = " | ".join(fmt(s["error_percent"][g]) for g in groups)
-            cov = " | ".join(f"{fmt(s['coverage'][g])} ({fmt(s['worst_z'][g])})" for g in groups)
-            print(
-                f"| {case.robot} | {case.trajectory} | {case.rate:g} | {case.caster:g} | {case.floor:g} | {m} | "
-                f"{s['logs']} | {s['failed']} | {errs} | {cov} | {len(s['offenders'])} |"
-            )
-
+    print_case_table(cases, summaries, clean=False)
     print("\nClean runs (seed 0, no noise): error in % of the truth and |z| per group.\n")
-    head = (
-        "| robot | trajectory | Hz | caster | floor | method | fail | "
-        + " | ".join(f"err % {g}" for g in groups)
-        + " | "
-        + " | ".join(f"\\|z\\| {g}" for g in groups)
-        + " | unflagged >3σ |"
-    )
-    print(head)
-    print("|" + " --- |" * (head.replace("\\|", "").count("|") - 1))
-    for case in cases:
-        for m in METHOD_NAMES:
-            s = summaries[(case, True, m)]
-            if not s["logs"]:
-                continue
-            errs = " | ".join(fmt(s["error_percent"][g]) for g in groups)
-            zz = " | ".join(fmt(s["worst_z"][g]) for g in groups)
-            print(
-                f"| {case.robot} | {case.trajectory} | {case.rate:g} | {case.caster:g} | {case.floor:g} | {m} | "
-                f"{s['failed']} | {errs} | {zz} | {len(s['offenders'])} |"
-            )
+    print_case_table(cases, summaries, clean=True)
 
     # Acceptance figure and offenders.
     offenders = []

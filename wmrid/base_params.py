@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wmrid.model import RegressorForm, intermediate_parameters, inverse_inertia
+from wmrid.model import RegressorForm, default_base_names, intermediate_parameters, inverse_inertia
 
 
 @dataclass(frozen=True)
@@ -211,7 +211,7 @@ def derived_with_std(
 
     ``names`` of theta0's entries (default: the eight base parameters, then Cv, Cw)."""
     if names is None:
-        names = ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2", "Cv", "Cw")[: len(theta0)]
+        names = default_base_names(len(theta0))
     std0 = np.sqrt(np.clip(np.diag(cov0), 0.0, None))  # inf stays inf: a parameter the log does not determine
     out = {n: (float(v), float(s)) for n, v, s in zip(names, theta0, std0, strict=True)}
     m = inverse_inertia(theta0)

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.model import CASTER_NAMES, THETA0_NAMES
+from wmrid.model import default_base_names
 
 
 @dataclass(frozen=True)
@@ -54,5 +54,5 @@ class BaseEstimate:
         """name -> (value, std) for the base parameters; ``names`` default: the eight, then Cv, Cw (give a form's
         ``base_names`` for a geometric caster model)."""
         if names is None:
-            names = (THETA0_NAMES + CASTER_NAMES)[: len(self.theta0)]
+            names = default_base_names(len(self.theta0))
         return {n: (float(v), float(s)) for n, v, s in zip(names, self.theta0, self.std, strict=True)}

@@ -198,11 +198,17 @@ def inverse_inertia(theta0: np.ndarray) -> np.ndarray:
     return np.array([[theta0[0], theta0[1]], [theta0[1], theta0[2]]])
 
 
+def default_base_names(n0: int) -> tuple[str, ...]:
+    """Names of a theta0 of n0 entries when its form is not at hand: the eight base parameters, then the two-term
+    caster drag Cv, Cw (a geometric caster model's D_k need ``RegressorForm.base_names``)."""
+    return (THETA0_NAMES + CASTER_NAMES)[:n0]
+
+
 def named_base(theta0: np.ndarray, names: tuple[str, ...] | None = None) -> dict[str, float]:
     """theta0 plus M = m^-1 as a name -> value map (M11, M12, M22 in kg m^2); ``names`` default: the eight
     base parameters, and Cv, Cw for ten."""
     if names is None:
-        names = THETA0_NAMES + CASTER_NAMES if len(theta0) == 10 else THETA0_NAMES
+        names = default_base_names(len(theta0))
     out = {name: float(v) for name, v in zip(names, theta0, strict=True)}
     big_m = np.linalg.inv(inverse_inertia(theta0))
     out.update(M11=float(big_m[0, 0]), M12=float(big_m[0, 1]), M22=float(big_m[1, 1]))
