@@ -23,6 +23,7 @@ from wmrid.model import THETA0_UNITS, RegressorForm
 from wmrid.model_error import (
     MISMATCH_P,
     MISMATCH_RELEVANT,
+    misfit_text,
     record_widening,
     widen,
 )
@@ -472,6 +473,8 @@ def _identify(
         gamma, alpha, chosen, fit, parameters, theta_cov, sens, undetermined, lo, hi, units, theta, inflation
     )
     warnings = early_warnings + hold_warnings + sv.signal_warnings() + physics_warnings(parameters) + warnings
+    if inflation["prediction_misfit"]["applied"]:
+        warnings.insert(0, misfit_text(inflation["prediction_misfit"]))
     dof = unc["dof"]
     diagnostics["uncertainty"] = {
         "method": "delete-a-segment jackknife over contiguous segments of the log",

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wmrid.model import regressor
+from wmrid.noise_floor import NoiseFloor
 from wmrid.observer import ObserverSettings
 
 CHUNK = 262_144
@@ -45,6 +46,8 @@ class ReplayOutput:
     block_t: np.ndarray
     theta_half: np.ndarray | None = None  # (2, p) the estimate from every other sample (twice the step), or None
     blk_slow: np.ndarray | None = None  # (J,) bool: the block holds a sample where a wheel is slower than low_speed
+    noise_sigma: np.ndarray | None = None  # (2,) rad/s: the speeds' white-noise level (wmrid.noise_floor)
+    eta_rms: np.ndarray | None = None  # (2,) rad/s: the speeds' root mean square
 
 
 def layout(n: int, duration: float, k: float, max_history: int) -> tuple[np.ndarray, np.ndarray]:
@@ -197,6 +200,7 @@ def replay_pieces(
     hold = settings.hold_code
     half = _HalfRate(n, duration, settings, kind) if half_rate and n >= 20 else None
     blk_slow = None if low_speed is None else np.zeros(nb, dtype=bool)
+    floor = NoiseFloor()
 
     # The half-rate run goes on a second thread (its compiled kernel releases the GIL), one piece behind at most;
     # the pieces reach it in order, so its result does not depend on the timing.
@@ -235,6 +239,7 @@ def replay_pieces(
                 theta, gamma, gamma_inv, hist_idx, hist_theta, hist_e, hist_gamma, block_end, blk_a, blk_c,
                 blk_uu, blk_ee, cursor, geom,
             )  # fmt: skip
+            floor.feed(eta)
             if blk_slow is not None:
                 slow = np.flatnonzero(np.any(np.abs(eta) < low_speed, axis=1))
                 if len(slow):
@@ -253,5 +258,6 @@ def replay_pieces(
         theta=theta, gamma=gamma, gamma_inv=gamma_inv, eta_hat=st[3:5].copy(), hist_idx=hist_idx,
         hist_theta=hist_theta, hist_e=hist_e, hist_gamma=hist_gamma, block_end=block_end, blk_a=blk_a,
         blk_c=blk_c, blk_uu=blk_uu, blk_ee=blk_ee, hist_t=hist_t, block_t=block_t,
-        theta_half=None if half is None else half.theta.copy(), blk_slow=blk_slow,
+        theta_half=None if half is None else half.theta.copy(), blk_slow=blk_slow, noise_sigma=floor.sigma(),
+        eta_rms=floor.rms(),
     )  # fmt: skip

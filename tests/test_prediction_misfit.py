@@ -1,0 +1,159 @@
+"""Wheels that slip, and other errors the std cannot see: the prediction-error check (issue 11).
+
+A slipping wheel biases every parameter by tens of per cent while the estimate stays steady along the log, so
+neither the jackknife nor the structural test notices.  The observer's own prediction error does: where the
+model holds it is the speed sensors' noise, which :class:`wmrid.noise_floor.NoiseFloor` measures from the
+log's second differences.  Tested on MuJoCo multibody logs (a floor of friction 0.15 against a normal one)
+and on wmrid's reduced simulator with a coloured disturbance in closed loop, which must not be flagged.
+"""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from wmrid.cli import main
+from wmrid.identify import identify
+from wmrid.methods import MethodOptions, run
+from wmrid.model_error import MISFIT_FLOOR, MISFIT_RATIO, prediction_misfit
+from wmrid.multibody import MultibodySettings, simulate_multibody
+from wmrid.noise_floor import WINDOW, NoiseFloor
+from wmrid.robot import BUILTIN_ROBOTS
+from wmrid.simulate import NoiseSettings, simulate
+
+AMR = BUILTIN_ROBOTS["amr"]
+PAPER = BUILTIN_ROBOTS["paper"]
+BASE = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
+#: rad/s, the physics benchmark's speed noise.
+ETA_STD = 0.02
+
+
+def as_log(sim, name="log"):
+    return SimpleNamespace(t=np.array(sim.t), eta=np.array(sim.eta), tau=np.array(sim.tau), source=name, notes=())
+
+
+def amr_log(floor: float):
+    """The light AMR, 12 s sinusoid at 1 kHz, frictionless casters, speed noise 0.02 rad/s, torque noise 0.01 N m."""
+    return simulate_multibody(
+        AMR.cad, AMR.nominal, settings=MultibodySettings(caster_resistance=0.0, floor_friction=floor),
+        duration=12.0, noise=NoiseSettings(eta_std=ETA_STD, tau_std=0.01), seed=3,
+    )  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def slipping():
+    sim = amr_log(0.15)
+    assert sim.settings["multibody"]["max_slip_speed"] > 0.05  # the wheels really slip (creep is ~1e-4 m/s)
+    return sim
+
+
+@pytest.fixture(scope="module")
+def gripping():
+    return amr_log(1.0)
+
+
+def test_noise_floor_measures_white_noise_on_a_smooth_motion():
+    """sigma of white noise on a 1 kHz sinusoidal speed, to 4 %: the median of 64-sample windows' mean squares
+    sits ~1 % below their mean (about 30 effective degrees of freedom) and the histogram buckets are 1.1 % wide;
+    the 1,560 windows' spread adds ~0.5 %.  The result does not depend on how the log is cut into pieces."""
+    rng = np.random.default_rng(0)
+    t = np.arange(100_000) * 1e-3
+    eta = np.column_stack([5 * np.sin(2 * t), 3 + np.cos(0.7 * t)]) + rng.normal(0, [0.02, 0.005], (len(t), 2))
+    whole = NoiseFloor()
+    whole.feed(eta)
+    assert whole.sigma() == pytest.approx([0.02, 0.005], rel=0.04)
+    assert whole.rms() == pytest.approx(np.sqrt(np.mean(eta**2, axis=0)), rel=1e-12)
+    cut = NoiseFloor()
+    for piece in np.array_split(eta, [1, 2, 3, 70, 5000, 5001, 77_777]):
+        cut.feed(piece)
+    assert np.array_equal(cut.sigma(), whole.sigma())
+
+
+def test_noise_floor_ignores_bursts():
+    """Spikes in a tenth of the windows (a wheel that slips at each acceleration peak) leave the median level
+    within 10 % of the noise, where a mean would be many times it; too short a log gives NaN."""
+    rng = np.random.default_rng(1)
+    eta = rng.normal(0, 0.01, (64_000, 2))
+    burst = np.zeros(len(eta), dtype=bool)
+    for start in range(0, len(eta), 10 * WINDOW):
+        burst[start : start + WINDOW] = True
+    eta[burst] += rng.normal(0, 0.5, (burst.sum(), 2))
+    floor = NoiseFloor()
+    floor.feed(eta)
+    assert floor.sigma() == pytest.approx([0.01, 0.01], rel=0.1)
+    short = NoiseFloor()
+    short.feed(eta[: 3 * WINDOW])
+    assert np.all(np.isnan(short.sigma()))
+
+
+def test_prediction_misfit_thresholds():
+    """Applied only when a wheel's prediction error exceeds MISFIT_RATIO times its noise and MISFIT_FLOOR of its
+    speed's rms: a noise-free log well predicted is not flagged however small its noise floor."""
+    rms = np.array([10.0, 10.0])
+    assert not prediction_misfit(np.array([0.03, 0.02]), np.array([0.02, 0.02]), rms)["applied"]
+    assert prediction_misfit(np.array([0.2, 0.02]), np.array([0.02, 0.02]), rms)["applied"]
+    tiny = prediction_misfit(np.array([1e-5, 1e-5]), np.array([1e-9, 1e-9]), rms)
+    assert not tiny["applied"] and tiny["ratio"] > MISFIT_RATIO
+    assert prediction_misfit(np.array([2 * MISFIT_FLOOR * 10, 0.0]), np.array([0.0, 0.0]), rms)["applied"]
+    assert not prediction_misfit(np.array([0.2, 0.2]), np.full(2, np.nan), rms)["applied"]
+
+
+def test_slipping_wheels_flag_every_parameter(slipping):
+    """Floor friction 0.15: the estimate is off by tens of per cent and the std alone does not cover it
+    (measured on 40 s logs: M12 49 % off at z 3.5 unflagged before this check).  The prediction error is many
+    times the noise (11-35 on the benchmark's slipping logs; 12 s here), so every parameter is flagged, the
+    first warning says why, and IDIM on the same log inherits the flags."""
+    result = identify(as_log(slipping), AMR)
+    misfit = result.diagnostics["uncertainty"]["model_error"]["prediction_misfit"]
+    assert misfit["applied"] and misfit["ratio"] > 5
+    assert misfit["noise_rms"] == pytest.approx([ETA_STD, ETA_STD], rel=0.1)
+    assert set(result.diagnostics["flagged"]) == set(BASE)
+    assert result.warnings[0].startswith("the model predicts the wheel speeds to")
+    assert "slip" in result.warnings[0]
+    idim = run("idim", as_log(slipping), result, MethodOptions(), AMR)
+    assert set(idim.diagnostics["flagged"]) == set(BASE)
+    assert any(w.startswith("the model predicts the wheel speeds") for w in idim.warnings)
+
+
+def test_gripping_wheels_are_not_flagged_by_it(gripping):
+    """The same robot and motion on a normal floor: the prediction error is the sensor noise (ratio 1.02-1.11 on
+    the benchmark's logs), well under MISFIT_RATIO."""
+    result = identify(as_log(gripping), AMR)
+    misfit = result.diagnostics["uncertainty"]["model_error"]["prediction_misfit"]
+    assert not misfit["applied"]
+    assert 0.9 < misfit["ratio"] < 1.3
+    assert not any(w.startswith("the model predicts the wheel speeds") for w in result.warnings)
+
+
+def test_a_closed_loop_disturbance_is_not_flagged():
+    """wmrid's reduced simulator with the coloured caster disturbance (0.05 N m, 0.3 s) inside the feedback loop:
+    the model holds apart from the disturbance, which the jackknife covers; the ratio was 1.08."""
+    noise = NoiseSettings(eta_std=0.01, tau_std=0.02, caster_std=0.05, caster_time=0.3)
+    sim = simulate(PAPER.cad, PAPER.nominal, duration=20, noise=noise, seed=0)
+    misfit = identify(as_log(sim), PAPER).diagnostics["uncertainty"]["model_error"]["prediction_misfit"]
+    assert not misfit["applied"]
+    assert misfit["ratio"] < 1.3
+
+
+def test_cli_json_and_table_show_the_flag(slipping, tmp_path, capsys):
+    """Through the CLI: the JSON carries the check's figures and flags every parameter; the terminal table marks
+    the flagged parameters and prints the warning."""
+    path = tmp_path / "slip.csv"
+    np.savetxt(
+        path, np.column_stack([slipping.t, slipping.eta, slipping.tau]), delimiter=",",
+        header="t,eta_r,eta_l,tau_r,tau_l", comments="",
+    )  # fmt: skip
+    with pytest.raises(SystemExit) as err:
+        main(["identify", str(path), "--robot", "amr", "--friction", "wheel", "--format", "json"])
+    assert err.value.code == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["diagnostics"]["uncertainty"]["model_error"]["prediction_misfit"]["applied"]
+    assert set(out["diagnostics"]["flagged"]) >= set(BASE)
+    with pytest.raises(SystemExit) as err:
+        main(["identify", str(path), "--robot", "amr", "--friction", "wheel"])
+    assert err.value.code == 0
+    captured = capsys.readouterr()
+    assert "predicts the wheel speeds" in captured.out + captured.err
