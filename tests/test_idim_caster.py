@@ -194,3 +194,28 @@ def test_idim_with_caster_drag_on_the_multibody_amr(amr_caster_log):
         assert abs(errors[name][0]) < 3.0, (name, errors[name])
     assert abs(errors["D1"][0]) < 10.0, errors["D1"]
     assert set(result.diagnostics["method"]["phi"]) == {*idim.PHI_NAMES, "D1"}
+
+
+def test_compare_identifies_the_caster_model_with_every_method(amr_caster_log, tmp_path, capsys):
+    """``wmrid compare --friction wheel+caster``: every method reports the casters' drag force D1 (N) next to the
+    wheel friction, and ``--friction wheel`` none; the multibody AMR's log, written as CSV, through the CLI."""
+    import json
+
+    from wmrid.cli import main
+
+    path = tmp_path / "amr.csv"
+    sim = amr_caster_log
+    np.savetxt(
+        path, np.column_stack([sim.t, sim.eta, sim.tau]), delimiter=",", header="t,eta_r,eta_l,tau_r,tau_l",
+        comments="",
+    )  # fmt: skip
+    for friction, has_drag in (("wheel+caster", True), ("wheel", False)):
+        with pytest.raises(SystemExit) as err:
+            main([
+                "compare", str(path), "--robot", "amr", "--methods", "observer,idim,rls,oe", "--friction", friction,
+                "--format", "json",
+            ])  # fmt: skip
+        assert err.value.code == 0
+        out = json.loads(capsys.readouterr().out)
+        for name in ("observer", "idim", "rls", "oe"):
+            assert ("D1" in out["methods"][name]["parameters"]) == has_drag, (friction, name)

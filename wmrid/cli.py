@@ -790,9 +790,10 @@ def compare(
     mirror_left: MirrorLeftOpt = False,
     flip_effort: FlipEffortOpt = False,
     rotor_inertia: RotorInertiaOpt = None,
+    friction: FrictionOpt = FrictionChoice.auto,
 ) -> None:
     """Run every identification method on LOG: estimates, standard errors, errors against --truth, fit on
-    --validate OTHER, run time."""
+    --validate OTHER, run time.  Every method identifies the same friction model (--friction)."""
     from wmrid.atomic import write_json
     from wmrid.identify import identify as run_identify
     from wmrid.methods import check_method
@@ -808,6 +809,7 @@ def compare(
         raise UsageError("LOG and --validate cannot both be standard input; give one of them as a file")
     truth_params = _load_truth(truth) if truth is not None else None
     robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
+    friction_model = _friction_for(friction, names, validate, robot_obj)
     log_options = _log_options(locals())
     wheel_log = _read_wheel_log(log, columns, time_unit.value, robot_obj, **log_options)
     other = None
@@ -818,7 +820,9 @@ def compare(
                 f"--validate {validate}: its effort is in {other.effort_unit}, LOG's in {wheel_log.effort_unit}; "
                 "give both logs in the same units"
             )
-    observer = run_identify(wheel_log, robot_obj, torque_hold=torque_hold.value, control_rate=control_rate)
+    observer = run_identify(
+        wheel_log, robot_obj, torque_hold=torque_hold.value, control_rate=control_rate, friction=friction_model
+    )
     data = run_compare(wheel_log, observer, options, names, other=other, truth=truth_params)
     if output is not None:
         write_json(str(output), data, force=force)

@@ -125,23 +125,22 @@ def compare(
 ) -> dict[str, Any]:
     """Every method in ``names`` on ``log`` (in memory; ``observer`` is the observer's result on it), JSON-ready.
 
-    {"methods": {name: {"description", "parameters": {n: {"value", "std", "unit"[, "error_percent"]}},
-    "seconds", "warnings"[, "validation": {"fit_percent": {"eta_r", "eta_l"}}]}}, ...}.  ``other`` : a second
+    {"methods": {name: {"description", "parameters": {n: {"value", "std", "unit"[, "error_percent"]}}, "flagged",
+    "seconds", "warnings"[, "validation": {"fit_percent": {"eta_r", "eta_l"}}]}}, ...}.  The std, flags and
+    warnings are those ``identify --method NAME`` reports (model-error widenings included); the parameters are
+    the form's (caster drag too under ``--friction wheel+caster``).  ``other`` : a second
     log to validate each model on (:func:`wmrid.predict.validation_fit`); ``truth`` : true base parameters.
     """
-    from wmrid.base_params import derived_with_std
-    from wmrid.identify import REPORTED
     from wmrid.predict import validation_fit
 
     out: dict[str, Any] = {"source": observer.source, "methods": {}}
     predictor = None
     for name in names:
         est = estimate(name, log, observer, options)
-        names = observer.form.base_names if len(est.theta0) == observer.form.n_base else None
-        values = derived_with_std(np.asarray(est.theta0, dtype=float), np.asarray(est.cov, dtype=float), names)
+        # the same honest std, flags and warnings as ``identify --method NAME`` (wmrid.identify.with_estimate)
+        result = observer if name == "observer" else with_estimate(observer, est)
         params = {}
-        for key in REPORTED:
-            value, std = values[key]
+        for key, (value, std) in result.parameters.items():
             entry = {"value": value, "std": std if np.isfinite(std) else None, "unit": observer.units[key]}
             if truth is not None and key in truth and truth[key]:
                 entry["error_percent"] = 100.0 * (value - truth[key]) / abs(truth[key])
@@ -149,8 +148,9 @@ def compare(
         row: dict[str, Any] = {
             "description": DESCRIPTIONS[name],
             "parameters": params,
+            "flagged": list(result.diagnostics.get("flagged", [])),
             "seconds": est.seconds,
-            "warnings": list(est.warnings) if name != "observer" else list(observer.warnings),
+            "warnings": list(result.warnings),
         }
         if other is not None:
             form = observer.form if len(est.theta0) == observer.form.n_base else None
@@ -162,5 +162,5 @@ def compare(
     if other is not None:
         out["validation"] = {"log": other.source, "samples": len(other.t), "predictor": predictor}
     if truth is not None:
-        out["truth"] = {key: truth[key] for key in REPORTED if key in truth}
+        out["truth"] = {key: value for key, value in truth.items() if key in observer.parameters}
     return out

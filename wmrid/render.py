@@ -195,6 +195,7 @@ def print_report(report: Any, console: Any) -> None:
 def print_comparison(data: dict, console: Any) -> None:
     """A rich table of ``wmrid compare``'s result: one column per method (estimate ± std, error % with truth)."""
     from rich import box
+    from rich.markup import escape
     from rich.table import Table
 
     methods = data["methods"]
@@ -212,7 +213,8 @@ def print_comparison(data: dict, console: Any) -> None:
             row.append(_fmt(truth.get(key)))
         for m in methods.values():
             e = m["parameters"][key]
-            cell = f"{_fmt(e['value'])}\n± {_fmt(e['std'], 2)}"
+            mark = "!" if key in m.get("flagged", ()) else ""
+            cell = f"{_fmt(e['value'])}\n± {_fmt(e['std'], 2)}{mark}"
             if "error_percent" in e:
                 cell += f"\n{e['error_percent']:+.2g} %"
             row.append(cell)
@@ -228,6 +230,8 @@ def print_comparison(data: dict, console: Any) -> None:
     if "validation" in data:
         v = data["validation"]
         console.print(f"fit on {v['log']}: {v['predictor']}", markup=False)
+    if any(m.get("flagged") for m in methods.values()):
+        console.print("! flagged: the std may not cover this parameter's error (see the warnings)", markup=False)
     for name, m in methods.items():
         for warning in m["warnings"]:
-            console.print(f"[yellow]warning ({name}):[/yellow] {warning}")
+            console.print(f"[yellow]warning ({name}):[/yellow] {escape(warning)}")
