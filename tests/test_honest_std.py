@@ -167,3 +167,19 @@ def test_cli_caster_drag_refusals(request, capsys):
     assert "ever stops or reverses" in text
     assert "Traceback" not in text
     assert text.count("\n") == 1
+
+
+def test_inertia_entries_are_flagged_when_poorly_determined():
+    """M = m^-1 is reported beside m and must be flagged by the same rule (std > 10 % of its magnitude): on a
+    slipping AMR log M12 came out 0.0031 +/- 0.00085 (27 %) unflagged, 3.5 std from the truth.  Base parameters
+    are judged by their own loop, and an M of an undetermined m (infinite std) is undetermined, not listed."""
+    from wmrid.identify import derived_poorly_determined
+
+    params = {
+        "m11": (23.6, 1.6), "m12": (-1.7, 0.61), "m22": (23.5, 0.76), "M11": (0.0426, 0.0028),
+        "M12": (0.0031, 0.00085), "M22": (0.0428, 0.0013), "Vc": (-6.7e-4, 2e-4),
+    }  # fmt: skip
+    names = ("m11", "m12", "m22", "Vc")
+    assert derived_poorly_determined(params, names, []) == ["M12"]
+    params["M11"] = (0.0426, math.inf)
+    assert derived_poorly_determined(params, names, ["m11"]) == ["M12"]

@@ -579,8 +579,11 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
             kept.append(
                 f"{name} is poorly determined by this log ({est.method}): {value:.6g} +/- {std:.2g} {units[name]}"
             )
-    diagnostics["poorly_determined"] = poorly
     undetermined = [j for j, name in enumerate(base_names) if not math.isfinite(parameters[name][1])]
+    derived = derived_poorly_determined(parameters, base_names, [base_names[j] for j in undetermined])
+    poorly += derived
+    kept += [_poorly_text(name, parameters[name], units[name], est.method) for name in derived]
+    diagnostics["poorly_determined"] = poorly
     record_widening(diagnostics, inflation, parameters, [base_names[j] for j in undetermined])
     warnings = [*kept, *est.warnings, *physics_warnings(parameters)]
     payload_est = None
@@ -592,6 +595,28 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
         result, parameters=parameters, theta0_cov=cov, diagnostics=diagnostics, warnings=tuple(warnings),
         payload=payload_est, method=est.method, estimate=est,
     )  # fmt: skip
+
+
+def derived_poorly_determined(
+    parameters: dict[str, tuple[float, float]], base_names: tuple[str, ...], undetermined_names: list[str]
+) -> list[str]:
+    """The reported parameters not in ``base_names`` (M11, M12, M22, computed from m11, m12, m22) whose standard
+    error exceeds POORLY_DETERMINED of their magnitude, as for the base parameters: M = m^-1 inherits the
+    uncertainty of every m entry, so M12 can be poorly determined where m12 alone is not flagged, or the reverse.
+    An M computed from an undetermined m is undetermined itself and not listed here."""
+    out = []
+    for name, (value, std) in parameters.items():
+        if name in base_names or name in undetermined_names or not math.isfinite(std):
+            continue
+        if std > POORLY_DETERMINED * abs(value):
+            out.append(name)
+    return out
+
+
+def _poorly_text(name: str, pair: tuple[float, float], unit: str, method: str | None = None) -> str:
+    value, std = pair
+    by = f" ({method})" if method else ""
+    return f"{name} is poorly determined by this log{by}: {value:.6g} +/- {std:.2g} {unit}"
 
 
 def physics_warnings(parameters: dict[str, tuple[float, float]]) -> list[str]:
@@ -767,6 +792,9 @@ def _diagnose(
         ]
         why = f"; it is not separable from {', '.join(partners)}" if partners else ""
         warnings.append(f"{name} is poorly determined by this log: {value:.6g} +/- {std:.2g} {units[name]}{why}")
+    derived = derived_poorly_determined(parameters, names0, undetermined_names=[names0[j] for j in undetermined])
+    poorly += derived
+    warnings += [_poorly_text(name, parameters[name], units[name]) for name in derived]
     at_bound = [
         n
         for n, v, a, b in zip(form.theta_names(), theta.ravel(), lo.ravel(), hi.ravel(), strict=True)
