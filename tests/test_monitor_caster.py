@@ -148,7 +148,8 @@ def test_no_false_alarm_on_the_log_the_caster_model_came_from(amr_caster_log, am
 
 def test_a_payload_loaded_mid_run_is_found(amr_caster_json) -> None:
     """5 kg loaded at 20 s on the multibody AMR, against the caster model of the unloaded robot (measured: the
-    change placed at 20.05 s, alarm at 20.40 s, statistic 495 against a threshold of 86; M11 +26 %)."""
+    change placed at 20.05 s, alarm at 20.40 s, statistic 495 against a threshold of 86; M11 +26 %).  The span
+    after the change is identified with the model's caster positions."""
     from wmrid.multibody import MultibodySettings, simulate_multibody
 
     load = Payload(5.0, 0.0, 0.0, 0.05)
@@ -164,3 +165,5 @@ def test_a_payload_loaded_mid_run_is_found(amr_caster_json) -> None:
     assert t_switch <= found.t_alarm <= t_switch + 2.0
     assert found.t == pytest.approx(t_switch, abs=0.2)
     assert found.relative_change["M11"] > 0.05  # identified again after the change, heavier
+    # with the model's own caster positions (one drag force per caster), not the two-term drag
+    assert "D1" in found.parameters and "Cv" not in found.parameters

@@ -266,6 +266,7 @@ def identify(
     payload: bool = False,
     control_rate: float | None = None,
     friction: Literal["wheel", "wheel+caster", "auto"] = "wheel",
+    geometry: tuple[float, ...] = (),
 ) -> IdentificationResult:
     """Identify the base parameters of the robot that recorded ``log``.
 
@@ -283,6 +284,8 @@ def identify(
     (``robot.casters``) one drag force D_k per caster, else the two-term Cv, Cw; general form only), or
     ``auto``: both, and the caster model when a Wald test puts its drag off zero at p < AUTO_P (never on a log
     whose wheels keep one sign).  ``diagnostics["friction"]`` states the model and why.
+    ``geometry`` : (r, b, x_1, y_1, ...) m, the geometric caster model's when no robot lists casters (a
+    saved model's ``form.geometry``, say; :func:`caster_geometry` builds it from a robot, whose casters win).
     """
     if friction not in FRICTION_CHOICES:
         raise UsageError(f"--friction must be one of {', '.join(FRICTION_CHOICES)}, got {friction!r}")
@@ -295,7 +298,7 @@ def identify(
         try:
             return _identify(
                 stream, sv, robot, form, k, alpha, box_width, max_history, torque_hold, progress, payload,
-                control_rate, caster,
+                control_rate, caster, geometry,
             )  # fmt: skip
         except np.linalg.LinAlgError as err:
             raise NotIdentifiableError(
@@ -377,6 +380,7 @@ def _identify(
     payload,
     control_rate,
     caster=False,
+    given_geometry: tuple[float, ...] = (),
 ) -> IdentificationResult:
     started = time.perf_counter()
     source = stream.source
@@ -399,7 +403,7 @@ def _identify(
             "estimate nor is compared with it; the start comes from the data"
         )
         robot = None
-    geometry: tuple[float, ...] = ()
+    geometry: tuple[float, ...] = tuple(given_geometry)
     if caster and robot is not None and robot.casters:
         geometry = caster_geometry(robot)
     if caster and sv.form().kind == "paper":

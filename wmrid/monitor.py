@@ -63,9 +63,9 @@ Caster drag.  A model identified with ``--friction wheel+caster`` (its JSON ``th
 theta0[param_j] col_j [1, pattern_j] to the wheel torques (:func:`wmrid.model.friction_torque`), smoothed as the
 other speed columns; p's drag entries are theta0's (as in :func:`wmrid.idim.rows_from_features`), with their
 reported standard errors.  The test then has len(p) degrees of freedom, S / len(p) ~ F(len(p), dof).  After a
-change the segment is identified with ``friction="wheel+caster"`` but without a robot file, so with the two-term
-drag (Cv, Cw), not the casters' positions (where the wheels never reverse, with wheel friction only; a warning
-says so).
+change the segment is identified with ``friction="wheel+caster"`` and the model's caster positions (its
+``form.geometry``) when it has them, else with the two-term drag (Cv, Cw) (where the wheels never reverse, with
+wheel friction only; a warning says so).
 
 Times: ``t`` of a change is s from the log's first sample; ``t_alarm`` is the time of the last log sample
 the alarming test used (its window's end plus the smoothing's half-width, 0.25 s), when a monitor
@@ -743,12 +743,12 @@ def _segment_log(log: Any, t_start: float, t_end: float, unit: str) -> _Log:
 
 
 def _identify_span(log: Any, t_start: float, t_end: float, unit: str, friction: str = "wheel",
-                   notes: list[str] | None = None):  # fmt: skip
+                   notes: list[str] | None = None, geometry: tuple[float, ...] = ()):  # fmt: skip
     """(identification of log[t_start, t_end] (s from the log's start), None) or (None, why not).
 
-    ``friction``: the given model's friction model.  ``wheel+caster`` is identified without a robot file, so
-    with the two-term caster model (Cv, Cw; :func:`wmrid.identify.identify` takes the casters' positions only
-    from a robot); where that is not identifiable (the wheels never stop or reverse: the drag then adds to the
+    ``friction``: the given model's friction model.  ``wheel+caster`` is identified with the given model's caster
+    positions ``geometry`` ((r, b, x_1, y_1, ...), its ``form.geometry``), else with the two-term caster model
+    (Cv, Cw); where that is not identifiable (the wheels never stop or reverse: the drag then adds to the
     Coulomb friction) the wheel friction model is used instead, and why is appended to ``notes``."""
     from wmrid.identify import identify
 
@@ -760,7 +760,7 @@ def _identify_span(log: Any, t_start: float, t_end: float, unit: str, friction: 
         )
     try:
         try:
-            result = identify(seg, None, friction=friction)
+            result = identify(seg, None, friction=friction, geometry=geometry)
         except NotIdentifiableError as err:
             if friction == "wheel":
                 raise
@@ -839,7 +839,7 @@ class _Segment:
                 [m.sig.residual(self.fixed.theta0, a, a + upto, self.fixed.form)], m.order
             )
         t0, t1 = self._t(0), self._t(upto - 1)
-        result, problem = _identify_span(m.log, t0, t1, m.unit, m.friction, m.notes)
+        result, problem = _identify_span(m.log, t0, t1, m.unit, m.friction, m.notes, m.geometry)
         if result is None:
             raise _Stop(problem)
         fitted = _model_of_result(result)
@@ -847,8 +847,8 @@ class _Segment:
         # model sees the model's estimation error as the test will, not an in-sample fit.
         half = upto // 2
         tm = self._t(half)
-        first, _ = _identify_span(m.log, t0, tm, m.unit, m.friction, m.notes)
-        second, _ = _identify_span(m.log, tm, t1, m.unit, m.friction, m.notes)
+        first, _ = _identify_span(m.log, t0, tm, m.unit, m.friction, m.notes, m.geometry)
+        second, _ = _identify_span(m.log, tm, t1, m.unit, m.friction, m.notes, m.geometry)
         if first is not None and second is not None:
             spans = [m.sig.residual(second.estimate.theta0, a, a + half, _caster_form(second.form)),
                      m.sig.residual(first.estimate.theta0, a + half, a + upto, _caster_form(first.form))]  # fmt: skip
@@ -920,7 +920,10 @@ class _Stop(Exception):
 
 
 class _Monitor:
-    def __init__(self, log: Any, sig: Signals, settings: MonitorSettings, unit: str, friction: str = "wheel") -> None:
+    def __init__(
+        self, log: Any, sig: Signals, settings: MonitorSettings, unit: str, friction: str = "wheel",
+        geometry: tuple[float, ...] = (),
+    ) -> None:  # fmt: skip
         self.log, self.sig, self.settings, self.unit = log, sig, settings, unit
         self.grid = window_grid(settings, sig.rate)
         self.order = max(1, round(settings.noise_memory_s * sig.rate))
@@ -928,6 +931,7 @@ class _Monitor:
         self.after = round(settings.locate_s * sig.rate)
         self.duration = float(log.t[-1] - log.t[0])
         self.friction = friction
+        self.geometry = geometry  # the model's caster positions (r, b, x_1, y_1, ...), () for none
         self.notes: list[str] = []  # fallbacks of re-identification (see _identify_span)
 
     def whitened(self, fitted: _Model, noise: NoiseModel, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
@@ -952,7 +956,8 @@ def monitor(log: Any, model_: MonitoredModel, settings: MonitorSettings | None =
         )
     sig = residual_signals(log.t, log.eta, log.tau, settings, source)
     friction = "wheel" if model_.form is None else model_.form.friction
-    mon = _Monitor(log, sig, settings, unit, friction)
+    geometry = () if model_.form is None else tuple(model_.form.geometry)
+    mon = _Monitor(log, sig, settings, unit, friction, geometry)
     duration = float(log.t[-1] - log.t[0])
     need = (MIN_ROWS_PER_COEFFICIENT * 2 + 2) * mon.order  # after a change the halves lose q samples each
     if mon.n_cal < need:
@@ -989,7 +994,7 @@ def monitor(log: Any, model_: MonitoredModel, settings: MonitorSettings | None =
     for i, change in enumerate(changes):
         t_end = changes[i + 1].t if i + 1 < len(changes) else duration
         notes: list[str] = []
-        result, problem = _identify_span(log, change.t, t_end, unit, friction, notes)
+        result, problem = _identify_span(log, change.t, t_end, unit, friction, notes, geometry)
         change.warnings.extend(notes)
         if result is None:
             change.warnings.append(problem)
