@@ -14,6 +14,7 @@ buckets (BUCKETS_PER_OCTAVE per factor of 2 in variance, 1.1 % in sigma): memory
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 #: Second differences per window (the median of windows' mean squares is then unbiased within ~2 %).
@@ -22,6 +23,46 @@ WINDOW = 64
 BUCKETS_PER_OCTAVE = 32
 #: Fewer windows than this and the level is not reported.
 MIN_WINDOWS = 4
+#: The histogram key of a window whose second differences are all zero.
+ZERO_KEY = -(2**31)
+
+
+@numba.njit(cache=True, nogil=True)
+def _window_variances(eta, prev, state, out):
+    """One pass over a piece eta (k, 2): second differences continued from ``prev`` (2, 2), the last two samples
+    before it (``state[0]`` of them known), summed in windows of WINDOW; each completed window's mean square / 6
+    goes to ``out`` (k // WINDOW + 1, 2).  state = [samples known (0-2), open window's count, its two sums,
+    two sums of eta^2].  Returns the number of windows completed."""
+    known = int(state[0])
+    count = int(state[1])
+    done = 0
+    for i in range(eta.shape[0]):
+        e0 = eta[i, 0]
+        e1 = eta[i, 1]
+        state[4] += e0 * e0
+        state[5] += e1 * e1
+        if known == 2:
+            d0 = e0 - 2.0 * prev[1, 0] + prev[0, 0]
+            d1 = e1 - 2.0 * prev[1, 1] + prev[0, 1]
+            state[2] += d0 * d0
+            state[3] += d1 * d1
+            count += 1
+            if count == WINDOW:
+                out[done, 0] = state[2] / (6.0 * WINDOW)
+                out[done, 1] = state[3] / (6.0 * WINDOW)
+                done += 1
+                count = 0
+                state[2] = 0.0
+                state[3] = 0.0
+        else:
+            known += 1
+        prev[0, 0] = prev[1, 0]
+        prev[0, 1] = prev[1, 1]
+        prev[1, 0] = e0
+        prev[1, 1] = e1
+    state[0] = known
+    state[1] = count
+    return done
 
 
 class NoiseFloor:
@@ -32,44 +73,21 @@ class NoiseFloor:
     """
 
     def __init__(self) -> None:
-        self._tail = np.empty((0, 2))  # the last two samples of the previous piece
-        self._partial = np.zeros(2)  # sum of d^2 in the window being filled, and its count
-        self._partial_count = 0
+        self._prev = np.zeros((2, 2))  # the last two samples seen
+        self._state = np.zeros(6)  # see _window_variances
         self._hist: list[dict[int, int]] = [{}, {}]
         self._windows = 0
-        self._sum_sq = np.zeros(2)
         self._n = 0
 
     def feed(self, eta: np.ndarray) -> None:
-        eta = np.asarray(eta, dtype=np.float64)
+        eta = np.ascontiguousarray(eta, dtype=np.float64)
         if len(eta) == 0:
             return
-        self._sum_sq += np.einsum("ij,ij->j", eta, eta)
+        out = np.empty((len(eta) // WINDOW + 1, 2))
+        done = _window_variances(eta, self._prev, self._state, out)
         self._n += len(eta)
-        joined = np.concatenate((self._tail, eta))
-        self._tail = joined[-2:].copy()
-        if len(joined) < 3:
-            return
-        d2 = np.square(joined[2:] - 2.0 * joined[1:-1] + joined[:-2])
-        start = 0
-        if self._partial_count:  # complete the window left open by the previous piece
-            take = min(WINDOW - self._partial_count, len(d2))
-            self._partial += d2[:take].sum(axis=0)
-            self._partial_count += take
-            start = take
-            if self._partial_count < WINDOW:
-                return
-            self._add(self._partial[None] / (6.0 * WINDOW))
-            self._partial[:] = 0.0
-            self._partial_count = 0
-        rest = d2[start:]
-        full = len(rest) // WINDOW
-        if full:
-            self._add(rest[: full * WINDOW].reshape(full, WINDOW, 2).mean(axis=1) / 6.0)
-        tail = rest[full * WINDOW :]
-        if len(tail):
-            self._partial += tail.sum(axis=0)
-            self._partial_count = len(tail)
+        if done:
+            self._add(out[:done])
 
     def _add(self, variances: np.ndarray) -> None:
         """Count windows' variance estimates (w, 2) into each wheel's log-spaced histogram."""
@@ -78,7 +96,7 @@ class NoiseFloor:
             keys = np.floor(np.log2(variances) * BUCKETS_PER_OCTAVE)
         for wheel in range(2):
             col = keys[:, wheel]
-            col = np.where(np.isfinite(col), col, np.iinfo(np.int32).min).astype(np.int64)  # zero: lowest bucket
+            col = np.where(np.isfinite(col), col, ZERO_KEY).astype(np.int64)  # a zero variance: the lowest bucket
             unique, counts = np.unique(col, return_counts=True)
             hist = self._hist[wheel]
             for key, count in zip(unique.tolist(), counts.tolist(), strict=True):
@@ -93,9 +111,9 @@ class NoiseFloor:
             keys = np.array(sorted(hist))
             cum = np.cumsum([hist[k] for k in keys])
             key = int(keys[np.searchsorted(cum, cum[-1] / 2.0)])
-            out[wheel] = 0.0 if key == np.iinfo(np.int32).min else np.sqrt(2.0 ** ((key + 0.5) / BUCKETS_PER_OCTAVE))
+            out[wheel] = 0.0 if key == ZERO_KEY else np.sqrt(2.0 ** ((key + 0.5) / BUCKETS_PER_OCTAVE))
         return out
 
     def rms(self) -> np.ndarray:
         """(2,) rad/s: root mean square of each wheel's speed."""
-        return np.sqrt(self._sum_sq / max(self._n, 1))
+        return np.sqrt(self._state[4:6] / max(self._n, 1))
