@@ -139,8 +139,8 @@ def test_a_closed_loop_disturbance_is_not_flagged():
 
 
 def test_cli_json_and_table_show_the_flag(slipping, tmp_path, capsys):
-    """Through the CLI: the JSON carries the check's figures and flags every parameter; the terminal table marks
-    the flagged parameters and prints the warning."""
+    """Through the CLI: the JSON carries the check's figures and flags every parameter; the terminal table and the
+    report mark the flagged parameters (!) and state the warning."""
     path = tmp_path / "slip.csv"
     np.savetxt(
         path, np.column_stack([slipping.t, slipping.eta, slipping.tau]), delimiter=",",
@@ -153,7 +153,14 @@ def test_cli_json_and_table_show_the_flag(slipping, tmp_path, capsys):
     assert out["diagnostics"]["uncertainty"]["model_error"]["prediction_misfit"]["applied"]
     assert set(out["diagnostics"]["flagged"]) >= set(BASE)
     with pytest.raises(SystemExit) as err:
-        main(["identify", str(path), "--robot", "amr", "--friction", "wheel"])
+        main(["identify", str(path), "--robot", "amr", "--friction", "wheel", "--format", "table"])
     assert err.value.code == 0
     captured = capsys.readouterr()
     assert "predicts the wheel speeds" in captured.out + captured.err
+    assert "! flagged" in captured.out
+    report = tmp_path / "r.md"
+    with pytest.raises(SystemExit) as err:
+        main(["report", str(path), "--robot", "amr", "--friction", "wheel", "-o", str(report)])
+    assert err.value.code == 0
+    text = report.read_text()
+    assert "! flagged" in text and "predicts the wheel speeds" in text

@@ -38,8 +38,10 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         table.add_column("CAD", justify="right", no_wrap=True)
         table.add_column("Δ/std", justify="right", no_wrap=True)
     inflated = set(result.diagnostics.get("inflated", []))
+    flagged = set(result.diagnostics.get("flagged", [])) - inflated
     for name, (value, std) in result.parameters.items():
-        row = [name, _fmt(value), _fmt(std, 2) + ("†" if name in inflated else ""), result.units[name]]
+        mark = "†" if name in inflated else "!" if name in flagged else ""
+        row = [name, _fmt(value), _fmt(std, 2) + mark, result.units[name]]
         if result.nominal is not None:
             row.append(_fmt(result.nominal.get(name)))
         if result.reference is not None:
@@ -84,6 +86,11 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
     if inflated and model_error:
         scale = f" (S = {model_error['scale']:.3g})" if model_error.get("applied") else ""
         console.print(f"† std widened{scale}: {model_error['meaning']}", markup=False)
+    if flagged:
+        console.print(
+            "! flagged (poorly determined, or the log departs from the model): the std may not cover the error; "
+            "see the warnings", markup=False,
+        )  # fmt: skip
     if info.get("effort_unit", "N m") != "N m":
         console.print(
             f"[bold]units: the effort is in {info['effort_unit']}, not N m, so every parameter is in "

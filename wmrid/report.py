@@ -177,6 +177,7 @@ def build_report(
     rows = []
     flagged = []
     inflated = set(data["diagnostics"].get("inflated", []))
+    warned = set(data["diagnostics"].get("flagged", [])) - inflated
     for name, entry in params.items():
         value, std = entry["value"], entry["std"]
         row = [name, entry["unit"]]
@@ -189,7 +190,7 @@ def build_report(
             if mark:
                 flagged.append(f"{name} differs from its CAD value by {z:+.1f} std")
             row += [_fmt(ref), f"{z:+.1f}{mark}" if math.isfinite(z) else "—"]
-        row += [_fmt(value), _fmt(std, 2) + (" †" if name in inflated else "")]
+        row += [_fmt(value), _fmt(std, 2) + (" †" if name in inflated else " !" if name in warned else "")]
         if truth:
             t = truth.get(name)
             zt = (value - t) / std if (t is not None and std) else math.nan
@@ -223,6 +224,12 @@ def build_report(
                 + f": {unc['model_error']['meaning']}."
             ]
             if inflated and unc.get("model_error")
+            else []
+        ),
+        *(
+            ["! flagged (poorly determined, or the log departs from the model): the std may not cover the error; "
+             "see the warnings below."]
+            if warned
             else []
         ),
         *(
