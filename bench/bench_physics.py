@@ -677,9 +677,13 @@ def main() -> int:
             "slip_checks": slip_checks,
             "summaries": [{"clean": clean, **s} for (_, clean, _), s in summaries.items()],
             "acceptance": {
-                "unflagged_beyond_3_std": len(offenders), "pairs": n_pairs, "undetermined": undetermined,
-                "unflagged_pairs": unflagged, "expected_by_chance": chance, "beyond_99_7_interval": beyond_interval,
-            },  # fmt: skip
+                "unflagged_beyond_3_std": len(offenders),
+                "pairs": n_pairs,
+                "undetermined": undetermined,
+                "unflagged_pairs": unflagged,
+                "expected_by_chance": chance,
+                "beyond_99_7_interval": beyond_interval,
+            },
             "offenders": offenders,
             "failures": [
                 {"case": label, "seed": seed, "clean": clean, "method": m, "error": e.get("error")}

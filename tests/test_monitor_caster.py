@@ -166,4 +166,5 @@ def test_a_payload_loaded_mid_run_is_found(amr_caster_json) -> None:
     assert found.t == pytest.approx(t_switch, abs=0.2)
     assert found.relative_change["M11"] > 0.05  # identified again after the change, heavier
     # with the model's own caster positions (one drag force per caster), not the two-term drag
-    assert "D1" in found.parameters and "Cv" not in found.parameters
+    assert "D1" in found.parameters
+    assert "Cv" not in found.parameters

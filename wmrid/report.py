@@ -227,8 +227,10 @@ def build_report(
             else []
         ),
         *(
-            ["! flagged (poorly determined, or the log departs from the model): the std may not cover the error; "
-             "see the warnings below."]
+            [
+                "! flagged (poorly determined, or the log departs from the model): the std may not cover the error; "
+                "see the warnings below."
+            ]
             if warned
             else []
         ),
