@@ -69,6 +69,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.special import stdtr, stdtrit
 
 ROBOTS = ("paper", "amr", "heavy")
 TRAJECTORIES = ("sinusoid", "reversing")
@@ -366,8 +367,6 @@ def summarize(case: Case, method: str, rows: list[dict[str, Any]]) -> dict[str, 
         "beyond_interval": 0,
     }
     zs: dict[str, list[float]] = {p: [] for p in PARAMS}
-    from scipy.special import stdtr, stdtrit
-
     for r in ok:
         entry = r["methods"][method]
         flagged = set(entry["flagged"])

@@ -198,7 +198,8 @@ def test_idim_with_caster_drag_on_the_multibody_amr(amr_caster_log):
 
 def test_compare_identifies_the_caster_model_with_every_method(amr_caster_log, tmp_path, capsys):
     """``wmrid compare --friction wheel+caster``: every method reports the casters' drag force D1 (N) next to the
-    wheel friction, and ``--friction wheel`` none; the multibody AMR's log, written as CSV, through the CLI."""
+    wheel friction, and ``--friction wheel`` none; IDIM's values, std (model-error widenings included) and flags
+    are those ``identify --method idim`` reports.  The multibody AMR's log, written as CSV, through the CLI."""
     import json
 
     from wmrid.cli import main
@@ -219,3 +220,13 @@ def test_compare_identifies_the_caster_model_with_every_method(amr_caster_log, t
         out = json.loads(capsys.readouterr().out)
         for name in ("observer", "idim", "rls", "oe"):
             assert ("D1" in out["methods"][name]["parameters"]) == has_drag, (friction, name)
+            assert "flagged" in out["methods"][name]
+    # the std and flags are those of ``identify --method idim``: the library's run() on the same arrays
+    log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="amr", notes=())
+    observer = identify(log, AMR, friction="wheel")
+    idim_result = run("idim", log, observer, MethodOptions(), AMR)
+    for key, (value, std) in idim_result.parameters.items():
+        entry = out["methods"]["idim"]["parameters"][key]
+        assert entry["value"] == pytest.approx(value, rel=1e-9)
+        assert entry["std"] == pytest.approx(std, rel=1e-9)
+    assert out["methods"]["idim"]["flagged"] == idim_result.diagnostics["flagged"]

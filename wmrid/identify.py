@@ -584,7 +584,7 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
                 f"{name} is poorly determined by this log ({est.method}): {value:.6g} +/- {std:.2g} {units[name]}"
             )
     undetermined = [j for j, name in enumerate(base_names) if not math.isfinite(parameters[name][1])]
-    derived = derived_poorly_determined(parameters, base_names, [base_names[j] for j in undetermined])
+    derived = derived_poorly_determined(parameters, base_names)
     poorly += derived
     kept += [_poorly_text(name, parameters[name], units[name], est.method) for name in derived]
     diagnostics["poorly_determined"] = poorly
@@ -601,16 +601,14 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
     )  # fmt: skip
 
 
-def derived_poorly_determined(
-    parameters: dict[str, tuple[float, float]], base_names: tuple[str, ...], undetermined_names: list[str]
-) -> list[str]:
+def derived_poorly_determined(parameters: dict[str, tuple[float, float]], base_names: tuple[str, ...]) -> list[str]:
     """The reported parameters not in ``base_names`` (M11, M12, M22, computed from m11, m12, m22) whose standard
     error exceeds POORLY_DETERMINED of their magnitude, as for the base parameters: M = m^-1 inherits the
     uncertainty of every m entry, so M12 can be poorly determined where m12 alone is not flagged, or the reverse.
-    An M computed from an undetermined m is undetermined itself and not listed here."""
+    An M computed from an undetermined m has an infinite std (undetermined itself) and is not listed here."""
     out = []
     for name, (value, std) in parameters.items():
-        if name in base_names or name in undetermined_names or not math.isfinite(std):
+        if name in base_names or not math.isfinite(std):
             continue
         if std > POORLY_DETERMINED * abs(value):
             out.append(name)
@@ -796,7 +794,7 @@ def _diagnose(
         ]
         why = f"; it is not separable from {', '.join(partners)}" if partners else ""
         warnings.append(f"{name} is poorly determined by this log: {value:.6g} +/- {std:.2g} {units[name]}{why}")
-    derived = derived_poorly_determined(parameters, names0, undetermined_names=[names0[j] for j in undetermined])
+    derived = derived_poorly_determined(parameters, names0)
     poorly += derived
     warnings += [_poorly_text(name, parameters[name], units[name]) for name in derived]
     at_bound = [

@@ -126,11 +126,13 @@ def compare(
     """Every method in ``names`` on ``log`` (in memory; ``observer`` is the observer's result on it), JSON-ready.
 
     {"methods": {name: {"description", "parameters": {n: {"value", "std", "unit"[, "error_percent"]}}, "flagged",
+    "marks" ({n: "", "†", "!" or "†!"}, :func:`wmrid.model_error.std_mark`),
     "seconds", "warnings"[, "validation": {"fit_percent": {"eta_r", "eta_l"}}]}}, ...}.  The std, flags and
     warnings are those ``identify --method NAME`` reports (model-error widenings included); the parameters are
     the form's (caster drag too under ``--friction wheel+caster``).  ``other`` : a second
     log to validate each model on (:func:`wmrid.predict.validation_fit`); ``truth`` : true base parameters.
     """
+    from wmrid.model_error import std_mark
     from wmrid.predict import validation_fit
 
     out: dict[str, Any] = {"source": observer.source, "methods": {}}
@@ -149,6 +151,7 @@ def compare(
             "description": DESCRIPTIONS[name],
             "parameters": params,
             "flagged": list(result.diagnostics.get("flagged", [])),
+            "marks": {key: std_mark(key, result.diagnostics) for key in params},
             "seconds": est.seconds,
             "warnings": list(result.warnings),
         }

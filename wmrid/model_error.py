@@ -13,7 +13,8 @@ A fourth check widens nothing but flags every parameter: wheel speeds that the m
 their own noise (:func:`prediction_misfit`) -- slipping wheels, above all, which bias the estimate by tens of
 per cent without making it vary along the log.
 
-:func:`widen` applies all three; :func:`record_widening` states them in a result's diagnostics.  Pure
+:func:`widen` applies the three and runs the fourth; :func:`record_widening` states them in a result's
+diagnostics.  Pure
 functions on arrays; no I/O.
 """
 
@@ -81,7 +82,7 @@ def widen(
     the box; weight_cov : the fit's weights; block_mid (J,) s : the blocks' mid-times from the log's start;
     duration : s; k : the observer's gain, 1/s.  The record holds the scale's test figures, "relative_misfit",
     "discretisation" and "slow_speed" (:func:`discretisation_error`, :func:`slow_speed_term`; fragile parameters
-    by name).
+    by name), and "prediction_misfit" (:func:`prediction_misfit`: it widens nothing, it flags).
     """
     fitted = model.intermediate_parameters(fit.theta0, form)
     relative_misfit = float(np.max(np.abs(fitted - theta)) / max(np.max(np.abs(theta)), 1e-300))
@@ -102,8 +103,10 @@ def widen(
         grow[j] = max(slow["var_without"][j] - cov0[j, j], 0.0)
     cov0 = cov0 + np.diag(grow)
     record["slow_speed"] = {**slow, "fragile": [form.base_names[j] for j in slow["fragile"]]}
-    with np.errstate(invalid="ignore", divide="ignore"):
-        pe_rms = np.sqrt(out.blk_ee.sum(axis=0) / duration) if duration > 0 else np.full(2, np.nan)
+    # per sample, as the noise is measured (the time-weighted blk_ee would let one gap's catch-up weigh like the
+    # whole gap): the decimated history holds e at up to max_history evenly spaced samples (the first is 0)
+    e = np.asarray(out.hist_e)[1:]
+    pe_rms = np.sqrt(np.mean(e**2, axis=0)) if len(e) else np.full(2, np.nan)
     record["prediction_misfit"] = prediction_misfit(pe_rms, out.noise_sigma, out.eta_rms)
     return cov0, record
 
@@ -117,32 +120,40 @@ MISFIT_RATIO = 2.0
 #: holds, 2e-3 with caster drag left out, 0.025-0.09 with slip.
 MISFIT_FLOOR = 5e-3
 PREDICTION_MISFIT_NOTE = (
-    "the model predicts the wheel speeds to {pe} rad/s rms (right / left), {ratio} their noise of {sigma} rad/s "
-    "and {share} % of their rms: wheels that slip, backlash, or an effect the model leaves out; such an error "
-    "biases the estimate without making it vary along the log, so every parameter is flagged: its std does not "
-    "cover it"
+    "the model predicts the {side} wheel's speed to {pe} rad/s rms, {ratio} its noise of {sigma} rad/s and {share} % "
+    "of its rms: wheels that slip, backlash, or an effect the model leaves out; such an error biases the estimate "
+    "without making it vary along the log, so every parameter is flagged: its std does not cover it"
 )
 
 
 def prediction_misfit(pe_rms: np.ndarray, sigma: np.ndarray | None, eta_rms: np.ndarray | None) -> dict[str, Any]:
     """Whether the observer's prediction error is far above the speed sensors' noise (README "Uncertainty").
 
-    pe_rms (2,) rad/s: rms of e = eta - eta_hat over the log; sigma (2,) rad/s: the speeds' white-noise level
-    (:class:`wmrid.noise_floor.NoiseFloor`); eta_rms (2,) rad/s.  Where the model holds, e is that noise and
-    the ratio pe_rms / sigma is about 1.  Applied when, for a wheel, the ratio exceeds MISFIT_RATIO and
-    pe_rms exceeds MISFIT_FLOOR of the speed's rms.
-    Returns {"applied": bool, "ratio": max over wheels or None, "prediction_error_rms", "noise_rms", "speed_rms":
-    (2,) rad/s}.
+    pe_rms (2,) rad/s: rms of e = eta - eta_hat over the log's samples; sigma (2,) rad/s: the speeds' white-noise
+    level (:class:`wmrid.noise_floor.NoiseFloor`; NaN where unknown); eta_rms (2,) rad/s.  Where the model
+    holds, e is that noise and the ratio pe_rms / sigma is about 1.  Applied when, for a wheel whose noise is
+    known, the ratio exceeds MISFIT_RATIO and pe_rms exceeds MISFIT_FLOOR of the speed's rms.
+    Returns {"applied": bool, "wheel": the worst wheel (0 right, 1 left; the worst applied one), "ratio" and
+    "share" (pe_rms / eta_rms) of that wheel, or None when no wheel's noise is known, and "prediction_error_rms",
+    "noise_rms", "speed_rms": (2,) rad/s}.
     """
-    if sigma is None or eta_rms is None or not (np.all(np.isfinite(sigma)) and np.all(np.isfinite(pe_rms))):
-        return {"applied": False, "ratio": None, "prediction_error_rms": None, "noise_rms": None, "speed_rms": None}
+    none = {"applied": False, "wheel": None, "ratio": None, "share": None, "prediction_error_rms": None,
+            "noise_rms": None, "speed_rms": None}  # fmt: skip
+    if sigma is None or eta_rms is None:
+        return none
     pe = np.asarray(pe_rms, dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(sigma > 0, pe / sigma, np.where(pe > 0, np.inf, 1.0))
-    applied = bool(np.any((ratio > MISFIT_RATIO) & (pe > MISFIT_FLOOR * np.asarray(eta_rms))))
+    sigma = np.asarray(sigma, dtype=float)
+    eta_rms = np.asarray(eta_rms, dtype=float)
+    known = np.isfinite(sigma) & (sigma > 0) & np.isfinite(pe)
+    if not known.any():
+        return none
+    ratio = np.where(known, pe / np.where(known, sigma, 1.0), -np.inf)
+    share = pe / np.maximum(eta_rms, 1e-300)
+    hit = known & (ratio > MISFIT_RATIO) & (share > MISFIT_FLOOR)
+    wheel = int(np.argmax(np.where(hit, ratio, -np.inf))) if hit.any() else int(np.argmax(ratio))
     return {
-        "applied": applied, "ratio": float(np.max(ratio)), "prediction_error_rms": pe.tolist(),
-        "noise_rms": np.asarray(sigma, dtype=float).tolist(), "speed_rms": np.asarray(eta_rms, dtype=float).tolist(),
+        "applied": bool(hit.any()), "wheel": wheel, "ratio": float(ratio[wheel]), "share": float(share[wheel]),
+        "prediction_error_rms": pe.tolist(), "noise_rms": sigma.tolist(), "speed_rms": eta_rms.tolist(),
     }  # fmt: skip
 
 
@@ -306,8 +317,6 @@ def record_widening(
     if fragile:
         meaning.append(FRAGILE_NOTE.format(", ".join(sorted(fragile))))
     misfit = inflation.get("prediction_misfit") or {}
-    if misfit.get("applied"):
-        meaning.append(misfit_text(misfit))
     diagnostics["uncertainty"]["model_error"] = {
         **inflation,
         "meaning": "; ".join(meaning)
@@ -321,13 +330,23 @@ def record_widening(
 
 
 def misfit_text(misfit: dict[str, Any]) -> str:
-    """The statement of an applied :func:`prediction_misfit`."""
-    pe = np.asarray(misfit["prediction_error_rms"])
+    """The statement of an applied :func:`prediction_misfit` (its worst wheel's figures)."""
+    wheel = misfit["wheel"]
     ratio = misfit["ratio"]
-    share = 100 * float(np.max(pe / np.maximum(np.asarray(misfit["speed_rms"]), 1e-300)))
     return PREDICTION_MISFIT_NOTE.format(
-        pe=" / ".join(f"{v:.2g}" for v in pe),
+        side=("right", "left")[wheel],
+        pe=f"{misfit['prediction_error_rms'][wheel]:.2g}",
         ratio=f"{ratio:.3g} times" if ratio < 1000 else "over 1000 times",
-        sigma=" / ".join(f"{v:.2g}" for v in misfit["noise_rms"]),
-        share=f"{share:.2g}",
+        sigma=f"{misfit['noise_rms'][wheel]:.2g}",
+        share=f"{100 * misfit['share']:.2g}",
     )
+
+
+def std_mark(name: str, diagnostics: dict[str, Any]) -> str:
+    """The mark after a parameter's std in tables and reports: "†" when it was widened, "!" when the parameter is
+    flagged and the widening does not answer the flag (it was not widened, or the prediction-error check says no
+    std covers the error); "" otherwise.  ``diagnostics``: a result's (or its JSON's)."""
+    inflated = name in diagnostics.get("inflated", ())
+    flagged = name in diagnostics.get("flagged", ())
+    misfit = ((diagnostics.get("uncertainty") or {}).get("model_error") or {}).get("prediction_misfit") or {}
+    return ("†" if inflated else "") + ("!" if flagged and (not inflated or misfit.get("applied")) else "")

@@ -1008,8 +1008,8 @@ def monitor(log: Any, model_: MonitoredModel, settings: MonitorSettings | None =
             change.warnings.append(
                 f"identified with friction model {'wheel' if after_form is None else after_form.friction} "
                 f"({', '.join((after_form.base_names if after_form else THETA0_NAMES)[8:]) or 'no caster drag'}), "
-                f"not the model's ({', '.join(before_form.base_names[8:])}; monitor identifies without a robot "
-                "file, so without the casters' positions): its friction and drag terms are not comparable"
+                f"not the model's ({', '.join(before_form.base_names[8:])}; the caster model was not identifiable "
+                "on this segment): its friction and drag terms are not comparable"
             )
         after_named, before_named = _named(change.theta0, after_form), _named(before, before_form)
         # the caster drag's parameters are compared when both models have them (same caster model)

@@ -23,8 +23,6 @@ WINDOW = 64
 BUCKETS_PER_OCTAVE = 32
 #: Fewer windows than this and the level is not reported.
 MIN_WINDOWS = 4
-#: The histogram key of a window whose second differences are all zero.
-ZERO_KEY = -(2**31)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -68,15 +66,15 @@ def _window_variances(eta, prev, state, out):
 class NoiseFloor:
     """Streaming estimate of each wheel's white speed noise sigma (rad/s) and of the speeds' rms.
 
-    ``feed(eta)`` with consecutive pieces (k, 2) rad/s of one log, in order; ``sigma()`` (2,) rad/s, NaN when
-    the log has fewer than MIN_WINDOWS windows; ``rms()`` (2,) rad/s.
+    ``feed(eta)`` with consecutive pieces (k, 2) rad/s of one log, in order; ``sigma()`` (2,) rad/s, NaN for a
+    wheel with fewer than MIN_WINDOWS windows that show any noise; ``rms()`` (2,) rad/s.
     """
 
     def __init__(self) -> None:
         self._prev = np.zeros((2, 2))  # the last two samples seen
         self._state = np.zeros(6)  # see _window_variances
         self._hist: list[dict[int, int]] = [{}, {}]
-        self._windows = 0
+        self._windows = np.zeros(2, dtype=np.int64)  # per wheel: windows counted (positive, finite variance)
         self._n = 0
 
     def feed(self, eta: np.ndarray) -> None:
@@ -90,28 +88,34 @@ class NoiseFloor:
             self._add(out[:done])
 
     def _add(self, variances: np.ndarray) -> None:
-        """Count windows' variance estimates (w, 2) into each wheel's log-spaced histogram."""
-        self._windows += len(variances)
-        with np.errstate(divide="ignore"):
-            keys = np.floor(np.log2(variances) * BUCKETS_PER_OCTAVE)
+        """Count windows' variance estimates (w, 2) into each wheel's log-spaced histogram.
+
+        A window whose second differences are all zero (a parked wheel, a speed held constant between encoder
+        updates) says nothing about the noise, nor does a non-finite one: neither is counted, so a log parked
+        most of the time still gives the noise of its moving part (or NaN when it never moves)."""
         for wheel in range(2):
-            col = keys[:, wheel]
-            col = np.where(np.isfinite(col), col, ZERO_KEY).astype(np.int64)  # a zero variance: the lowest bucket
-            unique, counts = np.unique(col, return_counts=True)
+            col = variances[:, wheel]
+            col = col[np.isfinite(col) & (col > 0.0)]
+            if not len(col):
+                continue
+            self._windows[wheel] += len(col)
+            keys = np.floor(np.log2(col) * BUCKETS_PER_OCTAVE).astype(np.int64)
+            unique, counts = np.unique(keys, return_counts=True)
             hist = self._hist[wheel]
             for key, count in zip(unique.tolist(), counts.tolist(), strict=True):
                 hist[key] = hist.get(key, 0) + count
 
     def sigma(self) -> np.ndarray:
-        """(2,) rad/s: the median window's noise level per wheel (NaN with fewer than MIN_WINDOWS windows)."""
-        if self._windows < MIN_WINDOWS:
-            return np.full(2, np.nan)
-        out = np.empty(2)
+        """(2,) rad/s: per wheel, the noise level of the median window (the lower median for an even count), NaN
+        with fewer than MIN_WINDOWS counted windows; always positive otherwise."""
+        out = np.full(2, np.nan)
         for wheel, hist in enumerate(self._hist):
+            if self._windows[wheel] < MIN_WINDOWS:
+                continue
             keys = np.array(sorted(hist))
             cum = np.cumsum([hist[k] for k in keys])
             key = int(keys[np.searchsorted(cum, cum[-1] / 2.0)])
-            out[wheel] = 0.0 if key == ZERO_KEY else np.sqrt(2.0 ** ((key + 0.5) / BUCKETS_PER_OCTAVE))
+            out[wheel] = np.sqrt(2.0 ** ((key + 0.5) / BUCKETS_PER_OCTAVE))
         return out
 
     def rms(self) -> np.ndarray:

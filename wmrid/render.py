@@ -7,6 +7,7 @@ from typing import Any
 
 from wmrid.atomic import to_json_text
 from wmrid.identify import IdentificationResult
+from wmrid.model_error import std_mark
 
 
 def to_json(obj: Any) -> str:
@@ -38,10 +39,9 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         table.add_column("CAD", justify="right", no_wrap=True)
         table.add_column("Δ/std", justify="right", no_wrap=True)
     inflated = set(result.diagnostics.get("inflated", []))
-    flagged = set(result.diagnostics.get("flagged", [])) - inflated
+    marks = {name: std_mark(name, result.diagnostics) for name in result.parameters}
     for name, (value, std) in result.parameters.items():
-        mark = "†" if name in inflated else "!" if name in flagged else ""
-        row = [name, _fmt(value), _fmt(std, 2) + mark, result.units[name]]
+        row = [name, _fmt(value), _fmt(std, 2) + marks[name], result.units[name]]
         if result.nominal is not None:
             row.append(_fmt(result.nominal.get(name)))
         if result.reference is not None:
@@ -86,7 +86,7 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
     if inflated and model_error:
         scale = f" (S = {model_error['scale']:.3g})" if model_error.get("applied") else ""
         console.print(f"† std widened{scale}: {model_error['meaning']}", markup=False)
-    if flagged:
+    if any("!" in mark for mark in marks.values()):
         console.print(
             "! flagged (poorly determined, or the log departs from the model): the std may not cover the error; "
             "see the warnings", markup=False,
@@ -219,9 +219,11 @@ def print_comparison(data: dict, console: Any) -> None:
         if truth:
             row.append(_fmt(truth.get(key)))
         for m in methods.values():
-            e = m["parameters"][key]
-            mark = "!" if key in m.get("flagged", ()) else ""
-            cell = f"{_fmt(e['value'])}\n± {_fmt(e['std'], 2)}{mark}"
+            e = m["parameters"].get(key)
+            if e is None:  # a parameter this method does not report
+                row.append("—")
+                continue
+            cell = f"{_fmt(e['value'])}\n± {_fmt(e['std'], 2)}{m.get('marks', {}).get(key, '')}"
             if "error_percent" in e:
                 cell += f"\n{e['error_percent']:+.2g} %"
             row.append(cell)
@@ -237,7 +239,10 @@ def print_comparison(data: dict, console: Any) -> None:
     if "validation" in data:
         v = data["validation"]
         console.print(f"fit on {v['log']}: {v['predictor']}", markup=False)
-    if any(m.get("flagged") for m in methods.values()):
+    marks = "".join(mark for m in methods.values() for mark in m.get("marks", {}).values())
+    if "†" in marks:
+        console.print("† std widened for model error (see the JSON's diagnostics)", markup=False)
+    if "!" in marks:
         console.print("! flagged: the std may not cover this parameter's error (see the warnings)", markup=False)
     for name, m in methods.items():
         for warning in m["warnings"]:

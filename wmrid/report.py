@@ -32,6 +32,7 @@ import numpy as np
 from wmrid import model
 from wmrid.errors import LogFormatError
 from wmrid.model import RegressorForm
+from wmrid.model_error import std_mark
 
 #: A difference from the CAD value beyond this many standard errors is flagged.
 SIGNIFICANT = 3.0
@@ -177,7 +178,8 @@ def build_report(
     rows = []
     flagged = []
     inflated = set(data["diagnostics"].get("inflated", []))
-    warned = set(data["diagnostics"].get("flagged", [])) - inflated
+    marks = {name: std_mark(name, data["diagnostics"]) for name in params}
+    warned = any("!" in mark for mark in marks.values())
     for name, entry in params.items():
         value, std = entry["value"], entry["std"]
         row = [name, entry["unit"]]
@@ -190,7 +192,7 @@ def build_report(
             if mark:
                 flagged.append(f"{name} differs from its CAD value by {z:+.1f} std")
             row += [_fmt(ref), f"{z:+.1f}{mark}" if math.isfinite(z) else "—"]
-        row += [_fmt(value), _fmt(std, 2) + (" †" if name in inflated else " !" if name in warned else "")]
+        row += [_fmt(value), _fmt(std, 2) + (f" {marks[name]}" if marks[name] else "")]
         if truth:
             t = truth.get(name)
             zt = (value - t) / std if (t is not None and std) else math.nan
