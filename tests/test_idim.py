@@ -93,7 +93,7 @@ def test_recovers_theta0_on_noise_free_logs(smooth_log, long_smooth_log, reversi
         (uneven, 1e-4, 2e-6),
         (long_smooth_log, 1e-7, 1e-7),
     ):
-        est = idim.identify_idim(log.t, log.eta, log.tau)
+        est = idim.identify_idim(log.t, log.eta, log.tau, torque_hold="foh")
         rel = np.abs(est.theta0 / truth - 1)
         assert rel.max() < tol, rel
         assert rel[:4].max() < tol_inertia, rel
@@ -105,8 +105,8 @@ def test_recovers_theta0_on_noise_free_logs(smooth_log, long_smooth_log, reversi
 
 def test_epoch_time_stamps_are_not_resampled(smooth_log):
     # At 1.7e9 s a double resolves 2.4e-7 s: 2.4e-4 of a 1 ms step, within UNEVEN_TOLERANCE of the grid.
-    here = idim.identify_idim(smooth_log.t, smooth_log.eta, smooth_log.tau)
-    epoch = idim.identify_idim(smooth_log.t + 1.7e9, smooth_log.eta, smooth_log.tau)
+    here = idim.identify_idim(smooth_log.t, smooth_log.eta, smooth_log.tau, torque_hold="foh")
+    epoch = idim.identify_idim(smooth_log.t + 1.7e9, smooth_log.eta, smooth_log.tau, torque_hold="foh")
     assert epoch.diagnostics["resampled"] is False
     np.testing.assert_allclose(epoch.theta0, here.theta0, rtol=1e-12)
 
@@ -221,7 +221,7 @@ def test_jackknife_std_is_honest():
         rng = np.random.default_rng(seed)
         eta = log.eta + 0.01 * rng.standard_normal(log.eta.shape)
         tau = log.tau + 0.02 * rng.standard_normal(log.tau.shape)
-        est = idim.identify_idim(log.t, eta, tau)
+        est = idim.identify_idim(log.t, eta, tau, torque_hold="foh")
         assert est.dof == 9
         z.append((est.theta0 - truth) / est.std)
     z = np.array(z)

@@ -143,14 +143,14 @@ def test_recovers_the_geometric_caster_drag_on_a_noise_free_log(caster_log):
     The wheel-only model on the same log is off by 0.3-0.6 % on M and 100-570 % on friction.
     """
     log = caster_log
-    est = idim.identify_idim(log.t, log.eta, log.tau, form=GEOMETRIC)
+    est = idim.identify_idim(log.t, log.eta, log.tau, form=GEOMETRIC, torque_hold="foh")
     assert_recovers_geometric(est, log)
     reg = idim.idim_regression(log.t, log.eta, log.tau, form=GEOMETRIC)
     assert reg.features.shape[1] == 8 + 4
     assert reg.feature_names[8:] == ("drag1_v", "drag1_w", "drag2_v", "drag2_w")
     assert np.all(reg.scales()[8:] > 0)
     # without the drag in the model it is absorbed elsewhere: the caster model is what makes the fit exact
-    wheel_only = idim.identify_idim(log.t, log.eta, log.tau)
+    wheel_only = idim.identify_idim(log.t, log.eta, log.tau, torque_hold="foh")
     assert np.max(np.abs(wheel_only.theta0[4:] / log.theta0[4:8] - 1)) > 0.5
 
 

@@ -74,7 +74,7 @@ def test_forgetting_tracks_a_step_in_viscous_friction(reversing_log):
     after = log.theta0.copy()
     after[4] *= 2.0
     tau = np.where((log.t >= 10.0)[:, None], model.wheel_torque(log.eta, acc, after), log.tau)
-    hist = rls.rls_history(log.t, log.eta, tau, forgetting=0.999)
+    hist = rls.rls_history(log.t, log.eta, tau, forgetting=0.999, torque_hold="foh")
     assert len(hist.t) <= rls.HISTORY_POINTS
     before = np.searchsorted(hist.t, 9.5)
     five = np.searchsorted(hist.t, 15.0)
@@ -83,7 +83,7 @@ def test_forgetting_tracks_a_step_in_viscous_friction(reversing_log):
     np.testing.assert_allclose(hist.theta0[five, :4], after[:4], rtol=0.01)
     np.testing.assert_allclose(hist.theta0[five], after, rtol=0.2)
     np.testing.assert_allclose(hist.theta0[-1], after, rtol=1e-3)
-    plain = rls.identify_rls(log.t, log.eta, tau)
+    plain = rls.identify_rls(log.t, log.eta, tau, torque_hold="foh")
     assert 0.013 < plain.theta0[4] < 0.018
 
 
@@ -103,7 +103,9 @@ def test_forgetting_std_is_local_and_its_dof_the_batches(noisy_closed_loop):
 
 
 def test_history_before_and_after_the_start(smooth_log):
-    est, hist = rls.rls_run(smooth_log.t, smooth_log.eta, smooth_log.tau, forgetting=1.0, history_points=100)
+    est, hist = rls.rls_run(
+        smooth_log.t, smooth_log.eta, smooth_log.tau, forgetting=1.0, history_points=100, torque_hold="foh"
+    )
     reg = idim.idim_regression(smooth_log.t, smooth_log.eta, smooth_log.tau, decimate=False)
     assert len(hist.t) <= 100
     assert hist.t[-1] == reg.t[-1]
@@ -123,7 +125,9 @@ def test_forgetting_does_not_wind_up_when_excitation_stops(reversing_log):
     eta_c = np.tile(log.eta[-1], (n, 1))
     tau_c = model.wheel_torque(eta_c, np.zeros_like(eta_c), log.theta0)
     t = np.concatenate([log.t, log.t[-1] + 1e-3 * np.arange(1, n + 1)])
-    est, hist = rls.rls_run(t, np.vstack([log.eta, eta_c]), np.vstack([log.tau, tau_c]), forgetting=0.999)
+    est, hist = rls.rls_run(
+        t, np.vstack([log.eta, eta_c]), np.vstack([log.tau, tau_c]), forgetting=0.999, torque_hold="foh"
+    )
     assert est.diagnostics["forgetting_capped"] > 20000
     assert np.all(np.isfinite(est.theta0))
     assert np.all(np.isfinite(hist.theta0[hist.t > 5.0]))

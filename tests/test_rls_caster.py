@@ -57,7 +57,7 @@ def test_recovers_the_geometric_caster_drag_on_a_noise_free_log(caster_log):  # 
     at most 0.057 % (Fv1), so 0.2 %.
     """
     log = caster_log
-    est, hist = rls.rls_run(log.t, log.eta, log.tau, form=GEOMETRIC, history_points=500)
+    est, hist = rls.rls_run(log.t, log.eta, log.tau, form=GEOMETRIC, history_points=500, torque_hold="foh")
     assert_recovers_geometric(est, log)
     assert est.cov.shape == (10, 10)
     assert est.dof == est.diagnostics["segments"] - 1
@@ -73,12 +73,12 @@ def test_recovers_the_geometric_caster_drag_on_a_noise_free_log(caster_log):  # 
     lstsq = np.linalg.lstsq(x.reshape(-1, x.shape[-1]), reg.tau.reshape(-1), rcond=None)[0]
     np.testing.assert_allclose(list(est.diagnostics["phi"].values()), lstsq, rtol=1e-9)
 
-    tracking = rls.identify_rls(log.t, log.eta, log.tau, forgetting=0.9995, form=GEOMETRIC)
+    tracking = rls.identify_rls(log.t, log.eta, log.tau, forgetting=0.9995, form=GEOMETRIC, torque_hold="foh")
     np.testing.assert_allclose(tracking.theta0, log.theta0, rtol=2e-3)
     assert tracking.diagnostics["uncertainty"].startswith("local")
     assert np.all(np.isfinite(tracking.std))
     # the two-term model on the same log runs too (its own names), but is not the drag law of this log
-    two = rls.identify_rls(log.t, log.eta, log.tau, form=TWO_TERM)
+    two = rls.identify_rls(log.t, log.eta, log.tau, form=TWO_TERM, torque_hold="foh")
     assert tuple(two.diagnostics["phi"])[8:] == ("Cv", "Cw")
 
 

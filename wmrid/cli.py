@@ -402,8 +402,9 @@ def _refuse_unmodelled(option: str, methods: tuple[str, ...], validate, supporte
     """UsageError when ``option`` would be ignored: by a method outside ``supported``, or by --validate's predictor."""
     others = [m for m in methods if m not in supported]
     if others:
+        names = supported[0] if len(supported) == 1 else f"{', '.join(supported[:-1])} and {supported[-1]}"
         raise UsageError(
-            f"{option} is modelled by the {' and '.join(supported)} only, not by {', '.join(others)} yet; drop it or "
+            f"{option} is modelled by the {names} only, not by {', '.join(others)} yet; drop it or "
             f"use --method {supported[0]}"
         )
     if validate is not None:
@@ -422,10 +423,10 @@ ValidateOpt = Annotated[
 
 
 def _check_control_rate(control_rate, methods: tuple[str, ...], validate) -> None:
-    """--control-rate is modelled by the observer only (the classical methods and the validation
-    predictor hold each logged effort over the whole step): refuse it where it would be ignored."""
+    """--control-rate is modelled by the observer, IDIM and RLS (output error and the validation predictor hold
+    each logged effort over the whole step): refuse it where it would be ignored."""
     if control_rate is not None:
-        _refuse_unmodelled("--control-rate", methods, validate, ("observer",))
+        _refuse_unmodelled("--control-rate", methods, validate, ("observer", "idim", "rls"))
 
 
 def _method_options(cutoff, weighted, forgetting, torque_hold):

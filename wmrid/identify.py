@@ -541,15 +541,23 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
     # The model-error scale and the low-speed difference are evidence about the log and the model, so they carry
     # over to another method: the log departs from the same model (and in the same slow parts) whichever method
     # reads it.  The discretisation term is the observer's own replay and does not.
+    # A method that refits itself without the slow parts (IDIM, wmrid.idim_checks) uses its own difference
+    # instead of the observer's, and its other alternative fit (another filter cutoff) the same way.
     slow = inflation.get("slow_speed") or {}
+    own = est.diagnostics.get("checks") or {}
+    if own.get("slow_speed"):
+        slow = {**own["slow_speed"], "method": est.method}
     if inflation.get("discretisation"):
         inflation["discretisation"] = {**inflation["discretisation"], "applied": False, "observer_only": True}
     if slow:
         inflation["slow_speed"] = {**slow, "fragile": []}
+    if own.get("cutoff"):
+        inflation["filter"] = {**own["cutoff"], "method": est.method}
     cov = np.array(est.cov, dtype=float) * inflation["scale"] ** 2  # the same log departs from the same model
-    if slow.get("applied") and slow.get("delta") is not None and len(slow["delta"]) == len(est.theta0):
-        delta = np.asarray(slow["delta"], dtype=float)
-        cov = cov + np.outer(delta, delta)
+    for term in (slow, inflation.get("filter") or {}):
+        if term.get("applied") and term.get("delta") is not None and len(term["delta"]) == len(est.theta0):
+            delta = np.asarray(term["delta"], dtype=float)
+            cov = cov + np.outer(delta, delta)
     form = result.form if len(est.theta0) == result.form.n_base else RegressorForm("general")
     parameters = derived_with_std(np.asarray(est.theta0, dtype=float), cov, form.base_names)
     parameters = {name: parameters[name] for name in reported_names(form)}

@@ -36,7 +36,8 @@ class MethodOptions:
 
     cutoff_hz : IDIM/RLS low-pass cutoff, Hz (None: from the log, see :func:`wmrid.idim.default_cutoff`).
     weighted : IDIM two-step weighted least squares.  forgetting : RLS forgetting factor in (0, 1].
-    torque_hold : how OE holds the torque between samples ("zoh" or "foh").
+    torque_hold : how the effort was held between samples ("zoh" or "foh"): OE simulates it, IDIM and RLS read
+    the efforts half a hold period earlier under "zoh" (:func:`wmrid.idim.effort_delay`).
     """
 
     cutoff_hz: float | None = None
@@ -78,14 +79,17 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
             from wmrid.idim import identify_idim
 
             # the observer's form: IDIM models the casters' drag too when the observer does (wheel+caster)
+            # and the effort held as the observer assumed (--torque-hold, --control-rate)
+            hold = {"torque_hold": options.torque_hold, "control_rate": observer.settings.control_rate}
             return identify_idim(
-                t, eta, tau, cutoff_hz=options.cutoff_hz, weighted=options.weighted, form=observer.form
+                t, eta, tau, cutoff_hz=options.cutoff_hz, weighted=options.weighted, form=observer.form, **hold
             )
         if name == "rls":
             from wmrid.rls import identify_rls
 
+            hold = {"torque_hold": options.torque_hold, "control_rate": observer.settings.control_rate}
             return identify_rls(
-                t, eta, tau, forgetting=options.forgetting, cutoff_hz=options.cutoff_hz, form=observer.form
+                t, eta, tau, forgetting=options.forgetting, cutoff_hz=options.cutoff_hz, form=observer.form, **hold
             )
         from wmrid.output_error import identify_oe
 

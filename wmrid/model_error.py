@@ -55,6 +55,11 @@ SLOW_SPEED_NOTE = (
     "(friction near zero speed is not F_v eta + F_d sgn(eta): stiction, a smooth Coulomb law), so that "
     "difference was added to the covariance"
 )
+FILTER_NOTE = (
+    "refitting with the filter's cutoff lowered by a factor sqrt(2) moved the estimate by more than its noise (the "
+    "model or the noise makes the estimate depend on the band the filter keeps), so that difference was added to "
+    "the covariance"
+)
 FRAGILE_NOTE = (
     "{} rest mostly on the parts of the log where a wheel is slow or reverses, where friction and caster drag are "
     "least like the model, so they report the std they have without those parts"
@@ -302,7 +307,10 @@ def record_widening(
     skip = set(undetermined)
     disc = inflation.get("discretisation") or {}
     slow = inflation.get("slow_speed") or {}
-    widened = scale >= INFLATION_MARK or bool(disc.get("applied")) or bool(slow.get("applied"))
+    cutoff = inflation.get("filter") or {}
+    widened = (
+        scale >= INFLATION_MARK or bool(disc.get("applied")) or bool(slow.get("applied")) or bool(cutoff.get("applied"))
+    )
     fragile = set(slow.get("fragile") or [])
     inflated = [n for n in parameters if n not in skip and (widened or n in fragile)]
     if fragile & {"m11", "m12", "m22"}:
@@ -314,6 +322,8 @@ def record_widening(
         meaning.append(DISCRETISATION_NOTE)
     if slow.get("applied"):
         meaning.append(SLOW_SPEED_NOTE)
+    if cutoff.get("applied"):
+        meaning.append(FILTER_NOTE)
     if fragile:
         meaning.append(FRAGILE_NOTE.format(", ".join(sorted(fragile))))
     misfit = inflation.get("prediction_misfit") or {}

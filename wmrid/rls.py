@@ -70,6 +70,7 @@ from wmrid.estimate import BaseEstimate
 from wmrid.idim import (
     ROW_LAYOUT,
     IdimRegression,
+    effort_delay,
     idim_regression,
     inertia_warnings,
     not_identifiable_message,
@@ -510,6 +511,8 @@ def rls_run(
     decimate: bool = False,
     history_points: int = HISTORY_POINTS,
     form: RegressorForm | None = None,
+    torque_hold: str = "zoh",
+    control_rate: float | None = None,
 ) -> tuple[BaseEstimate, RlsHistory]:
     """RLS over a log: (final estimate, history of the estimate).
 
@@ -520,13 +523,14 @@ def rls_run(
     history_points : at most this many points in the history.
     form : the observer's regressor form; with caster drag (``form.caster``) the regression gains its caster
     columns and phi, theta0 its caster parameters (``form.base_names[8:]``), as in :mod:`wmrid.idim`; otherwise
-    (or None) it is ignored.
+    (or None) it is ignored.  torque_hold, control_rate : how the effort was held (:func:`wmrid.idim.effort_delay`).
     The estimate (method "rls") is the one at the end of the log; see the module docstring for what its
     standard errors mean.  Raises NotIdentifiableError when the log does not excite the dynamics.
     """
     start = time.perf_counter()
     lam = _check_forgetting(forgetting)
-    reg = idim_regression(t, eta, tau, cutoff_hz, decimate, order=order, form=form)
+    delay = effort_delay(t, torque_hold, control_rate)
+    reg = idim_regression(t, eta, tau, cutoff_hz, decimate, order=order, form=form, effort_delay=delay)
     estimate, history = rls_on_regression(reg, forgetting=lam, history_points=history_points)
     estimate = dataclasses.replace(estimate, seconds=time.perf_counter() - start)
     return estimate, history
@@ -542,11 +546,14 @@ def identify_rls(
     order: int = 4,
     decimate: bool = False,
     form: RegressorForm | None = None,
+    torque_hold: str = "zoh",
+    control_rate: float | None = None,
 ) -> BaseEstimate:
     """The RLS estimate at the end of the log (see :func:`rls_run` for the arguments)."""
     estimate, _ = rls_run(
-        t, eta, tau, forgetting=forgetting, cutoff_hz=cutoff_hz, order=order, decimate=decimate, form=form
-    )
+        t, eta, tau, forgetting=forgetting, cutoff_hz=cutoff_hz, order=order, decimate=decimate, form=form,
+        torque_hold=torque_hold, control_rate=control_rate,
+    )  # fmt: skip
     return estimate
 
 
@@ -561,9 +568,11 @@ def rls_history(
     decimate: bool = False,
     history_points: int = HISTORY_POINTS,
     form: RegressorForm | None = None,
+    torque_hold: str = "zoh",
+    control_rate: float | None = None,
 ) -> RlsHistory:
     """theta0 over time: the tracking RLS estimate, at most ``history_points`` points (see :func:`rls_run`)."""
     return rls_run(
         t, eta, tau, forgetting=forgetting, cutoff_hz=cutoff_hz, order=order, decimate=decimate,
-        history_points=history_points, form=form,
+        history_points=history_points, form=form, torque_hold=torque_hold, control_rate=control_rate,
     )[1]  # fmt: skip
