@@ -353,8 +353,9 @@ def idim_regression(
     tau : (n, 2) N m.  cutoff_hz : low-pass cutoff, default :func:`default_cutoff`; must be below the
     Nyquist frequency.  decimate : keep every :func:`decimation_factor`-th sample.  order : Butterworth order.
     form : with caster drag (``form.caster``), the caster columns are filtered alongside and appended.
-    effort_delay : s, how far the effort acting on the robot lags its samples (:func:`effort_delay`): the
-    efforts are read that much earlier, by linear interpolation between samples, before filtering.
+    effort_delay : s, how far the effort acting on the robot lags its samples (:func:`effort_delay`, plus any
+    timing fault; negative: it leads them): the efforts are read that much earlier (:func:`shifted`) before
+    filtering.
     Raises UsageError for bad arguments, LogFormatError for unusable time stamps, NotIdentifiableError
     when the log is too short for the filter.
     """
@@ -380,11 +381,10 @@ def idim_regression(
         tau = np.column_stack([np.interp(grid, t, tau[:, j]) for j in range(2)])
         t = grid
     rate = 1.0 / dt
-    if not (math.isfinite(effort_delay) and 0.0 <= effort_delay <= dt * (1 + 1e-9)):
-        raise UsageError(f"effort delay {effort_delay!r} s must be in [0, one step {dt:.6g} s]")
-    if effort_delay > 0:
-        tau = tau.copy()
-        tau[1:] -= (effort_delay / dt) * (tau[1:] - tau[:-1])  # tau(t - d) on the regular grid, d <= dt
+    if not (math.isfinite(effort_delay) and abs(effort_delay) <= MAX_EFFORT_SHIFT_S):
+        raise UsageError(f"effort delay {effort_delay!r} s must be within +/-{MAX_EFFORT_SHIFT_S:g} s")
+    if effort_delay != 0:
+        tau = shifted(t, tau, effort_delay)
     if cutoff_hz is None:
         band = velocity_bandwidth(eta, rate)
         f_lo, f_hi = cutoff_bounds(rate, t[-1] - t[0], order)
@@ -425,6 +425,17 @@ def idim_regression(
         t=t[keep], features=features, tau=filt[keep][:, 6:8], cutoff_hz=cutoff, order=int(order),
         cutoff_rule=rule, rate_hz=rate, resampled=resampled, decimation=k, edge_seconds=edge_s, form=form,
     )  # fmt: skip
+
+
+#: The largest effort shift (s) idim_regression applies: a timing fault, not a different log.
+MAX_EFFORT_SHIFT_S = 1.0
+
+
+def shifted(t: np.ndarray, x: np.ndarray, delay: float) -> np.ndarray:
+    """x (n, k) read ``delay`` s earlier, x(t - delay), by linear interpolation between its samples at t (n,) s
+    (held at the first and last sample beyond the log's ends)."""
+    x = np.asarray(x, dtype=np.float64)
+    return np.column_stack([np.interp(t - delay, t, x[:, j]) for j in range(x.shape[1])])
 
 
 def effort_delay(t: np.ndarray, torque_hold: str = "zoh", control_rate: float | None = None) -> float:
