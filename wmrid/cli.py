@@ -327,6 +327,28 @@ ForgettingOpt = Annotated[
     float,
     typer.Option(help="rls: forgetting factor in (0, 1]; 1 = plain least squares.", rich_help_panel=_METHOD_PANEL),
 ]
+DelayOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--delay",
+        metavar="auto|SECONDS",
+        help="The efforts are stamped SECONDS later than the speeds (two topics, two clocks; negative: earlier): "
+        "read them that much earlier.  auto: estimate the delay from the log and apply it when significant (the "
+        "output states it).  Reads the log into memory.",
+    ),
+]
+
+
+def _delay_value(text: str | None) -> float | str | None:
+    """--delay: None, "auto" or seconds."""
+    if text is None or text.strip().lower() == "auto":
+        return None if text is None else "auto"
+    try:
+        return float(text)
+    except ValueError:
+        raise UsageError(f"--delay must be auto or a number of seconds, got {text!r}") from None
+
+
 ControlRateOpt = Annotated[
     float | None,
     typer.Option(
@@ -534,6 +556,7 @@ def identify(
     forgetting: ForgettingOpt = 1.0,
     validate: ValidateOpt = None,
     control_rate: ControlRateOpt = None,
+    delay: DelayOpt = None,
     friction: FrictionOpt = FrictionChoice.auto,
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
@@ -565,6 +588,7 @@ def identify(
             payload=payload,
             control_rate=control_rate,
             friction=friction_model,
+            delay=_delay_value(delay),
         )
     finally:
         finish()
@@ -665,6 +689,7 @@ def report(
     forgetting: ForgettingOpt = 1.0,
     validate: ValidateOpt = None,
     control_rate: ControlRateOpt = None,
+    delay: DelayOpt = None,
     friction: FrictionOpt = FrictionChoice.auto,
 ) -> None:
     """Tables (paper Tables 2 and 3), comparison with nominal/CAD/truth, diagnostics and figures for INPUT."""
@@ -705,8 +730,7 @@ def report(
         log = _read_wheel_log(input_, columns, time_unit.value, robot_obj, **log_options, data=source.data)
         result = run_identify(
             log, robot_obj, form=form.value, k=k, alpha=alpha, torque_hold=torque_hold.value, payload=payload,
-            control_rate=control_rate,
-            friction=friction_model,
+            control_rate=control_rate, friction=friction_model, delay=_delay_value(delay),
         )  # fmt: skip
         if method != MethodChoice.observer:
             from wmrid.methods import run
@@ -757,6 +781,7 @@ def compare(
     ] = None,
     validate: ValidateOpt = None,
     control_rate: ControlRateOpt = None,
+    delay: DelayOpt = None,
     methods: Annotated[
         str, typer.Option(help="Comma-separated methods to run, of observer, idim, rls, oe.")
     ] = "observer,idim,rls,oe",
@@ -822,8 +847,9 @@ def compare(
                 "give both logs in the same units"
             )
     observer = run_identify(
-        wheel_log, robot_obj, torque_hold=torque_hold.value, control_rate=control_rate, friction=friction_model
-    )
+        wheel_log, robot_obj, torque_hold=torque_hold.value, control_rate=control_rate, friction=friction_model,
+        delay=_delay_value(delay),
+    )  # fmt: skip
     data = run_compare(wheel_log, observer, options, names, other=other, truth=truth_params)
     if output is not None:
         write_json(str(output), data, force=force)

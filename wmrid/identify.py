@@ -267,6 +267,7 @@ def identify(
     control_rate: float | None = None,
     friction: Literal["wheel", "wheel+caster", "auto"] = "wheel",
     geometry: tuple[float, ...] = (),
+    delay: float | Literal["auto"] | None = None,
 ) -> IdentificationResult:
     """Identify the base parameters of the robot that recorded ``log``.
 
@@ -286,11 +287,19 @@ def identify(
     whose wheels keep one sign).  ``diagnostics["friction"]`` states the model and why.
     ``geometry`` : (r, b, x_1, y_1, ...) m, the geometric caster model's when no robot lists casters (a
     saved model's ``form.geometry``, say; :func:`caster_geometry` builds it from a robot, whose casters win).
+    ``delay`` : s, how late the efforts are stamped against the speeds (two topics, two clocks): they are read
+    that much earlier (:func:`wmrid.idim.shifted`; the log is then read into memory); ``"auto"``: estimated
+    from the log (:func:`wmrid.delay.estimate_delay`) and applied when significant; None: as stamped.
+    ``diagnostics["delay"]`` states what was estimated and applied.
     """
     if friction not in FRICTION_CHOICES:
         raise UsageError(f"--friction must be one of {', '.join(FRICTION_CHOICES)}, got {friction!r}")
     if payload and robot is None:
         raise UsageError("--payload needs --robot: the payload is what the log shows beyond the unloaded robot")
+    delay_record = None
+    delay_warnings: list[str] = []
+    if delay is not None:
+        log, delay_record, delay_warnings = _apply_delay(log, delay, torque_hold, control_rate)
     stream = log if isinstance(log, LogStream) else stream_arrays(log)
     sv = survey(stream, stream.source, stream.effort_unit)  # one survey pass, whichever models are fitted
 
@@ -306,22 +315,76 @@ def identify(
                 "not exciting enough, or its units or time stamps are wrong (check the notes of wmrid inspect)"
             ) from err
 
+    def finish(result: IdentificationResult, friction_record: dict[str, Any]) -> IdentificationResult:
+        result = _with_friction(result, friction_record)
+        if delay_record is None:
+            return result
+        diagnostics = {**result.diagnostics, "delay": delay_record}
+        return replace(result, diagnostics=diagnostics, warnings=tuple(delay_warnings) + tuple(result.warnings))
+
     if friction != "auto":
         result = run(friction == "wheel+caster")
-        return _with_friction(result, {"model": friction, "chosen_by": "--friction"})
+        return finish(result, {"model": friction, "chosen_by": "--friction"})
     wheel = run(False)
     if wheel.form.kind == "paper":
-        return _with_friction(wheel, {"model": "wheel", "chosen_by": "auto", "reason": AUTO_NO_REVERSAL})
+        return finish(wheel, {"model": "wheel", "chosen_by": "auto", "reason": AUTO_NO_REVERSAL})
     try:
         caster = run(True)
     except NotIdentifiableError as err:
-        return _with_friction(wheel, {"model": "wheel", "chosen_by": "auto", "reason": f"caster model failed: {err}"})
+        return finish(wheel, {"model": "wheel", "chosen_by": "auto", "reason": f"caster model failed: {err}"})
     choice = caster_drag_test(caster)
     chosen = caster if choice["p_value"] < AUTO_P else wheel
     reason = f"the caster drag ({choice['text']}) differs from zero at p = {choice['p_value']:.2g}" + (
         f" < {AUTO_P:g}" if chosen is caster else f" >= {AUTO_P:g}: not shown by this log"
     )
-    return _with_friction(chosen, {"model": chosen.form.friction, "chosen_by": "auto", "reason": reason, **choice})
+    return finish(chosen, {"model": chosen.form.friction, "chosen_by": "auto", "reason": reason, **choice})
+
+
+def _apply_delay(
+    log: Any, delay: float | str, torque_hold: str, control_rate: float | None
+) -> tuple[Any, dict[str, Any], list[str]]:
+    """(the log with its efforts read ``delay`` s earlier, the record for ``diagnostics["delay"]``, warnings).
+
+    ``delay``: seconds, or "auto" (:func:`wmrid.delay.estimate_delay`; applied only when significant)."""
+    from wmrid.delay import estimate_delay
+    from wmrid.idim import MAX_EFFORT_SHIFT_S, shifted
+    from wmrid.logio import WheelLog
+
+    whole = log.read() if isinstance(log, LogStream) else log
+    t = np.asarray(whole.t, dtype=np.float64)
+    eta = np.asarray(whole.eta, dtype=np.float64)
+    tau = np.asarray(whole.tau, dtype=np.float64)
+    source = getattr(whole, "source", "log")
+    warnings: list[str] = []
+    if delay == "auto":
+        est = estimate_delay(t, eta, tau, torque_hold=torque_hold, control_rate=control_rate)
+        record = {"chosen_by": "auto", **est.to_dict()}
+        applied = est.delay if est.significant and not est.at_edge else 0.0
+        if est.at_edge:
+            warnings.append(
+                f"the delay between efforts and speeds could not be estimated (the fit keeps improving to the edge of "
+                f"the searched +/-{abs(est.grid[0]) * 1e3:g} ms): the model does not fit this log well enough to time "
+                "it; the efforts are used as stamped"
+            )
+        elif est.significant:
+            warnings.append(
+                f"the efforts appear stamped {est.delay * 1e3:+.2f} +/- {est.std * 1e3:.2f} ms late against the "
+                "speeds (two topics or clocks?): they were read that much earlier (--delay "
+                f"{est.delay:.5f}); a delay left in biases the friction by tens of per cent"
+            )
+    else:
+        applied = float(delay)
+        if not (math.isfinite(applied) and abs(applied) <= MAX_EFFORT_SHIFT_S):
+            raise UsageError(f"--delay must be auto or seconds within +/-{MAX_EFFORT_SHIFT_S:g}, got {delay!r}")
+        record = {"chosen_by": "--delay"}
+    record["applied_s"] = applied
+    if applied == 0.0:
+        return whole, record, warnings
+    shifted_log = WheelLog(
+        t=t, eta=eta, tau=shifted(t, tau, -applied), source=source, notes=tuple(getattr(whole, "notes", ())),
+        effort_unit=getattr(whole, "effort_unit", "N m"),
+    )  # fmt: skip
+    return shifted_log, record, warnings
 
 
 #: Friction models of :func:`identify`: ``auto`` lets the log decide between the other two.

@@ -73,6 +73,11 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
     t = np.asarray(log.t, dtype=np.float64)
     eta = np.asarray(log.eta, dtype=np.float64)
     tau = np.asarray(log.tau, dtype=np.float64)
+    applied = (observer.diagnostics.get("delay") or {}).get("applied_s") or 0.0
+    if applied:  # the efforts' delay the observer's run applied (identify(..., delay=)): the same log for every method
+        from wmrid.idim import shifted
+
+        tau = shifted(t, tau, -applied)
     source = getattr(log, "source", observer.source)
     try:
         if name == "idim":
