@@ -3,10 +3,11 @@
     python bench/bench_coverage.py                       # 50 seeds, paper sinusoid, 40 s, default noise
     python bench/bench_coverage.py --trajectory reversing --seeds 50
     python bench/bench_coverage.py --caster 0 --seeds 100  # sensor noise only
+    python bench/bench_coverage.py --robot amr --caster 0.02 --eta-noise 0.02 --tau-noise 0.01 --seeds 20
 
 For each seed: ``wmrid simulate`` (in-process) with velocity noise, torque noise and a coloured caster
 disturbance (an Ornstein-Uhlenbeck torque, 0.3 s correlation, in closed loop), then ``identify`` with
-the built-in paper robot and default settings.  Prints, per base parameter, how often the truth lies
+the built-in robot (``--robot``, paper by default) and default settings.  Prints, per base parameter, how often the truth lies
 within +/-2 and +/-3 reported standard errors, the mean and spread of z = (estimate - truth)/std, and
 the rms and worst relative error.  Nominal coverage of +/-2 and +/-3 std under Student's t with the
 jackknife's degrees of freedom is printed for comparison.  Runs on all cores (seeded, so the same
@@ -31,7 +32,7 @@ from wmrid.simulate import NoiseSettings, simulate
 
 
 def one_seed(seed: int, args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, dict]:
-    robot = BUILTIN_ROBOTS["paper"]
+    robot = BUILTIN_ROBOTS[args.robot]
     noise = NoiseSettings(
         eta_std=args.eta_noise, tau_std=args.tau_noise, caster_std=args.caster, caster_time=args.caster_time
     )
@@ -55,6 +56,7 @@ def one_seed(seed: int, args: argparse.Namespace) -> tuple[np.ndarray, np.ndarra
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=50)
+    parser.add_argument("--robot", default="paper", choices=sorted(BUILTIN_ROBOTS), help="built-in robot")
     parser.add_argument("--trajectory", default="sinusoid", choices=["sinusoid", "reversing"])
     parser.add_argument("--duration", type=float, default=40.0)
     parser.add_argument("--eta-noise", type=float, default=0.01, help="rad/s")
