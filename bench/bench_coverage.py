@@ -6,13 +6,13 @@
     python bench/bench_coverage.py --robot amr --caster 0.02 --eta-noise 0.02 --tau-noise 0.01 --seeds 20
 
 For each seed: ``wmrid simulate`` (in-process) with velocity noise, torque noise and a coloured caster
-disturbance (an Ornstein-Uhlenbeck torque, 0.3 s correlation, in closed loop), then ``identify`` with
-the built-in robot (``--robot``, paper by default) and default settings.  Prints, per base parameter, how often the truth lies
-within +/-2 and +/-3 reported standard errors, the mean and spread of z = (estimate - truth)/std, and
-the rms and worst relative error.  Nominal coverage of +/-2 and +/-3 std under Student's t with the
-jackknife's degrees of freedom is printed for comparison.  Runs on all cores (seeded, so the same
-numbers every time).  Also counts the seeds whose std wmrid widened for model error, discretisation or
-low-speed friction (README "What the std covers when the model does not hold").
+disturbance (an Ornstein-Uhlenbeck torque, 0.3 s correlation, in closed loop), then ``identify`` with the
+built-in robot (``--robot``, paper by default) and default settings. Prints, per base parameter, how often the
+truth lies within +/-2 and +/-3 reported standard errors, the mean and spread of z = (estimate - truth)/std,
+and the rms and worst relative error. Nominal coverage of +/-2 and +/-3 std under Student's t with the
+jackknife's degrees of freedom is printed for comparison. Runs on all cores (seeded, so the same numbers every
+time). Also counts the seeds whose std wmrid widened for model error, discretisation or low-speed friction
+(README "What the std covers when the model does not hold").
 """
 
 from __future__ import annotations
