@@ -300,8 +300,10 @@ def identify(
     delay_record = None
     delay_warnings: list[str] = []
     if delay is not None:
-        original = log
-        log, delay_record, delay_warnings = _apply_delay(log, delay, torque_hold, control_rate)
+        from wmrid.delay import DELAY_RESOLUTION_S, apply_delay
+
+        original = log.read() if isinstance(log, LogStream) else log  # read once: shifting needs the whole log
+        log, delay_record, delay_warnings = apply_delay(original, delay, torque_hold, control_rate)
         applied = delay_record["applied_s"]
         if delay == "auto" and applied:
             # the timing term: identify again at the delay moved by its uncertainty; what that moves, the std carries
@@ -353,11 +355,6 @@ def identify(
     return finish(chosen, {"model": chosen.form.friction, "chosen_by": "auto", "reason": reason, **choice})
 
 
-#: s: the resolution of an estimated delay that the std must carry at least (the multibody prototype's
-#: contacts and load transfer put the delay of an on-time log at -0.39 ms, against a jackknife std of 0.07 ms).
-DELAY_RESOLUTION_S = 5e-4
-
-
 def _with_timing_term(
     base: IdentificationResult, moved: IdentificationResult, record: dict[str, Any], warnings: list[str], step: float
 ) -> IdentificationResult:
@@ -399,74 +396,6 @@ def _with_timing_term(
         base, parameters=parameters, diagnostics=diagnostics, warnings=tuple(warnings) + tuple(base.warnings),
         estimate=replace(est, cov=cov),
     )  # fmt: skip
-
-
-def faster_controller(est: Any, t: np.ndarray, torque_hold: str, control_rate: float | None) -> bool:
-    """Whether a significant delay estimate ``est`` (:class:`wmrid.delay.DelayEstimate`) is the signature of a
-    controller faster than the log rather than of two clocks: under the default hold over each logged step (zoh,
-    no --control-rate) the efforts act half a step after their stamps, while a faster controller's act after
-    half of its own, shorter period; the estimate then lies between 0 and half a logged step (within 2 std).
-    Measured on multibody logs of a 1 kHz controller at 100 Hz: 3.9-5.8 ms, half a step being 5 ms."""
-    if torque_hold != "zoh" or control_rate is not None or len(t) < 2:
-        return False
-    half = 0.5 * float(np.median(np.diff(np.asarray(t, dtype=np.float64))))
-    return -2 * est.std < est.delay <= half + 2 * est.std
-
-
-def _apply_delay(
-    log: Any, delay: float | str, torque_hold: str, control_rate: float | None
-) -> tuple[Any, dict[str, Any], list[str]]:
-    """(the log with its efforts read ``delay`` s earlier, the record for ``diagnostics["delay"]``, warnings).
-
-    ``delay``: seconds, or "auto" (:func:`wmrid.delay.estimate_delay`; applied only when significant)."""
-    from wmrid.delay import estimate_delay
-    from wmrid.idim import MAX_EFFORT_SHIFT_S, shifted
-    from wmrid.logio import WheelLog
-
-    whole = log.read() if isinstance(log, LogStream) else log
-    t = np.asarray(whole.t, dtype=np.float64)
-    eta = np.asarray(whole.eta, dtype=np.float64)
-    tau = np.asarray(whole.tau, dtype=np.float64)
-    source = getattr(whole, "source", "log")
-    warnings: list[str] = []
-    if delay == "auto":
-        est = estimate_delay(t, eta, tau, torque_hold=torque_hold, control_rate=control_rate)
-        record = {"chosen_by": "auto", **est.to_dict()}
-        applied = est.delay if est.significant and not est.at_edge else 0.0
-        if est.at_edge:
-            warnings.append(
-                f"the delay between efforts and speeds could not be estimated (the fit keeps improving to the edge of "
-                f"the searched +/-{abs(est.grid[0]) * 1e3:g} ms): the model does not fit this log well enough to time "
-                "it; the efforts are used as stamped"
-            )
-        elif est.significant and faster_controller(est, t, torque_hold, control_rate):
-            half = 0.5 * float(np.median(np.diff(t)))
-            warnings.append(
-                f"the efforts act {max(half - est.delay, 0.0) * 1e3:.2f} +/- {est.std * 1e3:.2f} ms after their "
-                f"stamps, not half a logged step ({half * 1e3:.3g} ms) as an effort held over each step would: a "
-                "controller faster than the log set them (the log holds one of its updates per step); give "
-                "--control-rate HZ (e.g. 1000 for a 1 kHz loop) or --torque-hold foh.  This run read them "
-                f"{est.delay * 1e3:.2f} ms later than the hold assumes (--delay {est.delay:.5f})"
-            )
-        elif est.significant:
-            warnings.append(
-                f"the efforts appear stamped {est.delay * 1e3:+.2f} +/- {est.std * 1e3:.2f} ms late against the "
-                "speeds (two topics or clocks?): they were read that much earlier (--delay "
-                f"{est.delay:.5f}); a delay left in biases the friction by tens of per cent"
-            )
-    else:
-        applied = float(delay)
-        if not (math.isfinite(applied) and abs(applied) <= MAX_EFFORT_SHIFT_S):
-            raise UsageError(f"--delay must be auto or seconds within +/-{MAX_EFFORT_SHIFT_S:g}, got {delay!r}")
-        record = {"chosen_by": "--delay"}
-    record["applied_s"] = applied
-    if applied == 0.0:
-        return whole, record, warnings
-    shifted_log = WheelLog(
-        t=t, eta=eta, tau=shifted(t, tau, -applied), source=source, notes=tuple(getattr(whole, "notes", ())),
-        effort_unit=getattr(whole, "effort_unit", "N m"),
-    )  # fmt: skip
-    return shifted_log, record, warnings
 
 
 #: Friction models of :func:`identify`: ``auto`` lets the log decide between the other two.
