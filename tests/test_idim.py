@@ -276,7 +276,7 @@ def test_alternative_fits_agree_where_the_model_holds(reversing_log):
         assert np.abs(np.asarray(check["delta"]) / est.theta0).max() < 1e-5, name
     reg = idim.idim_regression(log.t, log.eta, log.tau)
     seg, g = idim.segment_index(reg.t)
-    fac = idim_checks.segment_factors(reg.rows(), reg.tau, np.ones(2), seg, g)
+    fac = idim.segment_factors(reg.rows(), reg.tau, np.ones(2), seg, g)
     same = idim_checks.difference(fac, fac, 3.0)
     assert not same["applied"]
     assert np.all(np.asarray(same["delta"]) == 0.0)

@@ -479,6 +479,25 @@ def segment_index(t: np.ndarray) -> tuple[np.ndarray, int]:
     return np.minimum((pos * g).astype(np.int64), g - 1), g
 
 
+def segment_factors(
+    rows: np.ndarray, tau: np.ndarray, weights: np.ndarray, seg: np.ndarray, g: int, keep: np.ndarray | None = None
+) -> list[np.ndarray]:
+    """Triangular factors R_g (p + 1, p + 1) of [X y] per segment (see :func:`wmrid.idim.jackknife_from_factors`).
+
+    rows (N, 2, p), tau (N, 2), weights (2,) per wheel, seg (N,) in [0, g); keep (N,) bool: rows used.
+    """
+    p = rows.shape[2]
+    out = []
+    for i in range(g):
+        sel = seg == i
+        if keep is not None:
+            sel &= keep
+        x = rows[sel] * weights[None, :, None]
+        y = tau[sel] * weights[None, :]
+        out.append(_qr_r(np.column_stack([x.reshape(-1, p), y.reshape(-1)])))
+    return out
+
+
 def _qr_r(a: np.ndarray) -> np.ndarray:
     """R (c, c) of the QR factorisation of a (m, c), zero-padded when m < c."""
     r = np.linalg.qr(a, mode="r")
@@ -589,14 +608,10 @@ def fit_regression(
     scale = reg.scales()
     p = len(scale)
 
+    rows = reg.rows()
+
     def factors(weights: np.ndarray) -> list[np.ndarray]:
-        out = []
-        for i in range(g):
-            sl = slice(bounds[i], bounds[i + 1])
-            x = reg.rows(sl) * weights[None, :, None]
-            y = reg.tau[sl] * weights[None, :]
-            out.append(_qr_r(np.column_stack([x.reshape(-1, p), y.reshape(-1)])))
-        return out
+        return segment_factors(rows, reg.tau, weights, seg, g)
 
     def residual_rms(phi: np.ndarray) -> np.ndarray:
         ssq = np.zeros(2)
@@ -680,10 +695,11 @@ def identify_idim(
     diagnostics["effort_delay_s"] = delay
     seg, g = segment_index(reg.t)
     weights = np.asarray(diagnostics["weights"])
+    fac = segment_factors(reg.rows(), reg.tau, weights, seg, g)
     # what the jackknife cannot see (wmrid.idim_checks); the covariance takes them in wmrid.identify.with_estimate
     diagnostics["checks"] = {
-        "cutoff": cutoff_check(t, eta, tau, reg, weights, seg, g, decimate, delay),
-        "slow_speed": slow_speed_check(reg, np.asarray(eta, dtype=np.float64), weights, seg, g),
+        "cutoff": cutoff_check(t, eta, tau, reg, fac, weights, seg, g, decimate, delay),
+        "slow_speed": slow_speed_check(reg, np.asarray(eta, dtype=np.float64), fac, weights, seg, g),
     }
     theta0 = phi_to_theta0(phi)
     cov0 = theta0_covariance(phi, cov_phi)

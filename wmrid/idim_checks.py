@@ -45,27 +45,6 @@ def segments_on(t: np.ndarray, t0: float, duration: float, g: int) -> np.ndarray
     return np.clip((pos * g).astype(np.int64), 0, g - 1)
 
 
-def segment_factors(
-    rows: np.ndarray, tau: np.ndarray, weights: np.ndarray, seg: np.ndarray, g: int, keep: np.ndarray | None = None
-) -> list[np.ndarray]:
-    """Triangular factors R_g (p + 1, p + 1) of [X y] per segment (see :func:`wmrid.idim.jackknife_from_factors`).
-
-    rows (N, 2, p), tau (N, 2), weights (2,) per wheel, seg (N,) in [0, g); keep (N,) bool: rows used.
-    """
-    from wmrid.idim import _qr_r
-
-    p = rows.shape[2]
-    out = []
-    for i in range(g):
-        sel = seg == i
-        if keep is not None:
-            sel &= keep
-        x = rows[sel] * weights[None, :, None]
-        y = tau[sel] * weights[None, :]
-        out.append(_qr_r(np.column_stack([x.reshape(-1, p), y.reshape(-1)])))
-    return out
-
-
 def difference(fac_a: list[np.ndarray], fac_b: list[np.ndarray], gate: float) -> dict[str, Any]:
     """theta0 of fit a minus theta0 of fit b, with the delete-a-segment jackknife std of that difference.
 
@@ -99,16 +78,17 @@ def difference(fac_a: list[np.ndarray], fac_b: list[np.ndarray], gate: float) ->
 
 
 def cutoff_check(
-    t: np.ndarray, eta: np.ndarray, tau: np.ndarray, reg: Any, weights: np.ndarray, seg: np.ndarray, g: int,
-    decimate: bool, delay: float = 0.0,
+    t: np.ndarray, eta: np.ndarray, tau: np.ndarray, reg: Any, fac: list[np.ndarray], weights: np.ndarray,
+    seg: np.ndarray, g: int, decimate: bool, delay: float = 0.0,
 ) -> dict[str, Any]:  # fmt: skip
     """The estimate at the cutoff / CUTOFF_RATIO against that at the cutoff (``reg``, :func:`difference`).
 
     t, eta, tau: the log as given to :func:`wmrid.idim.idim_regression`; reg: its regression at the cutoff used;
-    weights (2,): the fit's; seg (N,), g: reg's jackknife segments; delay: its effort delay, s.  Skipped (not
+    fac: reg's per-segment factors (:func:`wmrid.idim.segment_factors`); weights (2,): the fit's; seg (N,), g:
+    reg's jackknife segments; delay: its effort delay, s.  Skipped (not
     applied, with "why") when the log is too short for the lower cutoff's transient.
     """
-    from wmrid.idim import idim_regression
+    from wmrid.idim import idim_regression, segment_factors
 
     low = reg.cutoff_hz / CUTOFF_RATIO
     try:
@@ -117,9 +97,8 @@ def cutoff_check(
         return {"applied": False, "delta": None, "sd": None, "largest_ratio": None, "why": str(err)}
     duration = float(reg.t[-1] - reg.t[0])
     seg_b = segments_on(other.t, float(reg.t[0]), duration, g)
-    fac_a = segment_factors(reg.rows(), reg.tau, weights, seg, g)
     fac_b = segment_factors(other.rows(), other.tau, weights, seg_b, g)
-    return {**difference(fac_a, fac_b, CUTOFF_GATE), "cutoff_hz": [reg.cutoff_hz, low]}
+    return {**difference(fac, fac_b, CUTOFF_GATE), "cutoff_hz": [reg.cutoff_hz, low]}
 
 
 def slow_rows(reg: Any, eta: np.ndarray) -> np.ndarray:
@@ -137,9 +116,14 @@ def slow_rows(reg: Any, eta: np.ndarray) -> np.ndarray:
     return hi > lo  # a slow row lies within the margin
 
 
-def slow_speed_check(reg: Any, eta: np.ndarray, weights: np.ndarray, seg: np.ndarray, g: int) -> dict[str, Any]:
-    """The estimate with every row against the one without the slow rows (:func:`slow_rows`, :func:`difference`);
-    skipped when no row is slow or fewer than MIN_KEPT of them remain, or the rest leaves a segment empty."""
+def slow_speed_check(
+    reg: Any, eta: np.ndarray, fac: list[np.ndarray], weights: np.ndarray, seg: np.ndarray, g: int
+) -> dict[str, Any]:
+    """The estimate with every row (its per-segment factors ``fac``) against the one without the slow rows
+    (:func:`slow_rows`, :func:`difference`); skipped when no row is slow or fewer than MIN_KEPT of them remain, or
+    the rest leaves a segment empty."""
+    from wmrid.idim import segment_factors
+
     none = {"applied": False, "delta": None, "sd": None, "largest_ratio": None}
     slow = slow_rows(reg, eta)
     kept = float(np.mean(~slow))
@@ -147,7 +131,5 @@ def slow_speed_check(reg: Any, eta: np.ndarray, weights: np.ndarray, seg: np.nda
         return {**none, "why": "no wheel is slow", "left_out_fraction": 0.0}
     if kept < MIN_KEPT or np.any(np.bincount(seg[~slow], minlength=g) == 0):
         return {**none, "why": "too little of the log is fast", "left_out_fraction": 1.0 - kept}
-    rows = reg.rows()
-    fac_all = segment_factors(rows, reg.tau, weights, seg, g)
-    fac_fast = segment_factors(rows, reg.tau, weights, seg, g, keep=~slow)
-    return {**difference(fac_all, fac_fast, SLOW_GATE), "left_out_fraction": 1.0 - kept}
+    fac_fast = segment_factors(reg.rows(), reg.tau, weights, seg, g, keep=~slow)
+    return {**difference(fac, fac_fast, SLOW_GATE), "left_out_fraction": 1.0 - kept}
