@@ -40,17 +40,22 @@ def one_seed(seed: int, args: argparse.Namespace) -> tuple[np.ndarray, np.ndarra
         robot.reference, robot.nominal, trajectory=args.trajectory, duration=args.duration, noise=noise, seed=seed
     )
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source=f"seed {seed}", notes=())
+    if args.reference:
+        log.reference = sim.eta_ref
     kwargs = {} if args.k is None else {"k": args.k}
-    result = identify(log, robot, **kwargs)
+    result = identify(log, robot, feedback=not args.no_feedback, **kwargs)
     truth = sim.truth()["parameters"]
     value = np.array([result.parameters[n][0] for n in THETA0_NAMES])
     std = np.array([result.parameters[n][1] for n in THETA0_NAMES])
     unc = result.diagnostics["uncertainty"]["model_error"]
     widened = {
-        "scale": unc["applied"], "discretisation": unc["discretisation"]["applied"],
-        "low-speed": unc["slow_speed"]["applied"] or bool(unc["slow_speed"]["fragile"]),
+        "scale": unc["applied"], "discretisation": bool((unc.get("discretisation") or {}).get("applied")),
+        "low-speed": bool(unc["slow_speed"].get("applied") or unc["slow_speed"].get("fragile")),
     }  # fmt: skip
-    return value, std, np.array([truth[n] for n in THETA0_NAMES]), result.diagnostics["uncertainty"]["dof"], widened
+    flagged = np.array([n in set(result.diagnostics.get("flagged", [])) for n in THETA0_NAMES])
+    extra = {"method": result.method, "flagged": flagged}
+    dof = result.diagnostics["uncertainty"]["dof"]
+    return value, std, np.array([truth[n] for n in THETA0_NAMES]), dof, widened, extra
 
 
 def main() -> None:
@@ -64,6 +69,8 @@ def main() -> None:
     parser.add_argument("--caster", type=float, default=0.05, help="N m")
     parser.add_argument("--caster-time", type=float, default=0.3, help="s")
     parser.add_argument("--k", type=float, default=None, help="observer gain (default: wmrid's)")
+    parser.add_argument("--reference", action="store_true", help="give identify the reference wheel speeds")
+    parser.add_argument("--no-feedback", action="store_true", help="without the closed-loop check (before)")
     args = parser.parse_args()
 
     from scipy.special import stdtr
@@ -93,6 +100,14 @@ def main() -> None:
             f"{zz.std():.2f} | {100 * np.sqrt(np.mean(rel[:, j] ** 2)):.3g} | {100 * np.max(np.abs(rel[:, j])):.3g} |"
         )
     print(f"| all | {np.mean(np.abs(z) < 2):.3f} | {np.mean(np.abs(z) < 3):.3f} | | | | |")
+    flagged = np.array([r[5]["flagged"] for r in rows])
+    methods = [r[5]["method"] for r in rows]
+    print(
+        "reported by: "
+        + ", ".join(f"{m} {methods.count(m)}" for m in sorted(set(methods)))
+        + "; within 3 std or flagged: "
+        + ", ".join(f"{n} {np.mean((np.abs(z[:, j]) < 3) | flagged[:, j]):.2f}" for j, n in enumerate(THETA0_NAMES))
+    )
     widened = [r[4] for r in rows]
     counts = ", ".join(f"{key} {sum(w[key] for w in widened)}" for key in widened[0])
     print(

@@ -90,7 +90,7 @@ def test_identify_applies_an_estimated_delay(late_log):
 
     sim, log = late_log
     truth = model.named_base(model.base_parameters(AMR.cad))
-    result = identify(log, AMR, delay="auto")
+    result = identify(log, AMR, delay="auto", feedback=False)
     record = result.diagnostics["delay"]
     assert record["applied_s"] == pytest.approx(0.005, abs=5e-4)
     assert record["significant"]
@@ -183,3 +183,26 @@ def test_the_delays_uncertainty_is_in_the_std():
     for name in ("Fv1", "Fv2", "Fd1", "Fd2"):
         assert result.parameters[name][1] > fixed.parameters[name][1], name
         assert name in result.diagnostics["inflated"]
+
+
+@pytest.mark.parametrize("rate", [100.0, 20.0])
+def test_a_slow_log_of_a_faster_controller_is_named_by_default(rate):
+    """The issue's case: a 1 kHz controller logged at 100 Hz or 20 Hz, default options (no --delay).  The hold check
+    (wmrid.delay.hold_check) finds the efforts acting well before the half logged step the default hold assumes
+    (measured: 4.5 of 5 ms, 24.6 of 25 ms) and names --control-rate; no parameter is beyond 3 std unflagged."""
+    from types import SimpleNamespace
+
+    from wmrid.identify import identify
+
+    sim = simulate(AMR.cad, AMR.nominal, duration=40.0, rate=rate, noise=NOISE, seed=1)
+    log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="slow", notes=())
+    result = identify(log, AMR)
+    assert result.diagnostics["hold"]["faster_controller"]
+    assert any("--control-rate" in w for w in result.warnings)
+    truth = sim.truth()["parameters"]
+    flagged = set(result.diagnostics.get("flagged", [])) | set(result.diagnostics.get("inflated", []))
+    for name, (value, std) in result.parameters.items():
+        assert abs(value - truth[name]) <= 3 * std or name in flagged, name
+    fast = simulate(AMR.cad, AMR.nominal, duration=10.0, noise=NOISE, seed=1)
+    on_time = identify(SimpleNamespace(t=fast.t, eta=fast.eta, tau=fast.tau, source="fast", notes=()), AMR)
+    assert not on_time.diagnostics["hold"]["checked"]  # 1 kHz: not slower than the check's 400 Hz

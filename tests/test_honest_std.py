@@ -101,7 +101,7 @@ def test_multibody_paper_robot_acceptance(paper_multibody):
 def test_other_methods_inherit_the_model_error_scale(paper_multibody):
     """The log departs from the model whichever method reads it: IDIM's covariance is scaled by the observer's S^2
     (its std grows by S exactly), and its parameters are marked as widened."""
-    observer = identify(as_log(paper_multibody), PAPER)
+    observer = identify(as_log(paper_multibody), PAPER, feedback=False)
     idim = run("idim", as_log(paper_multibody), observer, MethodOptions(), PAPER)
     scale = observer.diagnostics["uncertainty"]["model_error"]["scale"]
     assert scale > 5

@@ -174,7 +174,7 @@ def test_idim_with_caster_drag_on_the_multibody_amr(amr_caster_log):
     """
     sim = amr_caster_log
     log = SimpleNamespace(t=np.array(sim.t), eta=np.array(sim.eta), tau=np.array(sim.tau), source="amr", notes=())
-    observer = identify(log, AMR, friction="wheel+caster")
+    observer = identify(log, AMR, friction="wheel+caster", feedback=False)
     assert observer.form.caster
     assert observer.form.n_casters == 1
     result = run("idim", log, observer, MethodOptions(), AMR)
@@ -223,7 +223,7 @@ def test_compare_identifies_the_caster_model_with_every_method(amr_caster_log, t
             assert "flagged" in out["methods"][name]
     # the std and flags are those of ``identify --method idim``: the library's run() on the same arrays
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="amr", notes=())
-    observer = identify(log, AMR, friction="wheel")
+    observer = identify(log, AMR, friction="wheel", feedback=False)
     idim_result = run("idim", log, observer, MethodOptions(), AMR)
     for key, (value, std) in idim_result.parameters.items():
         entry = out["methods"]["idim"]["parameters"][key]

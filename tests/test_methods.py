@@ -36,7 +36,7 @@ def wmrid(*args: str) -> subprocess.CompletedProcess:
 
 def _log(seed: int, true=None) -> SimpleNamespace:
     sim = simulate(true or ROBOT.reference, ROBOT.nominal, duration=40.0, noise=NOISE, seed=seed)
-    return SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source=f"seed {seed}", notes=())
+    return SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source=f"seed {seed}", notes=(), reference=sim.eta_ref)
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +44,7 @@ def comparison() -> dict:
     """All methods on a noisy 40 s closed-loop log (seed 1), validated on a second log of the same robot."""
     log = _log(1)
     truth = model.named_base(model.base_parameters(ROBOT.reference))
-    observer = identify(log, ROBOT)
+    observer = identify(log, ROBOT, feedback=False)
     return compare(log, observer, MethodOptions(), other=_log(2), truth=truth)
 
 
@@ -78,7 +78,7 @@ def test_a_second_log_of_the_same_robot_fits_well(comparison: dict) -> None:
 def test_a_log_with_a_payload_fits_clearly_worse() -> None:
     # Measured: 65-68 % against 97 % on the unloaded robot's second log; issue 6 asks for 5 points lower.
     log = _log(1)
-    observer = identify(log, ROBOT)
+    observer = identify(log, ROBOT, feedback=False)
     same = compare(log, observer, MethodOptions(), ("observer", "idim"), other=_log(2))
     loaded = compare(
         log, observer, MethodOptions(), ("observer", "idim"), other=_log(3, ROBOT.reference.with_payload(PAYLOAD))
@@ -97,11 +97,12 @@ def test_method_options_are_validated() -> None:
         MethodOptions(cutoff_hz=-1.0)
 
 
-@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("method", [m for m in METHODS if m != "iv"])
 def test_identify_method_on_the_cli(method: str) -> None:
     # The noise-free sample: the observer and OE are exact to ~1e-6 %; IDIM's low-pass filter (its residual
     # gain and phase at the signal's frequencies) costs it 0.04 % on the inertia terms, 0.11 % on Vc (measured)
-    # and ~7 % on the small friction terms, so 0.2 % for IDIM and RLS.
+    # and ~7 % on the small friction terms, so 0.2 % for IDIM and RLS.  The sample has no reference columns, so
+    # `iv` refuses it; tests/test_iv.py runs `--method iv` on a log that has them.
     proc = wmrid("identify", str(SAMPLES / "paper_sinusoid.csv"), "--robot", "paper", "--method", method,
                  "--format", "json")  # fmt: skip
     assert proc.returncode == 0, proc.stderr
@@ -154,10 +155,10 @@ def test_compare_on_the_cli(tmp_path: Path) -> None:
         (("identify", "LOG", "--validate", "missing.csv"), "missing.csv: no such file"),
         (
             ("identify", "LOG", "--method", "oe", "--control-rate", "2000"),
-            "modelled by the observer, idim and rls only",
+            "modelled by the observer, idim, iv and rls only",
         ),
         (("identify", "LOG", "--validate", "LOG", "--control-rate", "2000"), "--validate predictor"),
-        (("compare", "LOG", "--control-rate", "2000"), "observer, idim and rls only"),
+        (("compare", "LOG", "--control-rate", "2000"), "observer, idim, iv and rls only"),
         (("identify", "LOG", "--control-rate", "1e9"), "1,000,000 held sub-steps"),
         (("identify", "-", "--validate", "-"), "cannot both be standard input"),
     ],

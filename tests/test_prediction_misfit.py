@@ -178,7 +178,7 @@ def test_slipping_wheels_flag_every_parameter(slipping):
     (measured on 40 s logs: M12 49 % off at z 3.5 unflagged before this check).  The prediction error is many
     times the noise (11-35 on the benchmark's slipping logs; 12 s here), so every parameter is flagged, the
     first warning says why, and IDIM on the same log inherits the flags."""
-    result = identify(as_log(slipping), AMR)
+    result = identify(as_log(slipping), AMR, feedback=False)
     misfit = result.diagnostics["uncertainty"]["model_error"]["prediction_misfit"]
     assert misfit["applied"]
     assert misfit["ratio"] > 5

@@ -40,6 +40,7 @@ class OutputFormat(str, Enum):
 class MethodChoice(str, Enum):
     observer = "observer"
     idim = "idim"
+    iv = "iv"
     rls = "rls"
     oe = "oe"
 
@@ -334,7 +335,8 @@ DelayOpt = Annotated[
         metavar="auto|SECONDS",
         help="The efforts are stamped SECONDS later than the speeds (two topics, two clocks; negative: earlier): "
         "read them that much earlier.  auto: estimate the delay from the log and apply it when significant (the "
-        "output states it).  Reads the log into memory.",
+        "output states it).  Reads the log into memory.  Default: as stamped, or auto when the efforts come from "
+        "another topic than the speeds.",
     ),
 ]
 
@@ -395,7 +397,7 @@ def _friction_for(friction, methods: tuple[str, ...], validate, robot) -> str:
 
 
 #: Methods that model caster drag (--friction wheel+caster); output error only with the casters' positions.
-CASTER_METHODS = ("observer", "idim", "rls", "oe")
+CASTER_METHODS = ("observer", "idim", "iv", "rls", "oe")
 
 
 def _simulates(methods: tuple[str, ...], validate) -> bool:
@@ -448,7 +450,7 @@ def _check_control_rate(control_rate, methods: tuple[str, ...], validate) -> Non
     """--control-rate is modelled by the observer, IDIM and RLS (output error and the validation predictor hold
     each logged effort over the whole step): refuse it where it would be ignored."""
     if control_rate is not None:
-        _refuse_unmodelled("--control-rate", methods, validate, ("observer", "idim", "rls"))
+        _refuse_unmodelled("--control-rate", methods, validate, ("observer", "idim", "iv", "rls"))
 
 
 def _method_options(cutoff, weighted, forgetting, torque_hold):
@@ -589,6 +591,7 @@ def identify(
             control_rate=control_rate,
             friction=friction_model,
             delay=_delay_value(delay),
+            feedback=method == MethodChoice.observer,  # another method is reported as asked
         )
     finally:
         finish()
@@ -731,6 +734,7 @@ def report(
         result = run_identify(
             log, robot_obj, form=form.value, k=k, alpha=alpha, torque_hold=torque_hold.value, payload=payload,
             control_rate=control_rate, friction=friction_model, delay=_delay_value(delay),
+            feedback=method == MethodChoice.observer,
         )  # fmt: skip
         if method != MethodChoice.observer:
             from wmrid.methods import run
@@ -783,7 +787,7 @@ def compare(
     control_rate: ControlRateOpt = None,
     delay: DelayOpt = None,
     methods: Annotated[
-        str, typer.Option(help="Comma-separated methods to run, of observer, idim, rls, oe.")
+        str, typer.Option(help="Comma-separated methods to run, of observer, idim, iv, rls, oe.")
     ] = "observer,idim,rls,oe",
     columns: Annotated[str | None, typer.Option(help="Column mapping, as for identify.")] = None,
     time_unit: Annotated[TimeUnit, typer.Option(help="Unit of the time column.")] = TimeUnit.auto,
@@ -848,7 +852,7 @@ def compare(
             )
     observer = run_identify(
         wheel_log, robot_obj, torque_hold=torque_hold.value, control_rate=control_rate, friction=friction_model,
-        delay=_delay_value(delay),
+        delay=_delay_value(delay), feedback=False,  # compare shows every method's own estimate
     )  # fmt: skip
     data = run_compare(wheel_log, observer, options, names, other=other, truth=truth_params)
     if output is not None:

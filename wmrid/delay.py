@@ -157,6 +157,54 @@ def faster_controller(est: Any, t: np.ndarray, torque_hold: str, control_rate: f
     return -2 * est.std < est.delay <= half + 2 * est.std
 
 
+#: Hz: a log slower than this is checked for a controller faster than the log (:func:`hold_check`): its half step
+#: is then more than 1.25 ms, beyond DELAY_RESOLUTION_S even against a 1 kHz controller's half period.
+SLOW_LOG_HZ = 400.0
+#: Logs with more samples than this are not checked (the profile holds the whole log in memory).
+HOLD_CHECK_MAX_SAMPLES = 2_000_000
+
+
+def faster_controller_text(est: Any, t: np.ndarray) -> str:
+    """The warning for a faster controller found by ``est`` on a log with times t (n,) s."""
+    half = 0.5 * float(np.median(np.diff(t)))
+    return (
+        f"the efforts act {max(half - est.delay, 0.0) * 1e3:.2f} +/- {est.std * 1e3:.2f} ms after their "
+        f"stamps, not half a logged step ({half * 1e3:.3g} ms) as an effort held over each step would: a "
+        "controller faster than the log set them (the log holds one of its updates per step); give "
+        "--control-rate HZ (e.g. 1000 for a 1 kHz loop) or --torque-hold foh"
+    )
+
+
+def hold_check(log: Any, torque_hold: str, control_rate: float | None) -> tuple[dict[str, Any], list[str]]:
+    """(record for ``diagnostics["hold"]``, warnings): whether a log slower than SLOW_LOG_HZ, read under the default
+    hold (zoh, no --control-rate), was set by a faster controller (:func:`faster_controller` on
+    :func:`estimate_delay`, searched over +/- max(DEFAULT_SPAN_S, 1.2 logged steps)).  Nothing is applied: the
+    warning names --control-rate.  Measured on the light AMR, 1 kHz controller: 100 Hz log 4.5 ms of the 5 ms half
+    step, 20 Hz log 24.6 of 25 ms, both found; a 1 kHz log of it is not checked."""
+    from wmrid.logio import LogStream
+
+    none = {"checked": False}
+    if torque_hold != "zoh" or control_rate is not None:
+        return {**none, "why": "the hold is given (--torque-hold foh or --control-rate)"}, []
+    whole = log.read() if isinstance(log, LogStream) else log
+    t = np.asarray(whole.t, dtype=np.float64)
+    if len(t) < 2 or len(t) > HOLD_CHECK_MAX_SAMPLES:
+        return {**none, "why": f"{len(t)} samples"}, []
+    step = float(np.median(np.diff(t)))
+    if step <= 0 or 1.0 / step >= SLOW_LOG_HZ:
+        return {**none, "why": f"the log is not slower than {SLOW_LOG_HZ:g} Hz"}, []
+    try:
+        est = estimate_delay(
+            t, np.asarray(whole.eta, dtype=np.float64), np.asarray(whole.tau, dtype=np.float64),
+            span=max(DEFAULT_SPAN_S, 1.2 * step),
+        )  # fmt: skip
+    except (NotIdentifiableError, UsageError) as err:
+        return {**none, "why": str(err)}, []
+    found = bool(est.significant and not est.at_edge and faster_controller(est, t, torque_hold, control_rate))
+    record = {"checked": True, **est.to_dict(), "faster_controller": found}
+    return record, ([faster_controller_text(est, t)] if found else [])
+
+
 def apply_delay(
     log: Any, delay: float | str, torque_hold: str, control_rate: float | None
 ) -> tuple[Any, dict[str, Any], list[str]]:
@@ -185,13 +233,9 @@ def apply_delay(
                 "it; the efforts are used as stamped"
             )
         elif est.significant and faster_controller(est, t, torque_hold, control_rate):
-            half = 0.5 * float(np.median(np.diff(t)))
             warnings.append(
-                f"the efforts act {max(half - est.delay, 0.0) * 1e3:.2f} +/- {est.std * 1e3:.2f} ms after their "
-                f"stamps, not half a logged step ({half * 1e3:.3g} ms) as an effort held over each step would: a "
-                "controller faster than the log set them (the log holds one of its updates per step); give "
-                "--control-rate HZ (e.g. 1000 for a 1 kHz loop) or --torque-hold foh.  This run read them "
-                f"{est.delay * 1e3:.2f} ms later than the hold assumes (--delay {est.delay:.5f})"
+                f"{faster_controller_text(est, t)}.  This run read them {est.delay * 1e3:.2f} ms later than the hold "
+                f"assumes (--delay {est.delay:.5f})"
             )
         elif est.significant:
             warnings.append(

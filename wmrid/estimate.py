@@ -15,6 +15,25 @@ import numpy as np
 from wmrid.model import default_base_names
 
 
+@dataclass(frozen=True, eq=False)
+class SegmentEstimates:
+    """The estimate with each of G equal contiguous segments of the log left out in turn (the jackknife's).
+
+    t0 : s, start of the segment grid; duration : s, its length (segment g covers [t0 + g d / G, t0 + (g+1) d / G)
+    with d = duration); loo : (G, n0) theta0 with segment g left out.  Two methods' estimates on the same grid give
+    the jackknife of their difference (:func:`wmrid.feedback.difference_test`).
+    """
+
+    t0: float
+    duration: float
+    loo: np.ndarray
+
+    @property
+    def grid(self) -> tuple[float, float, int]:
+        """(t0, duration, G): the grid, to fit another method on the same segments."""
+        return self.t0, self.duration, int(self.loo.shape[0])
+
+
 @dataclass(frozen=True)
 class BaseEstimate:
     """Base parameters theta0 = [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2 (Cv Cw)] found by one method.
@@ -28,6 +47,7 @@ class BaseEstimate:
     seconds : wall time the method took, s.
     diagnostics : method-specific figures (JSON-ready).
     warnings : plain-English warnings about this estimate.
+    segments : the leave-one-segment-out estimates behind the jackknife std, when the method keeps them.
     """
 
     method: str
@@ -37,6 +57,7 @@ class BaseEstimate:
     seconds: float = 0.0
     diagnostics: dict[str, Any] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
+    segments: SegmentEstimates | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         n0 = np.shape(self.theta0)[0] if np.ndim(self.theta0) == 1 else -1

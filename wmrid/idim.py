@@ -77,7 +77,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.errors import LogFormatError, NotIdentifiableError, UsageError
-from wmrid.estimate import BaseEstimate
+from wmrid.estimate import BaseEstimate, SegmentEstimates
 from wmrid.model import RegressorForm, caster_columns
 from wmrid.uncertainty import segment_count
 
@@ -594,17 +594,27 @@ def inertia_warnings(phi: np.ndarray) -> list[str]:
     return ["the estimated inertia matrix M is not positive definite: the log barely excites the accelerations"]
 
 
+def jackknife_segments(t: np.ndarray, grid: tuple[float, float, int] | None = None) -> tuple[np.ndarray, int]:
+    """Segment (N,) of each regression time t (N,) s and G: :func:`segment_index`, or on ``grid`` (t0 s, duration s,
+    G), another fit's segments (:attr:`wmrid.estimate.SegmentEstimates.grid`), so the two can be compared."""
+    if grid is None:
+        return segment_index(t)
+    t0, duration, g = grid
+    pos = (np.asarray(t) - t0) / max(duration, 1e-300)
+    return np.clip((pos * g).astype(np.int64), 0, g - 1), int(g)
+
+
 def fit_regression(
-    reg: IdimRegression, *, weighted: bool = False
+    reg: IdimRegression, *, weighted: bool = False, grid: tuple[float, float, int] | None = None
 ) -> tuple[np.ndarray, np.ndarray, dict[str, Any], list[str]]:
     """Least squares of phi on a regression: (phi (p,), jackknife covariance (p, p), diagnostics, warnings),
     p = len(reg.phi_names) (8, plus the caster parameters of ``reg.form``).
 
     weighted : two-step weighted LS, wheel j's rows scaled by 1 / s_j (s_j its OLS rms residual, N m).
+    grid : the jackknife's segments (:func:`jackknife_segments`).
     Raises NotIdentifiableError when the regressor is rank deficient.
     """
-    seg, g = segment_index(reg.t)
-    bounds = np.searchsorted(seg, np.arange(g + 1))
+    seg, g = jackknife_segments(reg.t, grid)
     scale = reg.scales()
     p = len(scale)
 
@@ -614,11 +624,7 @@ def fit_regression(
         return segment_factors(rows, reg.tau, weights, seg, g)
 
     def residual_rms(phi: np.ndarray) -> np.ndarray:
-        ssq = np.zeros(2)
-        for i in range(g):
-            sl = slice(bounds[i], bounds[i + 1])
-            ssq += np.sum((reg.rows(sl) @ phi - reg.tau[sl]) ** 2, axis=0)
-        return np.sqrt(ssq / len(reg.t))
+        return np.sqrt(np.mean((rows @ phi - reg.tau) ** 2, axis=0))
 
     ones = np.ones(2)
     fac = factors(ones)
@@ -670,6 +676,7 @@ def identify_idim(
     form: RegressorForm | None = None,
     torque_hold: str = "zoh",
     control_rate: float | None = None,
+    grid: tuple[float, float, int] | None = None,
 ) -> BaseEstimate:
     """IDIM least-squares estimate of the base parameters from a log.
 
@@ -678,7 +685,8 @@ def identify_idim(
     parallel decimation; weighted : two-step weighted LS.  form : the observer's regressor form; with caster
     drag (``form.caster``) theta0 and phi gain its caster parameters (``form.base_names[8:]``), otherwise (or
     None) it is ignored.  torque_hold, control_rate : how the effort was held between samples, as for the
-    observer (:func:`effort_delay`).  See the module docstring for each choice.
+    observer (:func:`effort_delay`).  grid : (t0 s, duration s, G) the jackknife's segments, e.g. the observer's
+    (default: G equal segments of the regression's span).  See the module docstring for each choice.
     Returns a :class:`BaseEstimate` (method "idim"): theta0 in the m = M^-1 parameterisation (``form.n_base``
     entries with caster drag, else 8), the jackknife covariance through the delta method, dof = G - 1;
     diagnostics hold the preprocessing choices, the residual rms per wheel (N m), ``checks``: the estimate at
@@ -691,14 +699,16 @@ def identify_idim(
     start = time.perf_counter()
     delay = effort_delay(t, torque_hold, control_rate)
     reg = idim_regression(t, eta, tau, cutoff_hz, decimate, order=order, form=form, effort_delay=delay)
-    phi, cov_phi, diagnostics, warnings = fit_regression(reg, weighted=weighted)
+    phi, cov_phi, diagnostics, warnings = fit_regression(reg, weighted=weighted, grid=grid)
     diagnostics["effort_delay_s"] = delay
-    seg, g = segment_index(reg.t)
+    seg, g = jackknife_segments(reg.t, grid)
     weights = np.asarray(diagnostics["weights"])
     fac = segment_factors(reg.rows(), reg.tau, weights, seg, g)
+    loo, _ = jackknife_from_factors(fac)
+    t0, span = (float(reg.t[0]), float(reg.t[-1] - reg.t[0])) if grid is None else (grid[0], grid[1])
     # what the jackknife cannot see (wmrid.idim_checks); the covariance takes them in wmrid.identify.with_estimate
     diagnostics["checks"] = {
-        "cutoff": cutoff_check(t, eta, tau, reg, fac, weights, seg, g, decimate, delay),
+        "cutoff": cutoff_check(t, eta, tau, reg, fac, weights, seg, g, decimate, delay, (t0, span)),
         "slow_speed": slow_speed_check(reg, np.asarray(eta, dtype=np.float64), fac, weights, seg, g),
     }
     theta0 = phi_to_theta0(phi)
@@ -709,4 +719,5 @@ def identify_idim(
     return BaseEstimate(
         method="idim", theta0=theta0, cov=cov0, dof=diagnostics["segments"] - 1,
         seconds=time.perf_counter() - start, diagnostics=diagnostics, warnings=tuple(warnings),
+        segments=SegmentEstimates(t0, span, phi_to_theta0(loo)),
     )  # fmt: skip

@@ -79,13 +79,14 @@ def difference(fac_a: list[np.ndarray], fac_b: list[np.ndarray], gate: float) ->
 
 def cutoff_check(
     t: np.ndarray, eta: np.ndarray, tau: np.ndarray, reg: Any, fac: list[np.ndarray], weights: np.ndarray,
-    seg: np.ndarray, g: int, decimate: bool, delay: float = 0.0,
+    seg: np.ndarray, g: int, decimate: bool, delay: float = 0.0, span: tuple[float, float] | None = None,
 ) -> dict[str, Any]:  # fmt: skip
     """The estimate at the cutoff / CUTOFF_RATIO against that at the cutoff (``reg``, :func:`difference`).
 
     t, eta, tau: the log as given to :func:`wmrid.idim.idim_regression`; reg: its regression at the cutoff used;
     fac: reg's per-segment factors (:func:`wmrid.idim.segment_factors`); weights (2,): the fit's; seg (N,), g:
-    reg's jackknife segments; delay: its effort delay, s.  Skipped (not
+    reg's jackknife segments, g equal parts of ``span`` (t0 s, duration s; default reg's own times); delay: its
+    effort delay, s.  Skipped (not
     applied, with "why") when the log is too short for the lower cutoff's transient.
     """
     from wmrid.idim import idim_regression, segment_factors
@@ -95,8 +96,8 @@ def cutoff_check(
         other = idim_regression(t, eta, tau, low, decimate, order=reg.order, form=reg.form, effort_delay=delay)
     except (NotIdentifiableError, UsageError) as err:
         return {"applied": False, "delta": None, "sd": None, "largest_ratio": None, "why": str(err)}
-    duration = float(reg.t[-1] - reg.t[0])
-    seg_b = segments_on(other.t, float(reg.t[0]), duration, g)
+    t0, duration = (float(reg.t[0]), float(reg.t[-1] - reg.t[0])) if span is None else span
+    seg_b = segments_on(other.t, t0, duration, g)
     fac_b = segment_factors(other.rows(), other.tau, weights, seg_b, g)
     return {**difference(fac, fac_b, CUTOFF_GATE), "cutoff_hz": [reg.cutoff_hz, low]}
 

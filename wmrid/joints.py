@@ -383,6 +383,16 @@ def _no_overlap(source: str, vel_topic: str, t_vel: np.ndarray, eff_topic: str, 
     )
 
 
+#: The words of the note that says the effort came from another topic than the speeds (:func:`split_topics`).
+SPLIT_NOTE = "put on the speed stamps"
+
+
+def split_topics(notes: tuple[str, ...] | list[str]) -> bool:
+    """Whether a log's reading notes say its efforts and speeds came from two topics (two clocks, two drivers), the
+    case where ``identify`` estimates their delay by default (:func:`wmrid.delay.apply_delay`)."""
+    return any(SPLIT_NOTE in note for note in notes)
+
+
 def _align_note(rule: str, vel_topic: str, vel_step: float, eff_topic: str, period: float, dropped: int) -> str:
     if rule == "zoh":
         how = "held from the latest effort message at or before each speed stamp (zero-order hold)"
@@ -390,7 +400,7 @@ def _align_note(rule: str, vel_topic: str, vel_step: float, eff_topic: str, peri
         how = "interpolated linearly between effort messages"
     rate_v = 1e9 / vel_step
     rate_e = 1e9 / period
-    return f"effort ({eff_topic}, {rate_e:.4g} Hz) put on the speed stamps ({vel_topic}, {rate_v:.4g} Hz): {how}" + (
+    return f"effort ({eff_topic}, {rate_e:.4g} Hz) {SPLIT_NOTE} ({vel_topic}, {rate_v:.4g} Hz): {how}" + (
         f"; {dropped} speed samples outside the effort's time span dropped" if dropped else ""
     )
 

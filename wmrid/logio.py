@@ -76,7 +76,9 @@ __all__ = [
 
 REQUIRED = ("t", "eta_r", "eta_l", "tau_r", "tau_l")
 POSE = ("x", "y", "phi")
-CANONICAL = REQUIRED + POSE
+#: Optional wheel-speed reference (set-points, rad/s): the instruments of ``--method iv`` (:mod:`wmrid.iv`).
+REFERENCE = ("eta_ref_r", "eta_ref_l")
+CANONICAL = REQUIRED + POSE + REFERENCE
 TIME_UNITS = ("auto", "s", "ms", "us", "ns")
 MIN_SAMPLES = 10
 _NS_PER_UNIT = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
@@ -104,6 +106,8 @@ class WheelLog:
     source : the file name as the user gave it (``"<stdin>"`` for ``-``).
     notes : plain-English statements of what was assumed while reading.
     pose : (n, 3) float64 [x m, y m, phi rad] when the log has x, y, phi; else None.
+    reference : (n, 2) float64 rad/s, the wheel-speed reference (set-points) [right, left] when the log has
+        eta_ref_r, eta_ref_l; else None.
     effort_unit : "N m" for a torque; else the unit of a PWM or voltage effort that could not be
         converted (tau then holds that effort, and the parameters come out in its units).
     """
@@ -115,12 +119,15 @@ class WheelLog:
     notes: tuple[str, ...] = ()
     pose: np.ndarray | None = None
     effort_unit: str = "N m"
+    reference: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = np.shape(self.t)[0] if np.ndim(self.t) == 1 else -1
         if n < 0:
             raise ValueError(f"WheelLog.t must be 1-D, got shape {np.shape(self.t)}")
-        for name, arr, width in (("eta", self.eta, 2), ("tau", self.tau, 2), ("pose", self.pose, 3)):
+        for name, arr, width in (
+            ("eta", self.eta, 2), ("tau", self.tau, 2), ("pose", self.pose, 3), ("reference", self.reference, 2)
+        ):  # fmt: skip
             if arr is not None and np.shape(arr) != (n, width):
                 raise ValueError(f"WheelLog.{name} must have shape ({n}, {width}), got {np.shape(arr)}")
 
@@ -195,10 +202,12 @@ class LogStream:
         pieces = list(self)
         poses = [p.pose for p in pieces]
         pose = np.concatenate(poses) if all(p is not None for p in poses) else None
+        refs = [p.reference for p in pieces]
+        reference = np.concatenate(refs) if refs and all(r is not None for r in refs) else None
         return WheelLog(
             t=np.concatenate([p.t for p in pieces]), eta=np.concatenate([p.eta for p in pieces]),
             tau=np.concatenate([p.tau for p in pieces]), source=self.source, notes=self.notes, pose=pose,
-            effort_unit=self.effort_unit,
+            effort_unit=self.effort_unit, reference=reference,
         )  # fmt: skip
 
 
@@ -420,9 +429,13 @@ def open_log(
                 continue
             if signals != SignalOptions():
                 eta, tau, signal_notes = convert(piece.eta, piece.tau, signals, gear_ratio)
+                reference = piece.reference
+                if reference is not None:  # set-points in the speeds' unit and sense
+                    reference = convert(reference, piece.tau, signals, gear_ratio)[0]
                 piece = WheelLog(
-                    t=piece.t, eta=eta, tau=tau, source=piece.source, pose=piece.pose, effort_unit=effort_unit
-                )
+                    t=piece.t, eta=eta, tau=tau, source=piece.source, pose=piece.pose, effort_unit=effort_unit,
+                    reference=reference,
+                )  # fmt: skip
             yield piece
         return (*notes, *assembler.finish(), *signal_notes)
 
@@ -608,7 +621,7 @@ def _select(present: list[str], mapping: dict[str, str], explicit: set[str], nam
     Raises one :class:`LogFormatError` naming every missing column, the columns there are, close
     matches, and the ``--columns`` option that would fix it.
     """
-    needed = list(REQUIRED) + [k for k in POSE if k in explicit]
+    needed = list(REQUIRED) + [k for k in POSE + REFERENCE if k in explicit]
     missing = [k for k in needed if mapping[k] not in present]
     if missing:
         parts, fixes = [], []
@@ -631,8 +644,9 @@ def _select(present: list[str], mapping: dict[str, str], explicit: set[str], nam
             f"name the log's columns with --columns {','.join(fixes)}"
         )
     chosen = {key: mapping[key] for key in REQUIRED}
-    if all(mapping[k] in present for k in POSE):
-        chosen.update({key: mapping[key] for key in POSE})
+    for optional in (POSE, REFERENCE):
+        if all(mapping[k] in present for k in optional):
+            chosen.update({key: mapping[key] for key in optional})
     return chosen
 
 
@@ -1164,7 +1178,17 @@ class _Assembler:
         eta = np.column_stack([arrays["eta_r"], arrays["eta_l"]]).astype(np.float64, copy=False)
         tau = np.column_stack([arrays["tau_r"], arrays["tau_l"]]).astype(np.float64, copy=False)
         pose = self._pose(values, where) if self.pose_ok else None
-        return WheelLog(t=t, eta=eta, tau=tau, source=name, pose=pose)
+        reference = None
+        if all(k in values for k in REFERENCE):  # optional, but when named it must be numbers, every row
+            refs = []
+            for key in REFERENCE:
+                arr = _numeric(values[key], key, mapping[key], name, where).astype(np.float64, copy=False)
+                i = _first_nonfinite(arr)
+                if i is not None:
+                    raise LogFormatError(_nonfinite_message(arr, i, mapping[key], name, where))
+                refs.append(arr)
+            reference = np.column_stack(refs)
+        return WheelLog(t=t, eta=eta, tau=tau, source=name, pose=pose, reference=reference)
 
     def _stamps(self, stamps: np.ndarray, where: Callable[[int], str]) -> np.ndarray:
         """The time column in the kind (integer or float) of the first piece's."""

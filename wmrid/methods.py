@@ -19,12 +19,14 @@ from wmrid.estimate import BaseEstimate
 from wmrid.identify import IdentificationResult, with_estimate
 from wmrid.robot import Robot
 
-METHODS = ("observer", "idim", "rls", "oe")
+METHODS = ("observer", "idim", "iv", "rls", "oe")
 #: The smallest RLS forgetting factor: a memory of 1/(1 - lambda) = 50 samples, about six per parameter.
 MIN_FORGETTING = 0.98
 DESCRIPTIONS = {
     "observer": "the paper's observer-based adaptive estimator (Eqs. 26-37), no accelerations",
     "idim": "inverse dynamic model, least squares on zero-phase low-pass filtered and differentiated speeds",
+    "iv": "instrumental variables (IDIM-IV): IDIM with the logged wheel-speed reference as instruments, "
+    "consistent under feedback",
     "rls": "recursive least squares with forgetting on the IDIM regression",
     "oe": "output error: simulate the model on the log's torques and minimise the speed error, from the observer",
 }
@@ -67,6 +69,10 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
     Errors of the methods are re-raised with the log's name in front, like every other wmrid error.
     """
     check_method(name)
+    if observer.method != "observer":
+        raise UsageError(
+            f"the observer's run reports method {observer.method!r}: give identify(..., feedback=False)'s result"
+        )
     if name == "observer":
         assert observer.estimate is not None
         return observer.estimate
@@ -89,6 +95,20 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
             return identify_idim(
                 t, eta, tau, cutoff_hz=options.cutoff_hz, weighted=options.weighted, form=observer.form, **hold
             )
+        if name == "iv":
+            from wmrid.iv import identify_iv
+
+            reference = getattr(log, "reference", None)
+            if reference is None:
+                raise UsageError(
+                    "--method iv needs the wheel-speed reference (set-points) the controller tracked: columns "
+                    "eta_ref_r, eta_ref_l, or name yours with --columns eta_ref_r=...,eta_ref_l=..."
+                )
+            hold = {"torque_hold": options.torque_hold, "control_rate": observer.settings.control_rate}
+            return identify_iv(
+                t, eta, tau, reference, cutoff_hz=options.cutoff_hz, weighted=options.weighted, form=observer.form,
+                **hold,
+            )  # fmt: skip
         if name == "rls":
             from wmrid.rls import identify_rls
 

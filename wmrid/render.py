@@ -80,7 +80,7 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         f"({unc['dof']} dof); "
         f"estimate ± {unc['interval_factor']['95%']:.2f} std covers the truth with 95 % probability, "
         f"± {unc['interval_factor']['99.7%']:.2f} std with 99.7 %, if disturbances do not feed back into the "
-        "efforts (in closed loop less, on a light robot much less: see the JSON's diagnostics.uncertainty.caveat)"
+        "efforts (in closed loop see diagnostics.feedback: the closed-loop check)"
     )
     model_error = unc.get("model_error")
     if inflated and model_error:

@@ -288,6 +288,9 @@ class SimulatedLog:
         physical sets ``physical_before`` and ``physical_after``, and the change's detail (payload, or
         wheel, factor, terms, parameters).
     reference : (n, 3) reference pose x_r (m), y_r (m), phi_r (rad) at t.
+    eta_ref : (n, 2) rad/s, the reference's wheel speeds [right, left] at t: (v_r +/- b w_r) / r with the
+        NOMINAL r, b -- the wheel-speed set-points a planner would send (uncorrelated with the disturbance),
+        logged as eta_ref_r, eta_ref_l (the instruments of ``identify --method iv``, :mod:`wmrid.iv`).
     disturbance : (n, 2) N m, caster torque tau_d applied over the control period starting at t (unlogged
         in a real log; kept for tests and diagnostics).
     eta_true : (n, 2) rad/s, true wheel velocities at t (the clean counterpart of ``eta``).
@@ -306,6 +309,7 @@ class SimulatedLog:
     disturbance: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
     eta_true: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
     change: PlantChange | None = field(repr=False, default=None)
+    eta_ref: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
 
     def plant_at(self, t: float) -> PhysicalParameters:
         """The plant's parameters over the control period starting at t (s): ``true`` before the switch time,
@@ -316,7 +320,8 @@ class SimulatedLog:
         return self.change.after if t >= t_switch - 1e-9 * self.settings["control_period"] else self.true
 
     def to_frame(self) -> pandas.DataFrame:
-        """Columns t, eta_r, eta_l, tau_r, tau_l, x, y, phi, theta_r, theta_l (SI units; r = right)."""
+        """Columns t, eta_r, eta_l, tau_r, tau_l, x, y, phi, theta_r, theta_l, eta_ref_r, eta_ref_l (SI units;
+        r = right; the last two: the reference's wheel speeds, :attr:`eta_ref`)."""
         import pandas as pd
 
         return pd.DataFrame(
@@ -331,6 +336,8 @@ class SimulatedLog:
                 "phi": self.pose[:, 2],
                 "theta_r": self.wheel_angle[:, 0],
                 "theta_l": self.wheel_angle[:, 1],
+                "eta_ref_r": self.eta_ref[:, 0],
+                "eta_ref_l": self.eta_ref[:, 1],
             }
         )
 
@@ -398,6 +405,17 @@ def _reference(kind, traj, t, xr_int, yr_int):
     wdot = wamp * ow * math.cos(ow * t)
     phi = wamp / ow * (1.0 - math.cos(ow * t))
     return xr_int, yr_int, phi, v, w, vdot, wdot
+
+
+@numba.njit(cache=True, nogil=True)
+def reference_wheel_speeds(kind, traj, t, r, b):
+    """(n, 2) rad/s: the reference's wheel speeds [(v_r + b w_r) / r, (v_r - b w_r) / r] at times t (n,) s."""
+    out = np.empty((t.shape[0], 2))
+    for i in range(t.shape[0]):
+        ref = _reference(kind, traj, t[i], 0.0, 0.0)
+        out[i, 0] = (ref[3] + b * ref[4]) / r
+        out[i, 1] = (ref[3] - b * ref[4]) / r
+    return out
 
 
 @numba.njit(cache=True, nogil=True)
@@ -756,11 +774,12 @@ class RunPlan:
         }
         if change is not None:
             settings["change"] = change.to_dict(self.period)
-        for a in (t, eta_log, tau_log, pose, angle, refpose, dist, eta_true):
+        eta_ref = reference_wheel_speeds(_KIND[self.trajectory], self.traj, t, self.nominal.r, self.nominal.b)
+        for a in (t, eta_log, tau_log, pose, angle, refpose, dist, eta_true, eta_ref):
             a.setflags(write=False)
         return SimulatedLog(
             t=t, eta=eta_log, tau=tau_log, pose=pose, wheel_angle=angle, true=true, nominal=self.nominal,
-            settings=settings, reference=refpose, disturbance=dist, eta_true=eta_true, change=change,
+            settings=settings, reference=refpose, disturbance=dist, eta_true=eta_true, change=change, eta_ref=eta_ref,
         )  # fmt: skip
 
 

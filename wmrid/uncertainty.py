@@ -100,6 +100,16 @@ def jackknife_covariance(
     right-hand side of the normal equations), blk_a (J, p, p), blk_c (J, 2, p) per-block sums,
     segment (J,) the segment index of each block in [0, n_segments).
     """
+    deltas = jackknife_deltas(gamma, theta, blk_a, blk_c, segment, n_segments)
+    centred = deltas - deltas.mean(axis=0)
+    return (n_segments - 1) / n_segments * (centred.T @ centred)
+
+
+def jackknife_deltas(
+    gamma: np.ndarray, theta: np.ndarray, blk_a: np.ndarray, blk_c: np.ndarray, segment: np.ndarray, n_segments: int
+) -> np.ndarray:
+    """theta_(g) - theta (G, 2p), ravelled: the estimate with segment g left out, exact from the block sums
+    (arguments as :func:`jackknife_covariance`)."""
     rhs = gamma @ theta.T  # (p, 2)
     deltas = np.empty((n_segments, theta.size))
     for g in range(n_segments):
@@ -108,8 +118,7 @@ def jackknife_covariance(
         c_g = blk_c[sel].sum(axis=0)
         theta_g = np.linalg.solve(gamma - a_g, rhs - c_g.T).T
         deltas[g] = (theta_g - theta).ravel()
-    centred = deltas - deltas.mean(axis=0)
-    return (n_segments - 1) / n_segments * (centred.T @ centred)
+    return deltas
 
 
 def interval_factor(coverage: float, dof: int) -> float:
