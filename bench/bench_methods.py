@@ -55,8 +55,10 @@ def main() -> None:
         for seed in range(1, args.seeds + 1):
             sim = simulate(robot.reference, robot.nominal, trajectory=args.trajectory, duration=args.duration,
                            noise=noise, seed=seed)  # fmt: skip
-            log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source=f"seed {seed}", notes=())
-            observer = identify(log, robot)
+            log = SimpleNamespace(
+                t=sim.t, eta=sim.eta, tau=sim.tau, source=f"seed {seed}", notes=(), reference=sim.eta_ref
+            )
+            observer = identify(log, robot, feedback=False)  # the observer's own estimate, as compare shows it
             data = compare(log, observer, MethodOptions(), truth=truth)
             for m, row in data["methods"].items():
                 seconds[m].append(row["seconds"])

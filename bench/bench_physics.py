@@ -262,7 +262,7 @@ def _error_text(err: BaseException) -> str:
 
 def run_job(job: Job) -> dict[str, Any]:
     """Simulate (or load) one log and identify it with every method; one JSON-ready row."""
-    from wmrid import methods, model
+    from wmrid import feedback, methods, model
     from wmrid.errors import WmridError
     from wmrid.identify import identify
     from wmrid.logio import WheelLog
@@ -303,8 +303,9 @@ def run_job(job: Job) -> dict[str, Any]:
         t0 = time.perf_counter()
         try:
             if name == "observer":
-                observer = identify(log, robot, control_rate=control_rate)
-                res = observer
+                # the observer's own run (the other methods start from it), then the default's closed-loop check
+                observer = identify(log, robot, control_rate=control_rate, feedback=False)
+                res = feedback.check(observer, log, robot)
             elif name == "observer+caster":
                 if c.trajectory == "sinusoid":
                     out[name] = {"status": "skip", "seconds": 0.0}

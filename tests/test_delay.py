@@ -189,7 +189,8 @@ def test_the_delays_uncertainty_is_in_the_std():
 def test_a_slow_log_of_a_faster_controller_is_named_by_default(rate):
     """The issue's case: a 1 kHz controller logged at 100 Hz or 20 Hz, default options (no --delay).  The hold check
     (wmrid.delay.hold_check) finds the efforts acting well before the half logged step the default hold assumes
-    (measured: 4.5 of 5 ms, 24.6 of 25 ms) and names --control-rate; no parameter is beyond 3 std unflagged."""
+    (measured: 4.5 of 5 ms, 24.6 of 25 ms), applies that delay (--delay auto) and names --control-rate; no
+    parameter is beyond 3 std unflagged."""
     from types import SimpleNamespace
 
     from wmrid.identify import identify
@@ -198,6 +199,8 @@ def test_a_slow_log_of_a_faster_controller_is_named_by_default(rate):
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="slow", notes=())
     result = identify(log, AMR)
     assert result.diagnostics["hold"]["faster_controller"]
+    assert result.diagnostics["delay"]["chosen_by"] == "auto"
+    assert result.diagnostics["delay"]["applied_s"] > 0
     assert any("--control-rate" in w for w in result.warnings)
     truth = sim.truth()["parameters"]
     flagged = set(result.diagnostics.get("flagged", [])) | set(result.diagnostics.get("inflated", []))

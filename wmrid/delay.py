@@ -164,6 +164,13 @@ SLOW_LOG_HZ = 400.0
 HOLD_CHECK_MAX_SAMPLES = 2_000_000
 
 
+def search_span(t: np.ndarray) -> float:
+    """s: the delay search's half-width for a log with times t (n,) s: DEFAULT_SPAN_S, or 1.2 logged steps when
+    longer (a slow log's held effort can lag its stamp by half a step: 25 ms at 20 Hz)."""
+    step = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    return max(DEFAULT_SPAN_S, 1.2 * step)
+
+
 def faster_controller_text(est: Any, t: np.ndarray) -> str:
     """The warning for a faster controller found by ``est`` on a log with times t (n,) s."""
     half = 0.5 * float(np.median(np.diff(t)))
@@ -178,9 +185,10 @@ def faster_controller_text(est: Any, t: np.ndarray) -> str:
 def hold_check(log: Any, torque_hold: str, control_rate: float | None) -> tuple[dict[str, Any], list[str]]:
     """(record for ``diagnostics["hold"]``, warnings): whether a log slower than SLOW_LOG_HZ, read under the default
     hold (zoh, no --control-rate), was set by a faster controller (:func:`faster_controller` on
-    :func:`estimate_delay`, searched over +/- max(DEFAULT_SPAN_S, 1.2 logged steps)).  Nothing is applied: the
-    warning names --control-rate.  Measured on the light AMR, 1 kHz controller: 100 Hz log 4.5 ms of the 5 ms half
-    step, 20 Hz log 24.6 of 25 ms, both found; a 1 kHz log of it is not checked."""
+    :func:`estimate_delay`, searched over +/- max(DEFAULT_SPAN_S, 1.2 logged steps)); :func:`wmrid.identify.identify`
+    then applies the delay (``delay="auto"``, whose warning names --control-rate).  Measured on the light AMR, 1 kHz
+    controller: 100 Hz log 4.5 ms of the 5 ms half step, 20 Hz log 24.6 of 25 ms, both found; a 1 kHz log of it is
+    not checked."""
     from wmrid.logio import LogStream
 
     none = {"checked": False}
@@ -195,8 +203,7 @@ def hold_check(log: Any, torque_hold: str, control_rate: float | None) -> tuple[
         return {**none, "why": f"the log is not slower than {SLOW_LOG_HZ:g} Hz"}, []
     try:
         est = estimate_delay(
-            t, np.asarray(whole.eta, dtype=np.float64), np.asarray(whole.tau, dtype=np.float64),
-            span=max(DEFAULT_SPAN_S, 1.2 * step),
+            t, np.asarray(whole.eta, dtype=np.float64), np.asarray(whole.tau, dtype=np.float64), span=search_span(t)
         )  # fmt: skip
     except (NotIdentifiableError, UsageError) as err:
         return {**none, "why": str(err)}, []
@@ -223,7 +230,7 @@ def apply_delay(
     source = getattr(whole, "source", "log")
     warnings: list[str] = []
     if delay == "auto":
-        est = estimate_delay(t, eta, tau, torque_hold=torque_hold, control_rate=control_rate)
+        est = estimate_delay(t, eta, tau, span=search_span(t), torque_hold=torque_hold, control_rate=control_rate)
         record = {"chosen_by": "auto", **est.to_dict()}
         applied = est.delay if est.significant and not est.at_edge else 0.0
         if est.at_edge:

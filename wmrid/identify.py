@@ -297,25 +297,21 @@ def identify(
     ``feedback`` : run the whole-log checks after the replay.  The closed-loop check (:func:`wmrid.feedback.check`):
     when the observer's estimate differs from IDIM's (IDIM-IV's, when the log has the wheel-speed reference) beyond
     noise, report that one instead, with a warning; ``diagnostics["feedback"]`` states what was compared.  And,
-    without ``delay``, the hold check (:func:`wmrid.delay.hold_check`): a log slower than 400 Hz set by a faster
-    controller gets a warning naming --control-rate (``diagnostics["hold"]``).
+    without ``delay``, the hold check (:func:`wmrid.delay.hold_check`, ``diagnostics["hold"]``): a log slower than
+    400 Hz set by a faster controller is identified with ``delay="auto"``, whose warning names --control-rate.
     """
     if friction not in FRICTION_CHOICES:
         raise UsageError(f"--friction must be one of {', '.join(FRICTION_CHOICES)}, got {friction!r}")
+
+    hold_record: dict[str, Any] | None = None  # the hold check's, when it runs (below)
 
     def checked(result: IdentificationResult, log_read: Any) -> IdentificationResult:
         if not feedback:
             return result
         from wmrid.feedback import check
 
-        if delay is None:  # --delay auto judges the hold itself (wmrid.delay.apply_delay)
-            from wmrid.delay import hold_check
-
-            record, hold_warnings = hold_check(log_read, torque_hold, control_rate)
-            result = replace(
-                result, diagnostics={**result.diagnostics, "hold": record},
-                warnings=tuple(hold_warnings) + tuple(result.warnings),
-            )  # fmt: skip
+        if hold_record is not None:
+            result = replace(result, diagnostics={**result.diagnostics, "hold": hold_record})
         return check(result, log_read, robot)
 
     if payload and robot is None:
@@ -344,14 +340,21 @@ def identify(
     checked_log = log
     sv = survey(stream, stream.source, stream.effort_unit)  # one survey pass, whichever models are fitted
     if delay is None and feedback:
+        from wmrid.delay import hold_check
         from wmrid.joints import split_topics
 
-        if split_topics(stream.notes):  # efforts and speeds from two topics: time them by default
-            return identify(
+        if not split_topics(stream.notes):
+            hold_record, _ = hold_check(log, torque_hold, control_rate)
+        # efforts and speeds from two topics, or a slow log of a faster controller: time the efforts by default
+        if split_topics(stream.notes) or (hold_record or {}).get("faster_controller"):
+            timed = identify(
                 log, robot, form=form, k=k, alpha=alpha, box_width=box_width, max_history=max_history,
                 torque_hold=torque_hold, progress=progress, payload=payload, control_rate=control_rate,
                 friction=friction, geometry=geometry, delay="auto",
             )  # fmt: skip
+            if hold_record is None:
+                return timed
+            return replace(timed, diagnostics={**timed.diagnostics, "hold": hold_record})
 
     def run(caster: bool) -> IdentificationResult:
         try:
