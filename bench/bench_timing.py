@@ -11,7 +11,7 @@ For each engine (wmrid's reduced simulator; the MuJoCo multibody prototype, fric
 shifted by that delay (:func:`wmrid.idim.shifted`; + = stamped late); ``100hz``, ``20hz``: logged at that rate
 (a decimated record of the 1 kHz loop); ``backdiff``: speeds as backward differences of a 2^20-count encoder (half
 a sample of lag; reduced engine only).  Each log is identified three times with the default method: ``before``
-(``feedback=False``: without the closed-loop and hold checks, as wmrid did before issue 12), ``default``
+(``feedback=False, timing=False``: without the closed-loop and timing checks, as wmrid did before issue 12), ``default``
 (``identify(log, amr)``), and ``auto`` (``delay="auto"``).  Printed per case and run: the delay found (median, and
 the share of seeds within 1 ms of the true one), the error of the friction terms (median of the largest |error|
 over Fv1, Fv2, Fd1, Fd2, in % of the truth), of the inertia entries and Vc, the share of seeds whose every parameter
@@ -64,7 +64,8 @@ def one(job: tuple[str, str, str, int, float]) -> dict:
     truth = model.named_base(model.base_parameters(sim.true))
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=shifted(sim.t, sim.tau, delay), source="bench", notes=())
     out = {"job": job}
-    for name, kwargs in (("before", {"feedback": False}), ("default", {}), ("auto", {"delay": "auto"})):
+    before = {"feedback": False, "timing": False}
+    for name, kwargs in (("before", before), ("default", {}), ("auto", {"delay": "auto"})):
         res = identify(log, amr, **kwargs)
         flagged = set(res.diagnostics.get("flagged", []))
         err = {p: abs(res.parameters[p][0] / truth[p] - 1) * 100 for p in PARAMS}

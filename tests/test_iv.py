@@ -169,3 +169,28 @@ def test_the_cli_reads_the_reference_and_runs_iv(tmp_path, capsys, clean_sim):
     text = capsys.readouterr().err
     assert "eta_ref_r" in text
     assert text.count("\n") == 1
+
+
+def test_a_bad_reference_cell_drops_the_reference_unless_it_was_named(tmp_path, clean_sim):
+    """The reference is optional, like the pose: a blank cell under its default names drops it with a note; named
+    by --columns it must be usable (one-line error naming the row); naming one of the two columns needs both."""
+    frame = clean_sim.to_frame().iloc[:2000].copy()
+    frame["eta_ref_r"] = frame["eta_ref_r"].astype(object)
+    frame.loc[5, "eta_ref_r"] = ""
+    path = tmp_path / "gap.csv"
+    frame.to_csv(path, index=False)
+    log = read_log(str(path))
+    assert log.reference is None
+    assert any("reference columns ignored" in note for note in log.notes)
+    with pytest.raises(Exception, match="eta_ref_r"):
+        read_log(str(path), columns={"eta_ref_r": "eta_ref_r", "eta_ref_l": "eta_ref_l"})
+    with pytest.raises(Exception, match="eta_ref_l"):
+        read_log(str(path), columns={"eta_ref_r": "eta_ref_r", "eta_ref_l": "nope"})
+
+
+def test_an_applied_delay_keeps_the_reference(clean_sim):
+    from wmrid.delay import apply_delay
+
+    shifted_log, record, _ = apply_delay(as_log(clean_sim), 0.002, "zoh", None)
+    assert record["applied_s"] == 0.002
+    np.testing.assert_array_equal(shifted_log.reference, clean_sim.eta_ref)

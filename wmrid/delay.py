@@ -182,30 +182,33 @@ def faster_controller_text(est: Any, t: np.ndarray) -> str:
     )
 
 
-def hold_check(log: Any, torque_hold: str, control_rate: float | None) -> tuple[dict[str, Any], list[str]]:
+def hold_check(
+    log: Any, torque_hold: str, control_rate: float | None, samples: int, median_step: float
+) -> tuple[dict[str, Any], list[str]]:
     """(record for ``diagnostics["hold"]``, warnings): whether a log slower than SLOW_LOG_HZ, read under the default
     hold (zoh, no --control-rate), was set by a faster controller (:func:`faster_controller` on
     :func:`estimate_delay`, searched over +/- max(DEFAULT_SPAN_S, 1.2 logged steps)); :func:`wmrid.identify.identify`
     then applies the delay (``delay="auto"``, whose warning names --control-rate).  Measured on the light AMR, 1 kHz
     controller: 100 Hz log 4.5 ms of the 5 ms half step, 20 Hz log 24.6 of 25 ms, both found; a 1 kHz log of it is
-    not checked."""
+    not checked.  ``samples`` and ``median_step`` (s) come from the survey, so a log that is not checked is not read
+    again; one that cannot be profiled (a hole, too short for the filter) is not checked, and the record says why."""
+    from wmrid.errors import WmridError
     from wmrid.logio import LogStream
 
     none = {"checked": False}
     if torque_hold != "zoh" or control_rate is not None:
         return {**none, "why": "the hold is given (--torque-hold foh or --control-rate)"}, []
+    if median_step <= 0 or 1.0 / median_step >= SLOW_LOG_HZ:
+        return {**none, "why": f"the log is not slower than {SLOW_LOG_HZ:g} Hz"}, []
+    if samples < 2 or samples > HOLD_CHECK_MAX_SAMPLES:
+        return {**none, "why": f"{samples} samples (the check holds at most {HOLD_CHECK_MAX_SAMPLES} in memory)"}, []
     whole = log.read() if isinstance(log, LogStream) else log
     t = np.asarray(whole.t, dtype=np.float64)
-    if len(t) < 2 or len(t) > HOLD_CHECK_MAX_SAMPLES:
-        return {**none, "why": f"{len(t)} samples"}, []
-    step = float(np.median(np.diff(t)))
-    if step <= 0 or 1.0 / step >= SLOW_LOG_HZ:
-        return {**none, "why": f"the log is not slower than {SLOW_LOG_HZ:g} Hz"}, []
     try:
         est = estimate_delay(
             t, np.asarray(whole.eta, dtype=np.float64), np.asarray(whole.tau, dtype=np.float64), span=search_span(t)
         )  # fmt: skip
-    except (NotIdentifiableError, UsageError) as err:
+    except WmridError as err:
         return {**none, "why": str(err)}, []
     found = bool(est.significant and not est.at_edge and faster_controller(est, t, torque_hold, control_rate))
     record = {"checked": True, **est.to_dict(), "faster_controller": found}
@@ -260,6 +263,7 @@ def apply_delay(
         return whole, record, warnings
     shifted_log = WheelLog(
         t=t, eta=eta, tau=shifted(t, tau, -applied), source=source, notes=tuple(getattr(whole, "notes", ())),
-        effort_unit=getattr(whole, "effort_unit", "N m"),
+        effort_unit=getattr(whole, "effort_unit", "N m"), pose=getattr(whole, "pose", None),
+        reference=getattr(whole, "reference", None),
     )  # fmt: skip
     return shifted_log, record, warnings

@@ -13,8 +13,9 @@ The second estimate: IDIM-IV (:func:`wmrid.iv.identify_iv`) when the log carries
 reaches only through the tracking error the controller lets through.  Both are fitted on the observer's jackknife
 segments, so the difference delta = theta0_observer - theta0_other has a delete-a-segment jackknife of its own
 (the classical Hausman variance V_IV - V_LS needs the least-squares estimate to be efficient, which the observer
-on coloured residuals is not).  When some |delta_j| exceeds GATE times its jackknife std, wmrid says so and
-reports the second estimate, with its own standard errors and checks (:func:`wmrid.identify.with_estimate`).
+on coloured residuals is not).  When some |delta_j| exceeds the gate (FAMILY_ALPHA) in its jackknife std, wmrid
+says so and reports the second estimate, with its own standard errors and checks
+(:func:`wmrid.identify.with_estimate`).
 
 Measured (``bench/bench_coverage.py --robot amr --caster 0.02 --eta-noise 0.02 --tau-noise 0.01``, 20 seeds): see
 the README section "Closed-loop bias".
@@ -27,11 +28,13 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.errors import UsageError, WmridError
+from wmrid.errors import NotIdentifiableError, UsageError, WmridError
 from wmrid.estimate import BaseEstimate
 
-#: The check reports the other estimate when some |delta_j| exceeds this many jackknife std of delta_j.
-GATE = 3.0
+#: The check reports the other estimate when some |delta_j| exceeds the gate, in jackknife std of delta_j: the
+#: Student-t quantile (G - 1 dof) that keeps the chance of any of the m judged parameters passing it by noise alone
+#: at FAMILY_ALPHA (Bonferroni): 3.9 std for 8 parameters on 40 s logs (19 dof), 4.8 on 20 s logs (9 dof).
+FAMILY_ALPHA = 0.01
 #: A disturbance is in evidence when the observer's prediction error exceeds the speeds' noise this many times
 #: (:func:`wmrid.model_error.prediction_misfit`): sqrt(2), an unmodelled part at least as large as the noise.
 DISTURBANCE_RATIO = 2.0**0.5
@@ -43,13 +46,18 @@ DISTURBANCE_SHARE = 1e-4
 MAX_SAMPLES = 2_000_000
 
 
-def difference_test(a: BaseEstimate, b: BaseEstimate, names: tuple[str, ...], gate: float = GATE) -> dict[str, Any]:
+def difference_test(
+    a: BaseEstimate, b: BaseEstimate, names: tuple[str, ...], gate: float | None = None
+) -> dict[str, Any]:
     """theta0 of ``a`` minus that of ``b``, judged by the delete-a-segment jackknife of the difference.
 
     Both need :attr:`BaseEstimate.segments` on the same grid.  Parameters either method leaves undetermined
-    (infinite std) are not judged.  Returns {"applied": some ratio > gate, "delta", "sd", "ratio" (per name),
-    "largest_ratio", "largest", "gate", "dof"}.
+    (infinite std) are not judged (their delta is reported as 0).  gate: in jackknife std (default: FAMILY_ALPHA's
+    Bonferroni Student-t quantile for the judged count).  Returns {"applied": some ratio > gate, "delta", "sd",
+    "ratio" (per name), "largest_ratio", "largest", "gate", "dof"}.
     """
+    from scipy.special import stdtrit
+
     sa, sb = a.segments, b.segments
     if sa is None or sb is None or sa.grid != sb.grid:
         raise UsageError("difference_test needs both estimates' leave-one-segment-out fits on the same grid")
@@ -61,6 +69,9 @@ def difference_test(a: BaseEstimate, b: BaseEstimate, names: tuple[str, ...], ga
     judged = np.isfinite(a.std) & np.isfinite(b.std) & np.isfinite(delta) & (sd > 0) & np.all(np.isfinite(loo), axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(judged, np.abs(delta) / sd, 0.0)
+    delta = np.where(judged, delta, 0.0)
+    if gate is None:
+        gate = float(stdtrit(g - 1, 1.0 - FAMILY_ALPHA / (2.0 * max(int(judged.sum()), 1))))
     j = int(np.argmax(ratio))
     return {
         "applied": bool(ratio[j] > gate),
@@ -88,7 +99,10 @@ def other_estimate(log: Any, result: Any, grid: tuple[float, float, int] | None 
     if reference is not None:
         from wmrid.iv import identify_iv
 
-        return identify_iv(t, eta, tau, reference, **common)
+        try:
+            return identify_iv(t, eta, tau, reference, **common)
+        except NotIdentifiableError:  # a reference that does not describe the motion: IDIM, as without one
+            pass
     from wmrid.idim import identify_idim
 
     return identify_idim(t, eta, tau, **common)

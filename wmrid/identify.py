@@ -16,7 +16,7 @@ import numpy as np
 
 from wmrid import model
 from wmrid.base_params import derived_with_std, fit_base_parameters
-from wmrid.errors import NotIdentifiableError, UsageError
+from wmrid.errors import NotIdentifiableError, UsageError, WmridError
 from wmrid.estimate import BaseEstimate, SegmentEstimates
 from wmrid.logio import LogStream, stream_arrays
 from wmrid.model import THETA0_UNITS, RegressorForm
@@ -269,6 +269,7 @@ def identify(
     geometry: tuple[float, ...] = (),
     delay: float | Literal["auto"] | None = None,
     feedback: bool = True,
+    timing: bool = True,
 ) -> IdentificationResult:
     """Identify the base parameters of the robot that recorded ``log``.
 
@@ -292,13 +293,15 @@ def identify(
     that much earlier (:func:`wmrid.idim.shifted`; the log is then read into memory); ``"auto"``: estimated
     from the log (:func:`wmrid.delay.estimate_delay`) and applied when significant; None: as stamped, unless the
     reading notes say the efforts came from another topic than the speeds (:func:`wmrid.joints.split_topics`),
-    then ``"auto"`` (with ``feedback``).
+    then ``"auto"`` (with ``timing``).
     ``diagnostics["delay"]`` states what was estimated and applied.
-    ``feedback`` : run the whole-log checks after the replay.  The closed-loop check (:func:`wmrid.feedback.check`):
-    when the observer's estimate differs from IDIM's (IDIM-IV's, when the log has the wheel-speed reference) beyond
-    noise, report that one instead, with a warning; ``diagnostics["feedback"]`` states what was compared.  And,
-    without ``delay``, the hold check (:func:`wmrid.delay.hold_check`, ``diagnostics["hold"]``): a log slower than
-    400 Hz set by a faster controller is identified with ``delay="auto"``, whose warning names --control-rate.
+    ``feedback`` : run the closed-loop check (:func:`wmrid.feedback.check`): when the observer's estimate differs
+    from IDIM's (IDIM-IV's, when the log has the wheel-speed reference) beyond noise, report that one instead, with a
+    warning; ``diagnostics["feedback"]`` states what was compared.  ``timing`` : without ``delay``, time the efforts
+    by default where the log calls for it: split topics (above), and the hold check (:func:`wmrid.delay.hold_check`,
+    ``diagnostics["hold"]``): a log slower than 400 Hz set by a faster controller is identified with
+    ``delay="auto"``, whose warning names --control-rate.  A log that cannot be timed is used as stamped, with a
+    warning.
     """
     if friction not in FRICTION_CHOICES:
         raise UsageError(f"--friction must be one of {', '.join(FRICTION_CHOICES)}, got {friction!r}")
@@ -310,8 +313,6 @@ def identify(
             return result
         from wmrid.feedback import check
 
-        if hold_record is not None:
-            result = replace(result, diagnostics={**result.diagnostics, "hold": hold_record})
         return check(result, log_read, robot)
 
     if payload and robot is None:
@@ -331,30 +332,37 @@ def identify(
                 "form": form, "k": k, "alpha": alpha, "box_width": box_width, "max_history": max_history,
                 "torque_hold": torque_hold, "payload": payload, "control_rate": control_rate, "geometry": geometry,
             }  # fmt: skip
-            base = identify(log, robot, friction=friction, feedback=False, **common)
+            base = identify(log, robot, friction=friction, feedback=False, timing=False, progress=progress, **common)
             moved = identify(
-                original, robot, friction=base.form.friction, delay=applied + step, feedback=False, **common
+                original, robot, friction=base.form.friction, delay=applied + step, feedback=False, timing=False,
+                **common,
             )  # fmt: skip
             return checked(_with_timing_term(base, moved, delay_record, delay_warnings, step), log)
     stream = log if isinstance(log, LogStream) else stream_arrays(log)
     checked_log = log
     sv = survey(stream, stream.source, stream.effort_unit)  # one survey pass, whichever models are fitted
-    if delay is None and feedback:
+    timing_warnings: list[str] = []
+    if timing and (delay is None or (delay == "auto" and not (delay_record or {}).get("applied_s"))):
         from wmrid.delay import hold_check
         from wmrid.joints import split_topics
 
-        if not split_topics(stream.notes):
-            hold_record, _ = hold_check(log, torque_hold, control_rate)
+        split = split_topics(stream.notes)
+        if not split:
+            hold_record, _ = hold_check(log, torque_hold, control_rate, sv.n, sv.median_step)
         # efforts and speeds from two topics, or a slow log of a faster controller: time the efforts by default
-        if split_topics(stream.notes) or (hold_record or {}).get("faster_controller"):
-            timed = identify(
-                log, robot, form=form, k=k, alpha=alpha, box_width=box_width, max_history=max_history,
-                torque_hold=torque_hold, progress=progress, payload=payload, control_rate=control_rate,
-                friction=friction, geometry=geometry, delay="auto",
-            )  # fmt: skip
-            if hold_record is None:
-                return timed
-            return replace(timed, diagnostics={**timed.diagnostics, "hold": hold_record})
+        if delay is None and (split or (hold_record or {}).get("faster_controller")):
+            try:
+                timed = identify(
+                    log, robot, form=form, k=k, alpha=alpha, box_width=box_width, max_history=max_history,
+                    torque_hold=torque_hold, progress=progress, payload=payload, control_rate=control_rate,
+                    friction=friction, geometry=geometry, delay="auto", feedback=feedback,
+                )  # fmt: skip
+            except WmridError as err:  # e.g. a hole IDIM's filter cannot bridge: as stamped, and say so
+                timing_warnings.append(f"the efforts could not be timed against the speeds ({err}); used as stamped")
+            else:
+                if hold_record is None:
+                    return timed
+                return replace(timed, diagnostics={**timed.diagnostics, "hold": hold_record})
 
     def run(caster: bool) -> IdentificationResult:
         try:
@@ -370,10 +378,25 @@ def identify(
 
     def finish(result: IdentificationResult, friction_record: dict[str, Any]) -> IdentificationResult:
         result = _with_friction(result, friction_record)
+        if hold_record is not None:
+            result = replace(result, diagnostics={**result.diagnostics, "hold": hold_record})
+        if timing_warnings:
+            result = replace(result, warnings=tuple(timing_warnings) + tuple(result.warnings))
         if delay_record is not None:
             diagnostics = {**result.diagnostics, "delay": delay_record}
             result = replace(result, diagnostics=diagnostics, warnings=tuple(delay_warnings) + tuple(result.warnings))
-        return checked(result, checked_log)
+        observer = result.estimate
+        result = checked(result, checked_log)
+        if (hold_record or {}).get("checked") and not hold_record.get("faster_controller") and observer is not None:
+            # a slow log whose controller rate is unknown: the truth lies between a hold at the log's rate (zoh)
+            # and a controller much faster than the log (foh); that bracket, the std carries (the hold term)
+            other = identify(
+                checked_log, robot, form=form, k=k, alpha=alpha, box_width=box_width, max_history=max_history,
+                torque_hold="foh", payload=False, friction=result.form.friction, geometry=geometry, feedback=False,
+                timing=False,
+            )  # fmt: skip
+            result = _with_hold_term(result, observer, other)
+        return result
 
     if friction != "auto":
         result = run(friction == "wheel+caster")
@@ -391,6 +414,43 @@ def identify(
         f" < {AUTO_P:g}" if chosen is caster else f" >= {AUTO_P:g}: not shown by this log"
     )
     return finish(chosen, {"model": chosen.form.friction, "chosen_by": "auto", "reason": reason, **choice})
+
+
+def _with_hold_term(result: IdentificationResult, zoh: BaseEstimate, foh: IdentificationResult) -> IdentificationResult:
+    """``result`` with delta delta^T added to its covariance, delta the observer's estimate under --torque-hold foh
+    (``foh``) minus that under zoh (``zoh``, the observer's estimate behind ``result``): on a log slower than the hold
+    check's 400 Hz whose controller rate is unknown, the hold is uncertain between those two.  Measured on the light
+    AMR (bench/bench_timing.py, 1 kHz controller): at 100 Hz zoh and foh bias friction by about the same amount in
+    opposite directions, so the bracket covers the truth.  Parameters widened beyond INFLATION_MARK are marked."""
+    from wmrid.model_error import INFLATION_MARK
+
+    est = result.estimate
+    if est is None or foh.estimate is None or len(foh.estimate.theta0) != len(zoh.theta0):
+        return result
+    delta = np.asarray(foh.estimate.theta0, dtype=float) - np.asarray(zoh.theta0, dtype=float)
+    if len(delta) != len(est.theta0) or not np.all(np.isfinite(delta)):
+        return result
+    cov = np.asarray(est.cov, dtype=float) + np.outer(delta, delta)
+    parameters = derived_with_std(np.asarray(est.theta0, dtype=float), cov, result.form.base_names)
+    parameters = {name: parameters[name] for name in reported_names(result.form)}
+    grown = [
+        name for name, (_, std) in parameters.items()
+        if math.isfinite(std) and std > INFLATION_MARK * result.parameters[name][1]
+    ]  # fmt: skip
+    diagnostics = dict(result.diagnostics)
+    diagnostics["hold"] = {**diagnostics.get("hold", {}), "hold_term": {"delta": delta.tolist(), "widened": grown}}
+    diagnostics["inflated"] = [n for n in parameters if n in set(diagnostics.get("inflated", [])) | set(grown)]
+    warnings = list(result.warnings)
+    if grown:
+        warnings.append(
+            f"the log ({1.0 / result.log_info['rate_hz'] * 1e3:.3g} ms steps) does not say how fast the controller "
+            f"that held its efforts was; the estimates under a hold over each step and a much faster controller "
+            f"differ, and the std of {', '.join(grown)} carries that difference: give --control-rate HZ if known"
+        )
+    return replace(
+        result, parameters=parameters, diagnostics=diagnostics, warnings=tuple(warnings),
+        estimate=replace(est, cov=cov),
+    )  # fmt: skip
 
 
 def _with_timing_term(

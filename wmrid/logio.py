@@ -212,8 +212,10 @@ class LogStream:
 
 
 def stream_arrays(log: Any, rows: int = CHUNK_ROWS) -> LogStream:
-    """A :class:`LogStream` over a log already in memory (t, eta, tau arrays; source, notes, effort_unit)."""
+    """A :class:`LogStream` over a log already in memory (t, eta, tau arrays; source, notes, effort_unit; pose and
+    reference when it has them)."""
     t, eta, tau = log.t, log.eta, log.tau
+    pose, reference = getattr(log, "pose", None), getattr(log, "reference", None)
     source = getattr(log, "source", "log")
     unit = getattr(log, "effort_unit", "N m")
     notes = tuple(getattr(log, "notes", ()))
@@ -221,7 +223,11 @@ def stream_arrays(log: Any, rows: int = CHUNK_ROWS) -> LogStream:
     def pieces() -> Generator[WheelLog, None, tuple[str, ...]]:
         for start in range(0, len(t), rows):
             stop = start + rows
-            yield WheelLog(t=t[start:stop], eta=eta[start:stop], tau=tau[start:stop], source=source, effort_unit=unit)
+            yield WheelLog(
+                t=t[start:stop], eta=eta[start:stop], tau=tau[start:stop], source=source, effort_unit=unit,
+                pose=None if pose is None else pose[start:stop],
+                reference=None if reference is None else reference[start:stop],
+            )  # fmt: skip
         return notes
 
     return LogStream(source, unit, pieces)
@@ -421,7 +427,7 @@ def open_log(
     effort_unit = "N m" if signals == SignalOptions() else signals.effort_label
 
     def pieces() -> Generator[WheelLog, None, tuple[str, ...]]:
-        assembler = _Assembler(source.name, mapping, time_unit, hint, where)
+        assembler = _Assembler(source.name, mapping, time_unit, hint, where, bool(explicit & set(REFERENCE)))
         signal_notes: list[str] = []
         for base, values in chunks():
             piece = assembler.add(values, base)
@@ -621,7 +627,9 @@ def _select(present: list[str], mapping: dict[str, str], explicit: set[str], nam
     Raises one :class:`LogFormatError` naming every missing column, the columns there are, close
     matches, and the ``--columns`` option that would fix it.
     """
-    needed = list(REQUIRED) + [k for k in POSE + REFERENCE if k in explicit]
+    needed = list(REQUIRED) + [k for k in POSE if k in explicit]
+    if explicit & set(REFERENCE):  # one reference column named: both are needed
+        needed += list(REFERENCE)
     missing = [k for k in needed if mapping[k] not in present]
     if missing:
         parts, fixes = [], []
@@ -1087,9 +1095,12 @@ class _Assembler:
     """
 
     def __init__(
-        self, name: str, mapping: dict[str, str], time_unit: str, hint: str | None, where: Callable[[int], str]
-    ):
+        self, name: str, mapping: dict[str, str], time_unit: str, hint: str | None, where: Callable[[int], str],
+        reference_required: bool = False,
+    ):  # fmt: skip
         self.name, self.mapping, self.time_unit, self.hint, self.where = name, mapping, time_unit, hint, where
+        self.reference_required = reference_required  # named by --columns: a bad cell is an error, not a note
+        self.reference_ok = True
         self.notes: list[str] = []
         self.unit: str | None = None
         self.kind: str | None = None  # "i" or "f": the time column's kind in the first piece
@@ -1178,17 +1189,31 @@ class _Assembler:
         eta = np.column_stack([arrays["eta_r"], arrays["eta_l"]]).astype(np.float64, copy=False)
         tau = np.column_stack([arrays["tau_r"], arrays["tau_l"]]).astype(np.float64, copy=False)
         pose = self._pose(values, where) if self.pose_ok else None
-        reference = None
-        if all(k in values for k in REFERENCE):  # optional, but when named it must be numbers, every row
-            refs = []
-            for key in REFERENCE:
-                arr = _numeric(values[key], key, mapping[key], name, where).astype(np.float64, copy=False)
+        reference = self._reference(values, where) if self.reference_ok else None
+        return WheelLog(t=t, eta=eta, tau=tau, source=name, pose=pose, reference=reference)
+
+    def _reference(self, values: dict[str, Any], where: Callable[[int], str]) -> np.ndarray | None:
+        """The optional (n, 2) wheel-speed reference; a bad cell drops it with a note, or is an error when
+        --columns named it (:attr:`reference_required`)."""
+        if not all(k in values for k in REFERENCE):
+            self.reference_ok = False
+            return None
+        refs = []
+        for key in REFERENCE:
+            try:
+                arr = _numeric(values[key], key, self.mapping[key], self.name, where).astype(np.float64, copy=False)
                 i = _first_nonfinite(arr)
                 if i is not None:
-                    raise LogFormatError(_nonfinite_message(arr, i, mapping[key], name, where))
-                refs.append(arr)
-            reference = np.column_stack(refs)
-        return WheelLog(t=t, eta=eta, tau=tau, source=name, pose=pose, reference=reference)
+                    raise LogFormatError(_nonfinite_message(arr, i, self.mapping[key], self.name, where))
+            except LogFormatError as err:
+                if self.reference_required:
+                    raise
+                problem = str(err).removeprefix(self.name + ": ").split(";")[0]
+                self.notes.append(f"reference columns ignored: {problem}")
+                self.reference_ok = False
+                return None
+            refs.append(arr)
+        return np.column_stack(refs)
 
     def _stamps(self, stamps: np.ndarray, where: Callable[[int], str]) -> np.ndarray:
         """The time column in the kind (integer or float) of the first piece's."""

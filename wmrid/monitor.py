@@ -760,11 +760,11 @@ def _identify_span(log: Any, t_start: float, t_end: float, unit: str, friction: 
         )
     try:
         try:
-            result = identify(seg, None, friction=friction, geometry=geometry, feedback=False)
+            result = identify(seg, None, friction=friction, geometry=geometry, feedback=False, timing=False)
         except NotIdentifiableError as err:
             if friction == "wheel":
                 raise
-            result = identify(seg, None, friction="wheel", feedback=False)
+            result = identify(seg, None, friction="wheel", feedback=False, timing=False)
             if notes is not None:
                 notes.append(
                     f"the log from {t_start:.3f} s to {t_end:.3f} s was identified with wheel friction only: the "
