@@ -77,7 +77,7 @@ def baselines(sims):
             sim=sim,
             free=values(identify(log, None)),
             robot=values(identify(log, PAPER)),
-            robot_foh=values(identify(log, PAPER, torque_hold="foh")),
+            robot_foh=values(identify(log, PAPER, torque_hold="foh", timing=False)),  # the h/2 sensitivity, uncorrected
         )
     return out
 

@@ -109,29 +109,32 @@ def estimate_delay(
         cutoff_hz = default_cutoff(eta, (len(t) - 1) / max(t[-1] - t[0], 1e-300))
     n_steps = round(span / DELAY_STEP_S)
     grid = DELAY_STEP_S * np.arange(-n_steps, n_steps + 1)
-    per_segment = None
-    seg = None
-    fast = None
+    # The regressor does not depend on the candidate; the filtered effort does, by a shift only (the zero-phase
+    # filter is time-invariant): the effort read d later than its hold, filtered, is the filtered effort read at
+    # t + d.  So: one regression, its QR once, and per candidate the filtered effort interpolated at the kept
+    # times (linear, between 1 kHz samples of a signal below 10 Hz: 1e-5 of it at most).
+    reg = idim_regression(t, eta, tau, cutoff_hz, True, effort_delay=hold, keep_effort=True)
+    assert reg.effort_grid is not None
+    assert reg.t_grid is not None
+    seg, g = segment_index(reg.t)
+    # Near a stop the measured sgn(eta) flips with the noise and friction is least like the model: a shift of the
+    # effort fits that error too (1.4 ms on a noisy reversing log), so those rows stay out.
+    fast = ~slow_rows(reg, eta)
+    if fast.sum() < MIN_FAST * len(fast):
+        fast = np.ones(len(fast), dtype=bool)
+    x = reg.rows()[fast]
+    rows = x.reshape(-1, x.shape[2])
+    q, _ = np.linalg.qr(rows)
+    times = reg.t[fast]
+    if times[0] + grid[0] < reg.t_grid[0] or times[-1] + grid[-1] > reg.t_grid[-1]:
+        raise NotIdentifiableError("the log is too short to profile the delay over the searched span")
+    per_segment = np.zeros((len(grid), g))
     for k, d in enumerate(grid):
-        # a candidate delay d: the effort acted d before its stamp, i.e. it is read d later (shift -d), then held
-        reg = idim_regression(t, eta, tau, cutoff_hz, True, effort_delay=hold - d)
-        if seg is None:
-            seg, g = segment_index(reg.t)
-            per_segment = np.zeros((len(grid), g))
-            # Near a stop the measured sgn(eta) flips with the noise and friction is least like the model: a shift
-            # of the effort fits that error too (1.4 ms on a noisy reversing log), so those rows stay out.
-            fast = ~slow_rows(reg, eta)
-            if fast.sum() < MIN_FAST * len(fast):
-                fast = np.ones(len(fast), dtype=bool)
-        x = reg.rows()[fast]
-        rows = x.reshape(-1, x.shape[2])
-        y = reg.tau[fast].reshape(-1)
-        phi, *_ = np.linalg.lstsq(rows, y, rcond=None)
-        r2 = ((rows @ phi - y) ** 2).reshape(-1, 2).sum(axis=1)  # per sample
-        if len(r2) != int(fast.sum()):
-            raise NotIdentifiableError("the delay profile's regressions differ in length; the log is too short")
-        per_segment[k] = np.bincount(seg[fast], weights=r2, minlength=per_segment.shape[1])
-    assert per_segment is not None
+        # a candidate delay d: the effort acted d before its stamp, i.e. it is read d later than its hold
+        y = np.column_stack([np.interp(times + d, reg.t_grid, reg.effort_grid[:, j]) for j in range(2)]).reshape(-1)
+        resid = y - q @ (q.T @ y)
+        r2 = (resid**2).reshape(-1, 2).sum(axis=1)  # per sample
+        per_segment[k] = np.bincount(seg[fast], weights=r2, minlength=g)
     rss = per_segment.sum(axis=1)
     delay, at_edge = _refine(grid, rss)
     g = per_segment.shape[1]
@@ -157,11 +160,11 @@ def faster_controller(est: Any, t: np.ndarray, torque_hold: str, control_rate: f
     return -2 * est.std < est.delay <= half + 2 * est.std
 
 
-#: Hz: a log slower than this is checked for a controller faster than the log (:func:`hold_check`): its half step
-#: is then more than 1.25 ms, beyond DELAY_RESOLUTION_S even against a 1 kHz controller's half period.
+#: Hz: a log slower than this whose controller rate is unknown has its hold uncertain (:func:`timing_check`): its
+#: half step is more than 1.25 ms, beyond DELAY_RESOLUTION_S even against a 1 kHz controller's half period.
 SLOW_LOG_HZ = 400.0
 #: Logs with more samples than this are not checked (the profile holds the whole log in memory).
-HOLD_CHECK_MAX_SAMPLES = 2_000_000
+TIMING_CHECK_MAX_SAMPLES = 2_000_000
 
 
 def search_span(t: np.ndarray) -> float:
@@ -182,37 +185,39 @@ def faster_controller_text(est: Any, t: np.ndarray) -> str:
     )
 
 
-def hold_check(
+def timing_check(
     log: Any, torque_hold: str, control_rate: float | None, samples: int, median_step: float
-) -> tuple[dict[str, Any], list[str]]:
-    """(record for ``diagnostics["hold"]``, warnings): whether a log slower than SLOW_LOG_HZ, read under the default
-    hold (zoh, no --control-rate), was set by a faster controller (:func:`faster_controller` on
-    :func:`estimate_delay`, searched over +/- max(DEFAULT_SPAN_S, 1.2 logged steps)); :func:`wmrid.identify.identify`
-    then applies the delay (``delay="auto"``, whose warning names --control-rate).  Measured on the light AMR, 1 kHz
-    controller: 100 Hz log 4.5 ms of the 5 ms half step, 20 Hz log 24.6 of 25 ms, both found; a 1 kHz log of it is
-    not checked.  ``samples`` and ``median_step`` (s) come from the survey, so a log that is not checked is not read
-    again; one that cannot be profiled (a hole, too short for the filter) is not checked, and the record says why."""
+) -> dict[str, Any]:
+    """The record for ``diagnostics["timing"]``: the efforts' delay estimated from the log (:func:`estimate_delay`,
+    searched over +/- max(DEFAULT_SPAN_S, 1.2 logged steps), under the given hold), for identify's default timing.
+
+    Keys: "checked"; the estimate (:meth:`DelayEstimate.to_dict`); "apply": significant and not at the edge of the
+    search (identify then identifies with ``delay="auto"``); "slow": the log is slower than SLOW_LOG_HZ;
+    "faster_controller": :func:`faster_controller` (the warning of :func:`apply_delay` then names --control-rate).
+    Measured on the light AMR (1 kHz controller, noise): 5 ms late or early at 1 kHz found within 0.1 ms on the
+    sinusoid; a 100 Hz log 4.5 ms of the 5 ms half step, a 20 Hz log 24.6 of 25 ms.  The profile costs one
+    regression (0.03 s for 40 s at 1 kHz).  ``samples`` and ``median_step`` (s) come from the survey, so a log over
+    TIMING_CHECK_MAX_SAMPLES is not read again; one that cannot be profiled (a hole, too short for the filter) is
+    not checked, and the record says why."""
     from wmrid.errors import WmridError
     from wmrid.logio import LogStream
 
-    none = {"checked": False}
-    if torque_hold != "zoh" or control_rate is not None:
-        return {**none, "why": "the hold is given (--torque-hold foh or --control-rate)"}, []
-    if median_step <= 0 or 1.0 / median_step >= SLOW_LOG_HZ:
-        return {**none, "why": f"the log is not slower than {SLOW_LOG_HZ:g} Hz"}, []
-    if samples < 2 or samples > HOLD_CHECK_MAX_SAMPLES:
-        return {**none, "why": f"{samples} samples (the check holds at most {HOLD_CHECK_MAX_SAMPLES} in memory)"}, []
+    slow = bool(median_step > 0 and 1.0 / median_step < SLOW_LOG_HZ)
+    none = {"checked": False, "apply": False, "slow": slow, "faster_controller": False}
+    if samples < 2 or samples > TIMING_CHECK_MAX_SAMPLES:
+        return {**none, "why": f"{samples} samples (the check holds at most {TIMING_CHECK_MAX_SAMPLES} in memory)"}
     whole = log.read() if isinstance(log, LogStream) else log
     t = np.asarray(whole.t, dtype=np.float64)
     try:
         est = estimate_delay(
-            t, np.asarray(whole.eta, dtype=np.float64), np.asarray(whole.tau, dtype=np.float64), span=search_span(t)
+            t, np.asarray(whole.eta, dtype=np.float64), np.asarray(whole.tau, dtype=np.float64), span=search_span(t),
+            torque_hold=torque_hold, control_rate=control_rate,
         )  # fmt: skip
     except WmridError as err:
-        return {**none, "why": str(err)}, []
-    found = bool(est.significant and not est.at_edge and faster_controller(est, t, torque_hold, control_rate))
-    record = {"checked": True, **est.to_dict(), "faster_controller": found}
-    return record, ([faster_controller_text(est, t)] if found else [])
+        return {**none, "why": str(err)}
+    apply = bool(est.significant and not est.at_edge)
+    faster = bool(apply and faster_controller(est, t, torque_hold, control_rate))
+    return {"checked": True, **est.to_dict(), "apply": apply, "slow": slow, "faster_controller": faster}
 
 
 def apply_delay(

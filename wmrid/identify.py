@@ -298,15 +298,16 @@ def identify(
     ``feedback`` : run the closed-loop check (:func:`wmrid.feedback.check`): when the observer's estimate differs
     from IDIM's (IDIM-IV's, when the log has the wheel-speed reference) beyond noise, report that one instead, with a
     warning; ``diagnostics["feedback"]`` states what was compared.  ``timing`` : without ``delay``, time the efforts
-    by default where the log calls for it: split topics (above), and the hold check (:func:`wmrid.delay.hold_check`,
-    ``diagnostics["hold"]``): a log slower than 400 Hz set by a faster controller is identified with
-    ``delay="auto"``, whose warning names --control-rate.  A log that cannot be timed is used as stamped, with a
-    warning.
+    by default: split topics (above), and the timing check (:func:`wmrid.delay.timing_check`,
+    ``diagnostics["timing"]``): a delay estimated significant is applied as by ``delay="auto"`` (whose warning names
+    --control-rate when a controller faster than the log explains it); on a log slower than 400 Hz whose hold is
+    unknown, the std carries the difference between zoh and foh (the hold term).  A log that cannot be timed is used
+    as stamped, with a warning.
     """
     if friction not in FRICTION_CHOICES:
         raise UsageError(f"--friction must be one of {', '.join(FRICTION_CHOICES)}, got {friction!r}")
 
-    hold_record: dict[str, Any] | None = None  # the hold check's, when it runs (below)
+    timing_record: dict[str, Any] | None = None  # the timing check's, when it runs (below)
 
     def checked(result: IdentificationResult, log_read: Any) -> IdentificationResult:
         if not feedback:
@@ -343,14 +344,14 @@ def identify(
     sv = survey(stream, stream.source, stream.effort_unit)  # one survey pass, whichever models are fitted
     timing_warnings: list[str] = []
     if timing and (delay is None or (delay == "auto" and not (delay_record or {}).get("applied_s"))):
-        from wmrid.delay import hold_check
+        from wmrid.delay import timing_check
         from wmrid.joints import split_topics
 
         split = split_topics(stream.notes)
         if not split:
-            hold_record, _ = hold_check(log, torque_hold, control_rate, sv.n, sv.median_step)
-        # efforts and speeds from two topics, or a slow log of a faster controller: time the efforts by default
-        if delay is None and (split or (hold_record or {}).get("faster_controller")):
+            timing_record = timing_check(log, torque_hold, control_rate, sv.n, sv.median_step)
+        # efforts and speeds from two topics, or a significant delay: time the efforts by default
+        if delay is None and (split or (timing_record or {}).get("apply")):
             try:
                 timed = identify(
                     log, robot, form=form, k=k, alpha=alpha, box_width=box_width, max_history=max_history,
@@ -360,9 +361,9 @@ def identify(
             except WmridError as err:  # e.g. a hole IDIM's filter cannot bridge: as stamped, and say so
                 timing_warnings.append(f"the efforts could not be timed against the speeds ({err}); used as stamped")
             else:
-                if hold_record is None:
+                if timing_record is None:
                     return timed
-                return replace(timed, diagnostics={**timed.diagnostics, "hold": hold_record})
+                return replace(timed, diagnostics={**timed.diagnostics, "timing": timing_record})
 
     def run(caster: bool) -> IdentificationResult:
         try:
@@ -378,8 +379,8 @@ def identify(
 
     def finish(result: IdentificationResult, friction_record: dict[str, Any]) -> IdentificationResult:
         result = _with_friction(result, friction_record)
-        if hold_record is not None:
-            result = replace(result, diagnostics={**result.diagnostics, "hold": hold_record})
+        if timing_record is not None:
+            result = replace(result, diagnostics={**result.diagnostics, "timing": timing_record})
         if timing_warnings:
             result = replace(result, warnings=tuple(timing_warnings) + tuple(result.warnings))
         if delay_record is not None:
@@ -387,7 +388,9 @@ def identify(
             result = replace(result, diagnostics=diagnostics, warnings=tuple(delay_warnings) + tuple(result.warnings))
         observer = result.estimate
         result = checked(result, checked_log)
-        if (hold_record or {}).get("checked") and not hold_record.get("faster_controller") and observer is not None:
+        rec = timing_record or {}
+        unknown_hold = torque_hold == "zoh" and control_rate is None and not rec.get("faster_controller")
+        if rec.get("checked") and rec.get("slow") and unknown_hold and observer is not None:
             # a slow log whose controller rate is unknown: the truth lies between a hold at the log's rate (zoh)
             # and a controller much faster than the log (foh); that bracket, the std carries (the hold term)
             other = identify(
@@ -438,7 +441,7 @@ def _with_hold_term(result: IdentificationResult, zoh: BaseEstimate, foh: Identi
         if math.isfinite(std) and std > INFLATION_MARK * result.parameters[name][1]
     ]  # fmt: skip
     diagnostics = dict(result.diagnostics)
-    diagnostics["hold"] = {**diagnostics.get("hold", {}), "hold_term": {"delta": delta.tolist(), "widened": grown}}
+    diagnostics["timing"] = {**diagnostics.get("timing", {}), "hold_term": {"delta": delta.tolist(), "widened": grown}}
     diagnostics["inflated"] = [n for n in parameters if n in set(diagnostics.get("inflated", [])) | set(grown)]
     warnings = list(result.warnings)
     if grown:

@@ -71,7 +71,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -146,6 +146,11 @@ class IdimRegression:
     decimation: int
     edge_seconds: float
     form: RegressorForm | None = None
+    #: (n, 2) N m: the filtered efforts on the whole uniform grid t_grid (n,) s, edges included, when asked for
+    #: (``idim_regression(..., keep_effort=True)``): a shifted effort is this read at shifted times (the filter is
+    #: time-invariant), which :func:`wmrid.delay.estimate_delay` uses instead of refiltering per candidate.
+    effort_grid: np.ndarray | None = field(default=None, repr=False)
+    t_grid: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def caster_map(self) -> tuple[tuple[int, int, int], ...]:
@@ -346,6 +351,7 @@ def idim_regression(
     order: int = 4,
     form: RegressorForm | None = None,
     effort_delay: float = 0.0,
+    keep_effort: bool = False,
 ) -> IdimRegression:
     """Preprocess a log into the filtered IDIM regression (see the module docstring for every choice).
 
@@ -355,7 +361,7 @@ def idim_regression(
     form : with caster drag (``form.caster``), the caster columns are filtered alongside and appended.
     effort_delay : s, how far the effort acting on the robot lags its samples (:func:`effort_delay`, plus any
     timing fault; negative: it leads them): the efforts are read that much earlier (:func:`shifted`) before
-    filtering.
+    filtering.  keep_effort : also keep the filtered efforts on the whole grid (:attr:`IdimRegression.effort_grid`).
     Raises UsageError for bad arguments, LogFormatError for unusable time stamps, NotIdentifiableError
     when the log is too short for the filter.
     """
@@ -421,9 +427,11 @@ def idim_regression(
     features = np.column_stack([acc[keep], filt[keep][:, [2, 3, 0, 1, 4, 5]]])
     if form is not None:
         features = np.column_stack([features, filt[keep][:, 8:]])
+    kept_effort = {"effort_grid": filt[:, 6:8].copy(), "t_grid": t.copy()} if keep_effort else {}
     return IdimRegression(
         t=t[keep], features=features, tau=filt[keep][:, 6:8], cutoff_hz=cutoff, order=int(order),
         cutoff_rule=rule, rate_hz=rate, resampled=resampled, decimation=k, edge_seconds=edge_s, form=form,
+        **kept_effort,
     )  # fmt: skip
 
 
