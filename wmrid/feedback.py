@@ -181,28 +181,16 @@ def widened(result: Any, delta: np.ndarray, other_std: np.ndarray, record: dict[
     logs (README "Closed-loop bias"): m11 beyond 3 std in 18 % of seeds without the term, 3 % with it.
     The parameters it widens by more than INFLATION_MARK are marked inflated.
     """
-    from wmrid.base_params import derived_with_std
-    from wmrid.identify import reported_names
-    from wmrid.model_error import INFLATION_MARK
+    from wmrid.identify import with_covariance
 
     est = result.estimate
-    theta0 = np.asarray(est.theta0, dtype=float)
     delta = np.where(np.isfinite(delta), delta, 0.0)
     cov = np.asarray(est.cov, dtype=float)
     own = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(divide="ignore", invalid="ignore"):
         scale = np.where((own > 0) & np.isfinite(other_std), np.maximum(1.0, other_std / own), 1.0)
-    cov = cov * np.outer(scale, scale) + np.outer(delta, delta)
-    parameters = derived_with_std(theta0, cov, result.form.base_names)
-    parameters = {name: parameters[name] for name in reported_names(result.form)}
-    grown = [
-        name for name, (_, std) in parameters.items()
-        if np.isfinite(std) and std > INFLATION_MARK * result.parameters[name][1]
-    ]  # fmt: skip
-    diagnostics = dict(result.diagnostics)
-    diagnostics["feedback"] = {**record, "widened": grown}
-    diagnostics["inflated"] = [n for n in parameters if n in set(diagnostics.get("inflated", [])) | set(grown)]
-    return replace(result, parameters=parameters, diagnostics=diagnostics, estimate=replace(est, cov=cov))
+    out, grown = with_covariance(result, cov * np.outer(scale, scale) + np.outer(delta, delta))
+    return replace(out, diagnostics={**out.diagnostics, "feedback": {**record, "widened": grown}})
 
 
 def disturbance(result: Any) -> dict[str, Any]:

@@ -419,21 +419,14 @@ def identify(
     return finish(chosen, {"model": chosen.form.friction, "chosen_by": "auto", "reason": reason, **choice})
 
 
-def _with_hold_term(result: IdentificationResult, zoh: BaseEstimate, foh: IdentificationResult) -> IdentificationResult:
-    """``result`` with delta delta^T added to its covariance, delta the observer's estimate under --torque-hold foh
-    (``foh``) minus that under zoh (``zoh``, the observer's estimate behind ``result``): on a log slower than the hold
-    check's 400 Hz whose controller rate is unknown, the hold is uncertain between those two.  Measured on the light
-    AMR (bench/bench_timing.py, 1 kHz controller): at 100 Hz zoh and foh bias friction by about the same amount in
-    opposite directions, so the bracket covers the truth.  Parameters widened beyond INFLATION_MARK are marked."""
+def with_covariance(result: IdentificationResult, cov: np.ndarray) -> tuple[IdentificationResult, list[str]]:
+    """(``result`` reporting its estimate with the covariance ``cov`` (n0, n0), the parameters it widened): their std
+    recomputed (:func:`wmrid.base_params.derived_with_std`), those grown beyond INFLATION_MARK times the old std
+    added to ``diagnostics["inflated"]``.  The one place a term (timing, hold, closed loop) widens a result."""
     from wmrid.model_error import INFLATION_MARK
 
     est = result.estimate
-    if est is None or foh.estimate is None or len(foh.estimate.theta0) != len(zoh.theta0):
-        return result
-    delta = np.asarray(foh.estimate.theta0, dtype=float) - np.asarray(zoh.theta0, dtype=float)
-    if len(delta) != len(est.theta0) or not np.all(np.isfinite(delta)):
-        return result
-    cov = np.asarray(est.cov, dtype=float) + np.outer(delta, delta)
+    assert est is not None
     parameters = derived_with_std(np.asarray(est.theta0, dtype=float), cov, result.form.base_names)
     parameters = {name: parameters[name] for name in reported_names(result.form)}
     grown = [
@@ -441,8 +434,26 @@ def _with_hold_term(result: IdentificationResult, zoh: BaseEstimate, foh: Identi
         if math.isfinite(std) and std > INFLATION_MARK * result.parameters[name][1]
     ]  # fmt: skip
     diagnostics = dict(result.diagnostics)
-    diagnostics["timing"] = {**diagnostics.get("timing", {}), "hold_term": {"delta": delta.tolist(), "widened": grown}}
     diagnostics["inflated"] = [n for n in parameters if n in set(diagnostics.get("inflated", [])) | set(grown)]
+    out = replace(result, parameters=parameters, diagnostics=diagnostics, estimate=replace(est, cov=cov))
+    return out, grown
+
+
+def _with_hold_term(result: IdentificationResult, zoh: BaseEstimate, foh: IdentificationResult) -> IdentificationResult:
+    """``result`` with delta delta^T added to its covariance, delta the observer's estimate under --torque-hold foh
+    (``foh``) minus that under zoh (``zoh``, the observer's estimate behind ``result``): on a log slower than the hold
+    check's 400 Hz whose controller rate is unknown, the hold is uncertain between those two.  Measured on the light
+    AMR (bench/bench_timing.py, 1 kHz controller): at 100 Hz zoh and foh bias friction by about the same amount in
+    opposite directions, so the bracket covers the truth.  Parameters widened beyond INFLATION_MARK are marked."""
+    est = result.estimate
+    if est is None or foh.estimate is None or len(foh.estimate.theta0) != len(zoh.theta0):
+        return result
+    delta = np.asarray(foh.estimate.theta0, dtype=float) - np.asarray(zoh.theta0, dtype=float)
+    if len(delta) != len(est.theta0) or not np.all(np.isfinite(delta)):
+        return result
+    result, grown = with_covariance(result, np.asarray(est.cov, dtype=float) + np.outer(delta, delta))
+    diagnostics = dict(result.diagnostics)
+    diagnostics["timing"] = {**diagnostics.get("timing", {}), "hold_term": {"delta": delta.tolist(), "widened": grown}}
     warnings = list(result.warnings)
     if grown:
         warnings.append(
@@ -450,10 +461,7 @@ def _with_hold_term(result: IdentificationResult, zoh: BaseEstimate, foh: Identi
             f"that held its efforts was; the estimates under a hold over each step and a much faster controller "
             f"differ, and the std of {', '.join(grown)} carries that difference: give --control-rate HZ if known"
         )
-    return replace(
-        result, parameters=parameters, diagnostics=diagnostics, warnings=tuple(warnings),
-        estimate=replace(est, cov=cov),
-    )  # fmt: skip
+    return replace(result, diagnostics=diagnostics, warnings=tuple(warnings))
 
 
 def _with_timing_term(
@@ -462,8 +470,6 @@ def _with_timing_term(
     """``base`` (identified with the estimated delay applied) with delta delta^T added to its covariance, delta the
     change of theta0 when the delay moves by ``step`` s (``moved``): the estimate's uncertainty about the timing,
     which its jackknife cannot see.  The parameters it widens by more than INFLATION_MARK are marked inflated."""
-    from wmrid.model_error import INFLATION_MARK
-
     est = base.estimate
     assert est is not None
     assert moved.estimate is not None
@@ -471,16 +477,10 @@ def _with_timing_term(
     delta = np.asarray(moved.estimate.theta0, dtype=float) - theta0
     if len(delta) != len(theta0) or not np.all(np.isfinite(delta)):
         delta = np.zeros_like(theta0)
-    cov = np.asarray(est.cov, dtype=float) + np.outer(delta, delta)
-    parameters = derived_with_std(theta0, cov, base.form.base_names)
-    parameters = {name: parameters[name] for name in reported_names(base.form)}
-    grown = [
-        name for name, (_, std) in parameters.items()
-        if math.isfinite(std) and std > INFLATION_MARK * base.parameters[name][1]
-    ]  # fmt: skip
-    diagnostics = dict(base.diagnostics)
+    widened, grown = with_covariance(base, np.asarray(est.cov, dtype=float) + np.outer(delta, delta))
+    parameters = widened.parameters
+    diagnostics = dict(widened.diagnostics)
     diagnostics["delay"] = {**record, "timing_term": {"step_s": step, "delta": delta.tolist(), "widened": grown}}
-    diagnostics["inflated"] = [n for n in parameters if n in set(diagnostics.get("inflated", [])) | set(grown)]
     diagnostics["flagged"] = [n for n in parameters if n in set(diagnostics.get("flagged", [])) | set(grown)]
     unc = dict(diagnostics.get("uncertainty", {}))
     model_error = dict(unc.get("model_error", {}))
@@ -494,8 +494,7 @@ def _with_timing_term(
     unc["model_error"] = model_error
     diagnostics["uncertainty"] = unc
     return replace(
-        base, parameters=parameters, diagnostics=diagnostics, warnings=tuple(warnings) + tuple(base.warnings),
-        estimate=replace(est, cov=cov),
+        widened, parameters=parameters, diagnostics=diagnostics, warnings=tuple(warnings) + tuple(base.warnings)
     )  # fmt: skip
 
 
