@@ -253,9 +253,13 @@ def apply_delay(
                 f"assumes (--delay {est.delay:.5f})"
             )
         elif est.significant:
+            half = 0.5 * float(np.median(np.diff(t)))
+            cause = "two topics or clocks?"
+            if abs(est.delay + half) <= max(2 * est.std, 0.2 * half):
+                cause = "half a logged step: speeds computed as backward differences of encoder counts lag by that much"
             warnings.append(
                 f"the efforts appear stamped {est.delay * 1e3:+.2f} +/- {est.std * 1e3:.2f} ms late against the "
-                "speeds (two topics or clocks?): they were read that much earlier (--delay "
+                f"speeds ({cause}): they were read that much earlier (--delay "
                 f"{est.delay:.5f}); a delay left in biases the friction by tens of per cent"
             )
     else:
