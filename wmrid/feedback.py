@@ -189,7 +189,12 @@ def widened(result: Any, delta: np.ndarray, other_std: np.ndarray, record: dict[
     own = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(divide="ignore", invalid="ignore"):
         scale = np.where((own > 0) & np.isfinite(other_std), np.maximum(1.0, other_std / own), 1.0)
-    out, grown = with_covariance(result, cov * np.outer(scale, scale) + np.outer(delta, delta))
+    other = {"iv": "IDIM-IV", "idim": "IDIM"}.get(record.get("against", ""), "the other method")
+    note = (
+        f"the prediction error shows a disturbance the loop may feed back: the std was raised to at least {other}'s "
+        "and the difference from it added (the closed-loop term)"
+    )
+    out, grown = with_covariance(result, cov * np.outer(scale, scale) + np.outer(delta, delta), note)
     return replace(out, diagnostics={**out.diagnostics, "feedback": {**record, "widened": grown}})
 
 

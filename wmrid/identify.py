@@ -419,10 +419,12 @@ def identify(
     return finish(chosen, {"model": chosen.form.friction, "chosen_by": "auto", "reason": reason, **choice})
 
 
-def with_covariance(result: IdentificationResult, cov: np.ndarray) -> tuple[IdentificationResult, list[str]]:
+def with_covariance(result: IdentificationResult, cov: np.ndarray, note: str) -> tuple[IdentificationResult, list[str]]:
     """(``result`` reporting its estimate with the covariance ``cov`` (n0, n0), the parameters it widened): their std
     recomputed (:func:`wmrid.base_params.derived_with_std`), those grown beyond INFLATION_MARK times the old std
-    added to ``diagnostics["inflated"]``.  The one place a term (timing, hold, closed loop) widens a result."""
+    added to ``diagnostics["inflated"]``, and ``note`` (what widened them) to the meaning of the widening mark
+    (``diagnostics["uncertainty"]["model_error"]["meaning"]``) when any grew.  The one place a term (timing, hold,
+    closed loop) widens a result."""
     from wmrid.model_error import INFLATION_MARK
 
     est = result.estimate
@@ -434,6 +436,13 @@ def with_covariance(result: IdentificationResult, cov: np.ndarray) -> tuple[Iden
         if math.isfinite(std) and std > INFLATION_MARK * result.parameters[name][1]
     ]  # fmt: skip
     diagnostics = dict(result.diagnostics)
+    if grown:
+        unc = dict(diagnostics.get("uncertainty", {}))
+        model_error = dict(unc.get("model_error", {}))
+        before = model_error.get("meaning") if diagnostics.get("inflated") else None
+        model_error["meaning"] = f"{before}; {note}" if before else note
+        unc["model_error"] = model_error
+        diagnostics["uncertainty"] = unc
     diagnostics["inflated"] = [n for n in parameters if n in set(diagnostics.get("inflated", [])) | set(grown)]
     out = replace(result, parameters=parameters, diagnostics=diagnostics, estimate=replace(est, cov=cov))
     return out, grown
@@ -451,7 +460,8 @@ def _with_hold_term(result: IdentificationResult, zoh: BaseEstimate, foh: Identi
     delta = np.asarray(foh.estimate.theta0, dtype=float) - np.asarray(zoh.theta0, dtype=float)
     if len(delta) != len(est.theta0) or not np.all(np.isfinite(delta)):
         return result
-    result, grown = with_covariance(result, np.asarray(est.cov, dtype=float) + np.outer(delta, delta))
+    note = "the hold of the efforts is unknown on this slow log: the change from zoh to foh was added to the covariance"
+    result, grown = with_covariance(result, np.asarray(est.cov, dtype=float) + np.outer(delta, delta), note)
     diagnostics = dict(result.diagnostics)
     diagnostics["timing"] = {**diagnostics.get("timing", {}), "hold_term": {"delta": delta.tolist(), "widened": grown}}
     warnings = list(result.warnings)
@@ -477,22 +487,15 @@ def _with_timing_term(
     delta = np.asarray(moved.estimate.theta0, dtype=float) - theta0
     if len(delta) != len(theta0) or not np.all(np.isfinite(delta)):
         delta = np.zeros_like(theta0)
-    widened, grown = with_covariance(base, np.asarray(est.cov, dtype=float) + np.outer(delta, delta))
+    note = (
+        f"the efforts' delay was estimated and applied; moving it by {step * 1e3:.2g} ms (its resolution) moved "
+        "the estimate, and that change was added to the covariance"
+    )
+    widened, grown = with_covariance(base, np.asarray(est.cov, dtype=float) + np.outer(delta, delta), note)
     parameters = widened.parameters
     diagnostics = dict(widened.diagnostics)
     diagnostics["delay"] = {**record, "timing_term": {"step_s": step, "delta": delta.tolist(), "widened": grown}}
     diagnostics["flagged"] = [n for n in parameters if n in set(diagnostics.get("flagged", [])) | set(grown)]
-    unc = dict(diagnostics.get("uncertainty", {}))
-    model_error = dict(unc.get("model_error", {}))
-    if grown:
-        note = (
-            f"the efforts' delay was estimated and applied; moving it by {step * 1e3:.2g} ms (its resolution) moved "
-            "the estimate, and that change was added to the covariance"
-        )
-        widened_before = bool(base.diagnostics.get("inflated"))
-        model_error["meaning"] = f"{model_error['meaning']}; {note}" if widened_before else note
-    unc["model_error"] = model_error
-    diagnostics["uncertainty"] = unc
     return replace(
         widened, parameters=parameters, diagnostics=diagnostics, warnings=tuple(warnings) + tuple(base.warnings)
     )  # fmt: skip
