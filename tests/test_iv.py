@@ -194,3 +194,10 @@ def test_an_applied_delay_keeps_the_reference(clean_sim):
     shifted_log, record, _ = apply_delay(as_log(clean_sim), 0.002, "zoh", None)
     assert record["applied_s"] == 0.002
     np.testing.assert_array_equal(shifted_log.reference, clean_sim.eta_ref)
+
+
+def test_a_reference_named_for_an_mcap_is_refused_not_ignored(request):
+    """MCAP reference topics are not read yet: naming reference columns for one is a clear usage error."""
+    path = request.config.rootpath / "sample_logs" / "paper_sinusoid.mcap"
+    with pytest.raises(UsageError, match="CSV and Parquet logs only"):
+        read_log(str(path), columns={"eta_ref_r": "a", "eta_ref_l": "b"})

@@ -419,6 +419,12 @@ def open_log(
     kind = detect_format(path, source.head(8))
     signals = signals or SignalOptions()
     if kind == "mcap":
+        if explicit & set(REFERENCE):
+            named = ", ".join(sorted(explicit & set(REFERENCE)))
+            raise UsageError(
+                f"{source.name}: --columns {named}: the wheel-speed reference is read from CSV and Parquet logs only "
+                "so far; export the set-points as columns of one"
+            )
         return _read_mcap_log(source, columns or {}, selection or TopicSelection(), signals, gear_ratio, rows)
     if kind == "parquet":
         chunks, where, notes, hint = _parquet_chunks(source, mapping, explicit, rows)
