@@ -284,3 +284,20 @@ def test_speeds_from_backward_differences_are_named():
     result = identify(SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="encoder", notes=()), AMR)
     assert result.diagnostics["delay"]["applied_s"] == pytest.approx(-0.0005, abs=2e-4)
     assert any("backward differences" in w for w in result.warnings)
+
+
+def test_the_timing_check_profiles_a_window_read_piece_by_piece():
+    """The timing check reads only the first TIMING_WINDOW_SAMPLES of a stream (bounded time and memory): the window
+    holds exactly the log's first samples, whether streamed in pieces or sliced from memory."""
+    from types import SimpleNamespace
+
+    from wmrid.delay import _window
+    from wmrid.logio import stream_arrays
+
+    sim = simulate(AMR.cad, AMR.nominal, duration=5.0, noise=NOISE, seed=1)
+    log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="w", notes=())
+    streamed = _window(stream_arrays(log, rows=700), log, 2500)
+    sliced = _window(None, log, 2500)
+    for a, b, full in zip(streamed, sliced, (sim.t, sim.eta, sim.tau), strict=True):
+        np.testing.assert_array_equal(a, full[:2500])
+        np.testing.assert_array_equal(b, full[:2500])

@@ -163,8 +163,9 @@ def faster_controller(est: Any, t: np.ndarray, torque_hold: str, control_rate: f
 #: Hz: a log slower than this whose controller rate is unknown has its hold uncertain (:func:`timing_check`): its
 #: half step is more than 1.25 ms, beyond DELAY_RESOLUTION_S even against a 1 kHz controller's half period.
 SLOW_LOG_HZ = 400.0
-#: Logs with more samples than this are not checked (the profile holds the whole log in memory).
-TIMING_CHECK_MAX_SAMPLES = 2_000_000
+#: The timing check profiles at most this many samples from the start of a log (200 s at 1 kHz): a clock offset or a
+#: controller's hold is the same all along a log, and 40 s already pin it to 0.07 ms; memory and time stay bounded.
+TIMING_WINDOW_SAMPLES = 200_000
 
 
 def search_span(t: np.ndarray) -> float:
@@ -196,28 +197,45 @@ def timing_check(
     "faster_controller": :func:`faster_controller` (the warning of :func:`apply_delay` then names --control-rate).
     Measured on the light AMR (1 kHz controller, noise): 5 ms late or early at 1 kHz found within 0.1 ms on the
     sinusoid; a 100 Hz log 4.5 ms of the 5 ms half step, a 20 Hz log 24.6 of 25 ms.  The profile costs one
-    regression (0.03 s for 40 s at 1 kHz).  ``samples`` and ``median_step`` (s) come from the survey, so a log over
-    TIMING_CHECK_MAX_SAMPLES is not read again; one that cannot be profiled (a hole, too short for the filter) is
-    not checked, and the record says why."""
+    regression (0.03 s for 40 s at 1 kHz) on at most the first TIMING_WINDOW_SAMPLES samples, read piece by piece
+    (``samples`` and ``median_step`` s come from the survey).  A log that cannot be profiled (a hole, too short
+    for the filter) is not checked, and the record says why."""
     from wmrid.errors import WmridError
     from wmrid.logio import LogStream
 
     slow = bool(median_step > 0 and 1.0 / median_step < SLOW_LOG_HZ)
     none = {"checked": False, "apply": False, "slow": slow, "faster_controller": False}
-    if samples < 2 or samples > TIMING_CHECK_MAX_SAMPLES:
-        return {**none, "why": f"{samples} samples (the check holds at most {TIMING_CHECK_MAX_SAMPLES} in memory)"}
-    whole = log.read() if isinstance(log, LogStream) else log
-    t = np.asarray(whole.t, dtype=np.float64)
+    if samples < 2:
+        return {**none, "why": f"{samples} samples"}
+    t, eta, tau = _window(log if isinstance(log, LogStream) else None, log, TIMING_WINDOW_SAMPLES)
     try:
         est = estimate_delay(
-            t, np.asarray(whole.eta, dtype=np.float64), np.asarray(whole.tau, dtype=np.float64), span=search_span(t),
-            torque_hold=torque_hold, control_rate=control_rate,
+            t, eta, tau, span=search_span(t), torque_hold=torque_hold, control_rate=control_rate
         )  # fmt: skip
     except WmridError as err:
         return {**none, "why": str(err)}
     apply = bool(est.significant and not est.at_edge)
     faster = bool(apply and faster_controller(est, t, torque_hold, control_rate))
-    return {"checked": True, **est.to_dict(), "apply": apply, "slow": slow, "faster_controller": faster}
+    window = {"samples_profiled": len(t), "of": int(samples)}
+    return {"checked": True, **est.to_dict(), "apply": apply, "slow": slow, "faster_controller": faster, **window}
+
+
+def _window(stream: Any, log: Any, most: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t (m,), eta (m, 2), tau (m, 2)): the first ``most`` samples of a log, from the stream's pieces when it is a
+    :class:`wmrid.logio.LogStream` (read no further), else sliced from the log in memory."""
+    if stream is None:
+        return tuple(np.asarray(a, dtype=np.float64)[:most] for a in (log.t, log.eta, log.tau))  # type: ignore[return-value]
+    parts: list[Any] = []
+    count = 0
+    for piece in stream:
+        parts.append(piece)
+        count += len(piece.t)
+        if count >= most:
+            break
+    t = np.concatenate([p.t for p in parts])[:most]
+    eta = np.concatenate([p.eta for p in parts])[:most]
+    tau = np.concatenate([p.tau for p in parts])[:most]
+    return t.astype(np.float64), eta.astype(np.float64), tau.astype(np.float64)
 
 
 def apply_delay(
