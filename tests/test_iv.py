@@ -201,3 +201,18 @@ def test_a_reference_named_for_an_mcap_is_refused_not_ignored(request):
     path = request.config.rootpath / "sample_logs" / "paper_sinusoid.mcap"
     with pytest.raises(UsageError, match="CSV and Parquet logs only"):
         read_log(str(path), columns={"eta_ref_r": "a", "eta_ref_l": "b"})
+
+
+def test_the_closed_loop_term_widens_the_payload_too():
+    """Below the gate the observer is kept and widened (the light AMR, 40 s, seed 17: the check judges m12 at 2.3
+    std of the difference); the payload's std follows the widened covariance, and every widened parameter is also
+    listed as flagged (the rule of wmrid.model_error.record_widening)."""
+    sim = simulate(AMR.reference, AMR.nominal, duration=40.0, noise=CLOSED_LOOP, seed=17)
+    plain = identify(as_log(sim, reference=False), AMR, payload=True, feedback=False)
+    checked = identify(as_log(sim, reference=False), AMR, payload=True)
+    record = checked.diagnostics["feedback"]
+    assert record["checked"]
+    assert not record["applied"]
+    assert record["widened"]
+    assert checked.payload["mass"][1] > plain.payload["mass"][1]
+    assert set(checked.diagnostics["inflated"]) <= set(checked.diagnostics["flagged"])

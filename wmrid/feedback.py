@@ -33,7 +33,7 @@ from wmrid.estimate import BaseEstimate
 
 #: The check reports the other estimate when some |delta_j| exceeds the gate, in jackknife std of delta_j: the
 #: Student-t quantile (G - 1 dof) that keeps the chance of any of the m judged parameters passing it by noise alone
-#: at FAMILY_ALPHA (Bonferroni): 3.9 std for 8 parameters on 40 s logs (19 dof), 4.8 on 20 s logs (9 dof).
+#: at FAMILY_ALPHA (Bonferroni): 3.8 std for 8 parameters on 40 s logs (19 dof), 4.6 on 20 s logs (9 dof).
 FAMILY_ALPHA = 0.01
 #: A disturbance is in evidence when the observer's prediction error exceeds the speeds' noise this many times
 #: (:func:`wmrid.model_error.prediction_misfit`): sqrt(2), an unmodelled part at least as large as the noise.
@@ -150,7 +150,7 @@ def check(result: Any, log: Any, robot: Any = None) -> Any:
     label = {"iv": "instrumental-variable (IDIM-IV, the logged reference as instruments)", "idim": "IDIM"}
     record = {"checked": True, "against": other.method, **evidence, **test, "reported": result.method}
     if not test["applied"]:
-        return widened(result, np.array(list(test["delta"].values())), matched.std, record)
+        return widened(result, np.array(list(test["delta"].values())), matched.std, record, robot)
     out = with_estimate(result, other, robot)
     record["reported"] = other.method
     big = [n for n, r in test["ratio"].items() if r > test["gate"]]
@@ -170,7 +170,7 @@ def check(result: Any, log: Any, robot: Any = None) -> Any:
     )  # fmt: skip
 
 
-def widened(result: Any, delta: np.ndarray, other_std: np.ndarray, record: dict[str, Any]) -> Any:
+def widened(result: Any, delta: np.ndarray, other_std: np.ndarray, record: dict[str, Any], robot: Any = None) -> Any:
     """The observer's ``result`` with the closed-loop term, ``record`` as ``diagnostics["feedback"]``.
 
     The observer's estimate is the other method's plus delta (n0,), so its error is the other's error plus delta,
@@ -194,7 +194,7 @@ def widened(result: Any, delta: np.ndarray, other_std: np.ndarray, record: dict[
         f"the prediction error shows a disturbance the loop may feed back: the std was raised to at least {other}'s "
         "and the difference from it added (the closed-loop term)"
     )
-    out, grown = with_covariance(result, cov * np.outer(scale, scale) + np.outer(delta, delta), note)
+    out, grown = with_covariance(result, cov * np.outer(scale, scale) + np.outer(delta, delta), note, robot)
     return replace(out, diagnostics={**out.diagnostics, "feedback": {**record, "widened": grown}})
 
 

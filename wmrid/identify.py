@@ -338,7 +338,7 @@ def identify(
                 original, robot, friction=base.form.friction, delay=applied + step, feedback=False, timing=False,
                 **common,
             )  # fmt: skip
-            return checked(_with_timing_term(base, moved, delay_record, delay_warnings, step), log)
+            return checked(_with_timing_term(base, moved, delay_record, delay_warnings, step, robot), log)
     stream = log if isinstance(log, LogStream) else stream_arrays(log)
     checked_log = log
     sv = survey(stream, stream.source, stream.effort_unit)  # one survey pass, whichever models are fitted
@@ -363,7 +363,9 @@ def identify(
             else:
                 if timing_record is None:
                     return timed
-                return replace(timed, diagnostics={**timed.diagnostics, "timing": timing_record})
+                # the window's record, with what the timed run found on the whole log (e.g. its hold term)
+                merged = {**timing_record, **(timed.diagnostics.get("timing") or {})}
+                return replace(timed, diagnostics={**timed.diagnostics, "timing": merged})
 
     def run(caster: bool) -> IdentificationResult:
         try:
@@ -389,7 +391,9 @@ def identify(
         observer = result.estimate
         result = checked(result, checked_log)
         rec = timing_record or {}
-        unknown_hold = torque_hold == "zoh" and control_rate is None and not rec.get("faster_controller")
+        # a faster controller found and timed settles the hold; found but not timed (the re-run failed), it does not
+        timed_controller = bool(rec.get("faster_controller")) and not timing_warnings
+        unknown_hold = torque_hold == "zoh" and control_rate is None and not timed_controller
         if rec.get("checked") and rec.get("slow") and unknown_hold and observer is not None:
             # a slow log whose controller rate is unknown: the truth lies between a hold at the log's rate (zoh)
             # and a controller much faster than the log (foh); that bracket, the std carries (the hold term)
@@ -398,7 +402,7 @@ def identify(
                 torque_hold="foh", payload=False, friction=result.form.friction, geometry=geometry, feedback=False,
                 timing=False,
             )  # fmt: skip
-            result = _with_hold_term(result, observer, other)
+            result = _with_hold_term(result, observer, other, robot)
         return result
 
     if friction != "auto":
@@ -419,10 +423,13 @@ def identify(
     return finish(chosen, {"model": chosen.form.friction, "chosen_by": "auto", "reason": reason, **choice})
 
 
-def with_covariance(result: IdentificationResult, cov: np.ndarray, note: str) -> tuple[IdentificationResult, list[str]]:
+def with_covariance(
+    result: IdentificationResult, cov: np.ndarray, note: str, robot: Robot | None = None
+) -> tuple[IdentificationResult, list[str]]:
     """(``result`` reporting its estimate with the covariance ``cov`` (n0, n0), the parameters it widened): their std
-    recomputed (:func:`wmrid.base_params.derived_with_std`), those grown beyond INFLATION_MARK times the old std
-    added to ``diagnostics["inflated"]``, and ``note`` (what widened them) to the meaning of the widening mark
+    recomputed (:func:`wmrid.base_params.derived_with_std`), ``theta0_cov`` and the payload's std (with ``robot``)
+    too, the parameters grown beyond INFLATION_MARK times the old std added to ``diagnostics["inflated"]`` and
+    ``["flagged"]``, and ``note`` (what widened them) to the meaning of the widening mark
     (``diagnostics["uncertainty"]["model_error"]["meaning"]``) when any grew.  The one place a term (timing, hold,
     closed loop) widens a result."""
     from wmrid.model_error import INFLATION_MARK
@@ -444,16 +451,29 @@ def with_covariance(result: IdentificationResult, cov: np.ndarray, note: str) ->
         unc["model_error"] = model_error
         diagnostics["uncertainty"] = unc
     diagnostics["inflated"] = [n for n in parameters if n in set(diagnostics.get("inflated", [])) | set(grown)]
-    out = replace(result, parameters=parameters, diagnostics=diagnostics, estimate=replace(est, cov=cov))
+    diagnostics["flagged"] = [n for n in parameters if n in set(diagnostics.get("flagged", [])) | set(grown)]
+    payload = result.payload
+    if payload is not None and robot is not None:
+        from wmrid.payload import payload_with_std
+
+        payload = payload_with_std(np.asarray(est.theta0, dtype=float), cov, robot.reference)
+    out = replace(
+        result, parameters=parameters, diagnostics=diagnostics, estimate=replace(est, cov=cov), theta0_cov=cov,
+        payload=payload,
+    )  # fmt: skip
     return out, grown
 
 
-def _with_hold_term(result: IdentificationResult, zoh: BaseEstimate, foh: IdentificationResult) -> IdentificationResult:
+def _with_hold_term(
+    result: IdentificationResult, zoh: BaseEstimate, foh: IdentificationResult, robot: Robot | None = None
+) -> IdentificationResult:
     """``result`` with delta delta^T added to its covariance, delta the observer's estimate under --torque-hold foh
     (``foh``) minus that under zoh (``zoh``, the observer's estimate behind ``result``): on a log slower than the hold
     check's 400 Hz whose controller rate is unknown, the hold is uncertain between those two.  Measured on the light
     AMR (bench/bench_timing.py, 1 kHz controller): at 100 Hz zoh and foh bias friction by about the same amount in
-    opposite directions, so the bracket covers the truth.  Parameters widened beyond INFLATION_MARK are marked."""
+    opposite directions, so the bracket covers the truth.  Parameters widened beyond INFLATION_MARK are marked.
+    When the closed-loop check reported another method, the observer's zoh-to-foh change stands for that method's
+    (an approximation: every method reads the efforts under the same hold)."""
     est = result.estimate
     if est is None or foh.estimate is None or len(foh.estimate.theta0) != len(zoh.theta0):
         return result
@@ -461,7 +481,7 @@ def _with_hold_term(result: IdentificationResult, zoh: BaseEstimate, foh: Identi
     if len(delta) != len(est.theta0) or not np.all(np.isfinite(delta)):
         return result
     note = "the hold of the efforts is unknown on this slow log: the change from zoh to foh was added to the covariance"
-    result, grown = with_covariance(result, np.asarray(est.cov, dtype=float) + np.outer(delta, delta), note)
+    result, grown = with_covariance(result, np.asarray(est.cov, dtype=float) + np.outer(delta, delta), note, robot)
     diagnostics = dict(result.diagnostics)
     diagnostics["timing"] = {**diagnostics.get("timing", {}), "hold_term": {"delta": delta.tolist(), "widened": grown}}
     warnings = list(result.warnings)
@@ -475,8 +495,9 @@ def _with_hold_term(result: IdentificationResult, zoh: BaseEstimate, foh: Identi
 
 
 def _with_timing_term(
-    base: IdentificationResult, moved: IdentificationResult, record: dict[str, Any], warnings: list[str], step: float
-) -> IdentificationResult:
+    base: IdentificationResult, moved: IdentificationResult, record: dict[str, Any], warnings: list[str], step: float,
+    robot: Robot | None = None,
+) -> IdentificationResult:  # fmt: skip
     """``base`` (identified with the estimated delay applied) with delta delta^T added to its covariance, delta the
     change of theta0 when the delay moves by ``step`` s (``moved``): the estimate's uncertainty about the timing,
     which its jackknife cannot see.  The parameters it widens by more than INFLATION_MARK are marked inflated."""
@@ -491,14 +512,10 @@ def _with_timing_term(
         f"the efforts' delay was estimated and applied; moving it by {step * 1e3:.2g} ms (its resolution) moved "
         "the estimate, and that change was added to the covariance"
     )
-    widened, grown = with_covariance(base, np.asarray(est.cov, dtype=float) + np.outer(delta, delta), note)
-    parameters = widened.parameters
+    widened, grown = with_covariance(base, np.asarray(est.cov, dtype=float) + np.outer(delta, delta), note, robot)
     diagnostics = dict(widened.diagnostics)
     diagnostics["delay"] = {**record, "timing_term": {"step_s": step, "delta": delta.tolist(), "widened": grown}}
-    diagnostics["flagged"] = [n for n in parameters if n in set(diagnostics.get("flagged", [])) | set(grown)]
-    return replace(
-        widened, parameters=parameters, diagnostics=diagnostics, warnings=tuple(warnings) + tuple(base.warnings)
-    )  # fmt: skip
+    return replace(widened, diagnostics=diagnostics, warnings=tuple(warnings) + tuple(base.warnings))
 
 
 #: Friction models of :func:`identify`: ``auto`` lets the log decide between the other two.
