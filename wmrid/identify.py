@@ -340,7 +340,6 @@ def identify(
             )  # fmt: skip
             return checked(_with_timing_term(base, moved, delay_record, delay_warnings, step, robot), log)
     stream = log if isinstance(log, LogStream) else stream_arrays(log)
-    checked_log = log
     sv = survey(stream, stream.source, stream.effort_unit)  # one survey pass, whichever models are fitted
     timing_warnings: list[str] = []
     if timing and (delay is None or (delay == "auto" and not (delay_record or {}).get("applied_s"))):
@@ -389,7 +388,7 @@ def identify(
             diagnostics = {**result.diagnostics, "delay": delay_record}
             result = replace(result, diagnostics=diagnostics, warnings=tuple(delay_warnings) + tuple(result.warnings))
         observer = result.estimate
-        result = checked(result, checked_log)
+        result = checked(result, log)
         rec = timing_record or {}
         # a faster controller found and timed settles the hold; found but not timed (the re-run failed), it does not
         timed_controller = bool(rec.get("faster_controller")) and not timing_warnings
@@ -398,7 +397,7 @@ def identify(
             # a slow log whose controller rate is unknown: the truth lies between a hold at the log's rate (zoh)
             # and a controller much faster than the log (foh); that bracket, the std carries (the hold term)
             other = identify(
-                checked_log, robot, form=form, k=k, alpha=alpha, box_width=box_width, max_history=max_history,
+                log, robot, form=form, k=k, alpha=alpha, box_width=box_width, max_history=max_history,
                 torque_hold="foh", payload=False, friction=result.form.friction, geometry=geometry, feedback=False,
                 timing=False,
             )  # fmt: skip

@@ -612,11 +612,29 @@ def jackknife_segments(t: np.ndarray, grid: tuple[float, float, int] | None = No
     return np.clip((pos * g).astype(np.int64), 0, g - 1), int(g)
 
 
+@dataclass(frozen=True, eq=False)
+class RegressionFit:
+    """A least-squares fit of an IDIM regression (:func:`fit_regression`).
+
+    phi (p,), cov (p, p) its jackknife covariance, loo (G, p) the leave-one-segment-out solutions; factors: the
+    per-segment triangular factors of the (weighted) rows, seg (N,) each row's segment in [0, G); diagnostics and
+    warnings as JSON-ready dict and plain-English list.
+    """
+
+    phi: np.ndarray
+    cov: np.ndarray
+    loo: np.ndarray
+    factors: list[np.ndarray]
+    seg: np.ndarray
+    diagnostics: dict[str, Any]
+    warnings: list[str]
+
+
 def fit_regression(
     reg: IdimRegression, *, weighted: bool = False, grid: tuple[float, float, int] | None = None
-) -> tuple[np.ndarray, np.ndarray, dict[str, Any], list[str]]:
-    """Least squares of phi on a regression: (phi (p,), jackknife covariance (p, p), diagnostics, warnings),
-    p = len(reg.phi_names) (8, plus the caster parameters of ``reg.form``).
+) -> RegressionFit:
+    """Least squares of phi on a regression (:class:`RegressionFit`), p = len(reg.phi_names) (8, plus the caster
+    parameters of ``reg.form``).
 
     weighted : two-step weighted LS, wheel j's rows scaled by 1 / s_j (s_j its OLS rms residual, N m).
     grid : the jackknife's segments (:func:`jackknife_segments`).
@@ -652,7 +670,7 @@ def fit_regression(
         fac = factors(weights)
         phi = _solve_r(np.vstack(fac))
         rms = residual_rms(phi)
-    _, cov = jackknife_from_factors(fac)
+    loo, cov = jackknife_from_factors(fac)
     diagnostics: dict[str, Any] = {
         **reg.info(),
         "rows": 2 * len(reg.t),
@@ -669,7 +687,7 @@ def fit_regression(
             f"the filter cutoff is only {reg.cutoff_hz:.3g} Hz (log rate {reg.rate_hz:.3g} Hz): faster dynamics "
             "are filtered out and little of the log's excitation is used"
         )
-    return phi, cov, diagnostics, warnings
+    return RegressionFit(phi, cov, loo, fac, seg, diagnostics, warnings)
 
 
 def identify_idim(
@@ -707,12 +725,11 @@ def identify_idim(
     start = time.perf_counter()
     delay = effort_delay(t, torque_hold, control_rate)
     reg = idim_regression(t, eta, tau, cutoff_hz, decimate, order=order, form=form, effort_delay=delay)
-    phi, cov_phi, diagnostics, warnings = fit_regression(reg, weighted=weighted, grid=grid)
+    fit = fit_regression(reg, weighted=weighted, grid=grid)
+    phi, cov_phi, diagnostics, warnings, loo = fit.phi, fit.cov, fit.diagnostics, fit.warnings, fit.loo
     diagnostics["effort_delay_s"] = delay
-    seg, g = jackknife_segments(reg.t, grid)
+    fac, seg, g = fit.factors, fit.seg, len(fit.factors)
     weights = np.asarray(diagnostics["weights"])
-    fac = segment_factors(reg.rows(), reg.tau, weights, seg, g)
-    loo, _ = jackknife_from_factors(fac)
     t0, span = (float(reg.t[0]), float(reg.t[-1] - reg.t[0])) if grid is None else (grid[0], grid[1])
     # what the jackknife cannot see (wmrid.idim_checks); the covariance takes them in wmrid.identify.with_estimate
     diagnostics["checks"] = {

@@ -1106,7 +1106,6 @@ class _Assembler:
     ):  # fmt: skip
         self.name, self.mapping, self.time_unit, self.hint, self.where = name, mapping, time_unit, hint, where
         self.reference_required = reference_required  # named by --columns: a bad cell is an error, not a note
-        self.reference_ok = True
         self.notes: list[str] = []
         self.unit: str | None = None
         self.kind: str | None = None  # "i" or "f": the time column's kind in the first piece
@@ -1120,7 +1119,7 @@ class _Assembler:
         self.prev_t: float | None = None
         self.first_step: float | None = None
         self.n = 0
-        self.pose_ok = True
+        self.dropped: set[str] = set()  # optional column groups dropped for the rest of the log (_optional)
         self.last_t = 0.0
 
     def add(self, values: dict[str, Any], base: int) -> WheelLog | None:
@@ -1194,32 +1193,9 @@ class _Assembler:
 
         eta = np.column_stack([arrays["eta_r"], arrays["eta_l"]]).astype(np.float64, copy=False)
         tau = np.column_stack([arrays["tau_r"], arrays["tau_l"]]).astype(np.float64, copy=False)
-        pose = self._pose(values, where) if self.pose_ok else None
-        reference = self._reference(values, where) if self.reference_ok else None
+        pose = self._optional("pose", POSE, values, where, required=False)
+        reference = self._optional("reference", REFERENCE, values, where, required=self.reference_required)
         return WheelLog(t=t, eta=eta, tau=tau, source=name, pose=pose, reference=reference)
-
-    def _reference(self, values: dict[str, Any], where: Callable[[int], str]) -> np.ndarray | None:
-        """The optional (n, 2) wheel-speed reference; a bad cell drops it with a note, or is an error when
-        --columns named it (:attr:`reference_required`)."""
-        if not all(k in values for k in REFERENCE):
-            self.reference_ok = False
-            return None
-        refs = []
-        for key in REFERENCE:
-            try:
-                arr = _numeric(values[key], key, self.mapping[key], self.name, where).astype(np.float64, copy=False)
-                i = _first_nonfinite(arr)
-                if i is not None:
-                    raise LogFormatError(_nonfinite_message(arr, i, self.mapping[key], self.name, where))
-            except LogFormatError as err:
-                if self.reference_required:
-                    raise
-                problem = str(err).removeprefix(self.name + ": ").split(";")[0]
-                self.notes.append(f"reference columns ignored: {problem}")
-                self.reference_ok = False
-                return None
-            refs.append(arr)
-        return np.column_stack(refs)
 
     def _stamps(self, stamps: np.ndarray, where: Callable[[int], str]) -> np.ndarray:
         """The time column in the kind (integer or float) of the first piece's."""
@@ -1274,24 +1250,31 @@ class _Assembler:
             if largest >= ABSOLUTE_LIMIT_S / 2:
                 self.offset = int(stamps[0]) if stamps.dtype.kind in "iu" else float(stamps[0])
 
-    def _pose(self, values: dict[str, Any], where: Callable[[int], str]) -> np.ndarray | None:
-        """The optional (n, 3) pose, or None with a note when a pose cell is unusable (the pose is optional)."""
-        if not all(k in values for k in POSE):
-            self.pose_ok = False
+    def _optional(
+        self, label: str, keys: tuple[str, ...], values: dict[str, Any], where: Callable[[int], str], required: bool
+    ) -> np.ndarray | None:
+        """The optional columns ``keys`` (the pose, the reference) as (n, len(keys)), or None: when one is absent, or,
+        unless ``required`` (named by --columns), with a note when a cell is unusable; they are then dropped for the
+        rest of the log (``self.dropped``)."""
+        if label in self.dropped:
+            return None
+        if not all(k in values for k in keys):
+            self.dropped.add(label)
             return None
         cols = []
-        for key in POSE:
+        for key in keys:
             try:
                 arr = _numeric(values[key], key, self.mapping[key], self.name, where).astype(np.float64, copy=False)
+                i = _first_nonfinite(arr)
+                problem = None if i is None else _nonfinite_message(arr, i, self.mapping[key], self.name, where)
+                short = None if problem is None else problem.split(";")[0]  # the cell, without the fix
             except LogFormatError as err:
-                self.notes.append(f"pose columns ignored: {str(err).removeprefix(self.name + ': ')}")
-                self.pose_ok = False
-                return None
-            i = _first_nonfinite(arr)
-            if i is not None:
-                problem = _nonfinite_message(arr, i, self.mapping[key], self.name, where)
-                self.notes.append(f"pose columns ignored: {problem.removeprefix(self.name + ': ').split(';')[0]}")
-                self.pose_ok = False
+                problem = short = str(err)
+            if problem is not None:
+                if required:
+                    raise LogFormatError(problem)
+                self.notes.append(f"{label} columns ignored: {short.removeprefix(self.name + ': ')}")
+                self.dropped.add(label)
                 return None
             cols.append(arr)
         return np.column_stack(cols)
