@@ -181,7 +181,7 @@ def widened(result: Any, delta: np.ndarray, other_std: np.ndarray, record: dict[
     logs (README "Closed-loop bias"): m11 beyond 3 std in 18 % of seeds without the term, 3 % with it.
     The parameters it widens by more than INFLATION_MARK are marked inflated.
     """
-    from wmrid.identify import with_covariance
+    from wmrid.widening import with_covariance
 
     est = result.estimate
     delta = np.where(np.isfinite(delta), delta, 0.0)

@@ -1,0 +1,124 @@
+"""Terms the std carries beyond the jackknife, each added to a result's covariance as delta delta^T.
+
+The jackknife sees how an estimate varies along a log; an error the same all along it, it cannot see.  Three such
+errors are measured by identifying the log another admissible way and taking the change delta of theta0:
+
+* the timing term: the efforts' estimated delay moved by its resolution (:func:`with_timing_term`);
+* the hold term: a slow log read under foh instead of zoh when its controller's rate is unknown
+  (:func:`with_hold_term`);
+* the closed-loop term: the observer against IDIM/IV (:func:`wmrid.feedback.widened`).
+
+:func:`with_covariance` is the one place any of them widens a result: the parameters' std, ``theta0_cov``, the
+payload's std, the inflated and flagged lists and the widening mark's legend.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from wmrid.base_params import derived_with_std
+from wmrid.estimate import BaseEstimate
+from wmrid.robot import Robot
+
+if TYPE_CHECKING:
+    from wmrid.identify import IdentificationResult
+
+
+def with_covariance(
+    result: IdentificationResult, cov: np.ndarray, note: str, robot: Robot | None = None
+) -> tuple[IdentificationResult, list[str]]:
+    """(``result`` reporting its estimate with the covariance ``cov`` (n0, n0), the parameters it widened): their std
+    recomputed (:func:`wmrid.base_params.derived_with_std`), ``theta0_cov`` and the payload's std (with ``robot``)
+    too, the parameters grown beyond INFLATION_MARK times the old std added to ``diagnostics["inflated"]`` and
+    ``["flagged"]``, and ``note`` (what widened them) to the meaning of the widening mark
+    (``diagnostics["uncertainty"]["model_error"]["meaning"]``) when any grew.  The one place a term (timing, hold,
+    closed loop) widens a result."""
+    from wmrid.identify import reported_names
+    from wmrid.model_error import INFLATION_MARK
+
+    est = result.estimate
+    assert est is not None
+    parameters = derived_with_std(np.asarray(est.theta0, dtype=float), cov, result.form.base_names)
+    parameters = {name: parameters[name] for name in reported_names(result.form)}
+    grown = [
+        name for name, (_, std) in parameters.items()
+        if math.isfinite(std) and std > INFLATION_MARK * result.parameters[name][1]
+    ]  # fmt: skip
+    diagnostics = dict(result.diagnostics)
+    if grown:
+        unc = dict(diagnostics.get("uncertainty", {}))
+        model_error = dict(unc.get("model_error", {}))
+        before = model_error.get("meaning") if diagnostics.get("inflated") else None
+        model_error["meaning"] = f"{before}; {note}" if before else note
+        unc["model_error"] = model_error
+        diagnostics["uncertainty"] = unc
+    diagnostics["inflated"] = [n for n in parameters if n in set(diagnostics.get("inflated", [])) | set(grown)]
+    diagnostics["flagged"] = [n for n in parameters if n in set(diagnostics.get("flagged", [])) | set(grown)]
+    payload = result.payload
+    if payload is not None and robot is not None:
+        from wmrid.payload import payload_with_std
+
+        payload = payload_with_std(np.asarray(est.theta0, dtype=float), cov, robot.reference)
+    out = replace(
+        result, parameters=parameters, diagnostics=diagnostics, estimate=replace(est, cov=cov), theta0_cov=cov,
+        payload=payload,
+    )  # fmt: skip
+    return out, grown
+
+
+def with_hold_term(
+    result: IdentificationResult, zoh: BaseEstimate, foh: IdentificationResult, robot: Robot | None = None
+) -> IdentificationResult:
+    """``result`` with delta delta^T added to its covariance, delta the observer's estimate under --torque-hold foh
+    (``foh``) minus that under zoh (``zoh``, the observer's estimate behind ``result``): on a log slower than the hold
+    check's 400 Hz whose controller rate is unknown, the hold is uncertain between those two.  Measured on the light
+    AMR (bench/bench_timing.py, 1 kHz controller): at 100 Hz zoh and foh bias friction by about the same amount in
+    opposite directions, so the bracket covers the truth.  Parameters widened beyond INFLATION_MARK are marked.
+    When the closed-loop check reported another method, the observer's zoh-to-foh change stands for that method's
+    (an approximation: every method reads the efforts under the same hold)."""
+    est = result.estimate
+    if est is None or foh.estimate is None or len(foh.estimate.theta0) != len(zoh.theta0):
+        return result
+    delta = np.asarray(foh.estimate.theta0, dtype=float) - np.asarray(zoh.theta0, dtype=float)
+    if len(delta) != len(est.theta0) or not np.all(np.isfinite(delta)):
+        return result
+    note = "the hold of the efforts is unknown on this slow log: the change from zoh to foh was added to the covariance"
+    result, grown = with_covariance(result, np.asarray(est.cov, dtype=float) + np.outer(delta, delta), note, robot)
+    diagnostics = dict(result.diagnostics)
+    diagnostics["timing"] = {**diagnostics.get("timing", {}), "hold_term": {"delta": delta.tolist(), "widened": grown}}
+    warnings = list(result.warnings)
+    if grown:
+        warnings.append(
+            f"the log ({1.0 / result.log_info['rate_hz'] * 1e3:.3g} ms steps) does not say how fast the controller "
+            f"that held its efforts was; the estimates under a hold over each step and a much faster controller "
+            f"differ, and the std of {', '.join(grown)} carries that difference: give --control-rate HZ if known"
+        )
+    return replace(result, diagnostics=diagnostics, warnings=tuple(warnings))
+
+
+def with_timing_term(
+    base: IdentificationResult, moved: IdentificationResult, record: dict[str, Any], warnings: list[str], step: float,
+    robot: Robot | None = None,
+) -> IdentificationResult:  # fmt: skip
+    """``base`` (identified with the estimated delay applied) with delta delta^T added to its covariance, delta the
+    change of theta0 when the delay moves by ``step`` s (``moved``): the estimate's uncertainty about the timing,
+    which its jackknife cannot see.  The parameters it widens by more than INFLATION_MARK are marked inflated."""
+    est = base.estimate
+    assert est is not None
+    assert moved.estimate is not None
+    theta0 = np.asarray(est.theta0, dtype=float)
+    delta = np.asarray(moved.estimate.theta0, dtype=float) - theta0
+    if len(delta) != len(theta0) or not np.all(np.isfinite(delta)):
+        delta = np.zeros_like(theta0)
+    note = (
+        f"the efforts' delay was estimated and applied; moving it by {step * 1e3:.2g} ms (its resolution) moved "
+        "the estimate, and that change was added to the covariance"
+    )
+    widened, grown = with_covariance(base, np.asarray(est.cov, dtype=float) + np.outer(delta, delta), note, robot)
+    diagnostics = dict(widened.diagnostics)
+    diagnostics["delay"] = {**record, "timing_term": {"step_s": step, "delta": delta.tolist(), "widened": grown}}
+    return replace(widened, diagnostics=diagnostics, warnings=tuple(warnings) + tuple(base.warnings))
