@@ -75,7 +75,10 @@ def one(job: tuple[str, str, str, int, float]) -> dict:
             "inertia": max(err[p] for p in INERTIA),
             "honest": all(z[p] <= 3 or p in flagged or not np.isfinite(z[p]) for p in PARAMS),
             "delay": (res.diagnostics.get("delay") or res.diagnostics.get("timing") or {}).get("delay_s"),
-            "warned": any("stamped" in w or "faster than the log" in w or "--control-rate" in w for w in res.warnings),
+            "warned": any(
+                "stamped" in w or "faster than the log" in w or "--control-rate" in w or "timing against" in w
+                for w in res.warnings
+            ),
         }
     return out
 

@@ -40,7 +40,10 @@ MIN_FAST = 0.3
 @dataclass(frozen=True)
 class DelayEstimate:
     """delay s (> 0: the effort is late), its jackknife std s, the profile (grid (m,) s, rss (m,)), G segments,
-    and whether it is significant (|delay| > SIGNIFICANT_Z std and > SIGNIFICANT_S)."""
+    and whether it is significant (|delay| > SIGNIFICANT_Z std and > SIGNIFICANT_S).  ``theta0_slope`` (8,):
+    d theta0 / d delay (units of theta0 per s) at the estimate, how much a delay left in moves the parameters
+    (:func:`unresolved_delay`): of the least-squares fits on the rows profiled and on every row, entry by entry the
+    larger (against the observer's own slope on the light AMR: 0.8-2.4 times it on sinusoids, 0.8-1.9 reversing)."""
 
     delay: float
     std: float
@@ -48,6 +51,7 @@ class DelayEstimate:
     rss: np.ndarray
     segments: int
     at_edge: bool
+    theta0_slope: np.ndarray | None = None
 
     @property
     def significant(self) -> bool:
@@ -124,14 +128,18 @@ def estimate_delay(
         fast = np.ones(len(fast), dtype=bool)
     x = reg.rows()[fast]
     rows = x.reshape(-1, x.shape[2])
-    q, _ = np.linalg.qr(rows)
+    q, r = np.linalg.qr(rows)
     times = reg.t[fast]
     if times[0] + grid[0] < reg.t_grid[0] or times[-1] + grid[-1] > reg.t_grid[-1]:
         raise NotIdentifiableError("the log is too short to profile the delay over the searched span")
     per_segment = np.zeros((len(grid), g))
-    for k, d in enumerate(grid):
+
+    def effort(d: float, at: np.ndarray) -> np.ndarray:
         # a candidate delay d: the effort acted d before its stamp, i.e. it is read d later than its hold
-        y = np.column_stack([np.interp(times + d, reg.t_grid, reg.effort_grid[:, j]) for j in range(2)]).reshape(-1)
+        return np.column_stack([np.interp(at + d, reg.t_grid, reg.effort_grid[:, j]) for j in range(2)]).reshape(-1)
+
+    for k, d in enumerate(grid):
+        y = effort(d, times)
         resid = y - q @ (q.T @ y)
         r2 = (resid**2).reshape(-1, 2).sum(axis=1)  # per sample
         per_segment[k] = np.bincount(seg[fast], weights=r2, minlength=g)
@@ -140,7 +148,32 @@ def estimate_delay(
     g = per_segment.shape[1]
     loo = np.array([_refine(grid, rss - per_segment[:, i])[0] for i in range(g)])
     std = float(np.sqrt((g - 1) / g * np.sum((loo - loo.mean()) ** 2)))
-    return DelayEstimate(delay=delay, std=std, grid=grid, rss=rss, segments=g, at_edge=at_edge)
+    # the slope of theta0 in the delay, of the fit on the rows profiled and of the fit on every row (which the
+    # observer's estimate, fitted on every sample, follows more closely on a reversing log), the larger of the two
+    fast_slope = _theta0_slope(q, r, lambda d: effort(d, times), delay)
+    every = reg.rows().reshape(-1, x.shape[2])
+    q_all, r_all = np.linalg.qr(every)
+    all_slope = _theta0_slope(q_all, r_all, lambda d: effort(d, reg.t), delay)
+    slope = None
+    if fast_slope is not None and all_slope is not None:
+        slope = np.where(np.abs(fast_slope) >= np.abs(all_slope), fast_slope, all_slope)
+    return DelayEstimate(
+        delay=delay, std=std, grid=grid, rss=rss, segments=g, at_edge=at_edge, theta0_slope=slope
+    )  # fmt: skip
+
+
+def _theta0_slope(q: np.ndarray, r: np.ndarray, effort: Any, delay: float) -> np.ndarray | None:
+    """d theta0 / d delay (8,) per s of the least-squares fit (rows = q r, efforts ``effort(d)``) at ``delay``, by a
+    central difference over DELAY_STEP_S; None when R is singular or the slope is not finite."""
+    from wmrid.idim import phi_to_theta0, theta0_jacobian
+
+    try:
+        phi = np.linalg.solve(r, q.T @ effort(delay))
+        dphi = np.linalg.solve(r, q.T @ (effort(delay + DELAY_STEP_S) - effort(delay - DELAY_STEP_S)))
+    except np.linalg.LinAlgError:
+        return None
+    slope = theta0_jacobian(phi) @ (dphi / (2 * DELAY_STEP_S))
+    return slope if np.all(np.isfinite(slope)) and np.all(np.isfinite(phi_to_theta0(phi))) else None
 
 
 #: s: the resolution of an estimated delay that the std must carry at least (the multibody prototype's
@@ -217,7 +250,54 @@ def timing_check(
     apply = bool(est.significant and not est.at_edge)
     faster = bool(apply and faster_controller(est, t, torque_hold, control_rate))
     window = {"samples_profiled": len(t), "of": int(samples)}
-    return {"checked": True, **est.to_dict(), "apply": apply, "slow": slow, "faster_controller": faster, **window}
+    slope = {"theta0_slope_per_s": est.theta0_slope.tolist()} if est.theta0_slope is not None else {}
+    record = {"checked": True, **est.to_dict(), "apply": apply, "slow": slow, "faster_controller": faster, **window}
+    return {**record, **slope}
+
+
+#: A delay the timing check could not resolve is carried by the std when it would move some parameter by more
+#: than this many of its std (the std then grows by more than 4 %); below, the extra identification is skipped.
+MATERIAL_SHIFT = 0.3
+
+
+def unresolved_delay(record: dict[str, Any], theta0_std: np.ndarray) -> float | None:
+    """The delay s whose effect the std must carry when the timing check (``record``, :func:`timing_check`) left the
+    efforts as stamped: sign(d) sqrt(d^2 + s^2), the root-mean-square error of taking the delay as 0 when the log
+    puts it at d +/- s; None when the check applied its delay, did not run, ended at the edge of its search, when
+    the log rules out a significant delay (|d| + SIGNIFICANT_Z s <= SIGNIFICANT_S: what is left is below the
+    resolution the check applies, and carrying it grew V_c's std 1.4-1.9 times on every well-specified log of the
+    paper's robot, whose delay it pins to 0.03-0.07 ms), or when that delay would move no parameter by
+    MATERIAL_SHIFT of its std ``theta0_std`` (n0,) (judged by the profile's slope, ``theta0_slope_per_s``).
+
+    Why: a delay below SIGNIFICANT_Z std is not applied, but on a log that times its efforts poorly (a slow
+    reversing motion with torque noise: std 1-1.6 ms) a 5 ms delay can fall below that and bias the friction by 7 %
+    at 5 std, with nothing said."""
+    if not record.get("checked") or record.get("apply") or record.get("at_edge_of_search"):
+        return None
+    slope = record.get("theta0_slope_per_s")
+    d, s = float(record.get("delay_s", 0.0)), float(record.get("std_s", 0.0))
+    if slope is None or not (math.isfinite(d) and math.isfinite(s)):
+        return None
+    if abs(d) + SIGNIFICANT_Z * s <= SIGNIFICANT_S:
+        return None  # the log rules out any delay the check would call significant
+    size = math.hypot(d, s)
+    slope = np.asarray(slope, dtype=float)
+    std = np.asarray(theta0_std, dtype=float)[: len(slope)]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        shift = np.abs(size * slope[: len(std)]) / std
+    if not np.any(np.isfinite(shift) & (shift > MATERIAL_SHIFT)):
+        return None
+    return math.copysign(size, d) if d else size
+
+
+def unresolved_text(record: dict[str, Any], moved: float) -> str:
+    """The warning for an unresolved delay (:func:`unresolved_delay`) ``moved`` s, the timing check's ``record``."""
+    return (
+        f"the efforts' timing against the speeds is uncertain: the log puts their delay at "
+        f"{record['delay_s'] * 1e3:+.2f} +/- {record['std_s'] * 1e3:.2f} ms, not distinguishable from none, so they "
+        f"were used as stamped; what a delay of {moved * 1e3:+.2f} ms would change was added to the std. Give "
+        "--delay 0 if the two clocks are known to agree (or --delay SECONDS if the offset is known)"
+    )
 
 
 def _window(stream: Any, log: Any, most: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -3,7 +3,8 @@
 The jackknife sees how an estimate varies along a log; an error the same all along it, it cannot see.  Three such
 errors are measured by identifying the log another admissible way and taking the change delta of theta0:
 
-* the timing term: the efforts' estimated delay moved by its resolution (:func:`with_timing_term`);
+* the timing term: the efforts' estimated delay moved by its resolution (:func:`with_timing_term`), or, when the
+  timing check left them as stamped, moved to the delay the log cannot rule out (:func:`with_unresolved_timing`);
 * the hold term: a slow log read under foh instead of zoh when its controller's rate is unknown
   (:func:`with_hold_term`);
 * the closed-loop term: the observer against IDIM/IV (:func:`wmrid.feedback.widened`).
@@ -29,24 +30,25 @@ if TYPE_CHECKING:
 
 
 def with_covariance(
-    result: IdentificationResult, cov: np.ndarray, note: str, robot: Robot | None = None
+    result: IdentificationResult, cov: np.ndarray, note: str, robot: Robot | None = None, mark: float | None = None
 ) -> tuple[IdentificationResult, list[str]]:
     """(``result`` reporting its estimate with the covariance ``cov`` (n0, n0), the parameters it widened): their std
     recomputed (:func:`wmrid.base_params.derived_with_std`), ``theta0_cov`` and the payload's std (with ``robot``)
     too, the parameters grown beyond INFLATION_MARK times the old std added to ``diagnostics["inflated"]`` and
     ``["flagged"]``, and ``note`` (what widened them) to the meaning of the widening mark
     (``diagnostics["uncertainty"]["model_error"]["meaning"]``) when any grew.  The one place a term (timing, hold,
-    closed loop) widens a result."""
+    closed loop) widens a result.  ``mark``: the growth that marks a parameter (default INFLATION_MARK)."""
     from wmrid.identify import reported_names
     from wmrid.model_error import INFLATION_MARK
 
+    mark = INFLATION_MARK if mark is None else mark
     est = result.estimate
     assert est is not None
     parameters = derived_with_std(np.asarray(est.theta0, dtype=float), cov, result.form.base_names)
     parameters = {name: parameters[name] for name in reported_names(result.form)}
     grown = [
         name for name, (_, std) in parameters.items()
-        if math.isfinite(std) and std > INFLATION_MARK * result.parameters[name][1]
+        if math.isfinite(std) and std > mark * result.parameters[name][1]
     ]  # fmt: skip
     diagnostics = dict(result.diagnostics)
     if grown:
@@ -98,6 +100,37 @@ def with_hold_term(
             f"differ, and the std of {', '.join(grown)} carries that difference: give --control-rate HZ if known"
         )
     return replace(result, diagnostics=diagnostics, warnings=tuple(warnings))
+
+
+#: The unresolved-delay term marks (and warns about) a parameter only when it grows its std by this factor: the
+#: check resolves an on-time sinusoid's delay to 0.1 ms, and what that leaves grows the friction's std by 5-20 %
+#: on every such log; a flag on every log would say nothing.
+UNRESOLVED_MARK = 1.5
+
+
+def with_unresolved_timing(
+    result: IdentificationResult, delta: np.ndarray, delay: float, how: str, warning: str, robot: Robot | None = None
+) -> IdentificationResult:
+    """``result`` (its efforts used as stamped) with delta delta^T added to its covariance, delta (n0,) the change of
+    theta0 when the efforts are read ``delay`` s earlier (:func:`wmrid.delay.unresolved_delay`; ``how`` it was
+    found: "identified again" or "the profile's slope"); recorded as ``diagnostics["timing"]["timing_term"]``;
+    parameters grown beyond UNRESOLVED_MARK are marked and ``warning`` is said."""
+    est = result.estimate
+    assert est is not None
+    delta = np.asarray(delta, dtype=float)
+    if len(delta) != len(est.theta0) or not np.all(np.isfinite(delta)):
+        return result
+    note = (
+        f"the efforts' delay could not be told from zero; reading them {delay * 1e3:+.2g} ms earlier (what the log "
+        "cannot rule out) moves the estimate, and that change was added to the covariance"
+    )
+    cov = np.asarray(est.cov, dtype=float) + np.outer(delta, delta)
+    widened, grown = with_covariance(result, cov, note, robot, mark=UNRESOLVED_MARK)
+    diagnostics = dict(widened.diagnostics)
+    term = {"delay_s": delay, "delta": delta.tolist(), "found_by": how, "widened": grown}
+    diagnostics["timing"] = {**(diagnostics.get("timing") or {}), "timing_term": term}
+    warnings = (warning, *widened.warnings) if grown else tuple(widened.warnings)
+    return replace(widened, diagnostics=diagnostics, warnings=warnings)
 
 
 def with_timing_term(
