@@ -15,7 +15,8 @@ a sample of lag; reduced engine only).  Each log is identified three times with 
 (``identify(log, amr)``), and ``auto`` (``delay="auto"``).  Printed per case and run: the delay found (median, and
 the share of seeds within 1 ms of the true one), the error of the friction terms (median of the largest |error|
 over Fv1, Fv2, Fd1, Fd2, in % of the truth), of the inertia entries and Vc, the share of seeds whose every parameter
-is within 3 std or flagged, and the share warned (a delay, a faster controller or --control-rate named).
+is within 3 std or flagged, and the share warned (a delay, a faster controller or --control-rate named, or
+the efforts' timing called uncertain).
 """
 
 from __future__ import annotations
