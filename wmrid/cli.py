@@ -698,7 +698,7 @@ def report(
     """Tables (paper Tables 2 and 3), comparison with nominal/CAD/truth, diagnostics and figures for INPUT."""
     import json
 
-    from wmrid.atomic import atomic_write_text, write_json
+    from wmrid.atomic import atomic_write_text, register_input, write_json
     from wmrid.logio import _open_source
     from wmrid.report import build_report, to_html, to_json_dict, to_markdown
 
@@ -717,6 +717,8 @@ def report(
                 f"{source.name}: --validate and --method need a log as INPUT, not a saved result; run "
                 "`wmrid identify LOG --method ... --validate OTHER --format json` and report its output"
             )
+        if source.data is None:
+            register_input(source.path)
         raw = source.data if source.data is not None else Path(source.path).read_bytes()
         try:
             data = json.loads(raw)
@@ -766,6 +768,9 @@ def _load_truth(path: Path) -> dict[str, float]:
     """The "parameters" of a truth file (the simulator's sidecar), name -> value."""
     import json
 
+    from wmrid.atomic import register_input
+
+    register_input(path)
     try:
         return {k: float(v) for k, v in json.loads(path.read_text(encoding="utf-8"))["parameters"].items()}
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
@@ -1231,22 +1236,34 @@ def monitor(
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point: run the app and map every outcome to one exit code and at most one stderr line."""
-    from wmrid.interrupts import install, restore
+    """Entry point: run the app and map every outcome to one exit code and at most one stderr line.
 
-    previous = install()  # Ctrl-C is deferred while numba compiles (an interrupt there crashes LLVM)
+    Exit codes: 0 success, 1 no result (or an output that could not be written), 2 usage or unreadable input,
+    128 + the signal for Ctrl-C, SIGTERM and SIGHUP (130, 143, 129; temporary files removed either way)."""
+    from wmrid import interrupts
+    from wmrid.atomic import clear_inputs, track_inputs
+    from wmrid.streams import finish_output, guard, unguard
+
+    previous = interrupts.install()  # Ctrl-C is deferred while numba compiles (an interrupt there crashes LLVM)
+    saved = guard()  # a failing stdout is an error naming it; a failing stderr never changes the outcome
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
     if debug:  # accepted anywhere on the line, not only before the command
         args = ["--debug", *[a for a in args if a != "--debug"]]
     try:
-        rv = app(args=args, prog_name="wmrid", standalone_mode=False)
+        track_inputs()  # an output that is one of the command's inputs is refused
+        try:
+            rv = app(args=args, prog_name="wmrid", standalone_mode=False)
+            finish_output()
+        finally:
+            clear_inputs()
         code = rv if isinstance(rv, int) else ExitStatus.OK
         if code == ExitStatus.INTERRUPTED:  # Typer turns Ctrl-C into an exit code of 130
-            sys.stderr.write("wmrid: interrupted; no output was written\n")
+            code = interrupts.exit_code()
+            sys.stderr.write(f"wmrid: {_stopped_by()}; no output was written\n")
     except KeyboardInterrupt:
-        sys.stderr.write("wmrid: interrupted\n")
-        code = ExitStatus.INTERRUPTED
+        sys.stderr.write(f"wmrid: {_stopped_by()}\n")
+        code = interrupts.exit_code()
     except WmridError as exc:
         if debug:
             raise
@@ -1259,7 +1276,7 @@ def main(argv: list[str] | None = None) -> None:
             exc.show()
             code = ExitStatus.USAGE
         elif type(exc).__name__ == "Abort":
-            code = ExitStatus.INTERRUPTED
+            code = interrupts.exit_code()
         elif debug:
             raise
         else:  # the last resort: never a traceback without --debug
@@ -1268,11 +1285,13 @@ def main(argv: list[str] | None = None) -> None:
                 "(run with --debug for the traceback)\n"
             )
             code = ExitStatus.NO_RESULT
-    if argv is not None:  # called in-process: leave the caller's signal handlers as they were
-        restore(previous)
+    if argv is not None:  # called in-process: leave the caller's signal handlers and streams as they were
+        unguard(saved)
+        interrupts.restore(previous)
         sys.exit(int(code))
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the outcome is decided: a late Ctrl-C must not change it
-    if code == ExitStatus.INTERRUPTED:
+    for signum in interrupts.STOPPING:  # the outcome is decided: a late signal must not change it
+        signal.signal(signum, signal.SIG_IGN)
+    if code >= 128:
         # Python remembers a KeyboardInterrupt that went through an embedded interpreter call (even one caught
         # later) and, at exit, kills itself with SIGINT instead of returning 130; leave at once instead.
         for stream in (sys.stdout, sys.stderr):
@@ -1280,6 +1299,15 @@ def main(argv: list[str] | None = None) -> None:
                 stream.flush()
         os._exit(int(code))
     sys.exit(int(code))
+
+
+def _stopped_by() -> str:
+    from wmrid import interrupts
+
+    received = interrupts.received
+    if received is None or received == signal.SIGINT:
+        return "interrupted"
+    return f"terminated by {signal.Signals(received).name}"
 
 
 def _one_line(text: str) -> str:

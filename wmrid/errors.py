@@ -42,3 +42,9 @@ class NotIdentifiableError(WmridError):
     """The log does not excite the dynamics enough to give any result."""
 
     exit_status = ExitStatus.NO_RESULT
+
+
+class OutputWriteError(WmridError):
+    """An output could not be written (a full disk, a closed or failing stream); nothing partial stands as complete."""
+
+    exit_status = ExitStatus.NO_RESULT

@@ -415,6 +415,10 @@ def open_log(
         mapping[key] = value
     explicit = set(columns or ())
 
+    if data is None and path != "-":
+        from wmrid.atomic import register_input
+
+        register_input(path)  # an output of this command may not be this file
     source = _open_source(path) if data is None else _Source(_STDIN_NAME if path == "-" else path, None, data)
     kind = detect_format(path, source.head(8))
     signals = signals or SignalOptions()

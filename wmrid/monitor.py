@@ -283,6 +283,9 @@ def _form_of(form_d: Any, source: str, hint: str) -> RegressorForm | None:
 
 def load_model(path: str | Path) -> MonitoredModel:
     """The model in an ``identify`` JSON result file; UsageError (one line, naming the file) otherwise."""
+    from wmrid.atomic import register_input
+
+    register_input(path)
     try:
         text = Path(path).read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as err:

@@ -362,6 +362,9 @@ def load_robot(spec: str) -> Robot:
         )
     if path.is_dir():
         raise RobotFileError(f"robot {spec!r} is a directory; give a robot TOML file")
+    from wmrid.atomic import register_input
+
+    register_input(path)
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as err:

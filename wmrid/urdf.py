@@ -611,6 +611,9 @@ def load_robot_urdf(
     name : default the URDF's <robot name>, else the file name without extension.
     torque_constant : k_t (N m/A) of each motor; efficiency : of the gearbox, in (0, 1].
     """
+    from wmrid.atomic import register_input
+
+    register_input(path)
     model = read_urdf(
         path, gear_ratio=gear_ratio, rotor_inertia=rotor_inertia, viscous_friction=viscous_friction,
         coulomb_friction=coulomb_friction, wheel_radius=wheel_radius, wheel_joints=wheel_joints,

@@ -1,0 +1,204 @@
+"""Reliability (issue 13): outputs that never clobber a device, a FIFO or an input; write errors that name their
+target; SIGTERM and SIGHUP handled like Ctrl-C; a read-only install without a home folder.
+
+Device targets are stand-ins made with mknod in a temporary folder (never the real /dev); a test that cannot make
+one (no CAP_MKNOD) says so and does not run.  Signals, closed streams and the read-only install run the real
+command in a subprocess; the rest call the CLI in-process.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import stat
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from wmrid.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run(*argv: str) -> int:
+    with pytest.raises(SystemExit) as info:
+        main(list(argv))
+    return int(info.value.code)
+
+
+@pytest.fixture(scope="module")
+def small_log(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("log") / "in.csv"
+    assert run("simulate", "--duration", "2", "-o", str(path)) == 0
+    return path
+
+
+def _device(folder: Path, name: str, kind: int, major: int, minor: int) -> Path:
+    path = folder / name
+    try:
+        os.mknod(path, kind | 0o666, os.makedev(major, minor))
+    except PermissionError:
+        pytest.skip("making a device stand-in needs CAP_MKNOD, which this machine does not give")
+    return path
+
+
+def test_a_character_device_is_written_in_place_never_replaced(tmp_path, small_log, capsys):
+    """``-o NULL --force``, NULL a stand-in of /dev/null: exit 0, and it is still the same character device (before
+    issue 13 it became a regular file: as root, ``-o /dev/null --force`` broke /dev/null for the whole system)."""
+    null = _device(tmp_path, "null", stat.S_IFCHR, 1, 3)
+    before = os.stat(null)
+    assert run("identify", str(small_log), "-o", str(null), "--force", "--format", "json") == 0
+    after = os.stat(null)
+    assert stat.S_ISCHR(after.st_mode)
+    assert (after.st_ino, after.st_rdev) == (before.st_ino, before.st_rdev)
+    assert run("identify", str(small_log), "-o", str(null), "--format", "json") == 0  # no --force needed
+    capsys.readouterr()
+
+
+def test_a_full_device_is_a_one_line_write_error(tmp_path, small_log, capsys):
+    """``-o FULL``, FULL a stand-in of /dev/full (every write fails with ENOSPC): exit 1 and one line naming it."""
+    full = _device(tmp_path, "full", stat.S_IFCHR, 1, 7)
+    assert run("identify", str(small_log), "-o", str(full), "--format", "json") == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert str(full) in err[0]
+    assert "No space left on device" in err[0]
+    assert stat.S_ISCHR(os.stat(full).st_mode)
+
+
+def test_a_block_device_is_refused(tmp_path, small_log, capsys):
+    """A block device (a stand-in whose numbers name no device) is never opened: exit 2, one line."""
+    block = _device(tmp_path, "disk", stat.S_IFBLK, 250, 250)
+    assert run("identify", str(small_log), "-o", str(block), "--force", "--format", "json") == 2
+    assert "block device" in capsys.readouterr().err
+    assert stat.S_ISBLK(os.stat(block).st_mode)
+
+
+def test_a_fifo_is_written_in_place(tmp_path, small_log, capsys):
+    """``-o FIFO``: the reader at the other end gets the whole result, and the FIFO stays a FIFO."""
+    fifo = tmp_path / "out.fifo"
+    os.mkfifo(fifo)
+    received: list[bytes] = []
+    reader = threading.Thread(target=lambda: received.append(fifo.read_bytes()))
+    reader.start()
+    assert run("identify", str(small_log), "-o", str(fifo), "--format", "json") == 0
+    reader.join(timeout=60)
+    assert received
+    assert received[0].startswith(b"{")
+    assert received[0].rstrip().endswith(b"}")
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize("how", ["same path", "hard link", "symbolic link"])
+def test_an_output_that_is_the_input_is_refused(tmp_path, small_log, capsys, how):
+    """``identify in.csv -o in.csv --force`` overwrote the log with the result; now exit 2, one line naming the
+    input, the log byte for byte as it was, whichever name the output gives it."""
+    log = tmp_path / "in.csv"
+    shutil.copy(small_log, log)
+    original = log.read_bytes()
+    target = {"same path": log, "hard link": tmp_path / "hard.csv", "symbolic link": tmp_path / "soft.csv"}[how]
+    if how == "hard link":
+        os.link(log, target)
+    elif how == "symbolic link":
+        target.symlink_to(log)
+    assert run("identify", str(log), "-o", str(target), "--force", "--format", "json") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert "it is the input" in err[0]
+    assert log.read_bytes() == original
+
+
+def test_a_symbolic_link_output_writes_the_file_it_names(tmp_path, small_log, capsys):
+    """A link as ``-o``: the file it points to gets the result; the link stays a link."""
+    link = tmp_path / "result.json"
+    link.symlink_to("real.json")
+    assert run("identify", str(small_log), "-o", str(link), "--format", "json") == 0
+    assert link.is_symlink()
+    assert (tmp_path / "real.json").read_text().startswith("{")
+    capsys.readouterr()
+
+
+def test_a_long_output_name_is_written(tmp_path, small_log, capsys):
+    """A legal 250-character name failed because the temporary name was longer than NAME_MAX."""
+    target = tmp_path / ("r" * 245 + ".json")
+    assert run("identify", str(small_log), "-o", str(target), "--format", "json") == 0
+    assert target.read_text().startswith("{")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [target.name]
+    capsys.readouterr()
+
+
+def _command(*args: str, **kwargs) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-m", "wmrid", *args], stdout=kwargs.pop("stdout", subprocess.PIPE),
+        stderr=subprocess.PIPE, **kwargs,
+    )  # fmt: skip
+
+
+def test_standard_streams_that_fail(tmp_path, small_log):
+    """Real processes: stdout on a full device, and stdout closed, exit 1 with one line naming standard output (was
+    exit 0 with truncated JSON, and "internal error"); stderr closed does not turn a success into a failure."""
+    full = _device(tmp_path, "full", stat.S_IFCHR, 1, 7)
+    with open(full, "wb") as sink:
+        proc = _command("identify", str(small_log), "--format", "json", stdout=sink)
+        _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 1, err
+    assert err.decode().strip().splitlines() == [
+        "wmrid: error: cannot write standard output: No space left on device; what was printed is incomplete"
+    ]
+    closed = subprocess.run(
+        [sys.executable, "-c", "import os, sys; os.close(1); from wmrid.cli import main; main()", "identify",
+         str(small_log), "--format", "json"], capture_output=False, stderr=subprocess.PIPE, timeout=300,
+    )  # fmt: skip
+    assert closed.returncode == 1, closed.stderr
+    assert b"cannot write standard output" in closed.stderr
+    quiet = subprocess.run(
+        [sys.executable, "-c", "import os; os.close(2); from wmrid.cli import main; main()", "identify",
+         str(small_log), "--format", "table"], stdout=subprocess.PIPE, timeout=300,
+    )  # fmt: skip
+    assert quiet.returncode == 0
+    assert b"m11" in quiet.stdout
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
+def test_sigterm_and_sighup_leave_no_temporary_file(tmp_path, signum):
+    """``simulate`` stopped by SIGTERM (``timeout``, ``docker stop``) or SIGHUP (a closed terminal) while it writes
+    its log: exit 128 + the signal, one line, no ``.tmp`` file and neither half of the log + truth group (both
+    used to be left behind).  The signal is sent when the temporary file appears (or after 20 s)."""
+    out = tmp_path / "run.csv"
+    proc = _command("simulate", "--duration", "400", "-o", str(out), cwd=tmp_path)
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline and not any(p.name.endswith(".tmp") for p in tmp_path.iterdir()):
+        time.sleep(0.005)
+    proc.send_signal(signum)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 128 + signum, err
+    (line,) = err.decode().strip().splitlines()
+    assert line.startswith(f"wmrid: terminated by {signal.Signals(signum).name}"), line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_read_only_install_without_a_home_folder(tmp_path, small_log):
+    """Installed where nothing can be written and run by a user whose HOME does not exist, every command but --help
+    failed with "cannot cache function" (numba's on-disk cache).  Made here without privileges: the package's
+    ``__pycache__`` is a file and HOME lies under a file, so neither cache folder can be created, even by root.
+    ``simulate`` and ``identify`` run, with numba's cache in a folder under TMPDIR."""
+    site = tmp_path / "site"
+    shutil.copytree(ROOT / "wmrid", site / "wmrid", ignore=shutil.ignore_patterns("__pycache__"))
+    (site / "wmrid" / "__pycache__").write_text("not a folder")
+    (tmp_path / "blocker").write_text("a file")
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "XDG_CACHE_HOME", "PYTHONPATH")}
+    env.update(HOME=str(tmp_path / "blocker" / "home"), TMPDIR=str(tmp), PYTHONDONTWRITEBYTECODE="1")
+    code = f"import sys; sys.path.insert(0, {str(site)!r}); from wmrid.cli import main; main()"
+    out = tmp_path / "sim.csv"
+    for args in (["simulate", "--duration", "1", "-o", str(out)], ["identify", str(out), "--format", "json"]):
+        proc = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, env=env, timeout=300)
+        assert proc.returncode == 0, proc.stderr
+    assert any(p.name.startswith("wmrid-numba-cache") for p in tmp.iterdir())
