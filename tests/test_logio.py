@@ -397,13 +397,27 @@ def test_small_integer_nanoseconds_stay_absolute(tmp_path):
     assert not any("relative" in note for note in log.notes)
 
 
-def test_integer_whole_seconds_get_a_warning_note(tmp_path):
+def test_integer_whole_seconds_are_refused_with_the_unit_to_give(tmp_path):
+    """Integers 1 apart read as ns are a 1 GHz log: refused, naming the units that make sense of the step, ms (1 kHz)
+    or s (1 Hz) (was a note, and m11 = 0)."""
     write_log(make_frame(pose=False).assign(t=np.arange(50)), str(tmp_path / "log.csv"))
-    log = read_log(str(tmp_path / "log.csv"))
-    assert log.t[1] == 1e-9
-    assert any("--time-unit" in note and "ns apart" in note for note in log.notes)
+    with pytest.raises(LogFormatError, match=r"--time-unit ms \(1e\+03 Hz\) or --time-unit s \(1 Hz\)") as info:
+        read_log(str(tmp_path / "log.csv"))
+    assert "\n" not in str(info.value)
     log = read_log(str(tmp_path / "log.csv"), time_unit="s")
     np.testing.assert_array_equal(log.t, np.arange(50.0))
+
+
+@pytest.mark.parametrize(("step", "unit"), [(1, "ms"), (10, "ms"), (1000, "us"), (5000, "us")])
+def test_integer_epoch_milliseconds_or_microseconds_are_refused_with_their_unit(tmp_path, step, unit):
+    """The issue's case: integer epoch milliseconds (1 ms steps at 1 kHz) were read as nanoseconds, 1 ns apart, and
+    identified to m11 = 0 with only a note; now refused, naming the unit that makes the steps 0.1 ms to 1 s."""
+    stamps = 1_700_000_000_000 * (1000 if unit == "us" else 1) + np.arange(50, dtype=np.int64) * step
+    write_log(make_frame(pose=False).assign(t=stamps), str(tmp_path / "log.csv"))
+    with pytest.raises(LogFormatError, match=f"--time-unit {unit}"):
+        read_log(str(tmp_path / "log.csv"))
+    log = read_log(str(tmp_path / "log.csv"), time_unit=unit)
+    assert np.median(np.diff(log.t)) == pytest.approx(step * {"ms": 1e-3, "us": 1e-6}[unit])
 
 
 @pytest.mark.parametrize(("unit", "scale"), [("ms", 1e3), ("us", 1e6), ("ns", 1e9), ("s", 1.0)])

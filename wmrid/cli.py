@@ -699,6 +699,7 @@ def report(
     import json
 
     from wmrid.atomic import atomic_write_text, register_input, write_json
+    from wmrid.limits import memory_budget, read_limited
     from wmrid.logio import _open_source
     from wmrid.report import build_report, to_html, to_json_dict, to_markdown
 
@@ -719,9 +720,13 @@ def report(
             )
         if source.data is None:
             register_input(source.path)
-        raw = source.data if source.data is not None else Path(source.path).read_bytes()
+        raw = source.data if source.data is not None else read_limited(
+            source.path, memory_budget(), f"{source.name}: holds more than {{size}} (WMRID_MEMORY_BUDGET)", UsageError
+        )  # fmt: skip
         try:
             data = json.loads(raw)
+        except RecursionError:
+            raise UsageError(f"{source.name}: nested too deeply to be a saved result") from None
         except ValueError as err:
             raise UsageError(f"{source.name}: starts like JSON but is not valid JSON ({err})") from err
     else:
@@ -1253,6 +1258,10 @@ def main(argv: list[str] | None = None) -> None:
     try:
         track_inputs()  # an output that is one of the command's inputs is refused
         try:
+            from wmrid.limits import memory_budget
+
+            if not {"--help", "-h", "--version"} & set(args):
+                memory_budget()  # a malformed WMRID_MEMORY_BUDGET is a usage error whatever the command reads
             rv = app(args=args, prog_name="wmrid", standalone_mode=False)
             finish_output()
         finally:

@@ -44,7 +44,7 @@ import io
 import os
 import re
 import sys
-from collections.abc import Callable, Generator, Iterator, Mapping
+from collections.abc import Callable, Generator, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -52,6 +52,7 @@ import numpy as np
 
 from wmrid.errors import LogFormatError, UsageError
 from wmrid.joints import TopicSelection
+from wmrid.limits import memory_budget, read_limited
 from wmrid.signals import SignalOptions, convert
 
 if TYPE_CHECKING:
@@ -323,11 +324,18 @@ class _Source:
         return self.path if self.data is None else io.BytesIO(self.data)
 
 
+#: The message for a pipe, a device or standard input that holds more than the memory budget ({size}: the budget).
+_ENDLESS = (
+    "{name}: {what} holds more than {{size}}, the memory budget (WMRID_MEMORY_BUDGET); an endless source? save the "
+    "log to a file, which wmrid reads piece by piece"
+)
+
+
 def _open_source(path: str) -> _Source:
     if path == "-":
         if sys.stdin is None or sys.stdin.isatty():
             raise UsageError("log '-' means standard input, but nothing is piped in; give a file or pipe one in")
-        data = sys.stdin.buffer.read()
+        data = read_limited(sys.stdin.buffer, memory_budget(), _ENDLESS.format(name=_STDIN_NAME, what="standard input"))
         if not data:
             raise LogFormatError(f"{_STDIN_NAME}: standard input is empty; pipe a CSV or Parquet log into it")
         return _Source(_STDIN_NAME, None, data)
@@ -341,9 +349,8 @@ def _open_source(path: str) -> _Source:
     if os.path.isdir(path):
         raise LogFormatError(f"{path}: is a folder, not a log file; give the CSV or Parquet file inside it")
     try:
-        if not os.path.isfile(path):  # a pipe such as <(command): read it once
-            with open(path, "rb") as fh:
-                data = fh.read()
+        if not os.path.isfile(path):  # a pipe such as <(command), or a device: read it once, within the budget
+            data = read_limited(path, memory_budget(), _ENDLESS.format(name=path, what="it is not a regular file and"))
             source = _Source(path, None, data)
             size = len(data)
         else:
@@ -715,14 +722,24 @@ def _parquet_chunks(
         with opened() as stream:
             try:
                 pf = pq.ParquetFile(stream)
-                # One row group at a time: iter_batches reads ahead and held ~40 % of a 4 h log at once.
+                # One row group at a time: iter_batches over the whole file reads ahead and held ~40 % of a 4 h
+                # log at once.  A row group too large to hold decoded (a 2 MB file can hold 100 M rows of zeros
+                # in one) is read in slices of ``rows`` instead: 35 MB of Arrow memory for 20 M rows, not 1.2 GB.
                 for group in range(pf.num_row_groups):
-                    table = pf.read_row_group(group, columns=wanted, use_threads=True)
-                    for batch in table.to_batches(max_chunksize=rows):
+                    decoded = pf.metadata.row_group(group).num_rows * len(wanted) * 8
+                    if decoded > ROW_GROUP_SLICE_BYTES:
+                        batches: Iterable[Any] = pf.iter_batches(
+                            batch_size=rows, row_groups=[group], columns=wanted, use_threads=False
+                        )
+                        table = None
+                    else:
+                        table = pf.read_row_group(group, columns=wanted, use_threads=True)
+                        batches = table.to_batches(max_chunksize=rows)
+                    for batch in batches:
                         values = {key: _arrow_values(batch.column(col), key == "t") for key, col in chosen.items()}
                         yield base, values
                         base += batch.num_rows
-                    del table
+                    del table, batches
             except (pa.ArrowException, OSError) as err:
                 raise broken(err) from err
 
@@ -1122,6 +1139,7 @@ class _Assembler:
         self.prev_stamp: Any = None
         self.prev_t: float | None = None
         self.first_step: float | None = None
+        self.first_stamp = 0.0  # the first stamp as stored (for the message about an implausible unit)
         self.n = 0
         self.dropped: set[str] = set()  # optional column groups dropped for the rest of the log (_optional)
         self.last_t = 0.0
@@ -1192,6 +1210,7 @@ class _Assembler:
             )
         if self.first_step is None and len(t) > 1:
             self.first_step = float(np.median(np.diff(t)))
+            self.first_stamp = float(stamps[0])
         self.prev_stamp, self.prev_t, self.last_t = stamps[-1], float(t[-1]), float(t[-1])
         self.n += len(t)
 
@@ -1315,16 +1334,44 @@ class _Assembler:
                 f"time column {tcol!r} reaches {self.last_t:.3g} s (over 3000 years): if it counts ms, us or ns, "
                 "say so with --time-unit"
             )
-        elif self.unit == "ns" and self.time_unit == "auto" and self.hint is None and (self.first_step or 1.0) < 1e-6:
-            notes.append(
-                f"as nanoseconds the samples are only {self.first_step * 1e9:.3g} ns apart: "  # type: ignore[operator]
-                "if the column counts s, ms or us, say so with --time-unit"
-            )
+        elif (
+            self.unit == "ns" and self.time_unit == "auto" and self.hint is None
+            and (self.first_step or 1.0) < MIN_PLAUSIBLE_STEP_S
+        ):  # fmt: skip
+            raise LogFormatError(_implausible_step(name, tcol, self.first_step or 0.0, self.first_stamp))
         if any(self.mapping[k] != k for k in REQUIRED):
             notes.append(
                 "columns read as " + ", ".join(f"{k} = {self.mapping[k]!r}" for k in REQUIRED if self.mapping[k] != k)
             )
         return notes
+
+
+#: bytes: a Parquet row group larger than this decoded (rows x columns read x 8) is read in slices.
+ROW_GROUP_SLICE_BYTES = 64 << 20
+
+#: s: integer stamps read as nanoseconds whose samples are closer than this (a wheel log above 100 kHz) are refused:
+#: they count a coarser unit (epoch milliseconds read as ns gave 1 ns steps and m11 = 0).
+MIN_PLAUSIBLE_STEP_S = 1e-5
+
+
+def _implausible_step(name: str, tcol: str, step_s: float, first: float) -> str:
+    """The message for integer stamps whose median step, read as ns, is ``step_s`` (``first``: the first stamp, as
+    stored): the unit under which the first stamp is a date of this century (epoch time), else every unit that
+    puts the step between 0.1 ms and 1 s (10 Hz to 10 kHz)."""
+    count = round(step_s * 1e9)
+    scales = {"ms": 1e-3, "us": 1e-6, "s": 1.0}
+    plausible = [u for u, scale in scales.items() if 1e-4 <= count * scale <= 1.0]
+    epoch = [u for u in plausible if 9.46e8 <= first * scales[u] <= 4.1e9]  # 2000 to 2100
+    units = epoch or plausible
+    if units:
+        fix = " or ".join(f"--time-unit {u} ({1.0 / (count * scales[u]):.3g} Hz)" for u in units)
+        fix = f"give {fix}" + (", which makes the first stamp a date since the Unix epoch" if epoch else "")
+    else:
+        fix = "give --time-unit s, ms or us for the unit it counts"
+    return (
+        f"{name}: time column {tcol!r} holds integers whose samples are {count} apart: as nanoseconds (the default "
+        f"for integers) that is a {1.0 / max(step_s, 1e-300):.3g} Hz wheel log, which no robot logs; {fix}"
+    )
 
 
 def _seconds(stamps: np.ndarray, unit: str, offset: int | float | None) -> np.ndarray:

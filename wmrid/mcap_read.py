@@ -22,6 +22,12 @@ How (bounded memory, no per-message Python objects on the fast path):
   say how much was lost; the ``mcap`` summary is never needed.
 * The mapped file's pages are handed back to the kernel (``madvise(MADV_DONTNEED)``) as the walk passes
   them, so they do not pile up in the process's resident memory on a large file.
+* Damage is checked, never trusted (issue 13): a record length is compared with the bytes left without
+  overflowing; a chunk whose declared size is beyond the memory budget (:mod:`wmrid.limits`) is skipped
+  unread, and one that decompresses to another size, or fails its CRC (``uncompressed_crc``; set
+  ``WMRID_MCAP_CRC=0`` to skip the check), is skipped; each with a note giving its size and time range.
+  A JointState channel whose schema lists other fields, or its fields in another order, than the standard
+  message goes to the generic decoder, which decodes by field name.
 
 Bounded memory for long recordings (:func:`scan_mcap`, :func:`iter_joint_parts`): a first pass keeps the
 decoded JointState arrays only while they hold at most ``keep`` messages; past that it keeps per topic
@@ -42,6 +48,7 @@ import io
 import json
 import mmap
 import os
+import zlib
 from collections.abc import Callable, Generator, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -50,6 +57,10 @@ import numba
 import numpy as np
 
 from wmrid.errors import LogFormatError
+from wmrid.limits import describe, memory_budget
+
+#: Set to 0 to read chunks whose CRC does not match (a file known to be written with wrong CRCs).
+CRC_ENV = "WMRID_MCAP_CRC"
 
 MAGIC = b"\x89MCAP0\r\n"
 JOINT_STATE = "sensor_msgs/msg/JointState"
@@ -98,7 +109,7 @@ def _scan(buf, start, end, ops, starts, lengths):
     cap = ops.shape[0]
     while p + 9 <= end and n < cap:
         length = _u64(buf, p + 1)
-        if length < 0 or p + 9 + length > end:
+        if length < 0 or length > end - p - 9:  # compared without adding: a length near 2^63 would overflow
             break
         ops[n] = buf[p]
         starts[n] = p + 9
@@ -249,6 +260,58 @@ def bucket_range(bucket: int) -> tuple[int, int]:
     shift = bucket // 512 - 1
     mantissa = bucket - shift * 512
     return mantissa << shift, min(((mantissa + 1) << shift) - 1, 2**63 - 1)
+
+
+def _time_span(start_ns: int, end_ns: int) -> str:
+    """A chunk's message log-time range for a note: 's1-s2 s' (in seconds of log time)."""
+    return f"{start_ns / 1e9:.9g}-{end_ns / 1e9:.9g} s of log time"
+
+
+def _decompress(name: str, compression: str, data: bytes, size: int) -> bytes:
+    """A chunk's records: ``data`` decompressed, never more than ``size`` + 1 bytes (its declared size, already
+    within the budget), so a chunk that lies about its size cannot make wmrid allocate more."""
+    if compression == "":
+        return bytes(data)
+    if compression == "zstd":
+        import zstandard
+
+        with zstandard.ZstdDecompressor().stream_reader(io.BytesIO(data)) as reader:
+            return reader.read(size + 1)
+    if compression == "lz4":
+        import lz4.frame
+
+        return lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
+    raise LogFormatError(
+        f"{name}: a chunk uses compression {compression!r}, which wmrid cannot read (zstd, lz4 or none); "
+        "recompress the file with `mcap convert`"
+    )
+
+
+#: The standard sensor_msgs/msg/JointState fields, in order: the layout the compiled reader decodes.
+_JOINT_STATE_FIELDS = (("header", "std_msgs/Header"), ("name", "string[]"), ("position", "float64[]"),
+                       ("velocity", "float64[]"), ("effort", "float64[]"))  # fmt: skip
+
+
+def standard_joint_state(encoding: str, data: bytes) -> bool:
+    """Whether a JointState schema (``encoding``, its text ``data``) lists exactly the standard fields in the standard
+    order, so the compiled reader may decode it; an IDL or other schema, or other fields, go to the generic one."""
+    if encoding != "ros2msg":
+        return False
+    try:
+        text = bytes(data).decode("utf-8")
+    except UnicodeDecodeError:
+        return False
+    fields = []
+    for line in text.splitlines():
+        if line.startswith("=" * 10):
+            break  # the definitions of the types it uses follow
+        line = line.split("#", 1)[0].strip()
+        parts = line.split()
+        if len(parts) < 2 or "=" in line:
+            continue  # blank, a comment, or a constant
+        kind = {"Header": "std_msgs/Header", "std_msgs/msg/Header": "std_msgs/Header"}.get(parts[0], parts[0])
+        fields.append((parts[1], kind))
+    return tuple(fields) == _JOINT_STATE_FIELDS
 
 
 # --------------------------------------------------------------------------------------------------
@@ -494,6 +557,7 @@ class _Accumulator:
     json_rows: list[tuple[int, list[float]]] = field(default_factory=list)
     batches: int = 0  # parts made (kept or not)
     stats: _JointStats | None = None
+    standard: bool | None = None  # the schema is the standard JointState (the compiled reader may decode it)
 
 
 def read_mcap(
@@ -687,6 +751,8 @@ class _ReadState:
         self.name = name
         self.json_fields = json_fields
         self.decode = decode_joint_states
+        self.budget = memory_budget()
+        self.check_crc = os.environ.get(CRC_ENV, "1").strip() != "0"
         self.keep = keep
         self.wanted = wanted
         self.release = release
@@ -786,26 +852,36 @@ class _ReadState:
         from mcap.records import Chunk
 
         chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
+        span = _time_span(chunk.message_start_time, chunk.message_end_time)
+        declared = int(chunk.uncompressed_size)
+        if declared > self.budget:
+            self.notes.append(
+                f"a chunk ({len(chunk.data)} bytes, messages {span}) declares {describe(declared)} uncompressed, "
+                f"beyond the memory budget of {describe(self.budget)} (WMRID_MEMORY_BUDGET): skipped, its messages "
+                "are lost"
+            )
+            return
         try:
-            if chunk.compression == "zstd":
-                import zstandard
-
-                raw = zstandard.decompress(chunk.data, chunk.uncompressed_size)
-            elif chunk.compression == "lz4":
-                import lz4.frame
-
-                raw = lz4.frame.decompress(chunk.data)
-            elif chunk.compression == "":
-                raw = chunk.data
-            else:
-                raise LogFormatError(
-                    f"{self.name}: a chunk uses compression {chunk.compression!r}, which wmrid cannot read "
-                    "(zstd, lz4 or none); recompress the file with `mcap convert`"
-                )
+            raw = _decompress(self.name, chunk.compression, chunk.data, declared)
         except LogFormatError:
             raise
         except Exception as err:  # a corrupt chunk: say so, keep what the other chunks hold
-            self.notes.append(f"a chunk could not be decompressed ({type(err).__name__}: {err}); its messages are lost")
+            self.notes.append(
+                f"a chunk ({len(chunk.data)} bytes, messages {span}) could not be decompressed ({type(err).__name__}: "
+                f"{err}); its messages are lost"
+            )
+            return
+        if len(raw) != declared:
+            self.notes.append(
+                f"a chunk (messages {span}) decompressed to {len(raw)} bytes, not the {declared} it declares: "
+                "skipped, its messages are lost"
+            )
+            return
+        if self.check_crc and chunk.uncompressed_crc and zlib.crc32(raw) != chunk.uncompressed_crc:
+            self.notes.append(
+                f"a chunk ({len(chunk.data)} bytes, messages {span}) fails its CRC check (damaged): skipped, its "
+                f"messages are lost ({CRC_ENV}=0 reads it anyway)"
+            )
             return
         inner = np.frombuffer(raw, dtype=np.uint8)
         reached, cut = yield from self.steps(inner, 0, inner.shape[0], top_level=False)
@@ -872,6 +948,12 @@ class _ReadState:
     # ---- messages
 
     def _messages(self, buf: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> None:
+        short = lengths < 22  # a Message record holds channel u16, sequence u32, log and publish times u64
+        if short.any():
+            self.notes.append(f"{int(short.sum())} message record(s) shorter than a message header were skipped")
+            starts, lengths = starts[~short], lengths[~short]
+            if not len(starts):
+                return
         head = buf[starts[:, None] + np.arange(14)[None, :]]  # channel u16, sequence u32, log_time u64
         chan = head[:, 0].astype(np.int64) | (head[:, 1].astype(np.int64) << 8)
         log_ns = np.zeros(len(starts), dtype=np.uint64)
@@ -909,14 +991,23 @@ class _ReadState:
                 acc.skipped += len(starts)
                 return
             self._set_names(acc, list(first.name))
+        if acc.standard is None:
+            schema = self.schemas.get(acc.info["schema_id"])
+            acc.standard = bool(schema) and standard_joint_state(schema["encoding"], schema["data"])
+            if not acc.standard:
+                self.notes.append(
+                    f"topic {acc.info['topic']}: its JointState schema is not the standard one (other fields, or "
+                    "another order); decoded field by field by name, more slowly"
+                )
         n = len(starts)
         k = len(acc.names)
         stamp = np.zeros(n, dtype=np.int64)
-        pos = np.empty((n, k))
-        vel = np.empty((n, k))
-        eff = np.empty((n, k))
-        status = np.zeros(n, dtype=np.int8)
-        _joint_states(buf, starts, lengths, acc.ref, acc.ref_off, stamp, pos, vel, eff, status)
+        pos = np.full((n, k), np.nan)
+        vel = np.full((n, k), np.nan)
+        eff = np.full((n, k), np.nan)
+        status = np.full(n, STATUS_MALFORMED, dtype=np.int8)
+        if acc.standard:
+            _joint_states(buf, starts, lengths, acc.ref, acc.ref_off, stamp, pos, vel, eff, status)
         slow = np.flatnonzero(status != STATUS_OK)
         keep = np.ones(n, dtype=bool)
         for i in slow:  # rare: other endianness, a layout the fast path refuses, or new joint names
@@ -925,13 +1016,21 @@ class _ReadState:
                 keep[i] = False
                 acc.skipped += 1
                 continue
-            stamp[i] = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+            try:
+                stamp[i] = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+                names = list(msg.name)
+                fields = [list(getattr(msg, f, None) or ()) for f in ("position", "velocity", "effort")]
+                values = [[float(v) for v in f] for f in fields]
+            except (AttributeError, TypeError, ValueError):
+                keep[i] = False
+                acc.skipped += 1
+                continue
             for kk, joint in enumerate(acc.names):
-                if joint in msg.name:
-                    j = list(msg.name).index(joint)
-                    pos[i, kk] = msg.position[j] if j < len(msg.position) else np.nan
-                    vel[i, kk] = msg.velocity[j] if j < len(msg.velocity) else np.nan
-                    eff[i, kk] = msg.effort[j] if j < len(msg.effort) else np.nan
+                if joint in names:
+                    j = names.index(joint)
+                    pos[i, kk] = values[0][j] if j < len(values[0]) else np.nan
+                    vel[i, kk] = values[1][j] if j < len(values[1]) else np.nan
+                    eff[i, kk] = values[2][j] if j < len(values[2]) else np.nan
         if not keep.all():
             times, stamp, pos, vel, eff = times[keep], stamp[keep], pos[keep], vel[keep], eff[keep]
         self._store(acc, (times.copy(), stamp, pos, vel, eff))

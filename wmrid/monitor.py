@@ -286,12 +286,19 @@ def load_model(path: str | Path) -> MonitoredModel:
     from wmrid.atomic import register_input
 
     register_input(path)
+    from wmrid.limits import memory_budget, read_limited
+
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = read_limited(
+            path, memory_budget(), f"--model {path}: holds more than {{size}} (WMRID_MEMORY_BUDGET); is it a result?",
+            UsageError,
+        ).decode("utf-8")  # fmt: skip
     except (OSError, UnicodeDecodeError) as err:
         raise UsageError(f"--model {path}: cannot read it ({err.__class__.__name__}: {err})") from None
     try:
         data = json.loads(text)
+    except RecursionError:
+        raise UsageError(f"--model {path}: nested too deeply to be an identify result") from None
     except ValueError as err:
         raise UsageError(f"--model {path}: not a wmrid identify result (not JSON: {err})") from None
     return model_from_dict(data, str(path))

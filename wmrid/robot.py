@@ -287,6 +287,8 @@ def robot_from_toml_text(text: str, source: str) -> Robot:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise RobotFileError(f"{source}: not valid TOML ({err})") from None
+    except RecursionError:
+        raise RobotFileError(f"{source}: nested too deeply to be a robot file; see README 'Robot files'") from None
     if "nominal" not in data:
         raise RobotFileError(f"{source}: no [nominal] table; a robot file needs at least its nominal parameters")
     nominal = _parse_set(data["nominal"], f"{source} [nominal]")
@@ -365,8 +367,13 @@ def load_robot(spec: str) -> Robot:
     from wmrid.atomic import register_input
 
     register_input(path)
+    from wmrid.limits import ROBOT_FILE_LIMIT, read_limited
+
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_limited(
+            path, ROBOT_FILE_LIMIT, f"robot {spec!r}: holds more than {{size}}; a robot TOML file is a few kilobytes",
+            RobotFileError,
+        ).decode("utf-8")  # fmt: skip
     except (OSError, UnicodeDecodeError) as err:
         raise RobotFileError(f"robot {spec!r}: cannot read ({err})") from None
     return robot_from_toml_text(text, str(path))
