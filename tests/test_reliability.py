@@ -270,3 +270,106 @@ def test_a_large_parquet_row_group_is_read_in_slices(tmp_path, monkeypatch):
     np.testing.assert_array_equal(sliced.t, whole.t)
     np.testing.assert_array_equal(sliced.eta, whole.eta)
     np.testing.assert_array_equal(sliced.tau, whole.tau)
+
+
+def _one_error(capsys) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert "internal error" not in err[0]
+    return err[0]
+
+
+def test_messages_that_blamed_the_wrong_thing(tmp_path, small_log, capsys):
+    """The red team's list: each is now one line, exit 2, naming what is wrong (in quotes: what it said before)."""
+    dangling = tmp_path / "dangling.csv"
+    dangling.symlink_to("nothere.csv")
+    loop = tmp_path / "loop1.csv"
+    loop.symlink_to("loop2.csv")
+    (tmp_path / "loop2.csv").symlink_to("loop1.csv")
+    cases = {
+        # "no such file (did you mean '<the same path>'?)"
+        ("identify", str(dangling)): "a symbolic link to 'nothere.csv', which does not exist",
+        ("identify", str(loop)): "loops back on itself",
+        # "does not excite the dynamics"
+        ("identify", str(small_log), "--k", "1e308"): "--k must be a number in (0, 100000]",
+        ("identify", str(small_log), "--columns", "t=t,eta_r=eta_r,eta_l=eta_r,tau_r=tau_r,tau_l=tau_l"): (
+            "maps both eta_r and eta_l to the column 'eta_r'"
+        ),
+        # "below the minimum"
+        ("identify", str(small_log), "--method", "rls", "--forgetting", "1.5"): "above 1 the recursion",
+        # accepted
+        ("identify", str(small_log), "--box-width", "nan"): "--box-width must be a number > 0",
+        ("simulate", "--duration", "1", "--payload", "25@", "-o", str(tmp_path / "p.csv")): "expected MASS[@X,Y]",
+    }
+    for argv, needle in cases.items():
+        code = run(*argv, "--format", "json") if argv[0] == "identify" else run(*argv)
+        assert code == 2, argv
+        assert needle in _one_error(capsys), argv
+
+
+def test_compressed_and_other_formats_are_named(tmp_path, small_log, capsys):
+    """A gzip or zstd log: "byte 8 is a NUL byte"; now the format is named, with the command that unpacks it."""
+    import gzip
+
+    import zstandard
+
+    data = small_log.read_bytes()
+    (tmp_path / "log.csv.gz").write_bytes(gzip.compress(data))
+    (tmp_path / "log.csv.zst").write_bytes(zstandard.compress(data))
+    (tmp_path / "run.bag").write_bytes(b"#ROSBAG V2.0\n" + bytes(64))
+    for name, needle in (("log.csv.gz", "gzip-compressed"), ("log.csv.zst", "zstd-compressed"), ("run.bag", "ROS 1")):
+        assert run("identify", str(tmp_path / name), "--format", "json") == 2
+        assert needle in _one_error(capsys)
+
+
+def test_broken_saved_results_and_parquet_files_are_named(tmp_path, small_log, capsys):
+    """A saved result without ``log`` or with a malformed history, and a Parquet file with two columns of one name,
+    were "internal error"s (and the report's errors named the file "?")."""
+    import json
+
+    import numpy as np
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    result = tmp_path / "r.json"
+    assert run("identify", str(small_log), "-o", str(result), "--format", "json") == 0
+    capsys.readouterr()
+    data = json.loads(result.read_text())
+    no_log = {k: v for k, v in data.items() if k != "log"}
+    (tmp_path / "nolog.json").write_text(json.dumps(no_log))
+    (tmp_path / "badhist.json").write_text(json.dumps({**data, "history": {"t": [0, 1], "theta": "x"}}))
+    for name in ("nolog.json", "badhist.json"):
+        assert run("report", str(tmp_path / name)) == 2
+        line = _one_error(capsys)
+        assert name in line
+        assert "not a complete identify result" in line
+    columns = [pa.array(np.arange(100) * 1e-3)] * 2 + [pa.array(np.zeros(100))] * 4
+    pq.write_table(pa.table(columns, names=["t", "t", "eta_r", "eta_l", "tau_r", "tau_l"]), tmp_path / "dup.parquet")
+    assert run("identify", str(tmp_path / "dup.parquet"), "--format", "json") == 2
+    assert "used twice ('t')" in _one_error(capsys)
+
+
+def test_a_csv_header_of_millions_of_columns_is_refused_at_once(tmp_path, capsys):
+    """A header of 10 M columns took 3.4 GB and 75 s; a first line beyond 1 MiB is now refused after reading 1 MiB."""
+    wide = tmp_path / "wide.csv"
+    with open(wide, "w") as fh:
+        fh.write(",".join(f"column{i}" for i in range(300_000)) + "\n")
+        fh.write(",".join("0" for _ in range(300_000)) + "\n")
+    assert run("identify", str(wide), "--format", "json") == 2
+    assert "first line is longer than 1 MiB" in _one_error(capsys)
+
+
+def test_an_mcap_cut_mid_chunk_says_so(tmp_path, capsys):
+    """An MCAP cut in its only chunk said "holds no channels", with no word of the truncation."""
+    from wmrid.mcap_write import write_joint_state_mcap
+    from wmrid.robot import BUILTIN_ROBOTS
+    from wmrid.simulate import simulate
+
+    robot = BUILTIN_ROBOTS["paper"]
+    full = tmp_path / "full.mcap"
+    write_joint_state_mcap(full, simulate(robot.cad, robot.nominal, duration=3.0).to_frame(), odom_topic=None)
+    data = full.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) // 2])
+    assert run("identify", str(cut), "--format", "json") == 2
+    assert "cut short" in _one_error(capsys)

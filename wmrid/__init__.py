@@ -31,4 +31,23 @@ def _numba_cache_fallback() -> None:
     _os.environ["NUMBA_CACHE_DIR"] = _os.path.join(tempfile.gettempdir(), f"wmrid-numba-cache-{uid}")
 
 
+def _blas_threads_under_a_cap() -> None:
+    """One BLAS thread when the process runs under an address-space cap (``ulimit -v``, ``prlimit --as``) and no
+    thread count is set: OpenBLAS reserves a buffer per thread when numpy loads, and under a 2 GB cap a 3 s log
+    hung inside ``eigvalsh`` (or printed OpenBLAS's own allocation errors) with its default of one per core.
+    wmrid's heavy loops are compiled (numba), so a single BLAS thread costs nothing measurable there."""
+    if any(_os.environ.get(v) for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")):
+        return
+    try:
+        import resource
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    except (ImportError, OSError, ValueError, AttributeError):
+        return
+    if soft != resource.RLIM_INFINITY:
+        _os.environ["OPENBLAS_NUM_THREADS"] = "1"
+        _os.environ["OMP_NUM_THREADS"] = "1"
+
+
 _numba_cache_fallback()
+_blas_threads_under_a_cap()

@@ -18,7 +18,7 @@ from typing import Annotated
 import typer
 
 from wmrid import __version__
-from wmrid.errors import ExitStatus, UsageError, WmridError
+from wmrid.errors import ExitStatus, LogFormatError, UsageError, WmridError
 
 app = typer.Typer(
     name="wmrid",
@@ -750,7 +750,22 @@ def report(
         if validate is not None:
             result = _validate(result, validate, columns, time_unit.value, robot_obj, log_options, torque_hold.value)
         data = result.to_dict()
-    rep = build_report(data, result=result, log=log, truth=truth_params, figures=suffix in (".html", ".htm", ".md"))
+    figures = suffix in (".html", ".htm", ".md")
+    if result is None:  # a saved result: whatever it lacks or holds malformed is named, with the file
+        if isinstance(data, dict) and not data.get("source"):
+            data["source"] = source.name
+        try:
+            rep = build_report(data, truth=truth_params, figures=figures)
+        except WmridError:
+            raise
+        except (KeyError, TypeError, ValueError, IndexError, AttributeError) as err:
+            what = f"no {err.args[0]!r}" if isinstance(err, KeyError) and err.args else _one_line(str(err))
+            raise LogFormatError(
+                f"{source.name}: not a complete identify result ({what}); give a log, or the unedited output of "
+                "`wmrid identify LOG --format json`"
+            ) from err
+    else:
+        rep = build_report(data, result=result, log=log, truth=truth_params, figures=figures)
     if residuals is not None:
         _write_residuals(rep, result, log, data, residuals, force)
     if suffix in (".html", ".htm"):

@@ -319,6 +319,8 @@ def identify(
 
     if payload and robot is None:
         raise UsageError("--payload needs --robot: the payload is what the log shows beyond the unloaded robot")
+    if not (isinstance(box_width, (int, float)) and box_width > 0):  # NaN fails too
+        raise UsageError(f"--box-width must be a number > 0 (inf: no box), got {box_width!r}")
     delay_record = None
     delay_warnings: list[str] = []
     if delay is not None:

@@ -87,8 +87,9 @@ class Signals:
 
 
 def _topic_listing(contents: McapContents) -> str:
+    damage = [n for n in contents.notes if "lost" in n or "skipped" in n or "cut short" in n]
     if not contents.channels:
-        return "it holds no channels"
+        return "it holds no channels" + (f" ({'; '.join(damage)})" if damage else "")
     parts = []
     for c in contents.channels:
         enc = "" if c.message_encoding in ("cdr", "json") else f", message encoding {c.message_encoding!r}"

@@ -40,6 +40,7 @@ from positions, messages out of time order, ...) are decoded whole, with a note 
 from __future__ import annotations
 
 import difflib
+import errno
 import io
 import os
 import re
@@ -267,6 +268,13 @@ def parse_column_mapping(text: str) -> dict[str, str]:
         mapping[key] = value
     if not mapping:
         raise UsageError(f"--columns is empty; write e.g. --columns {example}")
+    seen: dict[str, str] = {}
+    for key, value in mapping.items():
+        if value in seen:
+            raise UsageError(
+                f"--columns maps both {seen[value]} and {key} to the column {value!r}; each needs its own column"
+            )
+        seen[value] = key
     return mapping
 
 
@@ -281,13 +289,30 @@ def _check_key(key: str, what: str) -> None:
 # Format detection
 
 
+#: (magic bytes, what the file is, the fix) of formats wmrid recognises but does not read.
+_OTHER_FORMATS = (
+    (b"\x1f\x8b", "a gzip-compressed file", "decompress it first (gunzip -k FILE) and give the log inside"),
+    (b"\x28\xb5\x2f\xfd", "a zstd-compressed file", "decompress it first (zstd -d FILE) and give the log inside"),
+    (b"BZh", "a bzip2-compressed file", "decompress it first (bunzip2 -k FILE) and give the log inside"),
+    (b"\xfd7zXZ\x00", "an xz-compressed file", "decompress it first (unxz -k FILE) and give the log inside"),
+    (b"PK\x03\x04", "a zip archive", "unpack it first and give the log inside"),
+    (b"#ROSBAG", "a ROS 1 bag", "convert it to MCAP first (mcap convert FILE out.mcap)"),
+    (b"SQLite f", "an SQLite database (a ROS 2 .db3 bag?)", "convert it to MCAP first (ros2 bag convert)"),
+)
+
+
 def detect_format(path: str, head_bytes: bytes) -> str:
     """``"csv"``, ``"parquet"`` or ``"mcap"``: from the suffix of ``path``, else from the magic bytes.
 
     ``path`` ``"-"`` (standard input) or an unknown suffix: ``PAR1`` -> parquet, ``\\x89MCAP`` -> mcap,
-    anything else -> csv.
+    anything else -> csv.  A compressed file, an archive, a ROS 1 bag or an SQLite database (whatever its suffix)
+    is refused with LogFormatError naming what it is and how to get a log out of it.
     """
     suffix = os.path.splitext(path)[1].lower() if path != "-" else ""
+    for magic, what, fix in _OTHER_FORMATS:
+        if head_bytes.startswith(magic):
+            name = _STDIN_NAME if path == "-" else path
+            raise LogFormatError(f"{name}: {what}, not a CSV, Parquet or MCAP log; {fix}")
     if suffix in _CSV_SUFFIXES:
         return "csv"
     if suffix in _PARQUET_SUFFIXES:
@@ -339,6 +364,15 @@ def _open_source(path: str) -> _Source:
         if not data:
             raise LogFormatError(f"{_STDIN_NAME}: standard input is empty; pipe a CSV or Parquet log into it")
         return _Source(_STDIN_NAME, None, data)
+    if os.path.islink(path) and not os.path.exists(path):
+        try:
+            os.stat(path)
+        except OSError as err:
+            if err.errno == errno.ELOOP:
+                raise LogFormatError(f"{path}: a symbolic link that loops back on itself; give the log file") from None
+        raise LogFormatError(
+            f"{path}: a symbolic link to {os.readlink(path)!r}, which does not exist; fix the link or give the log file"
+        )
     if not os.path.exists(path):
         folder = os.path.dirname(path) or "."
         hint = ""
@@ -709,6 +743,12 @@ def _parquet_chunks(
         except (pa.ArrowException, OSError) as err:
             raise broken(err) from err
     chosen = _select(present, mapping, explicit, name)
+    twice = sorted({c for c in chosen.values() if present.count(c) > 1})
+    if twice:
+        raise LogFormatError(
+            f"{name}: the Parquet file has {len(twice)} column name(s) used twice ({', '.join(map(repr, twice))}), so "
+            "wmrid cannot tell which to read; rename one of each pair when writing the file"
+        )
     wanted = list(dict.fromkeys(chosen.values()))
     notes: list[str] = []
     hint = None
@@ -869,6 +909,13 @@ def _csv_layout(source: _Source) -> _CsvLayout:
 
     name = source.name
     text, encoding, notes = _text_head(source)
+    if "\n" not in text and "\r" not in text and len(source.head(_SNIFF_BYTES + 1)) > _SNIFF_BYTES:
+        longer = source.head(MAX_HEADER_BYTES + 1)
+        if not any(mark in longer for mark in (b"\n", b"\r")) and len(longer) > MAX_HEADER_BYTES:
+            raise LogFormatError(
+                f"{name}: its first line is longer than {MAX_HEADER_BYTES >> 20} MiB (a header of "
+                f"{longer.count(b',') + 1:,}+ columns?); a wheel log has a handful of columns: give a CSV log"
+            )
     lines = text.splitlines()
     skip = 0
     while skip < len(lines) and lines[skip].lstrip().startswith(_COMMENT_MARKS):
@@ -1345,6 +1392,9 @@ class _Assembler:
             )
         return notes
 
+
+#: bytes: the longest first line (header) of a CSV log; a 10 M-column header took 3.4 GB and 75 s to refuse.
+MAX_HEADER_BYTES = 1 << 20
 
 #: bytes: a Parquet row group larger than this decoded (rows x columns read x 8) is read in slices.
 ROW_GROUP_SLICE_BYTES = 64 << 20

@@ -51,10 +51,15 @@ class MethodOptions:
         if self.cutoff_hz is not None and not (np.isfinite(self.cutoff_hz) and self.cutoff_hz > 0):
             raise UsageError(f"--cutoff must be a positive frequency in Hz, got {self.cutoff_hz!r}")
         if not (MIN_FORGETTING <= self.forgetting <= 1.0):
-            raise UsageError(
-                f"--forgetting must be in [{MIN_FORGETTING}, 1], got {self.forgetting!r}: below, the recursion "
-                f"remembers fewer than {round(1 / (1 - MIN_FORGETTING))} samples for 8 parameters"
+            why = (
+                "above 1 the recursion weights old samples more than new ones and diverges"
+                if self.forgetting > 1.0
+                else f"below {MIN_FORGETTING} the recursion remembers fewer than "
+                f"{round(1 / (1 - MIN_FORGETTING))} samples for 8 parameters"
+                if self.forgetting < MIN_FORGETTING
+                else "it is not a number"
             )
+            raise UsageError(f"--forgetting must be in [{MIN_FORGETTING}, 1], got {self.forgetting!r}: {why}")
 
 
 def check_method(name: str) -> str:

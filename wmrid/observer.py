@@ -52,6 +52,11 @@ from wmrid.model import RegressorForm, regressor
 _SERIES_BELOW = 0.1
 
 
+#: 1/s: the largest predictor gain: a time constant of 10 us, a hundredth of a 1 kHz step (--k 1e308 used to be
+#: accepted and reported as "the log does not excite the dynamics").
+MAX_K = 1e5
+
+
 def substep_weights(k: float, h: float, m: int) -> tuple[float, float]:
     """(c0, c1): over a step of h s, the filter input int_0^h exp(-k (h - s)) tau(s) ds = c0 tau_n + c1 tau_{n+1}
     for a torque held over m equal sub-steps (a controller m times faster than the log) at the values
@@ -126,8 +131,11 @@ class ObserverSettings:
                 raise UsageError(f"--control-rate must be a frequency > 0 in Hz, got {self.control_rate!r}")
             if self.torque_hold != "zoh":
                 raise UsageError("--control-rate describes a held (zoh) effort; it cannot go with --torque-hold foh")
-        if not (math.isfinite(self.k) and self.k > 0):
-            raise UsageError(f"--k must be a finite number > 0 (1/s), got {self.k}")
+        if not (math.isfinite(self.k) and 0 < self.k <= MAX_K):
+            raise UsageError(
+                f"--k must be a number in (0, {MAX_K:g}] (1/s, the state predictor's gain; default 10), got {self.k}: "
+                "beyond that the predictor forgets within microseconds and its filter carries no signal"
+            )
         if not (math.isfinite(self.alpha) and self.alpha > 0):
             raise UsageError(f"--alpha must be a finite number > 0, got {self.alpha}")
         for name in ("theta_init", "theta_min", "theta_max"):

@@ -150,8 +150,10 @@ class Payload:
     @classmethod
     def parse(cls, text: str, inertia: float = 0.0) -> Payload:
         """Parse ``MASS[@X,Y]`` (kg, m), e.g. ``25`` or ``25@0.1,-0.05``."""
-        mass_text, _, where = text.partition("@")
+        mass_text, at, where = text.partition("@")
         try:
+            if at and not where.strip():
+                raise ValueError("nothing after @")
             mass = float(mass_text)
             x, y = (float(v) for v in where.split(",")) if where else (0.0, 0.0)
         except ValueError:
