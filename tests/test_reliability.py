@@ -373,3 +373,46 @@ def test_an_mcap_cut_mid_chunk_says_so(tmp_path, capsys):
     cut.write_bytes(data[: len(data) // 2])
     assert run("identify", str(cut), "--format", "json") == 2
     assert "cut short" in _one_error(capsys)
+
+
+STUCK = """
+import sys
+import numba
+from wmrid import interrupts
+from wmrid.atomic import atomic_output
+
+interrupts.install()
+interrupts.GRACE_S = 1.0
+interrupts.start_watchdog()
+
+
+@numba.njit(nogil=True)
+def spin(n):
+    s = 0
+    for i in range(n):
+        s += i % 7
+    return s
+
+
+spin(10)
+with atomic_output(sys.argv[1]) as fh:
+    fh.write(b"partial")
+    print("ready", flush=True)
+    spin(10**15)
+"""
+
+
+def test_a_signal_ends_a_process_stuck_in_compiled_code(tmp_path):
+    """Python runs a signal handler only between bytecodes, so SIGTERM did not end a process inside a long compiled
+    loop (``timeout`` waited forever).  The watchdog ends it GRACE_S later (1 s here): exit 143, its temporary file
+    removed, one line saying why."""
+    proc = subprocess.Popen(
+        [sys.executable, "-c", STUCK, str(tmp_path / "out.bin")], stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    assert proc.stdout.readline().strip() == b"ready"
+    assert any(p.name.endswith(".tmp") for p in tmp_path.iterdir())
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert b"did not return from compiled code" in err
+    assert list(tmp_path.iterdir()) == []

@@ -34,6 +34,7 @@ from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import IO, Any
 
+from wmrid import interrupts
 from wmrid.errors import OutputExistsError, OutputWriteError, UsageError
 
 __all__ = [
@@ -50,6 +51,20 @@ _TMP_NAME_CHARS = 200
 _STREAM_PATHS = {"-": 1, "/dev/stdout": 1, "/dev/stderr": 2, "/proc/self/fd/1": 1, "/proc/self/fd/2": 2}
 #: Signals held back while a group's renames run (Ctrl-C, kill, a closed terminal).
 _HELD = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
+
+
+#: Temporary files being written: what the signal watchdog removes if it has to end the process itself.
+_LIVE: set[str] = set()
+
+
+def _remove_live() -> None:
+    for name in list(_LIVE):
+        with suppress(OSError):
+            os.unlink(name)
+    _LIVE.clear()
+
+
+interrupts.forced_exit_cleanups.append(_remove_live)
 
 
 def register_input(path: str | Path) -> None:
@@ -197,6 +212,7 @@ def atomic_output(path: str | Path, *, force: bool = False, mode: str = "wb") ->
     except OSError as err:
         raise UsageError(f"cannot write {path}: {err.strerror or err}") from err
     tmp = Path(handle.name)
+    _LIVE.add(str(tmp))
     try:
         try:
             try:
@@ -214,9 +230,11 @@ def atomic_output(path: str | Path, *, force: bool = False, mode: str = "wb") ->
             _GROUP.append((tmp, path, force))
             return
         _commit(tmp, path, force)
+        _LIVE.discard(str(tmp))
     except BaseException:
         with suppress(OSError):
             os.unlink(tmp)
+        _LIVE.discard(str(tmp))
         raise
     _fsync_folder(folder)
 
@@ -277,6 +295,7 @@ def output_group() -> Iterator[None]:
         for tmp, _, _ in pending:
             with suppress(OSError):
                 os.unlink(tmp)
+            _LIVE.discard(str(tmp))
         raise
     finally:
         _GROUP = None
@@ -287,10 +306,12 @@ def output_group() -> Iterator[None]:
         for i, (tmp, path, force) in enumerate(pending):
             try:
                 _commit(tmp, path, force)
+                _LIVE.discard(str(tmp))
             except BaseException:
                 for later, _, _ in pending[i:]:
                     with suppress(OSError):
                         os.unlink(later)
+                    _LIVE.discard(str(later))
                 raise
         for folder in {path.parent for _, path, _ in pending}:
             _fsync_folder(folder)

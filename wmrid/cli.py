@@ -1265,6 +1265,8 @@ def main(argv: list[str] | None = None) -> None:
     from wmrid.streams import finish_output, guard, unguard
 
     previous = interrupts.install()  # Ctrl-C is deferred while numba compiles (an interrupt there crashes LLVM)
+    if argv is None:  # the command-line process: a signal that finds it stuck in compiled code still ends it
+        interrupts.start_watchdog()
     saved = guard()  # a failing stdout is an error naming it; a failing stderr never changes the outcome
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args

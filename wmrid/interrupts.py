@@ -15,8 +15,11 @@ or absent, exactly as for Ctrl-C; the CLI then exits 128 + the signal's number (
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
+import time
+from collections.abc import Callable
 from types import FrameType
 
 RETRY_S = 0.05
@@ -88,3 +91,65 @@ def restore(previous: dict[int, object]) -> None:
         signal.setitimer(signal.ITIMER_REAL, 0)
     for signum, handler in previous.items():
         signal.signal(signum, handler)  # type: ignore[arg-type]
+
+
+#: s: how long a stopping signal may wait for the program to return to Python (a compiled kernel, a BLAS call)
+#: before the watchdog removes the temporary files itself and exits.
+GRACE_S = 5.0
+#: Called by the watchdog before it exits: each removes what it owns (wmrid.atomic registers its temporary files).
+forced_exit_cleanups: list[Callable[[], None]] = []
+
+
+def start_watchdog() -> None:
+    """For the command-line process only (never in-process: it would end the caller): a thread that wakes on any
+    stopping signal (``signal.set_wakeup_fd``) and, if the process is still running GRACE_S later, runs
+    :data:`forced_exit_cleanups` and exits 128 + the signal.  Python runs a signal's handler only between bytecodes,
+    so SIGTERM used not to end a process stuck inside a compiled loop at all (``timeout`` then waited forever)."""
+    if not hasattr(signal, "set_wakeup_fd") or not hasattr(signal, "pthread_sigmask"):
+        return
+    import socket
+    import threading
+
+    reader, writer = socket.socketpair()
+    writer.setblocking(False)
+    try:
+        signal.set_wakeup_fd(writer.fileno(), warn_on_full_buffer=False)
+    except (ValueError, OSError):  # not the main thread, or no such support: no watchdog
+        reader.close()
+        writer.close()
+        return
+
+    def watch() -> None:
+        # Signals go to the main thread only (this thread starts with them blocked): while the main thread holds
+        # them back (a result group's renames), they wait.
+        while True:
+            data = reader.recv(64)
+            if not data:
+                return
+            stopping = [s for s in data if s in STOPPING]
+            if not stopping:
+                continue  # SIGALRM, the compile retry
+            time.sleep(GRACE_S)
+            for cleanup in forced_exit_cleanups:
+                with contextlib.suppress(Exception):
+                    cleanup()
+            with contextlib.suppress(Exception):
+                name = (
+                    "interrupted"
+                    if stopping[0] == signal.SIGINT
+                    else f"terminated by {signal.Signals(stopping[0]).name}"
+                )
+                os.write(
+                    2, f"wmrid: {name} (the program did not return from compiled code within {GRACE_S:g} s)\n".encode()
+                )
+            os._exit(128 + stopping[0])
+
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, set(STOPPING))  # the thread starts with them blocked
+    try:
+        threading.Thread(target=watch, name="wmrid-signal-watchdog", daemon=True).start()
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
+    _keep.append((reader, writer))
+
+
+_keep: list[object] = []  # the watchdog's socket pair lives as long as the process
