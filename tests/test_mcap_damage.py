@@ -199,3 +199,21 @@ def test_a_joint_state_schema_in_another_order_is_decoded_by_field_name(tmp_path
     np.testing.assert_array_equal(log.eta, sim.eta)
     np.testing.assert_array_equal(log.tau, sim.tau)
     assert any("not the standard one" in n for n in log.notes)
+
+
+def test_a_zstd_bomb_is_skipped_unread(tmp_path):
+    """A chunk of 80 MB of zeros compresses to kilobytes; declaring more than 64 MiB and more than 1000 times its
+    compressed size, it is skipped before decompression (a 366 KB file reached 6.3 GB this way), with a note."""
+    from mcap.writer import Writer
+
+    path = tmp_path / "bomb.mcap"
+    with open(path, "wb") as fh:
+        writer = Writer(fh, compression=CompressionType.ZSTD, chunk_size=1 << 30)
+        writer.start(profile="", library="wmrid-tests")
+        schema = writer.register_schema(name="blob", encoding="", data=b"")
+        channel = writer.register_channel(topic="/blob", message_encoding="", schema_id=schema)
+        writer.add_message(channel, log_time=1, data=bytes(80 << 20), publish_time=1)
+        writer.finish()
+    assert path.stat().st_size < 1 << 20
+    notes = read_mcap(str(path)).notes
+    assert any("1000 times its compressed size" in n for n in notes), notes

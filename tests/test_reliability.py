@@ -416,3 +416,22 @@ def test_a_signal_ends_a_process_stuck_in_compiled_code(tmp_path):
     assert proc.returncode == 143, err
     assert b"did not return from compiled code" in err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_file_too_large_for_the_disk_is_one_line_and_leaves_nothing(tmp_path):
+    """A write that fails midway (here RLIMIT_FSIZE, 20 kB: EFBIG, as a full disk gives ENOSPC): exit 1, one line
+    naming the file, and neither the log, its truth file nor a temporary file is left."""
+    import resource
+
+    def small_files() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (20_000, 20_000))
+
+    proc = subprocess.run(
+        [sys.executable, "-m", "wmrid", "simulate", "--duration", "5", "-o", "run.csv"], cwd=tmp_path,
+        preexec_fn=small_files, capture_output=True, timeout=300,
+    )  # fmt: skip
+    assert proc.returncode == 1, proc.stderr
+    assert proc.stderr.decode().strip().splitlines() == [
+        "wmrid: error: cannot write run.csv: File too large; nothing was written there in full"
+    ]
+    assert list(tmp_path.iterdir()) == []

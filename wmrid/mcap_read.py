@@ -59,6 +59,11 @@ import numpy as np
 from wmrid.errors import LogFormatError
 from wmrid.limits import describe, memory_budget
 
+#: A chunk declaring more than BOMB_FLOOR bytes and more than BOMB_RATIO times its compressed size is skipped
+#: unread: a recording's chunks (1-4 MiB of messages) compress 3-20 times; a 366 KB zstd chunk of zeros declaring
+#: gigabytes is a bomb.
+BOMB_RATIO = 1000
+BOMB_FLOOR = 64 << 20
 #: Set to 0 to read chunks whose CRC does not match (a file known to be written with wrong CRCs).
 CRC_ENV = "WMRID_MCAP_CRC"
 
@@ -854,11 +859,11 @@ class _ReadState:
         chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
         span = _time_span(chunk.message_start_time, chunk.message_end_time)
         declared = int(chunk.uncompressed_size)
-        if declared > self.budget:
+        if declared > self.budget or (declared > BOMB_FLOOR and declared > BOMB_RATIO * max(len(chunk.data), 1)):
             self.notes.append(
                 f"a chunk ({len(chunk.data)} bytes, messages {span}) declares {describe(declared)} uncompressed, "
-                f"beyond the memory budget of {describe(self.budget)} (WMRID_MEMORY_BUDGET): skipped, its messages "
-                "are lost"
+                f"beyond the memory budget of {describe(self.budget)} (WMRID_MEMORY_BUDGET) or {BOMB_RATIO} times its "
+                "compressed size: skipped, its messages are lost"
             )
             return
         try:
