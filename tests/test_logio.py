@@ -680,3 +680,31 @@ def test_zero_stamps_among_epoch_times_are_dropped_and_float_ns_is_recognised(tm
     np.testing.assert_allclose(np.diff(log.t), 0.01, atol=3e-7)  # float64 spacing at 1.7e18 ns is 256 ns
     assert any("time stamp 0" in n and "row 1" in n for n in log.notes)
     assert any("read as ns since the Unix epoch" in n for n in log.notes)
+
+
+def test_integer_nanoseconds_judged_on_the_whole_log_not_its_first_piece(tmp_path):
+    """A 1 kHz log in integer ns whose first Parquet row group holds 2 rows 2 us apart was refused (the check used the
+    first piece's median step); the whole log's mean step decides."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    stamps = np.concatenate([[0, 2_000], 1_000_000 + np.arange(200, dtype=np.int64) * 1_000_000])
+    frame = make_frame(pose=False)
+    n = len(stamps)
+    table = pa.table({"t": stamps, **{c: np.resize(frame[c].to_numpy(), n) for c in ("eta_r", "eta_l", "tau_r",
+                                                                                    "tau_l")}})  # fmt: skip
+    path = tmp_path / "groups.parquet"
+    with pq.ParquetWriter(path, table.schema) as writer:
+        writer.write_table(table.slice(0, 2))
+        writer.write_table(table.slice(2))
+    log = read_log(str(path))
+    assert len(log.t) == n
+
+
+def test_epoch_microseconds_at_20_khz_suggest_microseconds(tmp_path):
+    """20 kHz epoch microseconds (steps of 50): the unit suggested is the one that makes the first stamp a date (it
+    said ms, 20 Hz)."""
+    stamps = 1_700_000_000_000_000 + np.arange(50, dtype=np.int64) * 50
+    write_log(make_frame(pose=False).assign(t=stamps), str(tmp_path / "log.csv"))
+    with pytest.raises(LogFormatError, match=r"--time-unit us \(2e\+04 Hz\)"):
+        read_log(str(tmp_path / "log.csv"))

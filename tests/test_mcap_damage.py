@@ -217,3 +217,43 @@ def test_a_zstd_bomb_is_skipped_unread(tmp_path):
     assert path.stat().st_size < 1 << 20
     notes = read_mcap(str(path)).notes
     assert any("1000 times its compressed size" in n for n in notes), notes
+
+
+def test_a_joint_state_naming_thousands_of_joints_is_skipped(tmp_path):
+    """A 500 KB file whose first message names 50,000 joints made the per-joint arrays need 14 GB; a topic naming
+    more than MAX_JOINTS joints is skipped with a note."""
+    from wmrid.mcap_read import MAX_JOINTS
+
+    path = tmp_path / "wide.mcap"
+    names = [f"j{i}" for i in range(MAX_JOINTS + 1)]
+    with open(path, "wb") as fh:
+        writer = Ros2Writer(fh, compression=CompressionType.ZSTD)
+        schema = writer.register_msgdef("sensor_msgs/msg/JointState", JOINT_STATE_MSGDEF)
+        for i in range(3):
+            msg = {"header": {"stamp": {"sec": 1, "nanosec": i}, "frame_id": ""}, "name": names,
+                   "position": [], "velocity": [0.0] * len(names), "effort": []}  # fmt: skip
+            writer.write_message("/joint_states", schema, msg, log_time=i + 1, publish_time=i + 1)
+        writer.finish()
+    notes = read_mcap(str(path)).notes
+    assert any("more than the 4,096 wmrid decodes" in n for n in notes), notes
+
+
+def test_deep_json_in_a_json_topic_skips_that_message_only(tmp_path):
+    """A JSON message nested 100,000 deep raised RecursionError: an internal error, or (in a chunk) the chunk's good
+    messages lost with it.  Now that message is skipped and the others are read."""
+    from mcap.writer import Writer
+
+    path = tmp_path / "json.mcap"
+    with open(path, "wb") as fh:
+        writer = Writer(fh, compression=CompressionType.ZSTD)
+        writer.start(profile="", library="wmrid-tests")
+        schema = writer.register_schema(name="w", encoding="jsonschema", data=b"{}")
+        channel = writer.register_channel(topic="/w", message_encoding="json", schema_id=schema)
+        for i in range(50):
+            data = ('{"a":' * 100_000 + "1" + "}" * 100_000).encode() if i == 7 else b'{"a": 1.5}'
+            writer.add_message(channel, log_time=10**9 + i * 10**6, data=data, publish_time=10**9 + i * 10**6)
+        writer.finish()
+    contents = read_mcap(str(path), json_fields={"/w": {"a": "a"}})
+    series = contents.json["/w"]
+    assert len(series.log_ns) == 49
+    assert np.all(series.values["a"] == 1.5)

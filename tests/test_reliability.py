@@ -151,15 +151,16 @@ def test_standard_streams_that_fail(tmp_path, small_log):
     assert err.decode().strip().splitlines() == [
         "wmrid: error: cannot write standard output: No space left on device; what was printed is incomplete"
     ]
+    # closed before the program starts, as `>&-` does (closing it later would let the next file opened take fd 1)
     closed = subprocess.run(
-        [sys.executable, "-c", "import os, sys; os.close(1); from wmrid.cli import main; main()", "identify",
-         str(small_log), "--format", "json"], capture_output=False, stderr=subprocess.PIPE, timeout=300,
+        [sys.executable, "-m", "wmrid", "identify", str(small_log), "--format", "json"],
+        stderr=subprocess.PIPE, preexec_fn=lambda: os.close(1), timeout=300,
     )  # fmt: skip
     assert closed.returncode == 1, closed.stderr
     assert b"cannot write standard output" in closed.stderr
     quiet = subprocess.run(
-        [sys.executable, "-c", "import os; os.close(2); from wmrid.cli import main; main()", "identify",
-         str(small_log), "--format", "table"], stdout=subprocess.PIPE, timeout=300,
+        [sys.executable, "-m", "wmrid", "identify", str(small_log), "--format", "table"],
+        stdout=subprocess.PIPE, preexec_fn=lambda: os.close(2), timeout=300,
     )  # fmt: skip
     assert quiet.returncode == 0
     assert b"m11" in quiet.stdout
@@ -411,10 +412,11 @@ def test_a_signal_ends_a_process_stuck_in_compiled_code(tmp_path):
     )
     assert proc.stdout.readline().strip() == b"ready"
     assert any(p.name.endswith(".tmp") for p in tmp_path.iterdir())
+    time.sleep(0.5)  # into the compiled loop (a signal before it would be handled as usual)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 143, err
-    assert b"did not return from compiled code" in err
+    assert b"did not return to Python within 1 s" in err
     assert list(tmp_path.iterdir()) == []
 
 
@@ -435,3 +437,56 @@ def test_a_file_too_large_for_the_disk_is_one_line_and_leaves_nothing(tmp_path):
         "wmrid: error: cannot write run.csv: File too large; nothing was written there in full"
     ]
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_signal_inside_held_waits_for_its_end():
+    """A result group's renames run inside ``interrupts.held()``: a stopping signal handled there (as when it reaches
+    another thread, which pthread_sigmask does not hold back) is raised only when the block ends."""
+    from wmrid import interrupts
+
+    done = []
+
+    def group() -> None:
+        with interrupts.held():
+            interrupts._interrupt(signal.SIGTERM, None)
+            done.append("renamed")
+
+    with pytest.raises(interrupts.Terminated):
+        group()
+    assert done == ["renamed"]
+
+
+def test_in_process_calls_keep_the_callers_streams(tmp_path, capsys):
+    """``main([...])`` under a text-only stdout (StringIO) writes CSV there (it exited 1, "standard output is
+    closed"), and with --debug an error leaves the caller's streams and SIGINT handler as they were."""
+    import contextlib
+    import io
+
+    from wmrid.errors import LogFormatError
+
+    buffer = io.StringIO()
+    with contextlib.redirect_stdout(buffer):
+        assert run("simulate", "--duration", "0.5", "-o", "-") == 0
+    assert buffer.getvalue().startswith("t,eta_r")
+    stdout, handler = sys.stdout, signal.getsignal(signal.SIGINT)
+    with pytest.raises(LogFormatError):
+        main(["--debug", "identify", str(tmp_path / "missing.csv")])
+    assert sys.stdout is stdout
+    assert signal.getsignal(signal.SIGINT) is handler
+    capsys.readouterr()
+
+
+def test_output_to_standard_output_is_one_json_document(small_log, capsys):
+    """``identify LOG -o -`` printed the result twice (two JSON documents: not JSON)."""
+    import json
+
+    assert run("identify", str(small_log), "-o", "-") == 0
+    json.loads(capsys.readouterr().out)
+
+
+def test_a_long_name_in_bytes_is_written(tmp_path, small_log, capsys):
+    """NAME_MAX counts bytes: 'ü' * 120 + '.json' is 245 bytes (legal); its temporary name is cut by bytes."""
+    target = tmp_path / ("ü" * 120 + ".json")
+    assert run("identify", str(small_log), "-o", str(target), "--format", "json") == 0
+    assert target.exists()
+    capsys.readouterr()

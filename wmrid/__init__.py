@@ -17,7 +17,8 @@ def _numba_cache_fallback() -> None:
     here = _os.path.dirname(_os.path.abspath(__file__))
     candidates = [_os.path.join(here, "__pycache__")]
     home = _os.environ.get("XDG_CACHE_HOME") or _os.path.join(_os.path.expanduser("~"), ".cache")
-    candidates.append(_os.path.join(home, "numba"))
+    if _os.path.isabs(home):  # no HOME and no passwd entry leaves "~": never a folder made in the working directory
+        candidates.append(_os.path.join(home, "numba"))
     for folder in candidates:
         try:
             _os.makedirs(folder, exist_ok=True)

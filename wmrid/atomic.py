@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from wmrid import interrupts
-from wmrid.errors import OutputExistsError, OutputWriteError, UsageError
+from wmrid.errors import OutputExistsError, OutputWriteError, ReaderGone, UsageError
 
 __all__ = [
     "atomic_output", "atomic_write_bytes", "atomic_write_text", "clear_inputs", "output_group", "register_input",
@@ -45,8 +45,15 @@ __all__ = [
 #: (st_dev, st_ino) of the files this run reads: an output that is one of them is refused.  None: not tracked
 #: (a library caller may well rewrite a file it read); the CLI tracks them for the length of a command.
 _INPUTS: dict[tuple[int, int], str] | None = None
-#: Characters of the target's name kept in a temporary name: "." + 200 + "." + 8 random + ".tmp" < 255.
-_TMP_NAME_CHARS = 200
+#: Bytes of the target's name kept in a temporary name: "." + 200 + "." + 8 random + ".tmp" < 255 (NAME_MAX).
+_TMP_NAME_BYTES = 200
+
+
+def _short(name: str) -> str:
+    """``name`` cut to _TMP_NAME_BYTES bytes of its file-system encoding (never mid-character)."""
+    return os.fsencode(name)[:_TMP_NAME_BYTES].decode(sys.getfilesystemencoding(), errors="ignore")
+
+
 #: Paths written in place as the process's own streams.
 _STREAM_PATHS = {"-": 1, "/dev/stdout": 1, "/dev/stderr": 2, "/proc/self/fd/1": 1, "/proc/self/fd/2": 2}
 #: Signals held back while a group's renames run (Ctrl-C, kill, a closed terminal).
@@ -207,7 +214,7 @@ def atomic_output(path: str | Path, *, force: bool = False, mode: str = "wb") ->
     kwargs: dict[str, Any] = {"encoding": "utf-8"} if mode == "w" else {}
     try:
         handle = tempfile.NamedTemporaryFile(  # noqa: SIM115 - closed below on every path
-            mode=mode, dir=folder, delete=False, prefix=f".{path.name[:_TMP_NAME_CHARS]}.", suffix=".tmp", **kwargs
+            mode=mode, dir=folder, delete=False, prefix=f".{_short(path.name)}.", suffix=".tmp", **kwargs
         )
     except OSError as err:
         raise UsageError(f"cannot write {path}: {err.strerror or err}") from err
@@ -260,8 +267,8 @@ def _in_place(path: Path, fd: int | None, mode: str) -> Iterator[IO]:
         finally:
             with suppress(BrokenPipeError):
                 handle.close()
-    except BrokenPipeError:
-        raise
+    except BrokenPipeError as err:
+        raise ReaderGone() from err
     except OSError as err:
         raise _write_error(path, err) from err
 
@@ -303,18 +310,19 @@ def output_group() -> Iterator[None]:
     if blocked:
         signal.pthread_sigmask(signal.SIG_BLOCK, set(_HELD))
     try:
-        for i, (tmp, path, force) in enumerate(pending):
-            try:
-                _commit(tmp, path, force)
-                _LIVE.discard(str(tmp))
-            except BaseException:
-                for later, _, _ in pending[i:]:
-                    with suppress(OSError):
-                        os.unlink(later)
-                    _LIVE.discard(str(later))
-                raise
-        for folder in {path.parent for _, path, _ in pending}:
-            _fsync_folder(folder)
+        with interrupts.held():  # a signal that reaches another thread waits too
+            for i, (tmp, path, force) in enumerate(pending):
+                try:
+                    _commit(tmp, path, force)
+                    _LIVE.discard(str(tmp))
+                except BaseException:
+                    for later, _, _ in pending[i:]:
+                        with suppress(OSError):
+                            os.unlink(later)
+                        _LIVE.discard(str(later))
+                    raise
+            for folder in {path.parent for _, path, _ in pending}:
+                _fsync_folder(folder)
     finally:
         if blocked:
             signal.pthread_sigmask(signal.SIG_UNBLOCK, set(_HELD))

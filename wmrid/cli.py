@@ -13,12 +13,12 @@ import signal
 import sys
 from enum import Enum
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
 from wmrid import __version__
-from wmrid.errors import ExitStatus, LogFormatError, UsageError, WmridError
+from wmrid.errors import ExitStatus, LogFormatError, ReaderGone, UsageError, WmridError
 
 app = typer.Typer(
     name="wmrid",
@@ -606,6 +606,8 @@ def identify(
         write_json(str(output), payload, force=force)
     if out is not None:
         _write_estimates(result, out, force)
+    if _on_stdout(output):
+        return  # the result went to standard output already: a second document there would not be JSON
     fmt = output_format.value
     if fmt == "auto":
         fmt = "table" if sys.stdout.isatty() else "json"
@@ -882,6 +884,8 @@ def compare(
     data = run_compare(wheel_log, observer, options, names, other=other, truth=truth_params)
     if output is not None:
         write_json(str(output), data, force=force)
+    if _on_stdout(output):
+        return  # the result went to standard output already
     fmt = output_format.value
     if fmt == "auto":
         fmt = "table" if sys.stdout.isatty() else "json"
@@ -1244,6 +1248,8 @@ def monitor(
     payload = result.to_dict()
     if output is not None:
         write_json(str(output), payload, force=force)
+    if _on_stdout(output):
+        return  # the result went to standard output already
     fmt = output_format.value
     if fmt == "auto":
         fmt = "table" if sys.stdout.isatty() else "json"
@@ -1262,7 +1268,7 @@ def main(argv: list[str] | None = None) -> None:
     128 + the signal for Ctrl-C, SIGTERM and SIGHUP (130, 143, 129; temporary files removed either way)."""
     from wmrid import interrupts
     from wmrid.atomic import clear_inputs, track_inputs
-    from wmrid.streams import finish_output, guard, unguard
+    from wmrid.streams import finish_output, guard
 
     previous = interrupts.install()  # Ctrl-C is deferred while numba compiles (an interrupt there crashes LLVM)
     if argv is None:  # the command-line process: a signal that finds it stuck in compiled code still ends it
@@ -1292,10 +1298,14 @@ def main(argv: list[str] | None = None) -> None:
         code = interrupts.exit_code()
     except WmridError as exc:
         if debug:
+            _leave(argv, saved, previous)
             raise
         sys.stderr.write(f"wmrid: error: {_one_line(str(exc))}\n")
         code = exc.exit_status
-    except BrokenPipeError:
+    except (BrokenPipeError, ReaderGone):  # the reader (| head) has seen enough
+        if argv is None:  # and nothing more is flushed into the closed pipe at exit
+            with contextlib.suppress(OSError, ValueError):
+                os.dup2(os.open(os.devnull, os.O_WRONLY), 1)
         code = ExitStatus.OK
     except Exception as exc:
         if hasattr(exc, "show") and hasattr(exc, "exit_code"):  # a Click/Typer usage error: its own message
@@ -1304,6 +1314,7 @@ def main(argv: list[str] | None = None) -> None:
         elif type(exc).__name__ == "Abort":
             code = interrupts.exit_code()
         elif debug:
+            _leave(argv, saved, previous)
             raise
         else:  # the last resort: never a traceback without --debug
             sys.stderr.write(
@@ -1312,8 +1323,7 @@ def main(argv: list[str] | None = None) -> None:
             )
             code = ExitStatus.NO_RESULT
     if argv is not None:  # called in-process: leave the caller's signal handlers and streams as they were
-        unguard(saved)
-        interrupts.restore(previous)
+        _leave(argv, saved, previous)
         sys.exit(int(code))
     for signum in interrupts.STOPPING:  # the outcome is decided: a late signal must not change it
         signal.signal(signum, signal.SIG_IGN)
@@ -1325,6 +1335,22 @@ def main(argv: list[str] | None = None) -> None:
                 stream.flush()
         os._exit(int(code))
     sys.exit(int(code))
+
+
+def _on_stdout(output: Any) -> bool:
+    """Whether ``-o`` named standard output (``-``, /dev/stdout, /dev/fd/1)."""
+    return output is not None and str(output) in ("-", "/dev/stdout", "/dev/fd/1", "/proc/self/fd/1")
+
+
+def _leave(argv: list[str] | None, saved: Any, previous: Any) -> None:
+    """In-process (``argv`` given): put back the caller's streams and signal handlers."""
+    if argv is None:
+        return
+    from wmrid import interrupts
+    from wmrid.streams import unguard
+
+    unguard(saved)
+    interrupts.restore(previous)
 
 
 def _stopped_by() -> str:

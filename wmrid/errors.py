@@ -48,3 +48,8 @@ class OutputWriteError(WmridError):
     """An output could not be written (a full disk, a closed or failing stream); nothing partial stands as complete."""
 
     exit_status = ExitStatus.NO_RESULT
+
+
+class ReaderGone(Exception):
+    """The reader of standard output (``| head``) closed the pipe: not an error, the run ends with exit 0.  Not an
+    OSError, so that Click does not turn it into exit 1 on its way out."""

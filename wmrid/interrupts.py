@@ -19,7 +19,7 @@ import contextlib
 import os
 import signal
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from types import FrameType
 
 RETRY_S = 0.05
@@ -50,18 +50,46 @@ received: int | None = None
 _pending = signal.SIGINT
 
 
+_holding = 0  # > 0 inside held(): a stopping signal waits until it ends
+_deferred = False
+
+
 def _interrupt(signum: int, frame: FrameType | None) -> None:
-    global received, _pending
+    global received, _pending, _deferred
     if signum != getattr(signal, "SIGALRM", None):
         _pending = signum
         if received is None:
             received = signum
+    if _holding:
+        _deferred = True  # raised when held() ends
+        return
     if in_compiler(frame) and hasattr(signal, "setitimer"):
         signal.setitimer(signal.ITIMER_REAL, RETRY_S)  # try again once numba has finished
         return
+    _raise()
+
+
+def _raise() -> None:
     if _pending == signal.SIGINT:
         raise KeyboardInterrupt
     raise Terminated(_pending)
+
+
+@contextlib.contextmanager
+def held() -> Iterator[None]:
+    """Inside, a stopping signal is recorded and raised only at the end (a result group's renames run here).
+    Blocking the signals (``pthread_sigmask``) holds them back from the main thread only: a signal delivered to
+    another thread (OpenBLAS's workers) still ran the handler between two renames and split a log from its truth
+    file."""
+    global _holding, _deferred
+    _holding += 1
+    try:
+        yield
+    finally:
+        _holding -= 1
+    if not _holding and _deferred:
+        _deferred = False
+        _raise()
 
 
 def exit_code() -> int:
@@ -133,15 +161,14 @@ def start_watchdog() -> None:
             for cleanup in forced_exit_cleanups:
                 with contextlib.suppress(Exception):
                     cleanup()
+            signum = stopping[0]
+            name = "interrupted" if signum == signal.SIGINT else f"terminated by {signal.Signals(signum).name}"
+            note = f"wmrid: {name} (the program did not return to Python within {GRACE_S:g} s)\n"
             with contextlib.suppress(Exception):
-                name = (
-                    "interrupted"
-                    if stopping[0] == signal.SIGINT
-                    else f"terminated by {signal.Signals(stopping[0]).name}"
-                )
-                os.write(
-                    2, f"wmrid: {name} (the program did not return from compiled code within {GRACE_S:g} s)\n".encode()
-                )
+                import select
+
+                if select.select([], [2], [], 0.2)[1]:  # never block on a full stderr pipe
+                    os.write(2, note.encode())
             os._exit(128 + stopping[0])
 
     held = signal.pthread_sigmask(signal.SIG_BLOCK, set(STOPPING))  # the thread starts with them blocked

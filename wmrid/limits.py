@@ -63,14 +63,13 @@ def read_limited(source: Any, limit: int, message: str, error: type[Exception] |
     error = error or LogFormatError
 
     def read(fh: Any) -> bytes:
-        parts, size = [], 0
+        data = bytearray()  # grown in place: no second copy of everything read at the end
         while True:
             block = fh.read(1 << 20)
             if not block:
-                return b"".join(parts)
-            parts.append(block)
-            size += len(block)
-            if size > limit:
+                return data  # type: ignore[return-value]  # a bytearray reads like bytes everywhere it goes
+            data += block
+            if len(data) > limit:
                 raise error(message.format(size=describe(limit)))
 
     if isinstance(source, (str, os.PathLike)):

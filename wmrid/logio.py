@@ -1187,6 +1187,7 @@ class _Assembler:
         self.prev_t: float | None = None
         self.first_step: float | None = None
         self.first_stamp = 0.0  # the first stamp as stored (for the message about an implausible unit)
+        self.first_t = 0.0
         self.n = 0
         self.dropped: set[str] = set()  # optional column groups dropped for the rest of the log (_optional)
         self.last_t = 0.0
@@ -1257,7 +1258,8 @@ class _Assembler:
             )
         if self.first_step is None and len(t) > 1:
             self.first_step = float(np.median(np.diff(t)))
-            self.first_stamp = float(stamps[0])
+        if self.n == 0 and len(t):
+            self.first_stamp, self.first_t = float(stamps[0]), float(t[0])
         self.prev_stamp, self.prev_t, self.last_t = stamps[-1], float(t[-1]), float(t[-1])
         self.n += len(t)
 
@@ -1381,11 +1383,10 @@ class _Assembler:
                 f"time column {tcol!r} reaches {self.last_t:.3g} s (over 3000 years): if it counts ms, us or ns, "
                 "say so with --time-unit"
             )
-        elif (
-            self.unit == "ns" and self.time_unit == "auto" and self.hint is None
-            and (self.first_step or 1.0) < MIN_PLAUSIBLE_STEP_S
-        ):  # fmt: skip
-            raise LogFormatError(_implausible_step(name, tcol, self.first_step or 0.0, self.first_stamp))
+        elif self.unit == "ns" and self.time_unit == "auto" and self.hint is None and self.n > 1:
+            mean_step = (self.last_t - self.first_t) / (self.n - 1)  # the whole log's, not its first piece's
+            if mean_step < MIN_PLAUSIBLE_STEP_S:
+                raise LogFormatError(_implausible_step(name, tcol, mean_step, self.first_stamp))
         if any(self.mapping[k] != k for k in REQUIRED):
             notes.append(
                 "columns read as " + ", ".join(f"{k} = {self.mapping[k]!r}" for k in REQUIRED if self.mapping[k] != k)
@@ -1408,10 +1409,10 @@ def _implausible_step(name: str, tcol: str, step_s: float, first: float) -> str:
     """The message for integer stamps whose median step, read as ns, is ``step_s`` (``first``: the first stamp, as
     stored): the unit under which the first stamp is a date of this century (epoch time), else every unit that
     puts the step between 0.1 ms and 1 s (10 Hz to 10 kHz)."""
-    count = round(step_s * 1e9)
+    count = step_s * 1e9
     scales = {"ms": 1e-3, "us": 1e-6, "s": 1.0}
+    epoch = [u for u in scales if 9.46e8 <= first * scales[u] <= 4.1e9]  # the first stamp a date, 2000 to 2100
     plausible = [u for u, scale in scales.items() if 1e-4 <= count * scale <= 1.0]
-    epoch = [u for u in plausible if 9.46e8 <= first * scales[u] <= 4.1e9]  # 2000 to 2100
     units = epoch or plausible
     if units:
         fix = " or ".join(f"--time-unit {u} ({1.0 / (count * scales[u]):.3g} Hz)" for u in units)
@@ -1419,7 +1420,7 @@ def _implausible_step(name: str, tcol: str, step_s: float, first: float) -> str:
     else:
         fix = "give --time-unit s, ms or us for the unit it counts"
     return (
-        f"{name}: time column {tcol!r} holds integers whose samples are {count} apart: as nanoseconds (the default "
+        f"{name}: time column {tcol!r} holds integers whose samples are {count:.4g} apart: as nanoseconds (the default "
         f"for integers) that is a {1.0 / max(step_s, 1e-300):.3g} Hz wheel log, which no robot logs; {fix}"
     )
 

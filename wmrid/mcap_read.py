@@ -59,6 +59,9 @@ import numpy as np
 from wmrid.errors import LogFormatError
 from wmrid.limits import describe, memory_budget
 
+#: A JointState topic whose first message names more joints than this is skipped (a wheel log names a few; 50,000
+#: names in a 500 KB file made the per-joint arrays need 14 GB).
+MAX_JOINTS = 4096
 #: A chunk declaring more than BOMB_FLOOR bytes and more than BOMB_RATIO times its compressed size is skipped
 #: unread: a recording's chunks (1-4 MiB of messages) compress 3-20 times; a 366 KB zstd chunk of zeros declaring
 #: gigabytes is a bomb.
@@ -563,6 +566,7 @@ class _Accumulator:
     batches: int = 0  # parts made (kept or not)
     stats: _JointStats | None = None
     standard: bool | None = None  # the schema is the standard JointState (the compiled reader may decode it)
+    too_wide: bool = False  # its messages name more than MAX_JOINTS joints: skipped
 
 
 def read_mcap(
@@ -828,6 +832,12 @@ class _ReadState:
             handler = handlers.get(op)
             if handler is None:
                 continue  # index and summary records: not needed
+            if int(lengths[i]) > self.budget:  # checked before the record is copied (a sparse file can claim GBs)
+                self.notes.append(
+                    f"a record of {describe(int(lengths[i]))} (opcode {op}), beyond the memory budget of "
+                    f"{describe(self.budget)} (WMRID_MEMORY_BUDGET), was skipped unread"
+                )
+                continue
             body = bytes(buf[starts[i] : starts[i] + lengths[i]])
             try:
                 if op == OP_CHUNK:
@@ -995,7 +1005,27 @@ class _ReadState:
             if first is None:
                 acc.skipped += len(starts)
                 return
-            self._set_names(acc, list(first.name))
+            names = list(first.name)
+            if len(names) > MAX_JOINTS:
+                self.notes.append(
+                    f"topic {acc.info['topic']}: its JointState messages name {len(names):,} joints, more than the "
+                    f"{MAX_JOINTS:,} wmrid decodes; skipped"
+                )
+                acc.too_wide = True
+                self._set_names(acc, [])
+            else:
+                self._set_names(acc, names)
+        if acc.too_wide:
+            acc.skipped += len(starts)
+            return
+        need = len(starts) * len(acc.names) * 24
+        if need > self.budget:
+            self.notes.append(
+                f"topic {acc.info['topic']}: a batch of {len(starts):,} messages x {len(acc.names)} joints needs "
+                f"{describe(need)}, beyond the memory budget of {describe(self.budget)} (WMRID_MEMORY_BUDGET); skipped"
+            )
+            acc.skipped += len(starts)
+            return
         if acc.standard is None:
             schema = self.schemas.get(acc.info["schema_id"])
             acc.standard = bool(schema) and standard_joint_state(schema["encoding"], schema["data"])
@@ -1104,7 +1134,7 @@ class _ReadState:
         for s, n, t in zip(starts, lengths, times, strict=True):
             try:
                 obj = json.loads(bytes(buf[s : s + n]))
-            except ValueError:
+            except (ValueError, RecursionError):  # not JSON, or nested too deeply to be a message
                 acc.skipped += 1
                 continue
             acc.json_rows.append((int(t), [_lookup(obj, path) for path in paths]))

@@ -2,8 +2,8 @@
 
 * Standard output: a write or flush that fails (a full disk, ``/dev/full``, a closed stream) becomes
   :class:`wmrid.errors.OutputWriteError` naming standard output, so the run exits 1 with one line instead of 0
-  with truncated JSON or "internal error".  A closed pipe (``| head``) stays a BrokenPipeError, which the CLI
-  treats as a reader that has seen enough.
+  with truncated JSON or "internal error".  A closed pipe (``| head``) becomes :class:`wmrid.errors.ReaderGone`:
+  a reader that has seen enough, exit 0.
 * Standard error: carries only notes and messages, so a failure there (closed, full) is ignored and never
   changes the exit code of a run that succeeded.
 
@@ -15,7 +15,7 @@ from __future__ import annotations
 import sys
 from typing import Any
 
-from wmrid.errors import OutputWriteError
+from wmrid.errors import OutputWriteError, ReaderGone
 
 
 def _failure(err: BaseException | None) -> OutputWriteError:
@@ -34,8 +34,8 @@ class _GuardedOutput:
             raise _failure(None)
         try:
             return self._stream.write(data)
-        except BrokenPipeError:
-            raise
+        except BrokenPipeError as err:
+            raise ReaderGone() from err
         except (OSError, ValueError) as err:  # ValueError: a stream closed under us
             raise _failure(err) from err
 
@@ -44,8 +44,8 @@ class _GuardedOutput:
             return
         try:
             self._stream.flush()
-        except BrokenPipeError:
-            raise
+        except BrokenPipeError as err:
+            raise ReaderGone() from err
         except (OSError, ValueError) as err:
             raise _failure(err) from err
 
@@ -57,7 +57,12 @@ class _GuardedOutput:
 
     @property
     def buffer(self) -> _GuardedOutput:
-        return _GuardedOutput(getattr(self._stream, "buffer", None))
+        if self._stream is None:
+            return _GuardedOutput(None)  # closed: writing to it is the error, not asking for it
+        inner = getattr(self._stream, "buffer", None)
+        if inner is None:  # a text-only stream (StringIO, a test harness): callers fall back to text
+            raise AttributeError("buffer")
+        return _GuardedOutput(inner)
 
     def __getattr__(self, name: str) -> Any:
         if self._stream is None:
