@@ -490,3 +490,27 @@ def test_a_long_name_in_bytes_is_written(tmp_path, small_log, capsys):
     assert run("identify", str(small_log), "-o", str(target), "--format", "json") == 0
     assert target.exists()
     capsys.readouterr()
+
+
+def test_under_an_address_space_cap_a_log_identifies_and_an_endless_source_stops(tmp_path, small_log):
+    """Real processes under RLIMIT_AS = 2 GB (``ulimit -v``, ``prlimit --as``): a 2 s log identifies (a 3 s log hung
+    inside OpenBLAS's eigvalsh: one buffer per thread), and a /dev/zero stand-in as the log stops at a 256 MiB
+    budget with one line instead of growing until MemoryError."""
+    import resource
+
+    def capped() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (2_000_000_000, 2_000_000_000))
+
+    env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
+    proc = subprocess.run(
+        [sys.executable, "-m", "wmrid", "identify", str(small_log), "--format", "json"], preexec_fn=capped,
+        capture_output=True, timeout=180, env=env,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    zero = _device(tmp_path, "zero", stat.S_IFCHR, 1, 5)
+    proc = subprocess.run(
+        [sys.executable, "-m", "wmrid", "identify", str(zero), "--format", "json"], preexec_fn=capped,
+        capture_output=True, timeout=180, env={**env, "WMRID_MEMORY_BUDGET": "256M"},
+    )  # fmt: skip
+    assert proc.returncode == 2, proc.stderr
+    assert b"holds more than 256 MiB" in proc.stderr

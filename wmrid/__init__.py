@@ -32,23 +32,34 @@ def _numba_cache_fallback() -> None:
     _os.environ["NUMBA_CACHE_DIR"] = _os.path.join(tempfile.gettempdir(), f"wmrid-numba-cache-{uid}")
 
 
-def _blas_threads_under_a_cap() -> None:
-    """One BLAS thread when the process runs under an address-space cap (``ulimit -v``, ``prlimit --as``) and no
-    thread count is set: OpenBLAS reserves a buffer per thread when numpy loads, and under a 2 GB cap a 3 s log
-    hung inside ``eigvalsh`` (or printed OpenBLAS's own allocation errors) with its default of one per core.
-    wmrid's heavy loops are compiled (numba), so a single BLAS thread costs nothing measurable there."""
-    if any(_os.environ.get(v) for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")):
-        return
+def _under_an_address_space_cap() -> None:
+    """Keep the address space small when the process runs under a cap (``ulimit -v``, ``prlimit --as``).
+
+    Libraries reserve address space they rarely touch: OpenBLAS a buffer per thread, Arrow's default allocator
+    about 1 GB, glibc a 64 MB arena per thread.  An identify of a 2 s log reached 2.15 GB of address space, so
+    under a 2 GB cap an allocation failed deep inside OpenBLAS and the run hung in ``lstsq``.  Under a cap (and
+    unless set already): one BLAS thread, Arrow's system allocator, at most two malloc arenas -- 0.77 GB.  wmrid's
+    heavy loops are compiled (numba), so none of this costs measurable time."""
     try:
         import resource
 
         soft, _ = resource.getrlimit(resource.RLIMIT_AS)
     except (ImportError, OSError, ValueError, AttributeError):
         return
-    if soft != resource.RLIM_INFINITY:
+    if soft == resource.RLIM_INFINITY:
+        return
+    if not any(_os.environ.get(v) for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")):
         _os.environ["OPENBLAS_NUM_THREADS"] = "1"
         _os.environ["OMP_NUM_THREADS"] = "1"
+    _os.environ.setdefault("ARROW_DEFAULT_MEMORY_POOL", "system")
+    if "MALLOC_ARENA_MAX" not in _os.environ:
+        try:
+            import ctypes
+
+            ctypes.CDLL(None).mallopt(-8, 2)  # M_ARENA_MAX (glibc); elsewhere there is no such call
+        except (OSError, AttributeError):
+            pass
 
 
 _numba_cache_fallback()
-_blas_threads_under_a_cap()
+_under_an_address_space_cap()
