@@ -100,7 +100,7 @@ def clear_inputs() -> None:
     _INPUTS = None
 
 
-def _stream_fd(path: Path) -> int | None:
+def stream_fd(path: str | Path) -> int | None:
     """The file descriptor a path names as one of this process's streams (``-``, /dev/stdout, /dev/fd/N), else None."""
     text = str(path)
     if text in _STREAM_PATHS:
@@ -201,7 +201,7 @@ def atomic_output(path: str | Path, *, force: bool = False, mode: str = "wb") ->
     if mode not in ("wb", "w"):
         raise ValueError(f"atomic_output mode must be 'wb' or 'w', not {mode!r}")
     path = Path(path)
-    fd = _stream_fd(path)
+    fd = stream_fd(path)
     if fd is not None or _special(path) == "stream":
         with _in_place(path, fd, mode) as handle:
             yield handle

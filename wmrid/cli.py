@@ -1338,8 +1338,10 @@ def main(argv: list[str] | None = None) -> None:
 
 
 def _on_stdout(output: Any) -> bool:
-    """Whether ``-o`` named standard output (``-``, /dev/stdout, /dev/fd/1)."""
-    return output is not None and str(output) in ("-", "/dev/stdout", "/dev/fd/1", "/proc/self/fd/1")
+    """Whether ``-o`` named standard output (``-``, /dev/stdout, /dev/fd/1: :func:`wmrid.atomic.stream_fd`)."""
+    from wmrid.atomic import stream_fd
+
+    return output is not None and stream_fd(str(output)) == 1
 
 
 def _leave(argv: list[str] | None, saved: Any, previous: Any) -> None:

@@ -33,7 +33,7 @@ from wmrid.replay import replay_pieces
 from wmrid.robot import Robot
 from wmrid.survey import Survey, survey
 from wmrid.uncertainty import estimate_covariances, interval_factor, jackknife_deltas, segments_of
-from wmrid.widening import with_hold_term, with_timing_term, with_unresolved_timing
+from wmrid.widening import carry_unresolved_delay, with_hold_term, with_timing_term
 
 #: Reported parameter names, in report order.
 REPORTED = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
@@ -392,7 +392,7 @@ def identify(
             result = replace(result, diagnostics=diagnostics, warnings=tuple(delay_warnings) + tuple(result.warnings))
         rec = timing_record or {}
         if result.estimate is not None:
-            result = _carry_unresolved_delay(result, rec, log, robot, form, k, alpha, box_width, max_history,
+            result = carry_unresolved_delay(result, rec, log, robot, form, k, alpha, box_width, max_history,
                                              torque_hold, control_rate, geometry)  # fmt: skip
         observer = result.estimate
         result = checked(result, log)
@@ -468,47 +468,6 @@ def caster_drag_test(result: IdentificationResult) -> dict[str, Any]:
 def _with_friction(result: IdentificationResult, friction: dict[str, Any]) -> IdentificationResult:
     """``result`` with its friction model and how it was chosen in ``diagnostics["friction"]``."""
     return replace(result, diagnostics={**result.diagnostics, "friction": friction})
-
-
-def _carry_unresolved_delay(
-    result: IdentificationResult, record: dict[str, Any], log: Any, robot: Robot | None, form: Any, k: Any, alpha: Any,
-    box_width: Any, max_history: Any, torque_hold: str, control_rate: float | None, geometry: Any,
-) -> IdentificationResult:  # fmt: skip
-    """``result`` with the timing term of a delay the timing check could not resolve (:func:`wmrid.delay.
-    unresolved_delay`), carried by the std (:func:`wmrid.widening.with_unresolved_timing`): the change of theta0
-    when the log is identified again with its efforts read that much earlier; for a log longer than the check's
-    window (whose whole would have to be read into memory), that delay times the profile's least-squares slope
-    (within a factor 0.8-1.9 of the observer's for the friction, measured on the light AMR).  Unchanged when
-    there is none to carry, and when the result models caster drag: the profile fits the wheels' friction only,
-    and on a caster log its std measures that misfit rather than the timing (0.8 ms on a noise-free log that the
-    caster model fits to 3.5e-5, which widened every std 50 times)."""
-    from wmrid.delay import unresolved_delay, unresolved_text
-
-    est = result.estimate
-    assert est is not None
-    if result.form.caster:
-        return result
-    moved_delay = unresolved_delay(record, np.sqrt(np.maximum(np.diag(np.asarray(est.cov, dtype=float)), 0.0)))
-    if moved_delay is None:
-        return result
-    theta0 = np.asarray(est.theta0, dtype=float)
-    text = unresolved_text(record, moved_delay)
-    if record.get("samples_profiled", 0) < record.get("of", 0):
-        slope = np.zeros_like(theta0)
-        slope[:8] = record["theta0_slope_per_s"]
-        return with_unresolved_timing(result, moved_delay * slope, moved_delay, "the profile's slope", text, robot)
-    try:
-        moved = identify(
-            log, robot, form=form, k=k, alpha=alpha, box_width=box_width, max_history=max_history,
-            torque_hold=torque_hold, control_rate=control_rate, friction=result.form.friction, geometry=geometry,
-            delay=moved_delay, feedback=False, timing=False,
-        )  # fmt: skip
-    except WmridError:
-        return result
-    if moved.estimate is None or len(moved.estimate.theta0) != len(theta0):
-        return result
-    delta = np.asarray(moved.estimate.theta0, dtype=float) - theta0
-    return with_unresolved_timing(result, delta, moved_delay, "identified again", text, robot)
 
 
 def _identify(
