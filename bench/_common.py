@@ -59,8 +59,8 @@ def fmt_rss(rss: float | None) -> str:
 
 def noisy_paper_sim(duration: float, rate: float = 1000.0, seed: int = 1):
     """The ``paper`` robot on the sinusoid with the benchmarks' noise (0.01 rad/s, 0.02 N m, caster 0.05 N m)."""
-    from wmrid.robot import BUILTIN_ROBOTS
-    from wmrid.simulate import NoiseSettings, simulate
+    from wmrid.model.robot import BUILTIN_ROBOTS
+    from wmrid.sim.simulate import NoiseSettings, simulate
 
     r = BUILTIN_ROBOTS["paper"]
     noise = NoiseSettings(eta_std=0.01, tau_std=0.02, caster_std=0.05)
@@ -82,7 +82,7 @@ def cached_log(path: Path, duration: float, write, rate: float = 1000.0, seed: i
 
 def sim_log(duration: float, rate: float = 1000.0, seed: int = 1, suffix: str = ".parquet") -> Path:
     """A noisy ``paper`` sinusoid log (t, eta_r, eta_l, tau_r, tau_l) in bench/out/, generated if missing."""
-    from wmrid.logio import write_log
+    from wmrid.io.logs import write_log
 
     def write(frame, path):
         write_log(frame[["t", "eta_r", "eta_l", "tau_r", "tau_l"]], str(path), force=True)

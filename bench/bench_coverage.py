@@ -25,10 +25,10 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from wmrid.identify import identify
-from wmrid.model import THETA0_NAMES
-from wmrid.robot import BUILTIN_ROBOTS
-from wmrid.simulate import NoiseSettings, simulate
+from wmrid.estimators.identify import identify
+from wmrid.model.dynamics import THETA0_NAMES
+from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.sim.simulate import NoiseSettings, simulate
 
 
 def one_seed(seed: int, args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, dict]:

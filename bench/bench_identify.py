@@ -7,9 +7,9 @@ Measures, for each ``--duration`` (default one hour = 3.6 M samples):
     under ``/usr/bin/time -v``; wall time (min, median), samples/s end-to-end (process start, imports,
     reading, replay and reporting included) and peak RSS.  The JSON output is checked to parse and to
     hold ``parameters``.
-(b) in-process, the parts alone: ``wmrid.logio.read_log``; the sample-by-sample ``wmrid.replay.replay``
-    with settings built as ``wmrid.identify.identify`` builds them (JIT compile excluded by a warm-up
-    call on a short slice), in samples/s; and the whole ``wmrid.identify.identify`` call (replay plus
+(b) in-process, the parts alone: ``wmrid.io.logs.read_log``; the sample-by-sample ``wmrid.estimators.replay.replay``
+    with settings built as ``wmrid.estimators.identify.identify`` builds them (JIT compile excluded by a warm-up
+    call on a short slice), in samples/s; and the whole ``wmrid.estimators.identify.identify`` call (replay plus
     covariance, base-parameter fit and diagnostics).
 
 The log is simulated (seed ``--seed``) into bench/out/ the first time; later runs reuse it.
@@ -51,12 +51,12 @@ def end_to_end(path, n: int, repeat: int) -> dict:
 
 
 def in_process(path, repeat: int) -> dict:
-    from wmrid import model
-    from wmrid.identify import default_box, identify, resolve_form
-    from wmrid.logio import read_log
-    from wmrid.observer import ObserverSettings
-    from wmrid.replay import replay
-    from wmrid.robot import BUILTIN_ROBOTS
+    from wmrid.estimators.identify import default_box, identify, resolve_form
+    from wmrid.estimators.observer import ObserverSettings
+    from wmrid.estimators.replay import replay
+    from wmrid.io.logs import read_log
+    from wmrid.model import dynamics as model
+    from wmrid.model.robot import BUILTIN_ROBOTS
 
     def best(fn) -> float:  # median wall time of fn() over `repeat` calls
         times = []

@@ -1,8 +1,8 @@
 """MCAP benchmark: ``wmrid`` on a 10-minute 1 kHz ROS 2 JointState MCAP against the generic decoder.
 
 The log (``--duration`` s, default 600 = 600,001 messages) is a noisy ``paper`` simulation (default
-trajectory and rate of :func:`wmrid.simulate.simulate`, seed ``--seed``) written by
-:func:`wmrid.mcap_write.write_joint_state_mcap` as ``sensor_msgs/msg/JointState`` only (no odometry),
+trajectory and rate of :func:`wmrid.sim.simulate.simulate`, seed ``--seed``) written by
+:func:`wmrid.io.mcap.writer.write_joint_state_mcap` as ``sensor_msgs/msg/JointState`` only (no odometry),
 zstd chunks.  It is made once into bench/out/ and reused.  Measured:
 
 (a) generic decode: a ``python -c`` subprocess that opens the file with ``mcap.reader.make_reader`` and
@@ -14,7 +14,7 @@ zstd chunks.  It is made once into bench/out/ and reused.  Measured:
     available; wall min/median, samples/s, peak RSS.  The JSON must parse; the largest relative error of
     m11, m12, m22, Vc against the simulation's truth is printed.
 (c) ``wmrid inspect LOG --format json`` as a subprocess (same warm-up/repeat scheme), wall time.
-(d) in-process ``wmrid.mcap_read.read_mcap(path)`` alone, median of ``--repeat`` calls, after one
+(d) in-process ``wmrid.io.mcap.reader.read_mcap(path)`` alone, median of ``--repeat`` calls, after one
     warm-up call on a small MCAP (so JIT compile / numba cache load is excluded).
 
 Target: end-to-end identify <= 0.15 x the generic decode time (medians).
@@ -55,7 +55,7 @@ print(n)
 
 def mcap_log(duration: float, seed: int) -> Path:
     """The JointState-only zstd MCAP in bench/out/, made if missing."""
-    from wmrid.mcap_write import write_joint_state_mcap
+    from wmrid.io.mcap.writer import write_joint_state_mcap
 
     def write(frame, path):
         write_joint_state_mcap(path, frame, odom_topic=None, force=True)
@@ -87,8 +87,8 @@ def cli(args_: list[str], repeat: int) -> tuple[dict, list]:
 
 
 def max_rel_error(runs) -> tuple[float, str]:
-    from wmrid import model
-    from wmrid.robot import BUILTIN_ROBOTS
+    from wmrid.model import dynamics as model
+    from wmrid.model.robot import BUILTIN_ROBOTS
 
     truth = model.named_base(model.base_parameters(BUILTIN_ROBOTS["paper"].reference))
     worst, worst_name = 0.0, ""
@@ -102,7 +102,7 @@ def max_rel_error(runs) -> tuple[float, str]:
 
 
 def in_process_read(path, seed: int, repeat: int) -> float:
-    from wmrid.mcap_read import read_mcap
+    from wmrid.io.mcap.reader import read_mcap
 
     small = mcap_log(5.0, seed)
     read_mcap(str(small))  # warm-up: JIT compile / numba cache load, not timed

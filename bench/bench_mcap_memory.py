@@ -3,7 +3,7 @@
 The bags (``--short`` and ``--long`` s, default 3600 and 14400 s: 3.6 M and 14.4 M
 ``sensor_msgs/msg/JointState`` messages, zstd chunks, no odometry) are noisy ``paper`` sinusoid
 simulations (:func:`_common.noisy_paper_sim`, seed ``--seed``) written by
-:func:`wmrid.mcap_write.write_joint_state_mcap`, made once into bench/out/ and reused.
+:func:`wmrid.io.mcap.writer.write_joint_state_mcap`, made once into bench/out/ and reused.
 
 For each bag, ``wmrid identify BAG --robot paper --format json`` runs as a subprocess under
 ``/usr/bin/time -v`` (one untimed warm-up for numba's cache and the page cache, then ``--repeat`` runs):
@@ -32,7 +32,7 @@ RATIO_TARGET = 1.5  # peak RSS long / short
 
 def bag(duration: float, seed: int) -> Path:
     """The JointState-only zstd MCAP of ``duration`` s in bench/out/, made if missing."""
-    from wmrid.mcap_write import write_joint_state_mcap
+    from wmrid.io.mcap.writer import write_joint_state_mcap
 
     def write(frame, path):
         write_joint_state_mcap(path, frame, odom_topic=None, force=True)

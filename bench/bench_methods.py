@@ -1,7 +1,7 @@
 """Benchmark of the identification methods (observer, idim, rls, oe) on simulated closed-loop logs.
 
 For each noise level and seed: simulate the ``paper`` robot (CAD plant, nominal controller) on a 40 s
-sinusoid at 1 kHz, run every method (:func:`wmrid.methods.compare`) and record each base parameter's
+sinusoid at 1 kHz, run every method (:func:`wmrid.estimators.methods.compare`) and record each base parameter's
 relative error against the plant's truth and each method's run time.  Prints, per noise level and method,
 the rms and worst relative error (%) of M11, M12, M22, Vc and the friction terms, and the median run time.
 
@@ -33,11 +33,11 @@ def main() -> None:
     ap.add_argument("--levels", nargs="+", default=list(LEVELS), help=f"noise levels of {list(LEVELS)}")
     args = ap.parse_args()
 
-    from wmrid import model
-    from wmrid.identify import identify
-    from wmrid.methods import METHODS, MethodOptions, compare
-    from wmrid.robot import BUILTIN_ROBOTS
-    from wmrid.simulate import NoiseSettings, simulate
+    from wmrid.estimators.identify import identify
+    from wmrid.estimators.methods import METHODS, MethodOptions, compare
+    from wmrid.model import dynamics as model
+    from wmrid.model.robot import BUILTIN_ROBOTS
+    from wmrid.sim.simulate import NoiseSettings, simulate
 
     robot = BUILTIN_ROBOTS["paper"]
     truth = model.named_base(model.base_parameters(robot.reference))

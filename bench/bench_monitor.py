@@ -37,11 +37,11 @@ import numpy as np
 from _common import sim_log
 from scipy.stats import f as f_dist
 
-from wmrid import model
-from wmrid.identify import identify
-from wmrid.monitor import DOF, MonitorSettings, model_from_dict, monitor
-from wmrid.robot import BUILTIN_ROBOTS, Payload
-from wmrid.simulate import NoiseSettings, PlantChange, simulate
+from wmrid.estimators.identify import identify
+from wmrid.model import dynamics as model
+from wmrid.model.robot import BUILTIN_ROBOTS, Payload
+from wmrid.monitoring.monitor import DOF, MonitorSettings, model_from_dict, monitor
+from wmrid.sim.simulate import NoiseSettings, PlantChange, simulate
 
 ROBOT = BUILTIN_ROBOTS["paper"]
 TRUE, NOMINAL = ROBOT.cad, ROBOT.nominal
@@ -185,7 +185,7 @@ def main() -> None:
         f"median {np.median(times):.2f} s = {n / np.median(times):,.0f} samples/s"
     )
     if not args.quick:
-        from wmrid.logio import read_log
+        from wmrid.io.logs import read_log
 
         path = sim_log(3600.0)
         log = read_log(str(path))

@@ -4,7 +4,7 @@
     python bench/bench_physics.py --json /tmp/bench_physics.json   # 27 cases x (20 seeds + clean), ~15-20 min
     python bench/bench_physics.py --robots amr --seeds 50 --workers 4
 
-The logs come from :func:`wmrid.multibody.simulate_multibody` (rigid bodies, contacts, joint friction and
+The logs come from :func:`wmrid.sim.multibody.simulate_multibody` (rigid bodies, contacts, joint friction and
 casters derived by the engine), not from wmrid's reduced simulator, so they contain physics that the
 identified model leaves out.  A case is robot x trajectory x log rate x caster x floor:
 
@@ -47,7 +47,7 @@ Each log is identified with the observer (``identify(log, robot)``, default sett
 
 A ``WmridError`` of the simulation or of a method makes a failure row; other exceptions are recorded as
 crashes (the run goes on and exits with status 1).  Simulated logs are cached as .npz under ``--cache``,
-keyed by the case settings, noise, seed, duration, MuJoCo version and ``wmrid.multibody.PHYSICS_VERSION``, so
+keyed by the case settings, noise, seed, duration, MuJoCo version and ``wmrid.sim.multibody.PHYSICS_VERSION``, so
 a re-run after estimator changes only re-identifies.  Prints two Markdown tables (noisy seeds; clean
 runs), the offenders, the failures, wall time and samples/s; ``--json PATH`` dumps everything.
 """
@@ -120,7 +120,7 @@ class Job:
 
 
 def normal_floor() -> float:
-    from wmrid.multibody import FLOOR_FRICTION
+    from wmrid.sim.multibody import FLOOR_FRICTION
 
     return float(FLOOR_FRICTION)
 
@@ -153,9 +153,9 @@ def sim_version() -> str:
     a change of either invalidates the cache."""
     import mujoco
 
-    import wmrid.multibody
+    import wmrid.sim.multibody
 
-    return f"mujoco {mujoco.__version__} multibody physics {wmrid.multibody.PHYSICS_VERSION}"
+    return f"mujoco {mujoco.__version__} multibody physics {wmrid.sim.multibody.PHYSICS_VERSION}"
 
 
 def cache_path(job: Job) -> Path:
@@ -190,9 +190,9 @@ def simulate_cached(job: Job) -> tuple[dict[str, Any], float | None]:
                 }, None
         except (OSError, ValueError, KeyError):
             pass  # unreadable (e.g. a killed run's half file): simulate again
-    from wmrid.multibody import MultibodySettings, simulate_multibody
-    from wmrid.robot import BUILTIN_ROBOTS, Payload
-    from wmrid.simulate import NoiseSettings
+    from wmrid.model.robot import BUILTIN_ROBOTS, Payload
+    from wmrid.sim.multibody import MultibodySettings, simulate_multibody
+    from wmrid.sim.simulate import NoiseSettings
 
     c = job.case
     robot = BUILTIN_ROBOTS[c.robot]
@@ -262,11 +262,12 @@ def _error_text(err: BaseException) -> str:
 
 def run_job(job: Job) -> dict[str, Any]:
     """Simulate (or load) one log and identify it with every method; one JSON-ready row."""
-    from wmrid import feedback, methods, model
-    from wmrid.errors import WmridError
-    from wmrid.identify import identify
-    from wmrid.logio import WheelLog
-    from wmrid.robot import BUILTIN_ROBOTS, PhysicalParameters
+    from wmrid.core.errors import WmridError
+    from wmrid.estimators import feedback, methods
+    from wmrid.estimators.identify import identify
+    from wmrid.io.logs import WheelLog
+    from wmrid.model import dynamics as model
+    from wmrid.model.robot import BUILTIN_ROBOTS, PhysicalParameters
 
     row: dict[str, Any] = {"case": dataclasses.asdict(job.case), "seed": job.seed, "clean": job.clean}
     try:
@@ -491,7 +492,7 @@ def main() -> int:
     if seeds < 1 or args.workers < 1 or not args.duration > 0:
         ap.error("--seeds and --workers must be >= 1 and --duration > 0")
 
-    from wmrid.multibody import import_mujoco
+    from wmrid.sim.multibody import import_mujoco
 
     import_mujoco()  # a clear message when MuJoCo is missing
     wall0 = time.perf_counter()

@@ -1,4 +1,4 @@
-"""Simulator speed: ``wmrid.simulate.simulate`` in-process and ``wmrid simulate`` as a subprocess.
+"""Simulator speed: ``wmrid.sim.simulate.simulate`` in-process and ``wmrid simulate`` as a subprocess.
 
 In-process (a fresh interpreter is not needed: this script does not import the simulator before):
 the first call, which includes numba compilation or loading the on-disk cache, then the median of
@@ -27,8 +27,8 @@ def main() -> None:
     args = ap.parse_args()
 
     t0 = time.perf_counter()
-    from wmrid.robot import BUILTIN_ROBOTS
-    from wmrid.simulate import NoiseSettings, simulate
+    from wmrid.model.robot import BUILTIN_ROBOTS
+    from wmrid.sim.simulate import NoiseSettings, simulate
 
     t_import = time.perf_counter() - t0
     r = BUILTIN_ROBOTS["paper"]
@@ -77,7 +77,7 @@ def main() -> None:
     rss = [x.rss_mb for x in runs if x.rss_mb is not None]
 
     print(f"simulate(): paper robot, sinusoid, {args.duration:g} s at {args.rate:g} Hz = {n:,} samples, 4 RK4 substeps")
-    print(f"  import wmrid.simulate            {t_import:8.3f} s   (numba, numpy)")
+    print(f"  import wmrid.sim.simulate            {t_import:8.3f} s   (numba, numpy)")
     print(f"  first call (compile/cache load)  {first:8.3f} s")
     print(f"  median of {args.repeat} further calls     {rest:8.3f} s   {n / rest:12,.0f} samples/s")
     print(f"\nsubprocess: {' '.join(cmd)}")

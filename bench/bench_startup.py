@@ -2,7 +2,7 @@
 
 1. Wall time (median of ``--repeat``, after one warm-up) of ``python -c pass`` (the interpreter alone),
    ``wmrid --help`` and ``wmrid --version``.
-2. ``python -X importtime -c "import wmrid.cli"``: the slowest imports (what ``--help`` pays for).
+2. ``python -X importtime -c "import wmrid.cli.app"``: the slowest imports (what ``--help`` pays for).
 3. ``python -X importtime -m wmrid identify sample_logs/paper_sinusoid.csv --robot paper --format json``
    (a 40 s log, so the run is mostly start-up): the ``--top`` slowest imports by cumulative time, the
    import time of every wmrid module, and the third-party imports summed per (importing wmrid module,
@@ -135,11 +135,11 @@ def main() -> None:
     ]:
         print(f"  {label:<18} {wall(cmd, args.repeat) * 1e3:8.1f} ms")
 
-    rows, elapsed = profile(["-c", "import wmrid.cli"], args.profiles)
-    top = sorted((r for r in rows if r["name"] != "wmrid.cli"), key=lambda r: -r["cum"])
-    cli = next(r for r in rows if r["name"] == "wmrid.cli")
+    rows, elapsed = profile(["-c", "import wmrid.cli.app"], args.profiles)
+    top = sorted((r for r in rows if r["name"] != "wmrid.cli.app"), key=lambda r: -r["cum"])
+    cli = next(r for r in rows if r["name"] == "wmrid.cli.app")
     show(
-        f'python -X importtime -c "import wmrid.cli": wmrid.cli cumulative {cli["cum"]:.1f} ms '
+        f'python -X importtime -c "import wmrid.cli.app": wmrid.cli.app cumulative {cli["cum"]:.1f} ms '
         f"(process {elapsed * 1e3:.0f} ms); slowest imports:",
         top,
         10,

@@ -8,7 +8,8 @@ differences; before and after wmrid's checks and ``--delay auto``.
 For each engine (wmrid's reduced simulator; the MuJoCo multibody prototype, frictionless casters), trajectory
 (sinusoid, reversing) and fault, the light AMR is simulated with sensor noise (0.02 rad/s, 0.01 N m; seeds
 0..N-1), its controller at 1 kHz.  Faults (``--faults``): ``+5ms``, ``0ms``, ``-5ms``: logged at 1 kHz, the efforts
-shifted by that delay (:func:`wmrid.idim.shifted`; + = stamped late); ``100hz``, ``20hz``: logged at that rate
+shifted by that delay (:func:`wmrid.estimators.idim.shifted`; + = stamped late); ``100hz``, ``20hz``: logged at that
+rate
 (a decimated record of the 1 kHz loop); ``backdiff``: speeds as backward differences of a 2^20-count encoder (half
 a sample of lag; reduced engine only).  Each log is identified three times with the default method: ``before``
 (``feedback=False, timing=False``: without the closed-loop and timing checks, as wmrid did before issue 12), ``default``
@@ -43,11 +44,11 @@ def one(job: tuple[str, str, str, int, float]) -> dict:
     engine, trajectory, fault, seed, duration = job
     delay = FAULTS[fault]
     rate = RATES.get(fault, 1000.0)
-    from wmrid import model
-    from wmrid.identify import identify
-    from wmrid.idim import shifted
-    from wmrid.robot import BUILTIN_ROBOTS
-    from wmrid.simulate import NoiseSettings, simulate
+    from wmrid.estimators.identify import identify
+    from wmrid.estimators.idim import shifted
+    from wmrid.model import dynamics as model
+    from wmrid.model.robot import BUILTIN_ROBOTS
+    from wmrid.sim.simulate import NoiseSettings, simulate
 
     amr = BUILTIN_ROBOTS["amr"]
     noise = NoiseSettings(eta_std=0.02, tau_std=0.01, encoder_cpr=2**20 if fault == "backdiff" else 0)
@@ -56,7 +57,7 @@ def one(job: tuple[str, str, str, int, float]) -> dict:
             amr.cad, amr.nominal, trajectory=trajectory, duration=duration, rate=rate, noise=noise, seed=seed
         )  # fmt: skip
     else:
-        from wmrid.multibody import MultibodySettings, simulate_multibody
+        from wmrid.sim.multibody import MultibodySettings, simulate_multibody
 
         sim = simulate_multibody(
             amr.cad, amr.nominal, settings=MultibodySettings(caster_resistance=0.0), trajectory=trajectory,

@@ -26,11 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
-from wmrid.atomic import to_json_text, write_json
-from wmrid.logio import write_log
-from wmrid.mcap_write import write_joint_state_mcap
-from wmrid.robot import BUILTIN_ROBOTS
-from wmrid.simulate import simulate
+from wmrid.core.atomic import to_json_text, write_json
+from wmrid.io.logs import write_log
+from wmrid.io.mcap.writer import write_joint_state_mcap
+from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.sim.simulate import simulate
 
 NAME = "paper_sinusoid"
 DURATION = 40.0  # s, the paper's Fig. 5-7

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from wmrid import model
-from wmrid.robot import PAPER_CAD
+from wmrid.model import dynamics as model
+from wmrid.model.robot import PAPER_CAD
 
 
 def open_loop_log(
@@ -81,9 +81,9 @@ def amr_caster_log():
     """The light AMR on the MuJoCo multibody prototype: ball casters of rolling resistance 0.015, reversing at
     200 Hz, sensor noise 0.02 rad/s and 0.002 N m, seed 0 (issue 11's AMR configuration; about 3 s to simulate,
     so shared by every test that needs it)."""
-    from wmrid.multibody import MultibodySettings, simulate_multibody
-    from wmrid.robot import BUILTIN_ROBOTS
-    from wmrid.simulate import NoiseSettings
+    from wmrid.model.robot import BUILTIN_ROBOTS
+    from wmrid.sim.multibody import MultibodySettings, simulate_multibody
+    from wmrid.sim.simulate import NoiseSettings
 
     amr = BUILTIN_ROBOTS["amr"]
     return simulate_multibody(

@@ -9,8 +9,8 @@ import stat
 import numpy as np
 import pytest
 
-from wmrid.atomic import atomic_output, atomic_write_bytes, atomic_write_text, write_json
-from wmrid.errors import OutputExistsError, UsageError
+from wmrid.core.atomic import atomic_output, atomic_write_bytes, atomic_write_text, write_json
+from wmrid.core.errors import OutputExistsError, UsageError
 
 
 def names(folder) -> list[str]:

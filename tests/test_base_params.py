@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wmrid import model
-from wmrid.base_params import derived_with_std, direct_recovery, fit_base_parameters, jacobian_intermediate
-from wmrid.model import RegressorForm
-from wmrid.robot import PAPER_CAD
+from wmrid.model import dynamics as model
+from wmrid.model.base_params import derived_with_std, direct_recovery, fit_base_parameters, jacobian_intermediate
+from wmrid.model.dynamics import RegressorForm
+from wmrid.model.robot import PAPER_CAD
 
 FORMS = [RegressorForm("paper"), RegressorForm("paper", (-1, 1)), RegressorForm("general")]
 
@@ -78,7 +78,7 @@ def test_inconsistent_theta_gives_large_mismatch():
 def test_gauss_newton_matches_scipy_least_squares(form):
     from scipy.optimize import least_squares
 
-    from wmrid.base_params import _whitener, gauss_newton
+    from wmrid.model.base_params import _whitener, gauss_newton
 
     rng = np.random.default_rng(11)
     theta = model.intermediate_parameters(model.base_parameters(PAPER_CAD), form)

@@ -1,4 +1,4 @@
-"""The ``wheel+caster`` friction model against computations made here, independently of wmrid.model.
+"""The ``wheel+caster`` friction model against computations made here, independently of wmrid.model.dynamics.
 
 * The caster columns from rigid-body kinematics written out by hand: each caster's contact velocity, its drag
   force, the generalised forces on (v, w) and the wheel torques through J^T; and a virtual-work check.
@@ -21,20 +21,20 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from wmrid import model
-from wmrid.base_params import derived_with_std, direct_recovery, fit_base_parameters, jacobian_intermediate
-from wmrid.identify import caster_geometry, identify
-from wmrid.model import RegressorForm
-from wmrid.observer_kernel import DRAG_SPEED as KERNEL_DRAG_SPEED
-from wmrid.observer_kernel import (
+from wmrid.estimators.identify import caster_geometry, identify
+from wmrid.estimators.observer_kernel import DRAG_SPEED as KERNEL_DRAG_SPEED
+from wmrid.estimators.observer_kernel import (
     KIND_CASTER,
     KIND_CASTER_GEOMETRY,
     KIND_GENERAL,
     KIND_PAPER,
     _regressor_into,
 )
-from wmrid.replay import kernel_kind
-from wmrid.robot import AMR_NOMINAL, Caster, Robot
+from wmrid.estimators.replay import kernel_kind
+from wmrid.model import dynamics as model
+from wmrid.model.base_params import derived_with_std, direct_recovery, fit_base_parameters, jacobian_intermediate
+from wmrid.model.dynamics import RegressorForm
+from wmrid.model.robot import AMR_NOMINAL, Caster, Robot
 
 #: m/s: the speed below which a caster's drag direction is regularised, |u| -> sqrt(|u|^2 + DRAG_SPEED^2)
 #: (restated here, not imported: test_drag_speed_is_one_millimetre_per_second checks the model agrees).
@@ -549,7 +549,8 @@ def test_wheel_only_model_std_is_honest_or_flagged(caster_log, caster_robot):
 
     Until issue 12 this failed (a strict xfail): the structural test has little power here (p = 0.26 on a
     jackknife of 14 dof) and Fv1, Fv2, Fd1, Fd2, Vc lay 6.2, 6.3, 4.0, 4.0, 3.2 std off, unflagged.  The closed-loop
-    check (wmrid.feedback) now sees the prediction error at 2300 times the noise and widens by its term: every
+    check (wmrid.estimators.feedback) now sees the prediction error at 2300 times the noise and widens by its term:
+    every
     parameter is marked inflated, Fv1, Fv2 still 4.4 and 4.8 std off (the mark says the std does not cover all)."""
     result = identify(caster_log, caster_robot, friction="wheel", torque_hold="foh")
     z = {n: (result.parameters[n][0] - truth) / result.parameters[n][1] for n, truth in TRUTH.items() if n != "D1"}

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from cliutil import assert_clean_error, wmrid
 
-from wmrid import model
-from wmrid.robot import BUILTIN_ROBOTS, Payload
+from wmrid.model import dynamics as model
+from wmrid.model.robot import BUILTIN_ROBOTS, Payload
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE_CSV = ROOT / "sample_logs" / "paper_sinusoid.csv"
@@ -173,7 +173,7 @@ def test_simulate_reversing_selects_the_general_form(tmp_path):
 
 
 def test_identify_out_writes_the_estimates_as_mcap(tmp_path):
-    from wmrid.mcap_read import read_mcap
+    from wmrid.io.mcap.reader import read_mcap
 
     target = tmp_path / "estimates.mcap"
     out = identify_json(str(SAMPLE_PARQUET), "--robot", "paper", "--out", str(target))

@@ -54,8 +54,8 @@ def _base_frame():
 
 
 def _sim_frame(duration: float = 5.0):
-    from wmrid.robot import BUILTIN_ROBOTS
-    from wmrid.simulate import simulate
+    from wmrid.model.robot import BUILTIN_ROBOTS
+    from wmrid.sim.simulate import simulate
 
     robot = BUILTIN_ROBOTS["paper"]
     return simulate(robot.reference, robot.nominal, duration=duration).to_frame()
@@ -161,7 +161,7 @@ def missing_path(tmp: Path) -> str:
 
 
 def truncated_parquet(tmp: Path) -> str:
-    from wmrid.logio import write_log
+    from wmrid.io.logs import write_log
 
     path = tmp / "truncated.parquet"
     write_log(_base_frame(), str(path))
@@ -171,7 +171,7 @@ def truncated_parquet(tmp: Path) -> str:
 
 
 def truncated_mcap(tmp: Path) -> str:
-    from wmrid.mcap_write import write_joint_state_mcap
+    from wmrid.io.mcap.writer import write_joint_state_mcap
 
     path = tmp / "truncated.mcap"
     write_joint_state_mcap(path, _sim_frame())
@@ -212,7 +212,7 @@ def mcap_unknown_encoding(tmp: Path) -> str:
 def mcap_topics_not_overlapping(tmp: Path) -> str:
     from mcap_ros2.writer import Writer as Ros2Writer
 
-    from wmrid.mcap_write import JOINT_STATE_MSGDEF
+    from wmrid.io.mcap.writer import JOINT_STATE_MSGDEF
 
     names = ["left_wheel_joint", "right_wheel_joint"]
 
@@ -388,6 +388,6 @@ def test_interrupt_leaves_no_partial_output(tmp_path, delay):
     left = sorted(p.name for p in tmp_path.iterdir())
     if proc.returncode == 0 or left:
         assert left == ["long.parquet", "long.parquet.truth.json"], left
-        from wmrid.logio import read_log
+        from wmrid.io.logs import read_log
 
         assert len(read_log(str(out))) == 600_001

@@ -1,5 +1,5 @@
 """The delay between effort and speed signals, estimated by profiling the inverse-dynamics fit over the shift
-(:mod:`wmrid.delay`, issue 12).  Logs: wmrid's simulator and the MuJoCo multibody prototype, their efforts
+(:mod:`wmrid.estimators.delay`, issue 12).  Logs: wmrid's simulator and the MuJoCo multibody prototype, their efforts
 shifted by a known amount (``shifted``: the torque stamped 5 ms late or early, as two topics on two clocks)."""
 
 from __future__ import annotations
@@ -7,12 +7,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wmrid.delay import DELAY_STEP_S, _refine, estimate_delay
-from wmrid.errors import UsageError
-from wmrid.idim import shifted
-from wmrid.multibody import MultibodySettings, simulate_multibody
-from wmrid.robot import BUILTIN_ROBOTS
-from wmrid.simulate import NoiseSettings, simulate
+from wmrid.core.errors import UsageError
+from wmrid.estimators.delay import DELAY_STEP_S, _refine, estimate_delay
+from wmrid.estimators.idim import shifted
+from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.sim.multibody import MultibodySettings, simulate_multibody
+from wmrid.sim.simulate import NoiseSettings, simulate
 
 AMR = BUILTIN_ROBOTS["amr"]
 NOISE = NoiseSettings(eta_std=0.02, tau_std=0.01)
@@ -84,9 +84,9 @@ def test_identify_applies_an_estimated_delay(late_log):
     delay is applied as given; a log on time is left as stamped, with no warning."""
     from types import SimpleNamespace
 
-    from wmrid import model
-    from wmrid.identify import identify
-    from wmrid.methods import MethodOptions, run
+    from wmrid.estimators.identify import identify
+    from wmrid.estimators.methods import MethodOptions, run
+    from wmrid.model import dynamics as model
 
     sim, log = late_log
     truth = model.named_base(model.base_parameters(AMR.cad))
@@ -112,7 +112,7 @@ def test_cli_delay_option(late_log, tmp_path, capsys):
     error (exit 2)."""
     import json
 
-    from wmrid.cli import main
+    from wmrid.cli.app import main
 
     _, log = late_log
     path = tmp_path / "late.csv"
@@ -141,7 +141,7 @@ def test_a_controller_faster_than_the_log_is_named():
     -0.54 ms) and the warning is gone."""
     from types import SimpleNamespace
 
-    from wmrid.identify import identify
+    from wmrid.estimators.identify import identify
 
     sim = simulate_multibody(
         AMR.cad, AMR.nominal, settings=MultibodySettings(caster_resistance=0.0), duration=20.0, rate=100.0,
@@ -165,8 +165,8 @@ def test_the_delays_uncertainty_is_in_the_std():
     term every parameter is within 3 std or flagged, and the friction std grows."""
     from types import SimpleNamespace
 
-    from wmrid import model
-    from wmrid.identify import identify
+    from wmrid.estimators.identify import identify
+    from wmrid.model import dynamics as model
 
     sim = simulate_multibody(
         AMR.cad, AMR.nominal, settings=MultibodySettings(caster_resistance=0.0), duration=20.0, noise=NOISE, seed=0
@@ -188,12 +188,13 @@ def test_the_delays_uncertainty_is_in_the_std():
 @pytest.mark.parametrize("rate", [100.0, 20.0])
 def test_a_slow_log_of_a_faster_controller_is_named_by_default(rate):
     """The issue's case: a 1 kHz controller logged at 100 Hz or 20 Hz, default options (no --delay).  The timing check
-    (wmrid.delay.timing_check) finds the efforts acting well before the half logged step the default hold assumes
+    (wmrid.estimators.delay.timing_check) finds the efforts acting well before the half logged step the default hold
+    assumes
     (measured: 4.5 of 5 ms, 24.6 of 25 ms), applies that delay (--delay auto) and names --control-rate; no
     parameter is beyond 3 std unflagged."""
     from types import SimpleNamespace
 
-    from wmrid.identify import identify
+    from wmrid.estimators.identify import identify
 
     sim = simulate(AMR.cad, AMR.nominal, duration=40.0, rate=rate, noise=NOISE, seed=1)
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="slow", notes=())
@@ -222,7 +223,7 @@ def test_a_late_or_early_effort_is_timed_by_default(true_delay):
     and the friction comes out within 5 % (measured 0.6 %, against 8-9 % as stamped)."""
     from types import SimpleNamespace
 
-    from wmrid.identify import identify
+    from wmrid.estimators.identify import identify
 
     sim = simulate(AMR.cad, AMR.nominal, duration=30.0, noise=NOISE, seed=3)
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=shifted(sim.t, sim.tau, true_delay), source="late", notes=())
@@ -239,7 +240,7 @@ def test_a_slow_log_with_a_hole_is_not_refused_by_the_timing_check():
     (its record says why) and the log identified as before."""
     from types import SimpleNamespace
 
-    from wmrid.identify import identify
+    from wmrid.estimators.identify import identify
 
     sim = simulate(AMR.cad, AMR.nominal, duration=30.0, rate=100.0, noise=NOISE, seed=1)
     keep = (sim.t < 10.0) | (sim.t > 10.5)
@@ -256,7 +257,7 @@ def test_a_slow_reversing_log_carries_the_hold_in_its_std():
     within 3 std or flagged (was 45-50 % of seeds), and the warning names --control-rate."""
     from types import SimpleNamespace
 
-    from wmrid.identify import identify
+    from wmrid.estimators.identify import identify
 
     sim = simulate(AMR.cad, AMR.nominal, trajectory="reversing", duration=40.0, rate=100.0, noise=NOISE, seed=0)
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="slow", notes=())
@@ -277,7 +278,7 @@ def test_speeds_from_backward_differences_are_named():
     seeds), applies it, and the warning names backward differences rather than two clocks."""
     from types import SimpleNamespace
 
-    from wmrid.identify import identify
+    from wmrid.estimators.identify import identify
 
     noise = NoiseSettings(eta_std=0.02, tau_std=0.01, encoder_cpr=2**20)
     sim = simulate(AMR.cad, AMR.nominal, duration=40.0, noise=noise, seed=1)
@@ -291,8 +292,8 @@ def test_the_timing_check_profiles_a_window_read_piece_by_piece():
     holds exactly the log's first samples, whether streamed in pieces or sliced from memory."""
     from types import SimpleNamespace
 
-    from wmrid.delay import _window
-    from wmrid.logio import stream_arrays
+    from wmrid.estimators.delay import _window
+    from wmrid.io.logs import stream_arrays
 
     sim = simulate(AMR.cad, AMR.nominal, duration=5.0, noise=NOISE, seed=1)
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="w", notes=())
@@ -305,11 +306,12 @@ def test_the_timing_check_profiles_a_window_read_piece_by_piece():
 
 def test_the_profiles_slope_is_idims_sensitivity_to_the_delay():
     """``theta0_slope`` (d theta0 / d delay of the profile's least-squares fit) against an independent computation:
-    IDIM's whole pipeline (:func:`wmrid.idim.identify_idim`) on the efforts read 1 ms earlier and later, a central
+    IDIM's whole pipeline (:func:`wmrid.estimators.idim.identify_idim`) on the efforts read 1 ms earlier and later, a
+    central
     difference.  On a noise-free sinusoid every row is fast, so the two fits are the same least squares: agreement
     to 1e-3 (measured 1e-4; the difference step is 1 ms against the slope's 0.5 ms, on a parameter curve whose
     second derivative is small over that range)."""
-    from wmrid.idim import identify_idim
+    from wmrid.estimators.idim import identify_idim
 
     sim = simulate(AMR.cad, AMR.nominal, duration=20.0, noise=NoiseSettings(eta_std=0.0, tau_std=0.0), seed=1)
     est = estimate_delay(sim.t, sim.eta, sim.tau)
@@ -324,8 +326,8 @@ def test_the_profiles_slope_is_idims_sensitivity_to_the_delay():
 def _reversing_result(seed: float, true_delay: float, **kwargs):
     from types import SimpleNamespace
 
-    from wmrid import model
-    from wmrid.identify import identify
+    from wmrid.estimators.identify import identify
+    from wmrid.model import dynamics as model
 
     sim = simulate(AMR.cad, AMR.nominal, trajectory="reversing", duration=40.0, noise=NOISE, seed=seed)
     truth = model.named_base(model.base_parameters(sim.true))
@@ -360,7 +362,7 @@ def test_an_on_time_sinusoid_is_not_flagged_for_its_timing():
     such log, and a flag on every log would mean nothing)."""
     from types import SimpleNamespace
 
-    from wmrid.identify import identify
+    from wmrid.estimators.identify import identify
 
     sim = simulate(AMR.cad, AMR.nominal, duration=30.0, noise=NOISE, seed=1)
     result = identify(SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="s", notes=()), AMR)
@@ -374,9 +376,9 @@ def test_a_log_longer_than_the_window_carries_the_delay_by_the_profiles_slope(mo
     """Beyond the check's window the log is not read whole again: the term is the delay times the profile's slope.
     Here the window is cut to 10 s of a 40 s reversing log (late 5 ms, seed 12): the term is found so and still
     leaves every parameter within 3 std or flagged."""
-    import wmrid.delay
+    import wmrid.estimators.delay
 
-    monkeypatch.setattr(wmrid.delay, "TIMING_WINDOW_SAMPLES", 10_000)
+    monkeypatch.setattr(wmrid.estimators.delay, "TIMING_WINDOW_SAMPLES", 10_000)
     result, truth = _reversing_result(12, 0.005)
     record = result.diagnostics["timing"]
     assert record["samples_profiled"] == 10_000

@@ -14,13 +14,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from wmrid import figures
-from wmrid.errors import UsageError
-from wmrid.figures import MAX_POINTS, decimate_for_display
-from wmrid.identify import identify
-from wmrid.model import THETA0_NAMES, base_parameters, intermediate_parameters, named_base
-from wmrid.robot import BUILTIN_ROBOTS
-from wmrid.simulate import simulate
+from wmrid.core.errors import UsageError
+from wmrid.estimators.identify import identify
+from wmrid.model.dynamics import THETA0_NAMES, base_parameters, intermediate_parameters, named_base
+from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.reporting import figures
+from wmrid.reporting.figures import MAX_POINTS, decimate_for_display
+from wmrid.sim.simulate import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -304,7 +304,7 @@ def test_matplotlib_is_imported_lazily_and_pyplot_never():
     code = (
         "import sys, numpy as np\n"
         "from types import SimpleNamespace\n"
-        "import wmrid.figures as f\n"
+        "import wmrid.reporting.figures as f\n"
         "assert 'matplotlib' not in sys.modules\n"
         "log = SimpleNamespace(t=np.arange(5.0), eta=np.ones((5, 2)), tau=np.ones((5, 2)), source='x')\n"
         "assert f.log_overview(log, fmt='png').startswith(b'\\x89PNG')\n"

@@ -12,12 +12,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from wmrid.errors import WmridError
-from wmrid.identify import identify
-from wmrid.logio import read_log, write_log
-from wmrid.mcap_write import write_joint_state_mcap
-from wmrid.robot import BUILTIN_ROBOTS
-from wmrid.simulate import simulate
+from wmrid.core.errors import WmridError
+from wmrid.estimators.identify import identify
+from wmrid.io.logs import read_log, write_log
+from wmrid.io.mcap.writer import write_joint_state_mcap
+from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.sim.simulate import simulate
 
 #: Wall-clock bound per example, s (a 200-sample log reads and identifies in about 0.05 s).
 TIME_BOUND_S = 10.0

@@ -16,12 +16,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from wmrid.errors import WmridError
-from wmrid.logio import read_log
-from wmrid.mcap_read import read_mcap
-from wmrid.mcap_write import write_joint_state_mcap
-from wmrid.robot import BUILTIN_ROBOTS
-from wmrid.simulate import simulate
+from wmrid.core.errors import WmridError
+from wmrid.io.logs import read_log
+from wmrid.io.mcap.reader import read_mcap
+from wmrid.io.mcap.writer import write_joint_state_mcap
+from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.sim.simulate import simulate
 
 EXAMPLES = int(os.environ.get("WMRID_FUZZ_EXAMPLES", "150"))
 MAGIC_LEN = 8

@@ -12,15 +12,15 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from wmrid import model
-from wmrid.cli import main
-from wmrid.identify import identify
-from wmrid.logio import read_log
-from wmrid.methods import MethodOptions, run
-from wmrid.model_error import model_error_scale
-from wmrid.multibody import MultibodySettings, simulate_multibody
-from wmrid.robot import BUILTIN_ROBOTS
-from wmrid.simulate import NoiseSettings, simulate
+from wmrid.cli.app import main
+from wmrid.estimators.identify import identify
+from wmrid.estimators.methods import MethodOptions, run
+from wmrid.estimators.model_error import model_error_scale
+from wmrid.io.logs import read_log
+from wmrid.model import dynamics as model
+from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.sim.multibody import MultibodySettings, simulate_multibody
+from wmrid.sim.simulate import NoiseSettings, simulate
 
 PAPER = BUILTIN_ROBOTS["paper"]
 AMR = BUILTIN_ROBOTS["amr"]
@@ -173,7 +173,7 @@ def test_inertia_entries_are_flagged_when_poorly_determined():
     """M = m^-1 is reported beside m and must be flagged by the same rule (std > 10 % of its magnitude): on a
     slipping AMR log M12 came out 0.0031 +/- 0.00085 (27 %) unflagged, 3.5 std from the truth.  Base parameters
     are judged by their own loop, and an M of an undetermined m (infinite std) is undetermined, not listed."""
-    from wmrid.identify import derived_poorly_determined
+    from wmrid.estimators.identify import derived_poorly_determined
 
     params = {
         "m11": (23.6, 1.6), "m12": (-1.7, 0.61), "m22": (23.5, 0.76), "M11": (0.0426, 0.0028),

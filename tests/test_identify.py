@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from tests.conftest import open_loop_log
-from wmrid.identify import REPORTED, identify
-from wmrid.model import THETA0_NAMES
-from wmrid.robot import BUILTIN_ROBOTS
+from wmrid.estimators.identify import REPORTED, identify
+from wmrid.model.dynamics import THETA0_NAMES
+from wmrid.model.robot import BUILTIN_ROBOTS
 
 PAPER = BUILTIN_ROBOTS["paper"]
 
@@ -46,7 +46,7 @@ def test_reversing_wheels_use_the_general_form():
 def test_a_log_with_constant_torques_is_refused():
     # Constant torques: the torque columns are constant like the Coulomb column, so no base parameter can
     # be told apart from the others; identify refuses with a clear error (exit code 1 in the CLI).
-    from wmrid.errors import NotIdentifiableError
+    from wmrid.core.errors import NotIdentifiableError
 
     log = open_loop_log(duration=10.0, torque=lambda t: np.array([1.0, 0.8]), eta0=[3.0, 3.0])
     with pytest.raises(NotIdentifiableError, match="does not excite the dynamics"):

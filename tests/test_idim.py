@@ -1,4 +1,5 @@
-"""IDIM least squares (wmrid.idim): the regression, recovery of the truth, the default cutoff, the jackknife."""
+"""IDIM least squares (wmrid.estimators.idim): the regression, recovery of the truth, the default cutoff, the
+jackknife."""
 
 from __future__ import annotations
 
@@ -9,10 +10,11 @@ import numpy as np
 import pytest
 
 from tests.conftest import open_loop_log
-from wmrid import idim, model
-from wmrid.errors import LogFormatError, NotIdentifiableError, UsageError
-from wmrid.robot import BUILTIN_ROBOTS, PAPER_CAD
-from wmrid.simulate import NoiseSettings, simulate
+from wmrid.core.errors import LogFormatError, NotIdentifiableError, UsageError
+from wmrid.estimators import idim
+from wmrid.model import dynamics as model
+from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
+from wmrid.sim.simulate import NoiseSettings, simulate
 
 
 def true_phi(p=PAPER_CAD) -> np.ndarray:
@@ -248,7 +250,7 @@ def test_a_held_effort_is_read_half_a_step_earlier():
     on noise-free logs; read half a step earlier (zoh, the default), IDIM and RLS recover every base parameter
     to 2e-4 relative (measured 7.8e-5, the Coulomb terms; inertia 1.3e-6: asserted 2e-5).  foh (no delay) on the
     same log is still off by more than 5 % on friction (measured 11 %)."""
-    from wmrid import rls
+    from wmrid.estimators import rls
 
     sim = simulate(PAPER_CAD, BUILTIN_ROBOTS["paper"].nominal, duration=20.0)
     truth = model.base_parameters(PAPER_CAD)
@@ -267,7 +269,7 @@ def test_alternative_fits_agree_where_the_model_holds(reversing_log):
     """On a noise-free log of the model itself (continuous torques, so foh), the fit at a lower cutoff and the fit
     without the slow rows differ from the full one by less than 1e-5 of each parameter (measured 1.8e-6 and 6.5e-7):
     neither widens anything.  The same factors on both sides give a zero difference."""
-    from wmrid import idim_checks
+    from wmrid.estimators import idim_checks
 
     log = reversing_log
     est = idim.identify_idim(log.t, log.eta, log.tau, torque_hold="foh")
@@ -285,7 +287,7 @@ def test_alternative_fits_agree_where_the_model_holds(reversing_log):
 def test_slow_rows_cover_the_slow_speeds_and_their_margin(reversing_log):
     """Every row whose filtered speed is below SLOW_FRACTION of the 90th-percentile |speed| is slow, and so is every
     row within SLOW_MARGIN_PERIODS cutoff periods of one; no row farther from all of them is."""
-    from wmrid import idim_checks
+    from wmrid.estimators import idim_checks
 
     log = reversing_log
     reg = idim.idim_regression(log.t, log.eta, log.tau)

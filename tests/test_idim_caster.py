@@ -1,5 +1,6 @@
 """IDIM with the casters' drag (``wheel+caster``): unchanged without it, exact regression with it, recovery of
-the drag on a noise-free log of the direct model, and on the MuJoCo multibody AMR through ``wmrid.methods``."""
+the drag on a noise-free log of the direct model, and on the MuJoCo multibody AMR through
+``wmrid.estimators.methods``."""
 
 from __future__ import annotations
 
@@ -10,11 +11,12 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from tests.conftest import open_loop_log
-from wmrid import idim, model
-from wmrid.errors import NotIdentifiableError
-from wmrid.identify import identify
-from wmrid.methods import MethodOptions, run
-from wmrid.robot import BUILTIN_ROBOTS, PAPER_CAD
+from wmrid.core.errors import NotIdentifiableError
+from wmrid.estimators import idim
+from wmrid.estimators.identify import identify
+from wmrid.estimators.methods import MethodOptions, run
+from wmrid.model import dynamics as model
+from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
 
 AMR = BUILTIN_ROBOTS["amr"]
 #: Two casters at distinct places (not mirrored, so each has its own D): (x, y) m in the platform frame.
@@ -61,7 +63,7 @@ def test_a_form_without_caster_changes_nothing(reversing_log, weighted):
 
 @pytest.mark.parametrize("form", [GEOMETRIC, TWO_TERM], ids=["geometric", "two-term"])
 def test_regression_rows_reproduce_the_inverse_model_with_caster_drag(form):
-    """X phi = tau of :func:`wmrid.model.wheel_torque` with the drag (columns sharing a parameter add up)."""
+    """X phi = tau of :func:`wmrid.model.dynamics.wheel_torque` with the drag (columns sharing a parameter add up)."""
     rng = np.random.default_rng(3)
     eta = rng.normal(0.0, 2.0, (500, 2))
     eta_dot = rng.normal(0.0, 5.0, (500, 2))
@@ -92,7 +94,7 @@ def test_theta0_jacobian_is_the_identity_on_the_caster_parameters():
 @pytest.fixture(scope="module")
 def caster_log():
     """The paper's CAD robot with two casters' geometric drag, open loop, 30 s at 1 kHz, no noise: the direct
-    model with the drag (:func:`wmrid.model.wheel_acceleration`) integrated by DOP853 at rtol 1e-10.
+    model with the drag (:func:`wmrid.model.dynamics.wheel_acceleration`) integrated by DOP853 at rtol 1e-10.
 
     The torques are sums of cosines (zero-mean speeds, both wheels reverse 9-13 times, and turn both ways)
     sampled at the log's instants.  Not held between samples: a zero-order hold puts the applied torque half a
@@ -202,7 +204,7 @@ def test_compare_identifies_the_caster_model_with_every_method(amr_caster_log, t
     are those ``identify --method idim`` reports.  The multibody AMR's log, written as CSV, through the CLI."""
     import json
 
-    from wmrid.cli import main
+    from wmrid.cli.app import main
 
     path = tmp_path / "amr.csv"
     sim = amr_caster_log

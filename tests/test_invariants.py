@@ -26,10 +26,10 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from tests.conftest import open_loop_log
-from wmrid import model
-from wmrid.identify import REPORTED, identify
-from wmrid.robot import BUILTIN_ROBOTS, PAPER_CAD
-from wmrid.simulate import simulate
+from wmrid.estimators.identify import REPORTED, identify
+from wmrid.model import dynamics as model
+from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
+from wmrid.sim.simulate import simulate
 
 PAPER = BUILTIN_ROBOTS["paper"]
 TRAJECTORIES = ("sinusoid", "reversing")

@@ -1,4 +1,5 @@
-"""Instrumental variables (IDIM-IV, :mod:`wmrid.iv`) and the closed-loop check (:mod:`wmrid.feedback`), issue 12.
+"""Instrumental variables (IDIM-IV, :mod:`wmrid.estimators.iv`) and the closed-loop check
+(:mod:`wmrid.estimators.feedback`), issue 12.
 
 Independent references: the IV estimate with the regressor itself as instruments IS least squares (an algebraic
 identity, checked against IDIM's QR solution); the moments' leave-one-segment-out solutions against a refit
@@ -14,17 +15,17 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from wmrid.cli import main
-from wmrid.errors import NotIdentifiableError, UsageError
-from wmrid.estimate import BaseEstimate, SegmentEstimates
-from wmrid.feedback import difference_test
-from wmrid.identify import identify
-from wmrid.idim import identify_idim, idim_regression, segment_index
-from wmrid.iv import identify_iv, segment_moments, solve_moments
-from wmrid.logio import read_log, write_log
-from wmrid.model import THETA0_NAMES
-from wmrid.robot import BUILTIN_ROBOTS
-from wmrid.simulate import NoiseSettings, simulate
+from wmrid.cli.app import main
+from wmrid.core.errors import NotIdentifiableError, UsageError
+from wmrid.estimators.estimate import BaseEstimate, SegmentEstimates
+from wmrid.estimators.feedback import difference_test
+from wmrid.estimators.identify import identify
+from wmrid.estimators.idim import identify_idim, idim_regression, segment_index
+from wmrid.estimators.iv import identify_iv, segment_moments, solve_moments
+from wmrid.io.logs import read_log, write_log
+from wmrid.model.dynamics import THETA0_NAMES
+from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.sim.simulate import NoiseSettings, simulate
 
 AMR = BUILTIN_ROBOTS["amr"]
 PAPER = BUILTIN_ROBOTS["paper"]
@@ -189,7 +190,7 @@ def test_a_bad_reference_cell_drops_the_reference_unless_it_was_named(tmp_path, 
 
 
 def test_an_applied_delay_keeps_the_reference(clean_sim):
-    from wmrid.delay import apply_delay
+    from wmrid.estimators.delay import apply_delay
 
     shifted_log, record, _ = apply_delay(as_log(clean_sim), 0.002, "zoh", None)
     assert record["applied_s"] == 0.002
@@ -206,7 +207,7 @@ def test_a_reference_named_for_an_mcap_is_refused_not_ignored(request):
 def test_the_closed_loop_term_widens_the_payload_too():
     """Below the gate the observer is kept and widened (the light AMR, 40 s, seed 17: the check judges m12 at 2.3
     std of the difference); the payload's std follows the widened covariance, and every widened parameter is also
-    listed as flagged (the rule of wmrid.model_error.record_widening)."""
+    listed as flagged (the rule of wmrid.estimators.model_error.record_widening)."""
     sim = simulate(AMR.reference, AMR.nominal, duration=40.0, noise=CLOSED_LOOP, seed=17)
     plain = identify(as_log(sim, reference=False), AMR, payload=True, feedback=False)
     checked = identify(as_log(sim, reference=False), AMR, payload=True)

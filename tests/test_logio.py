@@ -16,8 +16,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from wmrid.errors import LogFormatError, OutputExistsError, UsageError
-from wmrid.logio import (
+from wmrid.core.errors import LogFormatError, OutputExistsError, UsageError
+from wmrid.io.logs import (
     WheelLog,
     detect_format,
     parse_column_mapping,
@@ -158,7 +158,7 @@ def run_python(code: str, stdin: bytes, cwd: Path) -> subprocess.CompletedProces
 
 def test_write_log_dash_writes_csv_to_stdout(tmp_path):
     make_frame().to_parquet(tmp_path / "in.parquet")
-    code = "import pandas as pd; from wmrid.logio import write_log; write_log(pd.read_parquet('in.parquet'), '-')"
+    code = "import pandas as pd; from wmrid.io.logs import write_log; write_log(pd.read_parquet('in.parquet'), '-')"
     out = run_python(code, b"", tmp_path)
     assert out.returncode == 0, out.stderr.decode()
     (tmp_path / "out.csv").write_bytes(out.stdout)
@@ -168,7 +168,7 @@ def test_write_log_dash_writes_csv_to_stdout(tmp_path):
 # ---- Standard input
 
 STDIN_CODE = (
-    "import json; from wmrid.logio import read_log; log = read_log('-'); "
+    "import json; from wmrid.io.logs import read_log; log = read_log('-'); "
     "print(json.dumps({'t': log.t.tolist(), 'eta': log.eta.tolist(), 'tau': log.tau.tolist(), "
     "'source': log.source, 'notes': list(log.notes)}))"
 )
@@ -194,7 +194,7 @@ def test_read_from_stdin(tmp_path, suffix):
 )
 def test_stdin_errors(tmp_path, stdin, expected):
     code = (
-        "from wmrid.logio import read_log\nfrom wmrid.errors import LogFormatError\n"
+        "from wmrid.io.logs import read_log\nfrom wmrid.core.errors import LogFormatError\n"
         "try:\n    read_log('-')\nexcept LogFormatError as err:\n    print(err)"
     )
     out = run_python(code, stdin, tmp_path)

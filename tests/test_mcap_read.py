@@ -17,15 +17,15 @@ from mcap.writer import CompressionType
 from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2Writer
 
-from wmrid import model
-from wmrid.errors import LogFormatError
-from wmrid.identify import identify
-from wmrid.joints import TopicSelection
-from wmrid.logio import read_log, write_log
-from wmrid.mcap_read import read_mcap
-from wmrid.mcap_write import JOINT_STATE_MSGDEF, write_joint_state_mcap
-from wmrid.robot import BUILTIN_ROBOTS
-from wmrid.simulate import NoiseSettings, simulate
+from wmrid.core.errors import LogFormatError
+from wmrid.estimators.identify import identify
+from wmrid.io.logs import read_log, write_log
+from wmrid.io.mcap.joints import TopicSelection
+from wmrid.io.mcap.reader import read_mcap
+from wmrid.io.mcap.writer import JOINT_STATE_MSGDEF, write_joint_state_mcap
+from wmrid.model import dynamics as model
+from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.sim.simulate import NoiseSettings, simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 REAL = ROOT.parent / "shared" / "real_logs"
@@ -243,7 +243,7 @@ def test_truncated_file_reads_what_is_intact(tmp_path, paper_sim):
 def test_read_from_a_pipe(tmp_path, paper_sim):
     path = tmp_path / "sim.mcap"
     write_joint_state_mcap(path, paper_sim.to_frame())
-    code = "import json, sys; from wmrid.logio import read_log; log = read_log('-'); print(len(log), log.source)"
+    code = "import json, sys; from wmrid.io.logs import read_log; log = read_log('-'); print(len(log), log.source)"
     proc = subprocess.run([sys.executable, "-c", code], input=path.read_bytes(), capture_output=True, check=True)
     assert proc.stdout.split() == [str(len(paper_sim.t)).encode(), b"<stdin>"]
 
@@ -312,7 +312,7 @@ def test_non_overlapping_topics_are_a_clear_error(tmp_path):
 
 
 def test_pwm_effort_is_identified_in_its_own_units(tmp_path, paper_sim):
-    from wmrid.signals import SignalOptions
+    from wmrid.io.signals import SignalOptions
 
     path = tmp_path / "sim.mcap"
     write_joint_state_mcap(path, paper_sim.to_frame())

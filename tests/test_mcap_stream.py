@@ -1,7 +1,7 @@
 """Long MCAP recordings are streamed: the pieces of ``open_log(bag, rows=small)`` join to exactly what the
 whole decode gives (t, eta, tau, notes), and identify on the stream equals identify on the whole log.
 
-The reference is :func:`wmrid.logio.read_log` with the default piece size, which decodes these small bags
+The reference is :func:`wmrid.io.logs.read_log` with the default piece size, which decodes these small bags
 whole (the path tests/test_mcap_read.py checks against mcap_ros2's generic decoder); with a small ``rows``
 the same bags are over the whole-decode limit and take the streaming path.
 """
@@ -16,16 +16,16 @@ import pytest
 from mcap.writer import CompressionType
 from mcap_ros2.writer import Writer as Ros2Writer
 
-from wmrid import logio
-from wmrid.errors import LogFormatError
-from wmrid.identify import identify
-from wmrid.joints import TopicSelection
-from wmrid.logio import open_log, read_log, stream_arrays
-from wmrid.mcap_read import _scan, read_mcap, scan_mcap
-from wmrid.mcap_write import JOINT_STATE_MSGDEF, write_joint_state_mcap
-from wmrid.robot import BUILTIN_ROBOTS
-from wmrid.signals import SignalOptions
-from wmrid.simulate import simulate
+from wmrid.core.errors import LogFormatError
+from wmrid.estimators.identify import identify
+from wmrid.io import logs as logio
+from wmrid.io.logs import open_log, read_log, stream_arrays
+from wmrid.io.mcap.joints import TopicSelection
+from wmrid.io.mcap.reader import _scan, read_mcap, scan_mcap
+from wmrid.io.mcap.writer import JOINT_STATE_MSGDEF, write_joint_state_mcap
+from wmrid.io.signals import SignalOptions
+from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.sim.simulate import simulate
 
 PAPER = BUILTIN_ROBOTS["paper"]
 T0 = 1_700_000_000 * 10**9
@@ -348,8 +348,8 @@ def test_a_file_that_changes_between_passes_is_refused(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("seed", range(6))
 def test_the_median_step_is_exact_from_the_histogram_and_a_second_look(seed):
-    from wmrid.joints import _StepMedian
-    from wmrid.mcap_read import STEP_BUCKETS, step_buckets
+    from wmrid.io.mcap.joints import _StepMedian
+    from wmrid.io.mcap.reader import STEP_BUCKETS, step_buckets
 
     rng = np.random.default_rng(seed)
     n = int(rng.integers(1, 5000))

@@ -15,8 +15,8 @@ from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2Writer
 
-from wmrid.errors import OutputExistsError, UsageError
-from wmrid.mcap_write import (
+from wmrid.core.errors import OutputExistsError, UsageError
+from wmrid.io.mcap.writer import (
     EPOCH_NS,
     JOINT_STATE_MSGDEF,
     ODOMETRY_MSGDEF,

@@ -1,6 +1,6 @@
 """The methods behind one interface (observer, idim, rls, oe), ``wmrid compare`` and ``--validate``.
 
-Truth: the simulator's plant parameters (:func:`wmrid.model.base_parameters` of the CAD robot, itself
+Truth: the simulator's plant parameters (:func:`wmrid.model.dynamics.base_parameters` of the CAD robot, itself
 checked against the paper's tables in test_model).
 """
 
@@ -15,12 +15,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from wmrid import model
-from wmrid.errors import UsageError
-from wmrid.identify import identify
-from wmrid.methods import METHODS, MethodOptions, compare
-from wmrid.robot import BUILTIN_ROBOTS, Payload
-from wmrid.simulate import NoiseSettings, simulate
+from wmrid.core.errors import UsageError
+from wmrid.estimators.identify import identify
+from wmrid.estimators.methods import METHODS, MethodOptions, compare
+from wmrid.model import dynamics as model
+from wmrid.model.robot import BUILTIN_ROBOTS, Payload
+from wmrid.sim.simulate import NoiseSettings, simulate
 
 ROBOT = BUILTIN_ROBOTS["paper"]
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_logs"

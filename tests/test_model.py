@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wmrid import model
-from wmrid.model import RegressorForm
-from wmrid.robot import BUILTIN_ROBOTS, PAPER_CAD, PAPER_NOMINAL, PhysicalParameters
+from wmrid.model import dynamics as model
+from wmrid.model.dynamics import RegressorForm
+from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD, PAPER_NOMINAL, PhysicalParameters
 
 PAPER = RegressorForm("paper")
 

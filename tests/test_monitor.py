@@ -17,12 +17,13 @@ import pytest
 from cliutil import assert_clean_error, wmrid
 from scipy.stats import chi2
 
-from wmrid import model
-from wmrid.atomic import write_json
-from wmrid.errors import NotIdentifiableError, UsageError
-from wmrid.identify import identify
-from wmrid.logio import write_log
-from wmrid.monitor import (
+from wmrid.core.atomic import write_json
+from wmrid.core.errors import NotIdentifiableError, UsageError
+from wmrid.estimators.identify import identify
+from wmrid.io.logs import write_log
+from wmrid.model import dynamics as model
+from wmrid.model.robot import BUILTIN_ROBOTS, Payload
+from wmrid.monitoring.monitor import (
     ModelError,
     MonitorSettings,
     NoiseModel,
@@ -32,8 +33,7 @@ from wmrid.monitor import (
     window_grid,
     window_statistics,
 )
-from wmrid.robot import BUILTIN_ROBOTS, Payload
-from wmrid.simulate import NoiseSettings, PlantChange, simulate
+from wmrid.sim.simulate import NoiseSettings, PlantChange, simulate
 
 TRUE = BUILTIN_ROBOTS["paper"].cad
 NOMINAL = BUILTIN_ROBOTS["paper"].nominal

@@ -10,12 +10,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-import wmrid.monitor as mon
-from wmrid import model
-from wmrid.errors import UsageError
-from wmrid.identify import identify
-from wmrid.robot import BUILTIN_ROBOTS, Payload
-from wmrid.simulate import NoiseSettings, PlantChange, simulate
+import wmrid.monitoring.monitor as mon
+from wmrid.core.errors import UsageError
+from wmrid.estimators.identify import identify
+from wmrid.model import dynamics as model
+from wmrid.model.robot import BUILTIN_ROBOTS, Payload
+from wmrid.sim.simulate import NoiseSettings, PlantChange, simulate
 
 AMR = BUILTIN_ROBOTS["amr"]
 PAPER = BUILTIN_ROBOTS["paper"]
@@ -114,7 +114,8 @@ def test_a_caster_model_is_read_with_its_drag(amr_caster_json) -> None:
 
 
 def test_the_caster_columns_are_the_drag_torque_smoothed(amr_caster_log, amr_caster_json) -> None:
-    """Phi p's drag part is the model's caster drag torque (:func:`wmrid.model.friction_torque`) smoothed as the
+    """Phi p's drag part is the model's caster drag torque (:func:`wmrid.model.dynamics.friction_torque`) smoothed as
+    the
     other speed columns: the Savitzky-Golay smoothing is linear."""
     log = amr_caster_log
     m = mon.model_from_dict(amr_caster_json, "amr.json")
@@ -150,7 +151,7 @@ def test_a_payload_loaded_mid_run_is_found(amr_caster_json) -> None:
     """5 kg loaded at 20 s on the multibody AMR, against the caster model of the unloaded robot (measured: the
     change placed at 20.05 s, alarm at 20.40 s, statistic 495 against a threshold of 86; M11 +26 %).  The span
     after the change is identified with the model's caster positions."""
-    from wmrid.multibody import MultibodySettings, simulate_multibody
+    from wmrid.sim.multibody import MultibodySettings, simulate_multibody
 
     load = Payload(5.0, 0.0, 0.0, 0.05)
     sim = simulate_multibody(

@@ -1,8 +1,8 @@
-"""Tests of the multibody prototype (wmrid.multibody, ``wmrid simulate --engine mujoco``).
+"""Tests of the multibody prototype (wmrid.sim.multibody, ``wmrid simulate --engine mujoco``).
 
 MuJoCo derives the robot's motion from bodies, joints and contacts; it knows nothing of Eqs. 9-14.  So
 agreement with the reduced simulator, and a torque balance of the engine's own motion against
-wmrid.model, check those equations independently.  Every simulation here is at most 10 s at 1 kHz (about
+wmrid.model.dynamics, check those equations independently.  Every simulation here is at most 10 s at 1 kHz (about
 1 s of wall time); the runs several tests share are module fixtures.
 """
 
@@ -18,12 +18,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from wmrid import model
-from wmrid import multibody as multibody_module
-from wmrid.cli import main
-from wmrid.errors import RobotFileError, UsageError
-from wmrid.multibody import GRAVITY, INSTALL_HINT, MultibodySettings, simulate_multibody
-from wmrid.robot import (
+from wmrid.cli.app import main
+from wmrid.core.errors import RobotFileError, UsageError
+from wmrid.model import dynamics as model
+from wmrid.model.robot import (
     BUILTIN_ROBOTS,
     Caster,
     Payload,
@@ -33,7 +31,9 @@ from wmrid.robot import (
     robot_from_toml_text,
     robot_to_toml,
 )
-from wmrid.simulate import NoiseSettings, _encoder_velocity, simulate
+from wmrid.sim import multibody as multibody_module
+from wmrid.sim.multibody import GRAVITY, INSTALL_HINT, MultibodySettings, simulate_multibody
+from wmrid.sim.simulate import NoiseSettings, _encoder_velocity, simulate
 
 PAPER = BUILTIN_ROBOTS["paper"]
 CAD = PAPER.cad

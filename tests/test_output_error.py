@@ -1,4 +1,4 @@
-"""Tests of the output-error refinement (wmrid.output_error) on logs with a known truth."""
+"""Tests of the output-error refinement (wmrid.estimators.output_error) on logs with a known truth."""
 
 from __future__ import annotations
 
@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from tests.conftest import open_loop_log
-from wmrid import model
-from wmrid.errors import NotIdentifiableError, UsageError
-from wmrid.output_error import MAX_NFEV, SHOOTING_SECONDS, cluster_sandwich, identify_oe, shooting_starts
-from wmrid.robot import BUILTIN_ROBOTS
-from wmrid.simulate import NoiseSettings, SimulatedLog, simulate
+from wmrid.core.errors import NotIdentifiableError, UsageError
+from wmrid.estimators.output_error import MAX_NFEV, SHOOTING_SECONDS, cluster_sandwich, identify_oe, shooting_starts
+from wmrid.model import dynamics as model
+from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.sim.simulate import NoiseSettings, SimulatedLog, simulate
 
 PAPER = BUILTIN_ROBOTS["paper"]
 assert PAPER.cad is not None

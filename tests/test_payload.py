@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wmrid import model
-from wmrid.payload import payload_from_base, payload_with_std
-from wmrid.robot import BUILTIN_ROBOTS, Payload
+from wmrid.model import dynamics as model
+from wmrid.model.payload import payload_from_base, payload_with_std
+from wmrid.model.robot import BUILTIN_ROBOTS, Payload
 
 CAD = BUILTIN_ROBOTS["paper"].cad
 
@@ -57,8 +57,8 @@ def test_identify_finds_a_25_kg_payload_in_a_noisy_simulated_log(tmp_path):
     # Issue 4: mass within 1 %, x and y within 5 mm, inertia within 10 %, truth within the uncertainty.
     from types import SimpleNamespace
 
-    from wmrid.identify import identify
-    from wmrid.simulate import NoiseSettings, simulate
+    from wmrid.estimators.identify import identify
+    from wmrid.sim.simulate import NoiseSettings, simulate
 
     load = Payload(25.0, 0.1, -0.05, 0.4)
     robot = BUILTIN_ROBOTS["paper"]

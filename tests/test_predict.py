@@ -1,4 +1,4 @@
-"""Tests of the validation predictor (wmrid.predict), each against an independent computation."""
+"""Tests of the validation predictor (wmrid.model.predict), each against an independent computation."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from tests.conftest import open_loop_log
-from wmrid import model
-from wmrid.errors import UsageError
-from wmrid.predict import MAX_STEP, fit_percent, simulate_segments, simulate_speeds, validation_fit
-from wmrid.robot import PAPER_CAD, PAPER_NOMINAL
+from wmrid.core.errors import UsageError
+from wmrid.model import dynamics as model
+from wmrid.model.predict import MAX_STEP, fit_percent, simulate_segments, simulate_speeds, validation_fit
+from wmrid.model.robot import PAPER_CAD, PAPER_NOMINAL
 
 THETA_CAD = model.base_parameters(PAPER_CAD)
 

@@ -10,12 +10,12 @@ import pytest
 
 from tests.conftest import open_loop_log
 from tests.test_idim_caster import GEOMETRIC, TWO_TERM, caster_log  # noqa: F401  (caster_log: a fixture)
-from wmrid import model
-from wmrid.errors import UsageError
-from wmrid.identify import identify
-from wmrid.output_error import identify_oe
-from wmrid.predict import simulate_segments, simulate_speeds, validation_fit
-from wmrid.robot import BUILTIN_ROBOTS, PAPER_CAD
+from wmrid.core.errors import UsageError
+from wmrid.estimators.identify import identify
+from wmrid.estimators.output_error import identify_oe
+from wmrid.model import dynamics as model
+from wmrid.model.predict import simulate_segments, simulate_speeds, validation_fit
+from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
 
 AMR = BUILTIN_ROBOTS["amr"]
 

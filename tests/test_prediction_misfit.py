@@ -2,7 +2,7 @@
 
 A slipping wheel biases every parameter by tens of per cent while the estimate stays steady along the log, so
 neither the jackknife nor the structural test notices.  The observer's own prediction error does: where the
-model holds it is the speed sensors' noise, which :class:`wmrid.noise_floor.NoiseFloor` measures from the
+model holds it is the speed sensors' noise, which :class:`wmrid.estimators.noise_floor.NoiseFloor` measures from the
 log's second differences.  Tested on MuJoCo multibody logs (a floor of friction 0.15 against a normal one)
 and on wmrid's reduced simulator with a coloured disturbance in closed loop, which must not be flagged.
 """
@@ -15,14 +15,14 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from wmrid.cli import main
-from wmrid.identify import identify
-from wmrid.methods import MethodOptions, run
-from wmrid.model_error import MISFIT_FLOOR, MISFIT_RATIO, prediction_misfit
-from wmrid.multibody import MultibodySettings, simulate_multibody
-from wmrid.noise_floor import WINDOW, NoiseFloor
-from wmrid.robot import BUILTIN_ROBOTS
-from wmrid.simulate import NoiseSettings, simulate
+from wmrid.cli.app import main
+from wmrid.estimators.identify import identify
+from wmrid.estimators.methods import MethodOptions, run
+from wmrid.estimators.model_error import MISFIT_FLOOR, MISFIT_RATIO, prediction_misfit
+from wmrid.estimators.noise_floor import WINDOW, NoiseFloor
+from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.sim.multibody import MultibodySettings, simulate_multibody
+from wmrid.sim.simulate import NoiseSettings, simulate
 
 AMR = BUILTIN_ROBOTS["amr"]
 PAPER = BUILTIN_ROBOTS["paper"]
@@ -66,7 +66,7 @@ def test_noise_floor_kernel_matches_a_numpy_reference_however_the_log_is_cut():
     """The compiled pass, fed in pieces of 1, 1, 1, 62, 1, 64, 570 ... samples, gives the windows' variances of
     the whole log written out with numpy, to 1e-12 relative (the sums differ only in rounding), and the same
     count of windows and speed rms."""
-    from wmrid.noise_floor import _window_variances
+    from wmrid.estimators.noise_floor import _window_variances
 
     rng = np.random.default_rng(4)
     eta = np.cumsum(rng.normal(0, 0.1, (5000, 2)), axis=0) + rng.normal(0, 0.02, (5000, 2))
@@ -126,7 +126,7 @@ def test_noise_floor_ignores_bursts_and_parked_wheels():
 def test_noise_floor_needs_min_windows():
     """MIN_WINDOWS windows of WINDOW second differences need MIN_WINDOWS * WINDOW + 2 samples: one fewer gives
     NaN; so do logs of 0 to 3 samples."""
-    from wmrid.noise_floor import MIN_WINDOWS
+    from wmrid.estimators.noise_floor import MIN_WINDOWS
 
     rng = np.random.default_rng(2)
     eta = rng.normal(0, 0.01, (MIN_WINDOWS * WINDOW + 2, 2))

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from wmrid.cli import main
+from wmrid.cli.app import main
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -197,7 +197,7 @@ def test_a_read_only_install_without_a_home_folder(tmp_path, small_log):
     tmp.mkdir()
     env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "XDG_CACHE_HOME", "PYTHONPATH")}
     env.update(HOME=str(tmp_path / "blocker" / "home"), TMPDIR=str(tmp), PYTHONDONTWRITEBYTECODE="1")
-    code = f"import sys; sys.path.insert(0, {str(site)!r}); from wmrid.cli import main; main()"
+    code = f"import sys; sys.path.insert(0, {str(site)!r}); from wmrid.cli.app import main; main()"
     out = tmp_path / "sim.csv"
     for args in (["simulate", "--duration", "1", "-o", str(out)], ["identify", str(out), "--format", "json"]):
         proc = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, env=env, timeout=300)
@@ -256,17 +256,17 @@ def test_a_large_parquet_row_group_is_read_in_slices(tmp_path, monkeypatch):
     on 20 M rows in one group: 88 MB of Arrow memory at most, against 1.2 GB decoded whole."""
     import numpy as np
 
-    import wmrid.logio
-    from wmrid.logio import read_log, write_log
-    from wmrid.robot import BUILTIN_ROBOTS
-    from wmrid.simulate import simulate
+    import wmrid.io.logs
+    from wmrid.io.logs import read_log, write_log
+    from wmrid.model.robot import BUILTIN_ROBOTS
+    from wmrid.sim.simulate import simulate
 
     robot = BUILTIN_ROBOTS["paper"]
     frame = simulate(robot.cad, robot.nominal, duration=3.0).to_frame()[["t", "eta_r", "eta_l", "tau_r", "tau_l"]]
     path = tmp_path / "one_group.parquet"
     write_log(frame, str(path))
     whole = read_log(str(path))
-    monkeypatch.setattr(wmrid.logio, "ROW_GROUP_SLICE_BYTES", 1024)
+    monkeypatch.setattr(wmrid.io.logs, "ROW_GROUP_SLICE_BYTES", 1024)
     sliced = read_log(str(path))
     np.testing.assert_array_equal(sliced.t, whole.t)
     np.testing.assert_array_equal(sliced.eta, whole.eta)
@@ -362,9 +362,9 @@ def test_a_csv_header_of_millions_of_columns_is_refused_at_once(tmp_path, capsys
 
 def test_an_mcap_cut_mid_chunk_says_so(tmp_path, capsys):
     """An MCAP cut in its only chunk said "holds no channels", with no word of the truncation."""
-    from wmrid.mcap_write import write_joint_state_mcap
-    from wmrid.robot import BUILTIN_ROBOTS
-    from wmrid.simulate import simulate
+    from wmrid.io.mcap.writer import write_joint_state_mcap
+    from wmrid.model.robot import BUILTIN_ROBOTS
+    from wmrid.sim.simulate import simulate
 
     robot = BUILTIN_ROBOTS["paper"]
     full = tmp_path / "full.mcap"
@@ -379,8 +379,8 @@ def test_an_mcap_cut_mid_chunk_says_so(tmp_path, capsys):
 STUCK = """
 import sys
 import numba
-from wmrid import interrupts
-from wmrid.atomic import atomic_output
+from wmrid.core import interrupts
+from wmrid.core.atomic import atomic_output
 
 interrupts.install()
 interrupts.GRACE_S = 1.0
@@ -442,7 +442,7 @@ def test_a_file_too_large_for_the_disk_is_one_line_and_leaves_nothing(tmp_path):
 def test_a_signal_inside_held_waits_for_its_end():
     """A result group's renames run inside ``interrupts.held()``: a stopping signal handled there (as when it reaches
     another thread, which pthread_sigmask does not hold back) is raised only when the block ends."""
-    from wmrid import interrupts
+    from wmrid.core import interrupts
 
     done = []
 
@@ -462,7 +462,7 @@ def test_in_process_calls_keep_the_callers_streams(tmp_path, capsys):
     import contextlib
     import io
 
-    from wmrid.errors import LogFormatError
+    from wmrid.core.errors import LogFormatError
 
     buffer = io.StringIO()
     with contextlib.redirect_stdout(buffer):

@@ -1,4 +1,5 @@
-"""Recursive least squares (wmrid.rls): equal to batch LS without forgetting, tracking with it, the history."""
+"""Recursive least squares (wmrid.estimators.rls): equal to batch LS without forgetting, tracking with it, the
+history."""
 
 from __future__ import annotations
 
@@ -8,10 +9,11 @@ import numpy as np
 import pytest
 
 from tests.conftest import open_loop_log
-from wmrid import idim, model, rls
-from wmrid.errors import NotIdentifiableError, UsageError
-from wmrid.robot import BUILTIN_ROBOTS, PAPER_CAD
-from wmrid.simulate import NoiseSettings, simulate
+from wmrid.core.errors import NotIdentifiableError, UsageError
+from wmrid.estimators import idim, rls
+from wmrid.model import dynamics as model
+from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
+from wmrid.sim.simulate import NoiseSettings, simulate
 
 
 @pytest.fixture(scope="module")

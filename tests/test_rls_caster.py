@@ -16,9 +16,10 @@ from tests.test_idim_caster import (  # noqa: F401 (caster_log: a fixture)
     caster_log,
     phi_of,
 )
-from wmrid import idim, model, rls
-from wmrid.identify import identify
-from wmrid.robot import BUILTIN_ROBOTS
+from wmrid.estimators import idim, rls
+from wmrid.estimators.identify import identify
+from wmrid.model import dynamics as model
+from wmrid.model.robot import BUILTIN_ROBOTS
 
 AMR = BUILTIN_ROBOTS["amr"]
 

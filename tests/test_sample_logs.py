@@ -69,7 +69,7 @@ def test_truth_is_unchanged(regenerated, name):
 
 def test_mcap_sample_is_unchanged(regenerated):
     # Compare what the bag holds (not its bytes: the writer library's version is recorded in the header).
-    from wmrid.mcap_read import read_mcap
+    from wmrid.io.mcap.reader import read_mcap
 
     new = read_mcap(str(regenerated / "paper_sinusoid.mcap"))
     old = read_mcap(str(SAMPLES / "paper_sinusoid.mcap"))
@@ -82,9 +82,9 @@ def test_mcap_sample_is_unchanged(regenerated):
 
 
 def test_the_three_samples_give_the_same_parameters():
-    from wmrid.identify import identify
-    from wmrid.logio import read_log
-    from wmrid.robot import BUILTIN_ROBOTS
+    from wmrid.estimators.identify import identify
+    from wmrid.io.logs import read_log
+    from wmrid.model.robot import BUILTIN_ROBOTS
 
     robot = BUILTIN_ROBOTS["paper"]
     mcap = identify(read_log(str(SAMPLES / "paper_sinusoid.mcap")), robot)

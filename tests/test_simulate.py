@@ -1,4 +1,4 @@
-"""Tests of the virtual prototype (wmrid.simulate), each against an independent computation."""
+"""Tests of the virtual prototype (wmrid.sim.simulate), each against an independent computation."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from wmrid import model
-from wmrid.errors import UsageError
-from wmrid.robot import BUILTIN_ROBOTS, Payload
-from wmrid.simulate import (
+from wmrid.core.errors import UsageError
+from wmrid.model import dynamics as model
+from wmrid.model.robot import BUILTIN_ROBOTS, Payload
+from wmrid.sim.simulate import (
     GAINS,
     TRAJECTORIES,
     NoiseSettings,

@@ -10,10 +10,10 @@ import pandas as pd
 import pytest
 from cliutil import assert_clean_error, wmrid
 
-from wmrid import model
-from wmrid.errors import UsageError
-from wmrid.robot import BUILTIN_ROBOTS, Payload
-from wmrid.simulate import (
+from wmrid.core.errors import UsageError
+from wmrid.model import dynamics as model
+from wmrid.model.robot import BUILTIN_ROBOTS, Payload
+from wmrid.sim.simulate import (
     GAINS,
     NoiseSettings,
     PlantChange,
@@ -315,7 +315,7 @@ def test_cli_payload_loaded_at_t_writes_log_and_truth_with_both_sets(tmp_path: P
 
 
 def test_cli_drop_and_friction_fault_in_parquet_and_mcap_metadata(tmp_path: Path) -> None:
-    from wmrid.mcap_read import read_mcap
+    from wmrid.io.mcap.reader import read_mcap
 
     bag = tmp_path / "drop.mcap"
     proc = wmrid("simulate", "-o", str(bag), "--duration", "3", "--payload", "25", "--drop-at", "1")

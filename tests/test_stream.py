@@ -1,6 +1,6 @@
 """Reading a log piece by piece gives what reading it whole gives, and identify streams it.
 
-Independent computation: :func:`wmrid.logio.read_log` of the same file (itself tested against hand
+Independent computation: :func:`wmrid.io.logs.read_log` of the same file (itself tested against hand
 values in test_logio) and the in-memory identify on the arrays.
 """
 
@@ -12,11 +12,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from wmrid import logio
-from wmrid.errors import LogFormatError
-from wmrid.identify import identify
-from wmrid.logio import open_log, read_log
-from wmrid.robot import BUILTIN_ROBOTS
+from wmrid.core.errors import LogFormatError
+from wmrid.estimators.identify import identify
+from wmrid.io import logs as logio
+from wmrid.io.logs import open_log, read_log
+from wmrid.model.robot import BUILTIN_ROBOTS
 
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_logs"
 

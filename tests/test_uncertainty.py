@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wmrid.uncertainty import interval_factor, jackknife_covariance, segment_count
+from wmrid.estimators.uncertainty import interval_factor, jackknife_covariance, segment_count
 
 
 def blocked_regression(seed: int, n_blocks: int = 60, per_block: int = 25, p: int = 4, rho: float = 0.0):

@@ -1,4 +1,4 @@
-"""wmrid.urdf: the paper's physical parameters from a URDF, against Table 1 and independent computations."""
+"""wmrid.model.urdf: the paper's physical parameters from a URDF, against Table 1 and independent computations."""
 
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from wmrid import model
-from wmrid.errors import RobotFileError, UsageError
-from wmrid.robot import BUILTIN_ROBOTS, PAPER_CAD, PAPER_NOMINAL
-from wmrid.urdf import load_robot_urdf, read_urdf, robot_from_urdf
+from wmrid.core.errors import RobotFileError, UsageError
+from wmrid.model import dynamics as model
+from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD, PAPER_NOMINAL
+from wmrid.model.urdf import load_robot_urdf, read_urdf, robot_from_urdf
 
 PAPER_URDF = Path(__file__).parent / "data" / "paper_robot.urdf"
 FRICTION = {"viscous_friction": (PAPER_CAD.F_v1, PAPER_CAD.F_v2), "coulomb_friction": (PAPER_CAD.F_d1, PAPER_CAD.F_d2)}

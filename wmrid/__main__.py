@@ -1,3 +1,3 @@
-from wmrid.cli import main
+from wmrid.cli.app import main
 
 main()

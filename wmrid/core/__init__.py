@@ -1,0 +1,1 @@
+"""Lowest layer: errors and exit codes, the memory budget, interrupts, atomic outputs, the wheel-log types."""

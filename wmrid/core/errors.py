@@ -1,0 +1,55 @@
+"""The exception hierarchy of wmrid and the exit codes it maps to.
+
+Every error a user can cause derives from :class:`WmridError`; the CLI maps the class to an exit code
+in one place (``wmrid.cli.app``) and prints the message as one line on stderr.
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+
+
+class ExitStatus(IntEnum):
+    OK = 0
+    NO_RESULT = 1  # the log does not support a result (e.g. no excitation)
+    USAGE = 2  # bad usage or unreadable input
+    INTERRUPTED = 130
+
+
+class WmridError(Exception):
+    """Base class of every error wmrid reports to a user."""
+
+    exit_status = ExitStatus.USAGE
+
+
+class UsageError(WmridError, ValueError):
+    """An option or argument that cannot be used as given."""
+
+
+class RobotFileError(WmridError, ValueError):
+    """A robot description that cannot be read or is not physically valid."""
+
+
+class LogFormatError(WmridError, ValueError):
+    """A log file that cannot be read, or lacks what identification needs."""
+
+
+class OutputExistsError(WmridError, FileExistsError):
+    """An output file already exists and ``--force`` was not given."""
+
+
+class NotIdentifiableError(WmridError):
+    """The log does not excite the dynamics enough to give any result."""
+
+    exit_status = ExitStatus.NO_RESULT
+
+
+class OutputWriteError(WmridError):
+    """An output could not be written (a full disk, a closed or failing stream); nothing partial stands as complete."""
+
+    exit_status = ExitStatus.NO_RESULT
+
+
+class ReaderGone(Exception):
+    """The reader of standard output (``| head``) closed the pipe: not an error, the run ends with exit 0.  Not an
+    OSError, so that Click does not turn it into exit 1 on its way out."""

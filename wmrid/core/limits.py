@@ -1,0 +1,78 @@
+"""The memory budget: how much one input may make wmrid allocate (issue 13: bounded memory on any input).
+
+A small file can declare a huge size: a zstd chunk that decompresses to gigabytes, a Parquet row group of 100 M
+rows, a CSV header of 10 M columns.  Every size an input declares is checked against the budget before it is
+allocated; beyond it the input is refused (or the part skipped) with a message naming the budget.
+
+The budget is ``WMRID_MEMORY_BUDGET`` in bytes, with an optional K, M or G suffix (powers of 1024); default 4 GiB,
+or half the machine's memory when that is less.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+from wmrid.core.errors import UsageError
+
+#: bytes: the default budget (at most half the machine's memory, :func:`memory_budget`).
+DEFAULT_BUDGET = 4 << 30
+ENV = "WMRID_MEMORY_BUDGET"
+_SUFFIX = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+
+
+def memory_budget() -> int:
+    """The budget in bytes (``WMRID_MEMORY_BUDGET``; default DEFAULT_BUDGET, or half the machine's memory when less,
+    but at least 1 GiB); UsageError for a malformed value."""
+    text = os.environ.get(ENV, "").strip()
+    if not text:
+        try:
+            half = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2
+        except (ValueError, OSError, AttributeError):
+            half = DEFAULT_BUDGET
+        return min(DEFAULT_BUDGET, max(half, 1 << 30))
+    number, suffix = text.rstrip("KMGTkmgtBb"), text[len(text.rstrip("KMGTkmgtBb")) :].upper().rstrip("B")
+    try:
+        value = int(float(number) * _SUFFIX[suffix])
+    except (ValueError, KeyError, OverflowError):
+        value = -1
+    if value <= 0:
+        raise UsageError(f"{ENV}={text!r}: give a size in bytes, e.g. 512M or 4G")
+    return value
+
+
+def describe(size: int) -> str:
+    """A byte count for a message: '3.2 GiB', '512 MiB', '12 KiB', '100 B'."""
+    for unit, scale in (("TiB", 1 << 40), ("GiB", 1 << 30), ("MiB", 1 << 20), ("KiB", 1 << 10)):
+        if size >= scale:
+            return f"{size / scale:.3g} {unit}"
+    return f"{size} B"
+
+
+#: bytes: the most a robot description (TOML, URDF) may hold; a real one is a few kilobytes.
+ROBOT_FILE_LIMIT = 16 << 20
+
+
+def read_limited(source: Any, limit: int, message: str, error: type[Exception] | None = None) -> bytes:
+    """The bytes of ``source`` (a path, or a binary file object such as standard input), read in 1 MiB blocks and
+    refused with :class:`wmrid.core.errors.LogFormatError` (``message``, formatted with ``size``, the limit described)
+    once they pass ``limit`` (or ``error``, another WmridError class): an endless source (``/dev/zero``, ``yes |``)
+    stops there instead of filling memory.  OSError passes through."""
+    from wmrid.core.errors import LogFormatError
+
+    error = error or LogFormatError
+
+    def read(fh: Any) -> bytes:
+        data = bytearray()  # grown in place: no second copy of everything read at the end
+        while True:
+            block = fh.read(1 << 20)
+            if not block:
+                return data  # type: ignore[return-value]  # a bytearray reads like bytes everywhere it goes
+            data += block
+            if len(data) > limit:
+                raise error(message.format(size=describe(limit)))
+
+    if isinstance(source, (str, os.PathLike)):
+        with open(source, "rb") as fh:
+            return read(fh)
+    return read(source)

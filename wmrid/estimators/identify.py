@@ -1,0 +1,969 @@
+"""Identification of a whole log: settings from the robot or the data, the compiled replay, the result.
+
+Pure with respect to files: takes arrays (a :class:`WheelLog`-like object) and returns a frozen
+:class:`IdentificationResult`; the CLI does the reading and printing.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import Any, Literal, Protocol
+
+import numpy as np
+
+from wmrid.core.errors import NotIdentifiableError, UsageError, WmridError
+from wmrid.estimators.estimate import BaseEstimate, SegmentEstimates
+from wmrid.estimators.model_error import (
+    MISMATCH_P,
+    MISMATCH_RELEVANT,
+    misfit_text,
+    record_widening,
+    widen,
+)
+from wmrid.estimators.observer import ObserverSettings
+from wmrid.estimators.observer_kernel import project_history_box
+from wmrid.estimators.replay import replay_pieces
+from wmrid.estimators.survey import Survey, survey
+from wmrid.estimators.uncertainty import estimate_covariances, interval_factor, jackknife_deltas, segments_of
+from wmrid.estimators.widening import carry_unresolved_delay, with_hold_term, with_timing_term
+from wmrid.io.logs import LogStream, stream_arrays
+from wmrid.model import dynamics as model
+from wmrid.model.base_params import derived_with_std, fit_base_parameters
+from wmrid.model.dynamics import THETA0_UNITS, RegressorForm
+from wmrid.model.robot import Robot
+
+#: Reported parameter names, in report order.
+REPORTED = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
+
+
+def reported_names(form: RegressorForm) -> tuple[str, ...]:
+    """The reported names for ``form``: REPORTED, then its caster-drag parameters."""
+    return REPORTED + form.base_names[8:]
+
+
+#: Points of the history kept in a JSON result (enough for the report's figures).
+JSON_HISTORY_POINTS = 300
+#: A time step longer than GAP_FACTOR median steps (and GAP_MIN_S) is a hole the estimator cannot bridge.
+GAP_FACTOR = 1000.0
+GAP_MIN_S = 1.0
+#: A direction of the column-scaled information whose eigenvalue is below this fraction of the largest is
+#: not excited at all (double precision resolves about 1e-16; real logs' weakest directions are ~1e-8).
+UNEXCITED = 1e-12
+#: A base parameter whose standard error exceeds this fraction of its magnitude is called poorly determined.
+POORLY_DETERMINED = 0.1
+#: A base parameter is not determined by the log when the start value sets it (start_sensitivity) more
+#: than the data's standard error and more than this fraction of its value.
+START_RELEVANT = 1e-4
+#: What the standard errors do not cover, with the coverage measured in simulation (bench/bench_coverage.py).
+CLOSED_LOOP_CAVEAT = (
+    "in closed loop a coloured disturbance (a caster, the floor) reaches the efforts through the controller and "
+    "biases the observer's inertia entries and Vc; the closed-loop check (diagnostics.feedback, "
+    "wmrid.estimators.feedback) compares it with IDIM (IDIM-IV when the log has the reference) and reports that "
+    "one when they differ beyond "
+    "noise, else widens the std by the difference when a disturbance shows (light 14 kg AMR, 0.02 N m disturbance: "
+    "m11, m22, Vc within 3 std in 97 % of 40 s logs and 100 % of 160 s logs, was 70-82 %)"
+)
+#: Two base parameters whose estimates correlate beyond this are called not separable.
+NOT_SEPARABLE = 0.98
+
+
+class LogLike(Protocol):
+    t: np.ndarray
+    eta: np.ndarray
+    tau: np.ndarray
+    source: str
+    notes: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class History:
+    """Decimated per-sample record: t (m,) s, theta (m, 2, p) projected estimate, e (m, 2) rad/s prior
+    prediction error, lambda_min (m,) smallest eigenvalue of Gamma."""
+
+    t: np.ndarray
+    theta: np.ndarray
+    e: np.ndarray
+    lambda_min: np.ndarray
+
+
+@dataclass(frozen=True)
+class IdentificationResult:
+    """Everything identify found, immutable.  ``to_dict`` gives the JSON form."""
+
+    source: str
+    form: RegressorForm
+    settings: ObserverSettings
+    start_source: str
+    theta: np.ndarray  # (2, p) projected onto the box
+    theta_unconstrained: np.ndarray  # (2, p)
+    theta_cov: np.ndarray  # (2p, 2p)
+    parameters: dict[str, tuple[float, float]]  # name -> (value, std), REPORTED names, SI units
+    theta0_cov: np.ndarray  # (8, 8)
+    history: History
+    diagnostics: dict[str, Any]
+    warnings: tuple[str, ...]
+    log_info: dict[str, Any]
+    nominal: dict[str, float] | None = None
+    reference: dict[str, float] | None = None
+    units: dict[str, str] = field(default_factory=lambda: dict(THETA0_UNITS))
+    payload: dict[str, tuple[float, float]] | None = None  # mass kg, x m, y m, inertia kg m^2: (value, std)
+    method: str = "observer"
+    estimate: BaseEstimate | None = None  # the reported theta0 and its covariance (undetermined: NaN/inf)
+    validation: dict[str, Any] | None = None  # fit on another log (wmrid.model.predict.validation_fit)
+
+    def theta_dict(self) -> dict[str, Any]:
+        names = self.form.theta_names()
+        std = np.sqrt(np.clip(np.diag(self.theta_cov), 0, None))
+        return {
+            "form": self.form.to_dict(),
+            "values": {n: float(v) for n, v in zip(names, self.theta.ravel(), strict=True)},
+            "std": {n: _finite_or_none(s) for n, s in zip(names, std, strict=True)},
+            "unconstrained": {n: float(v) for n, v in zip(names, self.theta_unconstrained.ravel(), strict=True)},
+            "start": {n: float(v) for n, v in zip(names, self.settings.theta_init.ravel(), strict=True)},
+            "box_min": {n: _finite_or_none(v) for n, v in zip(names, self.settings.theta_min.ravel(), strict=True)},
+            "box_max": {n: _finite_or_none(v) for n, v in zip(names, self.settings.theta_max.ravel(), strict=True)},
+        }
+
+    def to_dict(self) -> dict[str, Any]:
+        params = {
+            name: {"value": value, "std": _finite_or_none(std), "unit": self.units[name]}
+            for name, (value, std) in self.parameters.items()
+        }
+        out: dict[str, Any] = {
+            "source": self.source,
+            "method": self.method,
+            "effort_unit": self.log_info.get("effort_unit", "N m"),
+            "parameters": params,
+            "theta": self.theta_dict(),
+            "settings": {
+                "k": self.settings.k,
+                "alpha": self.settings.alpha,
+                "torque_hold": self.settings.torque_hold,
+                "control_rate": self.settings.control_rate,
+                "start": self.start_source,
+            },
+            "diagnostics": self.diagnostics,
+            "warnings": list(self.warnings),
+            "log": self.log_info,
+        }
+        out["history"] = history_dict(self)
+        if self.validation is not None:
+            out["validation"] = self.validation
+        if self.payload is not None:
+            from wmrid.model.payload import PAYLOAD_UNITS
+
+            out["payload"] = {
+                name: {"value": v, "std": _finite_or_none(e), "unit": PAYLOAD_UNITS[name]}
+                for name, (v, e) in self.payload.items()
+            }
+        if self.nominal is not None:
+            out["nominal"] = self.nominal
+        if self.reference is not None:
+            out["reference"] = self.reference
+        return out
+
+
+def history_dict(result: Any, max_points: int = JSON_HISTORY_POINTS) -> dict[str, Any]:
+    """A compact history for JSON: t, theta (p names -> list), e_r, e_l, lambda_min, at most ``max_points``."""
+    hist = result.history
+    idx = np.unique(np.linspace(0, len(hist.t) - 1, min(max_points, len(hist.t))).round().astype(int))
+    names = result.form.theta_names()
+    flat = hist.theta[idx].reshape(len(idx), -1)
+    return {
+        "t": hist.t[idx].tolist(),
+        "theta": {name: flat[:, j].tolist() for j, name in enumerate(names)},
+        "e_r": hist.e[idx, 0].tolist(),
+        "e_l": hist.e[idx, 1].tolist(),
+        "lambda_min": hist.lambda_min[idx].tolist(),
+    }
+
+
+def _finite_or_none(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def caster_geometry(robot: Robot) -> tuple[float, ...]:
+    """(r, b, x_1, y_1, ...) for the geometric caster model of ``robot`` (nominal r, b; its casters).
+
+    Two casters at (x, y) and (-x, y) have the same drag columns (their contacts' velocities mirror each
+    other about the platform's x axis), so the log can only tell their total drag: they are merged into one
+    parameter, listed once (casters within 1 mm of such a pair count as one).
+    """
+    seen: list[tuple[float, float]] = []
+    for c in robot.casters or ():
+        key = (abs(c.x), c.y)
+        if not any(abs(key[0] - s[0]) < 1e-3 and abs(key[1] - s[1]) < 1e-3 for s in seen):
+            seen.append(key)
+    return (robot.nominal.r, robot.nominal.b, *[v for key in seen for v in key])
+
+
+def resolve_form(
+    auto: RegressorForm,
+    choice: Literal["auto", "paper", "general"],
+    caster: bool = False,
+    geometry: tuple[float, ...] = (),
+) -> RegressorForm:
+    """The regressor form: ``auto`` picks ``auto`` (the paper form when each wheel keeps one sign); caster drag
+    needs the general form (``geometry``: see :class:`wmrid.model.dynamics.RegressorForm`)."""
+    if caster:
+        if choice == "paper":
+            raise UsageError("--friction wheel+caster needs the general form (--form general or auto), not paper")
+        return RegressorForm("general", caster=True, geometry=geometry)
+    if choice == "auto":
+        return auto
+    if choice == "paper":
+        if auto.kind != "paper":
+            raise UsageError(
+                "--form paper needs each wheel to keep one strict sign over the log, but a wheel stops or "
+                "reverses; use --form general (or auto)"
+            )
+        return auto
+    if choice == "general":
+        return RegressorForm("general")
+    raise UsageError(f"--form must be auto, paper or general, got {choice!r}")
+
+
+def default_box(
+    theta_init: np.ndarray, form: RegressorForm, width: float, from_robot: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """The parameter box [theta_min, theta_max], (2, p) each.
+
+    Physics first: the diagonal of m = M^-1 is positive, and so are m_11 F_v1, m_22 F_v2 (and, in the
+    general form, m_11 F_d1, m_22 F_d2).  With a robot file the box is also centred on the nominal
+    intermediate parameters with half-width ``width`` times max(|theta_ij|, m_ii) -- a sanity box, wide
+    enough never to bind on a robot near its description.  Without one, only the signs are bounded.
+    """
+    lo = np.full(theta_init.shape, -np.inf)
+    hi = np.full(theta_init.shape, np.inf)
+    if from_robot and math.isfinite(width):
+        for i in range(2):
+            floor = abs(theta_init[i, i])
+            half = width * np.maximum(np.abs(theta_init[i]), floor)
+            lo[i] = theta_init[i] - half
+            hi[i] = theta_init[i] + half
+    lo[0, 0] = max(lo[0, 0], 0.0)
+    lo[1, 1] = max(lo[1, 1], 0.0)
+    lo[0, 4] = max(lo[0, 4], 0.0)
+    lo[1, 5] = max(lo[1, 5], 0.0)
+    if form.kind == "general":
+        lo[0, 6] = max(lo[0, 6], 0.0)
+        lo[1, 7] = max(lo[1, 7], 0.0)
+    return lo, hi
+
+
+def identify(
+    log: LogLike | LogStream,
+    robot: Robot | None = None,
+    *,
+    form: Literal["auto", "paper", "general"] = "auto",
+    k: float = 10.0,
+    alpha: float = 1e-10,
+    box_width: float = 10.0,
+    max_history: int = 20000,
+    torque_hold: Literal["zoh", "foh"] = "zoh",
+    progress: Callable[[int, int], None] | None = None,
+    payload: bool = False,
+    control_rate: float | None = None,
+    friction: Literal["wheel", "wheel+caster", "auto"] = "wheel",
+    geometry: tuple[float, ...] = (),
+    delay: float | Literal["auto"] | None = None,
+    feedback: bool = True,
+    timing: bool = True,
+) -> IdentificationResult:
+    """Identify the base parameters of the robot that recorded ``log``.
+
+    log : a :class:`wmrid.io.logs.LogStream` (read in two passes, a survey and the replay, in bounded
+    memory), or a log in memory with t (n,) s strictly increasing, eta (n, 2) rad/s [right, left],
+    tau (n, 2) N m.
+    ``robot`` gives the nominal values that start the estimate and centre the box (as in the paper);
+    without it the start and box come from the data and physics (see :meth:`wmrid.estimators.survey.Survey.data_start`,
+    :func:`default_box`).
+    ``payload``: also estimate the payload the robot carries, against the robot's unloaded parameters
+    (its CAD set, else nominal; :mod:`wmrid.model.payload`).  ``progress(samples_done, samples)`` during the replay.
+    ``control_rate`` : Hz, the rate of the controller that held the effort, when the log is slower
+    (see :class:`wmrid.estimators.observer.ObserverSettings`).  ``friction``: ``wheel`` (Eqs. 15-17) or ``wheel+caster``
+    (also the casters' rolling drag, :func:`wmrid.model.dynamics.caster_columns`: with the robot's casters
+    (``robot.casters``) one drag force D_k per caster, else the two-term Cv, Cw; general form only), or
+    ``auto``: both, and the caster model when a Wald test puts its drag off zero at p < AUTO_P (never on a log
+    whose wheels keep one sign).  ``diagnostics["friction"]`` states the model and why.
+    ``geometry`` : (r, b, x_1, y_1, ...) m, the geometric caster model's when no robot lists casters (a
+    saved model's ``form.geometry``, say; :func:`caster_geometry` builds it from a robot, whose casters win).
+    ``delay`` : s, how late the efforts are stamped against the speeds (two topics, two clocks): they are read
+    that much earlier (:func:`wmrid.estimators.idim.shifted`; the log is then read into memory); ``"auto"``: estimated
+    from the log (:func:`wmrid.estimators.delay.estimate_delay`) and applied when significant; None: as stamped,
+    unless the
+    reading notes say the efforts came from another topic than the speeds (:func:`wmrid.io.mcap.joints.split_topics`),
+    then ``"auto"`` (with ``timing``).
+    ``diagnostics["delay"]`` states what was estimated and applied.
+    ``feedback`` : run the closed-loop check (:func:`wmrid.estimators.feedback.check`): when the observer's estimate
+    differs
+    from IDIM's (IDIM-IV's, when the log has the wheel-speed reference) beyond noise, report that one instead, with a
+    warning; ``diagnostics["feedback"]`` states what was compared.  ``timing`` : without ``delay``, time the efforts
+    by default: split topics (above), and the timing check (:func:`wmrid.estimators.delay.timing_check`,
+    ``diagnostics["timing"]``): a delay estimated significant is applied as by ``delay="auto"`` (whose warning names
+    --control-rate when a controller faster than the log explains it); on a log slower than 400 Hz whose hold is
+    unknown, the std carries the difference between zoh and foh (the hold term).  A log that cannot be timed is used
+    as stamped, with a warning.
+    """
+    if friction not in FRICTION_CHOICES:
+        raise UsageError(f"--friction must be one of {', '.join(FRICTION_CHOICES)}, got {friction!r}")
+
+    timing_record: dict[str, Any] | None = None  # the timing check's, when it runs (below)
+
+    def checked(result: IdentificationResult, log_read: Any) -> IdentificationResult:
+        if not feedback:
+            return result
+        from wmrid.estimators.feedback import check
+
+        return check(result, log_read, robot)
+
+    if payload and robot is None:
+        raise UsageError("--payload needs --robot: the payload is what the log shows beyond the unloaded robot")
+    if not (isinstance(box_width, (int, float)) and box_width > 0):  # NaN fails too
+        raise UsageError(f"--box-width must be a number > 0 (inf: no box), got {box_width!r}")
+    delay_record = None
+    delay_warnings: list[str] = []
+    if delay is not None:
+        from wmrid.estimators.delay import DELAY_RESOLUTION_S, apply_delay
+
+        original = log.read() if isinstance(log, LogStream) else log  # read once: shifting needs the whole log
+        log, delay_record, delay_warnings = apply_delay(original, delay, torque_hold, control_rate)
+        applied = delay_record["applied_s"]
+        if delay == "auto" and applied:
+            # the timing term: identify again at the delay moved by its uncertainty; what that moves, the std carries
+            step = max(DELAY_RESOLUTION_S, 2.0 * delay_record["std_s"])
+            common = {
+                "form": form, "k": k, "alpha": alpha, "box_width": box_width, "max_history": max_history,
+                "torque_hold": torque_hold, "payload": payload, "control_rate": control_rate, "geometry": geometry,
+            }  # fmt: skip
+            base = identify(log, robot, friction=friction, feedback=False, timing=False, progress=progress, **common)
+            moved = identify(
+                original, robot, friction=base.form.friction, delay=applied + step, feedback=False, timing=False,
+                **common,
+            )  # fmt: skip
+            return checked(with_timing_term(base, moved, delay_record, delay_warnings, step, robot), log)
+    stream = log if isinstance(log, LogStream) else stream_arrays(log)
+    sv = survey(stream, stream.source, stream.effort_unit)  # one survey pass, whichever models are fitted
+    timing_warnings: list[str] = []
+    if timing and (delay is None or (delay == "auto" and not (delay_record or {}).get("applied_s"))):
+        from wmrid.estimators.delay import timing_check
+        from wmrid.io.mcap.joints import split_topics
+
+        split = split_topics(stream.notes)
+        if not split:
+            timing_record = timing_check(log, torque_hold, control_rate, sv.n, sv.median_step)
+        # efforts and speeds from two topics, or a significant delay: time the efforts by default
+        if delay is None and (split or (timing_record or {}).get("apply")):
+            try:
+                timed = identify(
+                    log, robot, form=form, k=k, alpha=alpha, box_width=box_width, max_history=max_history,
+                    torque_hold=torque_hold, progress=progress, payload=payload, control_rate=control_rate,
+                    friction=friction, geometry=geometry, delay="auto", feedback=feedback,
+                )  # fmt: skip
+            except WmridError as err:  # e.g. a hole IDIM's filter cannot bridge: as stamped, and say so
+                timing_warnings.append(f"the efforts could not be timed against the speeds ({err}); used as stamped")
+            else:
+                if timing_record is None:
+                    return timed
+                # the window's record, with what the timed run found on the whole log (e.g. its hold term)
+                merged = {**timing_record, **(timed.diagnostics.get("timing") or {})}
+                return replace(timed, diagnostics={**timed.diagnostics, "timing": merged})
+
+    def run(caster: bool) -> IdentificationResult:
+        try:
+            return _identify(
+                stream, sv, robot, form, k, alpha, box_width, max_history, torque_hold, progress, payload,
+                control_rate, caster, geometry,
+            )  # fmt: skip
+        except np.linalg.LinAlgError as err:
+            raise NotIdentifiableError(
+                f"{stream.source}: the log does not support an estimate (a singular system: {err}); it is too short, "
+                "not exciting enough, or its units or time stamps are wrong (check the notes of wmrid inspect)"
+            ) from err
+
+    def finish(result: IdentificationResult, friction_record: dict[str, Any]) -> IdentificationResult:
+        result = _with_friction(result, friction_record)
+        if timing_record is not None:
+            result = replace(result, diagnostics={**result.diagnostics, "timing": timing_record})
+        if timing_warnings:
+            result = replace(result, warnings=tuple(timing_warnings) + tuple(result.warnings))
+        if delay_record is not None:
+            diagnostics = {**result.diagnostics, "delay": delay_record}
+            result = replace(result, diagnostics=diagnostics, warnings=tuple(delay_warnings) + tuple(result.warnings))
+        rec = timing_record or {}
+        if result.estimate is not None:
+            result = carry_unresolved_delay(result, rec, log, robot, form, k, alpha, box_width, max_history,
+                                             torque_hold, control_rate, geometry)  # fmt: skip
+        observer = result.estimate
+        result = checked(result, log)
+        # a faster controller found and timed settles the hold; found but not timed (the re-run failed), it does not
+        timed_controller = bool(rec.get("faster_controller")) and not timing_warnings
+        unknown_hold = torque_hold == "zoh" and control_rate is None and not timed_controller
+        if rec.get("checked") and rec.get("slow") and unknown_hold and observer is not None:
+            # a slow log whose controller rate is unknown: the truth lies between a hold at the log's rate (zoh)
+            # and a controller much faster than the log (foh); that bracket, the std carries (the hold term)
+            other = identify(
+                log, robot, form=form, k=k, alpha=alpha, box_width=box_width, max_history=max_history,
+                torque_hold="foh", payload=False, friction=result.form.friction, geometry=geometry, feedback=False,
+                timing=False,
+            )  # fmt: skip
+            result = with_hold_term(result, observer, other, robot)
+        return result
+
+    if friction != "auto":
+        result = run(friction == "wheel+caster")
+        return finish(result, {"model": friction, "chosen_by": "--friction"})
+    wheel = run(False)
+    if wheel.form.kind == "paper":
+        return finish(wheel, {"model": "wheel", "chosen_by": "auto", "reason": AUTO_NO_REVERSAL})
+    try:
+        caster = run(True)
+    except NotIdentifiableError as err:
+        return finish(wheel, {"model": "wheel", "chosen_by": "auto", "reason": f"caster model failed: {err}"})
+    choice = caster_drag_test(caster)
+    chosen = caster if choice["p_value"] < AUTO_P else wheel
+    reason = f"the caster drag ({choice['text']}) differs from zero at p = {choice['p_value']:.2g}" + (
+        f" < {AUTO_P:g}" if chosen is caster else f" >= {AUTO_P:g}: not shown by this log"
+    )
+    return finish(chosen, {"model": chosen.form.friction, "chosen_by": "auto", "reason": reason, **choice})
+
+
+#: Friction models of :func:`identify`: ``auto`` lets the log decide between the other two.
+FRICTION_CHOICES = ("wheel", "wheel+caster", "auto")
+#: ``--friction auto`` takes the caster model when a Wald test puts its drag parameters off zero at this level.
+AUTO_P = 1e-3
+AUTO_NO_REVERSAL = (
+    "neither wheel ever stops or reverses, so a caster's drag cannot be told from the wheels' Coulomb friction"
+)
+
+
+def caster_drag_test(result: IdentificationResult) -> dict[str, Any]:
+    """Wald test of the caster-drag parameters of a ``wheel+caster`` result against zero.
+
+    W = d^T C^-1 d over the q drag parameters d with their reported (widened) covariance C, a jackknife estimate
+    on B degrees of freedom, so Hotelling's (B - q + 1) W / (B q) ~ F(q, B - q + 1) (chi-square on q when B is
+    unknown).  Returns {"statistic", "dof", "p_value", "text"}."""
+    from scipy.special import chdtrc, fdtrc
+
+    names = result.form.base_names[8:]
+    idx = [result.form.base_names.index(n) for n in names]
+    values = np.array([result.parameters[n][0] for n in names])
+    cov = np.asarray(result.theta0_cov)[np.ix_(idx, idx)]
+    if not np.all(np.isfinite(cov)):
+        return {"statistic": 0.0, "dof": len(names), "p_value": 1.0, "text": "not determined by this log"}
+    stat = float(values @ np.linalg.pinv(cov, hermitian=True) @ values)
+    units = result.units
+    text = ", ".join(
+        f"{n} = {v:.4g} +/- {result.parameters[n][1]:.2g} {units[n]}" for n, v in zip(names, values, strict=True)
+    )
+    q = len(names)
+    big_b = result.diagnostics.get("uncertainty", {}).get("dof")
+    if big_b and big_b - q + 1 > 0:
+        p_value = float(fdtrc(q, big_b - q + 1, (big_b - q + 1) * stat / (big_b * q)))
+    else:
+        p_value = float(chdtrc(q, stat))
+    return {"statistic": stat, "dof": q, "p_value": p_value, "text": text}
+
+
+def _with_friction(result: IdentificationResult, friction: dict[str, Any]) -> IdentificationResult:
+    """``result`` with its friction model and how it was chosen in ``diagnostics["friction"]``."""
+    return replace(result, diagnostics={**result.diagnostics, "friction": friction})
+
+
+def _identify(
+    stream: LogStream,
+    sv: Survey,
+    robot,
+    form,
+    k,
+    alpha,
+    box_width,
+    max_history,
+    torque_hold,
+    progress,
+    payload,
+    control_rate,
+    caster=False,
+    given_geometry: tuple[float, ...] = (),
+) -> IdentificationResult:
+    started = time.perf_counter()
+    source = stream.source
+    effort_unit = stream.effort_unit
+    n = sv.n
+    if n < 10:
+        raise NotIdentifiableError(f"{source}: only {n} samples; identification needs at least 10")
+    if sv.max_step > max(GAP_FACTOR * sv.median_step, GAP_MIN_S):
+        raise NotIdentifiableError(
+            f"{source}: the log has a hole: time jumps by {sv.max_step:.6g} s after t = {sv.max_step_after:.6g} s "
+            f"(the median step is {sv.median_step:.3g} s), and the estimator cannot bridge it; cut the log into its "
+            "continuous parts and identify each"
+        )
+    hold_warnings = _control_rate_check(control_rate, sv, source)
+    units = model.base_units(effort_unit)
+    early_warnings = []
+    if robot is not None and effort_unit != "N m":
+        early_warnings.append(
+            f"the effort is in {effort_unit}, not N m, so robot '{robot.name}' (in SI units) neither starts the "
+            "estimate nor is compared with it; the start comes from the data"
+        )
+        robot = None
+    geometry: tuple[float, ...] = tuple(given_geometry)
+    if caster and robot is not None and robot.casters:
+        geometry = caster_geometry(robot)
+    if caster and sv.form().kind == "paper":
+        raise NotIdentifiableError(
+            f"{source}: neither wheel ever stops or reverses, so the casters' drag cannot be told from the wheels' "
+            "Coulomb friction (it adds to it); identify with --friction wheel, or record a log that reverses and "
+            "turns on the spot"
+        )
+    chosen = resolve_form(sv.form(), form, caster, geometry)
+    n0 = chosen.n_base
+    if robot is not None:
+        start0 = np.concatenate([model.base_parameters(robot.nominal), np.zeros(n0 - 8)])  # no caster drag known
+        theta_init = model.intermediate_parameters(start0, chosen)
+        start_source = f"nominal parameters of robot '{robot.name}'"
+    else:
+        theta_init = sv.data_start(chosen)
+        start_source = "from the data (unknown robot): m11 = m22 = robust |eta_dot|/|tau| ratio, all else 0"
+    lo, hi = default_box(theta_init, chosen, box_width, robot is not None)
+    settings = ObserverSettings(
+        form=chosen, theta_init=theta_init, theta_min=lo, theta_max=hi, k=k, alpha=alpha, torque_hold=torque_hold,
+        control_rate=control_rate,
+    )  # fmt: skip
+
+    duration = sv.duration
+    tick = None if progress is None else (lambda done: progress(done, n))
+    with np.errstate(over="ignore", invalid="ignore"):
+        out = replay_pieces(
+            ((p.t, p.eta, p.tau) for p in stream), n, duration, settings, max_history=max_history, progress=tick,
+            half_rate=True, low_speed=sv.low_speed(),
+        )  # fmt: skip
+    theta_u, gamma, gamma_inv = out.theta, out.gamma, out.gamma_inv
+    finite = all(np.all(np.isfinite(a)) for a in (theta_u, gamma, gamma_inv, out.blk_a, out.blk_c))
+    if not finite:
+        raise NotIdentifiableError(f"{source}: the estimate diverged to non-finite values; check the log's units")
+
+    theta = np.empty_like(theta_u)
+    project_history_box(theta_u[None], gamma[None], lo, hi, theta[None])
+    block_mid = 0.5 * (np.concatenate(([sv.t_first], out.block_t[:-1])) + out.block_t) - sv.t_first
+    theta_cov, weight_cov, unc = estimate_covariances(
+        gamma, gamma_inv, theta_u, out.blk_a, out.blk_c, block_mid / max(duration, 1e-300), duration
+    )
+    fit = fit_base_parameters(theta, weight_cov, chosen, report_cov=theta_cov, report_dof=unc["dof"])
+    sens = start_sensitivity(gamma, gamma_inv, alpha, theta_init, theta_u, fit.gain)
+    std_data = np.sqrt(np.clip(np.diag(fit.cov), 0.0, None))
+    undetermined = [
+        j for j in range(n0) if sens[j] > std_data[j] and sens[j] > START_RELEVANT * abs(fit.theta0[j])
+    ]  # fmt: skip
+    unexcited = unexcited_parameters(gamma, alpha, theta_u, fit)
+    undetermined = sorted(set(undetermined) | set(unexcited))
+    if len(unexcited) == n0 or torque_unexcited(gamma, alpha):
+        raise NotIdentifiableError(
+            f"{source}: the log does not excite the dynamics (no base parameter is determined by it: the wheel "
+            "speeds and efforts barely vary); record a log that accelerates, brakes and turns"
+        )
+    cov0, inflation = widen(
+        fit, theta, out, gamma, theta_u, lo, hi, weight_cov, chosen, block_mid, duration, k
+    )  # fmt: skip
+    cov0 = cov0 + np.diag(sens**2)
+    for j in undetermined:
+        cov0[j, :] = cov0[:, j] = np.nan
+        cov0[j, j] = np.inf
+    parameters = derived_with_std(fit.theta0, cov0, chosen.base_names)
+    parameters = {name: parameters[name] for name in reported_names(chosen)}
+
+    lam_hist = np.linalg.eigvalsh(out.hist_gamma)[:, 0]
+    h_theta = np.empty_like(out.hist_theta)
+    project_history_box(out.hist_theta, out.hist_gamma, lo, hi, h_theta)
+    history = History(t=out.hist_t - sv.t_first, theta=h_theta, e=out.hist_e, lambda_min=lam_hist)
+
+    diagnostics, warnings = _diagnose(
+        gamma, alpha, chosen, fit, parameters, theta_cov, sens, undetermined, lo, hi, units, theta, inflation
+    )
+    warnings = early_warnings + hold_warnings + sv.signal_warnings() + physics_warnings(parameters) + warnings
+    if inflation["prediction_misfit"]["applied"]:
+        warnings.insert(0, misfit_text(inflation["prediction_misfit"]))
+    dof = unc["dof"]
+    diagnostics["uncertainty"] = {
+        "method": "delete-a-segment jackknife over contiguous segments of the log",
+        "segments": unc["segments"],
+        "dof": dof,
+        "interval_factor": {"95%": interval_factor(0.95, dof), "99.7%": interval_factor(0.9973, dof)},
+        "meaning": "value +/- interval_factor * std covers the truth with that probability (Student t, dof) when "
+        "the disturbances do not feed back into the efforts",
+        "caveat": CLOSED_LOOP_CAVEAT,
+        "blocks": len(out.block_end),
+        "block_seconds": float(duration / len(out.block_end)),
+    }
+    record_widening(diagnostics, inflation, parameters, [chosen.base_names[j] for j in undetermined])
+    rms_e = np.sqrt(out.blk_ee.sum(axis=0) / duration) if duration > 0 else np.zeros(2)
+    diagnostics["prediction_error_rms"] = {"eta_r": float(rms_e[0]), "eta_l": float(rms_e[1]), "unit": "rad/s"}
+    log_info = {
+        "samples": n,
+        "duration_s": duration,
+        "rate_hz": float(1.0 / sv.median_step),
+        "uneven_steps": bool(sv.max_step - sv.min_step > 1e-6 * sv.median_step),
+        "notes": list(stream.notes),
+        "effort_unit": effort_unit,
+    }
+    payload_est = None
+    if payload and robot is not None:
+        from wmrid.model.payload import payload_with_std
+
+        payload_est = payload_with_std(fit.theta0, cov0, robot.reference)
+    nominal = reference = None
+    if robot is not None:
+        nominal = model.named_base(model.base_parameters(robot.nominal))
+        if robot.cad is not None:
+            reference = model.named_base(model.base_parameters(robot.cad))
+    # the jackknife's leave-one-segment-out estimates, theta0 to first order (fit.gain): for comparing methods
+    segment, n_seg = segments_of(block_mid / max(duration, 1e-300), duration)
+    deltas = jackknife_deltas(gamma, theta_u, out.blk_a, out.blk_c, segment, n_seg)
+    loo = SegmentEstimates(float(sv.t_first), float(duration), fit.theta0[None, :] + deltas @ fit.gain.T)
+    return IdentificationResult(
+        source=source, form=chosen, settings=settings, start_source=start_source, theta=theta,
+        theta_unconstrained=theta_u, theta_cov=theta_cov, parameters=parameters, theta0_cov=fit.cov,
+        history=history, diagnostics=diagnostics, warnings=tuple(warnings), log_info=log_info,
+        nominal=nominal, reference=reference, units=units, payload=payload_est,
+        estimate=BaseEstimate(
+            "observer", fit.theta0.copy(), cov0, dof=dof, seconds=time.perf_counter() - started, segments=loo
+        ),
+    )  # fmt: skip
+
+
+#: Diagnostics that describe the observer's run on the log (kept, and listed as such, under another method).
+OBSERVER_DIAGNOSTICS = (
+    "lambda_min_gamma", "lambda_max_gamma", "condition_number_scaled", "weakest_directions", "undetermined",
+    "not_separable", "at_box_boundary", "start_sensitivity", "structural_mismatch", "prediction_error_rms",
+)  # fmt: skip
+
+
+def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot | None = None) -> IdentificationResult:
+    """``result`` (the observer's run on a log) reporting another method's estimate ``est`` of the same log.
+
+    The parameters, their standard errors, the payload and the warnings about the estimate become the
+    method's; what describes the log (notes, excitation, the observer's history and intermediate
+    parameters, kept as the observer's) stays.  ``diagnostics["method"]`` holds the method's own
+    figures and ``diagnostics["observer_parameters"]`` the observer's estimate for comparison.
+    """
+    inflation = dict(result.diagnostics.get("uncertainty", {}).get("model_error", {"scale": 1.0, "applied": False}))
+    inflation.pop("meaning", None)
+    # The model-error scale and the low-speed difference are evidence about the log and the model, so they carry
+    # over to another method: the log departs from the same model (and in the same slow parts) whichever method
+    # reads it.  The discretisation term is the observer's own replay and does not.
+    # A method that refits itself without the slow parts (IDIM, wmrid.estimators.idim_checks) uses its own difference
+    # instead of the observer's, and its other alternative fit (another filter cutoff) the same way.
+    slow = inflation.get("slow_speed") or {}
+    own = est.diagnostics.get("checks") or {}
+    if own.get("slow_speed"):
+        slow = {**own["slow_speed"], "method": est.method}
+    if inflation.get("discretisation"):
+        inflation["discretisation"] = {**inflation["discretisation"], "applied": False, "observer_only": True}
+    if slow:
+        inflation["slow_speed"] = {**slow, "fragile": []}
+    if own.get("cutoff"):
+        inflation["filter"] = {**own["cutoff"], "method": est.method}
+    cov = np.array(est.cov, dtype=float) * inflation["scale"] ** 2  # the same log departs from the same model
+    timing = (result.diagnostics.get("delay") or {}).get("timing_term") or (
+        (result.diagnostics.get("timing") or {}).get("timing_term") or {}
+    )
+    terms = [slow, inflation.get("filter") or {}]
+    if timing.get("widened"):  # the efforts' timing is as uncertain whichever method reads them
+        terms.append({"applied": True, "delta": timing["delta"]})
+    for term in terms:
+        if term.get("applied") and term.get("delta") is not None and len(term["delta"]) == len(est.theta0):
+            delta = np.asarray(term["delta"], dtype=float)
+            cov = cov + np.outer(delta, delta)
+    form = result.form if len(est.theta0) == result.form.n_base else RegressorForm("general")
+    parameters = derived_with_std(np.asarray(est.theta0, dtype=float), cov, form.base_names)
+    parameters = {name: parameters[name] for name in reported_names(form)}
+    diagnostics = dict(result.diagnostics)
+    diagnostics["observer_parameters"] = {name: {"value": v, "std": _finite_or_none(e)} for name, (v, e) in
+                                          result.parameters.items()}  # fmt: skip
+    diagnostics["method"] = {"name": est.method, "seconds": est.seconds, "dof": est.dof, **est.diagnostics}
+    diagnostics["from_observer"] = [k for k in OBSERVER_DIAGNOSTICS if k in diagnostics]
+    dof = est.dof
+    diagnostics["uncertainty"] = {
+        "method": est.diagnostics.get("uncertainty", f"standard errors of method {est.method}"),
+        "segments": est.diagnostics.get("segments"),
+        "dof": dof,
+        "interval_factor": {
+            "95%": interval_factor(0.95, dof) if dof else 1.959964,
+            "99.7%": interval_factor(0.9973, dof) if dof else 2.999977,
+        },
+        "meaning": "value +/- interval_factor * std covers the truth with that probability when the disturbances "
+        "do not feed back into the efforts",
+        "caveat": CLOSED_LOOP_CAVEAT,
+    }
+    units = result.units
+    kept = [w for w in result.warnings if " is poorly determined by this log" not in w and "positive definite" not in w
+            and "friction cannot push" not in w]  # fmt: skip
+    poorly = []
+    base_names = form.base_names
+    for name in base_names:
+        value, std = parameters[name]
+        if not (math.isfinite(std) and std <= POORLY_DETERMINED * abs(value)):
+            poorly.append(name)
+            kept.append(
+                f"{name} is poorly determined by this log ({est.method}): {value:.6g} +/- {std:.2g} {units[name]}"
+            )
+    undetermined = [j for j, name in enumerate(base_names) if not math.isfinite(parameters[name][1])]
+    derived = derived_poorly_determined(parameters, base_names)
+    poorly += derived
+    kept += [_poorly_text(name, parameters[name], units[name], est.method) for name in derived]
+    diagnostics["poorly_determined"] = poorly
+    record_widening(diagnostics, inflation, parameters, [base_names[j] for j in undetermined])
+    warnings = [*kept, *est.warnings, *physics_warnings(parameters)]
+    payload_est = None
+    if result.payload is not None and robot is not None:
+        from wmrid.model.payload import payload_with_std
+
+        payload_est = payload_with_std(np.asarray(est.theta0, dtype=float), cov, robot.reference)
+    return replace(
+        result, parameters=parameters, theta0_cov=cov, diagnostics=diagnostics, warnings=tuple(warnings),
+        payload=payload_est, method=est.method, estimate=est,
+    )  # fmt: skip
+
+
+def derived_poorly_determined(parameters: dict[str, tuple[float, float]], base_names: tuple[str, ...]) -> list[str]:
+    """The reported parameters not in ``base_names`` (M11, M12, M22, computed from m11, m12, m22) whose standard
+    error exceeds POORLY_DETERMINED of their magnitude, as for the base parameters: M = m^-1 inherits the
+    uncertainty of every m entry, so M12 can be poorly determined where m12 alone is not flagged, or the reverse.
+    An M computed from an undetermined m has an infinite std (undetermined itself) and is not listed here."""
+    out = []
+    for name, (value, std) in parameters.items():
+        if name in base_names or not math.isfinite(std):
+            continue
+        if std > POORLY_DETERMINED * abs(value):
+            out.append(name)
+    return out
+
+
+def _poorly_text(name: str, pair: tuple[float, float], unit: str, method: str | None = None) -> str:
+    value, std = pair
+    by = f" ({method})" if method else ""
+    return f"{name} is poorly determined by this log{by}: {value:.6g} +/- {std:.2g} {unit}"
+
+
+def physics_warnings(parameters: dict[str, tuple[float, float]]) -> list[str]:
+    """Warnings for base parameters that no physical robot has: M not positive definite, negative friction
+    (each beyond 3 standard errors, so that noise alone does not trigger it)."""
+    out = []
+    m11, m12, m22 = (parameters[n][0] for n in ("m11", "m12", "m22"))
+    if m11 <= 0 or m22 <= 0 or m11 * m22 - m12 * m12 <= 0:
+        out.append(
+            f"the identified inverse inertia [m11 m12; m12 m22] = [{m11:.4g} {m12:.4g}; {m12:.4g} {m22:.4g}] is not "
+            "positive definite, which no robot has: the log departs from the model or does not excite it"
+        )
+    for name in ("Fv1", "Fv2", "Fd1", "Fd2"):
+        value, std = parameters[name]
+        if value < 0 and math.isfinite(std) and value < -3 * std:
+            out.append(f"{name} = {value:.4g} is negative beyond 3 std ({std:.2g}): friction cannot push; check signs")
+    return out
+
+
+#: A base parameter is not determined by the log when the start value moves it by more than its
+#: standard error and by more than this fraction of its value.
+START_RELEVANT = 1e-4
+
+
+#: Most sub-steps --control-rate may split one log step into (a 1 kHz controller under a 0.1 Hz log).
+MAX_SUBSTEPS = 10_000
+
+
+def _control_rate_check(control_rate: float | None, sv: Any, source: str) -> list[str]:
+    """Refuse a control rate that splits a step into absurdly many sub-steps; warn when it changes nothing."""
+    if control_rate is None or not (math.isfinite(control_rate) and control_rate > 0):
+        return []  # None, or refused by ObserverSettings with its own message
+    most = round(sv.max_step * control_rate)
+    if most > MAX_SUBSTEPS:
+        raise UsageError(
+            f"{source}: --control-rate {control_rate:g} Hz splits the longest step ({sv.max_step:.3g} s) into "
+            f"{most:,} held sub-steps (at most {MAX_SUBSTEPS:,}); give the controller's rate in Hz"
+        )
+    rate = 1.0 / sv.median_step if sv.median_step > 0 else math.inf
+    if control_rate < 1.5 * rate:
+        return [
+            f"--control-rate {control_rate:g} Hz is not faster than the log ({rate:.6g} Hz): each step keeps one "
+            "held effort, as without the option"
+        ]
+    return []
+
+
+def torque_unexcited(gamma: np.ndarray, alpha: float) -> bool:
+    """True when a direction the log does not excite at all involves the torque columns.
+
+    Then the inverse inertia m (the coefficients of the torques) is not determined, and every other base
+    parameter, read through M = m^-1, is meaningless: e.g. constant torques alongside the constant
+    Coulomb column, or a log whose signals do not vary at all.
+    """
+    p = gamma.shape[0]
+    info = gamma - alpha * np.eye(p)
+    scale = np.sqrt(np.clip(np.diag(info), 0.0, None))
+    if scale[0] == 0 or scale[1] == 0:
+        return True
+    safe = np.where(scale > 0, scale, 1.0)
+    evals, evecs = np.linalg.eigh(info / np.outer(safe, safe))
+    null = evals < UNEXCITED * max(float(evals[-1]), 1e-300)
+    return bool(np.any(np.abs(evecs[:2, null]) > 0.1))
+
+
+def unexcited_parameters(gamma: np.ndarray, alpha: float, theta_u: np.ndarray, fit) -> list[int]:
+    """Base parameters that move along regressor directions the log does not excite at all.
+
+    Directions of the column-scaled data information Gamma - alpha I whose eigenvalue is below
+    UNEXCITED of the largest carry no information (columns that are constant together, e.g. a constant
+    torque and the Coulomb column).  Moving theta along such a direction by the size of theta itself
+    changes theta0 through the minimum-distance gain; a parameter that changes by more than
+    1e-6 of its value is not determined by the log.
+    """
+    p = gamma.shape[0]
+    info = gamma - alpha * np.eye(p)
+    scale = np.sqrt(np.clip(np.diag(info), 0.0, None))
+    safe = np.where(scale > 0, scale, 1.0)
+    evals, evecs = np.linalg.eigh(info / np.outer(safe, safe))
+    top = max(float(evals[-1]), 1e-300)
+    out: set[int] = set()
+    for idx in np.flatnonzero(evals < UNEXCITED * top):
+        u = evecs[:, idx] / safe
+        u = u / max(np.linalg.norm(u), 1e-300)
+        for row in range(2):
+            step = np.zeros((2, p))
+            step[row] = u * max(np.linalg.norm(theta_u[row]), 1e-300)
+            moved = np.abs(fit.gain @ step.ravel())
+            out |= {j for j in range(len(fit.theta0)) if moved[j] > 1e-6 * max(abs(fit.theta0[j]), 1e-300)}
+    return sorted(out)
+
+
+def start_sensitivity(
+    gamma: np.ndarray,
+    gamma_inv: np.ndarray,
+    alpha: float,
+    theta_init: np.ndarray,
+    theta_u: np.ndarray,
+    gain: np.ndarray,
+) -> np.ndarray:
+    """How much the start value sets each base parameter, (8,) in its units.
+
+    The final estimate is exactly Gamma^-1 (alpha theta_init + data) (see wmrid.estimators.observer), so its
+    sensitivity to the start is alpha Gamma^-1: about 0 along directions the log excites, the identity
+    along directions it does not (where Gamma's data part is 0 and the estimate IS the start).  A start
+    wrong by 100 % of max(|theta_init|, |theta_hat|) in each entry, independently, then moves theta0 by
+    the returned standard deviation (propagated with the minimum-distance gain (8, 2p)).
+    """
+    sens_theta = alpha * gamma_inv  # (p, p)
+    if not np.all(np.isfinite(sens_theta)):
+        return np.full(gain.shape[0], np.inf)
+    plausible = np.maximum(np.abs(theta_init), np.abs(theta_u))  # (2, p)
+    per_row = [sens_theta * plausible[i][None, :] for i in range(2)]  # (p, p) each: d theta_i / d start_i
+    big = np.zeros((2 * gamma.shape[0], 2 * gamma.shape[0]))
+    p = gamma.shape[0]
+    big[:p, :p] = per_row[0]
+    big[p:, p:] = per_row[1]
+    effect = gain @ big  # (8, 2p)
+    return np.sqrt(np.sum(effect**2, axis=1))
+
+
+def _diagnose(
+    gamma, alpha, form, fit, parameters, theta_cov, sens, undetermined, lo, hi, units, theta, inflation
+) -> tuple[dict[str, Any], list[str]]:
+    """Excitation and consistency diagnostics, and the warnings they call for.
+
+    Warnings follow from what the log does to the *answer*: a base parameter whose standard error
+    exceeds 10 % of its value is poorly determined, and the partner it cannot be told apart from
+    (correlation above 0.98) is named.  Eigen-directions of the column-scaled information matrix are
+    reported as diagnostics (they say which regressor columns the log does not separate).
+    """
+    warnings: list[str] = []
+    p = form.n_columns
+    names0 = form.base_names
+    info = gamma - alpha * np.eye(p)
+    scale = np.sqrt(np.clip(np.diag(info), 0, None))
+    safe = np.where(scale > 0, scale, 1.0)
+    evals, evecs = np.linalg.eigh(info / np.outer(safe, safe))
+    lam = np.linalg.eigvalsh(gamma)
+    cond = float(evals[-1] / evals[0]) if evals[0] > 0 else math.inf
+    columns = form.column_names
+    weakest = []
+    for idx in range(min(2, p)):
+        vec = evecs[:, idx]
+        involved = [columns[j] for j in np.argsort(-np.abs(vec)) if abs(vec[j]) > 0.3]
+        weakest.append(
+            {"relative_eigenvalue": float(evals[idx] / evals[-1]) if evals[-1] > 0 else 0.0, "columns": involved}
+        )
+    dead = [columns[j] for j in range(p) if scale[j] == 0]
+    if dead:
+        warnings.append(
+            f"the log never excites regressor column(s) {', '.join(dead)}: their parameters stay at the start value"
+        )
+    std0 = np.sqrt(np.clip(np.diag(fit.cov), 0, None))
+    safe0 = np.where(std0 > 0, std0, 1.0)
+    corr = fit.cov / np.outer(safe0, safe0)
+    poorly = []
+    pairs = []
+    for idx, name in enumerate(names0):
+        value, std = parameters[name]
+        if idx in undetermined or (math.isfinite(std) and std <= POORLY_DETERMINED * abs(value)):
+            continue
+        poorly.append(name)
+        partners = [
+            f"{names0[j]} (correlation {corr[idx, j]:+.3f})"
+            for j in np.argsort(-np.abs(corr[idx]))
+            if j != idx and abs(corr[idx, j]) > NOT_SEPARABLE
+        ]
+        pairs += [
+            [name, names0[j], float(corr[idx, j])]
+            for j in range(len(names0))
+            if j != idx and abs(corr[idx, j]) > NOT_SEPARABLE
+        ]
+        why = f"; it is not separable from {', '.join(partners)}" if partners else ""
+        warnings.append(f"{name} is poorly determined by this log: {value:.6g} +/- {std:.2g} {units[name]}{why}")
+    derived = derived_poorly_determined(parameters, names0)
+    poorly += derived
+    warnings += [_poorly_text(name, parameters[name], units[name]) for name in derived]
+    at_bound = [
+        n
+        for n, v, a, b in zip(form.theta_names(), theta.ravel(), lo.ravel(), hi.ravel(), strict=True)
+        if v <= a or v >= b
+    ]
+    if at_bound:
+        warnings.append(f"estimate held on the box boundary for {', '.join(at_bound)}")
+    if undetermined:
+        names = ", ".join(names0[j] for j in undetermined)
+        warnings.insert(
+            0,
+            f"this log does not determine {names}: the start value, not the data, sets them (alpha = {alpha:g}), "
+            "so their std is null; record a longer log that varies speeds and turning more, or lower --alpha",
+        )
+    rel_mismatch = inflation["relative_misfit"]
+    # A significant misfit (p < 1e-3) is reported unless it is below 1e-5 of max |theta|: the
+    # discretisation error of a noise-free log (about 1e-7) is significant but irrelevant.
+    if fit.dof > 0 and fit.p_value < MISMATCH_P and rel_mismatch > MISMATCH_RELEVANT:
+        scale = inflation["scale"]
+        warnings.append(
+            f"the intermediate parameters are not consistent with one set of base parameters "
+            f"(Hotelling T2 {fit.chi2:.3g} on {fit.dof} directions, p = {fit.p_value:.2g}; largest misfit "
+            f"{100 * rel_mismatch:.2g} % of max |theta|): the log departs from the model (slip, caster drag, other "
+            f"friction, a wrong sign or unit, or the wrong --torque-hold); every std is scaled by {scale:.3g} to "
+            "cover it, and the estimates are only as good as the model"
+        )
+    diagnostics = {
+        "lambda_min_gamma": float(lam[0]),
+        "lambda_max_gamma": float(lam[-1]),
+        "condition_number_scaled": cond,
+        "weakest_directions": weakest,
+        "poorly_determined": poorly,
+        "undetermined": [names0[j] for j in undetermined],
+        "not_separable": pairs,
+        "at_box_boundary": at_bound,
+        "start_sensitivity": {name: float(v) for name, v in zip(names0, sens, strict=True)},
+        "structural_mismatch": {
+            "statistic": fit.chi2, "dof": fit.dof, "p_value": fit.p_value, "relative_misfit": rel_mismatch,
+            "meaning": "Hotelling T2 of the misfit of theta to the model's form (Eqs. 23-24) on dof directions; "
+            "small p_value = theta not of the model's form",
+        },
+    }  # fmt: skip
+    return diagnostics, warnings

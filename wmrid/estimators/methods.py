@@ -1,0 +1,204 @@
+"""The identification methods behind one interface: ``observer`` (the paper's), ``idim``, ``rls``, ``oe``.
+
+Every method takes a log in memory (t (n,) s, eta (n, 2) rad/s, tau (n, 2) N m) and returns a
+:class:`wmrid.estimators.estimate.BaseEstimate`.  The observer runs first in every case: it streams the log, checks
+its excitation and gives the start of ``oe`` (which removes the output-error method's initial-guess
+problem); :func:`run` then reports the chosen method's estimate through
+:func:`wmrid.estimators.identify.with_estimate`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from wmrid.core.errors import UsageError, WmridError
+from wmrid.estimators.estimate import BaseEstimate
+from wmrid.estimators.identify import IdentificationResult, with_estimate
+from wmrid.model.robot import Robot
+
+METHODS = ("observer", "idim", "iv", "rls", "oe")
+#: The smallest RLS forgetting factor: a memory of 1/(1 - lambda) = 50 samples, about six per parameter.
+MIN_FORGETTING = 0.98
+DESCRIPTIONS = {
+    "observer": "the paper's observer-based adaptive estimator (Eqs. 26-37), no accelerations",
+    "idim": "inverse dynamic model, least squares on zero-phase low-pass filtered and differentiated speeds",
+    "iv": "instrumental variables (IDIM-IV): IDIM with the logged wheel-speed reference as instruments, "
+    "consistent under feedback",
+    "rls": "recursive least squares with forgetting on the IDIM regression",
+    "oe": "output error: simulate the model on the log's torques and minimise the speed error, from the observer",
+}
+
+
+@dataclass(frozen=True)
+class MethodOptions:
+    """Options of the classical methods.
+
+    cutoff_hz : IDIM/RLS low-pass cutoff, Hz (None: from the log, see :func:`wmrid.estimators.idim.default_cutoff`).
+    weighted : IDIM two-step weighted least squares.  forgetting : RLS forgetting factor in (0, 1].
+    torque_hold : how the effort was held between samples ("zoh" or "foh"): OE simulates it, IDIM and RLS read
+    the efforts half a hold period earlier under "zoh" (:func:`wmrid.estimators.idim.effort_delay`).
+    """
+
+    cutoff_hz: float | None = None
+    weighted: bool = False
+    forgetting: float = 1.0
+    torque_hold: str = "zoh"
+
+    def __post_init__(self) -> None:
+        if self.cutoff_hz is not None and not (np.isfinite(self.cutoff_hz) and self.cutoff_hz > 0):
+            raise UsageError(f"--cutoff must be a positive frequency in Hz, got {self.cutoff_hz!r}")
+        if not (MIN_FORGETTING <= self.forgetting <= 1.0):
+            why = (
+                "above 1 the recursion weights old samples more than new ones and diverges"
+                if self.forgetting > 1.0
+                else f"below {MIN_FORGETTING} the recursion remembers fewer than "
+                f"{round(1 / (1 - MIN_FORGETTING))} samples for 8 parameters"
+                if self.forgetting < MIN_FORGETTING
+                else "it is not a number"
+            )
+            raise UsageError(f"--forgetting must be in [{MIN_FORGETTING}, 1], got {self.forgetting!r}: {why}")
+
+
+def check_method(name: str) -> str:
+    if name not in METHODS:
+        raise UsageError(f"--method must be one of {', '.join(METHODS)}, got {name!r}")
+    return name
+
+
+def estimate(name: str, log: Any, observer: IdentificationResult, options: MethodOptions) -> BaseEstimate:
+    """Method ``name``'s estimate on ``log`` (in memory); ``observer`` is the observer's result on the same log.
+
+    Errors of the methods are re-raised with the log's name in front, like every other wmrid error.
+    """
+    check_method(name)
+    if observer.method != "observer":
+        raise UsageError(
+            f"the observer's run reports method {observer.method!r}: give identify(..., feedback=False)'s result"
+        )
+    if name == "observer":
+        assert observer.estimate is not None
+        return observer.estimate
+    t = np.asarray(log.t, dtype=np.float64)
+    eta = np.asarray(log.eta, dtype=np.float64)
+    tau = np.asarray(log.tau, dtype=np.float64)
+    applied = (observer.diagnostics.get("delay") or {}).get("applied_s") or 0.0
+    if applied:  # the efforts' delay the observer's run applied (identify(..., delay=)): the same log for every method
+        from wmrid.estimators.idim import shifted
+
+        tau = shifted(t, tau, -applied)
+    source = getattr(log, "source", observer.source)
+    try:
+        if name == "idim":
+            from wmrid.estimators.idim import identify_idim
+
+            # the observer's form: IDIM models the casters' drag too when the observer does (wheel+caster)
+            # and the effort held as the observer assumed (--torque-hold, --control-rate)
+            hold = {"torque_hold": options.torque_hold, "control_rate": observer.settings.control_rate}
+            return identify_idim(
+                t, eta, tau, cutoff_hz=options.cutoff_hz, weighted=options.weighted, form=observer.form, **hold
+            )
+        if name == "iv":
+            from wmrid.estimators.iv import identify_iv
+
+            reference = getattr(log, "reference", None)
+            if reference is None:
+                raise UsageError(
+                    "--method iv needs the wheel-speed reference (set-points) the controller tracked: columns "
+                    "eta_ref_r, eta_ref_l, or name yours with --columns eta_ref_r=...,eta_ref_l=..."
+                )
+            hold = {"torque_hold": options.torque_hold, "control_rate": observer.settings.control_rate}
+            return identify_iv(
+                t, eta, tau, reference, cutoff_hz=options.cutoff_hz, weighted=options.weighted, form=observer.form,
+                **hold,
+            )  # fmt: skip
+        if name == "rls":
+            from wmrid.estimators.rls import identify_rls
+
+            hold = {"torque_hold": options.torque_hold, "control_rate": observer.settings.control_rate}
+            return identify_rls(
+                t, eta, tau, forgetting=options.forgetting, cutoff_hz=options.cutoff_hz, form=observer.form, **hold
+            )
+        from wmrid.estimators.output_error import identify_oe
+
+        assert observer.estimate is not None
+        est = identify_oe(
+            t, eta, tau, np.asarray(observer.estimate.theta0), torque_hold=options.torque_hold, form=observer.form
+        )
+        diagnostics = {
+            **est.diagnostics,
+            "uncertainty": "cluster-robust sandwich over contiguous segments of the log",
+            "segments": est.diagnostics.get("clusters"),
+        }
+        return replace(est, diagnostics=diagnostics)
+    except WmridError as err:
+        if str(err).startswith(source):
+            raise
+        raise type(err)(f"{source}: {name}: {err}") from err
+
+
+def run(
+    name: str, log: Any, observer: IdentificationResult, options: MethodOptions, robot: Robot | None = None
+) -> IdentificationResult:
+    """The observer's result on ``log`` reporting method ``name``'s estimate (itself for ``observer``)."""
+    if name == "observer":
+        return observer
+    return with_estimate(observer, estimate(name, log, observer, options), robot)
+
+
+def compare(
+    log: Any,
+    observer: IdentificationResult,
+    options: MethodOptions,
+    names: tuple[str, ...] = METHODS,
+    *,
+    other: Any = None,
+    truth: dict[str, float] | None = None,
+) -> dict[str, Any]:
+    """Every method in ``names`` on ``log`` (in memory; ``observer`` is the observer's result on it), JSON-ready.
+
+    {"methods": {name: {"description", "parameters": {n: {"value", "std", "unit"[, "error_percent"]}}, "flagged",
+    "marks" ({n: "", "†", "!" or "†!"}, :func:`wmrid.estimators.model_error.std_mark`),
+    "seconds", "warnings"[, "validation": {"fit_percent": {"eta_r", "eta_l"}}]}}, ...}.  The std, flags and
+    warnings are those ``identify --method NAME`` reports (model-error widenings included); the parameters are
+    the form's (caster drag too under ``--friction wheel+caster``).  ``other`` : a second
+    log to validate each model on (:func:`wmrid.model.predict.validation_fit`); ``truth`` : true base parameters.
+    """
+    from wmrid.estimators.model_error import std_mark
+    from wmrid.model.predict import validation_fit
+
+    out: dict[str, Any] = {"source": observer.source, "methods": {}}
+    predictor = None
+    for name in names:
+        est = estimate(name, log, observer, options)
+        # the same honest std, flags and warnings as ``identify --method NAME``
+        # (wmrid.estimators.identify.with_estimate)
+        result = observer if name == "observer" else with_estimate(observer, est)
+        params = {}
+        for key, (value, std) in result.parameters.items():
+            entry = {"value": value, "std": std if np.isfinite(std) else None, "unit": observer.units[key]}
+            if truth is not None and key in truth and truth[key]:
+                entry["error_percent"] = 100.0 * (value - truth[key]) / abs(truth[key])
+            params[key] = entry
+        row: dict[str, Any] = {
+            "description": DESCRIPTIONS[name],
+            "parameters": params,
+            "flagged": list(result.diagnostics.get("flagged", [])),
+            "marks": {key: std_mark(key, result.diagnostics) for key in params},
+            "seconds": est.seconds,
+            "warnings": list(result.warnings),
+        }
+        if other is not None:
+            form = observer.form if len(est.theta0) == observer.form.n_base else None
+            fit = validation_fit(other.t, other.eta, other.tau, np.asarray(est.theta0), options.torque_hold, form=form)
+            fit_percent = {w: fit[w] if np.isfinite(fit[w]) else None for w in ("eta_r", "eta_l")}
+            row["validation"] = {"fit_percent": fit_percent}
+            predictor = fit["predictor"]
+        out["methods"][name] = row
+    if other is not None:
+        out["validation"] = {"log": other.source, "samples": len(other.t), "predictor": predictor}
+    if truth is not None:
+        out["truth"] = {key: value for key, value in truth.items() if key in observer.parameters}
+    return out

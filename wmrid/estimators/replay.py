@@ -1,0 +1,263 @@
+"""Replay a log through the compiled estimator, chunk by chunk (a thin object around the kernel).
+
+The chunks let the CLI show progress and keep per-call work bounded; the result does not depend on
+the chunk size (tests check this).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from wmrid.estimators.noise_floor import NoiseFloor
+from wmrid.estimators.observer import ObserverSettings
+from wmrid.model.dynamics import regressor
+
+CHUNK = 262_144
+
+
+@dataclass(frozen=True)
+class ReplayOutput:
+    """What one replay produced.
+
+    theta (2, p) unconstrained estimate; gamma, gamma_inv (p, p); eta_hat (2,) rad/s;
+    hist_idx (m,) sample indices with hist_theta (m, 2, p), hist_e (m, 2) rad/s, hist_gamma (m, p, p);
+    hist_t (m,) and block_t (J,) the times (s) of the history samples and of the block ends;
+    block_end (J,) and per-block sums blk_a (J, p, p), blk_c (J, 2, p), blk_uu (J, 2), blk_ee (J, 2)
+    (see :func:`wmrid.estimators.observer_kernel.observer_chunk`).
+    """
+
+    theta: np.ndarray
+    gamma: np.ndarray
+    gamma_inv: np.ndarray
+    eta_hat: np.ndarray
+    hist_idx: np.ndarray
+    hist_theta: np.ndarray
+    hist_e: np.ndarray
+    hist_gamma: np.ndarray
+    block_end: np.ndarray
+    blk_a: np.ndarray
+    blk_c: np.ndarray
+    blk_uu: np.ndarray
+    blk_ee: np.ndarray
+    hist_t: np.ndarray
+    block_t: np.ndarray
+    theta_half: np.ndarray | None = None  # (2, p) the estimate from every other sample (twice the step), or None
+    blk_slow: np.ndarray | None = None  # (J,) bool: the block holds a sample where a wheel is slower than low_speed
+    noise_sigma: np.ndarray | None = None  # (2,) rad/s: the speeds' white-noise level (wmrid.estimators.noise_floor)
+    eta_rms: np.ndarray | None = None  # (2,) rad/s: the speeds' root mean square
+
+
+def layout(n: int, duration: float, k: float, max_history: int) -> tuple[np.ndarray, np.ndarray]:
+    """History sample indices (m,) and block end indices (J,) for a log of n samples over ``duration`` s.
+
+    Blocks last about min(0.1 s, 0.1/k): well below the residual correlation time 1/k, so the long-run
+    covariance sees the correlation; at most 16384 blocks.
+    """
+    hist = np.unique(np.linspace(0, n - 1, max(1, min(n, max_history))).round().astype(np.int64))
+    block_time = min(0.1, 0.1 / k)
+    n_blocks = int(min(max(duration / block_time, 1), 16384, max(n - 1, 1)))
+    ends = np.unique(np.linspace(0, n - 1, n_blocks + 1).round().astype(np.int64)[1:])
+    return hist, ends
+
+
+def replay(
+    t: np.ndarray,
+    eta: np.ndarray,
+    tau: np.ndarray,
+    settings: ObserverSettings,
+    *,
+    max_history: int = 20000,
+    chunk: int = CHUNK,
+    progress: Callable[[int], None] | None = None,
+) -> ReplayOutput:
+    """Run the estimator over t (n,) s, eta (n, 2) rad/s, tau (n, 2) N m; ``progress(samples_done)``."""
+    t = np.ascontiguousarray(t, dtype=np.float64)
+    eta = np.ascontiguousarray(eta, dtype=np.float64)
+    tau = np.ascontiguousarray(tau, dtype=np.float64)
+    pieces = ((t[i : i + chunk], eta[i : i + chunk], tau[i : i + chunk]) for i in range(0, len(t), chunk))
+    return replay_pieces(pieces, len(t), float(t[-1] - t[0]), settings, max_history=max_history, progress=progress)
+
+
+def kernel_kind(form) -> int:
+    """The compiled kernel's regressor kind for ``form`` (:mod:`wmrid.estimators.observer_kernel`)."""
+    from wmrid.estimators.observer_kernel import KIND_CASTER, KIND_CASTER_GEOMETRY, KIND_GENERAL, KIND_PAPER
+
+    if form.kind == "paper":
+        return KIND_PAPER
+    if form.caster:
+        return KIND_CASTER_GEOMETRY if form.geometry else KIND_CASTER
+    return KIND_GENERAL
+
+
+class _HalfRate:
+    """A second estimator run on every other sample (global indices 0, 2, 4, ...): the same log at twice the step.
+
+    It makes the same assumption about the effort between samples as the full-rate run (held over each step
+    of the log, linear, or held by a controller at --control-rate).
+
+    The difference between the two final estimates is a Richardson estimate of the replay's discretisation
+    error (:func:`wmrid.estimators.identify.discretisation_error`).  It keeps only its own state: no history, one block.
+    """
+
+    def __init__(self, n: int, duration: float, settings: ObserverSettings, kind: int) -> None:
+        p = settings.form.n_columns
+        self.n = (n + 1) // 2
+        self.kind = kind
+        self.form = settings.form
+        self.geom = np.array(settings.form.geometry, dtype=np.float64)
+        # An effort held over each step of the log is, at twice the step, an effort held by a controller at
+        # the log's rate, the dropped sample interpolated (see ObserverSettings.control_rate): the same
+        # assumption about the effort, so the two runs differ by their step only.  Whether the effort really
+        # is held over a whole step of the log cannot be told from the log; --control-rate says when it is not.
+        self.hold = settings.hold_code
+        if self.hold == 0.0 and duration > 0:
+            self.hold = (n - 1) / duration
+        self.k = float(settings.k)
+        self.st = np.zeros(7)
+        self.w = np.zeros(p)
+        self.g_prev = np.zeros(p)
+        self.theta = np.array(settings.theta_init, dtype=float)
+        self.gamma = settings.alpha * np.eye(p)
+        self.gamma_inv = np.eye(p) / settings.alpha
+        last = np.array([max(self.n - 1, 1)], dtype=np.int64)
+        self.hist_idx, self.block_end = last, last.copy()
+        self.hist_theta = np.empty((1, 2, p))
+        self.hist_e = np.empty((1, 2))
+        self.hist_gamma = np.empty((1, p, p))
+        self.blk = (np.zeros((1, p, p)), np.zeros((1, 2, p)), np.zeros((1, 2)), np.zeros((1, 2)))
+        self.cursor = np.zeros(2, dtype=np.int64)
+        self.done = 0  # decimated samples consumed
+
+    def feed(self, t: np.ndarray, eta: np.ndarray, tau: np.ndarray, start: int) -> None:
+        """Samples with global indices start .. start + len(t) - 1; only the even ones are used."""
+        from wmrid.estimators.observer_kernel import observer_chunk
+
+        first = start % 2  # offset of the first even global index within this piece
+        t, eta, tau = t[first::2], eta[first::2], tau[first::2]
+        if len(t) == 0 or self.n < 2:
+            return
+        skip = 0
+        if self.done == 0:
+            self.st[:] = [t[0], eta[0, 0], eta[0, 1], eta[0, 0], eta[0, 1], 0.0, 0.0]
+            self.g_prev[:] = regressor(eta[:1], tau[:1], self.form)[0]
+            skip = 1
+        if len(t) > skip:
+            observer_chunk(
+                np.ascontiguousarray(t[skip:]), np.ascontiguousarray(eta[skip:]), np.ascontiguousarray(tau[skip:]),
+                self.done + skip, self.kind, self.hold, self.k, self.st, self.w, self.g_prev, self.theta, self.gamma,
+                self.gamma_inv, self.hist_idx, self.hist_theta, self.hist_e, self.hist_gamma, self.block_end,
+                *self.blk, self.cursor, self.geom,
+            )  # fmt: skip
+        self.done += len(t)
+
+
+def replay_pieces(
+    pieces: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray]],
+    n: int,
+    duration: float,
+    settings: ObserverSettings,
+    *,
+    max_history: int = 20000,
+    progress: Callable[[int], None] | None = None,
+    half_rate: bool = False,
+    low_speed: np.ndarray | None = None,
+) -> ReplayOutput:
+    """Run the estimator over a log given as consecutive pieces (t (k,) s, eta (k, 2) rad/s, tau (k, 2)).
+
+    n : the log's samples (the pieces must add up to it); duration : t_last - t_first, s.  Memory: one
+    piece plus the history and block sums, whatever n.  ``progress(samples_done)`` after each piece.
+    ``half_rate``: also run the estimator on every other sample (``ReplayOutput.theta_half``).
+    ``low_speed`` (2,) rad/s: mark the blocks where |eta_i| < low_speed[i] for a wheel (``ReplayOutput.blk_slow``).
+    """
+    from wmrid.estimators.observer_kernel import observer_chunk
+
+    form = settings.form
+    p = form.n_columns
+    kind = kernel_kind(form)
+    geom = np.array(form.geometry, dtype=np.float64)
+    hist_idx, block_end = layout(n, duration, settings.k, max_history)
+    m, nb = len(hist_idx), len(block_end)
+
+    st = np.zeros(7)
+    w = np.zeros(p)
+    g_prev = np.zeros(p)
+    theta = np.array(settings.theta_init, dtype=float)
+    gamma = settings.alpha * np.eye(p)
+    gamma_inv = np.eye(p) / settings.alpha
+    hist_theta = np.empty((m, 2, p))
+    hist_e = np.empty((m, 2))
+    hist_gamma = np.empty((m, p, p))
+    hist_t = np.empty(m)
+    block_t = np.empty(nb)
+    blk_a = np.zeros((nb, p, p))
+    blk_c = np.zeros((nb, 2, p))
+    blk_uu = np.zeros((nb, 2))
+    blk_ee = np.zeros((nb, 2))
+    cursor = np.zeros(2, dtype=np.int64)
+    hold = settings.hold_code
+    half = _HalfRate(n, duration, settings, kind) if half_rate and n >= 20 else None
+    blk_slow = None if low_speed is None else np.zeros(nb, dtype=bool)
+    floor = NoiseFloor()
+
+    # The half-rate run goes on a second thread (its compiled kernel releases the GIL), one piece behind at most;
+    # the pieces reach it in order, so its result does not depend on the timing.
+    pool = None
+    pending = None
+    if half is not None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wmrid-half-rate")
+    done = 0
+    try:
+        for t, eta, tau in pieces:
+            k = len(t)
+            if k == 0:
+                continue
+            t = np.ascontiguousarray(t, dtype=np.float64)
+            eta = np.ascontiguousarray(eta, dtype=np.float64)
+            tau = np.ascontiguousarray(tau, dtype=np.float64)
+            for idx, out in ((hist_idx, hist_t), (block_end, block_t)):
+                lo, hi = np.searchsorted(idx, [done, done + k])
+                out[lo:hi] = t[idx[lo:hi] - done]
+            if half is not None:  # on its thread, while this one runs the full-rate kernel on the same piece
+                if pending is not None:
+                    pending.result()
+                pending = pool.submit(half.feed, t, eta, tau, done)
+            skip = 0
+            if done == 0:  # the first sample starts the predictor and the filter
+                st[:] = [t[0], eta[0, 0], eta[0, 1], eta[0, 0], eta[0, 1], 0.0, 0.0]
+                g_prev[:] = regressor(eta[:1], tau[:1], form)[0]
+                if hist_idx[0] == 0:
+                    hist_theta[0], hist_e[0], hist_gamma[0] = theta, 0.0, gamma
+                    cursor[0] = 1
+                skip = 1
+            observer_chunk(
+                t[skip:], eta[skip:], tau[skip:], done + skip, kind, hold, float(settings.k), st, w, g_prev,
+                theta, gamma, gamma_inv, hist_idx, hist_theta, hist_e, hist_gamma, block_end, blk_a, blk_c,
+                blk_uu, blk_ee, cursor, geom,
+            )  # fmt: skip
+            floor.feed(eta)
+            if blk_slow is not None:
+                slow = np.flatnonzero(np.any(np.abs(eta) < low_speed, axis=1))
+                if len(slow):
+                    blk_slow[np.minimum(np.searchsorted(block_end, done + slow), nb - 1)] = True
+            done += k
+            if progress is not None:
+                progress(done)
+        if pending is not None:
+            pending.result()
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True)
+    if done != n:
+        raise ValueError(f"replay_pieces: the pieces hold {done} samples, not n = {n}")
+    return ReplayOutput(
+        theta=theta, gamma=gamma, gamma_inv=gamma_inv, eta_hat=st[3:5].copy(), hist_idx=hist_idx,
+        hist_theta=hist_theta, hist_e=hist_e, hist_gamma=hist_gamma, block_end=block_end, blk_a=blk_a,
+        blk_c=blk_c, blk_uu=blk_uu, blk_ee=blk_ee, hist_t=hist_t, block_t=block_t,
+        theta_half=None if half is None else half.theta.copy(), blk_slow=blk_slow, noise_sigma=floor.sigma(),
+        eta_rms=floor.rms(),
+    )  # fmt: skip

@@ -1,0 +1,261 @@
+"""One pass over a log: what identification must know before the replay, in bounded memory.
+
+The replay needs, before its first sample, the regressor form (does each wheel keep one sign over the
+whole log?), the number of samples (for the history and block layout), a start value for an unknown
+robot, and the assurance that the log has no holes or impossible values.  :func:`survey` reads a
+:class:`wmrid.io.logs.LogStream` once, piece by piece, and keeps only running figures and a sparse sample.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+
+from wmrid.core.errors import NotIdentifiableError
+from wmrid.model.dynamics import RegressorForm
+
+#: Speeds (rad/s) or efforts beyond this magnitude are not what a robot logs (a unit or column error).
+PLAUSIBLE_LIMIT = 1e12
+#: Spacing (s) of the sparse sample kept for the data-driven start (differences over it give accelerations).
+START_SPACING_S = 0.05
+#: The median step is exact while the log has at most this many distinct step values (a regular log has a
+#: handful); beyond, it comes from a histogram of relative bucket width 2**-12 (0.024 %).
+EXACT_STEPS = 4096
+_BUCKETS_PER_OCTAVE = 4096
+#: A wheel slower than this fraction of its 90th-percentile speed counts as slow.
+LOW_SPEED_FRACTION = 0.1
+
+
+@dataclass
+class Survey:
+    """Figures of a whole log, gathered piece by piece.
+
+    n : samples.  t_first, t_last : s.  median_step : s, the median time step (exact while the log has at
+    most EXACT_STEPS distinct steps, else to 0.024 %; never dependent on how the log was cut into pieces).
+    min_step, max_step : s; max_step_after : s, the time before the largest step.
+    positive, negative (properties) : (2,) bool, whether every speed of the wheel is > 0 (< 0).
+    sparse_t (m,) s, sparse_eta (m, 2) rad/s, sparse_tau (m, 2): the first sample of each START_SPACING_S
+    interval of time from t_first.
+    Per wheel (2,): speed_pos, speed_neg, effort_pos, effort_neg counts of samples > 0 and < 0; power,
+    abs_power, opposing: sums of tau eta, |tau eta| and the count of tau eta < 0 (:meth:`signal_warnings`).
+    """
+
+    source: str
+    effort_unit: str = "N m"
+    n: int = 0
+    t_first: float = 0.0
+    t_last: float = 0.0
+    median_step: float = 0.0
+    min_step: float = np.inf
+    max_step: float = 0.0
+    max_step_after: float = 0.0
+    sparse_t: np.ndarray = field(default_factory=lambda: np.empty(0))
+    sparse_eta: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
+    sparse_tau: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
+    speed_pos: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    speed_neg: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    effort_neg: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    effort_pos: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    power: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    abs_power: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    opposing: np.ndarray = field(default_factory=lambda: np.zeros(2))
+
+    @property
+    def duration(self) -> float:
+        return self.t_last - self.t_first
+
+    @property
+    def positive(self) -> np.ndarray:
+        """(2,) bool: every speed of the wheel is > 0."""
+        return self.speed_pos == self.n
+
+    @property
+    def negative(self) -> np.ndarray:
+        """(2,) bool: every speed of the wheel is < 0."""
+        return self.speed_neg == self.n
+
+    def form(self) -> RegressorForm:
+        """The paper's form when each wheel keeps one strict sign (as :func:`wmrid.model.dynamics.choose_form`)."""
+        if all(self.positive | self.negative):
+            return RegressorForm("paper", tuple(1 if p else -1 for p in self.positive))  # type: ignore[arg-type]
+        return RegressorForm("general")
+
+    def low_speed(self) -> np.ndarray:
+        """(2,) rad/s: per wheel, LOW_SPEED_FRACTION of the 90th percentile of |eta| over the sparse sample;
+        below it a wheel counts as slow (the friction check of :func:`wmrid.estimators.identify.slow_speed_term`)."""
+        if len(self.sparse_eta) == 0:
+            return np.zeros(2)
+        return LOW_SPEED_FRACTION * np.percentile(np.abs(self.sparse_eta), 90, axis=0)
+
+    def data_start(self, form: RegressorForm) -> np.ndarray:
+        """A start for an unknown robot, (2, p): m11 = m22 = a robust acceleration-per-torque ratio, all else 0.
+
+        The ratio (95th percentile of |eta_dot| over that of |tau|, eta_dot by differences over about
+        START_SPACING_S, both over the sparse sample) only sets the order of magnitude; with the default
+        small alpha the start is forgotten within the first seconds of an exciting log.
+        """
+        theta = np.zeros((2, form.n_columns))
+        if len(self.sparse_t) > 1:
+            acc = np.abs(np.diff(self.sparse_eta, axis=0) / np.diff(self.sparse_t)[:, None])
+            for i in range(2):
+                a95 = float(np.percentile(acc[:, i], 95))
+                t95 = float(np.percentile(np.abs(self.sparse_tau[:, i]), 95))
+                if a95 > 0 and t95 > 0:
+                    theta[i, i] = a95 / t95
+        return theta
+
+    def signal_warnings(self) -> list[str]:
+        """Warnings about the signals themselves: an effort that never changes sign while the speed does (a
+        magnitude, not a signed effort), and an effort that mostly opposes the speed (a sign convention)."""
+        out = []
+        n = max(self.n, 1)
+        for i, wheel in enumerate(("right", "left")):
+            other_way = min(self.speed_neg[i], self.speed_pos[i]) / n
+            if other_way > 0.05 and (self.effort_neg[i] == 0 or self.effort_pos[i] == 0):
+                out.append(
+                    f"the {wheel} wheel's effort never changes sign while its speed does "
+                    f"({100 * other_way:.0f} % of samples the other way): the log holds a magnitude "
+                    "(e.g. an unsigned current), not a signed effort, so the model does not apply; give it the sign "
+                    "of the motor's drive"
+                )
+            power, scale = self.power[i] / n, self.abs_power[i] / n
+            # Braking makes the power negative for a while; a reversed sign makes it negative almost always.
+            if scale > 0 and power < -0.5 * scale and self.opposing[i] / n > 0.75:
+                out.append(
+                    f"the {wheel} wheel's effort mostly opposes its speed (mean power {power:.3g} {self.effort_unit} "
+                    "rad/s < 0): its sign convention is probably reversed; try --mirror-left or --flip-effort"
+                )
+        return out
+
+
+def survey(pieces: Iterable, source: str, effort_unit: str = "N m") -> Survey:
+    """One pass over ``pieces`` (objects with t (k,) s, eta (k, 2) rad/s, tau (k, 2)), in time order.
+
+    Raises :class:`NotIdentifiableError` at the first sample that is not finite or beyond PLAUSIBLE_LIMIT.
+    """
+    sv = Survey(source=source, effort_unit=effort_unit)
+    exact: dict[float, int] | None = {}
+    hist: dict[int, int] = {}
+    prev_t = None
+    last_bucket = -1
+    sparse_t, sparse_eta, sparse_tau = [], [], []
+    acc = np.zeros(14)  # per wheel: speeds > 0, < 0; efforts < 0, > 0; power, |power|, opposing samples
+    for piece in pieces:
+        t, eta, tau = piece.t, piece.eta, piece.tau
+        k = len(t)
+        if k == 0:
+            continue
+        if _piece_stats(eta, tau, PLAUSIBLE_LIMIT, acc) >= 0:
+            _raise_implausible(t, eta, tau, source, effort_unit)
+        steps = np.diff(t) if prev_t is None else np.diff(t, prepend=prev_t)
+        if sv.n == 0:
+            sv.t_first = float(t[0])
+        if len(steps):
+            exact = _count_steps(steps, exact, hist)
+            j = int(np.argmax(steps))
+            if steps[j] > sv.max_step:
+                sv.max_step = float(steps[j])
+                sv.max_step_after = float(t[j] if prev_t is None else (prev_t if j == 0 else t[j - 1]))
+            sv.min_step = min(sv.min_step, float(steps.min()))
+        # the first sample of each START_SPACING_S of time: the same samples however the log is cut
+        bucket = np.floor((t - sv.t_first) / START_SPACING_S)
+        keep = bucket != np.concatenate(([last_bucket], bucket[:-1]))
+        last_bucket = bucket[-1]
+        sparse_t.append(t[keep])  # boolean indexing copies: no view keeps the piece alive
+        sparse_eta.append(eta[keep])
+        sparse_tau.append(tau[keep])
+        sv.n += k
+        prev_t = float(t[-1])
+        sv.t_last = prev_t
+    sv.speed_pos, sv.speed_neg = acc[0:2].copy(), acc[2:4].copy()
+    sv.effort_neg, sv.effort_pos = acc[4:6].copy(), acc[6:8].copy()
+    sv.power, sv.abs_power, sv.opposing = acc[8:10].copy(), acc[10:12].copy(), acc[12:14].copy()
+    sv.median_step = _median_step(exact, hist)
+    if sparse_t:
+        sv.sparse_t = np.concatenate(sparse_t)
+        sv.sparse_eta = np.concatenate(sparse_eta)
+        sv.sparse_tau = np.concatenate(sparse_tau)
+    return sv
+
+
+def _count_steps(steps: np.ndarray, exact: dict[float, int] | None, hist: dict[int, int]) -> dict[float, int] | None:
+    """Count ``steps``: exactly while there are at most EXACT_STEPS distinct values, then (None is returned)
+    in the histogram ``hist``, into which the exact counts are moved when they overflow."""
+    if exact is not None:
+        for value, count in zip(*np.unique(steps, return_counts=True), strict=True):
+            exact[float(value)] = exact.get(float(value), 0) + int(count)
+        if len(exact) <= EXACT_STEPS:
+            return exact
+        values = np.fromiter(exact, dtype=float, count=len(exact))
+        counts = np.fromiter(exact.values(), dtype=np.int64, count=len(exact))
+        _add_to_histogram(values, counts, hist)
+        return None
+    _add_to_histogram(steps, np.ones(len(steps), dtype=np.int64), hist)
+    return None
+
+
+def _add_to_histogram(values: np.ndarray, counts: np.ndarray, hist: dict[int, int]) -> None:
+    mantissa, exponent = np.frexp(values)  # values = mantissa 2**exponent, mantissa in [0.5, 1)
+    keys = exponent.astype(np.int64) * _BUCKETS_PER_OCTAVE + np.floor((mantissa - 0.5) * 2 * _BUCKETS_PER_OCTAVE)
+    unique, where = np.unique(keys.astype(np.int64), return_inverse=True)
+    for key, count in zip(unique, np.bincount(where, weights=counts), strict=True):
+        hist[int(key)] = hist.get(int(key), 0) + int(count)
+
+
+def _median_step(exact: dict[float, int] | None, hist: dict[int, int]) -> float:
+    """The median of the counted steps (as numpy.median: the mean of the two middle ones for an even count)."""
+    if exact is not None:
+        if not exact:
+            return 0.0
+        values = np.array(sorted(exact))
+        cum = np.cumsum([exact[v] for v in values])
+        total = int(cum[-1])
+        lo = values[np.searchsorted(cum, (total - 1) // 2 + 1)]
+        hi = values[np.searchsorted(cum, total // 2 + 1)]
+        return float(0.5 * (lo + hi))
+    keys = np.array(sorted(hist))
+    cum = np.cumsum([hist[k] for k in keys])
+    key = int(keys[np.searchsorted(cum, cum[-1] / 2.0)])
+    exponent, sub = divmod(key, _BUCKETS_PER_OCTAVE)
+    return float(np.ldexp(0.5 + (sub + 0.5) / (2 * _BUCKETS_PER_OCTAVE), exponent))  # the bucket's middle
+
+
+def _raise_implausible(t: np.ndarray, eta: np.ndarray, tau: np.ndarray, source: str, effort_unit: str) -> None:
+    for arr, what, unit in ((eta, "wheel speed", "rad/s"), (tau, "effort", effort_unit)):
+        with np.errstate(invalid="ignore"):
+            bad = ~np.isfinite(arr) | (np.abs(arr) > PLAUSIBLE_LIMIT)
+        if bad.any():
+            i = int(np.argmax(bad.any(axis=1)))
+            raise NotIdentifiableError(
+                f"{source}: a {what} of {arr[i][bad[i]][0]:.3g} {unit} at t = {t[i]:.6g} s is not a number a "
+                "robot logs; check the log's units and columns"
+            )
+
+
+@numba.njit(cache=True, nogil=True)
+def _piece_stats(eta, tau, limit, acc):
+    """One pass over a piece, eta and tau (k, 2): adds to acc (14,) the counts and sums of :class:`Survey`
+    (see survey()); returns the first row holding a non-finite or implausible value, or -1."""
+    for i in range(eta.shape[0]):
+        for w in range(2):
+            e = eta[i, w]
+            u = tau[i, w]
+            if not (abs(e) <= limit and abs(u) <= limit):  # also NaN
+                return i
+            if e > 0:
+                acc[w] += 1
+            elif e < 0:
+                acc[2 + w] += 1
+            if u < 0:
+                acc[4 + w] += 1
+            elif u > 0:
+                acc[6 + w] += 1
+            prod = u * e
+            acc[8 + w] += prod
+            acc[10 + w] += abs(prod)
+            if prod < 0:
+                acc[12 + w] += 1
+    return -1

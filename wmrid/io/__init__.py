@@ -1,0 +1,1 @@
+"""Reading and writing logs: format sniffing, CSV, Parquet, signal conversion, inspection."""

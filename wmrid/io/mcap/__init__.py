@@ -1,0 +1,1 @@
+"""MCAP: the record reader, topics and joints to a wheel log, the writer."""

@@ -1,0 +1,1157 @@
+"""Reading MCAP files (ROS 2 bags and others): every record streamed, JointState decoded by a compiled path.
+
+What comes out (:func:`read_mcap`) is an inventory of the channels (topic, encoding, schema, message
+count, first and last log time) and, for each ``sensor_msgs/msg/JointState`` channel in CDR, the
+joint names and per-message arrays of header stamp, log time, position, velocity and effort.
+Optionally, JSON-encoded channels are read by field paths.
+
+How (bounded memory, no per-message Python objects on the fast path):
+
+* The file is memory-mapped (standard input is read into memory once).  A compiled scan walks the
+  record framing (opcode u8, length u64) of the data section; a Chunk record is decompressed (zstd or
+  lz4, with the libraries mcap itself uses) and its inner records scanned the same way, one chunk at a
+  time.  Schema, Channel and Metadata records are parsed with the ``mcap`` library's record classes.
+  Files without a summary or index, unchunked files and files on a pipe all read the same way.
+* Message records give channel id, log time and the payload's place; JointState payloads are decoded
+  by :func:`_joint_states`, a compiled CDR reader for the one layout ROS 2 uses for that type
+  (little-endian CDR: header stamp, frame id, names, then three sequences of float64).  It matches
+  joints BY NAME in every message, so joint order may change from message to message.  A message it
+  cannot read (big-endian CDR, a payload that breaks the layout) is decoded by mcap_ros2's generic
+  decoder instead; tests check the fast path field for field against that decoder.
+* A file cut short (a recording that crashed) is read up to its last complete record and the notes
+  say how much was lost; the ``mcap`` summary is never needed.
+* The mapped file's pages are handed back to the kernel (``madvise(MADV_DONTNEED)``) as the walk passes
+  them, so they do not pile up in the process's resident memory on a large file.
+* Damage is checked, never trusted (issue 13): a record length is compared with the bytes left without
+  overflowing; a chunk whose declared size is beyond the memory budget (:mod:`wmrid.core.limits`) is skipped
+  unread, and one that decompresses to another size, or fails its CRC (``uncompressed_crc``; set
+  ``WMRID_MCAP_CRC=0`` to skip the check), is skipped; each with a note giving its size and time range.
+  A JointState channel whose schema lists other fields, or its fields in another order, than the standard
+  message goes to the generic decoder, which decodes by field name.
+
+Bounded memory for long recordings (:func:`scan_mcap`, :func:`iter_joint_parts`): a first pass keeps the
+decoded JointState arrays only while they hold at most ``keep`` messages; past that it keeps per topic
+only what the whole-log choices need (:class:`JointSummary`: joint names, which fields are populated
+for which joint, whether each time source is set and in order, its range, its repeated stamps and a
+histogram of its steps).  A second pass decodes the chosen topics again, handing out the arrays of each
+batch of records (a chunk, or the top-level messages of a 4 MiB stretch of an unchunked file) as it goes.
+Both passes walk the file exactly as :func:`read_mcap` does, so the arrays come out the same, in the same
+order.
+
+Times stay integer nanoseconds here; conversion to seconds happens once, when a log is assembled.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import mmap
+import os
+import zlib
+from collections.abc import Callable, Generator, Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numba
+import numpy as np
+
+from wmrid.core.errors import LogFormatError
+from wmrid.core.limits import describe, memory_budget
+
+#: A JointState topic whose first message names more joints than this is skipped (a wheel log names a few; 50,000
+#: names in a 500 KB file made the per-joint arrays need 14 GB).
+MAX_JOINTS = 4096
+#: A chunk declaring more than BOMB_FLOOR bytes and more than BOMB_RATIO times its compressed size is skipped
+#: unread: a recording's chunks (1-4 MiB of messages) compress 3-20 times; a 366 KB zstd chunk of zeros declaring
+#: gigabytes is a bomb.
+BOMB_RATIO = 1000
+BOMB_FLOOR = 64 << 20
+#: Set to 0 to read chunks whose CRC does not match (a file known to be written with wrong CRCs).
+CRC_ENV = "WMRID_MCAP_CRC"
+
+MAGIC = b"\x89MCAP0\r\n"
+JOINT_STATE = "sensor_msgs/msg/JointState"
+JOINT_STATE_NAMES = (JOINT_STATE, "sensor_msgs/JointState")
+
+OP_HEADER = 0x01
+OP_FOOTER = 0x02
+OP_SCHEMA = 0x03
+OP_CHANNEL = 0x04
+OP_MESSAGE = 0x05
+OP_CHUNK = 0x06
+OP_METADATA = 0x0C
+OP_DATA_END = 0x0F
+
+STATUS_OK = 0
+STATUS_MALFORMED = 1
+STATUS_NOT_LE_CDR = 2
+
+
+# --------------------------------------------------------------------------------------------------
+# Compiled kernels
+
+
+@numba.njit(cache=True, nogil=True)
+def _u32(buf, p):
+    return np.int64(buf[p]) | (np.int64(buf[p + 1]) << 8) | (np.int64(buf[p + 2]) << 16) | (np.int64(buf[p + 3]) << 24)
+
+
+@numba.njit(cache=True, nogil=True)
+def _u64(buf, p):
+    lo = _u32(buf, p)
+    hi = _u32(buf, p + 4)
+    return lo | (hi << 32)
+
+
+@numba.njit(cache=True, nogil=True)
+def _scan(buf, start, end, ops, starts, lengths):
+    """Walk records (opcode u8, length u64, body) in buf[start:end].
+
+    Fills ops/starts (body offset)/lengths and returns (count, offset after the last complete record).
+    Stops early when the arrays are full (the caller grows them and continues from that offset) or
+    when a record runs past ``end`` (a truncated file).
+    """
+    p = start
+    n = 0
+    cap = ops.shape[0]
+    while p + 9 <= end and n < cap:
+        length = _u64(buf, p + 1)
+        if length < 0 or length > end - p - 9:  # compared without adding: a length near 2^63 would overflow
+            break
+        ops[n] = buf[p]
+        starts[n] = p + 9
+        lengths[n] = length
+        n += 1
+        p += 9 + length
+    return n, p
+
+
+@numba.njit(cache=True, nogil=True)
+def _f64(buf, p):
+    return buf[p : p + 8].view(np.float64)[0]
+
+
+@numba.njit(cache=True, nogil=True)
+def _joint_states(buf, starts, lengths, ref, ref_off, stamp, pos, vel, eff, status):
+    """Decode JointState CDR payloads buf[starts[i] : starts[i] + lengths[i]] into per-joint arrays.
+
+    ref, ref_off: the reference joint names, concatenated bytes and offsets (K + 1,).
+    stamp (n,) int64 header stamp in ns; pos, vel, eff (n, K) float64, NaN where the message lacks the
+    joint or the field; status (n,) int8: 0 ok, 1 malformed, 2 not little-endian CDR (for the caller
+    to decode another way).
+    """
+    n = starts.shape[0]
+    k_ref = ref_off.shape[0] - 1
+    idx = np.empty(k_ref, dtype=np.int64)
+    for i in range(n):
+        b = starts[i]
+        end = b + lengths[i]
+        status[i] = STATUS_OK
+        for k in range(k_ref):
+            pos[i, k] = np.nan
+            vel[i, k] = np.nan
+            eff[i, k] = np.nan
+        if lengths[i] < 16:
+            status[i] = STATUS_MALFORMED
+            continue
+        if buf[b] != 0 or buf[b + 1] != 1:
+            status[i] = STATUS_NOT_LE_CDR
+            continue
+        o = b + 4  # CDR alignment is relative to the payload after the encapsulation header
+        sec = _u32(buf, o)
+        if sec >= 2**31:
+            sec -= 2**32
+        nsec = _u32(buf, o + 4)
+        stamp[i] = sec * 1_000_000_000 + nsec
+        p = 8
+        slen = _u32(buf, o + p)
+        p += 4 + slen
+        p = (p + 3) & ~3
+        if o + p + 4 > end:
+            status[i] = STATUS_MALFORMED
+            continue
+        count = _u32(buf, o + p)
+        p += 4
+        for k in range(k_ref):
+            idx[k] = -1
+        bad = False
+        for j in range(count):
+            p = (p + 3) & ~3
+            if o + p + 4 > end:
+                bad = True
+                break
+            slen = _u32(buf, o + p)
+            p += 4
+            if o + p + slen > end or slen < 1:
+                bad = True
+                break
+            name_len = slen - 1  # the length counts the terminating NUL
+            for k in range(k_ref):
+                a = ref_off[k]
+                if ref_off[k + 1] - a != name_len or idx[k] >= 0:
+                    continue
+                same = True
+                for c in range(name_len):
+                    if buf[o + p + c] != ref[a + c]:
+                        same = False
+                        break
+                if same:
+                    idx[k] = j
+            p += slen
+        if bad:
+            status[i] = STATUS_MALFORMED
+            continue
+        for which in range(3):
+            p = (p + 3) & ~3
+            if o + p + 4 > end:
+                bad = True
+                break
+            m = _u32(buf, o + p)
+            p += 4
+            if m > 0:
+                p = (p + 7) & ~7
+                if o + p + 8 * m > end:
+                    bad = True
+                    break
+            for k in range(k_ref):
+                j = idx[k]
+                if j >= 0 and j < m:
+                    value = _f64(buf, o + p + 8 * j)
+                    if which == 0:
+                        pos[i, k] = value
+                    elif which == 1:
+                        vel[i, k] = value
+                    else:
+                        eff[i, k] = value
+            p += 8 * m
+        if bad:
+            status[i] = STATUS_MALFORMED
+
+
+@numba.njit(cache=True, nogil=True)
+def _field_stats(values, has_value, has_nonzero, has_nan, has_inf, max_abs):
+    """Per column of values (n, K): any non-NaN, any non-NaN non-zero, any NaN, any inf, largest finite |v|."""
+    n, k = values.shape
+    for i in range(n):
+        for j in range(k):
+            v = values[i, j]
+            if np.isnan(v):
+                has_nan[j] = True
+                continue
+            has_value[j] = True
+            if v != 0:
+                has_nonzero[j] = True
+            if np.isinf(v):
+                has_inf[j] = True
+            elif abs(v) > max_abs[j]:
+                max_abs[j] = abs(v)
+
+
+#: Buckets of the step histograms (:func:`step_buckets`): 1024 exact ones below 1024 ns, then 512 per octave.
+STEP_BUCKETS = 28160
+_POW2 = np.int64(1) << np.arange(63, dtype=np.int64)
+
+
+def step_buckets(steps: np.ndarray) -> np.ndarray:
+    """Histogram bucket of each positive int64 step: the step itself below 1024, else 512 buckets per octave
+    (relative width <= 1/512); buckets are ordered like the steps they hold."""
+    length = np.searchsorted(_POW2, steps, side="right")  # bit length, exactly
+    shift = np.maximum(length - 10, 0)
+    return shift * 512 + (steps >> shift)
+
+
+def bucket_range(bucket: int) -> tuple[int, int]:
+    """The steps (lowest, highest, both included) that fall into ``bucket`` of :func:`step_buckets`."""
+    if bucket < 1024:
+        return bucket, bucket
+    shift = bucket // 512 - 1
+    mantissa = bucket - shift * 512
+    return mantissa << shift, min(((mantissa + 1) << shift) - 1, 2**63 - 1)
+
+
+def _time_span(start_ns: int, end_ns: int) -> str:
+    """A chunk's message log-time range for a note: 's1-s2 s' (in seconds of log time)."""
+    return f"{start_ns / 1e9:.9g}-{end_ns / 1e9:.9g} s of log time"
+
+
+def _decompress(name: str, compression: str, data: bytes, size: int) -> bytes:
+    """A chunk's records: ``data`` decompressed, never more than ``size`` + 1 bytes (its declared size, already
+    within the budget), so a chunk that lies about its size cannot make wmrid allocate more."""
+    if compression == "":
+        return bytes(data)
+    if compression == "zstd":
+        import zstandard
+
+        with zstandard.ZstdDecompressor().stream_reader(io.BytesIO(data)) as reader:
+            return reader.read(size + 1)
+    if compression == "lz4":
+        import lz4.frame
+
+        return lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
+    raise LogFormatError(
+        f"{name}: a chunk uses compression {compression!r}, which wmrid cannot read (zstd, lz4 or none); "
+        "recompress the file with `mcap convert`"
+    )
+
+
+#: The standard sensor_msgs/msg/JointState fields, in order: the layout the compiled reader decodes.
+_JOINT_STATE_FIELDS = (("header", "std_msgs/Header"), ("name", "string[]"), ("position", "float64[]"),
+                       ("velocity", "float64[]"), ("effort", "float64[]"))  # fmt: skip
+
+
+def standard_joint_state(encoding: str, data: bytes) -> bool:
+    """Whether a JointState schema (``encoding``, its text ``data``) lists exactly the standard fields in the standard
+    order, so the compiled reader may decode it; an IDL or other schema, or other fields, go to the generic one."""
+    if encoding != "ros2msg":
+        return False
+    try:
+        text = bytes(data).decode("utf-8")
+    except UnicodeDecodeError:
+        return False
+    fields = []
+    for line in text.splitlines():
+        if line.startswith("=" * 10):
+            break  # the definitions of the types it uses follow
+        line = line.split("#", 1)[0].strip()
+        parts = line.split()
+        if len(parts) < 2 or "=" in line:
+            continue  # blank, a comment, or a constant
+        kind = {"Header": "std_msgs/Header", "std_msgs/msg/Header": "std_msgs/Header"}.get(parts[0], parts[0])
+        fields.append((parts[1], kind))
+    return tuple(fields) == _JOINT_STATE_FIELDS
+
+
+# --------------------------------------------------------------------------------------------------
+# Results
+
+
+@dataclass(frozen=True)
+class ChannelInfo:
+    """One channel: its topic, encodings, schema, and the messages seen (count, log-time range in ns)."""
+
+    id: int
+    topic: str
+    message_encoding: str
+    schema_name: str
+    schema_encoding: str
+    count: int
+    first_ns: int | None
+    last_ns: int | None
+
+    @property
+    def rate_hz(self) -> float | None:
+        """Mean message rate over the channel's span, Hz (None for fewer than 2 messages)."""
+        if self.count < 2 or self.first_ns is None or self.last_ns is None or self.last_ns <= self.first_ns:
+            return None
+        return (self.count - 1) / ((self.last_ns - self.first_ns) * 1e-9)
+
+
+@dataclass(frozen=True)
+class JointSeries:
+    """The JointState messages of one topic, in file order.
+
+    names : the joint names (those of the first message, plus any met later), K of them.
+    log_ns, stamp_ns : (n,) int64, the MCAP log time and the header stamp, ns.
+    position (rad or m), velocity (rad/s or m/s), effort (N m, N, or whatever was logged) : (n, K)
+    float64, NaN where a message does not carry that joint or that field.
+    """
+
+    topic: str
+    names: tuple[str, ...]
+    log_ns: np.ndarray
+    stamp_ns: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    effort: np.ndarray
+    skipped: int = 0
+
+    def field(self, name: str) -> np.ndarray:
+        return {"position": self.position, "velocity": self.velocity, "effort": self.effort}[name]
+
+    def any_nonzero(self, name: str, cols: list[int]) -> bool:
+        """Whether field ``name`` holds a non-NaN, non-zero value in one of the joint columns ``cols``."""
+        values = self.field(name)[:, cols]
+        finite = values[~np.isnan(values)]
+        return finite.size > 0 and bool(np.any(finite != 0))
+
+    def populated(self, name: str) -> str:
+        """'yes', 'zeros' (present but all zero), 'partly' (some NaN) or 'no' for field ``name``."""
+        values = self.field(name)
+        if values.size == 0 or np.all(np.isnan(values)):
+            return "no"
+        finite = values[~np.isnan(values)]
+        if np.all(finite == 0):
+            return "zeros"
+        return "partly" if np.any(np.isnan(values)) else "yes"
+
+
+FIELDS = ("position", "velocity", "effort")
+
+
+@dataclass(frozen=True)
+class TimeSummary:
+    """One time source (MCAP log time or header stamp) of a JointState topic, over the whole file in file order.
+
+    first, last, low, high : ns (None without messages).  ordered : never decreasing from one message to the
+    next.  steps_ok : every step fits in int64 (so ``hist`` holds them all).  all_positive : every value > 0.
+    repeats : steps of 0.  hist : (STEP_BUCKETS,) counts of the positive steps by :func:`step_buckets`.
+    """
+
+    first: int | None
+    last: int | None
+    low: int | None
+    high: int | None
+    ordered: bool
+    steps_ok: bool
+    all_positive: bool
+    repeats: int
+    hist: np.ndarray
+
+
+@dataclass(frozen=True)
+class JointSummary:
+    """What a JointState topic holds, without its arrays (the first pass over a long recording).
+
+    channel_id : the channel whose messages :class:`JointSeries` would hold.  names, count : as there.
+    has_value, has_nonzero, has_nan, has_inf : (3, K) bool per field (position, velocity, effort) and joint:
+    some value is not NaN, some non-NaN value is not 0, some value is NaN (or missing), some is infinite.
+    max_abs : (3, K) the largest finite |value| (0 when none).  times : {"log": ..., "header": ...}.
+    """
+
+    topic: str
+    channel_id: int
+    names: tuple[str, ...]
+    count: int
+    has_value: np.ndarray
+    has_nonzero: np.ndarray
+    has_nan: np.ndarray
+    has_inf: np.ndarray
+    max_abs: np.ndarray
+    times: dict[str, TimeSummary]
+
+    def populated(self, name: str) -> str:
+        """As :meth:`JointSeries.populated`."""
+        f = FIELDS.index(name)
+        if self.count == 0 or len(self.names) == 0 or not self.has_value[f].any():
+            return "no"
+        if not self.has_nonzero[f].any():
+            return "zeros"
+        return "partly" if self.has_nan[f].any() else "yes"
+
+    def any_nonzero(self, name: str, cols: list[int]) -> bool:
+        """Whether field ``name`` holds a non-NaN, non-zero value in one of the joint columns ``cols``."""
+        return bool(self.has_nonzero[FIELDS.index(name), cols].any())
+
+
+class _TimeStats:
+    """Builds a :class:`TimeSummary` batch by batch."""
+
+    def __init__(self) -> None:
+        self.first: int | None = None
+        self.prev: int | None = None
+        self.low: int | None = None
+        self.high: int | None = None
+        self.ordered = True
+        self.steps_ok = True
+        self.all_positive = True
+        self.repeats = 0
+        self.hist = np.zeros(STEP_BUCKETS, dtype=np.int64)
+
+    def add(self, values: np.ndarray) -> None:
+        if len(values) == 0:
+            return
+        if self.prev is None:
+            self.first = int(values[0])
+            steps = np.diff(values)
+            up = values[1:] >= values[:-1]
+        else:
+            steps = np.diff(values, prepend=np.int64(self.prev))
+            up = np.concatenate(([values[0] >= self.prev], values[1:] >= values[:-1]))
+        self.ordered = self.ordered and bool(up.all())
+        if self.ordered and self.steps_ok:
+            if (steps < 0).any():  # an int64 overflow: no histogram
+                self.steps_ok = False
+            else:
+                self.repeats += int(np.count_nonzero(steps == 0))
+                positive = steps[steps > 0]
+                if len(positive):
+                    self.hist += np.bincount(step_buckets(positive), minlength=STEP_BUCKETS)
+        self.all_positive = self.all_positive and bool((values > 0).all())
+        low, high = int(values.min()), int(values.max())
+        self.low = low if self.low is None else min(self.low, low)
+        self.high = high if self.high is None else max(self.high, high)
+        self.prev = int(values[-1])
+
+    def summary(self) -> TimeSummary:
+        return TimeSummary(
+            first=self.first, last=self.prev, low=self.low, high=self.high, ordered=self.ordered,
+            steps_ok=self.steps_ok, all_positive=self.all_positive, repeats=self.repeats, hist=self.hist,
+        )  # fmt: skip
+
+
+class _JointStats:
+    """Builds a :class:`JointSummary` part by part."""
+
+    def __init__(self, k: int) -> None:
+        self.count = 0
+        self.has_value = np.zeros((3, k), dtype=bool)
+        self.has_nonzero = np.zeros((3, k), dtype=bool)
+        self.has_nan = np.zeros((3, k), dtype=bool)
+        self.has_inf = np.zeros((3, k), dtype=bool)
+        self.max_abs = np.zeros((3, k))
+        self.times = {"log": _TimeStats(), "header": _TimeStats()}
+
+    def add(self, part: tuple[np.ndarray, ...]) -> None:
+        log_ns, stamp = part[0], part[1]
+        self.count += len(log_ns)
+        for f in range(3):
+            _field_stats(part[2 + f], self.has_value[f], self.has_nonzero[f], self.has_nan[f], self.has_inf[f],
+                         self.max_abs[f])  # fmt: skip
+        self.times["log"].add(log_ns)
+        self.times["header"].add(stamp)
+
+
+@dataclass(frozen=True)
+class JsonSeries:
+    """Numeric fields read from a JSON-encoded channel: log_ns (n,) int64 and {key: (n,) float64}."""
+
+    topic: str
+    log_ns: np.ndarray
+    values: dict[str, np.ndarray]
+
+
+@dataclass(frozen=True)
+class McapContents:
+    """What :func:`read_mcap` found.
+
+    complete : False when :func:`scan_mcap` stopped keeping the arrays: ``joints`` then holds a
+    :class:`JointSummary` per topic instead of a :class:`JointSeries`.
+    """
+
+    source: str
+    profile: str
+    library: str
+    channels: tuple[ChannelInfo, ...]
+    joints: dict[str, Any]
+    json: dict[str, JsonSeries]
+    metadata: dict[str, dict[str, str]]
+    notes: tuple[str, ...]
+    size_bytes: int
+    lost_bytes: int = 0
+    complete: bool = True
+
+    def channel(self, topic: str) -> ChannelInfo | None:
+        return next((c for c in self.channels if c.topic == topic), None)
+
+
+# --------------------------------------------------------------------------------------------------
+# Reading
+
+
+@dataclass
+class _Accumulator:
+    """Per-channel state while streaming."""
+
+    info: dict[str, Any]
+    count: int = 0
+    first_ns: int | None = None
+    last_ns: int | None = None
+    names: list[str] = field(default_factory=list)
+    ref: np.ndarray | None = None
+    ref_off: np.ndarray | None = None
+    parts: list[tuple[np.ndarray, ...]] = field(default_factory=list)
+    skipped: int = 0
+    json_rows: list[tuple[int, list[float]]] = field(default_factory=list)
+    batches: int = 0  # parts made (kept or not)
+    stats: _JointStats | None = None
+    standard: bool | None = None  # the schema is the standard JointState (the compiled reader may decode it)
+    too_wide: bool = False  # its messages name more than MAX_JOINTS joints: skipped
+
+
+def read_mcap(
+    path: str,
+    data: bytes | None = None,
+    *,
+    json_fields: Mapping[str, Mapping[str, str]] | None = None,
+    decode_joint_states: bool = True,
+) -> McapContents:
+    """Read an MCAP file (or ``data``, the bytes of one read from a pipe; ``path`` then only names it).
+
+    json_fields : {topic: {key: dotted field path}} for JSON-encoded channels to read as numbers.
+    decode_joint_states : False to take only the inventory (faster for ``inspect`` on huge files).
+    """
+    buf, release = _map(path, data)
+    state = _ReadState(path, json_fields or {}, decode_joint_states, release=release)
+    return _read_buffer(state, buf)
+
+
+def scan_mcap(path: str, data: bytes | None = None, *, keep: int) -> McapContents:
+    """The first pass over a recording that may be long: :func:`read_mcap`'s contents (JointState only, no
+    JSON) while its JointState topics hold at most ``keep`` messages in all; past that, ``complete`` is
+    False and ``joints`` holds a :class:`JointSummary` per topic.  Notes and inventory as in :func:`read_mcap`.
+    """
+    buf, release = _map(path, data)
+    return _read_buffer(_ReadState(path, {}, True, release=release, keep=keep), buf)
+
+
+def iter_joint_parts(
+    path: str, data: bytes | None, channel_ids: Iterable[int]
+) -> Generator[dict[int, list[tuple[np.ndarray, ...]]], None, None]:
+    """The second pass: for the JointState channels ``channel_ids`` (as in :attr:`JointSummary.channel_id`),
+    the arrays decoded from each batch of records, {channel id: [(log_ns, stamp_ns, position, velocity,
+    effort), ...]}, in file order; concatenated they are the arrays of :class:`JointSeries`.  Other channels
+    are not decoded; notes are those of the first pass (the walk is the same).  Memory: one batch.
+    """
+    wanted = set(channel_ids)
+    buf, release = _map(path, data)
+    _check_start(path, buf)
+    state = _ReadState(path, {}, True, release=release, wanted=wanted)
+
+    def drain() -> dict[int, list[tuple[np.ndarray, ...]]]:
+        out = {}
+        for cid in wanted:
+            acc = state.channels.get(cid)
+            if acc is not None and acc.parts:
+                out[cid], acc.parts = acc.parts, []
+        return out
+
+    for _ in state.steps(buf, len(MAGIC), buf.shape[0], top_level=True):
+        parts = drain()
+        if parts:
+            yield parts
+    parts = drain()
+    if parts:
+        yield parts
+
+
+def _map(path: str, data: bytes | None) -> tuple[np.ndarray, Callable[[int], None] | None]:
+    """(the bytes as uint8, a function that hands the mapped pages below an offset back to the kernel)."""
+    if data is not None:
+        return np.frombuffer(data, dtype=np.uint8), None
+    try:
+        with open(path, "rb") as fh:
+            size = os.fstat(fh.fileno()).st_size
+            if size == 0:
+                raise LogFormatError(f"{path}: the file is empty (0 bytes)")
+            # Not closed explicitly: numpy views of it may live on in a traceback; the map is released
+            # when the last view goes (the file descriptor closes here, the map keeps its own).
+            mapped = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+    except OSError as err:
+        raise LogFormatError(f"{path}: cannot be read ({err.strerror or err})") from err
+    if not hasattr(mapped, "madvise") or not hasattr(mmap, "MADV_DONTNEED"):
+        return np.frombuffer(mapped, dtype=np.uint8), None
+    done = [0]
+
+    def release(offset: int) -> None:
+        # Pages of a read-only file mapping: dropping them loses nothing (they come back from the page
+        # cache if touched again); without this a long file's pages all count in the resident memory.
+        upto = offset // mmap.PAGESIZE * mmap.PAGESIZE
+        if upto - done[0] >= _RELEASE_BYTES:
+            mapped.madvise(mmap.MADV_DONTNEED, done[0], upto - done[0])
+            done[0] = upto
+
+    return np.frombuffer(mapped, dtype=np.uint8), release
+
+
+#: Mapped pages are handed back in runs of at least this many bytes.
+_RELEASE_BYTES = 1 << 22
+#: Bytes of top-level records scanned at a time.
+_SCAN_WINDOW = 1 << 22
+
+
+def _check_start(name: str, buf: np.ndarray) -> None:
+    size = buf.shape[0]
+    if size < len(MAGIC) or bytes(buf[: len(MAGIC)]) != MAGIC:
+        raise LogFormatError(
+            f"{name}: not an MCAP file (it does not start with the MCAP magic bytes); give a .mcap recording "
+            "(ros2 bag record -s mcap) or a CSV/Parquet log"
+        )
+    if size < len(MAGIC) + 9 or buf[len(MAGIC)] != OP_HEADER:
+        raise LogFormatError(
+            f"{name}: starts like an MCAP file but no Header record follows the magic bytes: it is damaged or "
+            "not MCAP; check the file (mcap doctor) or record it again"
+        )
+
+
+def _read_buffer(state: _ReadState, buf: np.ndarray) -> McapContents:
+    name, json_fields = state.name, state.json_fields
+    size = buf.shape[0]
+    _check_start(name, buf)
+    end, lost = state.walk(buf, len(MAGIC), size, top_level=True)
+    notes = list(state.notes)
+    lost_bytes = 0
+    if lost:
+        lost_bytes = size - end
+        notes.append(
+            f"the file ends inside a record (byte {end} of {size}): it was cut short, e.g. by a crash; "
+            f"read everything up to there, {lost_bytes} bytes at the end are lost"
+        )
+    channels = tuple(state.channel_info())
+    joints: dict[str, Any] = {}
+    for acc in state.channels.values():
+        if acc.ref is not None and acc.batches:
+            joints[acc.info["topic"]] = _join(acc) if state.complete else _summary(acc)
+    json_out = {}
+    for acc in state.channels.values():
+        keys = json_fields.get(acc.info["topic"])
+        if keys is not None and acc.info["message_encoding"] == "json":
+            rows = acc.json_rows
+            json_out[acc.info["topic"]] = JsonSeries(
+                topic=acc.info["topic"],
+                log_ns=np.array([r[0] for r in rows], dtype=np.int64),
+                values={k: np.array([r[1][i] for r in rows], dtype=np.float64) for i, k in enumerate(keys)},
+            )
+    return McapContents(
+        source=name, profile=state.profile, library=state.library, channels=channels, joints=joints,
+        json=json_out, metadata=state.metadata, notes=tuple(notes), size_bytes=size, lost_bytes=lost_bytes,
+        complete=state.complete,
+    )  # fmt: skip
+
+
+def _summary(acc: _Accumulator) -> JointSummary:
+    stats = acc.stats or _JointStats(len(acc.names))
+    return JointSummary(
+        topic=acc.info["topic"], channel_id=acc.info["id"], names=tuple(acc.names), count=stats.count,
+        has_value=stats.has_value, has_nonzero=stats.has_nonzero, has_nan=stats.has_nan, has_inf=stats.has_inf,
+        max_abs=stats.max_abs, times={key: t.summary() for key, t in stats.times.items()},
+    )  # fmt: skip
+
+
+def _join(acc: _Accumulator) -> JointSeries:
+    k = len(acc.names)
+    log_ns = np.concatenate([p[0] for p in acc.parts])
+    stamp = np.concatenate([p[1] for p in acc.parts])
+
+    def stack(i: int) -> np.ndarray:
+        blocks = []
+        for part in acc.parts:
+            block = part[i]
+            if block.shape[1] < k:  # joints first met later: NaN before
+                block = np.hstack([block, np.full((block.shape[0], k - block.shape[1]), np.nan)])
+            blocks.append(block)
+        return np.concatenate(blocks)
+
+    return JointSeries(
+        topic=acc.info["topic"], names=tuple(acc.names), log_ns=log_ns, stamp_ns=stamp,
+        position=stack(2), velocity=stack(3), effort=stack(4), skipped=acc.skipped,
+    )  # fmt: skip
+
+
+class _ReadState:
+    """Schemas, channels and accumulators while walking the records.
+
+    keep : None to keep every JointState array (:func:`read_mcap`); else keep them while they hold at most
+    ``keep`` messages, and past that only their statistics (``complete`` turns False).  wanted : decode only
+    these JointState channels (the second pass; the caller takes their parts as they come).  release : hands
+    the mapped pages below an offset back to the kernel.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        json_fields: Mapping[str, Mapping[str, str]],
+        decode_joint_states: bool,
+        *,
+        keep: int | None = None,
+        wanted: set[int] | None = None,
+        release: Callable[[int], None] | None = None,
+    ):
+        self.name = name
+        self.json_fields = json_fields
+        self.decode = decode_joint_states
+        self.budget = memory_budget()
+        self.check_crc = os.environ.get(CRC_ENV, "1").strip() != "0"
+        self.keep = keep
+        self.wanted = wanted
+        self.release = release
+        self.complete = True
+        self.kept = 0
+        self.schemas: dict[int, dict[str, Any]] = {}
+        self.channels: dict[int, _Accumulator] = {}
+        self.metadata: dict[str, dict[str, str]] = {}
+        self.notes: list[str] = []
+        self.profile = ""
+        self.library = ""
+        self._decoders: dict[int, Any] = {}
+        self._unknown_channels: set[int] = set()
+
+    # ---- walking
+
+    def walk(self, buf: np.ndarray, start: int, end: int, top_level: bool) -> tuple[int, bool]:
+        """Scan records in buf[start:end]; returns (offset reached, True if a record was cut short)."""
+        steps = self.steps(buf, start, end, top_level)
+        while True:
+            try:
+                next(steps)
+            except StopIteration as stop:
+                return stop.value
+
+    def steps(self, buf: np.ndarray, start: int, end: int, top_level: bool) -> Generator[None, None, tuple[int, bool]]:
+        """:meth:`walk` as a generator that pauses after each batch of messages it has decoded."""
+        cap = 65536
+        ops = np.empty(cap, dtype=np.uint8)
+        starts = np.empty(cap, dtype=np.int64)
+        lengths = np.empty(cap, dtype=np.int64)
+        p = start
+        while True:
+            # At top level, scan at most _SCAN_WINDOW bytes ahead: each record header read maps the pages
+            # around it, and over a whole file of chunks those would add up to a good part of the file.
+            stop = min(end, p + _SCAN_WINDOW) if top_level else end
+            n, q = _scan(buf, p, stop, ops, starts, lengths)
+            if n == 0 and stop < end:  # a record longer than the window
+                n, q = _scan(buf, p, end, ops[:1], starts[:1], lengths[:1])
+                stop = q if n else end
+            if n:
+                done = yield from self._handle(buf, ops[:n], starts[:n], lengths[:n], top_level)
+                if done:
+                    return end, False
+            if n < cap and (stop >= end or n == 0):
+                return q, q < end and not self._only_padding(buf, q, end, top_level)
+            p = q
+
+    @staticmethod
+    def _only_padding(buf: np.ndarray, q: int, end: int, top_level: bool) -> bool:
+        # The closing magic (8 bytes) follows the footer at top level; inside a chunk nothing may remain.
+        return top_level and end - q == len(MAGIC) and bytes(buf[q:end]) == MAGIC
+
+    def _handle(self, buf, ops, starts, lengths, top_level: bool) -> Generator[None, None, bool]:
+        """Process a batch of records (pausing after each batch of messages); True once the footer has been read."""
+        is_msg = ops == OP_MESSAGE
+        other = np.flatnonzero(~is_msg)
+        # Non-message records are few; handle them in order relative to the messages around them:
+        # a Channel always precedes its messages, so handling all of them first is equivalent.
+        footer = False
+        handlers = {OP_CHUNK: self._chunk, OP_SCHEMA: self._schema, OP_CHANNEL: self._channel,
+                    OP_METADATA: self._metadata, OP_HEADER: self._header}  # fmt: skip
+        for i in other:
+            op = int(ops[i])
+            if op == OP_FOOTER and top_level:
+                footer = True
+                continue
+            handler = handlers.get(op)
+            if handler is None:
+                continue  # index and summary records: not needed
+            if int(lengths[i]) > self.budget:  # checked before the record is copied (a sparse file can claim GBs)
+                self.notes.append(
+                    f"a record of {describe(int(lengths[i]))} (opcode {op}), beyond the memory budget of "
+                    f"{describe(self.budget)} (WMRID_MEMORY_BUDGET), was skipped unread"
+                )
+                continue
+            body = bytes(buf[starts[i] : starts[i] + lengths[i]])
+            try:
+                if op == OP_CHUNK:
+                    yield from self._chunk(body)
+                else:
+                    handler(body)
+            except LogFormatError:
+                raise
+            except Exception as err:  # a damaged record: skip it, say so, keep the rest
+                what = {OP_CHUNK: "chunk", OP_SCHEMA: "schema", OP_CHANNEL: "channel", OP_METADATA: "metadata",
+                        OP_HEADER: "header"}[op]  # fmt: skip
+                self.notes.append(
+                    f"a damaged {what} record ({type(err).__name__}) was skipped"
+                    + ("; its messages are lost" if op == OP_CHUNK else "")
+                )
+            if top_level and self.release is not None:
+                self.release(int(starts[i] + lengths[i]))
+        if is_msg.any():
+            self._messages(buf, starts[is_msg], lengths[is_msg])
+            if top_level and self.release is not None:
+                self.release(int(starts[-1] + lengths[-1]))
+            yield
+        return footer
+
+    def _chunk(self, body: bytes) -> Generator[None, None, None]:
+        from mcap.data_stream import ReadDataStream
+        from mcap.records import Chunk
+
+        chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
+        span = _time_span(chunk.message_start_time, chunk.message_end_time)
+        declared = int(chunk.uncompressed_size)
+        if declared > self.budget or (declared > BOMB_FLOOR and declared > BOMB_RATIO * max(len(chunk.data), 1)):
+            self.notes.append(
+                f"a chunk ({len(chunk.data)} bytes, messages {span}) declares {describe(declared)} uncompressed, "
+                f"beyond the memory budget of {describe(self.budget)} (WMRID_MEMORY_BUDGET) or {BOMB_RATIO} times its "
+                "compressed size: skipped, its messages are lost"
+            )
+            return
+        try:
+            raw = _decompress(self.name, chunk.compression, chunk.data, declared)
+        except LogFormatError:
+            raise
+        except Exception as err:  # a corrupt chunk: say so, keep what the other chunks hold
+            self.notes.append(
+                f"a chunk ({len(chunk.data)} bytes, messages {span}) could not be decompressed ({type(err).__name__}: "
+                f"{err}); its messages are lost"
+            )
+            return
+        if len(raw) != declared:
+            self.notes.append(
+                f"a chunk (messages {span}) decompressed to {len(raw)} bytes, not the {declared} it declares: "
+                "skipped, its messages are lost"
+            )
+            return
+        if self.check_crc and chunk.uncompressed_crc and zlib.crc32(raw) != chunk.uncompressed_crc:
+            self.notes.append(
+                f"a chunk ({len(chunk.data)} bytes, messages {span}) fails its CRC check (damaged): skipped, its "
+                f"messages are lost ({CRC_ENV}=0 reads it anyway)"
+            )
+            return
+        inner = np.frombuffer(raw, dtype=np.uint8)
+        reached, cut = yield from self.steps(inner, 0, inner.shape[0], top_level=False)
+        if cut:
+            self.notes.append(
+                f"a chunk's records end mid-record (byte {reached} of {inner.shape[0]}); the rest is lost"
+            )
+
+    def _schema(self, body: bytes) -> None:
+        from mcap.data_stream import ReadDataStream
+        from mcap.records import Schema
+
+        s = Schema.read(ReadDataStream(io.BytesIO(body)))
+        self.schemas[s.id] = {"name": s.name, "encoding": s.encoding, "data": s.data}
+
+    def _channel(self, body: bytes) -> None:
+        from mcap.data_stream import ReadDataStream
+        from mcap.records import Channel
+
+        c = Channel.read(ReadDataStream(io.BytesIO(body)))
+        if c.id in self.channels:
+            return
+        schema = self.schemas.get(c.schema_id, {"name": "", "encoding": "", "data": b""})
+        self.channels[c.id] = _Accumulator(
+            info={
+                "id": c.id, "topic": c.topic, "message_encoding": c.message_encoding, "schema_id": c.schema_id,
+                "schema_name": schema["name"], "schema_encoding": schema["encoding"],
+            }
+        )  # fmt: skip
+
+    def _metadata(self, body: bytes) -> None:
+        from mcap.data_stream import ReadDataStream
+        from mcap.records import Metadata
+
+        m = Metadata.read(ReadDataStream(io.BytesIO(body)))
+        self.metadata[m.name] = dict(m.metadata)
+
+    def _header(self, body: bytes) -> None:
+        from mcap.data_stream import ReadDataStream
+        from mcap.records import Header
+
+        h = Header.read(ReadDataStream(io.BytesIO(body)))
+        self.profile, self.library = h.profile, h.library
+
+    def channel_info(self) -> list[ChannelInfo]:
+        out = []
+        for acc in self.channels.values():
+            info = acc.info
+            schema = self.schemas.get(info["schema_id"])
+            out.append(
+                ChannelInfo(
+                    id=info["id"],
+                    topic=info["topic"],
+                    message_encoding=info["message_encoding"],
+                    schema_name=schema["name"] if schema else info["schema_name"],
+                    schema_encoding=schema["encoding"] if schema else info["schema_encoding"],
+                    count=acc.count,
+                    first_ns=acc.first_ns,
+                    last_ns=acc.last_ns,
+                )
+            )
+        return sorted(out, key=lambda c: c.topic)
+
+    # ---- messages
+
+    def _messages(self, buf: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> None:
+        short = lengths < 22  # a Message record holds channel u16, sequence u32, log and publish times u64
+        if short.any():
+            self.notes.append(f"{int(short.sum())} message record(s) shorter than a message header were skipped")
+            starts, lengths = starts[~short], lengths[~short]
+            if not len(starts):
+                return
+        head = buf[starts[:, None] + np.arange(14)[None, :]]  # channel u16, sequence u32, log_time u64
+        chan = head[:, 0].astype(np.int64) | (head[:, 1].astype(np.int64) << 8)
+        log_ns = np.zeros(len(starts), dtype=np.uint64)
+        for b in range(8):
+            log_ns |= head[:, 6 + b].astype(np.uint64) << np.uint64(8 * b)
+        log_ns = log_ns.astype(np.int64)
+        data_start = starts + 22
+        data_len = lengths - 22
+        for cid in np.unique(chan):
+            sel = chan == cid
+            acc = self.channels.get(int(cid))
+            if acc is None:
+                if int(cid) not in self._unknown_channels:
+                    self._unknown_channels.add(int(cid))
+                    self.notes.append(
+                        f"messages on channel id {int(cid)}, which no Channel record defines, were skipped"
+                    )
+                continue
+            times = log_ns[sel]
+            acc.count += int(sel.sum())
+            lo, hi = int(times.min()), int(times.max())
+            acc.first_ns = lo if acc.first_ns is None else min(acc.first_ns, lo)
+            acc.last_ns = hi if acc.last_ns is None else max(acc.last_ns, hi)
+            info = acc.info
+            if self.decode and info["schema_name"] in JOINT_STATE_NAMES and info["message_encoding"] == "cdr":
+                if self.wanted is None or int(cid) in self.wanted:
+                    self._joint_batch(acc, buf, data_start[sel], data_len[sel], times)
+            elif info["message_encoding"] == "json" and info["topic"] in self.json_fields:
+                self._json_batch(acc, buf, data_start[sel], data_len[sel], times)
+
+    def _joint_batch(self, acc: _Accumulator, buf, starts, lengths, times) -> None:
+        if acc.ref is None:
+            first = self._generic(acc, bytes(buf[starts[0] : starts[0] + lengths[0]]))
+            if first is None:
+                acc.skipped += len(starts)
+                return
+            names = list(first.name)
+            if len(names) > MAX_JOINTS:
+                self.notes.append(
+                    f"topic {acc.info['topic']}: its JointState messages name {len(names):,} joints, more than the "
+                    f"{MAX_JOINTS:,} wmrid decodes; skipped"
+                )
+                acc.too_wide = True
+                self._set_names(acc, [])
+            else:
+                self._set_names(acc, names)
+        if acc.too_wide:
+            acc.skipped += len(starts)
+            return
+        need = len(starts) * len(acc.names) * 24
+        if need > self.budget:
+            self.notes.append(
+                f"topic {acc.info['topic']}: a batch of {len(starts):,} messages x {len(acc.names)} joints needs "
+                f"{describe(need)}, beyond the memory budget of {describe(self.budget)} (WMRID_MEMORY_BUDGET); skipped"
+            )
+            acc.skipped += len(starts)
+            return
+        if acc.standard is None:
+            schema = self.schemas.get(acc.info["schema_id"])
+            acc.standard = bool(schema) and standard_joint_state(schema["encoding"], schema["data"])
+            if not acc.standard:
+                self.notes.append(
+                    f"topic {acc.info['topic']}: its JointState schema is not the standard one (other fields, or "
+                    "another order); decoded field by field by name, more slowly"
+                )
+        n = len(starts)
+        k = len(acc.names)
+        stamp = np.zeros(n, dtype=np.int64)
+        pos = np.full((n, k), np.nan)
+        vel = np.full((n, k), np.nan)
+        eff = np.full((n, k), np.nan)
+        status = np.full(n, STATUS_MALFORMED, dtype=np.int8)
+        if acc.standard:
+            _joint_states(buf, starts, lengths, acc.ref, acc.ref_off, stamp, pos, vel, eff, status)
+        slow = np.flatnonzero(status != STATUS_OK)
+        keep = np.ones(n, dtype=bool)
+        for i in slow:  # rare: other endianness, a layout the fast path refuses, or new joint names
+            msg = self._generic(acc, bytes(buf[starts[i] : starts[i] + lengths[i]]))
+            if msg is None:
+                keep[i] = False
+                acc.skipped += 1
+                continue
+            try:
+                stamp[i] = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+                names = list(msg.name)
+                fields = [list(getattr(msg, f, None) or ()) for f in ("position", "velocity", "effort")]
+                values = [[float(v) for v in f] for f in fields]
+            except (AttributeError, TypeError, ValueError):
+                keep[i] = False
+                acc.skipped += 1
+                continue
+            for kk, joint in enumerate(acc.names):
+                if joint in names:
+                    j = names.index(joint)
+                    pos[i, kk] = values[0][j] if j < len(values[0]) else np.nan
+                    vel[i, kk] = values[1][j] if j < len(values[1]) else np.nan
+                    eff[i, kk] = values[2][j] if j < len(values[2]) else np.nan
+        if not keep.all():
+            times, stamp, pos, vel, eff = times[keep], stamp[keep], pos[keep], vel[keep], eff[keep]
+        self._store(acc, (times.copy(), stamp, pos, vel, eff))
+
+    def _store(self, acc: _Accumulator, part: tuple[np.ndarray, ...]) -> None:
+        """Keep a channel's decoded part, or (past ``keep`` messages) only its statistics."""
+        acc.batches += 1
+        if self.keep is None:
+            acc.parts.append(part)
+            return
+        if self.complete:
+            acc.parts.append(part)
+            self.kept += len(part[0])
+            if self.kept <= self.keep:
+                return
+            self.complete = False  # too long to keep: statistics from here on
+            for other in self.channels.values():
+                for kept in other.parts:
+                    self._add_stats(other, kept)
+                other.parts = []
+            return
+        self._add_stats(acc, part)
+
+    @staticmethod
+    def _add_stats(acc: _Accumulator, part: tuple[np.ndarray, ...]) -> None:
+        if acc.stats is None:
+            acc.stats = _JointStats(len(acc.names))
+        acc.stats.add(part)
+
+    def _set_names(self, acc: _Accumulator, names: list[str]) -> None:
+        acc.names = names
+        encoded = [n.encode("utf-8") for n in names]
+        acc.ref = np.frombuffer(b"".join(encoded) or b"\0", dtype=np.uint8).copy()
+        acc.ref_off = np.cumsum([0, *[len(e) for e in encoded]]).astype(np.int64)
+
+    def _generic(self, acc: _Accumulator, payload: bytes) -> Any:
+        """Decode one message with mcap_ros2's generic decoder (None if it cannot be decoded)."""
+        cid = acc.info["id"]
+        decoder = self._decoders.get(cid)
+        if decoder is None:
+            from mcap.records import Schema
+            from mcap_ros2.decoder import DecoderFactory
+
+            s = self.schemas.get(acc.info["schema_id"])
+            if s is None:
+                return None
+            schema = Schema(id=acc.info["schema_id"], name=s["name"], encoding=s["encoding"], data=s["data"])
+            try:
+                # mcap_ros2 prints parse problems of a damaged schema; keep them off wmrid's stdout/stderr.
+                with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+                    decoder = DecoderFactory().decoder_for("cdr", schema)
+            except Exception as err:
+                self.notes.append(f"topic {acc.info['topic']}: its schema cannot be parsed ({err}); skipped")
+                return None
+            if decoder is None:
+                return None
+            self._decoders[cid] = decoder
+        try:
+            return decoder(payload)
+        except Exception:
+            return None
+
+    def _json_batch(self, acc: _Accumulator, buf, starts, lengths, times) -> None:
+        keys = self.json_fields[acc.info["topic"]]
+        paths = [path.split(".") for path in keys.values()]
+        for s, n, t in zip(starts, lengths, times, strict=True):
+            try:
+                obj = json.loads(bytes(buf[s : s + n]))
+            except (ValueError, RecursionError):  # not JSON, or nested too deeply to be a message
+                acc.skipped += 1
+                continue
+            acc.json_rows.append((int(t), [_lookup(obj, path) for path in paths]))
+
+
+def _lookup(obj: Any, path: list[str]) -> float:
+    """obj[path[0]][path[1]]... as a float (list indices as integers); NaN when absent or not a number."""
+    for part in path:
+        if isinstance(obj, list):
+            try:
+                obj = obj[int(part)]
+            except (ValueError, IndexError):
+                return float("nan")
+        elif isinstance(obj, dict) and part in obj:
+            obj = obj[part]
+        else:
+            return float("nan")
+    if isinstance(obj, bool) or not isinstance(obj, (int, float)):
+        return float("nan")
+    return float(obj)

@@ -1,0 +1,69 @@
+"""The payload a robot carries, from its identified base parameters and its unloaded description.
+
+A rigid payload of mass m_L at (x, y) in the platform frame, with yaw inertia I_L about its own centre
+of mass, changes Eqs. (10)-(14) only through the platform (:meth:`PhysicalParameters.with_payload`):
+
+* the total mass m grows by m_L;
+* the yaw inertia about the axle midpoint O, I, grows by I_L + m_L (x^2 + y^2);
+* the first moments grow: m_p d_x by m_L x, m_p d_y by m_L y;
+* the wheels' spin inertia I_w + k_r^2 I_r does not change.
+
+With s = r^2 / (4 b^2), Eqs. (10)-(14) read M11 + M22 = 2 spin + 2 s (m b^2 + I), M12 = s (m b^2 - I),
+M11 - M22 = -4 s b (m_p d_y) and V_c = (r^3 / 4 b^2)(m_p d_x + 2 m_r c_x).  So the changes from the
+unloaded robot give, one after the other,
+
+    m_L      = (d(M11 + M22)/2 + dM12) / (2 s b^2)
+    I_L + m_L (x^2 + y^2) = (d(M11 + M22)/2 - dM12) / (2 s)
+    m_L y    = -d(M11 - M22) / (4 s b)
+    m_L x    = dV_c 4 b^2 / r^3
+
+four equations in the four unknowns (m_L, x, y, I_L), solvable whenever m_L != 0: all four are
+identifiable (tests/test_payload.py checks the round trip and the Jacobian's rank).  Standard errors
+follow by the delta method from the covariance of (m11, m12, m22, V_c) (M = m^-1 inside).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wmrid.model import dynamics as model
+from wmrid.model.robot import PhysicalParameters
+
+PAYLOAD_NAMES = ("mass", "x", "y", "inertia")
+PAYLOAD_UNITS = {"mass": "kg", "x": "m", "y": "m", "inertia": "kg m^2"}
+
+
+def payload_from_base(theta0: np.ndarray, unloaded: PhysicalParameters) -> np.ndarray:
+    """(m_L kg, x m, y m, I_L kg m^2) from base parameters theta0 (8,) [m11 m12 m22 Vc ...] of the loaded robot."""
+    big_m = np.linalg.inv(model.inverse_inertia(theta0))
+    big_m0 = model.inertia_matrix(unloaded)
+    vc0 = model.coriolis_coefficient(unloaded)
+    r, b = unloaded.r, unloaded.b
+    s = r**2 / (4.0 * b**2)
+    d_sum = 0.5 * ((big_m[0, 0] + big_m[1, 1]) - (big_m0[0, 0] + big_m0[1, 1]))
+    d_12 = big_m[0, 1] - big_m0[0, 1]
+    d_diff = (big_m[0, 0] - big_m[1, 1]) - (big_m0[0, 0] - big_m0[1, 1])
+    mass = (d_sum + d_12) / (2.0 * s * b**2)
+    inertia_about_o = (d_sum - d_12) / (2.0 * s)
+    moment_y = -d_diff / (4.0 * s * b)
+    moment_x = (theta0[3] - vc0) * 4.0 * b**2 / r**3
+    x, y = moment_x / mass, moment_y / mass
+    return np.array([mass, x, y, inertia_about_o - mass * (x**2 + y**2)])
+
+
+def payload_with_std(
+    theta0: np.ndarray, cov0: np.ndarray, unloaded: PhysicalParameters
+) -> dict[str, tuple[float, float]]:
+    """{name: (value, std)} for mass, x, y, inertia; std by the delta method (central differences)."""
+    value = payload_from_base(theta0, unloaded)
+    jac = np.zeros((4, 4))
+    for j in range(4):  # only m11, m12, m22, Vc enter
+        step = 1e-6 * max(abs(theta0[j]), 1e-3)
+        up, down = theta0.copy(), theta0.copy()
+        up[j] += step
+        down[j] -= step
+        jac[:, j] = (payload_from_base(up, unloaded) - payload_from_base(down, unloaded)) / (2 * step)
+    sub = cov0[:4, :4]
+    finite = np.all(np.isfinite(sub))
+    std = np.sqrt(np.clip(np.diag(jac @ sub @ jac.T), 0.0, None)) if finite else np.full(4, np.inf)
+    return {name: (float(v), float(e)) for name, v, e in zip(PAYLOAD_NAMES, value, std, strict=True)}

@@ -1,0 +1,381 @@
+"""Physical description of a differential-drive robot (the paper's Table 1 plus friction).
+
+A robot file is TOML::
+
+    name = "my-robot"
+    [nominal]          # required: what the designer believes; starts the estimator
+    I_p = 4.0          # kg m^2  platform inertia about its centre of mass O_p
+    ...
+    [cad]              # optional: the CAD ("Solidworks") values, taken as the reference truth
+    ...
+    [motor]            # optional: to turn a logged motor current into a wheel torque
+    torque_constant = 0.0105   # N m/A (k_t); the gear ratio is k_r of [nominal]
+    efficiency = 0.9           # of the gearbox, in (0, 1]
+
+All values are SI: kg, m, kg m^2, N m s/rad (viscous), N m (Coulomb). Every key of
+:data:`PARAMETER_UNITS` must be present in each set.
+
+Table 1 of the paper prints ``d_x`` in "cm", but its values (0.15, 0.1781) only make sense in metres:
+with d_x = 0.15 m, Eq. (13)'s V_c and the paper's Table 2 nominal column agree to every printed
+digit (theta_13 = m11 V_c = 0.147); with 0.15 cm they would be 100 times smaller. wmrid therefore
+reads d_x in metres, like every other length (``tests/test_model.py`` checks this).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from wmrid.core.errors import RobotFileError, UsageError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised only on Python 3.10
+    import tomli as tomllib
+
+#: Parameter name -> (unit, meaning).  Order is the order used in files and reports.
+PARAMETER_UNITS: dict[str, tuple[str, str]] = {
+    "I_p": ("kg m^2", "platform (without wheels and rotors) inertia about its centre of mass O_p"),
+    "m_p": ("kg", "platform mass (without wheels and rotors)"),
+    "d_x": ("m", "x of O_p in the platform frame (forward from the axle midpoint O)"),
+    "d_y": ("m", "y of O_p in the platform frame (towards the left wheel)"),
+    "I_wm": ("kg m^2", "wheel inertia about its diameter"),
+    "I_w": ("kg m^2", "wheel inertia about its axle"),
+    "m_w": ("kg", "mass of each wheel"),
+    "a": ("m", "distance from O to each wheel's centre of mass"),
+    "m_r": ("kg", "mass of each motor rotor"),
+    "I_rm": ("kg m^2", "rotor inertia about its diameter"),
+    "I_r": ("kg m^2", "rotor inertia about its axle"),
+    "c_x": ("m", "x of the rotors' centres of mass"),
+    "c_y": ("m", "|y| of the rotors' centres of mass"),
+    "k_r": ("1", "gear reduction ratio (rotor speed / wheel speed)"),
+    "r": ("m", "wheel radius"),
+    "b": ("m", "half track: distance from O to each wheel's ground contact"),
+    "F_v1": ("N m s/rad", "viscous friction of the right wheel (eta_1)"),
+    "F_v2": ("N m s/rad", "viscous friction of the left wheel (eta_2)"),
+    "F_d1": ("N m", "Coulomb (dynamic) friction of the right wheel"),
+    "F_d2": ("N m", "Coulomb (dynamic) friction of the left wheel"),
+}
+
+_POSITIVE = ("m_p", "m_w", "r", "b", "k_r")
+_NON_NEGATIVE = ("I_p", "I_wm", "I_w", "m_r", "I_rm", "I_r", "F_v1", "F_v2", "F_d1", "F_d2")
+
+
+@dataclass(frozen=True)
+class PhysicalParameters:
+    """One column of Table 1 plus friction, SI units (see :data:`PARAMETER_UNITS`)."""
+
+    I_p: float
+    m_p: float
+    d_x: float
+    d_y: float
+    I_wm: float
+    I_w: float
+    m_w: float
+    a: float
+    m_r: float
+    I_rm: float
+    I_r: float
+    c_x: float
+    c_y: float
+    k_r: float
+    r: float
+    b: float
+    F_v1: float = 0.0
+    F_v2: float = 0.0
+    F_d1: float = 0.0
+    F_d2: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in PARAMETER_UNITS:
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
+                raise RobotFileError(f"robot parameter {name} must be a finite number, got {value!r}")
+            object.__setattr__(self, name, float(value))
+        for name in _POSITIVE:
+            if getattr(self, name) <= 0:
+                raise RobotFileError(f"robot parameter {name} must be > 0, got {getattr(self, name)}")
+        for name in _NON_NEGATIVE:
+            if getattr(self, name) < 0:
+                raise RobotFileError(f"robot parameter {name} must be >= 0, got {getattr(self, name)}")
+
+    def to_dict(self) -> dict[str, float]:
+        return dataclasses.asdict(self)
+
+    def replace(self, **changes: float) -> PhysicalParameters:
+        return dataclasses.replace(self, **changes)
+
+    def with_payload(self, payload: Payload) -> PhysicalParameters:
+        """The platform carrying a rigid payload (parallel-axis theorem).
+
+        The payload of mass m_L at (x, y) in the platform frame, with inertia I_L about its own
+        centre of mass, merges with the platform: m_p' = m_p + m_L,
+        d' = (m_p d + m_L p) / m_p',
+        I_p' = I_p + m_p |d - d'|^2 + I_L + m_L |p - d'|^2.
+        """
+        m0, m_l = self.m_p, payload.mass
+        m1 = m0 + m_l
+        dx1 = (m0 * self.d_x + m_l * payload.x) / m1
+        dy1 = (m0 * self.d_y + m_l * payload.y) / m1
+        ip1 = (
+            self.I_p
+            + m0 * ((self.d_x - dx1) ** 2 + (self.d_y - dy1) ** 2)
+            + payload.inertia
+            + m_l * ((payload.x - dx1) ** 2 + (payload.y - dy1) ** 2)
+        )
+        return self.replace(m_p=m1, d_x=dx1, d_y=dy1, I_p=ip1)
+
+
+@dataclass(frozen=True)
+class Payload:
+    """A rigid payload on the platform: mass (kg) at (x, y) (m, platform frame), own yaw inertia (kg m^2)."""
+
+    mass: float
+    x: float = 0.0
+    y: float = 0.0
+    inertia: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("mass", "x", "y", "inertia"):
+            if not math.isfinite(getattr(self, name)):
+                raise UsageError(f"payload {name} must be finite")
+        if self.mass <= 0:
+            raise UsageError(f"payload mass must be > 0 kg, got {self.mass}")
+        if self.inertia < 0:
+            raise UsageError(f"payload inertia must be >= 0 kg m^2, got {self.inertia}")
+
+    @classmethod
+    def parse(cls, text: str, inertia: float = 0.0) -> Payload:
+        """Parse ``MASS[@X,Y]`` (kg, m), e.g. ``25`` or ``25@0.1,-0.05``."""
+        mass_text, at, where = text.partition("@")
+        try:
+            if at and not where.strip():
+                raise ValueError("nothing after @")
+            mass = float(mass_text)
+            x, y = (float(v) for v in where.split(",")) if where else (0.0, 0.0)
+        except ValueError:
+            raise UsageError(f"--payload {text!r}: expected MASS[@X,Y] in kg and metres, e.g. 25@0.1,-0.05") from None
+        return cls(mass=mass, x=x, y=y, inertia=inertia)
+
+
+#: Kinds of caster the multibody prototype builds.
+CASTER_KINDS = ("ball", "swivel")
+#: Default rolling-resistance coefficient of a caster (force / normal load): polyurethane on a hard floor.
+DEFAULT_CASTER_RESISTANCE = 0.015
+
+
+@dataclass(frozen=True)
+class Caster:
+    """A passive caster under the platform (only the multibody prototype uses it).
+
+    x, y : m, its ground contact in the platform frame (for a swivel caster: its swivel axis);
+    radius : m, of the ball or caster wheel; kind : ``ball`` or ``swivel``;
+    resistance : rolling-resistance coefficient, the drag force over the normal load (>= 0);
+    trail : m, swivel casters only: how far the wheel's contact trails behind the swivel axis.
+    """
+
+    x: float
+    y: float = 0.0
+    radius: float = 0.025
+    kind: str = "ball"
+    resistance: float = DEFAULT_CASTER_RESISTANCE
+    trail: float = 0.03
+
+    def __post_init__(self) -> None:
+        for name in ("x", "y", "radius", "resistance", "trail"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
+                raise RobotFileError(f"caster {name} must be a finite number, got {value!r}")
+            object.__setattr__(self, name, float(value))
+        if self.kind not in CASTER_KINDS:
+            raise RobotFileError(f"caster kind must be one of {', '.join(CASTER_KINDS)}, got {self.kind!r}")
+        if self.radius <= 0:
+            raise RobotFileError(f"caster radius must be > 0 m, got {self.radius}")
+        if self.resistance < 0 or self.trail < 0:
+            raise RobotFileError("caster resistance and trail must be >= 0")
+
+    def to_dict(self) -> dict[str, float | str]:
+        return dataclasses.asdict(self)
+
+
+def default_casters(p: PhysicalParameters) -> tuple[Caster, ...]:
+    """Two ball casters on the centre line, in front of and behind the axle, at x = +-max(b, 3 |d_x|).
+
+    Far enough out that the centre of mass stays inside the support polygon; radius min(0.025 m, 0.4 r);
+    resistance :data:`DEFAULT_CASTER_RESISTANCE`.
+    """
+    reach = max(p.b, 3.0 * abs(p.d_x))
+    radius = min(0.025, 0.4 * p.r)
+    return (Caster(x=reach, radius=radius), Caster(x=-reach, radius=radius))
+
+
+@dataclass(frozen=True)
+class Robot:
+    """A named robot: nominal parameters and, when known, CAD (reference) parameters."""
+
+    name: str
+    nominal: PhysicalParameters
+    cad: PhysicalParameters | None = None
+    torque_constant: float | None = None  # N m/A, of each motor ([motor] table)
+    efficiency: float | None = None  # of the gearbox ([motor] table)
+    casters: tuple[Caster, ...] | None = None  # [[caster]] tables; None: default_casters (multibody only)
+
+    @property
+    def reference(self) -> PhysicalParameters:
+        """The best-known parameters: CAD when given, else nominal."""
+        return self.cad if self.cad is not None else self.nominal
+
+
+# The paper's Table 1.  Nominal friction is unknown (0), as in Table 2's nominal column; the CAD
+# ("true") column carries the friction the paper's virtual prototype used (Sec. 5).
+PAPER_NOMINAL = PhysicalParameters(
+    I_p=4.0, m_p=55.0, d_x=0.15, d_y=0.0, I_wm=0.025, I_w=0.05, m_w=4.0, a=0.23,
+    m_r=0.05, I_rm=1e-5, I_r=1e-6, c_x=0.05, c_y=0.08, k_r=100.0, r=0.16, b=0.23,
+)  # fmt: skip
+PAPER_CAD = PhysicalParameters(
+    I_p=4.98, m_p=60.90, d_x=0.1781, d_y=0.0119, I_wm=0.03755, I_w=0.0738, m_w=4.98, a=0.2286,
+    m_r=0.0442, I_rm=3.74e-5, I_r=1.24e-6, c_x=0.075, c_y=0.107, k_r=100.0, r=0.16, b=0.23,
+    F_v1=0.01, F_v2=0.015, F_d1=0.045, F_d2=0.04,
+)  # fmt: skip
+
+# A light AMR (about 14 kg, 16 cm wheels, 20:1 gears) and a heavy base (about 170 kg, 30:1), for the
+# multibody prototype's benchmark: the nominal sets are round-number guesses 10-20 % off the CAD sets.
+AMR_CAD = PhysicalParameters(
+    I_p=0.32, m_p=12.0, d_x=-0.04, d_y=0.004, I_wm=0.0009, I_w=0.0016, m_w=0.6, a=0.185,
+    m_r=0.12, I_rm=2e-5, I_r=4e-6, c_x=0.03, c_y=0.11, k_r=20.0, r=0.08, b=0.2,
+    F_v1=0.004, F_v2=0.005, F_d1=0.02, F_d2=0.025,
+)  # fmt: skip
+AMR_NOMINAL = PhysicalParameters(
+    I_p=0.28, m_p=11.0, d_x=0.0, d_y=0.0, I_wm=0.001, I_w=0.0015, m_w=0.5, a=0.18,
+    m_r=0.1, I_rm=2e-5, I_r=5e-6, c_x=0.03, c_y=0.11, k_r=20.0, r=0.08, b=0.2,
+)  # fmt: skip
+HEAVY_CAD = PhysicalParameters(
+    I_p=14.0, m_p=160.0, d_x=0.06, d_y=-0.01, I_wm=0.02, I_w=0.035, m_w=3.5, a=0.3,
+    m_r=0.6, I_rm=3e-4, I_r=6e-5, c_x=0.08, c_y=0.18, k_r=30.0, r=0.1, b=0.3,
+    F_v1=0.08, F_v2=0.09, F_d1=0.5, F_d2=0.45,
+)  # fmt: skip
+HEAVY_NOMINAL = PhysicalParameters(
+    I_p=12.0, m_p=150.0, d_x=0.05, d_y=0.0, I_wm=0.02, I_w=0.03, m_w=3.0, a=0.3,
+    m_r=0.5, I_rm=3e-4, I_r=5e-5, c_x=0.08, c_y=0.18, k_r=30.0, r=0.1, b=0.3,
+)  # fmt: skip
+
+BUILTIN_ROBOTS: dict[str, Robot] = {
+    "paper": Robot(name="paper", nominal=PAPER_NOMINAL, cad=PAPER_CAD, casters=default_casters(PAPER_CAD)),
+    "amr": Robot(name="amr", nominal=AMR_NOMINAL, cad=AMR_CAD, casters=default_casters(AMR_CAD)),
+    "heavy": Robot(name="heavy", nominal=HEAVY_NOMINAL, cad=HEAVY_CAD, casters=default_casters(HEAVY_CAD)),
+}
+
+
+def _parse_set(table: object, where: str) -> PhysicalParameters:
+    if not isinstance(table, dict):
+        raise RobotFileError(f"{where}: expected a table of parameters")
+    unknown = sorted(set(table) - set(PARAMETER_UNITS))
+    if unknown:
+        raise RobotFileError(f"{where}: unknown parameter(s) {', '.join(unknown)}; known: {', '.join(PARAMETER_UNITS)}")
+    missing = [k for k in PARAMETER_UNITS if k not in table and not k.startswith("F_")]
+    if missing:
+        raise RobotFileError(f"{where}: missing parameter(s) {', '.join(missing)} (SI units)")
+    try:
+        return PhysicalParameters(**table)
+    except RobotFileError as err:
+        raise RobotFileError(f"{where}: {err}") from None
+
+
+def robot_from_toml_text(text: str, source: str) -> Robot:
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise RobotFileError(f"{source}: not valid TOML ({err})") from None
+    except RecursionError:
+        raise RobotFileError(f"{source}: nested too deeply to be a robot file; see README 'Robot files'") from None
+    if "nominal" not in data:
+        raise RobotFileError(f"{source}: no [nominal] table; a robot file needs at least its nominal parameters")
+    nominal = _parse_set(data["nominal"], f"{source} [nominal]")
+    cad = _parse_set(data["cad"], f"{source} [cad]") if "cad" in data else None
+    name = str(data.get("name", Path(source).stem))
+    motor = data.get("motor", {})
+    if not isinstance(motor, dict) or set(motor) - {"torque_constant", "efficiency"}:
+        raise RobotFileError(f"{source} [motor]: only torque_constant (N m/A) and efficiency may be given")
+    for key, value in motor.items():
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > 0
+        if not ok or (key == "efficiency" and value > 1):
+            raise RobotFileError(f"{source} [motor]: {key} must be a number > 0 (efficiency <= 1), got {value!r}")
+    casters = _parse_casters(data.get("caster"), source)
+    return Robot(
+        name=name, nominal=nominal, cad=cad, torque_constant=motor.get("torque_constant"),
+        efficiency=motor.get("efficiency"), casters=casters,
+    )  # fmt: skip
+
+
+def _parse_casters(tables: object, source: str) -> tuple[Caster, ...] | None:
+    """[[caster]] tables -> casters (None when there are none)."""
+    if tables is None:
+        return None
+    if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
+        raise RobotFileError(f"{source}: casters are [[caster]] tables with x, y, radius, kind, resistance, trail")
+    known = {f.name for f in dataclasses.fields(Caster)}
+    out = []
+    for i, table in enumerate(tables):
+        unknown = sorted(set(table) - known)
+        if unknown or "x" not in table:
+            raise RobotFileError(
+                f"{source} [[caster]] {i + 1}: "
+                + (f"unknown key(s) {', '.join(unknown)}" if unknown else "needs x (m)")
+                + f"; known: {', '.join(sorted(known))}"
+            )
+        try:
+            out.append(Caster(**table))
+        except RobotFileError as err:
+            raise RobotFileError(f"{source} [[caster]] {i + 1}: {err}") from None
+    return tuple(out)
+
+
+def robot_to_toml(robot: Robot) -> str:
+    """Serialise a robot to the TOML form :func:`load_robot` reads (a round trip)."""
+    lines = [f'name = "{robot.name}"']
+    sets = [("nominal", robot.nominal)] + ([("cad", robot.cad)] if robot.cad is not None else [])
+    for title, params in sets:
+        lines.append(f"\n[{title}]")
+        for key, value in params.to_dict().items():
+            unit = PARAMETER_UNITS[key][0]
+            lines.append(f"{key} = {value!r}  # {unit}")
+    for caster in robot.casters or ():
+        lines.append("\n[[caster]]")
+        for key, value in caster.to_dict().items():
+            lines.append(f"{key} = {value!r}" if not isinstance(value, str) else f'{key} = "{value}"')
+    if robot.torque_constant is not None or robot.efficiency is not None:
+        lines.append("\n[motor]")
+        if robot.torque_constant is not None:
+            lines.append(f"torque_constant = {robot.torque_constant!r}  # N m/A")
+        if robot.efficiency is not None:
+            lines.append(f"efficiency = {robot.efficiency!r}")
+    return "\n".join(lines) + "\n"
+
+
+def load_robot(spec: str) -> Robot:
+    """A built-in robot by name (``paper``) or a TOML file path."""
+    if spec in BUILTIN_ROBOTS:
+        return BUILTIN_ROBOTS[spec]
+    path = Path(spec)
+    if not path.exists():
+        raise RobotFileError(
+            f"robot {spec!r}: no such file and no built-in robot of that name (built-in: {', '.join(BUILTIN_ROBOTS)})"
+        )
+    if path.is_dir():
+        raise RobotFileError(f"robot {spec!r} is a directory; give a robot TOML file")
+    from wmrid.core.atomic import register_input
+
+    register_input(path)
+    from wmrid.core.limits import ROBOT_FILE_LIMIT, read_limited
+
+    try:
+        text = read_limited(
+            path, ROBOT_FILE_LIMIT, f"robot {spec!r}: holds more than {{size}}; a robot TOML file is a few kilobytes",
+            RobotFileError,
+        ).decode("utf-8")  # fmt: skip
+    except (OSError, UnicodeDecodeError) as err:
+        raise RobotFileError(f"robot {spec!r}: cannot read ({err})") from None
+    return robot_from_toml_text(text, str(path))

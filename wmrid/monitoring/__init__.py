@@ -1,0 +1,1 @@
+"""Change detection against an identified model."""

@@ -1,0 +1,1 @@
+"""Presentation: terminal tables, JSON, reports and figures."""

@@ -1,0 +1,462 @@
+"""Figures of a log and of an identification: pure functions from data to SVG or PNG bytes.
+
+Each figure has a ``build_*`` function returning a :class:`matplotlib.figure.Figure` (for tests and
+for callers who want to adjust it) and a function of the same name without the prefix that renders it
+(:func:`render`).  matplotlib is imported lazily, figures are made with ``Figure`` and the Agg canvas,
+never with pyplot, so no global figure state is created or left behind.
+
+No line carries more than :data:`MAX_POINTS` points: long series are reduced for display only by
+:func:`decimate_for_display`, which keeps the minimum and maximum of every bin, so spikes stay visible.
+
+Colours: right wheel blue (C0), left wheel orange (C1), in every figure.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from wmrid.core.errors import UsageError
+from wmrid.model.dynamics import THETA0_NAMES, RegressorForm, intermediate_parameters
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+    from wmrid.estimators.identify import IdentificationResult
+
+#: The most points any plotted line carries.
+MAX_POINTS = 4000
+#: Figure size (inches) of the single- and two-panel figures, and the PNG resolution.
+FIGSIZE = (8.0, 4.5)
+PNG_DPI = 120
+FORMATS = ("svg", "png")
+
+_WHEELS = (("right", "C0"), ("left", "C1"))
+#: lambda_min(Gamma) / alpha from which the data outweigh the start value (see excitation_figure).
+_OUTWEIGH = 100.0
+
+
+# --------------------------------------------------------------------------------------------------
+# Decimation for display
+
+
+def _bin_edges(n: int, max_points: int) -> np.ndarray:
+    """Edges of the bins that :func:`decimate_for_display` reduces, over samples 1 .. n-2.
+
+    Samples 0 and n-1 are always kept; the interior is cut into at most (max_points - 2) // 2 bins of
+    equal length (the last may be shorter).  Returns edges e (nb + 1,): bin j is samples e[j]:e[j+1].
+    """
+    interior = n - 2
+    n_bins = (max_points - 2) // 2
+    size = -(-interior // n_bins)
+    return np.append(np.arange(1, n - 1, size), n - 1)
+
+
+def _envelope_indices(y: np.ndarray, max_points: int) -> np.ndarray:
+    """Sorted indices of the samples that :func:`decimate_for_display` keeps (at most max_points)."""
+    n = len(y)
+    if n <= max_points:
+        return np.arange(n)
+    edges = _bin_edges(n, max_points)
+    n_bins, size = len(edges) - 1, int(edges[1] - edges[0])
+    interior = y[1 : n - 1]
+    pad = n_bins * size - len(interior)
+    nan = np.isnan(interior)
+    # NaN never wins a bin that has numbers; a bin of only NaN keeps one (a gap in the drawn line).
+    low = np.concatenate([np.where(nan, np.inf, interior), np.full(pad, np.inf)]).reshape(n_bins, size)
+    high = np.concatenate([np.where(nan, -np.inf, interior), np.full(pad, -np.inf)]).reshape(n_bins, size)
+    start = 1 + size * np.arange(n_bins)
+    keep = np.concatenate([[0], start + np.argmin(low, axis=1), start + np.argmax(high, axis=1), [n - 1]])
+    return np.unique(keep)
+
+
+def decimate_for_display(t: np.ndarray, y: np.ndarray, max_points: int = MAX_POINTS) -> tuple[np.ndarray, np.ndarray]:
+    """A series reduced to at most ``max_points`` samples for drawing, spikes kept.
+
+    t, y : (n,) (y may hold NaN).  When n <= max_points both are returned as they are (as arrays).
+    Otherwise the first and last samples are kept and the samples in between are cut into
+    (max_points - 2) // 2 bins of consecutive samples; of each bin the samples holding its minimum
+    and its maximum are kept, in their original order.  The result is a subset of the input, so the
+    drawn line passes through every bin's extremes.  For display only, never for computation.
+    """
+    t = np.asarray(t)
+    y = np.asarray(y)
+    if t.ndim != 1 or y.shape != t.shape:
+        raise UsageError(f"decimate_for_display needs t and y of one shape (n,), got {t.shape} and {y.shape}")
+    if max_points < 4:
+        raise UsageError(f"max_points must be at least 4 (first, last and one bin's min and max), got {max_points}")
+    idx = _envelope_indices(y, int(max_points))
+    return t[idx], y[idx]
+
+
+# --------------------------------------------------------------------------------------------------
+# Rendering
+
+
+def _new_figure(figsize: tuple[float, float] = FIGSIZE) -> Figure:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def render(fig: Figure, fmt: str = "svg") -> bytes:
+    """The figure as ``fmt`` bytes: "svg" (deterministic: no date, fixed ids) or "png" (PNG_DPI dpi)."""
+    if fmt not in FORMATS:
+        raise UsageError(f"figure format must be one of {', '.join(FORMATS)}, got {fmt!r}")
+    import matplotlib
+
+    buf = io.BytesIO()
+    if fmt == "svg":
+        with matplotlib.rc_context({"svg.hashsalt": "wmrid"}):
+            fig.savefig(buf, format="svg", metadata={"Date": None})
+    else:
+        fig.savefig(buf, format="png", dpi=PNG_DPI, metadata={"Software": None})
+    return buf.getvalue()
+
+
+def _plot(ax: Axes, t: np.ndarray, y: np.ndarray, **kwargs: Any) -> None:
+    td, yd = decimate_for_display(np.asarray(t, dtype=np.float64), np.asarray(y, dtype=np.float64))
+    ax.plot(td, yd, **kwargs)
+
+
+# --------------------------------------------------------------------------------------------------
+# 1. The log: torques and speeds (paper Fig. 6)
+
+
+def build_log_overview(log: Any) -> Figure:
+    """Wheel efforts and wheel speeds over time, right and left, two panels sharing the time axis.
+
+    log : a WheelLog-like object (t (n,) s, eta (n, 2) rad/s, tau (n, 2) in ``effort_unit``, default
+    N m, source).  Time is drawn from the first sample.
+    """
+    t = np.asarray(log.t, dtype=np.float64)
+    eta = np.asarray(log.eta, dtype=np.float64)
+    tau = np.asarray(log.tau, dtype=np.float64)
+    unit = getattr(log, "effort_unit", "N m")
+    t = t - t[0]
+    fig = _new_figure()
+    ax_tau, ax_eta = fig.subplots(2, 1, sharex=True)
+    for j, (wheel, colour) in enumerate(_WHEELS):
+        _plot(ax_tau, t, tau[:, j], color=colour, lw=0.9, label=f"{wheel} wheel")
+        _plot(ax_eta, t, eta[:, j], color=colour, lw=0.9, label=f"{wheel} wheel")
+    what = "torque" if unit == "N m" else "effort"
+    ax_tau.set_ylabel(f"wheel {what} ({unit})")
+    ax_eta.set_ylabel("wheel speed (rad/s)")
+    ax_eta.set_xlabel("time since first sample (s)")
+    for ax in (ax_tau, ax_eta):
+        ax.grid(alpha=0.3)
+    handles, labels = ax_tau.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", fontsize="small", ncols=2)
+    ax_eta.set_xlim(t[0], t[-1])
+    fig.suptitle(f"Wheel {what}s and speeds: {getattr(log, 'source', 'log')}")
+    return fig
+
+
+def log_overview(log: Any, fmt: str = "svg") -> bytes:
+    """:func:`build_log_overview` rendered as ``fmt`` bytes."""
+    return render(build_log_overview(log), fmt)
+
+
+# --------------------------------------------------------------------------------------------------
+# 2. The path (paper Fig. 5)
+
+
+def build_path_figure(pose: np.ndarray | None) -> Figure | None:
+    """The x-y path (m), equal aspect, start and end marked; None when ``pose`` is None.
+
+    pose : (n, 3) [x m, y m, phi rad] (only x and y are drawn; (n, 2) is accepted too).
+    """
+    if pose is None:
+        return None
+    pose = np.asarray(pose, dtype=np.float64)
+    if pose.ndim != 2 or pose.shape[1] < 2 or len(pose) < 1:
+        raise UsageError(f"pose must have shape (n, 3) [x, y, phi], got {pose.shape}")
+    x, y = pose[:, 0], pose[:, 1]
+    half = MAX_POINTS // 2
+    idx = np.union1d(_envelope_indices(x, half), _envelope_indices(y, half))
+    fig = _new_figure()
+    ax = fig.subplots()
+    ax.plot(x[idx], y[idx], color="C0", lw=1.2, label="path")
+    ax.plot(x[0], y[0], "o", color="C2", ms=8, label="start", zorder=3)
+    ax.plot(x[-1], y[-1], "s", color="C3", ms=8, label="end", zorder=3)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize="small")
+    ax.set_title("Path in the plane")
+    return fig
+
+
+def path_figure(pose: np.ndarray | None, fmt: str = "svg") -> bytes | None:
+    """:func:`build_path_figure` rendered as ``fmt`` bytes; None when ``pose`` is None."""
+    fig = build_path_figure(pose)
+    return None if fig is None else render(fig, fmt)
+
+
+# --------------------------------------------------------------------------------------------------
+# 3. Intermediate parameter estimates over time (paper Fig. 7)
+
+
+def theta_units(form: RegressorForm, effort_unit: str = "N m") -> list[str]:
+    """Units of theta_i1 .. theta_ip: eta_dot_i = g theta_i, so (rad/s^2) over each regressor column's unit."""
+    per_column = [f"(rad/s²)/({effort_unit})"] * 2 + ["1/rad"] * 2 + ["1/s"] * 2
+    per_column += ["rad/s²"] * (form.n_columns - 6)
+    return per_column
+
+
+def true_theta(truth: Mapping[str, Any], form: RegressorForm) -> np.ndarray:
+    """theta (2, p) of the base parameters in ``truth``.
+
+    truth : {"m11": ..., ..., "Fd2": ...} (extra keys ignored), or a simulator truth file's whole
+    content, whose "parameters" table holds them.
+    """
+    table = truth.get("parameters", truth) if isinstance(truth.get("parameters"), Mapping) else truth
+    missing = [n for n in THETA0_NAMES if n not in table]
+    if missing:
+        raise UsageError(f"truth lacks base parameter(s) {', '.join(missing)}; it needs {', '.join(THETA0_NAMES)}")
+    # A caster's drag the truth does not give is NaN, and so are its intermediate parameters (not drawn).
+    values = [float(table[n]) if n in table else math.nan for n in form.base_names]
+    return intermediate_parameters(np.array(values), form)
+
+
+def _display_scale(values: np.ndarray) -> tuple[float, str]:
+    """(scale, unit prefix) that keep tick labels short: values / scale are drawn, in "10^n unit"."""
+    finite = np.abs(values[np.isfinite(values)])
+    top = float(finite.max()) if len(finite) else 0.0
+    if top == 0.0:
+        return 1.0, ""
+    exp = math.floor(math.log10(top))
+    if -2 <= exp <= 3:
+        return 1.0, ""
+    return 10.0**exp, f"$10^{{{exp}}}$ "
+
+
+def _settled_limits(t: np.ndarray, est: np.ndarray, marks: np.ndarray) -> tuple[float, float] | None:
+    """y limits that leave out an estimate's early excursions, or None to show everything.
+
+    The "settled" range covers ``marks`` (start, truth) and the estimate after the first 20 % of the
+    time; when the whole range is over 3 times that, the axis shows the settled range (padded) and the
+    early excursions leave the panel.
+    """
+    ok = np.isfinite(est)
+    if len(t) < 2 or not ok.any():
+        return None
+    late = ok & (t >= t[0] + 0.2 * (t[-1] - t[0]))
+    core = np.concatenate([marks, est[late]])
+    lo, hi = float(core.min()), float(core.max())
+    full = max(float(est[ok].max()), hi) - min(float(est[ok].min()), lo)
+    if hi <= lo or full <= 3.0 * (hi - lo):
+        return None
+    pad = 0.15 * (hi - lo)
+    return lo - pad, hi + pad
+
+
+def build_estimates_figure(
+    result: IdentificationResult, truth: Mapping[str, Any] | None = None, *, error_mode: bool = False
+) -> Figure:
+    """Every intermediate parameter estimate theta_ij over time, one panel each (rows: wheel i = 1, 2).
+
+    The start value (``result.settings.theta_init``) is dashed; with ``truth`` (see :func:`true_theta`)
+    the true theta is dotted.  A panel whose early excursions would flatten the rest is zoomed on the
+    start, the truth and the last 80 % of the estimate (its title says "zoomed"; :func:`_settled_limits`).
+    ``error_mode``: the estimation error theta_hat - theta_true instead
+    (needs ``truth``), with the start's error dashed and zero dotted.
+    """
+    if error_mode and truth is None:
+        raise UsageError("the estimation-error figure needs the true parameters (truth)")
+    from matplotlib.ticker import MaxNLocator
+
+    h = result.history
+    form = result.form
+    p = form.n_columns
+    start = np.asarray(result.settings.theta_init, dtype=np.float64)
+    theta_true = true_theta(truth, form) if truth is not None else None
+    units = theta_units(form, result.log_info.get("effort_unit", "N m"))
+    t = np.asarray(h.t, dtype=np.float64)
+    fig = _new_figure((1.9 * p, 5.0))
+    axes = fig.subplots(2, p, sharex=True, squeeze=False)
+    symbol = r"\tilde\theta" if error_mode else r"\hat\theta"
+    for i in range(2):
+        for k in range(p):
+            ax = axes[i, k]
+            ref = theta_true[i, k] if error_mode and theta_true is not None else 0.0
+            est = h.theta[:, i, k] - ref
+            lines = [start[i, k] - ref] + ([0.0] if error_mode else [] if theta_true is None else [theta_true[i, k]])
+            limits = _settled_limits(t, est, np.array(lines))
+            scale, prefix = _display_scale(np.array(limits) if limits else np.concatenate([est, lines]))
+            if error_mode:
+                ax.axhline(0.0, color="k", ls=":", lw=1.4, label="zero error")
+            _plot(ax, t, est / scale, color="C0", lw=1.1, label="error of estimate" if error_mode else "estimate")
+            label = "error of the start value" if error_mode else "start value"
+            ax.axhline((start[i, k] - ref) / scale, color="0.45", ls="--", lw=1.0, label=label)
+            if theta_true is not None and not error_mode:
+                ax.axhline(theta_true[i, k] / scale, color="k", ls=":", lw=1.4, label="true value")
+            ax.set_title(f"${symbol}_{{{i + 1}{k + 1}}}$" + (" (zoomed)" if limits else ""))
+            if limits:
+                ax.set_ylim(limits[0] / scale, limits[1] / scale)
+            ax.set_ylabel(f"{prefix}{units[k]}", fontsize="small", labelpad=2)
+            ax.grid(alpha=0.3)
+            ax.tick_params(labelsize="small")
+            ax.ticklabel_format(axis="y", style="plain", useOffset=False)
+            if i == 1:
+                ax.set_xlabel("time (s)")
+    axes[0, 0].xaxis.set_major_locator(MaxNLocator(nbins=4, steps=[1, 2, 5, 10]))
+    if len(t) > 1:
+        axes[0, 0].set_xlim(t[0], t[-1])
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncols=len(labels), fontsize="small")
+    kind = "Estimation errors θ̂ − θ" if error_mode else "Estimates θ̂"
+    fig.suptitle(
+        f"{kind} of the intermediate parameters over time (row i: wheel i, 1 = right, 2 = left; "
+        f"{form.kind} form, k = {result.settings.k:g} 1/s): {result.source}"
+    )
+    return fig
+
+
+def estimates_figure(
+    result: IdentificationResult,
+    truth: Mapping[str, Any] | None = None,
+    *,
+    error_mode: bool = False,
+    fmt: str = "svg",
+) -> bytes:
+    """:func:`build_estimates_figure` rendered as ``fmt`` bytes."""
+    return render(build_estimates_figure(result, truth, error_mode=error_mode), fmt)
+
+
+# --------------------------------------------------------------------------------------------------
+# 4. Prediction errors
+
+
+def _robust_limits(values: np.ndarray) -> tuple[float, float]:
+    """Axis limits showing the bulk of ``values``: the full range, unless a few samples (the first
+    steps' transient, a glitch) would squeeze the rest into a line; then the 0.5-99.5 % range, widened."""
+    finite = values[np.isfinite(values)]
+    if len(finite) == 0:
+        return -1.0, 1.0
+    lo, hi = float(finite.min()), float(finite.max())
+    q_lo, q_hi = (float(q) for q in np.percentile(finite, [0.5, 99.5]))
+    if hi - lo > 4.0 * (q_hi - q_lo):
+        lo, hi = q_lo, q_hi
+    lo, hi = min(lo, 0.0), max(hi, 0.0)
+    pad = 0.08 * (hi - lo) if hi > lo else max(abs(hi), 1e-12)
+    return lo - pad, hi + pad
+
+
+def build_residuals_figure(result: IdentificationResult) -> Figure:
+    """The prediction error e = eta - eta_hat (rad/s) over time for both wheels, and its histogram.
+
+    Drawn from the recorded history (``result.history``, itself a subsample of the log).  When a few
+    samples (typically the first steps, before the estimate has data) would squeeze the rest into a
+    flat line, the axis shows the 0.5-99.5 % range and the samples beyond it are drawn as triangles
+    at its edge, counted in the legend (the histogram counts only the samples within the axis).
+    """
+    h = result.history
+    t = np.asarray(h.t, dtype=np.float64)
+    e = np.asarray(h.e, dtype=np.float64)
+    lo, hi = _robust_limits(e.ravel())
+    scale, prefix = _display_scale(np.array([lo, hi]))
+    lo, hi = lo / scale, hi / scale
+    fig = _new_figure()
+    ax_t, ax_h = fig.subplots(1, 2, sharey=True, width_ratios=(3, 1))
+    bins = np.linspace(lo, hi, 61)
+    beyond, extreme = 0, 0.0
+    for j, (wheel, colour) in enumerate(_WHEELS):
+        col = e[:, j]
+        ok = np.isfinite(col)
+        rms = math.sqrt(float(np.mean(col[ok] ** 2))) if ok.any() else math.nan
+        col = col / scale
+        _plot(ax_t, t, col, color=colour, lw=0.8, alpha=0.85, label=f"{wheel} wheel, RMS {rms:.3g} rad/s")
+        inside = ok & (col >= lo) & (col <= hi)
+        ax_h.hist(col[inside], bins=bins, orientation="horizontal", histtype="step", color=colour, lw=1.2)
+        out = np.flatnonzero(ok & ~inside)
+        if len(out):
+            beyond += len(out)
+            worst = scale * col[out[np.argmax(np.abs(col[out]))]]
+            extreme = worst if abs(worst) > abs(extreme) else extreme
+            keep = out[_envelope_indices(col[out], MAX_POINTS)]
+            for side, marker, edge in ((col[keep] > hi, "^", hi), (col[keep] < lo, "v", lo)):
+                if side.any():
+                    ax_t.plot(t[keep][side], np.full(side.sum(), edge), marker, color=colour, ms=5, clip_on=False)
+    if beyond:
+        ax_t.plot(
+            [], [], "^", color="0.4", ms=5, label=f"{beyond} samples beyond the axis (extreme {extreme:.3g} rad/s)"
+        )
+    ax_t.set_ylim(lo, hi)
+    ax_t.axhline(0.0, color="k", lw=0.6)
+    ax_t.set_xlabel("time (s)")
+    ax_t.set_ylabel(f"prediction error e = η − η̂ ({prefix}rad/s)")
+    ax_t.legend(loc="upper right", fontsize="small")
+    if len(t) > 1:
+        ax_t.set_xlim(t[0], t[-1])
+    ax_t.set_title("over time")
+    ax_h.set_xlabel("recorded samples (count)")
+    ax_h.set_title("distribution")
+    for ax in (ax_t, ax_h):
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"Prediction errors of the wheel speeds: {result.source}")
+    return fig
+
+
+def residuals_figure(result: IdentificationResult, fmt: str = "svg") -> bytes:
+    """:func:`build_residuals_figure` rendered as ``fmt`` bytes."""
+    return render(build_residuals_figure(result), fmt)
+
+
+# --------------------------------------------------------------------------------------------------
+# 5. Excitation
+
+
+def build_excitation_figure(result: IdentificationResult) -> Figure:
+    """lambda_min(Gamma) over time on a log axis, against the start weight alpha.
+
+    Gamma = alpha I + (the data's information), so lambda_min(Gamma) - alpha is the data's smallest
+    eigenvalue, and on disturbance-free data the estimate keeps at most alpha / lambda_min(Gamma) of the
+    start's error.  A vertical line marks when lambda_min(Gamma) first reaches 100 alpha (the data
+    outweigh the start 100:1).  Gamma's entries mix the regressor columns' units, hence "mixed units".
+    """
+    h = result.history
+    t = np.asarray(h.t, dtype=np.float64)
+    lam = np.asarray(h.lambda_min, dtype=np.float64)
+    lam = np.where(np.isfinite(lam) & (lam > 0), lam, np.nan)
+    alpha = float(result.settings.alpha)
+    fig = _new_figure()
+    ax = fig.subplots()
+    _plot(ax, t, lam, color="C0", lw=1.3, label=r"$\lambda_{\min}(\Gamma)$")
+    ax.axhline(alpha, color="0.45", ls="--", lw=1.0, label=f"α = {alpha:g} (weight of the start value)")
+    reached = np.flatnonzero(lam >= _OUTWEIGH * alpha)
+    if len(reached):
+        t_x = t[reached[0]]
+        ax.axvline(
+            t_x,
+            color="C2",
+            ls=":",
+            lw=1.4,
+            label=rf"$\lambda_{{\min}} \geq {_OUTWEIGH:g}\,\alpha$ from t = {t_x:.3g} s (data outweigh the start)",
+        )
+    else:
+        ax.plot([], [], " ", label=rf"$\lambda_{{\min}}$ never reaches {_OUTWEIGH:g} α: the start value still matters")
+    if np.isfinite(lam).any():
+        ax.set_yscale("log")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel(r"$\lambda_{\min}(\Gamma)$ (mixed units)")
+    if len(t) > 1:
+        ax.set_xlim(t[0], t[-1])
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right", fontsize="small")
+    ax.set_title(f"Excitation: smallest eigenvalue of the information matrix Γ: {result.source}")
+    return fig
+
+
+def excitation_figure(result: IdentificationResult, fmt: str = "svg") -> bytes:
+    """:func:`build_excitation_figure` rendered as ``fmt`` bytes."""
+    return render(build_excitation_figure(result), fmt)

@@ -1,0 +1,441 @@
+"""``wmrid report``: what was identified, how sure it is, how it compares with nominal/CAD and truth.
+
+:func:`build_report` turns an identification (run on a log, or a saved ``identify --format json``
+result) into a :class:`Report`: the paper's tables (Table 2: intermediate parameters; Table 3: base
+parameters), a comparison with the robot's nominal and CAD values in units of the standard error,
+error columns when a truth file is given, the diagnostics in plain words, residual statistics, and
+figures (:mod:`wmrid.reporting.figures`).  :func:`to_html` (one self-contained file: inline SVG, no external
+resources), :func:`to_markdown` (PNG figures as data URIs) and :func:`to_json_dict` render it.
+
+Residuals: (1) the estimator's prior prediction error e (rad/s) of each wheel, RMS over the decimated
+history; (2) when the log itself is at hand, the torque residual of the identified model,
+tau - M eta_dot - V(eta) - F_v eta - F_d sgn(eta), with eta_dot from a zero-phase Savitzky-Golay cubic
+over ACCEL_WINDOW_S = 0.1 s (:func:`wmrid.io.signals.speed_from_position` applied to the speed), never a raw
+difference of noise: 0.1 s keeps speed noise out of the accelerations (white speed noise of 0.01 rad/s
+at 1 kHz becomes about 0.03 rad/s^2) and still follows motion at a few hertz.  Its
+RMS and the fit percentage 100 (1 - ||tau - tau_model|| / ||tau - mean(tau)||) per wheel are reported
+(100 = the model explains every torque variation).
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import math
+import re
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+from wmrid.core.errors import LogFormatError
+from wmrid.estimators.model_error import std_mark
+from wmrid.model import dynamics as model
+from wmrid.model.dynamics import RegressorForm
+
+#: A difference from the CAD value beyond this many standard errors is flagged.
+SIGNIFICANT = 3.0
+#: Window of the Savitzky-Golay differentiator for the accelerations of the torque residual, s.
+ACCEL_WINDOW_S = 0.1
+
+
+@dataclass
+class Report:
+    """Tables (lists of rows with a header), statements, residual statistics and rendered figures."""
+
+    title: str
+    summary: list[str]
+    intermediate: dict[str, Any]
+    base: dict[str, Any]
+    payload: dict[str, Any] | None
+    diagnostics: list[str]
+    notes: list[str]
+    residuals: dict[str, Any]
+    figures: dict[str, bytes] = field(default_factory=dict)  # name -> SVG bytes
+    figures_png: dict[str, bytes] = field(default_factory=dict)
+    result: dict[str, Any] = field(default_factory=dict)
+
+
+def form_from_json(form_d: dict[str, Any]) -> RegressorForm:
+    """The regressor form recorded in an identify result's ``theta.form`` (friction model included)."""
+    caster = form_d.get("friction") == "wheel+caster"
+    geometry: tuple[float, ...] = ()
+    if caster and form_d.get("caster_geometry"):
+        g = form_d["caster_geometry"]
+        geometry = (g["r"], g["b"], *[v for xy in g["casters"] for v in xy])
+    return RegressorForm(form_d["kind"], tuple(form_d.get("signs", (1, 1))), caster=caster, geometry=geometry)
+
+
+def result_from_json(data: dict[str, Any], source: str) -> Any:
+    """A result-like object (what the figures need) from an ``identify --format json`` document."""
+    if not isinstance(data, dict) or "parameters" not in data or "theta" not in data:
+        raise LogFormatError(
+            f"{source}: not an identify result (no 'parameters'/'theta'); give a log or the output of "
+            "`wmrid identify --format json`"
+        )
+    form = form_from_json(data["theta"]["form"])
+    names = form.theta_names()
+    p = form.n_columns
+    start = np.array([data["theta"]["start"][n] for n in names]).reshape(2, p)
+    history = None
+    if "history" in data:
+        h = data["history"]
+        theta = np.column_stack([h["theta"][n] for n in names]).reshape(-1, 2, p)
+        history = SimpleNamespace(
+            t=np.asarray(h["t"]), theta=theta, e=np.column_stack([h["e_r"], h["e_l"]]),
+            lambda_min=np.asarray(h["lambda_min"]),
+        )  # fmt: skip
+    settings = SimpleNamespace(theta_init=start, k=data["settings"]["k"], alpha=data["settings"]["alpha"])
+    return SimpleNamespace(
+        source=data.get("source", source), form=form, settings=settings, history=history,
+        log_info=data.get("log", {}), data=data,
+    )  # fmt: skip
+
+
+def torque_residual(log: Any, theta0: np.ndarray, form: RegressorForm | None = None) -> dict[str, Any]:
+    """RMS (N m) and fit % per wheel of tau - tau_model(eta, eta_dot) on the whole log (see the module docstring)."""
+    from wmrid.io.signals import speed_from_position
+
+    eta_dot, how = speed_from_position(np.asarray(log.t) - log.t[0], np.asarray(log.eta), window_s=ACCEL_WINDOW_S)
+    predicted = model.wheel_torque(np.asarray(log.eta), eta_dot, theta0, form)
+    res = np.asarray(log.tau) - predicted
+    spread = np.asarray(log.tau) - np.asarray(log.tau).mean(axis=0)
+    rms = np.sqrt(np.mean(res**2, axis=0))
+    fit = 100.0 * (1.0 - np.linalg.norm(res, axis=0) / np.maximum(np.linalg.norm(spread, axis=0), 1e-300))
+    return {
+        "rms_n_m": {"tau_r": float(rms[0]), "tau_l": float(rms[1])},
+        "fit_percent": {"tau_r": float(fit[0]), "tau_l": float(fit[1])},
+        "eta_dot": how.replace("wheel speeds derived from wheel positions", "accelerations from wheel speeds"),
+        "residual": res,
+    }
+
+
+def _pct(value: float, truth: float) -> float:
+    return 100.0 * abs(value - truth) / abs(truth) if truth else math.nan
+
+
+def _fmt(x: Any, digits: int = 6) -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "—"
+    if isinstance(x, str):
+        return x
+    return f"{x:.{digits}g}"
+
+
+def build_report(
+    data: dict[str, Any],
+    *,
+    result: Any = None,
+    log: Any = None,
+    truth: dict[str, float] | None = None,
+    figures: bool = True,
+) -> Report:
+    """A report from an identify JSON document ``data`` (and the live ``result``/``log`` when available)."""
+    rl = result if result is not None else result_from_json(data, data.get("source", "?"))
+    form = rl.form
+    names = form.theta_names()
+    nominal = data.get("nominal")
+    reference = data.get("reference")
+    params = data["parameters"]
+    effort_unit = data.get("effort_unit", "N m")
+
+    # Table 2: intermediate parameters
+    theta_vals = data["theta"]["values"]
+    theta_std = data["theta"]["std"]
+    start = data["theta"]["start"]
+    ref_theta = true_theta_row = None
+    # A caster-drag parameter the reference or truth does not give is NaN: its intermediate parameters show "—".
+    if reference is not None:
+        ref_theta = model.intermediate_parameters(
+            np.array([reference.get(n, math.nan) for n in form.base_names]), form
+        ).ravel()
+    if truth is not None:
+        true_theta_row = model.intermediate_parameters(
+            np.array([truth.get(n, math.nan) for n in form.base_names]), form
+        ).ravel()
+    header = ["parameter", "start (nominal)"]
+    header += ["CAD"] if ref_theta is not None else []
+    header += ["true", "estimate", "std", "error %"] if true_theta_row is not None else ["estimate", "std"]
+    rows = []
+    for j, name in enumerate(names):
+        row = [name, _fmt(start[name])]
+        if ref_theta is not None:
+            row.append(_fmt(ref_theta[j]))
+        if true_theta_row is not None:
+            row += [_fmt(true_theta_row[j]), _fmt(theta_vals[name]), _fmt(theta_std[name], 2),
+                    _fmt(_pct(theta_vals[name], true_theta_row[j]), 3)]  # fmt: skip
+        else:
+            row += [_fmt(theta_vals[name]), _fmt(theta_std[name], 2)]
+        rows.append(row)
+    intermediate = {"header": header, "rows": rows}
+
+    # Table 3: base parameters, with the comparison against nominal and CAD
+    header = (
+        ["parameter", "unit"] + (["nominal"] if nominal else []) + (["CAD", "(est − CAD)/std"] if reference else [])
+    )
+    header += ["estimate", "std"] + (["true", "error %", "(est − true)/std"] if truth else [])
+    rows = []
+    flagged = []
+    inflated = set(data["diagnostics"].get("inflated", []))
+    marks = {name: std_mark(name, data["diagnostics"]) for name in params}
+    warned = any("!" in mark for mark in marks.values())
+    for name, entry in params.items():
+        value, std = entry["value"], entry["std"]
+        row = [name, entry["unit"]]
+        if nominal:
+            row.append(_fmt(nominal.get(name)))
+        if reference:
+            ref = reference.get(name, math.nan)  # no CAD value of a caster's drag
+            z = (value - ref) / std if std else math.nan
+            mark = " ⚑" if math.isfinite(z) and abs(z) > SIGNIFICANT else ""
+            if mark:
+                flagged.append(f"{name} differs from its CAD value by {z:+.1f} std")
+            row += [_fmt(ref), f"{z:+.1f}{mark}" if math.isfinite(z) else "—"]
+        row += [_fmt(value), _fmt(std, 2) + (f" {marks[name]}" if marks[name] else "")]
+        if truth:
+            t = truth.get(name)
+            zt = (value - t) / std if (t is not None and std) else math.nan
+            row += [
+                _fmt(t),
+                _fmt(_pct(value, t), 3) if t is not None else "—",
+                f"{zt:+.1f}" if math.isfinite(zt) else "—",
+            ]
+        rows.append(row)
+    base = {"header": header, "rows": rows}
+
+    payload = None
+    if "payload" in data:
+        payload = {
+            "header": ["quantity", "estimate", "std", "unit"],
+            "rows": [[k, _fmt(v["value"]), _fmt(v["std"], 2), v["unit"]] for k, v in data["payload"].items()],
+        }
+
+    diag = data["diagnostics"]
+    unc = diag["uncertainty"]
+    statements = [
+        f"Standard errors: {unc.get('method', 'jackknife')}"
+        + (f", {unc['segments']} segments" if unc.get("segments") else "")
+        + f" ({unc['dof']} degrees of "
+        f"freedom); estimate ± {unc['interval_factor']['95%']:.2f} std covers the truth with 95 % probability when "
+        "disturbances do not feed back into the efforts. " + (f"Caveat: {unc['caveat']}." if unc.get("caveat") else ""),
+        *(
+            [
+                "† std widened"
+                + (f" (S = {unc['model_error']['scale']:.3g})" if unc["model_error"].get("applied") else "")
+                + f": {unc['model_error']['meaning']}."
+            ]
+            if inflated and unc.get("model_error")
+            else []
+        ),
+        *(
+            [
+                "! flagged (poorly determined, or the log departs from the model): the std may not cover the error; "
+                "see the warnings below."
+            ]
+            if warned
+            else []
+        ),
+        *(
+            [
+                f"Friction model: {diag['friction']['model']} ({diag['friction']['chosen_by']}"
+                + (f": {diag['friction']['reason']}" if diag["friction"].get("reason") else "")
+                + ")."
+            ]
+            if diag.get("friction")
+            else []
+        ),
+        f"Structural consistency (Eqs. 23-24): p = {diag['structural_mismatch']['p_value']:.2g} on "
+        f"{diag['structural_mismatch']['dof']} directions"
+        + (
+            " — the intermediate parameters are not of the model's form."
+            if diag["structural_mismatch"]["p_value"] < 1e-3
+            else " — consistent with the model."
+        ),
+        f"Excitation: λ_min(Γ) = {diag['lambda_min_gamma']:.3g} (α = {data['settings']['alpha']:g}); "
+        + (
+            f"not determined by this log: {', '.join(diag['undetermined'])}."
+            if diag.get("undetermined")
+            else "the data, not the start value, set every parameter."
+        ),
+        *flagged,
+        *data.get("warnings", []),
+    ]
+    if effort_unit != "N m":
+        statements.insert(
+            0, f"Units: the effort is in {effort_unit}, not N m, so every parameter is in {effort_unit}-based units."
+        )
+    method = data.get("method", "observer")
+    if method != "observer":
+        statements.insert(
+            0,
+            f"Method: {method} ({diag.get('method', {}).get('seconds', float('nan')):.3g} s). Table 3 holds its "
+            "estimate; Table 2, the excitation figures and the history are the observer's, run on the same log.",
+        )
+    if "validation" in data:
+        v = data["validation"]
+        statements.insert(
+            0,
+            f"Validation on {v['log']}: fit {_fmt(v['fit_percent']['eta_r'], 3)} % (right wheel), "
+            f"{_fmt(v['fit_percent']['eta_l'], 3)} % (left wheel): {v['definition']}; "
+            f"the prediction: {v['predictor']}.",
+        )
+
+    residuals = {}
+    if rl.history is not None:
+        e = np.asarray(rl.history.e)
+        residuals = {
+            "rms_e_rad_s": {
+                "eta_r": float(np.sqrt(np.mean(e[:, 0] ** 2))),
+                "eta_l": float(np.sqrt(np.mean(e[:, 1] ** 2))),
+            },
+            "samples": len(e),
+        }
+    if "prediction_error_rms" in diag:
+        residuals["prediction_error_rms"] = diag["prediction_error_rms"]
+    if log is not None and effort_unit == "N m":
+        theta0 = np.array([params[n]["value"] for n in form.base_names])
+        residuals["torque"] = torque_residual(log, theta0, form)
+
+    report = Report(
+        title=f"wmrid report: {data.get('source', '?')}",
+        summary=[
+            f"{data['log'].get('samples', '?')} samples, {data['log'].get('duration_s', float('nan')):.3f} s at "
+            f"{data['log'].get('rate_hz', float('nan')):.5g} Hz; regressor: {form.kind} form; "
+            f"k = {data['settings']['k']:g} 1/s; start: {data['settings']['start']}",
+        ],
+        intermediate=intermediate, base=base, payload=payload, diagnostics=statements,
+        notes=list(data["log"].get("notes", [])), residuals=residuals, result=data,
+    )  # fmt: skip
+    if figures:
+        _add_figures(report, rl, log, truth)
+    return report
+
+
+def _add_figures(report: Report, rl: Any, log: Any, truth: dict[str, float] | None) -> None:
+    from wmrid.reporting import figures as fg
+
+    def both(name: str, fig: Any) -> None:
+        if fig is None:
+            return
+        report.figures[name] = fg.render(fig, "svg")
+        report.figures_png[name] = fg.render(fig, "png")
+
+    if log is not None:
+        both("Wheel torques and speeds (paper Fig. 6)", fg.build_log_overview(log))
+        if getattr(log, "pose", None) is not None:
+            both("Path (paper Fig. 5)", fg.build_path_figure(log.pose))
+    if rl.history is not None:
+        both("Estimates over time", fg.build_estimates_figure(rl, truth))
+        if truth is not None:
+            both("Estimation errors over time (paper Fig. 7)", fg.build_estimates_figure(rl, truth, error_mode=True))
+        both("Prediction error (residuals)", fg.build_residuals_figure(rl))
+        both("Excitation: λ_min(Γ) over time", fg.build_excitation_figure(rl))
+
+
+# --------------------------------------------------------------------------------------------------
+# Rendering
+
+_CSS = """
+body{font-family:system-ui,sans-serif;max-width:1200px;margin:2em auto;color:#222;padding:0 1em}
+table{border-collapse:collapse;margin:0.5em 0 1.5em}
+th,td{padding:0.25em 0.7em;border-bottom:1px solid #ddd;text-align:right}
+th:first-child,td:first-child{text-align:left}th{background:#f4f4f4}figure{margin:1.5em 0}
+figcaption{font-weight:600}svg{max-width:100%;height:auto}li{margin:0.2em 0}.small{color:#555;font-size:0.9em}
+"""
+
+
+def _html_table(table: dict[str, Any]) -> str:
+    head = "".join(f"<th>{html.escape(str(h))}</th>" for h in table["header"])
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in row) + "</tr>" for row in table["rows"])
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def to_html(report: Report) -> str:
+    """One self-contained HTML page (inline SVG figures, no external resources)."""
+    parts = [
+        "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>",
+        f"<title>{html.escape(report.title)}</title><style>{_CSS}</style></head><body>",
+        f"<h1>{html.escape(report.title)}</h1>",
+        *[f"<p class='small'>{html.escape(s)}</p>" for s in report.summary],
+        "<h2>Base parameters (paper Table 3)</h2>",
+        _html_table(report.base),
+        "<h2>Intermediate parameters (paper Table 2)</h2>",
+        _html_table(report.intermediate),
+    ]
+    if report.payload:
+        parts += ["<h2>Payload</h2>", _html_table(report.payload)]
+    parts += ["<h2>Diagnostics</h2><ul>", *[f"<li>{html.escape(s)}</li>" for s in report.diagnostics], "</ul>"]
+    if report.residuals:
+        parts.append(
+            "<h2>Residuals</h2><ul>" + "".join(f"<li>{html.escape(s)}</li>" for s in residual_lines(report)) + "</ul>"
+        )
+    for name, svg in report.figures.items():
+        text = svg.decode("utf-8")
+        text = text[text.index("<svg") :] if "<svg" in text else text
+        text = re.sub(r"<metadata>.*?</metadata>", "", text, flags=re.S)  # RDF/creator block: not needed inline
+        parts.append(f"<figure><figcaption>{html.escape(name)}</figcaption>{text}</figure>")
+    if report.notes:
+        parts += ["<h2>Notes on the log</h2><ul>", *[f"<li>{html.escape(n)}</li>" for n in report.notes], "</ul>"]
+    parts.append("</body></html>")
+    return "\n".join(parts)
+
+
+def _md_table(table: dict[str, Any]) -> str:
+    lines = ["| " + " | ".join(str(h) for h in table["header"]) + " |", "|" + "---|" * len(table["header"])]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in table["rows"]]
+    return "\n".join(lines)
+
+
+def residual_lines(report: Report) -> list[str]:
+    """The residual statistics in words."""
+    out = []
+    rms = report.residuals.get("rms_e_rad_s")
+    if rms:
+        out.append("RMS prediction error of the estimator: " + ", ".join(f"{k} {v:.3g} rad/s" for k, v in rms.items()))
+    tq = report.residuals.get("torque")
+    if tq:
+        out.append(
+            "torque residual of the identified model: RMS "
+            + ", ".join(f"{k} {v:.3g} N m" for k, v in tq["rms_n_m"].items())
+            + "; fit "
+            + ", ".join(f"{k} {v:.1f} %" for k, v in tq["fit_percent"].items())
+            + f" ({tq['eta_dot']})"
+        )
+    return out
+
+
+def to_markdown(report: Report) -> str:
+    """Markdown with the tables, statements and PNG figures as data URIs (one file)."""
+    parts = [
+        f"# {report.title}",
+        "",
+        *report.summary,
+        "",
+        "## Base parameters (paper Table 3)",
+        "",
+        _md_table(report.base),
+    ]
+    parts += ["", "## Intermediate parameters (paper Table 2)", "", _md_table(report.intermediate)]
+    if report.payload:
+        parts += ["", "## Payload", "", _md_table(report.payload)]
+    parts += ["", "## Diagnostics", "", *[f"- {s}" for s in report.diagnostics]]
+    if report.residuals:
+        parts += ["", "## Residuals", "", *[f"- {s}" for s in residual_lines(report)]]
+    for name, png in report.figures_png.items():
+        parts += ["", f"### {name}", "", f"![{name}](data:image/png;base64,{base64.b64encode(png).decode()})"]
+    if report.notes:
+        parts += ["", "## Notes on the log", "", *[f"- {n}" for n in report.notes]]
+    return "\n".join(parts) + "\n"
+
+
+def to_json_dict(report: Report) -> dict[str, Any]:
+    """The report's content as plain data (figures left out)."""
+    residuals = {k: v for k, v in report.residuals.items() if k != "torque"}
+    if "torque" in report.residuals:
+        residuals["torque"] = {k: v for k, v in report.residuals["torque"].items() if k != "residual"}
+    return {
+        "title": report.title, "base": report.base, "intermediate": report.intermediate, "payload": report.payload,
+        "diagnostics": report.diagnostics, "residuals": residuals, "notes": report.notes,
+        "result": report.result,
+    }  # fmt: skip

@@ -1,0 +1,1 @@
+"""Simulators: the reduced closed-loop prototype and the MuJoCo multibody prototype."""
