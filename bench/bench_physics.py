@@ -263,9 +263,9 @@ def _error_text(err: BaseException) -> str:
 def run_job(job: Job) -> dict[str, Any]:
     """Simulate (or load) one log and identify it with every method; one JSON-ready row."""
     from wmrid.core.errors import WmridError
+    from wmrid.core.wheel_log import WheelLog
     from wmrid.estimators import feedback, methods
     from wmrid.estimators.identify import identify
-    from wmrid.io.logs import WheelLog
     from wmrid.model import dynamics as model
     from wmrid.model.robot import BUILTIN_ROBOTS, PhysicalParameters
 

@@ -292,8 +292,8 @@ def test_the_timing_check_profiles_a_window_read_piece_by_piece():
     holds exactly the log's first samples, whether streamed in pieces or sliced from memory."""
     from types import SimpleNamespace
 
+    from wmrid.core.wheel_log import stream_arrays
     from wmrid.estimators.delay import _window
-    from wmrid.io.logs import stream_arrays
 
     sim = simulate(AMR.cad, AMR.nominal, duration=5.0, noise=NOISE, seed=1)
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="w", notes=())

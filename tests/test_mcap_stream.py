@@ -16,10 +16,12 @@ import pytest
 from mcap.writer import CompressionType
 from mcap_ros2.writer import Writer as Ros2Writer
 
+from wmrid.core import wheel_log
 from wmrid.core.errors import LogFormatError
+from wmrid.core.wheel_log import stream_arrays
 from wmrid.estimators.identify import identify
-from wmrid.io import logs as logio
-from wmrid.io.logs import open_log, read_log, stream_arrays
+from wmrid.io.logs import open_log, read_log
+from wmrid.io.mcap import log as mcap_log
 from wmrid.io.mcap.joints import TopicSelection
 from wmrid.io.mcap.reader import _scan, read_mcap, scan_mcap
 from wmrid.io.mcap.writer import JOINT_STATE_MSGDEF, write_joint_state_mcap
@@ -221,7 +223,7 @@ def test_a_chunk_of_garbage_gives_the_whole_decode(tmp_path):
     log = stream.read()
     if not hasattr(stream, "_mcap_peak"):  # decoded whole (here: the garbage is out of time order)
         assert log.notes[-1].startswith("the recording was decoded whole")
-        log = logio.WheelLog(t=log.t, eta=log.eta, tau=log.tau, source=log.source, notes=log.notes[:-1])
+        log = wheel_log.WheelLog(t=log.t, eta=log.eta, tau=log.tau, source=log.source, notes=log.notes[:-1])
     _same(log, whole)
 
 
@@ -232,13 +234,13 @@ def test_identify_on_the_stream_equals_identify_on_the_whole_log(tmp_path, monke
     whole_log = read_log(str(path))
     whole = identify(whole_log, PAPER)
     # pieces of the default size (as the CLI cuts them), the bag streamed as a long one would be
-    monkeypatch.setattr(logio, "_MCAP_WHOLE_PIECES", 0)
+    monkeypatch.setattr(mcap_log, "_MCAP_WHOLE_PIECES", 0)
     stream = open_log(str(path))
     streamed = identify(stream, PAPER)
     assert hasattr(stream, "_mcap_peak")
     assert json.dumps(streamed.to_dict()) == json.dumps(whole.to_dict())  # bit for bit, every figure
     # small pieces, and the replay reading the file a second time
-    monkeypatch.setattr(logio, "CACHE_ROWS", 0)
+    monkeypatch.setattr(wheel_log, "CACHE_ROWS", 0)
     small = identify(open_log(str(path), rows=4096), PAPER)
     assert json.dumps(small.to_dict()) == json.dumps(identify(stream_arrays(whole_log, 4096), PAPER).to_dict())
 
@@ -337,7 +339,7 @@ def test_split_topics_that_do_not_overlap_fail_as_the_whole_decode_does(tmp_path
 
 
 def test_a_file_that_changes_between_passes_is_refused(tmp_path, monkeypatch):
-    monkeypatch.setattr(logio, "CACHE_ROWS", 0)
+    monkeypatch.setattr(wheel_log, "CACHE_ROWS", 0)
     path = write_messages(tmp_path / "one.mcap", single_topic_messages(1000))
     stream = open_log(str(path), rows=100)
     list(stream)

@@ -266,7 +266,7 @@ def test_a_large_parquet_row_group_is_read_in_slices(tmp_path, monkeypatch):
     path = tmp_path / "one_group.parquet"
     write_log(frame, str(path))
     whole = read_log(str(path))
-    monkeypatch.setattr(wmrid.io.logs, "ROW_GROUP_SLICE_BYTES", 1024)
+    monkeypatch.setattr(wmrid.io.parquet_log, "ROW_GROUP_SLICE_BYTES", 1024)
     sliced = read_log(str(path))
     np.testing.assert_array_equal(sliced.t, whole.t)
     np.testing.assert_array_equal(sliced.eta, whole.eta)

@@ -12,9 +12,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from wmrid.core import wheel_log
 from wmrid.core.errors import LogFormatError
 from wmrid.estimators.identify import identify
-from wmrid.io import logs as logio
 from wmrid.io.logs import open_log, read_log
 from wmrid.model.robot import BUILTIN_ROBOTS
 
@@ -122,10 +122,10 @@ def test_a_column_that_turns_from_integers_to_decimals_is_refused(tmp_path: Path
         open_log(str(path), time_unit="ns", rows=10).read()
 
 
-@pytest.mark.parametrize("cache_rows", [logio.CACHE_ROWS, 0])
+@pytest.mark.parametrize("cache_rows", [wheel_log.CACHE_ROWS, 0])
 def test_identify_on_a_stream_equals_identify_in_memory(monkeypatch, cache_rows: int) -> None:
     # cache_rows 0: the replay reads the file a second time instead of keeping the pieces.
-    monkeypatch.setattr(logio, "CACHE_ROWS", cache_rows)
+    monkeypatch.setattr(wheel_log, "CACHE_ROWS", cache_rows)
     path = str(SAMPLES / "paper_sinusoid.parquet")
     robot = BUILTIN_ROBOTS["paper"]
     whole = identify(read_log(path), robot)
@@ -148,7 +148,7 @@ def test_identify_without_robot_streams_the_same_start(tmp_path: Path) -> None:
 
 
 def test_a_file_that_changes_between_passes_is_refused(tmp_path: Path, monkeypatch) -> None:
-    monkeypatch.setattr(logio, "CACHE_ROWS", 0)
+    monkeypatch.setattr(wheel_log, "CACHE_ROWS", 0)
     path = tmp_path / "grow.csv"
     _frame(100).to_csv(path, index=False)
     stream = open_log(str(path), rows=30)

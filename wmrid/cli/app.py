@@ -218,7 +218,8 @@ def _read_wheel_log(
 
     whole : the log in memory (a WheelLog); else a LogStream, read piece by piece when iterated.
     """
-    from wmrid.io.logs import open_log, parse_column_mapping
+    from wmrid.io.columns import parse_column_mapping
+    from wmrid.io.logs import open_log
     from wmrid.io.mcap.joints import TopicSelection
     from wmrid.io.signals import SignalOptions
 
@@ -702,7 +703,7 @@ def report(
 
     from wmrid.core.atomic import atomic_write_text, register_input, write_json
     from wmrid.core.limits import memory_budget, read_limited
-    from wmrid.io.logs import _open_source
+    from wmrid.io.sources import open_source as _open_source
     from wmrid.reporting.report import build_report, to_html, to_json_dict, to_markdown
 
     suffix = output.suffix.lower() if output is not None else None

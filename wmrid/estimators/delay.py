@@ -236,7 +236,7 @@ def timing_check(
     (``samples`` and ``median_step`` s come from the survey).  A log that cannot be profiled (a hole, too short
     for the filter) is not checked, and the record says why."""
     from wmrid.core.errors import WmridError
-    from wmrid.io.logs import LogStream
+    from wmrid.core.wheel_log import LogStream
 
     slow = bool(median_step > 0 and 1.0 / median_step < SLOW_LOG_HZ)
     none = {"checked": False, "apply": False, "slow": slow, "faster_controller": False}
@@ -304,7 +304,7 @@ def unresolved_text(record: dict[str, Any], moved: float) -> str:
 
 def _window(stream: Any, log: Any, most: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(t (m,), eta (m, 2), tau (m, 2)): the first ``most`` samples of a log, from the stream's pieces when it is a
-    :class:`wmrid.io.logs.LogStream` (read no further), else sliced from the log in memory."""
+    :class:`wmrid.core.wheel_log.LogStream` (read no further), else sliced from the log in memory."""
     if stream is None:
         return tuple(np.asarray(a, dtype=np.float64)[:most] for a in (log.t, log.eta, log.tau))  # type: ignore[return-value]
     parts: list[Any] = []
@@ -328,8 +328,8 @@ def apply_delay(
 
     ``delay``: seconds, or "auto" (:func:`estimate_delay`; applied only when significant and not at the edge
     of the search).  The warnings name the likely cause: two clocks, or a controller faster than the log."""
+    from wmrid.core.wheel_log import LogStream, WheelLog
     from wmrid.estimators.idim import MAX_EFFORT_SHIFT_S, shifted
-    from wmrid.io.logs import LogStream, WheelLog
 
     whole = log.read() if isinstance(log, LogStream) else log
     t = np.asarray(whole.t, dtype=np.float64)

@@ -116,12 +116,12 @@ def check(result: Any, log: Any, robot: Any = None) -> Any:
     Only when the prediction error shows a disturbance (:func:`disturbance`): without one nothing feeds back, and
     on noise-free logs the two methods differ by their own tiny biases, which the difference test would see.
 
-    log : the same log as the observer read (a :class:`wmrid.io.logs.LogStream` or arrays t, eta, tau, optionally
+    log : the same log as the observer read (a :class:`wmrid.core.wheel_log.LogStream` or arrays t, eta, tau, optionally
     reference).  Logs over MAX_SAMPLES samples, and logs where the other method cannot fit, are not checked (the
     record says why).
     """
+    from wmrid.core.wheel_log import LogStream
     from wmrid.estimators.identify import with_estimate
-    from wmrid.io.logs import LogStream
 
     est = result.estimate
     if est is None or est.segments is None or result.method != "observer":

@@ -15,6 +15,7 @@ from typing import Any, Literal, Protocol
 import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError, UsageError, WmridError
+from wmrid.core.wheel_log import LogStream, stream_arrays
 from wmrid.estimators.estimate import BaseEstimate, SegmentEstimates
 from wmrid.estimators.model_error import (
     MISMATCH_P,
@@ -29,7 +30,6 @@ from wmrid.estimators.replay import replay_pieces
 from wmrid.estimators.survey import Survey, survey
 from wmrid.estimators.uncertainty import estimate_covariances, interval_factor, jackknife_deltas, segments_of
 from wmrid.estimators.widening import carry_unresolved_delay, with_hold_term, with_timing_term
-from wmrid.io.logs import LogStream, stream_arrays
 from wmrid.model import dynamics as model
 from wmrid.model.base_params import derived_with_std, fit_base_parameters
 from wmrid.model.dynamics import THETA0_UNITS, RegressorForm
@@ -275,7 +275,7 @@ def identify(
 ) -> IdentificationResult:
     """Identify the base parameters of the robot that recorded ``log``.
 
-    log : a :class:`wmrid.io.logs.LogStream` (read in two passes, a survey and the replay, in bounded
+    log : a :class:`wmrid.core.wheel_log.LogStream` (read in two passes, a survey and the replay, in bounded
     memory), or a log in memory with t (n,) s strictly increasing, eta (n, 2) rad/s [right, left],
     tau (n, 2) N m.
     ``robot`` gives the nominal values that start the estimate and centre the box (as in the paper);

@@ -3,7 +3,7 @@
 The replay needs, before its first sample, the regressor form (does each wheel keep one sign over the
 whole log?), the number of samples (for the history and block layout), a start value for an unknown
 robot, and the assurance that the log has no holes or impossible values.  :func:`survey` reads a
-:class:`wmrid.io.logs.LogStream` once, piece by piece, and keeps only running figures and a sparse sample.
+:class:`wmrid.core.wheel_log.LogStream` once, piece by piece, and keeps only running figures and a sparse sample.
 """
 
 from __future__ import annotations

@@ -17,7 +17,8 @@ from wmrid.core.errors import LogFormatError
 
 def inspect_log(path: str) -> dict[str, Any]:
     """A description of the log at ``path`` (or ``-``): {"source", "format", ...}; see the module docstring."""
-    from wmrid.io.logs import _open_source, detect_format
+    from wmrid.io.sources import detect_format
+    from wmrid.io.sources import open_source as _open_source
 
     source = _open_source(path)
     kind = detect_format(path, source.head(8))
@@ -60,7 +61,7 @@ def _inspect_mcap(source) -> dict[str, Any]:
 
 
 def _inspect_table(source, kind: str) -> dict[str, Any]:
-    from wmrid.io.logs import CANONICAL
+    from wmrid.core.wheel_log import CANONICAL
 
     if kind == "parquet":
         import pyarrow as pa
@@ -77,7 +78,7 @@ def _inspect_table(source, kind: str) -> dict[str, Any]:
     else:
         import pandas as pd
 
-        from wmrid.io.logs import _csv_layout
+        from wmrid.io.csv_log import _csv_layout
 
         layout = _csv_layout(source)
         try:

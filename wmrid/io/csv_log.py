@@ -1,0 +1,318 @@
+"""CSV (and other delimited text) logs read piece by piece: delimiter, decimal comma, header, parsing engine.
+
+CSV delimiter (:func:`sniff_delimiter`): among the first 20 non-blank lines, the first of tab, ``;``, ``,``
+that occurs equally often (at least once) on every line; else the first that occurs in the header;
+else runs of whitespace when the header splits into several words.  A ``;``-delimited file whose data
+rows hold ``digit,digit`` is read with decimal commas (and a note says so).  Comma/tab/semicolon files
+are parsed by the multithreaded pyarrow engine; whitespace, decimal-comma and ``", "``-spaced files, and
+any file pyarrow refuses, by pandas' C engine with round-trip-exact float parsing.  Row numbers in messages are
+the line of the file as an editor counts it (header = line 1).
+"""
+
+from __future__ import annotations
+
+import io
+import re
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from wmrid.core.errors import LogFormatError
+
+if TYPE_CHECKING:
+    import pandas
+from wmrid.io.columns import select
+from wmrid.io.parquet_log import arrow_values
+from wmrid.io.sources import MCAP_MAGIC, PARQUET_MAGIC, SNIFF_BYTES, Source, one_line
+
+_COMMENT_MARKS = ("%", "#")
+
+
+def sniff_delimiter(text: str) -> tuple[str, str]:
+    """(delimiter, decimal) for CSV text; delimiter ``"\\s+"`` means runs of whitespace.
+
+    See the module docstring for the rule.
+    """
+    lines = [ln for ln in text.splitlines() if ln.strip()][:20]
+    if not lines:
+        return ",", "."
+    header, data = lines[0], lines[1:]
+    chosen = None
+    for cand in ("\t", ";", ","):
+        counts = {ln.count(cand) for ln in lines}
+        if len(counts) == 1 and counts.pop() > 0:
+            chosen = cand
+            break
+    if chosen is None:
+        chosen = next((c for c in ("\t", ";", ",") if c in header), None)
+    if chosen is None:
+        chosen = r"\s+" if len(header.split()) > 1 else ","
+    decimal = "."
+    if chosen == ";" and any(re.search(r"\d,\d", ln) for ln in data):
+        decimal = ","
+    return chosen, decimal
+
+
+def _text_head(source: Source) -> tuple[str, str, list[str]]:
+    """The first bytes decoded; (text, encoding, notes).  Raises for binary or undecodable input."""
+    head = source.head()
+    name = source.name
+    for magic, kind in ((PARQUET_MAGIC, "parquet"), (MCAP_MAGIC, "mcap")):
+        if head.startswith(magic):
+            raise LogFormatError(f"{name}: holds {kind.upper()} data, not CSV text; rename it with a .{kind} suffix")
+    nul = head.find(b"\0")
+    if nul >= 0:
+        raise LogFormatError(f"{name}: not a CSV text file (byte {nul} is a NUL byte); give a CSV or Parquet log")
+    try:
+        return head.decode("utf-8-sig"), "utf-8", []
+    except UnicodeDecodeError as err:
+        if len(head) == SNIFF_BYTES and err.start >= len(head) - 3 and "end of data" in err.reason:
+            return head[: err.start].decode("utf-8-sig"), "utf-8", []  # a character cut by the sniff window
+        text = head.decode("latin-1")
+        if any((ord(ch) < 32 and ch not in "\t\r\n\f") or 0x7F <= ord(ch) < 0xA0 for ch in text):
+            raise LogFormatError(
+                f"{name}: not a CSV text file (byte {err.start} is not UTF-8 text); give a CSV or Parquet log"
+            ) from err
+        return text, "latin-1", [f"{name} is not UTF-8; read as Latin-1 text"]
+
+
+def _csv_line_finder(source: Source, skip: int = 0, has_header: bool = True) -> Callable[[int], str]:
+    """Data index (0-based) -> ``"line N"``, counting every line of the file (line 1 is the first).
+
+    skip : leading comment lines; has_header : whether a header line follows them.
+    """
+
+    def where(index: int) -> str:
+        fh = open(source.path, "rb") if source.data is None else io.BytesIO(source.data)  # noqa: SIM115
+        with fh:
+            seen_header = not has_header
+            count = -1
+            for lineno, raw in enumerate(fh, start=1):
+                if lineno <= skip or not raw.strip():
+                    continue  # comments, and blank lines (skipped by both parsers)
+                if not seen_header:
+                    seen_header = True
+                    continue
+                count += 1
+                if count == index:
+                    return f"line {lineno}"
+        return f"data row {index + 1}"
+
+    return where
+
+
+@dataclass
+class _CsvLayout:
+    """How a CSV file is laid out: options for pandas, its columns, notes, and a parse-error mapper."""
+
+    c_options: dict[str, Any]
+    header_columns: list[Any]
+    present: list[str]
+    notes: list[str]
+    skip: int
+    has_header: bool
+    spaced: bool
+    fail: Callable[[BaseException], LogFormatError]
+    comments: list[str]
+
+
+def _csv_layout(source: Source) -> _CsvLayout:
+    """Comments, delimiter, decimal mark, header (or positional names) of a CSV file; see the module docstring."""
+    import pandas as pd
+
+    name = source.name
+    text, encoding, notes = _text_head(source)
+    if "\n" not in text and "\r" not in text and len(source.head(SNIFF_BYTES + 1)) > SNIFF_BYTES:
+        longer = source.head(MAX_HEADER_BYTES + 1)
+        if not any(mark in longer for mark in (b"\n", b"\r")) and len(longer) > MAX_HEADER_BYTES:
+            raise LogFormatError(
+                f"{name}: its first line is longer than {MAX_HEADER_BYTES >> 20} MiB (a header of "
+                f"{longer.count(b',') + 1:,}+ columns?); a wheel log has a handful of columns: give a CSV log"
+            )
+    lines = text.splitlines()
+    skip = 0
+    while skip < len(lines) and lines[skip].lstrip().startswith(_COMMENT_MARKS):
+        skip += 1
+    if skip:
+        notes.append(f"the first {skip} lines are comments (starting with % or #) and were skipped")
+        text = "\n".join(lines[skip:])
+    if not text.strip():
+        raise LogFormatError(f"{name}: the file holds only blank lines; give a log with a header and data rows")
+    sep, decimal = sniff_delimiter(text)
+    header_line = next(ln for ln in text.splitlines() if ln.strip())
+    has_header = not _all_numbers(header_line, sep, decimal)
+    if not has_header:
+        n_fields = len(header_line.split() if sep == r"\s+" else header_line.split(sep))
+        notes.append(
+            f"no header row: the {n_fields} columns are named by position, 1 to {n_fields}; map them with "
+            "--columns, e.g. t=1,eta_r=3"
+        )
+    spaced = sep != r"\s+" and any(f != f.strip() for f in header_line.split(sep))
+    if sep == "\t":
+        notes.append("columns separated by tabs")
+    elif sep == ";":
+        notes.append("columns separated by ';'")
+    elif sep == r"\s+":
+        notes.append("columns separated by whitespace")
+    if decimal == ",":
+        notes.append("decimal commas (e.g. 1,5) read as decimal points")
+
+    def fail(err: BaseException) -> LogFormatError:
+        if isinstance(err, UnicodeDecodeError):
+            return LogFormatError(
+                f"{name}: not a CSV text file (byte {err.start} of a block is not {encoding} text); "
+                "give a CSV or Parquet log"
+            )
+        if isinstance(err, pd.errors.EmptyDataError):
+            return LogFormatError(f"{name}: the file holds no header or data; give a log with a header and data rows")
+        msg = one_line(err).replace("Error tokenizing data. C error: ", "")
+        return LogFormatError(f"{name}: cannot be parsed as CSV ({msg}); every row needs one value per header column")
+
+    c_options: dict[str, Any] = {
+        "sep": sep,
+        "decimal": decimal,
+        "encoding": encoding,
+        "skipinitialspace": spaced,
+        "engine": "c",
+        "skiprows": skip,
+    }
+    if not has_header:
+        c_options["header"] = None
+    if int(pd.__version__.split(".")[0]) < 3:  # pandas 3 parses floats exactly by default (and warns on this)
+        c_options["float_precision"] = "round_trip"
+    try:
+        header = pd.read_csv(source.opener(), nrows=0 if has_header else 1, **c_options)
+    except (ValueError, UnicodeDecodeError) as err:
+        raise fail(err) from err
+    if not has_header:
+        c_options["names"] = [str(i + 1) for i in range(len(header.columns))]
+        header = header.set_axis(c_options["names"], axis=1)
+    present = [str(c).strip() for c in header.columns]
+    if spaced:
+        notes.append("spaces around column names and values ignored")
+    comments = lines[:skip]
+    return _CsvLayout(c_options, list(header.columns), present, notes, skip, has_header, spaced, fail, comments)
+
+
+def csv_chunks(
+    source: Source, mapping: dict[str, str], explicit: set[str], rows: int
+) -> tuple[Callable[[], Iterator[tuple[int, dict[str, Any]]]], Callable[[int], str], list[str], None]:
+    """(chunks, where, notes, None) of a CSV log; ``chunks()`` yields (first data row, columns) of ``rows`` rows.
+
+    Plain files (comma, tab or semicolon, no comments, a header) are parsed by pyarrow's streaming CSV
+    reader; anything it refuses, from the row it refused on, and all other files by pandas' C engine.
+    """
+    import pandas as pd
+
+    name = source.name
+    layout = _csv_layout(source)
+    c_options, present, notes = layout.c_options, layout.present, layout.notes
+    header = pd.DataFrame(columns=layout.header_columns)
+    chosen = select(present, mapping, explicit, name)
+    actual = {str(c).strip(): c for c in header.columns}
+    usecols = list(dict.fromkeys(actual[c] for c in chosen.values()))
+    plain = (
+        c_options["sep"] in (",", "\t", ";")
+        and c_options["decimal"] == "."
+        and c_options["encoding"] == "utf-8"
+        and not layout.spaced
+        and not layout.skip
+        and layout.has_header
+        and len(set(layout.header_columns)) == len(layout.header_columns)
+    )
+
+    def c_engine(skip_rows: int) -> Iterator[tuple[int, dict[str, Any]]]:
+        base = 0
+        try:  # all columns: usecols would hide ragged rows
+            with pd.read_csv(source.opener(), chunksize=rows, **c_options) as reader:
+                for frame in reader:
+                    n = len(frame)
+                    if base + n > skip_rows:
+                        start = max(skip_rows - base, 0)
+                        frame = frame.iloc[start:]
+                        frame.columns = [str(c).strip() for c in frame.columns]
+                        yield base + start, {key: _series_values(frame[col]) for key, col in chosen.items()}
+                    base += n
+        except (ValueError, UnicodeDecodeError) as err:
+            raise layout.fail(err) from err
+
+    def chunks() -> Iterator[tuple[int, dict[str, Any]]]:
+        done = 0
+        if plain:
+            try:
+                for values in _arrow_csv(source, c_options["sep"], usecols, chosen, actual, rows):
+                    n = len(values["t"])
+                    yield done, values
+                    done += n
+                return
+            except _ArrowCsvRefused:
+                pass  # the C engine decides, and explains, from the first row not yet handed out
+        yield from c_engine(done)
+
+    return chunks, _csv_line_finder(source, layout.skip, layout.has_header), notes, None
+
+
+class _ArrowCsvRefused(Exception):
+    """pyarrow's CSV reader cannot read (the rest of) a file the C engine may still read or explain."""
+
+
+def _arrow_csv(
+    source: Source, sep: str, usecols: list[Any], chosen: dict[str, str], actual: dict[str, Any], rows: int
+) -> Iterator[dict[str, Any]]:
+    """Column values of ``rows``-row pieces read by pyarrow's streaming CSV reader (raises _ArrowCsvRefused)."""
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
+    try:
+        reader = pcsv.open_csv(
+            source.opener(),
+            read_options=pcsv.ReadOptions(block_size=1 << 24, use_threads=True),
+            parse_options=pcsv.ParseOptions(delimiter=sep),
+            convert_options=pcsv.ConvertOptions(include_columns=usecols),
+        )
+    except (pa.ArrowException, OSError, ValueError) as err:
+        raise _ArrowCsvRefused from err
+    pending: list[Any] = []
+    count = 0
+
+    def values(table: Any) -> dict[str, Any]:
+        return {key: arrow_values(table.column(actual[col]).combine_chunks()) for key, col in chosen.items()}
+
+    try:
+        with reader:
+            for batch in reader:
+                pending.append(batch)
+                count += batch.num_rows
+                while count >= rows:  # pieces of exactly ``rows`` rows, whatever pyarrow's block size
+                    table = pa.Table.from_batches(pending)
+                    yield values(table.slice(0, rows))
+                    rest = table.slice(rows)
+                    pending, count = rest.to_batches(), rest.num_rows
+    except (pa.ArrowException, OSError, ValueError) as err:
+        raise _ArrowCsvRefused from err
+    if count:
+        yield values(pa.Table.from_batches(pending))
+
+
+def _all_numbers(line: str, sep: str, decimal: str) -> bool:
+    """True when every field of ``line`` reads as a number (a data row, not a header)."""
+    fields = line.split() if sep == r"\s+" else line.split(sep)
+    try:
+        for f in fields:
+            if f.strip():
+                float(f.strip().replace(decimal, ".") if decimal != "." else f.strip())
+    except ValueError:
+        return False
+    return any(f.strip() for f in fields)
+
+
+def _series_values(series: pandas.Series) -> Any:
+    """A numeric numpy array when pandas parsed the column as numbers, else the Series itself."""
+    numeric = isinstance(series.dtype, np.dtype) and series.dtype.kind in ("i", "u", "f")
+    return series.to_numpy() if numeric else series
+
+
+#: bytes: the longest first line (header) of a CSV log; a 10 M-column header took 3.4 GB and 75 s to refuse.
+MAX_HEADER_BYTES = 1 << 20

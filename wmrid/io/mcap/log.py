@@ -1,0 +1,193 @@
+"""An MCAP recording as a wheel log: JointState topics decoded whole, or in pieces for recordings of more than a
+million messages (summarised in a first pass, then decoded chunk by chunk, split topics aligned across pieces; the
+few layouts that cannot stream exactly are decoded whole, with a note saying why).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Generator, Iterator, Mapping
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from wmrid.core.errors import LogFormatError, UsageError
+from wmrid.io.mcap.joints import TopicSelection
+from wmrid.io.signals import SignalOptions
+
+if TYPE_CHECKING:
+    pass
+from wmrid.core.wheel_log import CHUNK_ROWS, MIN_SAMPLES, REQUIRED, LogStream, WheelLog, stream_arrays
+from wmrid.io.sources import Source
+from wmrid.io.stamps import ABSOLUTE_LIMIT_S, NS_PER_UNIT, seconds_from_stamps
+
+#: An MCAP whose JointState topics hold at most this many pieces' worth of messages is decoded whole, in one
+#: pass (a stream of that length keeps its samples in memory anyway); a longer one is streamed.
+_MCAP_WHOLE_PIECES = 4  # pieces of CHUNK_ROWS: bags of up to ~1 M messages are decoded in one pass
+
+
+def read_mcap_log(
+    source: Source,
+    columns: Mapping[str, str],
+    selection: TopicSelection,
+    signals: SignalOptions,
+    gear_ratio: float | None,
+    rows: int = CHUNK_ROWS,
+) -> LogStream:
+    """An MCAP recording as a LogStream: JointState topics (or a JSON topic with field paths).
+
+    A first pass (:func:`wmrid.io.mcap.reader.scan_mcap`) reads the file record by record.  When its JointState
+    topics hold at most ``_MCAP_WHOLE_PIECES * rows`` messages, that pass keeps them and the log is assembled
+    whole (:func:`_mcap_whole_log`).  A longer recording keeps only a summary per topic; the topic, joint and
+    time choices are made from it and each pass over the stream decodes the file again, a batch of records
+    at a time (:func:`_mcap_pieces`): memory does not grow with the recording, and the samples and notes are
+    those of the whole decode.  Read whole all the same, with a note saying why: speeds derived from
+    positions, messages out of time order in the file, and the other cases :func:`wmrid.io.mcap.joints.stream_plan`
+    lists; a JSON topic is always read whole.
+    """
+    from wmrid.io.mcap.joints import stream_plan
+    from wmrid.io.mcap.reader import read_mcap, scan_mcap
+
+    path = source.path or source.name
+    if columns and selection.topic:
+        missing = [k for k in REQUIRED[1:] if k not in columns]
+        if missing:
+            raise UsageError(f"a JSON topic needs field paths for {', '.join(missing)} in --columns")
+        contents = read_mcap(path, data=source.data, json_fields={selection.topic: dict(columns)})
+        return stream_arrays(_mcap_whole_log(source, contents, selection, signals, gear_ratio), rows)
+    contents = scan_mcap(path, source.data, keep=_MCAP_WHOLE_PIECES * rows)
+    if contents.complete:
+        return stream_arrays(_mcap_whole_log(source, contents, selection, signals, gear_ratio), rows)
+    plan, why = stream_plan(contents, selection, signals, gear_ratio)
+    relative = False
+    if why is None:  # seconds_from_stamps' choice, from the range of the stamps that can come out
+        times = plan.vel.times[plan.vel_time]
+        limit = ABSOLUTE_LIMIT_S * NS_PER_UNIT["s"]
+        relative = times.low >= limit
+        if not relative and not (times.high < limit and times.low > -limit):
+            why = "its stamps cross the limit of absolute float64 times"
+    if why is not None:
+        from dataclasses import replace
+
+        whole = _mcap_whole_log(source, read_mcap(path, data=source.data), selection, signals, gear_ratio)
+        note = f"the recording was decoded whole (memory grows with its length): {why}"
+        return stream_arrays(replace(whole, notes=(*whole.notes, note)), rows)
+    return _mcap_pieces(source, contents, plan, selection, signals, gear_ratio, rows, relative)
+
+
+def _mcap_whole_log(
+    source: Source, contents: Any, selection: TopicSelection, signals: SignalOptions, gear_ratio: float | None
+) -> WheelLog:
+    """The WheelLog of a recording read whole (:class:`wmrid.io.mcap.reader.McapContents` with its arrays)."""
+    from wmrid.io.mcap.joints import signals_from_json, signals_from_mcap
+
+    if selection.topic in contents.json:
+        sig = signals_from_json(contents, selection.topic, signals, gear_ratio)
+    else:
+        sig = signals_from_mcap(contents, selection, signals, gear_ratio)
+    notes = list(contents.notes) + list(sig.notes)
+    _mcap_check_count(source, len(sig.t_ns))
+    t, offset = seconds_from_stamps(sig.t_ns, "ns")
+    if offset is not None:
+        notes.append(f"time relative to the first stamp, {offset} ns")
+    _mcap_check_finite(source, t, sig.speed, sig.effort)
+    eta = np.ascontiguousarray(sig.speed, dtype=np.float64)
+    tau = np.ascontiguousarray(sig.effort, dtype=np.float64)
+    return WheelLog(t=t, eta=eta, tau=tau, source=source.name, notes=tuple(notes), effort_unit=sig.effort_unit)
+
+
+def _mcap_check_count(source: Source, n: int) -> None:
+    if n < MIN_SAMPLES:
+        raise LogFormatError(
+            f"{source.name}: only {n} usable samples after reading the topics; identification needs "
+            f"at least {MIN_SAMPLES}"
+        )
+
+
+def _mcap_check_finite(source: Source, t: np.ndarray, speed: np.ndarray, effort: np.ndarray) -> None:
+    for arr, what in ((speed, "speed"), (effort, "effort")):
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            raise LogFormatError(
+                f"{source.name}: a wheel {what} is not a finite number at t = {t[np.argmax(bad.any(axis=1))]:.6g} s"
+            )
+
+
+def _mcap_pieces(
+    source: Source,
+    contents: Any,
+    plan: Any,
+    selection: TopicSelection,
+    signals: SignalOptions,
+    gear_ratio: float | None,
+    rows: int,
+    relative: bool,
+) -> LogStream:
+    """The streamed LogStream of a long recording (see :func:`read_mcap_log`): pieces of exactly ``rows``
+    samples, as :func:`stream_arrays` cuts the whole log.  Its ``_mcap_peak`` is the most JointState samples
+    the last pass held at once (decoded, waiting and cut into pieces)."""
+    from wmrid.io.mcap.joints import SignalStream
+    from wmrid.io.mcap.reader import iter_joint_parts
+
+    path = source.path or source.name
+    unit = signals.effort_label
+    per_s = float(NS_PER_UNIT["s"])
+
+    def pieces() -> Generator[WheelLog, None, tuple[str, ...]]:
+        signal = SignalStream(plan, selection, signals, gear_ratio, source.name, rows)
+        ready: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        state = {"ready": 0, "total": 0, "offset": None, "error": None, "peak": 0}
+
+        def take(batch: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> None:
+            for t_ns, speed, effort in batch:
+                if state["offset"] is None and relative:
+                    state["offset"] = int(t_ns[0])
+                if relative:
+                    t = (t_ns - np.int64(state["offset"])).astype(np.float64) / per_s
+                else:
+                    t = t_ns.astype(np.float64) / per_s
+                if state["error"] is None:
+                    try:
+                        _mcap_check_finite(source, t, speed, effort)
+                    except LogFormatError as err:
+                        state["error"] = err  # raised once the log is known to have MIN_SAMPLES samples
+                ready.append((t, np.ascontiguousarray(speed, dtype=np.float64),
+                              np.ascontiguousarray(effort, dtype=np.float64)))  # fmt: skip
+                state["ready"] += len(t)
+                state["total"] += len(t)
+            if state["error"] is not None and state["total"] >= MIN_SAMPLES:
+                raise state["error"]
+
+        def cut(final: bool) -> Iterator[WheelLog]:
+            if not ready or (state["ready"] < rows and not final) or state["total"] < MIN_SAMPLES:
+                return
+            t, eta, tau = (np.concatenate([r[i] for r in ready]) for i in range(3))
+            ready.clear()
+            start = 0
+            while len(t) - start >= rows or (final and start < len(t)):
+                stop = min(start + rows, len(t))
+                yield WheelLog(t=t[start:stop], eta=eta[start:stop], tau=tau[start:stop], source=source.name,
+                               effort_unit=unit)  # fmt: skip
+                start = stop
+            if start < len(t):
+                ready.append((t[start:], eta[start:], tau[start:]))
+            state["ready"] = len(t) - start
+
+        for parts in iter_joint_parts(path, source.data, signal.channels):
+            decoded = sum(len(p[0]) for got in parts.values() for p in got)
+            take(signal.feed(parts))
+            state["peak"] = max(state["peak"], decoded + signal.held + state["ready"])
+            stream._mcap_peak = state["peak"]  # type: ignore[attr-defined]
+            yield from cut(final=False)
+        take(signal.finish())
+        _mcap_check_count(source, state["total"])
+        if state["error"] is not None:
+            raise state["error"]
+        yield from cut(final=True)
+        notes = [*contents.notes, *signal.notes()]
+        if relative:
+            notes.append(f"time relative to the first stamp, {state['offset']} ns")
+        return tuple(notes)
+
+    stream = LogStream(source.name, unit, pieces)
+    stream._mcap_peak = 0  # type: ignore[attr-defined]
+    return stream
