@@ -173,7 +173,7 @@ def test_inertia_entries_are_flagged_when_poorly_determined():
     """M = m^-1 is reported beside m and must be flagged by the same rule (std > 10 % of its magnitude): on a
     slipping AMR log M12 came out 0.0031 +/- 0.00085 (27 %) unflagged, 3.5 std from the truth.  Base parameters
     are judged by their own loop, and an M of an undetermined m (infinite std) is undetermined, not listed."""
-    from wmrid.estimators.identify import derived_poorly_determined
+    from wmrid.estimators.diagnostics import derived_poorly_determined
 
     params = {
         "m11": (23.6, 1.6), "m12": (-1.7, 0.61), "m22": (23.5, 0.76), "M11": (0.0426, 0.0028),

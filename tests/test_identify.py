@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from tests.conftest import open_loop_log
-from wmrid.estimators.identify import REPORTED, identify
+from wmrid.estimators.identify import identify
+from wmrid.estimators.result import REPORTED
 from wmrid.model.dynamics import THETA0_NAMES
 from wmrid.model.robot import BUILTIN_ROBOTS
 

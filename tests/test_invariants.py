@@ -26,7 +26,8 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from tests.conftest import open_loop_log
-from wmrid.estimators.identify import REPORTED, identify
+from wmrid.estimators.identify import identify
+from wmrid.estimators.result import REPORTED
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
 from wmrid.sim.simulate import simulate

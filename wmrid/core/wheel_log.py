@@ -169,3 +169,13 @@ def stream_arrays(log: Any, rows: int = CHUNK_ROWS) -> LogStream:
         return notes
 
     return LogStream(source, unit, pieces)
+
+
+#: The words of the note that says the effort came from another topic than the speeds (:func:`split_topics`).
+SPLIT_NOTE = "put on the speed stamps"
+
+
+def split_topics(notes: tuple[str, ...] | list[str]) -> bool:
+    """Whether a log's reading notes say its efforts and speeds came from two topics (two clocks, two drivers), the
+    case where ``identify`` estimates their delay by default (:func:`wmrid.estimators.delay.apply_delay`)."""
+    return any(SPLIT_NOTE in note for note in notes)

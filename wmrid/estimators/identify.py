@@ -9,17 +9,27 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
-from typing import Any, Literal, Protocol
+from dataclasses import replace
+from typing import Any, Literal
 
 import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError, UsageError, WmridError
 from wmrid.core.wheel_log import LogStream, stream_arrays
+from wmrid.estimators.diagnostics import (
+    POORLY_DETERMINED,
+    START_RELEVANT,
+    control_rate_check,
+    derived_poorly_determined,
+    diagnose,
+    physics_warnings,
+    poorly_text,
+    start_sensitivity,
+    torque_unexcited,
+    unexcited_parameters,
+)
 from wmrid.estimators.estimate import BaseEstimate, SegmentEstimates
 from wmrid.estimators.model_error import (
-    MISMATCH_P,
-    MISMATCH_RELEVANT,
     misfit_text,
     record_widening,
     widen,
@@ -27,36 +37,22 @@ from wmrid.estimators.model_error import (
 from wmrid.estimators.observer import ObserverSettings
 from wmrid.estimators.observer_kernel import project_history_box
 from wmrid.estimators.replay import replay_pieces
+from wmrid.estimators.result import History, IdentificationResult, LogLike, finite_or_none, reported_names
 from wmrid.estimators.survey import Survey, survey
 from wmrid.estimators.uncertainty import estimate_covariances, interval_factor, jackknife_deltas, segments_of
 from wmrid.estimators.widening import carry_unresolved_delay, with_hold_term, with_timing_term
 from wmrid.model import dynamics as model
 from wmrid.model.base_params import derived_with_std, fit_base_parameters
-from wmrid.model.dynamics import THETA0_UNITS, RegressorForm
+from wmrid.model.dynamics import RegressorForm
 from wmrid.model.robot import Robot
 
-#: Reported parameter names, in report order.
-REPORTED = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
-
-
-def reported_names(form: RegressorForm) -> tuple[str, ...]:
-    """The reported names for ``form``: REPORTED, then its caster-drag parameters."""
-    return REPORTED + form.base_names[8:]
-
-
-#: Points of the history kept in a JSON result (enough for the report's figures).
-JSON_HISTORY_POINTS = 300
 #: A time step longer than GAP_FACTOR median steps (and GAP_MIN_S) is a hole the estimator cannot bridge.
 GAP_FACTOR = 1000.0
+
+
 GAP_MIN_S = 1.0
-#: A direction of the column-scaled information whose eigenvalue is below this fraction of the largest is
-#: not excited at all (double precision resolves about 1e-16; real logs' weakest directions are ~1e-8).
-UNEXCITED = 1e-12
-#: A base parameter whose standard error exceeds this fraction of its magnitude is called poorly determined.
-POORLY_DETERMINED = 0.1
-#: A base parameter is not determined by the log when the start value sets it (start_sensitivity) more
-#: than the data's standard error and more than this fraction of its value.
-START_RELEVANT = 1e-4
+
+
 #: What the standard errors do not cover, with the coverage measured in simulation (bench/bench_coverage.py).
 CLOSED_LOOP_CAVEAT = (
     "in closed loop a coloured disturbance (a caster, the floor) reaches the efforts through the controller and "
@@ -66,123 +62,6 @@ CLOSED_LOOP_CAVEAT = (
     "noise, else widens the std by the difference when a disturbance shows (light 14 kg AMR, 0.02 N m disturbance: "
     "m11, m22, Vc within 3 std in 97 % of 40 s logs and 100 % of 160 s logs, was 70-82 %)"
 )
-#: Two base parameters whose estimates correlate beyond this are called not separable.
-NOT_SEPARABLE = 0.98
-
-
-class LogLike(Protocol):
-    t: np.ndarray
-    eta: np.ndarray
-    tau: np.ndarray
-    source: str
-    notes: tuple[str, ...]
-
-
-@dataclass(frozen=True)
-class History:
-    """Decimated per-sample record: t (m,) s, theta (m, 2, p) projected estimate, e (m, 2) rad/s prior
-    prediction error, lambda_min (m,) smallest eigenvalue of Gamma."""
-
-    t: np.ndarray
-    theta: np.ndarray
-    e: np.ndarray
-    lambda_min: np.ndarray
-
-
-@dataclass(frozen=True)
-class IdentificationResult:
-    """Everything identify found, immutable.  ``to_dict`` gives the JSON form."""
-
-    source: str
-    form: RegressorForm
-    settings: ObserverSettings
-    start_source: str
-    theta: np.ndarray  # (2, p) projected onto the box
-    theta_unconstrained: np.ndarray  # (2, p)
-    theta_cov: np.ndarray  # (2p, 2p)
-    parameters: dict[str, tuple[float, float]]  # name -> (value, std), REPORTED names, SI units
-    theta0_cov: np.ndarray  # (8, 8)
-    history: History
-    diagnostics: dict[str, Any]
-    warnings: tuple[str, ...]
-    log_info: dict[str, Any]
-    nominal: dict[str, float] | None = None
-    reference: dict[str, float] | None = None
-    units: dict[str, str] = field(default_factory=lambda: dict(THETA0_UNITS))
-    payload: dict[str, tuple[float, float]] | None = None  # mass kg, x m, y m, inertia kg m^2: (value, std)
-    method: str = "observer"
-    estimate: BaseEstimate | None = None  # the reported theta0 and its covariance (undetermined: NaN/inf)
-    validation: dict[str, Any] | None = None  # fit on another log (wmrid.model.predict.validation_fit)
-
-    def theta_dict(self) -> dict[str, Any]:
-        names = self.form.theta_names()
-        std = np.sqrt(np.clip(np.diag(self.theta_cov), 0, None))
-        return {
-            "form": self.form.to_dict(),
-            "values": {n: float(v) for n, v in zip(names, self.theta.ravel(), strict=True)},
-            "std": {n: _finite_or_none(s) for n, s in zip(names, std, strict=True)},
-            "unconstrained": {n: float(v) for n, v in zip(names, self.theta_unconstrained.ravel(), strict=True)},
-            "start": {n: float(v) for n, v in zip(names, self.settings.theta_init.ravel(), strict=True)},
-            "box_min": {n: _finite_or_none(v) for n, v in zip(names, self.settings.theta_min.ravel(), strict=True)},
-            "box_max": {n: _finite_or_none(v) for n, v in zip(names, self.settings.theta_max.ravel(), strict=True)},
-        }
-
-    def to_dict(self) -> dict[str, Any]:
-        params = {
-            name: {"value": value, "std": _finite_or_none(std), "unit": self.units[name]}
-            for name, (value, std) in self.parameters.items()
-        }
-        out: dict[str, Any] = {
-            "source": self.source,
-            "method": self.method,
-            "effort_unit": self.log_info.get("effort_unit", "N m"),
-            "parameters": params,
-            "theta": self.theta_dict(),
-            "settings": {
-                "k": self.settings.k,
-                "alpha": self.settings.alpha,
-                "torque_hold": self.settings.torque_hold,
-                "control_rate": self.settings.control_rate,
-                "start": self.start_source,
-            },
-            "diagnostics": self.diagnostics,
-            "warnings": list(self.warnings),
-            "log": self.log_info,
-        }
-        out["history"] = history_dict(self)
-        if self.validation is not None:
-            out["validation"] = self.validation
-        if self.payload is not None:
-            from wmrid.model.payload import PAYLOAD_UNITS
-
-            out["payload"] = {
-                name: {"value": v, "std": _finite_or_none(e), "unit": PAYLOAD_UNITS[name]}
-                for name, (v, e) in self.payload.items()
-            }
-        if self.nominal is not None:
-            out["nominal"] = self.nominal
-        if self.reference is not None:
-            out["reference"] = self.reference
-        return out
-
-
-def history_dict(result: Any, max_points: int = JSON_HISTORY_POINTS) -> dict[str, Any]:
-    """A compact history for JSON: t, theta (p names -> list), e_r, e_l, lambda_min, at most ``max_points``."""
-    hist = result.history
-    idx = np.unique(np.linspace(0, len(hist.t) - 1, min(max_points, len(hist.t))).round().astype(int))
-    names = result.form.theta_names()
-    flat = hist.theta[idx].reshape(len(idx), -1)
-    return {
-        "t": hist.t[idx].tolist(),
-        "theta": {name: flat[:, j].tolist() for j, name in enumerate(names)},
-        "e_r": hist.e[idx, 0].tolist(),
-        "e_l": hist.e[idx, 1].tolist(),
-        "lambda_min": hist.lambda_min[idx].tolist(),
-    }
-
-
-def _finite_or_none(x: float) -> float | None:
-    return float(x) if math.isfinite(x) else None
 
 
 def caster_geometry(robot: Robot) -> tuple[float, ...]:
@@ -295,7 +174,7 @@ def identify(
     that much earlier (:func:`wmrid.estimators.idim.shifted`; the log is then read into memory); ``"auto"``: estimated
     from the log (:func:`wmrid.estimators.delay.estimate_delay`) and applied when significant; None: as stamped,
     unless the
-    reading notes say the efforts came from another topic than the speeds (:func:`wmrid.io.mcap.joints.split_topics`),
+    reading notes say the efforts came from another topic than the speeds (:func:`wmrid.core.wheel_log.split_topics`),
     then ``"auto"`` (with ``timing``).
     ``diagnostics["delay"]`` states what was estimated and applied.
     ``feedback`` : run the closed-loop check (:func:`wmrid.estimators.feedback.check`): when the observer's estimate
@@ -349,8 +228,8 @@ def identify(
     sv = survey(stream, stream.source, stream.effort_unit)  # one survey pass, whichever models are fitted
     timing_warnings: list[str] = []
     if timing and (delay is None or (delay == "auto" and not (delay_record or {}).get("applied_s"))):
+        from wmrid.core.wheel_log import split_topics
         from wmrid.estimators.delay import timing_check
-        from wmrid.io.mcap.joints import split_topics
 
         split = split_topics(stream.notes)
         if not split:
@@ -433,8 +312,12 @@ def identify(
 
 #: Friction models of :func:`identify`: ``auto`` lets the log decide between the other two.
 FRICTION_CHOICES = ("wheel", "wheel+caster", "auto")
+
+
 #: ``--friction auto`` takes the caster model when a Wald test puts its drag parameters off zero at this level.
 AUTO_P = 1e-3
+
+
 AUTO_NO_REVERSAL = (
     "neither wheel ever stops or reverses, so a caster's drag cannot be told from the wheels' Coulomb friction"
 )
@@ -501,7 +384,7 @@ def _identify(
             f"(the median step is {sv.median_step:.3g} s), and the estimator cannot bridge it; cut the log into its "
             "continuous parts and identify each"
         )
-    hold_warnings = _control_rate_check(control_rate, sv, source)
+    hold_warnings = control_rate_check(control_rate, sv, source)
     units = model.base_units(effort_unit)
     early_warnings = []
     if robot is not None and effort_unit != "N m":
@@ -580,7 +463,7 @@ def _identify(
     project_history_box(out.hist_theta, out.hist_gamma, lo, hi, h_theta)
     history = History(t=out.hist_t - sv.t_first, theta=h_theta, e=out.hist_e, lambda_min=lam_hist)
 
-    diagnostics, warnings = _diagnose(
+    diagnostics, warnings = diagnose(
         gamma, alpha, chosen, fit, parameters, theta_cov, sens, undetermined, lo, hi, units, theta, inflation
     )
     warnings = early_warnings + hold_warnings + sv.signal_warnings() + physics_warnings(parameters) + warnings
@@ -681,7 +564,7 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
     parameters = derived_with_std(np.asarray(est.theta0, dtype=float), cov, form.base_names)
     parameters = {name: parameters[name] for name in reported_names(form)}
     diagnostics = dict(result.diagnostics)
-    diagnostics["observer_parameters"] = {name: {"value": v, "std": _finite_or_none(e)} for name, (v, e) in
+    diagnostics["observer_parameters"] = {name: {"value": v, "std": finite_or_none(e)} for name, (v, e) in
                                           result.parameters.items()}  # fmt: skip
     diagnostics["method"] = {"name": est.method, "seconds": est.seconds, "dof": est.dof, **est.diagnostics}
     diagnostics["from_observer"] = [k for k in OBSERVER_DIAGNOSTICS if k in diagnostics]
@@ -713,7 +596,7 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
     undetermined = [j for j, name in enumerate(base_names) if not math.isfinite(parameters[name][1])]
     derived = derived_poorly_determined(parameters, base_names)
     poorly += derived
-    kept += [_poorly_text(name, parameters[name], units[name], est.method) for name in derived]
+    kept += [poorly_text(name, parameters[name], units[name], est.method) for name in derived]
     diagnostics["poorly_determined"] = poorly
     record_widening(diagnostics, inflation, parameters, [base_names[j] for j in undetermined])
     warnings = [*kept, *est.warnings, *physics_warnings(parameters)]
@@ -726,244 +609,3 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
         result, parameters=parameters, theta0_cov=cov, diagnostics=diagnostics, warnings=tuple(warnings),
         payload=payload_est, method=est.method, estimate=est,
     )  # fmt: skip
-
-
-def derived_poorly_determined(parameters: dict[str, tuple[float, float]], base_names: tuple[str, ...]) -> list[str]:
-    """The reported parameters not in ``base_names`` (M11, M12, M22, computed from m11, m12, m22) whose standard
-    error exceeds POORLY_DETERMINED of their magnitude, as for the base parameters: M = m^-1 inherits the
-    uncertainty of every m entry, so M12 can be poorly determined where m12 alone is not flagged, or the reverse.
-    An M computed from an undetermined m has an infinite std (undetermined itself) and is not listed here."""
-    out = []
-    for name, (value, std) in parameters.items():
-        if name in base_names or not math.isfinite(std):
-            continue
-        if std > POORLY_DETERMINED * abs(value):
-            out.append(name)
-    return out
-
-
-def _poorly_text(name: str, pair: tuple[float, float], unit: str, method: str | None = None) -> str:
-    value, std = pair
-    by = f" ({method})" if method else ""
-    return f"{name} is poorly determined by this log{by}: {value:.6g} +/- {std:.2g} {unit}"
-
-
-def physics_warnings(parameters: dict[str, tuple[float, float]]) -> list[str]:
-    """Warnings for base parameters that no physical robot has: M not positive definite, negative friction
-    (each beyond 3 standard errors, so that noise alone does not trigger it)."""
-    out = []
-    m11, m12, m22 = (parameters[n][0] for n in ("m11", "m12", "m22"))
-    if m11 <= 0 or m22 <= 0 or m11 * m22 - m12 * m12 <= 0:
-        out.append(
-            f"the identified inverse inertia [m11 m12; m12 m22] = [{m11:.4g} {m12:.4g}; {m12:.4g} {m22:.4g}] is not "
-            "positive definite, which no robot has: the log departs from the model or does not excite it"
-        )
-    for name in ("Fv1", "Fv2", "Fd1", "Fd2"):
-        value, std = parameters[name]
-        if value < 0 and math.isfinite(std) and value < -3 * std:
-            out.append(f"{name} = {value:.4g} is negative beyond 3 std ({std:.2g}): friction cannot push; check signs")
-    return out
-
-
-#: A base parameter is not determined by the log when the start value moves it by more than its
-#: standard error and by more than this fraction of its value.
-START_RELEVANT = 1e-4
-
-
-#: Most sub-steps --control-rate may split one log step into (a 1 kHz controller under a 0.1 Hz log).
-MAX_SUBSTEPS = 10_000
-
-
-def _control_rate_check(control_rate: float | None, sv: Any, source: str) -> list[str]:
-    """Refuse a control rate that splits a step into absurdly many sub-steps; warn when it changes nothing."""
-    if control_rate is None or not (math.isfinite(control_rate) and control_rate > 0):
-        return []  # None, or refused by ObserverSettings with its own message
-    most = round(sv.max_step * control_rate)
-    if most > MAX_SUBSTEPS:
-        raise UsageError(
-            f"{source}: --control-rate {control_rate:g} Hz splits the longest step ({sv.max_step:.3g} s) into "
-            f"{most:,} held sub-steps (at most {MAX_SUBSTEPS:,}); give the controller's rate in Hz"
-        )
-    rate = 1.0 / sv.median_step if sv.median_step > 0 else math.inf
-    if control_rate < 1.5 * rate:
-        return [
-            f"--control-rate {control_rate:g} Hz is not faster than the log ({rate:.6g} Hz): each step keeps one "
-            "held effort, as without the option"
-        ]
-    return []
-
-
-def torque_unexcited(gamma: np.ndarray, alpha: float) -> bool:
-    """True when a direction the log does not excite at all involves the torque columns.
-
-    Then the inverse inertia m (the coefficients of the torques) is not determined, and every other base
-    parameter, read through M = m^-1, is meaningless: e.g. constant torques alongside the constant
-    Coulomb column, or a log whose signals do not vary at all.
-    """
-    p = gamma.shape[0]
-    info = gamma - alpha * np.eye(p)
-    scale = np.sqrt(np.clip(np.diag(info), 0.0, None))
-    if scale[0] == 0 or scale[1] == 0:
-        return True
-    safe = np.where(scale > 0, scale, 1.0)
-    evals, evecs = np.linalg.eigh(info / np.outer(safe, safe))
-    null = evals < UNEXCITED * max(float(evals[-1]), 1e-300)
-    return bool(np.any(np.abs(evecs[:2, null]) > 0.1))
-
-
-def unexcited_parameters(gamma: np.ndarray, alpha: float, theta_u: np.ndarray, fit) -> list[int]:
-    """Base parameters that move along regressor directions the log does not excite at all.
-
-    Directions of the column-scaled data information Gamma - alpha I whose eigenvalue is below
-    UNEXCITED of the largest carry no information (columns that are constant together, e.g. a constant
-    torque and the Coulomb column).  Moving theta along such a direction by the size of theta itself
-    changes theta0 through the minimum-distance gain; a parameter that changes by more than
-    1e-6 of its value is not determined by the log.
-    """
-    p = gamma.shape[0]
-    info = gamma - alpha * np.eye(p)
-    scale = np.sqrt(np.clip(np.diag(info), 0.0, None))
-    safe = np.where(scale > 0, scale, 1.0)
-    evals, evecs = np.linalg.eigh(info / np.outer(safe, safe))
-    top = max(float(evals[-1]), 1e-300)
-    out: set[int] = set()
-    for idx in np.flatnonzero(evals < UNEXCITED * top):
-        u = evecs[:, idx] / safe
-        u = u / max(np.linalg.norm(u), 1e-300)
-        for row in range(2):
-            step = np.zeros((2, p))
-            step[row] = u * max(np.linalg.norm(theta_u[row]), 1e-300)
-            moved = np.abs(fit.gain @ step.ravel())
-            out |= {j for j in range(len(fit.theta0)) if moved[j] > 1e-6 * max(abs(fit.theta0[j]), 1e-300)}
-    return sorted(out)
-
-
-def start_sensitivity(
-    gamma: np.ndarray,
-    gamma_inv: np.ndarray,
-    alpha: float,
-    theta_init: np.ndarray,
-    theta_u: np.ndarray,
-    gain: np.ndarray,
-) -> np.ndarray:
-    """How much the start value sets each base parameter, (8,) in its units.
-
-    The final estimate is exactly Gamma^-1 (alpha theta_init + data) (see wmrid.estimators.observer), so its
-    sensitivity to the start is alpha Gamma^-1: about 0 along directions the log excites, the identity
-    along directions it does not (where Gamma's data part is 0 and the estimate IS the start).  A start
-    wrong by 100 % of max(|theta_init|, |theta_hat|) in each entry, independently, then moves theta0 by
-    the returned standard deviation (propagated with the minimum-distance gain (8, 2p)).
-    """
-    sens_theta = alpha * gamma_inv  # (p, p)
-    if not np.all(np.isfinite(sens_theta)):
-        return np.full(gain.shape[0], np.inf)
-    plausible = np.maximum(np.abs(theta_init), np.abs(theta_u))  # (2, p)
-    per_row = [sens_theta * plausible[i][None, :] for i in range(2)]  # (p, p) each: d theta_i / d start_i
-    big = np.zeros((2 * gamma.shape[0], 2 * gamma.shape[0]))
-    p = gamma.shape[0]
-    big[:p, :p] = per_row[0]
-    big[p:, p:] = per_row[1]
-    effect = gain @ big  # (8, 2p)
-    return np.sqrt(np.sum(effect**2, axis=1))
-
-
-def _diagnose(
-    gamma, alpha, form, fit, parameters, theta_cov, sens, undetermined, lo, hi, units, theta, inflation
-) -> tuple[dict[str, Any], list[str]]:
-    """Excitation and consistency diagnostics, and the warnings they call for.
-
-    Warnings follow from what the log does to the *answer*: a base parameter whose standard error
-    exceeds 10 % of its value is poorly determined, and the partner it cannot be told apart from
-    (correlation above 0.98) is named.  Eigen-directions of the column-scaled information matrix are
-    reported as diagnostics (they say which regressor columns the log does not separate).
-    """
-    warnings: list[str] = []
-    p = form.n_columns
-    names0 = form.base_names
-    info = gamma - alpha * np.eye(p)
-    scale = np.sqrt(np.clip(np.diag(info), 0, None))
-    safe = np.where(scale > 0, scale, 1.0)
-    evals, evecs = np.linalg.eigh(info / np.outer(safe, safe))
-    lam = np.linalg.eigvalsh(gamma)
-    cond = float(evals[-1] / evals[0]) if evals[0] > 0 else math.inf
-    columns = form.column_names
-    weakest = []
-    for idx in range(min(2, p)):
-        vec = evecs[:, idx]
-        involved = [columns[j] for j in np.argsort(-np.abs(vec)) if abs(vec[j]) > 0.3]
-        weakest.append(
-            {"relative_eigenvalue": float(evals[idx] / evals[-1]) if evals[-1] > 0 else 0.0, "columns": involved}
-        )
-    dead = [columns[j] for j in range(p) if scale[j] == 0]
-    if dead:
-        warnings.append(
-            f"the log never excites regressor column(s) {', '.join(dead)}: their parameters stay at the start value"
-        )
-    std0 = np.sqrt(np.clip(np.diag(fit.cov), 0, None))
-    safe0 = np.where(std0 > 0, std0, 1.0)
-    corr = fit.cov / np.outer(safe0, safe0)
-    poorly = []
-    pairs = []
-    for idx, name in enumerate(names0):
-        value, std = parameters[name]
-        if idx in undetermined or (math.isfinite(std) and std <= POORLY_DETERMINED * abs(value)):
-            continue
-        poorly.append(name)
-        partners = [
-            f"{names0[j]} (correlation {corr[idx, j]:+.3f})"
-            for j in np.argsort(-np.abs(corr[idx]))
-            if j != idx and abs(corr[idx, j]) > NOT_SEPARABLE
-        ]
-        pairs += [
-            [name, names0[j], float(corr[idx, j])]
-            for j in range(len(names0))
-            if j != idx and abs(corr[idx, j]) > NOT_SEPARABLE
-        ]
-        why = f"; it is not separable from {', '.join(partners)}" if partners else ""
-        warnings.append(f"{name} is poorly determined by this log: {value:.6g} +/- {std:.2g} {units[name]}{why}")
-    derived = derived_poorly_determined(parameters, names0)
-    poorly += derived
-    warnings += [_poorly_text(name, parameters[name], units[name]) for name in derived]
-    at_bound = [
-        n
-        for n, v, a, b in zip(form.theta_names(), theta.ravel(), lo.ravel(), hi.ravel(), strict=True)
-        if v <= a or v >= b
-    ]
-    if at_bound:
-        warnings.append(f"estimate held on the box boundary for {', '.join(at_bound)}")
-    if undetermined:
-        names = ", ".join(names0[j] for j in undetermined)
-        warnings.insert(
-            0,
-            f"this log does not determine {names}: the start value, not the data, sets them (alpha = {alpha:g}), "
-            "so their std is null; record a longer log that varies speeds and turning more, or lower --alpha",
-        )
-    rel_mismatch = inflation["relative_misfit"]
-    # A significant misfit (p < 1e-3) is reported unless it is below 1e-5 of max |theta|: the
-    # discretisation error of a noise-free log (about 1e-7) is significant but irrelevant.
-    if fit.dof > 0 and fit.p_value < MISMATCH_P and rel_mismatch > MISMATCH_RELEVANT:
-        scale = inflation["scale"]
-        warnings.append(
-            f"the intermediate parameters are not consistent with one set of base parameters "
-            f"(Hotelling T2 {fit.chi2:.3g} on {fit.dof} directions, p = {fit.p_value:.2g}; largest misfit "
-            f"{100 * rel_mismatch:.2g} % of max |theta|): the log departs from the model (slip, caster drag, other "
-            f"friction, a wrong sign or unit, or the wrong --torque-hold); every std is scaled by {scale:.3g} to "
-            "cover it, and the estimates are only as good as the model"
-        )
-    diagnostics = {
-        "lambda_min_gamma": float(lam[0]),
-        "lambda_max_gamma": float(lam[-1]),
-        "condition_number_scaled": cond,
-        "weakest_directions": weakest,
-        "poorly_determined": poorly,
-        "undetermined": [names0[j] for j in undetermined],
-        "not_separable": pairs,
-        "at_box_boundary": at_bound,
-        "start_sensitivity": {name: float(v) for name, v in zip(names0, sens, strict=True)},
-        "structural_mismatch": {
-            "statistic": fit.chi2, "dof": fit.dof, "p_value": fit.p_value, "relative_misfit": rel_mismatch,
-            "meaning": "Hotelling T2 of the misfit of theta to the model's form (Eqs. 23-24) on dof directions; "
-            "small p_value = theta not of the model's form",
-        },
-    }  # fmt: skip
-    return diagnostics, warnings

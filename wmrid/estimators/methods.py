@@ -16,7 +16,8 @@ import numpy as np
 
 from wmrid.core.errors import UsageError, WmridError
 from wmrid.estimators.estimate import BaseEstimate
-from wmrid.estimators.identify import IdentificationResult, with_estimate
+from wmrid.estimators.identify import with_estimate
+from wmrid.estimators.result import IdentificationResult
 from wmrid.model.robot import Robot
 
 METHODS = ("observer", "idim", "iv", "rls", "oe")

@@ -98,7 +98,7 @@ from wmrid.model.predict import MAX_STEP, caster_array, fit_percent, predictor_t
 #: Default length (s) of the multiple-shooting segments (see the module docstring).
 SHOOTING_SECONDS = 0.5
 #: A direction of the column-normalised information J^T J whose eigenvalue is below this fraction of the
-#: largest is not determined by the log (as :data:`wmrid.estimators.identify.UNEXCITED`).
+#: largest is not determined by the log (as :data:`wmrid.estimators.diagnostics.UNEXCITED`).
 UNEXCITED = 1e-12
 #: Relative step of the central differences: eps^(1/3), balancing truncation (~step^2) against round-off.
 FD_STEP = float(np.finfo(float).eps ** (1.0 / 3.0))

@@ -27,7 +27,7 @@ from wmrid.model.base_params import derived_with_std
 from wmrid.model.robot import Robot
 
 if TYPE_CHECKING:
-    from wmrid.estimators.identify import IdentificationResult
+    from wmrid.estimators.result import IdentificationResult
 
 
 def with_covariance(
@@ -39,8 +39,8 @@ def with_covariance(
     ``["flagged"]``, and ``note`` (what widened them) to the meaning of the widening mark
     (``diagnostics["uncertainty"]["model_error"]["meaning"]``) when any grew.  The one place a term (timing, hold,
     closed loop) widens a result.  ``mark``: the growth that marks a parameter (default INFLATION_MARK)."""
-    from wmrid.estimators.identify import reported_names
     from wmrid.estimators.model_error import INFLATION_MARK
+    from wmrid.estimators.result import reported_names
 
     mark = INFLATION_MARK if mark is None else mark
     est = result.estimate

@@ -21,7 +21,7 @@ Two regressor forms:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -145,6 +145,16 @@ class RegressorForm:
             out["caster_geometry"] = {"r": self.geometry[0], "b": self.geometry[1], "casters": [
                 list(self.geometry[2 + 2 * k : 4 + 2 * k]) for k in range(self.n_casters)]}  # fmt: skip
         return out
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> RegressorForm:
+        """The form recorded by :meth:`to_dict` (an identify result's ``theta.form``), friction model included."""
+        caster = data.get("friction") == "wheel+caster"
+        geometry: tuple[float, ...] = ()
+        if caster and data.get("caster_geometry"):
+            g = data["caster_geometry"]
+            geometry = (g["r"], g["b"], *[v for xy in g["casters"] for v in xy])
+        return cls(data["kind"], tuple(data.get("signs", (1, 1))), caster=caster, geometry=geometry)
 
 
 def choose_form(eta: np.ndarray) -> RegressorForm:

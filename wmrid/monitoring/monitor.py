@@ -59,14 +59,13 @@ again) is found too.  When every change is found, each segment is identified on 
 change to the next change or the end of the log (time re-based to 0): those are the parameters reported.
 
 Caster drag.  A model identified with ``--friction wheel+caster`` (its JSON ``theta.form``, read by
-:func:`wmrid.reporting.report.form_from_json`) adds its caster columns to Phi: column j of ``form.caster_map`` adds
-theta0[param_j] col_j [1, pattern_j] to the wheel torques (:func:`wmrid.model.dynamics.friction_torque`), smoothed as
-the
-other speed columns; p's drag entries are theta0's (as in :func:`wmrid.estimators.idim.rows_from_features`), with their
-reported standard errors.  The test then has len(p) degrees of freedom, S / len(p) ~ F(len(p), dof).  After a
-change the segment is identified with ``friction="wheel+caster"`` and the model's caster positions (its
-``form.geometry``) when it has them, else with the two-term drag (Cv, Cw) (where the wheels never reverse, with
-wheel friction only; a warning says so).
+:meth:`wmrid.model.dynamics.RegressorForm.from_dict`) adds its caster columns to Phi: column j of ``form.caster_map``
+adds theta0[param_j] col_j [1, pattern_j] to the wheel torques (:func:`wmrid.model.dynamics.friction_torque`),
+smoothed as the other speed columns; p's drag entries are theta0's (as in
+:func:`wmrid.estimators.idim.rows_from_features`), with their reported standard errors.  The test then has len(p)
+degrees of freedom, S / len(p) ~ F(len(p), dof).  After a change the segment is identified with
+``friction="wheel+caster"`` and the model's caster positions (its ``form.geometry``) when it has them, else with the
+two-term drag (Cv, Cw) (where the wheels never reverse, with wheel friction only; a warning says so).
 
 Times: ``t`` of a change is s from the log's first sample; ``t_alarm`` is the time of the last log sample
 the alarming test used (its window's end plus the smoothing's half-width, 0.25 s), when a monitor
@@ -93,7 +92,6 @@ import numpy as np
 from wmrid.core.errors import NotIdentifiableError, UsageError
 from wmrid.model import dynamics as model
 from wmrid.model.dynamics import THETA0_NAMES, RegressorForm
-from wmrid.reporting.report import form_from_json
 
 #: Names of the columns of the inverse-dynamics regressor Phi (the parameters p it multiplies).
 REGRESSOR_NAMES = ("M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
@@ -268,12 +266,12 @@ def model_from_dict(data: Any, source: str) -> MonitoredModel:
 
 
 def _form_of(form_d: Any, source: str, hint: str) -> RegressorForm | None:
-    """The caster model of a result's ``theta.form`` (:func:`wmrid.reporting.report.form_from_json`), None for wheel
-    friction (or no form recorded)."""
+    """The caster model of a result's ``theta.form`` (:meth:`wmrid.model.dynamics.RegressorForm.from_dict`), None for
+    wheel friction (or no form recorded)."""
     if not isinstance(form_d, dict) or form_d.get("friction") != "wheel+caster":
         return None
     try:
-        form = form_from_json(form_d)
+        form = RegressorForm.from_dict(form_d)
     except (KeyError, TypeError, ValueError, IndexError) as err:
         raise UsageError(
             f"--model {source}: its caster-drag form (theta.form) is malformed ({err.__class__.__name__}: {err}); "

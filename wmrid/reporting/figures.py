@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-    from wmrid.estimators.identify import IdentificationResult
+    from wmrid.estimators.result import IdentificationResult
 
 #: The most points any plotted line carries.
 MAX_POINTS = 4000

@@ -6,8 +6,8 @@ import math
 from typing import Any
 
 from wmrid.core.atomic import to_json_text
-from wmrid.estimators.identify import IdentificationResult
 from wmrid.estimators.model_error import std_mark
+from wmrid.estimators.result import IdentificationResult
 
 
 def to_json(obj: Any) -> str:

@@ -24,13 +24,12 @@ import html
 import math
 import re
 from dataclasses import dataclass, field
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 
-from wmrid.core.errors import LogFormatError
 from wmrid.estimators.model_error import std_mark
+from wmrid.estimators.result import from_dict
 from wmrid.model import dynamics as model
 from wmrid.model.dynamics import RegressorForm
 
@@ -55,42 +54,6 @@ class Report:
     figures: dict[str, bytes] = field(default_factory=dict)  # name -> SVG bytes
     figures_png: dict[str, bytes] = field(default_factory=dict)
     result: dict[str, Any] = field(default_factory=dict)
-
-
-def form_from_json(form_d: dict[str, Any]) -> RegressorForm:
-    """The regressor form recorded in an identify result's ``theta.form`` (friction model included)."""
-    caster = form_d.get("friction") == "wheel+caster"
-    geometry: tuple[float, ...] = ()
-    if caster and form_d.get("caster_geometry"):
-        g = form_d["caster_geometry"]
-        geometry = (g["r"], g["b"], *[v for xy in g["casters"] for v in xy])
-    return RegressorForm(form_d["kind"], tuple(form_d.get("signs", (1, 1))), caster=caster, geometry=geometry)
-
-
-def result_from_json(data: dict[str, Any], source: str) -> Any:
-    """A result-like object (what the figures need) from an ``identify --format json`` document."""
-    if not isinstance(data, dict) or "parameters" not in data or "theta" not in data:
-        raise LogFormatError(
-            f"{source}: not an identify result (no 'parameters'/'theta'); give a log or the output of "
-            "`wmrid identify --format json`"
-        )
-    form = form_from_json(data["theta"]["form"])
-    names = form.theta_names()
-    p = form.n_columns
-    start = np.array([data["theta"]["start"][n] for n in names]).reshape(2, p)
-    history = None
-    if "history" in data:
-        h = data["history"]
-        theta = np.column_stack([h["theta"][n] for n in names]).reshape(-1, 2, p)
-        history = SimpleNamespace(
-            t=np.asarray(h["t"]), theta=theta, e=np.column_stack([h["e_r"], h["e_l"]]),
-            lambda_min=np.asarray(h["lambda_min"]),
-        )  # fmt: skip
-    settings = SimpleNamespace(theta_init=start, k=data["settings"]["k"], alpha=data["settings"]["alpha"])
-    return SimpleNamespace(
-        source=data.get("source", source), form=form, settings=settings, history=history,
-        log_info=data.get("log", {}), data=data,
-    )  # fmt: skip
 
 
 def torque_residual(log: Any, theta0: np.ndarray, form: RegressorForm | None = None) -> dict[str, Any]:
@@ -132,7 +95,7 @@ def build_report(
     figures: bool = True,
 ) -> Report:
     """A report from an identify JSON document ``data`` (and the live ``result``/``log`` when available)."""
-    rl = result if result is not None else result_from_json(data, data.get("source", "?"))
+    rl = result if result is not None else from_dict(data, data.get("source") or "?")
     form = rl.form
     names = form.theta_names()
     nominal = data.get("nominal")

@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import LogFormatError, UsageError
+from wmrid.core.wheel_log import SPLIT_NOTE
 from wmrid.io.mcap.reader import JOINT_STATE, JointSeries, JointSummary, JsonSeries, McapContents, bucket_range
 from wmrid.io.signals import SignalOptions, convert, position_to_rad, speed_from_position
 
@@ -382,16 +383,6 @@ def _no_overlap(source: str, vel_topic: str, t_vel: np.ndarray, eff_topic: str, 
         f"{source}: {vel_topic} ({_span(t_vel)}) and {eff_topic} ({_span(t_eff)}) do not overlap in time; "
         "check that both topics come from the same run (or try --time-source log)"
     )
-
-
-#: The words of the note that says the effort came from another topic than the speeds (:func:`split_topics`).
-SPLIT_NOTE = "put on the speed stamps"
-
-
-def split_topics(notes: tuple[str, ...] | list[str]) -> bool:
-    """Whether a log's reading notes say its efforts and speeds came from two topics (two clocks, two drivers), the
-    case where ``identify`` estimates their delay by default (:func:`wmrid.estimators.delay.apply_delay`)."""
-    return any(SPLIT_NOTE in note for note in notes)
 
 
 def _align_note(rule: str, vel_topic: str, vel_step: float, eff_topic: str, period: float, dropped: int) -> str:

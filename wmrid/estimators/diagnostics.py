@@ -1,0 +1,269 @@
+"""What the log does to the answer: excitation, start-value sensitivity, physically impossible values, and the
+warnings they call for (:func:`diagnose`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from wmrid.core.errors import UsageError
+from wmrid.estimators.model_error import (
+    MISMATCH_P,
+    MISMATCH_RELEVANT,
+)
+
+#: A direction of the column-scaled information whose eigenvalue is below this fraction of the largest is
+#: not excited at all (double precision resolves about 1e-16; real logs' weakest directions are ~1e-8).
+UNEXCITED = 1e-12
+
+
+#: A base parameter whose standard error exceeds this fraction of its magnitude is called poorly determined.
+POORLY_DETERMINED = 0.1
+
+
+#: A base parameter is not determined by the log when the start value sets it (start_sensitivity) more
+#: than the data's standard error and more than this fraction of its value.
+START_RELEVANT = 1e-4
+
+
+#: Two base parameters whose estimates correlate beyond this are called not separable.
+NOT_SEPARABLE = 0.98
+
+
+def derived_poorly_determined(parameters: dict[str, tuple[float, float]], base_names: tuple[str, ...]) -> list[str]:
+    """The reported parameters not in ``base_names`` (M11, M12, M22, computed from m11, m12, m22) whose standard
+    error exceeds POORLY_DETERMINED of their magnitude, as for the base parameters: M = m^-1 inherits the
+    uncertainty of every m entry, so M12 can be poorly determined where m12 alone is not flagged, or the reverse.
+    An M computed from an undetermined m has an infinite std (undetermined itself) and is not listed here."""
+    out = []
+    for name, (value, std) in parameters.items():
+        if name in base_names or not math.isfinite(std):
+            continue
+        if std > POORLY_DETERMINED * abs(value):
+            out.append(name)
+    return out
+
+
+def poorly_text(name: str, pair: tuple[float, float], unit: str, method: str | None = None) -> str:
+    value, std = pair
+    by = f" ({method})" if method else ""
+    return f"{name} is poorly determined by this log{by}: {value:.6g} +/- {std:.2g} {unit}"
+
+
+def physics_warnings(parameters: dict[str, tuple[float, float]]) -> list[str]:
+    """Warnings for base parameters that no physical robot has: M not positive definite, negative friction
+    (each beyond 3 standard errors, so that noise alone does not trigger it)."""
+    out = []
+    m11, m12, m22 = (parameters[n][0] for n in ("m11", "m12", "m22"))
+    if m11 <= 0 or m22 <= 0 or m11 * m22 - m12 * m12 <= 0:
+        out.append(
+            f"the identified inverse inertia [m11 m12; m12 m22] = [{m11:.4g} {m12:.4g}; {m12:.4g} {m22:.4g}] is not "
+            "positive definite, which no robot has: the log departs from the model or does not excite it"
+        )
+    for name in ("Fv1", "Fv2", "Fd1", "Fd2"):
+        value, std = parameters[name]
+        if value < 0 and math.isfinite(std) and value < -3 * std:
+            out.append(f"{name} = {value:.4g} is negative beyond 3 std ({std:.2g}): friction cannot push; check signs")
+    return out
+
+
+#: Most sub-steps --control-rate may split one log step into (a 1 kHz controller under a 0.1 Hz log).
+MAX_SUBSTEPS = 10_000
+
+
+def control_rate_check(control_rate: float | None, sv: Any, source: str) -> list[str]:
+    """Refuse a control rate that splits a step into absurdly many sub-steps; warn when it changes nothing."""
+    if control_rate is None or not (math.isfinite(control_rate) and control_rate > 0):
+        return []  # None, or refused by ObserverSettings with its own message
+    most = round(sv.max_step * control_rate)
+    if most > MAX_SUBSTEPS:
+        raise UsageError(
+            f"{source}: --control-rate {control_rate:g} Hz splits the longest step ({sv.max_step:.3g} s) into "
+            f"{most:,} held sub-steps (at most {MAX_SUBSTEPS:,}); give the controller's rate in Hz"
+        )
+    rate = 1.0 / sv.median_step if sv.median_step > 0 else math.inf
+    if control_rate < 1.5 * rate:
+        return [
+            f"--control-rate {control_rate:g} Hz is not faster than the log ({rate:.6g} Hz): each step keeps one "
+            "held effort, as without the option"
+        ]
+    return []
+
+
+def torque_unexcited(gamma: np.ndarray, alpha: float) -> bool:
+    """True when a direction the log does not excite at all involves the torque columns.
+
+    Then the inverse inertia m (the coefficients of the torques) is not determined, and every other base
+    parameter, read through M = m^-1, is meaningless: e.g. constant torques alongside the constant
+    Coulomb column, or a log whose signals do not vary at all.
+    """
+    p = gamma.shape[0]
+    info = gamma - alpha * np.eye(p)
+    scale = np.sqrt(np.clip(np.diag(info), 0.0, None))
+    if scale[0] == 0 or scale[1] == 0:
+        return True
+    safe = np.where(scale > 0, scale, 1.0)
+    evals, evecs = np.linalg.eigh(info / np.outer(safe, safe))
+    null = evals < UNEXCITED * max(float(evals[-1]), 1e-300)
+    return bool(np.any(np.abs(evecs[:2, null]) > 0.1))
+
+
+def unexcited_parameters(gamma: np.ndarray, alpha: float, theta_u: np.ndarray, fit) -> list[int]:
+    """Base parameters that move along regressor directions the log does not excite at all.
+
+    Directions of the column-scaled data information Gamma - alpha I whose eigenvalue is below
+    UNEXCITED of the largest carry no information (columns that are constant together, e.g. a constant
+    torque and the Coulomb column).  Moving theta along such a direction by the size of theta itself
+    changes theta0 through the minimum-distance gain; a parameter that changes by more than
+    1e-6 of its value is not determined by the log.
+    """
+    p = gamma.shape[0]
+    info = gamma - alpha * np.eye(p)
+    scale = np.sqrt(np.clip(np.diag(info), 0.0, None))
+    safe = np.where(scale > 0, scale, 1.0)
+    evals, evecs = np.linalg.eigh(info / np.outer(safe, safe))
+    top = max(float(evals[-1]), 1e-300)
+    out: set[int] = set()
+    for idx in np.flatnonzero(evals < UNEXCITED * top):
+        u = evecs[:, idx] / safe
+        u = u / max(np.linalg.norm(u), 1e-300)
+        for row in range(2):
+            step = np.zeros((2, p))
+            step[row] = u * max(np.linalg.norm(theta_u[row]), 1e-300)
+            moved = np.abs(fit.gain @ step.ravel())
+            out |= {j for j in range(len(fit.theta0)) if moved[j] > 1e-6 * max(abs(fit.theta0[j]), 1e-300)}
+    return sorted(out)
+
+
+def start_sensitivity(
+    gamma: np.ndarray,
+    gamma_inv: np.ndarray,
+    alpha: float,
+    theta_init: np.ndarray,
+    theta_u: np.ndarray,
+    gain: np.ndarray,
+) -> np.ndarray:
+    """How much the start value sets each base parameter, (8,) in its units.
+
+    The final estimate is exactly Gamma^-1 (alpha theta_init + data) (see wmrid.estimators.observer), so its
+    sensitivity to the start is alpha Gamma^-1: about 0 along directions the log excites, the identity
+    along directions it does not (where Gamma's data part is 0 and the estimate IS the start).  A start
+    wrong by 100 % of max(|theta_init|, |theta_hat|) in each entry, independently, then moves theta0 by
+    the returned standard deviation (propagated with the minimum-distance gain (8, 2p)).
+    """
+    sens_theta = alpha * gamma_inv  # (p, p)
+    if not np.all(np.isfinite(sens_theta)):
+        return np.full(gain.shape[0], np.inf)
+    plausible = np.maximum(np.abs(theta_init), np.abs(theta_u))  # (2, p)
+    per_row = [sens_theta * plausible[i][None, :] for i in range(2)]  # (p, p) each: d theta_i / d start_i
+    big = np.zeros((2 * gamma.shape[0], 2 * gamma.shape[0]))
+    p = gamma.shape[0]
+    big[:p, :p] = per_row[0]
+    big[p:, p:] = per_row[1]
+    effect = gain @ big  # (8, 2p)
+    return np.sqrt(np.sum(effect**2, axis=1))
+
+
+def diagnose(
+    gamma, alpha, form, fit, parameters, theta_cov, sens, undetermined, lo, hi, units, theta, inflation
+) -> tuple[dict[str, Any], list[str]]:
+    """Excitation and consistency diagnostics, and the warnings they call for.
+
+    Warnings follow from what the log does to the *answer*: a base parameter whose standard error
+    exceeds 10 % of its value is poorly determined, and the partner it cannot be told apart from
+    (correlation above 0.98) is named.  Eigen-directions of the column-scaled information matrix are
+    reported as diagnostics (they say which regressor columns the log does not separate).
+    """
+    warnings: list[str] = []
+    p = form.n_columns
+    names0 = form.base_names
+    info = gamma - alpha * np.eye(p)
+    scale = np.sqrt(np.clip(np.diag(info), 0, None))
+    safe = np.where(scale > 0, scale, 1.0)
+    evals, evecs = np.linalg.eigh(info / np.outer(safe, safe))
+    lam = np.linalg.eigvalsh(gamma)
+    cond = float(evals[-1] / evals[0]) if evals[0] > 0 else math.inf
+    columns = form.column_names
+    weakest = []
+    for idx in range(min(2, p)):
+        vec = evecs[:, idx]
+        involved = [columns[j] for j in np.argsort(-np.abs(vec)) if abs(vec[j]) > 0.3]
+        weakest.append(
+            {"relative_eigenvalue": float(evals[idx] / evals[-1]) if evals[-1] > 0 else 0.0, "columns": involved}
+        )
+    dead = [columns[j] for j in range(p) if scale[j] == 0]
+    if dead:
+        warnings.append(
+            f"the log never excites regressor column(s) {', '.join(dead)}: their parameters stay at the start value"
+        )
+    std0 = np.sqrt(np.clip(np.diag(fit.cov), 0, None))
+    safe0 = np.where(std0 > 0, std0, 1.0)
+    corr = fit.cov / np.outer(safe0, safe0)
+    poorly = []
+    pairs = []
+    for idx, name in enumerate(names0):
+        value, std = parameters[name]
+        if idx in undetermined or (math.isfinite(std) and std <= POORLY_DETERMINED * abs(value)):
+            continue
+        poorly.append(name)
+        partners = [
+            f"{names0[j]} (correlation {corr[idx, j]:+.3f})"
+            for j in np.argsort(-np.abs(corr[idx]))
+            if j != idx and abs(corr[idx, j]) > NOT_SEPARABLE
+        ]
+        pairs += [
+            [name, names0[j], float(corr[idx, j])]
+            for j in range(len(names0))
+            if j != idx and abs(corr[idx, j]) > NOT_SEPARABLE
+        ]
+        why = f"; it is not separable from {', '.join(partners)}" if partners else ""
+        warnings.append(f"{name} is poorly determined by this log: {value:.6g} +/- {std:.2g} {units[name]}{why}")
+    derived = derived_poorly_determined(parameters, names0)
+    poorly += derived
+    warnings += [poorly_text(name, parameters[name], units[name]) for name in derived]
+    at_bound = [
+        n
+        for n, v, a, b in zip(form.theta_names(), theta.ravel(), lo.ravel(), hi.ravel(), strict=True)
+        if v <= a or v >= b
+    ]
+    if at_bound:
+        warnings.append(f"estimate held on the box boundary for {', '.join(at_bound)}")
+    if undetermined:
+        names = ", ".join(names0[j] for j in undetermined)
+        warnings.insert(
+            0,
+            f"this log does not determine {names}: the start value, not the data, sets them (alpha = {alpha:g}), "
+            "so their std is null; record a longer log that varies speeds and turning more, or lower --alpha",
+        )
+    rel_mismatch = inflation["relative_misfit"]
+    # A significant misfit (p < 1e-3) is reported unless it is below 1e-5 of max |theta|: the
+    # discretisation error of a noise-free log (about 1e-7) is significant but irrelevant.
+    if fit.dof > 0 and fit.p_value < MISMATCH_P and rel_mismatch > MISMATCH_RELEVANT:
+        scale = inflation["scale"]
+        warnings.append(
+            f"the intermediate parameters are not consistent with one set of base parameters "
+            f"(Hotelling T2 {fit.chi2:.3g} on {fit.dof} directions, p = {fit.p_value:.2g}; largest misfit "
+            f"{100 * rel_mismatch:.2g} % of max |theta|): the log departs from the model (slip, caster drag, other "
+            f"friction, a wrong sign or unit, or the wrong --torque-hold); every std is scaled by {scale:.3g} to "
+            "cover it, and the estimates are only as good as the model"
+        )
+    diagnostics = {
+        "lambda_min_gamma": float(lam[0]),
+        "lambda_max_gamma": float(lam[-1]),
+        "condition_number_scaled": cond,
+        "weakest_directions": weakest,
+        "poorly_determined": poorly,
+        "undetermined": [names0[j] for j in undetermined],
+        "not_separable": pairs,
+        "at_box_boundary": at_bound,
+        "start_sensitivity": {name: float(v) for name, v in zip(names0, sens, strict=True)},
+        "structural_mismatch": {
+            "statistic": fit.chi2, "dof": fit.dof, "p_value": fit.p_value, "relative_misfit": rel_mismatch,
+            "meaning": "Hotelling T2 of the misfit of theta to the model's form (Eqs. 23-24) on dof directions; "
+            "small p_value = theta not of the model's form",
+        },
+    }  # fmt: skip
+    return diagnostics, warnings

@@ -1,0 +1,294 @@
+"""The identification result every method returns (:class:`IdentificationResult`) and its JSON form.
+
+``to_dict`` gives the document ``identify --format json`` prints, with a ``schema_version``; :func:`from_dict` reads
+one back (``report``, ``monitor`` and ``compare`` read saved results through it), so that
+``from_dict(r.to_dict()).to_dict() == r.to_dict()``.  The JSON keeps the history decimated to at most
+``JSON_HISTORY_POINTS`` samples and the intermediate parameters' standard errors, not their covariance: a result
+read back carries those, and the base parameters' full covariance under ``estimate``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from wmrid.core.errors import LogFormatError
+from wmrid.estimators.estimate import BaseEstimate
+from wmrid.estimators.observer import ObserverSettings
+from wmrid.model.dynamics import THETA0_UNITS, RegressorForm
+
+#: Reported parameter names, in report order.
+REPORTED = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
+
+
+def reported_names(form: RegressorForm) -> tuple[str, ...]:
+    """The reported names for ``form``: REPORTED, then its caster-drag parameters."""
+    return REPORTED + form.base_names[8:]
+
+
+#: Version of the JSON document :meth:`IdentificationResult.to_dict` writes.  1: the first with a version (the
+#: documents before it are read as version 1 too: it only added ``schema_version`` and ``estimate``).  A document
+#: of a newer version is refused by :func:`from_dict` with a message, not misread.
+SCHEMA_VERSION = 1
+
+#: Points of the history kept in a JSON result (enough for the report's figures).
+JSON_HISTORY_POINTS = 300
+
+
+class LogLike(Protocol):
+    t: np.ndarray
+    eta: np.ndarray
+    tau: np.ndarray
+    source: str
+    notes: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class History:
+    """Decimated per-sample record: t (m,) s, theta (m, 2, p) projected estimate, e (m, 2) rad/s prior
+    prediction error, lambda_min (m,) smallest eigenvalue of Gamma."""
+
+    t: np.ndarray
+    theta: np.ndarray
+    e: np.ndarray
+    lambda_min: np.ndarray
+
+
+@dataclass(frozen=True)
+class IdentificationResult:
+    """Everything identify found, immutable.  ``to_dict`` gives the JSON form."""
+
+    source: str
+    form: RegressorForm
+    settings: ObserverSettings
+    start_source: str
+    theta: np.ndarray  # (2, p) projected onto the box
+    theta_unconstrained: np.ndarray  # (2, p)
+    theta_cov: np.ndarray  # (2p, 2p)
+    parameters: dict[str, tuple[float, float]]  # name -> (value, std), REPORTED names, SI units
+    theta0_cov: np.ndarray  # (8, 8)
+    history: History
+    diagnostics: dict[str, Any]
+    warnings: tuple[str, ...]
+    log_info: dict[str, Any]
+    nominal: dict[str, float] | None = None
+    reference: dict[str, float] | None = None
+    units: dict[str, str] = field(default_factory=lambda: dict(THETA0_UNITS))
+    payload: dict[str, tuple[float, float]] | None = None  # mass kg, x m, y m, inertia kg m^2: (value, std)
+    method: str = "observer"
+    estimate: BaseEstimate | None = None  # the reported theta0 and its covariance (undetermined: NaN/inf)
+    validation: dict[str, Any] | None = None  # fit on another log (wmrid.model.predict.validation_fit)
+
+    def theta_dict(self) -> dict[str, Any]:
+        names = self.form.theta_names()
+        std = np.sqrt(np.clip(np.diag(self.theta_cov), 0, None))
+        return {
+            "form": self.form.to_dict(),
+            "values": {n: float(v) for n, v in zip(names, self.theta.ravel(), strict=True)},
+            "std": {n: finite_or_none(s) for n, s in zip(names, std, strict=True)},
+            "unconstrained": {n: float(v) for n, v in zip(names, self.theta_unconstrained.ravel(), strict=True)},
+            "start": {n: float(v) for n, v in zip(names, self.settings.theta_init.ravel(), strict=True)},
+            "box_min": {n: finite_or_none(v) for n, v in zip(names, self.settings.theta_min.ravel(), strict=True)},
+            "box_max": {n: finite_or_none(v) for n, v in zip(names, self.settings.theta_max.ravel(), strict=True)},
+        }
+
+    def to_dict(self) -> dict[str, Any]:
+        params = {
+            name: {"value": value, "std": finite_or_none(std), "unit": self.units[name]}
+            for name, (value, std) in self.parameters.items()
+        }
+        out: dict[str, Any] = {
+            "schema_version": SCHEMA_VERSION,
+            "source": self.source,
+            "method": self.method,
+            "effort_unit": self.log_info.get("effort_unit", "N m"),
+            "parameters": params,
+            "theta": self.theta_dict(),
+            "settings": {
+                "k": self.settings.k,
+                "alpha": self.settings.alpha,
+                "torque_hold": self.settings.torque_hold,
+                "control_rate": self.settings.control_rate,
+                "start": self.start_source,
+            },
+            "diagnostics": self.diagnostics,
+            "warnings": list(self.warnings),
+            "log": self.log_info,
+        }
+        if self.estimate is not None:
+            out["estimate"] = estimate_dict(self.estimate, self.form.base_names)
+        out["history"] = history_dict(self)
+        if self.validation is not None:
+            out["validation"] = self.validation
+        if self.payload is not None:
+            from wmrid.model.payload import PAYLOAD_UNITS
+
+            out["payload"] = {
+                name: {"value": v, "std": finite_or_none(e), "unit": PAYLOAD_UNITS[name]}
+                for name, (v, e) in self.payload.items()
+            }
+        if self.nominal is not None:
+            out["nominal"] = self.nominal
+        if self.reference is not None:
+            out["reference"] = self.reference
+        return out
+
+
+def history_dict(result: Any, max_points: int = JSON_HISTORY_POINTS) -> dict[str, Any]:
+    """A compact history for JSON: t, theta (p names -> list), e_r, e_l, lambda_min, at most ``max_points``."""
+    hist = result.history
+    idx = np.unique(np.linspace(0, len(hist.t) - 1, min(max_points, len(hist.t))).round().astype(int))
+    names = result.form.theta_names()
+    flat = hist.theta[idx].reshape(len(idx), -1)
+    return {
+        "t": hist.t[idx].tolist(),
+        "theta": {name: flat[:, j].tolist() for j, name in enumerate(names)},
+        "e_r": hist.e[idx, 0].tolist(),
+        "e_l": hist.e[idx, 1].tolist(),
+        "lambda_min": hist.lambda_min[idx].tolist(),
+    }
+
+
+def finite_or_none(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def estimate_dict(est: BaseEstimate, names: tuple[str, ...]) -> dict[str, Any]:
+    """The method-neutral estimate as JSON: theta0 in ``names`` order with its full covariance (null where the log
+    does not determine a parameter), the method and its degrees of freedom."""
+    return {
+        "method": est.method,
+        "names": list(names[: len(est.theta0)]),
+        "theta0": [finite_or_none(v) for v in est.theta0],
+        "covariance": [[finite_or_none(v) for v in row] for row in est.cov],
+        "dof": est.dof,
+    }
+
+
+def _floats(values: Any) -> np.ndarray:
+    """A float array from JSON numbers, null read as NaN."""
+    return np.array([math.nan if v is None else float(v) for v in values], dtype=float)
+
+
+def _box(values: dict[str, Any], names: tuple[str, ...], p: int, missing: float) -> np.ndarray:
+    return np.array([missing if values[n] is None else float(values[n]) for n in names], dtype=float).reshape(2, p)
+
+
+def from_dict(data: Any, source: str = "result") -> IdentificationResult:
+    """The result a document of :meth:`IdentificationResult.to_dict` describes (``identify --format json``).
+
+    Exact for everything the document holds: ``from_dict(d).to_dict() == d`` for a document ``to_dict`` wrote.
+    What it does not hold comes back as follows: the intermediate parameters' covariance as its diagonal (their
+    std), the history as the decimated one the document keeps (empty when it has none), the base parameters'
+    covariance from ``estimate`` (documents before schema 1: the diagonal of the reported std).
+    Raises :class:`LogFormatError` naming ``source`` when ``data`` is not a complete result, or one of a newer
+    schema.
+    """
+    if not isinstance(data, dict) or not isinstance(data.get("parameters"), dict) or "theta" not in data:
+        raise LogFormatError(
+            f"{source}: not an identify result (no 'parameters'/'theta'); give a log or the output of "
+            "`wmrid identify --format json`"
+        )
+    version = data.get("schema_version", 1)
+    if not isinstance(version, int) or version > SCHEMA_VERSION:
+        raise LogFormatError(
+            f"{source}: an identify result of schema version {version!r}, newer than this wmrid reads "
+            f"({SCHEMA_VERSION}); upgrade wmrid"
+        )
+    try:
+        return _from_dict(data, source)
+    except LogFormatError:
+        raise
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as err:
+        what = f"no {err.args[0]!r}" if isinstance(err, KeyError) and err.args else " ".join(str(err).split())
+        raise LogFormatError(
+            f"{source}: not a complete identify result ({what}); give a log, or the unedited output of "
+            "`wmrid identify LOG --format json`"
+        ) from err
+
+
+def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
+    theta_d = data["theta"]
+    form = RegressorForm.from_dict(theta_d["form"])
+    names = form.theta_names()
+    p = form.n_columns
+    settings_d = data["settings"]
+    settings = ObserverSettings(
+        form=form,
+        theta_init=_box(theta_d["start"], names, p, math.nan),
+        theta_min=_box(theta_d.get("box_min", dict.fromkeys(names)), names, p, -math.inf),
+        theta_max=_box(theta_d.get("box_max", dict.fromkeys(names)), names, p, math.inf),
+        k=float(settings_d["k"]),
+        alpha=float(settings_d["alpha"]),
+        torque_hold=settings_d.get("torque_hold", "zoh"),
+        control_rate=settings_d.get("control_rate"),
+    )
+    theta = _box(theta_d["values"], names, p, math.nan)
+    unconstrained = _box(theta_d.get("unconstrained", theta_d["values"]), names, p, math.nan)
+    theta_std = _box(theta_d.get("std", dict.fromkeys(names)), names, p, math.inf).ravel()
+    params_d = data["parameters"]
+    parameters = {
+        name: (math.nan if e["value"] is None else float(e["value"]), math.inf if e["std"] is None else float(e["std"]))
+        for name, e in params_d.items()
+    }
+    units = dict(THETA0_UNITS)
+    units.update({name: e["unit"] for name, e in params_d.items() if "unit" in e})
+    estimate = None
+    est_d = data.get("estimate")
+    base = form.base_names
+    if est_d is not None:
+        cov = np.array([_floats(row) for row in est_d["covariance"]], dtype=float).reshape(len(est_d["theta0"]), -1)
+        cov[~np.isfinite(cov)] = math.nan
+        undetermined = np.isnan(np.diag(cov))
+        cov[np.diag_indices_from(cov)] = np.where(undetermined, math.inf, np.diag(cov))
+        estimate = BaseEstimate(method=est_d["method"], theta0=_floats(est_d["theta0"]), cov=cov, dof=est_d.get("dof"))
+        theta0_cov = cov
+    else:
+        std = np.array([parameters.get(n, (math.nan, math.inf))[1] for n in base])
+        theta0_cov = np.diag(std**2)
+    hist_d = data.get("history")
+    if hist_d:
+        t = _floats(hist_d["t"])
+        history = History(
+            t=t,
+            theta=np.column_stack([_floats(hist_d["theta"][n]) for n in names]).reshape(len(t), 2, p),
+            e=np.column_stack([_floats(hist_d["e_r"]), _floats(hist_d["e_l"])]),
+            lambda_min=_floats(hist_d["lambda_min"]),
+        )
+    else:
+        history = History(t=np.zeros(0), theta=np.zeros((0, 2, p)), e=np.zeros((0, 2)), lambda_min=np.zeros(0))
+    payload_d = data.get("payload")
+    payload = None
+    if payload_d is not None:
+        payload = {
+            n: (
+                math.nan if e["value"] is None else float(e["value"]),
+                math.inf if e["std"] is None else float(e["std"]),
+            )
+            for n, e in payload_d.items()
+        }
+    return IdentificationResult(
+        source=data.get("source") or source,
+        form=form,
+        settings=settings,
+        start_source=settings_d.get("start", ""),
+        theta=theta,
+        theta_unconstrained=unconstrained,
+        theta_cov=np.diag(theta_std**2),
+        parameters=parameters,
+        theta0_cov=theta0_cov,
+        history=history,
+        diagnostics=data.get("diagnostics", {}),
+        warnings=tuple(data.get("warnings", ())),
+        log_info=data.get("log", {}),
+        nominal=data.get("nominal"),
+        reference=data.get("reference"),
+        units=units,
+        payload=payload,
+        method=data.get("method", "observer"),
+        estimate=estimate,
+        validation=data.get("validation"),
+    )
