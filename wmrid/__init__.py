@@ -1,4 +1,16 @@
-"""wmrid: identify the dynamic parameters of differential-drive wheeled mobile robots from their logs."""
+"""wmrid: identify the dynamic parameters of differential-drive wheeled mobile robots from their logs.
+
+The public API, loaded on first use so that ``import wmrid`` stays fast::
+
+    import wmrid
+    log = wmrid.read_log("sample_logs/paper_sinusoid.csv")
+    result = wmrid.identify(log, wmrid.load_robot("paper"))
+    value, std = result.parameters["m11"]
+
+Layers, lowest first: :mod:`wmrid.core`, :mod:`wmrid.model`, then :mod:`wmrid.io`, :mod:`wmrid.estimators` and
+:mod:`wmrid.sim` side by side, :mod:`wmrid.monitoring`, :mod:`wmrid.reporting`, :mod:`wmrid.api` and the command line
+:mod:`wmrid.cli` on top.
+"""
 
 import os as _os
 
@@ -63,3 +75,44 @@ def _under_an_address_space_cap() -> None:
 
 _numba_cache_fallback()
 _under_an_address_space_cap()
+
+
+#: Public name -> module that defines it (imported on first access: numpy, numba and pandas load only when used).
+_EXPORTS = {
+    "LogOptions": "wmrid.api.inputs",
+    "load_robot": "wmrid.api.inputs",
+    "open_log": "wmrid.api.inputs",
+    "read_log": "wmrid.api.inputs",
+    "identify": "wmrid.api.identification",
+    "compare": "wmrid.api.identification",
+    "simulate": "wmrid.api.simulation",
+    "monitor": "wmrid.api.monitoring",
+    "report": "wmrid.api.reporting",
+    "IdentificationResult": "wmrid.estimators.result",
+    "BaseEstimate": "wmrid.estimators.estimate",
+    "WheelLog": "wmrid.core.wheel_log",
+    "LogStream": "wmrid.core.wheel_log",
+    "Robot": "wmrid.model.robot",
+    "MonitorResult": "wmrid.monitoring.monitor",
+    "MonitorSettings": "wmrid.monitoring.monitor",
+    "Report": "wmrid.reporting.report",
+    "SimulationRun": "wmrid.api.simulation",
+    "WmridError": "wmrid.core.errors",
+}
+
+__all__ = ["__version__", *sorted(_EXPORTS)]
+
+
+def __getattr__(name: str):
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'wmrid' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # later accesses skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

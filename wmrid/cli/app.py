@@ -7,7 +7,6 @@ answers at once.  :func:`main` is the one place that maps errors to exit codes a
 from __future__ import annotations
 
 import contextlib
-import math
 import os
 import signal
 import sys
@@ -18,7 +17,7 @@ from typing import Annotated, Any
 import typer
 
 from wmrid import __version__
-from wmrid.core.errors import ExitStatus, LogFormatError, ReaderGone, UsageError, WmridError
+from wmrid.core.errors import ExitStatus, LogFormatError, ReaderGone, UsageError, WmridError, option_style
 
 app = typer.Typer(
     name="wmrid",
@@ -194,57 +193,25 @@ def _read_wheel_log(
     time_unit: str,
     robot_obj,
     *,
-    topic,
-    velocity_topic,
-    effort_topic,
-    right_joint,
-    left_joint,
-    time_source,
-    align,
-    velocity_from,
-    speed_unit,
-    wheel_radius,
-    effort,
-    effort_unit,
-    torque_constant,
-    gear_ratio,
-    efficiency,
-    mirror_left,
-    flip_effort=False,
     data: bytes | None = None,
     whole: bool = True,
+    **log_options,
 ):
     """Read LOG with the log-input options (shared by the commands that read logs; Enum values accepted).
 
     whole : the log in memory (a WheelLog); else a LogStream, read piece by piece when iterated.
     """
-    from wmrid.io.columns import parse_column_mapping
-    from wmrid.io.logs import open_log
-    from wmrid.io.mcap.joints import TopicSelection
-    from wmrid.io.signals import SignalOptions
+    from wmrid.api.inputs import open_log
 
-    if robot_obj is not None:
-        if wheel_radius is None and speed_unit == "m/s":
-            wheel_radius = robot_obj.nominal.r
-        if effort == "current" and torque_constant is None:
-            torque_constant = robot_obj.torque_constant
-        if effort == "current" and efficiency is None:
-            efficiency = robot_obj.efficiency
-    selection = TopicSelection(
-        topic=topic, velocity_topic=velocity_topic, effort_topic=effort_topic, right_joint=right_joint,
-        left_joint=left_joint, time_source=time_source, align=align, velocity_from=velocity_from,
-    )  # fmt: skip
-    signals = SignalOptions(
-        speed_unit=speed_unit, wheel_radius=wheel_radius, effort=effort, effort_unit=effort_unit,
-        torque_constant=torque_constant, gear_ratio=gear_ratio, efficiency=1.0 if efficiency is None else efficiency,
-        mirror_left=mirror_left, flip_effort=flip_effort,
-    )  # fmt: skip
-    mapping = parse_column_mapping(columns) if columns else None
-    k_r = robot_obj.nominal.k_r if robot_obj is not None else None
-    stream = open_log(
-        log, columns=mapping, time_unit=time_unit, selection=selection, signals=signals, gear_ratio=k_r, data=data
-    )
+    stream = open_log(log, _log_opts(columns, time_unit, log_options), robot=robot_obj, data=data)
     return stream.read() if whole else stream
+
+
+def _log_opts(columns: str | None, time_unit: str, log_options: dict):
+    """The :class:`wmrid.api.inputs.LogOptions` of a command's log-input flags."""
+    from wmrid.api.inputs import LogOptions
+
+    return LogOptions(columns=columns, time_unit=time_unit, **log_options)
 
 
 #: The log-input options every log-reading command takes (names of its parameters).
@@ -268,20 +235,9 @@ RotorInertiaOpt = Annotated[
 
 def _load_robot(spec: str, gear_ratio: float | None, rotor_inertia: float | None, wheel_radius: float | None = None):
     """A robot from a built-in name, a TOML file, or a URDF (which needs the gear ratio from --gear-ratio)."""
-    from wmrid.model.robot import load_robot
+    from wmrid.api.inputs import load_robot
 
-    if spec.lower().endswith(".urdf"):
-        from wmrid.model.urdf import load_robot_urdf
-
-        if gear_ratio is None:
-            raise UsageError(
-                f"--robot {spec}: a URDF does not give the gear ratio; add --gear-ratio KR (and --rotor-inertia "
-                "when the URDF has no rotor links)"
-            )
-        return load_robot_urdf(spec, gear_ratio=gear_ratio, rotor_inertia=rotor_inertia, wheel_radius=wheel_radius)
-    if rotor_inertia is not None:
-        raise UsageError("--rotor-inertia applies to a URDF robot only; a robot TOML file gives I_r itself")
-    return load_robot(spec)
+    return load_robot(spec, gear_ratio=gear_ratio, rotor_inertia=rotor_inertia, wheel_radius=wheel_radius)
 
 
 def _version(value: bool) -> None:
@@ -342,16 +298,6 @@ DelayOpt = Annotated[
 ]
 
 
-def _delay_value(text: str | None) -> float | str | None:
-    """--delay: None, "auto" or seconds."""
-    if text is None or text.strip().lower() == "auto":
-        return None if text is None else "auto"
-    try:
-        return float(text)
-    except ValueError:
-        raise UsageError(f"--delay must be auto or a number of seconds, got {text!r}") from None
-
-
 ControlRateOpt = Annotated[
     float | None,
     typer.Option(
@@ -382,60 +328,6 @@ FrictionOpt = Annotated[
 ]
 
 
-def _friction_for(friction, methods: tuple[str, ...], validate, robot) -> str:
-    """The friction model to identify with.
-
-    ``auto`` falls back to ``wheel`` where caster drag is not modelled: another method, or output error and
-    --validate's predictor without the casters' positions (they simulate the drag, which needs its direction).
-    An explicit ``wheel+caster`` there is refused (:func:`_check_friction`).
-    """
-    _check_friction(friction, methods, validate, robot)
-    if friction == FrictionChoice.auto and (
-        any(m not in CASTER_METHODS for m in methods) or (_simulates(methods, validate) and not _positions(robot))
-    ):
-        return "wheel"
-    return friction.value
-
-
-#: Methods that model caster drag (--friction wheel+caster); output error only with the casters' positions.
-CASTER_METHODS = ("observer", "idim", "iv", "rls", "oe")
-
-
-def _simulates(methods: tuple[str, ...], validate) -> bool:
-    """Whether the model is simulated (output error, --validate), which needs the casters' positions for the drag."""
-    return "oe" in methods or validate is not None
-
-
-def _positions(robot) -> bool:
-    return robot is not None and bool(robot.casters)
-
-
-def _check_friction(friction, methods: tuple[str, ...], validate, robot=None) -> None:
-    """Caster drag is modelled by some methods only so far: refuse it where it would be ignored or cannot be
-    simulated."""
-    if friction != FrictionChoice.wheel_caster:
-        return
-    _refuse_unmodelled("--friction wheel+caster", methods, None, CASTER_METHODS)
-    if _simulates(methods, validate) and not _positions(robot):
-        raise UsageError(
-            "--friction wheel+caster with --method oe or --validate needs the casters' positions to simulate their "
-            "drag: give --robot with [[caster]] tables, or drop the option"
-        )
-
-
-def _refuse_unmodelled(option: str, methods: tuple[str, ...], validate, supported: tuple[str, ...]) -> None:
-    """UsageError when ``option`` would be ignored: by a method outside ``supported``, or by --validate's predictor."""
-    others = [m for m in methods if m not in supported]
-    if others:
-        names = supported[0] if len(supported) == 1 else f"{', '.join(supported[:-1])} and {supported[-1]}"
-        raise UsageError(
-            f"{option} is modelled by the {names} only, not by {', '.join(others)} yet; drop it or "
-            f"use --method {supported[0]}"
-        )
-    if validate is not None:
-        raise UsageError(f"{option} is not modelled by the --validate predictor yet; validate without it")
-
-
 ValidateOpt = Annotated[
     str | None,
     typer.Option(
@@ -445,44 +337,6 @@ ValidateOpt = Annotated[
         "identified model, and report the fit % per wheel.",
     ),
 ]
-
-
-def _check_control_rate(control_rate, methods: tuple[str, ...], validate) -> None:
-    """--control-rate is modelled by the observer, IDIM and RLS (output error and the validation predictor hold
-    each logged effort over the whole step): refuse it where it would be ignored."""
-    if control_rate is not None:
-        _refuse_unmodelled("--control-rate", methods, validate, ("observer", "idim", "iv", "rls"))
-
-
-def _method_options(cutoff, weighted, forgetting, torque_hold):
-    from wmrid.estimators.methods import MethodOptions
-
-    return MethodOptions(cutoff_hz=cutoff, weighted=weighted, forgetting=forgetting, torque_hold=torque_hold.value)
-
-
-def _validate(result, other: str, columns, time_unit: str, robot_obj, log_options: dict, torque_hold: str):
-    """``result`` with ``validation``: the fit of its model on log ``other`` (read with the same options)."""
-    from dataclasses import replace
-
-    from wmrid.model.predict import validation_fit
-
-    other_log = _read_wheel_log(other, columns, time_unit, robot_obj, **log_options)
-    unit = result.log_info.get("effort_unit", "N m")
-    if other_log.effort_unit != unit:
-        raise UsageError(
-            f"--validate {other}: its effort is in {other_log.effort_unit}, the identified model's in {unit}; "
-            "give both logs in the same units"
-        )
-    theta0 = result.estimate.theta0
-    form = result.form if len(theta0) == result.form.n_base else None
-    fit = validation_fit(other_log.t, other_log.eta, other_log.tau, theta0, torque_hold, form=form)
-    validation = {
-        "log": other_log.source, "samples": len(other_log),
-        "fit_percent": {w: fit[w] if math.isfinite(fit[w]) else None for w in ("eta_r", "eta_l")},
-        "predictor": fit["predictor"],
-        "definition": "fit = 100 (1 - ||eta - eta_hat|| / ||eta - mean(eta)||) per wheel over the whole log",
-    }  # fmt: skip
-    return replace(result, validation=validation)
 
 
 @app.command()
@@ -563,45 +417,22 @@ def identify(
     friction: FrictionOpt = FrictionChoice.auto,
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
+    from wmrid.api.identification import identify as run_identify
     from wmrid.core.atomic import write_json
-    from wmrid.estimators.identify import identify as run_identify
     from wmrid.reporting.render import print_identification, to_json
 
-    options = _method_options(cutoff, weighted, forgetting, torque_hold)
-    _check_control_rate(control_rate, (method.value,), validate)
-    if log == "-" and validate == "-":
-        raise UsageError("LOG and --validate cannot both be standard input; give one of them as a file")
     robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
-    friction_model = _friction_for(friction, (method.value,), validate, robot_obj)
-    log_options = _log_options(locals())
-    wheel_log = _read_wheel_log(log, columns, time_unit.value, robot_obj, **log_options, whole=False)
-    if method != MethodChoice.observer:
-        wheel_log = wheel_log.read()  # the classical methods filter and simulate the whole log
     progress_cb, finish = _progress("identify")
     try:
         result = run_identify(
-            wheel_log,
-            robot_obj,
-            form=form.value,
-            k=k,
-            alpha=alpha,
-            box_width=box_width,
-            torque_hold=torque_hold.value,
+            log, robot_obj, method=method.value, validate=validate,
+            options=_log_opts(columns, time_unit.value, _log_options(locals())), form=form.value, k=k, alpha=alpha,
+            box_width=box_width, torque_hold=torque_hold.value, payload=payload, control_rate=control_rate,
+            delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted, forgetting=forgetting,
             progress=progress_cb,
-            payload=payload,
-            control_rate=control_rate,
-            friction=friction_model,
-            delay=_delay_value(delay),
-            feedback=method == MethodChoice.observer,  # another method is reported as asked
-        )
+        )  # fmt: skip
     finally:
         finish()
-    if method != MethodChoice.observer:
-        from wmrid.estimators.methods import run
-
-        result = run(method.value, wheel_log, result, options, robot_obj)
-    if validate is not None:
-        result = _validate(result, validate, columns, time_unit.value, robot_obj, log_options, torque_hold.value)
     payload = result.to_dict()
     if output is not None:
         write_json(str(output), payload, force=force)
@@ -733,25 +564,16 @@ def report(
         except ValueError as err:
             raise UsageError(f"{source.name}: starts like JSON but is not valid JSON ({err})") from err
     else:
-        from wmrid.estimators.identify import identify as run_identify
+        from wmrid.api.identification import identify as run_identify
 
         robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
-        options = _method_options(cutoff, weighted, forgetting, torque_hold)
-        _check_control_rate(control_rate, (method.value,), validate)
-        friction_model = _friction_for(friction, (method.value,), validate, robot_obj)
-        log_options = _log_options(locals())
-        log = _read_wheel_log(input_, columns, time_unit.value, robot_obj, **log_options, data=source.data)
+        log_opts = _log_opts(columns, time_unit.value, _log_options(locals()))
+        log = _read_wheel_log(input_, columns, time_unit.value, robot_obj, **_log_options(locals()), data=source.data)
         result = run_identify(
-            log, robot_obj, form=form.value, k=k, alpha=alpha, torque_hold=torque_hold.value, payload=payload,
-            control_rate=control_rate, friction=friction_model, delay=_delay_value(delay),
-            feedback=method == MethodChoice.observer,
+            log, robot_obj, method=method.value, validate=validate, options=log_opts, form=form.value, k=k,
+            alpha=alpha, torque_hold=torque_hold.value, payload=payload, control_rate=control_rate, delay=delay,
+            friction=friction.value, cutoff=cutoff, weighted=weighted, forgetting=forgetting,
         )  # fmt: skip
-        if method != MethodChoice.observer:
-            from wmrid.estimators.methods import run
-
-            result = run(method.value, log, result, options, robot_obj)
-        if validate is not None:
-            result = _validate(result, validate, columns, time_unit.value, robot_obj, log_options, torque_hold.value)
         data = result.to_dict()
     figures = suffix in (".html", ".htm", ".md")
     if result is None:  # a saved result: whatever it lacks or holds malformed is named, with the file
@@ -852,37 +674,18 @@ def compare(
 ) -> None:
     """Run every identification method on LOG: estimates, standard errors, errors against --truth, fit on
     --validate OTHER, run time.  Every method identifies the same friction model (--friction)."""
+    from wmrid.api.identification import compare as run_compare
     from wmrid.core.atomic import write_json
-    from wmrid.estimators.identify import identify as run_identify
-    from wmrid.estimators.methods import check_method
-    from wmrid.estimators.methods import compare as run_compare
     from wmrid.reporting.render import print_comparison, to_json
 
-    names = tuple(check_method(m.strip()) for m in methods.split(",") if m.strip())
-    if not names:
-        raise UsageError("--methods names no method; give e.g. observer,idim")
-    options = _method_options(cutoff, weighted, forgetting, torque_hold)
-    _check_control_rate(control_rate, names, validate)
-    if log == "-" and validate == "-":
-        raise UsageError("LOG and --validate cannot both be standard input; give one of them as a file")
     truth_params = _load_truth(truth) if truth is not None else None
     robot_obj = _load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
-    friction_model = _friction_for(friction, names, validate, robot_obj)
-    log_options = _log_options(locals())
-    wheel_log = _read_wheel_log(log, columns, time_unit.value, robot_obj, **log_options)
-    other = None
-    if validate is not None:
-        other = _read_wheel_log(validate, columns, time_unit.value, robot_obj, **log_options)
-        if other.effort_unit != wheel_log.effort_unit:
-            raise UsageError(
-                f"--validate {validate}: its effort is in {other.effort_unit}, LOG's in {wheel_log.effort_unit}; "
-                "give both logs in the same units"
-            )
-    observer = run_identify(
-        wheel_log, robot_obj, torque_hold=torque_hold.value, control_rate=control_rate, friction=friction_model,
-        delay=_delay_value(delay), feedback=False,  # compare shows every method's own estimate
+    data = run_compare(
+        log, robot_obj, methods=methods.split(","), validate=validate, truth=truth_params,
+        options=_log_opts(columns, time_unit.value, _log_options(locals())), torque_hold=torque_hold.value,
+        control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted,
+        forgetting=forgetting,
     )  # fmt: skip
-    data = run_compare(wheel_log, observer, options, names, other=other, truth=truth_params)
     if output is not None:
         write_json(str(output), data, force=force)
     if _on_stdout(output):
@@ -1286,7 +1089,8 @@ def main(argv: list[str] | None = None) -> None:
 
             if not {"--help", "-h", "--version"} & set(args):
                 memory_budget()  # a malformed WMRID_MEMORY_BUDGET is a usage error whatever the command reads
-            rv = app(args=args, prog_name="wmrid", standalone_mode=False)
+            with option_style("flag"):  # library messages name options as the flags the user typed
+                rv = app(args=args, prog_name="wmrid", standalone_mode=False)
             finish_output()
         finally:
             clear_inputs()

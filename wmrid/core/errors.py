@@ -6,6 +6,9 @@ in one place (``wmrid.cli.app``) and prints the message as one line on stderr.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+from collections.abc import Iterator
 from enum import IntEnum
 
 
@@ -53,3 +56,33 @@ class OutputWriteError(WmridError):
 class ReaderGone(Exception):
     """The reader of standard output (``| head``) closed the pipe: not an error, the run ends with exit 0.  Not an
     OSError, so that Click does not turn it into exit 1 on its way out."""
+
+
+# --------------------------------------------------------------------------------------------------
+# Options named as the caller knows them
+
+#: How :func:`option` names an option: "python" (a keyword argument, the library's default) or "flag" (the command
+#: line's, set by :func:`wmrid.cli.app.main` while a command runs).
+_OPTION_STYLE: contextvars.ContextVar[str] = contextvars.ContextVar("wmrid_option_style", default="python")
+
+#: Flags whose name is not the keyword argument's with dashes.
+FLAG_NAMES = {"output_format": "--format", "log": "LOG", "input_": "INPUT", "k": "--k"}
+
+
+def option(name: str, value: object = ...) -> str:
+    """An option as the caller gave it, for a message: ``friction='wheel+caster'`` to a library caller,
+    ``--friction wheel+caster`` on the command line (:func:`option_style`)."""
+    if _OPTION_STYLE.get() == "flag":
+        flag = FLAG_NAMES.get(name, "--" + name.replace("_", "-"))
+        return flag if value is ... else f"{flag} {value}"
+    return name if value is ... else f"{name}={value!r}"
+
+
+@contextlib.contextmanager
+def option_style(style: str) -> Iterator[None]:
+    """Name options in messages as ``style`` ("python" or "flag") inside the block."""
+    token = _OPTION_STYLE.set(style)
+    try:
+        yield
+    finally:
+        _OPTION_STYLE.reset(token)

@@ -1,0 +1,266 @@
+"""Identification as one call: :func:`identify` (one method, optionally validated on another log) and
+:func:`compare` (every method on the same log).
+
+Both take a log as a path (read with :class:`~wmrid.api.inputs.LogOptions`), a :class:`WheelLog` or a
+:class:`LogStream`, and a robot as a built-in name, a file or a :class:`Robot`.  ``wmrid identify`` and ``wmrid
+compare`` are these functions with their flags translated, so the two commands cannot drift apart.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable
+from dataclasses import replace
+from typing import Any
+
+from wmrid.api.inputs import LogOptions, load_robot, open_log
+from wmrid.core.errors import UsageError, option
+from wmrid.core.wheel_log import LogStream, WheelLog
+from wmrid.estimators.result import IdentificationResult
+from wmrid.model.robot import Robot
+
+__all__ = ["CASTER_METHODS", "compare", "identify", "with_validation"]
+
+#: Methods that model caster drag (``friction="wheel+caster"``); output error only with the casters' positions.
+CASTER_METHODS = ("observer", "idim", "iv", "rls", "oe")
+#: Methods that model a controller faster than the log (``control_rate``).
+CONTROL_RATE_METHODS = ("observer", "idim", "iv", "rls")
+FRICTION_CHOICES = ("auto", "wheel", "wheel+caster")
+
+LogInput = str | os.PathLike[str] | WheelLog | LogStream
+
+
+def _robot(robot: str | os.PathLike[str] | Robot | None) -> Robot | None:
+    return None if robot is None else load_robot(robot)
+
+
+def _is_path(log: Any) -> bool:
+    return isinstance(log, (str, os.PathLike))
+
+
+def _log(log: LogInput, options: LogOptions | None, robot: Robot | None, whole: bool) -> WheelLog | LogStream:
+    """The log as a stream (``whole`` False) or in memory."""
+    if _is_path(log):
+        stream = open_log(log, options, robot=robot)
+        return stream.read() if whole else stream
+    if whole and isinstance(log, LogStream):
+        return log.read()
+    return log
+
+
+def _refuse_unmodelled(name: str, value: Any, methods: tuple[str, ...], validating: bool, supported: tuple[str, ...]):
+    """UsageError when an option would be ignored: by a method outside ``supported``, or by the validation
+    predictor."""
+    others = [m for m in methods if m not in supported]
+    given = option(name, value) if name != "control_rate" else option(name)
+    if others:
+        names = supported[0] if len(supported) == 1 else f"{', '.join(supported[:-1])} and {supported[-1]}"
+        raise UsageError(
+            f"{given} is modelled by the {names} only, not by {', '.join(others)} yet; drop it or "
+            f"use {option('method', supported[0])}"
+        )
+    if validating:
+        raise UsageError(f"{given} is not modelled by the {option('validate')} predictor yet; validate without it")
+
+
+def _simulates(methods: tuple[str, ...], validating: bool) -> bool:
+    """Whether the model is simulated (output error, validation), which needs the casters' positions for the drag."""
+    return "oe" in methods or validating
+
+
+def friction_model(friction: str, methods: tuple[str, ...], validating: bool, robot: Robot | None) -> str:
+    """The friction model to identify with.
+
+    ``auto`` falls back to ``wheel`` where caster drag is not modelled: another method, or output error and
+    validation without the casters' positions (they simulate the drag, which needs its direction).  An explicit
+    ``wheel+caster`` there is refused.
+    """
+    if friction not in FRICTION_CHOICES:
+        raise UsageError(f"{option('friction')} must be one of {', '.join(FRICTION_CHOICES)}, got {friction!r}")
+    positions = robot is not None and bool(robot.casters)
+    if friction == "wheel+caster":
+        _refuse_unmodelled("friction", friction, methods, False, CASTER_METHODS)
+        if _simulates(methods, validating) and not positions:
+            raise UsageError(
+                f"{option('friction', 'wheel+caster')} with {option('method', 'oe')} or {option('validate')} needs "
+                f"the casters' positions to simulate their drag: give {option('robot')} with [[caster]] tables, or "
+                "drop the option"
+            )
+    if friction == "auto" and (
+        any(m not in CASTER_METHODS for m in methods) or (_simulates(methods, validating) and not positions)
+    ):
+        return "wheel"
+    return friction
+
+
+def check_control_rate(control_rate: float | None, methods: tuple[str, ...], validating: bool) -> None:
+    """A controller rate is modelled by the observer, IDIM and RLS (output error and the validation predictor hold
+    each logged effort over the whole step): refuse it where it would be ignored."""
+    if control_rate is not None:
+        _refuse_unmodelled("control_rate", control_rate, methods, validating, CONTROL_RATE_METHODS)
+
+
+def delay_value(delay: float | str | None) -> float | str | None:
+    """``delay``: None (as stamped, or estimated for split topics), "auto" or seconds (a number or its text)."""
+    if delay is None or (isinstance(delay, (int, float)) and not isinstance(delay, bool)):
+        return delay
+    text = str(delay)
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        return float(text)
+    except ValueError:
+        raise UsageError(f"{option('delay')} must be auto or a number of seconds, got {text!r}") from None
+
+
+def _method_options(cutoff: float | None, weighted: bool, forgetting: float, torque_hold: str) -> Any:
+    from wmrid.estimators.methods import MethodOptions
+
+    return MethodOptions(cutoff_hz=cutoff, weighted=weighted, forgetting=forgetting, torque_hold=torque_hold)
+
+
+def _no_two_stdin(log: Any, validate_log: Any, what: str) -> None:
+    if _is_path(log) and _is_path(validate_log) and os.fspath(log) == "-" and os.fspath(validate_log) == "-":
+        raise UsageError(f"{what} and {option('validate')} cannot both be standard input; give one of them as a file")
+
+
+def with_validation(
+    result: IdentificationResult,
+    other: LogInput,
+    options: LogOptions | None = None,
+    *,
+    robot: Robot | None = None,
+    torque_hold: str = "zoh",
+) -> IdentificationResult:
+    """``result`` with ``validation``: the fit % per wheel of its model's simulated wheel speeds on log ``other``
+    (read with the same ``options``)."""
+    from wmrid.model.predict import validation_fit
+
+    other_log = _log(other, options, robot, whole=True)
+    unit = result.log_info.get("effort_unit", "N m")
+    if other_log.effort_unit != unit:
+        raise UsageError(
+            f"{option('validate', getattr(other_log, 'source', other))}: its effort is in {other_log.effort_unit}, "
+            f"the identified model's in {unit}; give both logs in the same units"
+        )
+    theta0 = result.estimate.theta0
+    form = result.form if len(theta0) == result.form.n_base else None
+    fit = validation_fit(other_log.t, other_log.eta, other_log.tau, theta0, torque_hold, form=form)
+    validation = {
+        "log": other_log.source, "samples": len(other_log),
+        "fit_percent": {w: fit[w] if math.isfinite(fit[w]) else None for w in ("eta_r", "eta_l")},
+        "predictor": fit["predictor"],
+        "definition": "fit = 100 (1 - ||eta - eta_hat|| / ||eta - mean(eta)||) per wheel over the whole log",
+    }  # fmt: skip
+    return replace(result, validation=validation)
+
+
+def identify(
+    log: LogInput,
+    robot: str | os.PathLike[str] | Robot | None = None,
+    *,
+    method: str = "observer",
+    validate: LogInput | None = None,
+    options: LogOptions | None = None,
+    form: str = "auto",
+    k: float = 10.0,
+    alpha: float = 1e-10,
+    box_width: float = 10.0,
+    torque_hold: str = "zoh",
+    payload: bool = False,
+    control_rate: float | None = None,
+    delay: float | str | None = None,
+    friction: str = "auto",
+    cutoff: float | None = None,
+    weighted: bool = False,
+    forgetting: float = 1.0,
+    progress: Callable[[int, int], None] | None = None,
+) -> IdentificationResult:
+    """The base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded ``log``.
+
+    log : a path (CSV, Parquet, MCAP; ``"-"`` standard input), read with ``options``, or a log already read.
+    robot : a built-in name, a robot file (TOML, URDF) or a :class:`Robot`: the start value, the nominal/CAD
+        values to compare with, and the defaults of the log's units.  None: a start value from the data.
+    method : "observer" (the paper's), "idim", "iv", "rls" or "oe" (:data:`wmrid.estimators.methods.METHODS`).
+    validate : a second log (path or log) to predict with the identified model; its fit % is in ``validation``.
+    form, k, alpha, box_width, torque_hold, payload, control_rate, delay, friction : the observer's settings (see
+        ``wmrid identify --help``; ``delay``: None, "auto" or seconds).
+    cutoff, weighted, forgetting : the classical methods' settings.
+    progress : called as progress(done, total) samples while the observer replays the log.
+
+    Returns an :class:`IdentificationResult`; ``result.parameters[name]`` is (value, std) in SI units.
+    """
+    from wmrid.estimators.identify import identify as run_observer
+    from wmrid.estimators.methods import check_method
+
+    method = check_method(method)
+    validating = validate is not None
+    options_ = _method_options(cutoff, weighted, forgetting, torque_hold)
+    check_control_rate(control_rate, (method,), validating)
+    _no_two_stdin(log, validate, option("log"))
+    robot_obj = _robot(robot)
+    friction_ = friction_model(friction, (method,), validating, robot_obj)
+    # the observer streams the log; the classical methods filter and simulate the whole log
+    wheel_log = _log(log, options, robot_obj, whole=method != "observer")
+    result = run_observer(
+        wheel_log, robot_obj, form=form, k=k, alpha=alpha, box_width=box_width, torque_hold=torque_hold,
+        progress=progress, payload=payload, control_rate=control_rate, friction=friction_,
+        delay=delay_value(delay), feedback=method == "observer",  # another method is reported as asked
+    )  # fmt: skip
+    if method != "observer":
+        from wmrid.estimators.methods import run
+
+        result = run(method, wheel_log, result, options_, robot_obj)
+    if validate is not None:
+        result = with_validation(result, validate, options, robot=robot_obj, torque_hold=torque_hold)
+    return result
+
+
+def compare(
+    log: LogInput,
+    robot: str | os.PathLike[str] | Robot | None = None,
+    *,
+    methods: tuple[str, ...] | list[str] | None = None,
+    validate: LogInput | None = None,
+    truth: dict[str, float] | None = None,
+    options: LogOptions | None = None,
+    torque_hold: str = "zoh",
+    control_rate: float | None = None,
+    delay: float | str | None = None,
+    friction: str = "auto",
+    cutoff: float | None = None,
+    weighted: bool = False,
+    forgetting: float = 1.0,
+) -> dict[str, Any]:
+    """Every method in ``methods`` (default: all of :data:`wmrid.estimators.methods.METHODS`) on the same log:
+    estimates, standard errors, flags, errors against ``truth`` (base parameters by name), fit on ``validate``,
+    run time -- the document ``wmrid compare --format json`` prints.  Each method identifies the same friction
+    model; the observer's own estimate is shown as it is (no closed-loop substitution)."""
+    from wmrid.estimators.identify import identify as run_observer
+    from wmrid.estimators.methods import METHODS, check_method
+    from wmrid.estimators.methods import compare as run_compare
+
+    names = tuple(check_method(m.strip()) for m in (METHODS if methods is None else methods) if m.strip())
+    if not names:
+        raise UsageError(f"{option('methods')} names no method; give e.g. observer,idim")
+    options_ = _method_options(cutoff, weighted, forgetting, torque_hold)
+    validating = validate is not None
+    check_control_rate(control_rate, names, validating)
+    _no_two_stdin(log, validate, option("log"))
+    robot_obj = _robot(robot)
+    friction_ = friction_model(friction, names, validating, robot_obj)
+    wheel_log = _log(log, options, robot_obj, whole=True)
+    other = None
+    if validate is not None:
+        other = _log(validate, options, robot_obj, whole=True)
+        if other.effort_unit != wheel_log.effort_unit:
+            raise UsageError(
+                f"{option('validate', getattr(other, 'source', validate))}: its effort is in {other.effort_unit}, "
+                f"{option('log')}'s in {wheel_log.effort_unit}; give both logs in the same units"
+            )
+    observer = run_observer(
+        wheel_log, robot_obj, torque_hold=torque_hold, control_rate=control_rate, friction=friction_,
+        delay=delay_value(delay), feedback=False,  # compare shows every method's own estimate
+    )  # fmt: skip
+    return run_compare(wheel_log, observer, options_, names, other=other, truth=truth)

@@ -1,0 +1,162 @@
+"""Inputs every command shares: a robot (:func:`load_robot`) and a log read with one set of options
+(:class:`LogOptions`, :func:`read_log`, :func:`open_log`).
+
+The options are the command line's log-input flags, one field each (``--speed-unit rpm`` is
+``LogOptions(speed_unit="rpm")``).  A robot, when given, fills in what the log does not say: the wheel radius for
+speeds in m/s, the torque constant and gearbox efficiency for motor currents, the gear ratio for a PWM effort's
+conversion.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+from wmrid.core.errors import UsageError, option
+from wmrid.core.wheel_log import LogStream, WheelLog
+from wmrid.model.robot import Robot
+
+__all__ = ["LogOptions", "load_robot", "open_log", "read_log"]
+
+
+@dataclass(frozen=True)
+class LogOptions:
+    """How to read a log: the same fields for every command (the CLI's "Log input" flags).
+
+    columns : canonical name -> the file's column name (``{"t": "time", "eta_r": "vel_right"}``), or the CLI's text
+        form ``"t=time,eta_r=vel_right"``.
+    time_unit : "auto" (float s, integer ns), "s", "ms", "us" or "ns".
+    topic, velocity_topic, effort_topic, right_joint, left_joint, time_source, align, velocity_from : MCAP topics,
+        joints and time (see ``wmrid identify --help``).
+    speed_unit : "rad/s", "rpm", "deg/s" or "m/s" (at the rim: needs ``wheel_radius``, default the robot's r).
+    effort : "torque" (N m), "current" (A: needs ``torque_constant`` N m/A), "pwm" or "voltage".
+    effort_unit, torque_constant, gear_ratio, efficiency, mirror_left, flip_effort : as the flags of those names.
+    """
+
+    columns: dict[str, str] | str | None = None
+    time_unit: str = "auto"
+    topic: str | None = None
+    velocity_topic: str | None = None
+    effort_topic: str | None = None
+    right_joint: str | None = None
+    left_joint: str | None = None
+    time_source: str = "auto"
+    align: str = "linear"
+    velocity_from: str = "auto"
+    speed_unit: str = "rad/s"
+    wheel_radius: float | None = None
+    effort: str = "torque"
+    effort_unit: str | None = None
+    torque_constant: float | None = None
+    gear_ratio: float | None = None
+    efficiency: float | None = None
+    mirror_left: bool = False
+    flip_effort: bool = False
+
+    def with_robot(self, robot: Robot | None) -> LogOptions:
+        """These options with the robot's values where they are not given (wheel radius for m/s speeds, torque
+        constant and efficiency for currents)."""
+        if robot is None:
+            return self
+        changes: dict[str, Any] = {}
+        if self.wheel_radius is None and self.speed_unit == "m/s":
+            changes["wheel_radius"] = robot.nominal.r
+        if self.effort == "current" and self.torque_constant is None:
+            changes["torque_constant"] = robot.torque_constant
+        if self.effort == "current" and self.efficiency is None:
+            changes["efficiency"] = robot.efficiency
+        return replace(self, **changes) if changes else self
+
+
+#: The names of LogOptions' fields (the CLI's log-input parameters).
+LOG_OPTION_NAMES = tuple(f.name for f in fields(LogOptions))
+
+
+def log_options(options: LogOptions | None = None, **overrides: Any) -> LogOptions:
+    """``options`` (default: all defaults) with ``overrides`` by field name; an unknown name is a UsageError."""
+    unknown = sorted(set(overrides) - set(LOG_OPTION_NAMES))
+    if unknown:
+        raise UsageError(f"unknown log option {unknown[0]!r}; the options are {', '.join(LOG_OPTION_NAMES)}")
+    base = options if options is not None else LogOptions()
+    return replace(base, **overrides) if overrides else base
+
+
+def load_robot(
+    spec: str | os.PathLike[str] | Robot,
+    *,
+    gear_ratio: float | None = None,
+    rotor_inertia: float | None = None,
+    wheel_radius: float | None = None,
+) -> Robot:
+    """A robot from a built-in name (``"paper"``, ``"amr"``), a TOML file, or a URDF.
+
+    A URDF does not give the gear ratio: ``gear_ratio`` is required for one (``rotor_inertia`` kg m^2 when it has no
+    rotor links; ``wheel_radius`` m overrides its wheels').  A :class:`Robot` is returned as it is.
+    """
+    if isinstance(spec, Robot):
+        return spec
+    text = os.fspath(spec)
+    if text.lower().endswith(".urdf"):
+        from wmrid.model.urdf import load_robot_urdf
+
+        if gear_ratio is None:
+            raise UsageError(
+                f"{option('robot', text)}: a URDF does not give the gear ratio; add {option('gear_ratio', 'KR')} "
+                f"(and {option('rotor_inertia')} when the URDF has no rotor links)"
+            )
+        return load_robot_urdf(text, gear_ratio=gear_ratio, rotor_inertia=rotor_inertia, wheel_radius=wheel_radius)
+    if rotor_inertia is not None:
+        raise UsageError(f"{option('rotor_inertia')} applies to a URDF robot only; a robot TOML file gives I_r itself")
+    from wmrid.model.robot import load_robot as load_toml
+
+    return load_toml(text)
+
+
+def open_log(
+    path: str | os.PathLike[str],
+    options: LogOptions | None = None,
+    *,
+    robot: Robot | None = None,
+    data: bytes | None = None,
+    **overrides: Any,
+) -> LogStream:
+    """A log read piece by piece (memory: one piece, whatever its length): ``path`` a CSV, Parquet or MCAP file, or
+    ``"-"`` for standard input (``data``: its bytes, when already read).  ``overrides``: :class:`LogOptions` fields.
+    """
+    from wmrid.io.columns import parse_column_mapping
+    from wmrid.io.logs import open_log as open_file
+    from wmrid.io.mcap.joints import TopicSelection
+    from wmrid.io.signals import SignalOptions
+
+    opts = log_options(options, **overrides).with_robot(robot)
+    selection = TopicSelection(
+        topic=opts.topic, velocity_topic=opts.velocity_topic, effort_topic=opts.effort_topic,
+        right_joint=opts.right_joint, left_joint=opts.left_joint, time_source=opts.time_source, align=opts.align,
+        velocity_from=opts.velocity_from,
+    )  # fmt: skip
+    signals = SignalOptions(
+        speed_unit=opts.speed_unit, wheel_radius=opts.wheel_radius, effort=opts.effort, effort_unit=opts.effort_unit,
+        torque_constant=opts.torque_constant, gear_ratio=opts.gear_ratio,
+        efficiency=1.0 if opts.efficiency is None else opts.efficiency, mirror_left=opts.mirror_left,
+        flip_effort=opts.flip_effort,
+    )  # fmt: skip
+    mapping = parse_column_mapping(opts.columns) if isinstance(opts.columns, str) and opts.columns else opts.columns
+    k_r = robot.nominal.k_r if robot is not None else None
+    return open_file(
+        os.fspath(path), columns=mapping or None, time_unit=opts.time_unit, selection=selection, signals=signals,
+        gear_ratio=k_r, data=data,
+    )  # fmt: skip
+
+
+def read_log(
+    path: str | os.PathLike[str],
+    options: LogOptions | None = None,
+    *,
+    robot: Robot | None = None,
+    data: bytes | None = None,
+    **overrides: Any,
+) -> WheelLog:
+    """A whole log in memory (t (n,) s, eta (n, 2) rad/s, tau (n, 2) N m; see :class:`WheelLog`), read as
+    :func:`open_log` reads it."""
+    return open_log(path, options, robot=robot, data=data, **overrides).read()
