@@ -875,100 +875,22 @@ def simulate(
     are those at t = 0; its settings.change holds both parameter sets ("before", "after", base and
     physical), the requested time t and the switch time t_switch (s).
     """
-    from wmrid.core.atomic import output_group, to_json_text, write_json
-    from wmrid.io.logs import write_log
-    from wmrid.model.robot import Payload
-    from wmrid.sim.simulate import NoiseSettings, PlantChange, parse_friction_fault, parse_time
-    from wmrid.sim.simulate import simulate as run_simulate
+    from wmrid.api.simulation import simulate as run_simulate
+    from wmrid.api.simulation import write_simulation
 
-    robot_obj = _load_robot(robot, gear_ratio, rotor_inertia)
-    truth_params = robot_obj.reference
-    load = None
-    if payload is not None:
-        load = Payload.parse(payload, inertia=payload_inertia)
-    elif payload_inertia:
-        raise UsageError("--payload-inertia needs --payload MASS[@X,Y]")
-    times = {"--load-at": load_at, "--drop-at": drop_at, "--fault-at": fault_at}
-    given = [option for option, text in times.items() if text is not None]
-    if len(given) > 1:
-        raise UsageError(f"{' and '.join(given)}: one change per run; give only one of them")
-    if (load_at is not None or drop_at is not None) and load is None:
-        raise UsageError(f"{given[0]} needs --payload MASS[@X,Y] (the payload loaded or dropped)")
-    if (friction_fault is None) != (fault_at is None):
-        raise UsageError("--friction-fault WHEEL:FACTOR and --fault-at T go together; give both")
-    change = None
-    if given:
-        option = given[0]
-        when = parse_time(times[option], option)
-        if when >= duration:
-            raise UsageError(
-                f"{option} {times[option]}: the change must come before the end of the run ({duration:g} s)"
-            )
-        if load_at is not None:
-            change = PlantChange.payload_load(when, truth_params, load)
-        elif drop_at is not None:
-            change = PlantChange.payload_drop(when, truth_params, load)
-        else:
-            wheel, factor, terms = parse_friction_fault(friction_fault)
-            base = truth_params if load is None else truth_params.with_payload(load)
-            try:
-                change = PlantChange.friction_fault(when, base, wheel, factor, terms)
-            except UsageError as err:
-                raise UsageError(f"--friction-fault {friction_fault}: {err}") from None
-        truth_params = change.before
-    elif load is not None:
-        truth_params = truth_params.with_payload(load)
-    noise = NoiseSettings(
-        eta_std=eta_noise, tau_std=tau_noise, caster_std=caster, caster_time=caster_time, encoder_cpr=encoder_cpr
-    )
-    if engine == Engine.mujoco:
-        from wmrid.sim.multibody import FLOOR_FRICTION, MultibodySettings, import_mujoco, simulate_multibody
-
-        import_mujoco()  # before anything else, so that a missing engine says how to install it
-        mb_settings = MultibodySettings(
-            floor_friction=FLOOR_FRICTION if floor_friction is None else floor_friction,
-            caster_resistance=caster_resistance, torque_limit=torque_limit,
-        )  # fmt: skip
-        sim = simulate_multibody(
-            robot_obj.reference, robot_obj.nominal, casters=robot_obj.casters, settings=mb_settings,
-            trajectory=trajectory.value, duration=duration, rate=rate, noise=noise, seed=seed, change=change,
-            payload=load,
-        )  # fmt: skip
-    else:
-        given = {"--floor-friction": floor_friction, "--caster-resistance": caster_resistance,
-                 "--torque-limit": torque_limit}  # fmt: skip
-        for name, value in given.items():
-            if value is not None:
-                raise UsageError(f"{name} applies to --engine mujoco only; the reduced model has no floor or casters")
-        sim = run_simulate(
-            truth_params,
-            robot_obj.nominal,
-            trajectory=trajectory.value,
-            duration=duration,
-            rate=rate,
-            noise=noise,
-            seed=seed,
-            change=change,
-        )
-    truth = sim.truth()
-    truth["robot"] = robot_obj.name
-    if load is not None:
-        truth["payload"] = {"mass": load.mass, "x": load.x, "y": load.y, "inertia": load.inertia}
-    truth_path = None if output == "-" else output + ".truth.json"
-    if truth_path is not None and not force and os.path.exists(truth_path):
-        raise UsageError(f"{truth_path} exists; use --force to overwrite it")
-    with output_group():  # the log and its truth appear together or not at all
-        if output.lower().endswith(".mcap"):
-            from wmrid.io.mcap.writer import write_joint_state_mcap
-
-            write_joint_state_mcap(output, sim.to_frame(), force=force, metadata={"truth": to_json_text(truth)})
-        else:
-            write_log(sim.to_frame(), output, force=force, metadata={"wmrid_truth": to_json_text(truth)})
-        if truth_path is not None:
-            write_json(truth_path, truth, force=force)
+    run = run_simulate(
+        robot, trajectory=trajectory.value, duration=duration, rate=rate, seed=seed, payload=payload,
+        payload_inertia=payload_inertia, eta_noise=eta_noise, tau_noise=tau_noise, caster=caster,
+        caster_time=caster_time, encoder_cpr=encoder_cpr, load_at=load_at, drop_at=drop_at,
+        friction_fault=friction_fault, fault_at=fault_at, engine=engine.value, floor_friction=floor_friction,
+        caster_resistance=caster_resistance, torque_limit=torque_limit, gear_ratio=gear_ratio,
+        rotor_inertia=rotor_inertia,
+    )  # fmt: skip
+    truth_path = write_simulation(run, output, force=force)
     if truth_path is not None:
-        what = "" if change is None else f", {change.kind} at {sim.settings['change']['t_switch']:g} s"
-        _stderr_console().print(f"wrote {output} ({len(sim.t)} samples{what}) and {truth_path}")
+        change = run.change
+        what = "" if change is None else f", {change.kind} at {run.log.settings['change']['t_switch']:g} s"
+        _stderr_console().print(f"wrote {output} ({len(run.log.t)} samples{what}) and {truth_path}")
 
 
 _MONITOR_PANEL = "Change detection"
@@ -1041,8 +963,9 @@ def monitor(
     "parameters": {...}, ...}], "detector": {..., "threshold", "false_alarm_rate_per_hour"}, ...}.
     """
     from wmrid.core.atomic import write_json
-    from wmrid.monitoring.monitor import MonitorSettings, load_model, print_monitor
+    from wmrid.monitoring.monitor import MonitorSettings, load_model
     from wmrid.monitoring.monitor import monitor as run_monitor
+    from wmrid.reporting.monitor_view import print_monitor
     from wmrid.reporting.render import to_json
 
     settings = MonitorSettings(calibration_s=calibration, false_alarm_rate=false_alarm_rate)

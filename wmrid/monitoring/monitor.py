@@ -95,19 +95,31 @@ from wmrid.model.dynamics import THETA0_NAMES, RegressorForm
 
 #: Names of the columns of the inverse-dynamics regressor Phi (the parameters p it multiplies).
 REGRESSOR_NAMES = ("M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
+
+
 #: Degrees of freedom of the test without caster drag: the number of regressor columns (a ``wheel+caster`` model
 #: adds its drag parameters: len(p)).
 DOF = len(REGRESSOR_NAMES)
+
+
 #: Shortest span after a change that is identified at all, s (shorter: the change is reported without
 #: parameters).
 MIN_IDENTIFY_S = 3.0
+
+
 #: The model's error is taken as normal with this many times its reported standard errors (they leave out the
 #: closed-loop bias, and a given model's correlations are not in its JSON).
 PRIOR_STD_FACTOR = 2.0
+
+
 #: Equations per coefficient of each noise-model equation (2 q of them) at least.
 MIN_ROWS_PER_COEFFICIENT = 5
+
+
 #: A time step longer than this many median steps is a hole the monitor refuses.
 HOLE_FACTOR = 10.0
+
+
 #: The false-alarm rate measured at the default settings by bench/bench_monitor.py (reported with every result).
 MEASURED = {
     "logs": "300 unchanged noisy closed-loop simulated logs of 120 s (paper robot on the sinusoid at 1 kHz; noise "
@@ -117,6 +129,8 @@ MEASURED = {
     "per_hour_at_stated": {"10": 1.2, "1": 0.0, "0.3": 0.0, "0.1": 0.0},
     "by": "bench/bench_monitor.py",
 }
+
+
 #: Rows of the Savitzky-Golay evaluation done at once (bounds the memory of long logs).
 _CHUNK = 4096
 
@@ -180,10 +194,6 @@ class MonitorSettings:
             "regressor_window_s": self.regressor_window_s, "noise_memory_s": self.noise_memory_s,
             "locate_s": self.locate_s, "margin": self.margin,
         }  # fmt: skip
-
-
-# --------------------------------------------------------------------------------------------------
-# The model to monitor against
 
 
 @dataclass(frozen=True)
@@ -308,10 +318,6 @@ def _physical_vector(theta0: np.ndarray) -> np.ndarray:
     regressor Phi multiplies."""
     big_m = np.linalg.inv(model.inverse_inertia(theta0))
     return np.array([big_m[0, 0], big_m[0, 1], big_m[1, 1], *theta0[3:]])
-
-
-# --------------------------------------------------------------------------------------------------
-# Residual and regressor at the test rate
 
 
 @dataclass(frozen=True)
@@ -457,10 +463,6 @@ def residual_signals(t: np.ndarray, eta: np.ndarray, tau: np.ndarray, settings: 
     )  # fmt: skip
 
 
-# --------------------------------------------------------------------------------------------------
-# Noise model
-
-
 @dataclass(frozen=True)
 class NoiseModel:
     """r_k = sum_i A_i r_k-i + e_k, e_k ~ N(0, cov): a vector autoregression of the residual (2 wheels).
@@ -516,10 +518,6 @@ class NoiseModel:
             out -= np.einsum("jl,kl...->kj...", self.coeffs[i - 1], x[q - i : m - i])
         inv_l = np.linalg.inv(np.linalg.cholesky(self.cov))
         return np.einsum("jl,kl...->kj...", inv_l, out)
-
-
-# --------------------------------------------------------------------------------------------------
-# The windowed GLR test
 
 
 @dataclass(frozen=True)
@@ -621,10 +619,6 @@ def locate(z: np.ndarray, x: np.ndarray, err: ModelError, upto: int) -> int:
     proj_rev = np.cumsum(np.einsum("kip,ki->kp", x, z)[::-1], axis=0)[::-1]
     upto = max(1, min(upto, len(z)))
     return int(np.argmax(_glr(gram_rev[:upto], proj_rev[:upto], err)))
-
-
-# --------------------------------------------------------------------------------------------------
-# The monitor
 
 
 @dataclass
@@ -1020,7 +1014,7 @@ def monitor(log: Any, model_: MonitoredModel, settings: MonitorSettings | None =
                 f"not the model's ({', '.join(before_form.base_names[8:])}; the caster model was not identifiable "
                 "on this segment): its friction and drag terms are not comparable"
             )
-        after_named, before_named = _named(change.theta0, after_form), _named(before, before_form)
+        after_named, before_named = named(change.theta0, after_form), named(before, before_form)
         # the caster drag's parameters are compared when both models have them (same caster model)
         drag = [name for name in after_named if name not in (*THETA0_NAMES, "M11", "M12", "M22")]
         change.relative_change = {
@@ -1047,68 +1041,6 @@ def monitor(log: Any, model_: MonitoredModel, settings: MonitorSettings | None =
     )  # fmt: skip
 
 
-# --------------------------------------------------------------------------------------------------
-# Presenting
-
-
-def _named(theta0: np.ndarray, form: RegressorForm | None) -> dict[str, float]:
+def named(theta0: np.ndarray, form: RegressorForm | None) -> dict[str, float]:
     """theta0 and M by name (:func:`wmrid.model.dynamics.named_base`), the caster drag's named by ``form``."""
     return model.named_base(theta0) if form is None else model.named_base(theta0, form.base_names)
-
-
-def _fmt(x: Any, digits: int = 6) -> str:
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return "-"
-    return f"{x:.{digits}g}"
-
-
-def print_monitor(result: MonitorResult, console: Any) -> None:
-    """The changes found, and the parameters before and after each, as rich tables."""
-    from rich import box
-    from rich.table import Table
-
-    det = result.detector_dict()
-    st = result.settings
-    console.print(f"wmrid monitor: {result.source} against {result.model.source}")
-    info = result.log_info
-    console.print(
-        f"{info['samples']} samples, {info['duration_s']:.3f} s at {info['rate_hz']:.6g} Hz; windowed GLR test of "
-        f"the torque residual, at most {st.false_alarm_rate:g} false alarms per hour (threshold "
-        f"{det['threshold']['first_calibration']:.4g} after the first {st.calibration_s:g} s, assumed unchanged, "
-        f"falling to {det['threshold']['limit']:.4g} as the calibration grows)"
-    )
-    if not result.changes:
-        console.print("no change of the dynamics detected")
-    else:
-        table = Table(title="changes of the dynamics", title_justify="left", box=box.SIMPLE_HEAD)
-        for col in ("#", "t s", "alarm s", "delay s", "statistic", "threshold", "window s"):
-            table.add_column(col, justify="right", no_wrap=True)
-        for i, c in enumerate(result.changes, 1):
-            table.add_row(str(i), f"{c.t:.3f}", f"{c.t_alarm:.3f}", f"{c.t_alarm - c.t:.3f}", f"{c.statistic:.4g}",
-                          f"{c.threshold:.4g}", f"{c.window_s:.3g}")  # fmt: skip
-        console.print(table)
-        pt = Table(title="parameters before and after each change", title_justify="left", box=box.SIMPLE_HEAD)
-        pt.add_column("param", no_wrap=True)
-        pt.add_column("model", justify="right", no_wrap=True)
-        for i in range(len(result.changes)):
-            pt.add_column(f"after #{i + 1}", justify="right", no_wrap=True)
-            pt.add_column("std", justify="right", no_wrap=True)
-        pt.add_column("unit", no_wrap=True)
-        units = model.base_units(result.model.effort_unit)
-        drag = list(dict.fromkeys(name for params in [result.model.parameters, *(c.parameters or {} for c in
-                                  result.changes)] for name in params if name in units and name not in
-                                  (*THETA0_NAMES, "M11", "M12", "M22")))  # fmt: skip
-        for name in (*THETA0_NAMES[:3], "M11", "M12", "M22", *THETA0_NAMES[3:], *drag):
-            row = [name, _fmt((result.model.parameters.get(name) or {}).get("value"))]
-            for c in result.changes:
-                entry = (c.parameters or {}).get(name) or {}
-                row += [_fmt(entry.get("value")), _fmt(entry.get("std"), 2)]
-            pt.add_row(*row, units.get(name, ""))
-        console.print(pt)
-    for note in info["notes"]:
-        console.print(f"note: {note}")
-    for c in result.changes:
-        for w in c.warnings:
-            console.print(f"[yellow]warning:[/yellow] after the change at {c.t:.3f} s: {w}")
-    for w in result.warnings:
-        console.print(f"[yellow]warning:[/yellow] {w}")

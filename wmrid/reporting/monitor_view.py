@@ -1,0 +1,68 @@
+"""``wmrid monitor`` for people: the changes found, and the parameters before and after each, as rich tables."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from wmrid.model import dynamics as model
+from wmrid.model.dynamics import THETA0_NAMES
+from wmrid.monitoring.monitor import MonitorResult
+
+
+def _fmt(x: Any, digits: int = 6) -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "-"
+    return f"{x:.{digits}g}"
+
+
+def print_monitor(result: MonitorResult, console: Any) -> None:
+    """The changes found, and the parameters before and after each, as rich tables."""
+    from rich import box
+    from rich.table import Table
+
+    det = result.detector_dict()
+    st = result.settings
+    console.print(f"wmrid monitor: {result.source} against {result.model.source}")
+    info = result.log_info
+    console.print(
+        f"{info['samples']} samples, {info['duration_s']:.3f} s at {info['rate_hz']:.6g} Hz; windowed GLR test of "
+        f"the torque residual, at most {st.false_alarm_rate:g} false alarms per hour (threshold "
+        f"{det['threshold']['first_calibration']:.4g} after the first {st.calibration_s:g} s, assumed unchanged, "
+        f"falling to {det['threshold']['limit']:.4g} as the calibration grows)"
+    )
+    if not result.changes:
+        console.print("no change of the dynamics detected")
+    else:
+        table = Table(title="changes of the dynamics", title_justify="left", box=box.SIMPLE_HEAD)
+        for col in ("#", "t s", "alarm s", "delay s", "statistic", "threshold", "window s"):
+            table.add_column(col, justify="right", no_wrap=True)
+        for i, c in enumerate(result.changes, 1):
+            table.add_row(str(i), f"{c.t:.3f}", f"{c.t_alarm:.3f}", f"{c.t_alarm - c.t:.3f}", f"{c.statistic:.4g}",
+                          f"{c.threshold:.4g}", f"{c.window_s:.3g}")  # fmt: skip
+        console.print(table)
+        pt = Table(title="parameters before and after each change", title_justify="left", box=box.SIMPLE_HEAD)
+        pt.add_column("param", no_wrap=True)
+        pt.add_column("model", justify="right", no_wrap=True)
+        for i in range(len(result.changes)):
+            pt.add_column(f"after #{i + 1}", justify="right", no_wrap=True)
+            pt.add_column("std", justify="right", no_wrap=True)
+        pt.add_column("unit", no_wrap=True)
+        units = model.base_units(result.model.effort_unit)
+        drag = list(dict.fromkeys(name for params in [result.model.parameters, *(c.parameters or {} for c in
+                                  result.changes)] for name in params if name in units and name not in
+                                  (*THETA0_NAMES, "M11", "M12", "M22")))  # fmt: skip
+        for name in (*THETA0_NAMES[:3], "M11", "M12", "M22", *THETA0_NAMES[3:], *drag):
+            row = [name, _fmt((result.model.parameters.get(name) or {}).get("value"))]
+            for c in result.changes:
+                entry = (c.parameters or {}).get(name) or {}
+                row += [_fmt(entry.get("value")), _fmt(entry.get("std"), 2)]
+            pt.add_row(*row, units.get(name, ""))
+        console.print(pt)
+    for note in info["notes"]:
+        console.print(f"note: {note}")
+    for c in result.changes:
+        for w in c.warnings:
+            console.print(f"[yellow]warning:[/yellow] after the change at {c.t:.3f} s: {w}")
+    for w in result.warnings:
+        console.print(f"[yellow]warning:[/yellow] {w}")
