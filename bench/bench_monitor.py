@@ -40,7 +40,8 @@ from scipy.stats import f as f_dist
 from wmrid.estimators.identify import identify
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
-from wmrid.monitoring.monitor import DOF, MonitorSettings, model_from_dict, monitor
+from wmrid.monitoring.monitor import monitor
+from wmrid.monitoring.settings import DOF, MonitorSettings, model_from_dict
 from wmrid.sim.simulate import NoiseSettings, PlantChange, simulate
 
 ROBOT = BUILTIN_ROBOTS["paper"]

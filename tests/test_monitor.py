@@ -23,16 +23,9 @@ from wmrid.estimators.identify import identify
 from wmrid.io.logs import write_log
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
-from wmrid.monitoring.monitor import (
-    ModelError,
-    MonitorSettings,
-    NoiseModel,
-    load_model,
-    model_from_dict,
-    monitor,
-    window_grid,
-    window_statistics,
-)
+from wmrid.monitoring.glr import ModelError, NoiseModel, window_grid, window_statistics
+from wmrid.monitoring.monitor import monitor
+from wmrid.monitoring.settings import MonitorSettings, load_model, model_from_dict
 from wmrid.sim.simulate import NoiseSettings, PlantChange, simulate
 
 TRUE = BUILTIN_ROBOTS["paper"].cad

@@ -15,6 +15,8 @@ from wmrid.core.errors import UsageError
 from wmrid.estimators.identify import identify
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
+from wmrid.monitoring import glr, residuals
+from wmrid.monitoring import settings as mon_settings
 from wmrid.sim.simulate import NoiseSettings, PlantChange, simulate
 
 AMR = BUILTIN_ROBOTS["amr"]
@@ -29,7 +31,7 @@ def as_log(sim, name: str) -> SimpleNamespace:
 def spied_monitor(monkeypatch, log, model_):
     """monitor(log, model_) and every (z, x, [(width, ends, S)]) its window tests saw."""
     seen = []
-    original = mon.window_statistics
+    original = glr.window_statistics
 
     def spy(z, x, *args):
         out = original(z, x, *args)
@@ -58,7 +60,7 @@ def test_a_wheel_friction_model_is_monitored_as_before(monkeypatch) -> None:
     log = as_log(simulate(PAPER.cad, PAPER.nominal, duration=24.0, noise=NOISE, seed=12), "run")
     runs = []
     for d in (data, old):
-        m = mon.model_from_dict(d, "m.json")
+        m = mon_settings.model_from_dict(d, "m.json")
         assert m.form is None
         assert len(m.theta0) == len(m.std) == 8
         runs.append(spied_monitor(monkeypatch, log, m))
@@ -80,11 +82,11 @@ def test_a_wheel_friction_model_is_monitored_as_before(monkeypatch) -> None:
     grid = res_a.grid
     assert grid.threshold(50.0) == grid.threshold(50.0, 8)
     # the residual is the eight-column one
-    sig = mon.residual_signals(log.t, log.eta, log.tau, mon.MonitorSettings())
-    m = mon.model_from_dict(data, "m.json")
+    sig = residuals.residual_signals(log.t, log.eta, log.tau, mon_settings.MonitorSettings())
+    m = mon_settings.model_from_dict(data, "m.json")
     assert sig.phi_for(None) is sig.phi
     assert sig.phi_for(model.RegressorForm("general"), "test") is sig.phi_test
-    assert np.array_equal(sig.residual(m.theta0), sig.tau - sig.phi @ mon._physical_vector(m.theta0))
+    assert np.array_equal(sig.residual(m.theta0), sig.tau - sig.phi @ mon_settings.physical_vector(m.theta0))
 
 
 # ------------------------------------------------------------------------------------------ caster drag
@@ -97,7 +99,7 @@ def amr_caster_json(amr_caster_log) -> dict:
 
 
 def test_a_caster_model_is_read_with_its_drag(amr_caster_json) -> None:
-    m = mon.model_from_dict(amr_caster_json, "amr.json")
+    m = mon_settings.model_from_dict(amr_caster_json, "amr.json")
     assert m.form is not None
     assert m.form.caster
     assert m.form.geometry
@@ -110,7 +112,7 @@ def test_a_caster_model_is_read_with_its_drag(amr_caster_json) -> None:
     broken = json.loads(json.dumps(amr_caster_json))
     del broken["theta"]["form"]["kind"]
     with pytest.raises(UsageError, match="caster-drag form"):
-        mon.model_from_dict(broken, "broken.json")
+        mon_settings.model_from_dict(broken, "broken.json")
 
 
 def test_the_caster_columns_are_the_drag_torque_smoothed(amr_caster_log, amr_caster_json) -> None:
@@ -118,24 +120,24 @@ def test_the_caster_columns_are_the_drag_torque_smoothed(amr_caster_log, amr_cas
     the
     other speed columns: the Savitzky-Golay smoothing is linear."""
     log = amr_caster_log
-    m = mon.model_from_dict(amr_caster_json, "amr.json")
-    settings = mon.MonitorSettings()
-    sig = mon.residual_signals(log.t, log.eta, log.tau, settings)
+    m = mon_settings.model_from_dict(amr_caster_json, "amr.json")
+    settings = mon_settings.MonitorSettings()
+    sig = residuals.residual_signals(log.t, log.eta, log.tau, settings)
     phi = sig.phi_for(m.form)
     assert phi.shape[1:] == (2, len(m.theta0))
     assert np.array_equal(phi[:, :, :8], sig.phi)
     assert sig.phi_for(m.form, "test").shape == phi.shape
     drag = model.friction_torque(log.eta, m.theta0, m.form) - model.friction_torque(log.eta, m.theta0[:8])
     step = float(np.median(np.diff(log.t)))
-    window = mon._odd_window(settings.accel_window_s, step)
-    half = max(window, mon._odd_window(settings.regressor_window_s, step)) // 2
+    window = residuals._odd_window(settings.accel_window_s, step)
+    half = max(window, residuals._odd_window(settings.regressor_window_s, step)) // 2
     centres = np.arange(half, len(log.t) - half, max(1, round(1.0 / step / settings.rate_hz)))
-    expected = np.column_stack([mon._savgol_at(drag[:, j], window, 0, step, centres) for j in range(2)])
+    expected = np.column_stack([residuals._savgol_at(drag[:, j], window, 0, step, centres) for j in range(2)])
     np.testing.assert_allclose(phi[:, :, 8:] @ m.theta0[8:], expected, rtol=1e-10, atol=1e-12)
 
 
 def test_no_false_alarm_on_the_log_the_caster_model_came_from(amr_caster_log, amr_caster_json) -> None:
-    m = mon.model_from_dict(amr_caster_json, "amr.json")
+    m = mon_settings.model_from_dict(amr_caster_json, "amr.json")
     result = mon.monitor(as_log(amr_caster_log, "amr.csv"), m)
     assert result.changes == []
     det = result.to_dict()["detector"]
@@ -160,7 +162,7 @@ def test_a_payload_loaded_mid_run_is_found(amr_caster_json) -> None:
         payload=load, change=PlantChange.payload_load(20.0, AMR.cad, load),
     )  # fmt: skip
     t_switch = sim.settings["change"]["t_switch"]
-    result = mon.monitor(as_log(sim, "loaded.csv"), mon.model_from_dict(amr_caster_json, "amr.json"))
+    result = mon.monitor(as_log(sim, "loaded.csv"), mon_settings.model_from_dict(amr_caster_json, "amr.json"))
     assert len(result.changes) == 1
     found = result.changes[0]
     assert t_switch <= found.t_alarm <= t_switch + 2.0

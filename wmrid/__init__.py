@@ -94,7 +94,7 @@ _EXPORTS = {
     "LogStream": "wmrid.core.wheel_log",
     "Robot": "wmrid.model.robot",
     "MonitorResult": "wmrid.monitoring.monitor",
-    "MonitorSettings": "wmrid.monitoring.monitor",
+    "MonitorSettings": "wmrid.monitoring.settings",
     "Report": "wmrid.reporting.report",
     "SimulationRun": "wmrid.api.simulation",
     "WmridError": "wmrid.core.errors",

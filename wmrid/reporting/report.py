@@ -54,6 +54,9 @@ class Report:
     figures: dict[str, bytes] = field(default_factory=dict)  # name -> SVG bytes
     figures_png: dict[str, bytes] = field(default_factory=dict)
     result: dict[str, Any] = field(default_factory=dict)
+    #: The live identification and its log when the report was made from a log (None from a saved result).
+    identification: Any = field(default=None, repr=False, compare=False)
+    log: Any = field(default=None, repr=False, compare=False)
 
 
 def torque_residual(log: Any, theta0: np.ndarray, form: RegressorForm | None = None) -> dict[str, Any]:

@@ -1,0 +1,139 @@
+"""Reports as one call: :func:`report` builds what ``wmrid report`` writes (tables after the paper's Tables 2 and 3,
+the comparison with nominal/CAD values and a truth, diagnostics, figures), and :func:`write_report` writes it as
+HTML, Markdown or JSON by the file's suffix."""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import replace
+from typing import Any
+
+from wmrid.api.identification import identify
+from wmrid.api.inputs import LogOptions, load_robot, read_log
+from wmrid.core.errors import LogFormatError, UsageError, WmridError, option
+from wmrid.core.wheel_log import LogStream, WheelLog
+from wmrid.estimators.result import IdentificationResult
+from wmrid.model.robot import Robot
+from wmrid.reporting.report import Report, build_report
+
+__all__ = ["report", "residual_frame", "write_report"]
+
+#: Report formats by the output's suffix.
+REPORT_SUFFIXES = (".html", ".htm", ".md", ".json")
+
+
+def _parse_saved(source: Any) -> Any:
+    """The JSON document of a saved result (a file, or standard input already read), in bounded memory."""
+    from wmrid.core.atomic import register_input
+    from wmrid.core.limits import memory_budget, read_limited
+
+    if source.data is None:
+        register_input(source.path)
+    raw = source.data if source.data is not None else read_limited(
+        source.path, memory_budget(), f"{source.name}: holds more than {{size}} (WMRID_MEMORY_BUDGET)", UsageError
+    )  # fmt: skip
+    try:
+        return json.loads(raw)
+    except RecursionError:
+        raise UsageError(f"{source.name}: nested too deeply to be a saved result") from None
+    except ValueError as err:
+        raise UsageError(f"{source.name}: starts like JSON but is not valid JSON ({err})") from err
+
+
+def _from_saved(data: Any, name: str, truth: dict[str, float] | None, figures: bool) -> Report:
+    """The report of a saved result; whatever it lacks or holds malformed is named, with the file."""
+    if isinstance(data, dict) and not data.get("source"):
+        data["source"] = name
+    try:
+        return build_report(data, truth=truth, figures=figures)
+    except WmridError:
+        raise
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as err:
+        what = f"no {err.args[0]!r}" if isinstance(err, KeyError) and err.args else " ".join(str(err).split())
+        raise LogFormatError(
+            f"{name}: not a complete identify result ({what}); give a log, or the unedited output of "
+            "`wmrid identify LOG --format json`"
+        ) from err
+
+
+def report(
+    result: IdentificationResult | dict[str, Any] | str | os.PathLike[str] | WheelLog | LogStream,
+    *,
+    log: WheelLog | None = None,
+    truth: dict[str, float] | None = None,
+    figures: bool = True,
+    options: LogOptions | None = None,
+    robot: str | os.PathLike[str] | Robot | None = None,
+    **identify_options: Any,
+) -> Report:
+    """The report of an identification.
+
+    result : an :class:`IdentificationResult`; a saved ``identify --format json`` document (a dict, or a path to
+        one; ``"-"`` standard input); or a log (a path, or a log in memory), identified here on ``robot`` with
+        ``identify_options`` (the keywords of :func:`wmrid.api.identification.identify`: ``method``, ``validate``,
+        ...).
+    log : the identified log in memory, for the torque residual and the figures of the signals.
+    truth : true base parameters by name (a simulator's ``truth["parameters"]``), for the error columns.
+    figures : draw the figures (SVG and PNG; the slow part).
+    """
+    if isinstance(result, IdentificationResult):
+        rep = build_report(result.to_dict(), result=result, log=log, truth=truth, figures=figures)
+        return replace(rep, identification=result, log=log)
+    if isinstance(result, dict):
+        return _from_saved(result, str(result.get("source") or "result"), truth, figures)
+    robot_obj = None if robot is None else load_robot(robot)
+    if isinstance(result, (str, os.PathLike)):
+        from wmrid.io.sources import open_source
+
+        source = open_source(os.fspath(result))
+        if source.head(64).lstrip().startswith(b"{"):
+            if identify_options.get("validate") is not None or identify_options.get("method", "observer") != "observer":
+                raise UsageError(
+                    f"{source.name}: {option('validate')} and {option('method')} need a log as INPUT, not a saved "
+                    "result; run `wmrid identify LOG --method ... --validate OTHER --format json` and report its output"
+                )
+            return _from_saved(_parse_saved(source), source.name, truth, figures)
+        result = read_log(os.fspath(result), options, robot=robot_obj, data=source.data)
+    wheel_log = result.read() if isinstance(result, LogStream) else result
+    identified = identify(wheel_log, robot_obj, options=options, **identify_options)
+    rep = build_report(identified.to_dict(), result=identified, log=wheel_log, truth=truth, figures=figures)
+    return replace(rep, identification=identified, log=wheel_log)
+
+
+def residual_frame(rep: Report) -> Any:
+    """The residuals over time as a DataFrame: with the log, every sample's torque residual (N m) plus the nearest
+    recorded prediction error (rad/s) and lambda_min; from a saved result, its history only."""
+    import pandas as pd
+
+    result, log, data = rep.identification, rep.log, rep.result
+    if result is not None and log is not None and "torque" in rep.residuals:
+        log_t = rep.residuals["torque"]["residual"]
+        hist = result.history
+        frame = pd.DataFrame({"t": hist.t, "e_r": hist.e[:, 0], "e_l": hist.e[:, 1], "lambda_min": hist.lambda_min})
+        full = pd.DataFrame({"t": log.t - log.t[0], "tau_res_r": log_t[:, 0], "tau_res_l": log_t[:, 1]})
+        return pd.merge_asof(full, frame, on="t", direction="nearest")
+    if result is not None:
+        hist = result.history
+        return pd.DataFrame({"t": hist.t, "e_r": hist.e[:, 0], "e_l": hist.e[:, 1], "lambda_min": hist.lambda_min})
+    if "history" in data:
+        h = data["history"]
+        return pd.DataFrame({"t": h["t"], "e_r": h["e_r"], "e_l": h["e_l"], "lambda_min": h["lambda_min"]})
+    raise UsageError(f"{option('residuals')}: this result holds no history; give the log itself")
+
+
+def write_report(rep: Report, output: str | os.PathLike[str], *, force: bool = False) -> None:
+    """Write ``rep`` as a self-contained HTML page (.html, .htm), Markdown (.md) or JSON (.json), atomically."""
+    from wmrid.core.atomic import atomic_write_text, write_json
+    from wmrid.reporting.report import to_html, to_json_dict, to_markdown
+
+    path = os.fspath(output)
+    suffix = os.path.splitext(path)[1].lower()
+    if suffix in (".html", ".htm"):
+        atomic_write_text(path, to_html(rep), force=force)
+    elif suffix == ".md":
+        atomic_write_text(path, to_markdown(rep), force=force)
+    elif suffix == ".json":
+        write_json(path, to_json_dict(rep), force=force)
+    else:
+        raise UsageError(f"{option('output', path)}: the report format comes from the suffix: .html, .md or .json")

@@ -1,0 +1,111 @@
+"""What the commands share beyond their options: reading a log and a robot with the flags' values, progress, where
+the output goes."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any
+
+from wmrid.core.errors import UsageError
+
+
+def _read_wheel_log(
+    log: str,
+    columns: str | None,
+    time_unit: str,
+    robot_obj,
+    *,
+    data: bytes | None = None,
+    whole: bool = True,
+    **log_options,
+):
+    """Read LOG with the log-input options (shared by the commands that read logs; Enum values accepted).
+
+    whole : the log in memory (a WheelLog); else a LogStream, read piece by piece when iterated.
+    """
+    from wmrid.api.inputs import open_log
+
+    stream = open_log(log, log_opts(columns, time_unit, log_options), robot=robot_obj, data=data)
+    return stream.read() if whole else stream
+
+
+def log_opts(columns: str | None, time_unit: str, log_options: dict):
+    """The :class:`wmrid.api.inputs.LogOptions` of a command's log-input flags."""
+    from wmrid.api.inputs import LogOptions
+
+    return LogOptions(columns=columns, time_unit=time_unit, **log_options)
+
+
+def load_robot(spec: str, gear_ratio: float | None, rotor_inertia: float | None, wheel_radius: float | None = None):
+    """A robot from a built-in name, a TOML file, or a URDF (which needs the gear ratio from --gear-ratio)."""
+    from wmrid.api.inputs import load_robot
+
+    return load_robot(spec, gear_ratio=gear_ratio, rotor_inertia=rotor_inertia, wheel_radius=wheel_radius)
+
+
+def stderr_console():
+    from rich.console import Console
+
+    return Console(stderr=True)
+
+
+def load_truth(path: Path) -> dict[str, float]:
+    """The "parameters" of a truth file (the simulator's sidecar), name -> value."""
+    import json
+
+    from wmrid.core.atomic import register_input
+
+    register_input(path)
+    try:
+        return {k: float(v) for k, v in json.loads(path.read_text(encoding="utf-8"))["parameters"].items()}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
+        raise UsageError(f"--truth {path}: not a truth file {{'parameters': {{'m11': ...}}}} ({err})") from err
+
+
+def write_estimates(result, path: Path, force: bool) -> None:
+    """The decimated history of an identification as an MCAP JSON topic /wmrid/estimates."""
+    from wmrid.core.atomic import to_json_text
+    from wmrid.io.mcap.writer import write_series_mcap
+
+    if path.suffix.lower() != ".mcap":
+        raise UsageError(f"--out {path}: the estimates are written as MCAP; name the file .mcap")
+    hist = result.history
+    series = {name: hist.theta[:, i // hist.theta.shape[2], i % hist.theta.shape[2]] for i, name in
+              enumerate(result.form.theta_names())}  # fmt: skip
+    series["e_r"] = hist.e[:, 0]
+    series["e_l"] = hist.e[:, 1]
+    series["lambda_min"] = hist.lambda_min
+    write_series_mcap(str(path), hist.t, series, force=force, metadata={"result": to_json_text(result.to_dict())})
+
+
+def progress(label: str):
+    """(callback(done, total), finish): a rich progress bar on stderr, shown for logs of a million samples
+    or more when stderr is a terminal; else no-ops."""
+    if not sys.stderr.isatty():
+        return None, lambda: None
+    state: dict = {}
+
+    def update(done: int, total: int) -> None:
+        if total < 1_000_000:
+            return
+        if not state:
+            from rich.progress import Progress
+
+            bar = Progress(console=stderr_console(), transient=True)
+            state["bar"], state["task"] = bar, bar.add_task(label, total=total)
+            bar.start()
+        state["bar"].update(state["task"], completed=done)
+
+    def finish() -> None:
+        if state:
+            state["bar"].stop()
+
+    return update, finish
+
+
+def on_stdout(output: Any) -> bool:
+    """Whether ``-o`` named standard output (``-``, /dev/stdout, /dev/fd/1: :func:`wmrid.core.atomic.stream_fd`)."""
+    from wmrid.core.atomic import stream_fd
+
+    return output is not None and stream_fd(str(output)) == 1

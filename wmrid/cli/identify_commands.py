@@ -1,0 +1,357 @@
+"""``wmrid identify``, ``inspect``, ``report`` and ``compare``: each a translation of its flags into one library call
+(:mod:`wmrid.api`) and a rendering of the result."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from wmrid.cli.app import app
+from wmrid.cli.helpers import load_robot, load_truth, log_opts, on_stdout, progress, stderr_console, write_estimates
+from wmrid.cli.options import (
+    AlignOpt,
+    AlignRule,
+    ControlRateOpt,
+    CutoffOpt,
+    DelayOpt,
+    EfficiencyOpt,
+    EffortKind,
+    EffortOpt,
+    EffortTopicOpt,
+    EffortUnitOpt,
+    FlipEffortOpt,
+    ForgettingOpt,
+    FormChoice,
+    FrictionChoice,
+    FrictionOpt,
+    GearRatioOpt,
+    LeftJointOpt,
+    MethodChoice,
+    MethodOpt,
+    MirrorLeftOpt,
+    OutputFormat,
+    RightJointOpt,
+    RotorInertiaOpt,
+    SpeedUnit,
+    SpeedUnitOpt,
+    TimeSource,
+    TimeSourceOpt,
+    TimeUnit,
+    TopicOpt,
+    TorqueConstantOpt,
+    TorqueHold,
+    ValidateOpt,
+    VelocityFrom,
+    VelocityFromOpt,
+    VelocityTopicOpt,
+    WeightedOpt,
+    WheelRadiusOpt,
+    log_options,
+)
+from wmrid.core.errors import UsageError
+
+
+@app.command()
+def identify(
+    log: Annotated[
+        str, typer.Argument(metavar="LOG", help="Log file (.csv, .parquet, .mcap) or - for standard input.")
+    ],
+    robot: Annotated[
+        str | None,
+        typer.Option(
+            help="Robot: built-in name ('paper'), TOML file, or URDF (with --gear-ratio); starts the estimate."
+        ),
+    ] = None,
+    columns: Annotated[
+        str | None, typer.Option(help="Column mapping, e.g. t=time,eta_r=vel_right,tau_l=effort_left.")
+    ] = None,
+    time_unit: Annotated[
+        TimeUnit, typer.Option(help="Unit of the time column (auto: float s, integer ns).")
+    ] = TimeUnit.auto,
+    form: Annotated[
+        FormChoice, typer.Option(help="Regressor: paper (7 columns, wheels keep one sign), general (8), auto.")
+    ] = FormChoice.auto,
+    k: Annotated[
+        float, typer.Option("--k", help="Observer/filter gain k of Eqs. 26-30, 1/s (paper: 1; see README).")
+    ] = 10.0,
+    alpha: Annotated[
+        float, typer.Option(help="Initial Gamma = alpha I (Eq. 33): weight of the start value (paper: 5000).")
+    ] = 1e-10,
+    box_width: Annotated[
+        float,
+        typer.Option(help="Half-width of the parameter box around the nominal values, in units of max(|theta|, m_ii)."),
+    ] = 10.0,
+    torque_hold: Annotated[
+        TorqueHold,
+        typer.Option(help="Torque between samples: zoh (held, as a digital controller applies it) or foh (linear)."),
+    ] = TorqueHold.zoh,
+    output_format: Annotated[
+        OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
+    ] = OutputFormat.auto,
+    output: Annotated[Path | None, typer.Option("--output", "-o", help="Write the JSON result to this file.")] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", help="Write the estimates over time and the prediction errors as an MCAP (JSON topic)."),
+    ] = None,
+    force: Annotated[bool, typer.Option(help="Overwrite an existing output file.")] = False,
+    payload: Annotated[
+        bool,
+        typer.Option(
+            "--payload",
+            help="Also estimate the payload carried (mass, x, y, inertia) against --robot's unloaded parameters.",
+        ),
+    ] = False,
+    topic: TopicOpt = None,
+    velocity_topic: VelocityTopicOpt = None,
+    effort_topic: EffortTopicOpt = None,
+    right_joint: RightJointOpt = None,
+    left_joint: LeftJointOpt = None,
+    time_source: TimeSourceOpt = TimeSource.auto,
+    align: AlignOpt = AlignRule.linear,
+    velocity_from: VelocityFromOpt = VelocityFrom.auto,
+    speed_unit: SpeedUnitOpt = SpeedUnit.rad_s,
+    wheel_radius: WheelRadiusOpt = None,
+    effort: EffortOpt = EffortKind.torque,
+    effort_unit: EffortUnitOpt = None,
+    torque_constant: TorqueConstantOpt = None,
+    gear_ratio: GearRatioOpt = None,
+    efficiency: EfficiencyOpt = None,
+    mirror_left: MirrorLeftOpt = False,
+    flip_effort: FlipEffortOpt = False,
+    rotor_inertia: RotorInertiaOpt = None,
+    method: MethodOpt = MethodChoice.observer,
+    cutoff: CutoffOpt = None,
+    weighted: WeightedOpt = False,
+    forgetting: ForgettingOpt = 1.0,
+    validate: ValidateOpt = None,
+    control_rate: ControlRateOpt = None,
+    delay: DelayOpt = None,
+    friction: FrictionOpt = FrictionChoice.auto,
+) -> None:
+    """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
+    from wmrid.api.identification import identify as run_identify
+    from wmrid.core.atomic import write_json
+    from wmrid.reporting.render import print_identification, to_json
+
+    robot_obj = load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
+    progress_cb, finish = progress("identify")
+    try:
+        result = run_identify(
+            log, robot_obj, method=method.value, validate=validate,
+            options=log_opts(columns, time_unit.value, log_options(locals())), form=form.value, k=k, alpha=alpha,
+            box_width=box_width, torque_hold=torque_hold.value, payload=payload, control_rate=control_rate,
+            delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted, forgetting=forgetting,
+            progress=progress_cb,
+        )  # fmt: skip
+    finally:
+        finish()
+    payload = result.to_dict()
+    if output is not None:
+        write_json(str(output), payload, force=force)
+    if out is not None:
+        write_estimates(result, out, force)
+    if on_stdout(output):
+        return  # the result went to standard output already: a second document there would not be JSON
+    fmt = output_format.value
+    if fmt == "auto":
+        fmt = "table" if sys.stdout.isatty() else "json"
+    if fmt == "json":
+        sys.stdout.write(to_json(payload) + "\n")
+    else:
+        from rich.console import Console
+
+        print_identification(result, Console())
+
+
+@app.command()
+def inspect(
+    log: Annotated[
+        str, typer.Argument(metavar="LOG", help="Log file (.mcap, .csv, .parquet) or - for standard input.")
+    ],
+    output_format: Annotated[
+        OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
+    ] = OutputFormat.auto,
+) -> None:
+    """What LOG holds: topics, types, counts, rates, time range and JointState joints (MCAP), or columns."""
+    from wmrid.io.inspect import inspect_log
+    from wmrid.reporting.render import print_inspection, to_json
+
+    info = inspect_log(log)
+    fmt = output_format.value
+    if fmt == "auto":
+        fmt = "table" if sys.stdout.isatty() else "json"
+    if fmt == "json":
+        sys.stdout.write(to_json(info) + "\n")
+    else:
+        from rich.console import Console
+
+        print_inspection(info, Console())
+
+
+@app.command()
+def report(
+    input_: Annotated[
+        str,
+        typer.Argument(
+            metavar="INPUT", help="A log (identified on the fly) or an `identify --format json` result; - for stdin."
+        ),
+    ],
+    output: Annotated[
+        Path | None, typer.Option("--output", "-o", help="Write the report: .html (self-contained), .md or .json.")
+    ] = None,
+    truth: Annotated[
+        Path | None, typer.Option(help='Ground truth JSON {"parameters": {"m11": ...}} (the simulator\'s sidecar).')
+    ] = None,
+    residuals: Annotated[
+        Path | None, typer.Option(help="Export the prediction errors over time (t, e_r, e_l) as .csv or .parquet.")
+    ] = None,
+    robot: Annotated[str | None, typer.Option(help="Robot (name, TOML or URDF), as for identify.")] = None,
+    columns: Annotated[str | None, typer.Option(help="Column mapping, as for identify.")] = None,
+    time_unit: Annotated[TimeUnit, typer.Option(help="Unit of the time column.")] = TimeUnit.auto,
+    form: Annotated[FormChoice, typer.Option(help="Regressor form, as for identify.")] = FormChoice.auto,
+    k: Annotated[float, typer.Option("--k", help="Observer gain, 1/s.")] = 10.0,
+    alpha: Annotated[float, typer.Option(help="Initial Gamma = alpha I.")] = 1e-10,
+    torque_hold: Annotated[TorqueHold, typer.Option(help="zoh or foh.")] = TorqueHold.zoh,
+    payload: Annotated[bool, typer.Option("--payload", help="Also estimate the payload (needs --robot).")] = False,
+    force: Annotated[bool, typer.Option(help="Overwrite existing output files.")] = False,
+    topic: TopicOpt = None,
+    velocity_topic: VelocityTopicOpt = None,
+    effort_topic: EffortTopicOpt = None,
+    right_joint: RightJointOpt = None,
+    left_joint: LeftJointOpt = None,
+    time_source: TimeSourceOpt = TimeSource.auto,
+    align: AlignOpt = AlignRule.linear,
+    velocity_from: VelocityFromOpt = VelocityFrom.auto,
+    speed_unit: SpeedUnitOpt = SpeedUnit.rad_s,
+    wheel_radius: WheelRadiusOpt = None,
+    effort: EffortOpt = EffortKind.torque,
+    effort_unit: EffortUnitOpt = None,
+    torque_constant: TorqueConstantOpt = None,
+    gear_ratio: GearRatioOpt = None,
+    efficiency: EfficiencyOpt = None,
+    mirror_left: MirrorLeftOpt = False,
+    flip_effort: FlipEffortOpt = False,
+    rotor_inertia: RotorInertiaOpt = None,
+    method: MethodOpt = MethodChoice.observer,
+    cutoff: CutoffOpt = None,
+    weighted: WeightedOpt = False,
+    forgetting: ForgettingOpt = 1.0,
+    validate: ValidateOpt = None,
+    control_rate: ControlRateOpt = None,
+    delay: DelayOpt = None,
+    friction: FrictionOpt = FrictionChoice.auto,
+) -> None:
+    """Tables (paper Tables 2 and 3), comparison with nominal/CAD/truth, diagnostics and figures for INPUT."""
+    from wmrid.api.reporting import REPORT_SUFFIXES, residual_frame, write_report
+    from wmrid.api.reporting import report as build
+
+    suffix = output.suffix.lower() if output is not None else None
+    if suffix not in (None, *REPORT_SUFFIXES):
+        raise UsageError(f"-o {output}: the report format comes from the suffix: .html, .md or .json")
+    truth_params = load_truth(truth) if truth is not None else None
+    if input_ == "-" and validate == "-":
+        raise UsageError("INPUT and --validate cannot both be standard input; give one of them as a file")
+    robot_obj = load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
+    rep = build(
+        input_, truth=truth_params, figures=suffix in (".html", ".htm", ".md"),
+        options=log_opts(columns, time_unit.value, log_options(locals())), robot=robot_obj, method=method.value,
+        validate=validate, form=form.value, k=k, alpha=alpha, torque_hold=torque_hold.value, payload=payload,
+        control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted,
+        forgetting=forgetting,
+    )  # fmt: skip
+    if residuals is not None:
+        from wmrid.io.logs import write_log
+
+        write_log(residual_frame(rep), str(residuals), force=force)
+    if output is not None:
+        write_report(rep, output, force=force)
+    else:
+        from rich.console import Console
+
+        from wmrid.reporting.render import print_report
+
+        print_report(rep, Console())
+    if output is not None:
+        stderr_console().print(f"wrote {output}")
+
+
+@app.command()
+def compare(
+    log: Annotated[
+        str, typer.Argument(metavar="LOG", help="Log file (.csv, .parquet, .mcap) or - for standard input.")
+    ],
+    robot: Annotated[
+        str | None, typer.Option(help="Robot (name, TOML or URDF): starts the observer and gives nominal/CAD values.")
+    ] = None,
+    truth: Annotated[
+        Path | None, typer.Option(help='Ground truth JSON {"parameters": {"m11": ...}} (the simulator\'s sidecar).')
+    ] = None,
+    validate: ValidateOpt = None,
+    control_rate: ControlRateOpt = None,
+    delay: DelayOpt = None,
+    methods: Annotated[
+        str, typer.Option(help="Comma-separated methods to run, of observer, idim, iv, rls, oe.")
+    ] = "observer,idim,rls,oe",
+    columns: Annotated[str | None, typer.Option(help="Column mapping, as for identify.")] = None,
+    time_unit: Annotated[TimeUnit, typer.Option(help="Unit of the time column.")] = TimeUnit.auto,
+    torque_hold: Annotated[TorqueHold, typer.Option(help="zoh or foh (observer and oe).")] = TorqueHold.zoh,
+    cutoff: CutoffOpt = None,
+    weighted: WeightedOpt = False,
+    forgetting: ForgettingOpt = 1.0,
+    output_format: Annotated[
+        OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
+    ] = OutputFormat.auto,
+    output: Annotated[
+        Path | None, typer.Option("--output", "-o", help="Write the JSON comparison to this file.")
+    ] = None,
+    force: Annotated[bool, typer.Option(help="Overwrite an existing output file.")] = False,
+    topic: TopicOpt = None,
+    velocity_topic: VelocityTopicOpt = None,
+    effort_topic: EffortTopicOpt = None,
+    right_joint: RightJointOpt = None,
+    left_joint: LeftJointOpt = None,
+    time_source: TimeSourceOpt = TimeSource.auto,
+    align: AlignOpt = AlignRule.linear,
+    velocity_from: VelocityFromOpt = VelocityFrom.auto,
+    speed_unit: SpeedUnitOpt = SpeedUnit.rad_s,
+    wheel_radius: WheelRadiusOpt = None,
+    effort: EffortOpt = EffortKind.torque,
+    effort_unit: EffortUnitOpt = None,
+    torque_constant: TorqueConstantOpt = None,
+    gear_ratio: GearRatioOpt = None,
+    efficiency: EfficiencyOpt = None,
+    mirror_left: MirrorLeftOpt = False,
+    flip_effort: FlipEffortOpt = False,
+    rotor_inertia: RotorInertiaOpt = None,
+    friction: FrictionOpt = FrictionChoice.auto,
+) -> None:
+    """Run every identification method on LOG: estimates, standard errors, errors against --truth, fit on
+    --validate OTHER, run time.  Every method identifies the same friction model (--friction)."""
+    from wmrid.api.identification import compare as run_compare
+    from wmrid.core.atomic import write_json
+    from wmrid.reporting.render import print_comparison, to_json
+
+    truth_params = load_truth(truth) if truth is not None else None
+    robot_obj = load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
+    data = run_compare(
+        log, robot_obj, methods=methods.split(","), validate=validate, truth=truth_params,
+        options=log_opts(columns, time_unit.value, log_options(locals())), torque_hold=torque_hold.value,
+        control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted,
+        forgetting=forgetting,
+    )  # fmt: skip
+    if output is not None:
+        write_json(str(output), data, force=force)
+    if on_stdout(output):
+        return  # the result went to standard output already
+    fmt = output_format.value
+    if fmt == "auto":
+        fmt = "table" if sys.stdout.isatty() else "json"
+    if fmt == "json":
+        sys.stdout.write(to_json(data) + "\n")
+    else:
+        from rich.console import Console
+
+        print_comparison(data, Console())

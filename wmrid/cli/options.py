@@ -1,0 +1,391 @@
+"""The command line's choices and options, shared by the commands: enums of the allowed values, and each option once
+(type, help and panel) as an ``Annotated`` alias."""
+
+from __future__ import annotations
+
+from enum import Enum
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+
+class OutputFormat(str, Enum):
+    auto = "auto"
+    table = "table"
+    json = "json"
+
+
+class MethodChoice(str, Enum):
+    observer = "observer"
+    idim = "idim"
+    iv = "iv"
+    rls = "rls"
+    oe = "oe"
+
+
+class FormChoice(str, Enum):
+    auto = "auto"
+    paper = "paper"
+    general = "general"
+
+
+class TimeUnit(str, Enum):
+    auto = "auto"
+    s = "s"
+    ms = "ms"
+    us = "us"
+    ns = "ns"
+
+
+class TorqueHold(str, Enum):
+    zoh = "zoh"
+    foh = "foh"
+
+
+class Trajectory(str, Enum):
+    sinusoid = "sinusoid"
+    reversing = "reversing"
+
+
+class Engine(str, Enum):
+    reduced = "reduced"
+    mujoco = "mujoco"
+
+
+class TimeSource(str, Enum):
+    auto = "auto"
+    header = "header"
+    log = "log"
+
+
+class AlignRule(str, Enum):
+    zoh = "zoh"
+    linear = "linear"
+
+
+class VelocityFrom(str, Enum):
+    auto = "auto"
+    velocity = "velocity"
+    position = "position"
+
+
+class SpeedUnit(str, Enum):
+    rad_s = "rad/s"
+    rpm = "rpm"
+    deg_s = "deg/s"
+    m_s = "m/s"
+
+
+class EffortKind(str, Enum):
+    torque = "torque"
+    current = "current"
+    pwm = "pwm"
+    voltage = "voltage"
+
+
+_LOG_PANEL = "Log input (MCAP topics, units, effort)"
+
+
+TopicOpt = Annotated[
+    str | None,
+    typer.Option(help="MCAP: the JointState (or JSON) topic holding speed and effort.", rich_help_panel=_LOG_PANEL),
+]
+
+
+VelocityTopicOpt = Annotated[
+    str | None,
+    typer.Option(help="MCAP: the JointState topic with the wheel speeds (or positions).", rich_help_panel=_LOG_PANEL),
+]
+
+
+EffortTopicOpt = Annotated[
+    str | None, typer.Option(help="MCAP: the JointState topic with the wheel efforts.", rich_help_panel=_LOG_PANEL)
+]
+
+
+RightJointOpt = Annotated[
+    str | None, typer.Option(help="MCAP: name of the right wheel joint.", rich_help_panel=_LOG_PANEL)
+]
+
+
+LeftJointOpt = Annotated[
+    str | None, typer.Option(help="MCAP: name of the left wheel joint.", rich_help_panel=_LOG_PANEL)
+]
+
+
+TimeSourceOpt = Annotated[
+    TimeSource,
+    typer.Option(
+        help="MCAP: header stamps, log time, or auto (header when all set and in order).", rich_help_panel=_LOG_PANEL
+    ),
+]
+
+
+AlignOpt = Annotated[
+    AlignRule,
+    typer.Option(
+        help="Split topics: effort held from the latest message (zoh) or interpolated (linear).",
+        rich_help_panel=_LOG_PANEL,
+    ),
+]
+
+
+VelocityFromOpt = Annotated[
+    VelocityFrom,
+    typer.Option(
+        help="Wheel speed from the velocity field, from positions, or auto (positions when no speeds).",
+        rich_help_panel=_LOG_PANEL,
+    ),
+]
+
+
+SpeedUnitOpt = Annotated[
+    SpeedUnit,
+    typer.Option(
+        help="Unit of the logged wheel speeds (m/s: at the rim, needs the radius).", rich_help_panel=_LOG_PANEL
+    ),
+]
+
+
+WheelRadiusOpt = Annotated[
+    float | None,
+    typer.Option(help="Wheel radius, m (for m/s speeds; default: the robot's r).", rich_help_panel=_LOG_PANEL),
+]
+
+
+EffortOpt = Annotated[
+    EffortKind,
+    typer.Option(
+        help="What the effort is: wheel torque, motor current (A), or a PWM/voltage command.",
+        rich_help_panel=_LOG_PANEL,
+    ),
+]
+
+
+EffortUnitOpt = Annotated[
+    str | None, typer.Option(help="Label of a PWM/voltage effort's unit (default PWM, V).", rich_help_panel=_LOG_PANEL)
+]
+
+
+TorqueConstantOpt = Annotated[
+    float | None,
+    typer.Option(help="Motor torque constant k_t, N m/A (for --effort current).", rich_help_panel=_LOG_PANEL),
+]
+
+
+GearRatioOpt = Annotated[
+    float | None,
+    typer.Option(help="Gear ratio k_r (for --effort current; default: the robot's k_r).", rich_help_panel=_LOG_PANEL),
+]
+
+
+EfficiencyOpt = Annotated[
+    float, typer.Option(help="Gearbox efficiency in (0, 1] (for --effort current).", rich_help_panel=_LOG_PANEL)
+]
+
+
+FlipEffortOpt = Annotated[
+    bool,
+    typer.Option(
+        help="The effort's sign is opposite to the speed's on both wheels: change it.", rich_help_panel=_LOG_PANEL
+    ),
+]
+
+
+MirrorLeftOpt = Annotated[
+    bool,
+    typer.Option(
+        help="The left motor is mirrored: change the sign of its speed and effort.", rich_help_panel=_LOG_PANEL
+    ),
+]
+
+
+#: The log-input options every log-reading command takes (names of its parameters).
+_LOG_OPTIONS = (
+    "topic", "velocity_topic", "effort_topic", "right_joint", "left_joint", "time_source", "align", "velocity_from",
+    "speed_unit", "wheel_radius", "effort", "effort_unit", "torque_constant", "gear_ratio", "efficiency",
+    "mirror_left", "flip_effort",
+)  # fmt: skip
+
+
+def log_options(params: dict) -> dict:
+    """The log-input options out of a command's parameters, Enum choices as their plain values."""
+    return {name: params[name].value if isinstance(params[name], Enum) else params[name] for name in _LOG_OPTIONS}
+
+
+RotorInertiaOpt = Annotated[
+    float | None,
+    typer.Option(help="URDF robots: motor rotor inertia I_r, kg m^2 (when the URDF has no rotor links)."),
+]
+
+
+_METHOD_PANEL = "Method (observer, or a classical rival; see wmrid compare)"
+
+
+MethodOpt = Annotated[
+    MethodChoice,
+    typer.Option(
+        help="observer (the paper's, default), idim (least squares on filtered accelerations), rls (recursive "
+        "least squares with forgetting), oe (output error from the observer's estimate).",
+        rich_help_panel=_METHOD_PANEL,
+    ),
+]
+
+
+CutoffOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--cutoff", help="idim/rls: low-pass cutoff of speeds and efforts, Hz (default: from the log).",
+        rich_help_panel=_METHOD_PANEL,
+    ),
+]  # fmt: skip
+
+
+WeightedOpt = Annotated[
+    bool, typer.Option("--weighted", help="idim: two-step weighted least squares.", rich_help_panel=_METHOD_PANEL)
+]
+
+
+ForgettingOpt = Annotated[
+    float,
+    typer.Option(help="rls: forgetting factor in (0, 1]; 1 = plain least squares.", rich_help_panel=_METHOD_PANEL),
+]
+
+
+DelayOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--delay",
+        metavar="auto|SECONDS",
+        help="The efforts are stamped SECONDS later than the speeds (two topics, two clocks; negative: earlier): "
+        "read them that much earlier.  auto: estimate the delay from the log and apply it when significant (the "
+        "output states it).  Reads the log into memory.  Default: as stamped, or auto when the efforts come from "
+        "another topic than the speeds.",
+    ),
+]
+
+
+ControlRateOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--control-rate",
+        metavar="HZ",
+        help="The controller updated the (held) effort at HZ, faster than the log: each step is held over its "
+        "sub-steps, the unlogged values interpolated (e.g. a 1 kHz controller logged at 100 Hz).",
+    ),
+]
+
+
+class FrictionChoice(str, Enum):
+    auto = "auto"
+    wheel = "wheel"
+    wheel_caster = "wheel+caster"
+
+
+FrictionOpt = Annotated[
+    FrictionChoice,
+    typer.Option(
+        "--friction",
+        help="wheel: viscous and Coulomb friction per wheel (Eqs. 15-17); wheel+caster: also the casters' rolling "
+        "drag, one drag force per caster when --robot lists [[caster]] positions (else two terms, Cv against "
+        "speed and Cw against turning), for the observer, idim, rls and oe (oe and --validate need the positions); "
+        "auto: both, and the caster model when the log shows the drag (a Wald test, p < 0.001; the output says "
+        "which and why).",
+    ),
+]
+
+
+ValidateOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--validate",
+        metavar="OTHER",
+        help="Also predict the wheel speeds of log OTHER (read with the same options) from its efforts with the "
+        "identified model, and report the fit % per wheel.",
+    ),
+]
+
+
+_CHANGE_PANEL = "Change of the dynamics during the run (one per run)"
+
+
+LoadAtOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--load-at",
+        metavar="T",
+        help="Load the --payload at T s: unloaded before, loaded from the first 1 ms control period starting at "
+        "or after T.",
+        rich_help_panel=_CHANGE_PANEL,
+    ),
+]
+
+
+DropAtOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--drop-at",
+        metavar="T",
+        help="Drop the --payload at T s: loaded before, unloaded from the first control period at or after T.",
+        rich_help_panel=_CHANGE_PANEL,
+    ),
+]
+
+
+FrictionFaultOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--friction-fault",
+        metavar="WHEEL:FACTOR[:TERMS]",
+        help="Multiply one wheel's true friction by FACTOR from --fault-at on: WHEEL right or left, TERMS both "
+        "(default, F_v and F_d), viscous (F_v) or coulomb (F_d); e.g. right:3.",
+        rich_help_panel=_CHANGE_PANEL,
+    ),
+]
+
+
+FaultAtOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--fault-at",
+        metavar="T",
+        help="Time of the --friction-fault, s (from the first control period starting at or after T).",
+        rich_help_panel=_CHANGE_PANEL,
+    ),
+]
+
+
+_MONITOR_PANEL = "Change detection"
+
+
+MonitorModelOpt = Annotated[
+    Path,
+    typer.Option(
+        "--model",
+        metavar="RESULT.json",
+        help="The model to replay LOG against: the JSON `wmrid identify LOG0 -o RESULT.json` wrote.",
+        rich_help_panel=_MONITOR_PANEL,
+    ),
+]
+
+
+CalibrationOpt = Annotated[
+    float,
+    typer.Option(
+        "--calibration",
+        help="Span at the start of LOG (and after each change) assumed unchanged, on which the residual's noise is "
+        "calibrated, s.",
+        rich_help_panel=_MONITOR_PANEL,
+    ),
+]
+
+
+FalseAlarmRateOpt = Annotated[
+    float,
+    typer.Option(
+        "--false-alarm-rate",
+        help="Stated false alarms per hour of log (Bonferroni bound over the tests); sets the threshold.",
+        rich_help_panel=_MONITOR_PANEL,
+    ),
+]

@@ -1,0 +1,200 @@
+"""``wmrid simulate`` and ``monitor``: each a translation of its flags into one library call (:mod:`wmrid.api`)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from wmrid.cli.app import app
+from wmrid.cli.helpers import log_opts, on_stdout, stderr_console
+from wmrid.cli.options import (
+    AlignOpt,
+    AlignRule,
+    CalibrationOpt,
+    DropAtOpt,
+    EfficiencyOpt,
+    EffortKind,
+    EffortOpt,
+    EffortTopicOpt,
+    EffortUnitOpt,
+    Engine,
+    FalseAlarmRateOpt,
+    FaultAtOpt,
+    FlipEffortOpt,
+    FrictionFaultOpt,
+    GearRatioOpt,
+    LeftJointOpt,
+    LoadAtOpt,
+    MirrorLeftOpt,
+    MonitorModelOpt,
+    OutputFormat,
+    RightJointOpt,
+    RotorInertiaOpt,
+    SpeedUnit,
+    SpeedUnitOpt,
+    TimeSource,
+    TimeSourceOpt,
+    TimeUnit,
+    TopicOpt,
+    TorqueConstantOpt,
+    Trajectory,
+    VelocityFrom,
+    VelocityFromOpt,
+    VelocityTopicOpt,
+    WheelRadiusOpt,
+    log_options,
+)
+
+
+@app.command()
+def simulate(
+    output: Annotated[
+        str, typer.Option("--output", "-o", help="Log to write: .csv, .parquet or .mcap (- for CSV on stdout).")
+    ],
+    robot: Annotated[str, typer.Option(help="Robot TOML file or built-in name; its CAD set is the truth.")] = "paper",
+    trajectory: Annotated[Trajectory, typer.Option(help="Reference trajectory.")] = Trajectory.sinusoid,
+    duration: Annotated[float, typer.Option(help="Duration, s.")] = 40.0,
+    rate: Annotated[float, typer.Option(help="Log rate, Hz (control runs at 1 kHz).")] = 1000.0,
+    seed: Annotated[int, typer.Option(help="Seed of every random number.")] = 0,
+    payload: Annotated[
+        str | None,
+        typer.Option(
+            help="Rigid payload MASS[@X,Y] (kg, m in the platform frame), e.g. 25@0.1,-0.05; carried throughout "
+            "unless --load-at or --drop-at says when."
+        ),
+    ] = None,
+    payload_inertia: Annotated[
+        float, typer.Option(help="Payload yaw inertia about its own centre of mass, kg m^2.")
+    ] = 0.0,
+    eta_noise: Annotated[float, typer.Option(help="Std of white noise on logged wheel speeds, rad/s.")] = 0.0,
+    tau_noise: Annotated[float, typer.Option(help="Std of white noise on logged torques, N m.")] = 0.0,
+    caster: Annotated[float, typer.Option(help="Std of the coloured caster disturbance torque, N m.")] = 0.0,
+    caster_time: Annotated[float, typer.Option(help="Correlation time of the caster disturbance, s.")] = 0.3,
+    encoder_cpr: Annotated[int, typer.Option(help="Encoder counts per wheel revolution (0: no quantisation).")] = 0,
+    force: Annotated[bool, typer.Option(help="Overwrite existing output files.")] = False,
+    gear_ratio: Annotated[float | None, typer.Option(help="URDF robots: gear ratio k_r.")] = None,
+    rotor_inertia: RotorInertiaOpt = None,
+    load_at: LoadAtOpt = None,
+    drop_at: DropAtOpt = None,
+    friction_fault: FrictionFaultOpt = None,
+    fault_at: FaultAtOpt = None,
+    engine: Annotated[
+        Engine,
+        typer.Option(
+            help="reduced: the paper's reduced model (Eqs. 9-14); mujoco: a multibody prototype (rigid bodies, "
+            "wheel-ground contact, casters) that knows nothing of those equations (pip install 'wmrid[physics]').",
+            rich_help_panel="Multibody prototype",
+        ),
+    ] = Engine.reduced,
+    floor_friction: Annotated[
+        float | None,
+        typer.Option(
+            help="mujoco: Coulomb friction of the wheels on the floor (low values let them slip); default 1.0.",
+            rich_help_panel="Multibody prototype",
+        ),
+    ] = None,
+    caster_resistance: Annotated[
+        float | None,
+        typer.Option(
+            help="mujoco: rolling-resistance coefficient of every caster (drag / normal load; 0: frictionless); "
+            "default: the robot file's [[caster]] values, else 0.015 (polyurethane).",
+            rich_help_panel="Multibody prototype",
+        ),
+    ] = None,
+    torque_limit: Annotated[
+        float | None,
+        typer.Option(help="mujoco: clip each wheel torque to +-this, N m.", rich_help_panel="Multibody prototype"),
+    ] = None,
+) -> None:
+    """Simulate the paper's virtual prototype and write a log plus its ground truth (<log>.truth.json).
+
+    The dynamics may change once during the run, the controller keeping the nominal parameters:
+    --payload 25@0.1,-0.05 --load-at 30 loads the payload at 30 s, --payload 25 --drop-at 30 drops it,
+    --friction-fault right:3 --fault-at 30 triples the right wheel's friction.  The truth's "parameters"
+    are those at t = 0; its settings.change holds both parameter sets ("before", "after", base and
+    physical), the requested time t and the switch time t_switch (s).
+    """
+    from wmrid.api.simulation import simulate as run_simulate
+    from wmrid.api.simulation import write_simulation
+
+    run = run_simulate(
+        robot, trajectory=trajectory.value, duration=duration, rate=rate, seed=seed, payload=payload,
+        payload_inertia=payload_inertia, eta_noise=eta_noise, tau_noise=tau_noise, caster=caster,
+        caster_time=caster_time, encoder_cpr=encoder_cpr, load_at=load_at, drop_at=drop_at,
+        friction_fault=friction_fault, fault_at=fault_at, engine=engine.value, floor_friction=floor_friction,
+        caster_resistance=caster_resistance, torque_limit=torque_limit, gear_ratio=gear_ratio,
+        rotor_inertia=rotor_inertia,
+    )  # fmt: skip
+    truth_path = write_simulation(run, output, force=force)
+    if truth_path is not None:
+        change = run.change
+        what = "" if change is None else f", {change.kind} at {run.log.settings['change']['t_switch']:g} s"
+        stderr_console().print(f"wrote {output} ({len(run.log.t)} samples{what}) and {truth_path}")
+
+
+@app.command()
+def monitor(
+    log: Annotated[
+        str, typer.Argument(metavar="LOG", help="Log file (.csv, .parquet, .mcap) or - for standard input.")
+    ],
+    model: MonitorModelOpt,
+    calibration: CalibrationOpt = 10.0,
+    false_alarm_rate: FalseAlarmRateOpt = 0.1,
+    columns: Annotated[str | None, typer.Option(help="Column mapping, as for identify.")] = None,
+    time_unit: Annotated[TimeUnit, typer.Option(help="Unit of the time column.")] = TimeUnit.auto,
+    output_format: Annotated[
+        OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
+    ] = OutputFormat.auto,
+    output: Annotated[Path | None, typer.Option("--output", "-o", help="Write the JSON result to this file.")] = None,
+    force: Annotated[bool, typer.Option(help="Overwrite an existing output file.")] = False,
+    topic: TopicOpt = None,
+    velocity_topic: VelocityTopicOpt = None,
+    effort_topic: EffortTopicOpt = None,
+    right_joint: RightJointOpt = None,
+    left_joint: LeftJointOpt = None,
+    time_source: TimeSourceOpt = TimeSource.auto,
+    align: AlignOpt = AlignRule.linear,
+    velocity_from: VelocityFromOpt = VelocityFrom.auto,
+    speed_unit: SpeedUnitOpt = SpeedUnit.rad_s,
+    wheel_radius: WheelRadiusOpt = None,
+    effort: EffortOpt = EffortKind.torque,
+    effort_unit: EffortUnitOpt = None,
+    torque_constant: TorqueConstantOpt = None,
+    gear_ratio: GearRatioOpt = None,
+    efficiency: EfficiencyOpt = None,
+    mirror_left: MirrorLeftOpt = False,
+    flip_effort: FlipEffortOpt = False,
+) -> None:
+    """Replay LOG against an identified model; report when the dynamics change, and the parameters after.
+
+    A windowed likelihood-ratio test on the model's torque residual, with a stated false-alarm rate, finds
+    changes such as a payload loaded or dropped or a wheel's friction rising; after each, the robot is
+    identified again and the test restarts.  JSON: {"changes": [{"t": s from the log's start,
+    "parameters": {...}, ...}], "detector": {..., "threshold", "false_alarm_rate_per_hour"}, ...}.
+    """
+    from wmrid.api.monitoring import monitor as run_monitor
+    from wmrid.core.atomic import write_json
+    from wmrid.reporting.monitor_view import print_monitor
+    from wmrid.reporting.render import to_json
+
+    result = run_monitor(
+        log, model, options=log_opts(columns, time_unit.value, log_options(locals())), calibration=calibration,
+        false_alarm_rate=false_alarm_rate,
+    )  # fmt: skip
+    payload = result.to_dict()
+    if output is not None:
+        write_json(str(output), payload, force=force)
+    if on_stdout(output):
+        return  # the result went to standard output already
+    fmt = output_format.value
+    if fmt == "auto":
+        fmt = "table" if sys.stdout.isatty() else "json"
+    if fmt == "json":
+        sys.stdout.write(to_json(payload) + "\n")
+    else:
+        from rich.console import Console
+
+        print_monitor(result, Console())
