@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.conftest import open_loop_log
+from tests.open_loop import open_loop_log
 from wmrid.estimators.identify import identify
 from wmrid.estimators.result import REPORTED
 from wmrid.model.dynamics import THETA0_NAMES

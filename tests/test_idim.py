@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from tests.conftest import open_loop_log
+from tests.open_loop import open_loop_log
 from wmrid.core.errors import LogFormatError, NotIdentifiableError, UsageError
 from wmrid.estimators import idim
 from wmrid.model import dynamics as model

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from tests.conftest import open_loop_log
+from tests.open_loop import open_loop_log
 from wmrid.core.errors import NotIdentifiableError
 from wmrid.estimators import idim
 from wmrid.estimators.identify import identify

@@ -25,7 +25,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from tests.conftest import open_loop_log
+from tests.open_loop import open_loop_log
 from wmrid.estimators.identify import identify
 from wmrid.estimators.result import REPORTED
 from wmrid.model import dynamics as model

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 from types import SimpleNamespace
 
+import cliutil
 import numpy as np
 import pytest
 
@@ -29,9 +29,8 @@ PAYLOAD = Payload(mass=25.0, x=0.1, y=-0.05, inertia=0.4)
 
 
 def wmrid(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "wmrid", *args], capture_output=True, text=True, timeout=300, check=False
-    )
+    """``wmrid ARGS`` in this process, stdout and stderr as text."""
+    return cliutil.text(cliutil.wmrid(*args))
 
 
 def _log(seed: int, true=None) -> SimpleNamespace:

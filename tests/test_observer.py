@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import optimize, signal
 
-from tests.conftest import open_loop_log
+from tests.open_loop import open_loop_log
 from wmrid.estimators.observer import (
     ObserverSettings,
     foh_weights,

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from tests.conftest import open_loop_log
+from tests.open_loop import open_loop_log
 from wmrid.core.errors import NotIdentifiableError, UsageError
 from wmrid.estimators.output_error import MAX_NFEV, SHOOTING_SECONDS, cluster_sandwich, identify_oe, shooting_starts
 from wmrid.model import dynamics as model

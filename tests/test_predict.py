@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from tests.conftest import open_loop_log
+from tests.open_loop import open_loop_log
 from wmrid.core.errors import UsageError
 from wmrid.model import dynamics as model
 from wmrid.model.predict import MAX_STEP, fit_percent, simulate_segments, simulate_speeds, validation_fit

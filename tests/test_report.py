@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import json
-import os
 import subprocess
-import sys
 from pathlib import Path
 
+import cliutil
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -16,10 +15,8 @@ TRUTH = ROOT / "sample_logs" / "paper_sinusoid.parquet.truth.json"
 
 
 def wmrid(*args: str, stdin: bytes | None = None) -> subprocess.CompletedProcess:
-    env = dict(os.environ, COLUMNS="200")
-    return subprocess.run(
-        [sys.executable, "-m", "wmrid", *args], input=stdin, capture_output=True, env=env, timeout=300
-    )
+    """``wmrid ARGS`` in this process, 200 columns wide."""
+    return cliutil.wmrid(*args, stdin=stdin, columns="200")
 
 
 def test_html_report_from_a_log_is_self_contained_with_tables_and_figures(tmp_path):

@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from tests.conftest import open_loop_log
+from tests.open_loop import open_loop_log
 from wmrid.core.errors import NotIdentifiableError, UsageError
 from wmrid.estimators import idim, rls
 from wmrid.model import dynamics as model

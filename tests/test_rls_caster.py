@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from tests.conftest import open_loop_log
+from tests.open_loop import open_loop_log
 from tests.test_idim_caster import (  # noqa: F401 (caster_log: a fixture)
     GEOMETRIC,
     TWO_TERM,

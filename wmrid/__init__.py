@@ -88,6 +88,8 @@ _EXPORTS = {
     "simulate": "wmrid.api.simulation",
     "monitor": "wmrid.api.monitoring",
     "report": "wmrid.api.reporting",
+    "write_report": "wmrid.api.reporting",
+    "write_simulation": "wmrid.api.simulation",
     "IdentificationResult": "wmrid.estimators.result",
     "BaseEstimate": "wmrid.estimators.estimate",
     "WheelLog": "wmrid.core.wheel_log",

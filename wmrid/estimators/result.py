@@ -82,6 +82,11 @@ class IdentificationResult:
     estimate: BaseEstimate | None = None  # the reported theta0 and its covariance (undetermined: NaN/inf)
     validation: dict[str, Any] | None = None  # fit on another log (wmrid.model.predict.validation_fit)
 
+    @classmethod
+    def from_dict(cls, data: Any, source: str = "result") -> IdentificationResult:
+        """The result a document of :meth:`to_dict` describes (:func:`from_dict`)."""
+        return from_dict(data, source)
+
     def theta_dict(self) -> dict[str, Any]:
         names = self.form.theta_names()
         std = np.sqrt(np.clip(np.diag(self.theta_cov), 0, None))

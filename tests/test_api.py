@@ -1,0 +1,144 @@
+"""The library's front door (``wmrid.identify`` and friends): the README's Python example runs, the API and the CLI
+give the same document, results round-trip through their JSON, and library errors name options as Python names."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import wmrid
+from tests.cliutil import wmrid as cli
+from wmrid.core.errors import LogFormatError, UsageError
+from wmrid.estimators.result import SCHEMA_VERSION, from_dict
+from wmrid.reporting.render import to_json
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "sample_logs" / "paper_sinusoid.csv"
+
+
+@pytest.fixture(scope="module")
+def sample_log():
+    return wmrid.read_log(SAMPLE)
+
+
+@pytest.fixture(scope="module")
+def sample_result(sample_log):
+    return wmrid.identify(sample_log, wmrid.load_robot("paper"))
+
+
+def test_the_readme_python_example_runs(tmp_path, monkeypatch):
+    """The README's "Python" block, verbatim but for where it writes the report."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = readme.split("## Python", 1)[1]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    monkeypatch.chdir(ROOT)
+    code = code.replace('"r.html"', repr(str(tmp_path / "r.html")))
+    scope: dict = {}
+    exec(compile(code, "README.md", "exec"), scope)
+    assert scope["value"] == pytest.approx(0.7872544, rel=1e-6)
+    assert 0 < scope["std"] < 1e-5
+    assert set(scope["table"]["methods"]) == {"observer", "idim"}
+    assert scope["saved"].to_dict() == scope["result"].to_dict()
+    assert scope["sim"].truth["payload"]["mass"] == 25.0
+    assert isinstance(scope["changes"], wmrid.MonitorResult)
+    assert (tmp_path / "r.html").read_text(encoding="utf-8").startswith("<!DOCTYPE html>")
+
+
+def test_import_wmrid_loads_nothing_heavy():
+    """``import wmrid`` loads the exports lazily: no numpy, pandas, numba until one is used."""
+    code = "import sys, wmrid; print(sorted(m for m in ('numpy', 'pandas', 'numba', 'rich') if m in sys.modules))"
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)
+    assert proc.stdout.strip() == "[]"
+    with pytest.raises(AttributeError, match="no attribute 'nonsense'"):
+        wmrid.nonsense  # noqa: B018
+
+
+def test_the_api_and_the_cli_give_the_same_document(sample_result):
+    proc = cli("identify", str(SAMPLE), "--robot", "paper", "--format", "json")
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout) == json.loads(to_json(sample_result.to_dict()))
+
+
+@pytest.mark.parametrize("method", ["observer", "idim", "oe"])
+def test_a_result_round_trips_through_its_json(sample_log, method):
+    """from_dict(to_dict) gives the same document, through real JSON text; the estimate keeps its covariance."""
+    result = wmrid.identify(sample_log, "paper", method=method, payload=method == "observer")
+    doc = json.loads(to_json(result.to_dict()))
+    assert doc["schema_version"] == SCHEMA_VERSION
+    back = from_dict(doc, "saved.json")
+    assert json.loads(to_json(back.to_dict())) == doc
+    assert back.method == method
+    assert back.estimate.method == method
+    np.testing.assert_array_equal(back.estimate.theta0, result.estimate.theta0)
+    np.testing.assert_array_equal(back.estimate.cov, result.estimate.cov)
+    assert back.parameters == result.parameters
+    if method == "observer":
+        assert back.payload == result.payload
+
+
+def test_a_result_of_a_newer_schema_or_an_incomplete_one_is_refused(sample_result):
+    doc = sample_result.to_dict()
+    with pytest.raises(LogFormatError, match="schema version 2, newer than this wmrid reads"):
+        from_dict({**doc, "schema_version": 2}, "future.json")
+    broken = {k: v for k, v in doc.items() if k != "settings"}
+    with pytest.raises(LogFormatError, match=r"broken.json: not a complete identify result \(no 'settings'\)"):
+        from_dict(broken, "broken.json")
+    with pytest.raises(LogFormatError, match="not an identify result"):
+        from_dict([1, 2], "list.json")
+
+
+def test_a_result_saved_before_schema_versions_reads_as_version_1(sample_result):
+    """Documents written before ``schema_version`` and ``estimate`` existed: the reported std on the diagonal."""
+    doc = json.loads(to_json(sample_result.to_dict()))
+    del doc["schema_version"], doc["estimate"]
+    back = from_dict(doc)
+    std = np.sqrt(np.diag(back.theta0_cov))
+    assert std[0] == pytest.approx(doc["parameters"]["m11"]["std"], rel=1e-15)
+    assert back.estimate is None
+
+
+def test_library_errors_name_options_as_python_names(sample_log):
+    with pytest.raises(UsageError, match=r"friction='wheel\+caster' with method='oe' or validate needs"):
+        wmrid.identify(sample_log, method="oe", friction="wheel+caster")
+    with pytest.raises(UsageError, match=r"control_rate is modelled by the observer, idim, iv and rls only"):
+        wmrid.identify(sample_log, method="oe", control_rate=1000.0)
+    with pytest.raises(UsageError, match="delay must be auto or a number of seconds, got 'soon'"):
+        wmrid.identify(sample_log, delay="soon")
+    with pytest.raises(UsageError, match="unknown log option 'speed'"):
+        wmrid.read_log(SAMPLE, speed="rpm")
+
+
+def test_the_same_errors_name_flags_on_the_command_line():
+    proc = cli("identify", str(SAMPLE), "--method", "oe", "--friction", "wheel+caster")
+    assert proc.returncode == 2
+    assert "--friction wheel+caster with --method oe or --validate needs" in proc.stderr.decode()
+    proc = cli("identify", str(SAMPLE), "--delay", "soon")
+    assert "--delay must be auto or a number of seconds, got 'soon'" in proc.stderr.decode()
+
+
+def test_log_options_come_from_one_object_and_the_robot_fills_the_rest():
+    opts = wmrid.LogOptions(speed_unit="m/s", effort="current")
+    robot = wmrid.load_robot("paper")
+    filled = opts.with_robot(robot)
+    assert filled.wheel_radius == robot.nominal.r
+    assert filled.torque_constant == robot.torque_constant
+    assert opts.with_robot(None) is opts
+    log = wmrid.read_log(SAMPLE, wmrid.LogOptions(speed_unit="rpm"))
+    ref = wmrid.read_log(SAMPLE)
+    np.testing.assert_allclose(log.eta, ref.eta * 2 * math.pi / 60, rtol=1e-15)
+
+
+def test_simulate_and_write_simulation_give_the_cli_files(tmp_path):
+    run = wmrid.simulate("paper", duration=2.0, seed=3, eta_noise=0.01)
+    truth_path = wmrid.write_simulation(run, tmp_path / "api.csv")
+    proc = cli("simulate", "-o", str(tmp_path / "cli.csv"), "--duration", "2", "--seed", "3", "--eta-noise", "0.01")
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "api.csv").read_bytes() == (tmp_path / "cli.csv").read_bytes()
+    assert Path(truth_path).read_bytes() == (tmp_path / "cli.csv.truth.json").read_bytes()
