@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cliutil import assert_clean_error, wmrid
+from cliutil import assert_clean_error, process, wmrid
 
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
@@ -121,7 +121,8 @@ def test_missing_file_and_unknown_robot(tmp_path):
 
 
 def test_debug_shows_the_traceback(tmp_path):
-    proc = wmrid("--debug", "identify", str(tmp_path / "nope.csv"))
+    """A real process: --debug lets the exception reach the interpreter, which prints its traceback."""
+    proc = process("--debug", "identify", str(tmp_path / "nope.csv"))
     assert proc.returncode != 0
     assert "Traceback" in proc.stderr.decode()
 

@@ -5,8 +5,8 @@ result, 2 bad usage or unreadable input, 130 interrupted; on failure one line on
 the place at fault and what to do; never a traceback (without --debug); at most three lines on stderr.
 
 Each case builds its input inside ``tmp_path`` (CSV cases start from the first 2 s of the bundled 1 kHz
-``sample_logs/paper_sinusoid.csv`` and break it), runs ``python -m wmrid identify LOG --format json`` in
-a subprocess, and checks the exit code, the stderr message, and on success the single JSON object on
+``sample_logs/paper_sinusoid.csv`` and break it), runs ``wmrid identify LOG --format json`` through its
+entry point (in this process), and checks the exit code, the stderr message, and on success the single JSON object on
 stdout with the expected note or warning.
 """
 
@@ -23,6 +23,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import cliutil
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -308,14 +309,7 @@ def _finite_numbers(value) -> bool:
 @pytest.mark.parametrize("case", CASES)
 def test_broken_log_gets_a_clear_answer(tmp_path, case: Case):
     path = case.build(tmp_path)
-    proc = subprocess.run(
-        [sys.executable, "-m", "wmrid", "identify", path, "--format", "json", *case.args],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        cwd=tmp_path,
-        check=False,
-    )
+    proc = cliutil.text(cliutil.wmrid("identify", path, "--format", "json", *case.args, cwd=tmp_path))
     stderr = proc.stderr
     assert "Traceback" not in stderr, stderr
     assert len(stderr.splitlines()) <= 3, stderr

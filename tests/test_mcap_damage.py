@@ -13,7 +13,8 @@ from mcap.writer import CompressionType
 from mcap_ros2.writer import Writer as Ros2Writer
 
 from wmrid.io.logs import read_log
-from wmrid.io.mcap.reader import read_mcap, standard_joint_state
+from wmrid.io.mcap.reader import read_mcap
+from wmrid.io.mcap.records import standard_joint_state
 from wmrid.io.mcap.writer import JOINT_STATE_MSGDEF, write_joint_state_mcap
 from wmrid.model.robot import BUILTIN_ROBOTS
 from wmrid.sim.simulate import simulate
@@ -222,7 +223,7 @@ def test_a_zstd_bomb_is_skipped_unread(tmp_path):
 def test_a_joint_state_naming_thousands_of_joints_is_skipped(tmp_path):
     """A 500 KB file whose first message names 50,000 joints made the per-joint arrays need 14 GB; a topic naming
     more than MAX_JOINTS joints is skipped with a note."""
-    from wmrid.io.mcap.reader import MAX_JOINTS
+    from wmrid.io.mcap.records import MAX_JOINTS
 
     path = tmp_path / "wide.mcap"
     names = [f"j{i}" for i in range(MAX_JOINTS + 1)]

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cliutil import wmrid
 from mcap.reader import make_reader
 from mcap.writer import CompressionType
 from mcap_ros2.decoder import DecoderFactory
@@ -347,9 +348,7 @@ def test_real_bag_fast_path_equals_generic_decoder(bag):
 def test_me169_identifies_in_pwm_units_with_diagnostics():
     args = ["--velocity-topic", "/wheel_state", "--effort-topic", "/wheel_desired", "--right-joint", "rightwheel"]
     args += ["--left-joint", "leftwheel", "--effort", "pwm", "--format", "json"]
-    proc = subprocess.run(
-        [sys.executable, "-m", "wmrid", "identify", str(ME169), *args], capture_output=True, timeout=300
-    )
+    proc = wmrid("identify", str(ME169), *args)
     assert proc.returncode == 0, proc.stderr.decode()
     out = json.loads(proc.stdout)
     assert out["effort_unit"] == "PWM"
@@ -365,15 +364,13 @@ def test_me169_identifies_in_pwm_units_with_diagnostics():
 )
 def test_conformance_bags_give_clear_errors_and_inspect_lists_them(name):
     path = REAL / "rosbag2_conformance" / name
-    proc = subprocess.run([sys.executable, "-m", "wmrid", "identify", str(path)], capture_output=True, timeout=120)
+    proc = wmrid("identify", str(path))
     err = proc.stderr.decode()
     assert proc.returncode == 2, err
     assert "Traceback" not in err
     assert len(err.strip().splitlines()) == 1
     assert "no sensor_msgs/msg/JointState messages" in err
-    proc = subprocess.run(
-        [sys.executable, "-m", "wmrid", "inspect", str(path), "--format", "json"], capture_output=True, timeout=120
-    )
+    proc = wmrid("inspect", str(path), "--format", "json")
     assert proc.returncode == 0, proc.stderr.decode()
     info = json.loads(proc.stdout)
     assert info["format"] == "mcap"
@@ -385,9 +382,8 @@ def test_conformance_bags_give_clear_errors_and_inspect_lists_them(name):
 def test_inspect_simulated_bag(tmp_path, paper_sim):
     path = tmp_path / "sim.mcap"
     write_joint_state_mcap(path, paper_sim.to_frame())
-    proc = subprocess.run(
-        [sys.executable, "-m", "wmrid", "inspect", str(path), "--format", "json"], capture_output=True, check=True
-    )
+    proc = wmrid("inspect", str(path), "--format", "json")
+    assert proc.returncode == 0, proc.stderr.decode()
     info = json.loads(proc.stdout)
     topics = {t["topic"]: t for t in info["topics"]}
     assert topics["/joint_states"]["messages"] == len(paper_sim.t)
@@ -397,10 +393,7 @@ def test_inspect_simulated_bag(tmp_path, paper_sim):
 
 
 def test_truth_in_simulated_mcap_metadata(tmp_path):
-    proc = subprocess.run(
-        [sys.executable, "-m", "wmrid", "simulate", "-o", str(tmp_path / "s.mcap"), "--duration", "2"],
-        capture_output=True,
-    )
+    proc = wmrid("simulate", "-o", str(tmp_path / "s.mcap"), "--duration", "2")
     assert proc.returncode == 0, proc.stderr.decode()
     contents = read_mcap(str(tmp_path / "s.mcap"))
     truth = json.loads(contents.metadata["wmrid"]["truth"])

@@ -359,18 +359,18 @@ def test_missing_file_and_text_source(tmp_path):
 
 def test_cli_accepts_a_urdf_robot_with_its_gear_ratio():
     import json
-    import subprocess
-    import sys
+
+    from cliutil import wmrid
 
     root = Path(__file__).resolve().parents[1]
     log = root / "sample_logs" / "paper_sinusoid.csv"
     urdf = root / "tests" / "data" / "paper_robot.urdf"
-    args = [sys.executable, "-m", "wmrid", "identify", str(log), "--robot", str(urdf), "--format", "json"]
-    proc = subprocess.run([*args, "--gear-ratio", "100"], capture_output=True, timeout=300)
+    args = ["identify", str(log), "--robot", str(urdf), "--format", "json"]
+    proc = wmrid(*args, "--gear-ratio", "100")
     assert proc.returncode == 0, proc.stderr.decode()
     out = json.loads(proc.stdout)
     expected = model.named_base(model.base_parameters(BUILTIN_ROBOTS["paper"].cad))
     assert out["reference"]["m11"] == pytest.approx(expected["m11"], rel=1e-9)
-    proc = subprocess.run(args, capture_output=True, timeout=300)
+    proc = wmrid(*args)
     assert proc.returncode == 2
     assert "--gear-ratio" in proc.stderr.decode()

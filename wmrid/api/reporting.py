@@ -13,7 +13,7 @@ from wmrid.api.identification import identify
 from wmrid.api.inputs import LogOptions, load_robot, read_log
 from wmrid.core.errors import LogFormatError, UsageError, WmridError, option
 from wmrid.core.wheel_log import LogStream, WheelLog
-from wmrid.estimators.result import IdentificationResult
+from wmrid.estimators.result import IdentificationResult, from_dict
 from wmrid.model.robot import Robot
 from wmrid.reporting.report import Report, build_report
 
@@ -45,8 +45,9 @@ def _from_saved(data: Any, name: str, truth: dict[str, float] | None, figures: b
     """The report of a saved result; whatever it lacks or holds malformed is named, with the file."""
     if isinstance(data, dict) and not data.get("source"):
         data["source"] = name
+    saved = from_dict(data, name)  # names the file in its message, not the log it came from
     try:
-        return build_report(data, truth=truth, figures=figures)
+        return build_report(data, result=saved, truth=truth, figures=figures)
     except WmridError:
         raise
     except (KeyError, TypeError, ValueError, IndexError, AttributeError) as err:

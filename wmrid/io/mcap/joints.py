@@ -23,7 +23,7 @@ Choices, each stated in the log's notes:
   :func:`wmrid.io.signals.speed_from_position`.
 
 Streaming (:func:`stream_plan`, :class:`SignalStream`): for a long recording the choices above are made
-from a first pass's :class:`wmrid.io.mcap.reader.JointSummary` (the same rules, the same messages and errors),
+from a first pass's :class:`wmrid.io.mcap.contents.JointSummary` (the same rules, the same messages and errors),
 and the signals are then computed batch by batch as the second pass decodes the messages, giving exactly
 the values :func:`signals_from_mcap` gives.  One topic: each batch is cleaned and matched on its own,
 holding back the messages that share the batch's last time stamp for the next one.  Split topics: the
@@ -44,7 +44,8 @@ import numpy as np
 
 from wmrid.core.errors import LogFormatError, UsageError
 from wmrid.core.wheel_log import SPLIT_NOTE
-from wmrid.io.mcap.reader import JOINT_STATE, JointSeries, JointSummary, JsonSeries, McapContents, bucket_range
+from wmrid.io.mcap.contents import JointSeries, JointSummary, JsonSeries, McapContents
+from wmrid.io.mcap.records import JOINT_STATE, bucket_range
 from wmrid.io.signals import SignalOptions, convert, position_to_rad, speed_from_position
 
 TIME_SOURCES = ("auto", "header", "log")

@@ -77,7 +77,7 @@ def read_mcap_log(
 def _mcap_whole_log(
     source: Source, contents: Any, selection: TopicSelection, signals: SignalOptions, gear_ratio: float | None
 ) -> WheelLog:
-    """The WheelLog of a recording read whole (:class:`wmrid.io.mcap.reader.McapContents` with its arrays)."""
+    """The WheelLog of a recording read whole (:class:`wmrid.io.mcap.contents.McapContents` with its arrays)."""
     from wmrid.io.mcap.joints import signals_from_json, signals_from_mcap
 
     if selection.topic in contents.json:

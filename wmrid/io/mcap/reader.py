@@ -13,7 +13,7 @@ How (bounded memory, no per-message Python objects on the fast path):
   time.  Schema, Channel and Metadata records are parsed with the ``mcap`` library's record classes.
   Files without a summary or index, unchunked files and files on a pipe all read the same way.
 * Message records give channel id, log time and the payload's place; JointState payloads are decoded
-  by :func:`_joint_states`, a compiled CDR reader for the one layout ROS 2 uses for that type
+  by :func:`joint_states`, a compiled CDR reader for the one layout ROS 2 uses for that type
   (little-endian CDR: header stamp, frame id, names, then three sequences of float64).  It matches
   joints BY NAME in every message, so joint order may change from message to message.  A message it
   cannot read (big-endian CDR, a payload that breaks the layout) is decoded by mcap_ros2's generic
@@ -53,500 +53,33 @@ from collections.abc import Callable, Generator, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-import numba
 import numpy as np
 
 from wmrid.core.errors import LogFormatError
 from wmrid.core.limits import describe, memory_budget
-
-#: A JointState topic whose first message names more joints than this is skipped (a wheel log names a few; 50,000
-#: names in a 500 KB file made the per-joint arrays need 14 GB).
-MAX_JOINTS = 4096
-#: A chunk declaring more than BOMB_FLOOR bytes and more than BOMB_RATIO times its compressed size is skipped
-#: unread: a recording's chunks (1-4 MiB of messages) compress 3-20 times; a 366 KB zstd chunk of zeros declaring
-#: gigabytes is a bomb.
-BOMB_RATIO = 1000
-BOMB_FLOOR = 64 << 20
-#: Set to 0 to read chunks whose CRC does not match (a file known to be written with wrong CRCs).
-CRC_ENV = "WMRID_MCAP_CRC"
-
-MAGIC = b"\x89MCAP0\r\n"
-JOINT_STATE = "sensor_msgs/msg/JointState"
-JOINT_STATE_NAMES = (JOINT_STATE, "sensor_msgs/JointState")
-
-OP_HEADER = 0x01
-OP_FOOTER = 0x02
-OP_SCHEMA = 0x03
-OP_CHANNEL = 0x04
-OP_MESSAGE = 0x05
-OP_CHUNK = 0x06
-OP_METADATA = 0x0C
-OP_DATA_END = 0x0F
-
-STATUS_OK = 0
-STATUS_MALFORMED = 1
-STATUS_NOT_LE_CDR = 2
-
-
-# --------------------------------------------------------------------------------------------------
-# Compiled kernels
-
-
-@numba.njit(cache=True, nogil=True)
-def _u32(buf, p):
-    return np.int64(buf[p]) | (np.int64(buf[p + 1]) << 8) | (np.int64(buf[p + 2]) << 16) | (np.int64(buf[p + 3]) << 24)
-
-
-@numba.njit(cache=True, nogil=True)
-def _u64(buf, p):
-    lo = _u32(buf, p)
-    hi = _u32(buf, p + 4)
-    return lo | (hi << 32)
-
-
-@numba.njit(cache=True, nogil=True)
-def _scan(buf, start, end, ops, starts, lengths):
-    """Walk records (opcode u8, length u64, body) in buf[start:end].
-
-    Fills ops/starts (body offset)/lengths and returns (count, offset after the last complete record).
-    Stops early when the arrays are full (the caller grows them and continues from that offset) or
-    when a record runs past ``end`` (a truncated file).
-    """
-    p = start
-    n = 0
-    cap = ops.shape[0]
-    while p + 9 <= end and n < cap:
-        length = _u64(buf, p + 1)
-        if length < 0 or length > end - p - 9:  # compared without adding: a length near 2^63 would overflow
-            break
-        ops[n] = buf[p]
-        starts[n] = p + 9
-        lengths[n] = length
-        n += 1
-        p += 9 + length
-    return n, p
-
-
-@numba.njit(cache=True, nogil=True)
-def _f64(buf, p):
-    return buf[p : p + 8].view(np.float64)[0]
-
-
-@numba.njit(cache=True, nogil=True)
-def _joint_states(buf, starts, lengths, ref, ref_off, stamp, pos, vel, eff, status):
-    """Decode JointState CDR payloads buf[starts[i] : starts[i] + lengths[i]] into per-joint arrays.
-
-    ref, ref_off: the reference joint names, concatenated bytes and offsets (K + 1,).
-    stamp (n,) int64 header stamp in ns; pos, vel, eff (n, K) float64, NaN where the message lacks the
-    joint or the field; status (n,) int8: 0 ok, 1 malformed, 2 not little-endian CDR (for the caller
-    to decode another way).
-    """
-    n = starts.shape[0]
-    k_ref = ref_off.shape[0] - 1
-    idx = np.empty(k_ref, dtype=np.int64)
-    for i in range(n):
-        b = starts[i]
-        end = b + lengths[i]
-        status[i] = STATUS_OK
-        for k in range(k_ref):
-            pos[i, k] = np.nan
-            vel[i, k] = np.nan
-            eff[i, k] = np.nan
-        if lengths[i] < 16:
-            status[i] = STATUS_MALFORMED
-            continue
-        if buf[b] != 0 or buf[b + 1] != 1:
-            status[i] = STATUS_NOT_LE_CDR
-            continue
-        o = b + 4  # CDR alignment is relative to the payload after the encapsulation header
-        sec = _u32(buf, o)
-        if sec >= 2**31:
-            sec -= 2**32
-        nsec = _u32(buf, o + 4)
-        stamp[i] = sec * 1_000_000_000 + nsec
-        p = 8
-        slen = _u32(buf, o + p)
-        p += 4 + slen
-        p = (p + 3) & ~3
-        if o + p + 4 > end:
-            status[i] = STATUS_MALFORMED
-            continue
-        count = _u32(buf, o + p)
-        p += 4
-        for k in range(k_ref):
-            idx[k] = -1
-        bad = False
-        for j in range(count):
-            p = (p + 3) & ~3
-            if o + p + 4 > end:
-                bad = True
-                break
-            slen = _u32(buf, o + p)
-            p += 4
-            if o + p + slen > end or slen < 1:
-                bad = True
-                break
-            name_len = slen - 1  # the length counts the terminating NUL
-            for k in range(k_ref):
-                a = ref_off[k]
-                if ref_off[k + 1] - a != name_len or idx[k] >= 0:
-                    continue
-                same = True
-                for c in range(name_len):
-                    if buf[o + p + c] != ref[a + c]:
-                        same = False
-                        break
-                if same:
-                    idx[k] = j
-            p += slen
-        if bad:
-            status[i] = STATUS_MALFORMED
-            continue
-        for which in range(3):
-            p = (p + 3) & ~3
-            if o + p + 4 > end:
-                bad = True
-                break
-            m = _u32(buf, o + p)
-            p += 4
-            if m > 0:
-                p = (p + 7) & ~7
-                if o + p + 8 * m > end:
-                    bad = True
-                    break
-            for k in range(k_ref):
-                j = idx[k]
-                if j >= 0 and j < m:
-                    value = _f64(buf, o + p + 8 * j)
-                    if which == 0:
-                        pos[i, k] = value
-                    elif which == 1:
-                        vel[i, k] = value
-                    else:
-                        eff[i, k] = value
-            p += 8 * m
-        if bad:
-            status[i] = STATUS_MALFORMED
-
-
-@numba.njit(cache=True, nogil=True)
-def _field_stats(values, has_value, has_nonzero, has_nan, has_inf, max_abs):
-    """Per column of values (n, K): any non-NaN, any non-NaN non-zero, any NaN, any inf, largest finite |v|."""
-    n, k = values.shape
-    for i in range(n):
-        for j in range(k):
-            v = values[i, j]
-            if np.isnan(v):
-                has_nan[j] = True
-                continue
-            has_value[j] = True
-            if v != 0:
-                has_nonzero[j] = True
-            if np.isinf(v):
-                has_inf[j] = True
-            elif abs(v) > max_abs[j]:
-                max_abs[j] = abs(v)
-
-
-#: Buckets of the step histograms (:func:`step_buckets`): 1024 exact ones below 1024 ns, then 512 per octave.
-STEP_BUCKETS = 28160
-_POW2 = np.int64(1) << np.arange(63, dtype=np.int64)
-
-
-def step_buckets(steps: np.ndarray) -> np.ndarray:
-    """Histogram bucket of each positive int64 step: the step itself below 1024, else 512 buckets per octave
-    (relative width <= 1/512); buckets are ordered like the steps they hold."""
-    length = np.searchsorted(_POW2, steps, side="right")  # bit length, exactly
-    shift = np.maximum(length - 10, 0)
-    return shift * 512 + (steps >> shift)
-
-
-def bucket_range(bucket: int) -> tuple[int, int]:
-    """The steps (lowest, highest, both included) that fall into ``bucket`` of :func:`step_buckets`."""
-    if bucket < 1024:
-        return bucket, bucket
-    shift = bucket // 512 - 1
-    mantissa = bucket - shift * 512
-    return mantissa << shift, min(((mantissa + 1) << shift) - 1, 2**63 - 1)
-
-
-def _time_span(start_ns: int, end_ns: int) -> str:
-    """A chunk's message log-time range for a note: 's1-s2 s' (in seconds of log time)."""
-    return f"{start_ns / 1e9:.9g}-{end_ns / 1e9:.9g} s of log time"
-
-
-def _decompress(name: str, compression: str, data: bytes, size: int) -> bytes:
-    """A chunk's records: ``data`` decompressed, never more than ``size`` + 1 bytes (its declared size, already
-    within the budget), so a chunk that lies about its size cannot make wmrid allocate more."""
-    if compression == "":
-        return bytes(data)
-    if compression == "zstd":
-        import zstandard
-
-        with zstandard.ZstdDecompressor().stream_reader(io.BytesIO(data)) as reader:
-            return reader.read(size + 1)
-    if compression == "lz4":
-        import lz4.frame
-
-        return lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
-    raise LogFormatError(
-        f"{name}: a chunk uses compression {compression!r}, which wmrid cannot read (zstd, lz4 or none); "
-        "recompress the file with `mcap convert`"
-    )
-
-
-#: The standard sensor_msgs/msg/JointState fields, in order: the layout the compiled reader decodes.
-_JOINT_STATE_FIELDS = (("header", "std_msgs/Header"), ("name", "string[]"), ("position", "float64[]"),
-                       ("velocity", "float64[]"), ("effort", "float64[]"))  # fmt: skip
-
-
-def standard_joint_state(encoding: str, data: bytes) -> bool:
-    """Whether a JointState schema (``encoding``, its text ``data``) lists exactly the standard fields in the standard
-    order, so the compiled reader may decode it; an IDL or other schema, or other fields, go to the generic one."""
-    if encoding != "ros2msg":
-        return False
-    try:
-        text = bytes(data).decode("utf-8")
-    except UnicodeDecodeError:
-        return False
-    fields = []
-    for line in text.splitlines():
-        if line.startswith("=" * 10):
-            break  # the definitions of the types it uses follow
-        line = line.split("#", 1)[0].strip()
-        parts = line.split()
-        if len(parts) < 2 or "=" in line:
-            continue  # blank, a comment, or a constant
-        kind = {"Header": "std_msgs/Header", "std_msgs/msg/Header": "std_msgs/Header"}.get(parts[0], parts[0])
-        fields.append((parts[1], kind))
-    return tuple(fields) == _JOINT_STATE_FIELDS
-
-
-# --------------------------------------------------------------------------------------------------
-# Results
-
-
-@dataclass(frozen=True)
-class ChannelInfo:
-    """One channel: its topic, encodings, schema, and the messages seen (count, log-time range in ns)."""
-
-    id: int
-    topic: str
-    message_encoding: str
-    schema_name: str
-    schema_encoding: str
-    count: int
-    first_ns: int | None
-    last_ns: int | None
-
-    @property
-    def rate_hz(self) -> float | None:
-        """Mean message rate over the channel's span, Hz (None for fewer than 2 messages)."""
-        if self.count < 2 or self.first_ns is None or self.last_ns is None or self.last_ns <= self.first_ns:
-            return None
-        return (self.count - 1) / ((self.last_ns - self.first_ns) * 1e-9)
-
-
-@dataclass(frozen=True)
-class JointSeries:
-    """The JointState messages of one topic, in file order.
-
-    names : the joint names (those of the first message, plus any met later), K of them.
-    log_ns, stamp_ns : (n,) int64, the MCAP log time and the header stamp, ns.
-    position (rad or m), velocity (rad/s or m/s), effort (N m, N, or whatever was logged) : (n, K)
-    float64, NaN where a message does not carry that joint or that field.
-    """
-
-    topic: str
-    names: tuple[str, ...]
-    log_ns: np.ndarray
-    stamp_ns: np.ndarray
-    position: np.ndarray
-    velocity: np.ndarray
-    effort: np.ndarray
-    skipped: int = 0
-
-    def field(self, name: str) -> np.ndarray:
-        return {"position": self.position, "velocity": self.velocity, "effort": self.effort}[name]
-
-    def any_nonzero(self, name: str, cols: list[int]) -> bool:
-        """Whether field ``name`` holds a non-NaN, non-zero value in one of the joint columns ``cols``."""
-        values = self.field(name)[:, cols]
-        finite = values[~np.isnan(values)]
-        return finite.size > 0 and bool(np.any(finite != 0))
-
-    def populated(self, name: str) -> str:
-        """'yes', 'zeros' (present but all zero), 'partly' (some NaN) or 'no' for field ``name``."""
-        values = self.field(name)
-        if values.size == 0 or np.all(np.isnan(values)):
-            return "no"
-        finite = values[~np.isnan(values)]
-        if np.all(finite == 0):
-            return "zeros"
-        return "partly" if np.any(np.isnan(values)) else "yes"
-
-
-FIELDS = ("position", "velocity", "effort")
-
-
-@dataclass(frozen=True)
-class TimeSummary:
-    """One time source (MCAP log time or header stamp) of a JointState topic, over the whole file in file order.
-
-    first, last, low, high : ns (None without messages).  ordered : never decreasing from one message to the
-    next.  steps_ok : every step fits in int64 (so ``hist`` holds them all).  all_positive : every value > 0.
-    repeats : steps of 0.  hist : (STEP_BUCKETS,) counts of the positive steps by :func:`step_buckets`.
-    """
-
-    first: int | None
-    last: int | None
-    low: int | None
-    high: int | None
-    ordered: bool
-    steps_ok: bool
-    all_positive: bool
-    repeats: int
-    hist: np.ndarray
-
-
-@dataclass(frozen=True)
-class JointSummary:
-    """What a JointState topic holds, without its arrays (the first pass over a long recording).
-
-    channel_id : the channel whose messages :class:`JointSeries` would hold.  names, count : as there.
-    has_value, has_nonzero, has_nan, has_inf : (3, K) bool per field (position, velocity, effort) and joint:
-    some value is not NaN, some non-NaN value is not 0, some value is NaN (or missing), some is infinite.
-    max_abs : (3, K) the largest finite |value| (0 when none).  times : {"log": ..., "header": ...}.
-    """
-
-    topic: str
-    channel_id: int
-    names: tuple[str, ...]
-    count: int
-    has_value: np.ndarray
-    has_nonzero: np.ndarray
-    has_nan: np.ndarray
-    has_inf: np.ndarray
-    max_abs: np.ndarray
-    times: dict[str, TimeSummary]
-
-    def populated(self, name: str) -> str:
-        """As :meth:`JointSeries.populated`."""
-        f = FIELDS.index(name)
-        if self.count == 0 or len(self.names) == 0 or not self.has_value[f].any():
-            return "no"
-        if not self.has_nonzero[f].any():
-            return "zeros"
-        return "partly" if self.has_nan[f].any() else "yes"
-
-    def any_nonzero(self, name: str, cols: list[int]) -> bool:
-        """Whether field ``name`` holds a non-NaN, non-zero value in one of the joint columns ``cols``."""
-        return bool(self.has_nonzero[FIELDS.index(name), cols].any())
-
-
-class _TimeStats:
-    """Builds a :class:`TimeSummary` batch by batch."""
-
-    def __init__(self) -> None:
-        self.first: int | None = None
-        self.prev: int | None = None
-        self.low: int | None = None
-        self.high: int | None = None
-        self.ordered = True
-        self.steps_ok = True
-        self.all_positive = True
-        self.repeats = 0
-        self.hist = np.zeros(STEP_BUCKETS, dtype=np.int64)
-
-    def add(self, values: np.ndarray) -> None:
-        if len(values) == 0:
-            return
-        if self.prev is None:
-            self.first = int(values[0])
-            steps = np.diff(values)
-            up = values[1:] >= values[:-1]
-        else:
-            steps = np.diff(values, prepend=np.int64(self.prev))
-            up = np.concatenate(([values[0] >= self.prev], values[1:] >= values[:-1]))
-        self.ordered = self.ordered and bool(up.all())
-        if self.ordered and self.steps_ok:
-            if (steps < 0).any():  # an int64 overflow: no histogram
-                self.steps_ok = False
-            else:
-                self.repeats += int(np.count_nonzero(steps == 0))
-                positive = steps[steps > 0]
-                if len(positive):
-                    self.hist += np.bincount(step_buckets(positive), minlength=STEP_BUCKETS)
-        self.all_positive = self.all_positive and bool((values > 0).all())
-        low, high = int(values.min()), int(values.max())
-        self.low = low if self.low is None else min(self.low, low)
-        self.high = high if self.high is None else max(self.high, high)
-        self.prev = int(values[-1])
-
-    def summary(self) -> TimeSummary:
-        return TimeSummary(
-            first=self.first, last=self.prev, low=self.low, high=self.high, ordered=self.ordered,
-            steps_ok=self.steps_ok, all_positive=self.all_positive, repeats=self.repeats, hist=self.hist,
-        )  # fmt: skip
-
-
-class _JointStats:
-    """Builds a :class:`JointSummary` part by part."""
-
-    def __init__(self, k: int) -> None:
-        self.count = 0
-        self.has_value = np.zeros((3, k), dtype=bool)
-        self.has_nonzero = np.zeros((3, k), dtype=bool)
-        self.has_nan = np.zeros((3, k), dtype=bool)
-        self.has_inf = np.zeros((3, k), dtype=bool)
-        self.max_abs = np.zeros((3, k))
-        self.times = {"log": _TimeStats(), "header": _TimeStats()}
-
-    def add(self, part: tuple[np.ndarray, ...]) -> None:
-        log_ns, stamp = part[0], part[1]
-        self.count += len(log_ns)
-        for f in range(3):
-            _field_stats(part[2 + f], self.has_value[f], self.has_nonzero[f], self.has_nan[f], self.has_inf[f],
-                         self.max_abs[f])  # fmt: skip
-        self.times["log"].add(log_ns)
-        self.times["header"].add(stamp)
-
-
-@dataclass(frozen=True)
-class JsonSeries:
-    """Numeric fields read from a JSON-encoded channel: log_ns (n,) int64 and {key: (n,) float64}."""
-
-    topic: str
-    log_ns: np.ndarray
-    values: dict[str, np.ndarray]
-
-
-@dataclass(frozen=True)
-class McapContents:
-    """What :func:`read_mcap` found.
-
-    complete : False when :func:`scan_mcap` stopped keeping the arrays: ``joints`` then holds a
-    :class:`JointSummary` per topic instead of a :class:`JointSeries`.
-    """
-
-    source: str
-    profile: str
-    library: str
-    channels: tuple[ChannelInfo, ...]
-    joints: dict[str, Any]
-    json: dict[str, JsonSeries]
-    metadata: dict[str, dict[str, str]]
-    notes: tuple[str, ...]
-    size_bytes: int
-    lost_bytes: int = 0
-    complete: bool = True
-
-    def channel(self, topic: str) -> ChannelInfo | None:
-        return next((c for c in self.channels if c.topic == topic), None)
-
-
-# --------------------------------------------------------------------------------------------------
-# Reading
+from wmrid.io.mcap.contents import ChannelInfo, JointSeries, JointStats, JointSummary, JsonSeries, McapContents
+from wmrid.io.mcap.records import (
+    BOMB_FLOOR,
+    BOMB_RATIO,
+    CRC_ENV,
+    JOINT_STATE_NAMES,
+    MAGIC,
+    MAX_JOINTS,
+    OP_CHANNEL,
+    OP_CHUNK,
+    OP_FOOTER,
+    OP_HEADER,
+    OP_MESSAGE,
+    OP_METADATA,
+    OP_SCHEMA,
+    STATUS_MALFORMED,
+    STATUS_OK,
+    decompress,
+    joint_states,
+    scan,
+    standard_joint_state,
+    time_span,
+)
 
 
 @dataclass
@@ -564,7 +97,7 @@ class _Accumulator:
     skipped: int = 0
     json_rows: list[tuple[int, list[float]]] = field(default_factory=list)
     batches: int = 0  # parts made (kept or not)
-    stats: _JointStats | None = None
+    stats: JointStats | None = None
     standard: bool | None = None  # the schema is the standard JointState (the compiled reader may decode it)
     too_wide: bool = False  # its messages name more than MAX_JOINTS joints: skipped
 
@@ -656,6 +189,8 @@ def _map(path: str, data: bytes | None) -> tuple[np.ndarray, Callable[[int], Non
 
 #: Mapped pages are handed back in runs of at least this many bytes.
 _RELEASE_BYTES = 1 << 22
+
+
 #: Bytes of top-level records scanned at a time.
 _SCAN_WINDOW = 1 << 22
 
@@ -710,7 +245,7 @@ def _read_buffer(state: _ReadState, buf: np.ndarray) -> McapContents:
 
 
 def _summary(acc: _Accumulator) -> JointSummary:
-    stats = acc.stats or _JointStats(len(acc.names))
+    stats = acc.stats or JointStats(len(acc.names))
     return JointSummary(
         topic=acc.info["topic"], channel_id=acc.info["id"], names=tuple(acc.names), count=stats.count,
         has_value=stats.has_value, has_nonzero=stats.has_nonzero, has_nan=stats.has_nan, has_inf=stats.has_inf,
@@ -798,9 +333,9 @@ class _ReadState:
             # At top level, scan at most _SCAN_WINDOW bytes ahead: each record header read maps the pages
             # around it, and over a whole file of chunks those would add up to a good part of the file.
             stop = min(end, p + _SCAN_WINDOW) if top_level else end
-            n, q = _scan(buf, p, stop, ops, starts, lengths)
+            n, q = scan(buf, p, stop, ops, starts, lengths)
             if n == 0 and stop < end:  # a record longer than the window
-                n, q = _scan(buf, p, end, ops[:1], starts[:1], lengths[:1])
+                n, q = scan(buf, p, end, ops[:1], starts[:1], lengths[:1])
                 stop = q if n else end
             if n:
                 done = yield from self._handle(buf, ops[:n], starts[:n], lengths[:n], top_level)
@@ -867,7 +402,7 @@ class _ReadState:
         from mcap.records import Chunk
 
         chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
-        span = _time_span(chunk.message_start_time, chunk.message_end_time)
+        span = time_span(chunk.message_start_time, chunk.message_end_time)
         declared = int(chunk.uncompressed_size)
         if declared > self.budget or (declared > BOMB_FLOOR and declared > BOMB_RATIO * max(len(chunk.data), 1)):
             self.notes.append(
@@ -877,7 +412,7 @@ class _ReadState:
             )
             return
         try:
-            raw = _decompress(self.name, chunk.compression, chunk.data, declared)
+            raw = decompress(self.name, chunk.compression, chunk.data, declared)
         except LogFormatError:
             raise
         except Exception as err:  # a corrupt chunk: say so, keep what the other chunks hold
@@ -1042,7 +577,7 @@ class _ReadState:
         eff = np.full((n, k), np.nan)
         status = np.full(n, STATUS_MALFORMED, dtype=np.int8)
         if acc.standard:
-            _joint_states(buf, starts, lengths, acc.ref, acc.ref_off, stamp, pos, vel, eff, status)
+            joint_states(buf, starts, lengths, acc.ref, acc.ref_off, stamp, pos, vel, eff, status)
         slow = np.flatnonzero(status != STATUS_OK)
         keep = np.ones(n, dtype=bool)
         for i in slow:  # rare: other endianness, a layout the fast path refuses, or new joint names
@@ -1092,7 +627,7 @@ class _ReadState:
     @staticmethod
     def _add_stats(acc: _Accumulator, part: tuple[np.ndarray, ...]) -> None:
         if acc.stats is None:
-            acc.stats = _JointStats(len(acc.names))
+            acc.stats = JointStats(len(acc.names))
         acc.stats.add(part)
 
     def _set_names(self, acc: _Accumulator, names: list[str]) -> None:
