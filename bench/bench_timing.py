@@ -8,7 +8,8 @@ differences; before and after wmrid's checks and ``--delay auto``.
 For each engine (wmrid's reduced simulator; the MuJoCo multibody prototype, frictionless casters), trajectory
 (sinusoid, reversing) and fault, the light AMR is simulated with sensor noise (0.02 rad/s, 0.01 N m; seeds
 0..N-1), its controller at 1 kHz.  Faults (``--faults``): ``+5ms``, ``0ms``, ``-5ms``: logged at 1 kHz, the efforts
-shifted by that delay (:func:`wmrid.estimators.idim.shifted`; + = stamped late); ``100hz``, ``20hz``: logged at that
+shifted by that delay (:func:`wmrid.estimators.idim_regression.shifted`; + = stamped late); ``100hz``, ``20hz``:
+logged at that
 rate
 (a decimated record of the 1 kHz loop); ``backdiff``: speeds as backward differences of a 2^20-count encoder (half
 a sample of lag; reduced engine only).  Each log is identified three times with the default method: ``before``
@@ -45,7 +46,7 @@ def one(job: tuple[str, str, str, int, float]) -> dict:
     delay = FAULTS[fault]
     rate = RATES.get(fault, 1000.0)
     from wmrid.estimators.identify import identify
-    from wmrid.estimators.idim import shifted
+    from wmrid.estimators.idim_regression import shifted
     from wmrid.model import dynamics as model
     from wmrid.model.robot import BUILTIN_ROBOTS
     from wmrid.sim.simulate import NoiseSettings, simulate

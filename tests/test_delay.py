@@ -9,7 +9,7 @@ import pytest
 
 from wmrid.core.errors import UsageError
 from wmrid.estimators.delay import DELAY_STEP_S, _refine, estimate_delay
-from wmrid.estimators.idim import shifted
+from wmrid.estimators.idim_regression import shifted
 from wmrid.model.robot import BUILTIN_ROBOTS
 from wmrid.sim.multibody import MultibodySettings, simulate_multibody
 from wmrid.sim.simulate import NoiseSettings, simulate

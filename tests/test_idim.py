@@ -11,7 +11,7 @@ import pytest
 
 from tests.open_loop import open_loop_log
 from wmrid.core.errors import LogFormatError, NotIdentifiableError, UsageError
-from wmrid.estimators import idim
+from wmrid.estimators import idim, idim_regression
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
 from wmrid.sim.simulate import NoiseSettings, simulate
@@ -45,7 +45,7 @@ def test_regression_rows_reproduce_the_inverse_model(smooth_log, reversing_log):
     phi = true_phi()
     for log in (smooth_log, reversing_log):
         eta_dot = model.wheel_acceleration(log.eta, log.tau, log.theta0)
-        x = idim.regressor_rows(log.eta, eta_dot)
+        x = idim_regression.regressor_rows(log.eta, eta_dot)
         assert x.shape == (len(log.t), 2, 8)
         np.testing.assert_allclose(x @ phi, log.tau, rtol=0, atol=1e-12 * np.abs(log.tau).max())
 
@@ -65,7 +65,7 @@ def test_phi_to_theta0_and_its_jacobian():
 def test_filtered_regression_is_exact_on_a_noise_free_log(smooth_log):
     # Parallel filtering: the filtered torques obey the same linear equation as the raw ones, so the
     # residual of the true phi is only the derivative's and the edges' error (measured max 1e-6 N m).
-    reg = idim.idim_regression(smooth_log.t, smooth_log.eta, smooth_log.tau, decimate=False)
+    reg = idim_regression.idim_regression(smooth_log.t, smooth_log.eta, smooth_log.tau, decimate=False)
     resid = reg.rows() @ true_phi() - reg.tau
     assert np.abs(resid).max() < 1e-5
     assert reg.cutoff_hz == 10.0  # noise-free: the floor is rounding noise, the rule gives f_hi
@@ -135,7 +135,11 @@ def test_diagnostics_are_json_ready_and_complete(noisy_closed_loop):
     d = json.loads(json.dumps(est.diagnostics))
     for key in ("cutoff_hz", "cutoff_rule", "decimation", "samples_used", "residual_rms", "weights", "phi"):
         assert key in d
-    assert d["decimation"] == idim.decimation_factor(1000.0, d["cutoff_hz"]) == math.floor(250.0 / d["cutoff_hz"])
+    assert (
+        d["decimation"]
+        == idim_regression.decimation_factor(1000.0, d["cutoff_hz"])
+        == math.floor(250.0 / d["cutoff_hz"])
+    )
     assert len(d["residual_rms"]) == 2
     assert all(0.01 < r < 0.2 for r in d["residual_rms"])  # N m
     assert est.cov.shape == (8, 8)
@@ -150,24 +154,28 @@ def test_diagnostics_are_json_ready_and_complete(noisy_closed_loop):
 
 
 def test_default_cutoff_rule(smooth_log, noisy_closed_loop):
-    assert idim.cutoff_bounds(1000.0, 40.0) == pytest.approx((idim.edge_seconds(1.0, 4) / 4.0, 10.0))
-    assert idim.cutoff_bounds(100.0, 40.0)[1] == 5.0  # rate / 20
-    assert idim.cutoff_bounds(1000.0, 2.0) == (10.0, 10.0)  # short log: edges win over the bandwidth
+    assert idim_regression.cutoff_bounds(1000.0, 40.0) == pytest.approx(
+        (idim_regression.edge_seconds(1.0, 4) / 4.0, 10.0)
+    )
+    assert idim_regression.cutoff_bounds(100.0, 40.0)[1] == 5.0  # rate / 20
+    assert idim_regression.cutoff_bounds(1000.0, 2.0) == (10.0, 10.0)  # short log: edges win over the bandwidth
     # noise-free: no floor, f_hi; noisy closed loop: the speed loop reaches ~2.4 Hz
-    assert idim.default_cutoff(smooth_log.eta, 1000.0) == 10.0
-    assert 2.0 < idim.velocity_bandwidth(noisy_closed_loop.eta, 1000.0) < 3.5
+    assert idim_regression.default_cutoff(smooth_log.eta, 1000.0) == 10.0
+    assert 2.0 < idim_regression.velocity_bandwidth(noisy_closed_loop.eta, 1000.0) < 3.5
     # noisy open loop driven below 0.5 Hz: the cutoff drops to ~2 Hz, which is what keeps the inertia
     # unbiased there (a 10 Hz cutoff biased m12 by -12.6 %, see test_jackknife_std_is_honest)
     log = open_loop_log(duration=20.0)
     eta = log.eta + 0.01 * np.random.default_rng(0).standard_normal(log.eta.shape)
-    assert 1.5 < idim.default_cutoff(eta, 1000.0) < 3.0
+    assert 1.5 < idim_regression.default_cutoff(eta, 1000.0) < 3.0
 
 
 def test_edge_and_decimation_rules():
-    assert idim.edge_seconds(10.0, 4) == pytest.approx(math.log(1e4) / (2 * math.pi * 10 * math.sin(math.pi / 8)))
-    assert idim.decimation_factor(1000.0, 10.0) == 25
-    assert idim.decimation_factor(100.0, 5.0) == 5
-    assert idim.decimation_factor(100.0, 40.0) == 1
+    assert idim_regression.edge_seconds(10.0, 4) == pytest.approx(
+        math.log(1e4) / (2 * math.pi * 10 * math.sin(math.pi / 8))
+    )
+    assert idim_regression.decimation_factor(1000.0, 10.0) == 25
+    assert idim_regression.decimation_factor(100.0, 5.0) == 5
+    assert idim_regression.decimation_factor(100.0, 40.0) == 1
 
 
 # ----------------------------------------------------------------------------------------------- failures
@@ -237,11 +245,11 @@ def test_jackknife_std_is_honest():
 def test_effort_delay_is_half_a_hold_period():
     """zoh: half the median step; --control-rate: half the controller's period; foh: none."""
     t = np.arange(101) * 0.01
-    assert idim.effort_delay(t, "zoh") == pytest.approx(0.005)
-    assert idim.effort_delay(t, "zoh", control_rate=1000.0) == pytest.approx(0.0005)
-    assert idim.effort_delay(t, "foh") == 0.0
+    assert idim_regression.effort_delay(t, "zoh") == pytest.approx(0.005)
+    assert idim_regression.effort_delay(t, "zoh", control_rate=1000.0) == pytest.approx(0.0005)
+    assert idim_regression.effort_delay(t, "foh") == 0.0
     with pytest.raises(UsageError):
-        idim.effort_delay(t, "hold")
+        idim_regression.effort_delay(t, "hold")
 
 
 def test_a_held_effort_is_read_half_a_step_earlier():
@@ -276,7 +284,7 @@ def test_alternative_fits_agree_where_the_model_holds(reversing_log):
     for name, check in est.diagnostics["checks"].items():
         assert check["delta"] is not None, name
         assert np.abs(np.asarray(check["delta"]) / est.theta0).max() < 1e-5, name
-    reg = idim.idim_regression(log.t, log.eta, log.tau)
+    reg = idim_regression.idim_regression(log.t, log.eta, log.tau)
     seg, g = idim.segment_index(reg.t)
     fac = idim.segment_factors(reg.rows(), reg.tau, np.ones(2), seg, g)
     same = idim_checks.difference(fac, fac, 3.0)
@@ -290,7 +298,7 @@ def test_slow_rows_cover_the_slow_speeds_and_their_margin(reversing_log):
     from wmrid.estimators import idim_checks
 
     log = reversing_log
-    reg = idim.idim_regression(log.t, log.eta, log.tau)
+    reg = idim_regression.idim_regression(log.t, log.eta, log.tau)
     slow = idim_checks.slow_rows(reg, log.eta)
     low = idim_checks.SLOW_FRACTION * np.percentile(np.abs(log.eta), 90, axis=0)
     core = np.any(np.abs(reg.features[:, 4:6]) < low, axis=1)

@@ -5,7 +5,8 @@ dynamics look like friction (a torque that leads the speed's derivative by d add
 equation, which a sinusoidal motion turns into viscous friction) and biases F_v by tens of per cent.
 
 The estimate profiles the fit over the shift.  For each candidate delay d on a grid of DELAY_STEP_S over
-[-span, span], the efforts are read d later than stamped, tau_log(t + d) (:func:`wmrid.estimators.idim.shifted`), and
+[-span, span], the efforts are read d later than stamped, tau_log(t + d)
+(:func:`wmrid.estimators.idim_regression.shifted`), and
 the
 inverse-dynamics regression of :mod:`wmrid.estimators.idim` (the same zero-phase filter, cutoff fixed once from the log)
 is solved by least squares; its residual sum of squares RSS(d) is smallest at the delay that makes the model
@@ -92,17 +93,13 @@ def estimate_delay(
     """The delay of the efforts behind the speeds, with its standard error (see the module docstring).
 
     t (n,) s, eta (n, 2) rad/s, tau (n, 2); span s: search [-span, span]; torque_hold, control_rate: how the
-    effort was held (:func:`wmrid.estimators.idim.effort_delay`, applied on top of each candidate); cutoff_hz: the
+    effort was held (:func:`wmrid.estimators.idim_regression.effort_delay`, applied on top of each candidate);
+    cutoff_hz: the
     filter's (default: from the log, once).  Raises NotIdentifiableError when the log is too short.
     """
-    from wmrid.estimators.idim import (
-        MAX_EFFORT_SHIFT_S,
-        default_cutoff,
-        effort_delay,
-        idim_regression,
-        segment_index,
-    )
+    from wmrid.estimators.idim import segment_index
     from wmrid.estimators.idim_checks import slow_rows
+    from wmrid.estimators.idim_regression import MAX_EFFORT_SHIFT_S, default_cutoff, effort_delay, idim_regression
 
     if not (math.isfinite(span) and 0 < span <= MAX_EFFORT_SHIFT_S / 2):
         raise UsageError(f"the delay search span must be in (0, {MAX_EFFORT_SHIFT_S / 2:g}] s, got {span!r}")
@@ -329,7 +326,7 @@ def apply_delay(
     ``delay``: seconds, or "auto" (:func:`estimate_delay`; applied only when significant and not at the edge
     of the search).  The warnings name the likely cause: two clocks, or a controller faster than the log."""
     from wmrid.core.wheel_log import LogStream, WheelLog
-    from wmrid.estimators.idim import MAX_EFFORT_SHIFT_S, shifted
+    from wmrid.estimators.idim_regression import MAX_EFFORT_SHIFT_S, shifted
 
     whole = log.read() if isinstance(log, LogStream) else log
     t = np.asarray(whole.t, dtype=np.float64)

@@ -171,7 +171,8 @@ def identify(
     ``geometry`` : (r, b, x_1, y_1, ...) m, the geometric caster model's when no robot lists casters (a
     saved model's ``form.geometry``, say; :func:`caster_geometry` builds it from a robot, whose casters win).
     ``delay`` : s, how late the efforts are stamped against the speeds (two topics, two clocks): they are read
-    that much earlier (:func:`wmrid.estimators.idim.shifted`; the log is then read into memory); ``"auto"``: estimated
+    that much earlier (:func:`wmrid.estimators.idim_regression.shifted`; the log is then read into memory);
+    ``"auto"``: estimated
     from the log (:func:`wmrid.estimators.delay.estimate_delay`) and applied when significant; None: as stamped,
     unless the
     reading notes say the efforts came from another topic than the speeds (:func:`wmrid.core.wheel_log.split_topics`),

@@ -83,7 +83,8 @@ def cutoff_check(
 ) -> dict[str, Any]:  # fmt: skip
     """The estimate at the cutoff / CUTOFF_RATIO against that at the cutoff (``reg``, :func:`difference`).
 
-    t, eta, tau: the log as given to :func:`wmrid.estimators.idim.idim_regression`; reg: its regression at the cutoff
+    t, eta, tau: the log as given to :func:`wmrid.estimators.idim_regression.idim_regression`; reg: its regression at
+    the cutoff
     used;
     fac: reg's per-segment factors (:func:`wmrid.estimators.idim.segment_factors`); weights (2,): the fit's; seg
     (N,), g:
@@ -91,7 +92,8 @@ def cutoff_check(
     effort delay, s.  Skipped (not
     applied, with "why") when the log is too short for the lower cutoff's transient.
     """
-    from wmrid.estimators.idim import idim_regression, segment_factors
+    from wmrid.estimators.idim import segment_factors
+    from wmrid.estimators.idim_regression import idim_regression
 
     low = reg.cutoff_hz / CUTOFF_RATIO
     try:

@@ -46,15 +46,8 @@ import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError, UsageError
 from wmrid.estimators.estimate import BaseEstimate, SegmentEstimates
-from wmrid.estimators.idim import (
-    IdimRegression,
-    effort_delay,
-    idim_regression,
-    inertia_warnings,
-    jackknife_segments,
-    phi_to_theta0,
-    theta0_covariance,
-)
+from wmrid.estimators.idim import inertia_warnings, jackknife_segments, phi_to_theta0, theta0_covariance
+from wmrid.estimators.idim_regression import IdimRegression, effort_delay, idim_regression
 from wmrid.model.dynamics import RegressorForm
 
 #: A regressor column whose first-stage R^2 on the instruments is below this is not described by the reference.
@@ -67,7 +60,8 @@ def instrument_regression(reg: IdimRegression, t: np.ndarray, reference: np.ndar
     """Instruments Z (N, 2, p) for the regression ``reg`` of a log: its regressor rebuilt from the reference.
 
     t (n,) s, reference (n, 2) rad/s wheel-speed set-points [right, left], tau (n, 2) N m: the log ``reg`` was
-    built from (tau only fixes the shapes).  The reference goes through :func:`wmrid.estimators.idim.idim_regression`
+    built from (tau only fixes the shapes).  The reference goes through
+    :func:`wmrid.estimators.idim_regression.idim_regression`
     with
     reg's cutoff, order, decimation and caster form, so its rows are those of ``reg`` sample for sample.
     """

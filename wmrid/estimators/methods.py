@@ -37,10 +37,11 @@ DESCRIPTIONS = {
 class MethodOptions:
     """Options of the classical methods.
 
-    cutoff_hz : IDIM/RLS low-pass cutoff, Hz (None: from the log, see :func:`wmrid.estimators.idim.default_cutoff`).
+    cutoff_hz : IDIM/RLS low-pass cutoff, Hz (None: from the log, see
+    :func:`wmrid.estimators.idim_regression.default_cutoff`).
     weighted : IDIM two-step weighted least squares.  forgetting : RLS forgetting factor in (0, 1].
     torque_hold : how the effort was held between samples ("zoh" or "foh"): OE simulates it, IDIM and RLS read
-    the efforts half a hold period earlier under "zoh" (:func:`wmrid.estimators.idim.effort_delay`).
+    the efforts half a hold period earlier under "zoh" (:func:`wmrid.estimators.idim_regression.effort_delay`).
     """
 
     cutoff_hz: float | None = None
@@ -87,7 +88,7 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
     tau = np.asarray(log.tau, dtype=np.float64)
     applied = (observer.diagnostics.get("delay") or {}).get("applied_s") or 0.0
     if applied:  # the efforts' delay the observer's run applied (identify(..., delay=)): the same log for every method
-        from wmrid.estimators.idim import shifted
+        from wmrid.estimators.idim_regression import shifted
 
         tau = shifted(t, tau, -applied)
     source = getattr(log, "source", observer.source)

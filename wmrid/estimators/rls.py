@@ -1,10 +1,12 @@
 """Recursive least squares (RLS) with exponential forgetting on the IDIM regression.
 
-The regression is the one of :mod:`wmrid.estimators.idim` (:func:`wmrid.estimators.idim.idim_regression`: zero-phase
+The regression is the one of :mod:`wmrid.estimators.idim` (:func:`wmrid.estimators.idim_regression.idim_regression`:
+zero-phase
 parallel
 filtering, accelerations from the filtered velocities, edges dropped), two rows per sample,
 X_k phi = y_k with phi = [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2] (then the caster parameters with a ``form`` that
-has caster drag, :func:`wmrid.estimators.idim.phi_names`: the caster columns are filtered and mapped exactly as IDIM
+has caster drag, :func:`wmrid.estimators.idim_regression.phi_names`: the caster columns are filtered and mapped
+exactly as IDIM
 does, so p = 8 + their number of parameters).  By default it is NOT decimated, so the
 forgetting factor lambda acts per log sample.  (The filter is zero-phase, hence non-causal: this is an
 offline analysis of how the parameters drift, not an online estimator.)
@@ -69,16 +71,13 @@ import numpy as np
 from wmrid.core.errors import NotIdentifiableError, UsageError
 from wmrid.estimators.estimate import BaseEstimate
 from wmrid.estimators.idim import (
-    ROW_LAYOUT,
-    IdimRegression,
-    effort_delay,
-    idim_regression,
     inertia_warnings,
     not_identifiable_message,
     phi_to_theta0,
     segment_index,
     theta0_covariance,
 )
+from wmrid.estimators.idim_regression import ROW_LAYOUT, IdimRegression, effort_delay, idim_regression
 from wmrid.estimators.uncertainty import SEGMENT_SECONDS
 from wmrid.model.dynamics import RegressorForm
 
@@ -98,7 +97,8 @@ class RlsHistory:
     """The RLS estimate over time (at most ``history_points`` samples of the regression).
 
     t : (m,) s.  phi : (m, p) [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2, caster...]; theta0 : (m, p) [m11 m12 m22 Vc Fv1
-    Fv2 Fd1 Fd2, caster...] (p = 8, plus the caster parameters of the form, :func:`wmrid.estimators.idim.phi_names`);
+    Fv2 Fd1 Fd2, caster...] (p = 8, plus the caster parameters of the form,
+    :func:`wmrid.estimators.idim_regression.phi_names`);
     both NaN before the estimate is defined (see the module docstring, exact initialisation).
     std : (m, p) standard errors of theta0 (local sandwich; NaN before initialisation).
     forgetting : lambda.
@@ -182,10 +182,12 @@ def rls_kernel(
     """Covariance-form RLS over all samples (see the module docstring), in column-scaled coordinates.
 
     p, the size of phi, is that of ``scale``: 8, plus the caster parameters.
-    features (N, 8 + q) unscaled regression features (:data:`wmrid.estimators.idim.FEATURE_NAMES`, then the q caster
+    features (N, 8 + q) unscaled regression features (:data:`wmrid.estimators.idim_regression.FEATURE_NAMES`, then
+    the q caster
     columns); tau (N, 2) N m; scale (p,) column scales d (phi_s = d phi); caster (q, 3) int64 rows (feature
     index, phi index, pattern) of each caster column, which adds to phi's entry in row 1 and pattern x itself
-    in row 2 (:func:`wmrid.estimators.idim.rows_from_features`; (0, 3) without caster drag); lam the forgetting factor;
+    in row 2 (:func:`wmrid.estimators.idim_regression.rows_from_features`; (0, 3) without caster drag); lam the
+    forgetting factor;
     init_pivot the start test (:data:`INIT_PIVOT`); segment (N,) the jackknife segment of each sample;
     block_len samples per batch of the batch means.  Filled in place:
 
@@ -520,13 +522,13 @@ def rls_run(
     t : (n,) s strictly increasing; eta : (n, 2) rad/s [right, left]; tau : (n, 2) N m.
     forgetting : lambda in (0, 1], per regression sample (per log sample unless ``decimate``); the
     effective window is 1 / (1 - lambda) samples; 1 is plain RLS (= batch least squares).
-    cutoff_hz, order, decimate : the preprocessing of :func:`wmrid.estimators.idim.idim_regression`.
+    cutoff_hz, order, decimate : the preprocessing of :func:`wmrid.estimators.idim_regression.idim_regression`.
     history_points : at most this many points in the history.
     form : the observer's regressor form; with caster drag (``form.caster``) the regression gains its caster
     columns and phi, theta0 its caster parameters (``form.base_names[8:]``), as in :mod:`wmrid.estimators.idim`;
     otherwise
     (or None) it is ignored.  torque_hold, control_rate : how the effort was held
-    (:func:`wmrid.estimators.idim.effort_delay`).
+    (:func:`wmrid.estimators.idim_regression.effort_delay`).
     The estimate (method "rls") is the one at the end of the log; see the module docstring for what its
     standard errors mean.  Raises NotIdentifiableError when the log does not excite the dynamics.
     """
