@@ -351,7 +351,7 @@ def test_a_file_that_changes_between_passes_is_refused(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("seed", range(6))
 def test_the_median_step_is_exact_from_the_histogram_and_a_second_look(seed):
-    from wmrid.io.mcap.joints import _StepMedian
+    from wmrid.io.mcap.joint_stream import _StepMedian
     from wmrid.io.mcap.records import STEP_BUCKETS, step_buckets
 
     rng = np.random.default_rng(seed)

@@ -41,10 +41,11 @@ def read_mcap_log(
     time choices are made from it and each pass over the stream decodes the file again, a batch of records
     at a time (:func:`_mcap_pieces`): memory does not grow with the recording, and the samples and notes are
     those of the whole decode.  Read whole all the same, with a note saying why: speeds derived from
-    positions, messages out of time order in the file, and the other cases :func:`wmrid.io.mcap.joints.stream_plan`
+    positions, messages out of time order in the file, and the other cases
+    :func:`wmrid.io.mcap.joint_stream.stream_plan`
     lists; a JSON topic is always read whole.
     """
-    from wmrid.io.mcap.joints import stream_plan
+    from wmrid.io.mcap.joint_stream import stream_plan
     from wmrid.io.mcap.reader import read_mcap, scan_mcap
 
     path = source.path or source.name
@@ -125,7 +126,7 @@ def _mcap_pieces(
     """The streamed LogStream of a long recording (see :func:`read_mcap_log`): pieces of exactly ``rows``
     samples, as :func:`stream_arrays` cuts the whole log.  Its ``_mcap_peak`` is the most JointState samples
     the last pass held at once (decoded, waiting and cut into pieces)."""
-    from wmrid.io.mcap.joints import SignalStream
+    from wmrid.io.mcap.joint_stream import SignalStream
     from wmrid.io.mcap.reader import iter_joint_parts
 
     path = source.path or source.name
