@@ -60,7 +60,8 @@ def fmt_rss(rss: float | None) -> str:
 def noisy_paper_sim(duration: float, rate: float = 1000.0, seed: int = 1):
     """The ``paper`` robot on the sinusoid with the benchmarks' noise (0.01 rad/s, 0.02 N m, caster 0.05 N m)."""
     from wmrid.model.robot import BUILTIN_ROBOTS
-    from wmrid.sim.simulate import NoiseSettings, simulate
+    from wmrid.sim.scenario import NoiseSettings
+    from wmrid.sim.simulate import simulate
 
     r = BUILTIN_ROBOTS["paper"]
     noise = NoiseSettings(eta_std=0.01, tau_std=0.02, caster_std=0.05)

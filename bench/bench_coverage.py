@@ -28,7 +28,8 @@ import numpy as np
 from wmrid.estimators.identify import identify
 from wmrid.model.dynamics import THETA0_NAMES
 from wmrid.model.robot import BUILTIN_ROBOTS
-from wmrid.sim.simulate import NoiseSettings, simulate
+from wmrid.sim.scenario import NoiseSettings
+from wmrid.sim.simulate import simulate
 
 
 def one_seed(seed: int, args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, dict]:

@@ -37,7 +37,8 @@ def main() -> None:
     from wmrid.estimators.methods import METHODS, MethodOptions, compare
     from wmrid.model import dynamics as model
     from wmrid.model.robot import BUILTIN_ROBOTS
-    from wmrid.sim.simulate import NoiseSettings, simulate
+    from wmrid.sim.scenario import NoiseSettings
+    from wmrid.sim.simulate import simulate
 
     robot = BUILTIN_ROBOTS["paper"]
     truth = model.named_base(model.base_parameters(robot.reference))

@@ -42,7 +42,8 @@ from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
 from wmrid.monitoring.monitor import monitor
 from wmrid.monitoring.settings import DOF, MonitorSettings, model_from_dict
-from wmrid.sim.simulate import NoiseSettings, PlantChange, simulate
+from wmrid.sim.scenario import NoiseSettings, PlantChange
+from wmrid.sim.simulate import simulate
 
 ROBOT = BUILTIN_ROBOTS["paper"]
 TRUE, NOMINAL = ROBOT.cad, ROBOT.nominal

@@ -192,7 +192,7 @@ def simulate_cached(job: Job) -> tuple[dict[str, Any], float | None]:
             pass  # unreadable (e.g. a killed run's half file): simulate again
     from wmrid.model.robot import BUILTIN_ROBOTS, Payload
     from wmrid.sim.multibody import MultibodySettings, simulate_multibody
-    from wmrid.sim.simulate import NoiseSettings
+    from wmrid.sim.scenario import NoiseSettings
 
     c = job.case
     robot = BUILTIN_ROBOTS[c.robot]

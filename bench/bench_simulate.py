@@ -28,7 +28,8 @@ def main() -> None:
 
     t0 = time.perf_counter()
     from wmrid.model.robot import BUILTIN_ROBOTS
-    from wmrid.sim.simulate import NoiseSettings, simulate
+    from wmrid.sim.scenario import NoiseSettings
+    from wmrid.sim.simulate import simulate
 
     t_import = time.perf_counter() - t0
     r = BUILTIN_ROBOTS["paper"]

@@ -49,7 +49,8 @@ def one(job: tuple[str, str, str, int, float]) -> dict:
     from wmrid.estimators.idim_regression import shifted
     from wmrid.model import dynamics as model
     from wmrid.model.robot import BUILTIN_ROBOTS
-    from wmrid.sim.simulate import NoiseSettings, simulate
+    from wmrid.sim.scenario import NoiseSettings
+    from wmrid.sim.simulate import simulate
 
     amr = BUILTIN_ROBOTS["amr"]
     noise = NoiseSettings(eta_std=0.02, tau_std=0.01, encoder_cpr=2**20 if fault == "backdiff" else 0)

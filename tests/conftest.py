@@ -24,7 +24,7 @@ def amr_caster_log():
     so shared by every test that needs it)."""
     from wmrid.model.robot import BUILTIN_ROBOTS
     from wmrid.sim.multibody import MultibodySettings, simulate_multibody
-    from wmrid.sim.simulate import NoiseSettings
+    from wmrid.sim.scenario import NoiseSettings
 
     amr = BUILTIN_ROBOTS["amr"]
     return simulate_multibody(

@@ -12,7 +12,8 @@ from wmrid.estimators.delay import DELAY_STEP_S, _refine, estimate_delay
 from wmrid.estimators.idim_regression import shifted
 from wmrid.model.robot import BUILTIN_ROBOTS
 from wmrid.sim.multibody import MultibodySettings, simulate_multibody
-from wmrid.sim.simulate import NoiseSettings, simulate
+from wmrid.sim.scenario import NoiseSettings
+from wmrid.sim.simulate import simulate
 
 AMR = BUILTIN_ROBOTS["amr"]
 NOISE = NoiseSettings(eta_std=0.02, tau_std=0.01)

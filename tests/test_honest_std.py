@@ -20,7 +20,8 @@ from wmrid.io.logs import read_log
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS
 from wmrid.sim.multibody import MultibodySettings, simulate_multibody
-from wmrid.sim.simulate import NoiseSettings, simulate
+from wmrid.sim.scenario import NoiseSettings
+from wmrid.sim.simulate import simulate
 
 PAPER = BUILTIN_ROBOTS["paper"]
 AMR = BUILTIN_ROBOTS["amr"]

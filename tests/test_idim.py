@@ -14,7 +14,8 @@ from wmrid.core.errors import LogFormatError, NotIdentifiableError, UsageError
 from wmrid.estimators import idim, idim_regression
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
-from wmrid.sim.simulate import NoiseSettings, simulate
+from wmrid.sim.scenario import NoiseSettings
+from wmrid.sim.simulate import simulate
 
 
 def true_phi(p=PAPER_CAD) -> np.ndarray:

@@ -26,7 +26,8 @@ from wmrid.estimators.iv import identify_iv, segment_moments, solve_moments
 from wmrid.io.logs import read_log, write_log
 from wmrid.model.dynamics import THETA0_NAMES
 from wmrid.model.robot import BUILTIN_ROBOTS
-from wmrid.sim.simulate import NoiseSettings, simulate
+from wmrid.sim.scenario import NoiseSettings
+from wmrid.sim.simulate import simulate
 
 AMR = BUILTIN_ROBOTS["amr"]
 PAPER = BUILTIN_ROBOTS["paper"]

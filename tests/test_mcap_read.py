@@ -26,7 +26,8 @@ from wmrid.io.mcap.reader import read_mcap
 from wmrid.io.mcap.writer import JOINT_STATE_MSGDEF, write_joint_state_mcap
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS
-from wmrid.sim.simulate import NoiseSettings, simulate
+from wmrid.sim.scenario import NoiseSettings
+from wmrid.sim.simulate import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 REAL = ROOT.parent / "shared" / "real_logs"

@@ -20,7 +20,8 @@ from wmrid.estimators.identify import identify
 from wmrid.estimators.methods import METHODS, MethodOptions, compare
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
-from wmrid.sim.simulate import NoiseSettings, simulate
+from wmrid.sim.scenario import NoiseSettings
+from wmrid.sim.simulate import simulate
 
 ROBOT = BUILTIN_ROBOTS["paper"]
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_logs"

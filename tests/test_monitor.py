@@ -26,7 +26,8 @@ from wmrid.model.robot import BUILTIN_ROBOTS, Payload
 from wmrid.monitoring.glr import ModelError, NoiseModel, window_grid, window_statistics
 from wmrid.monitoring.monitor import monitor
 from wmrid.monitoring.settings import MonitorSettings, load_model, model_from_dict
-from wmrid.sim.simulate import NoiseSettings, PlantChange, simulate
+from wmrid.sim.scenario import NoiseSettings, PlantChange
+from wmrid.sim.simulate import simulate
 
 TRUE = BUILTIN_ROBOTS["paper"].cad
 NOMINAL = BUILTIN_ROBOTS["paper"].nominal

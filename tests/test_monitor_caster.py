@@ -17,7 +17,8 @@ from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
 from wmrid.monitoring import glr, residuals
 from wmrid.monitoring import settings as mon_settings
-from wmrid.sim.simulate import NoiseSettings, PlantChange, simulate
+from wmrid.sim.scenario import NoiseSettings, PlantChange
+from wmrid.sim.simulate import simulate
 
 AMR = BUILTIN_ROBOTS["amr"]
 PAPER = BUILTIN_ROBOTS["paper"]

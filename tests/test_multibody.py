@@ -33,7 +33,8 @@ from wmrid.model.robot import (
 )
 from wmrid.sim import multibody as multibody_module
 from wmrid.sim.multibody import GRAVITY, INSTALL_HINT, MultibodySettings, simulate_multibody
-from wmrid.sim.simulate import NoiseSettings, _encoder_velocity, simulate
+from wmrid.sim.scenario import NoiseSettings
+from wmrid.sim.simulate import _encoder_velocity, simulate
 
 PAPER = BUILTIN_ROBOTS["paper"]
 CAD = PAPER.cad

@@ -12,7 +12,8 @@ from wmrid.core.errors import NotIdentifiableError, UsageError
 from wmrid.estimators.output_error import MAX_NFEV, SHOOTING_SECONDS, cluster_sandwich, identify_oe, shooting_starts
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS
-from wmrid.sim.simulate import NoiseSettings, SimulatedLog, simulate
+from wmrid.sim.scenario import NoiseSettings
+from wmrid.sim.simulate import SimulatedLog, simulate
 
 PAPER = BUILTIN_ROBOTS["paper"]
 assert PAPER.cad is not None

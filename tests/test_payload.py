@@ -58,7 +58,8 @@ def test_identify_finds_a_25_kg_payload_in_a_noisy_simulated_log(tmp_path):
     from types import SimpleNamespace
 
     from wmrid.estimators.identify import identify
-    from wmrid.sim.simulate import NoiseSettings, simulate
+    from wmrid.sim.scenario import NoiseSettings
+    from wmrid.sim.simulate import simulate
 
     load = Payload(25.0, 0.1, -0.05, 0.4)
     robot = BUILTIN_ROBOTS["paper"]

@@ -22,7 +22,8 @@ from wmrid.estimators.model_error import MISFIT_FLOOR, MISFIT_RATIO, prediction_
 from wmrid.estimators.noise_floor import WINDOW, NoiseFloor
 from wmrid.model.robot import BUILTIN_ROBOTS
 from wmrid.sim.multibody import MultibodySettings, simulate_multibody
-from wmrid.sim.simulate import NoiseSettings, simulate
+from wmrid.sim.scenario import NoiseSettings
+from wmrid.sim.simulate import simulate
 
 AMR = BUILTIN_ROBOTS["amr"]
 PAPER = BUILTIN_ROBOTS["paper"]

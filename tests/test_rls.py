@@ -13,7 +13,8 @@ from wmrid.core.errors import NotIdentifiableError, UsageError
 from wmrid.estimators import idim, idim_regression, rls
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
-from wmrid.sim.simulate import NoiseSettings, simulate
+from wmrid.sim.scenario import NoiseSettings
+from wmrid.sim.simulate import simulate
 
 
 @pytest.fixture(scope="module")

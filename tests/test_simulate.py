@@ -12,15 +12,9 @@ from scipy.integrate import solve_ivp
 from wmrid.core.errors import UsageError
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
-from wmrid.sim.simulate import (
-    GAINS,
-    TRAJECTORIES,
-    NoiseSettings,
-    SimulatedLog,
-    closed_loop_kernel,
-    simulate,
-    timing,
-)
+from wmrid.sim.closed_loop import closed_loop_kernel
+from wmrid.sim.scenario import NoiseSettings
+from wmrid.sim.simulate import GAINS, TRAJECTORIES, SimulatedLog, simulate, timing
 
 PAPER = BUILTIN_ROBOTS["paper"]
 TRUE = PAPER.cad

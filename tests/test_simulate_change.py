@@ -13,16 +13,9 @@ from cliutil import assert_clean_error, wmrid
 from wmrid.core.errors import UsageError
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
-from wmrid.sim.simulate import (
-    GAINS,
-    NoiseSettings,
-    PlantChange,
-    SimulatedLog,
-    closed_loop_kernel,
-    parse_friction_fault,
-    parse_time,
-    simulate,
-)
+from wmrid.sim.closed_loop import closed_loop_kernel
+from wmrid.sim.scenario import NoiseSettings, PlantChange, parse_friction_fault, parse_time
+from wmrid.sim.simulate import GAINS, SimulatedLog, simulate
 
 PAPER = BUILTIN_ROBOTS["paper"]
 TRUE = PAPER.cad

@@ -20,7 +20,7 @@ __all__ = ["SimulationRun", "simulate", "write_simulation"]
 class SimulationRun:
     """A simulated run: ``log`` the simulator's output (t (n,) s, eta (n, 2) rad/s, tau (n, 2) N m, pose,
     ``to_frame()``), ``truth`` its ground truth (JSON-ready: "parameters" at t = 0, settings, robot, payload) and
-    ``change`` the change of the dynamics during the run, if any (:class:`wmrid.sim.simulate.PlantChange`)."""
+    ``change`` the change of the dynamics during the run, if any (:class:`wmrid.sim.scenario.PlantChange`)."""
 
     log: Any
     truth: dict[str, Any]
@@ -33,7 +33,7 @@ class SimulationRun:
 
 def _change(truth_params, load, duration, load_at, drop_at, friction_fault, fault_at):
     """(the change during the run or None, the physical parameters at t = 0)."""
-    from wmrid.sim.simulate import PlantChange, parse_friction_fault, parse_time
+    from wmrid.sim.scenario import PlantChange, parse_friction_fault, parse_time
 
     times = {"load_at": load_at, "drop_at": drop_at, "fault_at": fault_at}
     given = [name for name, text in times.items() if text is not None]
@@ -99,7 +99,7 @@ def simulate(
     the payload loaded at ``load_at`` or dropped at ``drop_at`` s, or a friction fault ("right:3") at ``fault_at`` s.
     ``engine``: "reduced" (the paper's model) or "mujoco" (multibody, with ``floor_friction``, ``caster_resistance``
     and ``torque_limit``).  Seeded: the same arguments give the same log bit for bit."""
-    from wmrid.sim.simulate import NoiseSettings
+    from wmrid.sim.scenario import NoiseSettings
     from wmrid.sim.simulate import simulate as run_reduced
 
     robot_obj = load_robot(robot, gear_ratio=gear_ratio, rotor_inertia=rotor_inertia)

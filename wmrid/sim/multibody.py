@@ -22,7 +22,7 @@ dynamics from masses, inertias, joints and contacts, as the paper's SimMechanics
 * a payload as a welded body.
 
 The robot tracks the same reference under the same backstepping + computed-torque controller as the
-reduced simulator (:func:`wmrid.sim.simulate._control`, on the NOMINAL parameters), fed with the engine's
+reduced simulator (:func:`wmrid.sim.closed_loop._control`, on the NOMINAL parameters), fed with the engine's
 state at each 1 ms control period: the pose of O from the platform's free joint (yaw unwrapped) and the
 wheel joints' speeds.  The torque, optionally clipped to +-``torque_limit``, is held over the control
 period while MuJoCo takes ``substeps`` steps (implicit-in-velocity integration, elliptic friction cones,
@@ -47,17 +47,11 @@ import numpy as np
 
 from wmrid.core.errors import UsageError
 from wmrid.model.robot import Caster, Payload, PhysicalParameters, default_casters
-from wmrid.sim.simulate import (
-    _KIND,
-    NoiseSettings,
-    PlantChange,
-    SimulatedLog,
-    _control,
-    _positive_number,
-    _reference,
-    plan_run,
-    reversing_advance,
-)
+from wmrid.sim.closed_loop import KIND as _KIND
+from wmrid.sim.closed_loop import _control, _reference, reversing_advance
+from wmrid.sim.scenario import NoiseSettings, PlantChange
+from wmrid.sim.scenario import positive_number as _positive_number
+from wmrid.sim.simulate import SimulatedLog, plan_run
 
 #: Bump when a change alters the simulated motion (not its docs or truth fields): benchmarks key their caches on it.
 PHYSICS_VERSION = 2

@@ -76,26 +76,28 @@ NOMINAL parameters throughout, and the random streams are drawn as without a cha
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-import numba
 import numpy as np
 
 from wmrid.core.errors import UsageError
 from wmrid.model import dynamics as model
-from wmrid.model.robot import Payload, PhysicalParameters
+from wmrid.model.robot import PhysicalParameters
 
 if TYPE_CHECKING:
     import pandas
+from wmrid.sim.closed_loop import KIND, closed_loop_kernel, reference_wheel_speeds
+from wmrid.sim.scenario import NoiseSettings, PlantChange, positive_number
 
 #: Control period used whenever the log rate is at most 1 kHz (the paper's sampling time), s.
 CONTROL_PERIOD = 1e-3
 
+
 #: Names of the built-in reference trajectories.
 TRAJECTORIES = ("sinusoid", "reversing")
+
 
 #: Parameters of each trajectory (SI units); see the module docstring for the formulas.
 TRAJECTORY_PARAMETERS: dict[str, dict[str, float]] = {
@@ -103,173 +105,9 @@ TRAJECTORY_PARAMETERS: dict[str, dict[str, float]] = {
     "reversing": {"V": 0.4, "v_period": 6.0, "W": 0.8, "w_period": 4.3},
 }
 
+
 #: Controller gains: k1 (1/s), k2 (1/m^2), k3 (1/m) kinematic; K (1/s) wheel-speed loop.
 GAINS: dict[str, float] = {"k1": 3.0, "k2": 25.0, "k3": 10.0, "K": 50.0}
-
-_KIND = {"sinusoid": 0, "reversing": 1}
-
-#: Kinds of :class:`PlantChange` (``settings["change"]["kind"]``).
-CHANGE_KINDS = ("payload-load", "payload-drop", "friction-fault", "custom")
-
-#: Wheel name -> index of its friction parameters (F_v1, F_d1: right; F_v2, F_d2: left).
-WHEELS = {"right": 1, "left": 2}
-
-#: Which friction terms a friction fault multiplies.
-FRICTION_TERMS = {"both": ("F_v", "F_d"), "viscous": ("F_v",), "coulomb": ("F_d",)}
-
-#: Keys of ``settings["change"]`` that a change's ``detail`` may not use.
-_CHANGE_KEYS = ("kind", "t", "t_switch", "switch_period", "before", "after", "physical_before", "physical_after")
-
-
-@dataclass(frozen=True)
-class NoiseSettings:
-    """Measurement noise, encoder quantisation and the unmodelled caster disturbance.
-
-    eta_std : rad/s, std of white Gaussian noise added to the logged wheel velocities.
-    tau_std : N m, std of white Gaussian noise added to the logged torques.
-    caster_std : N m, stationary std of the coloured disturbance torque tau_d on each wheel (the paper's
-        ball caster): an Ornstein-Uhlenbeck process per wheel, exactly discretised on the control grid.
-    caster_time : s, correlation time of that process.
-    encoder_cpr : counts per wheel revolution; when > 0 the logged velocity is the finite difference of
-        the quantised wheel angle over one log period (then eta_std, if any, is added on top); 0: off.
-    """
-
-    eta_std: float = 0.0
-    tau_std: float = 0.0
-    caster_std: float = 0.0
-    caster_time: float = 0.3
-    encoder_cpr: int = 0
-
-    def __post_init__(self) -> None:
-        for name in ("eta_std", "tau_std", "caster_std", "caster_time"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise UsageError(f"noise {name} must be a finite number, got {value!r}")
-            if value < 0:
-                raise UsageError(f"noise {name} must be >= 0, got {value}")
-            object.__setattr__(self, name, float(value))
-        if self.caster_time <= 0:
-            raise UsageError(f"noise caster_time must be > 0 s, got {self.caster_time}")
-        cpr = self.encoder_cpr
-        if isinstance(cpr, bool) or not isinstance(cpr, (int, np.integer)) or cpr < 0:
-            raise UsageError(f"noise encoder_cpr must be a whole number >= 0, got {cpr!r}")
-        object.__setattr__(self, "encoder_cpr", int(cpr))
-
-    def to_dict(self) -> dict[str, float | int]:
-        return dataclasses.asdict(self)
-
-
-def _time(name: str, value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise UsageError(f"{name} must be a number of seconds, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value) or value <= 0:
-        raise UsageError(f"{name} must be a finite time > 0 s, got {value}")
-    return value
-
-
-@dataclass(frozen=True, eq=False)
-class PlantChange:
-    """One change of the plant during a run: ``before`` until time t (s), ``after`` from then on.
-
-    The switch happens at the first control period starting at or after t (see the module docstring and
-    :meth:`switch_period`).  kind : one of :data:`CHANGE_KINDS`; detail : a JSON-serialisable description
-    (the payload, or the wheel and factor of a friction fault), copied into ``settings["change"]``.
-    Build one with :meth:`payload_load`, :meth:`payload_drop` or :meth:`friction_fault`, or directly
-    (kind ``custom``).
-    """
-
-    t: float
-    before: PhysicalParameters
-    after: PhysicalParameters
-    kind: str = "custom"
-    detail: dict = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "t", _time("change time", self.t))
-        if not isinstance(self.before, PhysicalParameters) or not isinstance(self.after, PhysicalParameters):
-            raise UsageError("a plant change needs PhysicalParameters before and after")
-        if self.kind not in CHANGE_KINDS:
-            raise UsageError(f"unknown plant change kind {self.kind!r}; choose one of {', '.join(CHANGE_KINDS)}")
-        if not isinstance(self.detail, dict) or set(self.detail) & set(_CHANGE_KEYS):
-            raise UsageError(f"plant change detail must be a dict without the keys {', '.join(_CHANGE_KEYS)}")
-        if self.before == self.after:
-            raise UsageError("the plant change changes nothing: before and after are the same parameters")
-
-    @classmethod
-    def payload_load(cls, t: float, robot: PhysicalParameters, payload: Payload) -> PlantChange:
-        """``robot`` until t, then ``robot`` carrying ``payload``."""
-        if not isinstance(payload, Payload):
-            raise UsageError(f"payload must be a Payload, got {type(payload).__name__}")
-        return cls(t, robot, robot.with_payload(payload), "payload-load", {"payload": dataclasses.asdict(payload)})
-
-    @classmethod
-    def payload_drop(cls, t: float, robot: PhysicalParameters, payload: Payload) -> PlantChange:
-        """``robot`` carrying ``payload`` until t, then ``robot`` alone."""
-        if not isinstance(payload, Payload):
-            raise UsageError(f"payload must be a Payload, got {type(payload).__name__}")
-        return cls(t, robot.with_payload(payload), robot, "payload-drop", {"payload": dataclasses.asdict(payload)})
-
-    @classmethod
-    def friction_fault(
-        cls, t: float, robot: PhysicalParameters, wheel: str, factor: float, terms: str = "both"
-    ) -> PlantChange:
-        """``robot`` until t, then with one wheel's friction multiplied by ``factor`` (>= 0, != 1).
-
-        wheel : ``right`` (F_v1, F_d1) or ``left`` (F_v2, F_d2); terms : ``both``, ``viscous`` (F_v only)
-        or ``coulomb`` (F_d only).
-        """
-        if wheel not in WHEELS:
-            raise UsageError(f"friction fault: unknown wheel {wheel!r}; choose one of {', '.join(WHEELS)}")
-        if terms not in FRICTION_TERMS:
-            raise UsageError(f"friction fault: unknown terms {terms!r}; choose one of {', '.join(FRICTION_TERMS)}")
-        if isinstance(factor, bool) or not isinstance(factor, (int, float, np.integer, np.floating)):
-            raise UsageError(f"friction fault factor must be a number, got {factor!r}")
-        factor = float(factor)
-        if not math.isfinite(factor) or factor < 0 or factor == 1:
-            raise UsageError(f"friction fault factor must be a finite number >= 0 other than 1, got {factor}")
-        names = [f"{term}{WHEELS[wheel]}" for term in FRICTION_TERMS[terms]]
-        if all(getattr(robot, name) == 0 for name in names):
-            raise UsageError(
-                f"friction fault: {' and '.join(names)} of the {wheel} wheel are 0 in the plant, so a factor changes "
-                "nothing"
-            )
-        after = robot.replace(**{name: getattr(robot, name) * factor for name in names})
-        detail = {"wheel": wheel, "factor": factor, "terms": terms, "parameters": names}
-        return cls(t, robot, after, "friction-fault", detail)
-
-    def switch_period(self, period: float) -> int:
-        """k_s: the first control period whose start k_s T is >= t, i.e. ceil(t / T), with t / T within 1e-9
-        (relative) of a whole number taken as that number."""
-        ratio = self.t / period
-        near = round(ratio)
-        if abs(ratio - near) <= 1e-9 * max(1.0, ratio):
-            return int(near)
-        return math.ceil(ratio)
-
-    def to_dict(self, period: float) -> dict:
-        """The change as recorded in ``settings["change"]`` for control period T = ``period`` (s)."""
-        k = self.switch_period(period)
-        return {
-            "kind": self.kind,
-            "t": self.t,
-            "t_switch": k * period,
-            "switch_period": k,
-            "before": model.named_base(model.base_parameters(self.before)),
-            "after": model.named_base(model.base_parameters(self.after)),
-            "physical_before": self.before.to_dict(),
-            "physical_after": self.after.to_dict(),
-            **self.detail,
-        }
-
-    @classmethod
-    def from_dict(cls, data: dict) -> PlantChange:
-        """The change back from ``settings["change"]`` (to reproduce a run)."""
-        detail = {key: value for key, value in data.items() if key not in _CHANGE_KEYS}
-        return cls(
-            data["t"], PhysicalParameters(**data["physical_before"]), PhysicalParameters(**data["physical_after"]),
-            data["kind"], detail,
-        )  # fmt: skip
 
 
 @dataclass(frozen=True, eq=False)
@@ -351,249 +189,13 @@ class SimulatedLog:
         }
 
 
-# --------------------------------------------------------------------------------------------------
-# Compiled kernel.  Parameter vectors (float64):
-#   traj   sinusoid: [A, wavelength, v0, dv, speed_period]; reversing: [V, v_period, W, w_period]
-#   plant  [m11, m12, m22, Vc, Fv1, Fv2, Fd1, Fd2, r, b]   (m = M^-1 of the TRUE robot; plant_after alike)
-#   ctrl   [M11, M12, M22, Vc, Fv1, Fv2, Fd1, Fd2, r, b]   (NOMINAL robot, M itself)
-#   gains  [k1, k2, k3, K]
-# State s (7,): x, y, phi, theta_1, theta_2, eta_1, eta_2.
-
-
-@numba.njit(cache=True, nogil=True)
-def _sgn(x):
-    if x > 0.0:
-        return 1.0
-    if x < 0.0:
-        return -1.0
-    return 0.0
-
-
-@numba.njit(cache=True, nogil=True)
-def _reference(kind, traj, t, xr_int, yr_int):
-    """Reference at time t: (x_r m, y_r m, phi_r rad, v_r m/s, w_r rad/s, v_r' m/s^2, w_r' rad/s^2).
-
-    For ``reversing`` x_r, y_r are the kernel's integrated values, passed in as xr_int, yr_int.
-    """
-    if kind == 0:
-        amp, lam, v0, dv, period = traj[0], traj[1], traj[2], traj[3], traj[4]
-        kx = 2.0 * math.pi / lam
-        om = 2.0 * math.pi / period
-        s, c = math.sin(om * t), math.cos(om * t)
-        x = v0 * t + dv / om * (1.0 - c)
-        xd = v0 + dv * s
-        xdd = dv * om * c
-        xddd = -dv * om * om * s
-        sk, ck = math.sin(kx * x), math.cos(kx * x)
-        y = amp * sk
-        yd = amp * kx * ck * xd
-        ydd = -amp * kx * kx * sk * xd * xd + amp * kx * ck * xdd
-        yddd = -amp * kx**3 * ck * xd**3 - 3.0 * amp * kx * kx * sk * xd * xdd + amp * kx * ck * xddd
-        v2 = xd * xd + yd * yd
-        v = math.sqrt(v2)
-        phi = math.atan2(yd, xd)
-        w = (xd * ydd - yd * xdd) / v2
-        vdot = (xd * xdd + yd * ydd) / v
-        wdot = (xd * yddd - yd * xddd) / v2 - 2.0 * w * vdot / v
-        return x, y, phi, v, w, vdot, wdot
-    vamp, vper, wamp, wper = traj[0], traj[1], traj[2], traj[3]
-    ov = 2.0 * math.pi / vper
-    ow = 2.0 * math.pi / wper
-    v = vamp * math.sin(ov * t)
-    vdot = vamp * ov * math.cos(ov * t)
-    w = wamp * math.sin(ow * t)
-    wdot = wamp * ow * math.cos(ow * t)
-    phi = wamp / ow * (1.0 - math.cos(ow * t))
-    return xr_int, yr_int, phi, v, w, vdot, wdot
-
-
-@numba.njit(cache=True, nogil=True)
-def reference_wheel_speeds(kind, traj, t, r, b):
-    """(n, 2) rad/s: the reference's wheel speeds [(v_r + b w_r) / r, (v_r - b w_r) / r] at times t (n,) s."""
-    out = np.empty((t.shape[0], 2))
-    for i in range(t.shape[0]):
-        ref = _reference(kind, traj, t[i], 0.0, 0.0)
-        out[i, 0] = (ref[3] + b * ref[4]) / r
-        out[i, 1] = (ref[3] - b * ref[4]) / r
-    return out
-
-
-@numba.njit(cache=True, nogil=True)
-def _reversing_velocity(traj, t):
-    """(x_r', y_r') m/s of the reversing reference at time t."""
-    vamp, vper, wamp, wper = traj[0], traj[1], traj[2], traj[3]
-    ow = 2.0 * math.pi / wper
-    v = vamp * math.sin(2.0 * math.pi / vper * t)
-    phi = wamp / ow * (1.0 - math.cos(ow * t))
-    return v * math.cos(phi), v * math.sin(phi)
-
-
-@numba.njit(cache=True, nogil=True)
-def reversing_advance(traj, t, h):
-    """(dx_r, dy_r) m: the reversing reference's advance from t to t + h s, by Simpson's rule (RK4 on x_r' = f(t))."""
-    fa = _reversing_velocity(traj, t)
-    fm = _reversing_velocity(traj, t + 0.5 * h)
-    fb = _reversing_velocity(traj, t + h)
-    return h / 6.0 * (fa[0] + 4.0 * fm[0] + fb[0]), h / 6.0 * (fa[1] + 4.0 * fm[1] + fb[1])
-
-
-@numba.njit(cache=True, nogil=True)
-def _plant_rhs(s, tau1, tau2, d1, d2, plant, out):
-    """out (7,) = s' for state s (7,) under wheel torques tau and caster disturbance d (N m)."""
-    m11, m12, m22, vc = plant[0], plant[1], plant[2], plant[3]
-    fv1, fv2, fd1, fd2, r, b = plant[4], plant[5], plant[6], plant[7], plant[8], plant[9]
-    phi, e1, e2 = s[2], s[5], s[6]
-    v = 0.5 * r * (e1 + e2)
-    out[0] = v * math.cos(phi)
-    out[1] = v * math.sin(phi)
-    out[2] = r / (2.0 * b) * (e1 - e2)
-    out[3] = e1
-    out[4] = e2
-    f1 = tau1 - d1 - vc * (e1 * e2 - e2 * e2) - fv1 * e1 - fd1 * _sgn(e1)
-    f2 = tau2 - d2 - vc * (e1 * e2 - e1 * e1) - fv2 * e2 - fd2 * _sgn(e2)
-    out[5] = m11 * f1 + m12 * f2
-    out[6] = m12 * f1 + m22 * f2
-
-
-@numba.njit(cache=True, nogil=True)
-def _control(s, ref, ctrl, gains):
-    """Computed-torque backstepping law: (tau_1, tau_2) N m from the state s (7,) and reference tuple."""
-    xr, yr, phir, vr, wr, vrd, wrd = ref
-    big11, big12, big22, vc = ctrl[0], ctrl[1], ctrl[2], ctrl[3]
-    fv1, fv2, fd1, fd2, r, b = ctrl[4], ctrl[5], ctrl[6], ctrl[7], ctrl[8], ctrl[9]
-    k1, k2, k3, kw = gains[0], gains[1], gains[2], gains[3]
-    x, y, phi, eta1, eta2 = s[0], s[1], s[2], s[5], s[6]
-    cp, sp = math.cos(phi), math.sin(phi)
-    dx, dy = xr - x, yr - y
-    err1 = cp * dx + sp * dy
-    err2 = -sp * dx + cp * dy
-    err3 = phir - phi
-    err3 -= 2.0 * math.pi * math.floor((err3 + math.pi) / (2.0 * math.pi))  # wrap to [-pi, pi)
-    v = 0.5 * r * (eta1 + eta2)
-    w = r / (2.0 * b) * (eta1 - eta2)
-    c3, s3 = math.cos(err3), math.sin(err3)
-    err1d = w * err2 - v + vr * c3
-    err2d = -w * err1 + vr * s3
-    err3d = wr - w
-    avr = abs(vr)
-    avrd = vrd * _sgn(vr)
-    vc_ = vr * c3 + k1 * err1
-    wc_ = wr + k2 * vr * err2 + k3 * avr * s3
-    vcd = vrd * c3 - vr * s3 * err3d + k1 * err1d
-    wcd = wrd + k2 * (vrd * err2 + vr * err2d) + k3 * (avrd * s3 + avr * c3 * err3d)
-    ec1 = (vc_ + b * wc_) / r
-    ec2 = (vc_ - b * wc_) / r
-    ecd1 = (vcd + b * wcd) / r
-    ecd2 = (vcd - b * wcd) / r
-    a1 = ecd1 + kw * (ec1 - eta1)
-    a2 = ecd2 + kw * (ec2 - eta2)
-    tau1 = big11 * a1 + big12 * a2 + vc * (eta1 * eta2 - eta2 * eta2) + fv1 * eta1 + fd1 * _sgn(eta1)
-    tau2 = big12 * a1 + big22 * a2 + vc * (eta1 * eta2 - eta1 * eta1) + fv2 * eta2 + fd2 * _sgn(eta2)
-    return tau1, tau2
-
-
-@numba.njit(cache=True, nogil=True)
-def closed_loop_kernel(kind, traj, plant, ctrl, gains, period, substeps, n_log, every, caster_z, caster_std,
-                       caster_time, plant_after=None, switch=-1):  # fmt: skip
-    """Run the closed loop; all arguments plain scalars / float64 arrays.
-
-    kind 0 sinusoid / 1 reversing; traj, plant (10,), ctrl (10,), gains (4,) as documented above;
-    period: control period T (s); substeps: RK4 steps per control period; n_log: number of log samples;
-    every: control periods per log period; caster_z (n_ctrl, 2) standard normals, n_ctrl = (n_log-1)*every+1;
-    caster_std (N m), caster_time (s) of the Ornstein-Uhlenbeck disturbance.
-    plant_after (10,), switch: the plant integrates control period k (from k T to (k + 1) T) with ``plant``
-    for k < switch and with ``plant_after`` for k >= switch; switch < 0 (the default): ``plant`` throughout.
-    The initial state uses ``plant``'s r, b.
-
-    Returns pose (n_log, 3), wheel_angle (n_log, 2), eta (n_log, 2) true, tau (n_log, 2) applied,
-    reference (n_log, 3), disturbance (n_log, 2) -- all at the log samples, the torque and disturbance
-    being those held over the control period that starts at the sample.
-    """
-    n_ctrl = (n_log - 1) * every + 1
-    after = plant if plant_after is None else plant_after
-    pose = np.empty((n_log, 3))
-    angle = np.empty((n_log, 2))
-    eta = np.empty((n_log, 2))
-    tau = np.empty((n_log, 2))
-    refpose = np.empty((n_log, 3))
-    dist = np.empty((n_log, 2))
-
-    # Initial state: on the reference, wheel speeds matching (v_r, w_r) with the TRUE r, b.
-    r, b = plant[8], plant[9]
-    s = np.zeros(7)
-    xr_int, yr_int = 0.0, 0.0
-    ref0 = _reference(kind, traj, 0.0, xr_int, yr_int)
-    s[0], s[1], s[2] = ref0[0], ref0[1], ref0[2]
-    s[5] = (ref0[3] + b * ref0[4]) / r
-    s[6] = (ref0[3] - b * ref0[4]) / r
-
-    a_ou = math.exp(-period / caster_time)
-    q_ou = caster_std * math.sqrt(-math.expm1(-2.0 * period / caster_time))  # sigma sqrt(1 - a^2)
-    d1 = caster_std * caster_z[0, 0]
-    d2 = caster_std * caster_z[0, 1]
-
-    h = period / substeps
-    k1 = np.empty(7)
-    k2 = np.empty(7)
-    k3 = np.empty(7)
-    k4 = np.empty(7)
-    tmp = np.empty(7)
-    for k in range(n_ctrl):
-        t = k * period
-        ref = _reference(kind, traj, t, xr_int, yr_int)
-        tau1, tau2 = _control(s, ref, ctrl, gains)
-        if k % every == 0:
-            i = k // every
-            pose[i, 0], pose[i, 1], pose[i, 2] = s[0], s[1], s[2]
-            angle[i, 0], angle[i, 1] = s[3], s[4]
-            eta[i, 0], eta[i, 1] = s[5], s[6]
-            tau[i, 0], tau[i, 1] = tau1, tau2
-            refpose[i, 0], refpose[i, 1], refpose[i, 2] = ref[0], ref[1], ref[2]
-            dist[i, 0], dist[i, 1] = d1, d2
-        if k == n_ctrl - 1:
-            break
-        p = plant if (switch < 0 or k < switch) else after
-        for j in range(substeps):
-            _plant_rhs(s, tau1, tau2, d1, d2, p, k1)
-            for m in range(7):
-                tmp[m] = s[m] + 0.5 * h * k1[m]
-            _plant_rhs(tmp, tau1, tau2, d1, d2, p, k2)
-            for m in range(7):
-                tmp[m] = s[m] + 0.5 * h * k2[m]
-            _plant_rhs(tmp, tau1, tau2, d1, d2, p, k3)
-            for m in range(7):
-                tmp[m] = s[m] + h * k3[m]
-            _plant_rhs(tmp, tau1, tau2, d1, d2, p, k4)
-            for m in range(7):
-                s[m] += h / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
-            if kind == 1:  # RK4 on x_r' = f(t) alone: Simpson's rule over the substep
-                dx, dy = reversing_advance(traj, t + j * h, h)
-                xr_int += dx
-                yr_int += dy
-        d1 = a_ou * d1 + q_ou * caster_z[k + 1, 0]
-        d2 = a_ou * d2 + q_ou * caster_z[k + 1, 1]
-    return pose, angle, eta, tau, refpose, dist
-
-
-# --------------------------------------------------------------------------------------------------
-
-
-def _positive_number(name: str, value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise UsageError(f"{name} must be a number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value) or value <= 0:
-        raise UsageError(f"{name} must be a finite number > 0, got {value}")
-    return value
-
-
 def timing(rate: float) -> tuple[float, int]:
     """(control period T in s, control periods per log period N) for a log rate in Hz.
 
     T = 1 ms (the paper's sampling time) for rate <= 1 kHz, else 1/rate.  Raises UsageError unless
     N = (1/rate)/T is a whole number.
     """
-    rate = _positive_number("rate", rate)
+    rate = positive_number("rate", rate)
     if rate > 1.0 / CONTROL_PERIOD:
         return 1.0 / rate, 1
     ratio = (1.0 / rate) / CONTROL_PERIOD
@@ -604,40 +206,6 @@ def timing(rate: float) -> tuple[float, int]:
             f"control periods (e.g. 1000, 500, 250, 200, 100 Hz), or the rate must exceed 1000 Hz"
         )
     return CONTROL_PERIOD, int(every)
-
-
-def parse_time(text: str, option: str) -> float:
-    """A time in seconds (> 0, finite) from an option's text; UsageError naming ``option`` otherwise."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise UsageError(f"{option} {text!r}: expected a time in seconds, e.g. 30") from None
-    if not math.isfinite(value) or value <= 0:
-        raise UsageError(f"{option} {text!r}: the time must be a finite number of seconds > 0")
-    return value
-
-
-def parse_friction_fault(text: str) -> tuple[str, float, str]:
-    """(wheel, factor, terms) from ``WHEEL:FACTOR[:TERMS]``, e.g. ``right:3`` or ``left:0.5:coulomb``.
-
-    WHEEL is right or left, FACTOR a number, TERMS one of :data:`FRICTION_TERMS` (default both); the
-    factor's range is checked by :meth:`PlantChange.friction_fault`.
-    """
-    parts = [part.strip() for part in text.split(":")]
-    usage = (
-        f"--friction-fault {text!r}: expected WHEEL:FACTOR[:TERMS] with WHEEL right or left and TERMS both, "
-        "viscous or coulomb, e.g. right:3"
-    )
-    if len(parts) not in (2, 3) or parts[0].lower() not in WHEELS:
-        raise UsageError(usage)
-    terms = parts[2].lower() if len(parts) == 3 else "both"
-    if terms not in FRICTION_TERMS:
-        raise UsageError(usage)
-    try:
-        factor = float(parts[1])
-    except ValueError:
-        raise UsageError(usage) from None
-    return parts[0].lower(), factor, terms
 
 
 def _plant_vector(p: PhysicalParameters) -> np.ndarray:
@@ -660,6 +228,10 @@ def _encoder_velocity(theta: np.ndarray, eta: np.ndarray, cpr: int, dt: float) -
     return diff * (step / dt)
 
 
+#: Noise-free sensors: the default of :func:`simulate`.
+NO_NOISE = NoiseSettings()
+
+
 def simulate(
     true: PhysicalParameters,
     nominal: PhysicalParameters,
@@ -667,7 +239,7 @@ def simulate(
     trajectory: str = "sinusoid",
     duration: float = 40.0,
     rate: float = 1000.0,
-    noise: NoiseSettings = NoiseSettings(),
+    noise: NoiseSettings = NO_NOISE,
     seed: int = 0,
     substeps: int = 4,
     change: PlantChange | None = None,
@@ -705,7 +277,7 @@ def simulate(
     plant = _plant_vector(true)
     traj, ctrl, gains, caster_z = run.traj, run.ctrl, run.gains, run.caster_z
 
-    args = (_KIND[trajectory], traj, plant, ctrl, gains, period, int(substeps), n, every, caster_z,
+    args = (KIND[trajectory], traj, plant, ctrl, gains, period, int(substeps), n, every, caster_z,
             noise.caster_std, noise.caster_time)  # fmt: skip
     if change is None:
         pose, angle, eta_true, tau_applied, refpose, dist = closed_loop_kernel(*args)
@@ -774,7 +346,7 @@ class RunPlan:
         }
         if change is not None:
             settings["change"] = change.to_dict(self.period)
-        eta_ref = reference_wheel_speeds(_KIND[self.trajectory], self.traj, t, self.nominal.r, self.nominal.b)
+        eta_ref = reference_wheel_speeds(KIND[self.trajectory], self.traj, t, self.nominal.r, self.nominal.b)
         for a in (t, eta_log, tau_log, pose, angle, refpose, dist, eta_true, eta_ref):
             a.setflags(write=False)
         return SimulatedLog(
@@ -787,6 +359,8 @@ class RunPlan:
 #: the writer's copies; measured for `simulate --duration 600`: 820 B written as CSV, 600 B as Parquet) and per
 #: control step (the caster draws).
 BYTES_PER_SAMPLE = 900
+
+
 BYTES_PER_CONTROL_STEP = 32
 
 
@@ -816,7 +390,7 @@ def plan_run(
         raise UsageError("true and nominal must be PhysicalParameters")
     if not isinstance(noise, NoiseSettings):
         raise UsageError(f"noise must be a NoiseSettings, got {type(noise).__name__}")
-    duration = _positive_number("duration", duration)
+    duration = positive_number("duration", duration)
     period, every = timing(rate)
     rate = float(rate)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
