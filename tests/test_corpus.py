@@ -368,7 +368,10 @@ def test_interrupt_exits_130(tmp_path):
     assert "interrupted" in stderr, stderr
 
 
-@pytest.mark.parametrize("delay", [0.5, 1.2, 2.0, 3.0, 4.5])
+@pytest.mark.parametrize(
+    "delay",
+    [0.5, 1.2, *(pytest.param(d, marks=pytest.mark.slow) for d in (2.0, 3.0, 4.5))],  # the later ones: 2-5 s each
+)
 def test_interrupt_leaves_no_partial_output(tmp_path, delay):
     """Ctrl-C at some point of `simulate` writing a long log: afterwards the folder holds either nothing or the
     complete log with its truth (they are renamed into place together), never a part or a temporary file."""

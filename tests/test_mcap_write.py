@@ -368,6 +368,7 @@ def test_series_rejects_bad_input(tmp_path):
 # ---- A long log
 
 
+@pytest.mark.slow  # 600,000 messages written and read back: 2.7 s
 def test_ten_minutes_at_1khz(tmp_path, record_property):
     """600 001 rows: summary counts right across many chunks; the write speed is recorded, not asserted."""
     n = 600_001

@@ -168,3 +168,27 @@ def test_builtin_paper_robot():
     assert robot.cad.F_d1 == 0.045
     assert robot.cad.F_d2 == 0.04
     assert robot.nominal.F_v1 == 0.0  # Table 2's nominal friction entries are 0
+
+
+def test_the_inertia_conversion_is_its_own_inverse_and_its_jacobian_a_finite_difference():
+    """theta0 <-> phi = [M11 M12 M22 Vc ...] (model.invert_inertia_entries): against numpy's 2x2 inverse, applied
+    twice it is the identity to rounding, and its Jacobian matches central differences (step 1e-7 of each entry:
+    truncation ~1e-14 relative, rounding ~1e-9; tolerance 1e-7 relative)."""
+    theta0 = model.base_parameters(PAPER_CAD)
+    phi = model.invert_inertia_entries(theta0)
+    big_m = np.linalg.inv(model.inverse_inertia(theta0))
+    np.testing.assert_allclose(phi[:3], [big_m[0, 0], big_m[0, 1], big_m[1, 1]], rtol=1e-14)
+    np.testing.assert_array_equal(phi[3:], theta0[3:])
+    np.testing.assert_allclose(model.invert_inertia_entries(phi), theta0, rtol=1e-14)
+    np.testing.assert_allclose(
+        model.invert_inertia_entries(np.stack([theta0, phi])), np.stack([phi, theta0]), rtol=1e-14
+    )
+    jac = model.invert_inertia_jacobian(theta0)
+    numeric = np.empty_like(jac)
+    for j in range(len(theta0)):
+        h = 1e-7 * max(abs(theta0[j]), 1e-3)
+        up, down = theta0.copy(), theta0.copy()
+        up[j] += h
+        down[j] -= h
+        numeric[:, j] = (model.invert_inertia_entries(up) - model.invert_inertia_entries(down)) / (2 * h)
+    np.testing.assert_allclose(jac, numeric, rtol=1e-7, atol=1e-9)

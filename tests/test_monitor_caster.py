@@ -150,6 +150,7 @@ def test_no_false_alarm_on_the_log_the_caster_model_came_from(amr_caster_log, am
         assert cal["largest_statistic"] < cal["threshold"]
 
 
+@pytest.mark.slow  # a second multibody run and a monitor over it: 7 s
 def test_a_payload_loaded_mid_run_is_found(amr_caster_json) -> None:
     """5 kg loaded at 20 s on the multibody AMR, against the caster model of the unloaded robot (measured: the
     change placed at 20.05 s, alarm at 20.40 s, statistic 495 against a threshold of 86; M11 +26 %).  The span

@@ -108,6 +108,7 @@ def test_free_run_from_twice_the_truth_finds_the_same_minimum(noisy, free_run_fr
     np.testing.assert_allclose(est.theta0, free_run_from_nominal.theta0, rtol=1e-5)
 
 
+@pytest.mark.slow  # a full output-error search from a far start: 6.5 s
 def test_free_run_from_wrong_sign_vc_lands_in_a_poor_local_minimum(noisy, free_run_from_nominal) -> None:
     # Observed (the paper's OE initial-guess problem): Vc of the wrong sign at twice its size makes the
     # single long simulation converge (xtol, 103 evaluations, ~5 s) to a poor minimum: cost 143 125

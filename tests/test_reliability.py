@@ -184,6 +184,7 @@ def test_sigterm_and_sighup_leave_no_temporary_file(tmp_path, signum):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow  # installs a copy and compiles every kernel from nothing: 14 s
 def test_a_read_only_install_without_a_home_folder(tmp_path, small_log):
     """Installed where nothing can be written and run by a user whose HOME does not exist, every command but --help
     failed with "cannot cache function" (numba's on-disk cache).  Made here without privileges: the package's

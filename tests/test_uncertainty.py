@@ -48,6 +48,7 @@ def test_jackknife_equals_refitting_without_each_segment():
     np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-12 * np.abs(expected).max())
 
 
+@pytest.mark.slow  # Monte Carlo over 200 seeds
 def test_jackknife_standard_errors_match_the_spread_over_seeds():
     # Seeded Monte Carlo with AR(1) residuals (rho 0.7: integrated memory 5.7 samples, segments of 50): the reported
     # std must match the actual spread.  200 replications give the ratio to about +/- 10 % (2 sigma), and

@@ -79,6 +79,7 @@ from wmrid.core.errors import NotIdentifiableError
 from wmrid.estimators.estimate import BaseEstimate, SegmentEstimates
 from wmrid.estimators.idim_regression import LOW_CUTOFF_HZ, PHI_NAMES, IdimRegression, effort_delay, idim_regression
 from wmrid.estimators.uncertainty import segment_count
+from wmrid.model import dynamics as model
 from wmrid.model.dynamics import RegressorForm
 
 #: A direction of the physically scaled information whose eigenvalue is below this fraction of the largest
@@ -166,33 +167,11 @@ def jackknife_from_factors(factors: list[np.ndarray]) -> tuple[np.ndarray, np.nd
     return loo, 0.5 * (cov + cov.T)
 
 
-def phi_to_theta0(phi: np.ndarray) -> np.ndarray:
-    """theta0 (..., p) = [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2, caster...] from phi (..., p) = [M11 M12 M22 Vc ...],
-    m = M^-1; every entry after the third (the caster parameters too) is the same in both."""
-    phi = np.asarray(phi, dtype=np.float64)
-    big11, big12, big22 = phi[..., 0], phi[..., 1], phi[..., 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        det = big11 * big22 - big12 * big12
-        out = phi.copy()
-        out[..., 0] = big22 / det
-        out[..., 1] = -big12 / det
-        out[..., 2] = big11 / det
-    return out
-
-
-def theta0_jacobian(phi: np.ndarray) -> np.ndarray:
-    """d theta0 / d phi (p, p): the 2x2 inverse, dm = -m dM m, in the top-left block; identity elsewhere."""
-    theta0 = phi_to_theta0(phi)
-    m11, m12, m22 = theta0[0], theta0[1], theta0[2]
-    jac = np.eye(len(theta0))
-    jac[:3, :3] = -np.array(
-        [
-            [m11 * m11, 2.0 * m11 * m12, m12 * m12],
-            [m11 * m12, m11 * m22 + m12 * m12, m12 * m22],
-            [m12 * m12, 2.0 * m12 * m22, m22 * m22],
-        ]
-    )
-    return jac
+#: theta0 (..., p) = [m11 m12 m22 Vc ...] from phi (..., p) = [M11 M12 M22 Vc ...] (m = M^-1; every entry after the
+#: third, the caster parameters too, is the same in both): the model's one conversion.
+phi_to_theta0 = model.invert_inertia_entries
+#: d theta0 / d phi (p, p) at phi: the 2x2 inverse's derivative dm = -m dM m, identity elsewhere.
+theta0_jacobian = model.invert_inertia_jacobian
 
 
 def theta0_covariance(phi: np.ndarray, cov_phi: np.ndarray) -> np.ndarray:

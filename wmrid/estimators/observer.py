@@ -47,10 +47,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wmrid.core.errors import UsageError
+from wmrid.estimators.observer_kernel import foh
 from wmrid.model.dynamics import RegressorForm, regressor
-
-_SERIES_BELOW = 0.1
-
 
 #: 1/s: the largest predictor gain: a time constant of 10 us, a hundredth of a 1 kHz step (--k 1e308 used to be
 #: accepted and reported as "the log does not excite the dynamics").
@@ -74,24 +72,11 @@ def foh_weights(x: float) -> tuple[float, float, float]:
 
     phi0(x) = int_0^1 exp(-x v) v dv = (1 - exp(-x)(1 + x)) / x^2, phi1(x) = (1 - exp(-x))/x - phi0(x),
     so that over one step of x' = -k x + f(t) with f linear: x_{n+1} = a x_n + h (phi0 f_n + phi1 f_{n+1}).
-    A Taylor series is used for x < 0.1 where the closed form cancels.
+    A Taylor series is used for x < 0.1 where the closed form cancels (the compiled kernel's, one implementation:
+    :func:`wmrid.estimators.observer_kernel.foh`).
     """
-    a = math.exp(-x)
-    if x < _SERIES_BELOW:
-        # phi0 = sum_j (-x)^j / (j! (j + 2)); 12 terms: truncation < x^12/12!/14 < 2e-22.
-        phi0, term = 0.0, 1.0
-        for j in range(12):
-            phi0 += term / (j + 2)
-            term *= -x / (j + 1)
-        e1 = 0.0  # (1 - exp(-x)) / x = sum_j (-x)^j / (j + 1)!
-        term = 1.0
-        for j in range(12):
-            e1 += term / (j + 1)
-            term *= -x / (j + 1)
-    else:
-        phi0 = (1.0 - a * (1.0 + x)) / (x * x)
-        e1 = -math.expm1(-x) / x
-    return a, phi0, e1 - phi0
+    a, phi0, phi1 = foh(float(x))
+    return float(a), float(phi0), float(phi1)
 
 
 @dataclass(frozen=True)

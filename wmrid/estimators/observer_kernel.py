@@ -12,20 +12,13 @@ import math
 import numba
 import numpy as np
 
+from wmrid.model.dynamics import DRAG_SPEED
+from wmrid.model.kernels import sign
+
 KIND_PAPER = 0
 KIND_GENERAL = 1
 KIND_CASTER = 2  # general plus the caster-drag columns -sgn(eta_1 + eta_2), -sgn(eta_1 - eta_2)
 KIND_CASTER_GEOMETRY = 3  # general plus two columns per caster of known position (wmrid.model.dynamics.caster_columns)
-DRAG_SPEED = 1e-3  # m/s, as wmrid.model.dynamics.DRAG_SPEED
-
-
-@numba.njit(cache=True, nogil=True)
-def _sign(x):
-    if x > 0.0:
-        return 1.0
-    if x < 0.0:
-        return -1.0
-    return 0.0
 
 
 @numba.njit(cache=True, nogil=True)
@@ -39,11 +32,11 @@ def _regressor_into(out, e1, e2, t1, t2, kind, geom):
     if kind == KIND_PAPER:
         out[6] = -1.0
     else:
-        out[6] = -_sign(e1)
-        out[7] = -_sign(e2)
+        out[6] = -sign(e1)
+        out[7] = -sign(e2)
         if kind == KIND_CASTER:
-            out[8] = -_sign(e1 + e2)
-            out[9] = -_sign(e1 - e2)
+            out[8] = -sign(e1 + e2)
+            out[9] = -sign(e1 - e2)
         elif kind == KIND_CASTER_GEOMETRY:  # geom = [r, b, x_1, y_1, ...]
             r, b = geom[0], geom[1]
             v = 0.5 * r * (e1 + e2)
@@ -58,7 +51,7 @@ def _regressor_into(out, e1, e2, t1, t2, kind, geom):
 
 
 @numba.njit(cache=True, nogil=True)
-def _foh(x):
+def foh(x):
     a = math.exp(-x)
     if x < 0.1:
         phi0 = 0.0
@@ -151,7 +144,7 @@ def observer_chunk(
     for i in range(c):
         n_i = offset + i
         h = t[i] - st[0]
-        a, phi0, phi1 = _foh(k * h)
+        a, phi0, phi1 = foh(k * h)
         b0 = h * phi0
         b1 = h * phi1
         e1 = eta[i, 0]

@@ -208,6 +208,41 @@ def inverse_inertia(theta0: np.ndarray) -> np.ndarray:
     return np.array([[theta0[0], theta0[1]], [theta0[1], theta0[2]]])
 
 
+def invert_inertia_entries(x: np.ndarray) -> np.ndarray:
+    """x (..., n) = [a11, a12, a22, rest...] -> the same with the entries of [[a11, a12], [a12, a22]]^-1 first.
+
+    The one conversion between theta0 = [m11 m12 m22 Vc ...] and the physical vector phi = [M11 M12 M22 Vc ...]
+    (Vc, friction and caster drag are the same in both), in either direction: the 2x2 inverse is its own inverse.
+    Closed form (M11 = m22 / det, M12 = -m12 / det, M22 = m11 / det); a singular block gives inf/nan, not an error.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    a11, a12, a22 = x[..., 0], x[..., 1], x[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        det = a11 * a22 - a12 * a12
+        out = x.copy()
+        out[..., 0] = a22 / det
+        out[..., 1] = -a12 / det
+        out[..., 2] = a11 / det
+    return out
+
+
+def invert_inertia_jacobian(x: np.ndarray) -> np.ndarray:
+    """d y / d x (n, n) of y = :func:`invert_inertia_entries` (x): the 2x2 inverse's derivative dY = -Y dX Y in the
+    top-left 3x3 block (entries 11, 12, 22; dX's 12 entry stands on both sides of the diagonal), identity elsewhere.
+    """
+    y = invert_inertia_entries(x)
+    y11, y12, y22 = y[0], y[1], y[2]
+    jac = np.eye(len(y))
+    jac[:3, :3] = -np.array(
+        [
+            [y11 * y11, 2.0 * y11 * y12, y12 * y12],
+            [y11 * y12, y11 * y22 + y12 * y12, y12 * y22],
+            [y12 * y12, 2.0 * y12 * y22, y22 * y22],
+        ]
+    )
+    return jac
+
+
 def default_base_names(n0: int) -> tuple[str, ...]:
     """Names of a theta0 of n0 entries when its form is not at hand: the eight base parameters, then the two-term
     caster drag Cv, Cw (a geometric caster model's D_k need ``RegressorForm.base_names``)."""

@@ -283,16 +283,8 @@ class _Model:
 
 def _physical_jacobian(theta0: np.ndarray) -> np.ndarray:
     """d p / d theta0 (n, n): M = m^-1 gives dM = -M dm M; the others (Vc, friction, caster drag) are the same in
-    both."""
-    n = len(theta0)
-    big_m = np.linalg.inv(model.inverse_inertia(theta0))
-    jac = np.zeros((n, n))
-    basis = (np.array([[1.0, 0.0], [0.0, 0.0]]), np.array([[0.0, 1.0], [1.0, 0.0]]), np.array([[0.0, 0.0], [0.0, 1.0]]))
-    for j, dm in enumerate(basis):
-        d_big = -big_m @ dm @ big_m
-        jac[:3, j] = [d_big[0, 0], d_big[0, 1], d_big[1, 1]]
-    jac[3:, 3:] = np.eye(n - 3)
-    return jac
+    both (:func:`wmrid.model.dynamics.invert_inertia_jacobian`)."""
+    return model.invert_inertia_jacobian(theta0)
 
 
 def _model_of_result(result: Any) -> _Model:

@@ -237,9 +237,8 @@ def load_model(path: str | Path) -> MonitoredModel:
 
 def physical_vector(theta0: np.ndarray) -> np.ndarray:
     """p = [M11, M12, M22, Vc, Fv1, Fv2, Fd1, Fd2, then theta0's caster drag parameters unchanged]: what the
-    regressor Phi multiplies."""
-    big_m = np.linalg.inv(model.inverse_inertia(theta0))
-    return np.array([big_m[0, 0], big_m[0, 1], big_m[1, 1], *theta0[3:]])
+    regressor Phi multiplies (:func:`wmrid.model.dynamics.invert_inertia_entries`)."""
+    return model.invert_inertia_entries(theta0)
 
 
 def named(theta0: np.ndarray, form: RegressorForm | None) -> dict[str, float]:

@@ -12,17 +12,9 @@ import numpy as np
 if TYPE_CHECKING:
     pass
 
+from wmrid.model.kernels import sign
 
 KIND = {"sinusoid": 0, "reversing": 1}
-
-
-@numba.njit(cache=True, nogil=True)
-def _sgn(x):
-    if x > 0.0:
-        return 1.0
-    if x < 0.0:
-        return -1.0
-    return 0.0
 
 
 @numba.njit(cache=True, nogil=True)
@@ -105,8 +97,8 @@ def _plant_rhs(s, tau1, tau2, d1, d2, plant, out):
     out[2] = r / (2.0 * b) * (e1 - e2)
     out[3] = e1
     out[4] = e2
-    f1 = tau1 - d1 - vc * (e1 * e2 - e2 * e2) - fv1 * e1 - fd1 * _sgn(e1)
-    f2 = tau2 - d2 - vc * (e1 * e2 - e1 * e1) - fv2 * e2 - fd2 * _sgn(e2)
+    f1 = tau1 - d1 - vc * (e1 * e2 - e2 * e2) - fv1 * e1 - fd1 * sign(e1)
+    f2 = tau2 - d2 - vc * (e1 * e2 - e1 * e1) - fv2 * e2 - fd2 * sign(e2)
     out[5] = m11 * f1 + m12 * f2
     out[6] = m12 * f1 + m22 * f2
 
@@ -132,7 +124,7 @@ def _control(s, ref, ctrl, gains):
     err2d = -w * err1 + vr * s3
     err3d = wr - w
     avr = abs(vr)
-    avrd = vrd * _sgn(vr)
+    avrd = vrd * sign(vr)
     vc_ = vr * c3 + k1 * err1
     wc_ = wr + k2 * vr * err2 + k3 * avr * s3
     vcd = vrd * c3 - vr * s3 * err3d + k1 * err1d
@@ -143,8 +135,8 @@ def _control(s, ref, ctrl, gains):
     ecd2 = (vcd - b * wcd) / r
     a1 = ecd1 + kw * (ec1 - eta1)
     a2 = ecd2 + kw * (ec2 - eta2)
-    tau1 = big11 * a1 + big12 * a2 + vc * (eta1 * eta2 - eta2 * eta2) + fv1 * eta1 + fd1 * _sgn(eta1)
-    tau2 = big12 * a1 + big22 * a2 + vc * (eta1 * eta2 - eta1 * eta1) + fv2 * eta2 + fd2 * _sgn(eta2)
+    tau1 = big11 * a1 + big12 * a2 + vc * (eta1 * eta2 - eta2 * eta2) + fv1 * eta1 + fd1 * sign(eta1)
+    tau2 = big12 * a1 + big22 * a2 + vc * (eta1 * eta2 - eta1 * eta1) + fv2 * eta2 + fd2 * sign(eta2)
     return tau1, tau2
 
 
