@@ -60,7 +60,7 @@ def main() -> None:
                 t=sim.t, eta=sim.eta, tau=sim.tau, source=f"seed {seed}", notes=(), reference=sim.eta_ref
             )
             observer = identify(log, robot, feedback=False)  # the observer's own estimate, as compare shows it
-            data = compare(log, observer, MethodOptions(), truth=truth)
+            data = compare(log, observer, MethodOptions(), truth=truth).to_dict()
             for m, row in data["methods"].items():
                 seconds[m].append(row["seconds"])
                 for g, keys in GROUPS.items():

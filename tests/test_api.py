@@ -44,10 +44,11 @@ def test_the_readme_python_example_runs(tmp_path, monkeypatch):
     exec(compile(code, "README.md", "exec"), scope)
     assert scope["value"] == pytest.approx(0.7872544, rel=1e-6)
     assert 0 < scope["std"] < 1e-5
-    assert set(scope["table"]["methods"]) == {"observer", "idim"}
+    assert set(scope["table"].methods) == {"observer", "idim"}
     assert scope["saved"].to_dict() == scope["result"].to_dict()
     assert scope["sim"].truth["payload"]["mass"] == 25.0
     assert isinstance(scope["changes"], wmrid.MonitorResult)
+    assert scope["what"].topics[0]["topic"] == "/joint_states"
     assert (tmp_path / "r.html").read_text(encoding="utf-8").startswith("<!DOCTYPE html>")
 
 

@@ -85,6 +85,8 @@ _EXPORTS = {
     "read_log": "wmrid.api.inputs",
     "identify": "wmrid.api.identification",
     "compare": "wmrid.api.identification",
+    "inspect": "wmrid.api.inputs",
+    "Comparison": "wmrid.estimators.methods",
     "simulate": "wmrid.api.simulation",
     "monitor": "wmrid.api.monitoring",
     "report": "wmrid.api.reporting",

@@ -17,6 +17,7 @@ from typing import Any
 from wmrid.api.inputs import LogOptions, load_robot, open_log
 from wmrid.core.errors import UsageError, option
 from wmrid.core.wheel_log import LogStream, WheelLog
+from wmrid.estimators.methods import Comparison
 from wmrid.estimators.result import IdentificationResult
 from wmrid.model.robot import Robot
 
@@ -232,10 +233,11 @@ def compare(
     cutoff: float | None = None,
     weighted: bool = False,
     forgetting: float = 1.0,
-) -> dict[str, Any]:
+) -> Comparison:
     """Every method in ``methods`` (default: all of :data:`wmrid.estimators.methods.METHODS`) on the same log:
     estimates, standard errors, flags, errors against ``truth`` (base parameters by name), fit on ``validate``,
-    run time -- the document ``wmrid compare --format json`` prints.  Each method identifies the same friction
+    run time, as a :class:`~wmrid.estimators.methods.Comparison` (``to_dict``: the document ``wmrid compare
+    --format json`` prints).  Each method identifies the same friction
     model; the observer's own estimate is shown as it is (no closed-loop substitution)."""
     from wmrid.estimators.identify import identify as run_observer
     from wmrid.estimators.methods import METHODS, check_method

@@ -17,7 +17,7 @@ from wmrid.core.errors import UsageError, option
 from wmrid.core.wheel_log import LogStream, WheelLog
 from wmrid.model.robot import Robot
 
-__all__ = ["LogOptions", "load_robot", "open_log", "read_log"]
+__all__ = ["LogOptions", "inspect", "load_robot", "open_log", "read_log"]
 
 
 @dataclass(frozen=True)
@@ -160,3 +160,12 @@ def read_log(
     """A whole log in memory (t (n,) s, eta (n, 2) rad/s, tau (n, 2) N m; see :class:`WheelLog`), read as
     :func:`open_log` reads it."""
     return open_log(path, options, robot=robot, data=data, **overrides).read()
+
+
+def inspect(path: str | os.PathLike[str]) -> Any:
+    """What the log at ``path`` holds, before any identification (``wmrid inspect``): an
+    :class:`~wmrid.io.inspect.McapInventory` (topics, types, rates, joints) or a
+    :class:`~wmrid.io.inspect.TableInventory` (columns, rows, canonical columns found); ``to_dict`` is the JSON."""
+    from wmrid.io.inspect import inspect_log
+
+    return inspect_log(os.fspath(path))

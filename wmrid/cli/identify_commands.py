@@ -179,7 +179,7 @@ def inspect(
     from wmrid.io.inspect import inspect_log
     from wmrid.reporting.render import print_inspection, to_json
 
-    info = inspect_log(log)
+    info = inspect_log(log).to_dict()
     fmt = output_format.value
     if fmt == "auto":
         fmt = "table" if sys.stdout.isatty() else "json"
@@ -341,7 +341,7 @@ def compare(
         options=log_opts(columns, time_unit.value, log_options(locals())), torque_hold=torque_hold.value,
         control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted,
         forgetting=forgetting,
-    )  # fmt: skip
+    ).to_dict()  # fmt: skip
     if output is not None:
         write_json(str(output), data, force=force)
     if on_stdout(output):

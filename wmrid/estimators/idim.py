@@ -123,7 +123,7 @@ def _qr_r(a: np.ndarray) -> np.ndarray:
     return r
 
 
-def _solve_r(r: np.ndarray) -> np.ndarray:
+def solve_r(r: np.ndarray) -> np.ndarray:
     """phi (p,) from the stacked triangular factors (.., p + 1) of [X y]."""
     from scipy.linalg import solve_triangular
 
@@ -161,7 +161,7 @@ def jackknife_from_factors(factors: list[np.ndarray]) -> tuple[np.ndarray, np.nd
     loo = np.empty((g, factors[0].shape[1] - 1))
     with np.errstate(all="ignore"):
         for i in range(g):
-            loo[i] = _solve_r(np.vstack(factors[:i] + factors[i + 1 :]))
+            loo[i] = solve_r(np.vstack(factors[:i] + factors[i + 1 :]))
     centred = loo - loo.mean(axis=0)
     cov = (g - 1) / g * (centred.T @ centred)
     return loo, 0.5 * (cov + cov.T)
@@ -247,7 +247,7 @@ def fit_regression(
     if reason is not None:
         raise NotIdentifiableError(reason)
     sv = np.linalg.svd(rs, compute_uv=False)
-    phi = _solve_r(r_all)
+    phi = solve_r(r_all)
     rms = residual_rms(phi)
     weights = ones
     if weighted:
@@ -255,7 +255,7 @@ def fit_regression(
             raise NotIdentifiableError("weighted IDIM: a wheel equation fits exactly, so its weight is undefined")
         weights = 1.0 / rms
         fac = factors(weights)
-        phi = _solve_r(np.vstack(fac))
+        phi = solve_r(np.vstack(fac))
         rms = residual_rms(phi)
     loo, cov = jackknife_from_factors(fac)
     diagnostics: dict[str, Any] = {

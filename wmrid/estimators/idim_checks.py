@@ -51,18 +51,18 @@ def difference(fac_a: list[np.ndarray], fac_b: list[np.ndarray], gate: float) ->
     fac_a, fac_b: the two fits' per-segment factors over the same g segments.  Returns {"applied": some
     |delta_j| > gate sd_j, "delta" (p,) theta0 units, "sd" (p,), "largest_ratio"}.
     """
-    from wmrid.estimators.idim import _solve_r, phi_to_theta0
+    from wmrid.estimators.idim import phi_to_theta0, solve_r
 
     g = len(fac_a)
     singular = {"applied": False, "delta": None, "sd": None, "largest_ratio": None, "why": "a refit was singular"}
     try:
         with np.errstate(all="ignore"):
-            full_a = phi_to_theta0(_solve_r(np.vstack(fac_a)))
-            full_b = phi_to_theta0(_solve_r(np.vstack(fac_b)))
+            full_a = phi_to_theta0(solve_r(np.vstack(fac_a)))
+            full_b = phi_to_theta0(solve_r(np.vstack(fac_b)))
             loo = np.empty((g, len(full_a)))
             for i in range(g):
-                a = phi_to_theta0(_solve_r(np.vstack(fac_a[:i] + fac_a[i + 1 :])))
-                b = phi_to_theta0(_solve_r(np.vstack(fac_b[:i] + fac_b[i + 1 :])))
+                a = phi_to_theta0(solve_r(np.vstack(fac_a[:i] + fac_a[i + 1 :])))
+                b = phi_to_theta0(solve_r(np.vstack(fac_b[:i] + fac_b[i + 1 :])))
                 loo[i] = a - b
     except np.linalg.LinAlgError:
         return singular

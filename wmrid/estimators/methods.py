@@ -150,6 +150,30 @@ def run(
     return with_estimate(observer, estimate(name, log, observer, options), robot)
 
 
+@dataclass(frozen=True)
+class Comparison:
+    """Every method's estimate on one log (:func:`compare`); ``to_dict`` is the ``wmrid compare`` JSON.
+
+    methods : name -> {"description", "parameters": {n: {"value", "std", "unit"[, "error_percent"]}}, "flagged",
+        "marks", "seconds", "warnings"[, "validation": {"fit_percent": {"eta_r", "eta_l"}}]}, in the order run.
+    validation : {"log", "samples", "predictor"} of the second log each model was validated on, or None.
+    truth : the true base parameters the errors are against, or None.
+    """
+
+    source: str
+    methods: dict[str, dict[str, Any]]
+    validation: dict[str, Any] | None = None
+    truth: dict[str, float] | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"source": self.source, "methods": self.methods}
+        if self.validation is not None:
+            out["validation"] = self.validation
+        if self.truth is not None:
+            out["truth"] = self.truth
+        return out
+
+
 def compare(
     log: Any,
     observer: IdentificationResult,
@@ -158,7 +182,7 @@ def compare(
     *,
     other: Any = None,
     truth: dict[str, float] | None = None,
-) -> dict[str, Any]:
+) -> Comparison:
     """Every method in ``names`` on ``log`` (in memory; ``observer`` is the observer's result on it), JSON-ready.
 
     {"methods": {name: {"description", "parameters": {n: {"value", "std", "unit"[, "error_percent"]}}, "flagged",
@@ -171,7 +195,7 @@ def compare(
     from wmrid.estimators.model_error import std_mark
     from wmrid.model.predict import validation_fit
 
-    out: dict[str, Any] = {"source": observer.source, "methods": {}}
+    methods: dict[str, dict[str, Any]] = {}
     predictor = None
     for name in names:
         est = estimate(name, log, observer, options)
@@ -198,9 +222,10 @@ def compare(
             fit_percent = {w: fit[w] if np.isfinite(fit[w]) else None for w in ("eta_r", "eta_l")}
             row["validation"] = {"fit_percent": fit_percent}
             predictor = fit["predictor"]
-        out["methods"][name] = row
-    if other is not None:
-        out["validation"] = {"log": other.source, "samples": len(other.t), "predictor": predictor}
-    if truth is not None:
-        out["truth"] = {key: value for key, value in truth.items() if key in observer.parameters}
-    return out
+        methods[name] = row
+    return Comparison(
+        source=observer.source,
+        methods=methods,
+        validation=None if other is None else {"log": other.source, "samples": len(other.t), "predictor": predictor},
+        truth=None if truth is None else {key: value for key, value in truth.items() if key in observer.parameters},
+    )

@@ -104,7 +104,7 @@ def _csv_line_finder(source: Source, skip: int = 0, has_header: bool = True) -> 
 
 
 @dataclass
-class _CsvLayout:
+class CsvLayout:
     """How a CSV file is laid out: options for pandas, its columns, notes, and a parse-error mapper."""
 
     c_options: dict[str, Any]
@@ -118,7 +118,7 @@ class _CsvLayout:
     comments: list[str]
 
 
-def _csv_layout(source: Source) -> _CsvLayout:
+def csv_layout(source: Source) -> CsvLayout:
     """Comments, delimiter, decimal mark, header (or positional names) of a CSV file; see the module docstring."""
     import pandas as pd
 
@@ -193,7 +193,7 @@ def _csv_layout(source: Source) -> _CsvLayout:
     if spaced:
         notes.append("spaces around column names and values ignored")
     comments = lines[:skip]
-    return _CsvLayout(c_options, list(header.columns), present, notes, skip, has_header, spaced, fail, comments)
+    return CsvLayout(c_options, list(header.columns), present, notes, skip, has_header, spaced, fail, comments)
 
 
 def csv_chunks(
@@ -207,7 +207,7 @@ def csv_chunks(
     import pandas as pd
 
     name = source.name
-    layout = _csv_layout(source)
+    layout = csv_layout(source)
     c_options, present, notes = layout.c_options, layout.present, layout.notes
     header = pd.DataFrame(columns=layout.header_columns)
     chosen = select(present, mapping, explicit, name)

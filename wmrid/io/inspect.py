@@ -3,11 +3,13 @@
 For an MCAP: every topic with its message type, encoding, message count, rate and time range, and for
 each JointState topic its joints and whether position, velocity and effort are populated.  For CSV and
 Parquet: the columns, the number of rows, and which canonical columns were found.  The result is a
-plain dict (the JSON form); :func:`wmrid.reporting.render.print_inspection` draws it as tables.
+:class:`McapInventory` or a :class:`TableInventory`; ``to_dict`` is the JSON form, which
+:func:`wmrid.reporting.render.print_inspection` draws as tables.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -15,19 +17,64 @@ import numpy as np
 from wmrid.core.errors import LogFormatError
 
 
-def inspect_log(path: str) -> dict[str, Any]:
-    """A description of the log at ``path`` (or ``-``): {"source", "format", ...}; see the module docstring."""
-    from wmrid.io.sources import detect_format
-    from wmrid.io.sources import open_source as _open_source
+@dataclass(frozen=True)
+class McapInventory:
+    """What an MCAP holds: its topics (each {"topic", "type", "encoding", "messages", "rate_hz", "start_s", "end_s"},
+    JointState topics also "joints", "fields" and "header_stamps"), time range (s), metadata names and notes."""
 
-    source = _open_source(path)
+    source: str
+    profile: str
+    library: str
+    size_bytes: int
+    start_s: float | None
+    end_s: float | None
+    duration_s: float
+    topics: list[dict[str, Any]]
+    metadata: list[str]
+    notes: list[str]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "source": self.source, "format": "mcap", "profile": self.profile, "library": self.library,
+            "size_bytes": self.size_bytes, "start_s": self.start_s, "end_s": self.end_s, "duration_s": self.duration_s,
+            "topics": self.topics, "metadata": self.metadata, "notes": self.notes,
+        }  # fmt: skip
+
+
+@dataclass(frozen=True)
+class TableInventory:
+    """What a CSV or Parquet log holds: its columns ({"name", "type"}), rows (None for CSV: not counted), which
+    canonical columns it has and which required ones it lacks, reading notes and comment lines."""
+
+    source: str
+    format: str
+    rows: int | None
+    columns: list[dict[str, str]]
+    canonical_found: list[str]
+    canonical_missing: list[str]
+    notes: list[str]
+    comments: list[str]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "source": self.source, "format": self.format, "rows": self.rows, "columns": self.columns,
+            "canonical_found": self.canonical_found, "canonical_missing": self.canonical_missing, "notes": self.notes,
+            "comments": self.comments,
+        }  # fmt: skip
+
+
+def inspect_log(path: str) -> McapInventory | TableInventory:
+    """A description of the log at ``path`` (or ``-``); see the module docstring."""
+    from wmrid.io.sources import detect_format, open_source
+
+    source = open_source(path)
     kind = detect_format(path, source.head(8))
     if kind == "mcap":
         return _inspect_mcap(source)
     return _inspect_table(source, kind)
 
 
-def _inspect_mcap(source) -> dict[str, Any]:
+def _inspect_mcap(source) -> McapInventory:
     from wmrid.io.mcap.reader import read_mcap
 
     contents = read_mcap(source.path or source.name, data=source.data)
@@ -51,16 +98,15 @@ def _inspect_mcap(source) -> dict[str, Any]:
                 else "some zero" if np.any(stamps <= 0) else "out of order"
             )  # fmt: skip
         topics.append(entry)
-    return {
-        "source": contents.source, "format": "mcap", "profile": contents.profile, "library": contents.library,
-        "size_bytes": contents.size_bytes,
-        "start_s": min(firsts) * 1e-9 if firsts else None, "end_s": max(lasts) * 1e-9 if lasts else None,
-        "duration_s": (max(lasts) - min(firsts)) * 1e-9 if firsts else 0.0,
-        "topics": topics, "metadata": sorted(contents.metadata), "notes": list(contents.notes),
-    }  # fmt: skip
+    return McapInventory(
+        source=contents.source, profile=contents.profile, library=contents.library, size_bytes=contents.size_bytes,
+        start_s=min(firsts) * 1e-9 if firsts else None, end_s=max(lasts) * 1e-9 if lasts else None,
+        duration_s=(max(lasts) - min(firsts)) * 1e-9 if firsts else 0.0,
+        topics=topics, metadata=sorted(contents.metadata), notes=list(contents.notes),
+    )  # fmt: skip
 
 
-def _inspect_table(source, kind: str) -> dict[str, Any]:
+def _inspect_table(source, kind: str) -> TableInventory:
     from wmrid.core.wheel_log import CANONICAL
 
     if kind == "parquet":
@@ -78,9 +124,9 @@ def _inspect_table(source, kind: str) -> dict[str, Any]:
     else:
         import pandas as pd
 
-        from wmrid.io.csv_log import _csv_layout
+        from wmrid.io.csv_log import csv_layout
 
-        layout = _csv_layout(source)
+        layout = csv_layout(source)
         try:
             frame = pd.read_csv(source.opener(), nrows=5, **layout.c_options)
         except (ValueError, UnicodeDecodeError) as err:
@@ -90,10 +136,9 @@ def _inspect_table(source, kind: str) -> dict[str, Any]:
         notes = layout.notes
         comments = layout.comments[:40]
     names = [c["name"] for c in columns]
-    return {
-        "source": source.name, "format": kind, "rows": rows, "columns": columns,
-        "canonical_found": [c for c in CANONICAL if c in names],
-        "canonical_missing": [c for c in CANONICAL[:5] if c not in names],
-        "notes": notes,
-        "comments": comments,
-    }  # fmt: skip
+    return TableInventory(
+        source=source.name, format=kind, rows=rows, columns=columns,
+        canonical_found=[c for c in CANONICAL if c in names],
+        canonical_missing=[c for c in CANONICAL[:5] if c not in names],
+        notes=notes, comments=comments,
+    )  # fmt: skip

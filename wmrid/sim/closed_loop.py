@@ -18,7 +18,7 @@ KIND = {"sinusoid": 0, "reversing": 1}
 
 
 @numba.njit(cache=True, nogil=True)
-def _reference(kind, traj, t, xr_int, yr_int):
+def reference_state(kind, traj, t, xr_int, yr_int):
     """Reference at time t: (x_r m, y_r m, phi_r rad, v_r m/s, w_r rad/s, v_r' m/s^2, w_r' rad/s^2).
 
     For ``reversing`` x_r, y_r are the kernel's integrated values, passed in as xr_int, yr_int.
@@ -60,7 +60,7 @@ def reference_wheel_speeds(kind, traj, t, r, b):
     """(n, 2) rad/s: the reference's wheel speeds [(v_r + b w_r) / r, (v_r - b w_r) / r] at times t (n,) s."""
     out = np.empty((t.shape[0], 2))
     for i in range(t.shape[0]):
-        ref = _reference(kind, traj, t[i], 0.0, 0.0)
+        ref = reference_state(kind, traj, t[i], 0.0, 0.0)
         out[i, 0] = (ref[3] + b * ref[4]) / r
         out[i, 1] = (ref[3] - b * ref[4]) / r
     return out
@@ -104,7 +104,7 @@ def _plant_rhs(s, tau1, tau2, d1, d2, plant, out):
 
 
 @numba.njit(cache=True, nogil=True)
-def _control(s, ref, ctrl, gains):
+def control_torque(s, ref, ctrl, gains):
     """Computed-torque backstepping law: (tau_1, tau_2) N m from the state s (7,) and reference tuple."""
     xr, yr, phir, vr, wr, vrd, wrd = ref
     big11, big12, big22, vc = ctrl[0], ctrl[1], ctrl[2], ctrl[3]
@@ -170,7 +170,7 @@ def closed_loop_kernel(kind, traj, plant, ctrl, gains, period, substeps, n_log, 
     r, b = plant[8], plant[9]
     s = np.zeros(7)
     xr_int, yr_int = 0.0, 0.0
-    ref0 = _reference(kind, traj, 0.0, xr_int, yr_int)
+    ref0 = reference_state(kind, traj, 0.0, xr_int, yr_int)
     s[0], s[1], s[2] = ref0[0], ref0[1], ref0[2]
     s[5] = (ref0[3] + b * ref0[4]) / r
     s[6] = (ref0[3] - b * ref0[4]) / r
@@ -188,8 +188,8 @@ def closed_loop_kernel(kind, traj, plant, ctrl, gains, period, substeps, n_log, 
     tmp = np.empty(7)
     for k in range(n_ctrl):
         t = k * period
-        ref = _reference(kind, traj, t, xr_int, yr_int)
-        tau1, tau2 = _control(s, ref, ctrl, gains)
+        ref = reference_state(kind, traj, t, xr_int, yr_int)
+        tau1, tau2 = control_torque(s, ref, ctrl, gains)
         if k % every == 0:
             i = k // every
             pose[i, 0], pose[i, 1], pose[i, 2] = s[0], s[1], s[2]

@@ -22,7 +22,7 @@ dynamics from masses, inertias, joints and contacts, as the paper's SimMechanics
 * a payload as a welded body.
 
 The robot tracks the same reference under the same backstepping + computed-torque controller as the
-reduced simulator (:func:`wmrid.sim.closed_loop._control`, on the NOMINAL parameters), fed with the engine's
+reduced simulator (:func:`wmrid.sim.closed_loop.control_torque`, on the NOMINAL parameters), fed with the engine's
 state at each 1 ms control period: the pose of O from the platform's free joint (yaw unwrapped) and the
 wheel joints' speeds.  The torque, optionally clipped to +-``torque_limit``, is held over the control
 period while MuJoCo takes ``substeps`` steps (implicit-in-velocity integration, elliptic friction cones,
@@ -47,10 +47,8 @@ import numpy as np
 
 from wmrid.core.errors import UsageError
 from wmrid.model.robot import Caster, Payload, PhysicalParameters, default_casters
-from wmrid.sim.closed_loop import KIND as _KIND
-from wmrid.sim.closed_loop import _control, _reference, reversing_advance
-from wmrid.sim.scenario import NoiseSettings, PlantChange
-from wmrid.sim.scenario import positive_number as _positive_number
+from wmrid.sim.closed_loop import KIND, control_torque, reference_state, reversing_advance
+from wmrid.sim.scenario import NoiseSettings, PlantChange, positive_number
 from wmrid.sim.simulate import SimulatedLog, plan_run
 
 #: Bump when a change alters the simulated motion (not its docs or truth fields): benchmarks key their caches on it.
@@ -108,13 +106,13 @@ class MultibodySettings:
     cg_height: float = 0.05
 
     def __post_init__(self) -> None:
-        _positive_number("--floor-friction", self.floor_friction)
+        positive_number("--floor-friction", self.floor_friction)
         if self.caster_resistance is not None:
             c = self.caster_resistance
             if isinstance(c, bool) or not isinstance(c, (int, float)) or not math.isfinite(c) or c < 0:
                 raise UsageError(f"--caster-resistance must be a number >= 0, got {c!r}")
         if self.torque_limit is not None:
-            _positive_number("--torque-limit", self.torque_limit)
+            positive_number("--torque-limit", self.torque_limit)
         if isinstance(self.substeps, bool) or not isinstance(self.substeps, int) or self.substeps < 1:
             raise UsageError(f"multibody substeps must be a whole number >= 1, got {self.substeps!r}")
         if not math.isfinite(self.cg_height):
@@ -412,12 +410,12 @@ def simulate_multibody(
     plant.set_joint_friction(plant0)
     m, d = plant.model, plant.data
 
-    kind = _KIND[trajectory]
+    kind = KIND[trajectory]
     traj, ctrl, gains = run.traj, run.ctrl, run.gains
 
     # Settle at rest on the contacts, then start on the reference with its speeds (true r, b).
     r, b = true.r, true.b
-    ref0 = _reference(kind, traj, 0.0, 0.0, 0.0)
+    ref0 = reference_state(kind, traj, 0.0, 0.0, 0.0)
     d.qpos[plant.base_q : plant.base_q + 3] = [ref0[0], ref0[1], r]
     half = 0.5 * ref0[2]
     d.qpos[plant.base_q + 3 : plant.base_q + 7] = [math.cos(half), 0.0, 0.0, math.sin(half)]
@@ -478,8 +476,8 @@ def simulate_multibody(
         s[0], s[1], s[2] = qpos[bq], qpos[bq + 1], phi_unwrapped
         s[3], s[4] = qpos[q1], qpos[q2]
         s[5], s[6] = qvel[v1], qvel[v2]
-        ref = _reference(kind, traj, t, xr_int, yr_int)
-        tau1, tau2 = _control(s, ref, ctrl, gains)
+        ref = reference_state(kind, traj, t, xr_int, yr_int)
+        tau1, tau2 = control_torque(s, ref, ctrl, gains)
         if limit is not None:
             tau1 = min(max(tau1, -limit), limit)
             tau2 = min(max(tau2, -limit), limit)
