@@ -224,13 +224,13 @@ def _median_step(exact: dict[float, int] | None, hist: dict[int, int]) -> float:
 
 
 def _raise_implausible(t: np.ndarray, eta: np.ndarray, tau: np.ndarray, source: str, effort_unit: str) -> None:
-    for arr, what, unit in ((eta, "wheel speed", "rad/s"), (tau, "effort", effort_unit)):
+    for arr, what, unit in ((eta, "a wheel speed", "rad/s"), (tau, "an effort", effort_unit)):
         with np.errstate(invalid="ignore"):
             bad = ~np.isfinite(arr) | (np.abs(arr) > PLAUSIBLE_LIMIT)
         if bad.any():
             i = int(np.argmax(bad.any(axis=1)))
             raise NotIdentifiableError(
-                f"{source}: a {what} of {arr[i][bad[i]][0]:.3g} {unit} at t = {t[i]:.6g} s is not a number a "
+                f"{source}: {what} of {arr[i][bad[i]][0]:.3g} {unit} at t = {t[i]:.6g} s is not a number a "
                 "robot logs; check the log's units and columns"
             )
 
