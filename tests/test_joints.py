@@ -33,7 +33,7 @@ def test_named_joints_are_checked_and_ambiguous_ones_refused_with_the_fix():
     assert choose_joints(("a", "b", "c"), sel, "bag.mcap", "/js") == ("a", "b", None)
     with pytest.raises(LogFormatError, match=r"bag.mcap: topic /js has no joint 'b'; its joints are a, c"):
         choose_joints(("a", "c"), sel, "bag.mcap", "/js")
-    with pytest.raises(LogFormatError, match=r"cannot tell the right and left wheel joints.*--right-joint NAME"):
+    with pytest.raises(LogFormatError, match=r"cannot tell the right and left wheel joints.*right_joint NAME"):
         choose_joints(("wheel_a", "wheel_b"), TopicSelection(), "bag.mcap", "/js")
 
 

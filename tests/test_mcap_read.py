@@ -290,7 +290,7 @@ def test_ambiguous_joints_are_refused_with_the_candidates(tmp_path):
     ]
     path = tmp_path / "ambiguous.mcap"
     write_joint_messages(path, msgs)
-    with pytest.raises(LogFormatError, match=r"joints: wheel_a, wheel_b\); name them with --right-joint"):
+    with pytest.raises(LogFormatError, match=r"joints: wheel_a, wheel_b\); name them with right_joint"):
         read_log(str(path))
     log = read_log(str(path), selection=TopicSelection(right_joint="wheel_b", left_joint="wheel_a"))
     np.testing.assert_array_equal(log.eta[0], [2.0, 1.0])

@@ -38,10 +38,10 @@ def test_current_to_torque_and_pwm_label():
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        ({"speed_unit": "m/s"}, "--wheel-radius"),
-        ({"efficiency": 1.5}, "--efficiency"),
-        ({"speed_unit": "furlong/fortnight"}, "--speed-unit"),
-        ({"wheel_radius": -1.0}, "--wheel-radius"),
+        ({"speed_unit": "m/s"}, "wheel_radius"),
+        ({"efficiency": 1.5}, "efficiency"),
+        ({"speed_unit": "furlong/fortnight"}, "speed_unit"),
+        ({"wheel_radius": -1.0}, "wheel_radius"),
     ],
 )
 def test_options_are_validated(kwargs, message):
@@ -59,7 +59,7 @@ def test_current_without_a_torque_constant_is_identified_in_amperes():
 
 
 def test_current_needs_a_gear_ratio():
-    with pytest.raises(UsageError, match="--gear-ratio"):
+    with pytest.raises(UsageError, match="gear_ratio"):
         effort_to_torque(np.ones((1, 2)), SignalOptions(effort="current", torque_constant=0.01), None)
 
 

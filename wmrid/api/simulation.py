@@ -158,7 +158,7 @@ def write_simulation(run: SimulationRun, output: str | os.PathLike[str], *, forc
     output = os.fspath(output)
     truth_path = None if output == "-" else output + ".truth.json"
     if truth_path is not None and not force and os.path.exists(truth_path):
-        raise UsageError(f"{truth_path} exists; use {option('force')} to overwrite it")
+        raise UsageError(f"{truth_path} exists; use {option('force', True)} to overwrite it")
     frame = run.to_frame()
     with output_group():  # the log and its truth appear together or not at all
         if output.lower().endswith(".mcap"):

@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from wmrid.core import interrupts
-from wmrid.core.errors import OutputExistsError, OutputWriteError, ReaderGone, UsageError
+from wmrid.core.errors import OutputExistsError, OutputWriteError, ReaderGone, UsageError, option
 
 __all__ = [
     "atomic_output", "atomic_write_bytes", "atomic_write_text", "clear_inputs", "output_group", "register_input",
@@ -145,7 +145,7 @@ def _write_error(path: Path | str, err: OSError) -> OutputWriteError:
 
 
 def _exists_error(path: Path) -> OutputExistsError:
-    return OutputExistsError(f"{path} exists; use --force to overwrite it")
+    return OutputExistsError(f"{path} exists; use {option('force', True)} to overwrite it")
 
 
 def _check_target(path: Path, force: bool) -> Path:

@@ -66,15 +66,16 @@ class ReaderGone(Exception):
 _OPTION_STYLE: contextvars.ContextVar[str] = contextvars.ContextVar("wmrid_option_style", default="python")
 
 #: Flags whose name is not the keyword argument's with dashes.
-FLAG_NAMES = {"output_format": "--format", "log": "LOG", "input_": "INPUT", "k": "--k"}
+FLAG_NAMES = {"output_format": "--format", "log": "LOG", "input_": "INPUT", "calibration_s": "--calibration"}
 
 
 def option(name: str, value: object = ...) -> str:
     """An option as the caller gave it, for a message: ``friction='wheel+caster'`` to a library caller,
-    ``--friction wheel+caster`` on the command line (:func:`option_style`)."""
+    ``--friction wheel+caster`` on the command line (:func:`option_style`); ``value=True``: a switch (``force=True``,
+    ``--force``)."""
     if _OPTION_STYLE.get() == "flag":
         flag = FLAG_NAMES.get(name, "--" + name.replace("_", "-"))
-        return flag if value is ... else f"{flag} {value}"
+        return flag if value is ... or value is True else f"{flag} {value}"  # a switch: the flag alone
     return name if value is ... else f"{name}={value!r}"
 
 

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.core.errors import NotIdentifiableError, UsageError
+from wmrid.core.errors import NotIdentifiableError, UsageError, option
 
 #: Grid step of the profile, s (a fifth of a 1 kHz step would be finer than the refinement needs).
 DELAY_STEP_S = 0.0005
@@ -362,7 +362,9 @@ def apply_delay(
     else:
         applied = float(delay)
         if not (math.isfinite(applied) and abs(applied) <= MAX_EFFORT_SHIFT_S):
-            raise UsageError(f"--delay must be auto or seconds within +/-{MAX_EFFORT_SHIFT_S:g}, got {delay!r}")
+            raise UsageError(
+                f"{option('delay')} must be auto or seconds within +/-{MAX_EFFORT_SHIFT_S:g}, got {delay!r}"
+            )
         record = {"chosen_by": "--delay"}
     record["applied_s"] = applied
     if applied == 0.0:

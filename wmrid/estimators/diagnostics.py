@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.core.errors import UsageError
+from wmrid.core.errors import UsageError, option
 from wmrid.estimators.model_error import (
     MISMATCH_P,
     MISMATCH_RELEVANT,
@@ -81,7 +81,8 @@ def control_rate_check(control_rate: float | None, sv: Any, source: str) -> list
     most = round(sv.max_step * control_rate)
     if most > MAX_SUBSTEPS:
         raise UsageError(
-            f"{source}: --control-rate {control_rate:g} Hz splits the longest step ({sv.max_step:.3g} s) into "
+            f"{source}: {option('control_rate')} {control_rate:g} Hz splits the longest step ({sv.max_step:.3g} s) "
+            "into "
             f"{most:,} held sub-steps (at most {MAX_SUBSTEPS:,}); give the controller's rate in Hz"
         )
     rate = 1.0 / sv.median_step if sv.median_step > 0 else math.inf

@@ -14,7 +14,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from wmrid.core.errors import NotIdentifiableError, UsageError, WmridError
+from wmrid.core.errors import NotIdentifiableError, UsageError, WmridError, option
 from wmrid.core.wheel_log import LogStream, stream_arrays
 from wmrid.estimators.diagnostics import (
     POORLY_DETERMINED,
@@ -89,20 +89,25 @@ def resolve_form(
     needs the general form (``geometry``: see :class:`wmrid.model.dynamics.RegressorForm`)."""
     if caster:
         if choice == "paper":
-            raise UsageError("--friction wheel+caster needs the general form (--form general or auto), not paper")
+            raise UsageError(
+                f"{option('friction', 'wheel+caster')} needs the general form ({option('form', 'general')} or auto), "
+                "not "
+                "paper"
+            )
         return RegressorForm("general", caster=True, geometry=geometry)
     if choice == "auto":
         return auto
     if choice == "paper":
         if auto.kind != "paper":
             raise UsageError(
-                "--form paper needs each wheel to keep one strict sign over the log, but a wheel stops or "
-                "reverses; use --form general (or auto)"
+                f"{option('form', 'paper')} needs each wheel to keep one strict sign over the log, but a wheel stops "
+                "or "
+                f"reverses; use {option('form', 'general')} (or auto)"
             )
         return auto
     if choice == "general":
         return RegressorForm("general")
-    raise UsageError(f"--form must be auto, paper or general, got {choice!r}")
+    raise UsageError(f"{option('form')} must be auto, paper or general, got {choice!r}")
 
 
 def default_box(
@@ -189,7 +194,7 @@ def identify(
     as stamped, with a warning.
     """
     if friction not in FRICTION_CHOICES:
-        raise UsageError(f"--friction must be one of {', '.join(FRICTION_CHOICES)}, got {friction!r}")
+        raise UsageError(f"{option('friction')} must be one of {', '.join(FRICTION_CHOICES)}, got {friction!r}")
 
     timing_record: dict[str, Any] | None = None  # the timing check's, when it runs (below)
 
@@ -201,9 +206,11 @@ def identify(
         return check(result, log_read, robot)
 
     if payload and robot is None:
-        raise UsageError("--payload needs --robot: the payload is what the log shows beyond the unloaded robot")
+        raise UsageError(
+            f"{option('payload')} needs {option('robot')}: the payload is what the log shows beyond the unloaded robot"
+        )
     if not (isinstance(box_width, (int, float)) and box_width > 0):  # NaN fails too
-        raise UsageError(f"--box-width must be a number > 0 (inf: no box), got {box_width!r}")
+        raise UsageError(f"{option('box_width')} must be a number > 0 (inf: no box), got {box_width!r}")
     delay_record = None
     delay_warnings: list[str] = []
     if delay is not None:
@@ -400,7 +407,8 @@ def _identify(
     if caster and sv.form().kind == "paper":
         raise NotIdentifiableError(
             f"{source}: neither wheel ever stops or reverses, so the casters' drag cannot be told from the wheels' "
-            "Coulomb friction (it adds to it); identify with --friction wheel, or record a log that reverses and "
+            f"Coulomb friction (it adds to it); identify with {option('friction', 'wheel')}, or record a log that "
+            "reverses and "
             "turns on the spot"
         )
     chosen = resolve_form(sv.form(), form, caster, geometry)

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.core.errors import LogFormatError, NotIdentifiableError, UsageError
+from wmrid.core.errors import LogFormatError, NotIdentifiableError, UsageError, option
 from wmrid.model.dynamics import RegressorForm, caster_columns
 
 #: Names of the IDIM parameters phi, in order (SI: kg m^2 for M and Vc, N m s/rad, N m).
@@ -414,7 +414,7 @@ def effort_delay(t: np.ndarray, torque_hold: str = "zoh", control_rate: float | 
     ``control_rate`` Hz: held by a controller at that rate (half its period), whatever the log's rate.
     """
     if torque_hold not in ("zoh", "foh"):
-        raise UsageError(f"--torque-hold must be zoh or foh, got {torque_hold!r}")
+        raise UsageError(f"{option('torque_hold')} must be zoh or foh, got {torque_hold!r}")
     if control_rate is not None:
         return 0.5 / float(control_rate)
     if torque_hold == "foh" or len(t) < 2:

@@ -44,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.core.errors import NotIdentifiableError, UsageError
+from wmrid.core.errors import NotIdentifiableError, UsageError, option
 from wmrid.estimators.estimate import BaseEstimate, SegmentEstimates
 from wmrid.estimators.idim import inertia_warnings, jackknife_segments, phi_to_theta0, theta0_covariance
 from wmrid.estimators.idim_regression import IdimRegression, effort_delay, idim_regression
@@ -167,7 +167,7 @@ def identify_iv(
         raise NotIdentifiableError(
             f"the reference speeds do not describe how the wheels moved (first-stage R^2 of {', '.join(weak)} "
             f"below {MIN_R2:g}: {min(r2):.2g}); check that the reference columns are the wheel-speed set-points in "
-            "rad/s, right then left, or leave out --method iv"
+            f"rad/s, right then left, or leave out {option('method', 'iv')}"
         )
 
     def fit(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

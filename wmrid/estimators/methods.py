@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.core.errors import UsageError, WmridError
+from wmrid.core.errors import UsageError, WmridError, option
 from wmrid.estimators.estimate import BaseEstimate
 from wmrid.estimators.identify import with_estimate
 from wmrid.estimators.result import IdentificationResult
@@ -51,7 +51,7 @@ class MethodOptions:
 
     def __post_init__(self) -> None:
         if self.cutoff_hz is not None and not (np.isfinite(self.cutoff_hz) and self.cutoff_hz > 0):
-            raise UsageError(f"--cutoff must be a positive frequency in Hz, got {self.cutoff_hz!r}")
+            raise UsageError(f"{option('cutoff')} must be a positive frequency in Hz, got {self.cutoff_hz!r}")
         if not (MIN_FORGETTING <= self.forgetting <= 1.0):
             why = (
                 "above 1 the recursion weights old samples more than new ones and diverges"
@@ -61,12 +61,12 @@ class MethodOptions:
                 if self.forgetting < MIN_FORGETTING
                 else "it is not a number"
             )
-            raise UsageError(f"--forgetting must be in [{MIN_FORGETTING}, 1], got {self.forgetting!r}: {why}")
+            raise UsageError(f"{option('forgetting')} must be in [{MIN_FORGETTING}, 1], got {self.forgetting!r}: {why}")
 
 
 def check_method(name: str) -> str:
     if name not in METHODS:
-        raise UsageError(f"--method must be one of {', '.join(METHODS)}, got {name!r}")
+        raise UsageError(f"{option('method')} must be one of {', '.join(METHODS)}, got {name!r}")
     return name
 
 
@@ -108,8 +108,9 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
             reference = getattr(log, "reference", None)
             if reference is None:
                 raise UsageError(
-                    "--method iv needs the wheel-speed reference (set-points) the controller tracked: columns "
-                    "eta_ref_r, eta_ref_l, or name yours with --columns eta_ref_r=...,eta_ref_l=..."
+                    f"{option('method', 'iv')} needs the wheel-speed reference (set-points) the controller tracked: "
+                    "columns "
+                    f"eta_ref_r, eta_ref_l, or name yours with {option('columns')} eta_ref_r=...,eta_ref_l=..."
                 )
             hold = {"torque_hold": options.torque_hold, "control_rate": observer.settings.control_rate}
             return identify_iv(

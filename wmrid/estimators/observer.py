@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wmrid.core.errors import UsageError
+from wmrid.core.errors import UsageError, option
 from wmrid.estimators.observer_kernel import foh
 from wmrid.model.dynamics import RegressorForm, regressor
 
@@ -110,19 +110,23 @@ class ObserverSettings:
     def __post_init__(self) -> None:
         p = self.form.n_columns
         if self.torque_hold not in ("zoh", "foh"):
-            raise UsageError(f"--torque-hold must be zoh or foh, got {self.torque_hold!r}")
+            raise UsageError(f"{option('torque_hold')} must be zoh or foh, got {self.torque_hold!r}")
         if self.control_rate is not None:
             if not (math.isfinite(self.control_rate) and self.control_rate > 0):
-                raise UsageError(f"--control-rate must be a frequency > 0 in Hz, got {self.control_rate!r}")
+                raise UsageError(f"{option('control_rate')} must be a frequency > 0 in Hz, got {self.control_rate!r}")
             if self.torque_hold != "zoh":
-                raise UsageError("--control-rate describes a held (zoh) effort; it cannot go with --torque-hold foh")
+                raise UsageError(
+                    f"{option('control_rate')} describes a held (zoh) effort; it cannot go with "
+                    f"{option('torque_hold', 'foh')}"
+                )
         if not (math.isfinite(self.k) and 0 < self.k <= MAX_K):
             raise UsageError(
-                f"--k must be a number in (0, {MAX_K:g}] (1/s, the state predictor's gain; default 10), got {self.k}: "
+                f"{option('k')} must be a number in (0, {MAX_K:g}] (1/s, the state predictor's gain; default 10), got "
+                f"{self.k}: "
                 "beyond that the predictor forgets within microseconds and its filter carries no signal"
             )
         if not (math.isfinite(self.alpha) and self.alpha > 0):
-            raise UsageError(f"--alpha must be a finite number > 0, got {self.alpha}")
+            raise UsageError(f"{option('alpha')} must be a finite number > 0, got {self.alpha}")
         for name in ("theta_init", "theta_min", "theta_max"):
             arr = np.array(getattr(self, name), dtype=float)
             if arr.shape != (2, p):

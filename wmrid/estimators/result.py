@@ -195,7 +195,7 @@ def from_dict(data: Any, source: str = "result") -> IdentificationResult:
     if not isinstance(data, dict) or not isinstance(data.get("parameters"), dict) or "theta" not in data:
         raise LogFormatError(
             f"{source}: not an identify result (no 'parameters'/'theta'); give a log or the output of "
-            "`wmrid identify --format json`"
+            f"`wmrid identify --format json`"
         )
     version = data.get("schema_version", 1)
     if not isinstance(version, int) or version > SCHEMA_VERSION:
@@ -211,7 +211,7 @@ def from_dict(data: Any, source: str = "result") -> IdentificationResult:
         what = f"no {err.args[0]!r}" if isinstance(err, KeyError) and err.args else " ".join(str(err).split())
         raise LogFormatError(
             f"{source}: not a complete identify result ({what}); give a log, or the unedited output of "
-            "`wmrid identify LOG --format json`"
+            f"`wmrid identify LOG --format json`"
         ) from err
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import difflib
 from typing import TYPE_CHECKING
 
-from wmrid.core.errors import LogFormatError, UsageError
+from wmrid.core.errors import LogFormatError, UsageError, option
 
 if TYPE_CHECKING:
     pass
@@ -34,18 +34,21 @@ def parse_column_mapping(text: str) -> dict[str, str]:
         key, sep, value = item.partition("=")
         key, value = key.strip(), value.strip()
         if not sep or not key or not value:
-            raise UsageError(f"--columns: {item!r} is not NAME=COLUMN; write e.g. --columns {example}")
+            raise UsageError(
+                f"{option('columns')}: {item!r} is not NAME=COLUMN; write e.g. {option('columns')} {example}"
+            )
         check_key(key, "--columns")
         if key in mapping:
-            raise UsageError(f"--columns: {key!r} is given twice ({mapping[key]!r} and {value!r})")
+            raise UsageError(f"{option('columns')}: {key!r} is given twice ({mapping[key]!r} and {value!r})")
         mapping[key] = value
     if not mapping:
-        raise UsageError(f"--columns is empty; write e.g. --columns {example}")
+        raise UsageError(f"{option('columns')} is empty; write e.g. {option('columns')} {example}")
     seen: dict[str, str] = {}
     for key, value in mapping.items():
         if value in seen:
             raise UsageError(
-                f"--columns maps both {seen[value]} and {key} to the column {value!r}; each needs its own column"
+                f"{option('columns')} maps both {seen[value]} and {key} to the column {value!r}; each needs its own "
+                "column"
             )
         seen[value] = key
     return mapping
@@ -86,7 +89,7 @@ def select(present: list[str], mapping: dict[str, str], explicit: set[str], name
         label = "column" if len(missing) == 1 else "columns"
         raise LogFormatError(
             f"{name}: no {label} {', '.join(parts)}; the columns are {shown or 'none'}; "
-            f"name the log's columns with --columns {','.join(fixes)}"
+            f"name the log's columns with {option('columns')} {','.join(fixes)}"
         )
     chosen = {key: mapping[key] for key in REQUIRED}
     for optional in (POSE, REFERENCE):

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from wmrid.core.errors import LogFormatError, UsageError
+from wmrid.core.errors import LogFormatError, UsageError, option
 from wmrid.io.mcap.joints import TopicSelection
 from wmrid.io.signals import SignalOptions, convert
 
@@ -94,7 +94,7 @@ def open_log(
     are read.
     """
     if time_unit not in TIME_UNITS:
-        raise UsageError(f"--time-unit {time_unit!r} is not one of {', '.join(TIME_UNITS)}")
+        raise UsageError(f"{option('time_unit')} {time_unit!r} is not one of {', '.join(TIME_UNITS)}")
     mapping = {key: key for key in CANONICAL}
     for key, value in (columns or {}).items():
         check_key(key, "--columns")
@@ -112,7 +112,8 @@ def open_log(
         if explicit & set(REFERENCE):
             named = ", ".join(sorted(explicit & set(REFERENCE)))
             raise UsageError(
-                f"{source.name}: --columns {named}: the wheel-speed reference is read from CSV and Parquet logs only "
+                f"{source.name}: {option('columns')} {named}: the wheel-speed reference is read from CSV and Parquet "
+                "logs only "
                 "so far; export the set-points as columns of one"
             )
         return read_mcap_log(source, columns or {}, selection or TopicSelection(), signals, gear_ratio, rows)
@@ -299,7 +300,8 @@ class _Assembler:
                 i = int(np.argmin(whole))
                 raise LogFormatError(
                     f"{self.name}: {where(i)}: time stamp {stamps[i].item()!r} has decimals where the rows before "
-                    "hold whole numbers; give the time column one kind of number (or --time-unit s with decimals)"
+                    f"hold whole numbers; give the time column one kind of number (or {option('time_unit', 's')} with "
+                    "decimals)"
                 )
             return stamps.astype(np.int64)
         return stamps.astype(np.int64) if stamps.dtype.kind == "u" else stamps

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wmrid.core.errors import UsageError
+from wmrid.core.errors import UsageError, option
 
 SPEED_UNITS = ("rad/s", "rpm", "deg/s", "m/s")
 EFFORT_KINDS = ("torque", "current", "pwm", "voltage")
@@ -53,17 +53,20 @@ class SignalOptions:
 
     def __post_init__(self) -> None:
         if self.speed_unit not in SPEED_UNITS:
-            raise UsageError(f"--speed-unit {self.speed_unit!r} is not one of {', '.join(SPEED_UNITS)}")
+            raise UsageError(f"{option('speed_unit')} {self.speed_unit!r} is not one of {', '.join(SPEED_UNITS)}")
         if self.effort not in EFFORT_KINDS:
-            raise UsageError(f"--effort {self.effort!r} is not one of {', '.join(EFFORT_KINDS)}")
+            raise UsageError(f"{option('effort')} {self.effort!r} is not one of {', '.join(EFFORT_KINDS)}")
         for name in ("wheel_radius", "torque_constant", "gear_ratio"):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value > 0):
-                raise UsageError(f"--{name.replace('_', '-')} must be a finite number > 0, got {value!r}")
+                raise UsageError(f"{option(name)} must be a finite number > 0, got {value!r}")
         if not (0 < self.efficiency <= 1):
-            raise UsageError(f"--efficiency must be in (0, 1], got {self.efficiency!r}")
+            raise UsageError(f"{option('efficiency')} must be in (0, 1], got {self.efficiency!r}")
         if self.speed_unit == "m/s" and self.wheel_radius is None:
-            raise UsageError("speeds in m/s at the rim need the wheel radius: give --wheel-radius R (m) or --robot")
+            raise UsageError(
+                f"speeds in m/s at the rim need the wheel radius: give {option('wheel_radius')} R (m) or "
+                f"{option('robot')}"
+            )
 
     @property
     def is_torque(self) -> bool:
@@ -114,7 +117,10 @@ def effort_to_torque(
     if opts.effort == "current":
         k_r = opts.gear_ratio if opts.gear_ratio is not None else robot_gear_ratio
         if k_r is None:
-            raise UsageError("--effort current needs the gear ratio: give --gear-ratio KR or a --robot with k_r")
+            raise UsageError(
+                f"{option('effort', 'current')} needs the gear ratio: give {option('gear_ratio')} KR or a "
+                f"{option('robot')} with k_r"
+            )
         gain = float(opts.torque_constant) * float(k_r) * opts.efficiency
         return values * gain, (
             f"effort read as motor current (A) and converted to wheel torque: tau = k_t i k_r eta = "

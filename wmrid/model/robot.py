@@ -29,7 +29,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from wmrid.core.errors import RobotFileError, UsageError
+from wmrid.core.errors import RobotFileError, UsageError, option
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -157,7 +157,9 @@ class Payload:
             mass = float(mass_text)
             x, y = (float(v) for v in where.split(",")) if where else (0.0, 0.0)
         except ValueError:
-            raise UsageError(f"--payload {text!r}: expected MASS[@X,Y] in kg and metres, e.g. 25@0.1,-0.05") from None
+            raise UsageError(
+                f"{option('payload')} {text!r}: expected MASS[@X,Y] in kg and metres, e.g. 25@0.1,-0.05"
+            ) from None
         return cls(mass=mass, x=x, y=y, inertia=inertia)
 
 

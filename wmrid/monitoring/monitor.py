@@ -88,7 +88,7 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.core.errors import NotIdentifiableError, UsageError
+from wmrid.core.errors import NotIdentifiableError, UsageError, option
 from wmrid.model import dynamics as model
 from wmrid.model.dynamics import THETA0_NAMES, RegressorForm
 from wmrid.monitoring.glr import ModelError, NoiseModel, WindowGrid, locate, window_grid, window_statistics
@@ -433,7 +433,8 @@ def monitor(log: Any, model_: MonitoredModel, settings: MonitorSettings | None =
     unit = getattr(log, "effort_unit", "N m")
     if unit != model_.effort_unit:
         raise UsageError(
-            f"--model {model_.source}: its parameters are for efforts in {model_.effort_unit}, but the log's effort "
+            f"{option('model')} {model_.source}: its parameters are for efforts in {model_.effort_unit}, but the "
+            "log's effort "
             f"is in {unit}; identify and monitor with the same effort options"
         )
     sig = residual_signals(log.t, log.eta, log.tau, settings, source)
@@ -444,14 +445,15 @@ def monitor(log: Any, model_: MonitoredModel, settings: MonitorSettings | None =
     need = (MIN_ROWS_PER_COEFFICIENT * 2 + 2) * mon.order  # after a change the halves lose q samples each
     if mon.n_cal < need:
         raise UsageError(
-            f"--calibration {settings.calibration_s:g} s: too short for the noise model ({mon.order} lags at "
+            f"{option('calibration_s')} {settings.calibration_s:g} s: too short for the noise model ({mon.order} lags "
+            "at "
             f"{sig.rate:.4g} Hz need at least {need / sig.rate:.3g} s)"
         )
     if len(sig.t) < mon.n_cal + min(mon.grid.windows) * mon.grid.block:
         raise NotIdentifiableError(
             f"{source}: the log lasts {duration:.3g} s, but monitoring needs more than the calibration span "
             f"({settings.calibration_s:g} s, assumed unchanged) plus a test window; record a longer log or lower "
-            "--calibration"
+            f"{option('calibration_s')}"
         )
     warnings: list[str] = []
     changes: list[Change] = []

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.core.errors import UsageError
+from wmrid.core.errors import UsageError, option
 from wmrid.model import dynamics as model
 from wmrid.model.dynamics import THETA0_NAMES, RegressorForm
 
@@ -57,8 +57,8 @@ MEASURED = {
 CHUNK = 4096
 
 
-#: Command-line names of the settings a user sets, for error messages.
-_OPTION_NAMES = {"calibration_s": "--calibration", "false_alarm_rate": "--false-alarm-rate"}
+#: The settings that are options of ``wmrid monitor`` (--calibration, --false-alarm-rate), named as such in messages.
+_OPTIONS = ("calibration_s", "false_alarm_rate")
 
 
 @dataclass(frozen=True)
@@ -92,7 +92,7 @@ class MonitorSettings:
                      "noise_memory_s", "margin"):  # fmt: skip
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-                label = _OPTION_NAMES.get(name, f"monitor setting {name}")
+                label = option(name) if name in _OPTIONS else f"monitor setting {name}"
                 raise UsageError(f"{label} must be a finite number > 0, got {value!r}")
         if (
             isinstance(self.locate_s, bool)
@@ -166,7 +166,7 @@ def model_from_dict(data: Any, source: str) -> MonitoredModel:
     ``source`` when it is not one."""
     hint = "give the JSON that `wmrid identify LOG -o RESULT.json` writes"
     if not isinstance(data, dict) or not isinstance(data.get("parameters"), dict):
-        raise UsageError(f'--model {source}: not a wmrid identify result (no "parameters" object); {hint}')
+        raise UsageError(f'{option("model")} {source}: not a wmrid identify result (no "parameters" object); {hint}')
     params = data["parameters"]
     form_d = data.get("theta", {}).get("form", {}) if isinstance(data.get("theta"), dict) else {}
     form = _form_of(form_d, source, hint)
@@ -177,16 +177,17 @@ def model_from_dict(data: Any, source: str) -> MonitoredModel:
         value = entry.get("value") if isinstance(entry, dict) else None
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
             raise UsageError(
-                f'--model {source}: not a wmrid identify result (parameter {name} has no finite "value"); {hint}'
+                f'{option("model")} {source}: not a wmrid identify result (parameter {name} has no finite "value"); '
+                f"{hint}"
             )
         values.append(float(value))
     unit = data.get("effort_unit", "N m")
     if not isinstance(unit, str):
-        raise UsageError(f'--model {source}: "effort_unit" must be a string, got {unit!r}')
+        raise UsageError(f'{option("model")} {source}: "effort_unit" must be a string, got {unit!r}')
     theta0 = np.array(values)
     if not inertia_ok(theta0):
         raise UsageError(
-            f"--model {source}: its inverse inertia [m11 m12; m12 m22] is not positive definite, so it is no "
+            f"{option('model')} {source}: its inverse inertia [m11 m12; m12 m22] is not positive definite, so it is no "
             "robot's model; identify the robot again"
         )
     reported = {name: dict(entry) for name, entry in params.items() if isinstance(entry, dict)}
@@ -206,7 +207,8 @@ def _form_of(form_d: Any, source: str, hint: str) -> RegressorForm | None:
         form = RegressorForm.from_dict(form_d)
     except (KeyError, TypeError, ValueError, IndexError) as err:
         raise UsageError(
-            f"--model {source}: its caster-drag form (theta.form) is malformed ({err.__class__.__name__}: {err}); "
+            f"{option('model')} {source}: its caster-drag form (theta.form) is malformed ({err.__class__.__name__}: "
+            f"{err}); "
             f"{hint}"
         ) from None
     return caster_form(form)
@@ -225,13 +227,13 @@ def load_model(path: str | Path) -> MonitoredModel:
             UsageError,
         ).decode("utf-8")  # fmt: skip
     except (OSError, UnicodeDecodeError) as err:
-        raise UsageError(f"--model {path}: cannot read it ({err.__class__.__name__}: {err})") from None
+        raise UsageError(f"{option('model')} {path}: cannot read it ({err.__class__.__name__}: {err})") from None
     try:
         data = json.loads(text)
     except RecursionError:
-        raise UsageError(f"--model {path}: nested too deeply to be an identify result") from None
+        raise UsageError(f"{option('model')} {path}: nested too deeply to be an identify result") from None
     except ValueError as err:
-        raise UsageError(f"--model {path}: not a wmrid identify result (not JSON: {err})") from None
+        raise UsageError(f"{option('model')} {path}: not a wmrid identify result (not JSON: {err})") from None
     return model_from_dict(data, str(path))
 
 

@@ -45,7 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wmrid.core.errors import UsageError
+from wmrid.core.errors import UsageError, option
 from wmrid.model.robot import Caster, Payload, PhysicalParameters, default_casters
 from wmrid.sim.closed_loop import KIND, control_torque, reference_state, reversing_advance
 from wmrid.sim.scenario import NoiseSettings, PlantChange, positive_number
@@ -110,7 +110,7 @@ class MultibodySettings:
         if self.caster_resistance is not None:
             c = self.caster_resistance
             if isinstance(c, bool) or not isinstance(c, (int, float)) or not math.isfinite(c) or c < 0:
-                raise UsageError(f"--caster-resistance must be a number >= 0, got {c!r}")
+                raise UsageError(f"{option('caster_resistance')} must be a number >= 0, got {c!r}")
         if self.torque_limit is not None:
             positive_number("--torque-limit", self.torque_limit)
         if isinstance(self.substeps, bool) or not isinstance(self.substeps, int) or self.substeps < 1:

@@ -82,7 +82,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from wmrid.core.errors import UsageError
+from wmrid.core.errors import UsageError, option
 from wmrid.model import dynamics as model
 from wmrid.model.robot import PhysicalParameters
 
@@ -375,7 +375,8 @@ def check_run_memory(n: int, n_ctrl: int, duration: float, rate: float) -> None:
     if need > budget:
         longest = budget / (BYTES_PER_SAMPLE + BYTES_PER_CONTROL_STEP * n_ctrl / max(n, 1)) / rate
         raise UsageError(
-            f"--duration {duration:g} s at {rate:g} Hz is {n:,} samples, about {describe(need)} of memory, beyond the "
+            f"{option('duration')} {duration:g} s at {rate:g} Hz is {n:,} samples, about {describe(need)} of memory, "
+            "beyond the "
             f"budget of {describe(budget)} ({ENV}); simulate at most {longest:,.0f} s at this rate, in several runs"
         )
 

@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.core.errors import LogFormatError, UsageError
+from wmrid.core.errors import LogFormatError, UsageError, option
 from wmrid.core.wheel_log import SPLIT_NOTE
 from wmrid.io.mcap.contents import JointSeries, JointSummary, JsonSeries, McapContents
 from wmrid.io.mcap.records import JOINT_STATE
@@ -72,13 +72,19 @@ class TopicSelection:
 
     def __post_init__(self) -> None:
         if self.time_source not in TIME_SOURCES:
-            raise UsageError(f"--time-source must be one of {', '.join(TIME_SOURCES)}, got {self.time_source!r}")
+            raise UsageError(
+                f"{option('time_source')} must be one of {', '.join(TIME_SOURCES)}, got {self.time_source!r}"
+            )
         if self.align not in ALIGN_RULES:
-            raise UsageError(f"--align must be one of {', '.join(ALIGN_RULES)}, got {self.align!r}")
+            raise UsageError(f"{option('align')} must be one of {', '.join(ALIGN_RULES)}, got {self.align!r}")
         if self.velocity_from not in VELOCITY_FROM:
-            raise UsageError(f"--velocity-from must be one of {', '.join(VELOCITY_FROM)}, got {self.velocity_from!r}")
+            raise UsageError(
+                f"{option('velocity_from')} must be one of {', '.join(VELOCITY_FROM)}, got {self.velocity_from!r}"
+            )
         if self.topic and (self.velocity_topic or self.effort_topic):
-            raise UsageError("give either --topic, or --velocity-topic and --effort-topic, not both")
+            raise UsageError(
+                f"give either {option('topic')}, or {option('velocity_topic')} and {option('effort_topic')}, not both"
+            )
 
 
 @dataclass(frozen=True)
@@ -119,7 +125,8 @@ def _series(contents: McapContents, topic: str, role: str) -> Any:
         raise LogFormatError(f"{contents.source}: no topic {topic!r} (--{role}); {_topic_listing(contents)}")
     raise LogFormatError(
         f"{contents.source}: topic {topic!r} holds {chan.schema_name or chan.message_encoding} messages, not "
-        f"{JOINT_STATE} in CDR; for a JSON topic map its fields with --columns (e.g. eta_r=wheels.right.velocity)"
+        f"{JOINT_STATE} in CDR; for a JSON topic map its fields with {option('columns')} (e.g. "
+        "eta_r=wheels.right.velocity)"
     )
 
 
@@ -129,7 +136,8 @@ def choose_topics(contents: McapContents, sel: TopicSelection) -> tuple[Any, Any
     if not contents.joints:
         raise LogFormatError(
             f"{contents.source}: no {JOINT_STATE} messages (CDR) found; {_topic_listing(contents)}. wmrid needs "
-            "the wheel speeds and efforts as JointState, or a JSON topic with --topic and --columns field paths"
+            f"the wheel speeds and efforts as JointState, or a JSON topic with {option('topic')} and "
+            f"{option('columns')} field paths"
         )
     if sel.topic:
         series = _series(contents, sel.topic, "topic")
@@ -152,7 +160,8 @@ def choose_topics(contents: McapContents, sel: TopicSelection) -> tuple[Any, Any
         return only, only, [f"speed and effort read from {only.topic}, the only JointState topic"]
     raise LogFormatError(
         f"{contents.source}: cannot tell which JointState topic holds the wheel speeds and which the efforts "
-        f"({_joint_listing(contents)}); say it with --topic T, or --velocity-topic V --effort-topic E"
+        f"({_joint_listing(contents)}); say it with {option('topic')} T, or {option('velocity_topic')} V "
+        f"{option('effort_topic')} E"
     )
 
 
@@ -175,7 +184,7 @@ def choose_joints(names: tuple[str, ...], sel: TopicSelection, source: str, topi
             return right[0], left[0], f"wheel joints chosen by name: right = {right[0]!r}, left = {left[0]!r}"
     raise LogFormatError(
         f"{source}: cannot tell the right and left wheel joints of {topic} apart (joints: {', '.join(names)}); "
-        "name them with --right-joint NAME --left-joint NAME"
+        f"name them with {option('right_joint')} NAME {option('left_joint')} NAME"
     )
 
 
@@ -278,7 +287,7 @@ def plan_signals(contents: McapContents, sel: TopicSelection) -> SignalPlan:
             if joint not in series.names:
                 raise LogFormatError(
                     f"{contents.source}: topic {series.topic} has no joint {joint!r}; its joints are "
-                    f"{', '.join(series.names)}; name them with --right-joint and --left-joint"
+                    f"{', '.join(series.names)}; name them with {option('right_joint')} and {option('left_joint')}"
                 )
     vcols = [vel_series.names.index(right), vel_series.names.index(left)]
     ecols = [eff_series.names.index(right), eff_series.names.index(left)]
@@ -292,7 +301,7 @@ def plan_signals(contents: McapContents, sel: TopicSelection) -> SignalPlan:
     if use_position and not _populated(vel_series, "position", vcols):
         raise LogFormatError(
             f"{contents.source}: topic {vel_series.topic} carries neither wheel speeds nor positions for "
-            f"{right!r} and {left!r}; choose the topic that does with --velocity-topic"
+            f"{right!r} and {left!r}; choose the topic that does with {option('velocity_topic')}"
         )
     return SignalPlan(
         vel=vel_series, eff=eff_series, right=right, left=left, vcols=vcols, ecols=ecols, vel_time=vel_time,
@@ -304,7 +313,7 @@ def check_effort(contents: McapContents, plan: SignalPlan) -> None:
     if not _populated(plan.eff, "effort", plan.ecols):
         raise LogFormatError(
             f"{contents.source}: the effort of {plan.right!r} and {plan.left!r} on {plan.eff.topic} is "
-            f"{plan.eff.populated('effort')}; the efforts must come from another topic: give --effort-topic "
+            f"{plan.eff.populated('effort')}; the efforts must come from another topic: give {option('effort_topic')} "
             f"({_joint_listing(contents)})"
         )
 
@@ -386,7 +395,7 @@ def align(
 def no_overlap(source: str, vel_topic: str, t_vel: np.ndarray, eff_topic: str, t_eff: np.ndarray) -> LogFormatError:
     return LogFormatError(
         f"{source}: {vel_topic} ({_span(t_vel)}) and {eff_topic} ({_span(t_eff)}) do not overlap in time; "
-        "check that both topics come from the same run (or try --time-source log)"
+        f"check that both topics come from the same run (or try {option('time_source', 'log')})"
     )
 
 

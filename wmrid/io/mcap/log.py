@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from wmrid.core.errors import LogFormatError, UsageError
+from wmrid.core.errors import LogFormatError, UsageError, option
 from wmrid.io.mcap.joints import TopicSelection
 from wmrid.io.signals import SignalOptions
 
@@ -52,7 +52,7 @@ def read_mcap_log(
     if columns and selection.topic:
         missing = [k for k in REQUIRED[1:] if k not in columns]
         if missing:
-            raise UsageError(f"a JSON topic needs field paths for {', '.join(missing)} in --columns")
+            raise UsageError(f"a JSON topic needs field paths for {', '.join(missing)} in {option('columns')}")
         contents = read_mcap(path, data=source.data, json_fields={selection.topic: dict(columns)})
         return stream_arrays(_mcap_whole_log(source, contents, selection, signals, gear_ratio), rows)
     contents = scan_mcap(path, source.data, keep=_MCAP_WHOLE_PIECES * rows)
