@@ -3,7 +3,7 @@ summaries (joints, fields, time sources, steps), JSON series."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -228,3 +228,56 @@ class McapContents:
 
     def channel(self, topic: str) -> ChannelInfo | None:
         return next((c for c in self.channels if c.topic == topic), None)
+
+
+# --------------------------------------------------------------------------------------------------
+# Per-channel accumulation while the reader streams
+
+
+@dataclass
+class Accumulator:
+    """Per-channel state while streaming."""
+
+    info: dict[str, Any]
+    count: int = 0
+    first_ns: int | None = None
+    last_ns: int | None = None
+    names: list[str] = field(default_factory=list)
+    ref: np.ndarray | None = None
+    ref_off: np.ndarray | None = None
+    parts: list[tuple[np.ndarray, ...]] = field(default_factory=list)
+    skipped: int = 0
+    json_rows: list[tuple[int, list[float]]] = field(default_factory=list)
+    batches: int = 0  # parts made (kept or not)
+    stats: JointStats | None = None
+    standard: bool | None = None  # the schema is the standard JointState (the compiled reader may decode it)
+    too_wide: bool = False  # its messages name more than MAX_JOINTS joints: skipped
+
+
+def summary(acc: Accumulator) -> JointSummary:
+    stats = acc.stats or JointStats(len(acc.names))
+    return JointSummary(
+        topic=acc.info["topic"], channel_id=acc.info["id"], names=tuple(acc.names), count=stats.count,
+        has_value=stats.has_value, has_nonzero=stats.has_nonzero, has_nan=stats.has_nan, has_inf=stats.has_inf,
+        max_abs=stats.max_abs, times={key: t.summary() for key, t in stats.times.items()},
+    )  # fmt: skip
+
+
+def join(acc: Accumulator) -> JointSeries:
+    k = len(acc.names)
+    log_ns = np.concatenate([p[0] for p in acc.parts])
+    stamp = np.concatenate([p[1] for p in acc.parts])
+
+    def stack(i: int) -> np.ndarray:
+        blocks = []
+        for part in acc.parts:
+            block = part[i]
+            if block.shape[1] < k:  # joints first met later: NaN before
+                block = np.hstack([block, np.full((block.shape[0], k - block.shape[1]), np.nan)])
+            blocks.append(block)
+        return np.concatenate(blocks)
+
+    return JointSeries(
+        topic=acc.info["topic"], names=tuple(acc.names), log_ns=log_ns, stamp_ns=stamp,
+        position=stack(2), velocity=stack(3), effort=stack(4), skipped=acc.skipped,
+    )  # fmt: skip

@@ -50,14 +50,21 @@ import mmap
 import os
 import zlib
 from collections.abc import Callable, Generator, Iterable, Mapping
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from wmrid.core.errors import LogFormatError
 from wmrid.core.limits import describe, memory_budget
-from wmrid.io.mcap.contents import ChannelInfo, JointSeries, JointStats, JointSummary, JsonSeries, McapContents
+from wmrid.io.mcap.contents import (
+    Accumulator,
+    ChannelInfo,
+    JointStats,
+    JsonSeries,
+    McapContents,
+    join,
+    summary,
+)
 from wmrid.io.mcap.records import (
     BOMB_FLOOR,
     BOMB_RATIO,
@@ -80,26 +87,6 @@ from wmrid.io.mcap.records import (
     standard_joint_state,
     time_span,
 )
-
-
-@dataclass
-class _Accumulator:
-    """Per-channel state while streaming."""
-
-    info: dict[str, Any]
-    count: int = 0
-    first_ns: int | None = None
-    last_ns: int | None = None
-    names: list[str] = field(default_factory=list)
-    ref: np.ndarray | None = None
-    ref_off: np.ndarray | None = None
-    parts: list[tuple[np.ndarray, ...]] = field(default_factory=list)
-    skipped: int = 0
-    json_rows: list[tuple[int, list[float]]] = field(default_factory=list)
-    batches: int = 0  # parts made (kept or not)
-    stats: JointStats | None = None
-    standard: bool | None = None  # the schema is the standard JointState (the compiled reader may decode it)
-    too_wide: bool = False  # its messages name more than MAX_JOINTS joints: skipped
 
 
 def read_mcap(
@@ -226,7 +213,7 @@ def _read_buffer(state: _ReadState, buf: np.ndarray) -> McapContents:
     joints: dict[str, Any] = {}
     for acc in state.channels.values():
         if acc.ref is not None and acc.batches:
-            joints[acc.info["topic"]] = _join(acc) if state.complete else _summary(acc)
+            joints[acc.info["topic"]] = join(acc) if state.complete else summary(acc)
     json_out = {}
     for acc in state.channels.values():
         keys = json_fields.get(acc.info["topic"])
@@ -241,35 +228,6 @@ def _read_buffer(state: _ReadState, buf: np.ndarray) -> McapContents:
         source=name, profile=state.profile, library=state.library, channels=channels, joints=joints,
         json=json_out, metadata=state.metadata, notes=tuple(notes), size_bytes=size, lost_bytes=lost_bytes,
         complete=state.complete,
-    )  # fmt: skip
-
-
-def _summary(acc: _Accumulator) -> JointSummary:
-    stats = acc.stats or JointStats(len(acc.names))
-    return JointSummary(
-        topic=acc.info["topic"], channel_id=acc.info["id"], names=tuple(acc.names), count=stats.count,
-        has_value=stats.has_value, has_nonzero=stats.has_nonzero, has_nan=stats.has_nan, has_inf=stats.has_inf,
-        max_abs=stats.max_abs, times={key: t.summary() for key, t in stats.times.items()},
-    )  # fmt: skip
-
-
-def _join(acc: _Accumulator) -> JointSeries:
-    k = len(acc.names)
-    log_ns = np.concatenate([p[0] for p in acc.parts])
-    stamp = np.concatenate([p[1] for p in acc.parts])
-
-    def stack(i: int) -> np.ndarray:
-        blocks = []
-        for part in acc.parts:
-            block = part[i]
-            if block.shape[1] < k:  # joints first met later: NaN before
-                block = np.hstack([block, np.full((block.shape[0], k - block.shape[1]), np.nan)])
-            blocks.append(block)
-        return np.concatenate(blocks)
-
-    return JointSeries(
-        topic=acc.info["topic"], names=tuple(acc.names), log_ns=log_ns, stamp_ns=stamp,
-        position=stack(2), velocity=stack(3), effort=stack(4), skipped=acc.skipped,
     )  # fmt: skip
 
 
@@ -303,7 +261,7 @@ class _ReadState:
         self.complete = True
         self.kept = 0
         self.schemas: dict[int, dict[str, Any]] = {}
-        self.channels: dict[int, _Accumulator] = {}
+        self.channels: dict[int, Accumulator] = {}
         self.metadata: dict[str, dict[str, str]] = {}
         self.notes: list[str] = []
         self.profile = ""
@@ -455,7 +413,7 @@ class _ReadState:
         if c.id in self.channels:
             return
         schema = self.schemas.get(c.schema_id, {"name": "", "encoding": "", "data": b""})
-        self.channels[c.id] = _Accumulator(
+        self.channels[c.id] = Accumulator(
             info={
                 "id": c.id, "topic": c.topic, "message_encoding": c.message_encoding, "schema_id": c.schema_id,
                 "schema_name": schema["name"], "schema_encoding": schema["encoding"],
@@ -534,7 +492,7 @@ class _ReadState:
             elif info["message_encoding"] == "json" and info["topic"] in self.json_fields:
                 self._json_batch(acc, buf, data_start[sel], data_len[sel], times)
 
-    def _joint_batch(self, acc: _Accumulator, buf, starts, lengths, times) -> None:
+    def _joint_batch(self, acc: Accumulator, buf, starts, lengths, times) -> None:
         if acc.ref is None:
             first = self._generic(acc, bytes(buf[starts[0] : starts[0] + lengths[0]]))
             if first is None:
@@ -605,7 +563,7 @@ class _ReadState:
             times, stamp, pos, vel, eff = times[keep], stamp[keep], pos[keep], vel[keep], eff[keep]
         self._store(acc, (times.copy(), stamp, pos, vel, eff))
 
-    def _store(self, acc: _Accumulator, part: tuple[np.ndarray, ...]) -> None:
+    def _store(self, acc: Accumulator, part: tuple[np.ndarray, ...]) -> None:
         """Keep a channel's decoded part, or (past ``keep`` messages) only its statistics."""
         acc.batches += 1
         if self.keep is None:
@@ -625,18 +583,18 @@ class _ReadState:
         self._add_stats(acc, part)
 
     @staticmethod
-    def _add_stats(acc: _Accumulator, part: tuple[np.ndarray, ...]) -> None:
+    def _add_stats(acc: Accumulator, part: tuple[np.ndarray, ...]) -> None:
         if acc.stats is None:
             acc.stats = JointStats(len(acc.names))
         acc.stats.add(part)
 
-    def _set_names(self, acc: _Accumulator, names: list[str]) -> None:
+    def _set_names(self, acc: Accumulator, names: list[str]) -> None:
         acc.names = names
         encoded = [n.encode("utf-8") for n in names]
         acc.ref = np.frombuffer(b"".join(encoded) or b"\0", dtype=np.uint8).copy()
         acc.ref_off = np.cumsum([0, *[len(e) for e in encoded]]).astype(np.int64)
 
-    def _generic(self, acc: _Accumulator, payload: bytes) -> Any:
+    def _generic(self, acc: Accumulator, payload: bytes) -> Any:
         """Decode one message with mcap_ros2's generic decoder (None if it cannot be decoded)."""
         cid = acc.info["id"]
         decoder = self._decoders.get(cid)
@@ -663,7 +621,7 @@ class _ReadState:
         except Exception:
             return None
 
-    def _json_batch(self, acc: _Accumulator, buf, starts, lengths, times) -> None:
+    def _json_batch(self, acc: Accumulator, buf, starts, lengths, times) -> None:
         keys = self.json_fields[acc.info["topic"]]
         paths = [path.split(".") for path in keys.values()]
         for s, n, t in zip(starts, lengths, times, strict=True):
