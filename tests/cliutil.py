@@ -3,7 +3,9 @@
 :func:`wmrid` runs it in this process through its entry point :func:`wmrid.cli.main` (about 0.1 s of overhead); the
 standard streams are swapped for in-memory ones, so it answers like a process: exit code, stdout and stderr bytes.
 :func:`process` starts a real ``python -m wmrid`` (about 2 s to import), for what only a process shows: the entry
-point itself, signals, pipes whose other end closes, output written straight to file descriptor 1 (``-o -``).
+point itself, signals, pipes whose other end closes, output written straight to file descriptor 1 (``-o -``,
+``/dev/stdout``), the signal watchdog and exits at 128 + the signal, the set-up ``import wmrid`` does once per
+process (address-space cap, numba's cache folder), an inherited standard input (here: the bytes given, else empty).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import io
 import os
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 from wmrid.cli import main
@@ -52,10 +55,15 @@ def wmrid(
     sys.stdin, sys.stdout, sys.stderr = streams
     code: int | str | None = 0
     try:
-        with _environment(cwd, columns):
+        # a process's warning filters, not the test run's "error" (which would turn a warning into an exception
+        # that the code under test might catch and act on)
+        with _environment(cwd, columns), warnings.catch_warnings():
+            warnings.resetwarnings()
             main([str(a) for a in args])
     except SystemExit as stop:
         code = stop.code
+        if isinstance(code, str):  # as the interpreter does: the message on stderr, exit 1
+            streams[2].write(code + "\n")
     finally:
         for stream in streams[1:]:
             with contextlib.suppress(ValueError):

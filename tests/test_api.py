@@ -17,6 +17,7 @@ import wmrid
 from tests.cliutil import wmrid as cli
 from wmrid.core.errors import LogFormatError, UsageError
 from wmrid.estimators.result import SCHEMA_VERSION, from_dict
+from wmrid.model import dynamics as model
 from wmrid.reporting.render import to_json
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -143,3 +144,51 @@ def test_simulate_and_write_simulation_give_the_cli_files(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "api.csv").read_bytes() == (tmp_path / "cli.csv").read_bytes()
     assert Path(truth_path).read_bytes() == (tmp_path / "cli.csv.truth.json").read_bytes()
+
+
+def test_a_saved_result_without_history_reads_back_without_one_and_reports(sample_result):
+    doc = json.loads(to_json(sample_result.to_dict()))
+    del doc["history"]
+    back = from_dict(doc, "short.json")
+    assert back.history is None
+    assert "history" not in back.to_dict()
+    rep = wmrid.report(doc, figures=False)
+    assert rep.result["source"] == doc["source"]
+    assert "source" in doc  # the caller's document is not changed
+    for bad in ("1", True, 0, -2):
+        with pytest.raises(LogFormatError, match="is not a version number"):
+            from_dict({**doc, "schema_version": bad}, "odd.json")
+    with pytest.raises(LogFormatError, match="not a complete identify result"):
+        from_dict({**doc, "settings": {**doc["settings"], "k": 10**400}}, "huge.json")
+
+
+def test_a_urdf_robot_in_the_library_takes_the_gear_ratio_from_the_log_options(sample_log):
+    urdf = ROOT / "tests" / "data" / "paper_robot.urdf"
+    result = wmrid.identify(sample_log, urdf, options=wmrid.LogOptions(gear_ratio=100.0))
+    paper_cad = model.named_base(model.base_parameters(wmrid.load_robot("paper").cad))
+    assert result.reference["m11"] == pytest.approx(paper_cad["m11"], rel=1e-9)  # as test_urdf checks the CLI
+    with pytest.raises(UsageError, match=r"robot='.*paper_robot.urdf': a URDF does not give the gear ratio"):
+        wmrid.identify(sample_log, urdf)
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["identify", "-", "--validate", "-", "--robot", "x.urdf"], "LOG and --validate cannot both be standard input"),
+        (["identify", str(SAMPLE), "--forgetting", "5", "--robot", "nosuch.toml"], "--forgetting must be in"),
+        (["compare", str(SAMPLE), "--methods", "foo", "--truth", "missing.json"], "--method must be one of"),
+        (["report", str(SAMPLE), "--method", "oe", "--control-rate", "1000", "--columns", "zz=t"], "--control-rate"),
+    ],
+)
+def test_the_command_line_checks_its_options_in_the_order_it_always_did(args, needle):
+    """The first of several mistakes is the one reported, as before the commands became library calls."""
+    proc = cli(*args)
+    assert proc.returncode == 2
+    assert needle in proc.stderr.decode()
+
+
+def test_report_of_a_saved_result_ignores_the_robot_flags(tmp_path, sample_result):
+    saved = tmp_path / "saved.json"
+    saved.write_text(to_json(sample_result.to_dict()), encoding="utf-8")
+    proc = cli("report", str(saved), "--robot", "x.urdf", "-o", str(tmp_path / "r.md"))
+    assert proc.returncode == 0, proc.stderr

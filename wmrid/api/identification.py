@@ -32,12 +32,41 @@ FRICTION_CHOICES = ("auto", "wheel", "wheel+caster")
 LogInput = str | os.PathLike[str] | WheelLog | LogStream
 
 
-def _robot(robot: str | os.PathLike[str] | Robot | None) -> Robot | None:
-    return None if robot is None else load_robot(robot)
+def robot_for(
+    robot: str | os.PathLike[str] | Robot | None, options: LogOptions | None, rotor_inertia: float | None
+) -> Robot | None:
+    """The robot, loaded with the log options' gear ratio and wheel radius (a URDF needs the gear ratio)."""
+    if robot is None:
+        return None
+    opts = options or LogOptions()
+    return load_robot(robot, gear_ratio=opts.gear_ratio, rotor_inertia=rotor_inertia, wheel_radius=opts.wheel_radius)
+
+
+def load_truth(truth: dict[str, float] | str | os.PathLike[str] | None) -> dict[str, float] | None:
+    """True base parameters by name: a dict as it is, or the "parameters" of a truth file (the simulator's
+    sidecar ``LOG.truth.json``)."""
+    if truth is None or isinstance(truth, dict):
+        return truth
+    import json
+
+    from wmrid.core.atomic import register_input
+
+    path = os.fspath(truth)
+    register_input(path)
+    try:
+        with open(path, encoding="utf-8") as fh:
+            return {k: float(v) for k, v in json.load(fh)["parameters"].items()}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, RecursionError) as err:
+        raise UsageError(f"{option('truth', path)}: not a truth file {{'parameters': {{'m11': ...}}}} ({err})") from err
 
 
 def _is_path(log: Any) -> bool:
     return isinstance(log, (str, os.PathLike))
+
+
+def _given(log: Any) -> str:
+    """A log as the caller named it: the path as given, else the source it was read from."""
+    return os.fspath(log) if _is_path(log) else str(getattr(log, "source", "log"))
 
 
 def _log(log: LogInput, options: LogOptions | None, robot: Robot | None, whole: bool) -> WheelLog | LogStream:
@@ -115,13 +144,13 @@ def delay_value(delay: float | str | None) -> float | str | None:
         raise UsageError(f"{option('delay')} must be auto or a number of seconds, got {text!r}") from None
 
 
-def _method_options(cutoff: float | None, weighted: bool, forgetting: float, torque_hold: str) -> Any:
+def method_options(cutoff: float | None, weighted: bool, forgetting: float, torque_hold: str) -> Any:
     from wmrid.estimators.methods import MethodOptions
 
     return MethodOptions(cutoff_hz=cutoff, weighted=weighted, forgetting=forgetting, torque_hold=torque_hold)
 
 
-def _no_two_stdin(log: Any, validate_log: Any, what: str) -> None:
+def no_two_stdin(log: Any, validate_log: Any, what: str) -> None:
     if _is_path(log) and _is_path(validate_log) and os.fspath(log) == "-" and os.fspath(validate_log) == "-":
         raise UsageError(f"{what} and {option('validate')} cannot both be standard input; give one of them as a file")
 
@@ -142,7 +171,7 @@ def with_validation(
     unit = result.log_info.get("effort_unit", "N m")
     if other_log.effort_unit != unit:
         raise UsageError(
-            f"{option('validate', getattr(other_log, 'source', other))}: its effort is in {other_log.effort_unit}, "
+            f"{option('validate', _given(other))}: its effort is in {other_log.effort_unit}, "
             f"the identified model's in {unit}; give both logs in the same units"
         )
     theta0 = result.estimate.theta0
@@ -176,13 +205,15 @@ def identify(
     cutoff: float | None = None,
     weighted: bool = False,
     forgetting: float = 1.0,
+    rotor_inertia: float | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> IdentificationResult:
     """The base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded ``log``.
 
     log : a path (CSV, Parquet, MCAP; ``"-"`` standard input), read with ``options``, or a log already read.
     robot : a built-in name, a robot file (TOML, URDF) or a :class:`Robot`: the start value, the nominal/CAD
-        values to compare with, and the defaults of the log's units.  None: a start value from the data.
+        values to compare with, and the defaults of the log's units.  None: a start value from the data.  A URDF
+        takes its gear ratio from ``options.gear_ratio`` and ``rotor_inertia`` (kg m^2) when it has no rotor links.
     method : "observer" (the paper's), "idim", "iv", "rls" or "oe" (:data:`wmrid.estimators.methods.METHODS`).
     validate : a second log (path or log) to predict with the identified model; its fit % is in ``validation``.
     form, k, alpha, box_width, torque_hold, payload, control_rate, delay, friction : the observer's settings (see
@@ -197,10 +228,10 @@ def identify(
 
     method = check_method(method)
     validating = validate is not None
-    options_ = _method_options(cutoff, weighted, forgetting, torque_hold)
+    options_ = method_options(cutoff, weighted, forgetting, torque_hold)
     check_control_rate(control_rate, (method,), validating)
-    _no_two_stdin(log, validate, option("log"))
-    robot_obj = _robot(robot)
+    no_two_stdin(log, validate, option("log"))
+    robot_obj = robot_for(robot, options, rotor_inertia)
     friction_ = friction_model(friction, (method,), validating, robot_obj)
     # the observer streams the log; the classical methods filter and simulate the whole log
     wheel_log = _log(log, options, robot_obj, whole=method != "observer")
@@ -224,7 +255,7 @@ def compare(
     *,
     methods: tuple[str, ...] | list[str] | None = None,
     validate: LogInput | None = None,
-    truth: dict[str, float] | None = None,
+    truth: dict[str, float] | str | os.PathLike[str] | None = None,
     options: LogOptions | None = None,
     torque_hold: str = "zoh",
     control_rate: float | None = None,
@@ -233,6 +264,7 @@ def compare(
     cutoff: float | None = None,
     weighted: bool = False,
     forgetting: float = 1.0,
+    rotor_inertia: float | None = None,
 ) -> Comparison:
     """Every method in ``methods`` (default: all of :data:`wmrid.estimators.methods.METHODS`) on the same log:
     estimates, standard errors, flags, errors against ``truth`` (base parameters by name), fit on ``validate``,
@@ -246,11 +278,12 @@ def compare(
     names = tuple(check_method(m.strip()) for m in (METHODS if methods is None else methods) if m.strip())
     if not names:
         raise UsageError(f"{option('methods')} names no method; give e.g. observer,idim")
-    options_ = _method_options(cutoff, weighted, forgetting, torque_hold)
+    options_ = method_options(cutoff, weighted, forgetting, torque_hold)
     validating = validate is not None
     check_control_rate(control_rate, names, validating)
-    _no_two_stdin(log, validate, option("log"))
-    robot_obj = _robot(robot)
+    no_two_stdin(log, validate, option("log"))
+    truth = load_truth(truth)
+    robot_obj = robot_for(robot, options, rotor_inertia)
     friction_ = friction_model(friction, names, validating, robot_obj)
     wheel_log = _log(log, options, robot_obj, whole=True)
     other = None
@@ -258,7 +291,7 @@ def compare(
         other = _log(validate, options, robot_obj, whole=True)
         if other.effort_unit != wheel_log.effort_unit:
             raise UsageError(
-                f"{option('validate', getattr(other, 'source', validate))}: its effort is in {other.effort_unit}, "
+                f"{option('validate', _given(validate))}: its effort is in {other.effort_unit}, "
                 f"{option('log')}'s in {wheel_log.effort_unit}; give both logs in the same units"
             )
     observer = run_observer(

@@ -9,8 +9,15 @@ import os
 from dataclasses import replace
 from typing import Any
 
-from wmrid.api.identification import identify
-from wmrid.api.inputs import LogOptions, load_robot, read_log
+from wmrid.api.identification import (
+    check_control_rate,
+    friction_model,
+    identify,
+    method_options,
+    no_two_stdin,
+    robot_for,
+)
+from wmrid.api.inputs import LogOptions, read_log
 from wmrid.core.errors import LogFormatError, UsageError, WmridError, option
 from wmrid.core.wheel_log import LogStream, WheelLog
 from wmrid.estimators.result import IdentificationResult, from_dict
@@ -66,6 +73,7 @@ def report(
     figures: bool = True,
     options: LogOptions | None = None,
     robot: str | os.PathLike[str] | Robot | None = None,
+    rotor_inertia: float | None = None,
     **identify_options: Any,
 ) -> Report:
     """The report of an identification.
@@ -73,7 +81,7 @@ def report(
     result : an :class:`IdentificationResult`; a saved ``identify --format json`` document (a dict, or a path to
         one; ``"-"`` standard input); or a log (a path, or a log in memory), identified here on ``robot`` with
         ``identify_options`` (the keywords of :func:`wmrid.api.identification.identify`: ``method``, ``validate``,
-        ...).
+        ...).  The robot is loaded only for a log (a saved result carries its nominal and CAD values).
     log : the identified log in memory, for the torque residual and the figures of the signals.
     truth : true base parameters by name (a simulator's ``truth["parameters"]``), for the error columns.
     figures : draw the figures (SVG and PNG; the slow part).
@@ -82,20 +90,32 @@ def report(
         rep = build_report(result.to_dict(), result=result, log=log, truth=truth, figures=figures)
         return replace(rep, identification=result, log=log)
     if isinstance(result, dict):
-        return _from_saved(result, str(result.get("source") or "result"), truth, figures)
-    robot_obj = None if robot is None else load_robot(robot)
+        return _from_saved(dict(result), str(result.get("source") or "result"), truth, figures)
+    validate = identify_options.get("validate")
+    method = identify_options.get("method", "observer")
     if isinstance(result, (str, os.PathLike)):
         from wmrid.io.sources import open_source
 
+        no_two_stdin(result, validate, option("input_"))
         source = open_source(os.fspath(result))
         if source.head(64).lstrip().startswith(b"{"):
-            if identify_options.get("validate") is not None or identify_options.get("method", "observer") != "observer":
+            if validate is not None or method != "observer":
                 raise UsageError(
                     f"{source.name}: {option('validate')} and {option('method')} need a log as INPUT, not a saved "
                     "result; run `wmrid identify LOG --method ... --validate OTHER --format json` and report its output"
                 )
             return _from_saved(_parse_saved(source), source.name, truth, figures)
+        # a log: the checks identify() makes, before the log is read
+        robot_obj = robot_for(robot, options, rotor_inertia)
+        method_options(
+            identify_options.get("cutoff"), identify_options.get("weighted", False),
+            identify_options.get("forgetting", 1.0), identify_options.get("torque_hold", "zoh"),
+        )  # fmt: skip
+        check_control_rate(identify_options.get("control_rate"), (method,), validate is not None)
+        friction_model(identify_options.get("friction", "auto"), (method,), validate is not None, robot_obj)
         result = read_log(os.fspath(result), options, robot=robot_obj, data=source.data)
+    else:
+        robot_obj = robot_for(robot, options, rotor_inertia)
     wheel_log = result.read() if isinstance(result, LogStream) else result
     identified = identify(wheel_log, robot_obj, options=options, **identify_options)
     rep = build_report(identified.to_dict(), result=identified, log=wheel_log, truth=truth, figures=figures)

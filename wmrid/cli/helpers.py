@@ -37,30 +37,10 @@ def log_opts(columns: str | None, time_unit: str, log_options: dict):
     return LogOptions(columns=columns, time_unit=time_unit, **log_options)
 
 
-def load_robot(spec: str, gear_ratio: float | None, rotor_inertia: float | None, wheel_radius: float | None = None):
-    """A robot from a built-in name, a TOML file, or a URDF (which needs the gear ratio from --gear-ratio)."""
-    from wmrid.api.inputs import load_robot
-
-    return load_robot(spec, gear_ratio=gear_ratio, rotor_inertia=rotor_inertia, wheel_radius=wheel_radius)
-
-
 def stderr_console():
     from rich.console import Console
 
     return Console(stderr=True)
-
-
-def load_truth(path: Path) -> dict[str, float]:
-    """The "parameters" of a truth file (the simulator's sidecar), name -> value."""
-    import json
-
-    from wmrid.core.atomic import register_input
-
-    register_input(path)
-    try:
-        return {k: float(v) for k, v in json.loads(path.read_text(encoding="utf-8"))["parameters"].items()}
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
-        raise UsageError(f"--truth {path}: not a truth file {{'parameters': {{'m11': ...}}}} ({err})") from err
 
 
 def write_estimates(result, path: Path, force: bool) -> None:

@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 
 from wmrid.cli.app import app
-from wmrid.cli.helpers import load_robot, load_truth, log_opts, on_stdout, progress, stderr_console, write_estimates
+from wmrid.cli.helpers import log_opts, on_stdout, progress, stderr_console, write_estimates
 from wmrid.cli.options import (
     AlignOpt,
     AlignRule,
@@ -136,11 +136,10 @@ def identify(
     from wmrid.core.atomic import write_json
     from wmrid.reporting.render import print_identification, to_json
 
-    robot_obj = load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
     progress_cb, finish = progress("identify")
     try:
         result = run_identify(
-            log, robot_obj, method=method.value, validate=validate,
+            log, robot, method=method.value, rotor_inertia=rotor_inertia, validate=validate,
             options=log_opts(columns, time_unit.value, log_options(locals())), form=form.value, k=k, alpha=alpha,
             box_width=box_width, torque_hold=torque_hold.value, payload=payload, control_rate=control_rate,
             delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted, forgetting=forgetting,
@@ -245,19 +244,19 @@ def report(
     friction: FrictionOpt = FrictionChoice.auto,
 ) -> None:
     """Tables (paper Tables 2 and 3), comparison with nominal/CAD/truth, diagnostics and figures for INPUT."""
+    from wmrid.api.identification import load_truth
     from wmrid.api.reporting import REPORT_SUFFIXES, residual_frame, write_report
     from wmrid.api.reporting import report as build
 
     suffix = output.suffix.lower() if output is not None else None
     if suffix not in (None, *REPORT_SUFFIXES):
         raise UsageError(f"-o {output}: the report format comes from the suffix: .html, .md or .json")
-    truth_params = load_truth(truth) if truth is not None else None
+    truth_params = load_truth(truth)
     if input_ == "-" and validate == "-":
         raise UsageError("INPUT and --validate cannot both be standard input; give one of them as a file")
-    robot_obj = load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
     rep = build(
-        input_, truth=truth_params, figures=suffix in (".html", ".htm", ".md"),
-        options=log_opts(columns, time_unit.value, log_options(locals())), robot=robot_obj, method=method.value,
+        input_, truth=truth_params, figures=suffix in (".html", ".htm", ".md"), rotor_inertia=rotor_inertia,
+        options=log_opts(columns, time_unit.value, log_options(locals())), robot=robot, method=method.value,
         validate=validate, form=form.value, k=k, alpha=alpha, torque_hold=torque_hold.value, payload=payload,
         control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted,
         forgetting=forgetting,
@@ -334,10 +333,8 @@ def compare(
     from wmrid.core.atomic import write_json
     from wmrid.reporting.render import print_comparison, to_json
 
-    truth_params = load_truth(truth) if truth is not None else None
-    robot_obj = load_robot(robot, gear_ratio, rotor_inertia, wheel_radius) if robot is not None else None
     data = run_compare(
-        log, robot_obj, methods=methods.split(","), validate=validate, truth=truth_params,
+        log, robot, methods=methods.split(","), validate=validate, truth=truth, rotor_inertia=rotor_inertia,
         options=log_opts(columns, time_unit.value, log_options(locals())), torque_hold=torque_hold.value,
         control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted,
         forgetting=forgetting,

@@ -70,7 +70,7 @@ class IdentificationResult:
     theta_cov: np.ndarray  # (2p, 2p)
     parameters: dict[str, tuple[float, float]]  # name -> (value, std), REPORTED names, SI units
     theta0_cov: np.ndarray  # (8, 8)
-    history: History
+    history: History | None  # None: a result read back from a document without history
     diagnostics: dict[str, Any]
     warnings: tuple[str, ...]
     log_info: dict[str, Any]
@@ -125,7 +125,8 @@ class IdentificationResult:
         }
         if self.estimate is not None:
             out["estimate"] = estimate_dict(self.estimate, self.form.base_names)
-        out["history"] = history_dict(self)
+        if self.history is not None:
+            out["history"] = history_dict(self)
         if self.validation is not None:
             out["validation"] = self.validation
         if self.payload is not None:
@@ -187,7 +188,7 @@ def from_dict(data: Any, source: str = "result") -> IdentificationResult:
 
     Exact for everything the document holds: ``from_dict(d).to_dict() == d`` for a document ``to_dict`` wrote.
     What it does not hold comes back as follows: the intermediate parameters' covariance as its diagonal (their
-    std), the history as the decimated one the document keeps (empty when it has none), the base parameters'
+    std), the history as the decimated one the document keeps (None when it has none), the base parameters'
     covariance from ``estimate`` (documents before schema 1: the diagonal of the reported std).
     Raises :class:`LogFormatError` naming ``source`` when ``data`` is not a complete result, or one of a newer
     schema.
@@ -198,7 +199,9 @@ def from_dict(data: Any, source: str = "result") -> IdentificationResult:
             f"`wmrid identify --format json`"
         )
     version = data.get("schema_version", 1)
-    if not isinstance(version, int) or version > SCHEMA_VERSION:
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
+        raise LogFormatError(f"{source}: its schema_version {version!r} is not a version number (1, 2, ...)")
+    if version > SCHEMA_VERSION:
         raise LogFormatError(
             f"{source}: an identify result of schema version {version!r}, newer than this wmrid reads "
             f"({SCHEMA_VERSION}); upgrade wmrid"
@@ -207,7 +210,7 @@ def from_dict(data: Any, source: str = "result") -> IdentificationResult:
         return _from_dict(data, source)
     except LogFormatError:
         raise
-    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as err:
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as err:
         what = f"no {err.args[0]!r}" if isinstance(err, KeyError) and err.args else " ".join(str(err).split())
         raise LogFormatError(
             f"{source}: not a complete identify result ({what}); give a log, or the unedited output of "
@@ -240,7 +243,7 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
         for name, e in params_d.items()
     }
     units = dict(THETA0_UNITS)
-    units.update({name: e["unit"] for name, e in params_d.items() if "unit" in e})
+    units.update({name: str(e["unit"]) for name, e in params_d.items()})
     estimate = None
     est_d = data.get("estimate")
     base = form.base_names
@@ -255,7 +258,8 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
         std = np.array([parameters.get(n, (math.nan, math.inf))[1] for n in base])
         theta0_cov = np.diag(std**2)
     hist_d = data.get("history")
-    if hist_d:
+    history = None
+    if hist_d is not None:
         t = _floats(hist_d["t"])
         history = History(
             t=t,
@@ -263,8 +267,6 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
             e=np.column_stack([_floats(hist_d["e_r"]), _floats(hist_d["e_l"])]),
             lambda_min=_floats(hist_d["lambda_min"]),
         )
-    else:
-        history = History(t=np.zeros(0), theta=np.zeros((0, 2, p)), e=np.zeros((0, 2)), lambda_min=np.zeros(0))
     payload_d = data.get("payload")
     payload = None
     if payload_d is not None:
