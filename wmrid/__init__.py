@@ -93,6 +93,7 @@ _EXPORTS = {
     "write_report": "wmrid.api.reporting",
     "write_simulation": "wmrid.api.simulation",
     "IdentificationResult": "wmrid.estimators.result",
+    "ObserverRun": "wmrid.estimators.result",
     "BaseEstimate": "wmrid.estimators.estimate",
     "WheelLog": "wmrid.core.wheel_log",
     "LogStream": "wmrid.core.wheel_log",

@@ -37,7 +37,7 @@ from wmrid.estimators.model_error import (
 from wmrid.estimators.observer import ObserverSettings
 from wmrid.estimators.observer_kernel import project_history_box
 from wmrid.estimators.replay import replay_pieces
-from wmrid.estimators.result import History, IdentificationResult, LogLike, finite_or_none, reported_names
+from wmrid.estimators.result import History, IdentificationResult, LogLike, ObserverRun, finite_or_none, reported_names
 from wmrid.estimators.survey import Survey, survey
 from wmrid.estimators.uncertainty import estimate_covariances, interval_factor, jackknife_deltas, segments_of
 from wmrid.estimators.widening import carry_unresolved_delay, with_hold_term, with_timing_term
@@ -516,9 +516,12 @@ def _identify(
     deltas = jackknife_deltas(gamma, theta_u, out.blk_a, out.blk_c, segment, n_seg)
     loo = SegmentEstimates(float(sv.t_first), float(duration), fit.theta0[None, :] + deltas @ fit.gain.T)
     return IdentificationResult(
-        source=source, form=chosen, settings=settings, start_source=start_source, theta=theta,
-        theta_unconstrained=theta_u, theta_cov=theta_cov, parameters=parameters, theta0_cov=fit.cov,
-        history=history, diagnostics=diagnostics, warnings=tuple(warnings), log_info=log_info,
+        source=source, form=chosen, parameters=parameters, theta0_cov=fit.cov, diagnostics=diagnostics,
+        warnings=tuple(warnings), log_info=log_info,
+        observer=ObserverRun(
+            settings=settings, start_source=start_source, theta=theta, theta_unconstrained=theta_u,
+            theta_cov=theta_cov, history=history,
+        ),
         nominal=nominal, reference=reference, units=units, payload=payload_est,
         estimate=BaseEstimate(
             "observer", fit.theta0.copy(), cov0, dof=dof, seconds=time.perf_counter() - started, segments=loo

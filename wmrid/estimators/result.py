@@ -58,22 +58,44 @@ class History:
 
 
 @dataclass(frozen=True)
+class ObserverRun:
+    """The paper's observer run on the log (Eqs. 26-36): what it was given and what it found in its own terms.
+
+    settings : gain, start and box (:class:`ObserverSettings`).  start_source : where the start came from.
+    theta, theta_unconstrained : (2, p) intermediate parameters, projected onto the box and not.
+    theta_cov : (2p, 2p) their covariance.  history : the decimated per-sample record, or None (a result read
+    back from a document without one).
+    """
+
+    settings: ObserverSettings
+    start_source: str
+    theta: np.ndarray
+    theta_unconstrained: np.ndarray
+    theta_cov: np.ndarray
+    history: History | None
+
+
+@dataclass(frozen=True)
 class IdentificationResult:
-    """Everything identify found, immutable.  ``to_dict`` gives the JSON form."""
+    """Everything an identification found, whichever the method, immutable.  ``to_dict`` gives the JSON form.
+
+    source : the log.  form : the regressor (friction model included).  method : the method whose estimate is
+    reported.  parameters : name -> (value, std), REPORTED names, SI units (the effort's units for a PWM log).
+    theta0_cov : (n0, n0) covariance of the base parameters.  estimate : the method's
+    :class:`~wmrid.estimators.estimate.BaseEstimate`.  diagnostics, warnings, log_info : what the log and the
+    method showed.  nominal, reference : the robot's nominal and CAD base parameters.  payload : (value, std) of
+    mass kg, x m, y m, inertia kg m^2.  validation : the fit on another log.  observer : the observer's run on the
+    log (every method runs it first: its excitation figures and history describe the log), or None.
+    """
 
     source: str
     form: RegressorForm
-    settings: ObserverSettings
-    start_source: str
-    theta: np.ndarray  # (2, p) projected onto the box
-    theta_unconstrained: np.ndarray  # (2, p)
-    theta_cov: np.ndarray  # (2p, 2p)
     parameters: dict[str, tuple[float, float]]  # name -> (value, std), REPORTED names, SI units
-    theta0_cov: np.ndarray  # (8, 8)
-    history: History | None  # None: a result read back from a document without history
+    theta0_cov: np.ndarray  # (n0, n0)
     diagnostics: dict[str, Any]
     warnings: tuple[str, ...]
     log_info: dict[str, Any]
+    observer: ObserverRun | None = None
     nominal: dict[str, float] | None = None
     reference: dict[str, float] | None = None
     units: dict[str, str] = field(default_factory=lambda: dict(THETA0_UNITS))
@@ -81,6 +103,36 @@ class IdentificationResult:
     method: str = "observer"
     estimate: BaseEstimate | None = None  # the reported theta0 and its covariance (undetermined: NaN/inf)
     validation: dict[str, Any] | None = None  # fit on another log (wmrid.model.predict.validation_fit)
+
+    # The observer run's figures, read through the result (the reports and figures use them).
+    @property
+    def settings(self) -> ObserverSettings:
+        return self._run().settings
+
+    @property
+    def start_source(self) -> str:
+        return self._run().start_source
+
+    @property
+    def theta(self) -> np.ndarray:
+        return self._run().theta
+
+    @property
+    def theta_unconstrained(self) -> np.ndarray:
+        return self._run().theta_unconstrained
+
+    @property
+    def theta_cov(self) -> np.ndarray:
+        return self._run().theta_cov
+
+    @property
+    def history(self) -> History | None:
+        return None if self.observer is None else self.observer.history
+
+    def _run(self) -> ObserverRun:
+        if self.observer is None:
+            raise AttributeError(f"{self.source}: this result holds no observer run")
+        return self.observer
 
     @classmethod
     def from_dict(cls, data: Any, source: str = "result") -> IdentificationResult:
@@ -111,18 +163,17 @@ class IdentificationResult:
             "method": self.method,
             "effort_unit": self.log_info.get("effort_unit", "N m"),
             "parameters": params,
-            "theta": self.theta_dict(),
-            "settings": {
+        }
+        if self.observer is not None:
+            out["theta"] = self.theta_dict()
+            out["settings"] = {
                 "k": self.settings.k,
                 "alpha": self.settings.alpha,
                 "torque_hold": self.settings.torque_hold,
                 "control_rate": self.settings.control_rate,
                 "start": self.start_source,
-            },
-            "diagnostics": self.diagnostics,
-            "warnings": list(self.warnings),
-            "log": self.log_info,
-        }
+            }
+        out.update(diagnostics=self.diagnostics, warnings=list(self.warnings), log=self.log_info)
         if self.estimate is not None:
             out["estimate"] = estimate_dict(self.estimate, self.form.base_names)
         if self.history is not None:
@@ -280,17 +331,19 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
     return IdentificationResult(
         source=data.get("source") or source,
         form=form,
-        settings=settings,
-        start_source=settings_d.get("start", ""),
-        theta=theta,
-        theta_unconstrained=unconstrained,
-        theta_cov=np.diag(theta_std**2),
         parameters=parameters,
         theta0_cov=theta0_cov,
-        history=history,
         diagnostics=data.get("diagnostics", {}),
         warnings=tuple(data.get("warnings", ())),
         log_info=data.get("log", {}),
+        observer=ObserverRun(
+            settings=settings,
+            start_source=settings_d.get("start", ""),
+            theta=theta,
+            theta_unconstrained=unconstrained,
+            theta_cov=np.diag(theta_std**2),
+            history=history,
+        ),
         nominal=data.get("nominal"),
         reference=data.get("reference"),
         units=units,
