@@ -343,3 +343,12 @@ def test_load_model_reads_what_identify_writes(cli_files) -> None:
     assert np.all(np.isfinite(got.std))
     assert got.theta0[:4] == pytest.approx(model.base_parameters(TRUE)[:4], rel=0.01)
     assert got.parameters["M11"]["unit"] == "kg m^2"
+
+
+def test_a_saved_result_is_also_read_through_from_dict(unloaded_json) -> None:
+    """A complete identify document goes through the same reader as report's: a malformed field the monitor
+    itself does not use (the observer's gain) is refused with the file named, as report refuses it."""
+    broken = json.loads(json.dumps(unloaded_json))
+    broken["settings"]["k"] = "ten"
+    with pytest.raises(UsageError, match=r"model x.json: not a complete identify result"):
+        model_from_dict(broken, "x.json")

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.core.errors import UsageError, option
+from wmrid.core.errors import LogFormatError, UsageError, option
 from wmrid.model import dynamics as model
 from wmrid.model.dynamics import THETA0_NAMES, RegressorForm
 
@@ -163,7 +163,13 @@ def inertia_ok(theta0: np.ndarray) -> bool:
 
 def model_from_dict(data: Any, source: str) -> MonitoredModel:
     """The model of an ``identify`` JSON result (its "parameters" and "effort_unit"); UsageError naming
-    ``source`` when it is not one."""
+    ``source`` when it is not one.
+
+    A saved result (with "settings" and a "theta.form") is also read through
+    :func:`wmrid.estimators.result.from_dict`, after the checks here, so that what identify wrote is checked
+    as ``report`` checks it; a shorter document (one from before the form was recorded, or a model written by
+    hand: "parameters", "effort_unit" and optionally "theta.form") is read for what the monitor needs.
+    """
     hint = "give the JSON that `wmrid identify LOG -o RESULT.json` writes"
     if not isinstance(data, dict) or not isinstance(data.get("parameters"), dict):
         raise UsageError(f'{option("model")} {source}: not a wmrid identify result (no "parameters" object); {hint}')
@@ -194,6 +200,14 @@ def model_from_dict(data: Any, source: str) -> MonitoredModel:
     columns = p_names(form)
     by_name = model.named_base(theta0, names)
     stds = {name: (reported.get(name) or {}).get("std") for name in columns}
+    theta_d = data.get("theta")
+    if isinstance(theta_d, dict) and "form" in theta_d and "settings" in data:  # a saved result: as report checks
+        from wmrid.estimators.result import from_dict
+
+        try:
+            from_dict(data, source)
+        except LogFormatError as err:
+            raise UsageError(f"{option('model')} {err}") from None
     return MonitoredModel(theta0=theta0, parameters=reported, effort_unit=unit, source=source,
                           std=_std_vector(by_name, stds, columns), form=form)  # fmt: skip
 
