@@ -17,6 +17,7 @@ from typing import Any
 from wmrid.api.inputs import LogOptions, load_robot, open_log
 from wmrid.core.errors import UsageError, option
 from wmrid.core.wheel_log import LogStream, WheelLog
+from wmrid.estimators.identify import FRICTION_CHOICES
 from wmrid.estimators.methods import Comparison
 from wmrid.estimators.result import IdentificationResult
 from wmrid.model.robot import Robot
@@ -27,7 +28,6 @@ __all__ = ["CASTER_METHODS", "compare", "identify", "with_validation"]
 CASTER_METHODS = ("observer", "idim", "iv", "rls", "oe")
 #: Methods that model a controller faster than the log (``control_rate``).
 CONTROL_RATE_METHODS = ("observer", "idim", "iv", "rls")
-FRICTION_CHOICES = ("auto", "wheel", "wheel+caster")
 
 LogInput = str | os.PathLike[str] | WheelLog | LogStream
 

@@ -5,7 +5,7 @@ warnings they call for (:func:`diagnose`).
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -18,6 +18,9 @@ from wmrid.estimators.model_error import (
 #: A direction of the column-scaled information whose eigenvalue is below this fraction of the largest is
 #: not excited at all (double precision resolves about 1e-16; real logs' weakest directions are ~1e-8).
 UNEXCITED = 1e-12
+
+if TYPE_CHECKING:
+    from wmrid.estimators.result import IdentificationResult
 
 
 #: A base parameter whose standard error exceeds this fraction of its magnitude is called poorly determined.
@@ -268,3 +271,40 @@ def diagnose(
         },
     }  # fmt: skip
     return diagnostics, warnings
+
+
+#: ``--friction auto`` takes the caster model when a Wald test puts its drag parameters off zero at this level.
+AUTO_P = 1e-3
+
+
+AUTO_NO_REVERSAL = (
+    "neither wheel ever stops or reverses, so a caster's drag cannot be told from the wheels' Coulomb friction"
+)
+
+
+def caster_drag_test(result: IdentificationResult) -> dict[str, Any]:
+    """Wald test of the caster-drag parameters of a ``wheel+caster`` result against zero.
+
+    W = d^T C^-1 d over the q drag parameters d with their reported (widened) covariance C, a jackknife estimate
+    on B degrees of freedom, so Hotelling's (B - q + 1) W / (B q) ~ F(q, B - q + 1) (chi-square on q when B is
+    unknown).  Returns {"statistic", "dof", "p_value", "text"}."""
+    from scipy.special import chdtrc, fdtrc
+
+    names = result.form.base_names[8:]
+    idx = [result.form.base_names.index(n) for n in names]
+    values = np.array([result.parameters[n][0] for n in names])
+    cov = np.asarray(result.theta0_cov)[np.ix_(idx, idx)]
+    if not np.all(np.isfinite(cov)):
+        return {"statistic": 0.0, "dof": len(names), "p_value": 1.0, "text": "not determined by this log"}
+    stat = float(values @ np.linalg.pinv(cov, hermitian=True) @ values)
+    units = result.units
+    text = ", ".join(
+        f"{n} = {v:.4g} +/- {result.parameters[n][1]:.2g} {units[n]}" for n, v in zip(names, values, strict=True)
+    )
+    q = len(names)
+    big_b = result.diagnostics.get("uncertainty", {}).get("dof")
+    if big_b and big_b - q + 1 > 0:
+        p_value = float(fdtrc(q, big_b - q + 1, (big_b - q + 1) * stat / (big_b * q)))
+    else:
+        p_value = float(chdtrc(q, stat))
+    return {"statistic": stat, "dof": q, "p_value": p_value, "text": text}

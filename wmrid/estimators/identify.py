@@ -17,8 +17,11 @@ import numpy as np
 from wmrid.core.errors import NotIdentifiableError, UsageError, WmridError, option
 from wmrid.core.wheel_log import LogStream, stream_arrays
 from wmrid.estimators.diagnostics import (
+    AUTO_NO_REVERSAL,
+    AUTO_P,
     POORLY_DETERMINED,
     START_RELEVANT,
+    caster_drag_test,
     control_rate_check,
     derived_poorly_determined,
     diagnose,
@@ -320,43 +323,6 @@ def identify(
 
 #: Friction models of :func:`identify`: ``auto`` lets the log decide between the other two.
 FRICTION_CHOICES = ("wheel", "wheel+caster", "auto")
-
-
-#: ``--friction auto`` takes the caster model when a Wald test puts its drag parameters off zero at this level.
-AUTO_P = 1e-3
-
-
-AUTO_NO_REVERSAL = (
-    "neither wheel ever stops or reverses, so a caster's drag cannot be told from the wheels' Coulomb friction"
-)
-
-
-def caster_drag_test(result: IdentificationResult) -> dict[str, Any]:
-    """Wald test of the caster-drag parameters of a ``wheel+caster`` result against zero.
-
-    W = d^T C^-1 d over the q drag parameters d with their reported (widened) covariance C, a jackknife estimate
-    on B degrees of freedom, so Hotelling's (B - q + 1) W / (B q) ~ F(q, B - q + 1) (chi-square on q when B is
-    unknown).  Returns {"statistic", "dof", "p_value", "text"}."""
-    from scipy.special import chdtrc, fdtrc
-
-    names = result.form.base_names[8:]
-    idx = [result.form.base_names.index(n) for n in names]
-    values = np.array([result.parameters[n][0] for n in names])
-    cov = np.asarray(result.theta0_cov)[np.ix_(idx, idx)]
-    if not np.all(np.isfinite(cov)):
-        return {"statistic": 0.0, "dof": len(names), "p_value": 1.0, "text": "not determined by this log"}
-    stat = float(values @ np.linalg.pinv(cov, hermitian=True) @ values)
-    units = result.units
-    text = ", ".join(
-        f"{n} = {v:.4g} +/- {result.parameters[n][1]:.2g} {units[n]}" for n, v in zip(names, values, strict=True)
-    )
-    q = len(names)
-    big_b = result.diagnostics.get("uncertainty", {}).get("dof")
-    if big_b and big_b - q + 1 > 0:
-        p_value = float(fdtrc(q, big_b - q + 1, (big_b - q + 1) * stat / (big_b * q)))
-    else:
-        p_value = float(chdtrc(q, stat))
-    return {"statistic": stat, "dof": q, "p_value": p_value, "text": text}
 
 
 def _with_friction(result: IdentificationResult, friction: dict[str, Any]) -> IdentificationResult:
