@@ -515,3 +515,25 @@ def test_under_an_address_space_cap_a_log_identifies_and_an_endless_source_stops
     )  # fmt: skip
     assert proc.returncode == 2, proc.stderr
     assert b"holds more than 256 MiB" in proc.stderr
+
+
+def test_an_in_process_run_keeps_the_callers_alarm(small_log):
+    """``main(argv)`` in a caller's process (a notebook, a test with an alarm-based timeout): the caller's
+    SIGALRM handler and its pending timer come back, the timer with the time it had left (within the run's
+    wall time), and it fires into the caller's handler, not wmrid's."""
+    fired = []
+    previous = signal.signal(signal.SIGALRM, lambda *_: fired.append(True))
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 30.0)
+        started = time.monotonic()
+        with pytest.raises(SystemExit) as done:
+            main(["identify", str(small_log), "--format", "json"])
+        assert done.value.code == 0
+        left, _ = signal.getitimer(signal.ITIMER_REAL)
+        assert 30.0 - (time.monotonic() - started) - 0.5 < left <= 30.0
+        signal.setitimer(signal.ITIMER_REAL, 0.01)
+        time.sleep(0.2)
+        assert fired == [True]
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)

@@ -109,16 +109,29 @@ def install() -> dict[int, object]:
         if signum == signal.SIGINT or signal.getsignal(signum) is not signal.SIG_IGN  # nohup's SIGHUP stays ignored
     }
     if hasattr(signal, "SIGALRM"):
+        if hasattr(signal, "setitimer"):  # the caller's alarm (a test's timeout, say) waits while wmrid runs
+            previous[_CALLER_TIMER] = (*signal.setitimer(signal.ITIMER_REAL, 0), time.monotonic())
         previous[signal.SIGALRM] = signal.signal(signal.SIGALRM, _interrupt)
     return previous
 
 
+#: The key under which :func:`install` keeps the caller's real-time timer: (delay s, interval s, when).
+_CALLER_TIMER = -1
+
+
 def restore(previous: dict[int, object]) -> None:
-    """Put back the handlers :func:`install` replaced, and cancel a pending retry."""
+    """Put back the handlers :func:`install` replaced, cancel a pending retry, and re-arm the caller's alarm for
+    the time it had left (at once if that has passed)."""
     if hasattr(signal, "setitimer"):
         signal.setitimer(signal.ITIMER_REAL, 0)
     for signum, handler in previous.items():
-        signal.signal(signum, handler)  # type: ignore[arg-type]
+        if signum != _CALLER_TIMER:
+            signal.signal(signum, handler)  # type: ignore[arg-type]
+    timer = previous.get(_CALLER_TIMER)
+    if timer is not None:
+        delay, interval, since = timer  # type: ignore[misc]
+        if delay > 0:
+            signal.setitimer(signal.ITIMER_REAL, max(delay - (time.monotonic() - since), 1e-6), interval)
 
 
 #: s: how long a stopping signal may wait for the program to return to Python (a compiled kernel, a BLAS call)
