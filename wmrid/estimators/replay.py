@@ -99,7 +99,8 @@ class _HalfRate:
     of the log, linear, or held by a controller at --control-rate).
 
     The difference between the two final estimates is a Richardson estimate of the replay's discretisation
-    error (:func:`wmrid.estimators.identify.discretisation_error`).  It keeps only its own state: no history, one block.
+    error (:func:`wmrid.estimators.model_error.discretisation_error`).  It keeps only its own state: no history,
+    one block.
     """
 
     def __init__(self, n: int, duration: float, settings: ObserverSettings, kind: int) -> None:

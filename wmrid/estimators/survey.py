@@ -85,7 +85,7 @@ class Survey:
 
     def low_speed(self) -> np.ndarray:
         """(2,) rad/s: per wheel, LOW_SPEED_FRACTION of the 90th percentile of |eta| over the sparse sample;
-        below it a wheel counts as slow (the friction check of :func:`wmrid.estimators.identify.slow_speed_term`)."""
+        below it a wheel counts as slow (the friction check of :func:`wmrid.estimators.model_error.slow_speed_term`)."""
         if len(self.sparse_eta) == 0:
             return np.zeros(2)
         return LOW_SPEED_FRACTION * np.percentile(np.abs(self.sparse_eta), 90, axis=0)
