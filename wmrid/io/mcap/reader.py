@@ -43,9 +43,7 @@ Times stay integer nanoseconds here; conversion to seconds happens once, when a 
 
 from __future__ import annotations
 
-import contextlib
 import io
-import json
 import mmap
 import os
 import zlib
@@ -65,6 +63,7 @@ from wmrid.io.mcap.contents import (
     join,
     summary,
 )
+from wmrid.io.mcap.generic import decode_generic, json_batch
 from wmrid.io.mcap.records import (
     BOMB_FLOOR,
     BOMB_RATIO,
@@ -266,7 +265,7 @@ class _ReadState:
         self.notes: list[str] = []
         self.profile = ""
         self.library = ""
-        self._decoders: dict[int, Any] = {}
+        self.decoders: dict[int, Any] = {}
         self._unknown_channels: set[int] = set()
 
     # ---- walking
@@ -490,11 +489,11 @@ class _ReadState:
                 if self.wanted is None or int(cid) in self.wanted:
                     self._joint_batch(acc, buf, data_start[sel], data_len[sel], times)
             elif info["message_encoding"] == "json" and info["topic"] in self.json_fields:
-                self._json_batch(acc, buf, data_start[sel], data_len[sel], times)
+                json_batch(self, acc, buf, data_start[sel], data_len[sel], times)
 
     def _joint_batch(self, acc: Accumulator, buf, starts, lengths, times) -> None:
         if acc.ref is None:
-            first = self._generic(acc, bytes(buf[starts[0] : starts[0] + lengths[0]]))
+            first = decode_generic(self, acc, bytes(buf[starts[0] : starts[0] + lengths[0]]))
             if first is None:
                 acc.skipped += len(starts)
                 return
@@ -539,7 +538,7 @@ class _ReadState:
         slow = np.flatnonzero(status != STATUS_OK)
         keep = np.ones(n, dtype=bool)
         for i in slow:  # rare: other endianness, a layout the fast path refuses, or new joint names
-            msg = self._generic(acc, bytes(buf[starts[i] : starts[i] + lengths[i]]))
+            msg = decode_generic(self, acc, bytes(buf[starts[i] : starts[i] + lengths[i]]))
             if msg is None:
                 keep[i] = False
                 acc.skipped += 1
@@ -593,58 +592,3 @@ class _ReadState:
         encoded = [n.encode("utf-8") for n in names]
         acc.ref = np.frombuffer(b"".join(encoded) or b"\0", dtype=np.uint8).copy()
         acc.ref_off = np.cumsum([0, *[len(e) for e in encoded]]).astype(np.int64)
-
-    def _generic(self, acc: Accumulator, payload: bytes) -> Any:
-        """Decode one message with mcap_ros2's generic decoder (None if it cannot be decoded)."""
-        cid = acc.info["id"]
-        decoder = self._decoders.get(cid)
-        if decoder is None:
-            from mcap.records import Schema
-            from mcap_ros2.decoder import DecoderFactory
-
-            s = self.schemas.get(acc.info["schema_id"])
-            if s is None:
-                return None
-            schema = Schema(id=acc.info["schema_id"], name=s["name"], encoding=s["encoding"], data=s["data"])
-            try:
-                # mcap_ros2 prints parse problems of a damaged schema; keep them off wmrid's stdout/stderr.
-                with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-                    decoder = DecoderFactory().decoder_for("cdr", schema)
-            except Exception as err:
-                self.notes.append(f"topic {acc.info['topic']}: its schema cannot be parsed ({err}); skipped")
-                return None
-            if decoder is None:
-                return None
-            self._decoders[cid] = decoder
-        try:
-            return decoder(payload)
-        except Exception:
-            return None
-
-    def _json_batch(self, acc: Accumulator, buf, starts, lengths, times) -> None:
-        keys = self.json_fields[acc.info["topic"]]
-        paths = [path.split(".") for path in keys.values()]
-        for s, n, t in zip(starts, lengths, times, strict=True):
-            try:
-                obj = json.loads(bytes(buf[s : s + n]))
-            except (ValueError, RecursionError):  # not JSON, or nested too deeply to be a message
-                acc.skipped += 1
-                continue
-            acc.json_rows.append((int(t), [_lookup(obj, path) for path in paths]))
-
-
-def _lookup(obj: Any, path: list[str]) -> float:
-    """obj[path[0]][path[1]]... as a float (list indices as integers); NaN when absent or not a number."""
-    for part in path:
-        if isinstance(obj, list):
-            try:
-                obj = obj[int(part)]
-            except (ValueError, IndexError):
-                return float("nan")
-        elif isinstance(obj, dict) and part in obj:
-            obj = obj[part]
-        else:
-            return float("nan")
-    if isinstance(obj, bool) or not isinstance(obj, (int, float)):
-        return float("nan")
-    return float(obj)
