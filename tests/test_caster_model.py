@@ -550,8 +550,8 @@ def test_wheel_only_model_std_is_honest_or_flagged(caster_log, caster_robot):
     Until issue 12 this failed (a strict xfail): the structural test has little power here (p = 0.26 on a
     jackknife of 14 dof) and Fv1, Fv2, Fd1, Fd2, Vc lay 6.2, 6.3, 4.0, 4.0, 3.2 std off, unflagged.  The closed-loop
     check (wmrid.estimators.feedback) now sees the prediction error at 2300 times the noise and widens by its term:
-    every
-    parameter is marked inflated, Fv1, Fv2 still 4.4 and 4.8 std off (the mark says the std does not cover all)."""
+    every parameter is marked inflated, Fv1, Fv2 still 4.4 and 4.8 std off (the mark says the std does not cover
+    all)."""
     result = identify(caster_log, caster_robot, friction="wheel", torque_hold="foh")
     z = {n: (result.parameters[n][0] - truth) / result.parameters[n][1] for n, truth in TRUTH.items() if n != "D1"}
     assert result.diagnostics["feedback"]["disturbance"]

@@ -190,8 +190,7 @@ def test_the_delays_uncertainty_is_in_the_std():
 def test_a_slow_log_of_a_faster_controller_is_named_by_default(rate):
     """The issue's case: a 1 kHz controller logged at 100 Hz or 20 Hz, default options (no --delay).  The timing check
     (wmrid.estimators.delay.timing_check) finds the efforts acting well before the half logged step the default hold
-    assumes
-    (measured: 4.5 of 5 ms, 24.6 of 25 ms), applies that delay (--delay auto) and names --control-rate; no
+    assumes (measured: 4.5 of 5 ms, 24.6 of 25 ms), applies that delay (--delay auto) and names --control-rate; no
     parameter is beyond 3 std unflagged."""
     from types import SimpleNamespace
 
@@ -308,9 +307,8 @@ def test_the_timing_check_profiles_a_window_read_piece_by_piece():
 def test_the_profiles_slope_is_idims_sensitivity_to_the_delay():
     """``theta0_slope`` (d theta0 / d delay of the profile's least-squares fit) against an independent computation:
     IDIM's whole pipeline (:func:`wmrid.estimators.idim.identify_idim`) on the efforts read 1 ms earlier and later, a
-    central
-    difference.  On a noise-free sinusoid every row is fast, so the two fits are the same least squares: agreement
-    to 1e-3 (measured 1e-4; the difference step is 1 ms against the slope's 0.5 ms, on a parameter curve whose
+    central difference.  On a noise-free sinusoid every row is fast, so the two fits are the same least squares:
+    agreement to 1e-3 (measured 1e-4; the difference step is 1 ms against the slope's 0.5 ms, on a parameter curve whose
     second derivative is small over that range)."""
     from wmrid.estimators.idim import identify_idim
 

@@ -118,8 +118,7 @@ def test_a_caster_model_is_read_with_its_drag(amr_caster_json) -> None:
 
 def test_the_caster_columns_are_the_drag_torque_smoothed(amr_caster_log, amr_caster_json) -> None:
     """Phi p's drag part is the model's caster drag torque (:func:`wmrid.model.dynamics.friction_torque`) smoothed as
-    the
-    other speed columns: the Savitzky-Golay smoothing is linear."""
+    the other speed columns: the Savitzky-Golay smoothing is linear."""
     log = amr_caster_log
     m = mon_settings.model_from_dict(amr_caster_json, "amr.json")
     settings = mon_settings.MonitorSettings()
