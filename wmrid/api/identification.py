@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 from wmrid.api.inputs import LogOptions, load_robot, open_log
@@ -223,29 +223,93 @@ def identify(
 
     Returns an :class:`IdentificationResult`; ``result.parameters[name]`` is (value, std) in SI units.
     """
-    from wmrid.estimators.identify import identify as run_observer
+    no_two = (log, option("log"))
+    prep = prepare(
+        method=method, validate=validate, options=options, robot=robot, rotor_inertia=rotor_inertia, cutoff=cutoff,
+        weighted=weighted, forgetting=forgetting, torque_hold=torque_hold, control_rate=control_rate,
+        friction=friction, stdin_check=no_two,
+    )  # fmt: skip
+    # the observer streams the log; the classical methods filter and simulate the whole log
+    wheel_log = _log(log, options, prep.robot, whole=prep.method != "observer")
+    return run_prepared(
+        wheel_log, prep, validate=validate, options=options, form=form, k=k, alpha=alpha, box_width=box_width,
+        torque_hold=torque_hold, payload=payload, control_rate=control_rate, delay=delay, progress=progress,
+    )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """What :func:`prepare` checked and loaded: the method, its options, the robot and the friction model."""
+
+    method: str
+    method_options: Any
+    robot: Robot | None
+    friction: str
+
+
+def prepare(
+    *,
+    method: str = "observer",
+    validate: LogInput | None = None,
+    options: LogOptions | None = None,
+    robot: str | os.PathLike[str] | Robot | None = None,
+    rotor_inertia: float | None = None,
+    cutoff: float | None = None,
+    weighted: bool = False,
+    forgetting: float = 1.0,
+    torque_hold: str = "zoh",
+    control_rate: float | None = None,
+    friction: str = "auto",
+    stdin_check: tuple[Any, str] | None = None,
+    **_: Any,
+) -> Prepared:
+    """The checks :func:`identify` makes before it reads anything, in the command line's order (method options,
+    control rate, two standard inputs when ``stdin_check`` = (log, its name) is given, robot, friction model);
+    other keywords of :func:`identify` are accepted and ignored."""
     from wmrid.estimators.methods import check_method
 
     method = check_method(method)
     validating = validate is not None
     options_ = method_options(cutoff, weighted, forgetting, torque_hold)
     check_control_rate(control_rate, (method,), validating)
-    no_two_stdin(log, validate, option("log"))
+    if stdin_check is not None:
+        no_two_stdin(stdin_check[0], validate, stdin_check[1])
     robot_obj = robot_for(robot, options, rotor_inertia)
-    friction_ = friction_model(friction, (method,), validating, robot_obj)
-    # the observer streams the log; the classical methods filter and simulate the whole log
-    wheel_log = _log(log, options, robot_obj, whole=method != "observer")
+    return Prepared(method, options_, robot_obj, friction_model(friction, (method,), validating, robot_obj))
+
+
+def run_prepared(
+    wheel_log: WheelLog | LogStream,
+    prep: Prepared,
+    *,
+    validate: LogInput | None = None,
+    options: LogOptions | None = None,
+    form: str = "auto",
+    k: float = 10.0,
+    alpha: float = 1e-10,
+    box_width: float = 10.0,
+    torque_hold: str = "zoh",
+    payload: bool = False,
+    control_rate: float | None = None,
+    delay: float | str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    **_: Any,
+) -> IdentificationResult:
+    """:func:`identify` on a log already read, with what :func:`prepare` checked and loaded; other keywords of
+    :func:`identify` are accepted and ignored (:func:`prepare` used them)."""
+    from wmrid.estimators.identify import identify as run_observer
+
     result = run_observer(
-        wheel_log, robot_obj, form=form, k=k, alpha=alpha, box_width=box_width, torque_hold=torque_hold,
-        progress=progress, payload=payload, control_rate=control_rate, friction=friction_,
-        delay=delay_value(delay), feedback=method == "observer",  # another method is reported as asked
+        wheel_log, prep.robot, form=form, k=k, alpha=alpha, box_width=box_width, torque_hold=torque_hold,
+        progress=progress, payload=payload, control_rate=control_rate, friction=prep.friction,
+        delay=delay_value(delay), feedback=prep.method == "observer",  # another method is reported as asked
     )  # fmt: skip
-    if method != "observer":
+    if prep.method != "observer":
         from wmrid.estimators.methods import run
 
-        result = run(method, wheel_log, result, options_, robot_obj)
+        result = run(prep.method, wheel_log, result, prep.method_options, prep.robot)
     if validate is not None:
-        result = with_validation(result, validate, options, robot=robot_obj, torque_hold=torque_hold)
+        result = with_validation(result, validate, options, robot=prep.robot, torque_hold=torque_hold)
     return result
 
 

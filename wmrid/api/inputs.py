@@ -113,6 +113,11 @@ def load_robot(
     return load_toml(text)
 
 
+def _subset(opts: LogOptions, kind: type) -> dict[str, Any]:
+    """The fields of ``opts`` that the dataclass ``kind`` (TopicSelection, SignalOptions) has, by name."""
+    return {f.name: getattr(opts, f.name) for f in fields(kind)}
+
+
 def open_log(
     path: str | os.PathLike[str],
     options: LogOptions | None = None,
@@ -130,17 +135,10 @@ def open_log(
     from wmrid.io.signals import SignalOptions
 
     opts = log_options(options, **overrides).with_robot(robot)
-    selection = TopicSelection(
-        topic=opts.topic, velocity_topic=opts.velocity_topic, effort_topic=opts.effort_topic,
-        right_joint=opts.right_joint, left_joint=opts.left_joint, time_source=opts.time_source, align=opts.align,
-        velocity_from=opts.velocity_from,
-    )  # fmt: skip
+    selection = TopicSelection(**_subset(opts, TopicSelection))
     signals = SignalOptions(
-        speed_unit=opts.speed_unit, wheel_radius=opts.wheel_radius, effort=opts.effort, effort_unit=opts.effort_unit,
-        torque_constant=opts.torque_constant, gear_ratio=opts.gear_ratio,
-        efficiency=1.0 if opts.efficiency is None else opts.efficiency, mirror_left=opts.mirror_left,
-        flip_effort=opts.flip_effort,
-    )  # fmt: skip
+        **{**_subset(opts, SignalOptions), "efficiency": 1.0 if opts.efficiency is None else opts.efficiency}
+    )
     mapping = parse_column_mapping(opts.columns) if isinstance(opts.columns, str) and opts.columns else opts.columns
     k_r = robot.nominal.k_r if robot is not None else None
     return open_file(

@@ -4,19 +4,13 @@ HTML, Markdown or JSON by the file's suffix."""
 
 from __future__ import annotations
 
+import inspect
 import json
 import os
 from dataclasses import replace
 from typing import Any
 
-from wmrid.api.identification import (
-    check_control_rate,
-    friction_model,
-    identify,
-    method_options,
-    no_two_stdin,
-    robot_for,
-)
+from wmrid.api.identification import identify, no_two_stdin, prepare, run_prepared
 from wmrid.api.inputs import LogOptions, read_log
 from wmrid.core.errors import LogFormatError, UsageError, WmridError, option
 from wmrid.core.wheel_log import LogStream, WheelLog
@@ -91,6 +85,9 @@ def report(
         return replace(rep, identification=result, log=log)
     if isinstance(result, dict):
         return _from_saved(dict(result), str(result.get("source") or "result"), truth, figures)
+    unknown = sorted(set(identify_options) - set(inspect.signature(identify).parameters))
+    if unknown:  # prepare() and run_prepared() take identify()'s keywords and ignore the other's
+        raise TypeError(f"report() got unexpected keyword arguments {unknown}")
     validate = identify_options.get("validate")
     method = identify_options.get("method", "observer")
     if isinstance(result, (str, os.PathLike)):
@@ -106,18 +103,12 @@ def report(
                 )
             return _from_saved(_parse_saved(source), source.name, truth, figures)
         # a log: the checks identify() makes, before the log is read
-        robot_obj = robot_for(robot, options, rotor_inertia)
-        method_options(
-            identify_options.get("cutoff"), identify_options.get("weighted", False),
-            identify_options.get("forgetting", 1.0), identify_options.get("torque_hold", "zoh"),
-        )  # fmt: skip
-        check_control_rate(identify_options.get("control_rate"), (method,), validate is not None)
-        friction_model(identify_options.get("friction", "auto"), (method,), validate is not None, robot_obj)
-        result = read_log(os.fspath(result), options, robot=robot_obj, data=source.data)
+        prep = prepare(options=options, robot=robot, rotor_inertia=rotor_inertia, **identify_options)
+        wheel_log = read_log(os.fspath(result), options, robot=prep.robot, data=source.data)
+        identified = run_prepared(wheel_log, prep, options=options, **identify_options)
     else:
-        robot_obj = robot_for(robot, options, rotor_inertia)
-    wheel_log = result.read() if isinstance(result, LogStream) else result
-    identified = identify(wheel_log, robot_obj, options=options, **identify_options)
+        wheel_log = result.read() if isinstance(result, LogStream) else result
+        identified = identify(wheel_log, robot, options=options, rotor_inertia=rotor_inertia, **identify_options)
     rep = build_report(identified.to_dict(), result=identified, log=wheel_log, truth=truth, figures=figures)
     return replace(rep, identification=identified, log=wheel_log)
 
@@ -128,19 +119,19 @@ def residual_frame(rep: Report) -> Any:
     import pandas as pd
 
     result, log, data = rep.identification, rep.log, rep.result
-    if result is not None and log is not None and "torque" in rep.residuals:
-        log_t = rep.residuals["torque"]["residual"]
-        hist = result.history
-        frame = pd.DataFrame({"t": hist.t, "e_r": hist.e[:, 0], "e_l": hist.e[:, 1], "lambda_min": hist.lambda_min})
-        full = pd.DataFrame({"t": log.t - log.t[0], "tau_res_r": log_t[:, 0], "tau_res_l": log_t[:, 1]})
-        return pd.merge_asof(full, frame, on="t", direction="nearest")
     if result is not None:
-        hist = result.history
-        return pd.DataFrame({"t": hist.t, "e_r": hist.e[:, 0], "e_l": hist.e[:, 1], "lambda_min": hist.lambda_min})
-    if "history" in data:
+        h = result.history
+        frame = pd.DataFrame({"t": h.t, "e_r": h.e[:, 0], "e_l": h.e[:, 1], "lambda_min": h.lambda_min})
+    elif "history" in data:
         h = data["history"]
-        return pd.DataFrame({"t": h["t"], "e_r": h["e_r"], "e_l": h["e_l"], "lambda_min": h["lambda_min"]})
-    raise UsageError(f"{option('residuals')}: this result holds no history; give the log itself")
+        frame = pd.DataFrame({"t": h["t"], "e_r": h["e_r"], "e_l": h["e_l"], "lambda_min": h["lambda_min"]})
+    else:
+        raise UsageError(f"{option('residuals')}: this result holds no history; give the log itself")
+    if result is not None and log is not None and "torque" in rep.residuals:
+        res = rep.residuals["torque"]["residual"]
+        full = pd.DataFrame({"t": log.t - log.t[0], "tau_res_r": res[:, 0], "tau_res_l": res[:, 1]})
+        frame = pd.merge_asof(full, frame, on="t", direction="nearest")
+    return frame
 
 
 def write_report(rep: Report, output: str | os.PathLike[str], *, force: bool = False) -> None:

@@ -4,37 +4,19 @@ the output goes."""
 from __future__ import annotations
 
 import sys
+from enum import Enum
 from pathlib import Path
 from typing import Any
 
 from wmrid.core.errors import UsageError
 
 
-def _read_wheel_log(
-    log: str,
-    columns: str | None,
-    time_unit: str,
-    robot_obj,
-    *,
-    data: bytes | None = None,
-    whole: bool = True,
-    **log_options,
-):
-    """Read LOG with the log-input options (shared by the commands that read logs; Enum values accepted).
+def log_opts(params: dict):
+    """The :class:`wmrid.api.inputs.LogOptions` of a command's log-input flags: its parameters by name (``locals()``),
+    Enum choices as their plain values."""
+    from wmrid.api.inputs import LOG_OPTION_NAMES, LogOptions
 
-    whole : the log in memory (a WheelLog); else a LogStream, read piece by piece when iterated.
-    """
-    from wmrid.api.inputs import open_log
-
-    stream = open_log(log, log_opts(columns, time_unit, log_options), robot=robot_obj, data=data)
-    return stream.read() if whole else stream
-
-
-def log_opts(columns: str | None, time_unit: str, log_options: dict):
-    """The :class:`wmrid.api.inputs.LogOptions` of a command's log-input flags."""
-    from wmrid.api.inputs import LogOptions
-
-    return LogOptions(columns=columns, time_unit=time_unit, **log_options)
+    return LogOptions(**{n: params[n].value if isinstance(params[n], Enum) else params[n] for n in LOG_OPTION_NAMES})
 
 
 def stderr_console():

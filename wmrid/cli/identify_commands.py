@@ -49,7 +49,6 @@ from wmrid.cli.options import (
     VelocityTopicOpt,
     WeightedOpt,
     WheelRadiusOpt,
-    log_options,
 )
 from wmrid.core.errors import UsageError
 
@@ -140,7 +139,7 @@ def identify(
     try:
         result = run_identify(
             log, robot, method=method.value, rotor_inertia=rotor_inertia, validate=validate,
-            options=log_opts(columns, time_unit.value, log_options(locals())), form=form.value, k=k, alpha=alpha,
+            options=log_opts(locals()), form=form.value, k=k, alpha=alpha,
             box_width=box_width, torque_hold=torque_hold.value, payload=payload, control_rate=control_rate,
             delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted, forgetting=forgetting,
             progress=progress_cb,
@@ -256,7 +255,7 @@ def report(
         raise UsageError("INPUT and --validate cannot both be standard input; give one of them as a file")
     rep = build(
         input_, truth=truth_params, figures=suffix in (".html", ".htm", ".md"), rotor_inertia=rotor_inertia,
-        options=log_opts(columns, time_unit.value, log_options(locals())), robot=robot, method=method.value,
+        options=log_opts(locals()), robot=robot, method=method.value,
         validate=validate, form=form.value, k=k, alpha=alpha, torque_hold=torque_hold.value, payload=payload,
         control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted,
         forgetting=forgetting,
@@ -335,7 +334,7 @@ def compare(
 
     data = run_compare(
         log, robot, methods=methods.split(","), validate=validate, truth=truth, rotor_inertia=rotor_inertia,
-        options=log_opts(columns, time_unit.value, log_options(locals())), torque_hold=torque_hold.value,
+        options=log_opts(locals()), torque_hold=torque_hold.value,
         control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted,
         forgetting=forgetting,
     ).to_dict()  # fmt: skip

@@ -201,19 +201,6 @@ MirrorLeftOpt = Annotated[
 ]
 
 
-#: The log-input options every log-reading command takes (names of its parameters).
-_LOG_OPTIONS = (
-    "topic", "velocity_topic", "effort_topic", "right_joint", "left_joint", "time_source", "align", "velocity_from",
-    "speed_unit", "wheel_radius", "effort", "effort_unit", "torque_constant", "gear_ratio", "efficiency",
-    "mirror_left", "flip_effort",
-)  # fmt: skip
-
-
-def log_options(params: dict) -> dict:
-    """The log-input options out of a command's parameters, Enum choices as their plain values."""
-    return {name: params[name].value if isinstance(params[name], Enum) else params[name] for name in _LOG_OPTIONS}
-
-
 RotorInertiaOpt = Annotated[
     float | None,
     typer.Option(help="URDF robots: motor rotor inertia I_r, kg m^2 (when the URDF has no rotor links)."),

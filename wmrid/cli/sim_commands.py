@@ -45,7 +45,6 @@ from wmrid.cli.options import (
     VelocityFromOpt,
     VelocityTopicOpt,
     WheelRadiusOpt,
-    log_options,
 )
 
 
@@ -181,7 +180,7 @@ def monitor(
     from wmrid.reporting.render import to_json
 
     result = run_monitor(
-        log, model, options=log_opts(columns, time_unit.value, log_options(locals())), calibration=calibration,
+        log, model, options=log_opts(locals()), calibration=calibration,
         false_alarm_rate=false_alarm_rate,
     )  # fmt: skip
     payload = result.to_dict()
