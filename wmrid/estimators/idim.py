@@ -15,8 +15,9 @@ by differentiating low-pass filtered velocities, which is where its choices live
   interpolated onto it (linear interpolation attenuates a component
   at f by less than (pi f / rate)^2 / 3: 1e-5 at 1 Hz from 1 kHz).  A step longer than
   :data:`MAX_STEP_RATIO` mean steps is a hole interpolation cannot bridge: refused.
-* Parallel filtering (Gautier 1997).  One zero-phase Butterworth low-pass (``scipy.signal.butter`` +
-  ``sosfiltfilt``, order ``order``, so the magnitude is 1 / (1 + (f / f_c)^(2 order)) and the phase 0)
+* Parallel filtering (Gautier 1997).  One zero-phase Butterworth low-pass (:mod:`wmrid.estimators.lowpass`,
+  as ``scipy.signal.butter`` + ``sosfiltfilt``; order ``order``, so the magnitude is 1 / (1 + (f / f_c)^(2 order))
+  and the phase 0)
   is applied to the torques AND to every regressor column that is a function of the velocities:
   eta_i, the Coriolis columns eta_1 eta_2 - eta_j^2 and sgn(eta_i), each computed from the unfiltered
   samples first.  The acceleration columns are the 5-point central derivative of the filtered velocity,
@@ -39,7 +40,7 @@ by differentiating low-pass filtered velocities, which is where its choices live
   (``bench/_common.noisy_paper_sim``, 40 s, seed 1) the inertia errors were within 0.5 % for cutoffs of
   2-15 Hz, 0.5-1.1 % at 25 Hz and 3.7-5.9 % at 50 Hz (the rule picks about 5 Hz there).  On a noise-free
   log the floor is rounding noise and the rule gives f_hi.
-* Edges.  ``sosfiltfilt`` pads by odd reflection over as many samples as are later dropped; the samples
+* Edges.  The zero-phase filter pads by odd reflection over as many samples as are later dropped; the samples
   within :func:`edge_seconds` of either end (the slowest filter pole decayed to :data:`EDGE_TOLERANCE`:
   0.38 s for order 4 at 10 Hz; with the long padding the
   remaining transient measured ~1e-6 of the torque on a noise-free log) are dropped.

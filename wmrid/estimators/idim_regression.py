@@ -234,12 +234,12 @@ def velocity_bandwidth(eta: np.ndarray, rate_hz: float) -> float:
     with 8 dof its chance is below 1e-12); the floor is the median spectrum above rate / 4.  The Nyquist
     frequency when the floor is 0 (a noise-free log).
     """
-    from scipy.signal import welch
+    from wmrid.estimators.lowpass import welch
 
     n = len(eta)
     nper = 2 ** max(3, math.floor(math.log2(max(8, min(n / 4.0, 8.0 * rate_hz)))))
     nper = min(nper, n)
-    freq, psd = welch(eta, fs=rate_hz, window="blackmanharris", nperseg=nper, detrend="linear", axis=0)
+    freq, psd = welch(eta, rate_hz, nper)
     top = 0.0
     for j in range(eta.shape[1]):
         floor = float(np.median(psd[freq >= rate_hz / 4.0, j]))
@@ -320,7 +320,7 @@ def idim_regression(
     Raises UsageError for bad arguments, LogFormatError for unusable time stamps, NotIdentifiableError
     when the log is too short for the filter.
     """
-    from scipy.signal import butter, sosfiltfilt
+    from wmrid.estimators.lowpass import butter_sos, filtfilt
 
     t, eta, tau = _check_arrays(t, eta, tau)
     if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or not 1 <= order <= 12:
@@ -368,7 +368,7 @@ def idim_regression(
             f"{edge_s:.3g} s of filter transient at each end (cutoff {cutoff:g} Hz); it needs at least {MIN_SAMPLES}"
         )
 
-    sos = butter(order, cutoff, fs=rate, output="sos")
+    sos = butter_sos(order, cutoff, rate)
     pad = min(edge, n - 1)
     e1, e2 = eta[:, 0], eta[:, 1]
     raw = (e1, e2, e1 * e2 - e2 * e2, e1 * e2 - e1 * e1, np.sign(e1), np.sign(e2), tau[:, 0], tau[:, 1])
@@ -377,7 +377,7 @@ def idim_regression(
         raw = raw + tuple(caster_columns(eta, form).T)
     filt = np.empty((n, len(raw)))
     for j, col in enumerate(raw):  # one column at a time bounds the filter's temporary memory
-        filt[:, j] = sosfiltfilt(sos, col, padlen=pad)
+        filt[:, j] = filtfilt(sos, col, pad)
     acc = _five_point_derivative(filt[:, 0:2], dt)
     features = np.column_stack([acc[keep], filt[keep][:, [2, 3, 0, 1, 4, 5]]])
     if form is not None:
