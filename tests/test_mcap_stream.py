@@ -1,6 +1,10 @@
 """Long MCAP recordings are streamed: the pieces of ``open_log(bag, rows=small)`` join to exactly what the
 whole decode gives (t, eta, tau, notes), and identify on the stream equals identify on the whole log.
 
+Every test runs twice (:func:`second_pass`): with the survey reading the parts the scan kept (the default for
+recordings of up to about 70 min), and with ``_MCAP_REPLAY_BYTES = 0``, the file decoded again on every pass
+(longer recordings).
+
 The reference is :func:`wmrid.io.logs.read_log` with the default piece size, which decodes these small bags
 whole (the path tests/test_mcap_read.py checks against mcap_ros2's generic decoder); with a small ``rows``
 the same bags are over the whole-decode limit and take the streaming path.
@@ -33,6 +37,13 @@ from wmrid.sim.simulate import simulate
 PAPER = BUILTIN_ROBOTS["paper"]
 T0 = 1_700_000_000 * 10**9
 NAMES = ["left_wheel_joint", "right_wheel_joint"]
+
+
+@pytest.fixture(autouse=True, params=["replayed", "decoded again"])
+def second_pass(request, monkeypatch) -> str:
+    if request.param == "decoded again":
+        monkeypatch.setattr(mcap_log, "_MCAP_REPLAY_BYTES", 0)
+    return request.param
 
 
 def write_messages(path: Path, messages, compression=CompressionType.ZSTD, chunked=True, chunk_size=16384) -> Path:
@@ -246,7 +257,7 @@ def test_identify_on_the_stream_equals_identify_on_the_whole_log(tmp_path, monke
     assert json.dumps(small.to_dict()) == json.dumps(identify(stream_arrays(whole_log, 4096), PAPER).to_dict())
 
 
-def test_the_streaming_path_holds_a_bounded_number_of_messages(tmp_path):
+def test_the_streaming_path_holds_a_bounded_number_of_messages(tmp_path, second_pass):
     sim = simulate(PAPER.reference, PAPER.nominal, trajectory="sinusoid", duration=30.0, seed=5)
     path = tmp_path / "sim.mcap"
     write_joint_state_mcap(path, sim.to_frame(), odom_topic=None, chunk_size=1 << 15)
@@ -254,9 +265,30 @@ def test_the_streaming_path_holds_a_bounded_number_of_messages(tmp_path):
     for rows in (500, 2000):
         stream, log = _streamed(path, rows)
         assert len(log) == len(sim.t) == 30_001
+        if second_pass == "replayed":  # the scan's parts, let go as they are handed out: never more than the log
+            assert 0 < stream._mcap_peak <= len(log) + 2 * rows
+            continue
         # decoded at once (a chunk), waiting to be cleaned (a piece), cut into pieces (a piece): never the log
         assert 0 < stream._mcap_peak <= 3 * rows + 4 * per_chunk
         assert stream._mcap_peak < len(log) / 4
+
+
+def test_within_the_replay_budget_the_file_is_decoded_once(tmp_path, second_pass):
+    """The survey's pass reads what the scan kept: the file can be gone by then (and the result is the whole
+    decode's).  Decoded again, its absence is an error; either way the replay (second pass) is the same."""
+    path = write_messages(tmp_path / "one.mcap", single_topic_messages(3000))
+    whole = read_log(str(path))
+    stream = open_log(str(path), rows=333)
+    gone = tmp_path / "elsewhere.mcap"
+    path.rename(gone)
+    if second_pass == "decoded again":
+        with pytest.raises(LogFormatError, match="cannot be read"):
+            list(stream)
+        return
+    pieces = list(stream)
+    assert hasattr(stream, "_mcap_peak")
+    _same(stream.read(), whole)
+    assert sum(len(p) for p in pieces) == len(whole)
 
 
 def test_a_short_bag_is_decoded_whole_in_one_pass(tmp_path):

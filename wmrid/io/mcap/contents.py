@@ -212,6 +212,9 @@ class McapContents:
 
     complete : False when :func:`scan_mcap` stopped keeping the arrays: ``joints`` then holds a
     :class:`JointSummary` per topic instead of a :class:`JointSeries`.
+    replay : with ``complete`` False, the JointState parts the scan decoded, without positions, when they fit
+    in its ``spare`` bytes: [(channel id, (log_ns, stamp_ns, None, velocity, effort))] in file order, to be
+    read (and emptied) by the next pass instead of decoding the file again; else None.
     """
 
     source: str
@@ -225,6 +228,7 @@ class McapContents:
     size_bytes: int
     lost_bytes: int = 0
     complete: bool = True
+    replay: list | None = field(default=None, repr=False, compare=False)
 
     def channel(self, topic: str) -> ChannelInfo | None:
         return next((c for c in self.channels if c.topic == topic), None)

@@ -16,13 +16,21 @@ from wmrid.io.signals import SignalOptions
 
 if TYPE_CHECKING:
     pass
-from wmrid.core.wheel_log import CHUNK_ROWS, MIN_SAMPLES, REQUIRED, LogStream, WheelLog, stream_arrays
+from wmrid.core.wheel_log import CACHE_ROWS, CHUNK_ROWS, MIN_SAMPLES, REQUIRED, LogStream, WheelLog, stream_arrays
 from wmrid.io.sources import Source
 from wmrid.io.stamps import ABSOLUTE_LIMIT_S, NS_PER_UNIT, seconds_from_stamps
 
 #: An MCAP whose JointState topics hold at most this many pieces' worth of messages is decoded whole, in one
 #: pass (a stream of that length keeps its samples in memory anyway); a longer one is streamed.
 _MCAP_WHOLE_PIECES = 4  # pieces of CHUNK_ROWS: bags of up to ~1 M messages are decoded in one pass
+
+
+#: A streamed recording's first pass keeps the speeds and efforts it decoded while they take at most this many
+#: bytes, and the survey reads them instead of decoding the file a second time: the 48 bytes per message of
+#: a two-wheel JointState (two stamps, two speeds, two efforts) for as many messages as LogStream caches
+#: samples (CACHE_ROWS, about 70 min at 1 kHz), about 200 MB, of the same order as that cache (40 bytes a
+#: sample), which the survey fills as it empties these.  Longer recordings are decoded again on each pass.
+_MCAP_REPLAY_BYTES = 48 * CACHE_ROWS
 
 
 def read_mcap_log(
@@ -40,7 +48,9 @@ def read_mcap_log(
     whole (:func:`_mcap_whole_log`).  A longer recording keeps only a summary per topic; the topic, joint and
     time choices are made from it and each pass over the stream decodes the file again, a batch of records
     at a time (:func:`_mcap_pieces`): memory does not grow with the recording, and the samples and notes are
-    those of the whole decode.  Read whole all the same, with a note saying why: speeds derived from
+    those of the whole decode.  The first of those passes (the survey) reads the speeds and efforts the scan
+    kept instead when they fitted in ``_MCAP_REPLAY_BYTES``: up to about 70 minutes at 1 kHz the file is
+    decoded once.  Read whole all the same, with a note saying why: speeds derived from
     positions, messages out of time order in the file, and the other cases
     :func:`wmrid.io.mcap.joint_stream.stream_plan`
     lists; a JSON topic is always read whole.
@@ -55,7 +65,7 @@ def read_mcap_log(
             raise UsageError(f"a JSON topic needs field paths for {', '.join(missing)} in {option('columns')}")
         contents = read_mcap(path, data=source.data, json_fields={selection.topic: dict(columns)})
         return stream_arrays(_mcap_whole_log(source, contents, selection, signals, gear_ratio), rows)
-    contents = scan_mcap(path, source.data, keep=_MCAP_WHOLE_PIECES * rows)
+    contents = scan_mcap(path, source.data, keep=_MCAP_WHOLE_PIECES * rows, spare=_MCAP_REPLAY_BYTES)
     if contents.complete:
         return stream_arrays(_mcap_whole_log(source, contents, selection, signals, gear_ratio), rows)
     plan, why = stream_plan(contents, selection, signals, gear_ratio)
@@ -68,6 +78,9 @@ def read_mcap_log(
             why = "its stamps cross the limit of absolute float64 times"
     if why is not None:
         from dataclasses import replace
+
+        if contents.replay:
+            contents.replay.clear()  # not needed by the whole decode, which would otherwise hold both
 
         whole = _mcap_whole_log(source, read_mcap(path, data=source.data), selection, signals, gear_ratio)
         note = f"the recording was decoded whole (memory grows with its length): {why}"
@@ -132,11 +145,28 @@ def _mcap_pieces(
     path = source.path or source.name
     unit = signals.effort_label
     per_s = float(NS_PER_UNIT["s"])
+    kept = [contents.replay]  # the scan's parts, for the first pass
 
     def pieces() -> Generator[WheelLog, None, tuple[str, ...]]:
         signal = SignalStream(plan, selection, signals, gear_ratio, source.name, rows)
         ready: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-        state = {"ready": 0, "total": 0, "offset": None, "error": None, "peak": 0}
+        state = {"ready": 0, "total": 0, "offset": None, "error": None, "peak": 0, "kept": 0}
+
+        def batches(channels: list[int]) -> Iterator[dict[int, list[tuple[np.ndarray | None, ...]]]]:
+            """The parts of the chosen channels: those the scan kept, each let go once handed out (the first
+            pass only), or decoded from the file again."""
+            replay, kept[0] = kept[0], None
+            if replay is None:
+                yield from iter_joint_parts(path, source.data, channels)
+                return
+            wanted = set(channels)
+            state["kept"] = sum(len(part[0]) for cid, part in replay if cid in wanted)
+            for i, (cid, part) in enumerate(replay):
+                replay[i] = (cid, None)
+                if cid in wanted:
+                    state["kept"] -= len(part[0])
+                    yield {cid: [part]}
+            replay.clear()
 
         def take(batch: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> None:
             for t_ns, speed, effort in batch:
@@ -173,8 +203,8 @@ def _mcap_pieces(
                 ready.append((t[start:], eta[start:], tau[start:]))
             state["ready"] = len(t) - start
 
-        for parts in iter_joint_parts(path, source.data, signal.channels):
-            decoded = sum(len(p[0]) for got in parts.values() for p in got)
+        for parts in batches(signal.channels):
+            decoded = sum(len(p[0]) for got in parts.values() for p in got) + state["kept"]
             take(signal.feed(parts))
             state["peak"] = max(state["peak"], decoded + signal.held + state["ready"])
             stream._mcap_peak = state["peak"]  # type: ignore[attr-defined]

@@ -33,7 +33,9 @@ Bounded memory for long recordings (:func:`scan_mcap`, :func:`iter_joint_parts`)
 decoded JointState arrays only while they hold at most ``keep`` messages; past that it keeps per topic
 only what the whole-log choices need (:class:`JointSummary`: joint names, which fields are populated
 for which joint, whether each time source is set and in order, its range, its repeated stamps and a
-histogram of its steps).  A second pass decodes the chosen topics again, handing out the arrays of each
+histogram of its steps).  While the speeds and efforts it decoded (positions left out) take at most
+``spare`` bytes, it also keeps them, in file order (:attr:`McapContents.replay`): the next pass reads those
+instead of the file.  Otherwise a second pass decodes the chosen topics again, handing out the arrays of each
 batch of records (a chunk, or the top-level messages of a 4 MiB stretch of an unchunked file) as it goes.
 Both passes walk the file exactly as :func:`read_mcap` does, so the arrays come out the same, in the same
 order.
@@ -105,13 +107,15 @@ def read_mcap(
     return _read_buffer(state, buf)
 
 
-def scan_mcap(path: str, data: bytes | None = None, *, keep: int) -> McapContents:
+def scan_mcap(path: str, data: bytes | None = None, *, keep: int, spare: int = 0) -> McapContents:
     """The first pass over a recording that may be long: :func:`read_mcap`'s contents (JointState only, no
     JSON) while its JointState topics hold at most ``keep`` messages in all; past that, ``complete`` is
     False and ``joints`` holds a :class:`JointSummary` per topic.  Notes and inventory as in :func:`read_mcap`.
+    spare : bytes; when ``complete`` is False and the parts decoded without their positions fit in this many
+    bytes, ``replay`` holds them (see the module docstring), else None.
     """
     buf, release = _map(path, data)
-    return _read_buffer(_ReadState(path, {}, True, release=release, keep=keep), buf)
+    return _read_buffer(_ReadState(path, {}, True, release=release, keep=keep, spare=spare), buf)
 
 
 def iter_joint_parts(
@@ -226,7 +230,7 @@ def _read_buffer(state: _ReadState, buf: np.ndarray) -> McapContents:
     return McapContents(
         source=name, profile=state.profile, library=state.library, channels=channels, joints=joints,
         json=json_out, metadata=state.metadata, notes=tuple(notes), size_bytes=size, lost_bytes=lost_bytes,
-        complete=state.complete,
+        complete=state.complete, replay=None if state.complete else state.replay,
     )  # fmt: skip
 
 
@@ -234,7 +238,9 @@ class _ReadState:
     """Schemas, channels and accumulators while walking the records.
 
     keep : None to keep every JointState array (:func:`read_mcap`); else keep them while they hold at most
-    ``keep`` messages, and past that only their statistics (``complete`` turns False).  wanted : decode only
+    ``keep`` messages, and past that only their statistics (``complete`` turns False); with ``spare`` bytes,
+    also the parts without positions while they fit (``replay``: [(channel id, part)] in file order, or None
+    once they do not).  wanted : decode only
     these JointState channels (the second pass; the caller takes their parts as they come).  release : hands
     the mapped pages below an offset back to the kernel.
     """
@@ -246,6 +252,7 @@ class _ReadState:
         decode_joint_states: bool,
         *,
         keep: int | None = None,
+        spare: int = 0,
         wanted: set[int] | None = None,
         release: Callable[[int], None] | None = None,
     ):
@@ -259,6 +266,9 @@ class _ReadState:
         self.release = release
         self.complete = True
         self.kept = 0
+        self.spare = spare
+        self.replay: list[tuple[int, tuple[np.ndarray | None, ...]]] | None = [] if keep is not None and spare else None
+        self.replay_bytes = 0
         self.schemas: dict[int, dict[str, Any]] = {}
         self.channels: dict[int, Accumulator] = {}
         self.metadata: dict[str, dict[str, str]] = {}
@@ -565,6 +575,13 @@ class _ReadState:
     def _store(self, acc: Accumulator, part: tuple[np.ndarray, ...]) -> None:
         """Keep a channel's decoded part, or (past ``keep`` messages) only its statistics."""
         acc.batches += 1
+        if self.replay is not None:
+            times, stamp, _, vel, eff = part
+            self.replay_bytes += times.nbytes + stamp.nbytes + vel.nbytes + eff.nbytes
+            if self.replay_bytes <= self.spare:
+                self.replay.append((acc.info["id"], (times, stamp, None, vel, eff)))  # arrays shared, not copied
+            else:
+                self.replay = None
         if self.keep is None:
             acc.parts.append(part)
             return
