@@ -309,17 +309,15 @@ def test_messages_that_blamed_the_wrong_thing(tmp_path, small_log, capsys):
         assert needle in _one_error(capsys), argv
 
 
-def test_compressed_and_other_formats_are_named(tmp_path, small_log, capsys):
-    """A gzip or zstd log: "byte 8 is a NUL byte"; now the format is named, with the command that unpacks it."""
-    import gzip
+def test_formats_wmrid_does_not_read_are_named(tmp_path, small_log, capsys):
+    """A zip archive or a ROS 1 bag was "byte 8 is a NUL byte"; now the format is named, with the way out.
+    (Compressed CSV is read: tests/test_compressed.py.)"""
+    import zipfile
 
-    import zstandard
-
-    data = small_log.read_bytes()
-    (tmp_path / "log.csv.gz").write_bytes(gzip.compress(data))
-    (tmp_path / "log.csv.zst").write_bytes(zstandard.compress(data))
+    with zipfile.ZipFile(tmp_path / "logs.zip", "w") as archive:
+        archive.write(small_log, "in.csv")
     (tmp_path / "run.bag").write_bytes(b"#ROSBAG V2.0\n" + bytes(64))
-    for name, needle in (("log.csv.gz", "gzip-compressed"), ("log.csv.zst", "zstd-compressed"), ("run.bag", "ROS 1")):
+    for name, needle in (("logs.zip", "a zip archive"), ("run.bag", "ROS 1")):
         assert run("identify", str(tmp_path / name), "--format", "json") == 2
         assert needle in _one_error(capsys)
 

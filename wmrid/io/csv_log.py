@@ -11,7 +11,6 @@ the line of the file as an editor counts it (header = line 1).
 
 from __future__ import annotations
 
-import io
 import re
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -25,7 +24,7 @@ if TYPE_CHECKING:
     import pandas
 from wmrid.io.columns import select
 from wmrid.io.parquet_log import arrow_values
-from wmrid.io.sources import MCAP_MAGIC, PARQUET_MAGIC, SNIFF_BYTES, Source, one_line
+from wmrid.io.sources import MCAP_MAGIC, PARQUET_MAGIC, SNIFF_BYTES, DamagedStream, Source, one_line
 
 _COMMENT_MARKS = ("%", "#")
 
@@ -85,8 +84,7 @@ def _csv_line_finder(source: Source, skip: int = 0, has_header: bool = True) -> 
     """
 
     def where(index: int) -> str:
-        fh = open(source.path, "rb") if source.data is None else io.BytesIO(source.data)  # noqa: SIM115
-        with fh:
+        with source.open() as fh:
             seen_header = not has_header
             count = -1
             for lineno, raw in enumerate(fh, start=1):
@@ -124,6 +122,8 @@ def csv_layout(source: Source) -> CsvLayout:
 
     name = source.name
     text, encoding, notes = _text_head(source)
+    if source.compression:
+        notes.append(f"{source.compression}-compressed: decompressed as it was read")
     if "\n" not in text and "\r" not in text and len(source.head(SNIFF_BYTES + 1)) > SNIFF_BYTES:
         longer = source.head(MAX_HEADER_BYTES + 1)
         if not any(mark in longer for mark in (b"\n", b"\r")) and len(longer) > MAX_HEADER_BYTES:
@@ -183,9 +183,12 @@ def csv_layout(source: Source) -> CsvLayout:
     if int(pd.__version__.split(".")[0]) < 3:  # pandas 3 parses floats exactly by default (and warns on this)
         c_options["float_precision"] = "round_trip"
     try:
-        header = pd.read_csv(source.opener(), nrows=0 if has_header else 1, **c_options)
+        with source.open() as fh:
+            header = pd.read_csv(fh, nrows=0 if has_header else 1, **c_options)
     except (ValueError, UnicodeDecodeError) as err:
         raise fail(err) from err
+    except DamagedStream as err:
+        raise source.damaged(err) from err
     if not has_header:
         c_options["names"] = [str(i + 1) for i in range(len(header.columns))]
         header = header.set_axis(c_options["names"], axis=1)
@@ -226,7 +229,7 @@ def csv_chunks(
     def c_engine(skip_rows: int) -> Iterator[tuple[int, dict[str, Any]]]:
         base = 0
         try:  # all columns: usecols would hide ragged rows
-            with pd.read_csv(source.opener(), chunksize=rows, **c_options) as reader:
+            with source.open() as fh, pd.read_csv(fh, chunksize=rows, **c_options) as reader:
                 for frame in reader:
                     n = len(frame)
                     if base + n > skip_rows:
@@ -237,6 +240,8 @@ def csv_chunks(
                     base += n
         except (ValueError, UnicodeDecodeError) as err:
             raise layout.fail(err) from err
+        except DamagedStream as err:
+            raise source.damaged(err) from err
 
     def chunks() -> Iterator[tuple[int, dict[str, Any]]]:
         done = 0
@@ -265,14 +270,16 @@ def _arrow_csv(
     import pyarrow as pa
     import pyarrow.csv as pcsv
 
+    fh = source.open()
     try:
         reader = pcsv.open_csv(
-            source.opener(),
+            fh,
             read_options=pcsv.ReadOptions(block_size=1 << 24, use_threads=True),
             parse_options=pcsv.ParseOptions(delimiter=sep),
             convert_options=pcsv.ConvertOptions(include_columns=usecols),
         )
     except (pa.ArrowException, OSError, ValueError) as err:
+        fh.close()
         raise _ArrowCsvRefused from err
     pending: list[Any] = []
     count = 0
@@ -281,7 +288,7 @@ def _arrow_csv(
         return {key: arrow_values(table.column(actual[col]).combine_chunks()) for key, col in chosen.items()}
 
     try:
-        with reader:
+        with fh, reader:
             for batch in reader:
                 pending.append(batch)
                 count += batch.num_rows

@@ -68,7 +68,7 @@ def inspect_log(path: str) -> McapInventory | TableInventory:
     from wmrid.io.sources import detect_format, open_source
 
     source = open_source(path)
-    kind = detect_format(path, source.head(8))
+    kind = detect_format(path, source.head(8), source.compression)
     if kind == "mcap":
         return _inspect_mcap(source)
     return _inspect_table(source, kind)
@@ -128,7 +128,8 @@ def _inspect_table(source, kind: str) -> TableInventory:
 
         layout = csv_layout(source)
         try:
-            frame = pd.read_csv(source.opener(), nrows=5, **layout.c_options)
+            with source.open() as fh:
+                frame = pd.read_csv(fh, nrows=5, **layout.c_options)
         except (ValueError, UnicodeDecodeError) as err:
             raise layout.fail(err) from err
         columns = [{"name": str(c).strip(), "type": str(t)} for c, t in frame.dtypes.items()]

@@ -106,7 +106,7 @@ def open_log(
 
         register_input(path)  # an output of this command may not be this file
     source = open_source(path) if data is None else Source(STDIN_NAME if path == "-" else path, None, data)
-    kind = detect_format(path, source.head(8))
+    kind = detect_format(path, source.head(8), source.compression)
     signals = signals or SignalOptions()
     if kind == "mcap":
         if explicit & set(REFERENCE):
@@ -426,7 +426,7 @@ def read_metadata(path: str) -> dict[str, str]:
     import pyarrow.parquet as pq
 
     source = open_source(path)
-    if detect_format(path, source.head(8)) != "parquet":
+    if detect_format(path, source.head(8), source.compression) != "parquet":
         return {}
     try:
         with pa.OSFile(source.path, "r") if source.path is not None else pa.BufferReader(source.data) as stream:

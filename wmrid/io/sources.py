@@ -2,7 +2,12 @@
 
 Format: by suffix (``.csv .txt .tsv`` -> CSV, ``.parquet .pq`` -> Parquet, ``.mcap`` -> MCAP); any other suffix,
 and standard input (``-``), by the first bytes (:func:`detect_format`), which also names the formats wmrid does not
-read (ROS 1 bags, SQLite, compressed files) instead of failing on them as text.
+read (ROS 1 bags, SQLite, zip archives) instead of failing on them as text.
+
+Compression: a gzip, bzip2, xz or zstd stream (recognised by its magic bytes, whatever the suffix) is decompressed
+as it is read (:attr:`Source.compression`, :meth:`Source.open`); a CSV log inside is read as any CSV log, in
+pieces (memory does not grow with the file).  Another format inside a compressed file is refused with the command
+that decompresses it.
 """
 
 from __future__ import annotations
@@ -11,8 +16,8 @@ import errno
 import io
 import os
 import sys
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, BinaryIO
 
 from wmrid.core.errors import LogFormatError, UsageError
 from wmrid.core.limits import memory_budget, read_limited
@@ -44,28 +49,62 @@ STDIN_NAME = "<stdin>"
 
 #: (magic bytes, what the file is, the fix) of formats wmrid recognises but does not read.
 _OTHER_FORMATS = (
-    (b"\x1f\x8b", "a gzip-compressed file", "decompress it first (gunzip -k FILE) and give the log inside"),
-    (b"\x28\xb5\x2f\xfd", "a zstd-compressed file", "decompress it first (zstd -d FILE) and give the log inside"),
-    (b"BZh", "a bzip2-compressed file", "decompress it first (bunzip2 -k FILE) and give the log inside"),
-    (b"\xfd7zXZ\x00", "an xz-compressed file", "decompress it first (unxz -k FILE) and give the log inside"),
     (b"PK\x03\x04", "a zip archive", "unpack it first and give the log inside"),
     (b"#ROSBAG", "a ROS 1 bag", "convert it to MCAP first (mcap convert FILE out.mcap)"),
     (b"SQLite f", "an SQLite database (a ROS 2 .db3 bag?)", "convert it to MCAP first (ros2 bag convert)"),
 )
 
 
-def detect_format(path: str, head_bytes: bytes) -> str:
+_COMPRESSION_SUFFIXES = (".gz", ".gzip", ".bz2", ".xz", ".zst", ".zstd")
+
+
+#: (magic bytes, name, the command that decompresses a file) of the compressed streams read transparently.
+COMPRESSIONS = (
+    (b"\x1f\x8b", "gzip", "gunzip -k FILE"),
+    (b"BZh", "bzip2", "bunzip2 -k FILE"),
+    (b"\xfd7zXZ\x00", "xz", "unxz -k FILE"),
+    (b"\x28\xb5\x2f\xfd", "zstd", "zstd -d FILE"),
+)
+
+
+def compression_of(head_bytes: bytes) -> str | None:
+    """The name of the compression (see COMPRESSIONS) the bytes start with, else None."""
+    return next((name for magic, name, _ in COMPRESSIONS if head_bytes.startswith(magic)), None)
+
+
+def decompress_command(compression: str) -> str:
+    return next(fix for _, name, fix in COMPRESSIONS if name == compression)
+
+
+def detect_format(path: str, head_bytes: bytes, compression: str | None = None) -> str:
     """``"csv"``, ``"parquet"`` or ``"mcap"``: from the suffix of ``path``, else from the magic bytes.
 
     ``path`` ``"-"`` (standard input) or an unknown suffix: ``PAR1`` -> parquet, ``\\x89MCAP`` -> mcap,
-    anything else -> csv.  A compressed file, an archive, a ROS 1 bag or an SQLite database (whatever its suffix)
-    is refused with LogFormatError naming what it is and how to get a log out of it.
+    anything else -> csv.  An archive, a ROS 1 bag or an SQLite database (whatever its suffix)
+    is refused with LogFormatError naming what it is and how to get a log out of it.  compression : the
+    compression of the file (``head_bytes`` are then the decompressed ones, and a compression suffix such as
+    ``.gz`` is looked through); only a CSV log is read compressed, anything else inside is refused.
     """
-    suffix = os.path.splitext(path)[1].lower() if path != "-" else ""
+    name = STDIN_NAME if path == "-" else path
+    stem = path
+    if compression is not None and os.path.splitext(path)[1].lower() in _COMPRESSION_SUFFIXES:
+        stem = os.path.splitext(path)[0]
+    suffix = os.path.splitext(stem)[1].lower() if path != "-" else ""
     for magic, what, fix in _OTHER_FORMATS:
         if head_bytes.startswith(magic):
-            name = STDIN_NAME if path == "-" else path
-            raise LogFormatError(f"{name}: {what}, not a CSV, Parquet or MCAP log; {fix}")
+            inside = f"a {compression}-compressed file holding {what}" if compression else what
+            raise LogFormatError(f"{name}: {inside}, not a CSV, Parquet or MCAP log; {fix}")
+    if compression is not None:
+        for magic, kind, suffixes in (
+            (PARQUET_MAGIC, "Parquet", PARQUET_SUFFIXES),
+            (MCAP_MAGIC, "MCAP", _MCAP_SUFFIXES),
+        ):
+            if head_bytes.startswith(magic) or suffix in suffixes:
+                raise LogFormatError(
+                    f"{name}: a {compression}-compressed {kind} file, which wmrid reads uncompressed only; decompress "
+                    f"it first ({decompress_command(compression)}) and give the log inside"
+                )
+        return "csv"
     if suffix in CSV_SUFFIXES:
         return "csv"
     if suffix in PARQUET_SUFFIXES:
@@ -81,21 +120,107 @@ def detect_format(path: str, head_bytes: bytes) -> str:
 
 @dataclass
 class Source:
-    """Where the log's bytes are: a regular file (``path``) or bytes already read (``data``)."""
+    """Where the log's bytes are: a regular file (``path``) or bytes already read (``data``).
+
+    compression : "gzip", "bzip2", "xz" or "zstd" when those bytes are a compressed stream (found from its magic
+    bytes when not given); :meth:`head` and :meth:`open` then give the decompressed bytes.
+    """
 
     name: str  # for messages
     path: str | None
     data: bytes | None
+    compression: str | None = field(default=None)
 
-    def head(self, size: int = SNIFF_BYTES) -> bytes:
+    def __post_init__(self) -> None:
+        if self.compression is None:
+            self.compression = compression_of(self._raw_head(8))
+
+    def _raw_head(self, size: int) -> bytes:
         if self.data is not None:
             return self.data[:size]
         with open(self.path, "rb") as fh:  # type: ignore[arg-type]
             return fh.read(size)
 
-    def opener(self) -> Any:
-        """What pandas/pyarrow read from: the path, or a fresh in-memory stream."""
-        return self.path if self.data is None else io.BytesIO(self.data)
+    def head(self, size: int = SNIFF_BYTES) -> bytes:
+        """The first ``size`` bytes of the log (decompressed)."""
+        if self.compression is None:
+            return self._raw_head(size)
+        with self.open() as fh:
+            return self._read(fh, size)
+
+    def open(self) -> BinaryIO:
+        """A binary stream of the log's bytes (decompressed), to be closed by the caller."""
+        raw: BinaryIO = open(self.path, "rb") if self.data is None else io.BytesIO(self.data)  # type: ignore[arg-type]  # noqa: SIM115
+        if self.compression is None:
+            return raw
+        import bz2
+        import gzip
+        import lzma
+
+        if self.compression == "gzip":
+            return _Closing(gzip.GzipFile(fileobj=raw, mode="rb"), raw)
+        if self.compression == "bzip2":
+            return _Closing(bz2.BZ2File(raw, mode="rb"), raw)
+        if self.compression == "xz":
+            return _Closing(lzma.LZMAFile(raw, mode="rb"), raw)
+        return _Closing(_ZstdReader(raw), raw)
+
+    def _read(self, fh: BinaryIO, size: int) -> bytes:
+        """Up to ``size`` bytes from ``fh``; a damaged compressed stream is a LogFormatError."""
+        try:
+            out = bytearray()
+            while len(out) < size:
+                block = fh.read(size - len(out))
+                if not block:
+                    break
+                out += block
+            return bytes(out)
+        except OSError as err:
+            raise self.damaged(err) from err
+
+    def damaged(self, err: BaseException) -> LogFormatError:
+        """The error for a compressed stream that cannot be decompressed."""
+        return LogFormatError(
+            f"{self.name}: its {self.compression} stream is damaged or cut short ({one_line(err)}); check it with "
+            f"{decompress_command(self.compression or '')} and give the log inside"
+        )
+
+
+class DamagedStream(OSError):
+    """A compressed stream that cannot be decompressed (damaged, cut short): what :meth:`Source.open`'s stream
+    raises instead of the decompressor's own error (EOFError, lzma.LZMAError, zstandard.ZstdError, ...), so that
+    readers catch one kind; :meth:`Source.damaged` words it."""
+
+
+class _Closing(io.RawIOBase):
+    """A decompressing reader that also closes the raw stream under it; its errors are DamagedStream."""
+
+    def __init__(self, reader: Any, raw: BinaryIO):
+        self._reader, self._raw = reader, raw
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, buffer: Any) -> int:
+        data = self.read(len(buffer))
+        buffer[: len(data)] = data
+        return len(data)
+
+    def read(self, size: int = -1) -> bytes:
+        try:
+            return self._reader.read(size) if size is not None and size >= 0 else self._reader.read()
+        except DamagedStream:
+            raise
+        except Exception as err:  # EOFError, OSError, lzma.LZMAError, zstandard.ZstdError
+            raise DamagedStream(one_line(err) or type(err).__name__) from err
+
+    def close(self) -> None:
+        if not self.closed:
+            try:
+                self._reader.close()
+            finally:
+                self._raw.close()
+                super().close()
 
 
 #: The message for a pipe, a device or standard input that holds more than the memory budget ({size}: the budget).
@@ -146,6 +271,44 @@ def open_source(path: str) -> Source:
     if size == 0:
         raise LogFormatError(f"{path}: the file is empty (0 bytes); give a log with a header and data rows")
     return source
+
+
+class _ZstdReader:
+    """A zstd stream's bytes, frame after frame, that raises at the end when the last frame is incomplete
+    (zstandard's stream reader then just stops: a file cut short would read as a shorter log)."""
+
+    def __init__(self, raw: BinaryIO):
+        import zstandard
+
+        self._zstd, self._raw = zstandard, raw
+        self._dobj = zstandard.ZstdDecompressor().decompressobj()
+        self._pending = b""
+        self._started = False
+        self._done = False
+
+    def read(self, size: int = -1) -> bytes:
+        out = bytearray(self._pending)
+        while (size < 0 or len(out) < size) and not self._done:
+            block = self._raw.read(1 << 20)
+            if not block:
+                self._done = True
+                if self._started and not self._dobj.eof:
+                    raise EOFError("the last zstd frame is incomplete")
+                break
+            while block:
+                if self._dobj.eof:  # the next frame
+                    self._dobj = self._zstd.ZstdDecompressor().decompressobj()
+                self._started = True
+                out += self._dobj.decompress(block)
+                block = self._dobj.unused_data if self._dobj.eof else b""
+        if size < 0:
+            self._pending = b""
+            return bytes(out)
+        self._pending = bytes(out[size:])
+        return bytes(out[:size])
+
+    def close(self) -> None:
+        pass
 
 
 def one_line(err: BaseException | str) -> str:
