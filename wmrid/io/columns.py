@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import difflib
+import re
 from typing import TYPE_CHECKING
 
 from wmrid.core.errors import LogFormatError, UsageError, option
@@ -61,16 +62,84 @@ def check_key(key: str, what: str) -> None:
         raise UsageError(f"{what}: {key!r} is not a column wmrid knows{hint}; use one of {', '.join(CANONICAL)}")
 
 
-def select(present: list[str], mapping: dict[str, str], explicit: set[str], name: str) -> dict[str, str]:
+#: Words that say what a column holds (its name split into words, lower case: see :func:`words`).
+_SIDE_WORDS = {"r": ("right", "r", "rt", "rgt"), "l": ("left", "l", "lt", "lft")}
+_SPEED_WORDS = ("velocity", "vel", "speed", "omega")
+_EFFORT_WORDS = ("effort", "torque", "tau")
+#: A column with one of these words is a command, a set-point or a position, not a measured speed or effort.
+_NOT_MEASURED = (
+    "cmd", "command", "commanded", "desired", "des", "ref", "reference", "target", "setpoint", "sp", "goal", "position",
+    "pos", "limit", "max", "min",
+)  # fmt: skip
+#: Time columns by name: PlotJuggler's ``__time`` first, then the usual words.
+_TIME_NAMES = ("__time", "time", "timestamp", "stamp", "t_s", "time_s")
+
+
+def words(column: str) -> list[str]:
+    """A column name as lower-case words: split at anything not a letter or digit, at lower-to-upper case changes
+    and between letters and digits (``/joint_states/right_wheel_joint/velocity`` -> joint, states, right,
+    wheel, joint, velocity; ``velLeft`` -> vel, left)."""
+    spaced = re.sub(r"(?<=[a-z])(?=[A-Z])|(?<=[A-Za-z])(?=[0-9])|(?<=[0-9])(?=[A-Za-z])", " ", column)
+    return [w for w in re.split(r"[^A-Za-z0-9]+", spaced.lower()) if w]
+
+
+def guess_candidates(key: str, columns: list[str]) -> list[str]:
+    """The columns whose names say they hold ``key`` (t, eta_r, eta_l, tau_r, tau_l), in file order.
+
+    A wheel signal: a speed word (velocity, vel, speed, omega) or an effort word (effort, torque, tau), one side
+    (right/r/rt or left/l/lt, not both), and no word of a command, set-point or position (cmd, desired, ref,
+    target, position, ...).  Time: a column named ``__time`` (PlotJuggler), else ``time``, ``timestamp``,
+    ``stamp`` (case-insensitive), the first of those names present.
+    """
+    if key == "t":
+        lowered = {c.lower(): c for c in columns}
+        return next(([lowered[n]] for n in _TIME_NAMES if n in lowered), [])
+    quantity, other = (_SPEED_WORDS, _EFFORT_WORDS) if key.startswith("eta") else (_EFFORT_WORDS, _SPEED_WORDS)
+    side, opposite = _SIDE_WORDS[key[-1]], _SIDE_WORDS["l" if key[-1] == "r" else "r"]
+    out = []
+    for column in columns:
+        w = set(words(column))
+        measured = not w & set(_NOT_MEASURED)
+        if measured and w & set(quantity) and w & set(side) and not w & set(opposite) and not w & set(other):
+            out.append(column)
+    return out
+
+
+def select(
+    present: list[str], mapping: dict[str, str], explicit: set[str], name: str, notes: list[str] | None = None
+) -> dict[str, str]:
     """{canonical: column in the file} for the required columns and, when all three exist, the pose.
 
-    Raises one :class:`LogFormatError` naming every missing column, the columns there are, close
-    matches, and the ``--columns`` option that would fix it.
+    When required columns are neither present by their canonical names nor named by ``--columns``, and for
+    each exactly one column says it is that signal (:func:`guess_candidates`), those are used, ``mapping`` is
+    updated with them and ``notes`` says so.  Raises one :class:`LogFormatError` naming every missing column,
+    the columns there are, close matches (or the several columns a guess could not choose between), and the
+    ``--columns`` option that would fix it.
     """
     needed = list(REQUIRED) + [k for k in POSE if k in explicit]
     if explicit & set(REFERENCE):  # one reference column named: both are needed
         needed += list(REFERENCE)
     missing = [k for k in needed if mapping[k] not in present]
+    guessable = [k for k in missing if k in REQUIRED and k not in explicit]
+    if guessable:
+        taken = {mapping[k] for k in needed if k not in missing}
+        found = {key: guess_candidates(key, [c for c in present if c not in taken]) for key in guessable}
+        ambiguous = {key: cands for key, cands in found.items() if len(cands) > 1}
+        unique = {key: cands[0] for key, cands in found.items() if len(cands) == 1}
+        if ambiguous:
+            parts = [f"{key} could be any of {', '.join(repr(c) for c in cands)}" for key, cands in ambiguous.items()]
+            fixes = ",".join(f"{key}={cands[0]}" for key, cands in ambiguous.items())
+            raise LogFormatError(
+                f"{name}: cannot tell which column to use: {'; '.join(parts)}; choose with {option('columns')} {fixes}"
+            )
+        if len(unique) == len(missing) and len(set(unique.values())) == len(unique):
+            mapping.update(unique)  # the caller's mapping: its messages name the columns used
+            missing = []
+            if notes is not None:
+                notes.append(
+                    f"columns for {', '.join(unique)} guessed from their names (the note 'columns read as' lists "
+                    f"them); give {option('columns')} to choose others"
+                )
     if missing:
         parts, fixes = [], []
         taken = {mapping[k] for k in needed if k not in missing}

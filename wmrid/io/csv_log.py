@@ -213,7 +213,7 @@ def csv_chunks(
     layout = csv_layout(source)
     c_options, present, notes = layout.c_options, layout.present, layout.notes
     header = pd.DataFrame(columns=layout.header_columns)
-    chosen = select(present, mapping, explicit, name)
+    chosen = select(present, mapping, explicit, name, notes)
     actual = {str(c).strip(): c for c in header.columns}
     usecols = list(dict.fromkeys(actual[c] for c in chosen.values()))
     plain = (

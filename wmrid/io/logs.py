@@ -43,6 +43,9 @@ from wmrid.io.stamps import (
     seconds,
 )
 
+#: The time column of PlotJuggler's CSV export, which merges every topic's samples into one table.
+MERGED_TIME = "__time"
+
 
 def read_log(
     path: str,
@@ -124,7 +127,10 @@ def open_log(
     effort_unit = "N m" if signals == SignalOptions() else signals.effort_label
 
     def pieces() -> Generator[WheelLog, None, tuple[str, ...]]:
-        assembler = _Assembler(source.name, mapping, time_unit, hint, where, bool(explicit & set(REFERENCE)))
+        assembler = _Assembler(
+            source.name, mapping, time_unit, hint, where, bool(explicit & set(REFERENCE)),
+            merged=mapping["t"].lower() == MERGED_TIME,
+        )  # fmt: skip
         signal_notes: list[str] = []
         for base, values in chunks():
             piece = assembler.add(values, base)
@@ -188,9 +194,12 @@ class _Assembler:
 
     def __init__(
         self, name: str, mapping: dict[str, str], time_unit: str, hint: str | None, where: Callable[[int], str],
-        reference_required: bool = False,
+        reference_required: bool = False, merged: bool = False,
     ):  # fmt: skip
         self.name, self.mapping, self.time_unit, self.hint, self.where = name, mapping, time_unit, hint, where
+        self.merged = merged  # a merged export (PlotJuggler): rows without any wheel value are other topics'
+        self.empty_rows = 0
+        self.empty_first: str | None = None
         self.reference_required = reference_required  # named by --columns: a bad cell is an error, not a note
         self.notes: list[str] = []
         self.unit: str | None = None
@@ -219,6 +228,10 @@ class _Assembler:
             return self.where(base + (int(kept[i]) if kept is not None else i))
 
         arrays = {key: _numeric(values[key], key, mapping[key], name, where) for key in REQUIRED}
+        if self.merged:
+            arrays, values, kept = self._other_topics(arrays, values, where)
+            if not len(arrays["t"]):
+                return None
         bad = [(i, key) for key in REQUIRED if (i := _first_nonfinite(arrays[key])) is not None]
         if bad:  # the first non-finite cell in file order among the required columns
             i, key = min(bad, key=lambda b: (b[0], REQUIRED.index(b[1])))
@@ -246,9 +259,10 @@ class _Assembler:
             rows = np.flatnonzero(zero)
             self.zero_rows += len(rows)
             self.zero_first = self.zero_first or where(int(rows[0]))
-            kept = np.flatnonzero(~zero)
-            arrays = {key: arr[kept] for key, arr in arrays.items()}
-            values = {key: _take(val, kept) for key, val in values.items()}
+            rows_kept = np.flatnonzero(~zero)
+            arrays = {key: arr[rows_kept] for key, arr in arrays.items()}
+            values = {key: _take(val, rows_kept) for key, val in values.items()}
+            kept = rows_kept if kept is None else kept[rows_kept]  # row numbers in the piece as read
             stamps = arrays["t"]
         if len(stamps) == 0:
             return None
@@ -286,6 +300,22 @@ class _Assembler:
         pose = self._optional("pose", POSE, values, where, required=False)
         reference = self._optional("reference", REFERENCE, values, where, required=self.reference_required)
         return WheelLog(t=t, eta=eta, tau=tau, source=name, pose=pose, reference=reference)
+
+    def _other_topics(
+        self, arrays: dict[str, np.ndarray], values: dict[str, Any], where: Callable[[int], str]
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any], np.ndarray | None]:
+        """A merged export's piece without the rows where every wheel speed and effort is empty (rows of other
+        topics, which such an export interleaves); (arrays, values, the kept rows' indices or None)."""
+        empty = np.ones(len(arrays["t"]), dtype=bool)
+        for key in REQUIRED[1:]:
+            arr = arrays[key]
+            empty &= np.isnan(arr) if arr.dtype.kind == "f" else np.zeros(len(arr), dtype=bool)
+        if not empty.any():
+            return arrays, values, None
+        self.empty_rows += int(empty.sum())
+        self.empty_first = self.empty_first or where(int(np.argmax(empty)))
+        kept = np.flatnonzero(~empty)
+        return {k: a[kept] for k, a in arrays.items()}, {k: _take(v, kept) for k, v in values.items()}, kept
 
     def _stamps(self, stamps: np.ndarray, where: Callable[[int], str]) -> np.ndarray:
         """The time column in the kind (integer or float) of the first piece's."""
@@ -385,6 +415,12 @@ class _Assembler:
         if self.n < MIN_SAMPLES:
             raise LogFormatError(
                 f"{name}: only {self.n} samples; identification needs at least {MIN_SAMPLES}, so record a longer log"
+            )
+        if self.empty_rows:
+            notes.insert(
+                0,
+                f"{self.empty_rows} rows without any wheel speed or effort (other topics' samples, which a "
+                f"{MERGED_TIME!r} export interleaves) were dropped (first: {self.empty_first})",
             )
         if self.zero_rows:
             notes.insert(

@@ -49,7 +49,8 @@ def parquet_chunks(
             schema = pf.schema_arrow
         except (pa.ArrowException, OSError) as err:
             raise broken(err) from err
-    chosen = select(present, mapping, explicit, name)
+    notes: list[str] = []
+    chosen = select(present, mapping, explicit, name, notes)
     twice = sorted({c for c in chosen.values() if present.count(c) > 1})
     if twice:
         raise LogFormatError(
@@ -57,7 +58,6 @@ def parquet_chunks(
             "wmrid cannot tell which to read; rename one of each pair when writing the file"
         )
     wanted = list(dict.fromkeys(chosen.values()))
-    notes: list[str] = []
     hint = None
     typ = schema.field(chosen["t"]).type
     if pa.types.is_timestamp(typ) or pa.types.is_duration(typ):
