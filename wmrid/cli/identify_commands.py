@@ -68,7 +68,8 @@ def identify(
         str | None, typer.Option(help="Column mapping, e.g. t=time,eta_r=vel_right,tau_l=effort_left.")
     ] = None,
     time_unit: Annotated[
-        TimeUnit, typer.Option(help="Unit of the time column (auto: float s, integer ns).")
+        TimeUnit,
+        typer.Option(help="Time column unit (auto: float s, floats past 1e13 us, 1e16 ns; integer ns)."),
     ] = TimeUnit.auto,
     form: Annotated[
         FormChoice, typer.Option(help="Regressor: paper (7 columns, wheels keep one sign), general (8), auto.")

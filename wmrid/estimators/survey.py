@@ -40,7 +40,8 @@ class Survey:
     sparse_t (m,) s, sparse_eta (m, 2) rad/s, sparse_tau (m, 2): the first sample of each START_SPACING_S
     interval of time from t_first.
     Per wheel (2,): speed_pos, speed_neg, effort_pos, effort_neg counts of samples > 0 and < 0; power,
-    abs_power, opposing: sums of tau eta, |tau eta| and the count of tau eta < 0 (:meth:`signal_warnings`).
+    abs_power, opposing, driving: sums of tau eta, |tau eta| and the counts of tau eta < 0 and > 0
+    (:meth:`signal_warnings`).
     """
 
     source: str
@@ -62,6 +63,7 @@ class Survey:
     power: np.ndarray = field(default_factory=lambda: np.zeros(2))
     abs_power: np.ndarray = field(default_factory=lambda: np.zeros(2))
     opposing: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    driving: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
     @property
     def duration(self) -> float:
@@ -122,11 +124,15 @@ class Survey:
                     "of the motor's drive"
                 )
             power, scale = self.power[i] / n, self.abs_power[i] / n
-            # Braking makes the power negative for a while; a reversed sign makes it negative almost always.
-            if scale > 0 and power < -0.5 * scale and self.opposing[i] / n > 0.75:
+            # Braking makes the power negative for a while; a reversed sign makes it negative almost always.  The
+            # share counts the samples with power (a wheel at rest, or no effort, says nothing about the sign).
+            working = self.opposing[i] + self.driving[i]
+            share = self.opposing[i] / working if working else 0.0
+            if scale > 0 and power < -0.5 * scale and share > 0.75:
                 out.append(
-                    f"the {wheel} wheel's effort mostly opposes its speed (mean power {power:.3g} {self.effort_unit} "
-                    "rad/s < 0): its sign convention is probably reversed; try --mirror-left or --flip-effort"
+                    f"the {wheel} wheel's effort mostly opposes its speed ({100 * share:.0f} % of the samples with "
+                    f"power; mean power {power:.3g} {self.effort_unit} rad/s < 0): its sign convention is probably "
+                    "reversed; try --mirror-left or --flip-effort"
                 )
         return out
 
@@ -142,7 +148,7 @@ def survey(pieces: Iterable, source: str, effort_unit: str = "N m") -> Survey:
     prev_t = None
     last_bucket = -1
     sparse_t, sparse_eta, sparse_tau = [], [], []
-    acc = np.zeros(14)  # per wheel: speeds > 0, < 0; efforts < 0, > 0; power, |power|, opposing samples
+    acc = np.zeros(16)  # per wheel: speeds > 0, < 0; efforts < 0, > 0; power, |power|, opposing, driving samples
     for piece in pieces:
         t, eta, tau = piece.t, piece.eta, piece.tau
         k = len(t)
@@ -173,6 +179,7 @@ def survey(pieces: Iterable, source: str, effort_unit: str = "N m") -> Survey:
     sv.speed_pos, sv.speed_neg = acc[0:2].copy(), acc[2:4].copy()
     sv.effort_neg, sv.effort_pos = acc[4:6].copy(), acc[6:8].copy()
     sv.power, sv.abs_power, sv.opposing = acc[8:10].copy(), acc[10:12].copy(), acc[12:14].copy()
+    sv.driving = acc[14:16].copy()
     sv.median_step = _median_step(exact, hist)
     if sparse_t:
         sv.sparse_t = np.concatenate(sparse_t)
@@ -237,7 +244,7 @@ def _raise_implausible(t: np.ndarray, eta: np.ndarray, tau: np.ndarray, source: 
 
 @numba.njit(cache=True, nogil=True)
 def _piece_stats(eta, tau, limit, acc):
-    """One pass over a piece, eta and tau (k, 2): adds to acc (14,) the counts and sums of :class:`Survey`
+    """One pass over a piece, eta and tau (k, 2): adds to acc (16,) the counts and sums of :class:`Survey`
     (see survey()); returns the first row holding a non-finite or implausible value, or -1."""
     for i in range(eta.shape[0]):
         for w in range(2):
@@ -258,4 +265,6 @@ def _piece_stats(eta, tau, limit, acc):
             acc[10 + w] += abs(prod)
             if prod < 0:
                 acc[12 + w] += 1
+            elif prod > 0:
+                acc[14 + w] += 1
     return -1

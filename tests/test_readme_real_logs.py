@@ -1,0 +1,401 @@
+"""README "Worked examples with real logs" (and the misfit ratios it quotes later), checked on ../shared/real_logs.
+
+One test per README statement about these logs: the README's command run in this process, its warnings and its
+figures to the digits the README prints.  When a statement stops holding, this file fails: fix the code or the
+README, never loosen the check.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from tests.cliutil import text, wmrid
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "real_logs"
+pytestmark = pytest.mark.skipif(not REAL.exists(), reason="../shared/real_logs is not beside the checkout")
+
+ME169_A = REAL / "me169" / "wheel_pwm_2022-04-13-14-27-37.mcap"
+ME169_B = REAL / "me169" / "wheel_pwm_2022-04-13-14-20-12.mcap"
+ME169_OPTIONS = (
+    "--velocity-topic", "/wheel_state", "--effort-topic", "/wheel_desired",
+    "--right-joint", "rightwheel", "--left-joint", "leftwheel", "--effort", "pwm",
+)  # fmt: skip
+REGBOT = REAL / "regbot" / "square_1.txt"
+REGBOT_OPTIONS = (
+    "--columns", "t=1,eta_l=9,eta_r=10,tau_l=7,tau_r=8", "--speed-unit", "m/s", "--wheel-radius", "0.02975",
+    "--effort", "current", "--torque-hold", "foh",
+)  # fmt: skip
+VULPI = REAL / "borealtc" / "vulpi_ploughed_pro_4.csv"
+BOREALTC_HUSKY = REAL / "borealtc" / "husky_flooring_pro_06.csv"
+BOREALTC_OPTIONS = ("--columns", "t=time,eta_l=velL,eta_r=velR,tau_l=curL,tau_r=curR", "--effort", "current")
+DRIVE_HUSKY = REAL / "drive" / "husky_avide_2024_11_3_15h4s4.parquet"
+DRIVE_WARTHOG = REAL / "drive" / "warthog_test_close.parquet"
+DRIVE_OPTIONS = (
+    "--columns",
+    "t=ros_time,eta_l=meas_left_vel,eta_r=meas_right_vel,tau_l=left_wheel_current,tau_r=right_wheel_current",
+    "--effort", "current",
+)  # fmt: skip
+CONFORMANCE = REAL / "rosbag2_conformance"
+PLANAR = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
+
+
+def run_json(*args) -> dict:
+    """``wmrid ARGS --format json`` in this process; it must succeed."""
+    proc = wmrid(*args, "--format", "json")
+    assert proc.returncode == 0, text(proc).stderr
+    return json.loads(proc.stdout)
+
+
+def warnings_with(result: dict, *fragments: str) -> list[str]:
+    return [w for w in result["warnings"] if all(f in w for f in fragments)]
+
+
+@pytest.fixture(scope="module")
+def me169() -> dict:
+    return run_json("identify", ME169_A, *ME169_OPTIONS)
+
+
+@pytest.fixture(scope="module")
+def me169_transfer() -> dict[str, dict]:
+    """The compare JSON per direction, keyed by the README table's row label."""
+    return {
+        "14-27-37 -> 14-20-12": run_json("compare", ME169_A, "--validate", ME169_B, *ME169_OPTIONS),
+        "14-20-12 -> 14-27-37": run_json("compare", ME169_B, "--validate", ME169_A, *ME169_OPTIONS),
+    }
+
+
+@pytest.fixture(scope="module")
+def regbot() -> dict:
+    return run_json("identify", REGBOT, *REGBOT_OPTIONS)
+
+
+@pytest.fixture(scope="module")
+def vulpi() -> dict:
+    return run_json("identify", VULPI, *BOREALTC_OPTIONS)
+
+
+@pytest.fixture(scope="module")
+def borealtc_husky() -> dict:
+    return run_json("identify", BOREALTC_HUSKY, *BOREALTC_OPTIONS)
+
+
+@pytest.fixture(scope="module")
+def drive_husky() -> dict:
+    return run_json("identify", DRIVE_HUSKY, *DRIVE_OPTIONS)
+
+
+@pytest.fixture(scope="module")
+def drive_warthog() -> dict:
+    return run_json("identify", DRIVE_WARTHOG, *DRIVE_OPTIONS)
+
+
+def fit(compare: dict, method: str) -> tuple[float, float]:
+    """(right, left) fit % of ``method`` on the validation log, as the compare table prints them (one decimal)."""
+    percent = compare["methods"][method]["validation"]["fit_percent"]
+    return round(percent["eta_r"], 1), round(percent["eta_l"], 1)
+
+
+# ---- ME169
+
+
+def test_me169_inspect_shows_three_joint_state_topics():
+    """README 158-161: "ME169 (ROS 2 bag, 50 Hz, speed and PWM on different topics). `wmrid inspect
+    wheel_pwm_2022-04-13-14-27-37.mcap` shows three JointState topics. `/wheel_state` has position and velocity, but
+    its effort is "zeros". `/wheel_desired` has the PWM effort. `/wheel_command` has velocity set-points only." """
+    info = run_json("inspect", ME169_A)
+    topics = {t["topic"]: t for t in info["topics"]}
+    assert set(topics) == {"/wheel_state", "/wheel_desired", "/wheel_command"}
+    assert {t["type"] for t in topics.values()} == {"sensor_msgs/msg/JointState"}
+    assert topics["/wheel_state"]["fields"] == {"position": "yes", "velocity": "yes", "effort": "zeros"}
+    assert topics["/wheel_desired"]["fields"]["effort"] == "yes"
+    assert topics["/wheel_command"]["fields"] == {"position": "no", "velocity": "yes", "effort": "no"}
+    for name in ("/wheel_state", "/wheel_desired"):
+        assert round(topics[name]["rate_hz"]) == 50
+
+
+def test_me169_without_options_refuses_and_lists_each_topic():
+    """README 161-162: "With no options wmrid refuses to guess and lists what each topic holds." """
+    proc = text(wmrid("identify", ME169_A))
+    assert proc.returncode == 2
+    assert proc.stdout == ""
+    assert "Traceback" not in proc.stderr
+    assert "cannot tell which JointState topic" in proc.stderr
+    for listed in (
+        "/wheel_command [joints leftwheel, rightwheel; position no, velocity yes, effort no]",
+        "/wheel_desired [joints leftwheel, rightwheel; position yes, velocity yes, effort yes]",
+        "/wheel_state [joints leftwheel, rightwheel; position yes, velocity yes, effort zeros]",
+    ):
+        assert listed in proc.stderr
+
+
+def test_me169_split_topics_run_to_the_end_in_pwm_units(me169):
+    """README 162-165: "`wmrid identify wheel_pwm_2022-04-13-14-27-37.mcap --velocity-topic /wheel_state
+    --effort-topic /wheel_desired --right-joint rightwheel --left-joint leftwheel --effort pwm` runs to the end.
+    Every parameter is in PWM units and the JSON's `effort_unit` and each unit field say so." """
+    assert me169["effort_unit"] == "PWM"
+    assert set(PLANAR) <= set(me169["parameters"])
+    for name, entry in me169["parameters"].items():
+        assert "PWM" in entry["unit"], name
+
+
+def test_me169_two_topics_default_to_delay_auto_that_cannot_time_them(me169):
+    """README: "The two topics make `--delay auto` the default, and the warnings say the delay cannot be timed (the
+    fit keeps improving to the edge of the ±24 ms search, 1.2 logged steps)." """
+    delay = me169["diagnostics"]["delay"]
+    assert delay["chosen_by"] == "auto"
+    assert delay["at_edge_of_search"] is True
+    assert delay["applied_s"] == 0.0
+    assert warnings_with(
+        me169,
+        "the delay between efforts and speeds could not be estimated",
+        "the fit keeps improving to the edge of the searched +/-24 ms",
+    )
+
+
+def test_me169_predicts_speeds_4_4_times_worse_than_their_noise(me169):
+    """README 166-167: "The model predicts the speeds 4.4 times worse than their noise", and README 960-961: "On the
+    real logs of the worked examples: ME169 4.4 […] (flagged)"."""
+    misfit = me169["diagnostics"]["uncertainty"]["model_error"]["prediction_misfit"]
+    assert misfit["applied"] is True
+    assert f"{misfit['ratio']:.1f}" == "4.4"
+    assert warnings_with(me169, "times its noise", "every parameter is flagged")
+
+
+def test_me169_closed_loop_check_puts_caster_drag_3_5_std_from_idim(me169):
+    """README 167-168: "the closed-loop check finds the observer's caster drag 3.5 std (of the difference) from
+    IDIM's"."""
+    feedback = me169["diagnostics"]["feedback"]
+    assert feedback["checked"] is True
+    assert feedback["against"] == "idim"
+    assert feedback["largest"] == "Cv"
+    assert f"{feedback['largest_ratio']:.1f}" == "3.5"
+
+
+def test_me169_observer_kept_under_the_gate_with_stds_raised(me169):
+    """README: "3.5 std (of the difference) from IDIM's, just under its gate of 3.56, so the observer is kept with
+    its stds raised to cover IDIM's: m11 = 0.027 ± 0.26 (rad/s²)/PWM" """
+    feedback = me169["diagnostics"]["feedback"]
+    assert f"{feedback['gate']:.2f}" == "3.56"
+    assert feedback["largest_ratio"] < feedback["gate"]
+    assert feedback["reported"] == me169["method"] == "observer"
+    m11 = me169["parameters"]["m11"]
+    assert (f"{m11['value']:.3f}", f"{m11['std']:.2f}") == ("0.027", "0.26")
+    assert m11["unit"] == "(rad/s^2)/PWM"
+
+
+def test_me169_every_std_widened_and_flagged(me169):
+    """README 168-169: "every std widened and flagged"."""
+    names = list(me169["parameters"])
+    assert me169["diagnostics"]["inflated"] == names
+    assert me169["diagnostics"]["flagged"] == names
+
+
+TRANSFER = {  # README's table: fit % right / left on the other bag
+    ("14-27-37 -> 14-20-12", "observer"): (-26.9, 0.5),
+    ("14-27-37 -> 14-20-12", "idim"): (50.3, 32.0),
+    ("14-27-37 -> 14-20-12", "rls"): (50.3, 32.0),
+    ("14-27-37 -> 14-20-12", "oe"): (35.7, 14.9),
+    ("14-20-12 -> 14-27-37", "observer"): (-46.4, 48.0),
+    ("14-20-12 -> 14-27-37", "idim"): (-24.6, -33.2),
+    ("14-20-12 -> 14-27-37", "rls"): (-25.2, -33.8),
+    ("14-20-12 -> 14-27-37", "oe"): (49.6, 51.2),
+}
+
+
+@pytest.mark.parametrize(("row", "method"), list(TRANSFER))
+def test_me169_transfer_table_cells(me169_transfer, row, method):
+    """README: "Identified on one bag and validated on the other (`wmrid compare A.mcap --validate B.mcap` with the
+    same options; fit % right / left wheel)": every cell of the table."""
+    assert fit(me169_transfer[row], method) == TRANSFER[row, method]
+
+
+def test_me169_observer_on_14_27_37_has_negative_fv1(me169_transfer):
+    """README 179-180: "(the observer's estimate on 14-27-37 even has a negative Fv1)"."""
+    assert me169_transfer["14-27-37 -> 14-20-12"]["methods"]["observer"]["parameters"]["Fv1"]["value"] < 0
+
+
+def test_me169_no_model_predicts_the_other_bag_well_and_oe_transfers_best(me169_transfer):
+    """README: "No model predicts the other bag well: […] and OE, which fits the speeds themselves, transfers best
+    over both directions (best mean and best worst case)." (Every method misses 50 % on some wheel.)"""
+    fits = {m: [] for m in ("observer", "idim", "rls", "oe")}
+    for compare in me169_transfer.values():
+        for method in fits:
+            fits[method] += fit(compare, method)
+    assert all(min(values) < 50 for values in fits.values())
+    mean = {m: sum(v) / len(v) for m, v in fits.items()}
+    assert max(mean, key=mean.get) == "oe"
+    assert max(fits, key=lambda m: min(fits[m])) == "oe"
+
+
+# ---- REGBOT
+
+
+def test_regbot_inspect_shows_the_comment_lines_that_number_the_columns():
+    """README 182-183: "REGBOT (whitespace text, 100 Hz, `%` comment header). `wmrid inspect square_1.txt` shows the
+    comment lines that number the columns." """
+    info = run_json("inspect", REGBOT)
+    assert [c["name"] for c in info["columns"]] == [str(i) for i in range(1, 16)]
+    comments = "\n".join(info["comments"])
+    for line in ("%  1    time", "%  7  8 Motor current left, right [A]", "%  9 10 Wheel velocity [m/s] left, right"):
+        assert line in comments
+    assert "columns separated by whitespace" in info["notes"]
+
+
+def test_regbot_reads_rim_speeds_and_currents_and_identifies_in_amperes(regbot):
+    """README 183-187: "`wmrid identify square_1.txt --columns t=1,eta_l=9,eta_r=10,tau_l=7,tau_r=8 --speed-unit m/s
+    --wheel-radius 0.02975 --effort current --torque-hold foh` reads rim speeds in m/s (r = 0.02975 m […]) and motor
+    currents. No torque constant is known, so the result is in amperes. Over 4.3 s […]" """
+    notes = regbot["log"]["notes"]
+    assert any("wheel speeds read as m/s at the rim and divided by the wheel radius r = 0.02975 m" in n for n in notes)
+    assert any("effort read as motor current in A with no torque constant given" in n for n in notes)
+    assert regbot["effort_unit"] == "A"
+    for name, entry in regbot["parameters"].items():
+        assert "A" in entry["unit"].replace("rad", ""), name
+    assert f"{regbot['log']['duration_s']:.1f}" == "4.3"
+    assert round(regbot["log"]["rate_hz"]) == 100
+
+
+def test_regbot_pins_m22_to_11_percent_and_m11_to_22(regbot):
+    """README: "Over 4.3 s it pins m22 to about 11 % (m11 to 22 %, flagged as poorly determined), and little
+    else." """
+    share = {n: regbot["parameters"][n]["std"] / abs(regbot["parameters"][n]["value"]) for n in ("m11", "m22")}
+    assert (round(100 * share["m22"]), round(100 * share["m11"])) == (11, 22)
+    poor = regbot["diagnostics"]["poorly_determined"]
+    assert "m11" in poor
+    assert "m22" not in poor
+    assert len(poor) >= len(regbot["parameters"]) - 3  # "and little else": m22 and at most two others pinned
+
+
+def test_regbot_prediction_error_2_2_times_noise_flagged(regbot):
+    """README 960-961: "On the real logs of the worked examples: ME169 4.4 and REGBOT 2.2 (flagged)"."""
+    misfit = regbot["diagnostics"]["uncertainty"]["model_error"]["prediction_misfit"]
+    assert misfit["applied"] is True
+    assert f"{misfit['ratio']:.1f}" == "2.2"
+    assert regbot["diagnostics"]["flagged"] == list(regbot["parameters"])
+
+
+# ---- BorealTC
+
+
+def test_vulpi_everything_poorly_determined(vulpi):
+    """README 188-189: "BorealTC vulpi (skid-steer CSV, currents). `--columns
+    t=time,eta_l=velL,eta_r=velR,tau_l=curL,tau_r=curR --effort current`: everything is flagged as poorly
+    determined, and the log determines nothing." """
+    names = list(vulpi["parameters"])
+    assert vulpi["effort_unit"] == "A"
+    assert sorted(vulpi["diagnostics"]["poorly_determined"]) == sorted(names)
+    assert vulpi["diagnostics"]["flagged"] == names
+    for name in names:
+        assert warnings_with(vulpi, f"{name} is poorly determined by this log"), name
+
+
+def test_vulpi_prediction_error_0_94_of_noise(vulpi):
+    """README 961: "BorealTC vulpi 0.94 (its speeds are quantised at 15 Hz)"."""
+    misfit = vulpi["diagnostics"]["uncertainty"]["model_error"]["prediction_misfit"]
+    assert f"{misfit['ratio']:.2f}" == "0.94"
+    assert misfit["applied"] is False
+    assert round(vulpi["log"]["rate_hz"]) == 15
+
+
+def test_borealtc_husky_effort_is_a_magnitude(borealtc_husky):
+    """README 190-192: "BorealTC husky and DRIVE (skid-steer; unsigned or reversed currents). The same options give
+    numbers that wmrid itself disowns. For husky: "the right wheel's effort never changes sign while its speed does
+    … the log holds a magnitude, not a signed effort"." """
+    assert borealtc_husky["diagnostics"]["flagged"] == list(borealtc_husky["parameters"])
+    assert warnings_with(
+        borealtc_husky,
+        "the right wheel's effort never changes sign while its speed does",
+        "the log holds a magnitude",
+        "not a signed effort",
+    )
+
+
+def test_drive_husky_effort_is_a_magnitude(drive_husky):
+    """README 191-192, for the DRIVE husky: "the right wheel's effort never changes sign while its speed does … the
+    log holds a magnitude, not a signed effort" (read with its own columns: ros_time, meas_*_vel, *_wheel_current)."""
+    assert warnings_with(
+        drive_husky,
+        "the right wheel's effort never changes sign while its speed does",
+        "the log holds a magnitude",
+        "not a signed effort",
+    )
+
+
+def test_warthog_effort_mostly_opposes_its_speed_and_friction_pushes(drive_warthog):
+    """README: "For warthog: "the left wheel's effort mostly opposes its speed (90 % of the samples with power …) …
+    try --mirror-left or --flip-effort", and a negative viscous friction on both wheels ("friction cannot push;
+    check signs")." """
+    assert warnings_with(
+        drive_warthog, "the left wheel's effort mostly opposes its speed (90 % of the samples with power",
+        "try --mirror-left or --flip-effort",
+    )  # fmt: skip
+    for name in ("Fv1", "Fv2"):
+        assert warnings_with(drive_warthog, f"{name} = -", "friction cannot push; check signs"), name
+
+
+def test_the_vulpi_options_do_not_fit_the_drive_files():
+    """README: the DRIVE files need their own --columns (the BorealTC names are not theirs): with the vulpi options
+    wmrid says which columns there are and how to name them."""
+    out = text(wmrid("identify", DRIVE_WARTHOG, *BOREALTC_OPTIONS))
+    assert out.returncode == 2
+    assert "'meas_left_vel'" in out.stderr
+    assert "--columns" in out.stderr
+
+
+def test_husky_and_warthog_inverse_inertia_not_positive_definite(borealtc_husky, drive_warthog):
+    """README: "For the BorealTC husky and warthog the inverse inertia is not positive definite." """
+    for result in (borealtc_husky, drive_warthog):
+        m11, m12, m22 = (result["parameters"][n]["value"] for n in ("m11", "m12", "m22"))
+        assert m11 <= 0 or m22 <= 0 or m11 * m22 - m12 * m12 <= 0
+        assert warnings_with(result, "the identified inverse inertia", "is not positive definite")
+
+
+@pytest.mark.parametrize("path", [DRIVE_HUSKY, DRIVE_WARTHOG], ids=lambda p: p.stem)
+def test_drive_float_ns_time_and_zero_stamp(path, drive_husky, drive_warthog):
+    """README 194-195: "The DRIVE Parquet files stamp time in float nanoseconds, with one row stamped 0. wmrid reads
+    the time as nanoseconds since the epoch and drops the zero row, and a note says both." """
+    result = drive_husky if path == DRIVE_HUSKY else drive_warthog
+    rows = run_json("inspect", path)["rows"]
+    assert result["log"]["samples"] == rows - 1
+    notes = result["log"]["notes"]
+    assert any(n.startswith("1 rows with time stamp 0 among epoch times were dropped as bad stamps") for n in notes)
+    assert any("'ros_time' holds floats" in n and "read as ns since the Unix epoch" in n for n in notes)
+
+
+# ---- rosbag2 conformance
+
+
+def test_talker_exits_2_listing_its_topics_none_a_joint_state():
+    """README 196-197: "`wmrid identify talker.mcap` exits with code 2 and lists the topics it found, none of them a
+    JointState." """
+    path = CONFORMANCE / "talker.mcap"
+    proc = text(wmrid("identify", path))
+    assert proc.returncode == 2
+    assert proc.stdout == ""
+    assert "Traceback" not in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+    assert "no sensor_msgs/msg/JointState messages" in proc.stderr
+    topics = run_json("inspect", path)["topics"]
+    assert "sensor_msgs/msg/JointState" not in {t["type"] for t in topics}
+    for topic in topics:
+        assert f"{topic['topic']} ({topic['type']}" in proc.stderr
+
+
+@pytest.mark.parametrize(
+    "name", ["cdr_test_0.mcap", "talker.mcap", "topics_and_services.mcap", "wrong_rmw_test_0.mcap"]
+)
+def test_inspect_lists_every_topic_of_the_conformance_bags(name):
+    """README 197-198: "`wmrid inspect` lists them all, including the unknown message encoding of
+    `wrong_rmw_test_0.mcap`." """
+    path = CONFORMANCE / name
+    topics = run_json("inspect", path)["topics"]
+    err = text(wmrid("identify", path)).stderr
+    listed = err.split("its topics are ", 1)[1]
+    assert len(topics) == listed.count(" messages)")
+    for topic in topics:
+        assert f"{topic['topic']} ({topic['type']}" in listed
+    if name == "wrong_rmw_test_0.mcap":
+        assert {t["encoding"] for t in topics} == {"wrong_format"}
