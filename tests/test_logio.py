@@ -490,7 +490,8 @@ def test_missing_file(tmp_path):
 
 
 def test_directory(tmp_path):
-    assert "is a folder" in log_error(tmp_path)
+    """A folder is read when it holds a recording (tests/test_bags.py); an empty one is named as such."""
+    assert "a folder with no recording in it" in log_error(tmp_path)
 
 
 def test_empty_file(tmp_path):

@@ -310,8 +310,8 @@ def test_messages_that_blamed_the_wrong_thing(tmp_path, small_log, capsys):
 
 
 def test_formats_wmrid_does_not_read_are_named(tmp_path, small_log, capsys):
-    """A zip archive or a ROS 1 bag was "byte 8 is a NUL byte"; now the format is named, with the way out.
-    (Compressed CSV is read: tests/test_compressed.py.)"""
+    """A zip archive or a damaged ROS 1 bag was "byte 8 is a NUL byte"; now the format is named, with the way out.
+    (Compressed CSV and bags are read: tests/test_compressed.py, tests/test_bags.py.)"""
     import zipfile
 
     with zipfile.ZipFile(tmp_path / "logs.zip", "w") as archive:

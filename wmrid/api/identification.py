@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -29,7 +29,7 @@ CASTER_METHODS = ("observer", "idim", "iv", "rls", "oe")
 #: Methods that model a controller faster than the log (``control_rate``).
 CONTROL_RATE_METHODS = ("observer", "idim", "iv", "rls")
 
-LogInput = str | os.PathLike[str] | WheelLog | LogStream
+LogInput = str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | WheelLog | LogStream
 
 
 def robot_for(
@@ -61,11 +61,17 @@ def load_truth(truth: dict[str, float] | str | os.PathLike[str] | None) -> dict[
 
 
 def _is_path(log: Any) -> bool:
+    """A path, or several (the files of one recording)."""
+    if isinstance(log, (list, tuple)):
+        return bool(log) and all(isinstance(p, (str, os.PathLike)) for p in log)
     return isinstance(log, (str, os.PathLike))
 
 
 def _given(log: Any) -> str:
-    """A log as the caller named it: the path as given, else the source it was read from."""
+    """A log as the caller named it: the path as given (the first of several, and how many more), else the source
+    it was read from."""
+    if isinstance(log, (list, tuple)) and _is_path(log):
+        return os.fspath(log[0]) + (f" (+{len(log) - 1} more)" if len(log) > 1 else "")
     return os.fspath(log) if _is_path(log) else str(getattr(log, "source", "log"))
 
 

@@ -10,6 +10,7 @@ conversion.
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, fields, replace
 from typing import Any
 
@@ -119,15 +120,16 @@ def _subset(opts: LogOptions, kind: type) -> dict[str, Any]:
 
 
 def open_log(
-    path: str | os.PathLike[str],
+    path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
     options: LogOptions | None = None,
     *,
     robot: Robot | None = None,
     data: bytes | None = None,
     **overrides: Any,
 ) -> LogStream:
-    """A log read piece by piece (memory: one piece, whatever its length): ``path`` a CSV, Parquet or MCAP file, or
-    ``"-"`` for standard input (``data``: its bytes, when already read).  ``overrides``: :class:`LogOptions` fields.
+    """A log read piece by piece (memory: one piece, whatever its length): ``path`` a CSV (plain or compressed),
+    Parquet or MCAP file, a ROS 1 or ROS 2 (.db3) bag, a rosbag2 folder, several files of one recording, or ``"-"``
+    for standard input (``data``: its bytes, when already read).  ``overrides``: :class:`LogOptions` fields.
     """
     from wmrid.io.columns import parse_column_mapping
     from wmrid.io.logs import open_log as open_file
@@ -142,13 +144,13 @@ def open_log(
     mapping = parse_column_mapping(opts.columns) if isinstance(opts.columns, str) and opts.columns else opts.columns
     k_r = robot.nominal.k_r if robot is not None else None
     return open_file(
-        os.fspath(path), columns=mapping or None, time_unit=opts.time_unit, selection=selection, signals=signals,
+        _fspaths(path), columns=mapping or None, time_unit=opts.time_unit, selection=selection, signals=signals,
         gear_ratio=k_r, data=data,
     )  # fmt: skip
 
 
 def read_log(
-    path: str | os.PathLike[str],
+    path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
     options: LogOptions | None = None,
     *,
     robot: Robot | None = None,
@@ -160,10 +162,14 @@ def read_log(
     return open_log(path, options, robot=robot, data=data, **overrides).read()
 
 
-def inspect(path: str | os.PathLike[str]) -> Any:
+def _fspaths(path: Any) -> str | list[str]:
+    return os.fspath(path) if isinstance(path, (str, os.PathLike)) else [os.fspath(p) for p in path]
+
+
+def inspect(path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]) -> Any:
     """What the log at ``path`` holds, before any identification (``wmrid inspect``): an
     :class:`~wmrid.io.inspect.McapInventory` (topics, types, rates, joints) or a
     :class:`~wmrid.io.inspect.TableInventory` (columns, rows, canonical columns found); ``to_dict`` is the JSON."""
     from wmrid.io.inspect import inspect_log
 
-    return inspect_log(os.fspath(path))
+    return inspect_log(_fspaths(path))

@@ -52,12 +52,20 @@ from wmrid.cli.options import (
 )
 from wmrid.core.errors import UsageError
 
+LOG_HELP = (
+    "Log: .csv (also gzip/bz2/xz/zstd), .parquet, .mcap, ROS 1 .bag, ROS 2 .db3, a rosbag2 folder, several bag "
+    "files of one recording, or - for standard input."
+)
+
+
+def one_or_many(paths: list[str]) -> str | list[str]:
+    """The LOG arguments: one path, or the files of one recording."""
+    return paths[0] if len(paths) == 1 else paths
+
 
 @app.command()
 def identify(
-    log: Annotated[
-        str, typer.Argument(metavar="LOG", help="Log file (.csv, .parquet, .mcap) or - for standard input.")
-    ],
+    log: Annotated[list[str], typer.Argument(metavar="LOG...", help=LOG_HELP)],
     robot: Annotated[
         str | None,
         typer.Option(
@@ -139,7 +147,7 @@ def identify(
     progress_cb, finish = progress("identify")
     try:
         result = run_identify(
-            log, robot, method=method.value, rotor_inertia=rotor_inertia, validate=validate,
+            one_or_many(log), robot, method=method.value, rotor_inertia=rotor_inertia, validate=validate,
             options=log_opts(locals()), form=form.value, k=k, alpha=alpha,
             box_width=box_width, torque_hold=torque_hold.value, payload=payload, control_rate=control_rate,
             delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted, forgetting=forgetting,
@@ -167,9 +175,7 @@ def identify(
 
 @app.command()
 def inspect(
-    log: Annotated[
-        str, typer.Argument(metavar="LOG", help="Log file (.mcap, .csv, .parquet) or - for standard input.")
-    ],
+    log: Annotated[list[str], typer.Argument(metavar="LOG...", help=LOG_HELP)],
     output_format: Annotated[
         OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
     ] = OutputFormat.auto,
@@ -178,7 +184,7 @@ def inspect(
     from wmrid.io.inspect import inspect_log
     from wmrid.reporting.render import print_inspection, to_json
 
-    info = inspect_log(log).to_dict()
+    info = inspect_log(one_or_many(log)).to_dict()
     fmt = output_format.value
     if fmt == "auto":
         fmt = "table" if sys.stdout.isatty() else "json"
@@ -279,9 +285,7 @@ def report(
 
 @app.command()
 def compare(
-    log: Annotated[
-        str, typer.Argument(metavar="LOG", help="Log file (.csv, .parquet, .mcap) or - for standard input.")
-    ],
+    log: Annotated[list[str], typer.Argument(metavar="LOG...", help=LOG_HELP)],
     robot: Annotated[
         str | None, typer.Option(help="Robot (name, TOML or URDF): starts the observer and gives nominal/CAD values.")
     ] = None,
@@ -334,7 +338,8 @@ def compare(
     from wmrid.reporting.render import print_comparison, to_json
 
     data = run_compare(
-        log, robot, methods=methods.split(","), validate=validate, truth=truth, rotor_inertia=rotor_inertia,
+        one_or_many(log), robot, methods=methods.split(","), validate=validate, truth=truth,
+        rotor_inertia=rotor_inertia,
         options=log_opts(locals()), torque_hold=torque_hold.value,
         control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted,
         forgetting=forgetting,

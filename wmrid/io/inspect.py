@@ -19,8 +19,9 @@ from wmrid.core.errors import LogFormatError
 
 @dataclass(frozen=True)
 class McapInventory:
-    """What an MCAP holds: its topics (each {"topic", "type", "encoding", "messages", "rate_hz", "start_s", "end_s"},
-    JointState topics also "joints", "fields" and "header_stamps"), time range (s), metadata names and notes."""
+    """What an MCAP or a bag (``format``) holds: its topics (each {"topic", "type", "encoding", "messages",
+    "rate_hz", "start_s", "end_s"}, JointState topics also "joints", "fields" and "header_stamps"), time range (s),
+    metadata names and notes."""
 
     source: str
     profile: str
@@ -32,10 +33,11 @@ class McapInventory:
     topics: list[dict[str, Any]]
     metadata: list[str]
     notes: list[str]
+    format: str = "mcap"  # or "ros1 bag", "ros2 bag"
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "source": self.source, "format": "mcap", "profile": self.profile, "library": self.library,
+            "source": self.source, "format": self.format, "profile": self.profile, "library": self.library,
             "size_bytes": self.size_bytes, "start_s": self.start_s, "end_s": self.end_s, "duration_s": self.duration_s,
             "topics": self.topics, "metadata": self.metadata, "notes": self.notes,
         }  # fmt: skip
@@ -63,21 +65,31 @@ class TableInventory:
         }  # fmt: skip
 
 
-def inspect_log(path: str) -> McapInventory | TableInventory:
-    """A description of the log at ``path`` (or ``-``); see the module docstring."""
+def inspect_log(path: str | list[str]) -> McapInventory | TableInventory:
+    """A description of the log at ``path`` (or ``-``; or the files of one recording); see the module docstring."""
+    from wmrid.io.bag.log import recording_paths
     from wmrid.io.sources import detect_format, open_source
 
+    paths = [path] if isinstance(path, str) else list(path)
+    bag = recording_paths(paths)
+    if bag is not None:
+        from wmrid.core.wheel_log import CHUNK_ROWS
+        from wmrid.io.bag.reader import read_bag
+
+        contents = read_bag(bag, keep=4 * CHUNK_ROWS)  # summaries past ~1 M messages: memory stays bounded
+        return _inventory(contents, f"{contents.profile} bag")
+    path = paths[0]
     source = open_source(path)
     kind = detect_format(path, source.head(8), source.compression)
     if kind == "mcap":
-        return _inspect_mcap(source)
+        from wmrid.io.mcap.reader import read_mcap
+
+        return _inventory(read_mcap(source.path or source.name, data=source.data), "mcap")
     return _inspect_table(source, kind)
 
 
-def _inspect_mcap(source) -> McapInventory:
-    from wmrid.io.mcap.reader import read_mcap
-
-    contents = read_mcap(source.path or source.name, data=source.data)
+def _inventory(contents: Any, kind: str) -> McapInventory:
+    """The inventory of a recording's contents (an MCAP read, or a bag's through rosbags)."""
     firsts = [c.first_ns for c in contents.channels if c.first_ns is not None]
     lasts = [c.last_ns for c in contents.channels if c.last_ns is not None]
     topics = []
@@ -92,17 +104,21 @@ def _inspect_mcap(source) -> McapInventory:
         if series is not None:
             entry["joints"] = list(series.names)
             entry["fields"] = {f: series.populated(f) for f in ("position", "velocity", "effort")}
-            stamps = series.stamp_ns
+            if hasattr(series, "stamp_ns"):
+                stamps = series.stamp_ns
+                positive, ordered = bool(np.all(stamps > 0)), bool(np.all(np.diff(stamps) >= 0))
+            else:  # a summary of a long recording
+                header = series.times["header"]
+                positive, ordered = header.all_positive, header.ordered
             entry["header_stamps"] = (
-                "all set, in order" if np.all(stamps > 0) and np.all(np.diff(stamps) >= 0)
-                else "some zero" if np.any(stamps <= 0) else "out of order"
-            )  # fmt: skip
+                "all set, in order" if positive and ordered else "some zero" if not positive else "out of order"
+            )
         topics.append(entry)
     return McapInventory(
         source=contents.source, profile=contents.profile, library=contents.library, size_bytes=contents.size_bytes,
         start_s=min(firsts) * 1e-9 if firsts else None, end_s=max(lasts) * 1e-9 if lasts else None,
         duration_s=(max(lasts) - min(firsts)) * 1e-9 if firsts else 0.0,
-        topics=topics, metadata=sorted(contents.metadata), notes=list(contents.notes),
+        topics=topics, metadata=sorted(contents.metadata), notes=list(contents.notes), format=kind,
     )  # fmt: skip
 
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Callable, Generator, Mapping
+from collections.abc import Callable, Generator, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -28,6 +28,7 @@ from wmrid.io.signals import SignalOptions, convert
 if TYPE_CHECKING:
     import pandas
 from wmrid.core.wheel_log import CANONICAL, CHUNK_ROWS, MIN_SAMPLES, POSE, REFERENCE, REQUIRED, LogStream, WheelLog
+from wmrid.io.bag.log import recording_paths
 from wmrid.io.columns import check_key
 from wmrid.io.csv_log import csv_chunks
 from wmrid.io.mcap.log import read_mcap_log
@@ -48,7 +49,7 @@ MERGED_TIME = "__time"
 
 
 def read_log(
-    path: str,
+    path: str | Sequence[str],
     *,
     columns: Mapping[str, str] | None = None,
     time_unit: str = "auto",
@@ -79,7 +80,7 @@ def read_log(
 
 
 def open_log(
-    path: str,
+    path: str | Sequence[str],
     *,
     columns: Mapping[str, str] | None = None,
     time_unit: str = "auto",
@@ -94,10 +95,18 @@ def open_log(
     CSV and Parquet logs are read piece by piece (bounded memory); so are MCAP recordings, except the
     layouts listed in the module docstring, which are decoded whole and then handed out in pieces.
     The file's layout (format, columns, delimiter) is checked here; the rows are checked as the pieces
-    are read.
+    are read.  ``path`` may also be a ROS 1 bag, a ROS 2 ``.db3`` bag, a rosbag2 folder, or several bag files
+    of one recording (read in time order: :func:`wmrid.io.bag.log.recording_paths`).
     """
     if time_unit not in TIME_UNITS:
         raise UsageError(f"{option('time_unit')} {time_unit!r} is not one of {', '.join(TIME_UNITS)}")
+    paths = [os.fspath(path)] if isinstance(path, (str, os.PathLike)) else [os.fspath(p) for p in path]
+    if not paths:
+        raise UsageError("no log given; give a log file")
+    bag = recording_paths(paths) if data is None else None
+    if bag is not None:
+        return _bag_log(bag, columns, selection, signals or SignalOptions(), gear_ratio, rows)
+    path = paths[0]
     mapping = {key: key for key in CANONICAL}
     for key, value in (columns or {}).items():
         check_key(key, "--columns")
@@ -149,6 +158,30 @@ def open_log(
         return (*notes, *assembler.finish(), *signal_notes)
 
     return LogStream(source.name, effort_unit, pieces)
+
+
+def _bag_log(
+    paths: list[str],
+    columns: Mapping[str, str] | None,
+    selection: TopicSelection | None,
+    signals: SignalOptions,
+    gear_ratio: float | None,
+    rows: int,
+) -> LogStream:
+    from wmrid.core.atomic import register_input
+    from wmrid.io.bag.log import read_bag_log
+
+    if columns:
+        raise UsageError(
+            f"{paths[0]}: {option('columns')} names the columns of a CSV or Parquet log (or a JSON topic's fields); "
+            f"a bag's JointState topics are chosen with {option('velocity_topic')}, {option('effort_topic')} and "
+            f"{option('right_joint')}/{option('left_joint')}"
+        )
+    for p in paths:
+        for root, _, files in os.walk(p) if os.path.isdir(p) else [("", None, [p])]:
+            for f in files:
+                register_input(os.path.join(root, f))  # an output of this command may not be one of them
+    return read_bag_log(paths, selection or TopicSelection(), signals, gear_ratio, rows)
 
 
 def _numeric(values: Any, key: str, col: str, name: str, where: Callable[[int], str]) -> np.ndarray:

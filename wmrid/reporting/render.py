@@ -116,12 +116,19 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         console.print(f"[yellow]warning:[/yellow] {warning}")
 
 
+def _format_name(info: dict) -> str:
+    """'MCAP, profile ros2', 'ROS 1 bag', 'ROS 2 bag'."""
+    if info["format"] == "mcap":
+        return f"MCAP, profile {info['profile'] or '-'}"
+    return {"ros1 bag": "ROS 1 bag", "ros2 bag": "ROS 2 bag"}.get(info["format"], info["format"])
+
+
 def print_inspection(info: dict, console: Any) -> None:
     """Tables of what a log holds (:func:`wmrid.io.inspect.inspect_log`)."""
     from rich import box
     from rich.table import Table
 
-    if info["format"] != "mcap":
+    if "topics" not in info:  # a CSV or Parquet log (an MCAP or a bag lists topics)
         table = Table(
             title=f"wmrid inspect: {info['source']} ({info['format']})", title_justify="left", box=box.SIMPLE_HEAD
         )
@@ -146,9 +153,7 @@ def print_inspection(info: dict, console: Any) -> None:
             console.print(f"note: {note}")
         return
     span = f"{info['duration_s']:.3f} s" if info.get("start_s") is not None else "no messages"
-    console.print(
-        f"wmrid inspect: {info['source']} (MCAP, profile {info['profile'] or '-'}, {info['size_bytes']} bytes, {span})"
-    )
+    console.print(f"wmrid inspect: {info['source']} ({_format_name(info)}, {info['size_bytes']} bytes, {span})")
     table = Table(box=box.SIMPLE_HEAD)
     for name in ("topic", "type", "encoding", "messages", "rate Hz", "start s", "end s"):
         table.add_column(name, no_wrap=name != "type", justify="right" if name in ("messages", "rate Hz") else "left")

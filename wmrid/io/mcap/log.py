@@ -5,7 +5,8 @@ few layouts that cannot stream exactly are decoded whole, with a note saying why
 
 from __future__ import annotations
 
-from collections.abc import Generator, Iterator, Mapping
+from collections.abc import Callable, Generator, Iterator, Mapping
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -55,8 +56,7 @@ def read_mcap_log(
     :func:`wmrid.io.mcap.joint_stream.stream_plan`
     lists; a JSON topic is always read whole.
     """
-    from wmrid.io.mcap.joint_stream import stream_plan
-    from wmrid.io.mcap.reader import read_mcap, scan_mcap
+    from wmrid.io.mcap.reader import iter_joint_parts, read_mcap, scan_mcap
 
     path = source.path or source.name
     if columns and selection.topic:
@@ -65,7 +65,36 @@ def read_mcap_log(
             raise UsageError(f"a JSON topic needs field paths for {', '.join(missing)} in {option('columns')}")
         contents = read_mcap(path, data=source.data, json_fields={selection.topic: dict(columns)})
         return stream_arrays(_mcap_whole_log(source, contents, selection, signals, gear_ratio), rows)
-    contents = scan_mcap(path, source.data, keep=_MCAP_WHOLE_PIECES * rows, spare=_MCAP_REPLAY_BYTES)
+    recording = Recording(
+        name=source.name,
+        scan=lambda keep, spare: scan_mcap(path, source.data, keep=keep, spare=spare),
+        read=lambda: read_mcap(path, data=source.data),
+        parts=lambda channels: iter_joint_parts(path, source.data, channels),
+    )
+    return recording_log(recording, selection, signals, gear_ratio, rows)
+
+
+@dataclass(frozen=True)
+class Recording:
+    """A recording whose JointState topics make a log, whatever its format (MCAP here, bags in
+    :mod:`wmrid.io.bag`): ``name`` for messages; ``scan(keep, spare)`` the first pass
+    (:func:`wmrid.io.mcap.reader.scan_mcap`'s contents), ``read()`` the whole contents, ``parts(channel_ids)``
+    a later pass's parts batch by batch (:func:`wmrid.io.mcap.reader.iter_joint_parts`)."""
+
+    name: str
+    scan: Callable[[int, int], Any]
+    read: Callable[[], Any]
+    parts: Callable[[list[int]], Iterator[dict[int, list[tuple[np.ndarray | None, ...]]]]]
+
+
+def recording_log(
+    recording: Recording, selection: TopicSelection, signals: SignalOptions, gear_ratio: float | None, rows: int
+) -> LogStream:
+    """The LogStream of a recording's JointState topics: decoded whole, or streamed (see :func:`read_mcap_log`)."""
+    from wmrid.io.mcap.joint_stream import stream_plan
+
+    source = recording
+    contents = recording.scan(_MCAP_WHOLE_PIECES * rows, _MCAP_REPLAY_BYTES)
     if contents.complete:
         return stream_arrays(_mcap_whole_log(source, contents, selection, signals, gear_ratio), rows)
     plan, why = stream_plan(contents, selection, signals, gear_ratio)
@@ -82,14 +111,14 @@ def read_mcap_log(
         if contents.replay:
             contents.replay.clear()  # not needed by the whole decode, which would otherwise hold both
 
-        whole = _mcap_whole_log(source, read_mcap(path, data=source.data), selection, signals, gear_ratio)
+        whole = _mcap_whole_log(source, recording.read(), selection, signals, gear_ratio)
         note = f"the recording was decoded whole (memory grows with its length): {why}"
         return stream_arrays(replace(whole, notes=(*whole.notes, note)), rows)
-    return _mcap_pieces(source, contents, plan, selection, signals, gear_ratio, rows, relative)
+    return _mcap_pieces(recording, contents, plan, selection, signals, gear_ratio, rows, relative)
 
 
 def _mcap_whole_log(
-    source: Source, contents: Any, selection: TopicSelection, signals: SignalOptions, gear_ratio: float | None
+    source: Any, contents: Any, selection: TopicSelection, signals: SignalOptions, gear_ratio: float | None
 ) -> WheelLog:
     """The WheelLog of a recording read whole (:class:`wmrid.io.mcap.contents.McapContents` with its arrays)."""
     from wmrid.io.mcap.joints import signals_from_json, signals_from_mcap
@@ -109,7 +138,7 @@ def _mcap_whole_log(
     return WheelLog(t=t, eta=eta, tau=tau, source=source.name, notes=tuple(notes), effort_unit=sig.effort_unit)
 
 
-def _mcap_check_count(source: Source, n: int) -> None:
+def _mcap_check_count(source: Any, n: int) -> None:
     if n < MIN_SAMPLES:
         raise LogFormatError(
             f"{source.name}: only {n} usable samples after reading the topics; identification needs "
@@ -117,7 +146,7 @@ def _mcap_check_count(source: Source, n: int) -> None:
         )
 
 
-def _mcap_check_finite(source: Source, t: np.ndarray, speed: np.ndarray, effort: np.ndarray) -> None:
+def _mcap_check_finite(source: Any, t: np.ndarray, speed: np.ndarray, effort: np.ndarray) -> None:
     for arr, what in ((speed, "speed"), (effort, "effort")):
         bad = ~np.isfinite(arr)
         if bad.any():
@@ -127,7 +156,7 @@ def _mcap_check_finite(source: Source, t: np.ndarray, speed: np.ndarray, effort:
 
 
 def _mcap_pieces(
-    source: Source,
+    recording: Recording,
     contents: Any,
     plan: Any,
     selection: TopicSelection,
@@ -140,9 +169,8 @@ def _mcap_pieces(
     samples, as :func:`stream_arrays` cuts the whole log.  Its ``_mcap_peak`` is the most JointState samples
     the last pass held at once (decoded, waiting and cut into pieces)."""
     from wmrid.io.mcap.joint_stream import SignalStream
-    from wmrid.io.mcap.reader import iter_joint_parts
 
-    path = source.path or source.name
+    source = recording
     unit = signals.effort_label
     per_s = float(NS_PER_UNIT["s"])
     kept = [contents.replay]  # the scan's parts, for the first pass
@@ -157,7 +185,7 @@ def _mcap_pieces(
             pass only), or decoded from the file again."""
             replay, kept[0] = kept[0], None
             if replay is None:
-                yield from iter_joint_parts(path, source.data, channels)
+                yield from recording.parts(channels)
                 return
             wanted = set(channels)
             state["kept"] = sum(len(part[0]) for cid, part in replay if cid in wanted)

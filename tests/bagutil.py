@@ -1,0 +1,121 @@
+"""Real bags for the tests, written by rosbags' own writers (a helper module, not a test module).
+
+:func:`recording` reads a ROS 2 MCAP recording's messages (rosbags' reader: topic, type, receive time, CDR bytes);
+:func:`write_ros1` writes them to a ROS 1 bag (each JointState re-serialised for ROS 1 by rosbags, with a header
+``seq``), :func:`write_rosbag2` to a rosbag2 folder (sqlite3 or MCAP storage, the CDR bytes as they are), and
+:func:`write_split_rosbag2` to a rosbag2 folder split into several storage files, as ``ros2 bag record
+--max-bag-size`` leaves it (one metadata.yaml listing every file).
+"""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+JOINT_STATE = "sensor_msgs/msg/JointState"
+
+
+@dataclass(frozen=True)
+class Message:
+    topic: str
+    msgtype: str
+    log_ns: int
+    cdr: bytes
+
+
+def recording(path: Path) -> list[Message]:
+    """Every message of a ROS 2 MCAP file, in file order."""
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([Path(path)]) as reader:
+        return [Message(c.topic, c.msgtype, t, bytes(raw)) for c, t, raw in reader.messages()]
+
+
+def _ros2_store():
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_HUMBLE)
+
+
+def write_ros1(path: Path, messages: list[Message], compression: str | None = None) -> Path:
+    """A ROS 1 bag of the JointState messages (``compression``: None, "bz2" or "lz4" chunks)."""
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ros1, ros2 = get_typestore(Stores.ROS1_NOETIC), _ros2_store()
+    js, header, time = (ros1.types[n] for n in (JOINT_STATE, "std_msgs/msg/Header", "builtin_interfaces/msg/Time"))
+    writer = Writer(Path(path))
+    if compression is not None:
+        writer.set_compression(getattr(Writer.CompressionFormat, compression.upper()))
+    with writer:
+        conns = {}
+        for seq, m in enumerate(messages):
+            if m.msgtype != JOINT_STATE:
+                continue
+            if m.topic not in conns:
+                conns[m.topic] = writer.add_connection(m.topic, JOINT_STATE, typestore=ros1)
+            msg = ros2.deserialize_cdr(m.cdr, JOINT_STATE)
+            stamp = msg.header.stamp
+            one = js(
+                header=header(seq=seq, stamp=time(sec=stamp.sec, nanosec=stamp.nanosec), frame_id=msg.header.frame_id),
+                name=list(msg.name), position=msg.position, velocity=msg.velocity, effort=msg.effort,
+            )  # fmt: skip
+            writer.write(conns[m.topic], m.log_ns, ros1.serialize_ros1(one, JOINT_STATE))
+    return Path(path)
+
+
+def write_rosbag2(folder: Path, messages: list[Message], storage: str = "sqlite3") -> Path:
+    """A rosbag2 folder (metadata.yaml and one storage file) of the messages, CDR bytes unchanged."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    store = _ros2_store()
+    plugin = StoragePlugin.SQLITE3 if storage == "sqlite3" else StoragePlugin.MCAP
+    with Writer(Path(folder), version=9, storage_plugin=plugin) as writer:
+        conns = {}
+        for m in messages:
+            if m.topic not in conns:
+                conns[m.topic] = writer.add_connection(m.topic, m.msgtype, typestore=store)
+            writer.write(conns[m.topic], m.log_ns, m.cdr)
+    return Path(folder)
+
+
+def write_split_rosbag2(folder: Path, messages: list[Message], storage: str = "sqlite3", parts: int = 2) -> Path:
+    """A rosbag2 folder whose messages are split over ``parts`` storage files in time order, one metadata.yaml
+    listing them all (each part written by rosbags, then moved in and its file entry merged)."""
+    from ruamel.yaml import YAML
+
+    folder = Path(folder)
+    cut = [round(i * len(messages) / parts) for i in range(parts + 1)]
+    pieces = []
+    for i in range(parts):
+        piece = folder.parent / f"{folder.name}.part{i}"
+        write_rosbag2(piece, messages[cut[i] : cut[i + 1]], storage)
+        pieces.append(piece)
+    yaml = YAML(typ="safe")
+    meta = yaml.load((pieces[0] / "metadata.yaml").read_text())
+    info = meta["rosbag2_bagfile_information"]
+    folder.mkdir()
+    info["relative_file_paths"], info["files"] = [], []
+    counts: dict[str, int] = {}
+    end = 0
+    for i, piece in enumerate(pieces):
+        part = yaml.load((piece / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+        for rel, entry in zip(part["relative_file_paths"], part["files"], strict=True):
+            name = f"{folder.name}_{i}{Path(rel).suffix}"
+            shutil.move(str(piece / Path(rel).name), str(folder / name))
+            info["relative_file_paths"].append(name)
+            info["files"].append({**entry, "path": name})
+        for topic in part["topics_with_message_count"]:
+            counts[topic["topic_metadata"]["name"]] = (
+                counts.get(topic["topic_metadata"]["name"], 0) + topic["message_count"]
+            )
+        end = max(end, part["starting_time"]["nanoseconds_since_epoch"] + part["duration"]["nanoseconds"])
+        shutil.rmtree(piece)
+    for topic in info["topics_with_message_count"]:
+        topic["message_count"] = counts[topic["topic_metadata"]["name"]]
+    info["message_count"] = sum(counts.values())
+    info["duration"]["nanoseconds"] = end - info["starting_time"]["nanoseconds_since_epoch"]
+    with open(folder / "metadata.yaml", "w") as fh:
+        yaml.dump(meta, fh)
+    return folder

@@ -1,0 +1,191 @@
+"""ROS 1 bags, ROS 2 .db3 bags, rosbag2 folders (sqlite3 and MCAP storage, split over several files) and several bag
+files of one recording: each read through rosbags gives exactly the log, and the identification, of the MCAP it was
+converted from.
+
+The bags are written in the tests by rosbags' own writers (:mod:`tests.bagutil`) from the bundled sample
+(``sample_logs/paper_sinusoid.mcap``) and from the real ME169 bags; the reference is wmrid's own MCAP reader,
+which tests/test_mcap_read.py checks against mcap_ros2's decoder.  The issue asks for the same parameters within
+1e-12 relative; they are checked for exact equality (the same samples go through the same arithmetic).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests import bagutil
+from tests.cliutil import text, wmrid
+from wmrid.io.bag.reader import read_bag
+from wmrid.io.logs import open_log, read_log
+from wmrid.io.mcap import log as mcap_log
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "sample_logs" / "paper_sinusoid.mcap"
+ME169 = ROOT.parent / "shared" / "real_logs" / "me169" / "wheel_pwm_2022-04-13-14-27-37.mcap"
+ME169_OPTIONS = (
+    "--velocity-topic", "/wheel_state", "--effort-topic", "/wheel_desired",
+    "--right-joint", "rightwheel", "--left-joint", "leftwheel", "--effort", "pwm",
+)  # fmt: skip
+
+
+def _formats(folder: Path, messages: list[bagutil.Message]) -> dict[str, list[Path]]:
+    """{format: the paths to give wmrid} of one recording written every way."""
+    half = len(messages) // 2
+    two = folder / "two"
+    two.mkdir()
+    out = {
+        "ros1": [bagutil.write_ros1(folder / "plain.bag", messages)],
+        "ros1-lz4": [bagutil.write_ros1(folder / "lz4.bag", messages, "lz4")],
+        "ros1-bz2": [bagutil.write_ros1(folder / "bz2.bag", messages, "bz2")],
+        "ros1-two-files": [
+            bagutil.write_ros1(two / f"run_{i}.bag", part) for i, part in enumerate((messages[:half], messages[half:]))
+        ],
+        "db3-folder": [bagutil.write_rosbag2(folder / "db3", messages)],
+        "mcap-folder": [bagutil.write_rosbag2(folder / "mcapdir", messages, "mcap")],
+        "db3-split": [bagutil.write_split_rosbag2(folder / "split_db3", messages)],
+        "mcap-split": [bagutil.write_split_rosbag2(folder / "split_mcap", messages, "mcap")],
+    }
+    out["db3-file"] = [folder / "db3" / "db3.db3"]
+    out["ros1-folder"] = [two]
+    return out
+
+
+@pytest.fixture(scope="module")
+def sample_bags(tmp_path_factory):
+    return _formats(tmp_path_factory.mktemp("sample"), bagutil.recording(SAMPLE))
+
+
+def _identify(paths, *options: str) -> dict:
+    out = wmrid("identify", *map(str, paths), *options, "--format", "json")
+    assert out.returncode == 0, text(out).stderr
+    return json.loads(out.stdout)
+
+
+@pytest.fixture(scope="module")
+def sample_result():
+    return _identify([SAMPLE])
+
+
+FORMATS = ["ros1", "ros1-lz4", "ros1-bz2", "ros1-two-files", "ros1-folder", "db3-folder", "db3-file", "mcap-folder",
+           "db3-split", "mcap-split"]  # fmt: skip
+
+
+@pytest.mark.parametrize("kind", FORMATS)
+def test_every_format_identifies_as_the_mcap(sample_bags, sample_result, kind):
+    """The issue's "done when": the bundled sample as a ROS 1 bag, a db3 and a split rosbag2 folder (and the rest)
+    identifies to the parameters of the MCAP; here exactly, with the same notes and warnings."""
+    result = _identify(sample_bags[kind])
+    assert result["parameters"] == sample_result["parameters"]
+    assert result["estimate"] == sample_result["estimate"]
+    assert result["log"]["notes"] == sample_result["log"]["notes"]
+    assert result["warnings"] == sample_result["warnings"]
+
+
+@pytest.mark.parametrize("kind", ["ros1", "db3-split"])
+def test_the_samples_are_the_mcap_samples_and_stream_the_same(sample_bags, kind, monkeypatch):
+    """Read whole, streamed in small pieces with the scan's parts replayed, and streamed decoding the files again:
+    the MCAP's samples, bit for bit."""
+    reference = read_log(str(SAMPLE))
+    paths = [str(p) for p in sample_bags[kind]]
+    whole = read_log(paths)
+    for replay in (mcap_log._MCAP_REPLAY_BYTES, 0):
+        monkeypatch.setattr(mcap_log, "_MCAP_REPLAY_BYTES", replay)
+        stream = open_log(paths, rows=3001)
+        pieces = list(stream)
+        assert hasattr(stream, "_mcap_peak"), "the streaming path was not taken"
+        assert max(len(p) for p in pieces) == 3001
+        joined = np.concatenate([p.eta for p in pieces]), np.concatenate([p.tau for p in pieces])
+        assert np.array_equal(joined[0], reference.eta)
+        assert np.array_equal(joined[1], reference.tau)
+        assert stream.notes == reference.notes
+    for log in (whole,):
+        assert np.array_equal(log.t, reference.t)
+        assert np.array_equal(log.eta, reference.eta)
+        assert np.array_equal(log.tau, reference.tau)
+
+
+def test_the_fast_path_equals_rosbags_deserialiser_message_by_message(sample_bags):
+    """Every JointState of the ROS 1 bag and the db3 decoded by wmrid's kernels against rosbags' deserialiser."""
+    from rosbags.highlevel import AnyReader
+
+    for kind in ("ros1-lz4", "db3-folder"):
+        series = read_bag([str(p) for p in sample_bags[kind]]).joints["/joint_states"]
+        with AnyReader(sample_bags[kind]) as reader:
+            msgs = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()]
+        assert len(msgs) == len(series.log_ns)
+        assert list(series.names) == list(msgs[0].name)
+        stamps = np.array([m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in msgs])
+        assert np.array_equal(series.stamp_ns, stamps)
+        for field in ("position", "velocity", "effort"):
+            assert np.array_equal(getattr(series, field), np.array([getattr(m, field) for m in msgs])), (kind, field)
+
+
+@pytest.mark.parametrize("kind", ["ros1-two-files", "db3-split"])
+def test_inspect_shows_a_bag_recording(sample_bags, kind):
+    out = wmrid("inspect", *map(str, sample_bags[kind]), "--format", "json")
+    assert out.returncode == 0, text(out).stderr
+    info = json.loads(out.stdout)
+    assert info["format"] == ("ros1 bag" if kind.startswith("ros1") else "ros2 bag")
+    (topic,) = info["topics"]
+    assert topic["topic"] == "/joint_states"
+    assert topic["messages"] == 40001
+    assert sorted(topic["joints"]) == ["left_wheel_joint", "right_wheel_joint"]
+    assert topic["fields"]["velocity"] == "yes"
+    assert round(topic["rate_hz"]) == 1000
+    table = text(wmrid("inspect", *map(str, sample_bags[kind]), "--format", "table", columns="160"))
+    assert ("ROS 1 bag" if kind.startswith("ros1") else "ROS 2 bag") in table.stdout
+    assert "right_wheel_joint" in table.stdout
+
+
+@pytest.mark.skipif(not ME169.exists(), reason="../shared/real_logs is not beside the checkout")
+def test_the_real_me169_bag_in_every_format_identifies_the_same(tmp_path):
+    """A real recording (50 Hz, speed and PWM on two topics) converted to each format: the same parameters."""
+    formats = _formats(tmp_path, bagutil.recording(ME169))
+    reference = _identify([ME169], *ME169_OPTIONS)
+    for kind in ("ros1", "db3-file", "db3-split", "ros1-two-files"):
+        result = _identify(formats[kind], *ME169_OPTIONS)
+        assert result["parameters"] == reference["parameters"], kind
+        assert result["warnings"] == reference["warnings"], kind
+
+
+def test_a_damaged_or_mixed_recording_is_one_clear_error(tmp_path, sample_bags):
+    cut = tmp_path / "cut.bag"
+    data = sample_bags["ros1"][0].read_bytes()
+    cut.write_bytes(data[: len(data) // 2])
+    csv = tmp_path / "a.csv"
+    csv.write_text("t,eta_r,eta_l,tau_r,tau_l\n")
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    cases = {
+        (str(cut),): "a ROS 1 bag that rosbags cannot open",
+        (str(sample_bags["ros1"][0]), str(sample_bags["db3-file"][0])): "ROS 1 bags and ROS 2 recordings mixed",
+        (str(csv), str(csv)): "several files are read as one recording only when they are bags",
+        (str(empty),): "a folder with no recording in it",
+    }
+    for args, needle in cases.items():
+        out = text(wmrid("identify", *args))
+        assert out.returncode == 2, args
+        assert len(out.stderr.strip().splitlines()) == 1, out.stderr
+        assert needle in out.stderr, out.stderr
+
+
+def test_columns_are_refused_for_a_bag_with_the_options_that_apply(sample_bags):
+    out = text(wmrid("identify", str(sample_bags["ros1"][0]), "--columns", "t=a,eta_r=b,eta_l=c,tau_r=d,tau_l=e"))
+    assert out.returncode == 2
+    assert "--velocity-topic" in out.stderr
+
+
+def test_the_library_reads_several_files_as_one_log_and_leaves_them_as_they_were(sample_bags):
+    import hashlib
+
+    import wmrid as api
+
+    paths = sample_bags["ros1-two-files"]
+    before = [hashlib.sha256(p.read_bytes()).hexdigest() for p in paths]
+    log = api.read_log([str(p) for p in paths])
+    assert len(log) == 40001
+    assert np.array_equal(log.eta, read_log(str(SAMPLE)).eta)
+    assert [hashlib.sha256(p.read_bytes()).hexdigest() for p in paths] == before

@@ -1,0 +1,98 @@
+"""A ROS 1 bag, a ROS 2 sqlite3 bag, a rosbag2 folder or a recording split over several files as a wheel log: the
+recording's paths (:func:`recording_paths`) read through rosbags (:mod:`wmrid.io.bag.reader`) into the same
+JointState logic as an MCAP file (:func:`wmrid.io.mcap.log.recording_log`: topics, joints, alignment, whole or
+streamed in bounded memory).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+
+from wmrid.core.errors import LogFormatError
+from wmrid.core.wheel_log import CHUNK_ROWS, LogStream
+from wmrid.io.mcap.joints import TopicSelection
+from wmrid.io.signals import SignalOptions
+
+ROS1_MAGIC = b"#ROSBAG V2.0"
+SQLITE_MAGIC = b"SQLite format 3\x00"
+MCAP_MAGIC = b"\x89MCAP"
+#: The suffixes of a recording's files inside a folder without metadata.yaml.
+BAG_SUFFIXES = (".bag", ".db3", ".mcap")
+
+
+def _magic(path: str) -> bytes:
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(16)
+    except OSError:
+        return b""
+
+
+def is_bag_file(path: str) -> bool:
+    """Whether ``path`` is a ROS 1 bag or an SQLite database (a ROS 2 .db3 bag), by its magic bytes."""
+    head = _magic(path)
+    return head.startswith(ROS1_MAGIC) or head.startswith(SQLITE_MAGIC)
+
+
+def recording_paths(paths: Sequence[str]) -> list[str] | None:
+    """The files (or the rosbag2 folder) rosbags reads for the log ``paths`` names, or None when it is not a bag
+    recording (one CSV, Parquet or MCAP file, or standard input, which the other readers take).
+
+    A rosbag2 folder (with its ``metadata.yaml``); a folder without one: its ``.bag``, ``.db3`` and ``.mcap`` files
+    in name order; one ROS 1 bag or ``.db3`` file (by magic bytes,
+    whatever the suffix); several files: all of them, as one recording in time order.
+    """
+    paths = [os.fspath(p) for p in paths]
+    if len(paths) == 1:
+        path = paths[0]
+        if path == "-" or not os.path.exists(path):
+            return None
+        if os.path.isdir(path):
+            if os.path.exists(os.path.join(path, "metadata.yaml")):
+                return [path]
+            inside = sorted(
+                os.path.join(path, f) for f in os.listdir(path)
+                if f.lower().endswith(BAG_SUFFIXES) and os.path.isfile(os.path.join(path, f))
+            )  # fmt: skip
+            if not inside:
+                raise LogFormatError(
+                    f"{path}: a folder with no recording in it (no metadata.yaml, .bag, .db3 or .mcap file); give the "
+                    "rosbag2 folder, the bag files, or a CSV, Parquet or MCAP log"
+                )
+            return inside
+        return [path] if is_bag_file(path) else None
+    for path in paths:
+        if path == "-":
+            raise LogFormatError("standard input cannot be one of several files of a recording; give the files")
+        if not os.path.exists(path):
+            raise LogFormatError(f"{path}: no such file; check the path")
+        head = _magic(path)
+        if not (os.path.isdir(path) or head.startswith((ROS1_MAGIC, SQLITE_MAGIC, MCAP_MAGIC))):
+            raise LogFormatError(
+                f"{path}: several files are read as one recording only when they are bags (ROS 1 .bag, ROS 2 .db3 or "
+                "MCAP files, or rosbag2 folders); give one CSV or Parquet log at a time"
+            )
+    return paths
+
+
+def read_bag_log(
+    paths: Sequence[str],
+    selection: TopicSelection,
+    signals: SignalOptions,
+    gear_ratio: float | None,
+    rows: int = CHUNK_ROWS,
+) -> LogStream:
+    """The LogStream of the recording in ``paths`` (see :func:`recording_paths`), JointState topics chosen, aligned
+    and converted as for an MCAP file."""
+    from wmrid.io.bag.reader import iter_bag_joint_parts, read_bag
+    from wmrid.io.mcap.log import Recording, recording_log
+
+    files = list(paths)
+    recording = Recording(
+        name=files[0] if len(files) == 1 else f"{files[0]} (+{len(files) - 1} more)",
+        scan=lambda keep, spare: read_bag(files, keep=keep, spare=spare),
+        read=lambda: read_bag(files),
+        parts=lambda channels: iter_bag_joint_parts(files, channels),
+    )
+    return recording_log(recording, selection, signals, gear_ratio, rows)

@@ -1,0 +1,283 @@
+"""ROS 1 bags, ROS 2 sqlite3 bags, rosbag2 folders and split recordings, read through rosbags into the contents an MCAP
+read gives (:class:`wmrid.io.mcap.contents.McapContents`), so that topic, joint and time choices are the same for
+every format.
+
+rosbags opens the files (``rosbags.rosbag1.Reader`` for a ROS 1 bag, ``rosbags.rosbag2.Reader`` for a ``.db3`` or
+``.mcap`` file or a rosbag2 folder with its ``metadata.yaml``) and hands out each message's serialised bytes with
+its receive time; several files are merged in time order (``heapq.merge``, as rosbags' AnyReader does).  The
+JointState messages are gathered per topic in batches of :data:`BATCH` and decoded by the compiled kernels of
+:class:`wmrid.io.mcap.joint_batches.JointChannels`: :func:`wmrid.io.bag.ros1_records.ros1_joint_states` for ROS 1,
+:func:`wmrid.io.mcap.records.joint_states` for CDR.  A message the kernel refuses, or a topic whose message
+definition is not the standard JointState, is decoded by rosbags' deserialiser with the definitions stored in the
+bag (a bag without them: the ROS 1 Noetic or ROS 2 Humble definitions).
+
+A topic recorded over several connections (ROS 1 bags keep one per publisher, a split recording one per file) is
+one channel.  Only JointState topics are read; the others are listed with their message count.
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wmrid.core.errors import LogFormatError
+from wmrid.io.mcap.contents import Accumulator, McapContents
+from wmrid.io.mcap.joint_batches import JointChannels
+from wmrid.io.mcap.records import JOINT_STATE_NAMES, joint_states, standard_joint_state
+
+#: Messages per topic decoded at a time (the batch's bytes are joined into one buffer for the kernel).
+BATCH = 16384
+
+
+@dataclass
+class _Topic:
+    """One topic of the recording: the connections that carry it, its type and its message definition."""
+
+    channel: int
+    topic: str
+    msgtype: str
+    definition: str  # the .msg text ("" when the bag has none)
+    encoding: str  # "ros1" or "cdr"
+    connections: list[Any]
+
+
+class BagFiles:
+    """The files of one recording opened with rosbags: ``topics`` (channel id -> :class:`_Topic`), ``kind``
+    ("ros1" or "ros2"), and :meth:`messages`.  Use as a context manager."""
+
+    def __init__(self, paths: Sequence[str], kind: str):
+        from rosbags.rosbag1 import Reader as Reader1
+        from rosbags.rosbag2 import Reader as Reader2
+
+        self.paths, self.kind = list(paths), kind
+        self.readers = [(Reader1 if kind == "ros1" else Reader2)(Path(p)) for p in paths]
+        self.topics: dict[int, _Topic] = {}
+        self.notes: list[str] = []
+        self._by_connection: dict[int, int] = {}  # id(connection) -> channel id
+
+    def __enter__(self) -> BagFiles:
+        opened = []
+        try:
+            for path, reader in zip(self.paths, self.readers, strict=True):
+                try:
+                    reader.open()
+                except Exception as err:
+                    what = "a ROS 1 bag" if self.kind == "ros1" else "a ROS 2 recording"
+                    raise LogFormatError(
+                        f"{path}: {what} that rosbags cannot open ({_one_line(err)}); check the recording (rosbag "
+                        "check, ros2 bag info) or record it again"
+                    ) from err
+                opened.append(reader)
+        except BaseException:
+            for reader in opened:
+                reader.close()
+            raise
+        self._gather()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for reader in self.readers:
+            reader.close()
+
+    def _gather(self) -> None:
+        by_topic: dict[str, _Topic] = {}
+        for reader in self.readers:
+            for conn in reader.connections:
+                definition = conn.msgdef.data if conn.msgdef.format.name == "MSG" else ""
+                known = by_topic.get(conn.topic)
+                if known is None:
+                    known = _Topic(len(by_topic) + 1, conn.topic, conn.msgtype, definition,
+                                   "ros1" if self.kind == "ros1" else "cdr", [])  # fmt: skip
+                    by_topic[conn.topic] = known
+                    self.topics[known.channel] = known
+                elif known.msgtype != conn.msgtype:
+                    self.notes.append(
+                        f"topic {conn.topic}: a connection of type {conn.msgtype} besides {known.msgtype}; its "
+                        "messages were skipped"
+                    )
+                    continue
+                known.connections.append(conn)
+                self._by_connection[id(conn)] = known.channel
+
+    def count(self, channel: int) -> int:
+        return sum(int(c.msgcount) for c in self.topics[channel].connections)
+
+    def messages(self, channels: Iterable[int]) -> Iterator[tuple[int, int, bytes]]:
+        """(channel id, receive time ns, serialised bytes) of the channels' messages, in time order."""
+        wanted = set(channels)
+        streams = []
+        for reader in self.readers:
+            conns = [c for c in reader.connections if self._by_connection.get(id(c)) in wanted]
+            if conns:
+                streams.append(reader.messages(connections=conns))
+        by_connection = self._by_connection
+        for conn, stamp, raw in heapq.merge(*streams, key=lambda m: m[1]):
+            yield by_connection[id(conn)], stamp, raw
+
+
+class _BagState(JointChannels):
+    """The JointState decoding of :class:`JointChannels` for the messages of a :class:`BagFiles`."""
+
+    def __init__(self, files: BagFiles, **kwargs: Any):
+        super().__init__(", ".join(files.paths), **kwargs)
+        self.files = files
+        self.typestore: Any = None
+        for channel, topic in files.topics.items():
+            self.schemas[channel] = {"name": topic.msgtype, "encoding": "ros1msg" if topic.encoding == "ros1"
+                                     else "ros2msg", "data": topic.definition.encode()}  # fmt: skip
+            self.channels[channel] = Accumulator(
+                info={
+                    "id": channel, "topic": topic.topic, "message_encoding": topic.encoding, "schema_id": channel,
+                    "schema_name": topic.msgtype, "schema_encoding": self.schemas[channel]["encoding"],
+                }
+            )  # fmt: skip
+            self.channels[channel].count = files.count(channel)
+        self.notes.extend(files.notes)
+
+    # ---- the format's JointState decoding
+
+    def generic(self, acc: Accumulator, payload: bytes) -> Any:
+        topic = self.files.topics[acc.info["id"]]
+        try:
+            store = self._store_for(topic)
+            if topic.encoding == "ros1":
+                return store.deserialize_ros1(payload, topic.msgtype)
+            return store.deserialize_cdr(payload, topic.msgtype)
+        except Exception:
+            return None
+
+    def standard(self, acc: Accumulator) -> bool:
+        topic = self.files.topics[acc.info["id"]]
+        if not topic.definition:  # no definition in the bag: the standard one is assumed, as rosbags does
+            return True
+        return standard_joint_state("ros2msg", topic.definition.encode())  # the .msg syntax of ROS 1 and 2
+
+    def kernel(self, acc: Accumulator) -> Callable[..., None]:
+        if self.files.topics[acc.info["id"]].encoding == "ros1":
+            from wmrid.io.bag.ros1_records import ros1_joint_states
+
+            return ros1_joint_states
+        return joint_states
+
+    def _store_for(self, topic: _Topic) -> Any:
+        """rosbags' typestore with the bag's definitions (the distribution's own where the bag has none)."""
+        if self.typestore is None:
+            from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+            store = get_typestore(Stores.ROS1_NOETIC if self.files.kind == "ros1" else Stores.ROS2_HUMBLE)
+            types: dict[str, Any] = {}
+            for t in self.files.topics.values():
+                if t.definition:
+                    try:
+                        types.update(get_types_from_msg(t.definition, t.msgtype))
+                    except Exception as err:
+                        self.notes.append(f"topic {t.topic}: its message definition cannot be parsed ({err})")
+            if types:
+                store.register(types)
+            self.typestore = store
+        return self.typestore
+
+    # ---- walking
+
+    def joint_channels(self) -> list[int]:
+        return [c for c, t in self.files.topics.items() if t.msgtype in JOINT_STATE_NAMES]
+
+    def steps(self) -> Generator[None, None, None]:
+        """Decode the JointState topics (``wanted`` of them when set), pausing after each batch."""
+        channels = self.joint_channels()
+        if self.wanted is not None:
+            channels = [c for c in channels if c in self.wanted]
+        pending: dict[int, tuple[list[int], list[bytes]]] = {c: ([], []) for c in channels}
+        for channel, stamp, raw in self.files.messages(channels):
+            times, datas = pending[channel]
+            times.append(stamp)
+            datas.append(raw)
+            if len(datas) >= BATCH:
+                self._flush(channel, times, datas)
+                pending[channel] = ([], [])
+                yield
+        for channel, (times, datas) in pending.items():
+            if datas:
+                self._flush(channel, times, datas)
+                yield
+
+    def _flush(self, channel: int, times: list[int], datas: list[bytes]) -> None:
+        acc = self.channels[channel]
+        lengths = np.fromiter((len(d) for d in datas), dtype=np.int64, count=len(datas))
+        starts = np.cumsum(lengths) - lengths
+        buf = np.frombuffer(b"".join(datas), dtype=np.uint8)
+        stamps = np.asarray(times, dtype=np.int64)
+        lo, hi = int(stamps.min()), int(stamps.max())
+        acc.first_ns = lo if acc.first_ns is None else min(acc.first_ns, lo)
+        acc.last_ns = hi if acc.last_ns is None else max(acc.last_ns, hi)
+        self._joint_batch(acc, buf, starts, lengths, stamps)
+
+
+def bag_kind(paths: Sequence[str]) -> str:
+    """ "ros1" when every path is a ROS 1 bag (by its magic bytes), "ros2" when none is; a mixture is refused."""
+    kinds = {_kind(p) for p in paths}
+    if len(kinds) > 1:
+        raise LogFormatError(
+            f"{', '.join(paths)}: ROS 1 bags and ROS 2 recordings mixed; give the files of one recording"
+        )
+    return kinds.pop()
+
+
+def _kind(path: str) -> str:
+    if Path(path).is_dir():
+        return "ros2"
+    with open(path, "rb") as fh:
+        return "ros1" if fh.read(13).startswith(b"#ROSBAG V2.0") else "ros2"
+
+
+def read_bag(paths: Sequence[str], *, keep: int | None = None, spare: int = 0) -> McapContents:
+    """The recording of ``paths`` (one or more ROS 1 bags, ``.db3``/``.mcap`` files, or a rosbag2 folder) as the
+    contents of an MCAP read: channels, JointState series (or, past ``keep`` messages, summaries, and the parts
+    kept within ``spare`` bytes: see :class:`JointChannels`), notes.  Raises LogFormatError when rosbags cannot
+    open a file."""
+    kind = bag_kind(paths)
+    with BagFiles(paths, kind) as files:
+        state = _BagState(files, keep=keep, spare=spare)
+        for _ in state.steps():
+            pass
+        return McapContents(
+            source=", ".join(paths), profile=kind, library="rosbags", channels=tuple(state.channel_info()),
+            joints=state.joints(), json={}, metadata={}, notes=tuple(state.notes), size_bytes=_size(paths),
+            complete=state.complete, replay=None if state.complete else state.replay,
+        )  # fmt: skip
+
+
+def iter_bag_joint_parts(
+    paths: Sequence[str], channel_ids: Iterable[int]
+) -> Generator[dict[int, list[tuple[np.ndarray, ...]]], None, None]:
+    """The second pass over a recording read by :func:`read_bag`: the parts of the JointState channels
+    ``channel_ids``, batch by batch (as :func:`wmrid.io.mcap.reader.iter_joint_parts`)."""
+    wanted = set(channel_ids)
+    with BagFiles(paths, bag_kind(paths)) as files:
+        state = _BagState(files, wanted=wanted)
+        for _ in state.steps():
+            out = {}
+            for cid in wanted:
+                acc = state.channels.get(cid)
+                if acc is not None and acc.parts:
+                    out[cid], acc.parts = acc.parts, []
+            if out:
+                yield out
+
+
+def _size(paths: Sequence[str]) -> int:
+    total = 0
+    for p in paths:
+        path = Path(p)
+        files = path.rglob("*") if path.is_dir() else [path]
+        total += sum(f.stat().st_size for f in files if f.is_file())
+    return total
+
+
+def _one_line(err: BaseException) -> str:
+    return " ".join(str(err).split())[:300] or type(err).__name__

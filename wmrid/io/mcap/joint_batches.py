@@ -1,0 +1,195 @@
+"""JointState decoding shared by every recording format: per-channel accumulators fed batches of serialised messages
+(:class:`JointChannels`), decoded by a compiled kernel when the message definition is the standard one, else
+message by message by the format's generic decoder; the decoded parts kept whole, summarised past ``keep``
+messages, or handed out as they come (a second pass).  :mod:`wmrid.io.mcap.reader` walks MCAP records into it,
+:mod:`wmrid.io.bag.reader` the messages rosbags reads from ROS 1 bags, sqlite3 bags and rosbag2 folders.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from wmrid.core.limits import describe, memory_budget
+from wmrid.io.mcap.contents import Accumulator, ChannelInfo, JointStats, join, summary
+from wmrid.io.mcap.records import MAX_JOINTS, STATUS_MALFORMED, STATUS_OK
+
+
+class JointChannels:
+    """Channels (id -> :class:`Accumulator`), their schemas (id -> {"name", "encoding", "data"}) and notes, and the
+    JointState decoding of batches of their messages.
+
+    keep : None to keep every JointState array (a whole read); else keep them while they hold at most ``keep``
+    messages, and past that only their statistics (``complete`` turns False); with ``spare`` bytes, also the parts
+    without positions while they fit (``replay``: [(channel id, part)] in file order, or None once they do not).
+    wanted : decode only these JointState channels (a second pass; the caller takes their parts as they come).
+
+    A format supplies :meth:`generic` (one message decoded to an object with ``name``, ``header.stamp.sec``,
+    ``.nanosec``, ``position``, ``velocity``, ``effort``), :meth:`standard` (may the kernel decode the channel)
+    and :meth:`kernel` (the compiled decoder of its wire format).
+    """
+
+    def __init__(self, name: str, *, keep: int | None = None, spare: int = 0, wanted: set[int] | None = None):
+        self.name = name
+        self.budget = memory_budget()
+        self.keep = keep
+        self.wanted = wanted
+        self.complete = True
+        self.kept = 0
+        self.spare = spare
+        self.replay: list[tuple[int, tuple[np.ndarray | None, ...]]] | None = [] if keep is not None and spare else None
+        self.replay_bytes = 0
+        self.schemas: dict[int, dict[str, Any]] = {}
+        self.channels: dict[int, Accumulator] = {}
+        self.notes: list[str] = []
+        self.decoders: dict[int, Any] = {}
+
+    # ---- what a format supplies
+
+    def generic(self, acc: Accumulator, payload: bytes) -> Any:
+        raise NotImplementedError
+
+    def standard(self, acc: Accumulator) -> bool:
+        raise NotImplementedError
+
+    def kernel(self, acc: Accumulator) -> Callable[..., None]:
+        raise NotImplementedError
+
+    # ---- results
+
+    def joints(self) -> dict[str, Any]:
+        """{topic: JointSeries} of a whole read (``complete``), else {topic: JointSummary}."""
+        out: dict[str, Any] = {}
+        for acc in self.channels.values():
+            if acc.ref is not None and acc.batches:
+                out[acc.info["topic"]] = join(acc) if self.complete else summary(acc)
+        return out
+
+    def channel_info(self) -> list[ChannelInfo]:
+        out = []
+        for acc in self.channels.values():
+            info = acc.info
+            schema = self.schemas.get(info["schema_id"])
+            out.append(
+                ChannelInfo(
+                    id=info["id"],
+                    topic=info["topic"],
+                    message_encoding=info["message_encoding"],
+                    schema_name=schema["name"] if schema else info["schema_name"],
+                    schema_encoding=schema["encoding"] if schema else info["schema_encoding"],
+                    count=acc.count,
+                    first_ns=acc.first_ns,
+                    last_ns=acc.last_ns,
+                )
+            )
+        return sorted(out, key=lambda c: c.topic)
+
+    def _joint_batch(self, acc: Accumulator, buf, starts, lengths, times) -> None:
+        if acc.ref is None:
+            first = self.generic(acc, bytes(buf[starts[0] : starts[0] + lengths[0]]))
+            if first is None:
+                acc.skipped += len(starts)
+                return
+            names = list(first.name)
+            if len(names) > MAX_JOINTS:
+                self.notes.append(
+                    f"topic {acc.info['topic']}: its JointState messages name {len(names):,} joints, more than the "
+                    f"{MAX_JOINTS:,} wmrid decodes; skipped"
+                )
+                acc.too_wide = True
+                self._set_names(acc, [])
+            else:
+                self._set_names(acc, names)
+        if acc.too_wide:
+            acc.skipped += len(starts)
+            return
+        need = len(starts) * len(acc.names) * 24
+        if need > self.budget:
+            self.notes.append(
+                f"topic {acc.info['topic']}: a batch of {len(starts):,} messages x {len(acc.names)} joints needs "
+                f"{describe(need)}, beyond the memory budget of {describe(self.budget)} (WMRID_MEMORY_BUDGET); skipped"
+            )
+            acc.skipped += len(starts)
+            return
+        if acc.standard is None:
+            acc.standard = self.standard(acc)
+            if not acc.standard:
+                self.notes.append(
+                    f"topic {acc.info['topic']}: its JointState schema is not the standard one (other fields, or "
+                    "another order); decoded field by field by name, more slowly"
+                )
+        n = len(starts)
+        k = len(acc.names)
+        stamp = np.zeros(n, dtype=np.int64)
+        pos = np.full((n, k), np.nan)
+        vel = np.full((n, k), np.nan)
+        eff = np.full((n, k), np.nan)
+        status = np.full(n, STATUS_MALFORMED, dtype=np.int8)
+        if acc.standard:
+            self.kernel(acc)(buf, starts, lengths, acc.ref, acc.ref_off, stamp, pos, vel, eff, status)
+        slow = np.flatnonzero(status != STATUS_OK)
+        keep = np.ones(n, dtype=bool)
+        for i in slow:  # rare: other endianness, a layout the fast path refuses, or new joint names
+            msg = self.generic(acc, bytes(buf[starts[i] : starts[i] + lengths[i]]))
+            if msg is None:
+                keep[i] = False
+                acc.skipped += 1
+                continue
+            try:
+                stamp[i] = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+                names = list(msg.name)
+                fields = [list(getattr(msg, f, None) or ()) for f in ("position", "velocity", "effort")]
+                values = [[float(v) for v in f] for f in fields]
+            except (AttributeError, TypeError, ValueError):
+                keep[i] = False
+                acc.skipped += 1
+                continue
+            for kk, joint in enumerate(acc.names):
+                if joint in names:
+                    j = names.index(joint)
+                    pos[i, kk] = values[0][j] if j < len(values[0]) else np.nan
+                    vel[i, kk] = values[1][j] if j < len(values[1]) else np.nan
+                    eff[i, kk] = values[2][j] if j < len(values[2]) else np.nan
+        if not keep.all():
+            times, stamp, pos, vel, eff = times[keep], stamp[keep], pos[keep], vel[keep], eff[keep]
+        self._store(acc, (times.copy(), stamp, pos, vel, eff))
+
+    def _store(self, acc: Accumulator, part: tuple[np.ndarray, ...]) -> None:
+        """Keep a channel's decoded part, or (past ``keep`` messages) only its statistics."""
+        acc.batches += 1
+        if self.replay is not None:
+            times, stamp, _, vel, eff = part
+            self.replay_bytes += times.nbytes + stamp.nbytes + vel.nbytes + eff.nbytes
+            if self.replay_bytes <= self.spare:
+                self.replay.append((acc.info["id"], (times, stamp, None, vel, eff)))  # arrays shared, not copied
+            else:
+                self.replay = None
+        if self.keep is None:
+            acc.parts.append(part)
+            return
+        if self.complete:
+            acc.parts.append(part)
+            self.kept += len(part[0])
+            if self.kept <= self.keep:
+                return
+            self.complete = False  # too long to keep: statistics from here on
+            for other in self.channels.values():
+                for kept in other.parts:
+                    self._add_stats(other, kept)
+                other.parts = []
+            return
+        self._add_stats(acc, part)
+
+    @staticmethod
+    def _add_stats(acc: Accumulator, part: tuple[np.ndarray, ...]) -> None:
+        if acc.stats is None:
+            acc.stats = JointStats(len(acc.names))
+        acc.stats.add(part)
+
+    def _set_names(self, acc: Accumulator, names: list[str]) -> None:
+        acc.names = names
+        encoded = [n.encode("utf-8") for n in names]
+        acc.ref = np.frombuffer(b"".join(encoded) or b"\0", dtype=np.uint8).copy()
+        acc.ref_off = np.cumsum([0, *[len(e) for e in encoded]]).astype(np.int64)
