@@ -1,0 +1,142 @@
+"""Bag benchmark: ``wmrid identify`` on a 10-minute 1 kHz JointState recording as a ROS 1 bag and as a ROS 2 .db3,
+against a plain rosbags deserialise loop over the same file.
+
+The recording is bench_mcap.py's (a noisy ``paper`` simulation, ``--duration`` s, default 600 = 600,001
+``sensor_msgs/msg/JointState`` messages), converted with rosbags: to a ROS 1 bag (each message deserialised from
+CDR and serialised for ROS 1, header ``seq`` added; ``--compression`` none, lz4 or bz2 chunks, default none) and
+to a rosbag2 folder with sqlite3 storage (the CDR bytes as they are).  Both are made once into bench/out/.
+
+Measured, per format, as subprocesses (wall time including process start and imports, as a user sees it):
+(a) the deserialise loop: ``rosbags.highlevel.AnyReader`` over the file, ``reader.deserialize(raw, type)`` for
+    every message, touching ``msg.velocity[0]`` (``--loop-repeat`` runs, default 1: it is slow);
+(b) ``wmrid identify BAG --robot paper --format json``: one untimed warm-up, then ``--repeat`` runs (default 3),
+    median; peak RSS under /usr/bin/time.
+
+Target (issue 15): identify <= 0.25 x the deserialise loop on both formats.
+
+    /work/venv/bin/python bench/bench_bags.py
+    /work/venv/bin/python bench/bench_bags.py --duration 60 --repeat 1
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from _common import BENCH, OUT, ROOT, fmt_rss, median, run_timed, wmrid_cmd
+
+sys.path[:] = [p for p in sys.path if p and Path(p).resolve() != BENCH]
+
+RATIO_TARGET = 0.25
+
+LOOP_SRC = """\
+import sys
+from pathlib import Path
+from rosbags.highlevel import AnyReader
+n = 0
+with AnyReader([Path(sys.argv[1])]) as reader:
+    for connection, stamp, raw in reader.messages():
+        msg = reader.deserialize(raw, connection.msgtype)
+        v = msg.velocity[0]
+        n += 1
+print(n)
+"""
+
+
+def mcap_source(duration: float, seed: int) -> Path:
+    sys.path.insert(0, str(BENCH))
+    from bench_mcap import mcap_log
+
+    return mcap_log(duration, seed)
+
+
+def ros1_bag(mcap: Path, compression: str) -> Path:
+    """The MCAP's JointState messages in a ROS 1 bag (made once)."""
+    path = OUT / f"{mcap.stem}_{compression}.bag"
+    if path.exists():
+        return path
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    print(f"converting {mcap.name} to {path.name} ...", flush=True)
+    ros1 = get_typestore(Stores.ROS1_NOETIC)
+    js, header, time = (ros1.types[n] for n in ("sensor_msgs/msg/JointState", "std_msgs/msg/Header",
+                                                  "builtin_interfaces/msg/Time"))  # fmt: skip
+    tmp = path.with_suffix(".tmp.bag")
+    tmp.unlink(missing_ok=True)
+    writer = Writer(tmp)
+    if compression != "none":
+        writer.set_compression(getattr(Writer.CompressionFormat, compression.upper()))
+    with AnyReader([mcap]) as reader, writer:
+        conn = writer.add_connection("/joint_states", "sensor_msgs/msg/JointState", typestore=ros1)
+        for seq, (c, stamp, raw) in enumerate(reader.messages()):
+            m = reader.deserialize(raw, c.msgtype)
+            one = js(header=header(seq=seq, stamp=time(sec=m.header.stamp.sec, nanosec=m.header.stamp.nanosec),
+                                   frame_id=m.header.frame_id), name=list(m.name), position=m.position,
+                     velocity=m.velocity, effort=m.effort)  # fmt: skip
+            writer.write(conn, stamp, ros1.serialize_ros1(one, "sensor_msgs/msg/JointState"))
+    tmp.rename(path)
+    return path
+
+
+def db3_folder(mcap: Path) -> Path:
+    """The MCAP's messages in a rosbag2 folder with sqlite3 storage (made once)."""
+    path = OUT / f"{mcap.stem}_db3"
+    if path.exists():
+        return path
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    print(f"converting {mcap.name} to {path.name}/ ...", flush=True)
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    with AnyReader([mcap]) as reader, Writer(path, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
+        conn = writer.add_connection("/joint_states", "sensor_msgs/msg/JointState", typestore=store)
+        for _, stamp, raw in reader.messages():
+            writer.write(conn, stamp, raw)
+    return path
+
+
+def loop(path: Path, repeat: int) -> dict:
+    runs = [run_timed([sys.executable, "-c", LOOP_SRC, str(path)]) for _ in range(repeat)]
+    walls = [r.wall for r in runs]
+    return {"n": int(runs[0].stdout.strip()), "median": median(walls), "rss": max(r.rss_mb or 0 for r in runs)}
+
+
+def identify(path: Path, repeat: int) -> dict:
+    cmd = [*wmrid_cmd(), "identify", str(path), "--robot", "paper", "--format", "json"]
+    run_timed(cmd)  # warm-up: numba's cache, the page cache
+    runs = [run_timed(cmd) for _ in range(repeat)]
+    m11 = json.loads(runs[-1].stdout)["parameters"]["m11"]["value"]
+    walls = [r.wall for r in runs]
+    return {"median": median(walls), "min": min(walls), "rss": max(r.rss_mb or 0 for r in runs), "m11": m11}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--duration", type=float, default=600.0, help="recording length, s (default 600)")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--compression", choices=["none", "lz4", "bz2"], default="none", help="ROS 1 chunk compression")
+    ap.add_argument("--repeat", type=int, default=3, help="timed identify runs after the warm-up (default 3)")
+    ap.add_argument("--loop-repeat", type=int, default=1, help="deserialise-loop runs (default 1)")
+    args = ap.parse_args()
+
+    mcap = mcap_source(args.duration, args.seed)
+    bags = {"ROS 1 bag": ros1_bag(mcap, args.compression), "ROS 2 db3": db3_folder(mcap)}
+    print(f"\nrecording: {args.duration:g} s at 1 kHz ({mcap.relative_to(ROOT)} converted)")
+    print(f"{'format':<11} {'loop s':>8} {'msg/s':>10} {'identify s':>11} {'(min)':>7} {'peak MB':>8} {'ratio':>7}")
+    for name, path in bags.items():
+        lp = loop(path, args.loop_repeat)
+        ident = identify(path, args.repeat)
+        ratio = ident["median"] / lp["median"]
+        verdict = "MET" if ratio <= RATIO_TARGET else "NOT MET"
+        print(f"{name:<11} {lp['median']:8.2f} {lp['n'] / lp['median']:10,.0f} {ident['median']:11.2f} "
+              f"{ident['min']:7.2f} {fmt_rss(ident['rss']):>8} {ratio:7.3f} {verdict}")  # fmt: skip
+    print(f"\ntarget: identify <= {RATIO_TARGET} x the rosbags deserialise loop")
+
+
+if __name__ == "__main__":
+    main()
