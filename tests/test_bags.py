@@ -151,16 +151,12 @@ def test_the_real_me169_bag_in_every_format_identifies_the_same(tmp_path):
         assert result["warnings"] == reference["warnings"], kind
 
 
-def test_a_damaged_or_mixed_recording_is_one_clear_error(tmp_path, sample_bags):
-    cut = tmp_path / "cut.bag"
-    data = sample_bags["ros1"][0].read_bytes()
-    cut.write_bytes(data[: len(data) // 2])
+def test_a_mixed_recording_or_an_empty_folder_is_one_clear_error(tmp_path, sample_bags):
     csv = tmp_path / "a.csv"
     csv.write_text("t,eta_r,eta_l,tau_r,tau_l\n")
     empty = tmp_path / "empty"
     empty.mkdir()
     cases = {
-        (str(cut),): "a ROS 1 bag that rosbags cannot open",
         (str(sample_bags["ros1"][0]), str(sample_bags["db3-file"][0])): "ROS 1 bags and ROS 2 recordings mixed",
         (str(csv), str(csv)): "several files are read as one recording only when they are bags",
         (str(empty),): "a folder with no recording in it",
@@ -170,6 +166,23 @@ def test_a_damaged_or_mixed_recording_is_one_clear_error(tmp_path, sample_bags):
         assert out.returncode == 2, args
         assert len(out.stderr.strip().splitlines()) == 1, out.stderr
         assert needle in out.stderr, out.stderr
+
+
+def test_a_ros1_bag_cut_short_is_read_up_to_its_last_whole_record(tmp_path, sample_bags):
+    """As an MCAP cut by a crash: the messages before the cut, and a note saying how many bytes were lost."""
+    data = sample_bags["ros1"][0].read_bytes()
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(data[: len(data) // 2])
+    log = read_log(str(cut))
+    whole = read_log(str(SAMPLE))
+    assert 15_000 < len(log) < 25_000
+    assert np.array_equal(log.eta, whole.eta[: len(log)])
+    assert any("it was cut short" in n and "bytes at the end are lost" in n for n in log.notes), log.notes
+    garbage = tmp_path / "garbage.bag"
+    garbage.write_bytes(b"#ROSBAG V2.0\n" + bytes(64))
+    out = text(wmrid("identify", str(garbage)))
+    assert out.returncode == 2
+    assert "JointState" in out.stderr
 
 
 def test_columns_are_refused_for_a_bag_with_the_options_that_apply(sample_bags):
@@ -189,3 +202,30 @@ def test_the_library_reads_several_files_as_one_log_and_leaves_them_as_they_were
     assert len(log) == 40001
     assert np.array_equal(log.eta, read_log(str(SAMPLE)).eta)
     assert [hashlib.sha256(p.read_bytes()).hexdigest() for p in paths] == before
+
+
+def test_split_ros1_bags_given_in_any_order_are_read_in_time_order(sample_bags, sample_result):
+    """Bags are ordered by their first message (the chunk-info records), not by the order they are named in."""
+    later_first = list(reversed(sample_bags["ros1-two-files"]))
+    assert _identify(later_first)["parameters"] == sample_result["parameters"]
+
+
+def test_other_topics_of_a_ros1_bag_are_listed_with_their_counts(tmp_path):
+    """A bag with a JointState topic and another type: the other is counted and listed, not decoded."""
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ros1 = get_typestore(Stores.ROS1_NOETIC)
+    messages = bagutil.recording(SAMPLE)[:500]
+    path = bagutil.write_ros1(tmp_path / "a.bag", messages)
+    extra = tmp_path / "b.bag"
+    string = ros1.types["std_msgs/msg/String"]
+    with Writer(extra) as writer:
+        conn = writer.add_connection("/chatter", "std_msgs/msg/String", typestore=ros1)
+        for i, m in enumerate(messages[:40]):
+            writer.write(conn, m.log_ns + 1, ros1.serialize_ros1(string(data=f"hello {i}"), "std_msgs/msg/String"))
+    info = json.loads(wmrid("inspect", str(path), str(extra), "--format", "json").stdout)
+    by_topic = {t["topic"]: t for t in info["topics"]}
+    assert by_topic["/chatter"]["messages"] == 40
+    assert by_topic["/chatter"]["type"] == "std_msgs/msg/String"
+    assert by_topic["/joint_states"]["messages"] == 500

@@ -310,14 +310,14 @@ def test_messages_that_blamed_the_wrong_thing(tmp_path, small_log, capsys):
 
 
 def test_formats_wmrid_does_not_read_are_named(tmp_path, small_log, capsys):
-    """A zip archive or a damaged ROS 1 bag was "byte 8 is a NUL byte"; now the format is named, with the way out.
+    """A zip archive or a ROS 1 bag was "byte 8 is a NUL byte"; now the format is named with the way out, or read.
     (Compressed CSV and bags are read: tests/test_compressed.py, tests/test_bags.py.)"""
     import zipfile
 
     with zipfile.ZipFile(tmp_path / "logs.zip", "w") as archive:
         archive.write(small_log, "in.csv")
     (tmp_path / "run.bag").write_bytes(b"#ROSBAG V2.0\n" + bytes(64))
-    for name, needle in (("logs.zip", "a zip archive"), ("run.bag", "ROS 1")):
+    for name, needle in (("logs.zip", "a zip archive"), ("run.bag", "no sensor_msgs/msg/JointState messages found")):
         assert run("identify", str(tmp_path / name), "--format", "json") == 2
         assert needle in _one_error(capsys)
 

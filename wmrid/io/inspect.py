@@ -77,7 +77,7 @@ def inspect_log(path: str | list[str]) -> McapInventory | TableInventory:
         from wmrid.io.bag.reader import read_bag
 
         contents = read_bag(bag, keep=4 * CHUNK_ROWS)  # summaries past ~1 M messages: memory stays bounded
-        return _inventory(contents, f"{contents.profile} bag")
+        return _inventory(contents, contents.format)
     path = paths[0]
     source = open_source(path)
     kind = detect_format(path, source.head(8), source.compression)

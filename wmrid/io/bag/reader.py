@@ -17,6 +17,7 @@ one channel.  Only JointState topics are read; the others are listed with their 
 
 from __future__ import annotations
 
+import contextlib
 import heapq
 from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
 from dataclasses import dataclass
@@ -121,30 +122,35 @@ class BagFiles:
 
 
 class _BagState(JointChannels):
-    """The JointState decoding of :class:`JointChannels` for the messages of a :class:`BagFiles`."""
+    """The JointState decoding of :class:`JointChannels` for a bag's topics (``topics``: channel id ->
+    :class:`_Topic`, added with :meth:`add_topic`); ``kind`` "ros1" or "ros2"."""
 
-    def __init__(self, files: BagFiles, **kwargs: Any):
-        super().__init__(", ".join(files.paths), **kwargs)
-        self.files = files
+    def __init__(self, name: str, kind: str, **kwargs: Any):
+        super().__init__(name, **kwargs)
+        self.kind = kind
+        self.topics: dict[int, _Topic] = {}
         self.typestore: Any = None
-        for channel, topic in files.topics.items():
-            self.schemas[channel] = {"name": topic.msgtype, "encoding": "ros1msg" if topic.encoding == "ros1"
-                                     else "ros2msg", "data": topic.definition.encode()}  # fmt: skip
-            self.channels[channel] = Accumulator(
-                info={
-                    "id": channel, "topic": topic.topic, "message_encoding": topic.encoding, "schema_id": channel,
-                    "schema_name": topic.msgtype, "schema_encoding": self.schemas[channel]["encoding"],
-                }
-            )  # fmt: skip
-            self.channels[channel].count = files.count(channel)
-        self.notes.extend(files.notes)
+
+    def add_topic(self, topic: _Topic, count: int = 0) -> None:
+        channel = topic.channel
+        self.topics[channel] = topic
+        encoding = "ros1msg" if topic.encoding == "ros1" else "ros2msg"
+        self.schemas[channel] = {"name": topic.msgtype, "encoding": encoding, "data": topic.definition.encode()}
+        self.channels[channel] = Accumulator(
+            info={
+                "id": channel, "topic": topic.topic, "message_encoding": topic.encoding, "schema_id": channel,
+                "schema_name": topic.msgtype, "schema_encoding": encoding,
+            }
+        )  # fmt: skip
+        self.channels[channel].count = count
+        self.typestore = None  # rebuilt with this topic's definition when needed
 
     # ---- the format's JointState decoding
 
     def generic(self, acc: Accumulator, payload: bytes) -> Any:
-        topic = self.files.topics[acc.info["id"]]
+        topic = self.topics[acc.info["id"]]
         try:
-            store = self._store_for(topic)
+            store = self._types()
             if topic.encoding == "ros1":
                 return store.deserialize_ros1(payload, topic.msgtype)
             return store.deserialize_cdr(payload, topic.msgtype)
@@ -152,26 +158,26 @@ class _BagState(JointChannels):
             return None
 
     def standard(self, acc: Accumulator) -> bool:
-        topic = self.files.topics[acc.info["id"]]
+        topic = self.topics[acc.info["id"]]
         if not topic.definition:  # no definition in the bag: the standard one is assumed, as rosbags does
             return True
         return standard_joint_state("ros2msg", topic.definition.encode())  # the .msg syntax of ROS 1 and 2
 
     def kernel(self, acc: Accumulator) -> Callable[..., None]:
-        if self.files.topics[acc.info["id"]].encoding == "ros1":
+        if self.topics[acc.info["id"]].encoding == "ros1":
             from wmrid.io.bag.ros1_records import ros1_joint_states
 
             return ros1_joint_states
         return joint_states
 
-    def _store_for(self, topic: _Topic) -> Any:
+    def _types(self) -> Any:
         """rosbags' typestore with the bag's definitions (the distribution's own where the bag has none)."""
         if self.typestore is None:
             from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-            store = get_typestore(Stores.ROS1_NOETIC if self.files.kind == "ros1" else Stores.ROS2_HUMBLE)
+            store = get_typestore(Stores.ROS1_NOETIC if self.kind == "ros1" else Stores.ROS2_HUMBLE)
             types: dict[str, Any] = {}
-            for t in self.files.topics.values():
+            for t in self.topics.values():
                 if t.definition:
                     try:
                         types.update(get_types_from_msg(t.definition, t.msgtype))
@@ -182,16 +188,32 @@ class _BagState(JointChannels):
             self.typestore = store
         return self.typestore
 
-    # ---- walking
-
     def joint_channels(self) -> list[int]:
-        return [c for c, t in self.files.topics.items() if t.msgtype in JOINT_STATE_NAMES]
+        channels = [c for c, t in self.topics.items() if t.msgtype in JOINT_STATE_NAMES]
+        return channels if self.wanted is None else [c for c in channels if c in self.wanted]
+
+    def decode(self, channel: int, buf: np.ndarray, starts: np.ndarray, lengths: np.ndarray, stamps: np.ndarray):
+        """A batch of one channel's messages: buf[starts[i] : starts[i] + lengths[i]] received at stamps[i] ns."""
+        acc = self.channels[channel]
+        lo, hi = int(stamps.min()), int(stamps.max())
+        acc.first_ns = lo if acc.first_ns is None else min(acc.first_ns, lo)
+        acc.last_ns = hi if acc.last_ns is None else max(acc.last_ns, hi)
+        self._joint_batch(acc, buf, starts, lengths, stamps)
+
+
+class _RosbagsState(_BagState):
+    """A recording read message by message through rosbags (:class:`BagFiles`): ROS 2 sqlite3 and MCAP storage."""
+
+    def __init__(self, files: BagFiles, **kwargs: Any):
+        super().__init__(", ".join(files.paths), files.kind, **kwargs)
+        self.files = files
+        for topic in files.topics.values():
+            self.add_topic(topic, files.count(topic.channel))
+        self.notes.extend(files.notes)
 
     def steps(self) -> Generator[None, None, None]:
         """Decode the JointState topics (``wanted`` of them when set), pausing after each batch."""
         channels = self.joint_channels()
-        if self.wanted is not None:
-            channels = [c for c in channels if c in self.wanted]
         pending: dict[int, tuple[list[int], list[bytes]]] = {c: ([], []) for c in channels}
         for channel, stamp, raw in self.files.messages(channels):
             times, datas = pending[channel]
@@ -207,15 +229,10 @@ class _BagState(JointChannels):
                 yield
 
     def _flush(self, channel: int, times: list[int], datas: list[bytes]) -> None:
-        acc = self.channels[channel]
         lengths = np.fromiter((len(d) for d in datas), dtype=np.int64, count=len(datas))
         starts = np.cumsum(lengths) - lengths
-        buf = np.frombuffer(b"".join(datas), dtype=np.uint8)
-        stamps = np.asarray(times, dtype=np.int64)
-        lo, hi = int(stamps.min()), int(stamps.max())
-        acc.first_ns = lo if acc.first_ns is None else min(acc.first_ns, lo)
-        acc.last_ns = hi if acc.last_ns is None else max(acc.last_ns, hi)
-        self._joint_batch(acc, buf, starts, lengths, stamps)
+        self.decode(channel, np.frombuffer(b"".join(datas), dtype=np.uint8), starts, lengths,
+                    np.asarray(times, dtype=np.int64))  # fmt: skip
 
 
 def bag_kind(paths: Sequence[str]) -> str:
@@ -241,12 +258,12 @@ def read_bag(paths: Sequence[str], *, keep: int | None = None, spare: int = 0) -
     kept within ``spare`` bytes: see :class:`JointChannels`), notes.  Raises LogFormatError when rosbags cannot
     open a file."""
     kind = bag_kind(paths)
-    with BagFiles(paths, kind) as files:
-        state = _BagState(files, keep=keep, spare=spare)
+    with _open_state(paths, kind, keep=keep, spare=spare) as state:
         for _ in state.steps():
             pass
         return McapContents(
-            source=", ".join(paths), profile=kind, library="rosbags", channels=tuple(state.channel_info()),
+            source=", ".join(paths), profile=kind, library="wmrid" if kind == "ros1" else "rosbags",
+            format=f"{kind} bag", channels=tuple(state.channel_info()),
             joints=state.joints(), json={}, metadata={}, notes=tuple(state.notes), size_bytes=_size(paths),
             complete=state.complete, replay=None if state.complete else state.replay,
         )  # fmt: skip
@@ -258,8 +275,7 @@ def iter_bag_joint_parts(
     """The second pass over a recording read by :func:`read_bag`: the parts of the JointState channels
     ``channel_ids``, batch by batch (as :func:`wmrid.io.mcap.reader.iter_joint_parts`)."""
     wanted = set(channel_ids)
-    with BagFiles(paths, bag_kind(paths)) as files:
-        state = _BagState(files, wanted=wanted)
+    with _open_state(paths, bag_kind(paths), wanted=wanted) as state:
         for _ in state.steps():
             out = {}
             for cid in wanted:
@@ -268,6 +284,19 @@ def iter_bag_joint_parts(
                     out[cid], acc.parts = acc.parts, []
             if out:
                 yield out
+
+
+@contextlib.contextmanager
+def _open_state(paths: Sequence[str], kind: str, **kwargs: Any) -> Iterator[_BagState]:
+    """The state that reads ``paths``: wmrid's own walker for ROS 1 bags, rosbags for ROS 2 recordings."""
+    if kind == "ros1":
+        from wmrid.io.bag.ros1_file import Ros1State
+
+        with Ros1State(paths, **kwargs) as state:
+            yield state
+        return
+    with BagFiles(paths, kind) as files:
+        yield _RosbagsState(files, **kwargs)
 
 
 def _size(paths: Sequence[str]) -> int:

@@ -102,3 +102,77 @@ def ros1_joint_states(buf, starts, lengths, ref, ref_off, stamp, pos, vel, eff, 
             p += 8 * m
         if bad:
             status[i] = STATUS_MALFORMED
+
+
+#: The record opcodes of a ROS 1 bag (format 2.0).
+OP_MESSAGE = 0x02
+OP_BAG_HEADER = 0x03
+OP_INDEX = 0x04
+OP_CHUNK = 0x05
+OP_CHUNK_INFO = 0x06
+OP_CONNECTION = 0x07
+
+
+@numba.njit(cache=True, nogil=True)
+def ros1_records(buf, p, end, ops, conns, times, hstart, hlen, dstart, dlen):
+    """Walk ROS 1 bag records in buf[p:end] (each: uint32 header length, header fields, uint32 data length, data).
+
+    Per record: ``ops`` the ``op`` field (-1 when absent), ``conns`` the ``conn`` field (-1), ``times`` the
+    ``time`` field in ns (sec * 1e9 + nsec, -1 when absent), the header's and the data's offset and length.  A
+    header field is uint32 length then ``name=value``; a field that runs past its header ends the header.
+    Returns (records read, offset after the last whole record): it stops when the arrays are full or a record runs
+    past ``end`` (a file cut short).
+    """
+    n = 0
+    cap = ops.shape[0]
+    while n < cap and p + 4 <= end:
+        hl = _u32(buf, p)
+        h0 = p + 4
+        if hl > end - h0 - 4:
+            break
+        h1 = h0 + hl
+        dl = _u32(buf, h1)
+        d0 = h1 + 4
+        if dl > end - d0:
+            break
+        op = -1
+        conn = -1
+        t = -1
+        q = h0
+        while q + 4 <= h1:
+            fl = _u32(buf, q)
+            q += 4
+            if fl > h1 - q:
+                break
+            eq = -1
+            for k in range(q, q + fl):
+                if buf[k] == 61:  # '='
+                    eq = k
+                    break
+            if eq >= 0:
+                name_len = eq - q
+                v0 = eq + 1
+                vlen = q + fl - v0
+                if name_len == 2 and vlen == 1 and buf[q] == 111 and buf[q + 1] == 112:  # "op"
+                    op = buf[v0]
+                elif (
+                    name_len == 4 and vlen == 4
+                    and buf[q] == 99 and buf[q + 1] == 111 and buf[q + 2] == 110 and buf[q + 3] == 110
+                ):  # "conn"  # fmt: skip
+                    conn = _u32(buf, v0)
+                elif (
+                    name_len == 4 and vlen == 8
+                    and buf[q] == 116 and buf[q + 1] == 105 and buf[q + 2] == 109 and buf[q + 3] == 101
+                ):  # "time"  # fmt: skip
+                    t = _u32(buf, v0) * 1_000_000_000 + _u32(buf, v0 + 4)
+            q += fl
+        ops[n] = op
+        conns[n] = conn
+        times[n] = t
+        hstart[n] = h0
+        hlen[n] = hl
+        dstart[n] = d0
+        dlen[n] = dl
+        n += 1
+        p = d0 + dl
+    return n, p

@@ -229,6 +229,7 @@ class McapContents:
     lost_bytes: int = 0
     complete: bool = True
     replay: list | None = field(default=None, repr=False, compare=False)
+    format: str = "mcap"  # or "ros1 bag", "ros2 bag" (wmrid.io.bag)
 
     def channel(self, topic: str) -> ChannelInfo | None:
         return next((c for c in self.channels if c.topic == topic), None)

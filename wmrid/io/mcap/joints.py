@@ -134,10 +134,11 @@ def choose_topics(contents: McapContents, sel: TopicSelection) -> tuple[Any, Any
     """(speed series, effort series, notes) following the rules in the module docstring (each a
     :class:`JointSeries`, or a :class:`JointSummary` when ``contents`` is not complete)."""
     if not contents.joints:
+        bag = contents.format != "mcap"  # a ROS 1 or ROS 2 bag (wmrid.io.bag): no JSON topics there
         raise LogFormatError(
-            f"{contents.source}: no {JOINT_STATE} messages (CDR) found; {_topic_listing(contents)}. wmrid needs "
-            f"the wheel speeds and efforts as JointState, or a JSON topic with {option('topic')} and "
-            f"{option('columns')} field paths"
+            f"{contents.source}: no {JOINT_STATE} messages{'' if bag else ' (CDR)'} found; {_topic_listing(contents)}. "
+            "wmrid needs the wheel speeds and efforts as JointState"
+            + ("" if bag else f", or a JSON topic with {option('topic')} and {option('columns')} field paths")
         )
     if sel.topic:
         series = _series(contents, sel.topic, "topic")
