@@ -13,6 +13,8 @@ import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 JOINT_STATE = "sensor_msgs/msg/JointState"
 
 
@@ -65,11 +67,12 @@ def write_ros1(path: Path, messages: list[Message], compression: str | None = No
     return Path(path)
 
 
-def write_rosbag2(folder: Path, messages: list[Message], storage: str = "sqlite3") -> Path:
-    """A rosbag2 folder (metadata.yaml and one storage file) of the messages, CDR bytes unchanged."""
+def write_rosbag2(folder: Path, messages: list[Message], storage: str = "sqlite3", store=None) -> Path:
+    """A rosbag2 folder (metadata.yaml and one storage file) of the messages, CDR bytes unchanged (``store``: the
+    typestore that defines their types, ROS 2 Humble's by default)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
 
-    store = _ros2_store()
+    store = store or _ros2_store()
     plugin = StoragePlugin.SQLITE3 if storage == "sqlite3" else StoragePlugin.MCAP
     with Writer(Path(folder), version=9, storage_plugin=plugin) as writer:
         conns = {}
@@ -119,3 +122,50 @@ def write_split_rosbag2(folder: Path, messages: list[Message], storage: str = "s
     with open(folder / "metadata.yaml", "w") as fh:
         yaml.dump(meta, fh)
     return folder
+
+
+DYNAMIC_JOINT_STATE = "control_msgs/msg/DynamicJointState"
+DYNAMIC_JOINT_STATE_MSG = """std_msgs/Header header
+string[] joint_names
+InterfaceValue[] interface_values
+================================================================================
+MSG: control_msgs/InterfaceValue
+string[] interface_names
+float64[] values
+"""
+
+
+def dynamic_store():
+    """rosbags' ROS 2 Humble typestore with control_msgs/DynamicJointState (not among its built-in types)."""
+    from rosbags.typesys import get_types_from_msg
+
+    store = _ros2_store()
+    store.register(get_types_from_msg(DYNAMIC_JOINT_STATE_MSG, DYNAMIC_JOINT_STATE))
+    return store
+
+
+def as_dynamic(messages: list[Message], effort_interface: str = "effort") -> list[Message]:
+    """The JointState messages as ros2_control's DynamicJointState on /dynamic_joint_states: per joint the
+    interfaces position, velocity and ``effort_interface`` (e.g. "current"), in that order."""
+    store = dynamic_store()
+    dyn, value = store.types[DYNAMIC_JOINT_STATE], store.types["control_msgs/msg/InterfaceValue"]
+    out = []
+    for m in messages:
+        if m.msgtype != JOINT_STATE:
+            continue
+        js = store.deserialize_cdr(m.cdr, JOINT_STATE)
+        interfaces = [
+            value(interface_names=["position", "velocity", effort_interface],
+                  values=np.array([js.position[j], js.velocity[j], js.effort[j]]))
+            for j in range(len(js.name))
+        ]  # fmt: skip
+        msg = dyn(header=js.header, joint_names=list(js.name), interface_values=interfaces)
+        out.append(
+            Message(
+                "/dynamic_joint_states",
+                DYNAMIC_JOINT_STATE,
+                m.log_ns,
+                bytes(store.serialize_cdr(msg, DYNAMIC_JOINT_STATE)),
+            )
+        )
+    return out

@@ -229,3 +229,36 @@ def test_other_topics_of_a_ros1_bag_are_listed_with_their_counts(tmp_path):
     assert by_topic["/chatter"]["messages"] == 40
     assert by_topic["/chatter"]["type"] == "std_msgs/msg/String"
     assert by_topic["/joint_states"]["messages"] == 500
+
+
+@pytest.fixture(scope="module")
+def dynamic_bags(tmp_path_factory):
+    """The sample as ros2_control's DynamicJointState (/dynamic_joint_states), in a db3 folder and an MCAP file,
+    with an 'effort' interface, and in a db3 folder with a 'current' one instead."""
+    folder = tmp_path_factory.mktemp("dynamic")
+    messages = bagutil.recording(SAMPLE)
+    store = bagutil.dynamic_store()
+    effort = bagutil.as_dynamic(messages)
+    return {
+        "db3": bagutil.write_rosbag2(folder / "db3", effort, store=store),
+        "mcap": bagutil.write_rosbag2(folder / "mcapdir", effort, "mcap", store=store) / "mcapdir.mcap",
+        "current": bagutil.write_rosbag2(folder / "current", bagutil.as_dynamic(messages, "current"), store=store),
+    }
+
+
+@pytest.mark.parametrize("kind", ["db3", "mcap"])
+def test_dynamic_joint_state_is_read_like_a_joint_state(dynamic_bags, sample_result, kind):
+    """The issue's "done when": a ros2_control DynamicJointState bag identifies, with no option, to the
+    parameters of the JointState recording it holds (the MCAP file through wmrid's MCAP reader)."""
+    result = _identify([dynamic_bags[kind]])
+    assert result["parameters"] == sample_result["parameters"]
+    assert any("DynamicJointState (ros2_control), read like a JointState" in n for n in result["log"]["notes"])
+
+
+def test_a_current_interface_stands_for_the_effort(dynamic_bags, sample_result):
+    """Interfaces position, velocity, current: the current is the effort, converted by --effort current (here
+    with k_t = k_r = 1, so the same numbers as the torque)."""
+    options = ("--effort", "current", "--torque-constant", "1", "--gear-ratio", "1")
+    result = _identify([dynamic_bags["current"]], *options)
+    assert result["parameters"] == sample_result["parameters"]
+    assert any("its 'current' interface is read as the effort" in n for n in result["log"]["notes"])

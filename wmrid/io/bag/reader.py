@@ -28,7 +28,7 @@ import numpy as np
 
 from wmrid.core.errors import LogFormatError
 from wmrid.io.mcap.contents import Accumulator, McapContents
-from wmrid.io.mcap.joint_batches import JointChannels
+from wmrid.io.mcap.joint_batches import DYNAMIC_JOINT_STATE_NAMES, JointChannels
 from wmrid.io.mcap.records import JOINT_STATE_NAMES, joint_states, standard_joint_state
 
 #: Messages per topic decoded at a time (the batch's bytes are joined into one buffer for the kernel).
@@ -189,7 +189,7 @@ class _BagState(JointChannels):
         return self.typestore
 
     def joint_channels(self) -> list[int]:
-        channels = [c for c, t in self.topics.items() if t.msgtype in JOINT_STATE_NAMES]
+        channels = [c for c, t in self.topics.items() if t.msgtype in JOINT_STATE_NAMES + DYNAMIC_JOINT_STATE_NAMES]
         return channels if self.wanted is None else [c for c in channels if c in self.wanted]
 
     def decode(self, channel: int, buf: np.ndarray, starts: np.ndarray, lengths: np.ndarray, stamps: np.ndarray):

@@ -8,6 +8,7 @@ messages, or handed out as they come (a second pass).  :mod:`wmrid.io.mcap.reade
 from __future__ import annotations
 
 from collections.abc import Callable
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -15,6 +16,30 @@ import numpy as np
 from wmrid.core.limits import describe, memory_budget
 from wmrid.io.mcap.contents import Accumulator, ChannelInfo, JointStats, join, summary
 from wmrid.io.mcap.records import MAX_JOINTS, STATUS_MALFORMED, STATUS_OK
+
+#: ros2_control's joint states with named interfaces: read like a JointState (:func:`as_joint_state`).
+DYNAMIC_JOINT_STATE_NAMES = ("control_msgs/msg/DynamicJointState", "control_msgs/DynamicJointState")
+
+
+def as_joint_state(msg: Any) -> tuple[SimpleNamespace, bool]:
+    """(a JointState view of a DynamicJointState message, whether a 'current' interface stood for the effort).
+
+    ``name`` = ``joint_names``; ``position``, ``velocity``, ``effort`` per joint = the value of the interface of
+    that name in ``interface_values[j]`` (NaN when the joint has none); the effort falls back on the interface
+    'current'.
+    """
+    names = [str(n) for n in msg.joint_names]
+    fields: dict[str, list[float]] = {"position": [], "velocity": [], "effort": []}
+    current = False
+    for j in range(len(names)):
+        iv = msg.interface_values[j] if j < len(msg.interface_values) else None
+        values = {} if iv is None else dict(zip(map(str, iv.interface_names), map(float, iv.values), strict=False))
+        for field in fields:
+            fields[field].append(values.get(field, float("nan")))
+        if "effort" not in values and "current" in values:
+            fields["effort"][-1] = values["current"]
+            current = True
+    return SimpleNamespace(name=names, header=msg.header, **fields), current
 
 
 class JointChannels:
@@ -57,6 +82,24 @@ class JointChannels:
     def kernel(self, acc: Accumulator) -> Callable[..., None]:
         raise NotImplementedError
 
+    def decoded(self, acc: Accumulator, payload: bytes) -> Any:
+        """One message decoded by :meth:`generic`, a DynamicJointState seen as a JointState (:func:`as_joint_state`;
+        its 'current' interface stands for the effort where it has no 'effort' one, with a note)."""
+        msg = self.generic(acc, payload)
+        if msg is None or acc.info["schema_name"] not in DYNAMIC_JOINT_STATE_NAMES:
+            return msg
+        try:
+            view, current = as_joint_state(msg)
+        except (AttributeError, TypeError, ValueError):
+            return None
+        if current and not getattr(acc, "current_noted", False):
+            acc.current_noted = True  # type: ignore[attr-defined]
+            self.notes.append(
+                f"topic {acc.info['topic']}: no 'effort' interface; its 'current' interface is read as the effort "
+                "(give --effort current, with the torque constant, to turn it into a torque)"
+            )
+        return view
+
     # ---- results
 
     def joints(self) -> dict[str, Any]:
@@ -88,7 +131,7 @@ class JointChannels:
 
     def _joint_batch(self, acc: Accumulator, buf, starts, lengths, times) -> None:
         if acc.ref is None:
-            first = self.generic(acc, bytes(buf[starts[0] : starts[0] + lengths[0]]))
+            first = self.decoded(acc, bytes(buf[starts[0] : starts[0] + lengths[0]]))
             if first is None:
                 acc.skipped += len(starts)
                 return
@@ -113,6 +156,12 @@ class JointChannels:
             )
             acc.skipped += len(starts)
             return
+        if acc.standard is None and acc.info["schema_name"] in DYNAMIC_JOINT_STATE_NAMES:
+            acc.standard = False
+            self.notes.append(
+                f"topic {acc.info['topic']}: DynamicJointState (ros2_control), read like a JointState: its joint "
+                "names, and the interfaces named position, velocity and effort (decoded message by message)"
+            )
         if acc.standard is None:
             acc.standard = self.standard(acc)
             if not acc.standard:
@@ -132,7 +181,7 @@ class JointChannels:
         slow = np.flatnonzero(status != STATUS_OK)
         keep = np.ones(n, dtype=bool)
         for i in slow:  # rare: other endianness, a layout the fast path refuses, or new joint names
-            msg = self.generic(acc, bytes(buf[starts[i] : starts[i] + lengths[i]]))
+            msg = self.decoded(acc, bytes(buf[starts[i] : starts[i] + lengths[i]]))
             if msg is None:
                 keep[i] = False
                 acc.skipped += 1

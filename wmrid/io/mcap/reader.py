@@ -62,7 +62,7 @@ from wmrid.io.mcap.contents import (
     McapContents,
 )
 from wmrid.io.mcap.generic import decode_generic, json_batch
-from wmrid.io.mcap.joint_batches import JointChannels
+from wmrid.io.mcap.joint_batches import DYNAMIC_JOINT_STATE_NAMES, JointChannels
 from wmrid.io.mcap.records import (
     BOMB_FLOOR,
     BOMB_RATIO,
@@ -461,7 +461,8 @@ class _ReadState(JointChannels):
             acc.first_ns = lo if acc.first_ns is None else min(acc.first_ns, lo)
             acc.last_ns = hi if acc.last_ns is None else max(acc.last_ns, hi)
             info = acc.info
-            if self.decode and info["schema_name"] in JOINT_STATE_NAMES and info["message_encoding"] == "cdr":
+            joint_like = info["schema_name"] in JOINT_STATE_NAMES + DYNAMIC_JOINT_STATE_NAMES
+            if self.decode and joint_like and info["message_encoding"] == "cdr":
                 if self.wanted is None or int(cid) in self.wanted:
                     self._joint_batch(acc, buf, data_start[sel], data_len[sel], times)
             elif info["message_encoding"] == "json" and info["topic"] in self.json_fields:
