@@ -169,3 +169,70 @@ def as_dynamic(messages: list[Message], effort_interface: str = "effort") -> lis
             )
         )
     return out
+
+
+MOTOR_STATE = "acme_msgs/msg/MotorState"
+MOTOR_STATE_MSG = """std_msgs/Header header
+MotorFeedback left
+MotorFeedback right
+================================================================================
+MSG: acme_msgs/MotorFeedback
+float64 current
+float64 voltage
+float64 temperature
+"""
+
+
+def motor_store(ros1: bool = False):
+    """A typestore (ROS 2 Humble's, or ROS 1 Noetic's) with the vendor message acme_msgs/MotorState."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC) if ros1 else _ros2_store()
+    store.register(get_types_from_msg(MOTOR_STATE_MSG, MOTOR_STATE))
+    return store
+
+
+def as_wheel_and_motor(messages: list[Message]) -> list[Message]:
+    """The JointState messages split as a vendor base logs them: /wheel_state, a JointState with the speeds only,
+    and /motor_state, acme_msgs/MotorState with each motor's current (= the effort here), voltage and temperature."""
+    store = motor_store()
+    js, state, feedback = (store.types[n] for n in (JOINT_STATE, MOTOR_STATE, "acme_msgs/msg/MotorFeedback"))
+    out = []
+    for m in messages:
+        if m.msgtype != JOINT_STATE:
+            continue
+        msg = store.deserialize_cdr(m.cdr, JOINT_STATE)
+        speeds = js(header=msg.header, name=list(msg.name), position=np.array([]), velocity=msg.velocity,
+                    effort=np.array([]))  # fmt: skip
+        side = {name: j for j, name in enumerate(msg.name)}
+        motors = {
+            s: feedback(current=float(msg.effort[side[f"{s}_wheel_joint"]]), voltage=12.0, temperature=40.0)
+            for s in ("left", "right")
+        }
+        motor = state(header=msg.header, left=motors["left"], right=motors["right"])
+        out.append(Message("/wheel_state", JOINT_STATE, m.log_ns, bytes(store.serialize_cdr(speeds, JOINT_STATE))))
+        out.append(Message("/motor_state", MOTOR_STATE, m.log_ns, bytes(store.serialize_cdr(motor, MOTOR_STATE))))
+    return out
+
+
+def write_ros1_wheel_and_motor(path: Path, messages: list[Message]) -> Path:
+    """:func:`as_wheel_and_motor`'s two topics in a ROS 1 bag (re-serialised for ROS 1, headers with ``seq``)."""
+    from rosbags.rosbag1 import Writer
+
+    ros1, ros2 = motor_store(ros1=True), motor_store()
+    header, time = ros1.types["std_msgs/msg/Header"], ros1.types["builtin_interfaces/msg/Time"]
+    js, state, feedback = (ros1.types[n] for n in (JOINT_STATE, MOTOR_STATE, "acme_msgs/msg/MotorFeedback"))
+    with Writer(Path(path)) as writer:
+        conns = {t: writer.add_connection(t, k, typestore=ros1) for t, k in (("/wheel_state", JOINT_STATE),
+                                                                           ("/motor_state", MOTOR_STATE))}  # fmt: skip
+        for seq, m in enumerate(messages):
+            msg = ros2.deserialize_cdr(m.cdr, m.msgtype)
+            head = header(seq=seq, stamp=time(sec=msg.header.stamp.sec, nanosec=msg.header.stamp.nanosec), frame_id="")
+            if m.msgtype == JOINT_STATE:
+                one = js(header=head, name=list(msg.name), position=msg.position, velocity=msg.velocity,
+                         effort=msg.effort)  # fmt: skip
+            else:
+                one = state(header=head, **{s: feedback(current=getattr(msg, s).current, voltage=12.0,
+                                                          temperature=40.0) for s in ("left", "right")})  # fmt: skip
+            writer.write(conns[m.topic], m.log_ns, ros1.serialize_ros1(one, m.msgtype))
+    return Path(path)

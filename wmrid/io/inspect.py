@@ -88,8 +88,40 @@ def inspect_log(path: str | list[str]) -> McapInventory | TableInventory:
     return _inspect_table(source, kind)
 
 
+def _field_paths(contents: Any, kind: str) -> dict[str, list[str]]:
+    """topic -> its numeric field paths as ``--columns`` takes them (``TOPIC:PATH``), from the message definitions
+    in the recording (the distribution's own for a bag without them); a type that cannot be parsed has none."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    from wmrid.io.field_paths import numeric_paths
+
+    store = get_typestore(Stores.ROS1_NOETIC if kind == "ros1 bag" else Stores.ROS2_HUMBLE)
+    types: dict[str, Any] = {}
+    for msgtype, text in contents.definitions.values():
+        if text:
+            try:
+                types.update(get_types_from_msg(text, _rosbags_name(msgtype)))
+            except Exception:  # a definition rosbags cannot parse: no paths listed for it
+                continue
+    if types:
+        try:
+            store.register(types)
+        except Exception:
+            return {}
+    return {
+        topic: [f"{topic}:{p}" for p in numeric_paths(store.fielddefs, _rosbags_name(msgtype))]
+        for topic, (msgtype, _) in contents.definitions.items()
+    }
+
+
+def _rosbags_name(msgtype: str) -> str:
+    pkg, _, rest = msgtype.partition("/")
+    return msgtype if not rest or rest.startswith("msg/") else f"{pkg}/msg/{rest}"
+
+
 def _inventory(contents: Any, kind: str) -> McapInventory:
     """The inventory of a recording's contents (an MCAP read, or a bag's through rosbags)."""
+    paths = _field_paths(contents, kind)
     firsts = [c.first_ns for c in contents.channels if c.first_ns is not None]
     lasts = [c.last_ns for c in contents.channels if c.last_ns is not None]
     topics = []
@@ -113,6 +145,8 @@ def _inventory(contents: Any, kind: str) -> McapInventory:
             entry["header_stamps"] = (
                 "all set, in order" if positive and ordered else "some zero" if not positive else "out of order"
             )
+        elif c.topic in paths:
+            entry["field_paths"] = paths[c.topic]
         topics.append(entry)
     return McapInventory(
         source=contents.source, profile=contents.profile, library=contents.library, size_bytes=contents.size_bytes,

@@ -31,6 +31,7 @@ from wmrid.core.wheel_log import CANONICAL, CHUNK_ROWS, MIN_SAMPLES, POSE, REFER
 from wmrid.io.bag.log import recording_paths
 from wmrid.io.columns import check_key
 from wmrid.io.csv_log import csv_chunks
+from wmrid.io.field_paths import field_signals
 from wmrid.io.mcap.log import read_mcap_log
 from wmrid.io.parquet_log import parquet_chunks
 from wmrid.io.sources import CSV_SUFFIXES, PARQUET_SUFFIXES, STDIN_NAME, Source, detect_format, one_line, open_source
@@ -171,17 +172,18 @@ def _bag_log(
     from wmrid.core.atomic import register_input
     from wmrid.io.bag.log import read_bag_log
 
-    if columns:
+    fs = field_signals(columns) if columns else None
+    if columns and fs is None:
         raise UsageError(
-            f"{paths[0]}: {option('columns')} names the columns of a CSV or Parquet log (or a JSON topic's fields); "
-            f"a bag's JointState topics are chosen with {option('velocity_topic')}, {option('effort_topic')} and "
-            f"{option('right_joint')}/{option('left_joint')}"
+            f"{paths[0]}: {option('columns')} names the columns of a CSV or Parquet log; in a bag it takes field "
+            "paths (eta_r=/topic:field.path, ...), and JointState topics are chosen with "
+            f"{option('velocity_topic')}, {option('effort_topic')} and {option('right_joint')}/{option('left_joint')}"
         )
     for p in paths:
         for root, _, files in os.walk(p) if os.path.isdir(p) else [("", None, [p])]:
             for f in files:
                 register_input(os.path.join(root, f))  # an output of this command may not be one of them
-    return read_bag_log(paths, selection or TopicSelection(), signals, gear_ratio, rows)
+    return read_bag_log(paths, selection or TopicSelection(), signals, gear_ratio, rows, fields=fs)
 
 
 def _numeric(values: Any, key: str, col: str, name: str, where: Callable[[int], str]) -> np.ndarray:

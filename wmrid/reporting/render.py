@@ -176,9 +176,24 @@ def print_inspection(info: dict, console: Any) -> None:
             )
         console.print(jt)
     else:
-        console.print("no sensor_msgs/msg/JointState topic: wmrid identify needs one (or a JSON topic with --columns)")
+        console.print(
+            "no sensor_msgs/msg/JointState topic: give the wheel signals by field path (below) with --columns "
+            "eta_r=TOPIC:PATH,eta_l=...,tau_r=...,tau_l=... (or a JSON topic with --topic and --columns)",
+            markup=False, highlight=False,
+        )  # fmt: skip
+    by_path = [e for e in info["topics"] if e.get("field_paths")]
+    if by_path:
+        from rich.markup import escape
+
+        title = escape("Numeric fields (for --columns eta_r=TOPIC:PATH,...; @NAME picks by name, [i] by position)")
+        ft = Table(title=title, title_justify="left", box=box.SIMPLE_HEAD)
+        ft.add_column("topic", no_wrap=True)
+        ft.add_column("field paths")
+        for e in by_path:
+            ft.add_row(escape(e["topic"]), escape(", ".join(p.split(":", 1)[1] for p in e["field_paths"])))
+        console.print(ft)
     for note in info["notes"]:
-        console.print(f"note: {note}")
+        console.print(f"note: {note}", markup=False, highlight=False)
 
 
 def print_report(report: Any, console: Any) -> None:

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 
 from wmrid.core.errors import LogFormatError
 from wmrid.core.wheel_log import CHUNK_ROWS, LogStream
+from wmrid.io.field_paths import FieldSignals
 from wmrid.io.mcap.joints import TopicSelection
 from wmrid.io.signals import SignalOptions
 
@@ -82,17 +83,21 @@ def read_bag_log(
     signals: SignalOptions,
     gear_ratio: float | None,
     rows: int = CHUNK_ROWS,
+    fields: FieldSignals | None = None,
 ) -> LogStream:
     """The LogStream of the recording in ``paths`` (see :func:`recording_paths`), JointState topics chosen, aligned
-    and converted as for an MCAP file."""
+    and converted as for an MCAP file; ``fields``: the wheel signals by field path instead."""
     from wmrid.io.bag.reader import iter_bag_joint_parts, read_bag
-    from wmrid.io.mcap.log import Recording, recording_log
+    from wmrid.io.mcap.log import Recording, field_selection, recording_log
 
     files = list(paths)
+    topics = fields.topics() if fields is not None else None
+    if fields is not None:
+        selection = field_selection(selection, fields)
     recording = Recording(
         name=files[0] if len(files) == 1 else f"{files[0]} (+{len(files) - 1} more)",
-        scan=lambda keep, spare: read_bag(files, keep=keep, spare=spare),
-        read=lambda: read_bag(files),
-        parts=lambda channels: iter_bag_joint_parts(files, channels),
+        scan=lambda keep, spare: read_bag(files, keep=keep, spare=spare, fields=topics),
+        read=lambda: read_bag(files, fields=topics),
+        parts=lambda channels: iter_bag_joint_parts(files, channels, fields=topics),
     )
-    return recording_log(recording, selection, signals, gear_ratio, rows)
+    return recording_log(recording, selection, signals, gear_ratio, rows, fields)

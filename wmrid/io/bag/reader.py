@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import heapq
-from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -189,7 +189,10 @@ class _BagState(JointChannels):
         return self.typestore
 
     def joint_channels(self) -> list[int]:
-        channels = [c for c, t in self.topics.items() if t.msgtype in JOINT_STATE_NAMES + DYNAMIC_JOINT_STATE_NAMES]
+        channels = [
+            c for c, t in self.topics.items()
+            if t.msgtype in JOINT_STATE_NAMES + DYNAMIC_JOINT_STATE_NAMES or t.topic in self.fields
+        ]  # fmt: skip
         return channels if self.wanted is None else [c for c in channels if c in self.wanted]
 
     def decode(self, channel: int, buf: np.ndarray, starts: np.ndarray, lengths: np.ndarray, stamps: np.ndarray):
@@ -198,7 +201,10 @@ class _BagState(JointChannels):
         lo, hi = int(stamps.min()), int(stamps.max())
         acc.first_ns = lo if acc.first_ns is None else min(acc.first_ns, lo)
         acc.last_ns = hi if acc.last_ns is None else max(acc.last_ns, hi)
-        self._joint_batch(acc, buf, starts, lengths, stamps)
+        if acc.info["topic"] in self.fields:
+            self._field_batch(acc, buf, starts, lengths, stamps)
+        else:
+            self._joint_batch(acc, buf, starts, lengths, stamps)
 
 
 class _RosbagsState(_BagState):
@@ -252,30 +258,33 @@ def _kind(path: str) -> str:
         return "ros1" if fh.read(13).startswith(b"#ROSBAG V2.0") else "ros2"
 
 
-def read_bag(paths: Sequence[str], *, keep: int | None = None, spare: int = 0) -> McapContents:
+def read_bag(
+    paths: Sequence[str], *, keep: int | None = None, spare: int = 0, fields: Mapping[str, Any] | None = None
+) -> McapContents:
     """The recording of ``paths`` (one or more ROS 1 bags, ``.db3``/``.mcap`` files, or a rosbag2 folder) as the
     contents of an MCAP read: channels, JointState series (or, past ``keep`` messages, summaries, and the parts
     kept within ``spare`` bytes: see :class:`JointChannels`), notes.  Raises LogFormatError when rosbags cannot
     open a file."""
     kind = bag_kind(paths)
-    with _open_state(paths, kind, keep=keep, spare=spare) as state:
+    with _open_state(paths, kind, keep=keep, spare=spare, fields=fields) as state:
         for _ in state.steps():
             pass
         return McapContents(
             source=", ".join(paths), profile=kind, library="wmrid" if kind == "ros1" else "rosbags",
             format=f"{kind} bag", channels=tuple(state.channel_info()),
+            definitions={t.topic: (t.msgtype, t.definition) for t in state.topics.values()},
             joints=state.joints(), json={}, metadata={}, notes=tuple(state.notes), size_bytes=_size(paths),
             complete=state.complete, replay=None if state.complete else state.replay,
         )  # fmt: skip
 
 
 def iter_bag_joint_parts(
-    paths: Sequence[str], channel_ids: Iterable[int]
+    paths: Sequence[str], channel_ids: Iterable[int], fields: Mapping[str, Any] | None = None
 ) -> Generator[dict[int, list[tuple[np.ndarray, ...]]], None, None]:
     """The second pass over a recording read by :func:`read_bag`: the parts of the JointState channels
     ``channel_ids``, batch by batch (as :func:`wmrid.io.mcap.reader.iter_joint_parts`)."""
     wanted = set(channel_ids)
-    with _open_state(paths, bag_kind(paths), wanted=wanted) as state:
+    with _open_state(paths, bag_kind(paths), wanted=wanted, fields=fields) as state:
         for _ in state.steps():
             out = {}
             for cid in wanted:

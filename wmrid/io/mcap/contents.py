@@ -230,6 +230,7 @@ class McapContents:
     complete: bool = True
     replay: list | None = field(default=None, repr=False, compare=False)
     format: str = "mcap"  # or "ros1 bag", "ros2 bag" (wmrid.io.bag)
+    definitions: dict[str, tuple[str, str]] = field(default_factory=dict)  # topic -> (type, .msg text or "")
 
     def channel(self, topic: str) -> ChannelInfo | None:
         return next((c for c in self.channels if c.topic == topic), None)

@@ -7,13 +7,15 @@ messages, or handed out as they come (a second pass).  :mod:`wmrid.io.mcap.reade
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+from collections.abc import Callable, Mapping
 from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 
 from wmrid.core.limits import describe, memory_budget
+from wmrid.io.field_paths import FieldPath
 from wmrid.io.mcap.contents import Accumulator, ChannelInfo, JointStats, join, summary
 from wmrid.io.mcap.records import MAX_JOINTS, STATUS_MALFORMED, STATUS_OK
 
@@ -56,8 +58,12 @@ class JointChannels:
     and :meth:`kernel` (the compiled decoder of its wire format).
     """
 
-    def __init__(self, name: str, *, keep: int | None = None, spare: int = 0, wanted: set[int] | None = None):
+    def __init__(
+        self, name: str, *, keep: int | None = None, spare: int = 0, wanted: set[int] | None = None,
+        fields: Mapping[str, Mapping[str, tuple[FieldPath, FieldPath]]] | None = None,
+    ):  # fmt: skip
         self.name = name
+        self.fields = dict(fields or {})  # topic -> {"velocity"/"effort": (right, left) paths}: :meth:`_field_batch`
         self.budget = memory_budget()
         self.keep = keep
         self.wanted = wanted
@@ -99,6 +105,41 @@ class JointChannels:
                 "(give --effort current, with the torque constant, to turn it into a torque)"
             )
         return view
+
+    def _field_batch(self, acc: Accumulator, buf, starts, lengths, times) -> None:
+        """A batch of a topic read by field paths (:mod:`wmrid.io.field_paths`): each message decoded by
+        :meth:`generic`, its right and left speed and/or effort taken by path, as a JointState of two joints
+        "right" and "left" (stamp from ``header.stamp``, 0 when it has none)."""
+        spec = self.fields[acc.info["topic"]]
+        if acc.ref is None:
+            self._set_names(acc, ["right", "left"])
+            acc.standard = False
+            said = "; ".join(f"{what} {paths[0].text} and {paths[1].text}" for what, paths in spec.items())
+            self.notes.append(
+                f"topic {acc.info['topic']}: wheel signals read by field path ({said}), message by message"
+            )
+        n = len(starts)
+        stamp = np.zeros(n, dtype=np.int64)
+        pos = np.full((n, 2), np.nan)
+        vel = np.full((n, 2), np.nan)
+        eff = np.full((n, 2), np.nan)
+        keep = np.ones(n, dtype=bool)
+        for i in range(n):
+            msg = self.generic(acc, bytes(buf[starts[i] : starts[i] + lengths[i]]))
+            if msg is None:
+                keep[i] = False
+                acc.skipped += 1
+                continue
+            header = getattr(msg, "header", None)
+            if header is not None and hasattr(header, "stamp"):
+                with contextlib.suppress(AttributeError, TypeError, ValueError):
+                    stamp[i] = int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+            for field, out in (("velocity", vel), ("effort", eff)):
+                if field in spec:
+                    out[i] = [path.value(msg) for path in spec[field]]
+        if not keep.all():
+            times, stamp, pos, vel, eff = times[keep], stamp[keep], pos[keep], vel[keep], eff[keep]
+        self._store(acc, (np.array(times, dtype=np.int64), stamp, pos, vel, eff))
 
     # ---- results
 

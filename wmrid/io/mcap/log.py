@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from wmrid.core.errors import LogFormatError, UsageError, option
+from wmrid.io.field_paths import FieldSignals, check_values, field_signals
 from wmrid.io.mcap.joints import TopicSelection
 from wmrid.io.signals import SignalOptions
 
@@ -59,6 +60,16 @@ def read_mcap_log(
     from wmrid.io.mcap.reader import iter_joint_parts, read_mcap, scan_mcap
 
     path = source.path or source.name
+    fs = field_signals(columns) if columns else None
+    if fs is not None:
+        topics = fs.topics()
+        recording = Recording(
+            name=source.name,
+            scan=lambda keep, spare: scan_mcap(path, source.data, keep=keep, spare=spare, fields=topics),
+            read=lambda: read_mcap(path, data=source.data, fields=topics),
+            parts=lambda channels: iter_joint_parts(path, source.data, channels, fields=topics),
+        )
+        return recording_log(recording, field_selection(selection, fs), signals, gear_ratio, rows, fs)
     if columns and selection.topic:
         missing = [k for k in REQUIRED[1:] if k not in columns]
         if missing:
@@ -72,6 +83,26 @@ def read_mcap_log(
         parts=lambda channels: iter_joint_parts(path, source.data, channels),
     )
     return recording_log(recording, selection, signals, gear_ratio, rows)
+
+
+def field_selection(selection: TopicSelection, fs: FieldSignals) -> TopicSelection:
+    """The topic selection that reads the field-path signals ``fs``: their topics, and the two joints "right" and
+    "left" the readers make of them; UsageError when topics or joints were also chosen by option."""
+    from dataclasses import replace
+
+    chosen = [
+        n for n in ("topic", "velocity_topic", "effort_topic", "right_joint", "left_joint") if getattr(selection, n)
+    ]
+    if chosen:
+        raise UsageError(
+            f"{option('columns')} with field paths names the topics and wheels itself; drop "
+            f"{', '.join(option(n) for n in chosen)}"
+        )
+    same = fs.speed_topic == fs.effort_topic
+    return replace(
+        selection, topic=fs.speed_topic if same else None, velocity_topic=None if same else fs.speed_topic,
+        effort_topic=None if same else fs.effort_topic, right_joint="right", left_joint="left",
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -88,13 +119,21 @@ class Recording:
 
 
 def recording_log(
-    recording: Recording, selection: TopicSelection, signals: SignalOptions, gear_ratio: float | None, rows: int
+    recording: Recording,
+    selection: TopicSelection,
+    signals: SignalOptions,
+    gear_ratio: float | None,
+    rows: int,
+    fields: FieldSignals | None = None,
 ) -> LogStream:
-    """The LogStream of a recording's JointState topics: decoded whole, or streamed (see :func:`read_mcap_log`)."""
+    """The LogStream of a recording's JointState topics (or of the wheel signals by field path ``fields``,
+    checked to give numbers): decoded whole, or streamed (see :func:`read_mcap_log`)."""
     from wmrid.io.mcap.joint_stream import stream_plan
 
     source = recording
     contents = recording.scan(_MCAP_WHOLE_PIECES * rows, _MCAP_REPLAY_BYTES)
+    if fields is not None:
+        check_values(contents.joints, fields, recording.name)
     if contents.complete:
         return stream_arrays(_mcap_whole_log(source, contents, selection, signals, gear_ratio), rows)
     plan, why = stream_plan(contents, selection, signals, gear_ratio)

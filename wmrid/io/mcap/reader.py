@@ -90,6 +90,7 @@ def read_mcap(
     *,
     json_fields: Mapping[str, Mapping[str, str]] | None = None,
     decode_joint_states: bool = True,
+    fields: Mapping[str, Any] | None = None,
 ) -> McapContents:
     """Read an MCAP file (or ``data``, the bytes of one read from a pipe; ``path`` then only names it).
 
@@ -97,11 +98,13 @@ def read_mcap(
     decode_joint_states : False to take only the inventory (faster for ``inspect`` on huge files).
     """
     buf, release = _map(path, data)
-    state = _ReadState(path, json_fields or {}, decode_joint_states, release=release)
+    state = _ReadState(path, json_fields or {}, decode_joint_states, release=release, fields=fields)
     return _read_buffer(state, buf)
 
 
-def scan_mcap(path: str, data: bytes | None = None, *, keep: int, spare: int = 0) -> McapContents:
+def scan_mcap(
+    path: str, data: bytes | None = None, *, keep: int, spare: int = 0, fields: Mapping[str, Any] | None = None
+) -> McapContents:
     """The first pass over a recording that may be long: :func:`read_mcap`'s contents (JointState only, no
     JSON) while its JointState topics hold at most ``keep`` messages in all; past that, ``complete`` is
     False and ``joints`` holds a :class:`JointSummary` per topic.  Notes and inventory as in :func:`read_mcap`.
@@ -109,11 +112,11 @@ def scan_mcap(path: str, data: bytes | None = None, *, keep: int, spare: int = 0
     bytes, ``replay`` holds them (see the module docstring), else None.
     """
     buf, release = _map(path, data)
-    return _read_buffer(_ReadState(path, {}, True, release=release, keep=keep, spare=spare), buf)
+    return _read_buffer(_ReadState(path, {}, True, release=release, keep=keep, spare=spare, fields=fields), buf)
 
 
 def iter_joint_parts(
-    path: str, data: bytes | None, channel_ids: Iterable[int]
+    path: str, data: bytes | None, channel_ids: Iterable[int], fields: Mapping[str, Any] | None = None
 ) -> Generator[dict[int, list[tuple[np.ndarray, ...]]], None, None]:
     """The second pass: for the JointState channels ``channel_ids`` (as in :attr:`JointSummary.channel_id`),
     the arrays decoded from each batch of records, {channel id: [(log_ns, stamp_ns, position, velocity,
@@ -123,7 +126,7 @@ def iter_joint_parts(
     wanted = set(channel_ids)
     buf, release = _map(path, data)
     _check_start(path, buf)
-    state = _ReadState(path, {}, True, release=release, wanted=wanted)
+    state = _ReadState(path, {}, True, release=release, wanted=wanted, fields=fields)
 
     def drain() -> dict[int, list[tuple[np.ndarray, ...]]]:
         out = {}
@@ -221,8 +224,18 @@ def _read_buffer(state: _ReadState, buf: np.ndarray) -> McapContents:
     return McapContents(
         source=name, profile=state.profile, library=state.library, channels=channels, joints=joints,
         json=json_out, metadata=state.metadata, notes=tuple(notes), size_bytes=size, lost_bytes=lost_bytes,
-        complete=state.complete, replay=None if state.complete else state.replay,
+        complete=state.complete, replay=None if state.complete else state.replay, definitions=_definitions(state),
     )  # fmt: skip
+
+
+def _definitions(state: _ReadState) -> dict[str, tuple[str, str]]:
+    """topic -> (type, .msg text) of the channels whose schema is a ROS 2 .msg definition."""
+    out = {}
+    for acc in state.channels.values():
+        schema = state.schemas.get(acc.info["schema_id"])
+        if schema and schema["encoding"] == "ros2msg":
+            out[acc.info["topic"]] = (schema["name"], bytes(schema["data"]).decode("utf-8", "replace"))
+    return out
 
 
 class _ReadState(JointChannels):
@@ -240,8 +253,9 @@ class _ReadState(JointChannels):
         spare: int = 0,
         wanted: set[int] | None = None,
         release: Callable[[int], None] | None = None,
+        fields: Mapping[str, Any] | None = None,
     ):
-        super().__init__(name, keep=keep, spare=spare, wanted=wanted)
+        super().__init__(name, keep=keep, spare=spare, wanted=wanted, fields=fields)
         self.json_fields = json_fields
         self.decode = decode_joint_states
         self.check_crc = os.environ.get(CRC_ENV, "1").strip() != "0"
@@ -462,7 +476,10 @@ class _ReadState(JointChannels):
             acc.last_ns = hi if acc.last_ns is None else max(acc.last_ns, hi)
             info = acc.info
             joint_like = info["schema_name"] in JOINT_STATE_NAMES + DYNAMIC_JOINT_STATE_NAMES
-            if self.decode and joint_like and info["message_encoding"] == "cdr":
+            by_path = info["topic"] in self.fields and info["message_encoding"] == "cdr"
+            if by_path and (self.wanted is None or int(cid) in self.wanted):
+                self._field_batch(acc, buf, data_start[sel], data_len[sel], times)
+            elif self.decode and joint_like and info["message_encoding"] == "cdr" and not by_path:
                 if self.wanted is None or int(cid) in self.wanted:
                     self._joint_batch(acc, buf, data_start[sel], data_len[sel], times)
             elif info["message_encoding"] == "json" and info["topic"] in self.json_fields:

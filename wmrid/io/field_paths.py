@@ -1,0 +1,201 @@
+"""Wheel signals taken from any message type by field path: ``TOPIC:PATH`` in ``--columns``.
+
+``--columns eta_r=/wheel_state:velocity@right_wheel_joint,eta_l=/wheel_state:velocity@left_wheel_joint,
+tau_r=/motor_state:right.current,tau_l=/motor_state:left.current`` reads the right wheel's speed from the array
+``velocity`` of the messages on ``/wheel_state`` at the position of ``right_wheel_joint`` in their ``name`` array, and
+its effort from the field ``current`` of the field ``right`` of the messages on ``/motor_state``.
+
+PATH is fields separated by dots.  A field may be followed by ``[i]`` (element i of an array, from 0) or by
+``@NAME`` (the element of an array at the position of NAME in the message's array of names beside it: the first
+of ``name``, ``names``, ``joint_names`` and ``interface_names`` the message has; so
+``interface_values@right_wheel_joint.values@velocity`` reads a ros2_control DynamicJointState).  A value that is
+absent (a shorter array, a name not in the list) is NaN.  Both speeds come from one topic, and both efforts from
+one topic (the same or another: the efforts are then aligned to the speeds' stamps as for two JointState topics).
+Time: each message's ``header.stamp`` when it has one, else its receive (log) time, as ``--time-source`` says.
+The messages are decoded with the message definitions stored in the recording, message by message (about 20 µs
+a message).  ``wmrid inspect`` lists the numeric field paths of every topic.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from wmrid.core.errors import UsageError, option
+
+#: Arrays of names an ``@NAME`` selector looks up, beside the array it selects from.
+NAME_ARRAYS = ("name", "names", "joint_names", "interface_names")
+
+_STEP = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\]|@(.+))?$")
+
+
+@dataclass(frozen=True)
+class FieldPath:
+    """One ``TOPIC:PATH``: ``steps`` are (field, index or None, selector name or None)."""
+
+    text: str
+    topic: str
+    steps: tuple[tuple[str, int | None, str | None], ...]
+
+    def value(self, msg: Any) -> float:
+        """The number at this path in a decoded message (attributes, lists or arrays), NaN when absent."""
+        obj = msg
+        for field, index, name in self.steps:
+            parent = obj
+            try:
+                obj = getattr(parent, field)
+                if index is not None:
+                    obj = obj[index]
+                elif name is not None:
+                    names = next((getattr(parent, n) for n in NAME_ARRAYS if hasattr(parent, n)), None)
+                    if names is None:
+                        return math.nan
+                    position = [str(n) for n in names].index(name)
+                    obj = obj[position]
+            except (AttributeError, IndexError, ValueError, TypeError):
+                return math.nan
+        try:
+            return float(obj)
+        except (TypeError, ValueError):
+            return math.nan
+
+
+def is_field_path(text: str) -> bool:
+    """Whether a ``--columns`` value is a ``TOPIC:PATH`` (a topic starts with '/')."""
+    return text.startswith("/") and ":" in text
+
+
+def parse(text: str) -> FieldPath:
+    """A ``TOPIC:PATH``; UsageError naming the part that is not a field, ``[i]`` or ``@NAME``."""
+    topic, _, path = text.partition(":")
+    if not topic or not path:
+        raise UsageError(
+            f"{option('columns')}: {text!r} is not TOPIC:FIELD.PATH; write e.g. /motor_state:right.current"
+        )
+    steps = []
+    for part in path.split("."):
+        m = _STEP.match(part)
+        if m is None:
+            raise UsageError(
+                f"{option('columns')}: {text!r}: {part!r} is not a field, field[i] or field@NAME; write e.g. "
+                "/wheel_state:velocity@right_wheel_joint"
+            )
+        field, index, name = m.groups()
+        steps.append((field, None if index is None else int(index), name))
+    return FieldPath(text, topic, tuple(steps))
+
+
+@dataclass(frozen=True)
+class FieldSignals:
+    """The four wheel signals by field path: ``speed`` (right, left) on ``speed_topic``, ``effort`` on
+    ``effort_topic``."""
+
+    speed: tuple[FieldPath, FieldPath]
+    effort: tuple[FieldPath, FieldPath]
+
+    @property
+    def speed_topic(self) -> str:
+        return self.speed[0].topic
+
+    @property
+    def effort_topic(self) -> str:
+        return self.effort[0].topic
+
+    def topics(self) -> dict[str, dict[str, tuple[FieldPath, FieldPath]]]:
+        """{topic: {"velocity": paths, "effort": paths}} of the topics to decode."""
+        out: dict[str, dict[str, tuple[FieldPath, FieldPath]]] = {}
+        out.setdefault(self.speed_topic, {})["velocity"] = self.speed
+        out.setdefault(self.effort_topic, {})["effort"] = self.effort
+        return out
+
+
+def field_signals(columns: Mapping[str, str]) -> FieldSignals | None:
+    """The field-path signals of a ``--columns`` mapping, None when it names none; UsageError when it mixes them
+    with column names, leaves a signal out, or spreads the speeds (or the efforts) over two topics."""
+    paths = {key: value for key, value in columns.items() if is_field_path(value)}
+    if not paths:
+        return None
+    needed = ("eta_r", "eta_l", "tau_r", "tau_l")
+    missing = [k for k in needed if k not in paths]
+    extra = [k for k in columns if k not in needed]
+    if missing or extra:
+        raise UsageError(
+            f"{option('columns')} with field paths (TOPIC:FIELD) needs exactly eta_r, eta_l, tau_r and tau_l as "
+            f"paths{'; missing ' + ', '.join(missing) if missing else ''}"
+            f"{'; not by path: ' + ', '.join(extra) if extra else ''} (time comes from the messages' stamps)"
+        )
+    parsed = {key: parse(paths[key]) for key in needed}
+    for a, b, what in (("eta_r", "eta_l", "speeds"), ("tau_r", "tau_l", "efforts")):
+        if parsed[a].topic != parsed[b].topic:
+            raise UsageError(
+                f"{option('columns')}: both {what} must come from one topic ({parsed[a].topic} and {parsed[b].topic} "
+                "given)"
+            )
+    return FieldSignals((parsed["eta_r"], parsed["eta_l"]), (parsed["tau_r"], parsed["tau_l"]))
+
+
+#: ROS base types that hold a number a wheel signal can be.
+NUMERIC_TYPES = ("float64", "float32", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64")
+
+
+def numeric_paths(fielddefs: Mapping[str, Any], typename: str, limit: int = 40) -> list[str]:
+    """The numeric field paths of a message type (``header`` left out: it holds time, not a signal), as
+    ``--columns`` takes them after ``TOPIC:``; an array beside an array of names shows ``@NAME``, another ``[i]``.
+
+    fielddefs : rosbags' ``Typestore.fielddefs`` ({type: (constants, [(field, (node kind, detail))])}).
+    """
+    out: list[str] = []
+
+    def walk(name: str, prefix: str, depth: int) -> None:
+        if depth > 8 or name not in fielddefs or len(out) >= limit:
+            return
+        fields = fielddefs[name][1]
+        here = {f for f, _ in fields}
+        sibling = next((n for n in NAME_ARRAYS if n in here), None)
+        for field, (node, detail) in fields:
+            if field == "header" and depth == 0:
+                continue
+            path = f"{prefix}{field}"
+            kind = getattr(node, "name", str(node))
+            if kind in ("ARRAY", "SEQUENCE"):
+                (sub_node, sub_detail), _ = detail
+                path += "@NAME" if sibling and sibling != field else "[i]"
+                node, detail, kind = sub_node, sub_detail, getattr(sub_node, "name", str(sub_node))
+            if kind == "BASE" and detail[0] in NUMERIC_TYPES:
+                out.append(path)
+            elif kind == "NAME":
+                walk(detail, path + ".", depth + 1)
+
+    walk(typename, "", 0)
+    return out[:limit]
+
+
+def check_values(series_by_topic: Mapping[str, Any], fs: FieldSignals, source: str) -> None:
+    """LogFormatError naming a field path that gave no number in any message of its topic (a misspelt field)."""
+    from wmrid.core.errors import LogFormatError
+
+    for field, paths in (("velocity", fs.speed), ("effort", fs.effort)):
+        series = series_by_topic.get(paths[0].topic)
+        if series is None:
+            raise LogFormatError(
+                f"{source}: no messages on {paths[0].topic} (from {option('columns')} {paths[0].text}); wmrid inspect "
+                "lists the topics"
+            )
+        for j, path in enumerate(paths):
+            if not _has_values(series, field, j):
+                raise LogFormatError(
+                    f"{source}: the field path {path.text} gives no number in any message on {path.topic}; wmrid "
+                    "inspect lists its numeric fields"
+                )
+
+
+def _has_values(series: Any, field: str, column: int) -> bool:
+    if hasattr(series, "has_value"):  # a summary of a long recording
+        return bool(series.has_value[("position", "velocity", "effort").index(field), column])
+    values = getattr(series, field)
+    return bool(values.shape[0]) and not bool(np.all(np.isnan(values[:, column])))
