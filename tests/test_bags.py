@@ -356,3 +356,18 @@ def test_a_field_path_evaluates_as_documented():
     for missing in ("velocity@c", "arr[3]", "nested.z", "name"):
         assert np.isnan(parse(f"/t:{missing}").value(msg)), missing
     assert np.isnan(parse("/t:interface_values@j.values@effort").value(dynamic))
+
+
+def test_formats_are_found_by_magic_bytes_and_an_unknown_one_lists_the_supported(tmp_path, sample_bags):
+    """A ROS 1 bag named .csv or with no suffix is read as a bag; a binary file of no known format is refused
+    with the list of what wmrid reads."""
+    for name in ("run.csv", "run"):
+        disguised = tmp_path / name
+        disguised.write_bytes(sample_bags["ros1"][0].read_bytes())
+        assert len(read_log(str(disguised))) == 40001
+    unknown = tmp_path / "blob.dat"
+    unknown.write_bytes(b"\x7fELF\x02\x01\x01\x00" + bytes(64))
+    out = text(wmrid("identify", str(unknown)))
+    assert out.returncode == 2
+    assert "a ROS 1 bag, a ROS 2 .db3 bag or a rosbag2 folder" in out.stderr
+    assert "MCAP" in out.stderr

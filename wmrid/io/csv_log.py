@@ -28,6 +28,12 @@ from wmrid.io.sources import MCAP_MAGIC, PARQUET_MAGIC, SNIFF_BYTES, DamagedStre
 
 _COMMENT_MARKS = ("%", "#")
 
+#: What an unrecognised file is told wmrid reads (by magic bytes, whatever the suffix).
+SUPPORTED = (
+    "another format wmrid reads: CSV text (also gzip, bzip2, xz or zstd compressed), Parquet, MCAP, a ROS 1 bag, a "
+    "ROS 2 .db3 bag or a rosbag2 folder"
+)
+
 
 def sniff_delimiter(text: str) -> tuple[str, str]:
     """(delimiter, decimal) for CSV text; delimiter ``"\\s+"`` means runs of whitespace.
@@ -63,7 +69,7 @@ def _text_head(source: Source) -> tuple[str, str, list[str]]:
             raise LogFormatError(f"{name}: holds {kind.upper()} data, not CSV text; rename it with a .{kind} suffix")
     nul = head.find(b"\0")
     if nul >= 0:
-        raise LogFormatError(f"{name}: not a CSV text file (byte {nul} is a NUL byte); give a CSV or Parquet log")
+        raise LogFormatError(f"{name}: not a CSV text file (byte {nul} is a NUL byte) nor {SUPPORTED}")
     try:
         return head.decode("utf-8-sig"), "utf-8", []
     except UnicodeDecodeError as err:
@@ -72,7 +78,7 @@ def _text_head(source: Source) -> tuple[str, str, list[str]]:
         text = head.decode("latin-1")
         if any((ord(ch) < 32 and ch not in "\t\r\n\f") or 0x7F <= ord(ch) < 0xA0 for ch in text):
             raise LogFormatError(
-                f"{name}: not a CSV text file (byte {err.start} is not UTF-8 text); give a CSV or Parquet log"
+                f"{name}: not a CSV text file (byte {err.start} is not UTF-8 text) nor {SUPPORTED}"
             ) from err
         return text, "latin-1", [f"{name} is not UTF-8; read as Latin-1 text"]
 
