@@ -157,6 +157,16 @@ class _BagState(JointChannels):
         except Exception:
             return None
 
+    def names_of(self, acc: Accumulator, payload: bytes) -> list[str] | None:
+        """A ROS 1 JointState's names read straight from its bytes (no deserialiser needed for the common case);
+        anything else as :class:`JointChannels` does."""
+        topic = self.topics[acc.info["id"]]
+        if topic.encoding == "ros1" and topic.msgtype in JOINT_STATE_NAMES and self.standard(acc):
+            names = _ros1_joint_names(payload)
+            if names is not None:
+                return names
+        return super().names_of(acc, payload)
+
     def standard(self, acc: Accumulator) -> bool:
         topic = self.topics[acc.info["id"]]
         if not topic.definition:  # no definition in the bag: the standard one is assumed, as rosbags does
@@ -239,6 +249,28 @@ class _RosbagsState(_BagState):
         starts = np.cumsum(lengths) - lengths
         self.decode(channel, np.frombuffer(b"".join(datas), dtype=np.uint8), starts, lengths,
                     np.asarray(times, dtype=np.int64))  # fmt: skip
+
+
+def _ros1_joint_names(payload: bytes) -> list[str] | None:
+    """The ``name`` array of a ROS 1 JointState (after seq, stamp and frame_id), None when it does not fit."""
+    try:
+        p = 12
+        p += 4 + int.from_bytes(payload[p : p + 4], "little")  # frame_id
+        count = int.from_bytes(payload[p : p + 4], "little")
+        p += 4
+        if count > len(payload):
+            return None
+        names = []
+        for _ in range(count):
+            n = int.from_bytes(payload[p : p + 4], "little")
+            p += 4
+            if p + n > len(payload):
+                return None
+            names.append(payload[p : p + n].decode("utf-8"))
+            p += n
+        return names if p <= len(payload) and len(payload) >= 16 else None
+    except UnicodeDecodeError:
+        return None
 
 
 def bag_kind(paths: Sequence[str]) -> str:

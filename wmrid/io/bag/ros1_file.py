@@ -186,8 +186,8 @@ class Ros1State(_BagState):
         yield
 
     def _messages(self, path, buf, conns, times, dstart, dlen, connections: dict[int, int | None]) -> None:
-        channels = np.array([-1 if connections.get(int(c)) is None else connections[int(c)] for c in conns])
-        self._unknown += sum(int(c) not in connections for c in conns)
+        channels = _channels_of(conns, connections)  # -1: no connection record, -2: a connection skipped
+        self._unknown += int(np.count_nonzero(channels == -1))
         wanted = set(self.joint_channels())
         for channel in np.unique(channels[channels >= 0]):
             sel = channels == channel
@@ -200,6 +200,19 @@ class Ros1State(_BagState):
                 acc.first_ns = lo if acc.first_ns is None else min(acc.first_ns, lo)
                 acc.last_ns = hi if acc.last_ns is None else max(acc.last_ns, hi)
             acc.count += int(sel.sum())
+
+
+def _channels_of(conns: np.ndarray, connections: dict[int, int | None]) -> np.ndarray:
+    """The channel of each message's connection id (-1 for an id no connection record defines, -2 for a skipped
+    connection), by a lookup table (ids are small counters; a dictionary when a file claims a huge one)."""
+    ids = conns.astype(np.int64)
+    top = max(int(ids.max()) if len(ids) else -1, max(connections, default=-1))
+    if top > 1 << 20:
+        return np.array([-1 if int(c) not in connections else (connections[int(c)] or -2) for c in ids], dtype=np.int64)
+    table = np.full(top + 2, -1, dtype=np.int64)  # the last entry answers for the ids of -1 (no conn field)
+    for conn, channel in connections.items():
+        table[conn] = -2 if channel is None else channel
+    return table[np.where(ids < 0, top + 1, ids)]
 
 
 def _decompress(compression: str, data: bytes, size: int) -> bytes:

@@ -88,6 +88,11 @@ class JointChannels:
     def kernel(self, acc: Accumulator) -> Callable[..., None]:
         raise NotImplementedError
 
+    def names_of(self, acc: Accumulator, payload: bytes) -> list[str] | None:
+        """The joint names of a channel's first message (None when it cannot be decoded)."""
+        first = self.decoded(acc, payload)
+        return None if first is None else [str(n) for n in first.name]
+
     def decoded(self, acc: Accumulator, payload: bytes) -> Any:
         """One message decoded by :meth:`generic`, a DynamicJointState seen as a JointState (:func:`as_joint_state`;
         its 'current' interface stands for the effort where it has no 'effort' one, with a note)."""
@@ -172,11 +177,10 @@ class JointChannels:
 
     def _joint_batch(self, acc: Accumulator, buf, starts, lengths, times) -> None:
         if acc.ref is None:
-            first = self.decoded(acc, bytes(buf[starts[0] : starts[0] + lengths[0]]))
-            if first is None:
+            names = self.names_of(acc, bytes(buf[starts[0] : starts[0] + lengths[0]]))
+            if names is None:
                 acc.skipped += len(starts)
                 return
-            names = list(first.name)
             if len(names) > MAX_JOINTS:
                 self.notes.append(
                     f"topic {acc.info['topic']}: its JointState messages name {len(names):,} joints, more than the "
