@@ -258,13 +258,18 @@ def dynamic_bags(tmp_path_factory):
     }
 
 
-@pytest.mark.parametrize("kind", ["db3", "mcap"])
-def test_dynamic_joint_state_is_read_like_a_joint_state(dynamic_bags, sample_result, kind):
+def test_dynamic_joint_state_is_read_like_a_joint_state(dynamic_bags, sample_result):
     """The issue's "done when": a ros2_control DynamicJointState bag identifies, with no option, to the
-    parameters of the JointState recording it holds (the MCAP file through wmrid's MCAP reader)."""
-    result = _identify([dynamic_bags[kind]])
+    parameters of the JointState recording it holds; the MCAP file (through wmrid's MCAP reader) gives the same
+    log, sample for sample."""
+    result = _identify([dynamic_bags["db3"]])
     assert result["parameters"] == sample_result["parameters"]
     assert any("DynamicJointState (ros2_control), read like a JointState" in n for n in result["log"]["notes"])
+    reference = read_log(str(SAMPLE))
+    log = read_log(str(dynamic_bags["mcap"]))
+    assert np.array_equal(log.eta, reference.eta)
+    assert np.array_equal(log.tau, reference.tau)
+    assert any("DynamicJointState (ros2_control)" in n for n in log.notes)
 
 
 def test_a_current_interface_stands_for_the_effort(dynamic_bags, sample_result):
@@ -297,16 +302,26 @@ def vendor_bags(tmp_path_factory):
     }
 
 
-@pytest.mark.parametrize("kind", ["db3", "mcap", "ros1"])
-def test_signals_by_field_path_from_a_vendor_message(vendor_bags, sample_result, kind):
+def test_signals_by_field_path_from_a_vendor_message(vendor_bags, sample_result):
     """The issue's "done when": speeds in one message type, currents in another, identified with documented
     options (--columns with TOPIC:FIELD paths); the efforts put on the speeds' stamps (the same stamps here, so
-    the figures are the sample's exactly)."""
-    result = _identify([vendor_bags[kind]], "--columns", VENDOR_COLUMNS, *AS_TORQUE)
+    the figures are the sample's exactly).  The MCAP file and the ROS 1 bag give the db3's log, sample for
+    sample and note for note."""
+    result = _identify([vendor_bags["db3"]], "--columns", VENDOR_COLUMNS, *AS_TORQUE)
     assert result["parameters"] == sample_result["parameters"]
     notes = " | ".join(result["log"]["notes"])
     assert "wheel signals read by field path (effort /motor_state:right.current" in notes
     assert "speed read from /wheel_state, effort from /motor_state" in notes
+    import wmrid as api
+
+    options = {"columns": VENDOR_COLUMNS, "effort": "current", "torque_constant": 1.0, "gear_ratio": 1.0}
+    reference = api.read_log(str(vendor_bags["db3"]), **options)
+    for kind in ("mcap", "ros1"):
+        log = api.read_log(str(vendor_bags[kind]), **options)
+        assert np.array_equal(log.t, reference.t), kind
+        assert np.array_equal(log.eta, reference.eta), kind
+        assert np.array_equal(log.tau, reference.tau), kind
+        assert log.notes == reference.notes, kind
 
 
 def test_a_dynamic_joint_state_by_field_path(dynamic_bags, sample_result):
