@@ -11,6 +11,7 @@ which tests/test_mcap_read.py checks against mcap_ros2's decoder.  The issue ask
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -398,3 +399,19 @@ def test_formats_are_found_by_magic_bytes_and_an_unknown_one_lists_the_supported
     assert out.returncode == 2
     assert "a ROS 1 bag, a ROS 2 .db3 bag or a rosbag2 folder" in out.stderr
     assert "MCAP" in out.stderr
+
+
+def test_a_damaged_ros2_recording_is_one_line_not_an_internal_error(tmp_path, sample_bags):
+    """A db3 whose message rows were overwritten: rosbags fails while reading; wmrid says the recording is
+    damaged, naming it."""
+    import sqlite3
+
+    folder = tmp_path / "damaged"
+    shutil.copytree(sample_bags["db3-folder"][0], folder)
+    db = next(folder.glob("*.db3"))
+    with sqlite3.connect(db) as con:
+        con.execute("UPDATE topics SET name = CAST(X'F1F2' AS TEXT) WHERE id = 1")
+    out = text(wmrid("identify", str(folder)))
+    assert out.returncode == 2
+    assert len(out.stderr.strip().splitlines()) == 1, out.stderr
+    assert "internal error" not in out.stderr

@@ -129,3 +129,7 @@ def test_a_partly_empty_row_of_a_merged_export_is_still_an_error(tmp_path, frame
     err = out.stderr.decode()
     assert "line 42" in err
     assert "'/joint_states/left_wheel_joint/effort' is empty or NaN" in err
+
+
+def test_controller_error_columns_are_not_taken_for_speeds():
+    assert guess_candidates("eta_r", ["time", "right_speed_error", "right_vel_err", "delta_right_vel"]) == []

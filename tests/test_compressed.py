@@ -167,3 +167,21 @@ def test_concatenated_streams_are_read_whole(tmp_path, plain, kind):
     assert np.array_equal(log.t, whole.t)
     assert np.array_equal(log.eta, whole.eta)
     assert np.array_equal(log.tau, whole.tau)
+
+
+def test_a_zstd_stream_is_read_in_bounded_steps_and_a_skippable_frame_first_is_recognised(tmp_path, plain):
+    """A 1 KiB step of compressed input at a time (a bomb cannot make one read huge), and a stream that starts with
+    a skippable frame (as pzstd writes) is zstd all the same."""
+    import io
+    import struct
+
+    from wmrid.io.sources import _ZstdReader
+
+    bomb = zstandard.ZstdCompressor().compress(bytes(64 << 20))
+    reader = _ZstdReader(io.BytesIO(bomb))
+    assert len(reader.read(10)) == 10
+    assert len(reader._buf) < 48 << 20  # one step's output, not the 64 MiB
+    skippable = struct.pack("<II", 0x184D2A50, 4) + b"skip"
+    path = tmp_path / "skip.csv.zst"
+    path.write_bytes(skippable + COMPRESS["zstd"][1](plain.read_bytes()))
+    assert np.array_equal(read_log(str(path)).eta, read_log(str(plain)).eta)

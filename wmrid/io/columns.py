@@ -69,7 +69,7 @@ _EFFORT_WORDS = ("effort", "torque", "tau")
 #: A column with one of these words is a command, a set-point or a position, not a measured speed or effort.
 _NOT_MEASURED = (
     "cmd", "command", "commanded", "desired", "des", "ref", "reference", "target", "setpoint", "sp", "goal", "position",
-    "pos", "limit", "max", "min",
+    "pos", "limit", "max", "min", "error", "err", "diff", "delta",
 )  # fmt: skip
 #: Time columns by name: PlotJuggler's ``__time`` first, then the usual words.
 _TIME_NAMES = ("__time", "time", "timestamp", "stamp", "t_s", "time_s")

@@ -150,9 +150,11 @@ def numeric_paths(fielddefs: Mapping[str, Any], typename: str, limit: int = 40) 
     fielddefs : rosbags' ``Typestore.fielddefs`` ({type: (constants, [(field, (node kind, detail))])}).
     """
     out: list[str] = []
+    visits = [0]  # a cap on the fields looked at: nested definitions can branch without limit
 
     def walk(name: str, prefix: str, depth: int) -> None:
-        if depth > 8 or name not in fielddefs or len(out) >= limit:
+        visits[0] += 1
+        if depth > 8 or name not in fielddefs or len(out) >= limit or visits[0] > 2000:
             return
         fields = fielddefs[name][1]
         here = {f for f, _ in fields}

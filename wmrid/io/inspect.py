@@ -96,18 +96,12 @@ def _field_paths(contents: Any, kind: str) -> dict[str, list[str]]:
     from wmrid.io.field_paths import numeric_paths
 
     store = get_typestore(Stores.ROS1_NOETIC if kind == "ros1 bag" else Stores.ROS2_HUMBLE)
-    types: dict[str, Any] = {}
     for msgtype, text in contents.definitions.values():
         if text:
-            try:
-                types.update(get_types_from_msg(text, _rosbags_name(msgtype)))
-            except Exception:  # a definition rosbags cannot parse: no paths listed for it
+            try:  # one type at a time: a definition rosbags cannot use loses only its own paths
+                store.register(get_types_from_msg(text, _rosbags_name(msgtype)))
+            except Exception:
                 continue
-    if types:
-        try:
-            store.register(types)
-        except Exception:
-            return {}
     return {
         topic: [f"{topic}:{p}" for p in numeric_paths(store.fielddefs, _rosbags_name(msgtype))]
         for topic, (msgtype, _) in contents.definitions.items()

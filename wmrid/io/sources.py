@@ -50,8 +50,8 @@ STDIN_NAME = "<stdin>"
 #: (magic bytes, what the file is, the fix) of formats wmrid recognises but does not read.
 _OTHER_FORMATS = (
     (b"PK\x03\x04", "a zip archive", "unpack it first and give the log inside"),
-    (b"#ROSBAG", "a ROS 1 bag", "convert it to MCAP first (mcap convert FILE out.mcap)"),
-    (b"SQLite f", "an SQLite database (a ROS 2 .db3 bag?)", "convert it to MCAP first (ros2 bag convert)"),
+    (b"#ROSBAG", "a ROS 1 bag", "wmrid reads bags from files: save it to a file (decompressed) and give its path"),
+    (b"SQLite f", "an SQLite database (a ROS 2 .db3 bag?)", "wmrid reads bags from files: give the .db3 file's path"),
 )
 
 
@@ -68,7 +68,11 @@ COMPRESSIONS = (
 
 
 def compression_of(head_bytes: bytes) -> str | None:
-    """The name of the compression (see COMPRESSIONS) the bytes start with, else None."""
+    """The name of the compression (see COMPRESSIONS) the bytes start with, else None (a zstd stream may also
+    start with a skippable frame, magic 0x184D2A50-5F)."""
+    skippable = len(head_bytes) >= 4 and 0x50 <= head_bytes[0] <= 0x5F and head_bytes[1:4] == b"\x2a\x4d\x18"
+    if skippable:
+        return "zstd"
     return next((name for magic, name, _ in COMPRESSIONS if head_bytes.startswith(magic)), None)
 
 
@@ -158,12 +162,14 @@ class Source:
         import lzma
 
         if self.compression == "gzip":
-            return _Closing(gzip.GzipFile(fileobj=raw, mode="rb"), raw)
-        if self.compression == "bzip2":
-            return _Closing(bz2.BZ2File(raw, mode="rb"), raw)
-        if self.compression == "xz":
-            return _Closing(lzma.LZMAFile(raw, mode="rb"), raw)
-        return _Closing(_ZstdReader(raw), raw)
+            reader: Any = gzip.GzipFile(fileobj=raw, mode="rb")
+        elif self.compression == "bzip2":
+            reader = bz2.BZ2File(raw, mode="rb")
+        elif self.compression == "xz":
+            reader = lzma.LZMAFile(raw, mode="rb")  # noqa: SIM115 - closed by _Closing
+        else:
+            reader = _ZstdReader(raw)
+        return io.BufferedReader(_Closing(reader, raw), 1 << 16)  # type: ignore[return-value]
 
     def _read(self, fh: BinaryIO, size: int) -> bytes:
         """Up to ``size`` bytes from ``fh``; a damaged compressed stream is a LogFormatError."""
@@ -275,37 +281,56 @@ def open_source(path: str) -> Source:
 
 class _ZstdReader:
     """A zstd stream's bytes, frame after frame, that raises at the end when the last frame is incomplete
-    (zstandard's stream reader then just stops: a file cut short would read as a shorter log)."""
+    (zstandard's stream reader then just stops: a file cut short would read as a shorter log).  The compressed
+    input is fed 1 KiB at a time, so one step's output stays bounded (a zstd block of 128 KiB takes a few bytes:
+    at most ~40 MB out of 1 KiB in), and ``read(size)`` holds little more than ``size`` bytes."""
+
+    _IN = 1024
 
     def __init__(self, raw: BinaryIO):
         import zstandard
 
         self._zstd, self._raw = zstandard, raw
         self._dobj = zstandard.ZstdDecompressor().decompressobj()
-        self._pending = b""
+        self._buf = bytearray()
+        self._off = 0
+        self._in = b""
+        self._in_off = 0
         self._started = False
         self._done = False
 
     def read(self, size: int = -1) -> bytes:
-        out = bytearray(self._pending)
-        while (size < 0 or len(out) < size) and not self._done:
-            block = self._raw.read(1 << 20)
-            if not block:
+        if size is None or size < 0:
+            parts = []
+            while block := self.read(1 << 20):
+                parts.append(block)
+            return b"".join(parts)
+        while len(self._buf) - self._off < size and not self._done:
+            self._step()
+        end = min(self._off + size, len(self._buf))
+        out = bytes(self._buf[self._off : end])
+        self._off = end
+        if self._off >= 1 << 16:
+            del self._buf[: self._off]
+            self._off = 0
+        return out
+
+    def _step(self) -> None:
+        if self._in_off >= len(self._in):
+            self._in, self._in_off = self._raw.read(1 << 16), 0
+            if not self._in:
                 self._done = True
                 if self._started and not self._dobj.eof:
                     raise EOFError("the last zstd frame is incomplete")
-                break
-            while block:
-                if self._dobj.eof:  # the next frame
-                    self._dobj = self._zstd.ZstdDecompressor().decompressobj()
-                self._started = True
-                out += self._dobj.decompress(block)
-                block = self._dobj.unused_data if self._dobj.eof else b""
-        if size < 0:
-            self._pending = b""
-            return bytes(out)
-        self._pending = bytes(out[size:])
-        return bytes(out[:size])
+                return
+        piece = self._in[self._in_off : self._in_off + self._IN]
+        self._in_off += len(piece)
+        while piece:
+            if self._dobj.eof:  # the next frame
+                self._dobj = self._zstd.ZstdDecompressor().decompressobj()
+            self._started = True
+            self._buf += self._dobj.decompress(piece)
+            piece = self._dobj.unused_data if self._dobj.eof else b""
 
     def close(self) -> None:
         pass

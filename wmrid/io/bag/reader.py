@@ -117,8 +117,16 @@ class BagFiles:
             if conns:
                 streams.append(reader.messages(connections=conns))
         by_connection = self._by_connection
-        for conn, stamp, raw in heapq.merge(*streams, key=lambda m: m[1]):
-            yield by_connection[id(conn)], stamp, raw
+        try:
+            for conn, stamp, raw in heapq.merge(*streams, key=lambda m: m[1]):
+                yield by_connection[id(conn)], stamp, raw
+        except LogFormatError:
+            raise
+        except Exception as err:  # rosbags, sqlite or struct errors of a damaged file
+            raise LogFormatError(
+                f"{', '.join(self.paths)}: the recording is damaged: rosbags stopped reading it ({_one_line(err)}); "
+                "check it (ros2 bag info) or record it again"
+            ) from err
 
 
 class _BagState(JointChannels):
@@ -186,15 +194,15 @@ class _BagState(JointChannels):
             from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
             store = get_typestore(Stores.ROS1_NOETIC if self.kind == "ros1" else Stores.ROS2_HUMBLE)
-            types: dict[str, Any] = {}
-            for t in self.topics.values():
+            for t in self.topics.values():  # one topic at a time: a definition that conflicts spoils only its own
                 if t.definition:
                     try:
-                        types.update(get_types_from_msg(t.definition, t.msgtype))
+                        store.register(get_types_from_msg(t.definition, t.msgtype))
                     except Exception as err:
-                        self.notes.append(f"topic {t.topic}: its message definition cannot be parsed ({err})")
-            if types:
-                store.register(types)
+                        self.notes.append(
+                            f"topic {t.topic}: its message definition cannot be used ({_one_line(err)}); its "
+                            "messages are decoded with the distribution's definition where it has one"
+                        )
             self.typestore = store
         return self.typestore
 

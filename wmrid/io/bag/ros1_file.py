@@ -233,8 +233,8 @@ def _decompress(compression: str, data: bytes, size: int) -> bytes:
 
 
 def _by_start(paths: list[str]) -> list[str]:
-    """The bags in the order of their first message (from their chunk-info records); a bag without an index (a
-    recording that was not closed) keeps its place after the indexed ones."""
+    """The bags in the order of their first message (from their chunk-info records); when one has no index (a
+    recording that was not closed), the order given."""
 
     def start(path: str) -> float:
         try:
@@ -262,4 +262,9 @@ def _by_start(paths: list[str]) -> list[str]:
             q += 8 + hl + dl
         return first
 
-    return sorted(paths, key=start) if len(paths) > 1 else paths
+    if len(paths) < 2:
+        return paths
+    starts = [start(p) for p in paths]
+    if any(s == float("inf") for s in starts):  # a bag without an index: its start is unknown, keep the given order
+        return paths
+    return [p for _, p in sorted(zip(starts, paths, strict=True), key=lambda sp: sp[0])]
