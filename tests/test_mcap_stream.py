@@ -400,3 +400,19 @@ def test_the_median_step_is_exact_from_the_histogram_and_a_second_look(seed):
     for part in np.array_split(steps, int(rng.integers(1, 20))):
         median.add(part)
     assert median.value() == float(np.median(steps))
+
+
+def test_many_joints_a_message_count_against_the_memory_budget_in_bytes(tmp_path, monkeypatch):
+    """Few messages of many joints are large: the scan stops keeping them past a quarter of the budget (bytes,
+    not only messages), and a whole read beyond the budget is refused by name (a 2.4 MB bag of 4096-joint
+    messages reached 5.9 GB with a 1 GB budget before)."""
+    names = [f"j{i}" for i in range(600)]
+    messages = [("/joint_states", T0 + i * 10**6, joint_msg(T0 + i * 10**6, names, velocity=np.zeros(600)))
+                for i in range(300)]  # fmt: skip
+    path = write_messages(tmp_path / "wide.mcap", messages)
+    monkeypatch.setenv("WMRID_MEMORY_BUDGET", "4M")  # the parts: 300 x 600 joints x 24 B = 4.3 MB
+    assert not scan_mcap(str(path), keep=10**6).complete
+    with pytest.raises(LogFormatError, match="need more than the memory budget"):
+        read_mcap(str(path))
+    monkeypatch.setenv("WMRID_MEMORY_BUDGET", "64M")
+    assert scan_mcap(str(path), keep=10**6).complete

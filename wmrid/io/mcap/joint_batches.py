@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from wmrid.core.errors import LogFormatError
 from wmrid.core.limits import describe, memory_budget
 from wmrid.io.field_paths import FieldPath
 from wmrid.io.mcap.contents import Accumulator, ChannelInfo, JointStats, join, summary
@@ -69,6 +70,7 @@ class JointChannels:
         self.wanted = wanted
         self.complete = True
         self.kept = 0
+        self.kept_bytes = 0  # bytes of the parts kept (a message of many joints is large: count bytes too)
         self.spare = spare
         self.replay: list[tuple[int, tuple[np.ndarray | None, ...]]] | None = [] if keep is not None and spare else None
         self.replay_bytes = 0
@@ -260,13 +262,21 @@ class JointChannels:
                 self.replay.append((acc.info["id"], (times, stamp, None, vel, eff)))  # arrays shared, not copied
             else:
                 self.replay = None
-        if self.keep is None:
+        size = sum(a.nbytes for a in part if a is not None)
+        self.kept_bytes += size
+        if self.keep is None:  # a whole read: the arrays must fit, however few the messages
+            if self.kept_bytes > self.budget:
+                raise LogFormatError(
+                    f"{self.name}: its JointState messages, decoded whole, need more than the memory budget of "
+                    f"{describe(self.budget)} (WMRID_MEMORY_BUDGET): {len(acc.names)} joints a message on "
+                    f"{acc.info['topic']}; raise the budget or record fewer joints on the wheel topic"
+                )
             acc.parts.append(part)
             return
         if self.complete:
             acc.parts.append(part)
             self.kept += len(part[0])
-            if self.kept <= self.keep:
+            if self.kept <= self.keep and self.kept_bytes <= self.budget // 4:  # messages and bytes: both bounded
                 return
             self.complete = False  # too long to keep: statistics from here on
             for other in self.channels.values():
