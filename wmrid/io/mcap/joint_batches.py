@@ -8,6 +8,7 @@ messages, or handed out as they come (a second pass).  :mod:`wmrid.io.mcap.reade
 from __future__ import annotations
 
 import contextlib
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from types import SimpleNamespace
 from typing import Any
@@ -45,7 +46,7 @@ def as_joint_state(msg: Any) -> tuple[SimpleNamespace, bool]:
     return SimpleNamespace(name=names, header=msg.header, **fields), current
 
 
-class JointChannels:
+class JointChannels(ABC):
     """Channels (id -> :class:`Accumulator`), their schemas (id -> {"name", "encoding", "data"}) and notes, and the
     JointState decoding of batches of their messages.
 
@@ -79,16 +80,19 @@ class JointChannels:
         self.notes: list[str] = []
         self.decoders: dict[int, Any] = {}
 
-    # ---- what a format supplies
+    # ---- what a format supplies (abstract: the MCAP reader's _ReadState and the bag readers' _BagState)
 
+    @abstractmethod
     def generic(self, acc: Accumulator, payload: bytes) -> Any:
-        raise NotImplementedError
+        """One message of the channel decoded by the format's generic decoder, None when it cannot be."""
 
+    @abstractmethod
     def standard(self, acc: Accumulator) -> bool:
-        raise NotImplementedError
+        """Whether the channel's message definition is the standard JointState (the kernel may decode it)."""
 
+    @abstractmethod
     def kernel(self, acc: Accumulator) -> Callable[..., None]:
-        raise NotImplementedError
+        """The compiled JointState decoder of the channel's wire format (CDR or ROS 1)."""
 
     def names_of(self, acc: Accumulator, payload: bytes) -> list[str] | None:
         """The joint names of a channel's first message (None when it cannot be decoded)."""
