@@ -136,6 +136,59 @@ def test_the_fast_path_equals_rosbags_deserialiser_message_by_message(sample_bag
             assert np.array_equal(getattr(series, field), np.array([getattr(m, field) for m in msgs])), (kind, field)
 
 
+def _read_both_ways(paths, monkeypatch, **options):
+    """The log of ``paths`` read with wmrid's own sqlite3 reading, and with rosbags' message generators."""
+    import wmrid as api
+    from wmrid.io.bag import reader
+
+    plans = []
+    real_plan = reader.BagFiles._sqlite_plan
+
+    def recorded(files, wanted):
+        plans.append(real_plan(files, wanted))
+        return plans[-1]
+
+    monkeypatch.setattr(reader.BagFiles, "_sqlite_plan", recorded)
+    own = api.read_log([str(p) for p in paths], **options)
+    monkeypatch.setattr(reader.BagFiles, "_sqlite_plan", lambda files, wanted: None)
+    theirs = api.read_log([str(p) for p in paths], **options)
+    return own, theirs, plans
+
+
+@pytest.mark.parametrize("kind", ["db3-folder", "db3-file", "db3-split"])
+def test_sqlite_storage_read_by_wmrid_equals_rosbags_reading(sample_bags, kind, monkeypatch):
+    """Uncompressed sqlite3 storage is read by wmrid's own queries (one plan entry per storage file); the log is
+    rosbags' message-by-message reading, bit for bit."""
+    own, theirs, plans = _read_both_ways(sample_bags[kind], monkeypatch)
+    assert plans
+    assert all(plan is not None for plan in plans), "wmrid's sqlite3 reading was not used"
+    assert len(plans[0]) == (2 if kind == "db3-split" else 1)
+    for field in ("t", "eta", "tau"):
+        assert np.array_equal(getattr(own, field), getattr(theirs, field)), field
+    assert own.notes == theirs.notes
+
+
+def test_sqlite_reading_of_two_topics_and_of_overlapping_recordings(tmp_path, monkeypatch):
+    """Two topics in one file (speeds in a JointState, currents in a vendor message) are read by wmrid's queries;
+    the same topics given as two recordings that overlap in time go to rosbags, which merges them by time.  All
+    three give the same log."""
+    messages = bagutil.as_wheel_and_motor(bagutil.recording(SAMPLE))
+    store = bagutil.motor_store()
+    one = bagutil.write_rosbag2(tmp_path / "one", messages, store=store)
+    wheel = bagutil.write_rosbag2(tmp_path / "wheel", [m for m in messages if m.topic == "/wheel_state"], store=store)
+    motor = bagutil.write_rosbag2(tmp_path / "motor", [m for m in messages if m.topic == "/motor_state"], store=store)
+    options = {"columns": VENDOR_COLUMNS, "effort": "current", "torque_constant": 1.0, "gear_ratio": 1.0}
+    own, theirs, plans = _read_both_ways([one], monkeypatch, **options)
+    assert plans
+    assert all(plan is not None and len(plan[0][1]) == 2 for plan in plans)
+    overlapping, _, overlap_plans = _read_both_ways([wheel, motor], monkeypatch, **options)
+    assert overlap_plans
+    assert all(plan is None for plan in overlap_plans), "overlapping recordings must be merged"
+    for field in ("t", "eta", "tau"):
+        assert np.array_equal(getattr(own, field), getattr(theirs, field)), field
+        assert np.array_equal(getattr(overlapping, field), getattr(own, field)), field
+
+
 @pytest.mark.parametrize("kind", ["ros1-two-files", "db3-split"])
 def test_inspect_shows_a_bag_recording(sample_bags, kind):
     out = wmrid("inspect", *map(str, sample_bags[kind]), "--format", "json")

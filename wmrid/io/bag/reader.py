@@ -4,8 +4,11 @@ every format.
 
 rosbags opens the files (``rosbags.rosbag1.Reader`` for a ROS 1 bag, ``rosbags.rosbag2.Reader`` for a ``.db3`` or
 ``.mcap`` file or a rosbag2 folder with its ``metadata.yaml``) and hands out each message's serialised bytes with
-its receive time; several files are merged in time order (``heapq.merge``, as rosbags' AnyReader does).  The
-JointState messages are gathered per topic in batches of :data:`BATCH` and decoded by the compiled kernels of
+its receive time; several files are merged in time order (``heapq.merge``, as rosbags' AnyReader does).  Uncompressed
+sqlite3 storage is read by wmrid itself, a block of rows per query step on the connection rosbags opened, with
+rosbags' query and order (messages by timestamp, files in turn); that skips rosbags' per-message generators, 2.4x
+faster on a 600,000-message .db3.  The JointState messages are gathered per topic in batches of :data:`BATCH` and
+decoded by the compiled kernels of
 :class:`wmrid.io.mcap.joint_batches.JointChannels`: :func:`wmrid.io.bag.ros1_records.ros1_joint_states` for ROS 1,
 :func:`wmrid.io.mcap.records.joint_states` for CDR.  A message the kernel refuses, or a topic whose message
 definition is not the standard JointState, is decoded by rosbags' deserialiser with the definitions stored in the
@@ -19,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import heapq
+import itertools
 from collections.abc import Callable, Generator, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,10 +33,12 @@ import numpy as np
 from wmrid.core.errors import LogFormatError
 from wmrid.io.mcap.contents import Accumulator, McapContents
 from wmrid.io.mcap.joint_batches import DYNAMIC_JOINT_STATE_NAMES, JointChannels
-from wmrid.io.mcap.records import JOINT_STATE_NAMES, joint_states, standard_joint_state
+from wmrid.io.mcap.records import JOINT_STATE_NAMES, joint_states, ros1_joint_names, standard_joint_state
 
 #: Messages per topic decoded at a time (the batch's bytes are joined into one buffer for the kernel).
 BATCH = 16384
+#: sqlite rows fetched at a time (below the garbage collector's threshold of 700 live allocations).
+_ROWS = 256
 
 
 @dataclass
@@ -108,6 +114,89 @@ class BagFiles:
     def count(self, channel: int) -> int:
         return sum(int(c.msgcount) for c in self.topics[channel].connections)
 
+    def batches(self, channels: Iterable[int]) -> Iterator[tuple[int, Sequence[int], Sequence[bytes]]]:
+        """(channel id, receive times ns, serialised messages) of the channels' messages, in time order, up to
+        :data:`BATCH` messages of one channel at a time."""
+        wanted = set(channels)
+        plan = self._sqlite_plan(wanted)
+        if plan is None:
+            pending: dict[int, tuple[list[int], list[bytes]]] = {c: ([], []) for c in wanted}
+            for channel, stamp, raw in self.messages(wanted):
+                times, datas = pending[channel]
+                times.append(stamp)
+                datas.append(raw)
+                if len(datas) >= BATCH:
+                    yield channel, times, datas
+                    pending[channel] = ([], [])
+            for channel, (times, datas) in pending.items():
+                if datas:
+                    yield channel, times, datas
+            return
+        try:
+            for dbconn, channel_of in plan:
+                ids = tuple(channel_of)
+                cursor = dbconn.execute(
+                    "SELECT topic_id, timestamp, data FROM messages WHERE topic_id IN "
+                    f"({','.join('?' * len(ids))}) ORDER BY timestamp",
+                    ids,
+                )
+                while True:
+                    topic_ids: list[int] = []
+                    stamps: list[int] = []
+                    datas: list[bytes] = []
+                    # Rows are taken a few hundred at a time and their tuples dropped at once: with fewer than the
+                    # collector's 700 live allocations its collections never run (holding a whole batch of row
+                    # tuples made Python's garbage collector take 0.55 s of a 1.3 s read).
+                    while len(datas) < BATCH and (rows := list(itertools.islice(cursor, _ROWS))):
+                        columns = tuple(zip(*rows, strict=True))
+                        del rows
+                        topic_ids.extend(columns[0])
+                        stamps.extend(columns[1])
+                        datas.extend(columns[2])
+                        del columns
+                    if not datas:
+                        break
+                    if len(ids) == 1:
+                        yield channel_of[ids[0]], stamps, datas
+                        continue
+                    for topic_id in dict.fromkeys(topic_ids):
+                        pick = [i for i, t in enumerate(topic_ids) if t == topic_id]
+                        yield channel_of[topic_id], [stamps[i] for i in pick], [datas[i] for i in pick]
+        except Exception as err:  # an sqlite error of a damaged file
+            raise LogFormatError(
+                f"{', '.join(self.paths)}: the recording is damaged: its sqlite3 storage stopped reading "
+                f"({_one_line(err)}); check it (ros2 bag info) or record it again"
+            ) from err
+
+    def _sqlite_plan(self, wanted: set[int]) -> list[tuple[Any, dict[int, int]]] | None:
+        """[(sqlite connection, {topic id: channel id})] in reading order, when wmrid can read the recording's
+        storage itself: every file uncompressed sqlite3 that rosbags opened, the recordings given one after another
+        in time (a later one starting after the earlier has ended; overlapping ones are merged by rosbags).  None
+        otherwise (MCAP storage, compression, or a rosbags version whose readers look different)."""
+        readers = []
+        for reader in self.readers:
+            storage = getattr(reader, "storage", None)
+            storages = getattr(storage, "storages", [storage])
+            if getattr(reader, "compression_mode", None) or not storages:
+                return None
+            if not all(type(s).__name__ == "Sqlite3Reader" and getattr(s, "dbconn", None) for s in storages):
+                return None
+            readers.append((int(reader.start_time), int(reader.end_time), storages))
+        readers.sort(key=lambda r: r[0])
+        if any(earlier[1] > later[0] for earlier, later in itertools.pairwise(readers)):
+            return None
+        topics = {t.topic: c for c, t in self.topics.items() if c in wanted}
+        plan = []
+        for _, _, storages in readers:
+            for storage in storages:
+                channel_of = {
+                    int(conn.id): topics[conn.topic] for conn in storage.connections
+                    if conn.topic in topics and conn.msgtype == self.topics[topics[conn.topic]].msgtype
+                }  # fmt: skip
+                if channel_of:
+                    plan.append((storage.dbconn, channel_of))
+        return plan
+
     def messages(self, channels: Iterable[int]) -> Iterator[tuple[int, int, bytes]]:
         """(channel id, receive time ns, serialised bytes) of the channels' messages, in time order."""
         wanted = set(channels)
@@ -170,7 +259,7 @@ class _BagState(JointChannels):
         anything else as :class:`JointChannels` does."""
         topic = self.topics[acc.info["id"]]
         if topic.encoding == "ros1" and topic.msgtype in JOINT_STATE_NAMES and self.standard(acc):
-            names = _ros1_joint_names(payload)
+            names = ros1_joint_names(payload)
             if names is not None:
                 return names
         return super().names_of(acc, payload)
@@ -237,48 +326,15 @@ class _RosbagsState(_BagState):
 
     def steps(self) -> Generator[None, None, None]:
         """Decode the JointState topics (``wanted`` of them when set), pausing after each batch."""
-        channels = self.joint_channels()
-        pending: dict[int, tuple[list[int], list[bytes]]] = {c: ([], []) for c in channels}
-        for channel, stamp, raw in self.files.messages(channels):
-            times, datas = pending[channel]
-            times.append(stamp)
-            datas.append(raw)
-            if len(datas) >= BATCH:
-                self._flush(channel, times, datas)
-                pending[channel] = ([], [])
-                yield
-        for channel, (times, datas) in pending.items():
-            if datas:
-                self._flush(channel, times, datas)
-                yield
+        for channel, times, datas in self.files.batches(self.joint_channels()):
+            self._flush(channel, times, datas)
+            yield
 
-    def _flush(self, channel: int, times: list[int], datas: list[bytes]) -> None:
-        lengths = np.fromiter((len(d) for d in datas), dtype=np.int64, count=len(datas))
+    def _flush(self, channel: int, times: Sequence[int], datas: Sequence[bytes]) -> None:
+        lengths = np.fromiter(map(len, datas), dtype=np.int64, count=len(datas))
         starts = np.cumsum(lengths) - lengths
         self.decode(channel, np.frombuffer(b"".join(datas), dtype=np.uint8), starts, lengths,
                     np.asarray(times, dtype=np.int64))  # fmt: skip
-
-
-def _ros1_joint_names(payload: bytes) -> list[str] | None:
-    """The ``name`` array of a ROS 1 JointState (after seq, stamp and frame_id), None when it does not fit."""
-    try:
-        p = 12
-        p += 4 + int.from_bytes(payload[p : p + 4], "little")  # frame_id
-        count = int.from_bytes(payload[p : p + 4], "little")
-        p += 4
-        if count > len(payload):
-            return None
-        names = []
-        for _ in range(count):
-            n = int.from_bytes(payload[p : p + 4], "little")
-            p += 4
-            if p + n > len(payload):
-                return None
-            names.append(payload[p : p + n].decode("utf-8"))
-            p += n
-        return names if p <= len(payload) and len(payload) >= 16 else None
-    except UnicodeDecodeError:
-        return None
 
 
 def bag_kind(paths: Sequence[str]) -> str:

@@ -19,7 +19,7 @@ from wmrid.core.errors import LogFormatError
 from wmrid.core.limits import describe, memory_budget
 from wmrid.io.field_paths import FieldPath
 from wmrid.io.mcap.contents import Accumulator, ChannelInfo, JointStats, join, summary
-from wmrid.io.mcap.records import MAX_JOINTS, STATUS_MALFORMED, STATUS_OK
+from wmrid.io.mcap.records import JOINT_STATE_NAMES, MAX_JOINTS, STATUS_MALFORMED, STATUS_OK, cdr_joint_names
 
 #: ros2_control's joint states with named interfaces: read like a JointState (:func:`as_joint_state`).
 DYNAMIC_JOINT_STATE_NAMES = ("control_msgs/msg/DynamicJointState", "control_msgs/DynamicJointState")
@@ -95,7 +95,16 @@ class JointChannels(ABC):
         """The compiled JointState decoder of the channel's wire format (CDR or ROS 1)."""
 
     def names_of(self, acc: Accumulator, payload: bytes) -> list[str] | None:
-        """The joint names of a channel's first message (None when it cannot be decoded)."""
+        """The joint names of a channel's first message (None when it cannot be decoded): read from the bytes of a
+        standard CDR JointState (:func:`cdr_joint_names`), else from the generic decoder's message."""
+        if (
+            acc.info["message_encoding"] == "cdr"
+            and acc.info["schema_name"] in JOINT_STATE_NAMES
+            and self.standard(acc)
+        ):
+            names = cdr_joint_names(payload)
+            if names is not None:
+                return names
         first = self.decoded(acc, payload)
         return None if first is None else [str(n) for n in first.name]
 

@@ -210,6 +210,76 @@ def joint_states(buf, starts, lengths, ref, ref_off, stamp, pos, vel, eff, statu
             status[i] = STATUS_MALFORMED
 
 
+def cdr_joint_names(payload: bytes) -> list[str] | None:
+    """The ``name`` array of a standard little-endian CDR JointState, read straight from its bytes; None when the
+    message is another encoding or is not a whole JointState (names, then three float64 arrays, then at most 3 bytes
+    of padding: what rosbags' deserialiser accepts), for the caller to decode it generically.  (The first message's
+    names were decoded by mcap_ros2 or rosbags, whose import and type store cost 0.1-0.2 s of a command's start-up.)"""
+    if len(payload) < 16 or payload[0] != 0 or payload[1] != 1:
+        return None
+    body = memoryview(payload)[4:]  # CDR alignment is relative to the payload after the encapsulation header
+    return _joint_names(body, (8 + 4 + int.from_bytes(body[8:12], "little") + 3) & ~3, align=True)
+
+
+def ros1_joint_names(payload: bytes) -> list[str] | None:
+    """The ``name`` array of a standard ROS 1 JointState (after seq, stamp and frame_id), read straight from its
+    bytes; None when it is not a whole JointState (names and three float64 arrays, nothing after them)."""
+    if len(payload) < 16:
+        return None
+    body = memoryview(payload)
+    return _joint_names(body, 12 + 4 + int.from_bytes(body[12:16], "little"), align=False)
+
+
+def _joint_names(body: memoryview, p: int, *, align: bool) -> list[str] | None:
+    """The names of a JointState whose name array starts at ``p``, checking the three arrays after them (CDR
+    ``align``-ed to 4 and 8 bytes, strings ending in one NUL; ROS 1 packed, strings without one)."""
+    end = len(body)
+
+    def u32(at: int) -> int:
+        return int.from_bytes(body[at : at + 4], "little")
+
+    def aligned(at: int, to: int) -> int:
+        return (at + to - 1) & ~(to - 1) if align else at
+
+    if p + 4 > end:
+        return None
+    count = u32(p)
+    p += 4
+    if count > (end - p) // 4:  # each name takes at least its length
+        return None
+    names = []
+    for _ in range(count):
+        p = aligned(p, 4)
+        if p + 4 > end:
+            return None
+        n = u32(p)
+        p += 4
+        if p + n > end:
+            return None
+        name = bytes(body[p : p + n])
+        if align:  # a CDR string counts and ends with its NUL
+            if n < 1 or name.find(0) != n - 1:
+                return None
+            name = name[:-1]
+        elif 0 in name:
+            return None
+        try:
+            names.append(name.decode("utf-8"))
+        except UnicodeDecodeError:
+            return None
+        p += n
+    for _ in range(3):  # position, velocity, effort: float64[]
+        p = aligned(p, 4)
+        if p + 4 > end:
+            return None
+        m = u32(p)
+        p = aligned(p + 4, 8) if m else p + 4
+        p += 8 * m
+        if p > end:
+            return None
+    return names if end - p <= (3 if align else 0) else None
+
+
 @numba.njit(cache=True, nogil=True)
 def field_stats(values, has_value, has_nonzero, has_nan, has_inf, max_abs):
     """Per column of values (n, K): any non-NaN, any non-NaN non-zero, any NaN, any inf, largest finite |v|."""
