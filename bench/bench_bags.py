@@ -11,8 +11,11 @@ Measured, per format, as subprocesses (wall time including process start and imp
     every message, touching ``msg.velocity[0]`` (``--loop-repeat`` runs, default 1: it is slow);
 (b) ``wmrid identify BAG --robot paper --format json``: one untimed warm-up, then ``--repeat`` runs (default 3),
     median; peak RSS under /usr/bin/time.
+Also, in one process each (what a command costs beyond its start-up: Python, numpy, numba's import and first-call
+initialisation, typer, about 1 s on this machine): the loop after importing rosbags, and the library call
+``wmrid.identify(BAG, robot="paper")`` after a warm-up call on the 5-s recording of the same kind.
 
-Target (issue 15): identify <= 0.25 x the deserialise loop on both formats.
+Target (issue 15): identify <= 0.25 x the deserialise loop on both formats (the subprocess figures).
 
     /work/venv/bin/python bench/bench_bags.py
     /work/venv/bin/python bench/bench_bags.py --duration 60 --repeat 1
@@ -106,6 +109,29 @@ def loop(path: Path, repeat: int) -> dict:
     return {"n": int(runs[0].stdout.strip()), "median": median(walls), "rss": max(r.rss_mb or 0 for r in runs)}
 
 
+IN_PROCESS_SRC = """\
+import sys, time
+from pathlib import Path
+kind, path, warm = sys.argv[1], Path(sys.argv[2]), Path(sys.argv[3])
+if kind == "loop":
+    from rosbags.highlevel import AnyReader
+    t = time.perf_counter()
+    with AnyReader([path]) as reader:
+        for connection, stamp, raw in reader.messages():
+            v = reader.deserialize(raw, connection.msgtype).velocity[0]
+else:
+    import wmrid
+    wmrid.identify(str(warm), robot="paper")
+    t = time.perf_counter()
+    wmrid.identify(str(path), robot="paper")
+print(time.perf_counter() - t)
+"""
+
+
+def in_process(kind: str, path: Path, warm: Path) -> float:
+    return float(run_timed([sys.executable, "-c", IN_PROCESS_SRC, kind, str(path), str(warm)]).stdout.strip())
+
+
 def identify(path: Path, repeat: int) -> dict:
     cmd = [*wmrid_cmd(), "identify", str(path), "--robot", "paper", "--format", "json"]
     run_timed(cmd)  # warm-up: numba's cache, the page cache
@@ -126,6 +152,8 @@ def main() -> None:
 
     mcap = mcap_source(args.duration, args.seed)
     bags = {"ROS 1 bag": ros1_bag(mcap, args.compression), "ROS 2 db3": db3_folder(mcap)}
+    small = mcap_source(5.0, args.seed)
+    warm = {"ROS 1 bag": ros1_bag(small, args.compression), "ROS 2 db3": db3_folder(small)}
     print(f"\nrecording: {args.duration:g} s at 1 kHz ({mcap.relative_to(ROOT)} converted)")
     print(f"{'format':<11} {'loop s':>8} {'msg/s':>10} {'identify s':>11} {'(min)':>7} {'peak MB':>8} {'ratio':>7}")
     for name, path in bags.items():
@@ -136,6 +164,11 @@ def main() -> None:
         print(f"{name:<11} {lp['median']:8.2f} {lp['n'] / lp['median']:10,.0f} {ident['median']:11.2f} "
               f"{ident['min']:7.2f} {fmt_rss(ident['rss']):>8} {ratio:7.3f} {verdict}")  # fmt: skip
     print(f"\ntarget: identify <= {RATIO_TARGET} x the rosbags deserialise loop")
+    print(f"\nin one process (start-up and imports excluded):\n{'format':<11} {'loop s':>8} {'identify s':>11} "
+          f"{'ratio':>7}")  # fmt: skip
+    for name, path in bags.items():
+        lp, ident = in_process("loop", path, warm[name]), in_process("identify", path, warm[name])
+        print(f"{name:<11} {lp:8.2f} {ident:11.2f} {ident / lp:7.3f}")
 
 
 if __name__ == "__main__":
