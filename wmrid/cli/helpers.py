@@ -20,9 +20,9 @@ def log_opts(params: dict):
 
 
 def stderr_console():
-    from rich.console import Console
+    from wmrid.reporting.terminal import console
 
-    return Console(stderr=True)
+    return console(stderr=True)
 
 
 def write_estimates(result, path: Path, force: bool) -> None:

@@ -51,6 +51,7 @@ from wmrid.cli.options import (
     WheelRadiusOpt,
 )
 from wmrid.core.errors import UsageError
+from wmrid.reporting.terminal import console
 
 LOG_HELP = (
     "Log: .csv (also gzip/bz2/xz/zstd), .parquet, .mcap, ROS 1 .bag, ROS 2 .db3, a rosbag2 folder, several bag "
@@ -168,9 +169,7 @@ def identify(
     if fmt == "json":
         sys.stdout.write(to_json(payload) + "\n")
     else:
-        from rich.console import Console
-
-        print_identification(result, Console())
+        print_identification(result, console())
 
 
 @app.command()
@@ -191,9 +190,7 @@ def inspect(
     if fmt == "json":
         sys.stdout.write(to_json(info) + "\n")
     else:
-        from rich.console import Console
-
-        print_inspection(info, Console())
+        print_inspection(info, console())
 
 
 @app.command()
@@ -274,11 +271,9 @@ def report(
     if output is not None:
         write_report(rep, output, force=force)
     else:
-        from rich.console import Console
-
         from wmrid.reporting.render import print_report
 
-        print_report(rep, Console())
+        print_report(rep, console())
     if output is not None:
         stderr_console().print(f"wrote {output}")
 
@@ -354,6 +349,4 @@ def compare(
     if fmt == "json":
         sys.stdout.write(to_json(data) + "\n")
     else:
-        from rich.console import Console
-
-        print_comparison(data, Console())
+        print_comparison(data, console())

@@ -46,6 +46,7 @@ from wmrid.cli.options import (
     VelocityTopicOpt,
     WheelRadiusOpt,
 )
+from wmrid.reporting.terminal import console
 
 
 @app.command()
@@ -194,6 +195,4 @@ def monitor(
     if fmt == "json":
         sys.stdout.write(to_json(payload) + "\n")
     else:
-        from rich.console import Console
-
-        print_monitor(result, Console())
+        print_monitor(result, console())

@@ -56,6 +56,22 @@ def poorly_text(name: str, pair: tuple[float, float], unit: str, method: str | N
     return f"{name} is poorly determined by this log{by}: {value:.6g} +/- {std:.2g} {unit}"
 
 
+def impossible_parameters(parameters: dict[str, tuple[float, float]]) -> set[str]:
+    """The base parameters that :func:`physics_warnings` warns of: m11, m12, m22 when [m11 m12; m12 m22] is not
+    positive definite, a friction negative beyond 3 standard errors."""
+    out = set()
+    if all(n in parameters for n in ("m11", "m12", "m22")):
+        m11, m12, m22 = (parameters[n][0] for n in ("m11", "m12", "m22"))
+        if m11 <= 0 or m22 <= 0 or m11 * m22 - m12 * m12 <= 0:
+            out |= {"m11", "m12", "m22"}
+    for name in ("Fv1", "Fv2", "Fd1", "Fd2"):
+        if name in parameters:
+            value, std = parameters[name]
+            if value < 0 and math.isfinite(std) and value < -3 * std:
+                out.add(name)
+    return out
+
+
 def physics_warnings(parameters: dict[str, tuple[float, float]]) -> list[str]:
     """Warnings for base parameters that no physical robot has: M not positive definite, negative friction
     (each beyond 3 standard errors, so that noise alone does not trigger it)."""

@@ -8,6 +8,7 @@ from typing import Any
 from wmrid.model import dynamics as model
 from wmrid.model.dynamics import THETA0_NAMES
 from wmrid.monitoring.monitor import MonitorResult
+from wmrid.reporting.terminal import print_table, warning
 
 
 def _fmt(x: Any, digits: int = 6) -> str:
@@ -18,9 +19,6 @@ def _fmt(x: Any, digits: int = 6) -> str:
 
 def print_monitor(result: MonitorResult, console: Any) -> None:
     """The changes found, and the parameters before and after each, as rich tables."""
-    from rich import box
-    from rich.table import Table
-
     det = result.detector_dict()
     st = result.settings
     console.print(f"wmrid monitor: {result.source} against {result.model.source}")
@@ -34,35 +32,31 @@ def print_monitor(result: MonitorResult, console: Any) -> None:
     if not result.changes:
         console.print("no change of the dynamics detected")
     else:
-        table = Table(title="changes of the dynamics", title_justify="left", box=box.SIMPLE_HEAD)
-        for col in ("#", "t s", "alarm s", "delay s", "statistic", "threshold", "window s"):
-            table.add_column(col, justify="right", no_wrap=True)
-        for i, c in enumerate(result.changes, 1):
-            table.add_row(str(i), f"{c.t:.3f}", f"{c.t_alarm:.3f}", f"{c.t_alarm - c.t:.3f}", f"{c.statistic:.4g}",
-                          f"{c.threshold:.4g}", f"{c.window_s:.3g}")  # fmt: skip
-        console.print(table)
-        pt = Table(title="parameters before and after each change", title_justify="left", box=box.SIMPLE_HEAD)
-        pt.add_column("param", no_wrap=True)
-        pt.add_column("model", justify="right", no_wrap=True)
+        rows = [[str(i), f"{c.t:.3f}", f"{c.t_alarm:.3f}", f"{c.t_alarm - c.t:.3f}", f"{c.statistic:.4g}",
+                 f"{c.threshold:.4g}", f"{c.window_s:.3g}"] for i, c in enumerate(result.changes, 1)]  # fmt: skip
+        print_table(console, ["#", "t s", "alarm s", "delay s", "statistic", "threshold", "window s"], rows,
+                    title="changes of the dynamics", numeric=tuple(range(7)))  # fmt: skip
+        header = ["param", "model"]
         for i in range(len(result.changes)):
-            pt.add_column(f"after #{i + 1}", justify="right", no_wrap=True)
-            pt.add_column("std", justify="right", no_wrap=True)
-        pt.add_column("unit", no_wrap=True)
+            header += [f"after #{i + 1}", "std"]
+        header.append("unit")
         units = model.base_units(result.model.effort_unit)
         drag = list(dict.fromkeys(name for params in [result.model.parameters, *(c.parameters or {} for c in
                                   result.changes)] for name in params if name in units and name not in
                                   (*THETA0_NAMES, "M11", "M12", "M22")))  # fmt: skip
+        rows = []
         for name in (*THETA0_NAMES[:3], "M11", "M12", "M22", *THETA0_NAMES[3:], *drag):
             row = [name, _fmt((result.model.parameters.get(name) or {}).get("value"))]
             for c in result.changes:
                 entry = (c.parameters or {}).get(name) or {}
                 row += [_fmt(entry.get("value")), _fmt(entry.get("std"), 2)]
-            pt.add_row(*row, units.get(name, ""))
-        console.print(pt)
+            rows.append([*row, units.get(name, "")])
+        print_table(console, header, rows, title="parameters before and after each change",
+                    numeric=tuple(range(1, len(header) - 1)))  # fmt: skip
     for note in info["notes"]:
         console.print(f"note: {note}")
     for c in result.changes:
         for w in c.warnings:
-            console.print(f"[yellow]warning:[/yellow] after the change at {c.t:.3f} s: {w}")
+            console.print(warning(f"after the change at {c.t:.3f} s: {w}"))
     for w in result.warnings:
-        console.print(f"[yellow]warning:[/yellow] {w}")
+        console.print(warning(w))

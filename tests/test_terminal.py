@@ -1,0 +1,97 @@
+"""The terminal output of every command: data printed verbatim (no Rich markup interpretation), JSON mode's warning
+summary on stderr, and tables that fit 80 columns."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+
+from tests.cliutil import text, wmrid
+
+ROOT = Path(__file__).resolve().parents[1]
+#: Square brackets as a path may hold them: a closing tag (across a folder and its file), a style, a plain word, an
+#: unmatched one.
+MARKUP = "logs [bold] run [/red] [motor] x[ ]"
+
+
+@pytest.fixture(scope="module")
+def bracketed(tmp_path_factory):
+    """A 6-s noisy simulated log and a model identified from it, with markup-like paths (``MARKUP`` in each)."""
+    folder = tmp_path_factory.mktemp("brackets") / "logs [bold] run ["
+    folder.mkdir()
+    log = folder / "red] [motor] x[ ].csv"
+    out = wmrid("simulate", "-o", log, "--duration", "6", "--eta-noise", "0.01", "--tau-noise", "0.01")
+    assert out.returncode == 0, text(out).stderr
+    model = folder / "red] [motor] x[ ].json"
+    out = wmrid("identify", log, "--robot", "paper", "-o", model, "--format", "json")
+    assert out.returncode == 0, text(out).stderr
+    return log, model
+
+
+def test_markup_like_names_print_verbatim_in_every_command(bracketed, tmp_path):
+    """The issue's "done when": file names and notes holding [, ], [/red] and [bold] print verbatim; before, notes
+    lost '[motor]' and a name with '[/red]' ended in 'internal error: MarkupError'."""
+    log, model = bracketed
+    runs = {
+        "identify": ("identify", log, "--robot", "paper", "--format", "table"),
+        "inspect": ("inspect", log, "--format", "table"),
+        "report": ("report", log, "--robot", "paper"),
+        "report -o": ("report", log, "--robot", "paper", "-o", log.with_suffix(".md"), "--force"),
+        "compare": ("compare", log, "--robot", "paper", "--methods", "observer,idim", "--format", "table"),
+        "monitor": ("monitor", log, "--model", model, "--calibration", "4", "--format", "table"),
+        "simulate": ("simulate", "-o", log.with_name("red] [motor] x[ ] sim.csv"), "--duration", "1", "--force"),
+    }
+    for name, args in runs.items():
+        out = text(wmrid(*args, columns="250"))
+        assert out.returncode == 0, (name, out.stderr)
+        printed = out.stdout + out.stderr
+        assert "MarkupError" not in printed, name
+        assert MARKUP in printed, (name, printed[:2000])
+        assert "\\[" not in printed, name  # no escaping left visible either
+
+
+def test_warnings_keep_their_brackets(bracketed):
+    """A warning that names a [section] of a file keeps it: the note that read '... or a robot  table' reads
+    '... or a robot [motor] table' (a log in volts without a torque constant)."""
+    log, _ = bracketed
+    out = text(wmrid("identify", log, "--robot", "paper", "--effort", "current", "--format", "table"))
+    assert "[motor]" in out.stdout + out.stderr, out.stdout + out.stderr
+
+
+def test_no_colour_codes_when_no_color_is_set(bracketed, monkeypatch):
+    """NO_COLOR: not one escape sequence, even when Rich is told it writes to a terminal."""
+    log, _ = bracketed
+    monkeypatch.setenv("NO_COLOR", "1")
+    monkeypatch.setenv("FORCE_COLOR", "1")
+    out = text(wmrid("identify", log, "--robot", "paper", "--format", "table", "--effort", "current"))
+    assert not colours(out.stdout + out.stderr)
+    monkeypatch.delenv("NO_COLOR")
+    out = text(wmrid("identify", log, "--robot", "paper", "--format", "table", "--effort", "current"))
+    assert "33" in colours(out.stdout + out.stderr)  # the warning's yellow, so the check above means something
+
+
+def colours(printed: str) -> set[str]:
+    """The colour codes of the SGR escape sequences in ``printed`` (foreground, background, 256 and true colour;
+    bold and italic are not colours, and NO_COLOR leaves them)."""
+    codes = set()
+    for params in re.findall(r"\x1b\[([0-9;]*)m", printed):
+        for code in params.split(";"):
+            if code.isdigit() and (30 <= int(code) <= 49 or 90 <= int(code) <= 107):
+                codes.add(code)
+                if code in ("38", "48"):
+                    break  # the rest are the colour's own numbers
+    return codes
+
+
+def test_copy_is_left_alone(bracketed, tmp_path):
+    """(Housekeeping) the bracketed log is read, never written: a copy compares equal after every command."""
+    log, _ = bracketed
+    before = log.read_bytes()
+    shutil.copy(log, tmp_path / "copy.csv")
+    wmrid("inspect", log, "--format", "json")
+    assert log.read_bytes() == before
+    assert json.loads(wmrid("inspect", log, "--format", "json").stdout)["source"] == str(log)
