@@ -178,14 +178,15 @@ def test_identify_out_writes_the_estimates_as_mcap(tmp_path):
     from wmrid.io.mcap.reader import read_mcap
 
     target = tmp_path / "estimates.mcap"
-    out = identify_json(str(SAMPLE_PARQUET), "--robot", "paper", "--out", str(target))
+    out = identify_json(str(SAMPLE_PARQUET), "--robot", "paper", "--mcap-out", str(target))
     contents = read_mcap(str(target), json_fields={"/wmrid/estimates": {"theta11": "theta11", "e_r": "e_r", "t": "t"}})
     series = contents.json["/wmrid/estimates"]
     assert len(series.log_ns) > 1000
     assert series.values["theta11"][-1] == pytest.approx(out["theta"]["values"]["theta11"], rel=1e-12)
     assert np.all(np.diff(series.values["t"]) > 0)
     assert json.loads(contents.metadata["wmrid"]["result"])["parameters"] == out["parameters"]
-    assert_clean_error(wmrid("identify", str(SAMPLE_PARQUET), "--out", str(tmp_path / "x.json")), 2, "--out", ".mcap")
+    refused = wmrid("identify", str(SAMPLE_PARQUET), "--mcap-out", str(tmp_path / "x.json"))
+    assert_clean_error(refused, 2, "--mcap-out", ".mcap")
 
 
 def test_identify_reads_an_mcap_from_a_pipe():

@@ -95,3 +95,48 @@ def test_copy_is_left_alone(bracketed, tmp_path):
     wmrid("inspect", log, "--format", "json")
     assert log.read_bytes() == before
     assert json.loads(wmrid("inspect", log, "--format", "json").stdout)["source"] == str(log)
+
+
+def test_json_mode_summarises_the_warnings_on_stderr(bracketed, tmp_path):
+    """--format json (and -o -): the JSON on stdout as before, and one line on stderr with the number of warnings
+    and the first, so that a script reading m11 learns the log may not support it.  No warnings, no line."""
+    log, _ = bracketed
+    for args in (("--format", "json"), ("-o", "-")):
+        out = text(wmrid("identify", log, "--robot", "paper", "--effort", "current", *args))
+        result = json.loads(out.stdout)
+        lines = out.stderr.splitlines()
+        assert len(lines) == 1, out.stderr
+        count = len(result["warnings"])
+        assert count >= 1
+        assert lines[0].startswith(f"wmrid: {count} warning")
+        assert " ".join(result["warnings"][0].split())[:100] in lines[0]
+    clean = text(wmrid("identify", ROOT / "sample_logs" / "paper_sinusoid.csv", "--format", "json"))
+    assert json.loads(clean.stdout)["warnings"] == []
+    assert clean.stderr == ""
+    compared = text(wmrid("compare", log, "--robot", "paper", "--methods", "observer,idim", "--effort", "current",
+                          "--format", "json"))  # fmt: skip
+    n = sum(len(m["warnings"]) for m in json.loads(compared.stdout)["methods"].values())
+    assert compared.stderr.startswith(f"wmrid: {n} warning"), compared.stderr
+
+
+def test_no_history_leaves_the_history_out_and_nothing_else(bracketed):
+    log, _ = bracketed
+    full = json.loads(wmrid("identify", log, "--robot", "paper", "--format", "json").stdout)
+    lean = json.loads(wmrid("identify", log, "--robot", "paper", "--format", "json", "--no-history").stdout)
+    assert "history" in full
+    assert "history" not in lean
+    for key in set(full) - {"history", "diagnostics", "log"}:
+        assert lean[key] == full[key], key
+
+
+def test_the_old_out_spelling_still_writes_the_mcap_with_a_note(bracketed, tmp_path):
+    log, _ = bracketed
+    old = text(wmrid("identify", log, "--robot", "paper", "--format", "json", "--no-history",
+                     "--out", tmp_path / "old.mcap"))  # fmt: skip
+    assert old.returncode == 0, old.stderr
+    assert "--out is now --mcap-out" in old.stderr
+    new = text(wmrid("identify", log, "--robot", "paper", "--format", "json", "--no-history",
+                     "--mcap-out", tmp_path / "new.mcap"))  # fmt: skip
+    assert new.returncode == 0, new.stderr
+    assert "--out" not in new.stderr
+    assert (tmp_path / "old.mcap").stat().st_size == (tmp_path / "new.mcap").stat().st_size

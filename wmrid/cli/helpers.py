@@ -25,13 +25,30 @@ def stderr_console():
     return console(stderr=True)
 
 
+def warning_summary(warnings: list[str], where: str = 'the JSON\'s "warnings"') -> None:
+    """One line on stderr when a JSON result carries warnings, so that a script reading one figure from it learns
+    that the log may not support it: the count and the first warning."""
+    if not warnings:
+        return
+    first = " ".join(warnings[0].split())
+    if len(first) > 160:
+        first = first[:159] + "…"
+    count = f"{len(warnings)} warning" + ("s" if len(warnings) > 1 else "")
+    sys.stderr.write(f"wmrid: {count} (see {where}); the first: {first}\n")
+
+
+def deprecated_option(old: str, new: str) -> None:
+    """A note on stderr that an option's old spelling was used (it keeps working)."""
+    sys.stderr.write(f"wmrid: note: {old} is now {new}; {old} still works but will go\n")
+
+
 def write_estimates(result, path: Path, force: bool) -> None:
     """The decimated history of an identification as an MCAP JSON topic /wmrid/estimates."""
     from wmrid.core.atomic import to_json_text
     from wmrid.io.mcap.writer import write_series_mcap
 
     if path.suffix.lower() != ".mcap":
-        raise UsageError(f"--out {path}: the estimates are written as MCAP; name the file .mcap")
+        raise UsageError(f"--mcap-out {path}: the estimates are written as MCAP; name the file .mcap")
     hist = result.history
     series = {name: hist.theta[:, i // hist.theta.shape[2], i % hist.theta.shape[2]] for i, name in
               enumerate(result.form.theta_names())}  # fmt: skip

@@ -10,7 +10,15 @@ from typing import Annotated
 import typer
 
 from wmrid.cli.app import app
-from wmrid.cli.helpers import log_opts, on_stdout, progress, stderr_console, write_estimates
+from wmrid.cli.helpers import (
+    deprecated_option,
+    log_opts,
+    on_stdout,
+    progress,
+    stderr_console,
+    warning_summary,
+    write_estimates,
+)
 from wmrid.cli.options import (
     AlignOpt,
     AlignRule,
@@ -101,10 +109,22 @@ def identify(
         OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
     ] = OutputFormat.auto,
     output: Annotated[Path | None, typer.Option("--output", "-o", help="Write the JSON result to this file.")] = None,
-    out: Annotated[
+    mcap_out: Annotated[
         Path | None,
-        typer.Option("--out", help="Write the estimates over time and the prediction errors as an MCAP (JSON topic)."),
+        typer.Option(
+            "--mcap-out",
+            help="Write the estimates over time and the prediction errors as an MCAP (JSON topic), to plot in "
+            "Foxglove beside the log.",
+        ),
     ] = None,
+    out: Annotated[Path | None, typer.Option("--out", hidden=True, help="Old spelling of --mcap-out.")] = None,
+    history: Annotated[
+        bool,
+        typer.Option(
+            "--history/--no-history",
+            help="Keep the estimates over time in the JSON result (most of its size); --no-history leaves them out.",
+        ),
+    ] = True,
     force: Annotated[bool, typer.Option(help="Overwrite an existing output file.")] = False,
     payload: Annotated[
         bool,
@@ -145,6 +165,9 @@ def identify(
     from wmrid.core.atomic import write_json
     from wmrid.reporting.render import print_identification, to_json
 
+    if out is not None:
+        deprecated_option("--out", "--mcap-out")
+        mcap_out = mcap_out or out
     progress_cb, finish = progress("identify")
     try:
         result = run_identify(
@@ -156,18 +179,18 @@ def identify(
         )  # fmt: skip
     finally:
         finish()
-    payload = result.to_dict()
+    payload = result.to_dict(history=history)
     if output is not None:
         write_json(str(output), payload, force=force)
-    if out is not None:
-        write_estimates(result, out, force)
-    if on_stdout(output):
-        return  # the result went to standard output already: a second document there would not be JSON
-    fmt = output_format.value
+    if mcap_out is not None:
+        write_estimates(result, mcap_out, force)
+    fmt = "json" if on_stdout(output) else output_format.value
     if fmt == "auto":
         fmt = "table" if sys.stdout.isatty() else "json"
     if fmt == "json":
-        sys.stdout.write(to_json(payload) + "\n")
+        if not on_stdout(output):  # else the result went to standard output already
+            sys.stdout.write(to_json(payload) + "\n")
+        warning_summary(payload["warnings"])
     else:
         print_identification(result, console())
 
@@ -341,12 +364,13 @@ def compare(
     ).to_dict()  # fmt: skip
     if output is not None:
         write_json(str(output), data, force=force)
-    if on_stdout(output):
-        return  # the result went to standard output already
-    fmt = output_format.value
+    fmt = "json" if on_stdout(output) else output_format.value
     if fmt == "auto":
         fmt = "table" if sys.stdout.isatty() else "json"
     if fmt == "json":
-        sys.stdout.write(to_json(data) + "\n")
+        if not on_stdout(output):  # else the result went to standard output already
+            sys.stdout.write(to_json(data) + "\n")
+        warning_summary([f"{name}: {w}" for name, m in data["methods"].items() for w in m["warnings"]],
+                        "each method's \"warnings\" in the JSON")  # fmt: skip
     else:
         print_comparison(data, console())

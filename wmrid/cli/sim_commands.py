@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from wmrid.cli.app import app
-from wmrid.cli.helpers import log_opts, on_stdout, stderr_console
+from wmrid.cli.helpers import log_opts, on_stdout, stderr_console, warning_summary
 from wmrid.cli.options import (
     AlignOpt,
     AlignRule,
@@ -187,12 +187,13 @@ def monitor(
     payload = result.to_dict()
     if output is not None:
         write_json(str(output), payload, force=force)
-    if on_stdout(output):
-        return  # the result went to standard output already
-    fmt = output_format.value
+    fmt = "json" if on_stdout(output) else output_format.value
     if fmt == "auto":
         fmt = "table" if sys.stdout.isatty() else "json"
     if fmt == "json":
-        sys.stdout.write(to_json(payload) + "\n")
+        if not on_stdout(output):  # else the result went to standard output already
+            sys.stdout.write(to_json(payload) + "\n")
+        warning_summary([*(f"after the change at {c.t:.3f} s: {w}" for c in result.changes for w in c.warnings),
+                         *result.warnings])  # fmt: skip
     else:
         print_monitor(result, console())

@@ -152,7 +152,8 @@ class IdentificationResult:
             "box_max": {n: finite_or_none(v) for n, v in zip(names, self.settings.theta_max.ravel(), strict=True)},
         }
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self, history: bool = True) -> dict[str, Any]:
+        """The result as JSON-ready data; ``history``: include the estimates over time (most of its size)."""
         params = {
             name: {"value": value, "std": finite_or_none(std), "unit": self.units[name]}
             for name, (value, std) in self.parameters.items()
@@ -176,7 +177,7 @@ class IdentificationResult:
         out.update(diagnostics=self.diagnostics, warnings=list(self.warnings), log=self.log_info)
         if self.estimate is not None:
             out["estimate"] = estimate_dict(self.estimate, self.form.base_names)
-        if self.history is not None:
+        if history and self.history is not None:
             out["history"] = history_dict(self)
         if self.validation is not None:
             out["validation"] = self.validation
