@@ -140,3 +140,44 @@ def test_the_old_out_spelling_still_writes_the_mcap_with_a_note(bracketed, tmp_p
     assert new.returncode == 0, new.stderr
     assert "--out" not in new.stderr
     assert (tmp_path / "old.mcap").stat().st_size == (tmp_path / "new.mcap").stat().st_size
+
+
+COMMANDS = ("identify", "inspect", "report", "compare", "simulate", "monitor")
+
+
+@pytest.mark.parametrize("name", COMMANDS)
+def test_help_has_panels_an_example_and_verbatim_text(name):
+    """Help grouped into panels (the option groups the code defines), an example per command, square brackets in
+    help texts shown as written (they are rendered with Rich), nothing cut at 80 columns."""
+    out = text(wmrid(name, "--help", columns="80"))
+    assert out.returncode == 0, out.stderr
+    assert "Examples:" in out.stdout
+    assert f"wmrid {name} " in out.stdout.split("Examples:")[1]
+    assert "╭─ Options" in out.stdout
+    if name in ("identify", "report", "compare"):
+        assert "╭─ Method" in out.stdout
+        assert "╭─ Log input" in out.stdout
+        assert "[0.98, 1]" in out.stdout.replace("│", " ").replace("\n", " ").replace("  ", " ")
+    if name == "identify":
+        assert "[m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2]" in out.stdout
+    assert "…" not in out.stdout, [line for line in out.stdout.splitlines() if "…" in line]
+
+
+def test_shell_completion_is_on():
+    out = text(wmrid("--show-completion", "bash"))
+    assert out.returncode == 0, out.stderr
+    assert "_WMRID_COMPLETE" in out.stdout
+
+
+def test_an_impossible_value_is_marked_in_the_table():
+    """A value no robot has is marked ✗ (and red) in the table itself, with a legend, not only in the warnings
+    below: the sample identified with its efforts' sign flipped has an inverse inertia that is not positive
+    definite (m11 < 0), so m11, m12, m22 and the M computed from them are marked, and the friction (within 3 std
+    of zero) is not."""
+    out = text(wmrid("identify", ROOT / "sample_logs" / "paper_sinusoid.csv", "--flip-effort", "--format", "table",
+                     columns="100"))  # fmt: skip
+    rows = {line.split()[0]: line for line in out.stdout.splitlines() if line.strip()[:3] in ("Fv1", "M11", "m11")}
+    assert "✗" in rows["m11"]
+    assert "✗" in rows["M11"]
+    assert "✗" not in rows["Fv1"]
+    assert "✗ impossible for a physical robot (M11, M12, M22, m11, m12, m22)" in out.stdout

@@ -22,9 +22,9 @@ app = typer.Typer(
     help="Identify the dynamic parameters of differential-drive wheeled mobile robots from their logs "
     "(Hoang & Kang 2015).",
     no_args_is_help=True,
-    add_completion=False,
+    add_completion=True,
     pretty_exceptions_enable=False,
-    rich_markup_mode=None,
+    rich_markup_mode="rich",  # the option panels; every help text is escaped first (:func:`_verbatim_help`)
 )
 
 
@@ -70,7 +70,7 @@ def main(argv: list[str] | None = None) -> None:
             if not {"--help", "-h", "--version"} & set(args):
                 memory_budget()  # a malformed WMRID_MEMORY_BUDGET is a usage error whatever the command reads
             with option_style("flag"):  # library messages name options as the flags the user typed
-                rv = app(args=args, prog_name="wmrid", standalone_mode=False)
+                rv = command().main(args=args, prog_name="wmrid", standalone_mode=False)
             finish_output()
         finally:
             clear_inputs()
@@ -120,6 +120,30 @@ def main(argv: list[str] | None = None) -> None:
                 stream.flush()
         os._exit(int(code))
     sys.exit(int(code))
+
+
+def command() -> Any:
+    """The click command Typer builds from ``app``, with every help text made verbatim (:func:`_verbatim_help`)."""
+    from wmrid.cli import identify_commands, sim_commands  # noqa: F401  (their commands join ``app`` on import)
+
+    root = typer.main.get_command(app)
+    _verbatim_help(root)
+    return root
+
+
+def _verbatim_help(cmd: Any) -> None:
+    """Escape Rich markup in the help of ``cmd``, its options and its subcommands: the help is rendered with Rich
+    (for the option panels), and texts such as '[m11 m12 ...]' or '[i]' are data, not styles."""
+    from rich.markup import escape
+
+    for attr in ("help", "epilog", "short_help"):
+        if getattr(cmd, attr, None):
+            setattr(cmd, attr, escape(getattr(cmd, attr)))
+    for param in getattr(cmd, "params", []):
+        if getattr(param, "help", None):
+            param.help = escape(param.help)
+    for sub in getattr(cmd, "commands", {}).values():
+        _verbatim_help(sub)
 
 
 def _leave(argv: list[str] | None, saved: Any, previous: Any) -> None:

@@ -72,7 +72,12 @@ def one_or_many(paths: list[str]) -> str | list[str]:
     return paths[0] if len(paths) == 1 else paths
 
 
-@app.command()
+@app.command(
+    epilog="Examples:\n\n"
+    "wmrid identify run.mcap --robot paper\n\n"
+    "wmrid identify run.bag --velocity-topic /wheel_state --effort-topic /wheel_cmd --format json | jq .parameters\n\n"
+    "wmrid identify log.csv.gz --columns t=time,eta_r=vr,eta_l=vl,tau_r=ur,tau_l=ul -o result.json"
+)
 def identify(
     log: Annotated[list[str], typer.Argument(metavar="LOG...", help=LOG_HELP)],
     robot: Annotated[
@@ -82,7 +87,7 @@ def identify(
         ),
     ] = None,
     columns: Annotated[
-        str | None, typer.Option(help="Column mapping, e.g. t=time,eta_r=vel_right,tau_l=effort_left.")
+        str | None, typer.Option(help="Column mapping NAME=COLUMN, comma-separated, e.g. t=time,eta_r=vr,tau_l=ul.")
     ] = None,
     time_unit: Annotated[
         TimeUnit,
@@ -118,14 +123,16 @@ def identify(
         ),
     ] = None,
     out: Annotated[Path | None, typer.Option("--out", hidden=True, help="Old spelling of --mcap-out.")] = None,
-    history: Annotated[
+    no_history: Annotated[
         bool,
         typer.Option(
-            "--history/--no-history",
-            help="Keep the estimates over time in the JSON result (most of its size); --no-history leaves them out.",
+            "--no-history",
+            help="Leave the estimates over time (most of its size) out of the JSON result; --history, the default, "
+            "keeps them.",
         ),
-    ] = True,
-    force: Annotated[bool, typer.Option(help="Overwrite an existing output file.")] = False,
+    ] = False,
+    history: Annotated[bool, typer.Option("--history", hidden=True, help="Keep the history (the default).")] = False,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing output file.")] = False,
     payload: Annotated[
         bool,
         typer.Option(
@@ -179,7 +186,7 @@ def identify(
         )  # fmt: skip
     finally:
         finish()
-    payload = result.to_dict(history=history)
+    payload = result.to_dict(history=history or not no_history)
     if output is not None:
         write_json(str(output), payload, force=force)
     if mcap_out is not None:
@@ -195,7 +202,7 @@ def identify(
         print_identification(result, console())
 
 
-@app.command()
+@app.command(epilog="Examples:\n\nwmrid inspect run.mcap\n\nwmrid inspect rosbag2_folder/ --format json")
 def inspect(
     log: Annotated[list[str], typer.Argument(metavar="LOG...", help=LOG_HELP)],
     output_format: Annotated[
@@ -216,7 +223,11 @@ def inspect(
         print_inspection(info, console())
 
 
-@app.command()
+@app.command(
+    epilog="Examples:\n\n"
+    "wmrid report run.mcap --robot paper -o report.html\n\n"
+    "wmrid identify run.mcap -o result.json; wmrid report result.json -o report.md"
+)
 def report(
     input_: Annotated[
         str,
@@ -241,7 +252,7 @@ def report(
     alpha: Annotated[float, typer.Option(help="Initial Gamma = alpha I.")] = 1e-10,
     torque_hold: Annotated[TorqueHold, typer.Option(help="zoh or foh.")] = TorqueHold.zoh,
     payload: Annotated[bool, typer.Option("--payload", help="Also estimate the payload (needs --robot).")] = False,
-    force: Annotated[bool, typer.Option(help="Overwrite existing output files.")] = False,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")] = False,
     topic: TopicOpt = None,
     velocity_topic: VelocityTopicOpt = None,
     effort_topic: EffortTopicOpt = None,
@@ -301,7 +312,11 @@ def report(
         stderr_console().print(f"wrote {output}")
 
 
-@app.command()
+@app.command(
+    epilog="Examples:\n\n"
+    "wmrid compare run.mcap --robot paper\n\n"
+    "wmrid compare sim.csv --truth sim.csv.truth.json --methods observer,idim,oe --validate other.csv"
+)
 def compare(
     log: Annotated[list[str], typer.Argument(metavar="LOG...", help=LOG_HELP)],
     robot: Annotated[
@@ -328,7 +343,7 @@ def compare(
     output: Annotated[
         Path | None, typer.Option("--output", "-o", help="Write the JSON comparison to this file.")
     ] = None,
-    force: Annotated[bool, typer.Option(help="Overwrite an existing output file.")] = False,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing output file.")] = False,
     topic: TopicOpt = None,
     velocity_topic: VelocityTopicOpt = None,
     effort_topic: EffortTopicOpt = None,

@@ -188,7 +188,9 @@ EfficiencyOpt = Annotated[
 FlipEffortOpt = Annotated[
     bool,
     typer.Option(
-        help="The effort's sign is opposite to the speed's on both wheels: change it.", rich_help_panel=_LOG_PANEL
+        "--flip-effort",
+        help="The effort's sign is opposite to the speed's on both wheels: change it.",
+        rich_help_panel=_LOG_PANEL,
     ),
 ]
 
@@ -196,7 +198,9 @@ FlipEffortOpt = Annotated[
 MirrorLeftOpt = Annotated[
     bool,
     typer.Option(
-        help="The left motor is mirrored: change the sign of its speed and effort.", rich_help_panel=_LOG_PANEL
+        "--mirror-left",
+        help="The left motor is mirrored: change the sign of its speed and effort.",
+        rich_help_panel=_LOG_PANEL,
     ),
 ]
 
@@ -236,7 +240,11 @@ WeightedOpt = Annotated[
 
 ForgettingOpt = Annotated[
     float,
-    typer.Option(help="rls: forgetting factor in (0, 1]; 1 = plain least squares.", rich_help_panel=_METHOD_PANEL),
+    typer.Option(
+        help="rls: forgetting factor in [0.98, 1] (below 0.98 it remembers fewer than 50 samples for 8 "
+        "parameters); 1 = plain least squares.",
+        rich_help_panel=_METHOD_PANEL,
+    ),
 ]
 
 

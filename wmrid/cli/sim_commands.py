@@ -49,7 +49,11 @@ from wmrid.cli.options import (
 from wmrid.reporting.terminal import console
 
 
-@app.command()
+@app.command(
+    epilog="Examples:\n\n"
+    "wmrid simulate -o sim.csv --duration 20 --eta-noise 0.01\n\n"
+    "wmrid simulate -o loaded.mcap --payload 25@0.1,-0.05 --load-at 30"
+)
 def simulate(
     output: Annotated[
         str, typer.Option("--output", "-o", help="Log to write: .csv, .parquet or .mcap (- for CSV on stdout).")
@@ -74,7 +78,7 @@ def simulate(
     caster: Annotated[float, typer.Option(help="Std of the coloured caster disturbance torque, N m.")] = 0.0,
     caster_time: Annotated[float, typer.Option(help="Correlation time of the caster disturbance, s.")] = 0.3,
     encoder_cpr: Annotated[int, typer.Option(help="Encoder counts per wheel revolution (0: no quantisation).")] = 0,
-    force: Annotated[bool, typer.Option(help="Overwrite existing output files.")] = False,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")] = False,
     gear_ratio: Annotated[float | None, typer.Option(help="URDF robots: gear ratio k_r.")] = None,
     rotor_inertia: RotorInertiaOpt = None,
     load_at: LoadAtOpt = None,
@@ -135,7 +139,9 @@ def simulate(
         stderr_console().print(f"wrote {output} ({len(run.log.t)} samples{what}) and {truth_path}")
 
 
-@app.command()
+@app.command(
+    epilog="Examples:\n\nwmrid identify monday.mcap -o model.json; wmrid monitor friday.mcap --model model.json"
+)
 def monitor(
     log: Annotated[
         str, typer.Argument(metavar="LOG", help="Log file (.csv, .parquet, .mcap) or - for standard input.")
@@ -149,7 +155,7 @@ def monitor(
         OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
     ] = OutputFormat.auto,
     output: Annotated[Path | None, typer.Option("--output", "-o", help="Write the JSON result to this file.")] = None,
-    force: Annotated[bool, typer.Option(help="Overwrite an existing output file.")] = False,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing output file.")] = False,
     topic: TopicOpt = None,
     velocity_topic: VelocityTopicOpt = None,
     effort_topic: EffortTopicOpt = None,

@@ -57,13 +57,14 @@ def poorly_text(name: str, pair: tuple[float, float], unit: str, method: str | N
 
 
 def impossible_parameters(parameters: dict[str, tuple[float, float]]) -> set[str]:
-    """The base parameters that :func:`physics_warnings` warns of: m11, m12, m22 when [m11 m12; m12 m22] is not
-    positive definite, a friction negative beyond 3 standard errors."""
+    """The base parameters that :func:`physics_warnings` warns of: m11, m12, m22 (and the inertia matrix M11, M12,
+    M22 computed from them) when [m11 m12; m12 m22] is not positive definite, a friction negative beyond 3 standard
+    errors."""
     out = set()
     if all(n in parameters for n in ("m11", "m12", "m22")):
         m11, m12, m22 = (parameters[n][0] for n in ("m11", "m12", "m22"))
         if m11 <= 0 or m22 <= 0 or m11 * m22 - m12 * m12 <= 0:
-            out |= {"m11", "m12", "m22"}
+            out |= {n for n in ("m11", "m12", "m22", "M11", "M12", "M22") if n in parameters}
     for name in ("Fv1", "Fv2", "Fd1", "Fd2"):
         if name in parameters:
             value, std = parameters[name]
