@@ -134,6 +134,9 @@ def check_control_rate(control_rate: float | None, methods: tuple[str, ...], val
     """A controller rate is modelled by the observer, IDIM and RLS (output error and the validation predictor hold
     each logged effort over the whole step): refuse it where it would be ignored."""
     if control_rate is not None:
+        from wmrid.estimators.observer import check_gains
+
+        check_gains(10.0, 1.0, control_rate)  # a frequency > 0 first, then where it is modelled
         _refuse_unmodelled("control_rate", control_rate, methods, validating, CONTROL_RATE_METHODS)
 
 
@@ -233,7 +236,7 @@ def identify(
     prep = prepare(
         method=method, validate=validate, options=options, robot=robot, rotor_inertia=rotor_inertia, cutoff=cutoff,
         weighted=weighted, forgetting=forgetting, torque_hold=torque_hold, control_rate=control_rate,
-        friction=friction, stdin_check=no_two,
+        friction=friction, stdin_check=no_two, k=k, alpha=alpha, box_width=box_width,
     )  # fmt: skip
     # the observer streams the log; the classical methods filter and simulate the whole log
     wheel_log = _log(log, options, prep.robot, whole=prep.method != "observer")
@@ -267,13 +270,17 @@ def prepare(
     control_rate: float | None = None,
     friction: str = "auto",
     stdin_check: tuple[Any, str] | None = None,
+    k: float = 10.0,
+    alpha: float = 1e-10,
+    box_width: float = 10.0,
     **_: Any,
 ) -> Prepared:
-    """The checks :func:`identify` makes before it reads anything, in the command line's order (method options,
-    control rate, two standard inputs when ``stdin_check`` = (log, its name) is given, robot, friction model);
-    other keywords of :func:`identify` are accepted and ignored."""
+    """The checks :func:`identify` makes before it reads anything, in the command line's order (the observer's
+    numbers, method options, control rate, two standard inputs when ``stdin_check`` = (log, its name) is given,
+    robot, friction model); other keywords of :func:`identify` are accepted and ignored."""
     from wmrid.estimators.methods import check_method
 
+    check_numbers(k=k, alpha=alpha, box_width=box_width, control_rate=control_rate, rotor_inertia=rotor_inertia)
     method = check_method(method)
     validating = validate is not None
     options_ = method_options(cutoff, weighted, forgetting, torque_hold)
@@ -282,6 +289,23 @@ def prepare(
         no_two_stdin(stdin_check[0], validate, stdin_check[1])
     robot_obj = robot_for(robot, options, rotor_inertia)
     return Prepared(method, options_, robot_obj, friction_model(friction, (method,), validating, robot_obj))
+
+
+def check_numbers(
+    *, k: float = 10.0, alpha: float = 1e-10, box_width: float = 10.0, control_rate: float | None = None,
+    cutoff: float | None = None, weighted: bool = False, forgetting: float = 1.0, torque_hold: str = "zoh",
+    rotor_inertia: float | None = None, **_: Any,
+) -> None:  # fmt: skip
+    """Refuse the numbers of :func:`identify`'s settings that no log can make right (k, alpha, box width, control
+    rate, cutoff, forgetting factor, rotor inertia), before any file is opened; other keywords are ignored."""
+    from wmrid.estimators.identify import check_box_width
+    from wmrid.estimators.observer import check_gains
+
+    if rotor_inertia is not None and not (math.isfinite(rotor_inertia) and rotor_inertia >= 0):
+        raise UsageError(f"{option('rotor_inertia')} must be a finite number >= 0 (kg m^2), got {rotor_inertia!r}")
+    check_gains(k, alpha, control_rate)
+    check_box_width(box_width)
+    method_options(cutoff, weighted, forgetting, torque_hold)
 
 
 def run_prepared(

@@ -55,6 +55,11 @@ class LogOptions:
     mirror_left: bool = False
     flip_effort: bool = False
 
+    def __post_init__(self) -> None:
+        from wmrid.io.signals import check_signal_numbers
+
+        check_signal_numbers(self.wheel_radius, self.torque_constant, self.gear_ratio, self.efficiency)
+
     def with_robot(self, robot: Robot | None) -> LogOptions:
         """These options with the robot's values where they are not given (wheel radius for m/s speeds, torque
         constant and efficiency for currents)."""

@@ -10,7 +10,7 @@ import os
 from dataclasses import replace
 from typing import Any
 
-from wmrid.api.identification import identify, no_two_stdin, prepare, run_prepared
+from wmrid.api.identification import check_numbers, identify, no_two_stdin, prepare, run_prepared
 from wmrid.api.inputs import LogOptions, read_log
 from wmrid.core.errors import LogFormatError, UsageError, WmridError, option
 from wmrid.core.wheel_log import LogStream, WheelLog
@@ -90,6 +90,7 @@ def report(
         raise TypeError(f"report() got unexpected keyword arguments {unknown}")
     validate = identify_options.get("validate")
     method = identify_options.get("method", "observer")
+    check_numbers(rotor_inertia=rotor_inertia, **identify_options)  # before INPUT is opened, as identify does
     if isinstance(result, (str, os.PathLike)):
         from wmrid.io.sources import open_source
 

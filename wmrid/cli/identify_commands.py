@@ -97,14 +97,18 @@ def identify(
         FormChoice, typer.Option(help="Regressor: paper (7 columns, wheels keep one sign), general (8), auto.")
     ] = FormChoice.auto,
     k: Annotated[
-        float, typer.Option("--k", help="Observer/filter gain k of Eqs. 26-30, 1/s (paper: 1; see README).")
+        float,
+        typer.Option("--k", help="Observer/filter gain k of Eqs. 26-30, 1/s, in (0, 100000] (paper: 1; see README)."),
     ] = 10.0,
     alpha: Annotated[
-        float, typer.Option(help="Initial Gamma = alpha I (Eq. 33): weight of the start value (paper: 5000).")
+        float, typer.Option(help="Initial Gamma = alpha I (Eq. 33), > 0: weight of the start value (paper: 5000).")
     ] = 1e-10,
     box_width: Annotated[
         float,
-        typer.Option(help="Half-width of the parameter box around the nominal values, in units of max(|theta|, m_ii)."),
+        typer.Option(
+            help="Half-width of the parameter box around the nominal values, in units of max(|theta|, m_ii), "
+            "in (0, inf] (inf: no box)."
+        ),
     ] = 10.0,
     torque_hold: Annotated[
         TorqueHold,
@@ -248,8 +252,8 @@ def report(
     columns: Annotated[str | None, typer.Option(help="Column mapping, as for identify.")] = None,
     time_unit: Annotated[TimeUnit, typer.Option(help="Unit of the time column.")] = TimeUnit.auto,
     form: Annotated[FormChoice, typer.Option(help="Regressor form, as for identify.")] = FormChoice.auto,
-    k: Annotated[float, typer.Option("--k", help="Observer gain, 1/s.")] = 10.0,
-    alpha: Annotated[float, typer.Option(help="Initial Gamma = alpha I.")] = 1e-10,
+    k: Annotated[float, typer.Option("--k", help="Observer gain, 1/s, in (0, 100000].")] = 10.0,
+    alpha: Annotated[float, typer.Option(help="Initial Gamma = alpha I, > 0.")] = 1e-10,
     torque_hold: Annotated[TorqueHold, typer.Option(help="zoh or foh.")] = TorqueHold.zoh,
     payload: Annotated[bool, typer.Option("--payload", help="Also estimate the payload (needs --robot).")] = False,
     force: Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")] = False,

@@ -150,7 +150,7 @@ SpeedUnitOpt = Annotated[
 
 WheelRadiusOpt = Annotated[
     float | None,
-    typer.Option(help="Wheel radius, m (for m/s speeds; default: the robot's r).", rich_help_panel=_LOG_PANEL),
+    typer.Option(help="Wheel radius, m, > 0 (for m/s speeds; default: the robot's r).", rich_help_panel=_LOG_PANEL),
 ]
 
 
@@ -170,13 +170,15 @@ EffortUnitOpt = Annotated[
 
 TorqueConstantOpt = Annotated[
     float | None,
-    typer.Option(help="Motor torque constant k_t, N m/A (for --effort current).", rich_help_panel=_LOG_PANEL),
+    typer.Option(help="Motor torque constant k_t, N m/A, > 0 (for --effort current).", rich_help_panel=_LOG_PANEL),
 ]
 
 
 GearRatioOpt = Annotated[
     float | None,
-    typer.Option(help="Gear ratio k_r (for --effort current; default: the robot's k_r).", rich_help_panel=_LOG_PANEL),
+    typer.Option(
+        help="Gear ratio k_r, > 0 (for --effort current; default: the robot's k_r).", rich_help_panel=_LOG_PANEL
+    ),
 ]
 
 
@@ -207,7 +209,7 @@ MirrorLeftOpt = Annotated[
 
 RotorInertiaOpt = Annotated[
     float | None,
-    typer.Option(help="URDF robots: motor rotor inertia I_r, kg m^2 (when the URDF has no rotor links)."),
+    typer.Option(help="URDF robots: motor rotor inertia I_r, kg m^2, >= 0 (when the URDF has no rotor links)."),
 ]
 
 
@@ -227,7 +229,7 @@ MethodOpt = Annotated[
 CutoffOpt = Annotated[
     float | None,
     typer.Option(
-        "--cutoff", help="idim/rls: low-pass cutoff of speeds and efforts, Hz (default: from the log).",
+        "--cutoff", help="idim/rls: low-pass cutoff of speeds and efforts, Hz, > 0 (default: from the log).",
         rich_help_panel=_METHOD_PANEL,
     ),
 ]  # fmt: skip
@@ -266,7 +268,7 @@ ControlRateOpt = Annotated[
     typer.Option(
         "--control-rate",
         metavar="HZ",
-        help="The controller updated the (held) effort at HZ, faster than the log: each step is held over its "
+        help="The controller updated the (held) effort at HZ (> 0), faster than the log: each step is held over its "
         "sub-steps, the unlogged values interpolated (e.g. a 1 kHz controller logged at 100 Hz).",
     ),
 ]
@@ -370,7 +372,7 @@ CalibrationOpt = Annotated[
     typer.Option(
         "--calibration",
         help="Span at the start of LOG (and after each change) assumed unchanged, on which the residual's noise is "
-        "calibrated, s.",
+        "calibrated, s, > 0.",
         rich_help_panel=_MONITOR_PANEL,
     ),
 ]
@@ -380,7 +382,7 @@ FalseAlarmRateOpt = Annotated[
     float,
     typer.Option(
         "--false-alarm-rate",
-        help="Stated false alarms per hour of log (Bonferroni bound over the tests); sets the threshold.",
+        help="Stated false alarms per hour of log, > 0 (Bonferroni bound over the tests); sets the threshold.",
         rich_help_panel=_MONITOR_PANEL,
     ),
 ]

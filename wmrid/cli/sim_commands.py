@@ -60,9 +60,11 @@ def simulate(
     ],
     robot: Annotated[str, typer.Option(help="Robot TOML file or built-in name; its CAD set is the truth.")] = "paper",
     trajectory: Annotated[Trajectory, typer.Option(help="Reference trajectory.")] = Trajectory.sinusoid,
-    duration: Annotated[float, typer.Option(help="Duration, s.")] = 40.0,
-    rate: Annotated[float, typer.Option(help="Log rate, Hz (control runs at 1 kHz).")] = 1000.0,
-    seed: Annotated[int, typer.Option(help="Seed of every random number.")] = 0,
+    duration: Annotated[float, typer.Option(help="Duration, s, > 0.")] = 40.0,
+    rate: Annotated[
+        float, typer.Option(help="Log rate, Hz, > 0, a whole number of 1 ms control periods per sample.")
+    ] = 1000.0,
+    seed: Annotated[int, typer.Option(help="Seed of every random number, >= 0.")] = 0,
     payload: Annotated[
         str | None,
         typer.Option(
@@ -71,15 +73,17 @@ def simulate(
         ),
     ] = None,
     payload_inertia: Annotated[
-        float, typer.Option(help="Payload yaw inertia about its own centre of mass, kg m^2.")
+        float, typer.Option(help="Payload yaw inertia about its own centre of mass, kg m^2, >= 0.")
     ] = 0.0,
-    eta_noise: Annotated[float, typer.Option(help="Std of white noise on logged wheel speeds, rad/s.")] = 0.0,
-    tau_noise: Annotated[float, typer.Option(help="Std of white noise on logged torques, N m.")] = 0.0,
-    caster: Annotated[float, typer.Option(help="Std of the coloured caster disturbance torque, N m.")] = 0.0,
-    caster_time: Annotated[float, typer.Option(help="Correlation time of the caster disturbance, s.")] = 0.3,
-    encoder_cpr: Annotated[int, typer.Option(help="Encoder counts per wheel revolution (0: no quantisation).")] = 0,
+    eta_noise: Annotated[float, typer.Option(help="Std of white noise on logged wheel speeds, rad/s, >= 0.")] = 0.0,
+    tau_noise: Annotated[float, typer.Option(help="Std of white noise on logged torques, N m, >= 0.")] = 0.0,
+    caster: Annotated[float, typer.Option(help="Std of the coloured caster disturbance torque, N m, >= 0.")] = 0.0,
+    caster_time: Annotated[float, typer.Option(help="Correlation time of the caster disturbance, s, > 0.")] = 0.3,
+    encoder_cpr: Annotated[
+        int, typer.Option(help="Encoder counts per wheel revolution, >= 0 (0: no quantisation).")
+    ] = 0,
     force: Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")] = False,
-    gear_ratio: Annotated[float | None, typer.Option(help="URDF robots: gear ratio k_r.")] = None,
+    gear_ratio: Annotated[float | None, typer.Option(help="URDF robots: gear ratio k_r, > 0.")] = None,
     rotor_inertia: RotorInertiaOpt = None,
     load_at: LoadAtOpt = None,
     drop_at: DropAtOpt = None,
@@ -96,21 +100,21 @@ def simulate(
     floor_friction: Annotated[
         float | None,
         typer.Option(
-            help="mujoco: Coulomb friction of the wheels on the floor (low values let them slip); default 1.0.",
+            help="mujoco: Coulomb friction of the wheels on the floor, > 0 (low values let them slip); default 1.0.",
             rich_help_panel="Multibody prototype",
         ),
     ] = None,
     caster_resistance: Annotated[
         float | None,
         typer.Option(
-            help="mujoco: rolling-resistance coefficient of every caster (drag / normal load; 0: frictionless); "
+            help="mujoco: rolling-resistance coefficient of every caster, >= 0 (drag / normal load; 0: frictionless); "
             "default: the robot file's [[caster]] values, else 0.015 (polyurethane).",
             rich_help_panel="Multibody prototype",
         ),
     ] = None,
     torque_limit: Annotated[
         float | None,
-        typer.Option(help="mujoco: clip each wheel torque to +-this, N m.", rich_help_panel="Multibody prototype"),
+        typer.Option(help="mujoco: clip each wheel torque to +-this, N m, > 0.", rich_help_panel="Multibody prototype"),
     ] = None,
 ) -> None:
     """Simulate the paper's virtual prototype and write a log plus its ground truth (<log>.truth.json).

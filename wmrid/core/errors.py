@@ -66,7 +66,10 @@ class ReaderGone(Exception):
 _OPTION_STYLE: contextvars.ContextVar[str] = contextvars.ContextVar("wmrid_option_style", default="python")
 
 #: Flags whose name is not the keyword argument's with dashes.
-FLAG_NAMES = {"output_format": "--format", "log": "LOG", "input_": "INPUT", "calibration_s": "--calibration"}
+FLAG_NAMES = {
+    "output_format": "--format", "log": "LOG", "input_": "INPUT", "calibration_s": "--calibration",
+    "eta_std": "--eta-noise", "tau_std": "--tau-noise", "caster_std": "--caster",
+}  # fmt: skip
 
 
 def option(name: str, value: object = ...) -> str:

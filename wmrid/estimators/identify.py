@@ -212,8 +212,7 @@ def identify(
         raise UsageError(
             f"{option('payload')} needs {option('robot')}: the payload is what the log shows beyond the unloaded robot"
         )
-    if not (isinstance(box_width, (int, float)) and box_width > 0):  # NaN fails too
-        raise UsageError(f"{option('box_width')} must be a number > 0 (inf: no box), got {box_width!r}")
+    check_box_width(box_width)
     delay_record = None
     delay_warnings: list[str] = []
     if delay is not None:
@@ -587,3 +586,9 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
         result, parameters=parameters, theta0_cov=cov, diagnostics=diagnostics, warnings=tuple(warnings),
         payload=payload_est, method=est.method, estimate=est,
     )  # fmt: skip
+
+
+def check_box_width(box_width: float) -> None:
+    """Refuse a box half-width that is not a number > 0 (inf: no box)."""
+    if not (isinstance(box_width, (int, float)) and box_width > 0):  # NaN fails too
+        raise UsageError(f"{option('box_width')} must be a number > 0 (inf: no box), got {box_width!r}")

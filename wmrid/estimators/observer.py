@@ -79,6 +79,20 @@ def foh_weights(x: float) -> tuple[float, float, float]:
     return float(a), float(phi0), float(phi1)
 
 
+def check_gains(k: float, alpha: float, control_rate: float | None = None) -> None:
+    """Refuse a gain k outside (0, MAX_K] 1/s, an alpha that is not a finite number > 0, a control rate that is not
+    a frequency > 0 Hz (None: none)."""
+    if control_rate is not None and not (math.isfinite(control_rate) and control_rate > 0):
+        raise UsageError(f"{option('control_rate')} must be a frequency > 0 in Hz, got {control_rate!r}")
+    if not (math.isfinite(k) and 0 < k <= MAX_K):
+        raise UsageError(
+            f"{option('k')} must be a number in (0, {MAX_K:g}] (1/s, the state predictor's gain; default 10), got "
+            f"{k}: beyond that the predictor forgets within microseconds and its filter carries no signal"
+        )
+    if not (math.isfinite(alpha) and alpha > 0):
+        raise UsageError(f"{option('alpha')} must be a finite number > 0, got {alpha}")
+
+
 @dataclass(frozen=True)
 class ObserverSettings:
     """Settings of the estimator, validated once.
@@ -111,22 +125,12 @@ class ObserverSettings:
         p = self.form.n_columns
         if self.torque_hold not in ("zoh", "foh"):
             raise UsageError(f"{option('torque_hold')} must be zoh or foh, got {self.torque_hold!r}")
-        if self.control_rate is not None:
-            if not (math.isfinite(self.control_rate) and self.control_rate > 0):
-                raise UsageError(f"{option('control_rate')} must be a frequency > 0 in Hz, got {self.control_rate!r}")
-            if self.torque_hold != "zoh":
-                raise UsageError(
-                    f"{option('control_rate')} describes a held (zoh) effort; it cannot go with "
-                    f"{option('torque_hold', 'foh')}"
-                )
-        if not (math.isfinite(self.k) and 0 < self.k <= MAX_K):
+        check_gains(self.k, self.alpha, self.control_rate)
+        if self.control_rate is not None and self.torque_hold != "zoh":
             raise UsageError(
-                f"{option('k')} must be a number in (0, {MAX_K:g}] (1/s, the state predictor's gain; default 10), got "
-                f"{self.k}: "
-                "beyond that the predictor forgets within microseconds and its filter carries no signal"
+                f"{option('control_rate')} describes a held (zoh) effort; it cannot go with "
+                f"{option('torque_hold', 'foh')}"
             )
-        if not (math.isfinite(self.alpha) and self.alpha > 0):
-            raise UsageError(f"{option('alpha')} must be a finite number > 0, got {self.alpha}")
         for name in ("theta_init", "theta_min", "theta_max"):
             arr = np.array(getattr(self, name), dtype=float)
             if arr.shape != (2, p):

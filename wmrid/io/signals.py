@@ -29,6 +29,22 @@ EFFORT_KINDS = ("torque", "current", "pwm", "voltage")
 SMOOTHING_S = 0.02
 
 
+def check_signal_numbers(
+    wheel_radius: float | None, torque_constant: float | None, gear_ratio: float | None, efficiency: float | None
+) -> None:
+    """Refuse a wheel radius, torque constant or gear ratio that is not a finite number > 0, an efficiency outside
+    (0, 1] (None: not given)."""
+    for name, value in (
+        ("wheel_radius", wheel_radius),
+        ("torque_constant", torque_constant),
+        ("gear_ratio", gear_ratio),
+    ):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise UsageError(f"{option(name)} must be a finite number > 0, got {value!r}")
+    if efficiency is not None and not (0 < efficiency <= 1):
+        raise UsageError(f"{option('efficiency')} must be in (0, 1], got {efficiency!r}")
+
+
 @dataclass(frozen=True)
 class SignalOptions:
     """What the speed and effort columns hold.
@@ -56,12 +72,7 @@ class SignalOptions:
             raise UsageError(f"{option('speed_unit')} {self.speed_unit!r} is not one of {', '.join(SPEED_UNITS)}")
         if self.effort not in EFFORT_KINDS:
             raise UsageError(f"{option('effort')} {self.effort!r} is not one of {', '.join(EFFORT_KINDS)}")
-        for name in ("wheel_radius", "torque_constant", "gear_ratio"):
-            value = getattr(self, name)
-            if value is not None and not (math.isfinite(value) and value > 0):
-                raise UsageError(f"{option(name)} must be a finite number > 0, got {value!r}")
-        if not (0 < self.efficiency <= 1):
-            raise UsageError(f"{option('efficiency')} must be in (0, 1], got {self.efficiency!r}")
+        check_signal_numbers(self.wheel_radius, self.torque_constant, self.gear_ratio, self.efficiency)
         if self.speed_unit == "m/s" and self.wheel_radius is None:
             raise UsageError(
                 f"speeds in m/s at the rim need the wheel radius: give {option('wheel_radius')} R (m) or "

@@ -139,13 +139,13 @@ class Payload:
     inertia: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("mass", "x", "y", "inertia"):
+        for name in ("mass", "x", "y"):
             if not math.isfinite(getattr(self, name)):
                 raise UsageError(f"payload {name} must be finite")
         if self.mass <= 0:
             raise UsageError(f"payload mass must be > 0 kg, got {self.mass}")
-        if self.inertia < 0:
-            raise UsageError(f"payload inertia must be >= 0 kg m^2, got {self.inertia}")
+        if not (math.isfinite(self.inertia) and self.inertia >= 0):  # simulate's payload_inertia
+            raise UsageError(f"{option('payload_inertia')} must be a finite number >= 0 kg m^2, got {self.inertia}")
 
     @classmethod
     def parse(cls, text: str, inertia: float = 0.0) -> Payload:

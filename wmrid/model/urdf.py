@@ -53,7 +53,7 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.core.errors import RobotFileError, UsageError
+from wmrid.core.errors import RobotFileError, UsageError, option
 from wmrid.model.robot import PhysicalParameters, Robot
 from wmrid.model.urdf_tree import Body, Joint, Reader, load
 
@@ -92,7 +92,8 @@ def _is_caster_name(name: str) -> bool:
 def _check_number(name: str, value: float, *, positive: bool = False) -> float:
     ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
     if not ok or value < 0 or (positive and value == 0):
-        raise UsageError(f"{name} must be a finite number {'> 0' if positive else '>= 0'}, got {value!r}")
+        label = option(name) if name.isidentifier() else name  # a keyword (a flag on the command line), or a label
+        raise UsageError(f"{label} must be a finite number {'> 0' if positive else '>= 0'}, got {value!r}")
     return float(value)
 
 
@@ -334,7 +335,7 @@ def read_urdf(
         if rotor_inertia is not None:
             raise UsageError(
                 f"{source}: has rotor links ({rotor_pair[0].name!r}, {rotor_pair[1].name!r}), which give I_r; "
-                "drop rotor_inertia, or pass rotor_joints=() to ignore them"
+                f"drop {option('rotor_inertia')} (or, in Python, pass rotor_joints=() to ignore them)"
             )
         rotor_values = []
         for joint in rotor_pair:

@@ -106,13 +106,13 @@ class MultibodySettings:
     cg_height: float = 0.05
 
     def __post_init__(self) -> None:
-        positive_number("--floor-friction", self.floor_friction)
+        positive_number("floor_friction", self.floor_friction)
         if self.caster_resistance is not None:
             c = self.caster_resistance
             if isinstance(c, bool) or not isinstance(c, (int, float)) or not math.isfinite(c) or c < 0:
                 raise UsageError(f"{option('caster_resistance')} must be a number >= 0, got {c!r}")
         if self.torque_limit is not None:
-            positive_number("--torque-limit", self.torque_limit)
+            positive_number("torque_limit", self.torque_limit)
         if isinstance(self.substeps, bool) or not isinstance(self.substeps, int) or self.substeps < 1:
             raise UsageError(f"multibody substeps must be a whole number >= 1, got {self.substeps!r}")
         if not math.isfinite(self.cg_height):

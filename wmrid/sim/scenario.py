@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from wmrid.core.errors import UsageError
+from wmrid.core.errors import UsageError, option
 from wmrid.model import dynamics as model
 from wmrid.model.robot import Payload, PhysicalParameters
 
@@ -58,15 +58,15 @@ class NoiseSettings:
         for name in ("eta_std", "tau_std", "caster_std", "caster_time"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise UsageError(f"noise {name} must be a finite number, got {value!r}")
+                raise UsageError(f"{option(name)} must be a finite number, got {value!r}")
             if value < 0:
-                raise UsageError(f"noise {name} must be >= 0, got {value}")
+                raise UsageError(f"{option(name)} must be >= 0, got {value}")
             object.__setattr__(self, name, float(value))
         if self.caster_time <= 0:
-            raise UsageError(f"noise caster_time must be > 0 s, got {self.caster_time}")
+            raise UsageError(f"{option('caster_time')} must be > 0 s, got {self.caster_time}")
         cpr = self.encoder_cpr
         if isinstance(cpr, bool) or not isinstance(cpr, (int, np.integer)) or cpr < 0:
-            raise UsageError(f"noise encoder_cpr must be a whole number >= 0, got {cpr!r}")
+            raise UsageError(f"{option('encoder_cpr')} must be a whole number >= 0, got {cpr!r}")
         object.__setattr__(self, "encoder_cpr", int(cpr))
 
     def to_dict(self) -> dict[str, float | int]:
@@ -188,10 +188,10 @@ class PlantChange:
 
 def positive_number(name: str, value: object) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise UsageError(f"{name} must be a number, got {value!r}")
+        raise UsageError(f"{option(name)} must be a number, got {value!r}")
     value = float(value)
     if not math.isfinite(value) or value <= 0:
-        raise UsageError(f"{name} must be a finite number > 0, got {value}")
+        raise UsageError(f"{option(name)} must be a finite number > 0, got {value}")
     return value
 
 

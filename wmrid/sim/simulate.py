@@ -395,7 +395,7 @@ def plan_run(
     period, every = timing(rate)
     rate = float(rate)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise UsageError(f"seed must be a whole number >= 0, got {seed!r}")
+        raise UsageError(f"{option('seed')} must be a whole number >= 0, got {seed!r}")
     n = math.floor(duration * rate + 1e-9) + 1
     if n < 2:
         raise UsageError(f"duration {duration:g} s at {rate:g} Hz gives fewer than 2 samples")
