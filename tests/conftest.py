@@ -2,9 +2,37 @@
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
+import os
+import pickle
+
 import pytest
 
 from tests.open_loop import open_loop_log
+
+
+def made_once_per_run(tmp_path_factory, name: str, make):
+    """``make()``, computed by one pytest-xdist worker of this run and read by the others from the run's shared
+    temporary folder (under a lock: a worker that asks while another computes waits for it).  Outside xdist,
+    simply ``make()``: nothing outlives the run, so no result of older code is ever read."""
+    if "PYTEST_XDIST_WORKER" not in os.environ:
+        return make()
+    root = tmp_path_factory.getbasetemp().parent  # this run's folder, shared by its workers
+    path = root / f"{name}.pickle"
+    with open(root / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            if path.exists():
+                return pickle.loads(path.read_bytes())
+            value = make()
+            tmp = path.with_suffix(".tmp")
+            tmp.write_bytes(pickle.dumps(value))
+            tmp.rename(path)
+            return value
+        finally:
+            with contextlib.suppress(OSError):
+                fcntl.flock(lock, fcntl.LOCK_UN)
 
 
 @pytest.fixture(scope="session")
@@ -18,16 +46,16 @@ def long_smooth_log():
 
 
 @pytest.fixture(scope="session")
-def amr_caster_log():
+def amr_caster_log(tmp_path_factory):
     """The light AMR on the MuJoCo multibody prototype: ball casters of rolling resistance 0.015, reversing at
-    200 Hz, sensor noise 0.02 rad/s and 0.002 N m, seed 0 (issue 11's AMR configuration; about 3 s to simulate,
-    so shared by every test that needs it)."""
+    200 Hz, sensor noise 0.02 rad/s and 0.002 N m, seed 0 (issue 11's AMR configuration; 3-11 s to simulate,
+    so made once per run and shared by every test that needs it)."""
     from wmrid.model.robot import BUILTIN_ROBOTS
     from wmrid.sim.multibody import MultibodySettings, simulate_multibody
     from wmrid.sim.scenario import NoiseSettings
 
     amr = BUILTIN_ROBOTS["amr"]
-    return simulate_multibody(
+    return made_once_per_run(tmp_path_factory, "amr_caster_log", lambda: simulate_multibody(
         amr.cad, amr.nominal, casters=amr.casters, settings=MultibodySettings(caster_resistance=0.015),
         trajectory="reversing", rate=200, noise=NoiseSettings(eta_std=0.02, tau_std=0.002), seed=0,
-    )  # fmt: skip
+    ))  # fmt: skip
