@@ -181,3 +181,31 @@ def test_an_impossible_value_is_marked_in_the_table():
     assert "✗" in rows["M11"]
     assert "✗" not in rows["Fv1"]
     assert "✗ impossible for a physical robot (M11, M12, M22, m11, m12, m22)" in out.stdout
+
+
+def test_compare_says_what_it_is_doing(bracketed):
+    """compare's stages, for the spinner on a terminal: the log, the observer, then each method in turn."""
+    import wmrid as api
+
+    log, _ = bracketed
+    stages = []
+    api.compare(str(log), "paper", methods=["observer", "idim"], stage=stages.append)
+    assert stages == ["reading the log", "the observer's run", "observer (1 of 2)", "idim (2 of 2)"]
+
+
+def test_the_spinner_shows_on_a_terminal_only(monkeypatch):
+    """On a terminal stderr the activity line is drawn (and cleared when done); elsewhere nothing is written."""
+    import io
+    import sys
+
+    from wmrid.cli.helpers import activity
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    for stream, shown in ((Terminal(), True), (io.StringIO(), False)):
+        monkeypatch.setattr(sys, "stderr", stream)
+        with activity("wmrid compare") as stage:
+            stage("idim (2 of 4)")
+        assert ("wmrid compare" in stream.getvalue()) == shown

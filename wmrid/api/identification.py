@@ -359,12 +359,14 @@ def compare(
     weighted: bool = False,
     forgetting: float = 1.0,
     rotor_inertia: float | None = None,
+    stage: Callable[[str], None] | None = None,
 ) -> Comparison:
     """Every method in ``methods`` (default: all of :data:`wmrid.estimators.methods.METHODS`) on the same log:
     estimates, standard errors, flags, errors against ``truth`` (base parameters by name), fit on ``validate``,
     run time, as a :class:`~wmrid.estimators.methods.Comparison` (``to_dict``: the document ``wmrid compare
     --format json`` prints).  Each method identifies the same friction
-    model; the observer's own estimate is shown as it is (no closed-loop substitution)."""
+    model; the observer's own estimate is shown as it is (no closed-loop substitution).  ``stage``: called with
+    what it does now (reading the log, each method), for a progress display."""
     from wmrid.estimators.identify import identify as run_observer
     from wmrid.estimators.methods import METHODS, check_method
     from wmrid.estimators.methods import compare as run_compare
@@ -379,6 +381,8 @@ def compare(
     truth = load_truth(truth)
     robot_obj = robot_for(robot, options, rotor_inertia)
     friction_ = friction_model(friction, names, validating, robot_obj)
+    say = stage or (lambda text: None)
+    say("reading the log")
     wheel_log = _log(log, options, robot_obj, whole=True)
     other = None
     if validate is not None:
@@ -388,8 +392,9 @@ def compare(
                 f"{option('validate', _given(validate))}: its effort is in {other.effort_unit}, "
                 f"{option('log')}'s in {wheel_log.effort_unit}; give both logs in the same units"
             )
+    say("the observer's run")
     observer = run_observer(
         wheel_log, robot_obj, torque_hold=torque_hold, control_rate=control_rate, friction=friction_,
         delay=delay_value(delay), feedback=False,  # compare shows every method's own estimate
     )  # fmt: skip
-    return run_compare(wheel_log, observer, options_, names, other=other, truth=truth)
+    return run_compare(wheel_log, observer, options_, names, other=other, truth=truth, stage=stage)

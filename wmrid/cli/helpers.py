@@ -3,7 +3,9 @@ the output goes."""
 
 from __future__ import annotations
 
+import contextlib
 import sys
+from collections.abc import Callable, Iterator
 from enum import Enum
 from pathlib import Path
 from typing import Any
@@ -81,6 +83,23 @@ def progress(label: str):
             state["bar"].stop()
 
     return update, finish
+
+
+@contextlib.contextmanager
+def activity(label: str) -> Iterator[Callable[[str], None]]:
+    """A transient spinner on stderr while a command works, shown only when stderr is a terminal; yields
+    ``stage(text)``, which says what it is doing now ("label: text")."""
+    if not sys.stderr.isatty():
+        yield lambda text: None
+        return
+    from rich.status import Status
+
+    status = Status(label, console=stderr_console())
+    status.start()
+    try:
+        yield lambda text: status.update(f"{label}: {text}")
+    finally:
+        status.stop()
 
 
 def on_stdout(output: Any) -> bool:

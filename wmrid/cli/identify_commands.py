@@ -11,6 +11,7 @@ import typer
 
 from wmrid.cli.app import app
 from wmrid.cli.helpers import (
+    activity,
     deprecated_option,
     log_opts,
     on_stdout,
@@ -295,20 +296,24 @@ def report(
     truth_params = load_truth(truth)
     if input_ == "-" and validate == "-":
         raise UsageError("INPUT and --validate cannot both be standard input; give one of them as a file")
-    rep = build(
-        input_, truth=truth_params, figures=suffix in (".html", ".htm", ".md"), rotor_inertia=rotor_inertia,
-        options=log_opts(locals()), robot=robot, method=method.value,
-        validate=validate, form=form.value, k=k, alpha=alpha, torque_hold=torque_hold.value, payload=payload,
-        control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted,
-        forgetting=forgetting,
-    )  # fmt: skip
-    if residuals is not None:
-        from wmrid.io.logs import write_log
+    opts = log_opts(locals())
+    with activity("wmrid report") as stage:
+        stage("identifying" + (" and drawing the figures" if suffix in (".html", ".htm", ".md") else ""))
+        rep = build(
+            input_, truth=truth_params, figures=suffix in (".html", ".htm", ".md"), rotor_inertia=rotor_inertia,
+            options=opts, robot=robot, method=method.value,
+            validate=validate, form=form.value, k=k, alpha=alpha, torque_hold=torque_hold.value, payload=payload,
+            control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted,
+            forgetting=forgetting,
+        )  # fmt: skip
+        if residuals is not None:
+            from wmrid.io.logs import write_log
 
-        write_log(residual_frame(rep), str(residuals), force=force)
-    if output is not None:
-        write_report(rep, output, force=force)
-    else:
+            write_log(residual_frame(rep), str(residuals), force=force)
+        if output is not None:
+            stage(f"writing {output}")
+            write_report(rep, output, force=force)
+    if output is None:
         from wmrid.reporting.render import print_report
 
         print_report(rep, console())
@@ -374,13 +379,14 @@ def compare(
     from wmrid.core.atomic import write_json
     from wmrid.reporting.render import print_comparison, to_json
 
-    data = run_compare(
-        one_or_many(log), robot, methods=methods.split(","), validate=validate, truth=truth,
-        rotor_inertia=rotor_inertia,
-        options=log_opts(locals()), torque_hold=torque_hold.value,
-        control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted,
-        forgetting=forgetting,
-    ).to_dict()  # fmt: skip
+    opts = log_opts(locals())
+    with activity("wmrid compare") as stage:
+        data = run_compare(
+            one_or_many(log), robot, methods=methods.split(","), validate=validate, truth=truth,
+            rotor_inertia=rotor_inertia, options=opts, torque_hold=torque_hold.value,
+            control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted,
+            forgetting=forgetting, stage=stage,
+        ).to_dict()  # fmt: skip
     if output is not None:
         write_json(str(output), data, force=force)
     fmt = "json" if on_stdout(output) else output_format.value

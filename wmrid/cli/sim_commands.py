@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from wmrid.cli.app import app
-from wmrid.cli.helpers import log_opts, on_stdout, stderr_console, warning_summary
+from wmrid.cli.helpers import activity, log_opts, on_stdout, stderr_console, warning_summary
 from wmrid.cli.options import (
     AlignOpt,
     AlignRule,
@@ -128,15 +128,18 @@ def simulate(
     from wmrid.api.simulation import simulate as run_simulate
     from wmrid.api.simulation import write_simulation
 
-    run = run_simulate(
-        robot, trajectory=trajectory.value, duration=duration, rate=rate, seed=seed, payload=payload,
-        payload_inertia=payload_inertia, eta_noise=eta_noise, tau_noise=tau_noise, caster=caster,
-        caster_time=caster_time, encoder_cpr=encoder_cpr, load_at=load_at, drop_at=drop_at,
-        friction_fault=friction_fault, fault_at=fault_at, engine=engine.value, floor_friction=floor_friction,
-        caster_resistance=caster_resistance, torque_limit=torque_limit, gear_ratio=gear_ratio,
-        rotor_inertia=rotor_inertia,
-    )  # fmt: skip
-    truth_path = write_simulation(run, output, force=force)
+    with activity("wmrid simulate") as stage:
+        stage(f"{duration:g} s on the {engine.value} model")
+        run = run_simulate(
+            robot, trajectory=trajectory.value, duration=duration, rate=rate, seed=seed, payload=payload,
+            payload_inertia=payload_inertia, eta_noise=eta_noise, tau_noise=tau_noise, caster=caster,
+            caster_time=caster_time, encoder_cpr=encoder_cpr, load_at=load_at, drop_at=drop_at,
+            friction_fault=friction_fault, fault_at=fault_at, engine=engine.value, floor_friction=floor_friction,
+            caster_resistance=caster_resistance, torque_limit=torque_limit, gear_ratio=gear_ratio,
+            rotor_inertia=rotor_inertia,
+        )  # fmt: skip
+        stage(f"writing {output}")
+        truth_path = write_simulation(run, output, force=force)
     if truth_path is not None:
         change = run.change
         what = "" if change is None else f", {change.kind} at {run.log.settings['change']['t_switch']:g} s"
@@ -190,10 +193,9 @@ def monitor(
     from wmrid.reporting.monitor_view import print_monitor
     from wmrid.reporting.render import to_json
 
-    result = run_monitor(
-        log, model, options=log_opts(locals()), calibration=calibration,
-        false_alarm_rate=false_alarm_rate,
-    )  # fmt: skip
+    opts = log_opts(locals())
+    with activity("wmrid monitor"):
+        result = run_monitor(log, model, options=opts, calibration=calibration, false_alarm_rate=false_alarm_rate)
     payload = result.to_dict()
     if output is not None:
         write_json(str(output), payload, force=force)

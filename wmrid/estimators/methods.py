@@ -9,6 +9,7 @@ problem); :func:`run` then reports the chosen method's estimate through
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -183,6 +184,7 @@ def compare(
     *,
     other: Any = None,
     truth: dict[str, float] | None = None,
+    stage: Callable[[str], None] | None = None,
 ) -> Comparison:
     """Every method in ``names`` on ``log`` (in memory; ``observer`` is the observer's result on it), JSON-ready.
 
@@ -192,13 +194,16 @@ def compare(
     warnings are those ``identify --method NAME`` reports (model-error widenings included); the parameters are
     the form's (caster drag too under ``--friction wheel+caster``).  ``other`` : a second
     log to validate each model on (:func:`wmrid.model.predict.validation_fit`); ``truth`` : true base parameters.
+    ``stage`` : called with each method's name as it starts (a progress display).
     """
     from wmrid.estimators.model_error import std_mark
     from wmrid.model.predict import validation_fit
 
     methods: dict[str, dict[str, Any]] = {}
     predictor = None
-    for name in names:
+    for i, name in enumerate(names, 1):
+        if stage is not None:
+            stage(f"{name} ({i} of {len(names)})")
         est = estimate(name, log, observer, options)
         # the same honest std, flags and warnings as ``identify --method NAME``
         # (wmrid.estimators.identify.with_estimate)
