@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
+import math
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -13,10 +16,19 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from matplotlib.colors import to_rgba
 
 from wmrid.core.errors import UsageError
 from wmrid.estimators.identify import identify
-from wmrid.model.dynamics import THETA0_NAMES, base_parameters, intermediate_parameters, named_base
+from wmrid.model.base_params import direct_recovery
+from wmrid.model.dynamics import (
+    THETA0_NAMES,
+    THETA0_UNITS,
+    RegressorForm,
+    base_parameters,
+    intermediate_parameters,
+    named_base,
+)
 from wmrid.model.robot import BUILTIN_ROBOTS
 from wmrid.reporting import figures
 from wmrid.reporting.figures import MAX_POINTS, decimate_for_display
@@ -40,6 +52,11 @@ def run():
     return SimpleNamespace(sim=sim, log=log, result=result, truth=truth)
 
 
+def _model_speeds(log):
+    """A stand-in for a model's predicted speeds: the measured ones, slightly off."""
+    return 1.02 * np.asarray(log.eta) + 0.01
+
+
 def _all_figures(run):
     return {
         "log_overview": figures.build_log_overview(run.log),
@@ -48,6 +65,9 @@ def _all_figures(run):
         "errors": figures.build_estimates_figure(run.result, run.truth, error_mode=True),
         "residuals": figures.build_residuals_figure(run.result),
         "excitation": figures.build_excitation_figure(run.result),
+        "convergence": figures.build_base_convergence_figure(run.result, run.truth),
+        "speed_fit": figures.build_speed_fit_figure(run.log.t, run.log.eta, _model_speeds(run.log), [97.1, 95.0]),
+        "correlation": figures.build_correlation_figure(run.result.form.base_names, run.result.theta0_cov),
     }
 
 
@@ -164,6 +184,17 @@ BOTH = ("svg", "png")
         ),
         ("residuals", BOTH, lambda run, fmt: figures.residuals_figure(run.result, fmt=fmt)),
         ("excitation", BOTH, lambda run, fmt: figures.excitation_figure(run.result, fmt=fmt)),
+        ("convergence", BOTH, lambda run, fmt: figures.base_convergence_figure(run.result, run.truth, fmt=fmt)),
+        (
+            "speed_fit",
+            BOTH,
+            lambda run, fmt: figures.speed_fit_figure(run.log.t, run.log.eta, _model_speeds(run.log), [97.1, 95], fmt),
+        ),
+        (
+            "correlation",
+            BOTH,
+            lambda run, fmt: figures.correlation_figure(run.result.form.base_names, run.result.theta0_cov, fmt),
+        ),
     ],
 )
 def test_renders_svg_and_png(run, name, formats, render):
@@ -195,7 +226,7 @@ def test_log_overview_labels(built, run):
     assert bottom.get_xlabel().endswith("(s)")
     assert top.get_shared_x_axes().joined(top, bottom)
     assert [t.get_text() for t in fig.legends[0].get_texts()] == ["right wheel", "left wheel"]
-    assert fig.get_suptitle()
+    assert fig.get_suptitle() == ""  # the report's caption names the figure
     pwm = SimpleNamespace(t=run.log.t + 1.7e9, eta=run.log.eta, tau=run.log.tau, source="x", effort_unit="PWM")
     fig = figures.build_log_overview(pwm)
     assert fig.axes[0].get_ylabel() == "wheel effort (PWM)"
@@ -321,3 +352,300 @@ def test_estimate_panels_zoom_past_early_excursions():
     lo, hi = figures._settled_limits(t, est, np.array([0.92, 0.787]))
     assert lo < 0.787 < 0.92 < hi < 1.0
     assert figures._settled_limits(t, np.linspace(0.92, 0.79, 1001), np.array([0.92, 0.787])) is None
+
+
+# --------------------------------------------------------------------------------------------------
+# Titles, SVG text
+
+
+def _titles(fig):
+    return [ax.get_title(loc=loc) for ax in fig.axes for loc in ("left", "center", "right")]
+
+
+def test_no_figure_title_and_no_source_in_titles(run):
+    source = "/data/robots/run_0042_outdoor.mcap"
+    result = dataclasses.replace(run.result, source=source)
+    log = SimpleNamespace(t=run.log.t, eta=run.log.eta, tau=run.log.tau, source=source, notes=())
+    every = _all_figures(SimpleNamespace(sim=run.sim, log=log, result=result, truth=run.truth))
+    for name, fig in every.items():
+        assert fig.get_suptitle() == "", name
+        assert not fig.texts, name  # no figure-level text standing in for a title
+        for title in _titles(fig):
+            assert "run_0042" not in title, (name, title)
+            assert len(title) <= 50, (name, title)  # short panel titles
+    assert _titles(every["residuals"])[1::3] == ["over time", "distribution"]
+    assert every["excitation"].axes[0].get_title() == "smallest eigenvalue of the information matrix Γ"
+    assert _titles(every["path"]) == ["", "", ""]
+    assert every["estimates"].axes[0].get_title() == r"$\hat\theta_{11}$"
+    # the rows' meaning, once in a figure-level title, is in the legend
+    legend = [t.get_text() for t in every["estimates"].legends[0].get_texts()]
+    assert legend[-1] == "row i: wheel i (1 = right, 2 = left)"
+
+
+def test_default_figures_are_page_wide():
+    assert figures.FIGSIZE == (11.0, 4.2)
+    log = SimpleNamespace(t=np.arange(5.0), eta=np.ones((5, 2)), tau=np.ones((5, 2)), source="x")
+    w, h = figures.build_log_overview(log).get_size_inches()
+    assert w == 11.0
+    assert h > figures.FIGSIZE[1]  # two stacked panels get more height
+
+
+@pytest.mark.parametrize("name", ["log_overview", "convergence", "speed_fit", "correlation"])
+def test_svg_keeps_text_as_text_and_is_deterministic(built, name):
+    fig = built[name]
+    svg = figures.render(fig, "svg")
+    assert svg.count(b"<text") >= 5
+    assert b'<path id="DejaVuSans' not in svg  # no glyph outlines
+    assert figures.render(fig, "png").startswith(PNG_MAGIC)
+    assert figures.render(fig, "svg") == svg  # the same bytes every time, a PNG in between or not
+    labels = [ax.get_ylabel() for ax in fig.axes if "$" not in ax.get_ylabel() and ax.get_ylabel()]
+    assert labels
+    for label in labels:  # the labels are in the file as text, searchable
+        assert label.replace("&", "&amp;").encode() in svg
+
+
+def test_svg_is_byte_identical_across_builds(run):
+    one = figures.render(figures.build_base_convergence_figure(run.result, run.truth))
+    two = figures.render(figures.build_base_convergence_figure(run.result, run.truth))
+    assert one == two
+
+
+# --------------------------------------------------------------------------------------------------
+# Base parameters over time
+
+
+def _display_scale(label: str) -> float:
+    """The 10^n a panel's values were divided by (its y label says "$10^{n}$ unit"), else 1."""
+    found = re.search(r"\$10\^\{(-?\d+)\}\$", label)
+    return 10.0 ** int(found.group(1)) if found else 1.0
+
+
+def _band(ax):
+    (patch,) = [p for p in ax.patches if p.get_label() == "final ± 2σ"]
+    y = patch.get_patch_transform().transform(patch.get_path().vertices)[:, 1]
+    return float(y.min()), float(y.max())
+
+
+def test_base_convergence_figure(built, run):
+    fig = built["convergence"]
+    result = run.result
+    names = result.form.base_names
+    assert len(fig.axes) == len(names) == 8
+    recovered = np.array([direct_recovery(th, result.form) for th in result.history.theta])
+    t = result.history.t
+    late = t >= t[-1] - 0.7 * (t[-1] - t[0])
+    for j, (ax, name) in enumerate(zip(fig.axes, names, strict=True)):
+        assert ax.get_title().split(" ")[0] == name
+        scale = _display_scale(ax.get_ylabel())
+        assert result.units[name] in ax.get_ylabel()
+        lines = {line.get_label(): line for line in ax.get_lines()}
+        assert set(lines) == {"estimate (closed form)", "final estimate", "true value"}
+        value, std = result.parameters[name]
+        assert lines["final estimate"].get_ydata()[0] * scale == pytest.approx(value, rel=1e-12)
+        lo, hi = _band(ax)
+        assert (hi - lo) * scale == pytest.approx(4.0 * std, rel=1e-9)
+        assert (hi + lo) / 2 * scale == pytest.approx(value, rel=1e-12)
+        assert lines["true value"].get_ydata()[0] * scale == pytest.approx(run.truth[name], rel=1e-12)
+        assert lines["true value"].get_linestyle() == ":"
+        est = lines["estimate (closed form)"]
+        assert est.get_xdata()[-1] == t[-1]
+        assert est.get_ydata()[-1] * scale == pytest.approx(recovered[-1, j], rel=1e-12, abs=1e-15)
+        # the axis shows the band, the truth and the settled trajectory ...
+        y0, y1 = (v * scale for v in ax.get_ylim())
+        shown = np.concatenate([[value - 2 * std, value + 2 * std, run.truth[name]], recovered[late, j]])
+        assert y0 <= shown.min()
+        assert shown.max() <= y1
+        # ... and says "zoomed" exactly when some of the early transient is off it
+        clipped = bool(np.any((recovered[:, j] < y0) | (recovered[:, j] > y1)))
+        assert ("(zoomed)" in ax.get_title()) == clipped
+        assert ax.yaxis.get_label().get_fontsize() >= 10
+        assert all(label.get_fontsize() >= 10 for label in ax.get_yticklabels())
+    # the start (~0.92, 17 % off) is far outside m11's panel: that one is zoomed
+    assert "(zoomed)" in fig.axes[0].get_title()
+    assert [ax.get_xlabel() for ax in fig.axes[4:]] == ["time (s)"] * 4
+    legend = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert legend == ["estimate (closed form)", "final ± 2σ", "final estimate", "true value"]
+
+
+def test_base_convergence_figure_without_history_truth_or_std(run):
+    assert figures.build_base_convergence_figure(dataclasses.replace(run.result, observer=None)) is None
+    assert figures.base_convergence_figure(dataclasses.replace(run.result, observer=None)) is None
+    params = dict(run.result.parameters)
+    for name, std in (("m11", math.nan), ("m12", None), ("m22", math.inf)):
+        params[name] = (params[name][0], std)
+    fig = figures.build_base_convergence_figure(dataclasses.replace(run.result, parameters=params))
+    for ax in fig.axes:
+        labels = {line.get_label() for line in ax.get_lines()}
+        assert labels == {"estimate (closed form)", "final estimate"}  # no truth given
+        has_band = any(p.get_label() == "final ± 2σ" for p in ax.patches)
+        assert has_band == (ax.get_title().split(" ")[0] not in ("m11", "m12", "m22"))
+
+
+def _synthetic_result(form, transient=True, n=400):
+    """A result-like object whose history converges exponentially to a known theta0 (fast, no identification)."""
+    names = form.base_names
+    theta0 = np.array(
+        [0.79, 0.24, 0.74, 0.21, 0.01, 0.015, 0.045, 0.04] + [0.3 + 0.1 * k for k in range(len(names) - 8)]
+    )
+    t = np.linspace(0.0, 10.0, n)
+    offset = 0.5 * np.exp(-3.0 * t) if transient else np.zeros(n)
+    theta = np.array([intermediate_parameters(theta0 * (1.0 + o), form) for o in offset])
+    params = {name: (float(v), 1e-3 * float(v)) for name, v in zip(names, theta0, strict=True)}
+    return SimpleNamespace(
+        history=SimpleNamespace(t=t, theta=theta), form=form, parameters=params, units=dict(THETA0_UNITS)
+    ), theta0
+
+
+@pytest.mark.parametrize(
+    ("form", "n_names"),
+    [
+        (RegressorForm("general", caster=True), 10),
+        (RegressorForm("general", caster=True, geometry=(0.1, 0.2, -0.3, 0.0)), 9),
+    ],
+)
+def test_base_convergence_figure_with_caster_drag(form, n_names):
+    result, theta0 = _synthetic_result(form)
+    names = form.base_names
+    assert len(names) == n_names
+    fig = figures.build_base_convergence_figure(result, dict(zip(names, theta0, strict=True)))
+    assert len(fig.axes) == n_names  # 2 rows of 5, the unused panel removed
+    assert {ax.get_subplotspec().get_geometry()[:2] for ax in fig.axes} == {(2, 5)}
+    assert [ax.get_title().split(" ")[0] for ax in fig.axes] == list(names)
+    assert fig.axes[-1].get_ylabel() == {"Cw": "N m", "D1": "N"}[names[-1]]  # caster drag
+    for ax, name in zip(fig.axes, names, strict=True):  # the bottom of each column shows the time axis
+        below = any(
+            other.get_subplotspec().rowspan.start == 1
+            for other in fig.axes
+            if other.get_subplotspec().colspan == ax.get_subplotspec().colspan and other is not ax
+        )
+        assert (ax.get_xlabel() == "time (s)") == (not below), name
+    # the synthetic estimate starts 50 % off: every panel is zoomed on the band and the settled estimate
+    assert all("(zoomed)" in ax.get_title() for ax in fig.axes)
+    quiet, _ = _synthetic_result(form, transient=False)
+    fig = figures.build_base_convergence_figure(quiet)
+    assert not any("(zoomed)" in ax.get_title() for ax in fig.axes)
+    for ax, value in zip(fig.axes, theta0, strict=True):
+        lo, hi = ax.get_ylim()
+        scale = _display_scale(ax.get_ylabel())
+        assert lo * scale < value * (1 - 2e-3)
+        assert value * (1 + 2e-3) < hi * scale
+
+
+def test_zoom_limits():
+    t = np.linspace(0.0, 10.0, 1001)
+    est = np.full_like(t, 1.0)
+    est[:50] = np.linspace(10.0, 1.0, 50)
+    lo, hi, clipped = figures._zoom_limits(t, est, np.array([0.9, 1.1]))
+    assert clipped
+    assert lo == pytest.approx(0.88)
+    assert hi == pytest.approx(1.12)
+    lo, hi, clipped = figures._zoom_limits(t, np.linspace(1.2, 1.0, 1001), np.array([0.9, 1.1]))
+    assert not clipped
+    assert lo < 0.9
+    assert hi > 1.2
+    assert figures._zoom_limits(t, np.full_like(t, np.nan), np.array([np.nan])) is None
+
+
+# --------------------------------------------------------------------------------------------------
+# Measured and predicted speeds
+
+
+def test_speed_fit_figure():
+    rng = np.random.default_rng(3)
+    t = np.linspace(0.0, 2.0, 50)
+    eta, eta_hat = rng.standard_normal((50, 2)), rng.standard_normal((50, 2))
+    fig = figures.build_speed_fit_figure(t, eta, eta_hat, [97.123, math.nan])
+    top, bottom = fig.axes
+    assert top.get_title() == "right wheel: fit 97.1 %"
+    assert bottom.get_title() == "left wheel: fit —"
+    assert bottom.get_xlabel() == "time (s)"
+    assert top.get_ylabel() == bottom.get_ylabel() == "speed (rad/s)"
+    assert top.get_shared_x_axes().joined(top, bottom)
+    for j, (ax, colour) in enumerate(((top, "C0"), (bottom, "C1"))):
+        measured, model = ax.get_lines()
+        assert (measured.get_label(), model.get_label()) == ("measured", "model")
+        np.testing.assert_array_equal(measured.get_xdata(), t)
+        np.testing.assert_array_equal(measured.get_ydata(), eta[:, j])
+        np.testing.assert_array_equal(model.get_xdata(), t)
+        np.testing.assert_array_equal(model.get_ydata(), eta_hat[:, j])
+        assert to_rgba(measured.get_color()) == to_rgba(colour)
+        assert to_rgba(model.get_color()) == to_rgba("k")
+        assert model.get_linestyle() == "--"
+        assert [x.get_text() for x in ax.get_legend().get_texts()] == ["measured", "model"]
+        assert all(label.get_fontsize() >= 10 for label in ax.get_yticklabels())
+    titles = [figures.build_speed_fit_figure(t, eta, eta_hat, f).axes[0].get_title() for f in ([100, 0], [5.2345, 0])]
+    assert titles == ["right wheel: fit 100 %", "right wheel: fit 5.23 %"]
+    assert figures.build_speed_fit_figure(t, eta, eta_hat, None).axes[1].get_title() == "left wheel: fit —"
+    assert figures.build_speed_fit_figure(t, eta, None, [1, 2]) is None
+    assert figures.speed_fit_figure(t, eta, None, [1, 2]) is None
+    with pytest.raises(UsageError):
+        figures.build_speed_fit_figure(t, eta, eta_hat[:10], [1, 2])
+
+
+def test_speed_fit_figure_decimates_long_logs(built, run):
+    ax = built["speed_fit"].axes[0]
+    measured = ax.get_lines()[0]
+    assert len(run.log.t) > MAX_POINTS >= len(measured.get_xdata())
+    assert measured.get_ydata().max() == run.log.eta[:, 0].max()  # the extremes survive
+
+
+# --------------------------------------------------------------------------------------------------
+# Correlations
+
+
+def _cell_text(value: float) -> str:
+    text = f"{value:.2f}"
+    return "0.00" if text == "-0.00" else text
+
+
+def test_correlation_figure(run):
+    names = list(run.result.form.base_names)
+    cov = np.array(run.result.theta0_cov, dtype=object)
+    cov[2, 5] = cov[5, 2] = None  # undefined covariances
+    cov[0, 7] = cov[7, 0] = math.nan
+    fig = figures.build_correlation_figure(names, cov.tolist())
+    ax, bar = fig.axes
+    c = np.array(run.result.theta0_cov, dtype=float)
+    expected = c / np.sqrt(np.outer(np.diag(c), np.diag(c)))  # computed here, independently
+    assert len(ax.texts) == len(names) ** 2
+    undefined = {(2, 5), (5, 2), (0, 7), (7, 0)}
+    for text in ax.texts:
+        j, i = (round(v) for v in text.get_position())
+        shown = text.get_text().replace("−", "-")
+        if (i, j) in undefined:
+            assert shown == "—"
+        else:
+            assert shown == _cell_text(expected[i, j]), (i, j)
+            dark = abs(expected[i, j]) > 0.8
+            light = abs(expected[i, j]) < 0.2
+            if dark or light:
+                assert to_rgba(text.get_color()) == to_rgba("white" if dark else "black"), (i, j)
+    assert any(t.get_text() == "1.00" for t in ax.texts)
+    assert [t.get_text() for t in ax.get_xticklabels()] == names
+    assert [t.get_text() for t in ax.get_yticklabels()] == names
+    mesh = ax.collections[0]
+    assert mesh.get_cmap().name.startswith("RdBu_r")
+    assert (mesh.norm.vmin, mesh.norm.vmax) == (-1.0, 1.0)
+    assert mesh.get_cmap().get_bad() == pytest.approx(to_rgba("0.75"))
+    assert np.ma.getmaskarray(mesh.get_array()).reshape(len(names), -1)[2, 5]
+    assert bar.get_ylabel() == "correlation"
+    assert all(label.get_fontsize() >= 10 for label in ax.get_xticklabels())
+
+
+def test_correlation_figure_edge_cases():
+    assert figures.build_correlation_figure(["m11"], [[1.0]]) is None
+    assert figures.correlation_figure([], []) is None
+    # a parameter whose variance is undefined or zero: its whole row and column are undefined
+    cov = [[4.0, 1.0, None], [1.0, 1.0, 0.5], [None, 0.5, 0.0]]
+    fig = figures.build_correlation_figure(["a", "b", "c"], cov)
+    cells = {tuple(round(v) for v in t.get_position())[::-1]: t.get_text() for t in fig.axes[0].texts}
+    assert cells[(0, 1)] == cells[(1, 0)] == "0.50"
+    assert cells[(0, 0)] == cells[(1, 1)] == "1.00"
+    assert all(cells[(2, j)] == cells[(j, 2)] == "—" for j in range(3))
+    np.testing.assert_allclose(figures.correlation_matrix([[4.0, -2.0], [-2.0, 4.0]]), [[1.0, -0.5], [-0.5, 1.0]])
+    assert (
+        figures.build_correlation_figure(["a", "b"], [[1.0, -0.999], [-0.999, 1.0]]).axes[0].texts[1].get_text()
+        == "−1.00"
+    )
+    with pytest.raises(UsageError):
+        figures.build_correlation_figure(["a", "b", "c"], np.eye(2))

@@ -68,6 +68,7 @@ def report(
     options: LogOptions | None = None,
     robot: str | os.PathLike[str] | Robot | None = None,
     rotor_inertia: float | None = None,
+    command: str | None = None,
     **identify_options: Any,
 ) -> Report:
     """The report of an identification.
@@ -79,39 +80,86 @@ def report(
     log : the identified log in memory, for the torque residual and the figures of the signals.
     truth : true base parameters by name (a simulator's ``truth["parameters"]``), for the error columns.
     figures : draw the figures (SVG and PNG; the slow part).
+    command : the command line that made the report, for its reproducibility block (the CLI gives it).
+
+    ``report.provenance``: wmrid's version, the time (UTC), the command, the options given, and each input file's
+    size and SHA-256.
     """
+    rep, inputs, data = _report(result, log, truth, figures, options, robot, rotor_inertia, identify_options)
+    return replace(rep, provenance=_provenance(command, inputs, data, options, robot, rotor_inertia, identify_options))
+
+
+def _report(result, log, truth, figures, options, robot, rotor_inertia, identify_options):
+    """(report, the input paths to record, the standard input's bytes or None)."""
     if isinstance(result, IdentificationResult):
         rep = build_report(result.to_dict(), result=result, log=log, truth=truth, figures=figures)
-        return replace(rep, identification=result, log=log)
+        return replace(rep, identification=result, log=log), [], None
     if isinstance(result, dict):
-        return _from_saved(dict(result), str(result.get("source") or "result"), truth, figures)
+        return _from_saved(dict(result), str(result.get("source") or "result"), truth, figures), [], None
     unknown = sorted(set(identify_options) - set(inspect.signature(identify).parameters))
     if unknown:  # prepare() and run_prepared() take identify()'s keywords and ignore the other's
         raise TypeError(f"report() got unexpected keyword arguments {unknown}")
     validate = identify_options.get("validate")
     method = identify_options.get("method", "observer")
     check_numbers(rotor_inertia=rotor_inertia, **identify_options)  # before INPUT is opened, as identify does
+    inputs: list[Any] = []
+    data = None
     if isinstance(result, (str, os.PathLike)):
         from wmrid.io.sources import open_source
 
         no_two_stdin(result, validate, option("input_"))
         source = open_source(os.fspath(result))
+        inputs, data = [os.fspath(result)], source.data
         if source.head(64).lstrip().startswith(b"{"):
             if validate is not None or method != "observer":
                 raise UsageError(
                     f"{source.name}: {option('validate')} and {option('method')} need a log as INPUT, not a saved "
                     "result; run `wmrid identify LOG --method ... --validate OTHER --format json` and report its output"
                 )
-            return _from_saved(_parse_saved(source), source.name, truth, figures)
+            return _from_saved(_parse_saved(source), source.name, truth, figures), inputs, data
         # a log: the checks identify() makes, before the log is read
         prep = prepare(options=options, robot=robot, rotor_inertia=rotor_inertia, **identify_options)
         wheel_log = read_log(os.fspath(result), options, robot=prep.robot, data=source.data)
         identified = run_prepared(wheel_log, prep, options=options, **identify_options)
+        robot_obj = prep.robot
     else:
         wheel_log = result.read() if isinstance(result, LogStream) else result
         identified = identify(wheel_log, robot, options=options, rotor_inertia=rotor_inertia, **identify_options)
-    rep = build_report(identified.to_dict(), result=identified, log=wheel_log, truth=truth, figures=figures)
-    return replace(rep, identification=identified, log=wheel_log)
+        robot_obj = robot if isinstance(robot, Robot) else None
+    validation_log = validate if isinstance(validate, WheelLog) else None
+    if isinstance(validate, (str, os.PathLike)) and os.fspath(validate) != "-":
+        inputs.append(os.fspath(validate))
+        if figures:  # its measured and predicted speeds (the identification read it, and kept only its fit)
+            validation_log = read_log(os.fspath(validate), options, robot=robot_obj)
+    rep = build_report(identified.to_dict(), result=identified, log=wheel_log, truth=truth, figures=figures,
+                       validation_log=validation_log)  # fmt: skip
+    return replace(rep, identification=identified, log=wheel_log), inputs, data
+
+
+def _provenance(command, inputs, data, options, robot, rotor_inertia, identify_options) -> dict[str, Any]:
+    """What a colleague needs to make the report again: version, time, command, options, inputs and their hashes."""
+    import dataclasses
+    import datetime
+
+    from wmrid import __version__
+    from wmrid.io.digest import file_digests
+
+    given: dict[str, Any] = {k: v for k, v in identify_options.items() if v is not None}
+    if options is not None:
+        defaults = LogOptions()
+        given.update({f.name: getattr(options, f.name) for f in dataclasses.fields(LogOptions)
+                      if getattr(options, f.name) != getattr(defaults, f.name)})  # fmt: skip
+    if robot is not None:
+        given["robot"] = robot if isinstance(robot, (str, os.PathLike)) else getattr(robot, "name", "?")
+    if rotor_inertia is not None:
+        given["rotor_inertia"] = rotor_inertia
+    return {
+        "wmrid": __version__,
+        "made_utc": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+        "command": command or "wmrid.report(...) from Python",
+        "options": {k: (os.fspath(v) if isinstance(v, os.PathLike) else v) for k, v in given.items()},
+        "inputs": file_digests(inputs, data),
+    }
 
 
 def residual_frame(rep: Report) -> Any:

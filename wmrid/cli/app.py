@@ -7,6 +7,7 @@ answers at once.  :func:`main` is the one place that maps errors to exit codes a
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import os
 import signal
 import sys
@@ -26,6 +27,17 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     rich_markup_mode="rich",  # the option panels; every help text is escaped first (:func:`_verbatim_help`)
 )
+
+
+#: The arguments of the command line being run (for a report's reproducibility block).
+_invocation: contextvars.ContextVar[tuple[str, ...]] = contextvars.ContextVar("wmrid_invocation", default=())
+
+
+def invocation() -> str:
+    """The command line being run, as a shell would take it back: ``wmrid report run.mcap -o r.html``."""
+    import shlex
+
+    return shlex.join(["wmrid", *_invocation.get()])
 
 
 def _version(value: bool) -> None:
@@ -62,6 +74,7 @@ def main(argv: list[str] | None = None) -> None:
     debug = "--debug" in args
     if debug:  # accepted anywhere on the line, not only before the command
         args = ["--debug", *[a for a in args if a != "--debug"]]
+    token = _invocation.set(tuple(a for a in args if a != "--debug"))
     try:
         track_inputs()  # an output that is one of the command's inputs is refused
         try:
@@ -107,6 +120,7 @@ def main(argv: list[str] | None = None) -> None:
                 "(run with --debug for the traceback)\n"
             )
             code = ExitStatus.NO_RESULT
+    _invocation.reset(token)
     if argv is not None:  # called in-process: leave the caller's signal handlers and streams as they were
         _leave(argv, saved, previous)
         sys.exit(int(code))

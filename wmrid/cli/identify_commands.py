@@ -9,7 +9,7 @@ from typing import Annotated
 
 import typer
 
-from wmrid.cli.app import app
+from wmrid.cli.app import app, invocation
 from wmrid.cli.helpers import (
     activity,
     deprecated_option,
@@ -304,7 +304,7 @@ def report(
             options=opts, robot=robot, method=method.value,
             validate=validate, form=form.value, k=k, alpha=alpha, torque_hold=torque_hold.value, payload=payload,
             control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted,
-            forgetting=forgetting,
+            forgetting=forgetting, command=invocation(),
         )  # fmt: skip
         if residuals is not None:
             from wmrid.io.logs import write_log

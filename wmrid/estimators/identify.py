@@ -476,6 +476,8 @@ def _identify(
         nominal = model.named_base(model.base_parameters(robot.nominal))
         if robot.cad is not None:
             reference = model.named_base(model.base_parameters(robot.cad))
+            for name in getattr(robot, "unknown_cad", ()):  # not given by the robot's source: no value, not 0
+                reference[name] = None
     # the jackknife's leave-one-segment-out estimates, theta0 to first order (fit.gain): for comparing methods
     segment, n_seg = segments_of(block_mid / max(duration, 1e-300), duration)
     deltas = jackknife_deltas(gamma, theta_u, out.blk_a, out.blk_c, segment, n_seg)

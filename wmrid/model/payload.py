@@ -24,6 +24,8 @@ follow by the delta method from the covariance of (m11, m12, m22, V_c) (M = m^-1
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from wmrid.model import dynamics as model
@@ -67,3 +69,26 @@ def payload_with_std(
     finite = np.all(np.isfinite(sub))
     std = np.sqrt(np.clip(np.diag(jac @ sub @ jac.T), 0.0, None)) if finite else np.full(4, np.inf)
     return {name: (float(v), float(e)) for name, v, e in zip(PAYLOAD_NAMES, value, std, strict=True)}
+
+
+#: The smallest payload mass reported as a payload, kg (below it a wheeled robot's load is noise or model error).
+MIN_PAYLOAD_KG = 0.05
+
+
+def payload_statement(payload: dict[str, tuple[float, float]]) -> str:
+    """One sentence on a payload estimate ({name: (value, std)}): detected when its mass exceeds both 3 std and
+    :data:`MIN_PAYLOAD_KG`, else "no payload detected" (and then its position and inertia mean nothing)."""
+    mass, std = payload["mass"]
+    if math.isfinite(std) and mass > 3 * std and mass > MIN_PAYLOAD_KG:
+        x, y = payload["x"][0], payload["y"][0]
+        return f"payload detected: {mass:.4g} ± {std:.2g} kg at x = {x:.3g} m, y = {y:.3g} m (platform frame)"
+    if mass <= 0:
+        why = "not positive"
+    elif mass <= MIN_PAYLOAD_KG:
+        why = f"below {MIN_PAYLOAD_KG:g} kg"
+    else:
+        why = "within 3 std of 0"
+    return (
+        f"no payload detected: the mass estimate {mass:.3g} ± {std:.2g} kg is {why} (the log shows the unloaded "
+        "robot; the position and inertia columns mean nothing then)"
+    )

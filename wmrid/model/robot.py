@@ -224,6 +224,8 @@ class Robot:
     torque_constant: float | None = None  # N m/A, of each motor ([motor] table)
     efficiency: float | None = None  # of the gearbox ([motor] table)
     casters: tuple[Caster, ...] | None = None  # [[caster]] tables; None: default_casters (multibody only)
+    #: Base parameters whose CAD value the source does not give (a URDF's friction): compared as "—", not 0.
+    unknown_cad: tuple[str, ...] = ()
 
     @property
     def reference(self) -> PhysicalParameters:

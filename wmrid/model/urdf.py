@@ -394,8 +394,8 @@ def load_robot_urdf(
     *,
     gear_ratio: float,
     rotor_inertia: float | None = None,
-    viscous_friction: Sequence[float] = (0.0, 0.0),
-    coulomb_friction: Sequence[float] = (0.0, 0.0),
+    viscous_friction: Sequence[float] | None = None,
+    coulomb_friction: Sequence[float] | None = None,
     wheel_radius: float | None = None,
     wheel_joints: Sequence[str] | None = None,
     rotor_joints: Sequence[str] | None = None,
@@ -407,6 +407,8 @@ def load_robot_urdf(
 ) -> Robot:
     """A :class:`~wmrid.model.robot.Robot` from a URDF file: ``cad`` is what the URDF gives (:func:`read_urdf`).
 
+    viscous_friction, coulomb_friction : (right, left); not given: 0 in the parameters, and unknown as CAD values
+        (``Robot.unknown_cad``: a comparison shows "—", not a difference from 0).
     nominal : the estimator's starting point; default the URDF's parameters themselves.
     name : default the URDF's <robot name>, else the file name without extension.
     torque_constant : k_t (N m/A) of each motor; efficiency : of the gearbox, in (0, 1].
@@ -414,10 +416,15 @@ def load_robot_urdf(
     from wmrid.core.atomic import register_input
 
     register_input(path)
+    unknown = (("Fv1", "Fv2") if viscous_friction is None else ()) + (
+        ("Fd1", "Fd2") if coulomb_friction is None else ()
+    )
     model = read_urdf(
-        path, gear_ratio=gear_ratio, rotor_inertia=rotor_inertia, viscous_friction=viscous_friction,
-        coulomb_friction=coulomb_friction, wheel_radius=wheel_radius, wheel_joints=wheel_joints,
-        rotor_joints=rotor_joints, symmetry_tolerance=symmetry_tolerance,
+        path, gear_ratio=gear_ratio, rotor_inertia=rotor_inertia,
+        viscous_friction=(0.0, 0.0) if viscous_friction is None else viscous_friction,
+        coulomb_friction=(0.0, 0.0) if coulomb_friction is None else coulomb_friction,
+        wheel_radius=wheel_radius, wheel_joints=wheel_joints, rotor_joints=rotor_joints,
+        symmetry_tolerance=symmetry_tolerance,
     )  # fmt: skip
     if torque_constant is not None:
         torque_constant = _check_number("torque_constant", torque_constant, positive=True)
@@ -429,4 +436,5 @@ def load_robot_urdf(
         cad=model.params,
         torque_constant=torque_constant,
         efficiency=efficiency,
+        unknown_cad=unknown,
     )

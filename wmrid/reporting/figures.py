@@ -9,6 +9,10 @@ No line carries more than :data:`MAX_POINTS` points: long series are reduced for
 :func:`decimate_for_display`, which keeps the minimum and maximum of every bin, so spikes stay visible.
 
 Colours: right wheel blue (C0), left wheel orange (C1), in every figure.
+
+The report shows each figure under its own caption, at the full width of the page (FIGSIZE is that
+width): no figure has a figure-level title, and no title repeats the log's name.  SVG keeps its text
+as ``<text>`` elements (selectable, searchable), not as glyph outlines.
 """
 
 from __future__ import annotations
@@ -31,8 +35,11 @@ if TYPE_CHECKING:
 
 #: The most points any plotted line carries.
 MAX_POINTS = 4000
-#: Figure size (inches) of the single- and two-panel figures, and the PNG resolution.
-FIGSIZE = (8.0, 4.5)
+#: Figure size (inches) of the single-panel and side-by-side figures (the full width of a report page),
+#: and the PNG resolution.
+FIGSIZE = (11.0, 4.2)
+#: Figure size (inches) of the figures with two panels stacked.
+FIGSIZE_STACKED = (11.0, 5.6)
 PNG_DPI = 120
 FORMATS = ("svg", "png")
 
@@ -107,15 +114,37 @@ def _new_figure(figsize: tuple[float, float] = FIGSIZE) -> Figure:
     return fig
 
 
+def _freeze_layout(fig: Figure) -> None:
+    """Lay ``fig`` out once and keep that layout (its layout engine is then "none").
+
+    The constrained layout, run on every draw, moves the axes by a rounding error from one draw to the
+    next, so the same figure saved twice would differ in the last digit of some coordinates.  A caller
+    who changes the figure after rendering it can lay it out again with
+    ``fig.set_layout_engine("constrained")``.
+    """
+    from matplotlib.layout_engine import PlaceHolderLayoutEngine
+
+    engine = fig.get_layout_engine()
+    if engine is not None and not isinstance(engine, PlaceHolderLayoutEngine):
+        fig.draw_without_rendering()
+        fig.set_layout_engine("none")
+
+
 def render(fig: Figure, fmt: str = "svg") -> bytes:
-    """The figure as ``fmt`` bytes: "svg" (deterministic: no date, fixed ids) or "png" (PNG_DPI dpi)."""
+    """The figure as ``fmt`` bytes: "svg" (deterministic: no date, fixed ids; text kept as ``<text>``, not
+    glyph paths) or "png" (PNG_DPI dpi).
+
+    The first render fixes the figure's layout (:func:`_freeze_layout`), so rendering it again gives the
+    same bytes, as does rendering a figure built from the same data.
+    """
     if fmt not in FORMATS:
         raise UsageError(f"figure format must be one of {', '.join(FORMATS)}, got {fmt!r}")
     import matplotlib
 
+    _freeze_layout(fig)
     buf = io.BytesIO()
     if fmt == "svg":
-        with matplotlib.rc_context({"svg.hashsalt": "wmrid"}):
+        with matplotlib.rc_context({"svg.hashsalt": "wmrid", "svg.fonttype": "none"}):
             fig.savefig(buf, format="svg", metadata={"Date": None})
     else:
         fig.savefig(buf, format="png", dpi=PNG_DPI, metadata={"Software": None})
@@ -142,7 +171,7 @@ def build_log_overview(log: Any) -> Figure:
     tau = np.asarray(log.tau, dtype=np.float64)
     unit = getattr(log, "effort_unit", "N m")
     t = t - t[0]
-    fig = _new_figure()
+    fig = _new_figure(FIGSIZE_STACKED)
     ax_tau, ax_eta = fig.subplots(2, 1, sharex=True)
     for j, (wheel, colour) in enumerate(_WHEELS):
         _plot(ax_tau, t, tau[:, j], color=colour, lw=0.9, label=f"{wheel} wheel")
@@ -156,7 +185,6 @@ def build_log_overview(log: Any) -> Figure:
     handles, labels = ax_tau.get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", fontsize="small", ncols=2)
     ax_eta.set_xlim(t[0], t[-1])
-    fig.suptitle(f"Wheel {what}s and speeds: {getattr(log, 'source', 'log')}")
     return fig
 
 
@@ -192,7 +220,6 @@ def build_path_figure(pose: np.ndarray | None) -> Figure | None:
     ax.set_ylabel("y (m)")
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize="small")
-    ax.set_title("Path in the plane")
     return fig
 
 
@@ -273,6 +300,7 @@ def build_estimates_figure(
     """
     if error_mode and truth is None:
         raise UsageError("the estimation-error figure needs the true parameters (truth)")
+    from matplotlib.lines import Line2D
     from matplotlib.ticker import MaxNLocator
 
     h = result.history
@@ -282,7 +310,7 @@ def build_estimates_figure(
     theta_true = true_theta(truth, form) if truth is not None else None
     units = theta_units(form, result.log_info.get("effort_unit", "N m"))
     t = np.asarray(h.t, dtype=np.float64)
-    fig = _new_figure((1.9 * p, 5.0))
+    fig = _new_figure((max(FIGSIZE[0], 1.45 * p), 5.6))
     axes = fig.subplots(2, p, sharex=True, squeeze=False)
     symbol = r"\tilde\theta" if error_mode else r"\hat\theta"
     for i in range(2):
@@ -313,12 +341,9 @@ def build_estimates_figure(
     if len(t) > 1:
         axes[0, 0].set_xlim(t[0], t[-1])
     handles, labels = axes[0, 0].get_legend_handles_labels()
+    handles.append(Line2D([], [], ls="none"))  # a text-only entry: what the rows are
+    labels.append("row i: wheel i (1 = right, 2 = left)")
     fig.legend(handles, labels, loc="outside lower center", ncols=len(labels), fontsize="small")
-    kind = "Estimation errors θ̂ − θ" if error_mode else "Estimates θ̂"
-    fig.suptitle(
-        f"{kind} of the intermediate parameters over time (row i: wheel i, 1 = right, 2 = left; "
-        f"{form.kind} form, k = {result.settings.k:g} 1/s): {result.source}"
-    )
     return fig
 
 
@@ -403,7 +428,6 @@ def build_residuals_figure(result: IdentificationResult) -> Figure:
     ax_h.set_title("distribution")
     for ax in (ax_t, ax_h):
         ax.grid(alpha=0.3)
-    fig.suptitle(f"Prediction errors of the wheel speeds: {result.source}")
     return fig
 
 
@@ -453,10 +477,256 @@ def build_excitation_figure(result: IdentificationResult) -> Figure:
         ax.set_xlim(t[0], t[-1])
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right", fontsize="small")
-    ax.set_title(f"Excitation: smallest eigenvalue of the information matrix Γ: {result.source}")
+    ax.set_title("smallest eigenvalue of the information matrix Γ")
     return fig
 
 
 def excitation_figure(result: IdentificationResult, fmt: str = "svg") -> bytes:
     """:func:`build_excitation_figure` rendered as ``fmt`` bytes."""
     return render(build_excitation_figure(result), fmt)
+
+
+# --------------------------------------------------------------------------------------------------
+# 6. Base parameters over time
+
+
+def _zoom_limits(
+    t: np.ndarray, est: np.ndarray, marks: np.ndarray, settled: float = 0.7
+) -> tuple[float, float, bool] | None:
+    """y limits (lo, hi, clipped) showing ``marks`` (final value, its band, truth) and the settled estimate.
+
+    The settled part is the estimate over the last ``settled`` fraction of the time.  When the early
+    transient reaches more than twice as far as that range, the axis shows the range, padded by 10 %
+    each side, and clipped is True (some of the estimate leaves the panel); otherwise it shows everything.
+    None when there is nothing finite to show.
+    """
+    ok = np.isfinite(est)
+    marks = marks[np.isfinite(marks)]
+    late = ok & (t >= t[-1] - settled * (t[-1] - t[0])) if len(t) else ok
+    core = np.concatenate([marks, est[late]])
+    if len(core) == 0:
+        return None
+    every = np.concatenate([core, est[ok]])
+
+    def padded(values: np.ndarray) -> tuple[float, float]:
+        lo, hi = float(values.min()), float(values.max())
+        pad = 0.1 * (hi - lo) if hi > lo else max(0.05 * abs(hi), 1e-12)
+        return lo - pad, hi + pad
+
+    lo, hi = padded(core)
+    if float(every.max() - every.min()) <= 2.0 * (hi - lo):
+        return (*padded(every), False)
+    return lo, hi, True
+
+
+def _truth_table(truth: Mapping[str, Any] | None) -> Mapping[str, Any]:
+    if truth is None:
+        return {}
+    return truth["parameters"] if isinstance(truth.get("parameters"), Mapping) else truth
+
+
+def _finite(x: Any) -> float:
+    """``x`` as a float, NaN when it is None, not a number, or infinite."""
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return math.nan
+    return v if math.isfinite(v) else math.nan
+
+
+def build_base_convergence_figure(
+    result: IdentificationResult, truth: Mapping[str, float] | None = None
+) -> Figure | None:
+    """The base parameters over time, one panel each (2 rows), converging to the final estimate.
+
+    Each point of the recorded history theta(t) is turned into base parameters by the closed form
+    :func:`wmrid.model.base_params.direct_recovery` (the start of the reported fit).  The final
+    estimate (``result.parameters``) is a horizontal line with its +-2 std band (no band when the std is
+    undefined), the truth (``truth``: {name: value}, or a truth file with a "parameters" table) a
+    dotted black line.  A panel whose early transient would flatten the rest is zoomed on the band, the
+    truth and the last 70 % of the estimate (its title says "zoomed"; :func:`_zoom_limits`).
+    None when the result has no history.
+    """
+    from wmrid.model.base_params import direct_recovery
+
+    h = result.history
+    if h is None:
+        return None
+    form = result.form
+    names = form.base_names
+    t = np.asarray(h.t, dtype=np.float64)
+    theta = np.asarray(h.theta, dtype=np.float64)
+    with np.errstate(all="ignore"):
+        base = np.array([direct_recovery(th, form) for th in theta]).reshape(len(theta), len(names))
+    table = _truth_table(truth)
+    ncols = max(4, -(-len(names) // 2))
+    fig = _new_figure((max(FIGSIZE[0], 2.3 * ncols), 5.8))
+    axes = fig.subplots(2, ncols, sharex=True, squeeze=False)
+    for ax in axes.flat[len(names) :]:  # unused panels
+        ax.remove()
+    for j, name in enumerate(names):
+        ax = axes.flat[j]
+        est = base[:, j]
+        value, std = result.parameters.get(name, (math.nan, math.nan))
+        value, std = _finite(value), _finite(std)
+        band = math.isfinite(value) and math.isfinite(std) and std >= 0.0
+        true = _finite(table.get(name))
+        marks = [value] + ([value - 2.0 * std, value + 2.0 * std] if band else []) + [true]
+        limits = _zoom_limits(t, est, np.array(marks))
+        scale, prefix = _display_scale(np.array(limits[:2]) if limits else np.append(est, marks))
+        _plot(ax, t, est / scale, color="C0", lw=1.2, label="estimate (closed form)")
+        if band:
+            lo, hi = (value - 2.0 * std) / scale, (value + 2.0 * std) / scale
+            ax.axhspan(lo, hi, color="C3", alpha=0.18, lw=0, label="final ± 2σ")
+        if math.isfinite(value):
+            ax.axhline(value / scale, color="C3", lw=1.2, label="final estimate")
+        if math.isfinite(true):
+            ax.axhline(true / scale, color="k", ls=":", lw=1.4, label="true value")
+        zoomed = bool(limits and limits[2])
+        ax.set_title(name + (" (zoomed)" if zoomed else ""))
+        if limits:
+            ax.set_ylim(limits[0] / scale, limits[1] / scale)
+        ax.set_ylabel(f"{prefix}{result.units.get(name, '')}", labelpad=2)
+        ax.ticklabel_format(axis="y", useMathText=True)  # a zoomed panel's offset as "×10⁻⁶ + 0.24"
+        ax.grid(alpha=0.3)
+        if j >= len(names) - ncols:  # no panel below: this one shows the time axis
+            ax.xaxis.set_tick_params(labelbottom=True)
+            ax.set_xlabel("time (s)")
+    if len(t) > 1:
+        axes[0, 0].set_xlim(t[0], t[-1])
+    entries: dict[str, Any] = {}
+    for ax in fig.axes:
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            entries.setdefault(label, handle)
+    fig.legend(list(entries.values()), list(entries), loc="outside lower center", ncols=len(entries))
+    return fig
+
+
+def base_convergence_figure(
+    result: IdentificationResult, truth: Mapping[str, float] | None = None, fmt: str = "svg"
+) -> bytes | None:
+    """:func:`build_base_convergence_figure` rendered as ``fmt`` bytes; None when the result has no history."""
+    fig = build_base_convergence_figure(result, truth)
+    return None if fig is None else render(fig, fmt)
+
+
+# --------------------------------------------------------------------------------------------------
+# 7. Measured and predicted wheel speeds
+
+
+def _fit_text(fit: Any) -> str:
+    v = _finite(fit)
+    return f"{v:.3g} %" if math.isfinite(v) else "—"
+
+
+def build_speed_fit_figure(
+    t: np.ndarray | None, eta: np.ndarray | None, eta_hat: np.ndarray | None, fit: Any
+) -> Figure | None:
+    """Measured and model-predicted wheel speeds, right wheel above, left below; None when data are missing.
+
+    t (n,) s, eta and eta_hat (n, 2) rad/s (column 0 right, 1 left), fit (2,) percent (each panel's
+    title; "—" when not finite).  The measured speed is drawn in the wheel's colour, the model's in
+    black dashed.
+    """
+    if t is None or eta is None or eta_hat is None:
+        return None
+    t = np.asarray(t, dtype=np.float64)
+    eta = np.asarray(eta, dtype=np.float64)
+    eta_hat = np.asarray(eta_hat, dtype=np.float64)
+    if t.ndim != 1 or eta.shape != (len(t), 2) or eta_hat.shape != eta.shape:
+        raise UsageError(
+            f"the speed fit needs t (n,), eta and eta_hat (n, 2), got {t.shape}, {eta.shape} and {eta_hat.shape}"
+        )
+    fits = [math.nan, math.nan] if fit is None else list(np.ravel(np.asarray(fit, dtype=object)))
+    if len(fits) != 2:
+        raise UsageError(f"the speed fit needs one fit per wheel (2,), got {len(fits)}")
+    fig = _new_figure(FIGSIZE_STACKED)
+    axes = fig.subplots(2, 1, sharex=True)
+    for j, (wheel, colour) in enumerate(_WHEELS):
+        ax = axes[j]
+        _plot(ax, t, eta[:, j], color=colour, lw=1.1, label="measured")
+        _plot(ax, t, eta_hat[:, j], color="k", ls="--", lw=1.0, label="model")
+        ax.set_title(f"{wheel} wheel: fit {_fit_text(fits[j])}")
+        ax.set_ylabel("speed (rad/s)")
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper right")
+    axes[1].set_xlabel("time (s)")
+    if len(t) > 1:
+        axes[1].set_xlim(t[0], t[-1])
+    return fig
+
+
+def speed_fit_figure(
+    t: np.ndarray | None, eta: np.ndarray | None, eta_hat: np.ndarray | None, fit: Any, fmt: str = "svg"
+) -> bytes | None:
+    """:func:`build_speed_fit_figure` rendered as ``fmt`` bytes; None when data are missing."""
+    fig = build_speed_fit_figure(t, eta, eta_hat, fit)
+    return None if fig is None else render(fig, fmt)
+
+
+# --------------------------------------------------------------------------------------------------
+# 8. Correlations of the base parameters
+
+
+def correlation_matrix(cov: Any) -> np.ndarray:
+    """corr_ij = cov_ij / sqrt(cov_ii cov_jj) of a (k, k) covariance; NaN where undefined.
+
+    An entry is undefined when it is None, NaN or infinite, or when either variance is (or is not > 0).
+    """
+    c = np.array([[_finite(v) for v in row] for row in cov], dtype=np.float64)
+    if c.ndim != 2 or c.shape[0] != c.shape[1]:
+        raise UsageError(f"a covariance must be square (k, k), got {c.shape}")
+    d = np.diag(c).copy()
+    ok = np.isfinite(d) & (d > 0.0)
+    d[~ok] = math.nan
+    with np.errstate(all="ignore"):
+        return c / np.sqrt(np.outer(d, d))
+
+
+def build_correlation_figure(names: Any, cov: Any) -> Figure | None:
+    """The correlations of the base parameters as an annotated heat map; None when fewer than 2 names.
+
+    names : (k,) parameter names; cov : (k, k) their covariance, None/NaN where undefined (those cells
+    are grey and marked "—").  Colours from -1 (blue) to +1 (red); each cell shows its value.
+    """
+    import matplotlib
+    from matplotlib.colors import Normalize
+
+    names = [str(n) for n in names]
+    k = len(names)
+    if k < 2:
+        return None
+    corr = correlation_matrix(cov)
+    if corr.shape != (k, k):
+        raise UsageError(f"a covariance of {k} parameters must be ({k}, {k}), got {corr.shape}")
+    cmap = matplotlib.colormaps["RdBu_r"].with_extremes(bad="0.75")
+    norm = Normalize(vmin=-1.0, vmax=1.0)
+    fig = _new_figure((FIGSIZE[0], max(FIGSIZE[1], 0.5 * k + 1.6)))
+    ax = fig.subplots()
+    edges = np.arange(k + 1) - 0.5
+    mesh = ax.pcolormesh(edges, edges, np.ma.masked_invalid(corr), cmap=cmap, norm=norm)
+    ax.set_facecolor("0.75")
+    for i in range(k):
+        for j in range(k):
+            v = corr[i, j]
+            if math.isfinite(v):
+                r, g, b, _ = cmap(norm(v))
+                colour = "white" if 0.299 * r + 0.587 * g + 0.114 * b < 0.5 else "black"
+                text = f"{v:.2f}".replace("-", "−").replace("−0.00", "0.00")
+            else:
+                colour, text = "black", "—"
+            ax.text(j, i, text, ha="center", va="center", color=colour)
+    ax.set_xlim(edges[0], edges[-1])
+    ax.set_ylim(edges[-1], edges[0])  # first parameter at the top
+    ax.set_aspect("equal")
+    ax.set_xticks(range(k), names)
+    ax.set_yticks(range(k), names)
+    ax.tick_params(length=0)
+    fig.colorbar(mesh, ax=ax, label="correlation")
+    return fig
+
+
+def correlation_figure(names: Any, cov: Any, fmt: str = "svg") -> bytes | None:
+    """:func:`build_correlation_figure` rendered as ``fmt`` bytes; None when fewer than 2 names."""
+    fig = build_correlation_figure(names, cov)
+    return None if fig is None else render(fig, fmt)

@@ -62,6 +62,9 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         rows = [[name, _fmt(value), _fmt(std, 2), PAYLOAD_UNITS[name]] for name, (value, std) in result.payload.items()]
         print_table(console, ["quantity", "estimate", "std", "unit"], rows,
                     title="payload (against the unloaded robot)", numeric=(1, 2))  # fmt: skip
+        from wmrid.model.payload import payload_statement
+
+        console.print(payload_statement(result.payload))
     if impossible:
         console.print(
             "✗ impossible for a physical robot (" + ", ".join(sorted(impossible)) + "): see the warnings",
@@ -200,6 +203,8 @@ def print_report(report: Any, console: Any) -> None:
         if not table:
             continue
         console.print()
+        if table.get("statement"):
+            console.print(table["statement"])
         rows = [[str(c) for c in row] for row in table["rows"]]
         print_table(console, [str(h) for h in table["header"]], rows, title=title,
                     numeric=tuple(i for i, h in enumerate(table["header"]) if i and h != "unit"))  # fmt: skip

@@ -53,7 +53,11 @@ class Report:
     residuals: dict[str, Any]
     figures: dict[str, bytes] = field(default_factory=dict)  # name -> SVG bytes
     figures_png: dict[str, bytes] = field(default_factory=dict)
+    figure_notes: dict[str, str] = field(default_factory=dict)  # name -> one sentence under its title
     result: dict[str, Any] = field(default_factory=dict)
+    #: How the report was made: wmrid's version, time, command, options, inputs with their SHA-256
+    #: (:func:`wmrid.api.reporting.report`).
+    provenance: dict[str, Any] = field(default_factory=dict)
     #: The live identification and its log when the report was made from a log (None from a saved result).
     identification: Any = field(default=None, repr=False, compare=False)
     log: Any = field(default=None, repr=False, compare=False)
@@ -77,6 +81,19 @@ def torque_residual(log: Any, theta0: np.ndarray, form: RegressorForm | None = N
     }
 
 
+def _interval(value: float, half: float) -> str:
+    """'lo … hi' with the digits that tell the two ends apart (two significant digits of the half-width)."""
+    digits = 6
+    if half > 0 and value != 0:
+        digits = max(digits, min(16, math.ceil(math.log10(abs(value) / half)) + 2))
+    return f"{value - half:.{digits}g} … {value + half:.{digits}g}"
+
+
+def _num(x: Any) -> float:
+    """A reference value as a float, NaN where there is none (None: unknown)."""
+    return math.nan if x is None else float(x)
+
+
 def _pct(value: float, truth: float) -> float:
     return 100.0 * abs(value - truth) / abs(truth) if truth else math.nan
 
@@ -96,8 +113,10 @@ def build_report(
     log: Any = None,
     truth: dict[str, float] | None = None,
     figures: bool = True,
+    validation_log: Any = None,
 ) -> Report:
-    """A report from an identify JSON document ``data`` (and the live ``result``/``log`` when available)."""
+    """A report from an identify JSON document ``data`` (and the live ``result``/``log`` when available;
+    ``validation_log``: the ``--validate`` log in memory, for its measured and predicted speeds)."""
     rl = result if result is not None else from_dict(data, data.get("source") or "?")
     form = rl.form
     names = form.theta_names()
@@ -113,9 +132,8 @@ def build_report(
     ref_theta = true_theta_row = None
     # A caster-drag parameter the reference or truth does not give is NaN: its intermediate parameters show "—".
     if reference is not None:
-        ref_theta = model.intermediate_parameters(
-            np.array([reference.get(n, math.nan) for n in form.base_names]), form
-        ).ravel()
+        ref_base = np.array([_num(reference.get(n)) for n in form.base_names])
+        ref_theta = model.intermediate_parameters(ref_base, form).ravel()
     if truth is not None:
         true_theta_row = model.intermediate_parameters(
             np.array([truth.get(n, math.nan) for n in form.base_names]), form
@@ -137,10 +155,10 @@ def build_report(
     intermediate = {"header": header, "rows": rows}
 
     # Table 3: base parameters, with the comparison against nominal and CAD
-    header = (
-        ["parameter", "unit"] + (["nominal"] if nominal else []) + (["CAD", "(est − CAD)/std"] if reference else [])
-    )
-    header += ["estimate", "std"] + (["true", "error %", "(est − true)/std"] if truth else [])
+    factor = data["diagnostics"]["uncertainty"]["interval_factor"]["95%"]
+    header = ["parameter", "unit", "estimate", "std", "95 % interval"]
+    header += (["nominal"] if nominal else []) + (["CAD", "(est − CAD)/std"] if reference else [])
+    header += ["true", "error %", "(est − true)/std"] if truth else []
     rows = []
     flagged = []
     inflated = set(data["diagnostics"].get("inflated", []))
@@ -148,20 +166,21 @@ def build_report(
     warned = any("!" in mark for mark in marks.values())
     for name, entry in params.items():
         value, std = entry["value"], entry["std"]
-        row = [name, entry["unit"]]
+        known_std = std is not None and math.isfinite(std)
+        interval = _interval(value, factor * std) if known_std else "—"
+        row = [name, entry["unit"], _fmt(value), _fmt(std, 2) + (f" {marks[name]}" if marks[name] else ""), interval]
         if nominal:
             row.append(_fmt(nominal.get(name)))
         if reference:
-            ref = reference.get(name, math.nan)  # no CAD value of a caster's drag
-            z = (value - ref) / std if std else math.nan
+            ref = _num(reference.get(name))  # no CAD value of a caster's drag, nor of a URDF's friction
+            z = (value - ref) / std if known_std and std else math.nan
             mark = " ⚑" if math.isfinite(z) and abs(z) > SIGNIFICANT else ""
             if mark:
                 flagged.append(f"{name} differs from its CAD value by {z:+.1f} std")
             row += [_fmt(ref), f"{z:+.1f}{mark}" if math.isfinite(z) else "—"]
-        row += [_fmt(value), _fmt(std, 2) + (f" {marks[name]}" if marks[name] else "")]
         if truth:
             t = truth.get(name)
-            zt = (value - t) / std if (t is not None and std) else math.nan
+            zt = (value - t) / std if (t is not None and known_std and std) else math.nan
             row += [
                 _fmt(t),
                 _fmt(_pct(value, t), 3) if t is not None else "—",
@@ -172,9 +191,13 @@ def build_report(
 
     payload = None
     if "payload" in data:
+        from wmrid.model.payload import payload_statement
+
+        verdict = payload_statement({k: (v["value"], _num(v["std"])) for k, v in data["payload"].items()})
         payload = {
             "header": ["quantity", "estimate", "std", "unit"],
             "rows": [[k, _fmt(v["value"]), _fmt(v["std"], 2), v["unit"]] for k, v in data["payload"].items()],
+            "statement": verdict[0].upper() + verdict[1:] + ".",
         }
 
     diag = data["diagnostics"]
@@ -274,77 +297,154 @@ def build_report(
         notes=list(data["log"].get("notes", [])), residuals=residuals, result=data,
     )  # fmt: skip
     if figures:
-        _add_figures(report, rl, log, truth)
+        _add_figures(report, rl, log, truth, validation_log)
     return report
 
 
-def _add_figures(report: Report, rl: Any, log: Any, truth: dict[str, float] | None) -> None:
+def _speed_fit(log: Any, theta0: np.ndarray, form: Any, torque_hold: str) -> tuple[np.ndarray, dict[str, Any]]:
+    """The model's simulated wheel speeds on ``log`` (from its first speed, driven by its efforts) and their fit
+    (:func:`wmrid.model.predict.validation_fit`'s)."""
+    from wmrid.model.predict import fit_percent, predictor_text, simulate_speeds
+
+    t, eta = np.asarray(log.t, dtype=float), np.asarray(log.eta, dtype=float)
+    eta_hat = simulate_speeds(t, np.asarray(log.tau, dtype=float), theta0, eta[0], torque_hold=torque_hold, form=form)
+    return eta_hat, {"fit": fit_percent(eta, eta_hat), "predictor": predictor_text(torque_hold, form)}
+
+
+def _add_figures(report: Report, rl: Any, log: Any, truth: dict[str, float] | None, validation_log: Any) -> None:
+    """The report's figures, each under a short title with a sentence saying what it shows (``figure_notes``)."""
     from wmrid.reporting import figures as fg
 
-    def both(name: str, fig: Any) -> None:
+    def both(name: str, fig: Any, note: str) -> None:
         if fig is None:
             return
         report.figures[name] = fg.render(fig, "svg")
         report.figures_png[name] = fg.render(fig, "png")
+        report.figure_notes[name] = note
 
-    if log is not None:
-        both("Wheel torques and speeds (paper Fig. 6)", fg.build_log_overview(log))
-        if getattr(log, "pose", None) is not None:
-            both("Path (paper Fig. 5)", fg.build_path_figure(log.pose))
+    data = report.result
+    params = data["parameters"]
+    theta0 = np.array([params[n]["value"] for n in rl.form.base_names])
+    hold = data.get("settings", {}).get("torque_hold", "zoh")
     if rl.history is not None:
-        both("Estimates over time", fg.build_estimates_figure(rl, truth))
+        both("Base parameters over time", fg.build_base_convergence_figure(rl, truth),
+             "Each base parameter recovered (Eq. 21, in closed form) from the observer's intermediate estimates as "
+             "the log is replayed; the band is the final estimate ± 2σ.")  # fmt: skip
+    for which, wheel_log in (("identification", log), ("validation", validation_log)):
+        if wheel_log is None or not np.all(np.isfinite(theta0)):
+            continue
+        eta_hat, fit = _speed_fit(wheel_log, theta0, rl.form, hold)
+        title = "Measured and predicted wheel speeds" + (" (validation log)" if which == "validation" else "")
+        figure = fg.build_speed_fit_figure(np.asarray(wheel_log.t), np.asarray(wheel_log.eta), eta_hat, fit["fit"])
+        note = (
+            f"On the {which} log ({getattr(wheel_log, 'source', '')}): fit {_fmt(fit['fit'][0], 3)} % right, "
+            f"{_fmt(fit['fit'][1], 3)} % left (100 (1 − ‖η − η̂‖ / ‖η − mean η‖)); {fit['predictor']}."
+        )
+        both(title, figure, note)
+    estimate = data.get("estimate")
+    if estimate and estimate.get("covariance"):
+        cov = np.array([[math.nan if v is None else v for v in row] for row in estimate["covariance"]], dtype=float)
+        both("Parameter correlations", fg.build_correlation_figure(list(estimate["names"]), cov),
+             "Correlations of the base parameters' estimates (from their covariance): near ±1, the log moves the "
+             "two together and tells them apart poorly.")  # fmt: skip
+    if log is not None:
+        both("Wheel efforts and speeds (paper Fig. 6)", fg.build_log_overview(log), "The log as read.")
+        if getattr(log, "pose", None) is not None:
+            both("Path (paper Fig. 5)", fg.build_path_figure(log.pose), "The robot's path in the plane.")
+    if rl.history is not None:
+        both("Intermediate parameters over time", fg.build_estimates_figure(rl, truth),
+             f"The observer's estimates θ̂ of Eqs. 23-24 (row i: wheel i, 1 = right, 2 = left; {rl.form.kind} form, "
+             f"k = {rl.settings.k:g} 1/s).")  # fmt: skip
         if truth is not None:
-            both("Estimation errors over time (paper Fig. 7)", fg.build_estimates_figure(rl, truth, error_mode=True))
-        both("Prediction error (residuals)", fg.build_residuals_figure(rl))
-        both("Excitation: λ_min(Γ) over time", fg.build_excitation_figure(rl))
+            both("Estimation errors over time (paper Fig. 7)", fg.build_estimates_figure(rl, truth, error_mode=True),
+                 "θ̂ − θ of the intermediate parameters against the truth.")  # fmt: skip
+        both("Prediction errors", fg.build_residuals_figure(rl),
+             "The estimator's prediction errors of the wheel speeds, over time and their distribution.")  # fmt: skip
+        both("Excitation: λ_min(Γ) over time", fg.build_excitation_figure(rl),
+             "The smallest eigenvalue of the information matrix Γ: the data outweigh the start value once it is "
+             "well above α.")  # fmt: skip
 
 
 # --------------------------------------------------------------------------------------------------
 # Rendering
 
 _CSS = """
-body{font-family:system-ui,sans-serif;max-width:1200px;margin:2em auto;color:#222;padding:0 1em}
-table{border-collapse:collapse;margin:0.5em 0 1.5em}
-th,td{padding:0.25em 0.7em;border-bottom:1px solid #ddd;text-align:right}
-th:first-child,td:first-child{text-align:left}th{background:#f4f4f4}figure{margin:1.5em 0}
-figcaption{font-weight:600}svg{max-width:100%;height:auto}li{margin:0.2em 0}.small{color:#555;font-size:0.9em}
+*{box-sizing:border-box}
+body{font-family:system-ui,sans-serif;max-width:1200px;margin:1.5em auto;color:#222;padding:0 1em;line-height:1.4}
+header .path{font-family:ui-monospace,monospace;font-size:0.9em;overflow-wrap:anywhere;color:#444}
+.scroll{overflow-x:auto;max-width:100%;margin:0.5em 0 1.5em}
+table{border-collapse:collapse}
+th,td{padding:0.25em 0.7em;border-bottom:1px solid #ddd;text-align:right;white-space:nowrap}
+th:first-child,td:first-child{text-align:left}th{background:#f4f4f4}
+td.wrap{white-space:normal;overflow-wrap:anywhere;text-align:left}
+figure{margin:1.5em 0}figcaption{font-weight:600}figcaption .note{font-weight:400;color:#444}
+figure svg{width:100%;height:auto}li{margin:0.2em 0}.small{color:#555;font-size:0.9em}
+code{font-family:ui-monospace,monospace;overflow-wrap:anywhere}
 """
 
 
 def _html_table(table: dict[str, Any]) -> str:
+    """A table in a box that scrolls sideways when the page is narrower (cells never break a number)."""
     head = "".join(f"<th>{html.escape(str(h))}</th>" for h in table["header"])
     body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in row) + "</tr>" for row in table["rows"])
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+    return f"<div class='scroll'><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div>"
 
 
 def to_html(report: Report) -> str:
-    """One self-contained HTML page (inline SVG figures, no external resources)."""
+    """One self-contained HTML page: inline SVG figures (text kept as text), inline style, nothing fetched."""
+    source = str(report.result.get("source", "?"))
     parts = [
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>",
+        "<meta name='viewport' content='width=device-width, initial-scale=1'>",
         f"<title>{html.escape(report.title)}</title><style>{_CSS}</style></head><body>",
-        f"<h1>{html.escape(report.title)}</h1>",
+        f"<header><h1>wmrid report</h1><p class='path'>{html.escape(source)}</p>",
         *[f"<p class='small'>{html.escape(s)}</p>" for s in report.summary],
+        "</header>",
         "<h2>Base parameters (paper Table 3)</h2>",
         _html_table(report.base),
-        "<h2>Intermediate parameters (paper Table 2)</h2>",
-        _html_table(report.intermediate),
     ]
     if report.payload:
-        parts += ["<h2>Payload</h2>", _html_table(report.payload)]
+        parts += ["<h2>Payload</h2>", f"<p>{html.escape(report.payload['statement'])}</p>", _html_table(report.payload)]
     parts += ["<h2>Diagnostics</h2><ul>", *[f"<li>{html.escape(s)}</li>" for s in report.diagnostics], "</ul>"]
     if report.residuals:
         parts.append(
             "<h2>Residuals</h2><ul>" + "".join(f"<li>{html.escape(s)}</li>" for s in residual_lines(report)) + "</ul>"
         )
+    if report.figures:
+        parts.append("<h2>Figures</h2>")
     for name, svg in report.figures.items():
         text = svg.decode("utf-8")
         text = text[text.index("<svg") :] if "<svg" in text else text
         text = re.sub(r"<metadata>.*?</metadata>", "", text, flags=re.S)  # RDF/creator block: not needed inline
-        parts.append(f"<figure><figcaption>{html.escape(name)}</figcaption>{text}</figure>")
+        note = report.figure_notes.get(name, "")
+        caption = html.escape(name) + (f" <span class='note'>— {html.escape(note)}</span>" if note else "")
+        parts.append(f"<figure><figcaption>{caption}</figcaption>{text}</figure>")
+    parts += ["<h2>Intermediate parameters (paper Table 2)</h2>", _html_table(report.intermediate)]
     if report.notes:
         parts += ["<h2>Notes on the log</h2><ul>", *[f"<li>{html.escape(n)}</li>" for n in report.notes], "</ul>"]
+    parts += _html_provenance(report.provenance)
     parts.append("</body></html>")
     return "\n".join(parts)
+
+
+def _html_provenance(prov: dict[str, Any]) -> list[str]:
+    """The reproducibility block: version, time, command, options, inputs with their SHA-256."""
+    if not prov:
+        return []
+    rows = [("wmrid", prov.get("wmrid", "?")), ("made (UTC)", prov.get("made_utc", "?")),
+            ("command", prov.get("command", "?"))]  # fmt: skip
+    rows += [(f"option {k}", repr(v) if not isinstance(v, str) else v) for k, v in prov.get("options", {}).items()]
+    out = ["<h2 id='reproducibility'>Reproducibility</h2>", "<div class='scroll'><table class='provenance'><tbody>"]
+    out += [f"<tr><th>{html.escape(k)}</th><td class='wrap'><code>{html.escape(str(v))}</code></td></tr>"
+            for k, v in rows]  # fmt: skip
+    out.append("</tbody></table></div>")
+    if prov.get("inputs"):
+        out.append("<div class='scroll'><table class='inputs'><thead><tr><th>input</th><th>bytes</th><th>SHA-256</th>"
+                   "</tr></thead><tbody>")  # fmt: skip
+        out += [f"<tr><td class='wrap'><code>{html.escape(i['path'])}</code></td><td>{i['bytes']:,}</td>"
+                f"<td class='wrap'><code>{i['sha256']}</code></td></tr>" for i in prov["inputs"]]  # fmt: skip
+        out.append("</tbody></table></div>")
+    return out
 
 
 def _md_table(table: dict[str, Any]) -> str:
@@ -384,14 +484,24 @@ def to_markdown(report: Report) -> str:
     ]
     parts += ["", "## Intermediate parameters (paper Table 2)", "", _md_table(report.intermediate)]
     if report.payload:
-        parts += ["", "## Payload", "", _md_table(report.payload)]
+        parts += ["", "## Payload", "", report.payload["statement"], "", _md_table(report.payload)]
     parts += ["", "## Diagnostics", "", *[f"- {s}" for s in report.diagnostics]]
     if report.residuals:
         parts += ["", "## Residuals", "", *[f"- {s}" for s in residual_lines(report)]]
     for name, png in report.figures_png.items():
-        parts += ["", f"### {name}", "", f"![{name}](data:image/png;base64,{base64.b64encode(png).decode()})"]
+        note = report.figure_notes.get(name)
+        parts += ["", f"### {name}", "", *([note, ""] if note else []),
+                  f"![{name}](data:image/png;base64,{base64.b64encode(png).decode()})"]  # fmt: skip
     if report.notes:
         parts += ["", "## Notes on the log", "", *[f"- {n}" for n in report.notes]]
+    prov = report.provenance
+    if prov:
+        parts += ["", "## Reproducibility", "", f"- wmrid {prov['wmrid']}, made {prov['made_utc']} (UTC)",
+                  f"- command: `{prov['command']}`"]  # fmt: skip
+        parts += [f"- option {k}: `{v!r}`" for k, v in prov.get("options", {}).items()]
+        parts += [
+            f"- input `{i['path']}`: {i['bytes']:,} bytes, SHA-256 `{i['sha256']}`" for i in prov.get("inputs", [])
+        ]
     return "\n".join(parts) + "\n"
 
 
@@ -403,5 +513,5 @@ def to_json_dict(report: Report) -> dict[str, Any]:
     return {
         "title": report.title, "base": report.base, "intermediate": report.intermediate, "payload": report.payload,
         "diagnostics": report.diagnostics, "residuals": residuals, "notes": report.notes,
-        "result": report.result,
+        "result": report.result, "provenance": report.provenance,
     }  # fmt: skip

@@ -1,0 +1,36 @@
+"""What a report records of its inputs: each file's size and SHA-256, so that a colleague can check that the
+report was made from the log they have.  A folder (a rosbag2 recording) is every file in it, in name order."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+from typing import Any
+
+#: Bytes read at a time while hashing (memory stays at one block, whatever the file's size).
+BLOCK = 1 << 20
+
+
+def file_digests(paths: str | os.PathLike[str] | list[Any], data: bytes | None = None) -> list[dict[str, Any]]:
+    """[{"path", "bytes", "sha256"}] of ``paths`` (a file, a folder, several; "-" standard input, whose bytes
+    ``data`` are then hashed, or an empty list when they were not kept)."""
+    items = [paths] if isinstance(paths, (str, os.PathLike)) else list(paths)
+    out = []
+    for item in items:
+        name = os.fspath(item)
+        if name == "-":
+            if data is not None:
+                out.append({"path": "-", "bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()})
+            continue
+        path = Path(name)
+        files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+        for f in files:
+            digest = hashlib.sha256()
+            size = 0
+            with open(f, "rb") as fh:
+                while block := fh.read(BLOCK):
+                    digest.update(block)
+                    size += len(block)
+            out.append({"path": str(f), "bytes": size, "sha256": digest.hexdigest()})
+    return out
