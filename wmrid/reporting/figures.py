@@ -556,6 +556,9 @@ def build_base_convergence_figure(
     names = form.base_names
     t = np.asarray(h.t, dtype=np.float64)
     theta = np.asarray(h.theta, dtype=np.float64)
+    if len(t) > MAX_POINTS // 2:  # recovered at evenly spaced points (the last included): a line's display budget
+        keep = np.unique(np.linspace(0, len(t) - 1, MAX_POINTS // 2).round().astype(int))
+        t, theta = t[keep], theta[keep]
     with np.errstate(all="ignore"):
         base = np.array([direct_recovery(th, form) for th in theta]).reshape(len(theta), len(names))
     table = _truth_table(truth)

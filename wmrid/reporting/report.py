@@ -112,11 +112,12 @@ def build_report(
     result: Any = None,
     log: Any = None,
     truth: dict[str, float] | None = None,
-    figures: bool = True,
+    figures: bool | tuple[str, ...] = True,
     validation_log: Any = None,
 ) -> Report:
     """A report from an identify JSON document ``data`` (and the live ``result``/``log`` when available;
-    ``validation_log``: the ``--validate`` log in memory, for its measured and predicted speeds)."""
+    ``validation_log``: the ``--validate`` log in memory, for its measured and predicted speeds).  ``figures``:
+    True for SVG and PNG, False for none, or the formats to render ("svg" for HTML, "png" for Markdown)."""
     rl = result if result is not None else from_dict(data, data.get("source") or "?")
     form = rl.form
     names = form.theta_names()
@@ -297,7 +298,8 @@ def build_report(
         notes=list(data["log"].get("notes", [])), residuals=residuals, result=data,
     )  # fmt: skip
     if figures:
-        _add_figures(report, rl, log, truth, validation_log)
+        formats = ("svg", "png") if figures is True else tuple(figures)
+        _add_figures(report, rl, log, truth, validation_log, formats)
     return report
 
 
@@ -311,15 +313,21 @@ def _speed_fit(log: Any, theta0: np.ndarray, form: Any, torque_hold: str) -> tup
     return eta_hat, {"fit": fit_percent(eta, eta_hat), "predictor": predictor_text(torque_hold, form)}
 
 
-def _add_figures(report: Report, rl: Any, log: Any, truth: dict[str, float] | None, validation_log: Any) -> None:
-    """The report's figures, each under a short title with a sentence saying what it shows (``figure_notes``)."""
+def _add_figures(
+    report: Report, rl: Any, log: Any, truth: dict[str, float] | None, validation_log: Any,
+    formats: tuple[str, ...] = ("svg", "png"),
+) -> None:  # fmt: skip
+    """The report's figures in ``formats``, each under a short title with a sentence saying what it shows
+    (``figure_notes``)."""
     from wmrid.reporting import figures as fg
 
     def both(name: str, fig: Any, note: str) -> None:
         if fig is None:
             return
-        report.figures[name] = fg.render(fig, "svg")
-        report.figures_png[name] = fg.render(fig, "png")
+        if "svg" in formats:
+            report.figures[name] = fg.render(fig, "svg")
+        if "png" in formats:
+            report.figures_png[name] = fg.render(fig, "png")
         report.figure_notes[name] = note
 
     data = report.result
