@@ -89,8 +89,8 @@ def test_a_urdf_robots_unknown_friction_is_a_dash_and_no_payload_is_said(tmp_pat
     page = out.read_text(encoding="utf-8")
     header = re.search(r"<thead><tr>(.*?)</tr></thead>", page).group(1)
     columns = re.findall(r"<th>(.*?)</th>", header)
-    rows = {cells[0]: cells for cells in (re.findall(r"<td>(.*?)</td>", r) for r in re.findall(r"<tr>(.*?)</tr>", page))
-            if cells}  # fmt: skip
+    cells_of = (re.findall(r"<td[^>]*>(.*?)</td>", r) for r in re.findall(r"<tr>(.*?)</tr>", page))
+    rows = {cells[0]: cells for cells in cells_of if cells}
     cad, z = columns.index("CAD"), columns.index("(est − CAD)/std")
     for name in ("Fv1", "Fv2", "Fd1", "Fd2"):
         assert rows[name][cad] == "—", rows[name]

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from wmrid.core.errors import WmridError
 from wmrid.estimators.model_error import std_mark
 from wmrid.estimators.result import from_dict
 from wmrid.model import dynamics as model
@@ -341,8 +342,12 @@ def _add_figures(
     for which, wheel_log in (("identification", log), ("validation", validation_log)):
         if wheel_log is None or not np.all(np.isfinite(theta0)):
             continue
-        eta_hat, fit = _speed_fit(wheel_log, theta0, rl.form, hold)
         title = "Measured and predicted wheel speeds" + (" (validation log)" if which == "validation" else "")
+        try:
+            eta_hat, fit = _speed_fit(wheel_log, theta0, rl.form, hold)
+        except WmridError as err:  # a model the simulator cannot run (a two-term caster drag): said, not drawn
+            report.diagnostics.append(f"{title}: not drawn: {err}")
+            continue
         figure = fg.build_speed_fit_figure(np.asarray(wheel_log.t), np.asarray(wheel_log.eta), eta_hat, fit["fit"])
         note = (
             f"On the {which} log ({getattr(wheel_log, 'source', '')}): fit {_fmt(fit['fit'][0], 3)} % right, "
@@ -385,6 +390,8 @@ table{border-collapse:collapse}
 th,td{padding:0.25em 0.7em;border-bottom:1px solid #ddd;text-align:right;white-space:nowrap}
 th:first-child,td:first-child{text-align:left}th{background:#f4f4f4}
 td.wrap{white-space:normal;overflow-wrap:anywhere;text-align:left}
+td.interval{white-space:normal;min-width:6em}
+@media (max-width:900px){body{padding:0 0.5em}table{font-size:0.85em}th,td{padding:0.2em 0.4em}}
 figure{margin:1.5em 0}figcaption{font-weight:600}figcaption .note{font-weight:400;color:#444}
 figure svg{width:100%;height:auto}li{margin:0.2em 0}.small{color:#555;font-size:0.9em}
 code{font-family:ui-monospace,monospace;overflow-wrap:anywhere}
@@ -394,8 +401,15 @@ code{font-family:ui-monospace,monospace;overflow-wrap:anywhere}
 def _html_table(table: dict[str, Any]) -> str:
     """A table in a box that scrolls sideways when the page is narrower (cells never break a number)."""
     head = "".join(f"<th>{html.escape(str(h))}</th>" for h in table["header"])
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in row) + "</tr>" for row in table["rows"])
+    body = "".join("<tr>" + "".join(_html_cell(c) for c in row) + "</tr>" for row in table["rows"])
     return f"<div class='scroll'><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div>"
+
+
+def _html_cell(value: Any) -> str:
+    """A table cell; an interval 'lo … hi' may break at its spaces (never inside a number)."""
+    text = str(value)
+    kind = " class='interval'" if " … " in text else ""
+    return f"<td{kind}>{html.escape(text)}</td>"
 
 
 def to_html(report: Report) -> str:
