@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import html
+import json
 import re
 import subprocess
 from pathlib import Path
@@ -81,17 +82,14 @@ def wmrid_version() -> str:
 def test_a_urdf_robots_unknown_friction_is_a_dash_and_no_payload_is_said(tmp_path):
     """A URDF gives no friction: its CAD friction shows as "—" (not 0, which made Δ/std +185592.1).  --payload on
     a log with no payload says so (the sample against the paper robot it was simulated with: the mass estimate is
-    -2e-5 kg, within its error of zero)."""
+    -2e-5 kg, within its error of zero).  (JSON reports: the same tables as HTML, without the figures' time.)"""
     urdf = ROOT / "tests" / "data" / "paper_robot.urdf"
-    out = tmp_path / "r.html"
+    out = tmp_path / "r.json"
     proc = wmrid("report", str(SAMPLE), "--robot", str(urdf), "--gear-ratio", "30", "-o", str(out))
     assert proc.returncode == 0, proc.stderr.decode()
-    page = out.read_text(encoding="utf-8")
-    header = re.search(r"<thead><tr>(.*?)</tr></thead>", page).group(1)
-    columns = re.findall(r"<th>(.*?)</th>", header)
-    cells_of = (re.findall(r"<td[^>]*>(.*?)</td>", r) for r in re.findall(r"<tr>(.*?)</tr>", page))
-    rows = {cells[0]: cells for cells in cells_of if cells}
-    cad, z = columns.index("CAD"), columns.index("(est − CAD)/std")
+    base = json.loads(out.read_text())["base"]
+    rows = {row[0]: row for row in base["rows"]}
+    cad, z = base["header"].index("CAD"), base["header"].index("(est − CAD)/std")
     for name in ("Fv1", "Fv2", "Fd1", "Fd2"):
         assert rows[name][cad] == "—", rows[name]
         assert rows[name][z] == "—", rows[name]
@@ -101,6 +99,5 @@ def test_a_urdf_robots_unknown_friction_is_a_dash_and_no_payload_is_said(tmp_pat
     assert fv1.split()[-2:] == ["—", "—"]
     unloaded = text(wmrid("identify", str(SAMPLE), "--robot", "paper", "--payload", "--format", "table"))
     assert "no payload detected: the mass estimate" in unloaded.stdout
-    md = tmp_path / "r.md"
-    assert wmrid("report", str(SAMPLE), "--robot", "paper", "--payload", "-o", str(md)).returncode == 0
-    assert "No payload detected: the mass estimate" in md.read_text()
+    assert wmrid("report", str(SAMPLE), "--robot", "paper", "--payload", "-o", str(out), "--force").returncode == 0
+    assert json.loads(out.read_text())["payload"]["statement"].startswith("No payload detected: the mass estimate")
