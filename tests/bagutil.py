@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import functools
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,8 +46,7 @@ def write_ros1(path: Path, messages: list[Message], compression: str | None = No
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
 
-    ros1, ros2 = get_typestore(Stores.ROS1_NOETIC), _ros2_store()
-    js, header, time = (ros1.types[n] for n in (JOINT_STATE, "std_msgs/msg/Header", "builtin_interfaces/msg/Time"))
+    ros1 = get_typestore(Stores.ROS1_NOETIC)
     writer = Writer(Path(path))
     if compression is not None:
         writer.set_compression(getattr(Writer.CompressionFormat, compression.upper()))
@@ -57,14 +57,30 @@ def write_ros1(path: Path, messages: list[Message], compression: str | None = No
                 continue
             if m.topic not in conns:
                 conns[m.topic] = writer.add_connection(m.topic, JOINT_STATE, typestore=ros1)
-            msg = ros2.deserialize_cdr(m.cdr, JOINT_STATE)
-            stamp = msg.header.stamp
-            one = js(
-                header=header(seq=seq, stamp=time(sec=stamp.sec, nanosec=stamp.nanosec), frame_id=msg.header.frame_id),
-                name=list(msg.name), position=msg.position, velocity=msg.velocity, effort=msg.effort,
-            )  # fmt: skip
-            writer.write(conns[m.topic], m.log_ns, ros1.serialize_ros1(one, JOINT_STATE))
+            writer.write(conns[m.topic], m.log_ns, _as_ros1(m.cdr, seq))
     return Path(path)
+
+
+@functools.cache
+def _ros1_and_ros2_stores():
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS1_NOETIC), _ros2_store()
+
+
+@functools.lru_cache(maxsize=200_000)
+def _as_ros1(cdr: bytes, seq: int) -> bytes:
+    """A ROS 2 JointState (CDR) re-serialised for ROS 1 by rosbags, with header ``seq`` (remembered: the tests
+    write the same recording as several ROS 1 bags)."""
+    ros1, ros2 = _ros1_and_ros2_stores()
+    js, header, time = (ros1.types[n] for n in (JOINT_STATE, "std_msgs/msg/Header", "builtin_interfaces/msg/Time"))
+    msg = ros2.deserialize_cdr(cdr, JOINT_STATE)
+    stamp = msg.header.stamp
+    one = js(
+        header=header(seq=seq, stamp=time(sec=stamp.sec, nanosec=stamp.nanosec), frame_id=msg.header.frame_id),
+        name=list(msg.name), position=msg.position, velocity=msg.velocity, effort=msg.effort,
+    )  # fmt: skip
+    return bytes(ros1.serialize_ros1(one, JOINT_STATE))
 
 
 def write_rosbag2(folder: Path, messages: list[Message], storage: str = "sqlite3", store=None) -> Path:

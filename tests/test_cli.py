@@ -179,10 +179,15 @@ def test_identify_out_writes_the_estimates_as_mcap(tmp_path):
 
     target = tmp_path / "estimates.mcap"
     out = identify_json(str(SAMPLE_PARQUET), "--robot", "paper", "--mcap-out", str(target))
-    contents = read_mcap(str(target), json_fields={"/wmrid/estimates": {"theta11": "theta11", "e_r": "e_r", "t": "t"}})
+    fields = {"theta11": "theta11", "e_r": "e_r", "t": "t", "m11": "m11", "m11_std": "m11_std", "Fd2": "Fd2"}
+    contents = read_mcap(str(target), json_fields={"/wmrid/estimates": fields})
     series = contents.json["/wmrid/estimates"]
     assert len(series.log_ns) > 1000
     assert series.values["theta11"][-1] == pytest.approx(out["theta"]["values"]["theta11"], rel=1e-12)
+    # the base parameters over time (closed-form recovery: theta11 is m11) and the final std in every message
+    assert np.array_equal(series.values["m11"], series.values["theta11"])
+    assert np.all(series.values["m11_std"] == out["parameters"]["m11"]["std"])
+    assert series.values["Fd2"][-1] == pytest.approx(out["parameters"]["Fd2"]["value"], rel=1e-3)
     assert np.all(np.diff(series.values["t"]) > 0)
     assert json.loads(contents.metadata["wmrid"]["result"])["parameters"] == out["parameters"]
     refused = wmrid("identify", str(SAMPLE_PARQUET), "--mcap-out", str(tmp_path / "x.json"))

@@ -404,6 +404,7 @@ def test_svg_keeps_text_as_text_and_is_deterministic(built, name):
         assert label.replace("&", "&amp;").encode() in svg
 
 
+@pytest.mark.slow  # 2.7 s; the same figure rendered twice is checked in the default run
 def test_svg_is_byte_identical_across_builds(run):
     one = figures.render(figures.build_base_convergence_figure(run.result, run.truth))
     two = figures.render(figures.build_base_convergence_figure(run.result, run.truth))

@@ -42,7 +42,7 @@ def _parse_saved(source: Any) -> Any:
         raise UsageError(f"{source.name}: starts like JSON but is not valid JSON ({err})") from err
 
 
-def _from_saved(data: Any, name: str, truth: dict[str, float] | None, figures: bool | tuple[str, ...]) -> Report:
+def _from_saved(data: Any, name: str, truth: dict[str, float] | None, figures: bool) -> Report:
     """The report of a saved result; whatever it lacks or holds malformed is named, with the file."""
     if isinstance(data, dict) and not data.get("source"):
         data["source"] = name
@@ -64,7 +64,7 @@ def report(
     *,
     log: WheelLog | None = None,
     truth: dict[str, float] | None = None,
-    figures: bool | tuple[str, ...] = True,
+    figures: bool = True,
     options: LogOptions | None = None,
     robot: str | os.PathLike[str] | Robot | None = None,
     rotor_inertia: float | None = None,
@@ -79,8 +79,7 @@ def report(
         ...).  The robot is loaded only for a log (a saved result carries its nominal and CAD values).
     log : the identified log in memory, for the torque residual and the figures of the signals.
     truth : true base parameters by name (a simulator's ``truth["parameters"]``), for the error columns.
-    figures : draw the figures (the slow part): True for SVG and PNG, or the formats ("svg" for HTML, "png" for
-        Markdown).
+    figures : build the figures (matplotlib; each is rendered, the slow part, only in the format an output needs).
     command : the command line that made the report, for its reproducibility block (the CLI gives it).
 
     ``report.provenance``: wmrid's version, the time (UTC), the command, the options given, and each input file's

@@ -45,15 +45,25 @@ def deprecated_option(old: str, new: str) -> None:
 
 
 def write_estimates(result, path: Path, force: bool) -> None:
-    """The decimated history of an identification as an MCAP JSON topic /wmrid/estimates."""
+    """The recorded history of an identification as an MCAP JSON topic /wmrid/estimates: the intermediate
+    estimates theta_ij, the base parameters recovered from them (their names, as ``identify`` reports them) with
+    the final estimate's std (``NAME_std``, the same in every message), the prediction errors and lambda_min."""
+    import numpy as np
+
     from wmrid.core.atomic import to_json_text
     from wmrid.io.mcap.writer import write_series_mcap
+    from wmrid.model.base_params import recover_history
 
     if path.suffix.lower() != ".mcap":
         raise UsageError(f"--mcap-out {path}: the estimates are written as MCAP; name the file .mcap")
     hist = result.history
     series = {name: hist.theta[:, i // hist.theta.shape[2], i % hist.theta.shape[2]] for i, name in
               enumerate(result.form.theta_names())}  # fmt: skip
+    base = recover_history(hist.theta, result.form)
+    for j, name in enumerate(result.form.base_names):
+        series[name] = base[:, j]
+        std = result.parameters.get(name, (np.nan, np.nan))[1]
+        series[f"{name}_std"] = np.full(len(hist.t), std if std is not None else np.nan)
     series["e_r"] = hist.e[:, 0]
     series["e_l"] = hist.e[:, 1]
     series["lambda_min"] = hist.lambda_min

@@ -298,10 +298,10 @@ def report(
         raise UsageError("INPUT and --validate cannot both be standard input; give one of them as a file")
     opts = log_opts(locals())
     with activity("wmrid report") as stage:
-        drawn = {".html": ("svg",), ".htm": ("svg",), ".md": ("png",)}.get(suffix or "", ())  # what the file shows
+        drawn = suffix in (".html", ".htm", ".md")  # the outputs that show figures
         stage("identifying" + (" and drawing the figures" if drawn else ""))
         rep = build(
-            input_, truth=truth_params, figures=drawn or False, rotor_inertia=rotor_inertia,
+            input_, truth=truth_params, figures=drawn, rotor_inertia=rotor_inertia,
             options=opts, robot=robot, method=method.value,
             validate=validate, form=form.value, k=k, alpha=alpha, torque_hold=torque_hold.value, payload=payload,
             control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted,

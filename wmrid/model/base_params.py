@@ -71,6 +71,14 @@ def direct_recovery(theta: np.ndarray, form: RegressorForm) -> np.ndarray:
     return np.array(base)
 
 
+def recover_history(theta: np.ndarray, form: RegressorForm) -> np.ndarray:
+    """The base parameters (n, form.n_base) of each of n intermediate estimates theta (n, 2, p), by
+    :func:`direct_recovery` (a history's trajectory: the reported estimate is the minimum-distance fit)."""
+    theta = np.asarray(theta, dtype=float)
+    with np.errstate(all="ignore"):
+        return np.array([direct_recovery(th, form) for th in theta]).reshape(len(theta), -1)
+
+
 def _whitener(cov: np.ndarray) -> np.ndarray:
     """W with W^T W = pinv(cov), dropping directions with eigenvalues below 1e-14 of the largest."""
     vals, vecs = np.linalg.eigh(0.5 * (cov + cov.T))

@@ -547,7 +547,7 @@ def build_base_convergence_figure(
     truth and the last 70 % of the estimate (its title says "zoomed"; :func:`_zoom_limits`).
     None when the result has no history.
     """
-    from wmrid.model.base_params import direct_recovery
+    from wmrid.model.base_params import recover_history
 
     h = result.history
     if h is None:
@@ -559,8 +559,7 @@ def build_base_convergence_figure(
     if len(t) > MAX_POINTS // 2:  # recovered at evenly spaced points (the last included): a line's display budget
         keep = np.unique(np.linspace(0, len(t) - 1, MAX_POINTS // 2).round().astype(int))
         t, theta = t[keep], theta[keep]
-    with np.errstate(all="ignore"):
-        base = np.array([direct_recovery(th, form) for th in theta]).reshape(len(theta), len(names))
+    base = recover_history(theta, form)
     table = _truth_table(truth)
     ncols = max(4, -(-len(names) // 2))
     fig = _new_figure((max(FIGSIZE[0], 2.3 * ncols), 5.8))

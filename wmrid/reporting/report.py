@@ -52,16 +52,30 @@ class Report:
     diagnostics: list[str]
     notes: list[str]
     residuals: dict[str, Any]
-    figures: dict[str, bytes] = field(default_factory=dict)  # name -> SVG bytes
+    figures: dict[str, bytes] = field(default_factory=dict)  # name -> SVG bytes, rendered when first needed
     figures_png: dict[str, bytes] = field(default_factory=dict)
     figure_notes: dict[str, str] = field(default_factory=dict)  # name -> one sentence under its title
     result: dict[str, Any] = field(default_factory=dict)
     #: How the report was made: wmrid's version, time, command, options, inputs with their SHA-256
     #: (:func:`wmrid.api.reporting.report`).
     provenance: dict[str, Any] = field(default_factory=dict)
+    #: name -> matplotlib Figure, rendered by :meth:`rendered` in the format an output needs.
+    figure_objects: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
     #: The live identification and its log when the report was made from a log (None from a saved result).
     identification: Any = field(default=None, repr=False, compare=False)
     log: Any = field(default=None, repr=False, compare=False)
+
+
+def rendered(report: Report, fmt: str) -> dict[str, bytes]:
+    """The report's figures as ``fmt`` ("svg" or "png") bytes by name, in order, each rendered once (matplotlib's
+    rendering is most of a report's time: an HTML file needs only SVG, Markdown only PNG)."""
+    from wmrid.reporting.figures import render
+
+    cache = report.figures if fmt == "svg" else report.figures_png
+    for name, fig in report.figure_objects.items():
+        if name not in cache:
+            cache[name] = render(fig, fmt)
+    return {name: cache[name] for name in report.figure_objects if name in cache} or dict(cache)
 
 
 def torque_residual(log: Any, theta0: np.ndarray, form: RegressorForm | None = None) -> dict[str, Any]:
@@ -113,12 +127,12 @@ def build_report(
     result: Any = None,
     log: Any = None,
     truth: dict[str, float] | None = None,
-    figures: bool | tuple[str, ...] = True,
+    figures: bool = True,
     validation_log: Any = None,
 ) -> Report:
     """A report from an identify JSON document ``data`` (and the live ``result``/``log`` when available;
     ``validation_log``: the ``--validate`` log in memory, for its measured and predicted speeds).  ``figures``:
-    True for SVG and PNG, False for none, or the formats to render ("svg" for HTML, "png" for Markdown)."""
+    build the figures (rendered only when an output needs them: :func:`rendered`)."""
     rl = result if result is not None else from_dict(data, data.get("source") or "?")
     form = rl.form
     names = form.theta_names()
@@ -299,8 +313,7 @@ def build_report(
         notes=list(data["log"].get("notes", [])), residuals=residuals, result=data,
     )  # fmt: skip
     if figures:
-        formats = ("svg", "png") if figures is True else tuple(figures)
-        _add_figures(report, rl, log, truth, validation_log, formats)
+        _add_figures(report, rl, log, truth, validation_log)
     return report
 
 
@@ -314,21 +327,14 @@ def _speed_fit(log: Any, theta0: np.ndarray, form: Any, torque_hold: str) -> tup
     return eta_hat, {"fit": fit_percent(eta, eta_hat), "predictor": predictor_text(torque_hold, form)}
 
 
-def _add_figures(
-    report: Report, rl: Any, log: Any, truth: dict[str, float] | None, validation_log: Any,
-    formats: tuple[str, ...] = ("svg", "png"),
-) -> None:  # fmt: skip
-    """The report's figures in ``formats``, each under a short title with a sentence saying what it shows
-    (``figure_notes``)."""
+def _add_figures(report: Report, rl: Any, log: Any, truth: dict[str, float] | None, validation_log: Any) -> None:
+    """The report's figures, each under a short title with a sentence saying what it shows (``figure_notes``)."""
     from wmrid.reporting import figures as fg
 
     def both(name: str, fig: Any, note: str) -> None:
         if fig is None:
             return
-        if "svg" in formats:
-            report.figures[name] = fg.render(fig, "svg")
-        if "png" in formats:
-            report.figures_png[name] = fg.render(fig, "png")
+        report.figure_objects[name] = fig  # rendered when an output needs it (:func:`rendered`)
         report.figure_notes[name] = note
 
     data = report.result
@@ -432,9 +438,9 @@ def to_html(report: Report) -> str:
         parts.append(
             "<h2>Residuals</h2><ul>" + "".join(f"<li>{html.escape(s)}</li>" for s in residual_lines(report)) + "</ul>"
         )
-    if report.figures:
+    if report.figure_objects or report.figures:
         parts.append("<h2>Figures</h2>")
-    for name, svg in report.figures.items():
+    for name, svg in rendered(report, "svg").items():
         text = svg.decode("utf-8")
         text = text[text.index("<svg") :] if "<svg" in text else text
         text = re.sub(r"<metadata>.*?</metadata>", "", text, flags=re.S)  # RDF/creator block: not needed inline
@@ -510,7 +516,7 @@ def to_markdown(report: Report) -> str:
     parts += ["", "## Diagnostics", "", *[f"- {s}" for s in report.diagnostics]]
     if report.residuals:
         parts += ["", "## Residuals", "", *[f"- {s}" for s in residual_lines(report)]]
-    for name, png in report.figures_png.items():
+    for name, png in rendered(report, "png").items():
         note = report.figure_notes.get(name)
         parts += ["", f"### {name}", "", *([note, ""] if note else []),
                   f"![{name}](data:image/png;base64,{base64.b64encode(png).decode()})"]  # fmt: skip
