@@ -187,6 +187,7 @@ def test_the_command_line_checks_its_options_in_the_order_it_always_did(args, ne
     assert needle in proc.stderr.decode()
 
 
+@pytest.mark.slow  # a whole report with figures (4 s)
 def test_report_of_a_saved_result_ignores_the_robot_flags(tmp_path, sample_result):
     saved = tmp_path / "saved.json"
     saved.write_text(to_json(sample_result.to_dict()), encoding="utf-8")

@@ -356,6 +356,7 @@ def _interrupted(args: list[str], delay: float, cwd: Path, timeout: float) -> su
     return subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr)
 
 
+@pytest.mark.slow  # a real process interrupted (3 s); SIGTERM/SIGHUP stay in the default run
 def test_interrupt_exits_130(tmp_path):
     """Ctrl-C while wmrid waits for a log on standard input: exit 130, one short line, no traceback."""
     # 3 s: past the imports, now blocked reading standard input

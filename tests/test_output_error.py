@@ -101,6 +101,7 @@ def test_free_run_from_nominal_also_recovers_inertia(free_run_from_nominal) -> N
 # ------------------------------------------------------------------------------ far starts (observed)
 
 
+@pytest.mark.slow  # a second output-error fit (3 s)
 def test_free_run_from_twice_the_truth_finds_the_same_minimum(noisy, free_run_from_nominal) -> None:
     # Observed: every parameter 2x off still leads the single long simulation to the minimum found from
     # the nominal start (18 evaluations instead of 6).

@@ -212,6 +212,7 @@ def test_a_closed_loop_disturbance_is_not_flagged():
     assert misfit["ratio"] < 1.3
 
 
+@pytest.mark.slow  # the CLI's view of a flag the library tests check (4 s)
 def test_cli_json_and_table_show_the_flag(slipping, tmp_path, capsys):
     """Through the CLI: the JSON carries the check's figures and flags every parameter; the terminal table and the
     report mark the flagged parameters (!) and state the warning."""

@@ -140,6 +140,7 @@ def _command(*args: str, **kwargs) -> subprocess.Popen:
     )  # fmt: skip
 
 
+@pytest.mark.slow  # a real process per broken stream (5 s)
 def test_standard_streams_that_fail(tmp_path, small_log):
     """Real processes: stdout on a full device, and stdout closed, exit 1 with one line naming standard output (was
     exit 0 with truncated JSON, and "internal error"); stderr closed does not turn a success into a failure."""
@@ -402,6 +403,7 @@ with atomic_output(sys.argv[1]) as fh:
 """
 
 
+@pytest.mark.slow  # a real process and a signal
 def test_a_signal_ends_a_process_stuck_in_compiled_code(tmp_path):
     """Python runs a signal handler only between bytecodes, so SIGTERM did not end a process inside a long compiled
     loop (``timeout`` waited forever).  The watchdog ends it GRACE_S later (1 s here): exit 143, its temporary file
@@ -419,6 +421,7 @@ def test_a_signal_ends_a_process_stuck_in_compiled_code(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow  # a real process on a small filesystem
 def test_a_file_too_large_for_the_disk_is_one_line_and_leaves_nothing(tmp_path):
     """A write that fails midway (here RLIMIT_FSIZE, 20 kB: EFBIG, as a full disk gives ENOSPC): exit 1, one line
     naming the file, and neither the log, its truth file nor a temporary file is left."""
@@ -491,6 +494,7 @@ def test_a_long_name_in_bytes_is_written(tmp_path, small_log, capsys):
     capsys.readouterr()
 
 
+@pytest.mark.slow  # real processes under RLIMIT_AS
 def test_under_an_address_space_cap_a_log_identifies_and_an_endless_source_stops(tmp_path, small_log):
     """Real processes under RLIMIT_AS = 2 GB (``ulimit -v``, ``prlimit --as``): a 2 s log identifies (a 3 s log hung
     inside OpenBLAS's eigvalsh: one buffer per thread), and a /dev/zero stand-in as the log stops at a 256 MiB

@@ -101,6 +101,7 @@ def test_time_going_back_at_a_piece_boundary_names_its_line(tmp_path: Path) -> N
     assert "line 22" in messages.pop()
 
 
+@pytest.mark.slow  # a 3 s large CSV
 def test_text_late_in_a_plain_csv_falls_back_from_the_row_it_failed_on(tmp_path: Path) -> None:
     # pyarrow infers float64 from its first 16 MB block and refuses "oops" later; the C engine then takes
     # over from the first row not yet handed out and names the line.

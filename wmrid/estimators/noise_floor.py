@@ -17,6 +17,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from wmrid.model.kernels import plain
+
 #: Second differences per window (the median of windows' mean squares is then unbiased within ~2 %).
 WINDOW = 64
 #: Histogram resolution: buckets per octave of variance.
@@ -78,7 +80,7 @@ class NoiseFloor:
         self._n = 0
 
     def feed(self, eta: np.ndarray) -> None:
-        eta = np.ascontiguousarray(eta, dtype=np.float64)
+        eta = plain(eta)
         if len(eta) == 0:
             return
         out = np.empty((len(eta) // WINDOW + 1, 2))

@@ -93,6 +93,7 @@ from wmrid.core.errors import NotIdentifiableError, UsageError
 from wmrid.estimators.estimate import BaseEstimate
 from wmrid.estimators.uncertainty import segment_count
 from wmrid.model.dynamics import RegressorForm
+from wmrid.model.kernels import plain
 from wmrid.model.predict import MAX_STEP, caster_array, fit_percent, predictor_text, simulate_kernel
 
 #: Default length (s) of the multiple-shooting segments (see the module docstring).
@@ -200,9 +201,9 @@ def identify_oe(
     bad input and NotIdentifiableError when the optimiser fails or the log does not determine theta0.
     """
     started = time.perf_counter()
-    t = np.ascontiguousarray(t, dtype=float)
+    t = plain(t)
     eta = np.ascontiguousarray(eta, dtype=float)
-    tau = np.ascontiguousarray(tau, dtype=float)
+    tau = plain(tau)
     x0 = np.array(theta0_start, dtype=float)
     n = t.size
     if t.ndim != 1 or n < 3:

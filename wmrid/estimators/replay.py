@@ -14,6 +14,7 @@ import numpy as np
 from wmrid.estimators.noise_floor import NoiseFloor
 from wmrid.estimators.observer import ObserverSettings
 from wmrid.model.dynamics import regressor
+from wmrid.model.kernels import plain
 
 CHUNK = 262_144
 
@@ -147,7 +148,7 @@ class _HalfRate:
             skip = 1
         if len(t) > skip:
             observer_chunk(
-                np.ascontiguousarray(t[skip:]), np.ascontiguousarray(eta[skip:]), np.ascontiguousarray(tau[skip:]),
+                plain(t[skip:]), plain(eta[skip:]), plain(tau[skip:]),
                 self.done + skip, self.kind, self.hold, self.k, self.st, self.w, self.g_prev, self.theta, self.gamma,
                 self.gamma_inv, self.hist_idx, self.hist_theta, self.hist_e, self.hist_gamma, self.block_end,
                 *self.blk, self.cursor, self.geom,
@@ -236,8 +237,8 @@ def replay_pieces(
                     cursor[0] = 1
                 skip = 1
             observer_chunk(
-                t[skip:], eta[skip:], tau[skip:], done + skip, kind, hold, float(settings.k), st, w, g_prev,
-                theta, gamma, gamma_inv, hist_idx, hist_theta, hist_e, hist_gamma, block_end, blk_a, blk_c,
+                plain(t[skip:]), plain(eta[skip:]), plain(tau[skip:]), done + skip, kind, hold, float(settings.k), st,
+                w, g_prev, theta, gamma, gamma_inv, hist_idx, hist_theta, hist_e, hist_gamma, block_end, blk_a, blk_c,
                 blk_uu, blk_ee, cursor, geom,
             )  # fmt: skip
             floor.feed(eta)

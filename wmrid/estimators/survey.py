@@ -16,6 +16,7 @@ import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError
 from wmrid.model.dynamics import RegressorForm
+from wmrid.model.kernels import plain
 
 #: Speeds (rad/s) or efforts beyond this magnitude are not what a robot logs (a unit or column error).
 PLAUSIBLE_LIMIT = 1e12
@@ -154,7 +155,7 @@ def survey(pieces: Iterable, source: str, effort_unit: str = "N m") -> Survey:
         k = len(t)
         if k == 0:
             continue
-        if _piece_stats(eta, tau, PLAUSIBLE_LIMIT, acc) >= 0:
+        if _piece_stats(plain(eta), plain(tau), PLAUSIBLE_LIMIT, acc) >= 0:
             _raise_implausible(t, eta, tau, source, effort_unit)
         steps = np.diff(t) if prev_t is None else np.diff(t, prepend=prev_t)
         if sv.n == 0:

@@ -65,6 +65,7 @@ import numpy as np
 from wmrid.core.errors import UsageError
 from wmrid.model.dynamics import DRAG_SPEED as DRAG_SPEED_MODEL
 from wmrid.model.dynamics import RegressorForm
+from wmrid.model.kernels import plain
 
 #: Default longest RK4 substep, s (one substep per sample at 1 kHz; see the module docstring).
 MAX_STEP = 1e-3
@@ -361,9 +362,9 @@ def _check_inputs(
     t: np.ndarray, tau: np.ndarray, theta0: np.ndarray, max_step: float, form: RegressorForm | None = None
 ) -> tuple[np.ndarray, ...]:
     """Checked (t, tau, theta0[:8], cas): the wheel part of theta0 and the kernel's caster argument."""
-    t = np.ascontiguousarray(t, dtype=float)
-    tau = np.ascontiguousarray(tau, dtype=float)
-    theta0 = np.ascontiguousarray(theta0, dtype=float)
+    t = plain(t)
+    tau = plain(tau)
+    theta0 = plain(theta0)
     if t.ndim != 1 or t.size < 1:
         raise UsageError(f"t must be a non-empty 1-D array, got shape {t.shape}")
     if tau.shape != (t.size, 2):
