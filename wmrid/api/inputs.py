@@ -147,7 +147,7 @@ def open_log(
         **{**_subset(opts, SignalOptions), "efficiency": 1.0 if opts.efficiency is None else opts.efficiency}
     )
     mapping = parse_column_mapping(opts.columns) if isinstance(opts.columns, str) and opts.columns else opts.columns
-    k_r = robot.nominal.k_r if robot is not None else None
+    k_r = robot.nominal.k_r if robot is not None and getattr(robot, "gear_ratio_known", True) else None
     return open_file(
         _fspaths(path), columns=mapping or None, time_unit=opts.time_unit, selection=selection, signals=signals,
         gear_ratio=k_r, data=data,

@@ -478,6 +478,8 @@ def _identify(
             reference = model.named_base(model.base_parameters(robot.cad))
             for name in getattr(robot, "unknown_cad", ()):  # not given by the robot's source: no value, not 0
                 reference[name] = None
+        if getattr(robot, "assumed", ()):  # what the robot file left out (said with every result that uses it)
+            diagnostics = {**diagnostics, "robot_assumed": list(robot.assumed)}
     # the jackknife's leave-one-segment-out estimates, theta0 to first order (fit.gain): for comparing methods
     segment, n_seg = segments_of(block_mid / max(duration, 1e-300), duration)
     deltas = jackknife_deltas(gamma, theta_u, out.blk_a, out.blk_c, segment, n_seg)

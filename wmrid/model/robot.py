@@ -28,6 +28,7 @@ import math
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from wmrid.core.errors import RobotFileError, UsageError, option
 
@@ -226,6 +227,10 @@ class Robot:
     casters: tuple[Caster, ...] | None = None  # [[caster]] tables; None: default_casters (multibody only)
     #: Base parameters whose CAD value the source does not give (a URDF's friction): compared as "—", not 0.
     unknown_cad: tuple[str, ...] = ()
+    #: What the robot file left out and was assumed (sentences, said in every result that uses the robot).
+    assumed: tuple[str, ...] = ()
+    #: False when the file gave no gear ratio (no rotors): a current log then needs --gear-ratio.
+    gear_ratio_known: bool = True
 
     @property
     def reference(self) -> PhysicalParameters:
@@ -273,17 +278,50 @@ BUILTIN_ROBOTS: dict[str, Robot] = {
 }
 
 
-def _parse_set(table: object, where: str) -> PhysicalParameters:
+#: The parameters a robot file must give: what M and V_c (Eqs. 10-14) depend on most.
+REQUIRED = ("I_p", "m_p", "d_x", "I_w", "m_w", "r", "b")
+#: Those it may leave out: (group of keys, their values from the table, the sentence that says what was assumed).
+#: The motor rotors add k_r^2 I_r to the wheels' inertia and m_r, I_rm to the platform's; without a datasheet,
+#: none (then k_r is unknown too: a current log needs --gear-ratio).
+OPTIONAL: tuple[tuple[tuple[str, ...], Any, str], ...] = (
+    (("d_y",), lambda t: (0.0,), "d_y = 0 (the centre of mass on the centre line)"),
+    (("I_wm",), lambda t: (t["I_w"] / 2,), "I_wm = I_w / 2 (each wheel a thin disc)"),
+    (("a",), lambda t: (t["b"],), "a = b (each wheel's centre of mass at its contact)"),
+    (("m_r", "I_rm", "I_r", "c_x", "c_y", "k_r"), lambda t: (0.0, 0.0, 0.0, 0.0, 0.0, 1.0),
+     "no motor rotors (m_r = I_rm = I_r = 0; k_r unknown)"),
+    (("F_v1", "F_v2", "F_d1", "F_d2"), lambda t: (0.0, 0.0, 0.0, 0.0), "no friction known (F_v = F_d = 0)"),
+)  # fmt: skip
+
+
+def _parse_set(table: object, where: str) -> tuple[PhysicalParameters, list[str], set[str]]:
+    """(the parameters, what was assumed for those not given, the keys assumed) of a [nominal] or [cad] table."""
     if not isinstance(table, dict):
         raise RobotFileError(f"{where}: expected a table of parameters")
     unknown = sorted(set(table) - set(PARAMETER_UNITS))
     if unknown:
         raise RobotFileError(f"{where}: unknown parameter(s) {', '.join(unknown)}; known: {', '.join(PARAMETER_UNITS)}")
-    missing = [k for k in PARAMETER_UNITS if k not in table and not k.startswith("F_")]
+    missing = [k for k in REQUIRED if k not in table]
     if missing:
-        raise RobotFileError(f"{where}: missing parameter(s) {', '.join(missing)} (SI units)")
+        raise RobotFileError(
+            f"{where}: missing parameter(s) {', '.join(missing)} (SI units); a robot file needs at least "
+            f"{', '.join(REQUIRED)} (see examples/)"
+        )
+    values = dict(table)
+    assumed: list[str] = []
+    keys: set[str] = set()
+    for group, make, sentence in OPTIONAL:
+        absent = [k for k in group if k not in values]
+        if not absent:
+            continue
+        if len(absent) < len(group) and group[0] != "F_v1":  # a group is given whole or not at all
+            raise RobotFileError(f"{where}: give all of {', '.join(group)} or none of them (none: {sentence})")
+        for key, value in zip(group, make(values), strict=True):
+            if key in absent:
+                values[key] = value
+                keys.add(key)
+        assumed.append(sentence if len(absent) == len(group) else f"{', '.join(absent)} = 0 (not given)")
     try:
-        return PhysicalParameters(**table)
+        return PhysicalParameters(**values), assumed, keys
     except RobotFileError as err:
         raise RobotFileError(f"{where}: {err}") from None
 
@@ -297,8 +335,15 @@ def robot_from_toml_text(text: str, source: str) -> Robot:
         raise RobotFileError(f"{source}: nested too deeply to be a robot file; see README 'Robot files'") from None
     if "nominal" not in data:
         raise RobotFileError(f"{source}: no [nominal] table; a robot file needs at least its nominal parameters")
-    nominal = _parse_set(data["nominal"], f"{source} [nominal]")
-    cad = _parse_set(data["cad"], f"{source} [cad]") if "cad" in data else None
+    nominal, assumed, nominal_keys = _parse_set(data["nominal"], f"{source} [nominal]")
+    assumed = [f"[nominal] {a}" for a in assumed]
+    cad, unknown_cad = None, ()
+    if "cad" in data:
+        cad, cad_assumed, cad_keys = _parse_set(data["cad"], f"{source} [cad]")
+        assumed += [f"[cad] {a}" for a in cad_assumed]
+        unknown_cad = tuple(n for n, k in (("Fv1", "F_v1"), ("Fv2", "F_v2"), ("Fd1", "F_d1"), ("Fd2", "F_d2"))
+                            if k in cad_keys)  # fmt: skip
+    unknown_k_r = "k_r" in nominal_keys
     name = str(data.get("name", Path(source).stem))
     motor = data.get("motor", {})
     if not isinstance(motor, dict) or set(motor) - {"torque_constant", "efficiency"}:
@@ -310,7 +355,8 @@ def robot_from_toml_text(text: str, source: str) -> Robot:
     casters = _parse_casters(data.get("caster"), source)
     return Robot(
         name=name, nominal=nominal, cad=cad, torque_constant=motor.get("torque_constant"),
-        efficiency=motor.get("efficiency"), casters=casters,
+        efficiency=motor.get("efficiency"), casters=casters, unknown_cad=unknown_cad, assumed=tuple(assumed),
+        gear_ratio_known=not unknown_k_r,
     )  # fmt: skip
 
 

@@ -77,6 +77,8 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         f"k = {result.settings.k:g} 1/s, alpha = {result.settings.alpha:g}; start: {result.start_source}"
     )
     diag = result.diagnostics
+    if diag.get("robot_assumed"):
+        console.print("robot file: assumed " + "; ".join(diag["robot_assumed"]))
     friction = diag.get("friction")
     if friction and friction.get("chosen_by") == "auto":
         console.print(f"friction model: {friction['model']} (auto: {friction.get('reason', '')})")

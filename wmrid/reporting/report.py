@@ -264,6 +264,7 @@ def build_report(
             else "the data, not the start value, set every parameter."
         ),
         *flagged,
+        *(["Robot file: assumed " + "; ".join(diag["robot_assumed"]) + "."] if diag.get("robot_assumed") else []),
         *data.get("warnings", []),
     ]
     if effort_unit != "N m":
