@@ -547,6 +547,18 @@ def test_zoom_limits():
     assert figures._zoom_limits(t, np.full_like(t, np.nan), np.array([np.nan])) is None
 
 
+def test_zoom_limits_ignore_a_few_late_spikes():
+    """A settled estimate with 5 spikes in its last 70 % (a recovery dividing by a near-zero m on a real log): the
+    axis is set by the 1st-99th percentile of the settled part and the marks, the spikes are clipped."""
+    t = np.linspace(0.0, 10.0, 1001)
+    est = np.full_like(t, 1.0)
+    est[[500, 520, 600, 700, 800]] = [3e4, -2e4, 5e3, -7e3, 1e4]
+    lo, hi, clipped = figures._zoom_limits(t, est, np.array([0.9, 1.1]))
+    assert clipped
+    assert lo == pytest.approx(0.88)
+    assert hi == pytest.approx(1.12)
+
+
 # --------------------------------------------------------------------------------------------------
 # Measured and predicted speeds
 

@@ -495,15 +495,19 @@ def _zoom_limits(
 ) -> tuple[float, float, bool] | None:
     """y limits (lo, hi, clipped) showing ``marks`` (final value, its band, truth) and the settled estimate.
 
-    The settled part is the estimate over the last ``settled`` fraction of the time.  When the early
-    transient reaches more than twice as far as that range, the axis shows the range, padded by 10 %
-    each side, and clipped is True (some of the estimate leaves the panel); otherwise it shows everything.
-    None when there is nothing finite to show.
+    The settled part is the estimate over the last ``settled`` fraction of the time (its 1st to 99th percentile
+    when it has 100 points or more, so that a few spikes, e.g. a recovery dividing by a near-zero m on a real log,
+    do not set the scale).  When the estimate reaches more than twice as far as that range, the axis shows the
+    range, padded by 10 % each side, and clipped is True (some of the estimate leaves the panel); otherwise it
+    shows everything.  None when there is nothing finite to show.
     """
     ok = np.isfinite(est)
     marks = marks[np.isfinite(marks)]
     late = ok & (t >= t[-1] - settled * (t[-1] - t[0])) if len(t) else ok
-    core = np.concatenate([marks, est[late]])
+    settled_values = est[late]
+    if len(settled_values) >= 100:
+        settled_values = np.percentile(settled_values, [1.0, 99.0])
+    core = np.concatenate([marks, settled_values])
     if len(core) == 0:
         return None
     every = np.concatenate([core, est[ok]])
