@@ -235,6 +235,18 @@ def test_a_mixed_recording_or_an_empty_folder_is_one_clear_error(tmp_path, sampl
         assert needle in out.stderr, out.stderr
 
 
+def test_the_same_bag_given_twice_is_refused_by_name(sample_bags, tmp_path):
+    """Its messages would count twice (the time steps of 0 then refused far from the cause): one line naming both."""
+    bag = sample_bags["ros1"][0]
+    link = tmp_path / "again.bag"
+    link.symlink_to(bag)
+    for second in (bag, link):
+        out = text(wmrid("identify", bag, second, "--format", "json"))
+        assert out.returncode == 2
+        expected = f"wmrid: error: {second}: the same file as {bag}; give each file of the recording once"
+        assert out.stderr.strip() == expected
+
+
 def test_a_ros1_bag_cut_short_is_read_up_to_its_last_whole_record(tmp_path, sample_bags):
     """As an MCAP cut by a crash: the messages before the cut, and a note saying how many bytes were lost."""
     data = sample_bags["ros1"][0].read_bytes()

@@ -63,11 +63,18 @@ def recording_paths(paths: Sequence[str]) -> list[str] | None:
                 )
             return inside
         return [path] if is_bag_file(path) else None
+    seen: dict[tuple[int, int], str] = {}
     for path in paths:
         if path == "-":
             raise LogFormatError("standard input cannot be one of several files of a recording; give the files")
         if not os.path.exists(path):
             raise LogFormatError(f"{path}: no such file; check the path")
+        st = os.stat(path)
+        if (st.st_dev, st.st_ino) in seen:  # the same file by any name: its messages would count twice
+            raise LogFormatError(
+                f"{path}: the same file as {seen[(st.st_dev, st.st_ino)]}; give each file of the recording once"
+            )
+        seen[(st.st_dev, st.st_ino)] = path
         head = _magic(path)
         if not (os.path.isdir(path) or head.startswith((ROS1_MAGIC, SQLITE_MAGIC, MCAP_MAGIC))):
             raise LogFormatError(
