@@ -104,3 +104,72 @@ def test_a_robot_file_missing_what_matters_is_refused_with_the_list():
         robot_from_toml_text(MINIMAL.replace("m_w = 4.0\n", "", 1), "x.toml")
     with pytest.raises(RobotFileError, match="give all of m_r, I_rm, I_r, c_x, c_y, k_r or none"):
         robot_from_toml_text(MINIMAL.replace("b = 0.23\n[cad]", "b = 0.23\nk_r = 100.0\n[cad]"), "x.toml")
+
+
+BASE_ONLY = """
+name = "base-only"
+[nominal_base]
+M11 = 1.15485
+M12 = -0.287168
+M22 = 1.15485
+Vc = 0.159794
+r = 0.16
+[cad_base]
+m11 = 0.787254
+m12 = 0.240611
+m22 = 0.744638
+Vc = 0.210083
+Fv1 = 0.01
+Fv2 = 0.015
+Fd1 = 0.045
+Fd2 = 0.04
+"""
+
+
+def test_a_robot_file_of_base_parameters(tmp_path):
+    """Nominal base parameters given directly (M here, m converted), CAD ones as m: the comparison uses them as
+    given; what needs physical parameters (a payload, a simulation) is refused by name; the assumption is said."""
+    path = tmp_path / "base.toml"
+    path.write_text(BASE_ONLY)
+    robot = load_robot(str(path))
+    assert robot.gear_ratio_known is False
+    m = np.linalg.inv([[1.15485, -0.287168], [-0.287168, 1.15485]])
+    np.testing.assert_allclose(model.base_parameters(robot.nominal)[:3], [m[0, 0], m[0, 1], m[1, 1]], rtol=1e-15)
+    sample = ROOT / "sample_logs" / "paper_sinusoid.csv"
+    out = text(wmrid("identify", sample, "--robot", path, "--format", "json"))
+    assert out.returncode == 0, out.stderr
+    import json
+
+    result = json.loads(out.stdout)
+    assert result["reference"]["m11"] == pytest.approx(0.787254)
+    assert result["nominal"]["M11"] == pytest.approx(1.15485, rel=1e-12)
+    assert result["parameters"]["m11"]["value"] == pytest.approx(0.787254, rel=1e-4)  # the sample's CAD robot
+    assert "[nominal_base] base parameters only: no payload estimate and no simulation" in result["diagnostics"][
+        "robot_assumed"]  # fmt: skip
+    refused = text(wmrid("identify", sample, "--robot", path, "--payload", "--format", "json"))
+    assert refused.returncode == 2
+    assert "--payload needs the robot's physical parameters" in refused.stderr
+    sim = text(wmrid("simulate", "-o", tmp_path / "s.csv", "--robot", path, "--duration", "1"))
+    assert sim.returncode == 2
+    assert "gives base parameters only; a simulation needs the physical ones" in sim.stderr
+    from wmrid.model.robot import robot_from_toml_text, robot_to_toml
+
+    again = robot_from_toml_text(robot_to_toml(robot), "again")
+    assert again.nominal == robot.nominal
+    assert again.cad == robot.cad
+
+
+def test_base_parameter_tables_are_checked():
+    from wmrid.core.errors import RobotFileError
+    from wmrid.model.robot import robot_from_toml_text
+
+    cases = {
+        BASE_ONLY.replace("M22 = 1.15485\n", ""): "all three of one of them",
+        BASE_ONLY.replace("M11 = 1.15485", "M11 = 0.05"): "positive definite",
+        BASE_ONLY.replace("Vc = 0.159794\n", ""): "missing Vc",
+        BASE_ONLY + "\n[nominal]\nI_p = 1.0\n": "as one table",
+        BASE_ONLY.replace("r = 0.16", "wheel = 0.16"): "unknown key",
+    }
+    for text_, message in cases.items():
+        with pytest.raises(RobotFileError, match=message):
+            robot_from_toml_text(text_, "x.toml")

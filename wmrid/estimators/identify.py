@@ -212,6 +212,11 @@ def identify(
         raise UsageError(
             f"{option('payload')} needs {option('robot')}: the payload is what the log shows beyond the unloaded robot"
         )
+    if payload and hasattr(robot.reference, "theta0"):
+        raise UsageError(
+            f"{option('payload')} needs the robot's physical parameters (masses, inertias, geometry); "
+            f"robot {robot.name!r} gives base parameters only"
+        )
     check_box_width(box_width)
     delay_record = None
     delay_warnings: list[str] = []

@@ -198,7 +198,11 @@ def coriolis_coefficient(p: PhysicalParameters) -> float:
 
 
 def base_parameters(p: PhysicalParameters) -> np.ndarray:
-    """theta0 (8,) = [m11, m12, m22, Vc, Fv1, Fv2, Fd1, Fd2] of Eq. (21), with m = M^-1."""
+    """theta0 (8,) = [m11, m12, m22, Vc, Fv1, Fv2, Fd1, Fd2] of Eq. (21), with m = M^-1 (a robot file's base set,
+    :class:`wmrid.model.robot.BaseSet`, gives them directly)."""
+    given = getattr(p, "theta0", None)
+    if given is not None:
+        return np.array(given, dtype=np.float64)
     m = np.linalg.inv(inertia_matrix(p))
     return np.array([m[0, 0], m[0, 1], m[1, 1], coriolis_coefficient(p), p.F_v1, p.F_v2, p.F_d1, p.F_d2])
 

@@ -220,8 +220,8 @@ class Robot:
     """A named robot: nominal parameters and, when known, CAD (reference) parameters."""
 
     name: str
-    nominal: PhysicalParameters
-    cad: PhysicalParameters | None = None
+    nominal: PhysicalParameters | BaseSet
+    cad: PhysicalParameters | BaseSet | None = None
     torque_constant: float | None = None  # N m/A, of each motor ([motor] table)
     efficiency: float | None = None  # of the gearbox ([motor] table)
     casters: tuple[Caster, ...] | None = None  # [[caster]] tables; None: default_casters (multibody only)
@@ -276,6 +276,66 @@ BUILTIN_ROBOTS: dict[str, Robot] = {
     "amr": Robot(name="amr", nominal=AMR_NOMINAL, cad=AMR_CAD, casters=default_casters(AMR_CAD)),
     "heavy": Robot(name="heavy", nominal=HEAVY_NOMINAL, cad=HEAVY_CAD, casters=default_casters(HEAVY_CAD)),
 }
+
+
+@dataclass(frozen=True)
+class BaseSet:
+    """A robot's base parameters given directly (a ``[nominal_base]`` or ``[cad_base]`` table): theta0 =
+    [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] (SI), and the wheel radius r, half track b and gear ratio k_r when known
+    (for unit conversions only).  :func:`wmrid.model.dynamics.base_parameters` returns ``theta0``; what needs the
+    physical parameters (a payload, a simulation) refuses a robot described this way."""
+
+    theta0: tuple[float, ...]
+    r: float | None = None
+    b: float | None = None
+    k_r: float | None = None
+
+    def to_dict(self) -> dict[str, float]:
+        out = dict(zip(BASE_KEYS, self.theta0, strict=True))
+        out.update({k: v for k, v in (("r", self.r), ("b", self.b), ("k_r", self.k_r)) if v is not None})
+        return out
+
+
+#: The keys of a base-parameter table: theta0's, in order (M11 M12 M22 may stand for m11 m12 m22).
+BASE_KEYS = ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
+
+
+def _parse_base_set(table: object, where: str) -> tuple[BaseSet, list[str], set[str]]:
+    """(the base set, what was assumed, the base names assumed) of a [nominal_base] or [cad_base] table."""
+    if not isinstance(table, dict):
+        raise RobotFileError(f"{where}: expected a table of base parameters")
+    known = {*BASE_KEYS, "M11", "M12", "M22", "r", "b", "k_r"}
+    unknown = sorted(set(table) - known)
+    if unknown:
+        raise RobotFileError(f"{where}: unknown key(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
+    for key, value in table.items():
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
+            raise RobotFileError(f"{where}: {key} must be a finite number, got {value!r}")
+    small, big = {"m11", "m12", "m22"} & set(table), {"M11", "M12", "M22"} & set(table)
+    if (len(small) != 3 and len(big) != 3) or (small and big):
+        raise RobotFileError(f"{where}: give the inverse inertia m11, m12, m22 (1/(kg m^2)) or the inertia M11, M12, "
+                             "M22 (kg m^2), all three of one of them")  # fmt: skip
+    if "Vc" not in table:
+        raise RobotFileError(f"{where}: missing Vc (kg m^2)")
+    entries = [table[k] for k in (("m11", "m12", "m22") if small else ("M11", "M12", "M22"))]
+    if not (entries[0] > 0 and entries[2] > 0 and entries[0] * entries[2] - entries[1] ** 2 > 0):
+        raise RobotFileError(f"{where}: the inertia matrix must be positive definite, got {entries}")
+    if big:
+        det = entries[0] * entries[2] - entries[1] ** 2
+        entries = [entries[2] / det, -entries[1] / det, entries[0] / det]
+    friction = [table.get(k) for k in BASE_KEYS[4:]]
+    assumed, keys = [], set()
+    if any(f is None for f in friction):
+        keys = {k for k, f in zip(BASE_KEYS[4:], friction, strict=True) if f is None}
+        assumed.append(f"{', '.join(sorted(keys))} = 0 (no friction given)")
+        friction = [0.0 if f is None else f for f in friction]
+    if any(f < 0 for f in friction):
+        raise RobotFileError(f"{where}: friction must be >= 0")
+    for key in ("r", "b", "k_r"):
+        if key in table and table[key] <= 0:
+            raise RobotFileError(f"{where}: {key} must be > 0, got {table[key]}")
+    theta0 = tuple(float(v) for v in [*entries, table["Vc"], *friction])
+    return BaseSet(theta0, table.get("r"), table.get("b"), table.get("k_r")), assumed, keys
 
 
 #: The parameters a robot file must give: what M and V_c (Eqs. 10-14) depend on most.
@@ -333,17 +393,30 @@ def robot_from_toml_text(text: str, source: str) -> Robot:
         raise RobotFileError(f"{source}: not valid TOML ({err})") from None
     except RecursionError:
         raise RobotFileError(f"{source}: nested too deeply to be a robot file; see README 'Robot files'") from None
-    if "nominal" not in data:
-        raise RobotFileError(f"{source}: no [nominal] table; a robot file needs at least its nominal parameters")
-    nominal, assumed, nominal_keys = _parse_set(data["nominal"], f"{source} [nominal]")
-    assumed = [f"[nominal] {a}" for a in assumed]
+    if ("nominal" in data) == ("nominal_base" in data) or ("cad" in data and "cad_base" in data):
+        raise RobotFileError(
+            f"{source}: give the nominal parameters as one table, [nominal] (physical, Table 1) or [nominal_base] "
+            "(m11 m12 m22 Vc ... directly), and the CAD ones likewise, [cad] or [cad_base] (see examples/)"
+        )
+    friction_names = {"F_v1": "Fv1", "F_v2": "Fv2", "F_d1": "Fd1", "F_d2": "Fd2"}
+    if "nominal" in data:
+        nominal, assumed, nominal_keys = _parse_set(data["nominal"], f"{source} [nominal]")
+        unknown_k_r = "k_r" in nominal_keys
+        assumed = [f"[nominal] {a}" for a in assumed]
+    else:
+        nominal, assumed, _ = _parse_base_set(data["nominal_base"], f"{source} [nominal_base]")
+        unknown_k_r = nominal.k_r is None
+        assumed = [f"[nominal_base] {a}" for a in assumed]
+        assumed.append("[nominal_base] base parameters only: no payload estimate and no simulation")
     cad, unknown_cad = None, ()
     if "cad" in data:
         cad, cad_assumed, cad_keys = _parse_set(data["cad"], f"{source} [cad]")
         assumed += [f"[cad] {a}" for a in cad_assumed]
-        unknown_cad = tuple(n for n, k in (("Fv1", "F_v1"), ("Fv2", "F_v2"), ("Fd1", "F_d1"), ("Fd2", "F_d2"))
-                            if k in cad_keys)  # fmt: skip
-    unknown_k_r = "k_r" in nominal_keys
+        unknown_cad = tuple(friction_names[k] for k in friction_names if k in cad_keys)
+    elif "cad_base" in data:
+        cad, cad_assumed, cad_keys = _parse_base_set(data["cad_base"], f"{source} [cad_base]")
+        assumed += [f"[cad_base] {a}" for a in cad_assumed]
+        unknown_cad = tuple(n for n in BASE_KEYS[4:] if n in cad_keys)
     name = str(data.get("name", Path(source).stem))
     motor = data.get("motor", {})
     if not isinstance(motor, dict) or set(motor) - {"torque_constant", "efficiency"}:
@@ -388,10 +461,10 @@ def robot_to_toml(robot: Robot) -> str:
     lines = [f'name = "{robot.name}"']
     sets = [("nominal", robot.nominal)] + ([("cad", robot.cad)] if robot.cad is not None else [])
     for title, params in sets:
-        lines.append(f"\n[{title}]")
+        base = isinstance(params, BaseSet)
+        lines.append(f"\n[{title}_base]" if base else f"\n[{title}]")
         for key, value in params.to_dict().items():
-            unit = PARAMETER_UNITS[key][0]
-            lines.append(f"{key} = {value!r}  # {unit}")
+            lines.append(f"{key} = {value!r}" if base else f"{key} = {value!r}  # {PARAMETER_UNITS[key][0]}")
     for caster in robot.casters or ():
         lines.append("\n[[caster]]")
         for key, value in caster.to_dict().items():
