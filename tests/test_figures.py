@@ -30,8 +30,8 @@ from wmrid.model.dynamics import (
     named_base,
 )
 from wmrid.model.robot import BUILTIN_ROBOTS
-from wmrid.reporting import figures
-from wmrid.reporting.figures import MAX_POINTS, decimate_for_display
+from wmrid.reporting import decimate, figures
+from wmrid.reporting.decimate import MAX_POINTS, decimate_for_display
 from wmrid.sim.simulate import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -90,7 +90,7 @@ def _check_decimation(t, y, max_points):
     assert np.all(np.diff(idx) > 0)  # ... in their order
     np.testing.assert_array_equal(y[idx], yd)
     if len(t) > max_points:
-        edges = figures._bin_edges(len(t), max_points)
+        edges = decimate._bin_edges(len(t), max_points)
         assert edges[0] == 1
         assert edges[-1] == len(t) - 1
         assert len(edges) - 1 <= (max_points - 2) // 2

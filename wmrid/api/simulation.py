@@ -103,7 +103,7 @@ def simulate(
     from wmrid.sim.simulate import simulate as run_reduced
 
     robot_obj = load_robot(robot, gear_ratio=gear_ratio, rotor_inertia=rotor_inertia)
-    if hasattr(robot_obj.nominal, "theta0") or hasattr(robot_obj.reference, "theta0"):
+    if not robot_obj.physical:
         raise UsageError(
             f"{option('robot', robot_obj.name)}: gives base parameters only; a simulation needs the physical ones "
             "([nominal] and [cad] tables of Table 1's parameters; see examples/)"

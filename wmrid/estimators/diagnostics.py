@@ -74,18 +74,19 @@ def impossible_parameters(parameters: dict[str, tuple[float, float]]) -> set[str
 
 
 def physics_warnings(parameters: dict[str, tuple[float, float]]) -> list[str]:
-    """Warnings for base parameters that no physical robot has: M not positive definite, negative friction
-    (each beyond 3 standard errors, so that noise alone does not trigger it)."""
+    """Warnings for base parameters that no physical robot has (:func:`impossible_parameters`): M not positive
+    definite, negative friction (each beyond 3 standard errors, so that noise alone does not trigger it)."""
+    impossible = impossible_parameters(parameters)
     out = []
-    m11, m12, m22 = (parameters[n][0] for n in ("m11", "m12", "m22"))
-    if m11 <= 0 or m22 <= 0 or m11 * m22 - m12 * m12 <= 0:
+    if "m11" in impossible:
+        m11, m12, m22 = (parameters[n][0] for n in ("m11", "m12", "m22"))
         out.append(
             f"the identified inverse inertia [m11 m12; m12 m22] = [{m11:.4g} {m12:.4g}; {m12:.4g} {m22:.4g}] is not "
             "positive definite, which no robot has: the log departs from the model or does not excite it"
         )
     for name in ("Fv1", "Fv2", "Fd1", "Fd2"):
-        value, std = parameters[name]
-        if value < 0 and math.isfinite(std) and value < -3 * std:
+        if name in impossible:
+            value, std = parameters[name]
             out.append(f"{name} = {value:.4g} is negative beyond 3 std ({std:.2g}): friction cannot push; check signs")
     return out
 

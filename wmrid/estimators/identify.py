@@ -212,7 +212,7 @@ def identify(
         raise UsageError(
             f"{option('payload')} needs {option('robot')}: the payload is what the log shows beyond the unloaded robot"
         )
-    if payload and hasattr(robot.reference, "theta0"):
+    if payload and not robot.physical:
         raise UsageError(
             f"{option('payload')} needs the robot's physical parameters (masses, inertias, geometry); "
             f"robot {robot.name!r} gives base parameters only"

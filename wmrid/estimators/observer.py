@@ -79,11 +79,16 @@ def foh_weights(x: float) -> tuple[float, float, float]:
     return float(a), float(phi0), float(phi1)
 
 
+def check_control_rate_value(control_rate: float | None) -> None:
+    """Refuse a control rate that is not a frequency > 0 Hz (None: none)."""
+    if control_rate is not None and not (math.isfinite(control_rate) and control_rate > 0):
+        raise UsageError(f"{option('control_rate')} must be a frequency > 0 in Hz, got {control_rate!r}")
+
+
 def check_gains(k: float, alpha: float, control_rate: float | None = None) -> None:
     """Refuse a gain k outside (0, MAX_K] 1/s, an alpha that is not a finite number > 0, a control rate that is not
     a frequency > 0 Hz (None: none)."""
-    if control_rate is not None and not (math.isfinite(control_rate) and control_rate > 0):
-        raise UsageError(f"{option('control_rate')} must be a frequency > 0 in Hz, got {control_rate!r}")
+    check_control_rate_value(control_rate)
     if not (math.isfinite(k) and 0 < k <= MAX_K):
         raise UsageError(
             f"{option('k')} must be a number in (0, {MAX_K:g}] (1/s, the state predictor's gain; default 10), got "

@@ -8,9 +8,6 @@ import os
 from pathlib import Path
 from typing import Any
 
-#: Bytes read at a time while hashing (memory stays at one block, whatever the file's size).
-BLOCK = 1 << 20
-
 
 def file_digests(paths: str | os.PathLike[str] | list[Any], data: bytes | None = None) -> list[dict[str, Any]]:
     """[{"path", "bytes", "sha256"}] of ``paths`` (a file, a folder, several; "-" standard input, whose bytes
@@ -26,11 +23,7 @@ def file_digests(paths: str | os.PathLike[str] | list[Any], data: bytes | None =
         path = Path(name)
         files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
         for f in files:
-            digest = hashlib.sha256()
-            size = 0
             with open(f, "rb") as fh:
-                while block := fh.read(BLOCK):
-                    digest.update(block)
-                    size += len(block)
-            out.append({"path": str(f), "bytes": size, "sha256": digest.hexdigest()})
+                digest = hashlib.file_digest(fh, "sha256")  # reads in blocks: memory stays bounded
+            out.append({"path": str(f), "bytes": f.stat().st_size, "sha256": digest.hexdigest()})
     return out

@@ -233,6 +233,12 @@ class Robot:
     gear_ratio_known: bool = True
 
     @property
+    def physical(self) -> bool:
+        """Whether both parameter sets are physical (Table 1), not base parameters given directly (:class:`BaseSet`):
+        what a payload estimate and a simulation need."""
+        return not isinstance(self.nominal, BaseSet) and not isinstance(self.cad, BaseSet)
+
+    @property
     def reference(self) -> PhysicalParameters:
         """The best-known parameters: CAD when given, else nominal."""
         return self.cad if self.cad is not None else self.nominal

@@ -6,7 +6,8 @@ for callers who want to adjust it) and a function of the same name without the p
 never with pyplot, so no global figure state is created or left behind.
 
 No line carries more than :data:`MAX_POINTS` points: long series are reduced for display only by
-:func:`decimate_for_display`, which keeps the minimum and maximum of every bin, so spikes stay visible.
+:func:`wmrid.reporting.decimate.decimate_for_display`, which keeps the minimum and maximum of every bin, so spikes
+stay visible.
 
 Colours: right wheel blue (C0), left wheel orange (C1), in every figure.
 
@@ -26,6 +27,7 @@ import numpy as np
 
 from wmrid.core.errors import UsageError
 from wmrid.model.dynamics import THETA0_NAMES, RegressorForm, intermediate_parameters
+from wmrid.reporting.decimate import MAX_POINTS, decimate_for_display, envelope_indices
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -33,8 +35,6 @@ if TYPE_CHECKING:
 
     from wmrid.estimators.result import IdentificationResult
 
-#: The most points any plotted line carries.
-MAX_POINTS = 4000
 #: Figure size (inches) of the single-panel and side-by-side figures (the full width of a report page),
 #: and the PNG resolution.
 FIGSIZE = (11.0, 4.2)
@@ -46,59 +46,6 @@ FORMATS = ("svg", "png")
 _WHEELS = (("right", "C0"), ("left", "C1"))
 #: lambda_min(Gamma) / alpha from which the data outweigh the start value (see excitation_figure).
 _OUTWEIGH = 100.0
-
-
-# --------------------------------------------------------------------------------------------------
-# Decimation for display
-
-
-def _bin_edges(n: int, max_points: int) -> np.ndarray:
-    """Edges of the bins that :func:`decimate_for_display` reduces, over samples 1 .. n-2.
-
-    Samples 0 and n-1 are always kept; the interior is cut into at most (max_points - 2) // 2 bins of
-    equal length (the last may be shorter).  Returns edges e (nb + 1,): bin j is samples e[j]:e[j+1].
-    """
-    interior = n - 2
-    n_bins = (max_points - 2) // 2
-    size = -(-interior // n_bins)
-    return np.append(np.arange(1, n - 1, size), n - 1)
-
-
-def _envelope_indices(y: np.ndarray, max_points: int) -> np.ndarray:
-    """Sorted indices of the samples that :func:`decimate_for_display` keeps (at most max_points)."""
-    n = len(y)
-    if n <= max_points:
-        return np.arange(n)
-    edges = _bin_edges(n, max_points)
-    n_bins, size = len(edges) - 1, int(edges[1] - edges[0])
-    interior = y[1 : n - 1]
-    pad = n_bins * size - len(interior)
-    nan = np.isnan(interior)
-    # NaN never wins a bin that has numbers; a bin of only NaN keeps one (a gap in the drawn line).
-    low = np.concatenate([np.where(nan, np.inf, interior), np.full(pad, np.inf)]).reshape(n_bins, size)
-    high = np.concatenate([np.where(nan, -np.inf, interior), np.full(pad, -np.inf)]).reshape(n_bins, size)
-    start = 1 + size * np.arange(n_bins)
-    keep = np.concatenate([[0], start + np.argmin(low, axis=1), start + np.argmax(high, axis=1), [n - 1]])
-    return np.unique(keep)
-
-
-def decimate_for_display(t: np.ndarray, y: np.ndarray, max_points: int = MAX_POINTS) -> tuple[np.ndarray, np.ndarray]:
-    """A series reduced to at most ``max_points`` samples for drawing, spikes kept.
-
-    t, y : (n,) (y may hold NaN).  When n <= max_points both are returned as they are (as arrays).
-    Otherwise the first and last samples are kept and the samples in between are cut into
-    (max_points - 2) // 2 bins of consecutive samples; of each bin the samples holding its minimum
-    and its maximum are kept, in their original order.  The result is a subset of the input, so the
-    drawn line passes through every bin's extremes.  For display only, never for computation.
-    """
-    t = np.asarray(t)
-    y = np.asarray(y)
-    if t.ndim != 1 or y.shape != t.shape:
-        raise UsageError(f"decimate_for_display needs t and y of one shape (n,), got {t.shape} and {y.shape}")
-    if max_points < 4:
-        raise UsageError(f"max_points must be at least 4 (first, last and one bin's min and max), got {max_points}")
-    idx = _envelope_indices(y, int(max_points))
-    return t[idx], y[idx]
 
 
 # --------------------------------------------------------------------------------------------------
@@ -209,7 +156,7 @@ def build_path_figure(pose: np.ndarray | None) -> Figure | None:
         raise UsageError(f"pose must have shape (n, 3) [x, y, phi], got {pose.shape}")
     x, y = pose[:, 0], pose[:, 1]
     half = MAX_POINTS // 2
-    idx = np.union1d(_envelope_indices(x, half), _envelope_indices(y, half))
+    idx = np.union1d(envelope_indices(x, half), envelope_indices(y, half))
     fig = _new_figure()
     ax = fig.subplots()
     ax.plot(x[idx], y[idx], color="C0", lw=1.2, label="path")
@@ -408,7 +355,7 @@ def build_residuals_figure(result: IdentificationResult) -> Figure:
             beyond += len(out)
             worst = scale * col[out[np.argmax(np.abs(col[out]))]]
             extreme = worst if abs(worst) > abs(extreme) else extreme
-            keep = out[_envelope_indices(col[out], MAX_POINTS)]
+            keep = out[envelope_indices(col[out], MAX_POINTS)]
             for side, marker, edge in ((col[keep] > hi, "^", hi), (col[keep] < lo, "v", lo)):
                 if side.any():
                     ax_t.plot(t[keep][side], np.full(side.sum(), edge), marker, color=colour, ms=5, clip_on=False)

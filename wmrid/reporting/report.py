@@ -75,7 +75,7 @@ def rendered(report: Report, fmt: str) -> dict[str, bytes]:
     for name, fig in report.figure_objects.items():
         if name not in cache:
             cache[name] = render(fig, fmt)
-    return {name: cache[name] for name in report.figure_objects if name in cache} or dict(cache)
+    return cache
 
 
 def torque_residual(log: Any, theta0: np.ndarray, form: RegressorForm | None = None) -> dict[str, Any]:
