@@ -103,6 +103,11 @@ _EXPORTS = {
     "Report": "wmrid.reporting.report",
     "SimulationRun": "wmrid.api.simulation",
     "WmridError": "wmrid.core.errors",
+    "fleet": "wmrid.api.fleet",
+    "FleetRun": "wmrid.api.fleet",
+    "fleet_report": "wmrid.api.fleet_reporting",
+    "write_fleet_report": "wmrid.api.fleet_reporting",
+    "FleetReport": "wmrid.reporting.fleet_report",
 }
 
 __all__ = ["__version__", *sorted(_EXPORTS)]

@@ -76,7 +76,10 @@ def _given(log: Any) -> str:
 
 
 def _log(log: LogInput, options: LogOptions | None, robot: Robot | None, whole: bool) -> WheelLog | LogStream:
-    """The log as a stream (``whole`` False) or in memory."""
+    """The log as a stream (``whole`` False) or in memory; a simulated log (``wmrid.simulate(...).log``) as the
+    :class:`WheelLog` it stands for."""
+    if hasattr(log, "to_wheel_log"):
+        log = log.to_wheel_log()
     if _is_path(log):
         stream = open_log(log, options, robot=robot)
         return stream.read() if whole else stream

@@ -25,6 +25,7 @@ follow by the delta method from the covariance of (m11, m12, m22, V_c) (M = m^-1
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -39,16 +40,25 @@ def payload_from_base(theta0: np.ndarray, unloaded: PhysicalParameters) -> np.nd
     """(m_L kg, x m, y m, I_L kg m^2) from base parameters theta0 (8,) [m11 m12 m22 Vc ...] of the loaded robot."""
     big_m = np.linalg.inv(model.inverse_inertia(theta0))
     big_m0 = model.inertia_matrix(unloaded)
-    vc0 = model.coriolis_coefficient(unloaded)
-    r, b = unloaded.r, unloaded.b
+    before = (big_m0[0, 0], big_m0[0, 1], big_m0[1, 1], model.coriolis_coefficient(unloaded))
+    after = (big_m[0, 0], big_m[0, 1], big_m[1, 1], theta0[3])
+    return payload_from_change(before, after, unloaded.r, unloaded.b)
+
+
+def payload_from_change(before: Any, after: Any, r: float, b: float) -> np.ndarray:
+    """(m_L kg, x m, y m, I_L kg m^2) of the payload that changed (M11, M12, M22 kg m^2, V_c kg m) from ``before``
+    to ``after`` on a robot of wheel radius r and half-track b (m): the module's four equations.  ``before`` may be
+    the robot's own identified values without its payload (a fleet's baseline), not only its model."""
+    m11_0, m12_0, m22_0, vc0 = (float(v) for v in before)
+    m11, m12, m22, vc = (float(v) for v in after)
     s = r**2 / (4.0 * b**2)
-    d_sum = 0.5 * ((big_m[0, 0] + big_m[1, 1]) - (big_m0[0, 0] + big_m0[1, 1]))
-    d_12 = big_m[0, 1] - big_m0[0, 1]
-    d_diff = (big_m[0, 0] - big_m[1, 1]) - (big_m0[0, 0] - big_m0[1, 1])
+    d_sum = 0.5 * ((m11 + m22) - (m11_0 + m22_0))
+    d_12 = m12 - m12_0
+    d_diff = (m11 - m22) - (m11_0 - m22_0)
     mass = (d_sum + d_12) / (2.0 * s * b**2)
     inertia_about_o = (d_sum - d_12) / (2.0 * s)
     moment_y = -d_diff / (4.0 * s * b)
-    moment_x = (theta0[3] - vc0) * 4.0 * b**2 / r**3
+    moment_x = (vc - vc0) * 4.0 * b**2 / r**3
     x, y = moment_x / mass, moment_y / mass
     return np.array([mass, x, y, inertia_about_o - mass * (x**2 + y**2)])
 

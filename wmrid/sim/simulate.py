@@ -83,6 +83,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from wmrid.core.errors import UsageError, option
+from wmrid.core.wheel_log import WheelLog
 from wmrid.model import dynamics as model
 from wmrid.model.robot import PhysicalParameters
 
@@ -156,6 +157,14 @@ class SimulatedLog:
             return self.true
         t_switch = self.settings["change"]["t_switch"]
         return self.change.after if t >= t_switch - 1e-9 * self.settings["control_period"] else self.true
+
+    def to_wheel_log(self, source: str = "simulation") -> WheelLog:
+        """The log as an identification sees it: t, eta, tau, the pose and, as the wheel-speed reference, the
+        reference's wheel speeds :attr:`eta_ref` (not the reference pose)."""
+        return WheelLog(
+            t=self.t, eta=self.eta, tau=self.tau, source=source, pose=self.pose,
+            reference=self.eta_ref,
+        )  # fmt: skip
 
     def to_frame(self) -> pandas.DataFrame:
         """Columns t, eta_r, eta_l, tau_r, tau_l, x, y, phi, theta_r, theta_l, eta_ref_r, eta_ref_l (SI units;

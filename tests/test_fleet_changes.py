@@ -1,0 +1,159 @@
+"""The statistics of the fleet report (issue 17): the scan's F statistics against a least-squares fit done
+independently, the stated false-alarm rates against fresh Monte Carlo draws, detection of ramps, steps and odd logs,
+the fleet's robust z, and the payload of a change of M and V_c."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from wmrid.model import dynamics as model
+from wmrid.model.payload import payload_from_base, payload_from_change
+from wmrid.model.robot import BUILTIN_ROBOTS, Payload
+from wmrid.monitoring import fleet_changes as fc
+
+CAD = BUILTIN_ROBOTS["paper"].cad
+
+
+def _f_by_lstsq(x: np.ndarray, tau: int, end: int, ramp: bool) -> float:
+    """F of the step/ramp term in a least-squares fit of x[0..end] with a constant, by numpy's lstsq."""
+    t = np.arange(end + 1)
+    g = np.where(t >= tau, (t - tau + 1.0) if ramp else 1.0, 0.0)
+    y = x[: end + 1]
+    full = np.column_stack([np.ones_like(g), g])
+    rss1 = np.sum((y - full @ np.linalg.lstsq(full, y, rcond=None)[0]) ** 2)
+    rss0 = np.sum((y - y.mean()) ** 2)
+    return (rss0 - rss1) / (rss1 / (end + 1 - 2))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_scan_statistics_equal_an_independent_least_squares_fit(seed):
+    # every end n and onset tau (first <= tau <= n, n - tau < window): the largest F of the two alternatives
+    rng = np.random.default_rng(seed)
+    x = 5.0 + 0.01 * rng.standard_normal(24)
+    x[15:] += 0.02 * np.arange(9)  # something to find
+    first, window = 6, 7
+    stat, onset, ramp = fc.scan(x[None, :], window, first)
+    for end in range(24):
+        cands = [(_f_by_lstsq(x, tau, end, r), tau, r) for tau in range(max(first, end - window + 1), end + 1)
+                 for r in (False, True)]  # fmt: skip
+        if end < first:
+            assert stat[0, end] == 0.0
+            continue
+        best = max(cands)
+        # relative 1e-9: sums of 24 values near 5 (centred first), against lstsq's QR; F grows to 1e3 here
+        assert stat[0, end] == pytest.approx(best[0], rel=1e-9)
+        assert onset[0, end] == best[1]
+
+
+def test_scan_floor_caps_the_statistic():
+    x = np.r_[np.zeros(10), np.ones(5) * 1e-12]  # a step far below what the logs' own std can tell
+    stat, _, _ = fc.scan(x[None, :], 10, 5, floor=np.array([1e-6]))
+    assert stat.max() < 1e-8
+
+
+@pytest.mark.parametrize(("alpha", "total"), [(0.05, 30), (0.01, 30), (0.01, 80)])
+def test_false_alarm_rate_holds_on_fresh_draws(alpha, total):
+    # A robot without change is flagged with probability at most alpha over its history: fresh Gaussian draws
+    # (another seed than the calibration's), 8 parameters, baseline 10, window 30.  Bound: alpha plus 3 binomial
+    # standard errors of the estimate from 3000 draws.
+    h = fc.threshold(alpha, total, 10, 30)
+    rng = np.random.Generator(np.random.PCG64(99))
+    draws = 3000
+    hits = 0
+    for start in range(0, draws, 500):
+        stat, _, _ = fc.scan(rng.standard_normal((500, 8, total)), 30, 10)
+        hits += int(np.sum(stat.max(axis=(1, 2)) > h))
+    rate = hits / draws
+    assert rate <= alpha + 3 * math.sqrt(alpha * (1 - alpha) / draws)
+
+
+@pytest.mark.slow(reason="40000 Monte Carlo draws, about 20 s")
+def test_false_alarm_rate_of_the_extrapolated_threshold():
+    # alpha = 0.001 lies beyond the calibration's draws: the threshold extrapolates the tail (conservatively)
+    h = fc.threshold(0.001, 50, 10, 30)
+    rng = np.random.Generator(np.random.PCG64(123))
+    hits = sum(int(np.sum(fc.scan(rng.standard_normal((500, 8, 50)), 30, 10)[0].max(axis=(1, 2)) > h))
+               for _ in range(80))  # fmt: skip
+    assert hits / 40000 <= 0.001 + 3 * math.sqrt(0.001 / 40000)
+
+
+def _robot(total=50, seed=0):
+    rng = np.random.default_rng(seed)
+    level = np.array([1.41, -0.455, 1.49, 0.21, 0.01, 0.015, 0.045, 0.04])
+    sd = np.abs(level) * np.array([2e-4, 5e-4, 2e-4, 3e-4, 0.012, 0.012, 0.012, 0.012])
+    return level + sd * rng.standard_normal((total, 8)), np.tile(sd / 2, (total, 1))
+
+
+def test_a_friction_ramp_is_found_within_days_of_its_onset():
+    x, s = _robot()
+    days = np.arange(50.0)
+    rise = np.where(days >= 20, 1 + 0.03 * (days - 20), 1.0)
+    x[:, 4] *= rise
+    x[:, 6] *= rise
+    hist = fc.analyse_robot(x, s, days)
+    (change,) = hist.changes
+    assert set(change.parameters) <= {"Fv1", "Fd1"} and change.parameters
+    assert change.kind == "ramp" and change.confirmed
+    assert 20 <= change.onset <= 23 and change.alarm - 20 <= 5
+    assert change.rate_per_day[change.parameters[0]] == pytest.approx(0.03, rel=0.2)
+
+
+def test_a_step_of_the_inertia_is_dated_on_its_log():
+    x, s = _robot(seed=1)
+    x[35:, 0] += 0.1
+    x[35:, 2] += 0.1
+    hist = fc.analyse_robot(x, s)
+    (change,) = hist.changes
+    assert change.onset == change.alarm == 35 and change.kind == "step"
+    assert {"M11", "M22"} <= set(change.parameters)
+    assert change.relative("M11") == pytest.approx(0.1 / 1.41, rel=0.01)
+
+
+def test_one_odd_log_is_not_a_change():
+    x, s = _robot(seed=2)
+    x[30, 4] *= 1.5
+    hist = fc.analyse_robot(x, s)
+    assert hist.changes == [] and hist.odd_logs == [30]
+
+
+def test_a_change_on_the_latest_log_is_unconfirmed():
+    x, s = _robot(seed=3)
+    x[49, 0] += 0.1
+    (change,) = fc.analyse_robot(x, s).changes
+    assert change.alarm == 49 and change.confirmed is None
+
+
+def test_too_few_logs_are_said_not_tested():
+    x, s = _robot(total=8)
+    hist = fc.analyse_robot(x, s)
+    assert hist.changes == [] and "too few" in hist.note
+
+
+def test_robust_z_against_a_direct_computation():
+    levels = np.array([[1.0, 5.0], [2.0, 5.0], [3.0, 5.0], [4.0, 5.0], [10.0, 6.0]])
+    z = fc.robust_z(levels)
+    # column 0: median 3, |dev| = 2 1 0 1 7 -> MAD 1; column 1: MAD 0: 0 at the median, inf elsewhere
+    np.testing.assert_allclose(z[:, 0], (levels[:, 0] - 3.0) / 1.4826)
+    assert list(z[:, 1]) == [0, 0, 0, 0, math.inf]
+
+
+def test_outlier_false_alarm_rate_holds_on_fresh_draws():
+    h = fc.outlier_threshold(0.01, 12)
+    rng = np.random.Generator(np.random.PCG64(7))
+    data = rng.standard_normal((4000, 12, 8))
+    hits = sum(bool(np.abs(fc.robust_z(d)).max() > h) for d in data)
+    assert hits / 4000 <= 0.01 + 3 * math.sqrt(0.01 * 0.99 / 4000)
+
+
+def test_payload_from_a_change_equals_the_model_inversion():
+    load = Payload(12.0, 0.08, -0.04, 0.3)
+    big_m0, big_m1 = model.inertia_matrix(CAD), model.inertia_matrix(CAD.with_payload(load))
+    before = (big_m0[0, 0], big_m0[0, 1], big_m0[1, 1], model.coriolis_coefficient(CAD))
+    after = (big_m1[0, 0], big_m1[0, 1], big_m1[1, 1], model.coriolis_coefficient(CAD.with_payload(load)))
+    got = payload_from_change(before, after, CAD.r, CAD.b)
+    np.testing.assert_allclose(got, [12.0, 0.08, -0.04, 0.3], rtol=1e-9, atol=1e-10)
+    theta0 = model.base_parameters(CAD.with_payload(load))
+    np.testing.assert_allclose(payload_from_base(theta0, CAD), got, rtol=1e-9, atol=1e-10)

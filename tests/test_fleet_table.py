@@ -1,0 +1,167 @@
+"""The fleet's files (issue 17): the table's schema is stable and round-trips through Parquet, the manifest is read
+with its per-log options and refused with its row named, logs are found from folders and globs, and a path states a
+robot id and a time."""
+
+from __future__ import annotations
+
+import datetime as dt
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from wmrid.core.errors import LogFormatError, UsageError
+from wmrid.io import fleet_table as ft
+
+UTC = dt.timezone.utc
+
+#: The table's columns as documented in the README ("Fleets"); a change here is a new schema version.
+DOCUMENTED = [
+    ("robot_id", "string"), ("log", "string"), ("robot", "string"), ("sha256", "string"), ("bytes", "int64"),
+    ("start_time", "timestamp[us, tz=UTC]"), ("time_source", "string"), ("duration_s", "double"),
+    ("samples", "int64"), ("rate_hz", "double"), ("method", "string"), ("form", "string"), ("effort_unit", "string"),
+    ("options", "string"), ("options_key", "string"),
+    *[(c, "double") for n in ft.PARAMETERS for c in (n, f"{n}_std")],
+    ("flags", "list<element: string>"), ("warnings", "list<element: string>"), ("fit_r", "double"), ("fit_l", "double"),
+    ("run_time_s", "double"), ("worker", "string"), ("wmrid_version", "string"), ("error", "string"),
+]  # fmt: skip
+
+
+def test_schema_is_stable():
+    schema = ft.schema()
+    assert [(f.name, str(f.type)) for f in schema] == DOCUMENTED
+    assert schema.metadata[b"wmrid_fleet_schema"] == b"1"
+    assert ft.PARAMETERS == ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2", "Cv", "Cw")
+
+
+def test_table_round_trip(tmp_path):
+    rows = [
+        ft.empty_row(robot_id="R1", log="a.mcap", start_time=dt.datetime(2026, 3, 1, 8, tzinfo=UTC), M11=1.5,
+                     M11_std=0.01, flags=["M11"], warnings=["w"], samples=10),
+        ft.empty_row(robot_id="R2", log="b.mcap", error="b.mcap: broken"),
+    ]  # fmt: skip
+    path = tmp_path / "t.parquet"
+    ft.write_table(rows, path)
+    back = ft.read_table(path)
+    assert back == rows
+    on_disk = pq.read_schema(path)
+    assert [(f.name, str(f.type)) for f in on_disk] == DOCUMENTED
+    assert on_disk.metadata[b"wmrid_fleet_schema"] == b"1"
+    with pytest.raises(Exception, match="exists"):
+        ft.write_table(rows, path)  # never over a table without force
+    ft.write_table(rows[:1], path, force=True)
+    assert len(ft.read_table(path)) == 1
+
+
+def test_an_unknown_row_column_is_refused():
+    with pytest.raises(ValueError, match="not columns"):
+        ft.empty_row(speed=1.0)
+
+
+def test_a_parquet_file_that_is_not_a_fleet_table_is_named(tmp_path):
+    other = tmp_path / "other.parquet"
+    pq.write_table(pa.table({"t": [0.0]}), other)
+    with pytest.raises(LogFormatError, match=r"other\.parquet: not a wmrid fleet table"):
+        ft.read_table(other)
+    with pytest.raises(UsageError, match="no such fleet table"):
+        ft.read_table(tmp_path / "none.parquet")
+    (tmp_path / "text.parquet").write_text("hello")
+    with pytest.raises(LogFormatError, match=r"text\.parquet: not a Parquet fleet table"):
+        ft.read_table(tmp_path / "text.parquet")
+
+
+def test_manifest_rows_with_options(tmp_path):
+    (tmp_path / "logs").mkdir()
+    (tmp_path / "robots").mkdir()
+    (tmp_path / "robots" / "r.toml").write_text("x")
+    (tmp_path / "m.csv").write_text(
+        "log,robot_id,robot,time,speed_unit,torque_constant,mirror_left\n"
+        "logs/a.mcap,R1,robots/r.toml,2026-03-01T08:30:00Z,rpm,0.05,true\n"
+        "logs/R9/2026-03-02.mcap,,paper,,,,\n"
+        "/abs/c.bag,R3,,1772352000,,,no\n"
+    )
+    a, b, c = ft.read_manifest(tmp_path / "m.csv")
+    assert a.log == str(tmp_path / "logs" / "a.mcap") and a.robot_id == "R1"
+    assert a.robot == str(tmp_path / "robots" / "r.toml")  # relative to the manifest, as the logs
+    assert a.time == dt.datetime(2026, 3, 1, 8, 30, tzinfo=UTC) and a.time_source == "manifest"
+    assert a.options == {"speed_unit": "rpm", "torque_constant": 0.05, "mirror_left": True}
+    assert b.robot_id == "R9" and b.robot == "paper" and b.options == {}
+    assert b.time == dt.datetime(2026, 3, 2, tzinfo=UTC) and b.time_source == "path"
+    assert c.log == "/abs/c.bag" and c.time == dt.datetime(2026, 3, 1, 8, tzinfo=UTC)
+    assert c.options == {"mirror_left": False}
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("path,robot_id\na,b\n", "needs a 'log' column"),
+        ("log,speed\na.mcap,1\n", "unknown manifest column.*speed"),
+        ("log,time\na.mcap,yesterday\n", r"m\.csv row 2: time: not a time"),
+        ("log,k\na.mcap,fast\n", r"m\.csv row 2: k: k must be a number"),
+        ("log,weighted\na.mcap,maybe\n", "weighted must be true or false"),
+        ("log\n\n", "lists no log"),
+        ("log,robot_id\n,R1\n", "row 2: the log cell is empty"),
+    ],
+)
+def test_manifest_errors_name_the_row(tmp_path, text, message):
+    (tmp_path / "m.csv").write_text(text)
+    with pytest.raises(UsageError, match=message):
+        ft.read_manifest(tmp_path / "m.csv")
+
+
+def test_parquet_manifest(tmp_path):
+    pq.write_table(pa.table({"log": ["x/a.csv"], "robot_id": ["R5"], "k": [20.0]}), tmp_path / "m.parquet")
+    (entry,) = ft.read_manifest(tmp_path / "m.parquet")
+    assert entry.robot_id == "R5" and entry.options == {"k": 20.0}
+
+
+def test_logs_found_in_folders_and_globs(tmp_path):
+    for name in ("R1/2026-01-01.mcap", "R1/2026-01-02.csv.gz", "R2/run.parquet", "R2/notes.txt",
+                 "R2/run.parquet.truth.json", "R3/rec/metadata.yaml", "R3/rec/rec_0.db3", ".hidden/x.mcap"):  # fmt: skip
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text("x")
+    found = ft.find_logs([str(tmp_path)])
+    assert [p.replace(str(tmp_path) + "/", "") for p in found] == [
+        "R1/2026-01-01.mcap", "R1/2026-01-02.csv.gz", "R2/run.parquet", "R3/rec",
+    ]  # fmt: skip
+    assert ft.find_logs([str(tmp_path / "R*" / "*.mcap")]) == [str(tmp_path / "R1" / "2026-01-01.mcap")]
+    # the same log twice (a folder and its file) is one log
+    assert len(ft.find_logs([str(tmp_path / "R1"), str(tmp_path / "R1" / "2026-01-01.mcap")])) == 2
+    with pytest.raises(UsageError, match="no such file"):
+        ft.find_logs([str(tmp_path / "nothing")])
+    with pytest.raises(UsageError, match="matches no log"):
+        ft.find_logs([str(tmp_path / "*.bag")])
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(UsageError, match="a folder with no log"):
+        ft.find_logs([str(tmp_path / "empty")])
+
+
+def test_robot_id_and_time_from_the_path():
+    assert ft.id_and_time_from_path("fleet/R07/2026-01-05.parquet") == ("R07", dt.datetime(2026, 1, 5, tzinfo=UTC))
+    assert ft.id_and_time_from_path("x/amr3/run_2026-01-05T08-30-15.mcap") == (
+        "amr3", dt.datetime(2026, 1, 5, 8, 30, 15, tzinfo=UTC))  # fmt: skip
+    assert ft.id_and_time_from_path("x/amr3/20260105_083015.bag")[1] == dt.datetime(2026, 1, 5, 8, 30, 15, tzinfo=UTC)
+    assert ft.id_and_time_from_path("x/amr3/run.mcap") == ("amr3", None)
+    assert ft.id_and_time_from_path("x/amr3/log_20261399.csv") == ("amr3", None)  # digits, not a date
+    pattern = r"(?P<robot>bot\d+)_(?P<time>\d{4}-\d\d-\d\d)"
+    assert ft.id_and_time_from_path("all/bot12_2026-02-03.mcap", pattern) == (
+        "bot12", dt.datetime(2026, 2, 3, tzinfo=UTC))  # fmt: skip
+    with pytest.raises(UsageError, match="does not match"):
+        ft.id_and_time_from_path("all/other.mcap", pattern)
+    with pytest.raises(UsageError, match="no \\(\\?P<robot>"):
+        ft.id_and_time_from_path("all/bot12.mcap", r"bot\d+")
+
+
+def test_content_digest_of_a_file_and_a_folder(tmp_path):
+    import hashlib
+
+    (tmp_path / "a.bin").write_bytes(b"abc")
+    assert ft.content_digest(str(tmp_path / "a.bin")) == (hashlib.sha256(b"abc").hexdigest(), 3)
+    rec = tmp_path / "rec"
+    rec.mkdir()
+    (rec / "metadata.yaml").write_bytes(b"m")
+    (rec / "rec_0.db3").write_bytes(b"dd")
+    digest, size = ft.content_digest(str(rec))
+    assert size == 3 and len(digest) == 64
+    (rec / "rec_0.db3").write_bytes(b"de")
+    assert ft.content_digest(str(rec))[0] != digest  # any byte of any file changes it

@@ -1,0 +1,500 @@
+"""A fleet's logs identified on a Dask cluster: :func:`fleet` runs ``identify`` on every log (one task per log) and
+writes one row per log to a Parquet table (:mod:`wmrid.io.fleet_table`).
+
+The same code path serves a LocalCluster started here (``scheduler="local"``: one single-threaded worker process per
+core) and an existing cluster (``scheduler="tcp://host:8786"``, whose workers have wmrid installed).  A log that
+fails is a row with its error; a worker that dies has its tasks retried by the scheduler (``allowed-failures``), and
+a log that kills three workers is a row with that error.  At most ``window`` tasks are in flight, so the client and
+the scheduler hold a bounded number of tasks whatever the fleet's size; the table is written atomically every
+``checkpoint`` seconds and at the end (also on Ctrl-C), so ``resume=True`` continues an interrupted run: a log
+whose content hash and options equal a row's is not identified again.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as dt
+import os
+import socket
+import time
+import uuid
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from wmrid.core.errors import UsageError, WmridError, option
+from wmrid.io.fleet_table import (
+    PARAMETERS,
+    LogEntry,
+    canonical_options,
+    content_digest,
+    empty_row,
+    entries_from_paths,
+    option_columns,
+    options_key,
+    read_manifest,
+    read_table,
+    sort_rows,
+    write_table,
+)
+
+__all__ = ["FleetRun", "fleet", "identify_entry"]
+
+#: A first stamp at least this far past the Unix epoch (2001-09-09) is taken as the log's start time.
+EPOCH_START_S = 1e9
+
+#: The fit column is computed (the log read whole once more) for logs of at most this many samples (80 MB).
+FIT_MAX_SAMPLES = 2_000_000
+
+
+@dataclass
+class FleetRun:
+    """What :func:`fleet` did: ``rows`` the table (old rows kept by ``resume`` included), ``identified`` the logs
+    identified in this run, ``skipped`` those resumed from the table, ``failed`` the rows of this run with an error,
+    ``wall_s`` the run's wall time, ``workers`` the cluster's worker count, ``scheduler`` its address."""
+
+    rows: list[dict[str, Any]]
+    identified: int = 0
+    skipped: int = 0
+    failed: int = 0
+    wall_s: float = 0.0
+    #: seconds to start (or reach) the cluster and its workers; seconds from then to the last result
+    startup_s: float = 0.0
+    processing_s: float = 0.0
+    #: CPU seconds of this process (the client, and the scheduler of a LocalCluster) while processing
+    client_cpu_s: float = 0.0
+    workers: int = 0
+    scheduler: str = ""
+    notes: list[str] = field(default_factory=list)
+
+
+# ------------------------------------------------------------------------------------------------------------------
+# One log, on a worker
+
+
+def _first_stamp_stream(stream: Any, first: list[float]) -> Any:
+    """``stream`` as a new LogStream that notes its first time stamp in ``first``."""
+    from wmrid.core.wheel_log import LogStream
+
+    def pieces():
+        for piece in stream:
+            if not first and len(piece):
+                first.append(float(piece.t[0]))
+            yield piece
+        return stream.notes
+
+    return LogStream(stream.source, stream.effort_unit, pieces)
+
+
+def _one_line(err: BaseException) -> str:
+    text = " ".join(str(err).split())
+    return text if len(text) <= 500 else text[:499] + "…"
+
+
+def _result_columns(result: Any) -> dict[str, Any]:
+    params = result.parameters
+    out: dict[str, Any] = {}
+    for name in PARAMETERS:
+        value, std = params.get(name, (None, None))
+        out[name], out[f"{name}_std"] = value, std
+    info = result.log_info
+    flagged = list(result.diagnostics.get("flagged", []))
+    out.update(
+        duration_s=info.get("duration_s"), samples=info.get("samples"), rate_hz=info.get("rate_hz"),
+        method=result.method, form=getattr(result.form, "kind", None), effort_unit=info.get("effort_unit"),
+        flags=flagged, warnings=[" ".join(w.split()) for w in result.warnings],
+    )  # fmt: skip
+    return out
+
+
+def identify_entry(spec: dict[str, Any]) -> dict[str, Any]:
+    """Identify one log of the fleet and return its table row (never raises for a bad log: the row's ``error``
+    says what went wrong).  The Dask task; importable, so that it travels to the workers by name.
+
+    spec : {"log", "robot_id", "robot", "time" (aware datetime or None), "time_source", "options" (identify's
+        keywords and LogOptions fields), "options_key", "fit" (bool), "known_sha256" (a resumed row's hash or
+        None)}.  When the log's content hash equals ``known_sha256`` the log is not identified and
+        {"skipped": True, "sha256": ...} is returned.
+    """
+    import wmrid
+
+    start = time.perf_counter()
+    row = empty_row(
+        robot_id=spec["robot_id"], log=spec["log"], robot=spec.get("robot"), start_time=spec.get("time"),
+        time_source=spec.get("time_source"), options=canonical_options(spec["options"]),
+        options_key=spec["options_key"], worker=f"{socket.gethostname()}:{os.getpid()}",
+        wmrid_version=wmrid.__version__,
+    )  # fmt: skip
+    try:
+        sha, size = content_digest(spec["log"])
+    except OSError as err:
+        row["error"] = f"{spec['log']}: cannot be read ({err.strerror or _one_line(err)})"
+        row["run_time_s"] = time.perf_counter() - start
+        return row
+    if spec.get("known_sha256") == sha:
+        return {"skipped": True, "sha256": sha}
+    row.update(sha256=sha, bytes=size)
+    try:
+        result, first = _identify(spec)
+        row.update(_result_columns(result))
+        if spec.get("fit", True):
+            row.update(_fit(spec, result))
+        if row["start_time"] is None and first is not None and first >= EPOCH_START_S:
+            row["start_time"] = dt.datetime.fromtimestamp(first, tz=dt.timezone.utc)
+            row["time_source"] = "log"
+    except WmridError as err:
+        row["error"] = _one_line(err)
+    except MemoryError:
+        row["error"] = f"{spec['log']}: out of memory on the worker"
+    except Exception as err:  # a bug must not end a fleet run: the row says it, with the type
+        row["error"] = f"internal error: {type(err).__name__}: {_one_line(err)}"
+    row["run_time_s"] = time.perf_counter() - start
+    return row
+
+
+def identify_batch(specs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """:func:`identify_entry` of several logs in turn: one Dask task for ``batch`` logs, which divides the
+    scheduler's work per log by ``batch``."""
+    return [identify_entry(spec) for spec in specs]
+
+
+def _split_options(options: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    from wmrid.api.inputs import LOG_OPTION_NAMES
+
+    log_opts = {k: v for k, v in options.items() if k in LOG_OPTION_NAMES}
+    run_opts = {k: v for k, v in options.items() if k not in LOG_OPTION_NAMES}
+    return log_opts, run_opts
+
+
+def _identify(spec: dict[str, Any]) -> tuple[Any, float | None]:
+    from wmrid.api.identification import prepare, run_prepared
+    from wmrid.api.inputs import LogOptions, open_log
+
+    log_opts, run_opts = _split_options(spec["options"])
+    options = LogOptions(**log_opts)
+    prep = prepare(options=options, robot=spec.get("robot"), **run_opts)
+    first: list[float] = []
+    stream = _first_stamp_stream(open_log(spec["log"], options, robot=prep.robot), first)
+    wheel_log = stream if prep.method == "observer" else stream.read()
+    result = run_prepared(wheel_log, prep, options=options, **run_opts)
+    return result, (first[0] if first else None)
+
+
+def _fit(spec: dict[str, Any], result: Any) -> dict[str, Any]:
+    """fit_r, fit_l: % fit of the identified model's simulated wheel speeds on the log itself (None above
+    :data:`FIT_MAX_SAMPLES` samples, or where the predictor cannot run the model)."""
+    from wmrid.api.identification import with_validation
+    from wmrid.api.inputs import LogOptions, load_robot
+
+    samples = result.log_info.get("samples") or 0
+    if samples > FIT_MAX_SAMPLES:
+        return {}
+    log_opts, run_opts = _split_options(spec["options"])
+    robot = spec.get("robot")
+    try:
+        robot_obj = None if robot is None else load_robot(robot, gear_ratio=log_opts.get("gear_ratio"))
+        checked = with_validation(
+            result, spec["log"], LogOptions(**log_opts), robot=robot_obj,
+            torque_hold=run_opts.get("torque_hold", "zoh"),
+        )  # fmt: skip
+    except WmridError:
+        return {}
+    fit = checked.validation["fit_percent"]
+    return {"fit_r": fit["eta_r"], "fit_l": fit["eta_l"]}
+
+
+# ------------------------------------------------------------------------------------------------------------------
+# The fleet, on the client
+
+
+def _robot_digest(robot: str | None, cache: dict[str, str | None]) -> str | None:
+    """SHA-256 of a robot file (None for a built-in name), so that a changed robot file re-runs its logs."""
+    if robot is None:
+        return None
+    if robot not in cache:
+        cache[robot] = content_digest(robot)[0] if os.path.isfile(robot) else None
+    return cache[robot]
+
+
+def check_defaults(defaults: dict[str, Any]) -> dict[str, Any]:
+    """The run-wide options (identify's keywords and LogOptions fields, None = not given), checked as ``identify``
+    checks them before any log is read."""
+    from wmrid.api.identification import check_numbers
+    from wmrid.api.inputs import LogOptions
+    from wmrid.estimators.methods import check_method
+
+    allowed = set(option_columns())
+    unknown = sorted(set(defaults) - allowed)
+    if unknown:
+        raise UsageError(f"not options of identify: {', '.join(unknown)}")
+    given = {k: v for k, v in defaults.items() if v is not None}
+    log_opts, run_opts = _split_options(given)
+    LogOptions(**log_opts)
+    check_numbers(**run_opts)
+    if "method" in run_opts:
+        check_method(run_opts["method"])
+    return given
+
+
+def plan(entries: Sequence[LogEntry], defaults: dict[str, Any], robot: str | None, fit: bool) -> list[dict[str, Any]]:
+    """One task spec per log (see :func:`identify_entry`): the run-wide options under each manifest row's own."""
+    digests: dict[str, str | None] = {}
+    specs = []
+    for e in entries:
+        opts = {**defaults, **e.options}
+        robot_ = e.robot or robot
+        keyed = {**opts, "robot": robot_, "robot_sha256": _robot_digest(robot_, digests), "fit": fit}
+        specs.append({
+            "log": e.log, "robot_id": e.robot_id, "robot": robot_, "time": e.time, "time_source": e.time_source,
+            "options": opts, "options_key": options_key(keyed), "fit": fit, "known_sha256": None,
+        })  # fmt: skip
+    return specs
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str, workers: int | None = None) -> Iterator[Any]:
+    """A ``distributed.Client``: on a LocalCluster of ``workers`` single-threaded worker processes (default: one per
+    core) for ``scheduler="local"``, else connected to the scheduler at that address."""
+    try:
+        import logging
+
+        from distributed import Client, LocalCluster
+    except ImportError as err:  # pragma: no cover - a dependency of wmrid
+        raise UsageError(
+            f"the fleet runs on dask.distributed, which is not installed ({err}); pip install distributed"
+        ) from None
+    if scheduler == "local":
+        n = workers or os.cpu_count() or 1
+        cluster = LocalCluster(
+            n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR,
+        )  # fmt: skip
+        try:
+            with Client(cluster) as client:
+                yield client
+        finally:
+            cluster.close()
+        return
+    if workers is not None:
+        raise UsageError(f"{option('workers')} starts a local cluster; an existing cluster has its own workers")
+    try:
+        client = Client(scheduler, timeout=30)
+    except (OSError, TimeoutError, ValueError) as err:
+        raise UsageError(
+            f"{option('scheduler', scheduler)}: no Dask scheduler answers there ({_one_line(err)}); start one with "
+            "`dask scheduler` and `dask worker ADDRESS`, or use --scheduler local"
+        ) from None
+    try:
+        yield client
+    finally:
+        client.close()
+
+
+def fleet(
+    logs: Sequence[str] = (),
+    output: str | os.PathLike[str] | None = None,
+    *,
+    manifest: str | os.PathLike[str] | None = None,
+    robot: str | None = None,
+    id_pattern: str | None = None,
+    scheduler: str = "local",
+    workers: int | None = None,
+    resume: bool = False,
+    retry_failed: bool = False,
+    force: bool = False,
+    fit: bool = True,
+    window: int | None = None,
+    batch: int = 1,
+    checkpoint: float = 60.0,
+    progress: Callable[[int, int, int], None] | None = None,
+    **defaults: Any,
+) -> FleetRun:
+    """Identify every log of a fleet on Dask and write the table (Parquet) to ``output``.
+
+    logs : paths, globs or folders (:func:`~wmrid.io.fleet_table.find_logs`); or ``manifest``: a CSV/Parquet file,
+        one row per log (:func:`~wmrid.io.fleet_table.read_manifest`).  Robot id and time of a log without them
+        come from ``id_pattern`` or the path's folder and date (:func:`~wmrid.io.fleet_table.id_and_time_from_path`),
+        else the log's own first stamp when it is an epoch time.
+    robot : the robot file or built-in name of every log whose manifest row names none.
+    scheduler : "local" (a LocalCluster of ``workers`` processes, default one per core) or a scheduler address.
+    resume : keep the rows of an existing table whose log, content hash and options are unchanged (not identified
+        again); ``retry_failed`` also re-runs its error rows.  Without ``resume`` an existing table needs ``force``.
+    fit : also compute each log's fit % (fit_r, fit_l): the model's simulated speeds on the log itself.
+    window : tasks in flight at most (default 8 per worker); batch : logs per task (a large fleet on a large
+        cluster: the scheduler's overhead per task is shared by ``batch`` logs); checkpoint : seconds between table
+        writes.
+    progress : called as progress(done, total, failed).
+    defaults : identify's keywords and LogOptions fields for every log (a manifest row's own options win).
+    """
+    from wmrid.core.atomic import register_input
+
+    if output is None:
+        raise UsageError(f"{option('output')} is required: the Parquet table to write (e.g. fleet.parquet)")
+    out = os.fspath(output)
+    if not out.lower().endswith(".parquet"):
+        raise UsageError(f"{option('output', out)}: the fleet table is Parquet; name it .parquet")
+    if workers is not None and (isinstance(workers, bool) or workers < 1):
+        raise UsageError(f"{option('workers')} must be >= 1, got {workers}")
+    if isinstance(batch, bool) or not isinstance(batch, int) or batch < 1:
+        raise UsageError(f"{option('batch')} must be a whole number >= 1, got {batch!r}")
+    if not (checkpoint > 0):
+        raise UsageError(f"{option('checkpoint')} must be > 0 seconds, got {checkpoint}")
+    if bool(logs) == (manifest is not None):
+        raise UsageError(f"give the logs or {option('manifest')}, one of the two")
+    given = check_defaults(defaults)
+    entries = read_manifest(manifest, id_pattern) if manifest is not None else entries_from_paths(logs, id_pattern)
+    for e in entries:
+        register_input(e.log)  # the table is never written over a log
+    if robot is not None:
+        from wmrid.api.inputs import load_robot
+
+        load_robot(robot, gear_ratio=given.get("gear_ratio"))  # a bad robot file is one error, not a row per log
+    specs = plan(entries, given, robot, fit)
+    kept, specs, notes = _resume(out, specs, resume, retry_failed, force)
+    run = FleetRun(rows=[], notes=notes, scheduler=scheduler)
+    started = time.perf_counter()
+    new_rows: list[dict[str, Any]] = []
+    running = False
+    try:
+        if specs:
+            with dask_client(scheduler, workers) as client:
+                run.workers = _worker_count(client)
+                client.run(warm_up)  # every worker loads the kernels now, not on its first log
+                run.scheduler = client.scheduler.address if client.scheduler is not None else scheduler
+                running = True
+                last_write = ready = time.perf_counter()
+                cpu = time.process_time()
+                run.startup_s = ready - started
+                tasks = _run_tasks(client, specs, window or 8 * max(run.workers, 1), progress, batch)
+                for row in tasks:
+                    if row.get("skipped"):
+                        run.skipped += 1
+                        continue
+                    new_rows.append(row)
+                    run.identified += 1
+                    run.failed += row["error"] is not None
+                    if time.perf_counter() - last_write >= checkpoint:
+                        write_table(sort_rows(_merged(kept, new_rows)), out, force=True)
+                        last_write = time.perf_counter()
+                run.processing_s = time.perf_counter() - ready
+                run.client_cpu_s = time.process_time() - cpu
+    finally:  # Ctrl-C, a lost scheduler: what is done is kept, and --resume continues from it
+        run.rows = sort_rows(_merged(kept, new_rows))
+        if running or not specs:
+            write_table(run.rows, out, force=True)  # an existing table without --resume/--force was refused above
+    run.wall_s = time.perf_counter() - started
+    return run
+
+
+def warm_up() -> float:
+    """Load wmrid's compiled kernels in this process (numba's cache: about a second once per process), so that a
+    worker's first log does not pay for it; returns the seconds it took.  Run on every worker at the start."""
+    import numpy as np
+
+    from wmrid.api.identification import identify
+    from wmrid.core.wheel_log import WheelLog
+    from wmrid.model.predict import validation_fit
+
+    start = time.perf_counter()
+    t = np.arange(2001) * 1e-3
+    eta = np.column_stack([2 + np.sin(3 * t), 2 + np.cos(2 * t)])
+    tau = np.column_stack([np.cos(3 * t), -np.sin(2 * t)]) + 0.1
+    with contextlib.suppress(WmridError):
+        result = identify(WheelLog(t=t, eta=eta, tau=tau, source="warm-up"), "paper")
+        validation_fit(t, eta, tau, result.estimate.theta0)
+    return time.perf_counter() - start
+
+
+def _worker_count(client: Any) -> int:
+    """The cluster's workers, waiting up to a minute for the first."""
+    count = len(client.scheduler_info().get("workers", {}))
+    if count == 0:
+        try:
+            client.wait_for_workers(1, timeout=60)
+        except (TimeoutError, OSError) as err:
+            raise UsageError(
+                f"the Dask scheduler has no worker after 60 s ({_one_line(err)}); start `dask worker`"
+            ) from None
+        count = len(client.scheduler_info().get("workers", {}))
+    return count
+
+
+def _merged(kept: dict[tuple[str, str], dict[str, Any]], new_rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    replaced = {(r["log"], r["options_key"]) for r in new_rows}
+    return [r for key, r in kept.items() if key not in replaced] + new_rows
+
+
+def _resume(
+    out: str, specs: list[dict[str, Any]], resume: bool, retry_failed: bool, force: bool
+) -> tuple[dict[tuple[str, str], dict[str, Any]], list[dict[str, Any]], list[str]]:
+    """(rows of the old table to keep by (log, options key), the specs still to run, notes)."""
+    exists = os.path.exists(out)
+    if not resume:
+        if exists and not force:
+            from wmrid.core.errors import OutputExistsError
+
+            raise OutputExistsError(
+                f"{out} exists; give --resume to continue it (logs already in it are not run again) or --force to "
+                "replace it"
+            )
+        return {}, specs, []
+    if not exists:
+        return {}, specs, [f"{out} does not exist yet: every log is identified"]
+    old = read_table(out)
+    kept = {(r["log"], r["options_key"]): r for r in old}
+    todo = []
+    for spec in specs:
+        prev = kept.get((spec["log"], spec["options_key"]))
+        if prev is not None and prev["sha256"] and not (retry_failed and prev["error"] is not None):
+            spec = {**spec, "known_sha256": prev["sha256"]}  # the worker hashes; the same content is not re-run
+        todo.append(spec)
+    return kept, todo, []
+
+
+def _run_tasks(
+    client: Any,
+    specs: list[dict[str, Any]],
+    window: int,
+    progress: Callable[[int, int, int], None] | None,
+    batch: int = 1,
+) -> Iterator[dict[str, Any]]:
+    """The rows of ``specs`` as their tasks (``batch`` logs each) finish, at most ``window`` tasks in flight."""
+    from distributed import as_completed
+
+    token = uuid.uuid4().hex[:12]
+    total, done, failed = len(specs), 0, 0
+    groups = iter(enumerate(specs[i : i + batch] for i in range(0, len(specs), batch)))
+    group_of: dict[Any, list[dict[str, Any]]] = {}
+
+    def submit(i: int, group: list[dict[str, Any]]) -> Any:
+        future = client.submit(identify_batch, group, pure=False, key=f"wmrid-identify-{token}-{i}")
+        group_of[future] = group
+        return future
+
+    queue = as_completed([submit(i, g) for i, g in (next(groups, (None, None)) for _ in range(window)) if g])
+    for future in queue:
+        group = group_of.pop(future)
+        if future.status == "finished":
+            rows = future.result()
+        else:  # the task never ran to its end: its workers died (KilledWorker) or it was cancelled
+            err = future.exception()
+            rows = [_failed_row(spec, err) for spec in group]
+        future.release()
+        nxt = next(groups, None)
+        if nxt is not None:
+            queue.add(submit(*nxt))
+        for row in rows:
+            if not row.get("skipped"):
+                failed += row["error"] is not None
+            done += 1
+            if progress is not None:
+                progress(done, total, failed)
+            yield row
+
+
+def _failed_row(spec: dict[str, Any], err: BaseException) -> dict[str, Any]:
+    return empty_row(
+        robot_id=spec["robot_id"], log=spec["log"], robot=spec.get("robot"), start_time=spec.get("time"),
+        time_source=spec.get("time_source"), options=canonical_options(spec["options"]),
+        options_key=spec["options_key"],
+        error=f"{spec['log']}: the task failed on the cluster ({type(err).__name__}: {_one_line(err)})",
+    )  # fmt: skip

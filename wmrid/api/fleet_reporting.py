@@ -1,0 +1,119 @@
+"""The fleet report as one call: :func:`fleet_report` reviews a ``wmrid fleet`` table (changes across each robot's
+logs, robots that stand out, a ranking) and :func:`write_fleet_report` writes it as HTML, Markdown or JSON by the
+file's suffix.  ``wmrid fleet-report`` is these two functions with its flags translated."""
+
+from __future__ import annotations
+
+import datetime
+import os
+from typing import Any
+
+from wmrid.core.errors import UsageError, WmridError, option
+from wmrid.reporting.fleet_report import FleetReport, build_fleet_report
+
+__all__ = ["fleet_report", "write_fleet_report"]
+
+REPORT_SUFFIXES = (".html", ".htm", ".md", ".json")
+
+
+def check_settings(baseline: int, window: int, alpha: float, outlier_alpha: float) -> None:
+    """Refuse settings no table can make right, before the table is read."""
+    from wmrid.monitoring.fleet_changes import MIN_BASELINE
+
+    if isinstance(baseline, bool) or not isinstance(baseline, int) or baseline < MIN_BASELINE:
+        raise UsageError(f"{option('baseline')} must be a whole number of logs >= {MIN_BASELINE}, got {baseline!r}")
+    if isinstance(window, bool) or not isinstance(window, int) or window < 1:
+        raise UsageError(f"{option('window')} must be a whole number of logs >= 1, got {window!r}")
+    for name, value in (("alpha", alpha), ("outlier_alpha", outlier_alpha)):
+        if not (isinstance(value, (int, float)) and 1e-9 <= value <= 0.2):
+            raise UsageError(f"{option(name)} must be a probability in [1e-09, 0.2], got {value!r}")
+
+
+def _robot_loader(robot: str | None):
+    """name -> Robot or None (a robot column that no longer loads gives no payload estimate, not an error)."""
+    from wmrid.api.inputs import load_robot
+    from wmrid.monitoring.fleet_review import NO_MODEL
+
+    cache: dict[str, Any] = {}
+
+    def robot_of(name: str) -> Any:
+        key = robot if name == NO_MODEL else name
+        if key is None:
+            return None
+        if key not in cache:
+            try:
+                loaded = load_robot(key)
+                cache[key] = loaded if loaded.physical else None
+            except (WmridError, OSError):
+                cache[key] = None
+        return cache[key]
+
+    return robot_of
+
+
+def fleet_report(
+    table: str | os.PathLike[str] | list[dict[str, Any]],
+    *,
+    robot: str | None = None,
+    baseline: int = 10,
+    window: int = 30,
+    alpha: float = 0.001,
+    outlier_alpha: float = 0.001,
+    figures: bool = True,
+    command: str | None = None,
+) -> FleetReport:
+    """The review of a fleet table (a path to a ``wmrid fleet`` Parquet table, or its rows).
+
+    robot : the robot (file or built-in name) of the rows without one: its r and b turn a change of M and V_c into a
+        payload estimate.
+    baseline, window, alpha : each robot's first ``baseline`` logs are its own reference; a step or ramp starting
+        within the last ``window`` logs is tested; ``alpha`` is the probability of flagging a robot whose parameters
+        do not change, over its whole history.
+    outlier_alpha : the probability that any robot of a model with Gaussian unit-to-unit spread is said to stand out.
+    figures : build the figures (what HTML and Markdown show).
+    """
+    from wmrid.io.fleet_table import read_table
+    from wmrid.monitoring.fleet_review import review_fleet
+
+    check_settings(baseline, window, alpha, outlier_alpha)
+    name = os.fspath(table) if isinstance(table, (str, os.PathLike)) else "rows"
+    rows = read_table(name) if isinstance(table, (str, os.PathLike)) else list(table)
+    if not rows:
+        raise UsageError(f"{name}: the fleet table has no rows")
+    review = review_fleet(rows, baseline=baseline, window=window, alpha=alpha, outlier_alpha=outlier_alpha,
+                          robot_of=_robot_loader(robot))  # fmt: skip
+    rep = build_fleet_report(review, rows, name, figures=figures)
+    import wmrid
+    from wmrid.io.digest import file_digests
+
+    rep.provenance = {
+        "wmrid": wmrid.__version__,
+        "made_utc": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+        "command": command or "wmrid.fleet_report(...)",
+        "options": {
+            "robot": robot,
+            "baseline": baseline,
+            "window": window,
+            "alpha": alpha,
+            "outlier_alpha": outlier_alpha,
+        },
+        "inputs": file_digests(name) if isinstance(table, (str, os.PathLike)) else [],
+    }
+    return rep
+
+
+def write_fleet_report(rep: FleetReport, output: str | os.PathLike[str], *, force: bool = False) -> None:
+    """Write ``rep`` as a self-contained HTML page (.html, .htm), Markdown (.md) or JSON (.json), atomically."""
+    from wmrid.core.atomic import atomic_write_text, write_json
+    from wmrid.reporting.fleet_report import to_html, to_json_dict, to_markdown
+
+    path = os.fspath(output)
+    suffix = os.path.splitext(path)[1].lower()
+    if suffix in (".html", ".htm"):
+        atomic_write_text(path, to_html(rep), force=force)
+    elif suffix == ".md":
+        atomic_write_text(path, to_markdown(rep), force=force)
+    elif suffix == ".json":
+        write_json(path, to_json_dict(rep), force=force)
+    else:
+        raise UsageError(f"{option('output', path)}: the report format comes from the suffix: .html, .md or .json")

@@ -1,0 +1,370 @@
+"""``wmrid fleet`` and ``wmrid fleet-report``: each a translation of its flags into one library call
+(:mod:`wmrid.api.fleet`, :mod:`wmrid.api.fleet_reporting`) and a rendering of the outcome."""
+
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import fields
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from wmrid.cli.app import app, invocation
+from wmrid.cli.helpers import activity, log_opts, stderr_console
+from wmrid.cli.options import (
+    AlignOpt,
+    AlignRule,
+    ControlRateOpt,
+    CutoffOpt,
+    DelayOpt,
+    EfficiencyOpt,
+    EffortKind,
+    EffortOpt,
+    EffortTopicOpt,
+    EffortUnitOpt,
+    FlipEffortOpt,
+    ForgettingOpt,
+    FormChoice,
+    FrictionChoice,
+    FrictionOpt,
+    GearRatioOpt,
+    LeftJointOpt,
+    MethodChoice,
+    MethodOpt,
+    MirrorLeftOpt,
+    OutputFormat,
+    RightJointOpt,
+    RotorInertiaOpt,
+    SpeedUnit,
+    SpeedUnitOpt,
+    TimeSource,
+    TimeSourceOpt,
+    TimeUnit,
+    TopicOpt,
+    TorqueConstantOpt,
+    TorqueHold,
+    VelocityFrom,
+    VelocityFromOpt,
+    VelocityTopicOpt,
+    WeightedOpt,
+    WheelRadiusOpt,
+)
+from wmrid.core.errors import ExitStatus, UsageError
+from wmrid.reporting.terminal import console
+
+_RUN_PANEL = "The fleet run"
+
+#: identify's settings as ``wmrid fleet`` passes them: only those given a value other than identify's default, so
+#: that the table's "options" column says what was asked and nothing else.
+_IDENTIFY_DEFAULTS = {
+    "method": "observer", "form": "auto", "k": 10.0, "alpha": 1e-10, "box_width": 10.0, "torque_hold": "zoh",
+    "control_rate": None, "delay": None, "friction": "auto", "cutoff": None, "weighted": False, "forgetting": 1.0,
+    "rotor_inertia": None,
+}  # fmt: skip
+
+
+def _given_options(params: dict[str, Any]) -> dict[str, Any]:
+    """The log-input and identify flags that differ from their defaults, by their Python names."""
+    from wmrid.api.inputs import LogOptions
+
+    opts = log_opts(params)
+    plain = LogOptions()
+    given = {
+        f.name: getattr(opts, f.name) for f in fields(LogOptions) if getattr(opts, f.name) != getattr(plain, f.name)
+    }
+    for name, default in _IDENTIFY_DEFAULTS.items():
+        value = params[name]
+        value = getattr(value, "value", value)
+        if value != default:
+            given[name] = value
+    return given
+
+
+@app.command(
+    epilog="Examples:\n\n"
+    "wmrid fleet logs/ --robot paper -o fleet.parquet\n\n"
+    "wmrid fleet --manifest fleet.csv -o fleet.parquet --resume\n\n"
+    "wmrid fleet 'logs/*/*.mcap' --scheduler tcp://10.0.0.5:8786 -o fleet.parquet"
+)
+def fleet(
+    logs: Annotated[
+        list[str] | None,
+        typer.Argument(
+            metavar="LOGS...",
+            help="Logs: files, globs (quoted, ** recursive) or folders (searched for logs; a rosbag2 folder is one "
+            "log).  Or give --manifest.",
+            show_default=False,
+        ),
+    ] = None,
+    output: Annotated[
+        Path | None,
+        typer.Option(
+            "--output", "-o", help="The table to write: Parquet, one row per log (required).", show_default=False
+        ),
+    ] = None,
+    manifest: Annotated[
+        Path | None,
+        typer.Option(
+            help="CSV or Parquet, one row per log: log (relative to the manifest), robot_id, robot, time, and any "
+            "identify option by its Python name (speed_unit, columns, method, ...).",
+            rich_help_panel=_RUN_PANEL,
+        ),
+    ] = None,
+    id_pattern: Annotated[
+        str | None,
+        typer.Option(
+            help="Regular expression with (?P<robot>...) and optionally (?P<time>...) groups, searched in each "
+            "log's path; default: the robot id is the log's folder name, the time a date in its file name.",
+            rich_help_panel=_RUN_PANEL,
+        ),
+    ] = None,
+    scheduler: Annotated[
+        str,
+        typer.Option(
+            help="local: a LocalCluster of one worker process per core; or an existing Dask scheduler's address "
+            "(tcp://HOST:8786).",
+            rich_help_panel=_RUN_PANEL,
+        ),
+    ] = "local",
+    workers: Annotated[
+        int | None,
+        typer.Option(
+            help="--scheduler local: worker processes, >= 1 (default: one per core).", rich_help_panel=_RUN_PANEL
+        ),
+    ] = None,
+    resume: Annotated[
+        bool,
+        typer.Option(
+            "--resume",
+            help="Continue the table: a log whose content hash and options equal a row's is not identified again.",
+            rich_help_panel=_RUN_PANEL,
+        ),
+    ] = False,
+    retry_failed: Annotated[
+        bool,
+        typer.Option(
+            "--retry-failed", help="With --resume: also re-run the rows with an error.", rich_help_panel=_RUN_PANEL
+        ),
+    ] = False,
+    no_fit: Annotated[
+        bool,
+        typer.Option(
+            "--no-fit",
+            help="Leave fit_r/fit_l empty (they simulate the identified model on each log: about a third of the "
+            "time per log).",
+            rich_help_panel=_RUN_PANEL,
+        ),
+    ] = False,
+    checkpoint: Annotated[
+        float,
+        typer.Option(
+            help="Seconds between writes of the table while the run goes on, > 0.", rich_help_panel=_RUN_PANEL
+        ),
+    ] = 60.0,
+    force: Annotated[bool, typer.Option("--force", help="Replace an existing table (else: --resume).")] = False,
+    output_format: Annotated[
+        OutputFormat, typer.Option("--format", help="Summary: table, json, or auto (table on a terminal).")
+    ] = OutputFormat.auto,
+    robot: Annotated[
+        str | None,
+        typer.Option(help="Robot of every log whose manifest row names none: built-in name, TOML or URDF file."),
+    ] = None,
+    columns: Annotated[str | None, typer.Option(help="Column mapping, as for identify.")] = None,
+    time_unit: Annotated[TimeUnit, typer.Option(help="Unit of the time column.")] = TimeUnit.auto,
+    form: Annotated[FormChoice, typer.Option(help="Regressor form, as for identify.")] = FormChoice.auto,
+    k: Annotated[float, typer.Option("--k", help="Observer gain, 1/s, in (0, 100000].")] = 10.0,
+    alpha: Annotated[float, typer.Option(help="Initial Gamma = alpha I, > 0.")] = 1e-10,
+    box_width: Annotated[
+        float, typer.Option(help="Half-width of the parameter box, in (0, inf] (inf: no box).")
+    ] = 10.0,
+    torque_hold: Annotated[TorqueHold, typer.Option(help="zoh or foh.")] = TorqueHold.zoh,
+    topic: TopicOpt = None,
+    velocity_topic: VelocityTopicOpt = None,
+    effort_topic: EffortTopicOpt = None,
+    right_joint: RightJointOpt = None,
+    left_joint: LeftJointOpt = None,
+    time_source: TimeSourceOpt = TimeSource.auto,
+    align: AlignOpt = AlignRule.linear,
+    velocity_from: VelocityFromOpt = VelocityFrom.auto,
+    speed_unit: SpeedUnitOpt = SpeedUnit.rad_s,
+    wheel_radius: WheelRadiusOpt = None,
+    effort: EffortOpt = EffortKind.torque,
+    effort_unit: EffortUnitOpt = None,
+    torque_constant: TorqueConstantOpt = None,
+    gear_ratio: GearRatioOpt = None,
+    efficiency: EfficiencyOpt = None,
+    mirror_left: MirrorLeftOpt = False,
+    flip_effort: FlipEffortOpt = False,
+    rotor_inertia: RotorInertiaOpt = None,
+    method: MethodOpt = MethodChoice.observer,
+    cutoff: CutoffOpt = None,
+    weighted: WeightedOpt = False,
+    forgetting: ForgettingOpt = 1.0,
+    control_rate: ControlRateOpt = None,
+    delay: DelayOpt = None,
+    friction: FrictionOpt = FrictionChoice.auto,
+) -> int:
+    """Identify every log of a fleet on Dask and write one Parquet table, one row per log: robot id, log, content
+    hash, start time, duration, samples, method, every base parameter with its std, flags, warnings, fit, run time,
+    and the error of a log that failed (a failed log never ends the run)."""
+    from wmrid.api.fleet import fleet as run_fleet
+
+    given = _given_options(locals())
+    if output is None:
+        raise UsageError("-o/--output is required: the Parquet table to write (e.g. -o fleet.parquet)")
+    update, finish = _progress()
+    try:
+        run = run_fleet(
+            logs or (), output, manifest=manifest, robot=robot, id_pattern=id_pattern, scheduler=scheduler,
+            workers=workers, resume=resume, retry_failed=retry_failed, force=force, fit=not no_fit,
+            checkpoint=checkpoint, progress=update, **given,
+        )  # fmt: skip
+    finally:
+        finish()
+    summary = _summary(run, output)
+    fmt = output_format.value
+    if fmt == "auto":
+        fmt = "table" if sys.stdout.isatty() else "json"
+    if fmt == "json":
+        sys.stdout.write(json.dumps(summary, indent=2) + "\n")
+    else:
+        _print_summary(summary)
+    ok = sum(1 for r in run.rows if r["error"] is None)
+    return int(ExitStatus.OK) if ok or not run.rows else int(ExitStatus.NO_RESULT)
+
+
+def _progress():
+    """(callback(done, total, failed), finish): a progress bar on stderr when it is a terminal."""
+    if not sys.stderr.isatty():
+        return None, lambda: None
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    bar = Progress(
+        TextColumn("fleet"), BarColumn(), MofNCompleteColumn(), TextColumn("logs, {task.fields[failed]} failed"),
+        TimeRemainingColumn(), console=stderr_console(), transient=True,
+    )  # fmt: skip
+    state: dict[str, Any] = {}
+
+    def update(done: int, total: int, failed: int) -> None:
+        if not state:
+            state["task"] = bar.add_task("fleet", total=total, failed=0)
+            bar.start()
+        bar.update(state["task"], completed=done, failed=failed)
+
+    def finish() -> None:
+        if state:
+            bar.stop()
+
+    return update, finish
+
+
+def _summary(run: Any, output: Path) -> dict[str, Any]:
+    errors = [{"log": r["log"], "error": r["error"]} for r in run.rows if r["error"] is not None]
+    rate = run.identified / run.wall_s if run.wall_s > 0 else None
+    return {
+        "table": str(output), "logs": len(run.rows), "robots": len({r["robot_id"] for r in run.rows}),
+        "identified": run.identified, "resumed": run.skipped, "failed": len(errors), "workers": run.workers,
+        "scheduler": run.scheduler, "wall_s": round(run.wall_s, 3), "logs_per_s": rate, "errors": errors,
+        "notes": run.notes, "command": invocation(),
+    }  # fmt: skip
+
+
+def _print_summary(summary: dict[str, Any]) -> None:
+    out = console()
+    rate = f", {summary['logs_per_s']:.3g} logs/s" if summary["logs_per_s"] else ""
+    out.print(
+        f"{summary['table']}: {summary['logs']} logs of {summary['robots']} robots; identified {summary['identified']}"
+        f" in {summary['wall_s']:.3g} s on {summary['workers']} workers{rate}; resumed {summary['resumed']}; "
+        f"failed {summary['failed']}"
+    )
+    for note in summary["notes"]:
+        out.print(f"note: {note}")
+    for err in summary["errors"][:10]:
+        out.print(f"failed: {err['error']}")
+    if len(summary["errors"]) > 10:
+        out.print(f"... and {len(summary['errors']) - 10} more failed logs (the table's error column)")
+
+
+@app.command(
+    "fleet-report",
+    epilog="Examples:\n\n"
+    "wmrid fleet-report fleet.parquet -o fleet.html\n\n"
+    "wmrid fleet-report fleet.parquet --robot paper --alpha 0.0001 -o fleet.json",
+)
+def fleet_report(
+    table: Annotated[str, typer.Argument(metavar="TABLE", help="The Parquet table of `wmrid fleet`.")],
+    output: Annotated[
+        Path | None,
+        typer.Option("--output", "-o", help="Write the report: .html (self-contained), .md or .json."),
+    ] = None,
+    robot: Annotated[
+        str | None,
+        typer.Option(help="Robot of the rows without one (name, TOML or URDF): its r and b give payload estimates."),
+    ] = None,
+    baseline: Annotated[
+        int, typer.Option(help="Logs of each robot that are its own reference, >= 5 (the first ones).")
+    ] = 10,
+    window: Annotated[int, typer.Option(help="A change is sought starting within the last this many logs, >= 1.")] = 30,
+    alpha: Annotated[
+        float,
+        typer.Option(
+            help="False-alarm rate: probability that a robot whose parameters do not change is flagged over its "
+            "history, in [1e-09, 0.2]."
+        ),
+    ] = 0.001,
+    outlier_alpha: Annotated[
+        float,
+        typer.Option(
+            help="Probability that any robot of a model with Gaussian unit-to-unit spread is said to stand out, in "
+            "[1e-09, 0.2]."
+        ),
+    ] = 0.001,
+    output_format: Annotated[
+        OutputFormat, typer.Option("--format", help="Without -o: table, json, or auto (table on a terminal).")
+    ] = OutputFormat.auto,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing output file.")] = False,
+) -> None:
+    """Review a fleet table: per robot, every base parameter over time with ±2σ bands; changes across its logs
+    (friction rising: wheel wear?; M or Vc shifting: payload or configuration change) at a stated false-alarm rate;
+    robots that stand out from their fleet; the robots ranked by the evidence against them."""
+    from wmrid.api.fleet_reporting import REPORT_SUFFIXES, check_settings, write_fleet_report
+    from wmrid.api.fleet_reporting import fleet_report as build
+    from wmrid.reporting.fleet_report import ranked_table, to_json_dict
+
+    suffix = output.suffix.lower() if output is not None else None
+    if suffix not in (None, *REPORT_SUFFIXES):
+        raise UsageError(f"-o {output}: the report format comes from the suffix: .html, .md or .json")
+    check_settings(baseline, window, alpha, outlier_alpha)
+    with activity("wmrid fleet-report") as stage:
+        stage("reviewing the table")
+        rep = build(
+            table, robot=robot, baseline=baseline, window=window, alpha=alpha, outlier_alpha=outlier_alpha,
+            figures=suffix in (".html", ".htm", ".md"), command=invocation(),
+        )  # fmt: skip
+        if output is not None:
+            stage(f"writing {output}")
+            write_fleet_report(rep, output, force=force)
+    if output is not None:
+        stderr_console().print(f"wrote {output}")
+        return
+    fmt = output_format.value
+    if fmt == "auto":
+        fmt = "table" if sys.stdout.isatty() else "json"
+    if fmt == "json":
+        sys.stdout.write(json.dumps(to_json_dict(rep), indent=2, default=str) + "\n")
+        return
+    from wmrid.reporting.terminal import print_table
+
+    out = console()
+    for line in rep.summary:
+        out.print(line)
+    ranked = ranked_table(rep.review)
+    rows = [[str(c) for c in row[1:]] for row in ranked["rows"]]  # the rank is the order
+    print_table(
+        out, ranked["header"][1:], rows, title="Robots ranked by the evidence against them", numeric=(3,), fold=(1, 4)
+    )
+    for rv in rep.review.robots:
+        for finding in rv.findings:
+            out.print(f"{rv.robot_id}: {finding}")

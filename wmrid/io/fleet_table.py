@@ -1,0 +1,412 @@
+"""A fleet's logs and results on disk: the manifest that lists the logs (:func:`read_manifest`), the logs found from
+paths, globs and folders (:func:`find_logs`), the robot id and time a path states (:func:`id_and_time_from_path`),
+and the results table, one row per log (:data:`SCHEMA`, :func:`write_table`, :func:`read_table`).
+
+The table is Parquet with a fixed schema (``wmrid_fleet_schema`` = :data:`SCHEMA_VERSION` in its metadata): the
+same columns, types and order whatever the logs held, so that tables of different runs concatenate.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import glob
+import hashlib
+import io
+import json
+import math
+import os
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from wmrid.core.errors import LogFormatError, UsageError, option
+
+SCHEMA_VERSION = "1"
+
+#: The base parameters of every row (value and ``NAME_std``), SI units as ``identify`` reports them: the entries of
+#: m = M^-1 and of M, the Coriolis coefficient, the wheels' viscous and Coulomb friction, the casters' drag (null
+#: unless identified with it).
+PARAMETERS = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2", "Cv", "Cw")
+
+#: Suffixes of the files :func:`find_logs` takes from a folder (a folder holding metadata.yaml is one recording).
+LOG_SUFFIXES = (".mcap", ".bag", ".db3", ".parquet", ".csv", ".csv.gz", ".csv.bz2", ".csv.xz", ".csv.zst")
+
+#: A date, optionally with a time, in a file or folder name: 2026-03-14, 2026-03-14T08-30-00, 20260314_083000.
+DATE_IN_NAME = re.compile(
+    r"(?P<y>\d{4})-?(?P<mo>\d{2})-?(?P<d>\d{2})(?:[T_ -]?(?P<h>\d{2})[:-]?(?P<mi>\d{2})[:-]?(?P<s>\d{2}))?"
+)
+
+#: Manifest columns besides the per-log options.
+MANIFEST_COLUMNS = ("log", "robot_id", "robot", "time")
+
+
+def _schema():
+    import pyarrow as pa
+
+    fields = [
+        ("robot_id", pa.string()), ("log", pa.string()), ("robot", pa.string()), ("sha256", pa.string()),
+        ("bytes", pa.int64()), ("start_time", pa.timestamp("us", tz="UTC")), ("time_source", pa.string()),
+        ("duration_s", pa.float64()), ("samples", pa.int64()), ("rate_hz", pa.float64()), ("method", pa.string()),
+        ("form", pa.string()), ("effort_unit", pa.string()), ("options", pa.string()), ("options_key", pa.string()),
+    ]  # fmt: skip
+    for name in PARAMETERS:
+        fields += [(name, pa.float64()), (f"{name}_std", pa.float64())]
+    fields += [
+        ("flags", pa.list_(pa.field("element", pa.string()))),
+        ("warnings", pa.list_(pa.field("element", pa.string()))), ("fit_r", pa.float64()),
+        ("fit_l", pa.float64()), ("run_time_s", pa.float64()), ("worker", pa.string()),
+        ("wmrid_version", pa.string()), ("error", pa.string()),
+    ]  # fmt: skip
+    return pa.schema(fields, metadata={b"wmrid_fleet_schema": SCHEMA_VERSION.encode()})
+
+
+def schema():
+    """The table's pyarrow schema (columns in order; see the README's "Fleets")."""
+    return _schema()
+
+
+def column_names() -> tuple[str, ...]:
+    return tuple(_schema().names)
+
+
+def empty_row(**given: Any) -> dict[str, Any]:
+    """A row of the table with every column None (lists empty) but those ``given``."""
+    row: dict[str, Any] = dict.fromkeys(column_names())
+    row["flags"], row["warnings"] = [], []
+    unknown = set(given) - set(row)
+    if unknown:
+        raise ValueError(f"not columns of the fleet table: {sorted(unknown)}")
+    row.update(given)
+    return row
+
+
+def to_arrow(rows: Sequence[dict[str, Any]]):
+    """The rows as a pyarrow Table of :func:`schema` (a missing column is null)."""
+    import pyarrow as pa
+
+    sch = _schema()
+    columns = {name: [row.get(name) for row in rows] for name in sch.names}
+    for name in ("flags", "warnings"):
+        columns[name] = [list(v) if v is not None else [] for v in columns[name]]
+    return pa.Table.from_pydict(columns, schema=sch)
+
+
+def write_table(rows: Sequence[dict[str, Any]], path: str | os.PathLike[str], *, force: bool = False) -> None:
+    """Write the rows as the fleet table at ``path`` (Parquet), atomically: a reader sees the old table or the new
+    one, never half of one."""
+    import pyarrow.parquet as pq
+
+    from wmrid.core.atomic import atomic_write_bytes
+
+    sink = io.BytesIO()
+    pq.write_table(to_arrow(rows), sink, compression="zstd")
+    atomic_write_bytes(path, sink.getvalue(), force=force)
+
+
+def read_table(path: str | os.PathLike[str]) -> list[dict[str, Any]]:
+    """The rows of a fleet table written by :func:`write_table` (start times as aware UTC datetimes)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from wmrid.core.atomic import register_input
+
+    name = os.fspath(path)
+    register_input(name)
+    try:
+        table = pq.read_table(name)
+    except FileNotFoundError:
+        raise UsageError(f"{name}: no such fleet table; run `wmrid fleet LOGS -o {name}` first") from None
+    except (OSError, pa.ArrowException) as err:
+        raise LogFormatError(f"{name}: not a Parquet fleet table ({_one_line(err)})") from None
+    meta = table.schema.metadata or {}
+    version = meta.get(b"wmrid_fleet_schema", b"").decode()
+    if version != SCHEMA_VERSION:
+        found = f"schema {version}" if version else "no wmrid_fleet_schema in its metadata"
+        raise LogFormatError(
+            f"{name}: not a wmrid fleet table of schema {SCHEMA_VERSION} ({found}); make it with `wmrid fleet`"
+        )
+    missing = [n for n in column_names() if n not in table.column_names]
+    if missing:
+        raise LogFormatError(f"{name}: the fleet table lacks the columns {', '.join(missing)}; remake it")
+    return table.select(list(column_names())).to_pylist()
+
+
+def _one_line(err: BaseException) -> str:
+    return " ".join(str(err).split())[:300]
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Which logs, and whose
+
+
+@dataclass(frozen=True)
+class LogEntry:
+    """One log of the fleet: its path(s), robot id, robot file, time stamp (aware UTC datetime or None), where the
+    time came from ("manifest", "path", None: the log's own first stamp when it is an epoch time), and the per-log
+    options of a manifest row (identify's keywords and :class:`~wmrid.api.inputs.LogOptions` fields)."""
+
+    log: str
+    robot_id: str
+    robot: str | None = None
+    time: dt.datetime | None = None
+    time_source: str | None = None
+    options: dict[str, Any] = field(default_factory=dict)
+
+
+def _is_log_file(path: Path) -> bool:
+    name = path.name.lower()
+    return path.is_file() and any(name.endswith(s) for s in LOG_SUFFIXES) and not name.endswith(".truth.json")
+
+
+def find_logs(paths: Sequence[str]) -> list[str]:
+    """The logs named by ``paths``: files as given, globs (``**`` recursive) expanded, folders searched for log
+    files (:data:`LOG_SUFFIXES`); a folder with a metadata.yaml (a rosbag2 recording) is one log.  Sorted within
+    each argument, duplicates dropped; an argument that names nothing is an error."""
+    out: list[str] = []
+    seen: set[str] = set()
+
+    def add(item: str) -> None:
+        key = os.path.realpath(item)
+        if key not in seen:
+            seen.add(key)
+            out.append(item)
+
+    for arg in paths:
+        if os.path.isdir(arg):
+            found = _logs_in_folder(Path(arg))
+            if not found:
+                raise UsageError(f"{arg}: a folder with no log in it ({', '.join(LOG_SUFFIXES)} or rosbag2 folders)")
+            for f in found:
+                add(f)
+        elif os.path.exists(arg):
+            add(arg)
+        elif glob.has_magic(arg):
+            matches = sorted(glob.glob(arg, recursive=True))
+            logs = [m for m in matches if os.path.isfile(m) or (Path(m) / "metadata.yaml").is_file()]
+            if not logs:
+                raise UsageError(f"{arg}: the pattern matches no log")
+            for m in logs:
+                add(m)
+        else:
+            raise UsageError(f"{arg}: no such file or folder")
+    return out
+
+
+def _logs_in_folder(folder: Path) -> list[str]:
+    if (folder / "metadata.yaml").is_file():
+        return [str(folder)]
+    found: list[str] = []
+    for root, dirs, files in os.walk(folder):
+        dirs.sort()
+        here = Path(root)
+        recordings = [d for d in dirs if (here / d / "metadata.yaml").is_file()]
+        found += [str(here / d) for d in recordings]
+        dirs[:] = [d for d in dirs if d not in recordings and not d.startswith(".")]
+        found += [str(here / f) for f in sorted(files) if _is_log_file(here / f)]
+    return sorted(found)
+
+
+def id_and_time_from_path(path: str, pattern: str | None = None) -> tuple[str, dt.datetime | None]:
+    """(robot id, time or None) that a log's path states.
+
+    ``pattern``: a regular expression searched in the path (with "/" separators) with a named group ``robot`` and
+    optionally ``time`` (ISO 8601 or a :data:`DATE_IN_NAME` form).  Without it, the robot id is the name of the
+    folder the log is in (of a rosbag2 folder: the folder above it) and the time the last date in the log's own
+    name (e.g. ``2026-03-14T08-30-00``), UTC.
+    """
+    posix = Path(path).as_posix()
+    if pattern is not None:
+        match = re.search(pattern, posix)
+        if match is None:
+            raise UsageError(f"{path}: {option('id_pattern', pattern)} does not match this path")
+        robot = match.groupdict().get("robot")
+        if not robot:
+            raise UsageError(f"{option('id_pattern', pattern)} has no (?P<robot>...) group, or it matched nothing")
+        text = match.groupdict().get("time")
+        return robot, (parse_time(text, f"{path}: the time {text!r} of {option('id_pattern')}") if text else None)
+    p = Path(path)
+    robot = p.parent.name or os.path.basename(os.path.abspath(p.parent)) or "robot"
+    if p.is_dir() and (p / "metadata.yaml").is_file() and not DATE_IN_NAME.search(p.name):
+        robot = p.parent.name or robot
+    matches = list(DATE_IN_NAME.finditer(p.name))
+    return robot, (_from_match(matches[-1]) if matches else None)
+
+
+def _from_match(m: re.Match) -> dt.datetime | None:
+    parts = [int(m.group(g)) if m.group(g) else 0 for g in ("y", "mo", "d", "h", "mi", "s")]
+    try:
+        return dt.datetime(*parts, tzinfo=dt.timezone.utc)
+    except ValueError:  # 20261399: digits, not a date
+        return None
+
+
+def parse_time(value: Any, where: str) -> dt.datetime:
+    """A time stamp as an aware UTC datetime: ISO 8601 text (no zone: UTC), a date in a :data:`DATE_IN_NAME` form,
+    seconds since the Unix epoch, a datetime or a pandas Timestamp."""
+    if isinstance(value, dt.datetime):
+        return value if value.tzinfo else value.replace(tzinfo=dt.timezone.utc)
+    if hasattr(value, "to_pydatetime"):
+        return parse_time(value.to_pydatetime(), where)
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        if math.isfinite(value):
+            return dt.datetime.fromtimestamp(float(value), tz=dt.timezone.utc)
+    elif isinstance(value, str):
+        text = value.strip()
+        try:
+            return parse_time(dt.datetime.fromisoformat(text.replace("Z", "+00:00")), where)
+        except ValueError:
+            m = DATE_IN_NAME.fullmatch(text)
+            stamp = _from_match(m) if m else None
+            if stamp is not None:
+                return stamp
+            try:
+                return parse_time(float(text), where)
+            except ValueError:
+                pass
+    raise UsageError(f"{where}: not a time (ISO 8601 such as 2026-03-14T08:30:00Z, or seconds since 1970)")
+
+
+#: Identify's keywords a manifest row may set, besides the :class:`~wmrid.api.inputs.LogOptions` fields.
+IDENTIFY_OPTIONS = (
+    "method", "form", "k", "alpha", "box_width", "torque_hold", "control_rate", "delay", "friction", "cutoff",
+    "weighted", "forgetting", "rotor_inertia",
+)  # fmt: skip
+
+
+def option_columns() -> tuple[str, ...]:
+    from wmrid.api.inputs import LOG_OPTION_NAMES
+
+    return IDENTIFY_OPTIONS + LOG_OPTION_NAMES
+
+
+_BOOL = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}
+
+
+def _option_value(name: str, value: Any, where: str) -> Any:
+    """A manifest cell as the option's Python value (text kept for text options, numbers for numeric ones)."""
+    numeric = {"k", "alpha", "box_width", "control_rate", "cutoff", "forgetting", "rotor_inertia", "wheel_radius",
+               "torque_constant", "gear_ratio", "efficiency"}  # fmt: skip
+    flags = {"weighted", "mirror_left", "flip_effort"}
+    if name in flags:
+        if isinstance(value, bool):
+            return value
+        text = str(value).strip().lower()
+        if text not in _BOOL:
+            raise UsageError(f"{where}: {name} must be true or false, got {value!r}")
+        return _BOOL[text]
+    if name in numeric:
+        try:
+            return float(value)
+        except (TypeError, ValueError):
+            raise UsageError(f"{where}: {name} must be a number, got {value!r}") from None
+    return value if name == "delay" and isinstance(value, (int, float)) else str(value).strip()
+
+
+def _blank(value: Any) -> bool:
+    if value is None:
+        return True
+    if isinstance(value, float) and math.isnan(value):
+        return True
+    return isinstance(value, str) and not value.strip()
+
+
+def read_manifest(path: str | os.PathLike[str], id_pattern: str | None = None) -> list[LogEntry]:
+    """The logs a manifest lists (CSV or Parquet, one row per log).
+
+    Columns: ``log`` (required; a path relative to the manifest's folder, or absolute), ``robot_id`` (else from the
+    path, :func:`id_and_time_from_path`), ``robot`` (a robot file or built-in name), ``time`` (ISO 8601 or epoch
+    seconds; else from the path or the log), and any of :func:`option_columns` (per-log options, e.g.
+    ``speed_unit``, ``columns``, ``method``); an empty cell is "not given".  Another column is refused by name.
+    """
+    import pandas as pd
+
+    from wmrid.core.atomic import register_input
+
+    name = os.fspath(path)
+    register_input(name)
+    try:
+        if name.lower().endswith(".parquet"):
+            frame = pd.read_parquet(name)
+        else:
+            frame = pd.read_csv(name, dtype=str, keep_default_na=False, skipinitialspace=True)
+    except FileNotFoundError:
+        raise UsageError(f"{option('manifest', name)}: no such file") from None
+    except (OSError, ValueError, ImportError) as err:
+        raise LogFormatError(f"{name}: not a CSV or Parquet manifest ({_one_line(err)})") from None
+    frame.columns = [str(c).strip() for c in frame.columns]
+    if "log" not in frame.columns:
+        raise UsageError(f"{name}: a manifest needs a 'log' column (one log per row); it has {list(frame.columns)}")
+    allowed = set(MANIFEST_COLUMNS) | set(option_columns())
+    unknown = [c for c in frame.columns if c not in allowed]
+    if unknown:
+        raise UsageError(
+            f"{name}: unknown manifest column(s) {', '.join(unknown)}; the columns are {', '.join(MANIFEST_COLUMNS)} "
+            f"and the options {', '.join(option_columns())}"
+        )
+    base = Path(name).parent
+    entries = []
+    for i, rec in enumerate(frame.to_dict("records")):
+        where = f"{name} row {i + 2}" if not name.lower().endswith(".parquet") else f"{name} row {i}"
+        if _blank(rec["log"]):
+            raise UsageError(f"{where}: the log cell is empty")
+        log = str(rec["log"]).strip()
+        log_path = log if os.path.isabs(log) else str(base / log)
+        robot_id, stamp = id_and_time_from_path(log_path, id_pattern)
+        source = "path" if stamp is not None else None
+        if not _blank(rec.get("robot_id")):
+            robot_id = str(rec["robot_id"]).strip()
+        if not _blank(rec.get("time")):
+            stamp, source = parse_time(rec["time"], f"{where}: time"), "manifest"
+        robot = None if _blank(rec.get("robot")) else str(rec["robot"]).strip()
+        if robot is not None and not os.path.isabs(robot) and (base / robot).exists():
+            robot = str(base / robot)
+        opts = {
+            c: _option_value(c, rec[c], f"{where}: {c}") for c in option_columns() if c in rec and not _blank(rec[c])
+        }
+        entries.append(LogEntry(log_path, robot_id, robot, stamp, source, opts))
+    if not entries:
+        raise UsageError(f"{name}: the manifest lists no log")
+    return entries
+
+
+def entries_from_paths(paths: Sequence[str], id_pattern: str | None = None) -> list[LogEntry]:
+    """:class:`LogEntry` of each log :func:`find_logs` finds, robot id and time from the path."""
+    out = []
+    for log in find_logs(paths):
+        robot_id, stamp = id_and_time_from_path(log, id_pattern)
+        out.append(LogEntry(log, robot_id, None, stamp, "path" if stamp is not None else None))
+    return out
+
+
+def content_digest(path: str) -> tuple[str, int]:
+    """(SHA-256 hex, bytes) of a log's content: of the file, or of a folder's files (names relative to it, sizes and
+    hashes, in name order), read in blocks."""
+    from wmrid.io.digest import file_digests
+
+    items = file_digests(path)
+    if len(items) == 1 and not os.path.isdir(path):
+        return items[0]["sha256"], int(items[0]["bytes"])
+    h = hashlib.sha256()
+    for item in items:
+        rel = os.path.relpath(item["path"], path)
+        h.update(f"{rel}\0{item['bytes']}\0{item['sha256']}\n".encode())
+    return h.hexdigest(), sum(int(i["bytes"]) for i in items)
+
+
+def options_key(options: dict[str, Any]) -> str:
+    """A short hash of a log's effective options (canonical JSON): ``--resume`` re-runs a log whose options
+    changed."""
+    text = json.dumps(options, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def canonical_options(options: dict[str, Any]) -> str:
+    return json.dumps(options, sort_keys=True, separators=(",", ":"), default=str)
+
+
+def sort_rows(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Rows by robot id, then time (rows without one last), then log."""
+    far = dt.datetime.max.replace(tzinfo=dt.timezone.utc)
+    return sorted(rows, key=lambda r: (str(r["robot_id"]), r["start_time"] or far, str(r["log"])))

@@ -1,0 +1,283 @@
+"""A fleet's table read for what matters: which robot's friction creeps up, which one now carries a payload, which
+one no longer matches its siblings (:func:`review_fleet`).  The statistics are in
+:mod:`wmrid.monitoring.fleet_changes`; this module groups the table's rows by robot, words the findings and ranks
+the robots by the evidence against them.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from wmrid.monitoring.fleet_changes import (
+    FRICTION,
+    MONITORED,
+    WHEEL_OF,
+    RobotHistory,
+    analyse_robot,
+    outlier_threshold,
+    robust_z,
+)
+
+#: Robots of one model needed to say which one stands out.
+MIN_FLEET = 5
+NO_MODEL = "(no robot file)"
+
+
+@dataclass
+class RobotReview:
+    """One robot: its usable logs (rows, in time order), failed logs, the change analysis, the findings in words
+    (``findings``) and as short tags (``flags``), its fleet robust z beyond the threshold (``outlier``), a payload
+    estimate, and the evidence against it (statistic / threshold; > 1 is flagged)."""
+
+    robot_id: str
+    model: str
+    rows: list[dict[str, Any]]
+    failed: int
+    history: RobotHistory
+    findings: list[str] = field(default_factory=list)
+    flags: list[str] = field(default_factory=list)
+    outlier: dict[str, float] = field(default_factory=dict)
+    payload: dict[str, tuple[float, float | None]] | None = None
+    evidence: float = 0.0
+
+    @property
+    def flagged(self) -> bool:
+        return bool(self.flags)
+
+    def time_of(self, index: int) -> dt.datetime | None:
+        return self.rows[index]["start_time"] if 0 <= index < len(self.rows) else None
+
+    def label_of(self, index: int) -> str:
+        """A log's time stamp (its date; with the time when two logs share a day), else its path."""
+        when = self.time_of(index)
+        if when is None:
+            return str(self.rows[index]["log"])
+        same_day = sum(1 for r in self.rows if r["start_time"] is not None and r["start_time"].date() == when.date())
+        return when.strftime("%Y-%m-%d %H:%M") if same_day > 1 else when.strftime("%Y-%m-%d")
+
+
+@dataclass
+class FleetReview:
+    """The fleet's robots ranked by the evidence against them, the settings and the statements of what the
+    thresholds mean."""
+
+    robots: list[RobotReview]
+    settings: dict[str, Any]
+    statements: list[str]
+    outlier_thresholds: dict[str, tuple[int, float]]
+
+
+def usable(row: dict[str, Any]) -> bool:
+    """A row identified without error with every watched parameter finite."""
+    if row.get("error") is not None:
+        return False
+    return all(row.get(n) is not None and math.isfinite(row[n]) for n in MONITORED)
+
+
+def _days(rows: list[dict[str, Any]]) -> np.ndarray:
+    times = [r["start_time"] for r in rows]
+    if all(t is not None for t in times) and times:
+        return np.array([(t - times[0]).total_seconds() / 86400.0 for t in times])
+    return np.arange(len(rows), dtype=float)
+
+
+def _order(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    far = dt.datetime.max.replace(tzinfo=dt.timezone.utc)
+    return sorted(rows, key=lambda r: (r["start_time"] or far, str(r["log"])))
+
+
+def review_fleet(
+    rows: Sequence[dict[str, Any]],
+    *,
+    baseline: int = 10,
+    window: int = 30,
+    alpha: float = 0.001,
+    outlier_alpha: float = 0.001,
+    robot_of: Callable[[str], Any] | None = None,
+) -> FleetReview:
+    """The review of a fleet table's rows (:func:`wmrid.io.fleet_table.read_table`).
+
+    baseline, window, alpha : :func:`~wmrid.monitoring.fleet_changes.analyse_robot`'s settings (alpha: the
+        probability of flagging a robot without change over its history).
+    outlier_alpha : the probability that any robot of a model with Gaussian unit-to-unit spread is said to stand
+        out.
+    robot_of : robot file or name -> :class:`~wmrid.model.robot.Robot` or None (its r and b turn a change of M and
+        V_c into a payload estimate).
+    """
+    if not 0 < alpha < 0.5 or not 0 < outlier_alpha < 0.5:
+        raise ValueError("alpha and outlier_alpha must be in (0, 0.5)")
+    by_robot: dict[str, list[dict[str, Any]]] = {}
+    for row in rows:
+        by_robot.setdefault(str(row["robot_id"]), []).append(row)
+    reviews = []
+    for robot_id, robot_rows in sorted(by_robot.items()):
+        ok = _order([r for r in robot_rows if usable(r)])
+        models = {r["robot"] for r in robot_rows if r.get("robot")}
+        model = sorted(models)[0] if models else NO_MODEL
+        values = np.array([[r[n] for n in MONITORED] for r in ok]).reshape(len(ok), len(MONITORED))
+        stds = np.array([[r.get(f"{n}_std") if r.get(f"{n}_std") is not None else np.nan for n in MONITORED]
+                         for r in ok]).reshape(len(ok), len(MONITORED))  # fmt: skip
+        history = analyse_robot(values, stds, _days(ok), baseline=baseline, window=window, alpha=alpha)
+        review = RobotReview(robot_id, model, ok, len(robot_rows) - len(ok), history, evidence=history.evidence)
+        if len(models) > 1:
+            review.findings.append(f"its logs name {len(models)} robot files ({', '.join(sorted(models))}); the "
+                                   f"fleet comparison uses {model}")  # fmt: skip
+        _word_changes(review, robot_of)
+        reviews.append(review)
+    thresholds = _outliers(reviews, baseline, outlier_alpha)
+    reviews.sort(key=lambda r: (-r.flagged, -r.evidence, r.robot_id))
+    tested = sum(1 for r in reviews if math.isfinite(r.history.threshold))
+    statements = [
+        f"Changes: each robot's logs from its {baseline + 1}th on are tested against its own earlier logs, for a step "
+        f"(payload, configuration) or a ramp (wear) starting within the last {window} logs.  A robot whose parameters "
+        f"do not change is flagged with probability at most {alpha:g} over its whole history (Gaussian log-to-log "
+        f"scatter; thresholds calibrated by seeded Monte Carlo and made conservative for small rates): about "
+        f"{tested * alpha:.2g} false flags expected among these {tested} robots.  Scatter with heavier tails than "
+        "Gaussian raises that rate; parameters correlated with each other lower it.",
+        f"Fleet comparison: each robot's mean over its first {baseline} logs against the other robots of the same "
+        f"robot file (robust z: distance to the median in units of 1.4826 MAD); the probability that any robot of a "
+        f"model with Gaussian unit-to-unit spread is said to stand out is {outlier_alpha:g} (at least {MIN_FLEET} "
+        "robots per model).",
+    ]
+    settings = {"baseline": baseline, "window": window, "alpha": alpha, "outlier_alpha": outlier_alpha}
+    return FleetReview(reviews, settings, statements, thresholds)
+
+
+def _pct(x: float) -> str:
+    return f"{100 * x:+.1f} %" if math.isfinite(x) else "from 0"
+
+
+def _word_changes(review: RobotReview, robot_of: Callable[[str], Any] | None) -> None:
+    hist = review.history
+    if hist.note:
+        review.findings.append(hist.note)
+    if hist.odd_logs:
+        names = ", ".join(review.label_of(i) for i in hist.odd_logs)
+        review.findings.append(
+            f"odd log{'s' if len(hist.odd_logs) > 1 else ''} left out of the change test: {names} (beyond 3 std of "
+            "the robot's earlier logs, the next logs back within it)"
+        )
+    for change in hist.changes:
+        onset, alarm = review.label_of(change.onset), review.label_of(change.alarm)
+        lag = _lag(review, change.onset, change.alarm)
+        pending = " (on the robot's latest log: no later log confirms it yet)" if change.confirmed is None else ""
+        if change.confirmed is False:
+            pending = " (the logs after the alarm do not all agree)"
+        inertial = [p for p in change.parameters if p not in FRICTION]
+        friction = [p for p in change.parameters if p in FRICTION]
+        if inertial:
+            shifts = ", ".join(f"{p} {_pct(change.relative(p))}" for p in inertial)
+            text = f"payload or configuration change from {onset} (flagged {alarm}{lag}): {shifts}"
+            if friction:
+                text += "; friction changed with it: " + ", ".join(f"{p} {_pct(change.relative(p))}" for p in friction)
+            review.payload = _payload(review, change, robot_of)
+            if review.payload is not None:
+                m, m_sd = review.payload["mass"]
+                x, y = review.payload["x"][0], review.payload["y"][0]
+                sd = f" ± {m_sd:.2g}" if m_sd is not None else ""
+                text += (f"; payload ≈ {m:.3g}{sd} kg at x = {x:.3g} m, y = {y:.3g} m (against the robot's own "
+                         "logs before the change)")  # fmt: skip
+            elif robot_of is not None:
+                text += "; no payload estimate: the robot's r and b are unknown (give --robot or a robot column)"
+            review.findings.append(text + pending)
+            review.flags.append("payload or configuration change")
+        else:
+            wheels = sorted({WHEEL_OF[p] for p in friction})
+            rising = [p for p in friction if change.relative(p) > 0]
+            how = ", ".join(
+                f"{p} {_pct(change.relative(p))}" + (f" ({100 * change.rate_per_day[p]:+.2g} %/day)"
+                                                      if change.kind == "ramp" else "")
+                for p in friction
+            )  # fmt: skip
+            wheel_text = " and ".join(wheels) + (" wheel's" if len(wheels) == 1 else " wheels'")
+            if rising and len(rising) == len(friction):
+                verb = "rising" if change.kind == "ramp" else "up"
+                review.findings.append(
+                    f"wheel wear? {wheel_text} friction {verb} from {onset} (flagged {alarm}{lag}): {how}{pending}"
+                )
+                review.flags.append(f"wheel wear? ({' and '.join(wheels)})")
+            else:
+                review.findings.append(f"{wheel_text} friction changed from {onset} (flagged {alarm}{lag}): {how}"
+                                       f"{pending}")  # fmt: skip
+                review.flags.append(f"friction change ({' and '.join(wheels)})")
+
+
+def _lag(review: RobotReview, onset: int, alarm: int) -> str:
+    a, b = review.time_of(onset), review.time_of(alarm)
+    if a is None or b is None:
+        return f", {alarm - onset} logs later" if alarm > onset else ""
+    days = (b - a).total_seconds() / 86400
+    return f", {days:.3g} days after" if alarm > onset else ""
+
+
+def _payload(review: RobotReview, change: Any, robot_of: Callable[[str], Any] | None):
+    """{mass, x, y, inertia: (value, standard error or None)} from the mean of the logs from the onset on against the
+    mean of the robot's own logs before it (odd logs left out), when its r and b are known; the standard error
+    from both means' log-to-log scatter by the delta method."""
+    from wmrid.model.payload import PAYLOAD_NAMES, payload_from_change
+
+    if robot_of is None or review.model == NO_MODEL:
+        return None
+    robot = robot_of(review.model)
+    if robot is None:
+        return None
+    r, b = robot.nominal.r, robot.nominal.b
+    before = [change.before[n] for n in ("M11", "M12", "M22", "Vc")]
+    names = ("M11", "M12", "M22", "Vc")
+    odd = set(review.history.odd_logs)
+    values = np.array([[row[n] for n in names] for row in review.rows])
+    used = np.array([i not in odd for i in range(len(values))])
+    before_logs = values[: change.onset][used[: change.onset]]
+    after_logs = values[change.onset :][used[change.onset :]]
+    before, after = before_logs.mean(axis=0), after_logs.mean(axis=0)
+    med = payload_from_change(before, after, r, b)
+    err = [None] * 4
+    if len(before_logs) > 1 and len(after_logs) > 1:
+        # delta method: the means' covariances (log-to-log scatter / logs) through central differences
+        var = np.zeros(4)
+        for mean, logs, which in ((before, before_logs, 0), (after, after_logs, 1)):
+            jac = np.zeros((4, 4))
+            for j in range(4):
+                step = 1e-6 * max(abs(mean[j]), 1e-6)
+                up, down = mean.copy(), mean.copy()
+                up[j] += step
+                down[j] -= step
+                args_up = (up, after) if which == 0 else (before, up)
+                args_down = (down, after) if which == 0 else (before, down)
+                jac[:, j] = (payload_from_change(*args_up, r, b) - payload_from_change(*args_down, r, b)) / (2 * step)
+            var += np.diag(jac @ (np.cov(logs.T) / len(logs)) @ jac.T)
+        err = np.sqrt(np.clip(var, 0.0, None))
+    return {n: (float(v), None if e is None else float(e)) for n, v, e in zip(PAYLOAD_NAMES, med, err, strict=True)}
+
+
+def _outliers(reviews: list[RobotReview], baseline: int, alpha: float) -> dict[str, tuple[int, float]]:
+    """Mark the robots that stand out among those of the same model; returns {model: (robots, threshold)}."""
+    groups: dict[str, list[RobotReview]] = {}
+    for rv in reviews:
+        if len(rv.rows) >= 3:
+            groups.setdefault(rv.model, []).append(rv)
+    out = {}
+    for model, members in groups.items():
+        if len(members) < MIN_FLEET:
+            continue
+        levels = np.array([[np.mean([r[n] for r in rv.rows[:baseline]]) for n in MONITORED] for rv in members])
+        z = robust_z(levels)
+        h = outlier_threshold(alpha, len(members))
+        out[model] = (len(members), h)
+        med = np.median(levels, axis=0)
+        for rv, zr, lv in zip(members, z, levels, strict=True):
+            rv.evidence = max(rv.evidence, float(np.max(np.abs(zr)) / h))
+            beyond = [i for i in np.argsort(-np.abs(zr)) if abs(zr[i]) > h]
+            if beyond:
+                rv.outlier = {MONITORED[i]: float(zr[i]) for i in beyond}
+                parts = ", ".join(f"{MONITORED[i]} {lv[i]:.4g} (fleet median {med[i]:.4g}, robust z {zr[i]:+.1f})"
+                                  for i in beyond)  # fmt: skip
+                rv.findings.append(f"stands out from the {len(members)} robots of {model}: {parts}")
+                rv.flags.append("stands out from the fleet")
+    return out

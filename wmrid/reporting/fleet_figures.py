@@ -1,0 +1,99 @@
+"""Figures of a fleet review: each robot's parameters over its logs with ±2σ bands, its baseline and the change
+found (:func:`build_robot_figure`), and the evidence against every robot (:func:`build_evidence_figure`).
+
+Same conventions as :mod:`wmrid.reporting.figures`: ``Figure`` objects on the Agg canvas (no pyplot), no
+figure-level title, rendered by :func:`wmrid.reporting.figures.render`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from wmrid.monitoring.fleet_changes import MONITORED
+from wmrid.reporting.figures import _new_figure
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from wmrid.monitoring.fleet_review import FleetReview, RobotReview
+
+UNITS = {"M11": "kg m²", "M12": "kg m²", "M22": "kg m²", "Vc": "kg m", "Fv1": "N m s", "Fv2": "N m s",
+         "Fd1": "N m", "Fd2": "N m"}  # fmt: skip
+
+
+def _x(review: RobotReview) -> tuple[Any, str]:
+    """The horizontal axis: the logs' start times, else their order."""
+    times = [r["start_time"] for r in review.rows]
+    if times and all(t is not None for t in times):
+        import matplotlib.dates as mdates
+
+        return mdates.date2num([t.replace(tzinfo=None) for t in times]), "date"
+    return np.arange(len(review.rows), dtype=float), "log"
+
+
+def build_robot_figure(review: RobotReview) -> Figure | None:
+    """Eight panels (M11 M12 M22 Vc / Fv1 Fv2 Fd1 Fd2): each log's estimate with its ±2σ band, the mean of the
+    logs before the change (dashed), the change's onset (dotted) and the log that first flagged it (red); odd logs
+    as crosses.  None for a robot without usable logs."""
+    if not review.rows:
+        return None
+    x, kind = _x(review)
+    fig = _new_figure((11.0, 4.6))
+    axes = fig.subplots(2, 4, sharex=True)
+    change = review.history.changes[0] if review.history.changes else None
+    odd = set(review.history.odd_logs)
+    for ax, name in zip(axes.flat, MONITORED, strict=True):
+        y = np.array([r[name] for r in review.rows], dtype=float)
+        s = np.array([r.get(f"{name}_std") if r.get(f"{name}_std") is not None else np.nan for r in review.rows])
+        s = np.where(np.isfinite(s), s, 0.0)
+        changed = change is not None and name in change.parameters
+        color = "C3" if changed else "C0"
+        ax.fill_between(x, y - 2 * s, y + 2 * s, color=color, alpha=0.25, linewidth=0, step=None)
+        keep = np.array([i not in odd for i in range(len(y))])
+        ax.plot(x[keep], y[keep], ".-", color=color, markersize=3, linewidth=0.8)
+        if odd:
+            idx = sorted(odd)
+            ax.plot(x[idx], y[idx], "x", color="0.3", markersize=6)
+        stop = change.onset if change is not None else len(y)
+        base = y[:stop][keep[:stop]]
+        if base.size:
+            ax.axhline(float(base.mean()), color="0.4", linestyle="--", linewidth=0.8)
+        if change is not None:
+            ax.axvline(x[change.onset], color="0.3", linestyle=":", linewidth=1.0)
+            ax.axvline(x[change.alarm], color="C3", linewidth=1.0)
+        ax.set_title(f"{name} ({UNITS[name]})", fontsize=9, color="C3" if changed else "black")
+        ax.tick_params(labelsize=7)
+        ax.yaxis.get_offset_text().set_fontsize(7)
+    if kind == "date":
+        import matplotlib.dates as mdates
+
+        for ax in axes[1]:
+            ax.xaxis.set_major_locator(mdates.AutoDateLocator(maxticks=5))
+            ax.xaxis.set_major_formatter(mdates.ConciseDateFormatter(ax.xaxis.get_major_locator()))
+    else:
+        for ax in axes[1]:
+            ax.set_xlabel("log", fontsize=8)
+    return fig
+
+
+def build_evidence_figure(review: FleetReview) -> Figure | None:
+    """The evidence against each robot (largest statistic over its threshold), ranked; 1 is the flag line."""
+    robots = review.robots
+    if not robots:
+        return None
+    height = min(1.2 + 0.22 * len(robots), 14.0)
+    fig = _new_figure((11.0, height))
+    ax = fig.subplots()
+    shown = robots[: int((height - 1.2) / 0.22)] if len(robots) * 0.22 + 1.2 > height else robots
+    names = [r.robot_id for r in shown][::-1]
+    values = [max(r.evidence, 1e-3) if math.isfinite(r.evidence) else 0.0 for r in shown][::-1]
+    colors = ["C3" if r.flagged else "C0" for r in shown][::-1]
+    ax.barh(names, values, color=colors)
+    ax.axvline(1.0, color="0.2", linestyle="--", linewidth=1.0)
+    ax.set_xscale("log")
+    ax.set_xlabel("evidence (statistic / threshold; > 1: flagged)")
+    ax.tick_params(axis="y", labelsize=7 if len(shown) > 30 else 9)
+    return fig
