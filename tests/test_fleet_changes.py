@@ -35,7 +35,7 @@ def test_scan_statistics_equal_an_independent_least_squares_fit(seed):
     x = 5.0 + 0.01 * rng.standard_normal(24)
     x[15:] += 0.02 * np.arange(9)  # something to find
     first, window = 6, 7
-    stat, onset, ramp = fc.scan(x[None, :], window, first)
+    stat, onset, _ramp, effect = fc.scan(x[None, :], window, first)
     for end in range(24):
         cands = [(_f_by_lstsq(x, tau, end, r), tau, r) for tau in range(max(first, end - window + 1), end + 1)
                  for r in (False, True)]  # fmt: skip
@@ -46,12 +46,19 @@ def test_scan_statistics_equal_an_independent_least_squares_fit(seed):
         # relative 1e-9: sums of 24 values near 5 (centred first), against lstsq's QR; F grows to 1e3 here
         assert stat[0, end] == pytest.approx(best[0], rel=1e-9)
         assert onset[0, end] == best[1]
+        # the fitted change at the end log: the step's height, or the ramp's rise over its logs
+        t = np.arange(end + 1)
+        g = np.where(t >= best[1], (t - best[1] + 1.0) if best[2] else 1.0, 0.0)
+        coef = np.linalg.lstsq(np.column_stack([np.ones_like(g), g]), x[: end + 1], rcond=None)[0]
+        assert effect[0, end] == pytest.approx(coef[1] * g[-1], rel=1e-8, abs=1e-14)
 
 
-def test_scan_floor_caps_the_statistic():
-    x = np.r_[np.zeros(10), np.ones(5) * 1e-12]  # a step far below what the logs' own std can tell
-    stat, _, _ = fc.scan(x[None, :], 10, 5, floor=np.array([1e-6]))
-    assert stat.max() < 1e-8
+def test_a_change_within_the_logs_own_uncertainty_is_not_flagged():
+    # a clear step against a tiny log-to-log scatter, but smaller than twice what each log claims to know
+    x, s = _robot(seed=4)
+    x[30:, 0] += 5e-3
+    assert fc.analyse_robot(x, s).changes  # std 1.4e-4: the step is 18 of them
+    assert not fc.analyse_robot(x, s * 20).changes  # each log claims 2.8e-3: the step is less than 2 of them
 
 
 @pytest.mark.parametrize(("alpha", "total"), [(0.05, 30), (0.01, 30), (0.01, 80)])
@@ -63,8 +70,8 @@ def test_false_alarm_rate_holds_on_fresh_draws(alpha, total):
     rng = np.random.Generator(np.random.PCG64(99))
     draws = 3000
     hits = 0
-    for start in range(0, draws, 500):
-        stat, _, _ = fc.scan(rng.standard_normal((500, 8, total)), 30, 10)
+    for _start in range(0, draws, 500):
+        stat = fc.scan(rng.standard_normal((500, 8, total)), 30, 10)[0]
         hits += int(np.sum(stat.max(axis=(1, 2)) > h))
     rate = hits / draws
     assert rate <= alpha + 3 * math.sqrt(alpha * (1 - alpha) / draws)
@@ -95,9 +102,12 @@ def test_a_friction_ramp_is_found_within_days_of_its_onset():
     x[:, 6] *= rise
     hist = fc.analyse_robot(x, s, days)
     (change,) = hist.changes
-    assert set(change.parameters) <= {"Fv1", "Fd1"} and change.parameters
-    assert change.kind == "ramp" and change.confirmed
-    assert 20 <= change.onset <= 23 and change.alarm - 20 <= 5
+    assert set(change.parameters) <= {"Fv1", "Fd1"}
+    assert change.parameters
+    assert change.kind == "ramp"
+    assert change.confirmed
+    assert 20 <= change.onset <= 23
+    assert change.alarm - 20 <= 5
     assert change.rate_per_day[change.parameters[0]] == pytest.approx(0.03, rel=0.2)
 
 
@@ -107,7 +117,8 @@ def test_a_step_of_the_inertia_is_dated_on_its_log():
     x[35:, 2] += 0.1
     hist = fc.analyse_robot(x, s)
     (change,) = hist.changes
-    assert change.onset == change.alarm == 35 and change.kind == "step"
+    assert change.onset == change.alarm == 35
+    assert change.kind == "step"
     assert {"M11", "M22"} <= set(change.parameters)
     assert change.relative("M11") == pytest.approx(0.1 / 1.41, rel=0.01)
 
@@ -116,36 +127,49 @@ def test_one_odd_log_is_not_a_change():
     x, s = _robot(seed=2)
     x[30, 4] *= 1.5
     hist = fc.analyse_robot(x, s)
-    assert hist.changes == [] and hist.odd_logs == [30]
+    assert hist.changes == []
+    assert hist.odd_logs == [30]
 
 
 def test_a_change_on_the_latest_log_is_unconfirmed():
     x, s = _robot(seed=3)
     x[49, 0] += 0.1
     (change,) = fc.analyse_robot(x, s).changes
-    assert change.alarm == 49 and change.confirmed is None
+    assert change.alarm == 49
+    assert change.confirmed is None
 
 
 def test_too_few_logs_are_said_not_tested():
     x, s = _robot(total=8)
     hist = fc.analyse_robot(x, s)
-    assert hist.changes == [] and "too few" in hist.note
+    assert hist.changes == []
+    assert "too few" in hist.note
 
 
-def test_robust_z_against_a_direct_computation():
-    levels = np.array([[1.0, 5.0], [2.0, 5.0], [3.0, 5.0], [4.0, 5.0], [10.0, 6.0]])
-    z = fc.robust_z(levels)
-    # column 0: median 3, |dev| = 2 1 0 1 7 -> MAD 1; column 1: MAD 0: 0 at the median, inf elsewhere
-    np.testing.assert_allclose(z[:, 0], (levels[:, 0] - 3.0) / 1.4826)
-    assert list(z[:, 1]) == [0, 0, 0, 0, math.inf]
+def test_leave_one_out_t_against_a_direct_computation():
+    rng = np.random.default_rng(8)
+    levels = rng.standard_normal((7, 3))
+    t = fc.leave_one_out_t(levels)
+    for i in range(7):
+        others = np.delete(levels, i, axis=0)
+        want = (levels[i] - others.mean(axis=0)) / (others.std(axis=0, ddof=1) * math.sqrt(1 + 1 / 6))
+        np.testing.assert_allclose(t[i], want, rtol=1e-12)
 
 
 def test_outlier_false_alarm_rate_holds_on_fresh_draws():
     h = fc.outlier_threshold(0.01, 12)
     rng = np.random.Generator(np.random.PCG64(7))
-    data = rng.standard_normal((4000, 12, 8))
-    hits = sum(bool(np.abs(fc.robust_z(d)).max() > h) for d in data)
-    assert hits / 4000 <= 0.01 + 3 * math.sqrt(0.01 * 0.99 / 4000)
+    data = rng.standard_normal((20000, 12, 8))
+    hits = sum(bool(np.abs(fc.leave_one_out_t(d)).max() > h) for d in data)
+    assert hits / 20000 <= 0.01 + 3 * math.sqrt(0.01 * 0.99 / 20000)
+
+
+def test_a_robot_far_from_its_siblings_stands_out():
+    rng = np.random.default_rng(9)
+    levels = 1 + 0.03 * rng.standard_normal((10, 8))
+    levels[7, 7] *= 1.4  # 13 unit spreads
+    t = fc.leave_one_out_t(levels)
+    assert np.argwhere(np.abs(t) > fc.outlier_threshold(0.001, 10)).tolist() == [[7, 7]]
 
 
 def test_payload_from_a_change_equals_the_model_inversion():

@@ -10,10 +10,12 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
+from wmrid.api.fleet import option_columns
 from wmrid.core.errors import LogFormatError, UsageError
 from wmrid.io import fleet_table as ft
 
 UTC = dt.timezone.utc
+OPTIONS = option_columns()
 
 #: The table's columns as documented in the README ("Fleets"); a change here is a new schema version.
 DOCUMENTED = [
@@ -80,14 +82,20 @@ def test_manifest_rows_with_options(tmp_path):
         "logs/R9/2026-03-02.mcap,,paper,,,,\n"
         "/abs/c.bag,R3,,1772352000,,,no\n"
     )
-    a, b, c = ft.read_manifest(tmp_path / "m.csv")
-    assert a.log == str(tmp_path / "logs" / "a.mcap") and a.robot_id == "R1"
+    a, b, c = ft.read_manifest(tmp_path / "m.csv", option_names=OPTIONS)
+    assert a.log == str(tmp_path / "logs" / "a.mcap")
+    assert a.robot_id == "R1"
     assert a.robot == str(tmp_path / "robots" / "r.toml")  # relative to the manifest, as the logs
-    assert a.time == dt.datetime(2026, 3, 1, 8, 30, tzinfo=UTC) and a.time_source == "manifest"
+    assert a.time == dt.datetime(2026, 3, 1, 8, 30, tzinfo=UTC)
+    assert a.time_source == "manifest"
     assert a.options == {"speed_unit": "rpm", "torque_constant": 0.05, "mirror_left": True}
-    assert b.robot_id == "R9" and b.robot == "paper" and b.options == {}
-    assert b.time == dt.datetime(2026, 3, 2, tzinfo=UTC) and b.time_source == "path"
-    assert c.log == "/abs/c.bag" and c.time == dt.datetime(2026, 3, 1, 8, tzinfo=UTC)
+    assert b.robot_id == "R9"
+    assert b.robot == "paper"
+    assert b.options == {}
+    assert b.time == dt.datetime(2026, 3, 2, tzinfo=UTC)
+    assert b.time_source == "path"
+    assert c.log == "/abs/c.bag"
+    assert c.time == dt.datetime(2026, 3, 1, 8, tzinfo=UTC)
     assert c.options == {"mirror_left": False}
 
 
@@ -106,18 +114,20 @@ def test_manifest_rows_with_options(tmp_path):
 def test_manifest_errors_name_the_row(tmp_path, text, message):
     (tmp_path / "m.csv").write_text(text)
     with pytest.raises(UsageError, match=message):
-        ft.read_manifest(tmp_path / "m.csv")
+        ft.read_manifest(tmp_path / "m.csv", option_names=OPTIONS)
 
 
 def test_parquet_manifest(tmp_path):
     pq.write_table(pa.table({"log": ["x/a.csv"], "robot_id": ["R5"], "k": [20.0]}), tmp_path / "m.parquet")
-    (entry,) = ft.read_manifest(tmp_path / "m.parquet")
-    assert entry.robot_id == "R5" and entry.options == {"k": 20.0}
+    (entry,) = ft.read_manifest(tmp_path / "m.parquet", option_names=OPTIONS)
+    assert entry.robot_id == "R5"
+    assert entry.options == {"k": 20.0}
 
 
 def test_logs_found_in_folders_and_globs(tmp_path):
-    for name in ("R1/2026-01-01.mcap", "R1/2026-01-02.csv.gz", "R2/run.parquet", "R2/notes.txt",
-                 "R2/run.parquet.truth.json", "R3/rec/metadata.yaml", "R3/rec/rec_0.db3", ".hidden/x.mcap"):  # fmt: skip
+    names = ("R1/2026-01-01.mcap", "R1/2026-01-02.csv.gz", "R2/run.parquet", "R2/notes.txt",
+             "R2/run.parquet.truth.json", "R3/rec/metadata.yaml", "R3/rec/rec_0.db3", ".hidden/x.mcap")  # fmt: skip
+    for name in names:
         (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / name).write_text("x")
     found = ft.find_logs([str(tmp_path)])
@@ -162,6 +172,7 @@ def test_content_digest_of_a_file_and_a_folder(tmp_path):
     (rec / "metadata.yaml").write_bytes(b"m")
     (rec / "rec_0.db3").write_bytes(b"dd")
     digest, size = ft.content_digest(str(rec))
-    assert size == 3 and len(digest) == 64
+    assert size == 3
+    assert len(digest) == 64
     (rec / "rec_0.db3").write_bytes(b"de")
     assert ft.content_digest(str(rec))[0] != digest  # any byte of any file changes it

@@ -42,6 +42,8 @@ def base_args(name: str, tmp: Path) -> list[str]:
         return ["-o", str(tmp / "sim.csv"), "--force", "--duration", "0.01", "--rate", "1000"]
     if name == "monitor":
         return [MISSING_LOG, "--model", "/nonexistent/wmrid-test/model.json"]
+    if name == "fleet":
+        return [MISSING_LOG, "-o", str(tmp / "fleet.parquet")]
     return [MISSING_LOG]
 
 

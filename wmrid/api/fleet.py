@@ -30,7 +30,6 @@ from wmrid.io.fleet_table import (
     content_digest,
     empty_row,
     entries_from_paths,
-    option_columns,
     options_key,
     read_manifest,
     read_table,
@@ -38,7 +37,22 @@ from wmrid.io.fleet_table import (
     write_table,
 )
 
-__all__ = ["FleetRun", "fleet", "identify_entry"]
+__all__ = ["FleetRun", "fleet", "identify_entry", "option_columns"]
+
+#: identify's keywords a manifest row may set, besides the :class:`~wmrid.api.inputs.LogOptions` fields.
+IDENTIFY_OPTIONS = (
+    "method", "form", "k", "alpha", "box_width", "torque_hold", "control_rate", "delay", "friction", "cutoff",
+    "weighted", "forgetting", "rotor_inertia",
+)  # fmt: skip
+
+
+def option_columns() -> tuple[str, ...]:
+    """The per-log options a manifest may give (and ``fleet``'s keywords): identify's settings and the log
+    options, by their Python names."""
+    from wmrid.api.inputs import LOG_OPTION_NAMES
+
+    return IDENTIFY_OPTIONS + LOG_OPTION_NAMES
+
 
 #: A first stamp at least this far past the Unix epoch (2001-09-09) is taken as the log's start time.
 EPOCH_START_S = 1e9
@@ -266,7 +280,8 @@ def dask_client(scheduler: str, workers: int | None = None) -> Iterator[Any]:
     if scheduler == "local":
         n = workers or os.cpu_count() or 1
         cluster = LocalCluster(
-            n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR,
+            n_workers=n, threads_per_worker=1, processes=True, silence_logs=logging.ERROR,
+            dashboard_address="127.0.0.1:0",  # a free port: two runs at once never fight over 8787
         )  # fmt: skip
         try:
             with Client(cluster) as client:
@@ -341,7 +356,10 @@ def fleet(
     if bool(logs) == (manifest is not None):
         raise UsageError(f"give the logs or {option('manifest')}, one of the two")
     given = check_defaults(defaults)
-    entries = read_manifest(manifest, id_pattern) if manifest is not None else entries_from_paths(logs, id_pattern)
+    if manifest is not None:
+        entries = read_manifest(manifest, id_pattern, option_columns())
+    else:
+        entries = entries_from_paths(logs, id_pattern)
     for e in entries:
         register_input(e.log)  # the table is never written over a log
     if robot is not None:

@@ -160,7 +160,8 @@ def fleet(
     checkpoint: Annotated[
         float,
         typer.Option(
-            help="Seconds between writes of the table while the run goes on, > 0.", rich_help_panel=_RUN_PANEL
+            help="Seconds between writes of the table while the run goes on, in (0, inf] (inf: at the end only).",
+            rich_help_panel=_RUN_PANEL,
         ),
     ] = 60.0,
     force: Annotated[bool, typer.Option("--force", help="Replace an existing table (else: --resume).")] = False,

@@ -268,19 +268,6 @@ def parse_time(value: Any, where: str) -> dt.datetime:
     raise UsageError(f"{where}: not a time (ISO 8601 such as 2026-03-14T08:30:00Z, or seconds since 1970)")
 
 
-#: Identify's keywords a manifest row may set, besides the :class:`~wmrid.api.inputs.LogOptions` fields.
-IDENTIFY_OPTIONS = (
-    "method", "form", "k", "alpha", "box_width", "torque_hold", "control_rate", "delay", "friction", "cutoff",
-    "weighted", "forgetting", "rotor_inertia",
-)  # fmt: skip
-
-
-def option_columns() -> tuple[str, ...]:
-    from wmrid.api.inputs import LOG_OPTION_NAMES
-
-    return IDENTIFY_OPTIONS + LOG_OPTION_NAMES
-
-
 _BOOL = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}
 
 
@@ -312,13 +299,16 @@ def _blank(value: Any) -> bool:
     return isinstance(value, str) and not value.strip()
 
 
-def read_manifest(path: str | os.PathLike[str], id_pattern: str | None = None) -> list[LogEntry]:
+def read_manifest(
+    path: str | os.PathLike[str], id_pattern: str | None = None, option_names: Sequence[str] = ()
+) -> list[LogEntry]:
     """The logs a manifest lists (CSV or Parquet, one row per log).
 
     Columns: ``log`` (required; a path relative to the manifest's folder, or absolute), ``robot_id`` (else from the
     path, :func:`id_and_time_from_path`), ``robot`` (a robot file or built-in name), ``time`` (ISO 8601 or epoch
-    seconds; else from the path or the log), and any of :func:`option_columns` (per-log options, e.g.
-    ``speed_unit``, ``columns``, ``method``); an empty cell is "not given".  Another column is refused by name.
+    seconds; else from the path or the log), and any of ``option_names`` (per-log options, e.g. ``speed_unit``,
+    ``columns``, ``method``: :func:`wmrid.api.fleet.option_columns`); an empty cell is "not given".  Another column
+    is refused by name.
     """
     import pandas as pd
 
@@ -338,12 +328,12 @@ def read_manifest(path: str | os.PathLike[str], id_pattern: str | None = None) -
     frame.columns = [str(c).strip() for c in frame.columns]
     if "log" not in frame.columns:
         raise UsageError(f"{name}: a manifest needs a 'log' column (one log per row); it has {list(frame.columns)}")
-    allowed = set(MANIFEST_COLUMNS) | set(option_columns())
+    allowed = set(MANIFEST_COLUMNS) | set(tuple(option_names))
     unknown = [c for c in frame.columns if c not in allowed]
     if unknown:
         raise UsageError(
             f"{name}: unknown manifest column(s) {', '.join(unknown)}; the columns are {', '.join(MANIFEST_COLUMNS)} "
-            f"and the options {', '.join(option_columns())}"
+            f"and the options {', '.join(tuple(option_names))}"
         )
     base = Path(name).parent
     entries = []
@@ -363,7 +353,7 @@ def read_manifest(path: str | os.PathLike[str], id_pattern: str | None = None) -
         if robot is not None and not os.path.isabs(robot) and (base / robot).exists():
             robot = str(base / robot)
         opts = {
-            c: _option_value(c, rec[c], f"{where}: {c}") for c in option_columns() if c in rec and not _blank(rec[c])
+            c: _option_value(c, rec[c], f"{where}: {c}") for c in tuple(option_names) if c in rec and not _blank(rec[c])
         }
         entries.append(LogEntry(log_path, robot_id, robot, stamp, source, opts))
     if not entries:

@@ -20,8 +20,8 @@ from wmrid.monitoring.fleet_changes import (
     WHEEL_OF,
     RobotHistory,
     analyse_robot,
+    leave_one_out_t,
     outlier_threshold,
-    robust_z,
 )
 
 #: Robots of one model needed to say which one stands out.
@@ -32,7 +32,7 @@ NO_MODEL = "(no robot file)"
 @dataclass
 class RobotReview:
     """One robot: its usable logs (rows, in time order), failed logs, the change analysis, the findings in words
-    (``findings``) and as short tags (``flags``), its fleet robust z beyond the threshold (``outlier``), a payload
+    (``findings``) and as short tags (``flags``), its fleet t beyond the threshold (``outlier``), a payload
     estimate, and the evidence against it (statistic / threshold; > 1 is flagged)."""
 
     robot_id: str
@@ -140,9 +140,9 @@ def review_fleet(
         f"scatter; thresholds calibrated by seeded Monte Carlo and made conservative for small rates): about "
         f"{tested * alpha:.2g} false flags expected among these {tested} robots.  Scatter with heavier tails than "
         "Gaussian raises that rate; parameters correlated with each other lower it.",
-        f"Fleet comparison: each robot's mean over its first {baseline} logs against the other robots of the same "
-        f"robot file (robust z: distance to the median in units of 1.4826 MAD); the probability that any robot of a "
-        f"model with Gaussian unit-to-unit spread is said to stand out is {outlier_alpha:g} (at least {MIN_FLEET} "
+        f"Fleet comparison: each robot's mean over its first {baseline} logs against the mean and spread of the other "
+        f"robots of the same robot file (Student's t); the probability that any robot of a model with Gaussian "
+        f"unit-to-unit spread is said to stand out is at most {outlier_alpha:g} (Bonferroni; at least {MIN_FLEET} "
         "robots per model).",
     ]
     settings = {"baseline": baseline, "window": window, "alpha": alpha, "outlier_alpha": outlier_alpha}
@@ -267,16 +267,16 @@ def _outliers(reviews: list[RobotReview], baseline: int, alpha: float) -> dict[s
         if len(members) < MIN_FLEET:
             continue
         levels = np.array([[np.mean([r[n] for r in rv.rows[:baseline]]) for n in MONITORED] for rv in members])
-        z = robust_z(levels)
+        z = leave_one_out_t(levels)
         h = outlier_threshold(alpha, len(members))
         out[model] = (len(members), h)
-        med = np.median(levels, axis=0)
-        for rv, zr, lv in zip(members, z, levels, strict=True):
+        for k, (rv, zr, lv) in enumerate(zip(members, z, levels, strict=True)):
+            others = np.delete(levels, k, axis=0).mean(axis=0)
             rv.evidence = max(rv.evidence, float(np.max(np.abs(zr)) / h))
             beyond = [i for i in np.argsort(-np.abs(zr)) if abs(zr[i]) > h]
             if beyond:
                 rv.outlier = {MONITORED[i]: float(zr[i]) for i in beyond}
-                parts = ", ".join(f"{MONITORED[i]} {lv[i]:.4g} (fleet median {med[i]:.4g}, robust z {zr[i]:+.1f})"
+                parts = ", ".join(f"{MONITORED[i]} {lv[i]:.4g} (the others' mean {others[i]:.4g}, t {zr[i]:+.1f})"
                                   for i in beyond)  # fmt: skip
                 rv.findings.append(f"stands out from the {len(members)} robots of {model}: {parts}")
                 rv.flags.append("stands out from the fleet")

@@ -180,13 +180,18 @@ def to_markdown(rep: FleetReport) -> str:
     return "\n".join(parts) + "\n"
 
 
+def _iso(when: Any) -> str | None:
+    return None if when is None else when.isoformat()
+
+
 def robot_dict(rv: RobotReview) -> dict[str, Any]:
     """One robot of the review as plain data."""
     changes = []
     for c in rv.history.changes:
         changes.append({
             "parameters": c.parameters, "kind": c.kind, "onset_log": rv.rows[c.onset]["log"],
-            "onset_time": rv.time_of(c.onset), "alarm_log": rv.rows[c.alarm]["log"], "alarm_time": rv.time_of(c.alarm),
+            "onset_time": _iso(rv.time_of(c.onset)), "alarm_log": rv.rows[c.alarm]["log"],
+            "alarm_time": _iso(rv.time_of(c.alarm)),
             "evidence": c.evidence, "confirmed": c.confirmed, "before": c.before, "after": c.after,
             "relative_change": {p: c.relative(p) for p in c.parameters}, "rate_per_day": c.rate_per_day,
         })  # fmt: skip
@@ -194,7 +199,7 @@ def robot_dict(rv: RobotReview) -> dict[str, Any]:
         "robot_id": rv.robot_id, "robot_file": rv.model, "logs": len(rv.rows), "failed": rv.failed,
         "evidence": rv.evidence if math.isfinite(rv.evidence) else None, "flagged": rv.flagged, "flags": rv.flags,
         "findings": rv.findings, "changes": changes, "odd_logs": [rv.rows[i]["log"] for i in rv.history.odd_logs],
-        "outlier_z": rv.outlier,
+        "outlier_t": rv.outlier,
         "payload": None if rv.payload is None else {k: {"value": v, "std": e} for k, (v, e) in rv.payload.items()},
         "threshold": rv.history.threshold if math.isfinite(rv.history.threshold) else None, "note": rv.history.note,
     }  # fmt: skip
