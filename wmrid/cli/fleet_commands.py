@@ -157,6 +157,14 @@ def fleet(
             rich_help_panel=_RUN_PANEL,
         ),
     ] = False,
+    batch: Annotated[
+        int | None,
+        typer.Option(
+            help="Logs per Dask task, >= 1 (default: about 32 tasks per worker, at most 16 logs each): the "
+            "scheduler's work per task is shared by this many logs.",
+            rich_help_panel=_RUN_PANEL,
+        ),
+    ] = None,
     checkpoint: Annotated[
         float,
         typer.Option(
@@ -220,8 +228,12 @@ def fleet(
         run = run_fleet(
             logs or (), output, manifest=manifest, robot=robot, id_pattern=id_pattern, scheduler=scheduler,
             workers=workers, resume=resume, retry_failed=retry_failed, force=force, fit=not no_fit,
-            checkpoint=checkpoint, progress=update, **given,
+            batch=batch, checkpoint=checkpoint, progress=update, **given,
         )  # fmt: skip
+    except KeyboardInterrupt:
+        finish()
+        sys.stderr.write(f"wmrid: fleet: the logs identified before the stop are in {output}; --resume continues\n")
+        raise
     finally:
         finish()
     summary = _summary(run, output)
@@ -255,7 +267,7 @@ def _progress():
         bar.update(state["task"], completed=done, failed=failed)
 
     def finish() -> None:
-        if state:
+        if state.pop("task", None) is not None:
             bar.stop()
 
     return update, finish
