@@ -31,9 +31,10 @@ from wmrid.io.fleet_table import (
     empty_row,
     entries_from_paths,
     options_key,
+    read_arrow,
     read_manifest,
-    read_table,
-    sort_rows,
+    sort_table,
+    to_arrow,
     write_table,
 )
 
@@ -63,11 +64,12 @@ FIT_MAX_SAMPLES = 2_000_000
 
 @dataclass
 class FleetRun:
-    """What :func:`fleet` did: ``rows`` the table (old rows kept by ``resume`` included), ``identified`` the logs
-    identified in this run, ``skipped`` those resumed from the table, ``failed`` the rows of this run with an error,
-    ``wall_s`` the run's wall time, ``workers`` the cluster's worker count, ``scheduler`` its address."""
+    """What :func:`fleet` did: ``table`` the table written (a pyarrow Table; old rows kept by ``resume`` included;
+    ``rows`` the same as dicts), ``identified`` the logs identified in this run, ``skipped`` those resumed from the
+    table, ``failed`` the rows of this run with an error, ``wall_s`` the run's wall time, ``workers`` the cluster's
+    worker count, ``scheduler`` its address."""
 
-    rows: list[dict[str, Any]]
+    table: Any = None
     identified: int = 0
     skipped: int = 0
     failed: int = 0
@@ -80,6 +82,52 @@ class FleetRun:
     workers: int = 0
     scheduler: str = ""
     notes: list[str] = field(default_factory=list)
+
+    @property
+    def rows(self) -> list[dict[str, Any]]:
+        """The table's rows as dicts (as :func:`~wmrid.io.fleet_table.read_table` gives them)."""
+        return [] if self.table is None else self.table.to_pylist()
+
+
+class _NewRows:
+    """This run's rows, kept as Arrow tables of :data:`CHUNK` rows: about half a kilobyte a row in the client, not
+    the few kilobytes of a dict, so a million logs fit."""
+
+    CHUNK = 2048
+
+    def __init__(self) -> None:
+        self.chunks: list[Any] = []
+        self.pending: list[dict[str, Any]] = []
+
+    def add(self, row: dict[str, Any]) -> None:
+        self.pending.append(row)
+        if len(self.pending) >= self.CHUNK:
+            self.chunks.append(to_arrow(self.pending))
+            self.pending = []
+
+    def table(self) -> Any:
+        import pyarrow as pa
+
+        return pa.concat_tables([*self.chunks, to_arrow(self.pending)])
+
+
+def _keys(table: Any) -> Any:
+    """Each row's (log, options key) as one string column."""
+    import pyarrow.compute as pc
+
+    return pc.binary_join_element_wise(table["log"], table["options_key"], "\x00")
+
+
+def _merged(old: Any, new: _NewRows) -> Any:
+    """The old table's rows that this run did not redo, and this run's, sorted (robot, time, log)."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    fresh = new.table()
+    if old is None:
+        return sort_table(fresh)
+    keep = pc.invert(pc.is_in(_keys(old), value_set=_keys(fresh)))
+    return sort_table(pa.concat_tables([old.filter(keep), fresh]))
 
 
 # ------------------------------------------------------------------------------------------------------------------
@@ -394,10 +442,10 @@ def fleet(
 
         load_robot(robot, gear_ratio=given.get("gear_ratio"))  # a bad robot file is one error, not a row per log
     specs = plan(entries, given, robot, fit)
-    kept, specs, notes = _resume(out, specs, resume, retry_failed, force)
-    run = FleetRun(rows=[], notes=notes, scheduler=scheduler)
+    old, specs, notes = _resume(out, specs, resume, retry_failed, force)
+    run = FleetRun(notes=notes, scheduler=scheduler)
     started = time.perf_counter()
-    new_rows: list[dict[str, Any]] = []
+    new_rows = _NewRows()
     running = False
     try:
         if specs:
@@ -415,18 +463,18 @@ def fleet(
                     if row.get("skipped"):
                         run.skipped += 1
                         continue
-                    new_rows.append(row)
+                    new_rows.add(row)
                     run.identified += 1
                     run.failed += row["error"] is not None
                     if time.perf_counter() - last_write >= checkpoint:
-                        write_table(sort_rows(_merged(kept, new_rows)), out, force=True)
+                        write_table(_merged(old, new_rows), out, force=True)
                         last_write = time.perf_counter()
                 run.processing_s = time.perf_counter() - ready
                 run.client_cpu_s = time.process_time() - cpu
     finally:  # Ctrl-C, a lost scheduler: what is done is kept, and --resume continues from it
-        run.rows = sort_rows(_merged(kept, new_rows))
+        run.table = _merged(old, new_rows)
         if running or not specs:
-            write_table(run.rows, out, force=True)  # an existing table without --resume/--force was refused above
+            write_table(run.table, out, force=True)  # an existing table without --resume/--force was refused above
     run.wall_s = time.perf_counter() - started
     return run
 
@@ -472,15 +520,11 @@ def _worker_count(client: Any) -> int:
     return count
 
 
-def _merged(kept: dict[tuple[str, str], dict[str, Any]], new_rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    replaced = {(r["log"], r["options_key"]) for r in new_rows}
-    return [r for key, r in kept.items() if key not in replaced] + new_rows
-
-
 def _resume(
     out: str, specs: list[dict[str, Any]], resume: bool, retry_failed: bool, force: bool
-) -> tuple[dict[tuple[str, str], dict[str, Any]], list[dict[str, Any]], list[str]]:
-    """(rows of the old table to keep by (log, options key), the specs still to run, notes)."""
+) -> tuple[Any, list[dict[str, Any]], list[str]]:
+    """(the old table or None, the specs, each with the content hash of its old row when that row is kept unless the
+    log changed: ``known_sha256``, notes)."""
     exists = os.path.exists(out)
     if not resume:
         if exists and not force:
@@ -490,18 +534,21 @@ def _resume(
                 f"{out} exists; give --resume to continue it (logs already in it are not run again) or --force to "
                 "replace it"
             )
-        return {}, specs, []
+        return None, specs, []
     if not exists:
-        return {}, specs, [f"{out} does not exist yet: every log is identified"]
-    old = read_table(out)
-    kept = {(r["log"], r["options_key"]): r for r in old}
-    todo = []
+        return None, specs, [f"{out} does not exist yet: every log is identified"]
+    old = read_arrow(out)
+    columns = old.select(["log", "options_key", "sha256", "error"]).to_pydict()
+    known = {
+        (log, key): sha
+        for log, key, sha, err in zip(*columns.values(), strict=True)
+        if sha and not (retry_failed and err is not None)
+    }
     for spec in specs:
-        prev = kept.get((spec["log"], spec["options_key"]))
-        if prev is not None and prev["sha256"] and not (retry_failed and prev["error"] is not None):
-            spec = {**spec, "known_sha256": prev["sha256"]}  # the worker hashes; the same content is not re-run
-        todo.append(spec)
-    return kept, todo, []
+        sha = known.get((spec["log"], spec["options_key"]))
+        if sha is not None:
+            spec["known_sha256"] = sha  # the worker hashes; the same content is not identified again
+    return old, specs, []
 
 
 def _run_tasks(

@@ -244,8 +244,8 @@ def fleet(
         sys.stdout.write(json.dumps(summary, indent=2) + "\n")
     else:
         _print_summary(summary)
-    ok = sum(1 for r in run.rows if r["error"] is None)
-    return int(ExitStatus.OK) if ok or not run.rows else int(ExitStatus.NO_RESULT)
+    rows = summary["logs"]
+    return int(ExitStatus.OK) if summary["failed"] < rows or not rows else int(ExitStatus.NO_RESULT)
 
 
 def _progress():
@@ -274,11 +274,15 @@ def _progress():
 
 
 def _summary(run: Any, output: Path) -> dict[str, Any]:
-    errors = [{"log": r["log"], "error": r["error"]} for r in run.rows if r["error"] is not None]
+    import pyarrow.compute as pc
+
+    table = run.table
+    failed = table.filter(pc.is_valid(table["error"])).select(["log", "error"])
+    errors = failed.slice(0, 100).to_pylist()  # the first 100; the table has them all
     rate = run.identified / run.wall_s if run.wall_s > 0 else None
     return {
-        "table": str(output), "logs": len(run.rows), "robots": len({r["robot_id"] for r in run.rows}),
-        "identified": run.identified, "resumed": run.skipped, "failed": len(errors), "workers": run.workers,
+        "table": str(output), "logs": table.num_rows, "robots": pc.count_distinct(table["robot_id"]).as_py(),
+        "identified": run.identified, "resumed": run.skipped, "failed": failed.num_rows, "workers": run.workers,
         "scheduler": run.scheduler, "wall_s": round(run.wall_s, 3), "logs_per_s": rate, "errors": errors,
         "notes": run.notes, "command": invocation(),
     }  # fmt: skip
@@ -296,8 +300,8 @@ def _print_summary(summary: dict[str, Any]) -> None:
         out.print(f"note: {note}")
     for err in summary["errors"][:10]:
         out.print(f"failed: {err['error']}")
-    if len(summary["errors"]) > 10:
-        out.print(f"... and {len(summary['errors']) - 10} more failed logs (the table's error column)")
+    if summary["failed"] > 10:
+        out.print(f"... and {summary['failed'] - 10} more failed logs (the table's error column)")
 
 
 @app.command(

@@ -11,7 +11,6 @@ from __future__ import annotations
 import datetime as dt
 import glob
 import hashlib
-import io
 import json
 import math
 import os
@@ -93,20 +92,26 @@ def to_arrow(rows: Sequence[dict[str, Any]]):
     return pa.Table.from_pydict(columns, schema=sch)
 
 
-def write_table(rows: Sequence[dict[str, Any]], path: str | os.PathLike[str], *, force: bool = False) -> None:
-    """Write the rows as the fleet table at ``path`` (Parquet), atomically: a reader sees the old table or the new
-    one, never half of one."""
+def write_table(rows: Any, path: str | os.PathLike[str], *, force: bool = False) -> None:
+    """Write the rows (dicts, or a pyarrow Table of :func:`schema`) as the fleet table at ``path`` (Parquet),
+    atomically: a reader sees the old table or the new one, never half of one."""
+    import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from wmrid.core.atomic import atomic_write_bytes
+    from wmrid.core.atomic import atomic_output
 
-    sink = io.BytesIO()
-    pq.write_table(to_arrow(rows), sink, compression="zstd")
-    atomic_write_bytes(path, sink.getvalue(), force=force)
+    table = rows if isinstance(rows, pa.Table) else to_arrow(rows)
+    with atomic_output(path, force=force) as fh:
+        pq.write_table(table, fh, compression="zstd")
 
 
 def read_table(path: str | os.PathLike[str]) -> list[dict[str, Any]]:
     """The rows of a fleet table written by :func:`write_table` (start times as aware UTC datetimes)."""
+    return read_arrow(path).to_pylist()
+
+
+def read_arrow(path: str | os.PathLike[str]):
+    """The fleet table at ``path`` as a pyarrow Table of :func:`schema` (its columns in order), checked."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -130,7 +135,7 @@ def read_table(path: str | os.PathLike[str]) -> list[dict[str, Any]]:
     missing = [n for n in column_names() if n not in table.column_names]
     if missing:
         raise LogFormatError(f"{name}: the fleet table lacks the columns {', '.join(missing)}; remake it")
-    return table.select(list(column_names())).to_pylist()
+    return table.select(list(column_names())).cast(_schema())
 
 
 def _one_line(err: BaseException) -> str:
@@ -394,6 +399,11 @@ def options_key(options: dict[str, Any]) -> str:
 
 def canonical_options(options: dict[str, Any]) -> str:
     return json.dumps(options, sort_keys=True, separators=(",", ":"), default=str)
+
+
+def sort_table(table):
+    """A table's rows by robot id, then time (rows without one last), then log (as :func:`sort_rows`)."""
+    return table.sort_by([("robot_id", "ascending"), ("start_time", "ascending"), ("log", "ascending")])
 
 
 def sort_rows(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
