@@ -164,12 +164,13 @@ def threshold(alpha: float, total: int, first: int, window: int, params: int = l
 class Change:
     """A change found in one robot's history.
 
-    parameters : the parameters whose statistic passed the threshold, the strongest first.  onset / alarm : indices
-    (into the robot's logs) of the change's first log and of the log where it was first flagged.  kind : "step" or
-    "ramp".  evidence : the largest statistic over the threshold (> 1).  before : {parameter: mean of the logs before
-    the onset}.  after : {parameter: mean of the last :data:`CONFIRM_LOGS` logs (a step: of all logs from the onset)}.
-    rate_per_day : {parameter: slope from the onset on, relative to ``before`` per day} (a ramp).  confirmed : the
-    logs after the alarm agree (None: the alarm is on the robot's latest log)."""
+    parameters : the parameters whose statistic passed the threshold at the alarm or later, the strongest first.
+    onset / alarm : indices (into the robot's logs) of the change's first log and of the log where it was first
+    flagged.  kind : "step" or "ramp".  evidence : the largest statistic over the threshold (> 1).  before :
+    {parameter: mean of the logs before the onset}.  after : {parameter: mean of the last :data:`CONFIRM_LOGS` logs
+    (a step: of all logs from the onset)}.  rate_per_day : {parameter: slope from the onset on, relative to
+    ``before`` per day} (a ramp).  confirmed : the logs after the alarm agree (None: the alarm is on the robot's
+    latest log)."""
 
     parameters: list[str]
     onset: int
@@ -271,7 +272,9 @@ def analyse_robot(
                 hist.odd_logs.append(int(idx[a]))
                 keep[idx[a]] = False
                 continue
-        passed = [int(p) for p in np.argsort(-stat[:, a]) if stat[p, a] > h]
+        # the parameters that pass at the alarm or at any later log (a slower one joins as the change grows)
+        later_max = stat[:, a:].max(axis=1)
+        passed = [int(p) for p in np.argsort(-later_max) if later_max[p] > h]
         kind = _kind(x[passed], tau)
         seg = x[:, tau:]
         after = seg[:, -CONFIRM_LOGS:].mean(axis=1) if kind == "ramp" else seg.mean(axis=1)

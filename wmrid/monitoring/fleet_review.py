@@ -213,7 +213,7 @@ def _lag(review: RobotReview, onset: int, alarm: int) -> str:
     if a is None or b is None:
         return f", {alarm - onset} logs later" if alarm > onset else ""
     days = (b - a).total_seconds() / 86400
-    return f", {days:.3g} days after" if alarm > onset else ""
+    return (f", {days:.3g} day{'' if days == 1 else 's'} after") if alarm > onset else ""
 
 
 def _payload(review: RobotReview, change: Any, robot_of: Callable[[str], Any] | None):
