@@ -40,7 +40,8 @@ def test_the_readme_python_example_runs(tmp_path, monkeypatch):
     section = readme.split("## Python", 1)[1]
     code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
     monkeypatch.chdir(ROOT)
-    code = code.replace('"r.html"', repr(str(tmp_path / "r.html")))
+    for name in ("r.html", "fleet.parquet", "fleet.html"):
+        code = code.replace(f'"{name}"', repr(str(tmp_path / name)))
     scope: dict = {}
     exec(compile(code, "README.md", "exec"), scope)
     assert scope["value"] == pytest.approx(0.7872544, rel=1e-6)
@@ -51,6 +52,8 @@ def test_the_readme_python_example_runs(tmp_path, monkeypatch):
     assert isinstance(scope["changes"], wmrid.MonitorResult)
     assert scope["what"].topics[0]["topic"] == "/joint_states"
     assert (tmp_path / "r.html").read_text(encoding="utf-8").startswith("<!DOCTYPE html>")
+    assert scope["run"].identified == 3  # the sample's three files, one robot "sample_logs"
+    assert (tmp_path / "fleet.html").read_text(encoding="utf-8").startswith("<!DOCTYPE html>")
 
 
 def test_import_wmrid_loads_nothing_heavy():

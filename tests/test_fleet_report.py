@@ -161,10 +161,10 @@ def test_the_command_line(rows, tmp_path):
     assert "Robots ranked by the evidence against them" in out
     assert "R02: wheel wear? right wheel's friction rising from 2026-01-1" in " ".join(out.split())
     assert max(len(line) for line in out.splitlines()) <= 80
-    proc = wmrid("fleet-report", str(table), "-o", str(tmp_path / "r.html"))
+    proc = wmrid("fleet-report", str(table), "-o", str(tmp_path / "r.json"))  # the page: test_html_report_...
     assert proc.returncode == 0
-    assert (tmp_path / "r.html").exists()
-    assert_clean_error(wmrid("fleet-report", str(table), "-o", str(tmp_path / "r.html")), 2, "exists")
+    assert json.loads((tmp_path / "r.json").read_text())["table"] == str(table)
+    assert_clean_error(wmrid("fleet-report", str(table), "-o", str(tmp_path / "r.json")), 2, "exists")
     assert_clean_error(wmrid("fleet-report", str(table), "-o", str(tmp_path / "r.pdf")), 2, ".html, .md or .json")
     assert_clean_error(wmrid("fleet-report", str(tmp_path / "none.parquet")), 2, "no such fleet table")
     (tmp_path / "x.parquet").write_text("no")
