@@ -61,7 +61,10 @@ def test_a_change_within_the_logs_own_uncertainty_is_not_flagged():
     assert not fc.analyse_robot(x, s * 20).changes  # each log claims 2.8e-3: the step is less than 2 of them
 
 
-@pytest.mark.parametrize(("alpha", "total"), [(0.05, 30), (0.01, 30), (0.01, 80)])
+@pytest.mark.parametrize(
+    ("alpha", "total"),
+    [(0.05, 30), (0.01, 30), pytest.param(0.01, 80, marks=pytest.mark.slow(reason="5 s of Monte Carlo draws"))],
+)
 def test_false_alarm_rate_holds_on_fresh_draws(alpha, total):
     # A robot without change is flagged with probability at most alpha over its history: fresh Gaussian draws
     # (another seed than the calibration's), 8 parameters, baseline 10, window 30.  Bound: alpha plus 3 binomial

@@ -181,9 +181,9 @@ def _start(args: list[str], log: Path) -> subprocess.Popen:
                                 start_new_session=True)  # fmt: skip
 
 
-def test_the_same_command_against_a_scheduler_started_separately(logs, tmp_path):
-    # `dask scheduler` and `dask worker`, two processes of their own, as on a real cluster; the command is the one a
-    # LocalCluster runs, with only --scheduler changed, and it writes the same table (but for run times and workers)
+def test_the_same_command_against_a_scheduler_started_separately(logs, cluster, tmp_path):
+    # `dask scheduler` and `dask worker`, two processes of their own, as on a real cluster; the command is the one run
+    # on the LocalCluster, with only --scheduler changed, and it writes the same table (but for run times and workers)
     sched_file = tmp_path / "scheduler.json"
     scheduler = _start(["scheduler", "--host", "127.0.0.1", "--port", "0", "--dashboard-address", "127.0.0.1:0",
                         "--scheduler-file", str(sched_file)], tmp_path / "scheduler.log")  # fmt: skip
@@ -199,7 +199,7 @@ def test_the_same_command_against_a_scheduler_started_separately(logs, tmp_path)
         proc = wmrid(*args, "--scheduler", address, "-o", str(tmp_path / "remote.parquet"))
         assert proc.returncode == 0, proc.stderr.decode() + (tmp_path / "worker.log").read_text()
         assert json.loads(proc.stdout)["scheduler"] == address
-        local = wmrid(*args, "--workers", "1", "-o", str(tmp_path / "local.parquet"))
+        local = wmrid(*args, "--scheduler", cluster, "-o", str(tmp_path / "local.parquet"))  # the LocalCluster
         assert local.returncode == 0, local.stderr
     finally:
         for p in (worker, scheduler):

@@ -124,11 +124,11 @@ def test_a_robot_without_change_is_not_flagged_over_many_fleets():
 
 def test_html_report_is_self_contained(rows, tmp_path):
     table = tmp_path / "t.parquet"
-    write_table(rows, table)
+    write_table([r for r in rows if r["robot_id"] <= "R05"], table)  # the wear and the payload, 5 robots
     rep = fleet_report(table, robot="paper", command="wmrid fleet-report t.parquet")
     write_fleet_report(rep, tmp_path / "r.html")
     page = (tmp_path / "r.html").read_text()
-    assert page.count("<svg") == 1 + 10  # the evidence and every robot
+    assert page.count("<svg") == 1 + 5  # the evidence and every robot
     assert "Robots ranked by the evidence against them" in page
     assert "wheel wear? (right)" in page
     assert "payload ≈ " in page
@@ -139,12 +139,10 @@ def test_html_report_is_self_contained(rows, tmp_path):
     assert not re.search(r"<script|<link|<iframe|<object|<embed|@import|(src|href)=['\"]?https?:", page)
     write_fleet_report(rep, tmp_path / "r.md")
     md = (tmp_path / "r.md").read_text()
-    assert md.count("data:image/png;base64,") == 10
+    assert md.count("data:image/png;base64,") == 5
     write_fleet_report(rep, tmp_path / "r.json")
     data = json.loads((tmp_path / "r.json").read_text())
-    assert [r["robot_id"] for r in data["robots"] if r["flagged"]] == ["R05", "R02", "R08"] or {
-        r["robot_id"] for r in data["robots"] if r["flagged"]
-    } == {"R02", "R05", "R08"}
+    assert {r["robot_id"] for r in data["robots"] if r["flagged"]} == {"R02", "R05"}
     assert data["settings"] == {"baseline": 10, "window": 30, "alpha": 0.001, "outlier_alpha": 0.001}
 
 
