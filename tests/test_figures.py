@@ -185,8 +185,10 @@ BOTH = ("svg", "png")
         ("residuals", BOTH, lambda run, fmt: figures.residuals_figure(run.result, fmt=fmt)),
         ("excitation", BOTH, lambda run, fmt: figures.excitation_figure(run.result, fmt=fmt)),
         pytest.param(
-            "convergence", BOTH, lambda run, fmt: figures.base_convergence_figure(run.result, run.truth, fmt=fmt),
-            marks=pytest.mark.slow(reason="3 s; rendered as SVG by the determinism test, as PNG by test_terminal's .md"),
+            "convergence",
+            BOTH,
+            lambda run, fmt: figures.base_convergence_figure(run.result, run.truth, fmt=fmt),
+            marks=pytest.mark.slow(reason="3 s; drawn as SVG by the determinism test, as PNG by test_terminal's .md"),
         ),
         (
             "speed_fit",
