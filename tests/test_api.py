@@ -196,3 +196,12 @@ def test_report_of_a_saved_result_ignores_the_robot_flags(tmp_path, sample_resul
     saved.write_text(to_json(sample_result.to_dict()), encoding="utf-8")
     proc = cli("report", str(saved), "--robot", "x.urdf", "-o", str(tmp_path / "r.md"))
     assert proc.returncode == 0, proc.stderr
+
+
+def test_a_simulated_log_identifies_as_its_wheel_log():
+    # wmrid.simulate(...).log is taken by identify as it is (it failed: its reference pose is (n, 3))
+    run = wmrid.simulate("paper", duration=4.0, seed=2, eta_noise=0.01)
+    direct = wmrid.identify(run.log, "paper")
+    log = run.log.to_wheel_log()
+    assert log.reference is run.log.eta_ref  # the wheel-speed reference, not the pose
+    assert direct.estimate.theta0.tolist() == wmrid.identify(log, "paper").estimate.theta0.tolist()
