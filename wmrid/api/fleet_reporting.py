@@ -13,8 +13,6 @@ from wmrid.reporting.fleet_report import FleetReport, build_fleet_report
 
 __all__ = ["fleet_report", "write_fleet_report"]
 
-REPORT_SUFFIXES = (".html", ".htm", ".md", ".json")
-
 
 def check_settings(baseline: int, window: int, alpha: float, outlier_alpha: float) -> None:
     """Refuse settings no table can make right, before the table is read."""
@@ -109,16 +107,7 @@ def fleet_report(
 
 def write_fleet_report(rep: FleetReport, output: str | os.PathLike[str], *, force: bool = False) -> None:
     """Write ``rep`` as a self-contained HTML page (.html, .htm), Markdown (.md) or JSON (.json), atomically."""
-    from wmrid.core.atomic import atomic_write_text, write_json
+    from wmrid.api.reporting import write_by_suffix
     from wmrid.reporting.fleet_report import to_html, to_json_dict, to_markdown
 
-    path = os.fspath(output)
-    suffix = os.path.splitext(path)[1].lower()
-    if suffix in (".html", ".htm"):
-        atomic_write_text(path, to_html(rep), force=force)
-    elif suffix == ".md":
-        atomic_write_text(path, to_markdown(rep), force=force)
-    elif suffix == ".json":
-        write_json(path, to_json_dict(rep), force=force)
-    else:
-        raise UsageError(f"{option('output', path)}: the report format comes from the suffix: .html, .md or .json")
+    write_by_suffix(output, rep, to_html, to_markdown, to_json_dict, force=force)

@@ -185,16 +185,25 @@ def residual_frame(rep: Report) -> Any:
 
 def write_report(rep: Report, output: str | os.PathLike[str], *, force: bool = False) -> None:
     """Write ``rep`` as a self-contained HTML page (.html, .htm), Markdown (.md) or JSON (.json), atomically."""
-    from wmrid.core.atomic import atomic_write_text, write_json
     from wmrid.reporting.report import to_html, to_json_dict, to_markdown
+
+    write_by_suffix(output, rep, to_html, to_markdown, to_json_dict, force=force)
+
+
+def write_by_suffix(
+    output: str | os.PathLike[str], rep: Any, html: Any, markdown: Any, data: Any, *, force: bool
+) -> None:
+    """Write a report atomically in the format its file's suffix names: ``html(rep)`` for .html/.htm,
+    ``markdown(rep)`` for .md, ``data(rep)`` as JSON for .json."""
+    from wmrid.core.atomic import atomic_write_text, write_json
 
     path = os.fspath(output)
     suffix = os.path.splitext(path)[1].lower()
     if suffix in (".html", ".htm"):
-        atomic_write_text(path, to_html(rep), force=force)
+        atomic_write_text(path, html(rep), force=force)
     elif suffix == ".md":
-        atomic_write_text(path, to_markdown(rep), force=force)
+        atomic_write_text(path, markdown(rep), force=force)
     elif suffix == ".json":
-        write_json(path, to_json_dict(rep), force=force)
+        write_json(path, data(rep), force=force)
     else:
         raise UsageError(f"{option('output', path)}: the report format comes from the suffix: .html, .md or .json")

@@ -346,8 +346,9 @@ def fleet_report(
     """Review a fleet table: per robot, every base parameter over time with ±2σ bands; changes across its logs
     (friction rising: wheel wear?; M or Vc shifting: payload or configuration change) at a stated false-alarm rate;
     robots that stand out from their fleet; the robots ranked by the evidence against them."""
-    from wmrid.api.fleet_reporting import REPORT_SUFFIXES, check_settings, write_fleet_report
+    from wmrid.api.fleet_reporting import check_settings, write_fleet_report
     from wmrid.api.fleet_reporting import fleet_report as build
+    from wmrid.api.reporting import REPORT_SUFFIXES
     from wmrid.reporting.fleet_report import ranked_table, to_json_dict
 
     suffix = output.suffix.lower() if output is not None else None

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from wmrid.monitoring.fleet_review import FleetReview, RobotReview
-from wmrid.reporting.report import _CSS, _html_provenance, _html_table, _md_table
+from wmrid.reporting.report import _CSS, _html_provenance, _html_table, _md_table, md_provenance
 
 #: Robots drawn at most (flagged robots always; the others in rank order up to this count).
 MAX_ROBOT_FIGURES = 60
@@ -169,14 +169,7 @@ def to_markdown(rep: FleetReport) -> str:
                 png = base64.b64encode(rep.rendered(name, "png")).decode()
                 parts += ["", f"![{name}](data:image/png;base64,{png})"]
     parts += ["", "## What a flag means", "", *[f"- {s}" for s in review.statements]]
-    prov = rep.provenance
-    if prov:
-        parts += ["", "## Reproducibility", "", f"- wmrid {prov['wmrid']}, made {prov['made_utc']} (UTC)",
-                  f"- command: `{prov['command']}`"]  # fmt: skip
-        parts += [f"- option {k}: `{v!r}`" for k, v in prov.get("options", {}).items()]
-        parts += [
-            f"- input `{i['path']}`: {i['bytes']:,} bytes, SHA-256 `{i['sha256']}`" for i in prov.get("inputs", [])
-        ]
+    parts += md_provenance(rep.provenance)
     return "\n".join(parts) + "\n"
 
 

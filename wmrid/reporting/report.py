@@ -523,15 +523,19 @@ def to_markdown(report: Report) -> str:
                   f"![{name}](data:image/png;base64,{base64.b64encode(png).decode()})"]  # fmt: skip
     if report.notes:
         parts += ["", "## Notes on the log", "", *[f"- {n}" for n in report.notes]]
-    prov = report.provenance
-    if prov:
-        parts += ["", "## Reproducibility", "", f"- wmrid {prov['wmrid']}, made {prov['made_utc']} (UTC)",
-                  f"- command: `{prov['command']}`"]  # fmt: skip
-        parts += [f"- option {k}: `{v!r}`" for k, v in prov.get("options", {}).items()]
-        parts += [
-            f"- input `{i['path']}`: {i['bytes']:,} bytes, SHA-256 `{i['sha256']}`" for i in prov.get("inputs", [])
-        ]
+    parts += md_provenance(report.provenance)
     return "\n".join(parts) + "\n"
+
+
+def md_provenance(prov: dict[str, Any]) -> list[str]:
+    """The reproducibility block in Markdown: version, time, command, options, inputs with their SHA-256."""
+    if not prov:
+        return []
+    parts = ["", "## Reproducibility", "", f"- wmrid {prov['wmrid']}, made {prov['made_utc']} (UTC)",
+             f"- command: `{prov['command']}`"]  # fmt: skip
+    parts += [f"- option {k}: `{v!r}`" for k, v in prov.get("options", {}).items()]
+    parts += [f"- input `{i['path']}`: {i['bytes']:,} bytes, SHA-256 `{i['sha256']}`" for i in prov.get("inputs", [])]
+    return parts
 
 
 def to_json_dict(report: Report) -> dict[str, Any]:
