@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -87,3 +89,18 @@ def test_unknown_robot_starts_from_the_data_and_converges(long_smooth_log):
 def test_paper_alpha_keeps_the_start_and_says_so(long_smooth_log, k):
     result = identify(long_smooth_log, PAPER, alpha=5000.0, k=k, torque_hold="foh")
     assert any("start value, not the data, sets them" in w for w in result.warnings)
+
+
+def test_the_half_rate_run_inline_equals_it_on_its_thread():
+    # wmrid fleet's workers run it on the caller's thread (estimators.replay.one_thread); same numbers, bit for bit
+    from wmrid.api.identification import identify as api_identify
+    from wmrid.estimators import replay
+
+    sample = str(Path(__file__).resolve().parents[1] / "sample_logs" / "paper_sinusoid.csv")
+    threaded = api_identify(sample, "paper").to_dict()
+    replay.one_thread()
+    try:
+        inline = api_identify(sample, "paper").to_dict()
+    finally:
+        replay.one_thread(False)
+    assert inline == threaded

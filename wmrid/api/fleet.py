@@ -224,10 +224,14 @@ _malloc_tuned = False
 
 
 def tune_malloc() -> bool:
-    """Apply :data:`_MALLOC` in this process (once; glibc only: elsewhere nothing happens).  Returns whether it
-    applied."""
+    """Set this process up as one fleet worker among one per core (once): each identify on one thread
+    (:func:`wmrid.estimators.replay.one_thread`), and :data:`_MALLOC` (glibc only: elsewhere that part does
+    nothing).  Returns whether malloc was tuned."""
     global _malloc_tuned
     if not _malloc_tuned:
+        from wmrid.estimators.replay import one_thread
+
+        one_thread()
         _malloc_tuned = True
         try:
             import ctypes

@@ -18,6 +18,17 @@ from wmrid.model.kernels import plain
 
 CHUNK = 262_144
 
+#: Whether the half-rate run goes on a second thread (one identify then uses two cores).  A process that shares the
+#: machine's cores with others doing the same (``wmrid fleet``'s workers, one per core) turns it off
+#: (:func:`one_thread`): there the second thread only competes for a busy core (+6-10 % per log, measured).
+_SECOND_THREAD = True
+
+
+def one_thread(on: bool = True) -> None:
+    """Run the half-rate replay inline, on the caller's thread (``on``), or on a second thread (the default)."""
+    global _SECOND_THREAD
+    _SECOND_THREAD = not on
+
 
 @dataclass(frozen=True)
 class ReplayOutput:
@@ -208,7 +219,7 @@ def replay_pieces(
     # the pieces reach it in order, so its result does not depend on the timing.
     pool = None
     pending = None
-    if half is not None:
+    if half is not None and _SECOND_THREAD:
         from concurrent.futures import ThreadPoolExecutor
 
         pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wmrid-half-rate")
@@ -224,7 +235,9 @@ def replay_pieces(
             for idx, out in ((hist_idx, hist_t), (block_end, block_t)):
                 lo, hi = np.searchsorted(idx, [done, done + k])
                 out[lo:hi] = t[idx[lo:hi] - done]
-            if half is not None:  # on its thread, while this one runs the full-rate kernel on the same piece
+            if half is not None and pool is None:
+                half.feed(t, eta, tau, done)
+            elif half is not None:  # on its thread, while this one runs the full-rate kernel on the same piece
                 if pending is not None:
                     pending.result()
                 pending = pool.submit(half.feed, t, eta, tau, done)
