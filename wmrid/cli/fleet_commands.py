@@ -291,10 +291,14 @@ def _summary(run: Any, output: Path) -> dict[str, Any]:
 def _print_summary(summary: dict[str, Any]) -> None:
     out = console()
     rate = f", {summary['logs_per_s']:.3g} logs/s" if summary["logs_per_s"] else ""
+
+    def n(count: int, noun: str) -> str:
+        return f"{count} {noun}" + ("" if count == 1 else "s")
+
     out.print(
-        f"{summary['table']}: {summary['logs']} logs of {summary['robots']} robots; identified {summary['identified']}"
-        f" in {summary['wall_s']:.3g} s on {summary['workers']} workers{rate}; resumed {summary['resumed']}; "
-        f"failed {summary['failed']}"
+        f"{summary['table']}: {n(summary['logs'], 'log')} of {n(summary['robots'], 'robot')}; identified "
+        f"{summary['identified']} in {summary['wall_s']:.3g} s on {n(summary['workers'], 'worker')}{rate}; resumed "
+        f"{summary['resumed']}; failed {summary['failed']}"
     )
     for note in summary["notes"]:
         out.print(f"note: {note}")
