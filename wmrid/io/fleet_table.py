@@ -15,7 +15,7 @@ import json
 import math
 import os
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -402,11 +402,5 @@ def canonical_options(options: dict[str, Any]) -> str:
 
 
 def sort_table(table):
-    """A table's rows by robot id, then time (rows without one last), then log (as :func:`sort_rows`)."""
+    """A table's rows by robot id, then time (rows without one last), then log."""
     return table.sort_by([("robot_id", "ascending"), ("start_time", "ascending"), ("log", "ascending")])
-
-
-def sort_rows(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Rows by robot id, then time (rows without one last), then log."""
-    far = dt.datetime.max.replace(tzinfo=dt.timezone.utc)
-    return sorted(rows, key=lambda r: (str(r["robot_id"]), r["start_time"] or far, str(r["log"])))
