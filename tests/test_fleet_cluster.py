@@ -213,3 +213,32 @@ def test_the_same_command_against_a_scheduler_started_separately(logs, cluster, 
     ]
     assert len(remote_rows) == 4
     assert sum(r["error"] is not None for r in remote_rows) == 1
+
+
+@pytest.mark.slow(reason="a real process with its own LocalCluster, stopped by Ctrl-C: about 15 s")
+def test_ctrl_c_keeps_the_logs_done_and_resume_continues(tmp_path):
+    """A fleet stopped by SIGINT: exit 130, the table holds the logs identified before the stop (written in the
+    finally), the messages say so, no worker process is left; --resume then identifies only the rest."""
+    import psutil
+
+    write_fleet(tmp_path / "logs", robots=4, days=10, duration=20.0)  # 40 logs, about 2 s on 2 workers
+    out = tmp_path / "t.parquet"
+    args = [sys.executable, "-m", "wmrid", "fleet", str(tmp_path / "logs"), "--robot", "paper", "--workers", "2",
+            "--batch", "1", "--checkpoint", "0.5", "-o", str(out)]  # fmt: skip
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT)
+    deadline = time.monotonic() + 90
+    while time.monotonic() < deadline and not out.exists():  # the first checkpoint: logs are being identified
+        time.sleep(0.05)
+    children = psutil.Process(proc.pid).children(recursive=True)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert f"wrote {out} before the stop" in err.decode()
+    assert "--resume" in err.decode()
+    done = read_table(out)
+    assert 0 < len(done) < 40
+    psutil.wait_procs(children, timeout=30)
+    assert not [c for c in children if c.is_running() and c.status() != psutil.STATUS_ZOMBIE]
+    again = fleet([str(tmp_path / "logs")], out, robot="paper", workers=2, resume=True)
+    assert again.skipped == len(done)
+    assert again.identified == 40 - len(done)

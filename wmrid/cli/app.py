@@ -90,7 +90,7 @@ def main(argv: list[str] | None = None) -> None:
         code = rv if isinstance(rv, int) else ExitStatus.OK
         if code == ExitStatus.INTERRUPTED:  # Typer turns Ctrl-C into an exit code of 130
             code = interrupts.exit_code()
-            sys.stderr.write(f"wmrid: {_stopped_by()}; no output was written\n")
+            sys.stderr.write(f"wmrid: {_stopped_by()}; {_kept()}\n")
     except KeyboardInterrupt:
         sys.stderr.write(f"wmrid: {_stopped_by()}\n")
         code = interrupts.exit_code()
@@ -169,6 +169,14 @@ def _leave(argv: list[str] | None, saved: Any, previous: Any) -> None:
 
     unguard(saved)
     interrupts.restore(previous)
+
+
+def _kept() -> str:
+    """What a stopped command leaves: the files it wrote completely before the stop (a fleet's table), or none."""
+    from wmrid.core.atomic import written
+
+    done = written()
+    return f"wrote {', '.join(done)} before the stop" if done else "no output was written"
 
 
 def _stopped_by() -> str:

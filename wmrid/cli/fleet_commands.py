@@ -232,7 +232,7 @@ def fleet(
         )  # fmt: skip
     except KeyboardInterrupt:
         finish()
-        sys.stderr.write(f"wmrid: fleet: the logs identified before the stop are in {output}; --resume continues\n")
+        sys.stderr.write("wmrid: fleet: the same command with --resume continues where this one stopped\n")
         raise
     finally:
         finish()

@@ -89,9 +89,11 @@ def register_input(path: str | Path) -> None:
 
 
 def track_inputs() -> None:
-    """Start noting inputs (:func:`register_input`); the CLI calls this when a command starts."""
+    """Start noting inputs (:func:`register_input`) and outputs written (:func:`written`); the CLI calls this when a
+    command starts."""
     global _INPUTS
     _INPUTS = {}
+    _WRITTEN.clear()
 
 
 def clear_inputs() -> None:
@@ -278,6 +280,17 @@ def _commit(tmp: Path, path: Path, force: bool) -> None:
         os.replace(tmp, path)
     else:
         _link_no_clobber(tmp, path)
+    if _INPUTS is not None:  # a command runs: what it wrote, for the message when it is stopped
+        _WRITTEN.append(str(path))
+
+
+#: The files the running command has written so far (the CLI's stop message names them).
+_WRITTEN: list[str] = []
+
+
+def written() -> list[str]:
+    """The files written (committed) since the command started (:func:`track_inputs`)."""
+    return list(dict.fromkeys(_WRITTEN))
 
 
 _GROUP: list[tuple[Path, Path, bool]] | None = None
