@@ -90,6 +90,18 @@ def test_false_alarm_rate_of_the_extrapolated_threshold():
     assert hits / 40000 <= 0.001 + 3 * math.sqrt(0.001 / 40000)
 
 
+@pytest.mark.slow(reason="Monte Carlo over 115-log histories, about 10 s")
+def test_false_alarm_rate_with_a_long_baseline():
+    # a baseline of 55 logs left 5 scanned logs in a 60-log calibration (a rate of 0.022 at a stated 0.01, and a
+    # division by zero at 60): the calibration now simulates at least two windows after the baseline
+    h = fc.threshold(0.05, 120, 55, 30)
+    rng = np.random.Generator(np.random.PCG64(5))
+    hits = sum(int(np.sum(fc.scan(rng.standard_normal((250, 8, 120)), 30, 55)[0].max(axis=(1, 2)) > h))
+               for _ in range(8))  # fmt: skip
+    assert hits / 2000 <= 0.05 + 3 * math.sqrt(0.05 * 0.95 / 2000)
+    assert math.isfinite(fc.threshold(0.001, 100, 60, 30))
+
+
 def _robot(total=50, seed=0):
     rng = np.random.default_rng(seed)
     level = np.array([1.41, -0.455, 1.49, 0.21, 0.01, 0.015, 0.045, 0.04])

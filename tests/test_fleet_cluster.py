@@ -173,6 +173,12 @@ def test_the_command_line_on_the_cluster(logs, cluster, tmp_path):
     assert summary["scheduler"] == cluster
     proc = wmrid("fleet", str(logs / "R01"), "--scheduler", cluster, "-o", str(tmp_path / "t.parquet"))
     assert_clean_error(proc, 2, "exists", "--resume", "--force")
+    # --resume on the command line reads the table it then rewrites (it was refused as "the input")
+    proc = wmrid("fleet", str(logs / "R01"), "--robot", "paper", "--scheduler", cluster, "-o",
+                 str(tmp_path / "t.parquet"), "--resume", "--format", "json")  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    again = json.loads(proc.stdout)
+    assert (again["identified"], again["resumed"], again["logs"]) == (0, 3, 3)
 
 
 def _start(args: list[str], log: Path) -> subprocess.Popen:

@@ -171,6 +171,18 @@ def test_the_command_line(rows, tmp_path):
     assert_clean_error(wmrid("fleet-report", str(table), "--baseline", "3"), 2, "--baseline", ">= 5")
 
 
+def test_a_log_identified_twice_counts_once_and_report_robot_gives_the_payload(rows):
+    # the same content under two options keys (resume with other options keeps both rows): one log for the review;
+    # rows without a robot file get --robot's r and b for the payload
+    twice = [dict(r, robot=None) for r in rows] + [dict(r, robot=None, options_key="other") for r in rows]
+    rep = fleet_report(twice, robot="paper", figures=False)
+    robots = _by_id(rep)
+    assert {rid for rid, rv in robots.items() if rv.flagged} == {"R02", "R05", "R08"}
+    assert all(len(rv.rows) == 40 for rv in robots.values())
+    assert any("left out: each log counts once" in s for s in rep.review.statements)
+    assert robots["R05"].payload["mass"][0] == pytest.approx(10.0, abs=3 * robots["R05"].payload["mass"][1])
+
+
 def test_robots_with_too_few_logs_are_said_not_tested():
     rep = fleet_report(synthetic_rows(6, 8), figures=False)
     assert all(not rv.flagged for rv in rep.review.robots)

@@ -107,6 +107,7 @@ def test_manifest_rows_with_options(tmp_path):
         ("log,time\na.mcap,yesterday\n", r"m\.csv row 2: time: not a time"),
         ("log,k\na.mcap,fast\n", r"m\.csv row 2: k: k must be a number"),
         ("log,weighted\na.mcap,maybe\n", "weighted must be true or false"),
+        ("log,time\na.mcap,1772352000000\n", "not seconds since 1970"),
         ("log\n\n", "lists no log"),
         ("log,robot_id\n,R1\n", "row 2: the log cell is empty"),
     ],
@@ -118,8 +119,16 @@ def test_manifest_errors_name_the_row(tmp_path, text, message):
 
 
 def test_parquet_manifest(tmp_path):
-    pq.write_table(pa.table({"log": ["x/a.csv"], "robot_id": ["R5"], "k": [20.0]}), tmp_path / "m.parquet")
-    (entry,) = ft.read_manifest(tmp_path / "m.parquet", option_names=OPTIONS)
+    times = pa.array([None, dt.datetime(2026, 2, 1, tzinfo=UTC)], pa.timestamp("us", tz="UTC"))
+    table = pa.table({"log": ["x/R5/2026-01-09.csv", "y.csv"], "robot_id": ["R5", "R6"], "k": [20.0, None],
+                      "time": times})  # fmt: skip
+    pq.write_table(table, tmp_path / "m.parquet")
+    entry, other = ft.read_manifest(tmp_path / "m.parquet", option_names=OPTIONS)
+    # a null time (NaT in pandas) is an empty cell: the path's date stands
+    assert entry.time == dt.datetime(2026, 1, 9, tzinfo=UTC)
+    assert entry.time_source == "path"
+    assert other.time == dt.datetime(2026, 2, 1, tzinfo=UTC)
+    assert other.options == {}
     assert entry.robot_id == "R5"
     assert entry.options == {"k": 20.0}
 
@@ -153,6 +162,9 @@ def test_robot_id_and_time_from_the_path():
     assert ft.id_and_time_from_path("x/amr3/20260105_083015.bag")[1] == dt.datetime(2026, 1, 5, 8, 30, 15, tzinfo=UTC)
     assert ft.id_and_time_from_path("x/amr3/run.mcap") == ("amr3", None)
     assert ft.id_and_time_from_path("x/amr3/log_20261399.csv") == ("amr3", None)  # digits, not a date
+    # the last valid date: a sequence number that reads like no date does not hide the one before it
+    assert ft.id_and_time_from_path("R7/2026-03-14_08-30-00_seq00000012.mcap")[1] == dt.datetime(
+        2026, 3, 14, 8, 30, tzinfo=UTC)  # fmt: skip
     pattern = r"(?P<robot>bot\d+)_(?P<time>\d{4}-\d\d-\d\d)"
     assert ft.id_and_time_from_path("all/bot12_2026-02-03.mcap", pattern) == (
         "bot12", dt.datetime(2026, 2, 3, tzinfo=UTC))  # fmt: skip

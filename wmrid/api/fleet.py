@@ -112,21 +112,24 @@ class _NewRows:
 
 
 def _keys(table: Any) -> Any:
-    """Each row's (log, options key) as one string column."""
+    """Each row's (log's real path, options key) as one string column: the same log named two ways is one log."""
+    import pyarrow as pa
     import pyarrow.compute as pc
 
-    return pc.binary_join_element_wise(table["log"], table["options_key"], "\x00")
+    real = pa.array([os.path.realpath(log) for log in table["log"].to_pylist()], pa.string())
+    return pc.binary_join_element_wise(real, table["options_key"], "\x00")
 
 
-def _merged(old: Any, new: _NewRows) -> Any:
-    """The old table's rows that this run did not redo, and this run's, sorted (robot, time, log)."""
+def _merged(old: Any, new: _NewRows, old_keys: Any = None) -> Any:
+    """The old table's rows that this run did not redo, and this run's, sorted (robot, time, log); ``old_keys``: the
+    old table's :func:`_keys`, computed once per run."""
     import pyarrow as pa
     import pyarrow.compute as pc
 
     fresh = new.table()
     if old is None:
         return sort_table(fresh)
-    keep = pc.invert(pc.is_in(_keys(old), value_set=_keys(fresh)))
+    keep = pc.invert(pc.is_in(_keys(old) if old_keys is None else old_keys, value_set=_keys(fresh)))
     return sort_table(pa.concat_tables([old.filter(keep), fresh]))
 
 
@@ -290,7 +293,7 @@ def _fit(spec: dict[str, Any], result: Any) -> dict[str, Any]:
             result, spec["log"], LogOptions(**log_opts), robot=robot_obj,
             torque_hold=run_opts.get("torque_hold", "zoh"),
         )  # fmt: skip
-    except WmridError:
+    except Exception:  # the fit is an extra: its failure never discards the identification
         return {}
     fit = checked.validation["fit_percent"]
     return {"fit_r": fit["eta_r"], "fit_l": fit["eta_l"]}
@@ -439,6 +442,14 @@ def fleet(
         entries = read_manifest(manifest, id_pattern, option_columns())
     else:
         entries = entries_from_paths(logs, id_pattern)
+    seen: set[str] = set()
+    unique = []
+    for e in entries:  # a log named twice (a manifest's repeated row, a folder and its file) is identified once
+        key = os.path.realpath(e.log)
+        if key not in seen:
+            seen.add(key)
+            unique.append(e)
+    entries = unique
     for e in entries:
         register_input(e.log)  # the table is never written over a log
     if robot is not None:
@@ -450,6 +461,7 @@ def fleet(
     run = FleetRun(notes=notes, scheduler=scheduler)
     started = time.perf_counter()
     new_rows = _NewRows()
+    old_keys = None if old is None else _keys(old)
     running = False
     try:
         if specs:
@@ -471,12 +483,12 @@ def fleet(
                     run.identified += 1
                     run.failed += row["error"] is not None
                     if time.perf_counter() - last_write >= checkpoint:
-                        write_table(_merged(old, new_rows), out, force=True)
+                        write_table(_merged(old, new_rows, old_keys), out, force=True)
                         last_write = time.perf_counter()
                 run.processing_s = time.perf_counter() - ready
                 run.client_cpu_s = time.process_time() - cpu
     finally:  # Ctrl-C, a lost scheduler: what is done is kept, and --resume continues from it
-        run.table = _merged(old, new_rows)
+        run.table = _merged(old, new_rows, old_keys)
         if running or not specs:
             write_table(run.table, out, force=True)  # an existing table without --resume/--force was refused above
     run.wall_s = time.perf_counter() - started
@@ -541,16 +553,19 @@ def _resume(
         return None, specs, []
     if not exists:
         return None, specs, [f"{out} does not exist yet: every log is identified"]
-    old = read_arrow(out)
-    columns = old.select(["log", "options_key", "sha256", "error"]).to_pydict()
-    known = {
-        (log, key): sha
-        for log, key, sha, err in zip(*columns.values(), strict=True)
-        if sha and not (retry_failed and err is not None)
-    }
+    old = read_arrow(out, as_input=False)  # read, then rewritten: not an input the output must differ from
+    columns = old.select(["log", "options_key", "sha256", "error", "robot_id", "start_time", "time_source"])
+    known = {}
+    for log, key, sha, err, robot_id, start, source in zip(*columns.to_pydict().values(), strict=True):
+        if sha and not (retry_failed and err is not None):
+            known[(os.path.realpath(log), key)] = (sha, robot_id, start, source)
     for spec in specs:
-        sha = known.get((spec["log"], spec["options_key"]))
-        if sha is not None:
+        prev = known.get((os.path.realpath(spec["log"]), spec["options_key"]))
+        if prev is None:
+            continue
+        sha, robot_id, start, source = prev
+        renamed = robot_id != spec["robot_id"] or (spec["time"] is not None and start != spec["time"])
+        if not renamed:  # a manifest that now says another robot or time: identified again, to carry them
             spec["known_sha256"] = sha  # the worker hashes; the same content is not identified again
     return old, specs, []
 

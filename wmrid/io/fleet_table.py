@@ -110,15 +110,17 @@ def read_table(path: str | os.PathLike[str]) -> list[dict[str, Any]]:
     return read_arrow(path).to_pylist()
 
 
-def read_arrow(path: str | os.PathLike[str]):
-    """The fleet table at ``path`` as a pyarrow Table of :func:`schema` (its columns in order), checked."""
+def read_arrow(path: str | os.PathLike[str], *, as_input: bool = True):
+    """The fleet table at ``path`` as a pyarrow Table of :func:`schema` (its columns in order), checked.
+    ``as_input`` False: not noted as an input of the command (``fleet --resume`` reads the table it then rewrites)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     from wmrid.core.atomic import register_input
 
     name = os.fspath(path)
-    register_input(name)
+    if as_input:
+        register_input(name)
     try:
         table = pq.read_table(name)
     except FileNotFoundError:
@@ -235,8 +237,8 @@ def id_and_time_from_path(path: str, pattern: str | None = None) -> tuple[str, d
     robot = p.parent.name or os.path.basename(os.path.abspath(p.parent)) or "robot"
     if p.is_dir() and (p / "metadata.yaml").is_file() and not DATE_IN_NAME.search(p.name):
         robot = p.parent.name or robot
-    matches = list(DATE_IN_NAME.finditer(p.name))
-    return robot, (_from_match(matches[-1]) if matches else None)
+    stamps = [s for s in (_from_match(m) for m in DATE_IN_NAME.finditer(p.name)) if s is not None]
+    return robot, (stamps[-1] if stamps else None)  # the last valid date: digits that are no date are skipped
 
 
 def _from_match(m: re.Match) -> dt.datetime | None:
@@ -256,7 +258,12 @@ def parse_time(value: Any, where: str) -> dt.datetime:
         return parse_time(value.to_pydatetime(), where)
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         if math.isfinite(value):
-            return dt.datetime.fromtimestamp(float(value), tz=dt.timezone.utc)
+            try:
+                return dt.datetime.fromtimestamp(float(value), tz=dt.timezone.utc)
+            except (OverflowError, ValueError, OSError):
+                raise UsageError(
+                    f"{where}: {value!r} is not seconds since 1970 (milliseconds? give seconds or ISO 8601)"
+                ) from None
     elif isinstance(value, str):
         text = value.strip()
         try:
@@ -267,9 +274,11 @@ def parse_time(value: Any, where: str) -> dt.datetime:
             if stamp is not None:
                 return stamp
             try:
-                return parse_time(float(text), where)
+                seconds = float(text)
             except ValueError:
-                pass
+                seconds = None
+            if seconds is not None:
+                return parse_time(seconds, where)
     raise UsageError(f"{where}: not a time (ISO 8601 such as 2026-03-14T08:30:00Z, or seconds since 1970)")
 
 
@@ -297,11 +306,17 @@ def _option_value(name: str, value: Any, where: str) -> Any:
 
 
 def _blank(value: Any) -> bool:
+    """An empty manifest cell: None, NaN, NaT (a Parquet manifest's null time) or blank text."""
     if value is None:
         return True
-    if isinstance(value, float) and math.isnan(value):
-        return True
-    return isinstance(value, str) and not value.strip()
+    if isinstance(value, str):
+        return not value.strip()
+    try:
+        import pandas as pd
+
+        return bool(pd.isna(value))
+    except (TypeError, ValueError):
+        return False
 
 
 def read_manifest(

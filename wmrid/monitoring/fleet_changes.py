@@ -26,6 +26,7 @@ Robots that stand out: each robot's baseline mean of each parameter against the 
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -146,7 +147,8 @@ def threshold(alpha: float, total: int, first: int, window: int, params: int = l
 
     if not 0 < alpha < 1:
         raise ValueError(f"alpha must be in (0, 1), got {alpha}")
-    n_cal = min(total, CALIBRATION_MAX_LOGS)
+    # at least two windows of scanned logs are simulated, whatever the baseline (a baseline of 55 left 5 of 60)
+    n_cal = min(total, max(CALIBRATION_MAX_LOGS, first + 2 * window))
     maxima = _null_maxima(n_cal, first, min(window, n_cal), params)
     if alpha >= CALIBRATION_ALPHA and total <= CALIBRATION_MAX_LOGS:
         return float(np.quantile(maxima, 1 - alpha))
@@ -241,7 +243,10 @@ def analyse_robot(
     if total < baseline + 1:
         return RobotHistory(total, math.inf, note=f"{total} logs: too few to test for changes (the baseline is the "
                             f"first {baseline} logs)")  # fmt: skip
-    floor = np.nanmedian(np.where(np.isfinite(stds[:baseline]), stds[:baseline], np.nan), axis=0)
+    known = np.where(np.isfinite(stds[:baseline]), stds[:baseline], np.nan)
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a parameter no log gave a std for: no floor
+        floor = np.nanmedian(known, axis=0)
     floor = np.where(np.isfinite(floor), floor, 0.0)
     h = threshold(alpha, total, baseline, window, len(names))
     hist = RobotHistory(total, h)

@@ -45,6 +45,8 @@ class RobotReview:
     outlier: dict[str, float] = field(default_factory=dict)
     payload: dict[str, tuple[float, float | None]] | None = None
     evidence: float = 0.0
+    #: True when some log has no start time: logs in name order, rates per log instead of per day
+    per_log: bool = False
 
     @property
     def flagged(self) -> bool:
@@ -113,7 +115,14 @@ def review_fleet(
     if not 0 < alpha < 0.5 or not 0 < outlier_alpha < 0.5:
         raise ValueError("alpha and outlier_alpha must be in (0, 0.5)")
     by_robot: dict[str, list[dict[str, Any]]] = {}
-    for row in rows:
+    seen: set[tuple[str, str]] = set()
+    repeats = 0
+    for row in rows:  # a log identified again under other options is one log: its first row in the table counts
+        key = (str(row["robot_id"]), str(row.get("sha256") or row["log"]))
+        if key in seen:
+            repeats += 1
+            continue
+        seen.add(key)
         by_robot.setdefault(str(row["robot_id"]), []).append(row)
     reviews = []
     for robot_id, robot_rows in sorted(by_robot.items()):
@@ -124,7 +133,8 @@ def review_fleet(
         stds = np.array([[r.get(f"{n}_std") if r.get(f"{n}_std") is not None else np.nan for n in MONITORED]
                          for r in ok]).reshape(len(ok), len(MONITORED))  # fmt: skip
         history = analyse_robot(values, stds, _days(ok), baseline=baseline, window=window, alpha=alpha)
-        review = RobotReview(robot_id, model, ok, len(robot_rows) - len(ok), history, evidence=history.evidence)
+        review = RobotReview(robot_id, model, ok, len(robot_rows) - len(ok), history, evidence=history.evidence,
+                             per_log=any(r["start_time"] is None for r in ok))  # fmt: skip
         if len(models) > 1:
             review.findings.append(f"its logs name {len(models)} robot files ({', '.join(sorted(models))}); the "
                                    f"fleet comparison uses {model}")  # fmt: skip
@@ -145,6 +155,11 @@ def review_fleet(
         f"unit-to-unit spread is said to stand out is at most {outlier_alpha:g} (Bonferroni; at least {MIN_FLEET} "
         "robots per model).",
     ]
+    if repeats:
+        statements.append(f"{repeats} rows of logs already in the table (the same content identified again with other "
+                          "options) were left out: each log counts once.")  # fmt: skip
+    if any(r.per_log for r in reviews):
+        statements.append("Robots whose logs lack start times are ordered by log name and their rates are per log.")
     settings = {"baseline": baseline, "window": window, "alpha": alpha, "outlier_alpha": outlier_alpha}
     return FleetReview(reviews, settings, statements, thresholds)
 
@@ -189,9 +204,10 @@ def _word_changes(review: RobotReview, robot_of: Callable[[str], Any] | None) ->
             review.flags.append("payload or configuration change")
         else:
             wheels = sorted({WHEEL_OF[p] for p in friction})
+            unit = "log" if review.per_log else "day"
             rising = [p for p in friction if change.relative(p) > 0]
             how = ", ".join(
-                f"{p} {_pct(change.relative(p))}" + (f" ({100 * change.rate_per_day[p]:+.2g} %/day)"
+                f"{p} {_pct(change.relative(p))}" + (f" ({100 * change.rate_per_day[p]:+.2g} %/{unit})"
                                                       if change.kind == "ramp" else "")
                 for p in friction
             )  # fmt: skip
@@ -222,9 +238,9 @@ def _payload(review: RobotReview, change: Any, robot_of: Callable[[str], Any] | 
     from both means' log-to-log scatter by the delta method."""
     from wmrid.model.payload import PAYLOAD_NAMES, payload_from_change
 
-    if robot_of is None or review.model == NO_MODEL:
+    if robot_of is None:
         return None
-    robot = robot_of(review.model)
+    robot = robot_of(review.model)  # NO_MODEL: the report's --robot, if given
     if robot is None:
         return None
     r, b = robot.nominal.r, robot.nominal.b

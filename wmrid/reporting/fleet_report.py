@@ -161,7 +161,7 @@ def to_markdown(rep: FleetReport) -> str:
                          ("Other robots", [rv for rv in review.robots if not rv.flagged])):  # fmt: skip
         parts += ["", f"## {title}"]
         if not group:
-            parts += ["", "No robot flagged."]
+            parts += ["", "No robot flagged." if title == "Flagged robots" else "None: every robot is flagged."]
         for rv in group:
             parts += ["", f"### {rv.robot_id}", "", *[f"- {f}" for f in rv.findings]]
             name = f"robot {rv.robot_id}"
