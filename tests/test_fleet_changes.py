@@ -61,44 +61,42 @@ def test_a_change_within_the_logs_own_uncertainty_is_not_flagged():
     assert not fc.analyse_robot(x, s * 20).changes  # each log claims 2.8e-3: the step is less than 2 of them
 
 
+def _false_alarms(h: float, total: int, first: int, draws: int, seed: int) -> float:
+    """The rate at which ``draws`` robots of Gaussian logs without change (8 parameters, window 30, fresh draws with
+    ``seed``, not the calibration's) pass threshold h anywhere in their ``total`` logs scanned from ``first``."""
+    rng = np.random.Generator(np.random.PCG64(seed))
+    hits = 0
+    for start in range(0, draws, 500):
+        stat = fc.scan(rng.standard_normal((min(500, draws - start), 8, total)), 30, first)[0]
+        hits += int(np.sum(stat.max(axis=(1, 2)) > h))
+    return hits / draws
+
+
+def _bound(alpha: float, draws: int) -> float:
+    """alpha plus 3 binomial standard errors of a rate estimated from ``draws``."""
+    return alpha + 3 * math.sqrt(alpha * (1 - alpha) / draws)
+
+
 @pytest.mark.parametrize(
     ("alpha", "total"),
     [(0.05, 30), (0.01, 30), pytest.param(0.01, 80, marks=pytest.mark.slow(reason="5 s of Monte Carlo draws"))],
 )
 def test_false_alarm_rate_holds_on_fresh_draws(alpha, total):
-    # A robot without change is flagged with probability at most alpha over its history: fresh Gaussian draws
-    # (another seed than the calibration's), 8 parameters, baseline 10, window 30.  Bound: alpha plus 3 binomial
-    # standard errors of the estimate from 3000 draws.
-    h = fc.threshold(alpha, total, 10, 30)
-    rng = np.random.Generator(np.random.PCG64(99))
-    draws = 3000
-    hits = 0
-    for _start in range(0, draws, 500):
-        stat = fc.scan(rng.standard_normal((500, 8, total)), 30, 10)[0]
-        hits += int(np.sum(stat.max(axis=(1, 2)) > h))
-    rate = hits / draws
-    assert rate <= alpha + 3 * math.sqrt(alpha * (1 - alpha) / draws)
+    # A robot without change is flagged with probability at most alpha over its history (baseline 10, window 30)
+    assert _false_alarms(fc.threshold(alpha, total, 10, 30), total, 10, 3000, 99) <= _bound(alpha, 3000)
 
 
 @pytest.mark.slow(reason="40000 Monte Carlo draws, about 20 s")
 def test_false_alarm_rate_of_the_extrapolated_threshold():
     # alpha = 0.001 lies beyond the calibration's draws: the threshold extrapolates the tail (conservatively)
-    h = fc.threshold(0.001, 50, 10, 30)
-    rng = np.random.Generator(np.random.PCG64(123))
-    hits = sum(int(np.sum(fc.scan(rng.standard_normal((500, 8, 50)), 30, 10)[0].max(axis=(1, 2)) > h))
-               for _ in range(80))  # fmt: skip
-    assert hits / 40000 <= 0.001 + 3 * math.sqrt(0.001 / 40000)
+    assert _false_alarms(fc.threshold(0.001, 50, 10, 30), 50, 10, 40000, 123) <= _bound(0.001, 40000)
 
 
-@pytest.mark.slow(reason="Monte Carlo over 115-log histories, about 10 s")
+@pytest.mark.slow(reason="Monte Carlo over 120-log histories, about 10 s")
 def test_false_alarm_rate_with_a_long_baseline():
     # a baseline of 55 logs left 5 scanned logs in a 60-log calibration (a rate of 0.022 at a stated 0.01, and a
     # division by zero at 60): the calibration now simulates at least two windows after the baseline
-    h = fc.threshold(0.05, 120, 55, 30)
-    rng = np.random.Generator(np.random.PCG64(5))
-    hits = sum(int(np.sum(fc.scan(rng.standard_normal((250, 8, 120)), 30, 55)[0].max(axis=(1, 2)) > h))
-               for _ in range(8))  # fmt: skip
-    assert hits / 2000 <= 0.05 + 3 * math.sqrt(0.05 * 0.95 / 2000)
+    assert _false_alarms(fc.threshold(0.05, 120, 55, 30), 120, 55, 2000, 5) <= _bound(0.05, 2000)
     assert math.isfinite(fc.threshold(0.001, 100, 60, 30))
 
 

@@ -200,10 +200,10 @@ def identify_entry(spec: dict[str, Any]) -> dict[str, Any]:
         return {"skipped": True, "sha256": sha}
     row.update(sha256=sha, bytes=size)
     try:
-        result, first = _identify(spec)
+        result, first, robot, log = _identify(spec)
         row.update(_result_columns(result))
         if spec.get("fit", True):
-            row.update(_fit(spec, result))
+            row.update(_fit(result, log, robot, spec["options"].get("torque_hold", "zoh")))
         if row["start_time"] is None and first is not None and first >= EPOCH_START_S:
             row["start_time"] = dt.datetime.fromtimestamp(first, tz=dt.timezone.utc)
             row["time_source"] = "log"
@@ -223,19 +223,19 @@ def identify_entry(spec: dict[str, Any]) -> dict[str, Any]:
 #: and unmapped afresh, and identify takes 0.19 s instead of 0.11 s on a 60 s log (+70 %, bench/bench_fleet.py).
 #: A worker holds nothing between logs, so keeping 64 MiB of freed heap bounds what it keeps.
 _MALLOC = {-3: 32 * 1024 * 1024, -1: 64 * 1024 * 1024}
-_malloc_tuned = False
+_worker_prepared = False
 
 
-def tune_malloc() -> bool:
+def prepare_worker() -> bool:
     """Set this process up as one fleet worker among one per core (once): each identify on one thread
     (:func:`wmrid.estimators.replay.one_thread`), and :data:`_MALLOC` (glibc only: elsewhere that part does
     nothing).  Returns whether malloc was tuned."""
-    global _malloc_tuned
-    if not _malloc_tuned:
+    global _worker_prepared
+    if not _worker_prepared:
         from wmrid.estimators.replay import one_thread
 
         one_thread()
-        _malloc_tuned = True
+        _worker_prepared = True
         try:
             import ctypes
 
@@ -249,8 +249,8 @@ def tune_malloc() -> bool:
 
 def identify_batch(specs: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """:func:`identify_entry` of several logs in turn: one Dask task for ``batch`` logs, which divides the
-    scheduler's work per log by ``batch``.  The worker's malloc is tuned first (:func:`tune_malloc`)."""
-    tune_malloc()
+    scheduler's work per log by ``batch``.  The worker's malloc is tuned first (:func:`prepare_worker`)."""
+    prepare_worker()
     return [identify_entry(spec) for spec in specs]
 
 
@@ -262,7 +262,8 @@ def _split_options(options: dict[str, Any]) -> tuple[dict[str, Any], dict[str, A
     return log_opts, run_opts
 
 
-def _identify(spec: dict[str, Any]) -> tuple[Any, float | None]:
+def _identify(spec: dict[str, Any]) -> tuple[Any, float | None, Any, Any]:
+    """(result, the log's first stamp, the prepared robot, the log as read: a stream or a whole log)."""
     from wmrid.api.identification import prepare, run_prepared
     from wmrid.api.inputs import LogOptions, open_log
 
@@ -273,26 +274,21 @@ def _identify(spec: dict[str, Any]) -> tuple[Any, float | None]:
     stream = _first_stamp_stream(open_log(spec["log"], options, robot=prep.robot), first)
     wheel_log = stream if prep.method == "observer" else stream.read()
     result = run_prepared(wheel_log, prep, options=options, **run_opts)
-    return result, (first[0] if first else None)
+    return result, (first[0] if first else None), prep.robot, wheel_log
 
 
-def _fit(spec: dict[str, Any], result: Any) -> dict[str, Any]:
-    """fit_r, fit_l: % fit of the identified model's simulated wheel speeds on the log itself (None above
-    :data:`FIT_MAX_SAMPLES` samples, or where the predictor cannot run the model)."""
+def _fit(result: Any, log: Any, robot: Any, torque_hold: str) -> dict[str, Any]:
+    """fit_r, fit_l: % fit of the identified model's simulated wheel speeds on the log it was identified from (None
+    above :data:`FIT_MAX_SAMPLES` samples, or where the predictor cannot run the model).  A stream of that size
+    kept its pieces from the identification: the file is not read again."""
     from wmrid.api.identification import with_validation
-    from wmrid.api.inputs import LogOptions, load_robot
 
     samples = result.log_info.get("samples") or 0
     if samples > FIT_MAX_SAMPLES:
         return {}
-    log_opts, run_opts = _split_options(spec["options"])
-    robot = spec.get("robot")
     try:
-        robot_obj = None if robot is None else load_robot(robot, gear_ratio=log_opts.get("gear_ratio"))
-        checked = with_validation(
-            result, spec["log"], LogOptions(**log_opts), robot=robot_obj,
-            torque_hold=run_opts.get("torque_hold", "zoh"),
-        )  # fmt: skip
+        whole = log.read() if hasattr(log, "read") else log
+        checked = with_validation(result, whole, robot=robot, torque_hold=torque_hold)
     except Exception:  # the fit is an extra: its failure never discards the identification
         return {}
     fit = checked.validation["fit_percent"]
@@ -505,7 +501,7 @@ def warm_up() -> float:
     from wmrid.model.predict import validation_fit
 
     start = time.perf_counter()
-    tune_malloc()
+    prepare_worker()
     t = np.arange(2001) * 1e-3
     eta = np.column_stack([2 + np.sin(3 * t), 2 + np.cos(2 * t)])
     tau = np.column_stack([np.cos(3 * t), -np.sin(2 * t)]) + 0.1

@@ -4,7 +4,6 @@ file's suffix.  ``wmrid fleet-report`` is these two functions with its flags tra
 
 from __future__ import annotations
 
-import datetime
 import os
 from typing import Any
 
@@ -86,22 +85,12 @@ def fleet_report(
     review = review_fleet(rows, baseline=baseline, window=window, alpha=alpha, outlier_alpha=outlier_alpha,
                           robot_of=_robot_loader(robot))  # fmt: skip
     rep = build_fleet_report(review, rows, name, figures=figures)
-    import wmrid
+    from wmrid.api.reporting import provenance_block
     from wmrid.io.digest import file_digests
 
-    rep.provenance = {
-        "wmrid": wmrid.__version__,
-        "made_utc": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
-        "command": command or "wmrid.fleet_report(...)",
-        "options": {
-            "robot": robot,
-            "baseline": baseline,
-            "window": window,
-            "alpha": alpha,
-            "outlier_alpha": outlier_alpha,
-        },
-        "inputs": file_digests(name) if isinstance(table, (str, os.PathLike)) else [],
-    }
+    options = {"robot": robot, "baseline": baseline, "window": window, "alpha": alpha, "outlier_alpha": outlier_alpha}
+    inputs = file_digests(name) if isinstance(table, (str, os.PathLike)) else []
+    rep.provenance = provenance_block(command or "wmrid.fleet_report(...)", options, inputs)
     return rep
 
 

@@ -139,9 +139,7 @@ def _report(result, log, truth, figures, options, robot, rotor_inertia, identify
 def _provenance(command, inputs, data, options, robot, rotor_inertia, identify_options) -> dict[str, Any]:
     """What a colleague needs to make the report again: version, time, command, options, inputs and their hashes."""
     import dataclasses
-    import datetime
 
-    from wmrid import __version__
     from wmrid.io.digest import file_digests
 
     given: dict[str, Any] = {k: v for k, v in identify_options.items() if v is not None}
@@ -153,12 +151,22 @@ def _provenance(command, inputs, data, options, robot, rotor_inertia, identify_o
         given["robot"] = robot if isinstance(robot, (str, os.PathLike)) else getattr(robot, "name", "?")
     if rotor_inertia is not None:
         given["rotor_inertia"] = rotor_inertia
+    return provenance_block(command or "wmrid.report(...) from Python", given, file_digests(inputs, data))
+
+
+def provenance_block(command: str, options: dict[str, Any], inputs: list[dict[str, Any]]) -> dict[str, Any]:
+    """A report's reproducibility block: wmrid's version, the time (UTC), the command, the options given (paths as
+    text) and the inputs with their sizes and SHA-256 (:func:`wmrid.io.digest.file_digests`)."""
+    import datetime
+
+    from wmrid import __version__
+
     return {
         "wmrid": __version__,
         "made_utc": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
-        "command": command or "wmrid.report(...) from Python",
-        "options": {k: (os.fspath(v) if isinstance(v, os.PathLike) else v) for k, v in given.items()},
-        "inputs": file_digests(inputs, data),
+        "command": command,
+        "options": {k: (os.fspath(v) if isinstance(v, os.PathLike) else v) for k, v in options.items()},
+        "inputs": inputs,
     }
 
 

@@ -408,11 +408,12 @@ def content_digest(path: str) -> tuple[str, int]:
 def options_key(options: dict[str, Any]) -> str:
     """A short hash of a log's effective options (canonical JSON): ``--resume`` re-runs a log whose options
     changed."""
-    text = json.dumps(options, sort_keys=True, separators=(",", ":"), default=str)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
+    return hashlib.sha256(canonical_options(options).encode()).hexdigest()[:16]
 
 
 def canonical_options(options: dict[str, Any]) -> str:
+    """Options as JSON with sorted keys and no spaces: the table's "options" cell and what :func:`options_key`
+    hashes."""
     return json.dumps(options, sort_keys=True, separators=(",", ":"), default=str)
 
 

@@ -197,7 +197,7 @@ def _word_changes(review: RobotReview, robot_of: Callable[[str], Any] | None) ->
                 x, y = review.payload["x"][0], review.payload["y"][0]
                 sd = f" ± {m_sd:.2g}" if m_sd is not None else ""
                 text += (f"; payload ≈ {m:.3g}{sd} kg at x = {x:.3g} m, y = {y:.3g} m (against the robot's own "
-                         "logs before the change)")  # fmt: skip
+                         "logs before the change; the ± is their scatter, not the model's error)")  # fmt: skip
             elif robot_of is not None:
                 text += "; no payload estimate: the robot's r and b are unknown (give --robot or a robot column)"
             review.findings.append(text + pending)
