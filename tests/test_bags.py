@@ -137,32 +137,33 @@ def test_the_fast_path_equals_rosbags_deserialiser_message_by_message(sample_bag
 
 
 def _read_both_ways(paths, monkeypatch, **options):
-    """The log of ``paths`` read with wmrid's own sqlite3 reading, and with rosbags' message generators."""
+    """The log of ``paths`` read with wmrid's own sqlite3 reader, and with rosbags' message generators; and the
+    recordings wmrid's reader was given (None when it left them to rosbags)."""
     import wmrid as api
-    from wmrid.io.bag import reader
+    from wmrid.io.bag import db3_file
 
     plans = []
-    real_plan = reader.BagFiles._sqlite_plan
+    real_files = db3_file.db3_files
 
-    def recorded(files, wanted):
-        plans.append(real_plan(files, wanted))
+    def recorded(paths):
+        plans.append(real_files(paths))
         return plans[-1]
 
-    monkeypatch.setattr(reader.BagFiles, "_sqlite_plan", recorded)
+    monkeypatch.setattr(db3_file, "db3_files", recorded)
     own = api.read_log([str(p) for p in paths], **options)
-    monkeypatch.setattr(reader.BagFiles, "_sqlite_plan", lambda files, wanted: None)
+    monkeypatch.setattr(db3_file, "db3_files", lambda paths: None)
     theirs = api.read_log([str(p) for p in paths], **options)
     return own, theirs, plans
 
 
 @pytest.mark.parametrize("kind", ["db3-folder", "db3-file", "db3-split"])
 def test_sqlite_storage_read_by_wmrid_equals_rosbags_reading(sample_bags, kind, monkeypatch):
-    """Uncompressed sqlite3 storage is read by wmrid's own queries (one plan entry per storage file); the log is
+    """Uncompressed sqlite3 storage is read by wmrid's own reader (every storage file of the recording); the log is
     rosbags' message-by-message reading, bit for bit."""
     own, theirs, plans = _read_both_ways(sample_bags[kind], monkeypatch)
     assert plans
     assert all(plan is not None for plan in plans), "wmrid's sqlite3 reading was not used"
-    assert len(plans[0]) == (2 if kind == "db3-split" else 1)
+    assert sum(len(recording) for recording in plans[0]) == (2 if kind == "db3-split" else 1)
     for field in ("t", "eta", "tau"):
         assert np.array_equal(getattr(own, field), getattr(theirs, field)), field
     assert own.notes == theirs.notes
@@ -180,7 +181,7 @@ def test_sqlite_reading_of_two_topics_and_of_overlapping_recordings(tmp_path, mo
     options = {"columns": VENDOR_COLUMNS, "effort": "current", "torque_constant": 1.0, "gear_ratio": 1.0}
     own, theirs, plans = _read_both_ways([one], monkeypatch, **options)
     assert plans
-    assert all(plan is not None and len(plan[0][1]) == 2 for plan in plans)
+    assert all(plan is not None and len(plan[0][0].topics) == 2 for plan in plans)
     overlapping, _, overlap_plans = _read_both_ways([wheel, motor], monkeypatch, **options)
     assert overlap_plans
     assert all(plan is None for plan in overlap_plans), "overlapping recordings must be merged"
@@ -481,3 +482,65 @@ def test_a_damaged_ros2_recording_is_one_line_not_an_internal_error(tmp_path, sa
     assert out.returncode == 2
     assert len(out.stderr.strip().splitlines()) == 1, out.stderr
     assert "internal error" not in out.stderr
+
+
+def test_other_topics_of_a_db3_are_counted_in_the_same_pass(tmp_path, monkeypatch):
+    """A db3 with a JointState topic and another type: wmrid's reader counts the other topic (and its time range) in
+    the pass that reads the JointState bytes; `inspect` says what it says when rosbags reads the file, and also the
+    other topic's time range and rate (rosbags' counts come without them)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from wmrid.io.bag import db3_file
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    string = store.types["std_msgs/msg/String"]
+    joints = bagutil.recording(SAMPLE)[:500]
+    chatter = [
+        bagutil.Message("/chatter", "std_msgs/msg/String", m.log_ns + 1,
+                        bytes(store.serialize_cdr(string(data=f"hello {i}"), "std_msgs/msg/String")))
+        for i, m in enumerate(joints[:40])
+    ]  # fmt: skip
+    folder = bagutil.write_rosbag2(tmp_path / "two", sorted(joints + chatter, key=lambda m: m.log_ns), store=store)
+    assert db3_file.db3_files([str(folder)]) is not None, "wmrid's reader must take this recording"
+    own = json.loads(wmrid("inspect", str(folder), "--format", "json").stdout)
+    monkeypatch.setattr(db3_file, "db3_files", lambda paths: None)
+    theirs = json.loads(wmrid("inspect", str(folder), "--format", "json").stdout)
+    by_topic = {t["topic"]: t for t in own["topics"]}
+    assert by_topic["/chatter"]["messages"] == 40
+    assert by_topic["/chatter"]["type"] == "std_msgs/msg/String"
+    assert by_topic["/joint_states"]["messages"] == 500
+    same = ("topic", "type", "encoding", "messages")
+    assert [{k: t[k] for k in same} for t in own["topics"]] == [{k: t[k] for k in same} for t in theirs["topics"]]
+    assert by_topic["/chatter"]["start_s"] == chatter[0].log_ns * 1e-9
+    assert by_topic["/chatter"]["end_s"] == chatter[-1].log_ns * 1e-9
+    assert by_topic["/chatter"]["rate_hz"] == pytest.approx(39 / ((chatter[-1].log_ns - chatter[0].log_ns) * 1e-9))
+
+
+@pytest.mark.parametrize("damage", ["cut short", "pages overwritten"])
+def test_a_db3_damaged_inside_its_messages_is_one_line(tmp_path, sample_bags, damage):
+    """A .db3 cut in half, or with its message pages overwritten, fails inside wmrid's own reading: one line that
+    names the file and says it is damaged (rc 2), never a traceback."""
+    folder = tmp_path / "damaged"
+    shutil.copytree(sample_bags["db3-folder"][0], folder)
+    db = next(folder.glob("*.db3"))
+    data = bytearray(db.read_bytes())
+    if damage == "cut short":
+        data = data[: len(data) // 2]
+    else:
+        data[len(data) // 3 : len(data) // 3 + 200_000] = b"\xa5" * 200_000
+    db.write_bytes(bytes(data))
+    out = text(wmrid("identify", str(folder)))
+    assert out.returncode == 2, out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1, out.stderr
+    assert "damaged" in out.stderr, out.stderr
+    assert str(folder) in out.stderr, out.stderr
+    assert "Traceback" not in out.stderr
+    assert "internal error" not in out.stderr
+
+
+def test_a_db3_under_a_path_with_uri_characters(tmp_path, sample_bags, sample_result):
+    """The file is opened by an SQLite URI: '#', '?', '%' and spaces in its folder's name are quoted, not read as
+    URI syntax."""
+    folder = tmp_path / "run #1 ?x=%20 done"
+    shutil.copytree(sample_bags["db3-folder"][0], folder)
+    assert _identify([folder])["parameters"] == sample_result["parameters"]

@@ -4,11 +4,11 @@ every format.
 
 rosbags opens the files (``rosbags.rosbag1.Reader`` for a ROS 1 bag, ``rosbags.rosbag2.Reader`` for a ``.db3`` or
 ``.mcap`` file or a rosbag2 folder with its ``metadata.yaml``) and hands out each message's serialised bytes with
-its receive time; several files are merged in time order (``heapq.merge``, as rosbags' AnyReader does).  Uncompressed
-sqlite3 storage is read by wmrid itself, a block of rows per query step on the connection rosbags opened, with
-rosbags' query and order (messages by timestamp, files in turn); that skips rosbags' per-message generators, 2.4x
-faster on a 600,000-message .db3.  The JointState messages are gathered per topic in batches of :data:`BATCH` and
-decoded by the compiled kernels of
+its receive time; several files are merged in time order (``heapq.merge``, as rosbags' AnyReader does).  ROS 1 bags
+(:mod:`wmrid.io.bag.ros1_file`) and uncompressed sqlite3 storage (:mod:`wmrid.io.bag.db3_file`) are read by wmrid
+itself, which skips rosbags' per-message generators; this module keeps what rosbags reads (compressed recordings,
+MCAP storage, recordings that overlap in time).  The JointState messages are gathered per topic in batches of
+:data:`BATCH` and decoded by the compiled kernels of
 :class:`wmrid.io.mcap.joint_batches.JointChannels`: :func:`wmrid.io.bag.ros1_records.ros1_joint_states` for ROS 1,
 :func:`wmrid.io.mcap.records.joint_states` for CDR.  A message the kernel refuses, or a topic whose message
 definition is not the standard JointState, is decoded by rosbags' deserialiser with the definitions stored in the
@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import contextlib
 import heapq
-import itertools
 from collections.abc import Callable, Generator, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,8 +36,6 @@ from wmrid.io.mcap.records import JOINT_STATE_NAMES, joint_states, ros1_joint_na
 
 #: Messages per topic decoded at a time (the batch's bytes are joined into one buffer for the kernel).
 BATCH = 16384
-#: sqlite rows fetched at a time (below the garbage collector's threshold of 700 live allocations).
-_ROWS = 256
 
 
 @dataclass
@@ -118,84 +115,17 @@ class BagFiles:
         """(channel id, receive times ns, serialised messages) of the channels' messages, in time order, up to
         :data:`BATCH` messages of one channel at a time."""
         wanted = set(channels)
-        plan = self._sqlite_plan(wanted)
-        if plan is None:
-            pending: dict[int, tuple[list[int], list[bytes]]] = {c: ([], []) for c in wanted}
-            for channel, stamp, raw in self.messages(wanted):
-                times, datas = pending[channel]
-                times.append(stamp)
-                datas.append(raw)
-                if len(datas) >= BATCH:
-                    yield channel, times, datas
-                    pending[channel] = ([], [])
-            for channel, (times, datas) in pending.items():
-                if datas:
-                    yield channel, times, datas
-            return
-        try:
-            for dbconn, channel_of in plan:
-                ids = tuple(channel_of)
-                cursor = dbconn.execute(
-                    "SELECT topic_id, timestamp, data FROM messages WHERE topic_id IN "
-                    f"({','.join('?' * len(ids))}) ORDER BY timestamp",
-                    ids,
-                )
-                while True:
-                    topic_ids: list[int] = []
-                    stamps: list[int] = []
-                    datas: list[bytes] = []
-                    # Rows are taken a few hundred at a time and their tuples dropped at once: with fewer than the
-                    # collector's 700 live allocations its collections never run (holding a whole batch of row
-                    # tuples made Python's garbage collector take 0.55 s of a 1.3 s read).
-                    while len(datas) < BATCH and (rows := list(itertools.islice(cursor, _ROWS))):
-                        columns = tuple(zip(*rows, strict=True))
-                        del rows
-                        topic_ids.extend(columns[0])
-                        stamps.extend(columns[1])
-                        datas.extend(columns[2])
-                        del columns
-                    if not datas:
-                        break
-                    if len(ids) == 1:
-                        yield channel_of[ids[0]], stamps, datas
-                        continue
-                    for topic_id in dict.fromkeys(topic_ids):
-                        pick = [i for i, t in enumerate(topic_ids) if t == topic_id]
-                        yield channel_of[topic_id], [stamps[i] for i in pick], [datas[i] for i in pick]
-        except Exception as err:  # an sqlite error of a damaged file
-            raise LogFormatError(
-                f"{', '.join(self.paths)}: the recording is damaged: its sqlite3 storage stopped reading "
-                f"({_one_line(err)}); check it (ros2 bag info) or record it again"
-            ) from err
-
-    def _sqlite_plan(self, wanted: set[int]) -> list[tuple[Any, dict[int, int]]] | None:
-        """[(sqlite connection, {topic id: channel id})] in reading order, when wmrid can read the recording's
-        storage itself: every file uncompressed sqlite3 that rosbags opened, the recordings given one after another
-        in time (a later one starting after the earlier has ended; overlapping ones are merged by rosbags).  None
-        otherwise (MCAP storage, compression, or a rosbags version whose readers look different)."""
-        readers = []
-        for reader in self.readers:
-            storage = getattr(reader, "storage", None)
-            storages = getattr(storage, "storages", [storage])
-            if getattr(reader, "compression_mode", None) or not storages:
-                return None
-            if not all(type(s).__name__ == "Sqlite3Reader" and getattr(s, "dbconn", None) for s in storages):
-                return None
-            readers.append((int(reader.start_time), int(reader.end_time), storages))
-        readers.sort(key=lambda r: r[0])
-        if any(earlier[1] > later[0] for earlier, later in itertools.pairwise(readers)):
-            return None
-        topics = {t.topic: c for c, t in self.topics.items() if c in wanted}
-        plan = []
-        for _, _, storages in readers:
-            for storage in storages:
-                channel_of = {
-                    int(conn.id): topics[conn.topic] for conn in storage.connections
-                    if conn.topic in topics and conn.msgtype == self.topics[topics[conn.topic]].msgtype
-                }  # fmt: skip
-                if channel_of:
-                    plan.append((storage.dbconn, channel_of))
-        return plan
+        pending: dict[int, tuple[list[int], list[bytes]]] = {c: ([], []) for c in wanted}
+        for channel, stamp, raw in self.messages(wanted):
+            times, datas = pending[channel]
+            times.append(stamp)
+            datas.append(raw)
+            if len(datas) >= BATCH:
+                yield channel, times, datas
+                pending[channel] = ([], [])
+        for channel, (times, datas) in pending.items():
+            if datas:
+                yield channel, times, datas
 
     def messages(self, channels: Iterable[int]) -> Iterator[tuple[int, int, bytes]]:
         """(channel id, receive time ns, serialised bytes) of the channels' messages, in time order."""
@@ -366,7 +296,7 @@ def read_bag(
         for _ in state.steps():
             pass
         return McapContents(
-            source=", ".join(paths), profile=kind, library="wmrid" if kind == "ros1" else "rosbags",
+            source=", ".join(paths), profile=kind, library="rosbags" if isinstance(state, _RosbagsState) else "wmrid",
             format=f"{kind} bag", channels=tuple(state.channel_info()),
             definitions={t.topic: (t.msgtype, t.definition) for t in state.topics.values()},
             joints=state.joints(), json={}, metadata={}, notes=tuple(state.notes), size_bytes=_size(paths),
@@ -393,11 +323,19 @@ def iter_bag_joint_parts(
 
 @contextlib.contextmanager
 def _open_state(paths: Sequence[str], kind: str, **kwargs: Any) -> Iterator[_BagState]:
-    """The state that reads ``paths``: wmrid's own walker for ROS 1 bags, rosbags for ROS 2 recordings."""
+    """The state that reads ``paths``: wmrid's own readers for ROS 1 bags and uncompressed sqlite3 recordings,
+    rosbags for the other ROS 2 recordings."""
     if kind == "ros1":
         from wmrid.io.bag.ros1_file import Ros1State
 
         with Ros1State(paths, **kwargs) as state:
+            yield state
+        return
+    from wmrid.io.bag.db3_file import Db3State, db3_files
+
+    recordings = db3_files(paths)
+    if recordings is not None:
+        with Db3State(paths, recordings, **kwargs) as state:
             yield state
         return
     with BagFiles(paths, kind) as files:
