@@ -346,8 +346,11 @@ def signals_from_mcap(
             _time_values(eff_series, plan.eff_time), eff_series.effort[:, ecols].copy(), eff_series.topic, "effort"
         )
         notes += more
-        common, i_vel, i_eff = np.intersect1d(t_vel, t_eff, assume_unique=True, return_indices=True)
-        t_out, speed, effort = common, speed[i_vel], effort[i_eff]
+        if np.array_equal(t_vel, t_eff):  # the usual case; _clean leaves both sorted and unique, as intersect1d's
+            t_out = t_vel
+        else:
+            common, i_vel, i_eff = np.intersect1d(t_vel, t_eff, assume_unique=True, return_indices=True)
+            t_out, speed, effort = common, speed[i_vel], effort[i_eff]
     else:
         notes.append(plan.eff_time_note)
         t_eff = _time_values(eff_series, plan.eff_time)
