@@ -58,13 +58,23 @@ LEVEL = {"M11": 1.41, "M12": -0.455, "M22": 1.49, "Vc": 0.21, "Fv1": 0.010, "Fv2
 SCATTER = {"M11": 3e-4, "M12": 3e-4, "M22": 3e-4, "Vc": 1e-4, "Fv1": 1.5e-4, "Fv2": 2e-4, "Fd1": 6e-4, "Fd2": 5e-4}
 
 
+#: The multibody prototype's friction, as the fleet review sees it (README "Fleets"): each log trades Fv against Fd
+#: (their estimates correlate at -0.95; 15 % of Fv log to log), their sum at the wheels' typical speed (4 rad/s)
+#: scatters by 1 %, and the reported std holds a model error common to every log (3x Fv's value).
+TRADE = {"speed": 4.0, "fv_scatter": 0.15, "fw_scatter": 0.01, "corr": -0.95, "fv_std": 3.0, "fd_std": 1.0}
+
+
 def synthetic_rows(
     robots: int = 8, days: int = 40, *, changes: dict | None = None, seed: int = 3, robot: str = "paper",
-    unit_spread: float = 0.03,
+    unit_spread: float = 0.03, trade: bool = False,
 ) -> list[dict]:  # fmt: skip
     """Fleet-table rows whose watched parameters are drawn directly: each unit's level (relative spread
     ``unit_spread``), Gaussian log-to-log scatter (:data:`SCATTER`), and ``changes`` {robot index: function(day,
-    values dict) -> None that edits the values in place}.  Reported std: half the scatter."""
+    values dict) -> None that edits the values in place}.  Reported std: half the scatter.
+
+    trade : friction as on the multibody prototype (:data:`TRADE`): per wheel, Fw = Fd + 4 Fv scatters by 1 % and Fv
+    by 15 %, Fd taking up the difference; the rows carry the wheels' mean speeds and the Fv-Fd correlations (a
+    change edits Fv and Fd, applied after the trade)."""
     from wmrid.io.fleet_table import empty_row
 
     rng = np.random.Generator(np.random.PCG64(seed))
@@ -73,12 +83,23 @@ def synthetic_rows(
         level = {n: v * (1 + unit_spread * rng.standard_normal()) for n, v in LEVEL.items()}
         for day in range(days):
             values = {n: level[n] + SCATTER[n] * rng.standard_normal() for n in LEVEL}
+            stds = {f"{n}_std": SCATTER[n] / 2 for n in LEVEL}
+            extra = {}
+            if trade:
+                w = TRADE["speed"]
+                for v, d, speed, corr in (("Fv1", "Fd1", "speed_r", "Fv1_Fd1_corr"),
+                                          ("Fv2", "Fd2", "speed_l", "Fv2_Fd2_corr")):  # fmt: skip
+                    fw = (level[d] + w * level[v]) * (1 + TRADE["fw_scatter"] * rng.standard_normal())
+                    values[v] = level[v] * (1 + TRADE["fv_scatter"] * rng.standard_normal())
+                    values[d] = fw - w * values[v]
+                    stds[f"{v}_std"], stds[f"{d}_std"] = TRADE["fv_std"] * level[v], TRADE["fd_std"] * level[d]
+                    extra[speed] = w * (1 + 0.01 * rng.standard_normal())
+                    extra[corr] = TRADE["corr"]
             if changes and u in changes:
                 changes[u](day, values)
-            stds = {f"{n}_std": SCATTER[n] / 2 for n in LEVEL}
             rows.append(empty_row(
                 robot_id=f"R{u + 1:02d}", log=f"R{u + 1:02d}/{day}.parquet", robot=robot,
                 start_time=START + dt.timedelta(days=day), options="{}", options_key="k", sha256=f"{u}-{day}",
-                **values, **stds,
+                **values, **stds, **extra,
             ))  # fmt: skip
     return rows

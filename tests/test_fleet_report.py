@@ -215,3 +215,87 @@ def test_a_simulated_fleet_end_to_end(tmp_path):
     mass, std = robots["R04"].payload["mass"]
     assert abs(mass - 10.0) <= max(3 * std, 0.05 * 10.0)
     assert np.isfinite(std)
+
+
+# ---- each wheel's friction at its typical speed (the multibody prototype's case: Fv and Fd trade off per log)
+
+
+def test_wear_hidden_by_the_fv_fd_trade_is_found_through_the_friction_at_typical_speed():
+    """Fv and Fd scatter by 15 % from log to log against each other while their sum at 4 rad/s scatters by 1 %:
+    a +1.5 %/day wear of R02's right wheel is flagged through Fw1 within 8 days, and only it; the same rows without
+    the speeds (a schema-1 table) hide it: no flag at all."""
+    from wmrid.io.fleet_table import ADDED_IN_2
+
+    rows = synthetic_rows(8, 40, changes={1: _wear(15, 0.015)}, trade=True, seed=11)
+    rep = fleet_report(rows, robot="paper", figures=False)
+    robots = _by_id(rep)
+    assert {rid for rid, rv in robots.items() if rv.flagged} == {"R02"}
+    r02 = robots["R02"]
+    assert r02.flags == ["wheel wear? (right)"]
+    change = r02.history.changes[0]
+    assert "Fw1" in change.parameters
+    assert 15 <= change.onset <= 18
+    assert change.alarm - 15 <= 8
+    assert r02.wheel_friction["Fw1"][0] == pytest.approx(4.0, rel=0.02)  # the median of the logs' mean speeds
+    assert "Fw1 (the right wheel's friction at 4" in r02.findings[0]
+    blind = [{**r, **dict.fromkeys(ADDED_IN_2)} for r in rows]
+    assert not any(rv.flagged for rv in fleet_report(blind, robot="paper", figures=False).review.robots)
+
+
+def test_the_friction_at_typical_speed_is_computed_as_stated():
+    """Fw = Fd + omega Fv per log, omega the median of the first logs' mean speeds; its std is the linear
+    combination's, from the two std and their correlation (here against a 2x2 covariance by numpy)."""
+    rows = synthetic_rows(1, 12, trade=True, seed=2)
+    rv = fleet_report(rows, figures=False).review.robots[0]
+    omega, value, std = rv.wheel_friction["Fw2"]
+    assert omega == float(np.median([r["speed_l"] for r in rows[:10]]))
+    for r, v, s in zip(rows, value, std, strict=True):
+        assert v == pytest.approx(r["Fd2"] + omega * r["Fv2"], rel=1e-15)
+        cov = np.array([[r["Fv2_std"] ** 2, r["Fv2_Fd2_corr"] * r["Fv2_std"] * r["Fd2_std"]],
+                        [r["Fv2_Fd2_corr"] * r["Fv2_std"] * r["Fd2_std"], r["Fd2_std"] ** 2]])  # fmt: skip
+        weights = np.array([omega, 1.0])
+        assert s == pytest.approx(np.sqrt(weights @ cov @ weights), rel=1e-12)
+
+
+def test_no_false_flags_with_the_friction_at_typical_speed_watched():
+    # 30 fleets x 10 unchanged robots with the multibody-like trade and Fw watched (10 parameters): expected false
+    # flags 0.3 + 0.03, and more than 3 would reject the stated rate (Poisson(0.33) > 3: p < 5e-4)
+    flags = 0
+    for seed in range(30):
+        rep = fleet_report(synthetic_rows(10, 30, seed=500 + seed, trade=True), figures=False)
+        assert all("Fw1" in rv.wheel_friction for rv in rep.review.robots)
+        flags += sum(rv.flagged for rv in rep.review.robots)
+    assert flags <= 3
+
+
+def test_the_robot_figure_shows_the_friction_at_typical_speed():
+    from wmrid.reporting.fleet_figures import build_robot_figure
+
+    rows = synthetic_rows(2, 20, changes={1: _wear(8, 0.02)}, trade=True, seed=4)
+    robots = _by_id(fleet_report(rows, figures=False))
+    titles = [ax.get_title() for ax in build_robot_figure(robots["R02"]).axes]
+    assert len(titles) == 10
+    assert re.fullmatch(r"Fw1 at (3\.9\d|4\.0\d) rad/s \(N m\)", titles[4]), titles
+    assert re.fullmatch(r"Fw2 at (3\.9\d|4\.0\d) rad/s \(N m\)", titles[9]), titles
+    blind = [{**r, "speed_r": None, "speed_l": None} for r in rows]
+    assert len(build_robot_figure(_by_id(fleet_report(blind, figures=False))["R02"]).axes) == 8
+
+
+def test_a_fleet_row_carries_the_mean_wheel_speeds_and_the_friction_correlations(tmp_path):
+    """identify_entry's speed_r / speed_l are the log's mean |wheel speed| (the log read again here, by read_log),
+    and the correlations those of the identification's own covariance (wmrid.identify, its JSON)."""
+    import wmrid
+    from wmrid.api.fleet import identify_entry, plan
+    from wmrid.io.fleet_table import entries_from_paths
+
+    (path,) = write_fleet(tmp_path, robots=1, days=1, duration=6.0)
+    (spec,) = plan(entries_from_paths([str(tmp_path)]), {}, "paper", fit=False)
+    row = identify_entry(spec)
+    assert row["error"] is None
+    log = wmrid.read_log(str(path))
+    assert row["speed_r"] == pytest.approx(np.abs(log.eta[:, 0]).mean(), rel=1e-12)
+    assert row["speed_l"] == pytest.approx(np.abs(log.eta[:, 1]).mean(), rel=1e-12)
+    cov = np.array(wmrid.identify(str(path), robot="paper").to_dict()["estimate"]["covariance"], dtype=float)
+    for (v, d), name in (((4, 6), "Fv1_Fd1_corr"), ((5, 7), "Fv2_Fd2_corr")):
+        assert row[name] == pytest.approx(cov[v, d] / np.sqrt(cov[v, v] * cov[d, d]), rel=1e-9)
+        assert -1 <= row[name] <= 1

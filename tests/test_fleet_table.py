@@ -24,6 +24,7 @@ DOCUMENTED = [
     ("samples", "int64"), ("rate_hz", "double"), ("method", "string"), ("form", "string"), ("effort_unit", "string"),
     ("options", "string"), ("options_key", "string"),
     *[(c, "double") for n in ft.PARAMETERS for c in (n, f"{n}_std")],
+    ("speed_r", "double"), ("speed_l", "double"), ("Fv1_Fd1_corr", "double"), ("Fv2_Fd2_corr", "double"),
     ("flags", "list<element: string>"), ("warnings", "list<element: string>"), ("fit_r", "double"), ("fit_l", "double"),
     ("run_time_s", "double"), ("worker", "string"), ("wmrid_version", "string"), ("error", "string"),
 ]  # fmt: skip
@@ -32,7 +33,7 @@ DOCUMENTED = [
 def test_schema_is_stable():
     schema = ft.schema()
     assert [(f.name, str(f.type)) for f in schema] == DOCUMENTED
-    assert schema.metadata[b"wmrid_fleet_schema"] == b"1"
+    assert schema.metadata[b"wmrid_fleet_schema"] == b"2"
     assert ft.PARAMETERS == ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2", "Cv", "Cw")
 
 
@@ -48,16 +49,31 @@ def test_table_round_trip(tmp_path):
     assert back == rows
     on_disk = pq.read_schema(path)
     assert [(f.name, str(f.type)) for f in on_disk] == DOCUMENTED
-    assert on_disk.metadata[b"wmrid_fleet_schema"] == b"1"
+    assert on_disk.metadata[b"wmrid_fleet_schema"] == b"2"
     with pytest.raises(Exception, match="exists"):
         ft.write_table(rows, path)  # never over a table without force
     ft.write_table(rows[:1], path, force=True)
     assert len(ft.read_table(path)) == 1
 
 
+def test_a_schema_1_table_reads_with_nulls_in_the_columns_schema_2_added(tmp_path):
+    """A table written before schema 2 (no speeds, no friction correlations) still reads, resumes and reviews:
+    those columns come back null, everything else as written."""
+    rows = [ft.empty_row(robot_id="R1", log="a.mcap", M11=1.5, M11_std=0.01, flags=["M11"], samples=10)]
+    table = ft.to_arrow(rows).drop_columns(list(ft.ADDED_IN_2))
+    old = table.replace_schema_metadata({b"wmrid_fleet_schema": b"1"})
+    path = tmp_path / "v1.parquet"
+    pq.write_table(old, path)
+    assert ft.read_table(path) == rows
+    newer = table.replace_schema_metadata({b"wmrid_fleet_schema": b"3"})
+    pq.write_table(newer, tmp_path / "v3.parquet")
+    with pytest.raises(LogFormatError, match=r"schema 1 or 2 \(schema 3\)"):
+        ft.read_table(tmp_path / "v3.parquet")
+
+
 def test_an_unknown_row_column_is_refused():
     with pytest.raises(ValueError, match="not columns"):
-        ft.empty_row(speed=1.0)
+        ft.empty_row(speed=1.0)  # speed_r and speed_l are columns; "speed" is not
 
 
 def test_a_parquet_file_that_is_not_a_fleet_table_is_named(tmp_path):

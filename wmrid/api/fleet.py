@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
+import math
 import os
 import socket
 import time
@@ -21,6 +22,8 @@ import uuid
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
+
+import numpy as np
 
 from wmrid.core.errors import UsageError, WmridError, option
 from wmrid.io.fleet_table import (
@@ -137,18 +140,52 @@ def _merged(old: Any, new: _NewRows, old_keys: Any = None) -> Any:
 # One log, on a worker
 
 
-def _first_stamp_stream(stream: Any, first: list[float]) -> Any:
-    """``stream`` as a new LogStream that notes its first time stamp in ``first``."""
+@dataclass
+class _Seen:
+    """What a log's pieces showed as they went by: its first time stamp (s) and each wheel's sum of |speed|
+    (rad/s) over its samples."""
+
+    first: float | None = None
+    abs_speed: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    samples: int = 0
+
+    def mean_speed(self) -> tuple[float | None, float | None]:
+        """(right, left) mean absolute wheel speed, rad/s (None for an empty log)."""
+        if not self.samples:
+            return None, None
+        right, left = (self.abs_speed / self.samples).tolist()
+        return right, left
+
+
+def _watched_stream(stream: Any, seen: _Seen) -> Any:
+    """``stream`` as a new LogStream whose pieces are noted in ``seen`` as they pass."""
     from wmrid.core.wheel_log import LogStream
 
     def pieces():
         for piece in stream:
-            if not first and len(piece):
-                first.append(float(piece.t[0]))
+            if len(piece):
+                if seen.first is None:
+                    seen.first = float(piece.t[0])
+                seen.abs_speed += np.abs(piece.eta).sum(axis=0)
+                seen.samples += len(piece)
             yield piece
         return stream.notes
 
     return LogStream(stream.source, stream.effort_unit, pieces)
+
+
+def friction_correlations(result: Any) -> tuple[float | None, float | None]:
+    """The correlation of each wheel's viscous and Coulomb friction estimates (Fv1 with Fd1, Fv2 with Fd2) in an
+    identification's covariance of theta0 = [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2 ...]; None where one of them is
+    undetermined."""
+    est = getattr(result, "estimate", None)
+    cov = np.asarray(est.cov if est is not None else result.theta0_cov, dtype=float)
+    out = []
+    for v, d in ((4, 6), (5, 7)):
+        denom = math.sqrt(cov[v, v] * cov[d, d]) if cov[v, v] > 0 and cov[d, d] > 0 else math.nan
+        rho = cov[v, d] / denom if math.isfinite(denom) and denom > 0 else math.nan
+        out.append(float(np.clip(rho, -1.0, 1.0)) if math.isfinite(rho) else None)
+    return out[0], out[1]
 
 
 def _one_line(err: BaseException) -> str:
@@ -169,6 +206,7 @@ def _result_columns(result: Any) -> dict[str, Any]:
         method=result.method, form=getattr(result.form, "kind", None), effort_unit=info.get("effort_unit"),
         flags=flagged, warnings=[" ".join(w.split()) for w in result.warnings],
     )  # fmt: skip
+    out["Fv1_Fd1_corr"], out["Fv2_Fd2_corr"] = friction_correlations(result)
     return out
 
 
@@ -200,8 +238,10 @@ def identify_entry(spec: dict[str, Any]) -> dict[str, Any]:
         return {"skipped": True, "sha256": sha}
     row.update(sha256=sha, bytes=size)
     try:
-        result, first, robot, log = _identify(spec)
+        result, seen, robot, log = _identify(spec)
         row.update(_result_columns(result))
+        row["speed_r"], row["speed_l"] = seen.mean_speed()
+        first = seen.first
         if spec.get("fit", True):
             row.update(_fit(result, log, robot, spec["options"].get("torque_hold", "zoh")))
         if row["start_time"] is None and first is not None and first >= EPOCH_START_S:
@@ -262,19 +302,20 @@ def _split_options(options: dict[str, Any]) -> tuple[dict[str, Any], dict[str, A
     return log_opts, run_opts
 
 
-def _identify(spec: dict[str, Any]) -> tuple[Any, float | None, Any, Any]:
-    """(result, the log's first stamp, the prepared robot, the log as read: a stream or a whole log)."""
+def _identify(spec: dict[str, Any]) -> tuple[Any, _Seen, Any, Any]:
+    """(result, what its pieces showed (first stamp, wheel speeds), the prepared robot, the log as read: a stream or
+    a whole log)."""
     from wmrid.api.identification import prepare, run_prepared
     from wmrid.api.inputs import LogOptions, open_log
 
     log_opts, run_opts = _split_options(spec["options"])
     options = LogOptions(**log_opts)
     prep = prepare(options=options, robot=spec.get("robot"), **run_opts)
-    first: list[float] = []
-    stream = _first_stamp_stream(open_log(spec["log"], options, robot=prep.robot), first)
+    seen = _Seen()
+    stream = _watched_stream(open_log(spec["log"], options, robot=prep.robot), seen)
     wheel_log = stream if prep.method == "observer" else stream.read()
     result = run_prepared(wheel_log, prep, options=options, **run_opts)
-    return result, (first[0] if first else None), prep.robot, wheel_log
+    return result, seen, prep.robot, wheel_log
 
 
 def _fit(result: Any, log: Any, robot: Any, torque_hold: str) -> dict[str, Any]:
@@ -494,8 +535,6 @@ def fleet(
 def warm_up() -> float:
     """Load wmrid's compiled kernels in this process (numba's cache: about a second once per process), so that a
     worker's first log does not pay for it; returns the seconds it took.  Run on every worker at the start."""
-    import numpy as np
-
     from wmrid.api.identification import identify
     from wmrid.core.wheel_log import WheelLog
     from wmrid.model.predict import validation_fit

@@ -69,14 +69,15 @@ def fleet_report(
     outlier_alpha : the probability that any robot of a model with Gaussian unit-to-unit spread is said to stand out.
     figures : build the figures (what HTML and Markdown show).
     """
-    from wmrid.io.fleet_table import read_arrow
+    from wmrid.io.fleet_table import ADDED_IN_2, read_arrow
     from wmrid.monitoring.fleet_changes import MONITORED
     from wmrid.monitoring.fleet_review import review_fleet
 
     check_settings(baseline, window, alpha, outlier_alpha)
     name = os.fspath(table) if isinstance(table, (str, os.PathLike)) else "rows"
     if isinstance(table, (str, os.PathLike)):  # only the columns the review reads: a row of ~20 values, not ~60
-        columns = ["robot_id", "log", "robot", "start_time", "error", *MONITORED, *(f"{n}_std" for n in MONITORED)]
+        columns = ["robot_id", "log", "robot", "start_time", "error", *MONITORED, *(f"{n}_std" for n in MONITORED),
+                   *ADDED_IN_2]  # fmt: skip
         rows = read_arrow(name).select(columns).to_pylist()
     else:
         rows = list(table)

@@ -22,7 +22,13 @@ from typing import Any
 
 from wmrid.core.errors import LogFormatError, UsageError, option
 
-SCHEMA_VERSION = "1"
+SCHEMA_VERSION = "2"
+#: Schema versions read (a version-1 table lacks :data:`ADDED_IN_2`: read as nulls, so that it can be resumed).
+READABLE_VERSIONS = ("1", "2")
+#: Columns added by schema 2: each wheel's mean absolute speed over the log (rad/s, at the wheel) and the
+#: correlation of that wheel's viscous and Coulomb friction estimates (what the fleet review needs for the
+#: friction torque at a robot's typical speed, :mod:`wmrid.monitoring.fleet_review`).
+ADDED_IN_2 = ("speed_r", "speed_l", "Fv1_Fd1_corr", "Fv2_Fd2_corr")
 
 #: The base parameters of every row (value and ``NAME_std``), SI units as ``identify`` reports them: the entries of
 #: m = M^-1 and of M, the Coriolis coefficient, the wheels' viscous and Coulomb friction, the casters' drag (null
@@ -52,6 +58,7 @@ def _schema():
     ]  # fmt: skip
     for name in PARAMETERS:
         fields += [(name, pa.float64()), (f"{name}_std", pa.float64())]
+    fields += [(name, pa.float64()) for name in ADDED_IN_2]
     fields += [
         ("flags", pa.list_(pa.field("element", pa.string()))),
         ("warnings", pa.list_(pa.field("element", pa.string()))), ("fit_r", pa.float64()),
@@ -129,11 +136,16 @@ def read_arrow(path: str | os.PathLike[str], *, as_input: bool = True):
         raise LogFormatError(f"{name}: not a Parquet fleet table ({_one_line(err)})") from None
     meta = table.schema.metadata or {}
     version = meta.get(b"wmrid_fleet_schema", b"").decode()
-    if version != SCHEMA_VERSION:
+    if version not in READABLE_VERSIONS:
         found = f"schema {version}" if version else "no wmrid_fleet_schema in its metadata"
         raise LogFormatError(
-            f"{name}: not a wmrid fleet table of schema {SCHEMA_VERSION} ({found}); make it with `wmrid fleet`"
+            f"{name}: not a wmrid fleet table of schema {' or '.join(READABLE_VERSIONS)} ({found}); make it with "
+            "`wmrid fleet`"
         )
+    if version == "1":
+        for column in ADDED_IN_2:
+            if column not in table.column_names:
+                table = table.append_column(column, pa.nulls(len(table), pa.float64()))
     missing = [n for n in column_names() if n not in table.column_names]
     if missing:
         raise LogFormatError(f"{name}: the fleet table lacks the columns {', '.join(missing)}; remake it")

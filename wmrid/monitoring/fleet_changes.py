@@ -35,8 +35,11 @@ import numpy as np
 #: The parameters watched across logs: the inertia matrix M (what a payload changes), the Coriolis coefficient V_c
 #: (a payload's x offset) and each wheel's viscous and Coulomb friction (what wear changes).
 MONITORED = ("M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
-FRICTION = ("Fv1", "Fv2", "Fd1", "Fd2")
-WHEEL_OF = {"Fv1": "right", "Fd1": "right", "Fv2": "left", "Fd2": "left"}
+#: Each wheel's friction torque at the robot's typical speed of that wheel, Fw = Fd + omega Fv (N m): watched besides
+#: Fv and Fd when the table has the logs' speeds (:func:`friction_at`).
+WHEEL_FRICTION = ("Fw1", "Fw2")
+FRICTION = ("Fv1", "Fv2", "Fd1", "Fd2", *WHEEL_FRICTION)
+WHEEL_OF = {"Fv1": "right", "Fd1": "right", "Fw1": "right", "Fv2": "left", "Fd2": "left", "Fw2": "left"}
 
 #: Logs before the first that can be tested (a baseline needs a spread).
 MIN_BASELINE = 5
@@ -158,6 +161,21 @@ def threshold(alpha: float, total: int, first: int, window: int, params: int = l
     return float(brentq(lambda h: chances * _tail(h, dof) - alpha, 1e-6, 1e9, xtol=1e-9))
 
 
+def friction_at(
+    omega: float, fv: np.ndarray, fd: np.ndarray, fv_std: np.ndarray, fd_std: np.ndarray, corr: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """A wheel's friction torque at speed ``omega`` (rad/s), Fw = Fd + omega Fv (N m), for each log (arrays (T,)),
+    and its standard error from the two estimates' standard errors and their correlation ``corr`` (NaN where a log
+    does not give it).
+
+    A log determines Fv and Fd badly apart (their estimates correlate at -0.9 to -0.99 when the wheel's speed keeps
+    away from zero: a higher Fv with a lower Fd fits almost as well) and their sum at the log's mean speed well: in
+    linear regression the prediction at the regressor's mean is the best determined.  On the multibody prototype's
+    logs Fv and Fd scatter by 3-29 % from log to log and Fw by 0.7-1.7 % (README "Fleets")."""
+    var = fd_std**2 + (omega * fv_std) ** 2 + 2.0 * omega * corr * fv_std * fd_std
+    return fd + omega * fv, np.sqrt(np.clip(var, 0.0, None))
+
+
 # ----------------------------------------------------------------------------------------------------------------
 # One robot's history
 
@@ -226,6 +244,7 @@ def analyse_robot(
     baseline: int = 10,
     window: int = 30,
     alpha: float = 0.001,
+    unfloored: tuple[str, ...] = (),
 ) -> RobotHistory:
     """Changes in one robot's logs: ``values`` and ``stds`` (T, P) in time order, columns ``names``, finite (pass only
     usable logs); ``days`` (T,) their times in days (for rates; default the log index).
@@ -233,7 +252,9 @@ def analyse_robot(
     Logs from ``baseline`` on are scanned (:func:`scan`, module docstring) at the threshold of false-alarm
     probability ``alpha`` over the robot's history (:func:`threshold`); a change also has to exceed
     :data:`MIN_EFFECT_STDS` times the median of the first logs' own standard errors (which only removes alarms: the
-    rate stays at most ``alpha``)."""
+    rate stays at most ``alpha``), except for the parameters ``unfloored``: those whose standard error holds an
+    error common to all the robot's logs (the model error of :data:`WHEEL_FRICTION`), which a change between logs
+    does not have to beat."""
     values = np.asarray(values, dtype=float)
     stds = np.asarray(stds, dtype=float)
     total = values.shape[0]
@@ -248,6 +269,7 @@ def analyse_robot(
         warnings.simplefilter("ignore", RuntimeWarning)  # a parameter no log gave a std for: no floor
         floor = np.nanmedian(known, axis=0)
     floor = np.where(np.isfinite(floor), floor, 0.0)
+    floor = np.where([n in unfloored for n in names], 0.0, floor)
     h = threshold(alpha, total, baseline, window, len(names))
     hist = RobotHistory(total, h)
     keep = np.ones(total, dtype=bool)  # odd logs are dropped from the scan

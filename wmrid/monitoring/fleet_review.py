@@ -17,12 +17,17 @@ import numpy as np
 from wmrid.monitoring.fleet_changes import (
     FRICTION,
     MONITORED,
+    WHEEL_FRICTION,
     WHEEL_OF,
     RobotHistory,
     analyse_robot,
+    friction_at,
     leave_one_out_t,
     outlier_threshold,
 )
+
+#: The table columns of each wheel's friction at its typical speed: (Fw name, Fv, Fd, speed, correlation).
+_WHEEL_COLUMNS = (("Fw1", "Fv1", "Fd1", "speed_r", "Fv1_Fd1_corr"), ("Fw2", "Fv2", "Fd2", "speed_l", "Fv2_Fd2_corr"))
 
 #: Robots of one model needed to say which one stands out.
 MIN_FLEET = 5
@@ -47,10 +52,33 @@ class RobotReview:
     evidence: float = 0.0
     #: True when some log has no start time: logs in name order, rates per log instead of per day
     per_log: bool = False
+    #: {Fw name: (the wheel's typical speed in rad/s, values (T,), standard errors (T,))}: each wheel's friction
+    #: torque at the median of its mean speeds over the baseline logs (none when the table has no speeds)
+    wheel_friction: dict[str, tuple[float, np.ndarray, np.ndarray]] = field(default_factory=dict)
 
     @property
     def flagged(self) -> bool:
         return bool(self.flags)
+
+    @property
+    def watched(self) -> tuple[str, ...]:
+        """The parameters scanned for changes: :data:`MONITORED`, then the wheel friction torques it has."""
+        return (*MONITORED, *self.wheel_friction)
+
+    def series(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """(values (T,), standard errors (T,), NaN where unknown) of one watched parameter over the usable logs."""
+        if name in self.wheel_friction:
+            return self.wheel_friction[name][1], self.wheel_friction[name][2]
+        values = np.array([r[name] for r in self.rows], dtype=float)
+        stds = np.array([r.get(f"{name}_std") if r.get(f"{name}_std") is not None else np.nan for r in self.rows],
+                        dtype=float)  # fmt: skip
+        return values, stds
+
+    def describe(self, name: str) -> str:
+        """A parameter's name as the findings say it (a wheel friction torque with its speed)."""
+        if name in self.wheel_friction:
+            return f"{name} (the {WHEEL_OF[name]} wheel's friction at {self.wheel_friction[name][0]:.3g} rad/s)"
+        return name
 
     def time_of(self, index: int) -> dt.datetime | None:
         return self.rows[index]["start_time"] if 0 <= index < len(self.rows) else None
@@ -129,12 +157,16 @@ def review_fleet(
         ok = _order([r for r in robot_rows if usable(r)])
         models = {r["robot"] for r in robot_rows if r.get("robot")}
         model = sorted(models)[0] if models else NO_MODEL
-        values = np.array([[r[n] for n in MONITORED] for r in ok]).reshape(len(ok), len(MONITORED))
-        stds = np.array([[r.get(f"{n}_std") if r.get(f"{n}_std") is not None else np.nan for n in MONITORED]
-                         for r in ok]).reshape(len(ok), len(MONITORED))  # fmt: skip
-        history = analyse_robot(values, stds, _days(ok), baseline=baseline, window=window, alpha=alpha)
-        review = RobotReview(robot_id, model, ok, len(robot_rows) - len(ok), history, evidence=history.evidence,
+        review = RobotReview(robot_id, model, ok, len(robot_rows) - len(ok), RobotHistory(len(ok), math.inf),
                              per_log=any(r["start_time"] is None for r in ok))  # fmt: skip
+        review.wheel_friction = _wheel_friction(review, baseline)
+        names = review.watched
+        pairs = [review.series(n) for n in names]
+        values = np.array([v for v, _ in pairs], dtype=float).reshape(len(names), len(ok)).T
+        stds = np.array([e for _, e in pairs], dtype=float).reshape(len(names), len(ok)).T
+        review.history = analyse_robot(values, stds, _days(ok), names=names, baseline=baseline, window=window,
+                                       alpha=alpha, unfloored=WHEEL_FRICTION)  # fmt: skip
+        review.evidence = review.history.evidence
         if len(models) > 1:
             review.findings.append(f"its logs name {len(models)} robot files ({', '.join(sorted(models))}); the "
                                    f"fleet comparison uses {model}")  # fmt: skip
@@ -164,6 +196,24 @@ def review_fleet(
     return FleetReview(reviews, settings, statements, thresholds)
 
 
+def _wheel_friction(review: RobotReview, baseline: int) -> dict[str, tuple[float, np.ndarray, np.ndarray]]:
+    """Each wheel's friction torque at its typical speed (:func:`~wmrid.monitoring.fleet_changes.friction_at`): the
+    median of the wheel's mean speeds over the robot's first ``baseline`` logs that have one (a table of schema 1,
+    or logs all without speeds: none)."""
+    out: dict[str, tuple[float, np.ndarray, np.ndarray]] = {}
+    for name, fv, fd, speed, corr in _WHEEL_COLUMNS:
+        speeds = [r.get(speed) for r in review.rows[:baseline]]
+        known = [float(v) for v in speeds if v is not None and math.isfinite(v)]
+        if not known:
+            continue
+        omega = float(np.median(known))
+        (v_fv, s_fv), (v_fd, s_fd) = review.series(fv), review.series(fd)
+        rho = np.array([r.get(corr) if r.get(corr) is not None else np.nan for r in review.rows], dtype=float)
+        value, std = friction_at(omega, v_fv, v_fd, s_fv, s_fd, rho)
+        out[name] = (omega, value, std)
+    return out
+
+
 def _pct(x: float) -> str:
     return f"{100 * x:+.1f} %" if math.isfinite(x) else "from 0"
 
@@ -190,7 +240,9 @@ def _word_changes(review: RobotReview, robot_of: Callable[[str], Any] | None) ->
             shifts = ", ".join(f"{p} {_pct(change.relative(p))}" for p in inertial)
             text = f"payload or configuration change from {onset} (flagged {alarm}{lag}): {shifts}"
             if friction:
-                text += "; friction changed with it: " + ", ".join(f"{p} {_pct(change.relative(p))}" for p in friction)
+                text += "; friction changed with it: " + ", ".join(
+                    f"{review.describe(p)} {_pct(change.relative(p))}" for p in friction
+                )
             review.payload = _payload(review, change, robot_of)
             if review.payload is not None:
                 m, m_sd = review.payload["mass"]
@@ -207,8 +259,8 @@ def _word_changes(review: RobotReview, robot_of: Callable[[str], Any] | None) ->
             unit = "log" if review.per_log else "day"
             rising = [p for p in friction if change.relative(p) > 0]
             how = ", ".join(
-                f"{p} {_pct(change.relative(p))}" + (f" ({100 * change.rate_per_day[p]:+.2g} %/{unit})"
-                                                      if change.kind == "ramp" else "")
+                f"{review.describe(p)} {_pct(change.relative(p))}"
+                + (f" ({100 * change.rate_per_day[p]:+.2g} %/{unit})" if change.kind == "ramp" else "")
                 for p in friction
             )  # fmt: skip
             wheel_text = " and ".join(wheels) + (" wheel's" if len(wheels) == 1 else " wheels'")

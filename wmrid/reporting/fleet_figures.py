@@ -12,7 +12,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from wmrid.monitoring.fleet_changes import MONITORED
 from wmrid.reporting.figures import _new_figure
 
 if TYPE_CHECKING:
@@ -21,7 +20,10 @@ if TYPE_CHECKING:
     from wmrid.monitoring.fleet_review import FleetReview, RobotReview
 
 UNITS = {"M11": "kg m²", "M12": "kg m²", "M22": "kg m²", "Vc": "kg m", "Fv1": "N m s", "Fv2": "N m s",
-         "Fd1": "N m", "Fd2": "N m"}  # fmt: skip
+         "Fd1": "N m", "Fd2": "N m", "Fw1": "N m", "Fw2": "N m"}  # fmt: skip
+#: The panels, row by row: the inertial parameters and the friction, with each wheel's friction at its typical
+#: speed in a fifth column when the review has it (right wheel's on top).
+_PANELS = (("M11", "M12", "M22", "Vc"), ("Fv1", "Fv2", "Fd1", "Fd2"))
 
 
 def _x(review: RobotReview) -> tuple[Any, str]:
@@ -35,9 +37,10 @@ def _x(review: RobotReview) -> tuple[Any, str]:
 
 
 def build_robot_figure(review: RobotReview) -> Figure | None:
-    """Eight panels (M11 M12 M22 Vc / Fv1 Fv2 Fd1 Fd2): each log's estimate with its ±2σ band, the mean of the
-    logs before the change (dashed), the change's onset (dotted) and the log that first flagged it (red); odd logs
-    as crosses.  None for a robot without usable logs."""
+    """Eight panels (M11 M12 M22 Vc / Fv1 Fv2 Fd1 Fd2), and Fw1 / Fw2 in a fifth column when the review has the
+    wheels' friction at their typical speeds: each log's estimate with its ±2σ band, the mean of the logs before
+    the change (dashed), the change's onset (dotted) and the log that first flagged it (red); odd logs as crosses.
+    None for a robot without usable logs."""
     if not review.rows:
         return None
     x, kind = _x(review)
@@ -48,12 +51,13 @@ def build_robot_figure(review: RobotReview) -> Figure | None:
     fig = Figure(figsize=(11.0, 4.6))
     FigureCanvasAgg(fig)
     fig.subplots_adjust(left=0.06, right=0.995, bottom=0.11, top=0.93, wspace=0.42, hspace=0.32)
-    axes = fig.subplots(2, 4, sharex=True)
+    extra = [n for n in ("Fw1", "Fw2") if n in review.wheel_friction]
+    panels = [list(row) + ([extra[k]] if k < len(extra) and len(extra) == 2 else []) for k, row in enumerate(_PANELS)]
+    axes = fig.subplots(2, len(panels[0]), sharex=True)
     change = review.history.changes[0] if review.history.changes else None
     odd = set(review.history.odd_logs)
-    for ax, name in zip(axes.flat, MONITORED, strict=True):
-        y = np.array([r[name] for r in review.rows], dtype=float)
-        s = np.array([r.get(f"{name}_std") if r.get(f"{name}_std") is not None else np.nan for r in review.rows])
+    for ax, name in zip(axes.flat, [n for row in panels for n in row], strict=True):
+        y, s = review.series(name)
         s = np.where(np.isfinite(s), s, 0.0)
         changed = change is not None and name in change.parameters
         color = "C3" if changed else "C0"
@@ -67,10 +71,17 @@ def build_robot_figure(review: RobotReview) -> Figure | None:
         base = y[:stop][keep[:stop]]
         if base.size:
             ax.axhline(float(base.mean()), color="0.4", linestyle="--", linewidth=0.8)
+        finite = y[np.isfinite(y)]
+        if finite.size > 1 and np.ptp(finite) > 0 and 4 * np.max(s) > 10 * np.ptp(finite):
+            # bands far wider than the logs' spread (a model error common to every log): the band fills the panel
+            # and the axis follows the values, so that their trend stays visible
+            lo, hi = float(finite.min()), float(finite.max())
+            ax.set_ylim(lo - 1.5 * (hi - lo), hi + 1.5 * (hi - lo))
         if change is not None:
             ax.axvline(x[change.onset], color="0.3", linestyle=":", linewidth=1.0)
             ax.axvline(x[change.alarm], color="C3", linewidth=1.0)
-        ax.set_title(f"{name} ({UNITS[name]})", fontsize=9, color="C3" if changed else "black")
+        speed = f" at {review.wheel_friction[name][0]:.3g} rad/s" if name in review.wheel_friction else ""
+        ax.set_title(f"{name}{speed} ({UNITS[name]})", fontsize=9, color="C3" if changed else "black")
         ax.tick_params(labelsize=7)
         ax.yaxis.get_offset_text().set_fontsize(7)
     if kind == "date":

@@ -91,7 +91,9 @@ def build_fleet_report(
                 rep.figure_objects[f"robot {rv.robot_id}"] = fig
                 rep.figure_notes[f"robot {rv.robot_id}"] = (
                     "each log's estimate with ±2σ; dashed: mean before any change; dotted: the change's onset; red "
-                    "line: first flagged; ×: odd logs"
+                    "line: first flagged; ×: odd logs; a band that fills its panel is far wider than the logs' spread "
+                    "(an error common to all of them), and the axis then follows the values; Fw1, Fw2: each wheel's "
+                    "friction at its typical speed"
                 )
         left = len(review.robots) - len(flagged) - len(others)
         if left > 0:
