@@ -194,3 +194,35 @@ def test_payload_from_a_change_equals_the_model_inversion():
     np.testing.assert_allclose(got, [12.0, 0.08, -0.04, 0.3], rtol=1e-9, atol=1e-10)
     theta0 = model.base_parameters(CAD.with_payload(load))
     np.testing.assert_allclose(payload_from_base(theta0, CAD), got, rtol=1e-9, atol=1e-10)
+
+
+@pytest.mark.parametrize(("kind", "length"), [("step", 1), ("step", 4), ("ramp", 10)])
+def test_the_detectable_change_is_flagged_about_half_the_time(kind, length):
+    """detectable(h, ...) is the change the scan flags at least half the time by its ``length``-th log: on 2000 fresh
+    robots (8 parameters of unit Gaussian scatter, the change in one, 40 logs, baseline 10) the rate of a flag by
+    then lies in [0.45, 0.75] (the statement's 'at least half', with 3 binomial std below; the other onsets and the
+    other alternative may add chances above)."""
+    total, baseline = 40, 10
+    h = fc.threshold(0.001, total, baseline, 30)
+    k = fc.detectable(h, baseline, length, kind)
+    rng = np.random.Generator(np.random.PCG64(2024 + length))
+    x = rng.standard_normal((2000, 8, total))
+    t = np.arange(total) - baseline + 1.0
+    x[:, 0, :] += np.where(t >= 1, k if kind == "step" else k * t / length, 0.0)
+    end = baseline + length - 1
+    stat = fc.scan(x[..., : end + 1], 30, baseline)[0]
+    rate = float(np.mean((stat > h).any(axis=(1, 2))))
+    assert 0.5 - 3 * math.sqrt(0.25 / 2000) <= rate <= 0.75, rate
+
+
+def test_the_detectable_change_against_the_noncentral_f_by_hand():
+    # a step of one log after 10: n = 11 logs, the regressor is one 1, S_gg - S_g^2 / n = 1 - 1/11; the effect k
+    # makes lambda = k^2 (10/11) the noncentrality whose F(1, 9) median is h
+    from scipy.stats import ncf
+
+    k = fc.detectable(30.0, 10, 1, "step")
+    assert float(ncf.median(1, 9, k * k * 10 / 11)) == pytest.approx(30.0, rel=1e-8)
+    # a ramp of 10 logs after 10: g = 1..10, S_g = 55, S_gg = 385, n = 20; the rise is 10 slopes
+    k = fc.detectable(30.0, 10, 10, "ramp")
+    slope = k / 10
+    assert float(ncf.median(1, 18, slope**2 * (385 - 55**2 / 20))) == pytest.approx(30.0, rel=1e-8)

@@ -299,3 +299,31 @@ def test_a_fleet_row_carries_the_mean_wheel_speeds_and_the_friction_correlations
     for (v, d), name in (((4, 6), "Fv1_Fd1_corr"), ((5, 7), "Fv2_Fd2_corr")):
         assert row[name] == pytest.approx(cov[v, d] / np.sqrt(cov[v, v] * cov[d, d]), rel=1e-9)
         assert -1 <= row[name] <= 1
+
+
+def test_each_robot_states_the_smallest_changes_it_would_flag(rows, tmp_path):
+    """Under every tested robot: the step of each inertial parameter and the friction rise over 10 logs flagged at
+    least half the time, from its first 10 logs' scatter (detectable(h) sd, and no less than twice the median std),
+    relative to their mean; in the page, the Markdown and the JSON."""
+    from wmrid.monitoring.fleet_changes import detectable
+
+    rep = fleet_report(rows, robot="paper", figures=False)
+    rv = _by_id(rep)["R01"]
+    h = rv.history.threshold
+    for name in ("M11", "Vc", "Fd2"):
+        base = np.array([r[name] for r in rv.rows[:10]])
+        floor = 2 * np.median([r[f"{name}_std"] for r in rv.rows[:10]])
+        expect_step = max(detectable(h, 10, 1, "step") * base.std(ddof=1), floor) / abs(base.mean())
+        expect_ramp = max(detectable(h, 10, 10, "ramp") * base.std(ddof=1), floor) / abs(base.mean())
+        assert rv.sensitivity["step"][name] == pytest.approx(expect_step, rel=1e-12)
+        assert rv.sensitivity["ramp"][name] == pytest.approx(expect_ramp, rel=1e-12)
+    assert rv.sensitivity_text.startswith("smallest changes flagged at least half the time: a step on its first log")
+    assert f"M11 {100 * rv.sensitivity['step']['M11']:.2g} %" in rv.sensitivity_text
+    write_fleet_report(rep, tmp_path / "r.md")
+    write_fleet_report(rep, tmp_path / "r.json")
+    assert rv.sensitivity_text in (tmp_path / "r.md").read_text()
+    data = json.loads((tmp_path / "r.json").read_text())
+    r01 = next(r for r in data["robots"] if r["robot_id"] == "R01")
+    assert r01["sensitivity"]["ramp_logs"] == 10
+    assert r01["sensitivity"]["step"]["M11"] == pytest.approx(rv.sensitivity["step"]["M11"])
+    assert any(s.startswith("Sensitivity:") for s in data["statements"])

@@ -161,6 +161,35 @@ def threshold(alpha: float, total: int, first: int, window: int, params: int = l
     return float(brentq(lambda h: chances * _tail(h, dof) - alpha, 1e-6, 1e9, xtol=1e-9))
 
 
+#: The ramp length (logs) the sensitivity statement uses: wear reaching its size over this many logs.
+SENSITIVITY_RAMP_LOGS = 10
+
+
+@lru_cache(maxsize=256)
+def detectable(h: float, baseline: int, length: int, kind: str) -> float:
+    """The size of a change, in units of the log-to-log standard deviation, that the scan flags at least half the
+    time by the time it has lasted ``length`` logs after ``baseline`` unchanged logs: a step of that height
+    (``kind`` "step"), or a ramp that has risen by that much over its ``length`` logs ("ramp").
+
+    At the end log n = baseline + length - 1 with the onset at ``baseline``, the statistic of that alternative is
+    noncentral F(1, n - 1) with noncentrality (effect / rise)^2 (S_gg - S_g^2 / (n + 1)) in the units of the scatter,
+    S_g and S_gg the sums of the alternative's regressor and of its square (:func:`scan`); the effect whose F has
+    median h is returned.  The scan also tries the other onsets, ends and the other alternative, so the chance of a
+    flag is at least one half (``tests/test_fleet_changes.py`` measures it by Monte Carlo)."""
+    from scipy.optimize import brentq
+    from scipy.stats import ncf
+
+    if length < 1 or baseline < 2:
+        raise ValueError("detectable: length >= 1 and baseline >= 2 logs")
+    count = float(baseline + length)
+    g = np.ones(length) if kind == "step" else np.arange(1.0, length + 1.0)
+    denom = float(g @ g - g.sum() ** 2 / count)
+    rise = 1.0 if kind == "step" else float(length)
+    dof = count - 2.0
+    lam = brentq(lambda nc: float(ncf.median(1, dof, nc)) - h, 1e-9, 1e7, xtol=1e-10)
+    return rise * math.sqrt(lam / denom)
+
+
 def friction_at(
     omega: float, fv: np.ndarray, fd: np.ndarray, fv_std: np.ndarray, fd_std: np.ndarray, corr: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:

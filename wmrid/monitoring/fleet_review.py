@@ -16,11 +16,14 @@ import numpy as np
 
 from wmrid.monitoring.fleet_changes import (
     FRICTION,
+    MIN_EFFECT_STDS,
     MONITORED,
+    SENSITIVITY_RAMP_LOGS,
     WHEEL_FRICTION,
     WHEEL_OF,
     RobotHistory,
     analyse_robot,
+    detectable,
     friction_at,
     leave_one_out_t,
     outlier_threshold,
@@ -55,6 +58,11 @@ class RobotReview:
     #: {Fw name: (the wheel's typical speed in rad/s, values (T,), standard errors (T,))}: each wheel's friction
     #: torque at the median of its mean speeds over the baseline logs (none when the table has no speeds)
     wheel_friction: dict[str, tuple[float, np.ndarray, np.ndarray]] = field(default_factory=dict)
+    #: The smallest changes flagged at least half the time, relative to the baseline mean (:func:`_sensitivity`):
+    #: {"step": {parameter: size on its first log}, "ramp": {parameter: rise over "ramp_logs" logs}, "ramp_logs"}
+    sensitivity: dict[str, Any] = field(default_factory=dict)
+    #: The same in words (empty for a robot with too few logs to test)
+    sensitivity_text: str = ""
 
     @property
     def flagged(self) -> bool:
@@ -167,6 +175,7 @@ def review_fleet(
         review.history = analyse_robot(values, stds, _days(ok), names=names, baseline=baseline, window=window,
                                        alpha=alpha, unfloored=WHEEL_FRICTION)  # fmt: skip
         review.evidence = review.history.evidence
+        review.sensitivity, review.sensitivity_text = _sensitivity(review, baseline, window)
         if len(models) > 1:
             review.findings.append(f"its logs name {len(models)} robot files ({', '.join(sorted(models))}); the "
                                    f"fleet comparison uses {model}")  # fmt: skip
@@ -182,6 +191,10 @@ def review_fleet(
         f"scatter; thresholds calibrated by seeded Monte Carlo and made conservative for small rates): about "
         f"{tested * alpha:.2g} false flags expected among these {tested} robots.  Scatter with heavier tails than "
         "Gaussian raises that rate; parameters correlated with each other lower it.",
+        f"Sensitivity: under each robot, the smallest changes its tests flag at least half the time, from the "
+        f"scatter of its first {baseline} logs: a step of each inertial parameter on its first log, and each wheel's "
+        f"friction rising over {min(SENSITIVITY_RAMP_LOGS, window)} logs (its most sensitive parameter); smaller "
+        "changes may pass unflagged.",
         f"Fleet comparison: each robot's mean over its first {baseline} logs against the mean and spread of the other "
         f"robots of the same robot file (Student's t); the probability that any robot of a model with Gaussian "
         f"unit-to-unit spread is said to stand out is at most {outlier_alpha:g} (Bonferroni; at least {MIN_FLEET} "
@@ -212,6 +225,39 @@ def _wheel_friction(review: RobotReview, baseline: int) -> dict[str, tuple[float
         value, std = friction_at(omega, v_fv, v_fd, s_fv, s_fd, rho)
         out[name] = (omega, value, std)
     return out
+
+
+def _sensitivity(review: RobotReview, baseline: int, window: int) -> tuple[dict[str, Any], str]:
+    """The smallest changes the robot's tests flag at least half the time
+    (:func:`~wmrid.monitoring.fleet_changes.detectable`): each watched parameter's step on its first log and rise
+    over :data:`SENSITIVITY_RAMP_LOGS` logs, from the sd of its first ``baseline`` logs (and no smaller than the
+    size rule of :func:`~wmrid.monitoring.fleet_changes.analyse_robot`), relative to their mean; and a sentence
+    with the inertial steps and, per wheel, its most sensitive friction parameter."""
+    h = review.history.threshold
+    if not math.isfinite(h) or len(review.rows) <= baseline:
+        return {}, ""
+    ramp_logs = min(SENSITIVITY_RAMP_LOGS, window)
+    k_step, k_ramp = detectable(h, baseline, 1, "step"), detectable(h, baseline, ramp_logs, "ramp")
+    step: dict[str, float] = {}
+    ramp: dict[str, float] = {}
+    for name in review.watched:
+        values, stds = review.series(name)
+        base, base_std = values[:baseline], stds[:baseline]
+        mean, sd = float(np.mean(base)), float(np.std(base, ddof=1))
+        known = base_std[np.isfinite(base_std)]
+        floor = 0.0 if name in WHEEL_FRICTION or not known.size else MIN_EFFECT_STDS * float(np.median(known))
+        scale = abs(mean) if mean != 0 else math.inf
+        step[name] = max(k_step * sd, floor) / scale
+        ramp[name] = max(k_ramp * sd, floor) / scale
+    inertial = ", ".join(f"{n} {100 * step[n]:.2g} %" for n in MONITORED[:4])
+    wheels = []
+    for wheel in ("right", "left"):
+        names = [n for n in review.watched if WHEEL_OF.get(n) == wheel]
+        best = min(names, key=lambda n: ramp[n])
+        wheels.append(f"{100 * ramp[best]:.2g} % ({wheel} wheel, {best})")
+    text = (f"smallest changes flagged at least half the time: a step on its first log of {inertial}; a friction rise "
+            f"over {ramp_logs} logs of {' and '.join(wheels)}")  # fmt: skip
+    return {"step": step, "ramp": ramp, "ramp_logs": ramp_logs}, text
 
 
 def _pct(x: float) -> str:

@@ -111,6 +111,8 @@ def _robot_html(rep: FleetReport, rv: RobotReview) -> list[str]:
     parts = [f"<h3 id='robot-{html.escape(rv.robot_id)}'>{html.escape(rv.robot_id)}</h3>"]
     if rv.findings:
         parts += ["<ul>", *[f"<li>{html.escape(f)}</li>" for f in rv.findings], "</ul>"]
+    if rv.sensitivity_text:
+        parts.append(f"<p class='small'>{html.escape(rv.sensitivity_text)}</p>")
     if rv.payload:
         rows = [[n, f"{v:.4g}", "—" if e is None else f"{e:.2g}"] for n, (v, e) in rv.payload.items()]
         parts.append(_html_table({"header": ["payload", "estimate", "std"], "rows": rows}))
@@ -166,6 +168,8 @@ def to_markdown(rep: FleetReport) -> str:
             parts += ["", "No robot flagged." if title == "Flagged robots" else "None: every robot is flagged."]
         for rv in group:
             parts += ["", f"### {rv.robot_id}", "", *[f"- {f}" for f in rv.findings]]
+            if rv.sensitivity_text:
+                parts += ["", f"*{rv.sensitivity_text}*"]
             name = f"robot {rv.robot_id}"
             if name in rep.figure_objects:
                 png = base64.b64encode(rep.rendered(name, "png")).decode()
@@ -197,7 +201,18 @@ def robot_dict(rv: RobotReview) -> dict[str, Any]:
         "outlier_t": rv.outlier,
         "payload": None if rv.payload is None else {k: {"value": v, "std": e} for k, (v, e) in rv.payload.items()},
         "threshold": rv.history.threshold if math.isfinite(rv.history.threshold) else None, "note": rv.history.note,
+        "typical_speed": {name: omega for name, (omega, _, _) in rv.wheel_friction.items()},
+        "sensitivity": _finite(rv.sensitivity),
     }  # fmt: skip
+
+
+def _finite(value: Any) -> Any:
+    """Infinities and NaN as None, inside dicts (JSON has no infinity)."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
 def to_json_dict(rep: FleetReport) -> dict[str, Any]:
