@@ -127,7 +127,11 @@ def _describe(path: str) -> _File | None:
             ):
                 if encoding == "ros2msg" and name not in definitions:
                     definitions[name] = text or ""
-        ((first, last),) = db.execute("SELECT MIN(timestamp), MAX(timestamp) FROM messages")
+        # Two scalar subqueries: each is one look-up in rosbag2's timestamp index, where MIN and MAX in one SELECT
+        # scan the whole index (28 ms of a 600,000-message file from the page cache, ~0.1 s from disk).
+        ((first, last),) = db.execute(
+            "SELECT (SELECT MIN(timestamp) FROM messages), (SELECT MAX(timestamp) FROM messages)"
+        )
     except Exception:  # not a database, another schema: rosbags says what is wrong
         return None
     finally:

@@ -5,9 +5,10 @@ every format.
 rosbags opens the files (``rosbags.rosbag1.Reader`` for a ROS 1 bag, ``rosbags.rosbag2.Reader`` for a ``.db3`` or
 ``.mcap`` file or a rosbag2 folder with its ``metadata.yaml``) and hands out each message's serialised bytes with
 its receive time; several files are merged in time order (``heapq.merge``, as rosbags' AnyReader does).  ROS 1 bags
-(:mod:`wmrid.io.bag.ros1_file`) and uncompressed sqlite3 storage (:mod:`wmrid.io.bag.db3_file`) are read by wmrid
-itself, which skips rosbags' per-message generators; this module keeps what rosbags reads (compressed recordings,
-MCAP storage, recordings that overlap in time).  The JointState messages are gathered per topic in batches of
+(:mod:`wmrid.io.bag.ros1_file`), uncompressed sqlite3 storage (:mod:`wmrid.io.bag.db3_file`) and MCAP files
+(:mod:`wmrid.io.bag.mcap_files`) are read by wmrid itself, which skips rosbags' per-message generators and reads a
+file cut short by a crash; this module keeps what rosbags reads (compressed recordings, files that overlap in
+time).  The JointState messages are gathered per topic in batches of
 :data:`BATCH` and decoded by the compiled kernels of
 :class:`wmrid.io.mcap.joint_batches.JointChannels`: :func:`wmrid.io.bag.ros1_records.ros1_joint_states` for ROS 1,
 :func:`wmrid.io.mcap.records.joint_states` for CDR.  A message the kernel refuses, or a topic whose message
@@ -323,8 +324,8 @@ def iter_bag_joint_parts(
 
 @contextlib.contextmanager
 def _open_state(paths: Sequence[str], kind: str, **kwargs: Any) -> Iterator[_BagState]:
-    """The state that reads ``paths``: wmrid's own readers for ROS 1 bags and uncompressed sqlite3 recordings,
-    rosbags for the other ROS 2 recordings."""
+    """The state that reads ``paths``: wmrid's own readers for ROS 1 bags, uncompressed sqlite3 recordings and MCAP
+    files, rosbags for the other ROS 2 recordings (compressed, or files that overlap in time)."""
     if kind == "ros1":
         from wmrid.io.bag.ros1_file import Ros1State
 
@@ -336,6 +337,13 @@ def _open_state(paths: Sequence[str], kind: str, **kwargs: Any) -> Iterator[_Bag
     recordings = db3_files(paths)
     if recordings is not None:
         with Db3State(paths, recordings, **kwargs) as state:
+            yield state
+        return
+    from wmrid.io.bag.mcap_files import McapFilesState, mcap_files
+
+    files = mcap_files(paths)
+    if files is not None:
+        with McapFilesState(paths, files, **kwargs) as state:
             yield state
         return
     with BagFiles(paths, kind) as files:

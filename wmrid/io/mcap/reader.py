@@ -461,26 +461,30 @@ class _ReadState(JointChannels):
         data_len = lengths - 22
         for cid in np.unique(chan):
             sel = chan == cid
-            acc = self.channels.get(int(cid))
-            if acc is None:
-                if int(cid) not in self._unknown_channels:
-                    self._unknown_channels.add(int(cid))
-                    self.notes.append(
-                        f"messages on channel id {int(cid)}, which no Channel record defines, were skipped"
-                    )
-                continue
-            times = log_ns[sel]
-            acc.count += int(sel.sum())
-            lo, hi = int(times.min()), int(times.max())
-            acc.first_ns = lo if acc.first_ns is None else min(acc.first_ns, lo)
-            acc.last_ns = hi if acc.last_ns is None else max(acc.last_ns, hi)
-            info = acc.info
-            joint_like = info["schema_name"] in JOINT_STATE_NAMES + DYNAMIC_JOINT_STATE_NAMES
-            by_path = info["topic"] in self.fields and info["message_encoding"] == "cdr"
-            if by_path and (self.wanted is None or int(cid) in self.wanted):
-                self._field_batch(acc, buf, data_start[sel], data_len[sel], times)
-            elif self.decode and joint_like and info["message_encoding"] == "cdr" and not by_path:
-                if self.wanted is None or int(cid) in self.wanted:
-                    self._joint_batch(acc, buf, data_start[sel], data_len[sel], times)
-            elif info["message_encoding"] == "json" and info["topic"] in self.json_fields:
-                json_batch(self, acc, buf, data_start[sel], data_len[sel], times)
+            self._channel_messages(int(cid), buf, data_start[sel], data_len[sel], log_ns[sel])
+
+    def _channel_messages(
+        self, cid: int, buf: np.ndarray, starts: np.ndarray, lengths: np.ndarray, times: np.ndarray
+    ) -> None:
+        """The messages of channel ``cid`` in one batch: payloads buf[starts[i] : starts[i] + lengths[i]], log times
+        ``times`` (ns)."""
+        acc = self.channels.get(cid)
+        if acc is None:
+            if cid not in self._unknown_channels:
+                self._unknown_channels.add(cid)
+                self.notes.append(f"messages on channel id {cid}, which no Channel record defines, were skipped")
+            return
+        acc.count += len(times)
+        lo, hi = int(times.min()), int(times.max())
+        acc.first_ns = lo if acc.first_ns is None else min(acc.first_ns, lo)
+        acc.last_ns = hi if acc.last_ns is None else max(acc.last_ns, hi)
+        info = acc.info
+        joint_like = info["schema_name"] in JOINT_STATE_NAMES + DYNAMIC_JOINT_STATE_NAMES
+        by_path = info["topic"] in self.fields and info["message_encoding"] == "cdr"
+        if by_path and (self.wanted is None or cid in self.wanted):
+            self._field_batch(acc, buf, starts, lengths, times)
+        elif self.decode and joint_like and info["message_encoding"] == "cdr" and not by_path:
+            if self.wanted is None or cid in self.wanted:
+                self._joint_batch(acc, buf, starts, lengths, times)
+        elif info["message_encoding"] == "json" and info["topic"] in self.json_fields:
+            json_batch(self, acc, buf, starts, lengths, times)
