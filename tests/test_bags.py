@@ -408,7 +408,7 @@ def test_bad_field_paths_are_one_clear_error(vendor_bags):
     cases = {
         "eta_r=/wheel_state:velocity@right_wheel_joint": "needs exactly eta_r, eta_l, tau_r and tau_l",
         VENDOR_COLUMNS.replace("eta_l=/wheel_state", "eta_l=/motor_state"): "both speeds must come from one topic",
-        VENDOR_COLUMNS.replace("right.current", "right..current"): "is not a field, field[i] or field@NAME",
+        VENDOR_COLUMNS.replace("right.current", "right..current"): 'field@NAME or field@"NAME"',
     }
     for columns, needle in cases.items():
         out = text(wmrid("identify", bag, "--columns", columns, *AS_TORQUE))
@@ -451,6 +451,47 @@ def test_a_field_path_evaluates_as_documented():
     for missing in ("velocity@c", "arr[3]", "nested.z", "name"):
         assert np.isnan(parse(f"/t:{missing}").value(msg)), missing
     assert np.isnan(parse("/t:interface_values@j.values@effort").value(dynamic))
+
+
+def test_a_name_with_a_dot_or_a_comma_is_given_in_double_quotes():
+    from types import SimpleNamespace as M
+
+    from wmrid.core.errors import UsageError
+    from wmrid.io.columns import parse_column_mapping
+    from wmrid.io.field_paths import parse
+
+    msg = M(name=["base.wheel_r", "wheel,l", "plain"], velocity=[1.0, 2.0, 3.0])
+    assert parse('/t:velocity@"base.wheel_r"').value(msg) == 1.0
+    assert parse('/t:velocity@"wheel,l"').value(msg) == 2.0
+    assert parse('/t:velocity@"plain"').value(msg) == 3.0
+    assert np.isnan(parse("/t:velocity@base.wheel_r").value(msg))  # unquoted: the field 'wheel_r' of a number
+    mapping = parse_column_mapping('eta_r=/t:velocity@"base.wheel_r",eta_l=/t:velocity@"wheel,l",tau_r="a,b",tau_l=c')
+    assert mapping == {"eta_r": '/t:velocity@"base.wheel_r"', "eta_l": '/t:velocity@"wheel,l"', "tau_r": "a,b",
+                       "tau_l": "c"}  # fmt: skip
+    for bad in ('eta_r=/t:velocity@"open', '/t:velocity@""'):
+        with pytest.raises(UsageError, match=r"double quote|not a field"):
+            parse_column_mapping(bad) if bad.startswith("eta_r") else parse(bad)
+
+
+def test_joint_names_with_dots_read_by_field_path_from_a_bag(tmp_path, sample_result):
+    """A JointState whose joints are named 'base.right_wheel' and 'base,left_wheel': the field paths quote them
+    and give the sample's parameters exactly."""
+    store = bagutil.motor_store()
+    js = store.types[bagutil.JOINT_STATE]
+    renamed = []
+    for m in bagutil.recording(SAMPLE):
+        msg = store.deserialize_cdr(m.cdr, bagutil.JOINT_STATE)
+        names = [{"right_wheel_joint": "base.right_wheel", "left_wheel_joint": "base,left_wheel"}[n] for n in msg.name]
+        out = js(header=msg.header, name=names, position=msg.position, velocity=msg.velocity, effort=msg.effort)
+        renamed.append(bagutil.Message(m.topic, m.msgtype, m.log_ns, bytes(store.serialize_cdr(out, m.msgtype))))
+    bag = bagutil.write_ros1(tmp_path / "dotted.bag", renamed)
+    columns = ",".join(
+        f'{key}=/joint_states:{field}@"base{sep}{side}_wheel"'
+        for key, field, sep, side in (("eta_r", "velocity", ".", "right"), ("eta_l", "velocity", ",", "left"),
+                                      ("tau_r", "effort", ".", "right"), ("tau_l", "effort", ",", "left"))
+    )  # fmt: skip
+    result = _identify([bag], "--columns", columns)
+    assert result["parameters"] == sample_result["parameters"]
 
 
 def test_formats_are_found_by_magic_bytes_and_an_unknown_one_lists_the_supported(tmp_path, sample_bags):

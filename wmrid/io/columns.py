@@ -26,9 +26,11 @@ def parse_column_mapping(text: str) -> dict[str, str]:
     Keys are canonical names (t, eta_r, eta_l, tau_r, tau_l, x, y, phi); values are column names in the
     log.  Returns {canonical: source name}.  Raises :class:`UsageError` on anything else.
     """
+    from wmrid.io.field_paths import split_outside_quotes
+
     mapping: dict[str, str] = {}
     example = "t=time,eta_r=vel_right,tau_l=effort_left"
-    for item in text.split(","):
+    for item in split_outside_quotes(text, ","):
         item = item.strip()
         if not item:
             continue
@@ -39,6 +41,8 @@ def parse_column_mapping(text: str) -> dict[str, str]:
                 f"{option('columns')}: {item!r} is not NAME=COLUMN; write e.g. {option('columns')} {example}"
             )
         check_key(key, "--columns")
+        if len(value) >= 2 and value[0] == value[-1] == '"':  # a column name with a comma, in quotes
+            value = value[1:-1]
         if key in mapping:
             raise UsageError(f"{option('columns')}: {key!r} is given twice ({mapping[key]!r} and {value!r})")
         mapping[key] = value

@@ -8,7 +8,9 @@ its effort from the field ``current`` of the field ``right`` of the messages on 
 PATH is fields separated by dots.  A field may be followed by ``[i]`` (element i of an array, from 0) or by
 ``@NAME`` (the element of an array at the position of NAME in the message's array of names beside it: the first
 of ``name``, ``names``, ``joint_names`` and ``interface_names`` the message has; so
-``interface_values@right_wheel_joint.values@velocity`` reads a ros2_control DynamicJointState).  A value that is
+``interface_values@right_wheel_joint.values@velocity`` reads a ros2_control DynamicJointState).  A NAME holding a
+dot or a comma is written in double quotes: ``velocity@"base.wheel_r"`` (``--columns`` splits at commas outside
+quotes; the shell needs the whole option in single quotes then).  A value that is
 absent (a shorter array, a name not in the list) is NaN.  Both speeds come from one topic, and both efforts from
 one topic (the same or another: the efforts are then aligned to the speeds' stamps as for two JointState topics).
 Time: each message's ``header.stamp`` when it has one, else its receive (log) time, as ``--time-source`` says.
@@ -31,7 +33,7 @@ from wmrid.core.errors import UsageError, option
 #: Arrays of names an ``@NAME`` selector looks up, beside the array it selects from.
 NAME_ARRAYS = ("name", "names", "joint_names", "interface_names")
 
-_STEP = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\]|@(.+))?$")
+_STEP = re.compile(r'^([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\]|@"([^"]+)"|@([^"]+))?$')
 
 
 @dataclass(frozen=True)
@@ -78,16 +80,34 @@ def parse(text: str) -> FieldPath:
             f"{option('columns')}: {text!r} is not TOPIC:FIELD.PATH; write e.g. /motor_state:right.current"
         )
     steps = []
-    for part in path.split("."):
+    for part in split_outside_quotes(path, "."):
         m = _STEP.match(part)
         if m is None:
             raise UsageError(
-                f"{option('columns')}: {text!r}: {part!r} is not a field, field[i] or field@NAME; write e.g. "
-                "/wheel_state:velocity@right_wheel_joint"
+                f'{option("columns")}: {text!r}: {part!r} is not a field, field[i], field@NAME or field@"NAME"; '
+                "write e.g. /wheel_state:velocity@right_wheel_joint"
             )
-        field, index, name = m.groups()
-        steps.append((field, None if index is None else int(index), name))
+        field, index, quoted, name = m.groups()
+        steps.append((field, None if index is None else int(index), quoted if quoted is not None else name))
     return FieldPath(text, topic, tuple(steps))
+
+
+def split_outside_quotes(text: str, sep: str) -> list[str]:
+    """``text`` split at each ``sep`` that is not between double quotes (the quotes are kept); UsageError when a
+    quote is left open."""
+    parts, current, quoted = [], [], False
+    for char in text:
+        if char == '"':
+            quoted = not quoted
+        if char == sep and not quoted:
+            parts.append("".join(current))
+            current = []
+        else:
+            current.append(char)
+    if quoted:
+        raise UsageError(f"{option('columns')}: {text!r} opens a double quote it does not close")
+    parts.append("".join(current))
+    return parts
 
 
 @dataclass(frozen=True)
