@@ -257,34 +257,24 @@ def identify_entry(spec: dict[str, Any]) -> dict[str, Any]:
     return row
 
 
-#: glibc's malloc settings for a worker (mallopt parameter -> value): large blocks from the heap up to 32 MiB
-#: (M_MMAP_THRESHOLD) and up to 64 MiB of freed heap kept (M_TRIM_THRESHOLD).  Dask's nanny starts workers with
-#: MALLOC_TRIM_THRESHOLD_=65536, which also fixes the mmap threshold at 128 KiB: every array of a log is then mapped
-#: and unmapped afresh, and identify takes 0.19 s instead of 0.11 s on a 60 s log (+70 %, bench/bench_fleet.py).
-#: A worker holds nothing between logs, so keeping 64 MiB of freed heap bounds what it keeps.
-_MALLOC = {-3: 32 * 1024 * 1024, -1: 64 * 1024 * 1024}
 _worker_prepared = False
+_malloc_tuned = False
 
 
 def prepare_worker() -> bool:
     """Set this process up as one fleet worker among one per core (once): each identify on one thread
-    (:func:`wmrid.estimators.replay.one_thread`), and :data:`_MALLOC` (glibc only: elsewhere that part does
-    nothing).  Returns whether malloc was tuned."""
-    global _worker_prepared
+    (:func:`wmrid.estimators.replay.one_thread`), and malloc tuned (:func:`wmrid.core.limits.tune_malloc`, over
+    the MALLOC_TRIM_THRESHOLD_ Dask's nanny sets: +70 % on a 60 s log without it).  Returns whether malloc was
+    tuned."""
+    global _worker_prepared, _malloc_tuned
     if not _worker_prepared:
+        from wmrid.core.limits import tune_malloc
         from wmrid.estimators.replay import one_thread
 
         one_thread()
         _worker_prepared = True
-        try:
-            import ctypes
-
-            libc = ctypes.CDLL(None)
-            for param, value in _MALLOC.items():
-                libc.mallopt(param, value)
-        except (OSError, AttributeError):
-            return False
-    return True
+        _malloc_tuned = tune_malloc(override_environment=True)
+    return _malloc_tuned
 
 
 def identify_batch(specs: list[dict[str, Any]]) -> list[dict[str, Any]]:

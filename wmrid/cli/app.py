@@ -69,6 +69,9 @@ def main(argv: list[str] | None = None) -> None:
     previous = interrupts.install()  # Ctrl-C is deferred while numba compiles (an interrupt there crashes LLVM)
     if argv is None:  # the command-line process: a signal that finds it stuck in compiled code still ends it
         interrupts.start_watchdog()
+        from wmrid.core.limits import tune_malloc
+
+        tune_malloc()  # large arrays from the heap, not mapped afresh each time (a process of one command)
     saved = guard()  # a failing stdout is an error naming it; a failing stderr never changes the outcome
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
