@@ -29,6 +29,7 @@ from wmrid.core.errors import LogFormatError
 from wmrid.core.limits import describe
 from wmrid.io.bag.reader import _BagState, _Topic
 from wmrid.io.bag.ros1_records import OP_CHUNK, OP_CHUNK_INFO, OP_CONNECTION, OP_MESSAGE, ros1_records
+from wmrid.io.mcap.reader import page_releaser
 from wmrid.io.mcap.records import BOMB_FLOOR, BOMB_RATIO
 
 MAGIC = b"#ROSBAG V2.0\n"
@@ -65,6 +66,7 @@ class Ros1State(_BagState):
         self.paths = _by_start(list(paths))
         self._by_topic: dict[str, int] = {}
         self._unknown = 0
+        self._release: Any = None
 
     def __enter__(self) -> Ros1State:
         return self
@@ -87,6 +89,7 @@ class Ros1State(_BagState):
             buf = np.frombuffer(mapped, dtype=np.uint8)
             connections: dict[int, int | None] = {}  # this file's connection ids -> channel (None: skipped)
             self._unknown = 0
+            self._release = page_releaser(mapped)  # the pages walked past leave the resident memory (as for MCAP)
             reached = yield from self._records(path, buf, len(MAGIC), size, connections, top=True)
             if self._unknown:
                 self.notes.append(
@@ -119,6 +122,8 @@ class Ros1State(_BagState):
                                      connections)  # fmt: skip
                 elif top:
                     yield from self._chunk(path, header, buf[dstart[i] : dstart[i] + dlen[i]], connections)
+                    if self._release is not None:
+                        self._release(int(dstart[i] + dlen[i]))
             messages = np.flatnonzero(ops == OP_MESSAGE)
             if len(messages):
                 self._messages(path, buf, conns[messages], times[messages], dstart[messages], dlen[messages],
@@ -126,6 +131,8 @@ class Ros1State(_BagState):
                 if top:
                     yield
             p = q
+            if top and self._release is not None:
+                self._release(p)
             if n < _RECORDS:
                 return p
         return p

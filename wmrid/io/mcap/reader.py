@@ -159,19 +159,24 @@ def _map(path: str, data: bytes | None) -> tuple[np.ndarray, Callable[[int], Non
             mapped = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
     except OSError as err:
         raise LogFormatError(f"{path}: cannot be read ({err.strerror or err})") from err
+    return np.frombuffer(mapped, dtype=np.uint8), page_releaser(mapped)
+
+
+def page_releaser(mapped: mmap.mmap) -> Callable[[int], None] | None:
+    """A function that hands the pages of a read-only file mapping below an offset back to the kernel, in runs of
+    at least :data:`_RELEASE_BYTES` (None where the platform cannot).  Dropping them loses nothing (they come back
+    from the page cache if touched again); without this a long file's pages all count in the resident memory."""
     if not hasattr(mapped, "madvise") or not hasattr(mmap, "MADV_DONTNEED"):
-        return np.frombuffer(mapped, dtype=np.uint8), None
+        return None
     done = [0]
 
     def release(offset: int) -> None:
-        # Pages of a read-only file mapping: dropping them loses nothing (they come back from the page
-        # cache if touched again); without this a long file's pages all count in the resident memory.
         upto = offset // mmap.PAGESIZE * mmap.PAGESIZE
         if upto - done[0] >= _RELEASE_BYTES:
             mapped.madvise(mmap.MADV_DONTNEED, done[0], upto - done[0])
             done[0] = upto
 
-    return np.frombuffer(mapped, dtype=np.uint8), release
+    return release
 
 
 #: Mapped pages are handed back in runs of at least this many bytes.
