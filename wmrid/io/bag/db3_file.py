@@ -22,20 +22,17 @@ import os
 import urllib.request
 from collections.abc import Generator, Sequence
 from dataclasses import dataclass
-from pathlib import PurePath
 from typing import Any
 
 import numpy as np
 
 from wmrid.core.errors import LogFormatError
-from wmrid.io.bag.reader import BATCH, _BagState, _one_line, _Topic
+from wmrid.io.bag.reader import BATCH, _BagState, _one_line, _Topic, storage_files
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
 #: sqlite rows fetched at a time (below the garbage collector's threshold of 700 live allocations: holding a whole
 #: batch of row tuples made Python's collector take 0.55 s of a 1.3 s read).
 _ROWS = 256
-#: The rosbag2 metadata versions this reader knows (rosbags reads up to 9 too).
-_MAX_METADATA_VERSION = 9
 
 
 @dataclass
@@ -54,7 +51,7 @@ def db3_files(paths: Sequence[str]) -> list[list[_File]] | None:
     the module docstring)."""
     recordings = []
     for path in paths:
-        files = _recording_files(path)
+        files = storage_files(path, "sqlite3", SQLITE_MAGIC)
         if files is None:
             return None
         opened = []
@@ -77,27 +74,6 @@ def _span(files: list[_File]) -> tuple[int, int]:
     firsts = [f.first for f in files if f.first is not None]
     lasts = [f.last for f in files if f.last is not None]
     return (min(firsts), max(lasts)) if firsts else (-1, -2)
-
-
-def _recording_files(path: str) -> list[str] | None:
-    """The .db3 files of one recording path: a folder's by its metadata.yaml (sqlite3 storage, uncompressed), or the
-    file itself when it is an SQLite database; None otherwise."""
-    if not os.path.isdir(path):
-        with open(path, "rb") as fh:
-            return [path] if fh.read(len(SQLITE_MAGIC)) == SQLITE_MAGIC else None
-    try:
-        from ruamel.yaml import YAML
-
-        with open(os.path.join(path, "metadata.yaml"), encoding="utf-8") as fh:
-            info = YAML(typ="safe").load(fh)["rosbag2_bagfile_information"]
-        if int(info["version"]) > _MAX_METADATA_VERSION or info["storage_identifier"] != "sqlite3":
-            return None
-        if str(info.get("compression_mode") or "none").lower() != "none":
-            return None
-        files = [os.path.join(path, PurePath(str(p)).name) for p in info["relative_file_paths"]]
-    except Exception:  # no or unreadable metadata, missing keys: rosbags says what is wrong
-        return None
-    return files if files and all(os.path.isfile(f) for f in files) else None
 
 
 def _connect(path: str) -> Any:

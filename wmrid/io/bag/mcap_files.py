@@ -20,21 +20,16 @@ message -- :func:`mcap_files` leaves to rosbags.
 from __future__ import annotations
 
 import itertools
-import os
 from collections.abc import Generator, Sequence
-from pathlib import PurePath
 from typing import Any
 
 import numpy as np
 
 from wmrid.core.errors import LogFormatError
-from wmrid.io.bag.reader import _BagState, _Topic
+from wmrid.io.bag.reader import _BagState, _Topic, storage_files
 from wmrid.io.mcap.joint_batches import DYNAMIC_JOINT_STATE_NAMES
 from wmrid.io.mcap.reader import _SCAN_WINDOW, _check_start, _map, _ReadState
 from wmrid.io.mcap.records import JOINT_STATE_NAMES, MAGIC, OP_CHUNK, OP_MESSAGE, scan
-
-#: The rosbag2 metadata versions this reader knows (rosbags reads up to 9 too).
-_MAX_METADATA_VERSION = 9
 
 
 def mcap_files(paths: Sequence[str]) -> list[str] | None:
@@ -43,7 +38,7 @@ def mcap_files(paths: Sequence[str]) -> list[str] | None:
     (see the module docstring)."""
     files: list[str] = []
     for path in paths:
-        got = _recording_files(path)
+        got = storage_files(path, "mcap", MAGIC)
         if got is None:
             return None
         files.extend(got)
@@ -59,30 +54,6 @@ def mcap_files(paths: Sequence[str]) -> list[str] | None:
         if spans[a][1] > spans[b][0]:  # overlapping files are merged message by message by rosbags
             return None
     return [files[i] for i in empty + timed]
-
-
-def _recording_files(path: str) -> list[str] | None:
-    """The .mcap files of one recording path: a folder's by its metadata.yaml (MCAP storage, uncompressed), or the
-    file itself when it starts with the MCAP magic bytes; None otherwise."""
-    if not os.path.isdir(path):
-        try:
-            with open(path, "rb") as fh:
-                return [path] if fh.read(len(MAGIC)) == MAGIC else None
-        except OSError:
-            return None
-    try:
-        from ruamel.yaml import YAML
-
-        with open(os.path.join(path, "metadata.yaml"), encoding="utf-8") as fh:
-            info = YAML(typ="safe").load(fh)["rosbag2_bagfile_information"]
-        if int(info["version"]) > _MAX_METADATA_VERSION or info["storage_identifier"] != "mcap":
-            return None
-        if str(info.get("compression_mode") or "none").lower() != "none":
-            return None
-        files = [os.path.join(path, PurePath(str(p)).name) for p in info["relative_file_paths"]]
-    except Exception:  # no or unreadable metadata, missing keys: rosbags says what is wrong
-        return None
-    return files if files and all(os.path.isfile(f) for f in files) else None
 
 
 def _u64s(buf: np.ndarray, offsets: np.ndarray) -> np.ndarray:

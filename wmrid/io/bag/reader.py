@@ -23,9 +23,10 @@ from __future__ import annotations
 
 import contextlib
 import heapq
+import os
 from collections.abc import Callable, Generator, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
+from pathlib import Path, PurePath
 from typing import Any
 
 import numpy as np
@@ -266,6 +267,35 @@ class _RosbagsState(_BagState):
         starts = np.cumsum(lengths) - lengths
         self.decode(channel, np.frombuffer(b"".join(datas), dtype=np.uint8), starts, lengths,
                     np.asarray(times, dtype=np.int64))  # fmt: skip
+
+
+#: The rosbag2 metadata versions wmrid's own readers know (rosbags reads up to 9 too).
+MAX_METADATA_VERSION = 9
+
+
+def storage_files(path: str, storage: str, magic: bytes) -> list[str] | None:
+    """The storage files of one recording path when wmrid's own reader of ``storage`` ("sqlite3" or "mcap") takes
+    it: a rosbag2 folder's by its metadata.yaml (that storage, uncompressed, every file present), or the path itself
+    when it is a file starting with ``magic``; None otherwise (rosbags reads it, or says what is wrong)."""
+    if not os.path.isdir(path):
+        try:
+            with open(path, "rb") as fh:
+                return [path] if fh.read(len(magic)) == magic else None
+        except OSError:
+            return None
+    try:
+        from ruamel.yaml import YAML
+
+        with open(os.path.join(path, "metadata.yaml"), encoding="utf-8") as fh:
+            info = YAML(typ="safe").load(fh)["rosbag2_bagfile_information"]
+        if int(info["version"]) > MAX_METADATA_VERSION or info["storage_identifier"] != storage:
+            return None
+        if str(info.get("compression_mode") or "none").lower() != "none":
+            return None
+        files = [os.path.join(path, PurePath(str(p)).name) for p in info["relative_file_paths"]]
+    except Exception:  # no or unreadable metadata, missing keys: rosbags says what is wrong
+        return None
+    return files if files and all(os.path.isfile(f) for f in files) else None
 
 
 def bag_kind(paths: Sequence[str]) -> str:
