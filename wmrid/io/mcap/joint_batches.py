@@ -249,8 +249,9 @@ class JointChannels(ABC):
             try:
                 stamp[i] = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
                 names = list(msg.name)
-                fields = [list(getattr(msg, f, None) or ()) for f in ("position", "velocity", "effort")]
-                values = [[float(v) for v in f] for f in fields]
+                # rosbags gives numpy arrays, mcap_ros2 lists (an array has no truth value: no `or ()` here)
+                fields = [getattr(msg, f, None) for f in ("position", "velocity", "effort")]
+                values = [[] if f is None else [float(v) for v in f] for f in fields]
             except (AttributeError, TypeError, ValueError):
                 keep[i] = False
                 acc.skipped += 1
