@@ -93,8 +93,8 @@ def parse(text: str) -> FieldPath:
 
 
 def split_outside_quotes(text: str, sep: str) -> list[str]:
-    """``text`` split at each ``sep`` that is not between double quotes (the quotes are kept); UsageError when a
-    quote is left open."""
+    """``text`` split at each ``sep`` that is not between double quotes (the quotes are kept).  With an odd number
+    of quotes none of them quotes: a lone ``"`` is part of a name (``--columns tau_r=cur"r`` as before quoting)."""
     parts, current, quoted = [], [], False
     for char in text:
         if char == '"':
@@ -105,7 +105,7 @@ def split_outside_quotes(text: str, sep: str) -> list[str]:
         else:
             current.append(char)
     if quoted:
-        raise UsageError(f"{option('columns')}: {text!r} opens a double quote it does not close")
+        return text.split(sep)
     parts.append("".join(current))
     return parts
 

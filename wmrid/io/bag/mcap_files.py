@@ -7,19 +7,24 @@ alone is read by :mod:`wmrid.io.mcap.reader` up to its last whole record; here e
 the same way (:class:`wmrid.io.mcap.reader._ReadState`: the compiled record scan, chunk checks, the CDR kernel), each
 file's channels mapped by topic to the recording's (a topic is one channel whatever file and channel id it comes
 in), and the files taken in the order of their first message.  A file cut short gives a note naming it and the bytes
-lost.  The JointState messages are decoded as for rosbags' reads (:class:`wmrid.io.bag.reader._BagState`: the
-compiled CDR kernel, rosbags' deserialiser with the definitions stored in the files for the rest), so a recording
-reads the same through either.
+lost; one that ends between two records without MCAP's footer, a note that it was not closed; one the crash left
+before its first whole record (empty, the magic bytes alone, part of the header record) is skipped with a note.  The
+JointState messages are decoded as for rosbags' reads (:class:`wmrid.io.bag.reader._BagState`: the compiled CDR
+kernel, rosbags' deserialiser with the definitions stored in the files for the rest), so a recording whose files
+hold their messages in log-time order reads the same through either (rosbags merges a file's chunks by log time;
+wmrid keeps the file's order, as it does for a single .mcap).
 
 The files' time spans (:func:`mcap_span`) come from a walk of the top-level records alone (a chunk's record header
-gives its first and last message time; the chunk is not decompressed).  What this reader does not take -- a file that
-is not MCAP, compressed storage (``.mcap.zstd`` files), files that overlap in time, which rosbags merges message by
-message -- :func:`mcap_files` leaves to rosbags.
+gives its first and last message time; the chunk is not decompressed; the pages walked past are handed back).  What
+this reader does not take -- a file that is not MCAP, compressed storage (``.mcap.zstd`` files), files that overlap
+in time (rosbags merges files given apart message by message, and reads a rosbag2 folder's files in its
+metadata's order) -- :func:`mcap_files` leaves to rosbags.
 """
 
 from __future__ import annotations
 
 import itertools
+import os
 from collections.abc import Generator, Sequence
 from typing import Any
 
@@ -28,8 +33,8 @@ import numpy as np
 from wmrid.core.errors import LogFormatError
 from wmrid.io.bag.reader import _BagState, _Topic, storage_files
 from wmrid.io.mcap.joint_batches import DYNAMIC_JOINT_STATE_NAMES
-from wmrid.io.mcap.reader import _SCAN_WINDOW, _check_start, _map, _ReadState
-from wmrid.io.mcap.records import JOINT_STATE_NAMES, MAGIC, OP_CHUNK, OP_MESSAGE, scan
+from wmrid.io.mcap.reader import _SCAN_WINDOW, UNCLOSED_NOTE, _check_start, _map, _ReadState, closed
+from wmrid.io.mcap.records import JOINT_STATE_NAMES, MAGIC, OP_CHUNK, OP_HEADER, OP_MESSAGE, scan
 
 
 def mcap_files(paths: Sequence[str]) -> list[str] | None:
@@ -37,11 +42,17 @@ def mcap_files(paths: Sequence[str]) -> list[str] | None:
     order they are read (by their first message; files without messages first), or None when rosbags must read it
     (see the module docstring)."""
     files: list[str] = []
+    stubs: list[str] = []
     for path in paths:
         got = storage_files(path, "mcap", MAGIC)
+        if got is None and os.path.isfile(path) and stub(path):
+            got, stubs = [], [*stubs, path]
         if got is None:
             return None
-        files.extend(got)
+        for file in got:
+            (stubs if stub(file) else files).append(file)
+    if not files:
+        return None
     spans = []
     for file in files:
         span = mcap_span(file)
@@ -51,9 +62,27 @@ def mcap_files(paths: Sequence[str]) -> list[str] | None:
     empty = [i for i, s in enumerate(spans) if s[0] is None]
     timed = sorted((i for i, s in enumerate(spans) if s[0] is not None), key=lambda i: (spans[i][0], i))
     for a, b in itertools.pairwise(timed):
-        if spans[a][1] > spans[b][0]:  # overlapping files are merged message by message by rosbags
+        if spans[a][1] > spans[b][0]:  # overlapping files: rosbags reads them (see the module docstring)
             return None
-    return [files[i] for i in empty + timed]
+    return [files[i] for i in empty + timed] + stubs
+
+
+def stub(path: str) -> bool:
+    """Whether ``path`` is what a crash leaves of an MCAP file before its first whole record: empty, part of the
+    magic bytes, or the magic and part of the header record."""
+    try:
+        if os.path.getsize(path) > 4096:
+            return False
+        with open(path, "rb") as fh:
+            head = fh.read()
+    except OSError:
+        return False
+    if len(head) <= len(MAGIC):
+        return MAGIC.startswith(head)
+    rest = head[len(MAGIC) :]
+    if not head.startswith(MAGIC) or rest[0] != OP_HEADER:
+        return False
+    return len(rest) < 9 or len(rest) < 9 + int.from_bytes(rest[1:9], "little")
 
 
 def _u64s(buf: np.ndarray, offsets: np.ndarray) -> np.ndarray:
@@ -66,7 +95,7 @@ def mcap_span(path: str) -> tuple[int | None, int | None] | None:
     an MCAP file.  Only top-level records are read: a chunk's times from its record header, a message's from its own;
     a file cut short is walked up to its last whole record."""
     try:
-        buf, _ = _map(path, None)
+        buf, release = _map(path, None)
     except LogFormatError:
         return None
     size = buf.shape[0]
@@ -100,6 +129,8 @@ def mcap_span(path: str) -> tuple[int | None, int | None] | None:
             lows.append(int(times.min()))
             highs.append(int(times.max()))
         p = q
+        if release is not None:
+            release(p)
     del buf
     return (min(lows), max(highs)) if lows else (None, None)
 
@@ -123,11 +154,18 @@ class McapFilesState(_BagState):
     def steps(self) -> Generator[None, None, None]:
         """Walk every file, pausing after each batch of messages."""
         for path in self.files:
+            if stub(path):
+                self.notes.append(
+                    f"{path}: holds no whole MCAP record ({os.path.getsize(path)} bytes: the recording stopped as this "
+                    "file began): skipped"
+                )
+                continue
             buf, release = _map(path, None)
             _check_start(path, buf)
             size = buf.shape[0]
             walker = _FileWalker(self, path, release)
             reached, cut = yield from walker.steps(buf, len(MAGIC), size, top_level=True)
+            ended = closed(buf)
             del buf
             self.notes.extend(f"{path}: {note}" for note in walker.notes)
             if cut:
@@ -135,6 +173,8 @@ class McapFilesState(_BagState):
                     f"{path}: the file ends inside a record (byte {reached} of {size}): it was cut short, e.g. by a "
                     f"crash; read everything up to there, {size - reached} bytes at the end are lost"
                 )
+            elif not ended:
+                self.notes.append(f"{path}: {UNCLOSED_NOTE}")
 
     def channel_for(self, path: str, info: dict[str, Any], schema: dict[str, Any] | None) -> int | None:
         """The recording's channel of a file's channel (its topic's), registered on first sight; None (with a note)

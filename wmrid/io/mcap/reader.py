@@ -214,6 +214,8 @@ def _read_buffer(state: _ReadState, buf: np.ndarray) -> McapContents:
             f"the file ends inside a record (byte {end} of {size}): it was cut short, e.g. by a crash; "
             f"read everything up to there, {lost_bytes} bytes at the end are lost"
         )
+    elif not closed(buf):
+        notes.append(UNCLOSED_NOTE)
     channels = tuple(state.channel_info())
     joints = state.joints()
     json_out = {}
@@ -231,6 +233,18 @@ def _read_buffer(state: _ReadState, buf: np.ndarray) -> McapContents:
         json=json_out, metadata=state.metadata, notes=tuple(notes), size_bytes=size, lost_bytes=lost_bytes,
         complete=state.complete, replay=None if state.complete else state.replay, definitions=_definitions(state),
     )  # fmt: skip
+
+
+#: Said of a file that ends between two records without MCAP's footer and closing magic bytes.
+UNCLOSED_NOTE = (
+    "the file ends without MCAP's footer (the recording was not closed, e.g. a crash or a split cut off): read "
+    "every record it holds; what was to follow is not in it"
+)
+
+
+def closed(buf: np.ndarray) -> bool:
+    """Whether an MCAP file's bytes end with the closing magic (a writer that finished wrote its footer before)."""
+    return buf.shape[0] >= 2 * len(MAGIC) and bytes(buf[-len(MAGIC) :]) == MAGIC
 
 
 def _definitions(state: _ReadState) -> dict[str, tuple[str, str]]:
