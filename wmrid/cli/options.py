@@ -84,40 +84,43 @@ class EffortKind(str, Enum):
     voltage = "voltage"
 
 
-_LOG_PANEL = "Log input (MCAP topics, units, effort)"
+_LOG_PANEL = "Log input (bag topics, units, effort)"
 
 
 TopicOpt = Annotated[
     str | None,
-    typer.Option(help="MCAP: the JointState (or JSON) topic holding speed and effort.", rich_help_panel=_LOG_PANEL),
+    typer.Option(
+        help="Bags (MCAP, ROS 1, db3): the JointState (or JSON) topic holding speed and effort.",
+        rich_help_panel=_LOG_PANEL,
+    ),
 ]
 
 
 VelocityTopicOpt = Annotated[
     str | None,
-    typer.Option(help="MCAP: the JointState topic with the wheel speeds (or positions).", rich_help_panel=_LOG_PANEL),
+    typer.Option(help="Bags: the JointState topic with the wheel speeds (or positions).", rich_help_panel=_LOG_PANEL),
 ]
 
 
 EffortTopicOpt = Annotated[
-    str | None, typer.Option(help="MCAP: the JointState topic with the wheel efforts.", rich_help_panel=_LOG_PANEL)
+    str | None, typer.Option(help="Bags: the JointState topic with the wheel efforts.", rich_help_panel=_LOG_PANEL)
 ]
 
 
 RightJointOpt = Annotated[
-    str | None, typer.Option(help="MCAP: name of the right wheel joint.", rich_help_panel=_LOG_PANEL)
+    str | None, typer.Option(help="Bags: name of the right wheel joint.", rich_help_panel=_LOG_PANEL)
 ]
 
 
 LeftJointOpt = Annotated[
-    str | None, typer.Option(help="MCAP: name of the left wheel joint.", rich_help_panel=_LOG_PANEL)
+    str | None, typer.Option(help="Bags: name of the left wheel joint.", rich_help_panel=_LOG_PANEL)
 ]
 
 
 TimeSourceOpt = Annotated[
     TimeSource,
     typer.Option(
-        help="MCAP: header stamps, log time, or auto (header when all set and in order).", rich_help_panel=_LOG_PANEL
+        help="Bags: header stamps, log time, or auto (header when all set and in order).", rich_help_panel=_LOG_PANEL
     ),
 ]
 
