@@ -77,8 +77,16 @@ def _span(files: list[_File]) -> tuple[int, int]:
 
 
 def _connect(path: str) -> Any:
+    """A read-only, immutable connection to a .db3 file: through its write-ahead log when it has one with committed
+    pages (a recording that was not closed: :mod:`wmrid.io.bag.db3_wal`)."""
     import apsw
 
+    if os.path.exists(path + "-wal"):
+        from wmrid.io.bag.db3_wal import connect, wal_view
+
+        view = wal_view(path)
+        if view is not None:
+            return connect(path, view)
     uri = "file:" + urllib.request.pathname2url(os.path.abspath(path)) + "?immutable=1"
     return apsw.Connection(uri, flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI)
 
@@ -127,6 +135,12 @@ class Db3State(_BagState):
         self._ids: list[dict[int, int]] = []  # per file: topic id -> channel (skipped topics left out)
         by_topic: dict[str, int] = {}
         for file in self.files:
+            if os.path.exists(file.path + "-wal"):
+                from wmrid.io.bag.db3_wal import wal_view
+
+                view = wal_view(file.path)
+                if view is not None:
+                    self.notes.append(view.note())
             ids = {}
             for topic_id, name, kind, definition in file.topics:
                 channel = by_topic.get(name)

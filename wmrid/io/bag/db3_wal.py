@@ -1,0 +1,227 @@
+"""The write-ahead log (``run.db3-wal``) of a ROS 2 sqlite3 recording that was not closed, read without touching it.
+
+rosbag2's "resilient" storage preset records in SQLite's WAL mode, so that a crash loses little: committed messages
+sit in the ``-wal`` file beside the ``.db3`` until a checkpoint copies them in, which a crash prevents.  A reader that
+opens the database as immutable -- rosbags does, and wmrid does so as not to write beside its inputs (SQLite would
+create the ``-shm`` index and, on close, checkpoint into the ``.db3``) -- sees only the pages checkpointed so far:
+on a recording cut by a power loss that can be most of it, with no error.
+
+Here the log is read as SQLite itself recovers it (https://www.sqlite.org/fileformat2.html#the_write_ahead_log):
+a 32-byte header (magic 0x377f0682 or 0x377f0683, the byte order of the checksums' words; version 3007000; page
+size; two salts; a checksum), then frames of a 24-byte header (page number, the database's size in pages after a
+commit frame, else 0; the salts; a cumulative checksum) and one page.  Frames count while their salts match and
+their checksums hold; those up to the last commit frame are the committed ones, and the newest committed copy of a
+page is the page.  The database is then opened through an apsw VFS (:func:`_vfs_classes`) that serves the main file's
+reads from those pages over the ``.db3`` (page 1's in-header size set to the committed size), still immutable:
+the ``.db3`` and ``-wal`` files are only read, the ``-shm`` not even opened.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Any
+
+import numba
+import numpy as np
+
+WAL_MAGIC = (0x377F0682, 0x377F0683)
+WAL_VERSION = 3007000
+_HEADER = 32
+_FRAME_HEADER = 24
+#: The apsw VFS name wmrid registers (once per process).
+VFS_NAME = "wmrid-wal"
+
+
+@dataclass(frozen=True)
+class WalView:
+    """The committed state of a database and its write-ahead log: ``pages`` maps a page number (from 1) to the
+    offset of its newest committed copy in the ``-wal`` file; ``size`` is the database's size in pages after the
+    last commit; ``frames`` the committed frames and ``torn`` the frames after them (a transaction the crash cut,
+    or a torn write), which are not read."""
+
+    path: str
+    page_size: int
+    pages: dict[int, int]
+    size: int
+    frames: int
+    torn: int
+
+    def note(self) -> str:
+        torn = f"; {self.torn} frame(s) after the last commit were left out" if self.torn else ""
+        return (
+            f"{self.path}: the recording was not closed: {self.frames} page write(s) of its write-ahead log "
+            f"({os.path.basename(self.path)}-wal) not yet in the database were read as SQLite recovers them{torn}"
+        )
+
+
+@numba.njit(cache=True, nogil=True)
+def _u32(buf, p, big):
+    if big:
+        return (np.int64(buf[p]) << 24) | (np.int64(buf[p + 1]) << 16) | (np.int64(buf[p + 2]) << 8) | buf[p + 3]
+    return (np.int64(buf[p + 3]) << 24) | (np.int64(buf[p + 2]) << 16) | (np.int64(buf[p + 1]) << 8) | buf[p]
+
+
+@numba.njit(cache=True, nogil=True)
+def _checksum(buf, start, n, big, s0, s1):
+    """SQLite's WAL checksum over buf[start : start + n] (n a multiple of 8), from (s0, s1)."""
+    mask = np.int64(0xFFFFFFFF)
+    for q in range(start, start + n, 8):
+        s0 = (s0 + _u32(buf, q, big) + s1) & mask
+        s1 = (s1 + _u32(buf, q + 4, big) + s0) & mask
+    return s0, s1
+
+
+@numba.njit(cache=True, nogil=True)
+def wal_frames(buf, page_size, big, salt1, salt2, s0, s1, pages, sizes):
+    """Walk the frames of a WAL file (uint8 ``buf``): fills ``pages[i]`` (page number) and ``sizes[i]`` (database
+    size after a commit frame, else 0) and returns how many frames are valid (salts and checksums, in order)."""
+    frame = _FRAME_HEADER + page_size
+    n = (buf.shape[0] - _HEADER) // frame
+    for i in range(n):
+        p = _HEADER + i * frame
+        if _u32(buf, p + 8, True) != salt1 or _u32(buf, p + 12, True) != salt2:
+            return i
+        s0, s1 = _checksum(buf, p, 8, big, s0, s1)
+        s0, s1 = _checksum(buf, p + _FRAME_HEADER, page_size, big, s0, s1)
+        if s0 != _u32(buf, p + 16, True) or s1 != _u32(buf, p + 20, True):
+            return i
+        pages[i] = _u32(buf, p, True)
+        sizes[i] = _u32(buf, p + 4, True)
+    return n
+
+
+_cache: dict[str, tuple[tuple[int, int], WalView | None]] = {}
+
+
+def wal_view(db_path: str) -> WalView | None:
+    """The committed pages of ``db_path``'s write-ahead log, None when there is none with a committed frame (no
+    ``-wal`` file, an empty one, another format).  Read once per process while the file is unchanged."""
+    wal = db_path + "-wal"
+    try:
+        st = os.stat(wal)
+    except OSError:
+        return None
+    key = (st.st_size, st.st_mtime_ns)
+    known = _cache.get(db_path)
+    if known is None or known[0] != key:
+        known = (key, _read_view(db_path, wal))
+        _cache[db_path] = known
+    return known[1]
+
+
+def _read_view(db_path: str, wal: str) -> WalView | None:
+    try:
+        size = os.path.getsize(wal)
+        if size < _HEADER + _FRAME_HEADER:
+            return None
+        with open(wal, "rb") as fh:
+            head = fh.read(_HEADER)
+        magic, version, page_size, _, salt1, salt2, c1, c2 = (
+            int.from_bytes(head[i : i + 4], "big") for i in range(0, _HEADER, 4)
+        )
+        if magic not in WAL_MAGIC or version != WAL_VERSION or page_size < 512 or page_size & (page_size - 1):
+            return None
+        big = magic == WAL_MAGIC[1]
+        s0, s1 = _checksum(np.frombuffer(head, dtype=np.uint8), 0, 24, big, 0, 0)
+        if (s0, s1) != (c1, c2):
+            return None
+        count = (size - _HEADER) // (_FRAME_HEADER + page_size)
+        pages = np.zeros(count, dtype=np.int64)
+        sizes = np.zeros(count, dtype=np.int64)
+        buf = np.memmap(wal, dtype=np.uint8, mode="r")  # the pages stay in the file: only the headers are kept
+        valid = wal_frames(buf, page_size, big, salt1, salt2, s0, s1, pages, sizes)
+        del buf
+    except (OSError, ValueError):
+        return None
+    commits = np.flatnonzero(sizes[:valid])
+    if not len(commits):
+        return None
+    last = int(commits[-1])
+    offsets = _HEADER + np.arange(last + 1, dtype=np.int64) * (_FRAME_HEADER + page_size) + _FRAME_HEADER
+    newest = dict(zip(pages[: last + 1].tolist(), offsets.tolist(), strict=True))  # later frames overwrite earlier
+    return WalView(os.path.abspath(db_path), page_size, newest, int(sizes[last]), last + 1, count - last - 1)
+
+
+_VIEWS: dict[str, WalView] = {}
+_registered: list[Any] = []
+
+
+def connect(db_path: str, view: WalView) -> Any:
+    """An immutable, read-only apsw connection to ``db_path`` as committed in its write-ahead log ``view``."""
+    import urllib.request
+
+    import apsw
+
+    if not _registered:
+        _registered.append(_make_vfs())
+    _VIEWS[view.path] = view
+    uri = "file:" + urllib.request.pathname2url(view.path) + "?immutable=1"
+    return apsw.Connection(uri, flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI, vfs=VFS_NAME)
+
+
+def _vfs_classes() -> tuple[type, type]:
+    import apsw
+
+    class WalVFS(apsw.VFS):
+        """The default VFS, but a main database with a registered :class:`WalView` is opened as :class:`WalFile`."""
+
+        def __init__(self) -> None:
+            super().__init__(VFS_NAME, "")
+
+        def xOpen(self, name: Any, flags: list[int]) -> Any:
+            path = name.filename() if isinstance(name, apsw.URIFilename) else name
+            view = _VIEWS.get(os.path.abspath(path)) if path else None
+            if view is not None and flags[0] & apsw.SQLITE_OPEN_MAIN_DB:
+                return WalFile(view, name, flags)
+            return apsw.VFSFile("", name, flags)
+
+    class WalFile(apsw.VFSFile):
+        """The main database file seen through its write-ahead log: committed pages from the log, the rest from the
+        file, page 1's in-header size set to the committed size, beyond the file's end zeros (never written)."""
+
+        def __init__(self, view: WalView, name: Any, flags: list[int]):
+            super().__init__("", name, flags)
+            self.view = view
+            self.wal = open(view.path + "-wal", "rb")  # noqa: SIM115 (closed in xClose)
+            self.base = os.path.getsize(view.path)
+
+        def _page(self, number: int) -> bytes:
+            ps = self.view.page_size
+            where = self.view.pages.get(number)
+            if where is not None:
+                self.wal.seek(where)
+                data = self.wal.read(ps)
+            elif (number - 1) * ps < self.base:
+                data = super().xRead(ps, (number - 1) * ps)
+            else:
+                data = bytes(ps)
+            if number == 1:
+                data = data[:28] + self.view.size.to_bytes(4, "big") + data[32:]
+            return data
+
+        def xRead(self, amount: int, offset: int) -> bytes:
+            ps = self.view.page_size
+            out = bytearray()
+            pos, end = offset, offset + amount
+            while pos < end:
+                number, within = pos // ps + 1, pos % ps
+                take = min(ps - within, end - pos)
+                out += self._page(number)[within : within + take]
+                pos += take
+            return bytes(out)
+
+        def xFileSize(self) -> int:
+            return self.view.size * self.view.page_size
+
+        def xClose(self) -> None:
+            self.wal.close()
+            super().xClose()
+
+    return WalVFS, WalFile
+
+
+def _make_vfs() -> Any:
+    """The VFS, registered with apsw (made on first use: apsw is imported only when a recording needs it)."""
+    vfs_class, _ = _vfs_classes()
+    return vfs_class()
