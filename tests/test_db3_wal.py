@@ -165,3 +165,13 @@ def test_no_wal_or_an_empty_or_foreign_one_is_no_view(crashed, tmp_path):
     log = api.read_log(str(folder))  # the checkpointed part alone, as before
     assert len(log) == 1500
     assert not any("write-ahead" in n for n in log.notes)
+
+
+def test_read_through_rosbags_the_log_left_out_is_said(crashed, monkeypatch):
+    """Where rosbags reads the recording (compressed, or overlapping files), the write-ahead log's messages are left
+    out, and a note says so instead of nothing."""
+    monkeypatch.setattr(db3_file, "db3_files", lambda paths: None)
+    log = api.read_log(str(crashed))
+    assert len(log) == 1500
+    (note,) = [n for n in log.notes if "write-ahead log" in n]
+    assert "they are left out" in note
