@@ -257,25 +257,6 @@ class _RosbagsState(_BagState):
         self.notes.extend(files.notes)
         self.notes.extend(_unread_logs(files.paths))
 
-
-def _unread_logs(paths: Sequence[str]) -> list[str]:
-    """Notes for the .db3 files among ``paths`` (files or folders) whose write-ahead log holds committed messages
-    that rosbags, which opens the database immutable, does not read."""
-    found = []
-    for path in map(Path, paths):
-        for wal in sorted(path.glob("*.db3-wal")) if path.is_dir() else [Path(f"{path}-wal")]:
-            if wal.exists():
-                from wmrid.io.bag.db3_wal import wal_view
-
-                db = str(wal)[: -len("-wal")]
-                if wal_view(db) is not None:
-                    found.append(
-                        f"{db}: the recording was not closed and its write-ahead log ({wal.name}) holds messages "
-                        "not yet in the database; read through rosbags (a compressed recording, or files that "
-                        "overlap in time), they are left out"
-                    )
-    return found
-
     def steps(self) -> Generator[None, None, None]:
         """Decode the JointState topics (``wanted`` of them when set), pausing after each batch."""
         for channel, times, datas in self.files.batches(self.joint_channels()):
@@ -316,6 +297,25 @@ def storage_files(path: str, storage: str, magic: bytes) -> list[str] | None:
     except Exception:  # no or unreadable metadata, missing keys: rosbags says what is wrong
         return None
     return files if files and all(os.path.isfile(f) for f in files) else None
+
+
+def _unread_logs(paths: Sequence[str]) -> list[str]:
+    """Notes for the .db3 files among ``paths`` (files or folders) whose write-ahead log holds committed messages
+    that rosbags, which opens the database immutable, does not read."""
+    found = []
+    for path in map(Path, paths):
+        for wal in sorted(path.glob("*.db3-wal")) if path.is_dir() else [Path(f"{path}-wal")]:
+            if wal.exists():
+                from wmrid.io.bag.db3_wal import wal_view
+
+                db = str(wal)[: -len("-wal")]
+                if wal_view(db) is not None:
+                    found.append(
+                        f"{db}: the recording was not closed and its write-ahead log ({wal.name}) holds messages "
+                        "not yet in the database; read through rosbags (a compressed recording, or files that "
+                        "overlap in time), they are left out"
+                    )
+    return found
 
 
 def bag_kind(paths: Sequence[str]) -> str:
