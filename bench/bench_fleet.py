@@ -56,12 +56,14 @@ def unit_robot(rng: np.random.Generator, name: str):
     return replace(paper, name=name, cad=cad, casters=default_casters(cad))
 
 
-def day_robot(unit, rng: np.random.Generator, robot_id: str, day: int):
-    """The unit on one day: friction with the day's jitter and any injected drift."""
+def day_robot(unit, rng: np.random.Generator, robot_id: str, day: int, drifts: dict | None = None):
+    """The unit on one day: friction with the day's jitter and any injected drift (``drifts``: as :data:`DRIFTS`,
+    the default)."""
+    drifts = DRIFTS if drifts is None else drifts
     cad = unit.cad
     factor = 1 + 0.01 * rng.standard_normal(4)
-    if robot_id in DRIFTS:
-        wheel, rate, onset = DRIFTS[robot_id]
+    if robot_id in drifts:
+        wheel, rate, onset = drifts[robot_id]
         rise = 1 + rate * max(0, day - onset)
         factor[[0, 2] if wheel == "right" else [1, 3]] *= rise
     cad = replace(cad, F_v1=cad.F_v1 * factor[0], F_v2=cad.F_v2 * factor[1], F_d1=cad.F_d1 * factor[2],
