@@ -208,12 +208,12 @@ def test_inspect_shows_a_bag_recording(sample_bags, kind):
 
 
 @pytest.mark.skipif(not ME169.exists(), reason="../shared/real_logs is not beside the checkout")
-@pytest.mark.slow  # four conversions of the real bag; the sample's are in the default run
+@pytest.mark.slow  # six conversions of the real bag; the sample's are in the default run
 def test_the_real_me169_bag_in_every_format_identifies_the_same(tmp_path):
     """A real recording (50 Hz, speed and PWM on two topics) converted to each format: the same parameters."""
     formats = _formats(tmp_path, bagutil.recording(ME169))
     reference = _identify([ME169], *ME169_OPTIONS)
-    for kind in ("ros1", "db3-file", "db3-split", "ros1-two-files"):
+    for kind in ("ros1", "db3-file", "db3-split", "ros1-two-files", "mcap-folder", "mcap-split"):
         result = _identify(formats[kind], *ME169_OPTIONS)
         assert result["parameters"] == reference["parameters"], kind
         assert result["warnings"] == reference["warnings"], kind
