@@ -319,3 +319,17 @@ def test_the_span_walk_hands_the_pages_back(long_split, monkeypatch):
     assert mcap_files.mcap_span(str(last))[0] is not None
     assert asked
     assert asked[-1] >= last.stat().st_size - 8
+
+
+CONFORMANCE = ROOT.parent / "shared" / "real_logs" / "rosbag2_conformance"
+
+
+@pytest.mark.skipif(not CONFORMANCE.exists(), reason="../shared/real_logs is not beside the checkout")
+def test_a_folder_of_overlapping_mcap_files_goes_to_rosbags_and_inspect_counts_its_messages():
+    """The rosbag2 conformance bags as one folder: two files span the same instants, so rosbags reads them; its
+    counts of the topics come without times, and inspect says so instead of "no messages"."""
+    files = sorted(str(p) for p in CONFORMANCE.glob("*.mcap"))
+    assert mcap_files.mcap_files(files) is None
+    out = text(wmrid("inspect", str(CONFORMANCE), "--format", "table", columns="200"))
+    assert out.returncode == 0, out.stderr
+    assert "47 messages, times not read" in out.stdout

@@ -155,7 +155,11 @@ def print_inspection(info: dict, console: Any) -> None:
         for note in info.get("notes", []):
             console.print(f"note: {note}")
         return
-    span = f"{info['duration_s']:.3f} s" if info.get("start_s") is not None else "no messages"
+    if info.get("start_s") is not None:
+        span = f"{info['duration_s']:.3f} s"
+    else:  # a recording read through rosbags gives other topics' counts without their times
+        counted = sum(entry["messages"] or 0 for entry in info["topics"])
+        span = f"{counted} messages, times not read" if counted else "no messages"
     t0 = info.get("start_s") or 0.0
     rows = []
     for entry in info["topics"]:
