@@ -30,10 +30,10 @@ SAMPLE = ROOT / "sample_logs" / "paper_sinusoid.mcap"
 
 _CRASHING_WRITER = """
 import os, pickle, sqlite3, sys
-path, rows_file, batches = sys.argv[1], sys.argv[2], int(sys.argv[3])
+path, rows_file, batches, autocheckpoint = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
 rows = pickle.load(open(rows_file, "rb"))
 con = sqlite3.connect(path)
-con.execute("PRAGMA wal_autocheckpoint=0")
+con.execute(f"PRAGMA wal_autocheckpoint={autocheckpoint}")  # 0: never; else a checkpoint (and restart) past N pages
 step = -(-len(rows) // batches)
 for i in range(0, len(rows), step):  # one transaction a batch: pages rewritten by later ones
     con.executemany("INSERT INTO messages (id, topic_id, timestamp, data) VALUES (?, ?, ?, ?)", rows[i : i + step])
@@ -42,8 +42,9 @@ os._exit(0)  # the power loss: no checkpoint, no close
 """
 
 
-def _crashed(folder: Path, messages, kept: int, batches: int = 4) -> Path:
-    """A rosbag2 folder whose messages after the first ``kept`` are only in the db3's write-ahead log."""
+def _crashed(folder: Path, messages, kept: int, batches: int = 4, autocheckpoint: int = 0) -> Path:
+    """A rosbag2 folder whose messages after the first ``kept`` are only in the db3's write-ahead log (with
+    ``autocheckpoint`` pages, some of them checkpointed on the way, the log restarted over older frames)."""
     import pickle
 
     bagutil.write_rosbag2(folder, messages)
@@ -57,7 +58,9 @@ def _crashed(folder: Path, messages, kept: int, batches: int = 4) -> Path:
     con.close()
     rows_file = folder.parent / f"{folder.name}.rows.pkl"
     rows_file.write_bytes(pickle.dumps(rows))
-    subprocess.run([sys.executable, "-c", _CRASHING_WRITER, str(db), str(rows_file), str(batches)], check=True)
+    subprocess.run(
+        [sys.executable, "-c", _CRASHING_WRITER, str(db), str(rows_file), str(batches), str(autocheckpoint)], check=True
+    )
     rows_file.unlink()
     assert Path(f"{db}-wal").stat().st_size > 0
     return folder
@@ -174,4 +177,56 @@ def test_read_through_rosbags_the_log_left_out_is_said(crashed, monkeypatch):
     log = api.read_log(str(crashed))
     assert len(log) == 1500
     (note,) = [n for n in log.notes if "write-ahead log" in n]
-    assert "they are left out" in note
+    assert "are left out" in note
+
+
+def test_a_log_restarted_by_checkpoints_reads_as_sqlite_recovers_it_and_nothing_is_called_torn(messages, tmp_path):
+    """rosbag2's resilient preset keeps SQLite's automatic checkpoints: the log restarts over older frames (other
+    salts, already in the database).  Those are neither read nor said to be left out."""
+    folder = _crashed(tmp_path / "run", messages, kept=1000, batches=40, autocheckpoint=20)
+    db = str(next(folder.glob("*.db3")))
+    view = wal_view(db)
+    assert view is not None
+    assert view.torn == 0
+    in_file = (Path(f"{db}-wal").stat().st_size - 32) // (24 + view.page_size)
+    assert in_file > view.frames, "no older frames after the restarted log: the case is not made"
+    con = db3_file._connect(db)
+    try:
+        ours = [tuple(r) for r in con.execute("SELECT id, topic_id, timestamp, data FROM messages ORDER BY id")]
+    finally:
+        con.close()
+    assert ours == _sqlite_recovery(folder, tmp_path)
+    assert len(ours) == 6000
+    assert "left out" not in view.note()
+
+
+def test_a_recording_reached_through_a_symbolic_link(crashed, tmp_path):
+    """A folder or a db3 reached through a symbolic link reads its log as well (SQLite's default VFS answers a
+    link with a code apsw took for an error, and the recording went to rosbags: 1500 of 6000 messages)."""
+    (tmp_path / "linked").symlink_to(crashed, target_is_directory=True)
+    assert len(api.read_log(str(tmp_path / "linked"))) == 6000
+    db = next(crashed.glob("*.db3"))
+    files = tmp_path / "files"
+    files.mkdir()
+    for suffix in ("", "-wal"):
+        (files / f"{db.name}{suffix}").symlink_to(f"{db}{suffix}")
+    log = api.read_log(str(files / db.name))
+    assert len(log) == 6000
+    assert any("write-ahead log" in n for n in log.notes)
+
+
+def test_an_unreadable_log_is_said(crashed, monkeypatch):
+    """A write-ahead log that cannot be read (permissions): the database alone is read, and a note says what may be
+    missing instead of nothing."""
+    from wmrid.io.bag import db3_wal
+
+    def refused(*args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(db3_wal, "_cache", {})
+    monkeypatch.setattr(db3_wal, "open", refused, raising=False)
+    log = api.read_log(str(crashed))
+    assert len(log) == 1500
+    (note,) = [n for n in log.notes if "write-ahead log" in n]
+    assert "could not be read (Permission denied)" in note
+    assert "may be missing" in note

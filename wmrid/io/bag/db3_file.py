@@ -84,7 +84,10 @@ def _connect(path: str) -> Any:
     if os.path.exists(path + "-wal"):
         from wmrid.io.bag.db3_wal import connect, wal_view
 
-        view = wal_view(path)
+        try:
+            view = wal_view(path)
+        except OSError:  # said in a note (Db3State)
+            view = None
         if view is not None:
             return connect(path, view)
     uri = "file:" + urllib.request.pathname2url(os.path.abspath(path)) + "?immutable=1"
@@ -138,9 +141,16 @@ class Db3State(_BagState):
             if os.path.exists(file.path + "-wal"):
                 from wmrid.io.bag.db3_wal import wal_view
 
-                view = wal_view(file.path)
+                try:
+                    view = wal_view(file.path)
+                except OSError as err:
+                    self.notes.append(
+                        f"{file.path}: its write-ahead log could not be read ({err.strerror or err}): the messages "
+                        "recorded after its last checkpoint may be missing"
+                    )
+                    view = None
                 if view is not None:
-                    self.notes.append(view.note())
+                    self.notes.append(view.note(file.path))
             ids = {}
             for topic_id, name, kind, definition in file.topics:
                 channel = by_topic.get(name)

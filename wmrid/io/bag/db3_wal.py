@@ -35,10 +35,10 @@ VFS_NAME = "wmrid-wal"
 
 @dataclass(frozen=True)
 class WalView:
-    """The committed state of a database and its write-ahead log: ``pages`` maps a page number (from 1) to the
-    offset of its newest committed copy in the ``-wal`` file; ``size`` is the database's size in pages after the
-    last commit; ``frames`` the committed frames and ``torn`` the frames after them (a transaction the crash cut,
-    or a torn write), which are not read."""
+    """The committed state of a database and its write-ahead log: ``path`` the database's real path; ``pages`` maps
+    a page number (from 1) to the offset of its newest committed copy in the ``-wal`` file; ``size`` is the
+    database's size in pages after the last commit; ``frames`` the committed frames and ``torn`` this generation's
+    frames after them (a transaction the stop cut, or a torn write), which are not read."""
 
     path: str
     page_size: int
@@ -47,11 +47,17 @@ class WalView:
     frames: int
     torn: int
 
-    def note(self) -> str:
-        torn = f"; {self.torn} frame(s) after the last commit were left out" if self.torn else ""
+    def note(self, shown: str | None = None) -> str:
+        """What was read, for the log's notes (``shown``: the database's path as the user gave it)."""
+        torn = (
+            f"; {self.torn} page write(s) after its last commit (a transaction the stop cut) were left out"
+            if self.torn
+            else ""
+        )
         return (
-            f"{self.path}: the recording was not closed: {self.frames} page write(s) of its write-ahead log "
-            f"({os.path.basename(self.path)}-wal) not yet in the database were read as SQLite recovers them{torn}"
+            f"{shown or self.path}: the recording was not closed: its write-ahead log "
+            f"({os.path.basename(self.path)}-wal) was read as SQLite recovers it, {self.frames} committed page "
+            f"write(s) over the database (those a checkpoint had already copied read the same){torn}"
         )
 
 
@@ -75,72 +81,82 @@ def _checksum(buf, start, n, big, s0, s1):
 @numba.njit(cache=True, nogil=True)
 def wal_frames(buf, page_size, big, salt1, salt2, s0, s1, pages, sizes):
     """Walk the frames of a WAL file (uint8 ``buf``): fills ``pages[i]`` (page number) and ``sizes[i]`` (database
-    size after a commit frame, else 0) and returns how many frames are valid (salts and checksums, in order)."""
+    size after a commit frame, else 0).  Returns (valid, current): the frames that are valid (salts, page number and
+    checksums, in order), and those of this generation (the header's salts), valid or not, before the first frame of
+    an older one (left by a checkpoint that restarted the log: already in the database)."""
     frame = _FRAME_HEADER + page_size
     n = (buf.shape[0] - _HEADER) // frame
+    valid = -1
     for i in range(n):
         p = _HEADER + i * frame
         if _u32(buf, p + 8, True) != salt1 or _u32(buf, p + 12, True) != salt2:
-            return i
+            return (i if valid < 0 else valid), i
+        if valid >= 0:
+            continue  # past a broken frame: only counting this generation's frames
         s0, s1 = _checksum(buf, p, 8, big, s0, s1)
         s0, s1 = _checksum(buf, p + _FRAME_HEADER, page_size, big, s0, s1)
-        if s0 != _u32(buf, p + 16, True) or s1 != _u32(buf, p + 20, True):
-            return i
+        if _u32(buf, p, True) == 0 or s0 != _u32(buf, p + 16, True) or s1 != _u32(buf, p + 20, True):
+            valid = i
+            continue
         pages[i] = _u32(buf, p, True)
         sizes[i] = _u32(buf, p + 4, True)
-    return n
+    return (n if valid < 0 else valid), n
 
 
-_cache: dict[str, tuple[tuple[int, int], WalView | None]] = {}
+#: Views read, by the database's real path: (the log's identity, the view); at most _CACHED of them.
+_cache: dict[str, tuple[tuple[Any, ...], WalView | None]] = {}
+_CACHED = 64
 
 
 def wal_view(db_path: str) -> WalView | None:
     """The committed pages of ``db_path``'s write-ahead log, None when there is none with a committed frame (no
-    ``-wal`` file, an empty one, another format).  Read once per process while the file is unchanged."""
-    wal = db_path + "-wal"
+    ``-wal`` file, an empty one, another format).  Read once per process while the file is unchanged (its inode,
+    size, times and header: a restarted log has new salts).  OSError when the log exists but cannot be read."""
+    real = os.path.realpath(db_path)
+    wal = real + "-wal"
     try:
         st = os.stat(wal)
-    except OSError:
+    except FileNotFoundError:
         return None
-    key = (st.st_size, st.st_mtime_ns)
-    known = _cache.get(db_path)
+    with open(wal, "rb") as fh:
+        head = fh.read(_HEADER)
+    key = (st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns, head)
+    known = _cache.get(real)
     if known is None or known[0] != key:
-        known = (key, _read_view(db_path, wal))
-        _cache[db_path] = known
+        if len(_cache) >= _CACHED:
+            _cache.pop(next(iter(_cache)))
+        known = (key, _read_view(real, wal, head, st.st_size))
+        _cache[real] = known
     return known[1]
 
 
-def _read_view(db_path: str, wal: str) -> WalView | None:
-    try:
-        size = os.path.getsize(wal)
-        if size < _HEADER + _FRAME_HEADER:
-            return None
-        with open(wal, "rb") as fh:
-            head = fh.read(_HEADER)
-        magic, version, page_size, _, salt1, salt2, c1, c2 = (
-            int.from_bytes(head[i : i + 4], "big") for i in range(0, _HEADER, 4)
-        )
-        if magic not in WAL_MAGIC or version != WAL_VERSION or page_size < 512 or page_size & (page_size - 1):
-            return None
-        big = magic == WAL_MAGIC[1]
-        s0, s1 = _checksum(np.frombuffer(head, dtype=np.uint8), 0, 24, big, 0, 0)
-        if (s0, s1) != (c1, c2):
-            return None
-        count = (size - _HEADER) // (_FRAME_HEADER + page_size)
-        pages = np.zeros(count, dtype=np.int64)
-        sizes = np.zeros(count, dtype=np.int64)
-        buf = np.memmap(wal, dtype=np.uint8, mode="r")  # the pages stay in the file: only the headers are kept
-        valid = wal_frames(buf, page_size, big, salt1, salt2, s0, s1, pages, sizes)
-        del buf
-    except (OSError, ValueError):
+def _read_view(db_path: str, wal: str, head: bytes, size: int) -> WalView | None:
+    if size < _HEADER + _FRAME_HEADER or len(head) < _HEADER:
         return None
+    magic, version, page_size, _, salt1, salt2, c1, c2 = (
+        int.from_bytes(head[i : i + 4], "big") for i in range(0, _HEADER, 4)
+    )
+    if magic not in WAL_MAGIC or version != WAL_VERSION or not 512 <= page_size <= 65536 or page_size & (page_size - 1):
+        return None
+    big = magic == WAL_MAGIC[1]
+    s0, s1 = _checksum(np.frombuffer(head, dtype=np.uint8), 0, 24, big, 0, 0)
+    if (s0, s1) != (c1, c2):
+        return None
+    count = (size - _HEADER) // (_FRAME_HEADER + page_size)
+    if not count:
+        return None
+    pages = np.zeros(count, dtype=np.int64)
+    sizes = np.zeros(count, dtype=np.int64)
+    buf = np.memmap(wal, dtype=np.uint8, mode="r")  # the pages stay in the file: only the headers are kept
+    valid, current = wal_frames(buf, page_size, big, salt1, salt2, s0, s1, pages, sizes)
+    del buf
     commits = np.flatnonzero(sizes[:valid])
     if not len(commits):
         return None
     last = int(commits[-1])
     offsets = _HEADER + np.arange(last + 1, dtype=np.int64) * (_FRAME_HEADER + page_size) + _FRAME_HEADER
     newest = dict(zip(pages[: last + 1].tolist(), offsets.tolist(), strict=True))  # later frames overwrite earlier
-    return WalView(os.path.abspath(db_path), page_size, newest, int(sizes[last]), last + 1, count - last - 1)
+    return WalView(db_path, page_size, newest, int(sizes[last]), last + 1, int(current) - last - 1)
 
 
 _VIEWS: dict[str, WalView] = {}
@@ -155,9 +171,12 @@ def connect(db_path: str, view: WalView) -> Any:
 
     if not _registered:
         _registered.append(_make_vfs())
-    _VIEWS[view.path] = view
+    _VIEWS[view.path] = view  # view.path is the real path (no symbolic link), as xFullPathname gives it
     uri = "file:" + urllib.request.pathname2url(view.path) + "?immutable=1"
-    return apsw.Connection(uri, flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI, vfs=VFS_NAME)
+    try:
+        return apsw.Connection(uri, flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI, vfs=VFS_NAME)
+    finally:
+        _VIEWS.pop(view.path, None)  # the main file is open (or failed): the view lives on in its WalFile
 
 
 def _vfs_classes() -> tuple[type, type]:
@@ -169,9 +188,13 @@ def _vfs_classes() -> tuple[type, type]:
         def __init__(self) -> None:
             super().__init__(VFS_NAME, "")
 
+        def xFullPathname(self, name: str) -> str:
+            # the default VFS resolves a symbolic link with SQLITE_OK_SYMLINK, which apsw takes for an error
+            return os.path.realpath(name)
+
         def xOpen(self, name: Any, flags: list[int]) -> Any:
             path = name.filename() if isinstance(name, apsw.URIFilename) else name
-            view = _VIEWS.get(os.path.abspath(path)) if path else None
+            view = _VIEWS.get(os.path.realpath(path)) if path else None
             if view is not None and flags[0] & apsw.SQLITE_OPEN_MAIN_DB:
                 return WalFile(view, name, flags)
             return apsw.VFSFile("", name, flags)

@@ -309,11 +309,15 @@ def _unread_logs(paths: Sequence[str]) -> list[str]:
                 from wmrid.io.bag.db3_wal import wal_view
 
                 db = str(wal)[: -len("-wal")]
-                if wal_view(db) is not None:
+                try:
+                    committed = wal_view(db) is not None
+                except OSError:
+                    committed = True  # unreadable: it may hold messages
+                if committed:
                     found.append(
-                        f"{db}: the recording was not closed and its write-ahead log ({wal.name}) holds messages "
-                        "not yet in the database; read through rosbags (a compressed recording, or files that "
-                        "overlap in time), they are left out"
+                        f"{db}: the recording was not closed and its write-ahead log ({wal.name}) holds committed "
+                        "pages that may not be in the database yet; read through rosbags (a compressed recording, or "
+                        "files that overlap in time), the messages in them are left out"
                     )
     return found
 
