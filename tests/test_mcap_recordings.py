@@ -204,7 +204,8 @@ def test_a_topic_of_another_type_in_a_later_file_is_skipped_with_a_note(tmp_path
 
 def test_ros1_files_whose_last_was_cut_short_read_likewise(tmp_path):
     """The same crash in a recording of two ROS 1 bags, given in any order: the unclosed bag (no index) is read
-    last, up to its last whole record, with a note naming it."""
+    last, up to its last whole record, with a note naming it; in their folder, named ``.bag.active`` as rosbag
+    record leaves it, likewise."""
     messages = bagutil.recording(SAMPLE)
     first = bagutil.write_ros1(tmp_path / "run_0.bag", messages[:20_000])
     last = bagutil.write_ros1(tmp_path / "run_1.bag", messages[20_000:])
@@ -217,6 +218,11 @@ def test_ros1_files_whose_last_was_cut_short_read_likewise(tmp_path):
         assert np.array_equal(getattr(log, field), getattr(whole, field)[: len(log)]), field
     (cut,) = [n for n in log.notes if "it was cut short" in n]
     assert cut.startswith(str(last))
+    active = tmp_path / "run_1.bag.active"  # the name rosbag record gives the file it is writing
+    last.rename(active)
+    folder = api.read_log(str(tmp_path))
+    for field in ("t", "eta", "tau"):
+        assert np.array_equal(getattr(folder, field), getattr(log, field)), field
 
 
 def test_big_endian_joint_states_in_bags_take_rosbags_deserialiser(tmp_path, messages):

@@ -36,7 +36,9 @@ ADDED_IN_2 = ("speed_r", "speed_l", "Fv1_Fd1_corr", "Fv2_Fd2_corr")
 PARAMETERS = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2", "Cv", "Cw")
 
 #: Suffixes of the files :func:`find_logs` takes from a folder (a folder holding metadata.yaml is one recording).
-LOG_SUFFIXES = (".mcap", ".bag", ".db3", ".parquet", ".csv", ".csv.gz", ".csv.bz2", ".csv.xz", ".csv.zst")
+LOG_SUFFIXES = (
+    ".mcap", ".bag", ".bag.active", ".db3", ".parquet", ".csv", ".csv.gz", ".csv.bz2", ".csv.xz", ".csv.zst",
+)  # fmt: skip
 
 #: A date, optionally with a time, in a file or folder name: 2026-03-14, 2026-03-14T08-30-00, 20260314_083000.
 DATE_IN_NAME = re.compile(

@@ -18,8 +18,9 @@ from wmrid.io.signals import SignalOptions
 ROS1_MAGIC = b"#ROSBAG V2.0"
 SQLITE_MAGIC = b"SQLite format 3\x00"
 MCAP_MAGIC = b"\x89MCAP"
-#: The suffixes of a recording's files inside a folder without metadata.yaml.
-BAG_SUFFIXES = (".bag", ".db3", ".mcap")
+#: The suffixes of a recording's files inside a folder without metadata.yaml (``.bag.active``: the file ROS 1's
+#: ``rosbag record`` was writing when it stopped, left so by a crash).
+BAG_SUFFIXES = (".bag", ".bag.active", ".db3", ".mcap")
 
 
 def _magic(path: str) -> bytes:
