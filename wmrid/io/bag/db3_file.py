@@ -167,12 +167,6 @@ class Db3State(_BagState):
                 ids[topic_id] = channel
             self._ids.append(ids)
 
-    def __enter__(self) -> Db3State:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        pass
-
     def steps(self) -> Generator[None, None, None]:
         """Read every file, pausing after each block of messages."""
         decoded = set(self.joint_channels())

@@ -145,12 +145,6 @@ class McapFilesState(_BagState):
         self._by_topic: dict[str, int] = {}
         self._decoded: set[int] = set()
 
-    def __enter__(self) -> McapFilesState:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        pass
-
     def steps(self) -> Generator[None, None, None]:
         """Walk every file, pausing after each batch of messages."""
         for path in self.files:

@@ -160,6 +160,12 @@ class _BagState(JointChannels):
         self.topics: dict[int, _Topic] = {}
         self.typestore: Any = None
 
+    def __enter__(self) -> _BagState:  # wmrid's own readers hold nothing open between steps
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        pass
+
     def add_topic(self, topic: _Topic, count: int = 0) -> None:
         channel = topic.channel
         self.topics[channel] = topic

@@ -68,12 +68,6 @@ class Ros1State(_BagState):
         self._unknown = 0
         self._release: Any = None
 
-    def __enter__(self) -> Ros1State:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        pass
-
     def steps(self) -> Generator[None, None, None]:
         """Walk every bag, pausing after each chunk."""
         for path in self.paths:
