@@ -39,14 +39,15 @@ from wmrid.io.mcap.records import JOINT_STATE_NAMES, MAGIC, OP_CHUNK, OP_HEADER,
 
 def mcap_files(paths: Sequence[str]) -> list[str] | None:
     """The MCAP files of the recording ``paths`` names (rosbag2 folders with MCAP storage and .mcap files) in the
-    order they are read (by their first message; files without messages first), or None when rosbags must read it
-    (see the module docstring)."""
+    order they are read (files without messages first, then by their first message, then the :func:`stub` files a
+    crash left), or None when rosbags must read it (see the module docstring)."""
     files: list[str] = []
     stubs: list[str] = []
     for path in paths:
         got = storage_files(path, "mcap", MAGIC)
-        if got is None and os.path.isfile(path) and stub(path):
-            got, stubs = [], [*stubs, path]
+        if got is None and os.path.isfile(path) and stub(path):  # e.g. an empty file: no magic bytes to find
+            stubs.append(path)
+            continue
         if got is None:
             return None
         for file in got:
