@@ -33,7 +33,16 @@ import numpy as np
 from wmrid.core.errors import LogFormatError
 from wmrid.io.bag.reader import _BagState, _Topic, storage_files
 from wmrid.io.mcap.joint_batches import DYNAMIC_JOINT_STATE_NAMES
-from wmrid.io.mcap.reader import _SCAN_WINDOW, UNCLOSED_NOTE, _check_start, _map, _ReadState, closed
+from wmrid.io.mcap.reader import (
+    _SCAN_WINDOW,
+    UNCLOSED_NOTE,
+    _check_start,
+    _map,
+    _ReadState,
+    closed,
+    cut_short_note,
+    u64s_at,
+)
 from wmrid.io.mcap.records import JOINT_STATE_NAMES, MAGIC, OP_CHUNK, OP_HEADER, OP_MESSAGE, scan
 
 
@@ -86,11 +95,6 @@ def stub(path: str) -> bool:
     return len(rest) < 9 or len(rest) < 9 + int.from_bytes(rest[1:9], "little")
 
 
-def _u64s(buf: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """The little-endian uint64 at each of ``offsets`` in ``buf``, as int64 (n,)."""
-    return np.ascontiguousarray(buf[offsets[:, None] + np.arange(8)]).view("<i8").ravel()
-
-
 def mcap_span(path: str) -> tuple[int | None, int | None] | None:
     """(first, last) message log time (ns) of an MCAP file, (None, None) when it holds no message, None when it is not
     an MCAP file.  Only top-level records are read: a chunk's times from its record header, a message's from its own;
@@ -119,14 +123,14 @@ def mcap_span(path: str) -> tuple[int | None, int | None] | None:
         op, at, length = ops[:n], starts[:n], lengths[:n]
         chunks = at[(op == OP_CHUNK) & (length >= 16)]
         if len(chunks):
-            first, last = _u64s(buf, chunks), _u64s(buf, chunks + 8)
+            first, last = u64s_at(buf, chunks), u64s_at(buf, chunks + 8)
             held = (last >= first) & ~((first == 0) & (last == 0))  # an empty chunk's times are both 0
             if held.any():
                 lows.append(int(first[held].min()))
                 highs.append(int(last[held].max()))
         messages = at[(op == OP_MESSAGE) & (length >= 22)]
         if len(messages):
-            times = _u64s(buf, messages + 6)
+            times = u64s_at(buf, messages + 6)
             lows.append(int(times.min()))
             highs.append(int(times.max()))
         p = q
@@ -164,10 +168,7 @@ class McapFilesState(_BagState):
             del buf
             self.notes.extend(f"{path}: {note}" for note in walker.notes)
             if cut:
-                self.notes.append(
-                    f"{path}: the file ends inside a record (byte {reached} of {size}): it was cut short, e.g. by a "
-                    f"crash; read everything up to there, {size - reached} bytes at the end are lost"
-                )
+                self.notes.append(f"{path}: {cut_short_note(reached, size)}")
             elif not ended:
                 self.notes.append(f"{path}: {UNCLOSED_NOTE}")
 
@@ -219,12 +220,12 @@ class _FileWalker(_ReadState):
         self.owner = owner
         self.local: dict[int, int | None] = {}  # this file's channel id -> the recording's (None: skipped)
 
-    def _channel(self, body: bytes) -> None:
-        before = set(self.channels)
-        super()._channel(body)
-        for cid in set(self.channels) - before:
+    def _channel(self, body: bytes) -> int | None:
+        cid = super()._channel(body)
+        if cid is not None:
             info = self.channels[cid].info
             self.local[cid] = self.owner.channel_for(self.name, info, self.schemas.get(info["schema_id"]))
+        return cid
 
     def _channel_messages(
         self, cid: int, buf: np.ndarray, starts: np.ndarray, lengths: np.ndarray, times: np.ndarray

@@ -29,7 +29,7 @@ from wmrid.core.errors import LogFormatError
 from wmrid.core.limits import describe
 from wmrid.io.bag.reader import _BagState, _Topic
 from wmrid.io.bag.ros1_records import OP_CHUNK, OP_CHUNK_INFO, OP_CONNECTION, OP_MESSAGE, ros1_records
-from wmrid.io.mcap.reader import page_releaser
+from wmrid.io.mcap.reader import cut_short_note, page_releaser
 from wmrid.io.mcap.records import BOMB_FLOOR, BOMB_RATIO
 
 MAGIC = b"#ROSBAG V2.0\n"
@@ -90,10 +90,7 @@ class Ros1State(_BagState):
                     f"{path}: {self._unknown} message(s) on a connection no connection record defines were skipped"
                 )
             if reached < size:
-                self.notes.append(
-                    f"{path}: the file ends inside a record (byte {reached} of {size}): it was cut short, e.g. by a "
-                    f"crash; read everything up to there, {size - reached} bytes at the end are lost"
-                )
+                self.notes.append(f"{path}: {cut_short_note(reached, size)}")
             del buf
         finally:
             with contextlib.suppress(BufferError):  # a view of it still lives (in a traceback): it goes with it

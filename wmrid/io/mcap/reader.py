@@ -210,10 +210,7 @@ def _read_buffer(state: _ReadState, buf: np.ndarray) -> McapContents:
     lost_bytes = 0
     if lost:
         lost_bytes = size - end
-        notes.append(
-            f"the file ends inside a record (byte {end} of {size}): it was cut short, e.g. by a crash; "
-            f"read everything up to there, {lost_bytes} bytes at the end are lost"
-        )
+        notes.append(cut_short_note(end, size))
     elif not closed(buf):
         notes.append(UNCLOSED_NOTE)
     channels = tuple(state.channel_info())
@@ -233,6 +230,19 @@ def _read_buffer(state: _ReadState, buf: np.ndarray) -> McapContents:
         json=json_out, metadata=state.metadata, notes=tuple(notes), size_bytes=size, lost_bytes=lost_bytes,
         complete=state.complete, replay=None if state.complete else state.replay, definitions=_definitions(state),
     )  # fmt: skip
+
+
+def cut_short_note(reached: int, size: int) -> str:
+    """Said of a file (MCAP or ROS 1) whose last record stops at byte ``size``, after ``reached``."""
+    return (
+        f"the file ends inside a record (byte {reached} of {size}): it was cut short, e.g. by a crash; read "
+        f"everything up to there, {size - reached} bytes at the end are lost"
+    )
+
+
+def u64s_at(buf: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """The little-endian uint64 at each of ``offsets`` (n,) in ``buf`` (uint8), as int64 (n,)."""
+    return np.ascontiguousarray(buf[offsets[:, None] + np.arange(8)]).view("<i8").ravel()
 
 
 #: Said of a file that ends between two records without MCAP's footer and closing magic bytes.
@@ -432,13 +442,14 @@ class _ReadState(JointChannels):
         s = Schema.read(ReadDataStream(io.BytesIO(body)))
         self.schemas[s.id] = {"name": s.name, "encoding": s.encoding, "data": s.data}
 
-    def _channel(self, body: bytes) -> None:
+    def _channel(self, body: bytes) -> int | None:
+        """Add the channel of a Channel record; its id, None when it was known (the summary repeats them)."""
         from mcap.data_stream import ReadDataStream
         from mcap.records import Channel
 
         c = Channel.read(ReadDataStream(io.BytesIO(body)))
         if c.id in self.channels:
-            return
+            return None
         schema = self.schemas.get(c.schema_id, {"name": "", "encoding": "", "data": b""})
         self.channels[c.id] = Accumulator(
             info={
@@ -446,6 +457,7 @@ class _ReadState(JointChannels):
                 "schema_name": schema["name"], "schema_encoding": schema["encoding"],
             }
         )  # fmt: skip
+        return c.id
 
     def _metadata(self, body: bytes) -> None:
         from mcap.data_stream import ReadDataStream
@@ -470,12 +482,9 @@ class _ReadState(JointChannels):
             starts, lengths = starts[~short], lengths[~short]
             if not len(starts):
                 return
-        head = buf[starts[:, None] + np.arange(14)[None, :]]  # channel u16, sequence u32, log_time u64
-        chan = head[:, 0].astype(np.int64) | (head[:, 1].astype(np.int64) << 8)
-        log_ns = np.zeros(len(starts), dtype=np.uint64)
-        for b in range(8):
-            log_ns |= head[:, 6 + b].astype(np.uint64) << np.uint64(8 * b)
-        log_ns = log_ns.astype(np.int64)
+        # channel u16, sequence u32, log_time u64
+        chan = buf[starts].astype(np.int64) | (buf[starts + 1].astype(np.int64) << 8)
+        log_ns = u64s_at(buf, starts + 6)
         data_start = starts + 22
         data_len = lengths - 22
         for cid in np.unique(chan):
