@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import LogFormatError
+from wmrid.io.bag.db3_wal import wal_state
 from wmrid.io.bag.reader import BATCH, _BagState, _one_line, _Topic, storage_files
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -81,15 +82,11 @@ def _connect(path: str) -> Any:
     pages (a recording that was not closed: :mod:`wmrid.io.bag.db3_wal`)."""
     import apsw
 
-    if os.path.exists(path + "-wal"):
-        from wmrid.io.bag.db3_wal import connect, wal_view
+    from wmrid.io.bag.db3_wal import connect, wal_state
 
-        try:
-            view = wal_view(path)
-        except OSError:  # said in a note (Db3State)
-            view = None
-        if view is not None:
-            return connect(path, view)
+    view, _ = wal_state(path)  # an unreadable log is said in a note (Db3State)
+    if view is not None:
+        return connect(path, view)
     uri = "file:" + urllib.request.pathname2url(os.path.abspath(path)) + "?immutable=1"
     return apsw.Connection(uri, flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI)
 
@@ -138,19 +135,9 @@ class Db3State(_BagState):
         self._ids: list[dict[int, int]] = []  # per file: topic id -> channel (skipped topics left out)
         by_topic: dict[str, int] = {}
         for file in self.files:
-            if os.path.exists(file.path + "-wal"):
-                from wmrid.io.bag.db3_wal import wal_view
-
-                try:
-                    view = wal_view(file.path)
-                except OSError as err:
-                    self.notes.append(
-                        f"{file.path}: its write-ahead log could not be read ({err.strerror or err}): the messages "
-                        "recorded after its last checkpoint may be missing"
-                    )
-                    view = None
-                if view is not None:
-                    self.notes.append(view.note(file.path))
+            view, problem = wal_state(file.path)
+            if view is not None or problem is not None:
+                self.notes.append(problem or view.note(file.path))
             ids = {}
             for topic_id, name, kind, definition in file.topics:
                 channel = by_topic.get(name)

@@ -103,6 +103,20 @@ def wal_frames(buf, page_size, big, salt1, salt2, s0, s1, pages, sizes):
     return (n if valid < 0 else valid), n
 
 
+def wal_state(db_path: str) -> tuple[WalView | None, str | None]:
+    """(:func:`wal_view` of ``db_path``, None) -- or (None, a note) when its write-ahead log exists but cannot be
+    read.  Costs one stat when there is no log."""
+    if not os.path.exists(db_path + "-wal"):
+        return None, None
+    try:
+        return wal_view(db_path), None
+    except OSError as err:
+        return None, (
+            f"{db_path}: its write-ahead log could not be read ({err.strerror or err}): the messages recorded after "
+            "its last checkpoint may be missing"
+        )
+
+
 #: Views read, by the database's real path: (the log's identity, the view); at most _CACHED of them.
 _cache: dict[str, tuple[tuple[Any, ...], WalView | None]] = {}
 _CACHED = 64

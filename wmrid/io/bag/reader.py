@@ -308,23 +308,18 @@ def storage_files(path: str, storage: str, magic: bytes) -> list[str] | None:
 def _unread_logs(paths: Sequence[str]) -> list[str]:
     """Notes for the .db3 files among ``paths`` (files or folders) whose write-ahead log holds committed messages
     that rosbags, which opens the database immutable, does not read."""
+    from wmrid.io.bag.db3_wal import wal_state
+
     found = []
     for path in map(Path, paths):
         for wal in sorted(path.glob("*.db3-wal")) if path.is_dir() else [Path(f"{path}-wal")]:
-            if wal.exists():
-                from wmrid.io.bag.db3_wal import wal_view
-
-                db = str(wal)[: -len("-wal")]
-                try:
-                    committed = wal_view(db) is not None
-                except OSError:
-                    committed = True  # unreadable: it may hold messages
-                if committed:
-                    found.append(
-                        f"{db}: the recording was not closed and its write-ahead log ({wal.name}) holds committed "
-                        "pages that may not be in the database yet; read through rosbags (a compressed recording, or "
-                        "files that overlap in time), the messages in them are left out"
-                    )
+            db = str(wal)[: -len("-wal")]
+            if any(wal_state(db)):  # committed pages, or unreadable (it may hold messages)
+                found.append(
+                    f"{db}: the recording was not closed and its write-ahead log ({wal.name}) holds committed "
+                    "pages that may not be in the database yet; read through rosbags (a compressed recording, or "
+                    "files that overlap in time), the messages in them are left out"
+                )
     return found
 
 
