@@ -110,7 +110,7 @@ def test_a_result_saved_before_schema_versions_reads_as_version_1(sample_result)
 
 
 def test_library_errors_name_options_as_python_names(sample_log):
-    with pytest.raises(UsageError, match=r"friction='wheel\+caster' with method='oe' or validate needs"):
+    with pytest.raises(UsageError, match=r"friction='wheel\+caster' with method='oe' needs"):
         wmrid.identify(sample_log, method="oe", friction="wheel+caster")
     with pytest.raises(UsageError, match=r"control_rate is modelled by the observer, idim, iv and rls only"):
         wmrid.identify(sample_log, method="oe", control_rate=1000.0)
@@ -123,7 +123,7 @@ def test_library_errors_name_options_as_python_names(sample_log):
 def test_the_same_errors_name_flags_on_the_command_line():
     proc = cli("identify", str(SAMPLE), "--method", "oe", "--friction", "wheel+caster")
     assert proc.returncode == 2
-    assert "--friction wheel+caster with --method oe or --validate needs" in proc.stderr.decode()
+    assert "--friction wheel+caster with --method oe needs" in proc.stderr.decode()
     proc = cli("identify", str(SAMPLE), "--delay", "soon")
     assert "--delay must be auto or a number of seconds, got 'soon'" in proc.stderr.decode()
 

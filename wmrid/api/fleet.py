@@ -354,7 +354,7 @@ def check_defaults(defaults: dict[str, Any]) -> dict[str, Any]:
     log_opts, run_opts = _split_options(given)
     LogOptions(**log_opts)
     check_numbers(**run_opts)
-    if "method" in run_opts:
+    if run_opts.get("method", "auto") != "auto":
         check_method(run_opts["method"])
     return given
 

@@ -103,32 +103,27 @@ def _refuse_unmodelled(name: str, value: Any, methods: tuple[str, ...], validati
         raise UsageError(f"{given} is not modelled by the {option('validate')} predictor yet; validate without it")
 
 
-def _simulates(methods: tuple[str, ...], validating: bool) -> bool:
-    """Whether the model is simulated (output error, validation), which needs the casters' positions for the drag."""
-    return "oe" in methods or validating
-
-
 def friction_model(friction: str, methods: tuple[str, ...], validating: bool, robot: Robot | None) -> str:
     """The friction model to identify with.
 
-    ``auto`` falls back to ``wheel`` where caster drag is not modelled: another method, or output error and
-    validation without the casters' positions (they simulate the drag, which needs its direction).  An explicit
-    ``wheel+caster`` there is refused.
+    ``auto`` falls back to ``wheel`` where the *method* cannot model caster drag: another method, or output error
+    without the casters' positions (it simulates the drag, which needs its direction).  An explicit
+    ``wheel+caster`` there is refused.  ``validating`` changes nothing here: an option that only adds output never
+    changes the estimate (a model whose drag the validation predictor cannot simulate is validated without a fit,
+    and the validation says why: :func:`with_validation`).
     """
     if friction not in FRICTION_CHOICES:
         raise UsageError(f"{option('friction')} must be one of {', '.join(FRICTION_CHOICES)}, got {friction!r}")
     positions = robot is not None and bool(robot.casters)
     if friction == "wheel+caster":
         _refuse_unmodelled("friction", friction, methods, False, CASTER_METHODS)
-        if _simulates(methods, validating) and not positions:
+        if "oe" in methods and not positions:
             raise UsageError(
-                f"{option('friction', 'wheel+caster')} with {option('method', 'oe')} or {option('validate')} needs "
+                f"{option('friction', 'wheel+caster')} with {option('method', 'oe')} needs "
                 f"the casters' positions to simulate their drag: give {option('robot')} with [[caster]] tables, or "
                 "drop the option"
             )
-    if friction == "auto" and (
-        any(m not in CASTER_METHODS for m in methods) or (_simulates(methods, validating) and not positions)
-    ):
+    if friction == "auto" and (any(m not in CASTER_METHODS for m in methods) or ("oe" in methods and not positions)):
         return "wheel"
     return friction
 
@@ -177,7 +172,7 @@ def with_validation(
 ) -> IdentificationResult:
     """``result`` with ``validation``: the fit % per wheel of its model's simulated wheel speeds on log ``other``
     (read with the same ``options``)."""
-    from wmrid.model.predict import validation_fit
+    from wmrid.model.predict import unsimulated, validation_fit
 
     other_log = _log(other, options, robot, whole=True)
     unit = result.log_info.get("effort_unit", "N m")
@@ -188,13 +183,17 @@ def with_validation(
         )
     theta0 = result.estimate.theta0
     form = result.form if len(theta0) == result.form.n_base else None
-    fit = validation_fit(other_log.t, other_log.eta, other_log.tau, theta0, torque_hold, form=form)
     validation = {
         "log": other_log.source, "samples": len(other_log),
-        "fit_percent": {w: fit[w] if math.isfinite(fit[w]) else None for w in ("eta_r", "eta_l")},
-        "predictor": fit["predictor"],
         "definition": "fit = 100 (1 - ||eta - eta_hat|| / ||eta - mean(eta)||) per wheel over the whole log",
     }  # fmt: skip
+    why = unsimulated(form)
+    if why:
+        validation.update({"fit_percent": {"eta_r": None, "eta_l": None}, "predictor": None, "not_simulated": why})
+        return replace(result, validation=validation, warnings=(*result.warnings, f"--validate: {why}"))
+    fit = validation_fit(other_log.t, other_log.eta, other_log.tau, theta0, torque_hold, form=form)
+    validation["fit_percent"] = {w: fit[w] if math.isfinite(fit[w]) else None for w in ("eta_r", "eta_l")}
+    validation["predictor"] = fit["predictor"]
     return replace(result, validation=validation)
 
 
@@ -202,7 +201,7 @@ def identify(
     log: LogInput,
     robot: str | os.PathLike[str] | Robot | None = None,
     *,
-    method: str = "observer",
+    method: str = "auto",
     validate: LogInput | None = None,
     options: LogOptions | None = None,
     form: str = "auto",
@@ -226,7 +225,9 @@ def identify(
     robot : a built-in name, a robot file (TOML, URDF) or a :class:`Robot`: the start value, the nominal/CAD
         values to compare with, and the defaults of the log's units.  None: a start value from the data.  A URDF
         takes its gear ratio from ``options.gear_ratio`` and ``rotor_inertia`` (kg m^2) when it has no rotor links.
-    method : "observer" (the paper's), "idim", "iv", "rls" or "oe" (:data:`wmrid.estimators.methods.METHODS`).
+    method : "auto" (the observer, or the IDIM/IDIM-IV estimate when the closed-loop check finds the observer's
+        biased by feedback, said in the first warning), "observer" (the paper's, always reported), "idim", "iv",
+        "rls" or "oe" (:data:`wmrid.estimators.methods.METHODS`): a method named is the method reported.
     validate : a second log (path or log) to predict with the identified model; its fit % is in ``validation``.
     form, k, alpha, box_width, torque_hold, payload, control_rate, delay, friction : the observer's settings (see
         ``wmrid identify --help``; ``delay``: None, "auto" or seconds).
@@ -257,11 +258,16 @@ class Prepared:
     method_options: Any
     robot: Robot | None
     friction: str
+    #: the method was left to wmrid (``method="auto"``): the closed-loop check may report IDIM or IDIM-IV instead of
+    #: the observer, and says so first; a method the user names is the method reported
+    auto_method: bool = False
+    #: why ``friction="auto"`` was settled before the log was read (a method that cannot model caster drag), or None
+    friction_reason: str | None = None
 
 
 def prepare(
     *,
-    method: str = "observer",
+    method: str = "auto",
     validate: LogInput | None = None,
     options: LogOptions | None = None,
     robot: str | os.PathLike[str] | Robot | None = None,
@@ -284,14 +290,24 @@ def prepare(
     from wmrid.estimators.methods import check_method
 
     check_numbers(k=k, alpha=alpha, box_width=box_width, control_rate=control_rate, rotor_inertia=rotor_inertia)
-    method = check_method(method)
+    auto_method = method == "auto"
+    method = "observer" if auto_method else check_method(method)
     validating = validate is not None
     options_ = method_options(cutoff, weighted, forgetting, torque_hold)
     check_control_rate(control_rate, (method,), validating)
     if stdin_check is not None:
         no_two_stdin(stdin_check[0], validate, stdin_check[1])
     robot_obj = robot_for(robot, options, rotor_inertia)
-    return Prepared(method, options_, robot_obj, friction_model(friction, (method,), validating, robot_obj))
+    model = friction_model(friction, (method,), validating, robot_obj)
+    reason = None
+    if friction == "auto" and model != "auto":
+        reason = (
+            f"{option('method', method)} cannot model caster drag"
+            if method not in CASTER_METHODS
+            else f"{option('method', method)} simulates the drag, which needs the casters' positions (a robot file "
+            "with [[caster]] tables)"
+        )
+    return Prepared(method, options_, robot_obj, model, auto_method, reason)
 
 
 def check_numbers(
@@ -336,7 +352,11 @@ def run_prepared(
         wheel_log, prep.robot, form=form, k=k, alpha=alpha, box_width=box_width, torque_hold=torque_hold,
         progress=progress, payload=payload, control_rate=control_rate, friction=prep.friction,
         delay=delay_value(delay), feedback=prep.method == "observer",  # another method is reported as asked
+        switch=prep.auto_method,
     )  # fmt: skip
+    if prep.friction_reason:
+        friction_record = {"model": prep.friction, "chosen_by": "auto", "reason": prep.friction_reason}
+        result = replace(result, diagnostics={**result.diagnostics, "friction": friction_record})
     if prep.method != "observer":
         from wmrid.estimators.methods import run
 
@@ -383,7 +403,11 @@ def compare(
     no_two_stdin(log, validate, option("log"))
     truth = load_truth(truth)
     robot_obj = robot_for(robot, options, rotor_inertia)
-    friction_ = friction_model(friction, names, validating, robot_obj)
+    # every method with the friction model identify --method NAME would use: the ones that model caster drag share
+    # the observer's (auto: chosen by its drag test); output error without the casters' positions cannot simulate the
+    # two-term drag and is run on the wheel-friction model, which its row says
+    drag_methods = tuple(m for m in names if m != "oe") or names
+    friction_ = friction_model(friction, drag_methods, validating, robot_obj)
     say = stage or (lambda text: None)
     say("reading the log")
     wheel_log = _log(log, options, robot_obj, whole=True)
@@ -396,8 +420,26 @@ def compare(
                 f"{option('log')}'s in {wheel_log.effort_unit}; give both logs in the same units"
             )
     say("the observer's run")
-    observer = run_observer(
-        wheel_log, robot_obj, torque_hold=torque_hold, control_rate=control_rate, friction=friction_,
-        delay=delay_value(delay), feedback=False,  # compare shows every method's own estimate
-    )  # fmt: skip
-    return run_compare(wheel_log, observer, options_, names, other=other, truth=truth, stage=stage)
+    common = {"torque_hold": torque_hold, "control_rate": control_rate, "delay": delay_value(delay)}
+    # the observer's column is identify --method observer's: the closed-loop check widens it, never swaps it
+    observer = run_observer(wheel_log, robot_obj, friction=friction_, switch=False, **common)
+    wheel_only = "oe" in names and friction_model(friction, ("oe",), validating, robot_obj) != observer.form.friction
+    if not wheel_only:
+        return run_compare(wheel_log, observer, options_, names, other=other, truth=truth, stage=stage)
+    shared = tuple(m for m in names if m != "oe")
+    first = (
+        run_compare(wheel_log, observer, options_, shared, other=other, truth=truth, stage=stage) if shared else None
+    )
+    say("the observer's run with wheel friction (for oe)")
+    plain = run_observer(wheel_log, robot_obj, friction="wheel", feedback=False, **common)
+    oe = run_compare(wheel_log, plain, options_, ("oe",), other=other, truth=truth, stage=stage)
+    row = dict(oe.methods["oe"])
+    row["warnings"] = [
+        f"friction: wheel, not the observer's {observer.form.friction}: output error simulates the drag, which needs "
+        "the casters' positions (a robot file with [[caster]] tables)",
+        *row["warnings"],
+    ]
+    methods = {m: (row if m == "oe" else first.methods[m]) for m in names}
+    base = first or oe
+    validation = base.validation if first is None or first.validation is None else first.validation
+    return replace(base, methods=methods, validation=validation)

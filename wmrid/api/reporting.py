@@ -100,7 +100,7 @@ def _report(result, log, truth, figures, options, robot, rotor_inertia, identify
     if unknown:  # prepare() and run_prepared() take identify()'s keywords and ignore the other's
         raise TypeError(f"report() got unexpected keyword arguments {unknown}")
     validate = identify_options.get("validate")
-    method = identify_options.get("method", "observer")
+    method = identify_options.get("method", "auto")
     check_numbers(rotor_inertia=rotor_inertia, **identify_options)  # before INPUT is opened, as identify does
     inputs: list[Any] = []
     data = None
@@ -111,7 +111,7 @@ def _report(result, log, truth, figures, options, robot, rotor_inertia, identify
         source = open_source(os.fspath(result))
         inputs, data = [os.fspath(result)], source.data
         if source.head(64).lstrip().startswith(b"{"):
-            if validate is not None or method != "observer":
+            if validate is not None or method not in ("auto", "observer"):
                 raise UsageError(
                     f"{source.name}: {option('validate')} and {option('method')} need a log as INPUT, not a saved "
                     "result; run `wmrid identify LOG --method ... --validate OTHER --format json` and report its output"

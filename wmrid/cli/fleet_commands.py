@@ -207,7 +207,7 @@ def fleet(
     mirror_left: MirrorLeftOpt = False,
     flip_effort: FlipEffortOpt = False,
     rotor_inertia: RotorInertiaOpt = None,
-    method: MethodOpt = MethodChoice.observer,
+    method: MethodOpt = MethodChoice.auto,
     cutoff: CutoffOpt = None,
     weighted: WeightedOpt = False,
     forgetting: ForgettingOpt = 1.0,

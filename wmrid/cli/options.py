@@ -17,6 +17,7 @@ class OutputFormat(str, Enum):
 
 
 class MethodChoice(str, Enum):
+    auto = "auto"
     observer = "observer"
     idim = "idim"
     iv = "iv"
@@ -222,8 +223,10 @@ _METHOD_PANEL = "Method (observer, or a classical rival; see wmrid compare)"
 MethodOpt = Annotated[
     MethodChoice,
     typer.Option(
-        help="observer (the paper's, default), idim (least squares on filtered accelerations), rls (recursive "
-        "least squares with forgetting), oe (output error from the observer's estimate).",
+        help="auto (default: the observer, or IDIM/IDIM-IV when the closed-loop check finds the observer biased by "
+        "feedback, said first), observer (the paper's, always reported), idim (least squares on filtered "
+        "accelerations), iv (IDIM with the logged reference as instruments), rls (recursive least squares with "
+        "forgetting), oe (output error from the observer's estimate).",
         rich_help_panel=_METHOD_PANEL,
     ),
 ]

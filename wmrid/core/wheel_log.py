@@ -175,6 +175,23 @@ def stream_arrays(log: Any, rows: int = CHUNK_ROWS) -> LogStream:
 SPLIT_NOTE = "put on the speed stamps"
 
 
+#: The words of the note that says a topic's efforts were all whole numbers before they were put on the speed stamps
+#: (PWM counts look like that; interpolation hides it from the units check, :mod:`wmrid.estimators.plausibility`).
+WHOLE_EFFORTS_NOTE = "every effort message holds whole numbers"
+
+
+def whole_efforts(effort) -> str | None:
+    """The :data:`WHOLE_EFFORTS_NOTE` clause for efforts (k, 2) that are all whole numbers, not all zero; else None."""
+    import numpy as np
+
+    effort = np.asarray(effort, dtype=float)
+    if effort.size == 0 or not np.all(np.isfinite(effort)) or not np.any(effort):
+        return None
+    if not np.array_equal(effort, np.floor(effort)):
+        return None
+    return f"{WHOLE_EFFORTS_NOTE} (up to {float(np.abs(effort).max()):.6g})"
+
+
 def split_topics(notes: tuple[str, ...] | list[str]) -> bool:
     """Whether a log's reading notes say its efforts and speeds came from two topics (two clocks, two drivers), the
     case where ``identify`` estimates their delay by default (:func:`wmrid.estimators.delay.apply_delay`)."""

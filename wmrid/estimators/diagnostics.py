@@ -316,9 +316,8 @@ def caster_drag_test(result: IdentificationResult) -> dict[str, Any]:
         return {"statistic": 0.0, "dof": len(names), "p_value": 1.0, "text": "not determined by this log"}
     stat = float(values @ np.linalg.pinv(cov, hermitian=True) @ values)
     units = result.units
-    text = ", ".join(
-        f"{n} = {v:.4g} +/- {result.parameters[n][1]:.2g} {units[n]}" for n, v in zip(names, values, strict=True)
-    )
+    # values only: their std is the table's, which later terms may widen (wmrid.estimators.verdict)
+    text = ", ".join(f"{n} = {v:.4g} {units[n]}" for n, v in zip(names, values, strict=True))
     q = len(names)
     big_b = result.diagnostics.get("uncertainty", {}).get("dof")
     if big_b and big_b - q + 1 > 0:

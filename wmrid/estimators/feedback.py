@@ -109,10 +109,12 @@ def other_estimate(log: Any, result: Any, grid: tuple[float, float, int] | None 
     return identify_idim(t, eta, tau, **common)
 
 
-def check(result: Any, log: Any, robot: Any = None) -> Any:
+def check(result: Any, log: Any, robot: Any = None, switch: bool = True) -> Any:
     """``result`` (the observer's) with ``diagnostics["feedback"]``: reporting the other estimate (on its own
     segments), with a warning, when the difference test (:func:`difference_test`) finds the observer's estimate
     biased; else the observer's with the closed-loop term delta delta^T added to its covariance (:func:`widened`).
+    ``switch`` False (the user named the observer): the observer's estimate is kept even past the gate, widened by
+    the difference as below it, with a warning that says the bias was found and how to get the other estimate.
     Only when the prediction error shows a disturbance (:func:`disturbance`): without one nothing feeds back, and
     on noise-free logs the two methods differ by their own tiny biases, which the difference test would see.
 
@@ -150,8 +152,19 @@ def check(result: Any, log: Any, robot: Any = None) -> Any:
         return replace(result, diagnostics={**result.diagnostics, "feedback": record})
     label = {"iv": "instrumental-variable (IDIM-IV, the logged reference as instruments)", "idim": "IDIM"}
     record = {"checked": True, "against": other.method, **evidence, **test, "reported": result.method}
-    if not test["applied"]:
-        return widened(result, np.array(list(test["delta"].values())), matched.std, record, robot)
+    if not test["applied"] or not switch:
+        out = widened(result, np.array(list(test["delta"].values())), matched.std, record, robot)
+        if not test["applied"]:
+            return out
+        big = [n for n, r in test["ratio"].items() if r > test["gate"]]
+        text = (
+            f"closed-loop bias: the observer's {', '.join(big)} differ from the {label[matched.method]} estimate by up "
+            f"to {test['largest_ratio']:.1f} std of the difference (gate {test['gate']:g}), the mark of a controller "
+            "answering a disturbance through the efforts; the observer's estimate is kept as --method observer asks, "
+            "its std widened by that difference (the default, --method auto, reports the "
+            f"{'IDIM-IV' if matched.method == 'iv' else 'IDIM'} estimate)"
+        )
+        return replace(out, warnings=(text, *out.warnings))
     out = with_estimate(result, other, robot)
     record["reported"] = other.method
     big = [n for n, r in test["ratio"].items() if r > test["gate"]]
@@ -159,7 +172,8 @@ def check(result: Any, log: Any, robot: Any = None) -> Any:
         f"closed-loop bias: the observer's {', '.join(big)} differ from the {label[other.method]} estimate by up to "
         f"{test['largest_ratio']:.1f} std of the difference (gate {test['gate']:g}), the mark of a controller "
         "answering a disturbance (a caster, the floor) through the efforts; reporting the "
-        f"{other.method.upper() if other.method == 'iv' else 'IDIM'} estimate"
+        f"{other.method.upper() if other.method == 'iv' else 'IDIM'} estimate instead of the observer's "
+        "(--method observer keeps the observer's)"
     )
     if other.method == "idim":
         text += (

@@ -141,7 +141,18 @@ def default_box(
     return lo, hi
 
 
-def identify(
+def identify(log: LogLike | LogStream, robot: Robot | None = None, **settings: Any) -> IdentificationResult:
+    """Identify the base parameters of the robot that recorded ``log`` (:func:`identify_log`, whose keywords it
+    takes), with every statement about them made from the final numbers (:func:`wmrid.estimators.verdict.settle`):
+    the warnings' std, the flags, the units check against ``robot``, the verdict."""
+    from wmrid.estimators.verdict import settle
+
+    result = identify_log(log, robot, **settings)
+    radius = None if robot is None else getattr(robot.nominal, "r", None)
+    return settle(result, radius=None if radius is None else float(radius))
+
+
+def identify_log(
     log: LogLike | LogStream,
     robot: Robot | None = None,
     *,
@@ -159,6 +170,7 @@ def identify(
     delay: float | Literal["auto"] | None = None,
     feedback: bool = True,
     timing: bool = True,
+    switch: bool = True,
 ) -> IdentificationResult:
     """Identify the base parameters of the robot that recorded ``log``.
 
@@ -189,7 +201,8 @@ def identify(
     ``feedback`` : run the closed-loop check (:func:`wmrid.estimators.feedback.check`): when the observer's estimate
     differs
     from IDIM's (IDIM-IV's, when the log has the wheel-speed reference) beyond noise, report that one instead, with a
-    warning; ``diagnostics["feedback"]`` states what was compared.  ``timing`` : without ``delay``, time the efforts
+    warning first (``switch``; else keep the observer's, its std widened by the difference, and say so);
+    ``diagnostics["feedback"]`` states what was compared.  ``timing`` : without ``delay``, time the efforts
     by default: split topics (above), and the timing check (:func:`wmrid.estimators.delay.timing_check`,
     ``diagnostics["timing"]``): a delay estimated significant is applied as by ``delay="auto"`` (whose warning names
     --control-rate when a controller faster than the log explains it); on a log slower than 400 Hz whose hold is
@@ -206,7 +219,7 @@ def identify(
             return result
         from wmrid.estimators.feedback import check
 
-        return check(result, log_read, robot)
+        return check(result, log_read, robot, switch=switch)
 
     if payload and robot is None:
         raise UsageError(
@@ -255,7 +268,7 @@ def identify(
                 timed = identify(
                     log, robot, form=form, k=k, alpha=alpha, box_width=box_width, max_history=max_history,
                     torque_hold=torque_hold, progress=progress, payload=payload, control_rate=control_rate,
-                    friction=friction, geometry=geometry, delay="auto", feedback=feedback,
+                    friction=friction, geometry=geometry, delay="auto", feedback=feedback, switch=switch,
                 )  # fmt: skip
             except WmridError as err:  # e.g. a hole IDIM's filter cannot bridge: as stamped, and say so
                 timing_warnings.append(f"the efforts could not be timed against the speeds ({err}); used as stamped")
@@ -470,6 +483,7 @@ def _identify(
         "uneven_steps": bool(sv.max_step - sv.min_step > 1e-6 * sv.median_step),
         "notes": list(stream.notes),
         "effort_unit": effort_unit,
+        "scales": sv.scales(),
     }
     payload_est = None
     if payload and robot is not None:
@@ -591,10 +605,12 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
         from wmrid.model.payload import payload_with_std
 
         payload_est = payload_with_std(np.asarray(est.theta0, dtype=float), cov, robot.reference)
-    return replace(
+    from wmrid.estimators.verdict import settle
+
+    return settle(replace(
         result, parameters=parameters, theta0_cov=cov, diagnostics=diagnostics, warnings=tuple(warnings),
         payload=payload_est, method=est.method, estimate=est,
-    )  # fmt: skip
+    ))  # fmt: skip
 
 
 def check_box_width(box_width: float) -> None:

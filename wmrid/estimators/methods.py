@@ -157,7 +157,8 @@ class Comparison:
     """Every method's estimate on one log (:func:`compare`); ``to_dict`` is the ``wmrid compare`` JSON.
 
     methods : name -> {"description", "parameters": {n: {"value", "std", "unit"[, "error_percent"]}}, "flagged",
-        "marks", "seconds", "warnings"[, "validation": {"fit_percent": {"eta_r", "eta_l"}}]}, in the order run.
+        "marks", "seconds", "warnings", "verdict"[, "validation": {"fit_percent": {"eta_r", "eta_l"}}]}, in the order
+        run.
     validation : {"log", "samples", "predictor"} of the second log each model was validated on, or None.
     truth : the true base parameters the errors are against, or None.
     """
@@ -197,7 +198,7 @@ def compare(
     ``stage`` : called with each method's name as it starts (a progress display).
     """
     from wmrid.estimators.model_error import std_mark
-    from wmrid.model.predict import validation_fit
+    from wmrid.model.predict import unsimulated, validation_fit
 
     methods: dict[str, dict[str, Any]] = {}
     predictor = None
@@ -221,13 +222,20 @@ def compare(
             "marks": {key: std_mark(key, result.diagnostics) for key in params},
             "seconds": est.seconds,
             "warnings": list(result.warnings),
+            "verdict": result.verdict,
         }
         if other is not None:
             form = observer.form if len(est.theta0) == observer.form.n_base else None
-            fit = validation_fit(other.t, other.eta, other.tau, np.asarray(est.theta0), options.torque_hold, form=form)
-            fit_percent = {w: fit[w] if np.isfinite(fit[w]) else None for w in ("eta_r", "eta_l")}
-            row["validation"] = {"fit_percent": fit_percent}
-            predictor = fit["predictor"]
+            why = unsimulated(form)
+            if why:
+                row["validation"] = {"fit_percent": {"eta_r": None, "eta_l": None}, "not_simulated": why}
+            else:
+                fit = validation_fit(
+                    other.t, other.eta, other.tau, np.asarray(est.theta0), options.torque_hold, form=form
+                )
+                fit_percent = {w: fit[w] if np.isfinite(fit[w]) else None for w in ("eta_r", "eta_l")}
+                row["validation"] = {"fit_percent": fit_percent}
+                predictor = fit["predictor"]
         methods[name] = row
     return Comparison(
         source=observer.source,

@@ -304,7 +304,8 @@ def record_widening(
     diagnostics: dict[str, Any], inflation: dict[str, Any], parameters: dict[str, Any], undetermined: list[str]
 ) -> None:
     """Put the model-error scale in ``diagnostics["uncertainty"]["model_error"]`` and list the parameters whose
-    std it widened (``diagnostics["inflated"]``) and every parameter the output warns about (``"flagged"``)."""
+    std it widened (``diagnostics["inflated"]``) and the parameters whose std is not to be trusted (``"flagged"``,
+    :func:`wmrid.estimators.verdict.flagged_names`)."""
     scale = inflation["scale"]
     skip = set(undetermined)
     disc = inflation.get("discretisation") or {}
@@ -328,17 +329,15 @@ def record_widening(
         meaning.append(FILTER_NOTE)
     if fragile:
         meaning.append(FRAGILE_NOTE.format(", ".join(sorted(fragile))))
-    misfit = inflation.get("prediction_misfit") or {}
     diagnostics["uncertainty"]["model_error"] = {
         **inflation,
         "meaning": "; ".join(meaning)
         or "the model holds within the log's noise, and the step is fine enough: no widening",
     }
     diagnostics["inflated"] = inflated
-    flagged = set(inflated) | set(diagnostics.get("poorly_determined", [])) | skip
-    if misfit.get("applied"):
-        flagged |= set(parameters)
-    diagnostics["flagged"] = [n for n in parameters if n in flagged]
+    from wmrid.estimators.verdict import flagged_names
+
+    diagnostics["flagged"] = flagged_names(parameters, diagnostics)
 
 
 def misfit_text(misfit: dict[str, Any]) -> str:
@@ -355,10 +354,9 @@ def misfit_text(misfit: dict[str, Any]) -> str:
 
 
 def std_mark(name: str, diagnostics: dict[str, Any]) -> str:
-    """The mark after a parameter's std in tables and reports: "†" when it was widened, "!" when the parameter is
-    flagged and the widening does not answer the flag (it was not widened, or the prediction-error check says no
-    std covers the error); "" otherwise.  ``diagnostics``: a result's (or its JSON's)."""
+    """The mark after a parameter's std in tables and reports: "†" when it was widened to cover an error the log
+    shows (``diagnostics["inflated"]``), "!" when it is flagged: its std is not to be trusted
+    (``diagnostics["flagged"]``); "" otherwise.  ``diagnostics``: a result's (or its JSON's)."""
     inflated = name in diagnostics.get("inflated", ())
     flagged = name in diagnostics.get("flagged", ())
-    misfit = ((diagnostics.get("uncertainty") or {}).get("model_error") or {}).get("prediction_misfit") or {}
-    return ("†" if inflated else "") + ("!" if flagged and (not inflated or misfit.get("applied")) else "")
+    return ("†" if inflated else "") + ("!" if flagged else "")

@@ -103,6 +103,7 @@ class IdentificationResult:
     method: str = "observer"
     estimate: BaseEstimate | None = None  # the reported theta0 and its covariance (undetermined: NaN/inf)
     validation: dict[str, Any] | None = None  # fit on another log (wmrid.model.predict.validation_fit)
+    verdict: dict[str, Any] | None = None  # what the log determines, per group (wmrid.estimators.verdict)
 
     # The observer run's figures, read through the result (the reports and figures use them).
     @property
@@ -163,8 +164,10 @@ class IdentificationResult:
             "source": self.source,
             "method": self.method,
             "effort_unit": self.log_info.get("effort_unit", "N m"),
-            "parameters": params,
         }
+        if self.verdict is not None:
+            out["verdict"] = self.verdict
+        out["parameters"] = params
         if self.observer is not None:
             out["theta"] = self.theta_dict()
             out["settings"] = {
@@ -352,4 +355,5 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
         method=data.get("method", "observer"),
         estimate=estimate,
         validation=data.get("validation"),
+        verdict=data.get("verdict"),
     )

@@ -8,8 +8,10 @@ robot, and the assurance that the log has no holes or impossible values.  :func:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numba
 import numpy as np
@@ -42,7 +44,8 @@ class Survey:
     interval of time from t_first.
     Per wheel (2,): speed_pos, speed_neg, effort_pos, effort_neg counts of samples > 0 and < 0; power,
     abs_power, opposing, driving: sums of tau eta, |tau eta| and the counts of tau eta < 0 and > 0
-    (:meth:`signal_warnings`).
+    (:meth:`signal_warnings`); speed_max, effort_max: the largest |eta| (rad/s) and |tau|; effort_fractional: the
+    count of efforts that are not whole numbers (PWM counts are: :meth:`scales`).
     """
 
     source: str
@@ -65,6 +68,9 @@ class Survey:
     abs_power: np.ndarray = field(default_factory=lambda: np.zeros(2))
     opposing: np.ndarray = field(default_factory=lambda: np.zeros(2))
     driving: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    speed_max: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    effort_max: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    effort_fractional: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
     @property
     def duration(self) -> float:
@@ -110,6 +116,19 @@ class Survey:
                     theta[i, i] = a95 / t95
         return theta
 
+    def scales(self) -> dict[str, Any]:
+        """The signals' magnitudes, for the units check (:mod:`wmrid.estimators.plausibility`): {"speed_max" (2,)
+        rad/s, "effort_max" (2,), "effort_whole": every effort a whole number, "rate_hz", "duration_s",
+        "effort_unit"}."""
+        return {
+            "speed_max": [float(v) for v in self.speed_max],
+            "effort_max": [float(v) for v in self.effort_max],
+            "effort_whole": bool(self.n > 0 and not np.any(self.effort_fractional)),
+            "rate_hz": float(1.0 / self.median_step) if self.median_step > 0 else None,
+            "duration_s": float(self.duration),
+            "effort_unit": self.effort_unit,
+        }
+
     def signal_warnings(self) -> list[str]:
         """Warnings about the signals themselves: an effort that never changes sign while the speed does (a
         magnitude, not a signed effort), and an effort that mostly opposes the speed (a sign convention)."""
@@ -149,7 +168,9 @@ def survey(pieces: Iterable, source: str, effort_unit: str = "N m") -> Survey:
     prev_t = None
     last_bucket = -1
     sparse_t, sparse_eta, sparse_tau = [], [], []
-    acc = np.zeros(16)  # per wheel: speeds > 0, < 0; efforts < 0, > 0; power, |power|, opposing, driving samples
+    # per wheel: speeds > 0, < 0; efforts < 0, > 0; power, |power|, opposing, driving samples; max |eta|, max |tau|,
+    # efforts that are not whole numbers
+    acc = np.zeros(22)
     for piece in pieces:
         t, eta, tau = piece.t, piece.eta, piece.tau
         k = len(t)
@@ -181,6 +202,7 @@ def survey(pieces: Iterable, source: str, effort_unit: str = "N m") -> Survey:
     sv.effort_neg, sv.effort_pos = acc[4:6].copy(), acc[6:8].copy()
     sv.power, sv.abs_power, sv.opposing = acc[8:10].copy(), acc[10:12].copy(), acc[12:14].copy()
     sv.driving = acc[14:16].copy()
+    sv.speed_max, sv.effort_max, sv.effort_fractional = acc[16:18].copy(), acc[18:20].copy(), acc[20:22].copy()
     sv.median_step = _median_step(exact, hist)
     if sparse_t:
         sv.sparse_t = np.concatenate(sparse_t)
@@ -245,7 +267,7 @@ def _raise_implausible(t: np.ndarray, eta: np.ndarray, tau: np.ndarray, source: 
 
 @numba.njit(cache=True, nogil=True)
 def _piece_stats(eta, tau, limit, acc):
-    """One pass over a piece, eta and tau (k, 2): adds to acc (16,) the counts and sums of :class:`Survey`
+    """One pass over a piece, eta and tau (k, 2): adds to acc (22,) the counts, sums and maxima of :class:`Survey`
     (see survey()); returns the first row holding a non-finite or implausible value, or -1."""
     for i in range(eta.shape[0]):
         for w in range(2):
@@ -268,4 +290,8 @@ def _piece_stats(eta, tau, limit, acc):
                 acc[12 + w] += 1
             elif prod > 0:
                 acc[14 + w] += 1
+            acc[16 + w] = max(acc[16 + w], abs(e))
+            acc[18 + w] = max(acc[18 + w], abs(u))
+            if u != math.floor(u):
+                acc[20 + w] += 1
     return -1

@@ -35,9 +35,10 @@ def with_covariance(
 ) -> tuple[IdentificationResult, list[str]]:
     """(``result`` reporting its estimate with the covariance ``cov`` (n0, n0), the parameters it widened): their std
     recomputed (:func:`wmrid.model.base_params.derived_with_std`), ``theta0_cov`` and the payload's std (with ``robot``)
-    too, the parameters grown beyond INFLATION_MARK times the old std added to ``diagnostics["inflated"]`` and
-    ``["flagged"]``, and ``note`` (what widened them) to the meaning of the widening mark
-    (``diagnostics["uncertainty"]["model_error"]["meaning"]``) when any grew.  The one place a term (timing, hold,
+    too, the parameters grown beyond INFLATION_MARK times the old std added to ``diagnostics["inflated"]`` (a widened
+    std is trusted: ``["flagged"]`` is made again, :func:`wmrid.estimators.verdict.flagged_names`), and ``note``
+    (what widened them) to the meaning of the widening mark (``diagnostics["uncertainty"]["model_error"]["meaning"]``)
+    when any grew.  The one place a term (timing, hold,
     closed loop) widens a result.  ``mark``: the growth that marks a parameter (default INFLATION_MARK)."""
     from wmrid.estimators.model_error import INFLATION_MARK
     from wmrid.estimators.result import reported_names
@@ -60,7 +61,9 @@ def with_covariance(
         unc["model_error"] = model_error
         diagnostics["uncertainty"] = unc
     diagnostics["inflated"] = [n for n in parameters if n in set(diagnostics.get("inflated", [])) | set(grown)]
-    diagnostics["flagged"] = [n for n in parameters if n in set(diagnostics.get("flagged", [])) | set(grown)]
+    from wmrid.estimators.verdict import flagged_names
+
+    diagnostics["flagged"] = flagged_names(parameters, diagnostics)
     payload = result.payload
     if payload is not None and robot is not None:
         from wmrid.model.payload import payload_with_std

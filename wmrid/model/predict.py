@@ -330,6 +330,17 @@ TWO_TERM_REFUSAL = (
 )
 
 
+def unsimulated(form: RegressorForm | None) -> str | None:
+    """Why the validation predictor cannot simulate a model of ``form`` (the two-term caster drag: see
+    :func:`caster_array`), said in one sentence, or None when it can."""
+    if form is not None and form.caster and not form.geometry:
+        return (
+            "no fit: the identified caster drag (Cv, Cw) cannot be simulated without the casters' positions; give "
+            "a robot file with [[caster]] tables to validate it"
+        )
+    return None
+
+
 def caster_array(theta0: np.ndarray, form: RegressorForm | None) -> np.ndarray:
     """The kernel's caster argument for base parameters theta0 of model ``form``.
 

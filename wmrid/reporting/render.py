@@ -9,6 +9,7 @@ from wmrid.core.atomic import to_json_text
 from wmrid.estimators.diagnostics import impossible_parameters
 from wmrid.estimators.model_error import std_mark
 from wmrid.estimators.result import IdentificationResult
+from wmrid.estimators.verdict import LEGEND
 from wmrid.reporting.terminal import STYLES, print_table, styled
 from wmrid.reporting.terminal import warning as warning_line
 
@@ -28,11 +29,27 @@ def _cell(text: str, meaning: str | None) -> Any:
     return text if meaning is None else styled(text, meaning)
 
 
+def print_verdict(verdict: dict[str, Any] | None, console: Any, prefix: str = "") -> None:
+    """The verdict (:func:`wmrid.estimators.verdict.verdict`) before any number: its summary, then one line per
+    parameter group; a summary that says not to use the numbers in the impossible style."""
+    if not verdict:
+        return
+    doubt = verdict["summary"].startswith("Do not use")
+    lines = [*(verdict.get("first") or []), verdict["summary"]]
+    for line in lines:
+        console.print(f"{prefix}verdict: {line}", style=STYLES["impossible"] if doubt else "bold")
+    for group in verdict["groups"]:
+        console.print(f"{prefix}  {group['text']}")
+    if verdict.get("units"):
+        console.print(f"{prefix}  {verdict['units']}")
+
+
 def print_identification(result: IdentificationResult, console: Any) -> None:
     """A table of the base parameters with their standard errors, nominal and CAD values; a flagged value in the
     flagged style, a physically impossible one (:func:`impossible_parameters`) in the impossible style and marked
     ✗."""
     method = getattr(result, "method", "observer")
+    print_verdict(result.verdict, console)
     title = f"wmrid identify: {result.source}" + (f" (method {method})" if method != "observer" else "")
     header = ["param", "estimate", "std", "unit"]
     if result.nominal is not None:
@@ -95,14 +112,11 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         "efforts (in closed loop see diagnostics.feedback: the closed-loop check)"
     )
     model_error = unc.get("model_error")
-    if any("†" in mark for mark in marks.values()) and model_error:
-        scale = f" (S = {model_error['scale']:.3g})" if model_error.get("applied") else ""
-        console.print(f"† std widened{scale}: {model_error['meaning']}")
+    if any("†" in mark for mark in marks.values()):
+        scale = f" (S = {model_error['scale']:.3g})" if model_error and model_error.get("applied") else ""
+        console.print(LEGEND["†"] + (f"; here{scale}: {model_error['meaning']}" if model_error else ""))
     if any("!" in mark for mark in marks.values()):
-        console.print(
-            "! flagged (poorly determined, or the log departs from the model): the std may not cover the error; "
-            "see the warnings",
-        )  # fmt: skip
+        console.print(LEGEND["!"])
     if info.get("effort_unit", "N m") != "N m":
         console.print(
             f"units: the effort is in {info['effort_unit']}, not N m, so every parameter is in "
@@ -114,7 +128,9 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
             "history are the observer's, run on the same log"
         )
     validation = getattr(result, "validation", None)
-    if validation is not None:
+    if validation is not None and validation.get("not_simulated"):
+        console.print(f"validation on {validation['log']}: {validation['not_simulated']}")
+    elif validation is not None:
         fit = validation["fit_percent"]
         console.print(
             f"validation on {validation['log']}: fit {_fmt(fit['eta_r'], 3)} % (right), "
@@ -223,6 +239,11 @@ def print_comparison(data: dict, console: Any) -> None:
     slices of methods where the terminal is narrow."""
     methods = data["methods"]
     truth = data.get("truth")
+    for name, m in methods.items():
+        verdict = m.get("verdict")
+        if verdict:
+            doubt = verdict["summary"].startswith("Do not use")
+            console.print(f"verdict ({name}): {verdict['summary']}", style=STYLES["impossible"] if doubt else "bold")
     header = ["param", *(["true"] if truth else []), *methods]
     rows = []
     first = next(iter(methods.values()))
@@ -250,12 +271,12 @@ def print_comparison(data: dict, console: Any) -> None:
                 numeric=tuple(range(1, len(header))))  # fmt: skip
     if "validation" in data:
         v = data["validation"]
-        console.print(f"fit on {v['log']}: {v['predictor']}")
+        console.print(f"fit on {v['log']}: {v['predictor'] or 'not simulated (see the warnings)'}")
     marks = "".join(mark for m in methods.values() for mark in m.get("marks", {}).values())
     if "†" in marks:
-        console.print("† std widened for model error (see the JSON's diagnostics)")
+        console.print(LEGEND["†"])
     if "!" in marks:
-        console.print("! flagged: the std may not cover this parameter's error (see the warnings)")
+        console.print(LEGEND["!"])
     for name, m in methods.items():
         for warning in m["warnings"]:
             console.print(warning_line(warning, f"warning ({name})"))

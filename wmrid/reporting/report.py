@@ -31,6 +31,7 @@ import numpy as np
 from wmrid.core.errors import WmridError
 from wmrid.estimators.model_error import std_mark
 from wmrid.estimators.result import from_dict
+from wmrid.estimators.verdict import LEGEND
 from wmrid.model import dynamics as model
 from wmrid.model.dynamics import RegressorForm
 
@@ -226,21 +227,15 @@ def build_report(
         "disturbances do not feed back into the efforts. " + (f"Caveat: {unc['caveat']}." if unc.get("caveat") else ""),
         *(
             [
-                "† std widened"
+                LEGEND["†"]
+                + "; here"
                 + (f" (S = {unc['model_error']['scale']:.3g})" if unc["model_error"].get("applied") else "")
                 + f": {unc['model_error']['meaning']}."
             ]
             if inflated and unc.get("model_error")
             else []
         ),
-        *(
-            [
-                "! flagged (poorly determined, or the log departs from the model): the std may not cover the error; "
-                "see the warnings below."
-            ]
-            if warned
-            else []
-        ),
+        *([LEGEND["!"] + "."] if warned else []),
         *(
             [
                 f"Friction model: {diag['friction']['model']} ({diag['friction']['chosen_by']}"
@@ -278,7 +273,9 @@ def build_report(
             f"Method: {method} ({diag.get('method', {}).get('seconds', float('nan')):.3g} s). Table 3 holds its "
             "estimate; Table 2, the excitation figures and the history are the observer's, run on the same log.",
         )
-    if "validation" in data:
+    if "validation" in data and data["validation"].get("not_simulated"):
+        statements.insert(0, f"Validation on {data['validation']['log']}: {data['validation']['not_simulated']}.")
+    elif "validation" in data:
         v = data["validation"]
         statements.insert(
             0,
@@ -303,9 +300,14 @@ def build_report(
         theta0 = np.array([params[n]["value"] for n in form.base_names])
         residuals["torque"] = torque_residual(log, theta0, form)
 
+    verdict = data.get("verdict") or {}
+    said = [f"Verdict: {line}" for line in [*(verdict.get("first") or []), verdict.get("summary")] if line]
+    said += [group["text"][0].upper() + group["text"][1:] + "." for group in verdict.get("groups", [])]
+    said += [verdict["units"]] if verdict.get("units") else []
     report = Report(
         title=f"wmrid report: {data.get('source', '?')}",
         summary=[
+            *said,
             f"{data['log'].get('samples', '?')} samples, {data['log'].get('duration_s', float('nan')):.3f} s at "
             f"{data['log'].get('rate_hz', float('nan')):.5g} Hz; regressor: {form.kind} form; "
             f"k = {data['settings']['k']:g} 1/s; start: {data['settings']['start']}",

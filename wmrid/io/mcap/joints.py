@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import LogFormatError, UsageError, option
-from wmrid.core.wheel_log import SPLIT_NOTE
+from wmrid.core.wheel_log import SPLIT_NOTE, whole_efforts
 from wmrid.io.mcap.contents import JointSeries, JointSummary, JsonSeries, McapContents
 from wmrid.io.mcap.records import JOINT_STATE
 from wmrid.io.signals import SignalOptions, convert, position_to_rad, speed_from_position
@@ -356,10 +356,11 @@ def signals_from_mcap(
         t_eff = _time_values(eff_series, plan.eff_time)
         t_eff, effort, more = _clean(t_eff, eff_series.effort[:, ecols].copy(), eff_series.topic, "effort")
         notes += more
+        whole = whole_efforts(effort)
         t_out, speed, effort, note = align(
             t_vel, speed, t_eff, effort, sel.align, vel_series.topic, eff_series.topic, contents.source
         )
-        notes.append(note)
+        notes.append(note + (f"; {whole}" if whole else ""))
 
     speed, effort, more = convert(speed, effort, opts, gear_ratio, speed_in_rad_s=use_position)
     notes += more

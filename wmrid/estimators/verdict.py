@@ -1,0 +1,271 @@
+"""The last word on a result: every statement that quotes a parameter, made once from its final numbers.
+
+A result passes through several stages (the observer's run, a method's estimate, the closed-loop check, the
+timing and hold terms); each may change a std.  What the user reads must not depend on which stage wrote it, so
+:func:`settle` rebuilds, from the reported parameters and their final covariance:
+
+* the per-parameter warnings (poorly determined, not positive definite, negative friction), so that every std a
+  warning quotes is the table's;
+* ``diagnostics["flagged"]``, which has one meaning everywhere: *do not trust this value's std*.  A parameter is
+  flagged when the log does not determine it (infinite std), when the model does not fit the log so that no std
+  covers the error (the prediction-error check), when its value is one no robot has, and when its unit is in
+  doubt (:mod:`wmrid.estimators.plausibility`).  A std widened to cover a model error is trusted (marked "†",
+  ``diagnostics["inflated"]``), and so is a large std (``diagnostics["poorly_determined"]``): both say how
+  uncertain the value is;
+* the units check (``diagnostics["units"]``);
+* the verdict (``result.verdict``): one plain sentence per parameter group (inertia, Coriolis, friction,
+  casters) saying whether this log determines it, and the main reason when it does not.
+
+Idempotent: settling a settled result changes nothing.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from wmrid.estimators.diagnostics import (
+    NOT_SEPARABLE,
+    POORLY_DETERMINED,
+    impossible_parameters,
+    physics_warnings,
+)
+from wmrid.estimators.plausibility import units_check
+
+#: Warnings :func:`settle` owns: dropped from the stages' warnings and made again from the final numbers.
+OWNED = (" is poorly determined by this log", "is not positive definite, which no robot has",
+         "friction cannot push; check signs", "unit check: ")  # fmt: skip
+
+#: Above this relative std a parameter cannot be told from zero: "not determined by this log".
+NOT_DETERMINED = 1.0
+
+#: The parameter groups of the verdict, in the order said.  The inertia is judged on its diagonal (the coupling
+#: M12 is often near zero, where a relative std says little) and the coupling is named when it is worse.
+GROUPS = (
+    ("inertia", ("M11", "M22"), ("M12",)),
+    ("Coriolis coefficient", ("Vc",), ()),
+    ("friction", ("Fv1", "Fv2", "Fd1", "Fd2"), ()),
+)
+
+#: The one legend of each mark, the same in the table, compare, the report and the docs.
+LEGEND = {
+    "†": "† std widened to cover an error the log shows beyond its noise (model, timing, feedback); it includes it",
+    "!": "! flagged: do not trust this std (see the warnings)",
+    "✗": "✗ a value no robot has",
+}
+
+
+def _relative(value: float, std: float) -> float:
+    if not math.isfinite(std):
+        return math.inf
+    if value == 0:
+        return math.inf if std > 0 else 0.0
+    return std / abs(value)
+
+
+def _references(result: Any) -> list[tuple[str, dict[str, float]]]:
+    out = []
+    for label, ref in (("nominal", result.nominal), ("CAD", result.reference)):
+        if ref:
+            out.append((label, {k: v for k, v in ref.items() if v is not None}))
+    return out
+
+
+def _correlations(result: Any) -> tuple[tuple[str, ...], np.ndarray]:
+    names = result.form.base_names
+    cov = np.asarray(result.theta0_cov, dtype=float)
+    if cov.shape != (len(names), len(names)):
+        return names, np.zeros((len(names), len(names)))
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    ok = np.isfinite(std) & (std > 0)
+    safe = np.where(ok, std, 1.0)
+    with np.errstate(invalid="ignore"):
+        corr = cov / np.outer(safe, safe)
+    corr[~ok, :] = 0.0
+    corr[:, ~ok] = 0.0
+    return names, np.nan_to_num(corr)
+
+
+def _poorly_warnings(result: Any, method: str | None) -> tuple[list[str], list[str], list[list[Any]]]:
+    """(warnings, names, not-separable pairs) for the reported parameters whose std exceeds POORLY_DETERMINED of
+    their value, the std being the reported one."""
+    names, corr = _correlations(result)
+    by = f" ({method})" if method else ""
+    texts, poorly, pairs = [], [], []
+    for name, (value, std) in result.parameters.items():
+        if not math.isfinite(std) or std <= POORLY_DETERMINED * abs(value):
+            continue
+        poorly.append(name)
+        why = ""
+        if name in names:
+            i = names.index(name)
+            partners = [j for j in np.argsort(-np.abs(corr[i])) if j != i and abs(corr[i, j]) > NOT_SEPARABLE]
+            pairs += [[name, names[j], float(corr[i, j])] for j in partners]
+            if partners:
+                why = "; it is not separable from " + ", ".join(
+                    f"{names[j]} (correlation {corr[i, j]:+.3f})" for j in partners
+                )
+        texts.append(
+            f"{name} is poorly determined by this log{by}: {value:.6g} +/- {std:.2g} {result.units[name]}{why}"
+        )
+    return texts, poorly, pairs
+
+
+def flagged_names(parameters: dict[str, tuple[float, float]], diagnostics: dict[str, Any]) -> list[str]:
+    """The parameters whose std is not to be trusted (see the module docstring), in the parameters' order."""
+    misfit = ((diagnostics.get("uncertainty") or {}).get("model_error") or {}).get("prediction_misfit") or {}
+    units = diagnostics.get("units") or {}
+    out = {n for n, (_, std) in parameters.items() if not math.isfinite(std)}
+    out |= impossible_parameters(parameters)
+    if misfit.get("applied") or units.get("doubt"):
+        out |= set(parameters)
+    return [n for n in parameters if n in out]
+
+
+def settle(result: Any, radius: float | None = None) -> Any:
+    """``result`` with its parameter statements made from its final numbers (module docstring).  ``radius`` m:
+    the robot's wheel radius for the units check (default: the one a previous settle recorded)."""
+    diagnostics = dict(result.diagnostics)
+    previous = diagnostics.get("units") or {}
+    r = radius if radius is not None else previous.get("wheel_radius")
+    references = _references(result) if result.log_info.get("effort_unit", "N m") == "N m" else []
+    notes = tuple(result.log_info.get("notes") or ())
+    units = units_check(result.parameters, result.log_info.get("scales"), references, r, notes)
+    units["wheel_radius"] = r
+    diagnostics["units"] = units
+    method = result.method if result.method != "observer" else None
+    poorly_texts, poorly, pairs = _poorly_warnings(result, method)
+    diagnostics["poorly_determined"] = poorly
+    if "not_separable" in diagnostics or pairs:
+        diagnostics["not_separable"] = pairs
+    diagnostics["flagged"] = flagged_names(result.parameters, diagnostics)
+    kept = [w for w in result.warnings if not any(key in w for key in OWNED)]
+    unit_texts = [f"unit check: {f['text']}" for f in units["findings"]]
+    warnings = (*unit_texts, *kept, *poorly_texts, *physics_warnings(result.parameters))
+    out = replace(result, diagnostics=diagnostics, warnings=warnings)
+    return replace(out, verdict=verdict(out))
+
+
+def _reason(names: tuple[str, ...], result: Any) -> str:
+    """The main reason the parameters ``names`` are not (well) determined."""
+    diag = result.diagnostics
+    pairs = [p for p in diag.get("not_separable", []) if p[0] in names]
+    if pairs:
+        a, b, c = pairs[0]
+        return f"{a} cannot be told from {b} on this log (correlation {c:+.3f}); drive so that they act differently"
+    timing = ((diag.get("timing") or {}).get("timing_term") or {}).get("widened") or []
+    timing += ((diag.get("delay") or {}).get("timing_term") or {}).get("widened") or []
+    if set(timing) & set(names):
+        return "the efforts' timing against the speeds is uncertain and moves them"
+    feedback = (diag.get("feedback") or {}).get("widened") or []
+    if set(feedback) & set(names):
+        return "a disturbance fed back by the controller moves them (the closed-loop term)"
+    scale = ((diag.get("uncertainty") or {}).get("model_error") or {}).get("scale") or 1.0
+    if scale > 2.0:
+        return f"the log departs from the model (std scaled by {scale:.3g} to cover it)"
+    return "too little excitation: accelerate, brake, turn and reverse more, for longer"
+
+
+def _group_sentence(group: str, names: tuple[str, ...], extra: tuple[str, ...], result: Any) -> dict[str, Any] | None:
+    params = result.parameters
+    present = tuple(n for n in names if n in params)
+    if not present:
+        return None
+    flagged = set(result.diagnostics.get("flagged", []))
+    units = result.diagnostics.get("units") or {}
+    misfit = ((result.diagnostics.get("uncertainty") or {}).get("model_error") or {}).get("prediction_misfit") or {}
+    rel = {n: _relative(*params[n]) for n in present + tuple(n for n in extra if n in params)}
+    worst = max(present, key=lambda n: rel[n])
+    label = f"{group} ({', '.join(present + tuple(n for n in extra if n in params))})"
+    record: dict[str, Any] = {"group": group, "parameters": list(present), "worst": worst,
+                              "relative_std": rel[worst] if math.isfinite(rel[worst]) else None}  # fmt: skip
+    impossible = impossible_parameters(params) & set(present)
+    if units.get("doubt"):
+        record.update(status="in doubt", reason="the log's units are in doubt (see the unit check)")
+    elif not math.isfinite(rel[worst]):
+        record.update(status="not determined", reason="the log does not excite it: the start value sets it")
+    elif impossible:
+        record.update(status="in doubt", reason=f"{', '.join(sorted(impossible))}: a value no robot has")
+    elif misfit.get("applied") and set(present) <= flagged:
+        quality = "determined" if rel[worst] <= POORLY_DETERMINED else "poorly determined"
+        record.update(
+            status="in doubt",
+            reason=f"{quality} by its std, but the model does not fit this log (slip, backlash or an effect it leaves "
+            "out), so no std covers the error",
+        )
+    elif rel[worst] <= POORLY_DETERMINED:
+        record.update(status="determined", reason=None)
+    elif rel[worst] <= NOT_DETERMINED:
+        record.update(status="poorly determined", reason=_reason(present, result))
+    else:
+        record.update(status="not determined", reason=_reason(present, result) + " (its std exceeds its value)")
+    pct = f"{100 * rel[worst]:.2g} %" if math.isfinite(rel[worst]) else "unbounded"
+    text = f"{label}: {record['status']}"
+    if record["status"] in ("determined", "poorly determined"):
+        text += f" (std up to {pct} of the value, {worst})"
+    coupling = [n for n in extra if n in rel and rel[n] > POORLY_DETERMINED and record["status"] == "determined"]
+    if coupling:
+        text += (
+            f"; {coupling[0]} only to {100 * rel[coupling[0]]:.2g} %"
+            if math.isfinite(rel[coupling[0]])
+            else (f"; {coupling[0]} not determined")
+        )
+    if record["reason"]:
+        text += f": {record['reason']}"
+    record["text"] = text
+    return record
+
+
+def verdict(result: Any) -> dict[str, Any]:
+    """One sentence per parameter group (see the module docstring): {"summary", "groups": [{"group",
+    "parameters", "status" ("determined", "poorly determined", "not determined", "in doubt"), "worst",
+    "relative_std", "reason", "text"}]}."""
+    groups = [_group_sentence(g, names, extra, result) for g, names, extra in GROUPS]
+    casters = tuple(result.form.base_names[8:])
+    if casters:
+        groups.append(_group_sentence("casters", casters, (), result))
+    groups = [g for g in groups if g is not None]
+    units = result.diagnostics.get("units") or {}
+    if units.get("doubt"):
+        first = units["findings"][0]["text"]
+        summary = f"Do not use these numbers: {first}."
+    else:
+        good = [g["group"] for g in groups if g["status"] == "determined"]
+        weak = [g["group"] for g in groups if g["status"] == "poorly determined"]
+        bad = [g["group"] for g in groups if g["status"] in ("not determined", "in doubt")]
+        parts = []
+        if good:
+            parts.append(f"this log determines the {_join(good)}")
+        if weak:
+            parts.append(f"{'only poorly ' if good else 'poorly '}the {_join(weak)}")
+        if bad:
+            parts.append(f"not the {_join(bad)}")
+        text = ", ".join(parts) if parts else "nothing to judge"
+        summary = text[0].upper() + text[1:] + "."
+        if not good and not weak:
+            summary = f"This log determines none of the parameters ({_join(bad)})."
+    out: dict[str, Any] = {"summary": summary, "groups": groups}
+    feedback = result.diagnostics.get("feedback") or {}
+    if feedback.get("reported") and feedback["reported"] != "observer" and result.method == feedback["reported"]:
+        other = "IDIM-IV" if feedback["reported"] == "iv" else "IDIM"
+        out["first"] = [
+            f"method: {other}, not the observer: the closed-loop check found the observer's estimate biased by "
+            "feedback (see the first warning); --method observer keeps the observer's"
+        ]
+    if not _references(result):
+        scales = result.log_info.get("scales") or {}
+        speed, effort = max(scales.get("speed_max") or [0.0]), max(scales.get("effort_max") or [0.0])
+        unit = result.log_info.get("effort_unit", "N m")
+        if scales:
+            out["units"] = (
+                f"units not checked against a robot file (give --robot): speeds read as rad/s (up to {speed:.3g}), "
+                f"efforts as {unit} (up to {effort:.3g})"
+            )
+    return out
+
+
+def _join(words: list[str]) -> str:
+    return words[0] if len(words) == 1 else ", ".join(words[:-1]) + " and " + words[-1]
