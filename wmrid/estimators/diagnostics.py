@@ -59,18 +59,28 @@ def poorly_text(name: str, pair: tuple[float, float], unit: str, method: str | N
 def impossible_parameters(parameters: dict[str, tuple[float, float]]) -> set[str]:
     """The base parameters that :func:`physics_warnings` warns of: m11, m12, m22 (and the inertia matrix M11, M12,
     M22 computed from them) when [m11 m12; m12 m22] is not positive definite, a friction negative beyond 3 standard
-    errors."""
+    errors; a caster's drag likewise."""
     out = set()
     if all(n in parameters for n in ("m11", "m12", "m22")):
         m11, m12, m22 = (parameters[n][0] for n in ("m11", "m12", "m22"))
         if m11 <= 0 or m22 <= 0 or m11 * m22 - m12 * m12 <= 0:
             out |= {n for n in ("m11", "m12", "m22", "M11", "M12", "M22") if n in parameters}
-    for name in ("Fv1", "Fv2", "Fd1", "Fd2"):
+    for name in (*FRICTION_NAMES, *(n for n in parameters if is_drag(n))):
         if name in parameters:
             value, std = parameters[name]
             if value < 0 and math.isfinite(std) and value < -3 * std:
                 out.add(name)
     return out
+
+
+#: The wheels' friction; every one resists motion, so none is negative.
+FRICTION_NAMES = ("Fv1", "Fv2", "Fd1", "Fd2")
+
+
+def is_drag(name: str) -> bool:
+    """Whether ``name`` is a caster-drag parameter (Cv, Cw of the two-term model, D1, D2, ... of the geometric one);
+    a caster's drag resists motion, so none is negative."""
+    return name in ("Cv", "Cw") or (name.startswith("D") and name[1:].isdigit())
 
 
 def physics_warnings(parameters: dict[str, tuple[float, float]]) -> list[str]:
@@ -84,10 +94,11 @@ def physics_warnings(parameters: dict[str, tuple[float, float]]) -> list[str]:
             f"the identified inverse inertia [m11 m12; m12 m22] = [{m11:.4g} {m12:.4g}; {m12:.4g} {m22:.4g}] is not "
             "positive definite, which no robot has: the log departs from the model or does not excite it"
         )
-    for name in ("Fv1", "Fv2", "Fd1", "Fd2"):
-        if name in impossible:
+    for name in parameters:
+        if name in impossible and (name in FRICTION_NAMES or is_drag(name)):
             value, std = parameters[name]
-            out.append(f"{name} = {value:.4g} is negative beyond 3 std ({std:.2g}): friction cannot push; check signs")
+            what = "friction" if name in FRICTION_NAMES else "a caster's drag"
+            out.append(f"{name} = {value:.4g} is negative beyond 3 std ({std:.2g}): {what} cannot push; check signs")
     return out
 
 
@@ -305,7 +316,8 @@ def caster_drag_test(result: IdentificationResult) -> dict[str, Any]:
 
     W = d^T C^-1 d over the q drag parameters d with their reported (widened) covariance C, a jackknife estimate
     on B degrees of freedom, so Hotelling's (B - q + 1) W / (B q) ~ F(q, B - q + 1) (chi-square on q when B is
-    unknown).  Returns {"statistic", "dof", "p_value", "text"}."""
+    unknown).  Returns {"statistic", "dof", "p_value", "text", "negative": the drag parameters that push (every one
+    when none is positive; see DRAG_SIGN_Z)}."""
     from scipy.special import chdtrc, fdtrc
 
     names = result.form.base_names[8:]
@@ -324,4 +336,14 @@ def caster_drag_test(result: IdentificationResult) -> dict[str, Any]:
         p_value = float(fdtrc(q, big_b - q + 1, (big_b - q + 1) * stat / (big_b * q)))
     else:
         p_value = float(chdtrc(q, stat))
-    return {"statistic": stat, "dof": q, "p_value": p_value, "text": text}
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    pushing = [n for n, v, s in zip(names, values, std, strict=True) if v < -DRAG_SIGN_Z * s]
+    if not np.any(values > 0):
+        pushing = list(names)
+    return {"statistic": stat, "dof": q, "p_value": p_value, "text": text, "negative": pushing}
+
+
+#: A caster model whose drag is negative (no drag positive, or one below -DRAG_SIGN_Z of its std) is not taken by
+#: ``--friction auto``: a drag pushes no robot, so what the test found off zero is something else (a sign, a unit,
+#: an effect neither model has).
+DRAG_SIGN_Z = 2.0

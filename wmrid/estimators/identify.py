@@ -331,10 +331,16 @@ def identify_log(
     except NotIdentifiableError as err:
         return finish(wheel, {"model": "wheel", "chosen_by": "auto", "reason": f"caster model failed: {err}"})
     choice = caster_drag_test(caster)
-    chosen = caster if choice["p_value"] < AUTO_P else wheel
+    significant = choice["p_value"] < AUTO_P
+    chosen = caster if significant and not choice["negative"] else wheel
     reason = f"the caster drag ({choice['text']}) differs from zero at p = {choice['p_value']:.2g}" + (
-        f" < {AUTO_P:g}" if chosen is caster else f" >= {AUTO_P:g}: not shown by this log"
+        f" < {AUTO_P:g}" if significant else f" >= {AUTO_P:g}: not shown by this log"
     )
+    if significant and choice["negative"]:
+        reason += (
+            f", but {', '.join(choice['negative'])} would push the robot, which no caster does: not a caster's drag "
+            "(a sign, a unit, or an effect neither model has), so the wheel model is kept"
+        )
     return finish(chosen, {"model": chosen.form.friction, "chosen_by": "auto", "reason": reason, **choice})
 
 

@@ -134,6 +134,7 @@ class Survey:
         magnitude, not a signed effort), and an effort that mostly opposes the speed (a sign convention)."""
         out = []
         n = max(self.n, 1)
+        opposing = [self._opposes(i) for i in range(2)]
         for i, wheel in enumerate(("right", "left")):
             other_way = min(self.speed_neg[i], self.speed_pos[i]) / n
             if other_way > 0.05 and (self.effort_neg[i] == 0 or self.effort_pos[i] == 0):
@@ -143,18 +144,35 @@ class Survey:
                     "(e.g. an unsigned current), not a signed effort, so the model does not apply; give it the sign "
                     "of the motor's drive"
                 )
-            power, scale = self.power[i] / n, self.abs_power[i] / n
-            # Braking makes the power negative for a while; a reversed sign makes it negative almost always.  The
-            # share counts the samples with power (a wheel at rest, or no effort, says nothing about the sign).
-            working = self.opposing[i] + self.driving[i]
-            share = self.opposing[i] / working if working else 0.0
-            if scale > 0 and power < -0.5 * scale and share > 0.75:
-                out.append(
-                    f"the {wheel} wheel's effort mostly opposes its speed ({100 * share:.0f} % of the samples with "
-                    f"power; mean power {power:.3g} {self.effort_unit} rad/s < 0): its sign convention is probably "
-                    "reversed; try --mirror-left or --flip-effort"
+            if opposing[i] is None:
+                continue
+            share, power = opposing[i]
+            if all(opposing):
+                fix = "--flip-effort changes the sign of both wheels' efforts"
+            else:
+                fix = (
+                    "only this wheel's: negate its effort in the log (--flip-effort flips both wheels, and "
+                    "--mirror-left flips a wheel's speed with its effort, which leaves their product as it is)"
                 )
+            out.append(
+                f"the {wheel} wheel's effort mostly opposes its speed ({100 * share:.0f} % of the samples with "
+                f"power; mean power {power:.3g} {self.effort_unit} rad/s < 0): its sign is probably reversed "
+                f"against the speed's; {fix}"
+            )
         return out
+
+    def _opposes(self, i: int) -> tuple[float, float] | None:
+        """(share of the samples with power where effort opposes speed, mean power) of wheel ``i`` when its effort
+        mostly opposes its speed, else None.  Braking makes the power negative for a while; a reversed sign makes it
+        negative almost always.  The share counts the samples with power (a wheel at rest, or no effort, says
+        nothing about the sign)."""
+        n = max(self.n, 1)
+        power, scale = self.power[i] / n, self.abs_power[i] / n
+        working = self.opposing[i] + self.driving[i]
+        share = self.opposing[i] / working if working else 0.0
+        if scale > 0 and power < -0.5 * scale and share > 0.75:
+            return float(share), float(power)
+        return None
 
 
 def survey(pieces: Iterable, source: str, effort_unit: str = "N m") -> Survey:

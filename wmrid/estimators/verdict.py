@@ -190,7 +190,13 @@ def _group_sentence(group: str, names: tuple[str, ...], extra: tuple[str, ...], 
     elif impossible:
         record.update(status="in doubt", reason=f"{', '.join(sorted(impossible))}: a value no robot has")
     elif misfit.get("applied") and set(present) <= flagged:
-        quality = "determined" if rel[worst] <= POORLY_DETERMINED else "poorly determined"
+        quality = (
+            "determined"
+            if rel[worst] <= POORLY_DETERMINED
+            else "poorly determined"
+            if rel[worst] <= NOT_DETERMINED
+            else "not determined"
+        )
         record.update(
             status="in doubt",
             reason=f"{quality} by its std, but the model does not fit this log (slip, backlash or an effect it leaves "
@@ -247,7 +253,7 @@ def verdict(result: Any) -> dict[str, Any]:
         summary = text[0].upper() + text[1:] + "."
         if not good and not weak:
             summary = f"This log determines none of the parameters ({_join(bad)})."
-    out: dict[str, Any] = {"summary": summary, "groups": groups}
+    out: dict[str, Any] = {"summary": summary, "groups": groups, "lines": lines(groups)}
     feedback = result.diagnostics.get("feedback") or {}
     if feedback.get("reported") and feedback["reported"] != "observer" and result.method == feedback["reported"]:
         other = "IDIM-IV" if feedback["reported"] == "iv" else "IDIM"
@@ -265,6 +271,18 @@ def verdict(result: Any) -> dict[str, Any]:
                 f"efforts as {unit} (up to {effort:.3g})"
             )
     return out
+
+
+def lines(groups: list[dict[str, Any]]) -> list[str]:
+    """The groups' sentences to print: one per group, or one for all when every group has the same status and
+    reason (a unit in doubt, a model that does not fit the log)."""
+    if (
+        len(groups) > 1
+        and groups[0]["reason"]
+        and all((g["status"], g["reason"]) == (groups[0]["status"], groups[0]["reason"]) for g in groups)
+    ):
+        return [f"{_join([g['group'] for g in groups])}: {groups[0]['status']}: {groups[0]['reason']}"]
+    return [g["text"] for g in groups]
 
 
 def _join(words: list[str]) -> str:

@@ -38,8 +38,8 @@ def print_verdict(verdict: dict[str, Any] | None, console: Any, prefix: str = ""
     lines = [*(verdict.get("first") or []), verdict["summary"]]
     for line in lines:
         console.print(f"{prefix}verdict: {line}", style=STYLES["impossible"] if doubt else "bold")
-    for group in verdict["groups"]:
-        console.print(f"{prefix}  {group['text']}")
+    for line in verdict.get("lines") or [g["text"] for g in verdict["groups"]]:
+        console.print(f"{prefix}  {line}")
     if verdict.get("units"):
         console.print(f"{prefix}  {verdict['units']}")
 

@@ -302,7 +302,10 @@ def build_report(
 
     verdict = data.get("verdict") or {}
     said = [f"Verdict: {line}" for line in [*(verdict.get("first") or []), verdict.get("summary")] if line]
-    said += [group["text"][0].upper() + group["text"][1:] + "." for group in verdict.get("groups", [])]
+    said += [
+        line[0].upper() + line[1:] + "."
+        for line in verdict.get("lines") or [g["text"] for g in verdict.get("groups", [])]
+    ]
     said += [verdict["units"]] if verdict.get("units") else []
     report = Report(
         title=f"wmrid report: {data.get('source', '?')}",
