@@ -71,7 +71,7 @@ R_g of [X_g y_g] (X_g^T X_g = R_g^T R_g), without refitting.  theta0 = [m11 m12 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -278,6 +278,79 @@ def fit_regression(
     return RegressionFit(phi, cov, loo, fac, seg, diagnostics, warnings)
 
 
+#: The default cutoff is lowered at most this many times (by CUTOFF_RATIO each: 10 Hz -> 2.5 Hz).
+MAX_LOWERINGS = 4
+
+
+def _lower_cutoff(
+    t: np.ndarray, eta: np.ndarray, tau: np.ndarray, reg: IdimRegression, cut: dict[str, Any],
+    lowered: list[dict[str, Any]], default: bool, decimate: bool, order: int, form: RegressorForm | None,
+    delay: float,
+) -> IdimRegression | None:  # fmt: skip
+    """The regression at the next lower cutoff when the default cutoff's estimate moves with the filter (errors in
+    variables), else None; appends to ``lowered`` what was seen.
+
+    Noise in the speeds reaches the acceleration columns through the filter, amplified with the band it keeps
+    (errors in variables, which bias the inertia towards zero; README "IDIM's filter").  Where the model holds and
+    the speeds are noise-free, the parallel-filtered regression is exact at every cutoff, so an estimate that moves
+    when the cutoff is divided by CUTOFF_RATIO (:func:`wmrid.estimators.idim_checks.cutoff_check` applied) measures
+    the noise's bias.  That bias shrinks as the band does (as f_c^3 for white noise on the speeds, faster for
+    quantised positions differentiated); a model error does not, so the cutoff is lowered only while the
+    difference keeps shrinking, at most MAX_LOWERINGS times and never below the default's lower bound
+    (:func:`wmrid.estimators.idim_regression.cutoff_bounds`).  Only the default cutoff is lowered (``default``).
+    """
+    from wmrid.estimators.idim_checks import CUTOFF_GATE, CUTOFF_RATIO
+    from wmrid.estimators.idim_regression import cutoff_bounds
+
+    if not default or not cut.get("applied") or len(lowered) >= MAX_LOWERINGS:
+        return None
+    ratio = float(cut["largest_ratio"])
+    if lowered and ratio >= lowered[-1]["largest_ratio"]:
+        return None
+    low = reg.cutoff_hz / CUTOFF_RATIO
+    f_lo = cutoff_bounds(reg.rate_hz, float(t[-1] - t[0]), order)[0]
+    if low < f_lo:
+        return None
+    try:
+        lower = idim_regression(t, eta, tau, low, decimate, order=order, form=form, effort_delay=delay)
+    except NotIdentifiableError:
+        return None
+    head = lowered[0]["rule"] if lowered else reg.cutoff_rule
+    lowered.append({"from_hz": float(reg.cutoff_hz), "to_hz": float(low), "largest_ratio": ratio, "rule": head})
+    rule = (
+        f"{head}; lowered to {low:.3g} Hz ({len(lowered)} x 1/{CUTOFF_RATIO:.3g}): the estimate moved with the cutoff "
+        f"beyond {CUTOFF_GATE:g} std of the difference (errors in variables: noise in the speeds)"
+    )
+    return replace(lower, cutoff_rule=rule)
+
+
+def fit_with_cutoff(
+    t: np.ndarray, eta: np.ndarray, tau: np.ndarray, cutoff_hz: float | None, *, weighted: bool = False,
+    decimate: bool = True, order: int = 4, form: RegressorForm | None = None, delay: float = 0.0,
+    grid: tuple[float, float, int] | None = None,
+) -> tuple[IdimRegression, RegressionFit, dict[str, Any], list[dict[str, Any]]]:  # fmt: skip
+    """IDIM's regression, its fit and its cutoff check (:func:`wmrid.estimators.idim_checks.cutoff_check`) at
+    ``cutoff_hz``, or at the default cutoff lowered while the estimate moves with it (:func:`_lower_cutoff`).
+
+    Returns (regression, fit, cutoff check, the lowerings made: [{"from_hz", "to_hz", "largest_ratio", "rule"}]).
+    Arguments as :func:`identify_idim`'s (``delay``: its effort delay, s).
+    """
+    from wmrid.estimators.idim_checks import cutoff_check
+
+    reg = idim_regression(t, eta, tau, cutoff_hz, decimate, order=order, form=form, effort_delay=delay)
+    lowered: list[dict[str, Any]] = []
+    while True:
+        fit = fit_regression(reg, weighted=weighted, grid=grid)
+        weights = np.asarray(fit.diagnostics["weights"])
+        t0, span = (float(reg.t[0]), float(reg.t[-1] - reg.t[0])) if grid is None else (grid[0], grid[1])
+        cut = cutoff_check(t, eta, tau, reg, fit.factors, weights, fit.seg, len(fit.factors), decimate, delay,
+                           (t0, span))  # fmt: skip
+        lower = _lower_cutoff(t, eta, tau, reg, cut, lowered, cutoff_hz is None, decimate, order, form, delay)
+        if lower is None:
+            return reg, fit, cut, lowered
+        reg = lower
+
+
 def identify_idim(
     t: np.ndarray,
     eta: np.ndarray,
@@ -308,21 +381,22 @@ def identify_idim(
     phi = [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2, caster...] and its standard errors.
     Raises NotIdentifiableError when the log does not excite the dynamics.
     """
-    from wmrid.estimators.idim_checks import cutoff_check, slow_speed_check
+    from wmrid.estimators.idim_checks import slow_speed_check
 
     start = time.perf_counter()
     delay = effort_delay(t, torque_hold, control_rate)
-    reg = idim_regression(t, eta, tau, cutoff_hz, decimate, order=order, form=form, effort_delay=delay)
-    fit = fit_regression(reg, weighted=weighted, grid=grid)
+    reg, fit, cut, lowered = fit_with_cutoff(
+        t, eta, tau, cutoff_hz, weighted=weighted, decimate=decimate, order=order, form=form, delay=delay, grid=grid
+    )
+    weights = np.asarray(fit.diagnostics["weights"])
     phi, cov_phi, diagnostics, warnings, loo = fit.phi, fit.cov, fit.diagnostics, fit.warnings, fit.loo
     diagnostics["effort_delay_s"] = delay
     fac, seg, g = fit.factors, fit.seg, len(fit.factors)
-    weights = np.asarray(diagnostics["weights"])
     t0, span = (float(reg.t[0]), float(reg.t[-1] - reg.t[0])) if grid is None else (grid[0], grid[1])
-    # what the jackknife cannot see (wmrid.estimators.idim_checks); the covariance takes them in
-    # wmrid.estimators.identify.with_estimate
+    if lowered:
+        diagnostics["cutoff_lowered"] = lowered
     diagnostics["checks"] = {
-        "cutoff": cutoff_check(t, eta, tau, reg, fac, weights, seg, g, decimate, delay, (t0, span)),
+        "cutoff": cut,
         "slow_speed": slow_speed_check(reg, np.asarray(eta, dtype=np.float64), fac, weights, seg, g),
     }
     theta0 = phi_to_theta0(phi)
