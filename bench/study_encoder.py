@@ -97,8 +97,10 @@ def main() -> None:
         s = summary([r for r in rows if r["cpr"] == c])
         out["per_cpr"][str(c)] = s
         rep = ", ".join(f"{k} {v}" for k, v in sorted(s["reported"].items()))
-        print(f"| {c} | {s['max_inertia_error_percent']:.3f} | {s['max_vc_error_percent']:.3f} | "
-              f"{s['share_honest']:.0%} | {rep} | {s['check_applied']} | {s['all_flagged']} | {s['delay_applied']} |")
+        print(
+            f"| {c} | {s['max_inertia_error_percent']:.3f} | {s['max_vc_error_percent']:.3f} | "
+            f"{s['share_honest']:.0%} | {rep} | {s['check_applied']} | {s['all_flagged']} | {s['delay_applied']} |"
+        )
     if args.json is not None:
         args.json.write_text(json.dumps(out, indent=1, default=float))
 

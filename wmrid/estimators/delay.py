@@ -94,8 +94,8 @@ def estimate_delay(
 
     t (n,) s, eta (n, 2) rad/s, tau (n, 2); span s: search [-span, span]; torque_hold, control_rate: how the
     effort was held (:func:`wmrid.estimators.idim_regression.effort_delay`, applied on top of each candidate);
-    cutoff_hz: the
-    filter's (default: IDIM's, from the log, once: :func:`wmrid.estimators.idim.fit_with_cutoff`).  Raises NotIdentifiableError when the log is too short.
+    cutoff_hz: the filter's (default: IDIM's, from the log, once: :func:`wmrid.estimators.idim.fit_with_cutoff`).
+    Raises NotIdentifiableError when the log is too short.
     """
     from wmrid.estimators.idim import fit_with_cutoff, segment_index
     from wmrid.estimators.idim_checks import slow_rows

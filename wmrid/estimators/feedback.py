@@ -16,7 +16,10 @@ segments, so the difference delta = theta0_observer - theta0_other has a delete-
 (the classical Hausman variance V_IV - V_LS needs the least-squares estimate to be efficient, which the observer
 on coloured residuals is not).  When some |delta_j| exceeds the gate (FAMILY_ALPHA) in its jackknife std, wmrid
 says so and reports the second estimate, with its own standard errors and checks
-(:func:`wmrid.estimators.identify.with_estimate`).
+(:func:`wmrid.estimators.identify.with_estimate`).  The second estimate's own errors that its checks measured (IDIM's
+movement with its filter, the errors in variables of noisy speeds) join that std first (:func:`systematic_variance`):
+a difference they explain is not feedback, and an estimate is never reported for a difference within its own
+stated uncertainty.
 
 Measured (``bench/bench_coverage.py --robot amr --caster 0.02 --eta-noise 0.02 --tau-noise 0.01``, 20 seeds): see
 the README section "Closed-loop bias".

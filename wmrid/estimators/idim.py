@@ -39,7 +39,10 @@ by differentiating low-pass filtered velocities, which is where its choices live
   by 4.5-4.9 %, 2 Hz by less than 0.07 %; on the noisy closed-loop simulation
   (``bench/_common.noisy_paper_sim``, 40 s, seed 1) the inertia errors were within 0.5 % for cutoffs of
   2-15 Hz, 0.5-1.1 % at 25 Hz and 3.7-5.9 % at 50 Hz (the rule picks about 5 Hz there).  On a noise-free
-  log the floor is rounding noise and the rule gives f_hi.
+  log the floor is rounding noise and the rule gives f_hi.  Noise that is quiet above rate / 4 (speeds derived
+  from encoder positions by a smoothing derivative) hides from that floor, so the default is then lowered by
+  sqrt(2) while the estimate moves with the cutoff (:func:`fit_with_cutoff`): on 2048-count positions of the paper
+  sinusoid 10 Hz biased the inertia by 0.5-1.2 %, the 5-7 Hz it lowers to by at most 0.05 %.
 * Edges.  The zero-phase filter pads by odd reflection over as many samples as are later dropped; the samples
   within :func:`edge_seconds` of either end (the slowest filter pole decayed to :data:`EDGE_TOLERANCE`:
   0.38 s for order 4 at 10 Hz; with the long padding the
