@@ -94,10 +94,10 @@ def estimate_delay(
 
     t (n,) s, eta (n, 2) rad/s, tau (n, 2); span s: search [-span, span]; torque_hold, control_rate: how the
     effort was held (:func:`wmrid.estimators.idim_regression.effort_delay`, applied on top of each candidate);
-    cutoff_hz: the
-    filter's (default: from the log, once).  Raises NotIdentifiableError when the log is too short.
+    cutoff_hz: the filter's (default: IDIM's, from the log, once: :func:`wmrid.estimators.idim.fit_with_cutoff`).
+    Raises NotIdentifiableError when the log is too short.
     """
-    from wmrid.estimators.idim import segment_index
+    from wmrid.estimators.idim import fit_with_cutoff, segment_index
     from wmrid.estimators.idim_checks import slow_rows
     from wmrid.estimators.idim_regression import MAX_EFFORT_SHIFT_S, default_cutoff, effort_delay, idim_regression
 
@@ -107,8 +107,11 @@ def estimate_delay(
     eta = np.asarray(eta, dtype=np.float64)
     tau = np.asarray(tau, dtype=np.float64)
     hold = effort_delay(t, torque_hold, control_rate)
-    if cutoff_hz is None:
-        cutoff_hz = default_cutoff(eta, (len(t) - 1) / max(t[-1] - t[0], 1e-300))
+    if cutoff_hz is None:  # IDIM's: the default, lowered while the estimate moves with it (errors in variables)
+        try:
+            cutoff_hz = fit_with_cutoff(t, eta, tau, None, delay=hold)[0].cutoff_hz
+        except NotIdentifiableError:
+            cutoff_hz = default_cutoff(eta, (len(t) - 1) / max(t[-1] - t[0], 1e-300))
     n_steps = round(span / DELAY_STEP_S)
     grid = DELAY_STEP_S * np.arange(-n_steps, n_steps + 1)
     # The regressor does not depend on the candidate; the filtered effort does, by a shift only (the zero-phase

@@ -16,7 +16,10 @@ segments, so the difference delta = theta0_observer - theta0_other has a delete-
 (the classical Hausman variance V_IV - V_LS needs the least-squares estimate to be efficient, which the observer
 on coloured residuals is not).  When some |delta_j| exceeds the gate (FAMILY_ALPHA) in its jackknife std, wmrid
 says so and reports the second estimate, with its own standard errors and checks
-(:func:`wmrid.estimators.identify.with_estimate`).
+(:func:`wmrid.estimators.identify.with_estimate`).  The second estimate's own errors that its checks measured (IDIM's
+movement with its filter, the errors in variables of noisy speeds) join that std first (:func:`systematic_variance`):
+a difference they explain is not feedback, and an estimate is never reported for a difference within its own
+stated uncertainty.
 
 Measured (``bench/bench_coverage.py --robot amr --caster 0.02 --eta-noise 0.02 --tau-noise 0.01``, 20 seeds): see
 the README section "Closed-loop bias".
@@ -48,14 +51,17 @@ MAX_SAMPLES = 2_000_000
 
 
 def difference_test(
-    a: BaseEstimate, b: BaseEstimate, names: tuple[str, ...], gate: float | None = None
-) -> dict[str, Any]:
+    a: BaseEstimate, b: BaseEstimate, names: tuple[str, ...], gate: float | None = None,
+    systematic: np.ndarray | None = None,
+) -> dict[str, Any]:  # fmt: skip
     """theta0 of ``a`` minus that of ``b``, judged by the delete-a-segment jackknife of the difference.
 
     Both need :attr:`BaseEstimate.segments` on the same grid.  Parameters either method leaves undetermined
     (infinite std) are not judged (their delta is reported as 0).  gate: in jackknife std (default: FAMILY_ALPHA's
-    Bonferroni Student-t quantile for the judged count).  Returns {"applied": some ratio > gate, "delta", "sd",
-    "ratio" (per name), "largest_ratio", "largest", "gate", "dof"}.
+    Bonferroni Student-t quantile for the judged count).  systematic (n0,): a variance added to the jackknife's,
+    per parameter, for an error of ``b`` that is the same all along the log (:func:`systematic_variance`).
+    Returns {"applied": some ratio > gate, "delta", "sd" (the jackknife's, with ``systematic``), "ratio" (per
+    name), "largest_ratio", "largest", "gate", "dof"}.
     """
     from scipy.special import stdtrit
 
@@ -66,7 +72,7 @@ def difference_test(
     loo = sa.loo - sb.loo
     g = loo.shape[0]
     centred = loo - loo.mean(axis=0)
-    sd = np.sqrt((g - 1) / g * np.sum(centred**2, axis=0))
+    sd = np.sqrt((g - 1) / g * np.sum(centred**2, axis=0) + (0.0 if systematic is None else systematic))
     judged = np.isfinite(a.std) & np.isfinite(b.std) & np.isfinite(delta) & (sd > 0) & np.all(np.isfinite(loo), axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(judged, np.abs(delta) / sd, 0.0)
@@ -84,6 +90,29 @@ def difference_test(
         "gate": gate,
         "dof": g - 1,
     }
+
+
+def systematic_variance(other: BaseEstimate) -> tuple[np.ndarray, list[str]]:
+    """(n0,) variance, per parameter, of the errors of ``other`` that its jackknife cannot see and its own checks
+    measured (``diagnostics["checks"]``: IDIM's estimate at a lower filter cutoff and without the slow rows,
+    :mod:`wmrid.estimators.idim_checks`), delta_j^2 summed over the applied checks; and their names.
+
+    Noise in the speeds biases IDIM's inertia towards zero (errors in variables) by the same amount all along the
+    log, so it shows in the difference from the observer exactly as a feedback bias would.  Its mark is that the
+    estimate moves with the filter's band (the cutoff check); a difference that this movement can explain is not
+    evidence of feedback.  These are the terms the reported estimate's covariance takes in
+    (:func:`wmrid.estimators.identify.with_estimate`), so a difference called feedback is beyond the other estimate's
+    own stated uncertainty too.
+    """
+    out = np.zeros(len(other.theta0))
+    used = []
+    for name, record in (other.diagnostics.get("checks") or {}).items():
+        record = record or {}
+        delta = record.get("delta")
+        if record.get("applied") and delta is not None and len(delta) == len(out):
+            out += np.nan_to_num(np.asarray(delta, dtype=float)) ** 2
+            used.append(name)
+    return out, used
 
 
 def other_estimate(log: Any, result: Any, grid: tuple[float, float, int] | None = None) -> BaseEstimate:
@@ -145,13 +174,15 @@ def check(result: Any, log: Any, robot: Any = None, switch: bool = True) -> Any:
     try:
         with np.errstate(all="ignore"):
             matched = other_estimate(log, result, est.segments.grid)
-            test = difference_test(est, matched, result.form.base_names)
+            systematic, terms = systematic_variance(matched)
+            test = difference_test(est, matched, result.form.base_names, systematic=systematic)
             other = other_estimate(log, result) if test["applied"] else matched
     except (WmridError, np.linalg.LinAlgError) as err:
         record = {"checked": False, "why": f"{type(err).__name__}: {err}"}
         return replace(result, diagnostics={**result.diagnostics, "feedback": record})
     label = {"iv": "instrumental-variable (IDIM-IV, the logged reference as instruments)", "idim": "IDIM"}
     record = {"checked": True, "against": other.method, **evidence, **test, "reported": result.method}
+    record["other_systematic"] = terms  # its own checks whose difference joined the difference's variance
     if not test["applied"] or not switch:
         out = widened(result, np.array(list(test["delta"].values())), matched.std, record, robot)
         if not test["applied"]:

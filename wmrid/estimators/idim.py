@@ -39,7 +39,10 @@ by differentiating low-pass filtered velocities, which is where its choices live
   by 4.5-4.9 %, 2 Hz by less than 0.07 %; on the noisy closed-loop simulation
   (``bench/_common.noisy_paper_sim``, 40 s, seed 1) the inertia errors were within 0.5 % for cutoffs of
   2-15 Hz, 0.5-1.1 % at 25 Hz and 3.7-5.9 % at 50 Hz (the rule picks about 5 Hz there).  On a noise-free
-  log the floor is rounding noise and the rule gives f_hi.
+  log the floor is rounding noise and the rule gives f_hi.  Noise that is quiet above rate / 4 (speeds derived
+  from encoder positions by a smoothing derivative) hides from that floor, so the default is then lowered by
+  sqrt(2) while the estimate moves with the cutoff (:func:`fit_with_cutoff`): on 2048-count positions of the paper
+  sinusoid 10 Hz biased the inertia by 0.5-1.2 %, the 5-7 Hz it lowers to by at most 0.05 %.
 * Edges.  The zero-phase filter pads by odd reflection over as many samples as are later dropped; the samples
   within :func:`edge_seconds` of either end (the slowest filter pole decayed to :data:`EDGE_TOLERANCE`:
   0.38 s for order 4 at 10 Hz; with the long padding the
@@ -71,7 +74,7 @@ R_g of [X_g y_g] (X_g^T X_g = R_g^T R_g), without refitting.  theta0 = [m11 m12 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -278,6 +281,95 @@ def fit_regression(
     return RegressionFit(phi, cov, loo, fac, seg, diagnostics, warnings)
 
 
+#: The default cutoff is lowered at most this many times (by CUTOFF_RATIO each: 10 Hz -> 2.5 Hz).
+MAX_LOWERINGS = 4
+#: ... each time the cutoff check's difference exceeds this many of its std in some parameter.  Lower than the
+#: check's own gate (CUTOFF_GATE, which adds the difference to the covariance): a needless step costs only the band
+#: between f_c / CUTOFF_RATIO and f_c (the parallel-filtered regression stays exact), a missed one the noise's bias
+#: (on 512-count encoder positions the check read 3.7 std at 10 Hz where m11 was 3.2 % off, 0.05 % at 5 Hz).
+#: Noise alone passes it in about 6 % of logs (8 parameters, Student t with 19 dof).
+LOWERING_GATE = 3.0
+
+
+def _lower_cutoff(
+    t: np.ndarray, eta: np.ndarray, tau: np.ndarray, reg: IdimRegression, cut: dict[str, Any],
+    lowered: list[dict[str, Any]], default: bool, decimate: bool, order: int, form: RegressorForm | None,
+    delay: float,
+) -> IdimRegression | None:  # fmt: skip
+    """The regression at the next lower cutoff when the default cutoff's estimate moves with the filter (errors in
+    variables), else None; appends to ``lowered`` what was seen.
+
+    Noise in the speeds reaches the acceleration columns through the filter, amplified with the band it keeps
+    (errors in variables, which bias the inertia towards zero).  Where the model holds and
+    the speeds are noise-free, the parallel-filtered regression is exact at every cutoff, so an estimate that moves
+    when the cutoff is divided by CUTOFF_RATIO (:func:`wmrid.estimators.idim_checks.cutoff_check`, beyond
+    LOWERING_GATE std of the difference) measures the noise's bias.  That bias shrinks as the band does (as f_c^3
+    for white noise on the speeds, faster for quantised positions differentiated); a model error's need not, so the
+    cutoff is lowered only while the difference keeps shrinking (its largest entry in the first step's std), at
+    most MAX_LOWERINGS times and never below the default's lower bound
+    (:func:`wmrid.estimators.idim_regression.cutoff_bounds`).  Only the default cutoff is lowered (``default``).
+    """
+    from wmrid.estimators.idim_checks import CUTOFF_RATIO
+    from wmrid.estimators.idim_regression import cutoff_bounds
+
+    if not default or len(lowered) >= MAX_LOWERINGS or cut.get("delta") is None:
+        return None
+    ratio = float(cut["largest_ratio"])
+    if ratio <= LOWERING_GATE:
+        return None
+    delta, sd = np.abs(np.asarray(cut["delta"], dtype=float)), np.asarray(cut["sd"], dtype=float)
+    sd0 = np.asarray(lowered[0]["sd"], dtype=float) if lowered else sd
+    with np.errstate(divide="ignore", invalid="ignore"):
+        size = float(np.max(np.where(sd0 > 0, delta / sd0, 0.0)))  # in the first step's std: comparable
+    if lowered and size >= lowered[-1]["size"]:
+        return None
+    low = reg.cutoff_hz / CUTOFF_RATIO
+    f_lo = cutoff_bounds(reg.rate_hz, float(t[-1] - t[0]), order)[0]
+    if low < f_lo:
+        return None
+    try:
+        lower = idim_regression(t, eta, tau, low, decimate, order=order, form=form, effort_delay=delay)
+    except NotIdentifiableError:
+        return None
+    head = lowered[0]["rule"] if lowered else reg.cutoff_rule
+    lowered.append({
+        "from_hz": float(reg.cutoff_hz), "to_hz": float(low), "largest_ratio": ratio, "rule": head, "size": size,
+        "sd": sd.tolist(),
+    })  # fmt: skip
+    rule = (
+        f"{head}; lowered to {low:.3g} Hz ({len(lowered)} x 1/{CUTOFF_RATIO:.3g}): the estimate moved with the cutoff "
+        f"beyond {LOWERING_GATE:g} std of the difference (errors in variables: noise in the speeds)"
+    )
+    return replace(lower, cutoff_rule=rule)
+
+
+def fit_with_cutoff(
+    t: np.ndarray, eta: np.ndarray, tau: np.ndarray, cutoff_hz: float | None, *, weighted: bool = False,
+    decimate: bool = True, order: int = 4, form: RegressorForm | None = None, delay: float = 0.0,
+    grid: tuple[float, float, int] | None = None,
+) -> tuple[IdimRegression, RegressionFit, dict[str, Any], list[dict[str, Any]]]:  # fmt: skip
+    """IDIM's regression, its fit and its cutoff check (:func:`wmrid.estimators.idim_checks.cutoff_check`) at
+    ``cutoff_hz``, or at the default cutoff lowered while the estimate moves with it (:func:`_lower_cutoff`).
+
+    Returns (regression, fit, cutoff check, the lowerings made: [{"from_hz", "to_hz", "largest_ratio", "rule"}]).
+    Arguments as :func:`identify_idim`'s (``delay``: its effort delay, s).
+    """
+    from wmrid.estimators.idim_checks import cutoff_check
+
+    reg = idim_regression(t, eta, tau, cutoff_hz, decimate, order=order, form=form, effort_delay=delay)
+    lowered: list[dict[str, Any]] = []
+    while True:
+        fit = fit_regression(reg, weighted=weighted, grid=grid)
+        weights = np.asarray(fit.diagnostics["weights"])
+        t0, span = (float(reg.t[0]), float(reg.t[-1] - reg.t[0])) if grid is None else (grid[0], grid[1])
+        cut = cutoff_check(t, eta, tau, reg, fit.factors, weights, fit.seg, len(fit.factors), decimate, delay,
+                           (t0, span))  # fmt: skip
+        lower = _lower_cutoff(t, eta, tau, reg, cut, lowered, cutoff_hz is None, decimate, order, form, delay)
+        if lower is None:
+            return reg, fit, cut, lowered
+        reg = lower
+
+
 def identify_idim(
     t: np.ndarray,
     eta: np.ndarray,
@@ -308,21 +400,22 @@ def identify_idim(
     phi = [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2, caster...] and its standard errors.
     Raises NotIdentifiableError when the log does not excite the dynamics.
     """
-    from wmrid.estimators.idim_checks import cutoff_check, slow_speed_check
+    from wmrid.estimators.idim_checks import slow_speed_check
 
     start = time.perf_counter()
     delay = effort_delay(t, torque_hold, control_rate)
-    reg = idim_regression(t, eta, tau, cutoff_hz, decimate, order=order, form=form, effort_delay=delay)
-    fit = fit_regression(reg, weighted=weighted, grid=grid)
+    reg, fit, cut, lowered = fit_with_cutoff(
+        t, eta, tau, cutoff_hz, weighted=weighted, decimate=decimate, order=order, form=form, delay=delay, grid=grid
+    )
+    weights = np.asarray(fit.diagnostics["weights"])
     phi, cov_phi, diagnostics, warnings, loo = fit.phi, fit.cov, fit.diagnostics, fit.warnings, fit.loo
     diagnostics["effort_delay_s"] = delay
     fac, seg, g = fit.factors, fit.seg, len(fit.factors)
-    weights = np.asarray(diagnostics["weights"])
     t0, span = (float(reg.t[0]), float(reg.t[-1] - reg.t[0])) if grid is None else (grid[0], grid[1])
-    # what the jackknife cannot see (wmrid.estimators.idim_checks); the covariance takes them in
-    # wmrid.estimators.identify.with_estimate
+    if lowered:
+        diagnostics["cutoff_lowered"] = lowered
     diagnostics["checks"] = {
-        "cutoff": cutoff_check(t, eta, tau, reg, fac, weights, seg, g, decimate, delay, (t0, span)),
+        "cutoff": cut,
         "slow_speed": slow_speed_check(reg, np.asarray(eta, dtype=np.float64), fac, weights, seg, g),
     }
     theta0 = phi_to_theta0(phi)

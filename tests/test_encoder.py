@@ -1,0 +1,85 @@
+"""Speeds derived from encoder positions (issue 28, item 5): IDIM's filter chosen from the noise's effect, the
+closed-loop check's attribution, and the reported estimate, on the paper sinusoid logged as a positions-only MCAP
+of a 2048-count/rev encoder (tests/encoder_log.py).  The figures over seeds and at 512 counts/rev:
+``bench/study_encoder.py`` (README "Encoder positions")."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import wmrid
+from tests.encoder_log import encoder_mcap
+from wmrid.estimators import feedback, idim
+from wmrid.estimators.identify import identify
+from wmrid.model.dynamics import THETA0_NAMES
+from wmrid.model.robot import BUILTIN_ROBOTS
+
+JUDGED = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc")
+
+
+@pytest.fixture(scope="module")
+def encoder_log(tmp_path_factory):
+    """Paper sinusoid, 40 s at 1 kHz, no sensor noise; positions quantised to 2048 counts/rev (seed 0)."""
+    run = wmrid.simulate("paper", seed=0)
+    path = encoder_mcap(tmp_path_factory.mktemp("enc") / "encoder.mcap", run.log, 2048, seed=0)
+    return path, run.truth["parameters"]
+
+
+def test_the_reported_estimate_is_within_one_percent_and_honest(encoder_log):
+    """Defaults, the MCAP's positions only: inertia entries and Vc within 1 % (the issue's criterion; measured
+    0.02 % here, at most 0.05 % over 10 seeds), truth within 3 std or flagged, no spurious effort delay applied
+    (the delay check's regression is IDIM's, whose 10 Hz band carried the noise's bias: -1.1 ms before), and the
+    closed-loop check does not replace the observer."""
+    path, truth = encoder_log
+    result = wmrid.identify(str(path), "paper")
+    assert any("derived from wheel positions" in note for note in result.log_info["notes"])
+    assert result.method == "observer"
+    assert not result.diagnostics["feedback"].get("applied")
+    assert (result.diagnostics.get("delay") or {}).get("applied_s") in (None, 0.0)
+    flagged = set(result.diagnostics.get("flagged", []))
+    for name in JUDGED:
+        value, std = result.parameters[name]
+        assert abs(value / truth[name] - 1) < 0.01, name
+        assert abs(value - truth[name]) <= 3 * std or name in flagged, name
+
+
+def test_idim_lowers_its_default_cutoff_while_the_estimate_moves_with_it(encoder_log):
+    """The spectral rule picks 10 Hz (the Savitzky-Golay derivative low-passes the quantisation noise, so the floor
+    above rate / 4 is far below it at 50 Hz); there the estimate moves with the cutoff (errors in variables), so it
+    is lowered (to 5 Hz) and the inertia comes within 0.1 % (measured 0.02 %; 0.5 % at 10 Hz).  A given cutoff is
+    kept as given."""
+    path, truth = encoder_log
+    log = wmrid.read_log(str(path))
+    t, eta, tau = (np.asarray(a) for a in (log.t, log.eta, log.tau))
+    est = idim.identify_idim(t, eta, tau)
+    steps = est.diagnostics["cutoff_lowered"]
+    assert steps[0]["from_hz"] == 10.0
+    assert est.diagnostics["cutoff_hz"] == pytest.approx(10.0 / np.sqrt(2.0) ** len(steps))
+    assert "lowered" in est.diagnostics["cutoff_rule"]
+    named = dict(zip(THETA0_NAMES, est.theta0, strict=True))
+    for name in ("m11", "m12", "m22", "Vc"):
+        assert abs(named[name] / truth[name] - 1) < 1e-3, name
+    given = idim.identify_idim(t, eta, tau, cutoff_hz=10.0)
+    assert given.diagnostics["cutoff_hz"] == 10.0
+    assert "cutoff_lowered" not in given.diagnostics
+
+
+def test_a_difference_explained_by_idims_filter_is_not_called_feedback(encoder_log, monkeypatch):
+    """Without the lowering (IDIM at 10 Hz, as before), IDIM's own cutoff check measures how its estimate moves with
+    its filter; with that term in the difference's variance the check keeps the observer (widened: 1.2 std of the
+    difference) and names the term it counted.  Without it, the same difference read as feedback (5.0 std, gate
+    3.8) and IDIM, the worse estimate, was reported, as in the issue."""
+    monkeypatch.setattr(idim, "MAX_LOWERINGS", 0)
+    path, _ = encoder_log
+    log = wmrid.read_log(str(path))
+    checked = identify(log, BUILTIN_ROBOTS["paper"])
+    record = checked.diagnostics["feedback"]
+    assert checked.method == "observer"
+    assert record["checked"]
+    assert not record["applied"]
+    assert "cutoff" in record["other_systematic"]
+    monkeypatch.setattr(feedback, "systematic_variance", lambda other: (np.zeros(len(other.theta0)), []))
+    unaware = identify(log, BUILTIN_ROBOTS["paper"])
+    assert unaware.diagnostics["feedback"]["applied"]
+    assert unaware.method == "idim"
