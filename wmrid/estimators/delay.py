@@ -513,9 +513,12 @@ def _windows(stream: Any, log: Any, size: int) -> Any:
         count += len(piece.t)
         while count >= size:
             t, eta, tau, reference = window(parts)
-            yield t[:size], eta[:size], tau[:size], None if reference is None else reference[:size]
+            ref_head = ref_rest = None
+            if reference is not None:
+                ref_head, ref_rest = reference[:size], reference[size:]
+            yield t[:size], eta[:size], tau[:size], ref_head
             rest = t[size:]
-            parts = [] if len(rest) == 0 else [_Piece(rest, eta[size:], tau[size:], None if reference is None else reference[size:])]
+            parts = [] if len(rest) == 0 else [_Piece(rest, eta[size:], tau[size:], ref_rest)]
             count = len(rest)
     if count:
         yield window(parts)
