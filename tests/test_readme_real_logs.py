@@ -258,15 +258,17 @@ def test_regbot_reads_rim_speeds_and_currents_and_identifies_in_amperes(regbot):
     assert round(regbot["log"]["rate_hz"]) == 100
 
 
-def test_regbot_pins_m22_to_11_percent_and_m11_to_22(regbot):
-    """README: "Over 4.3 s it pins m22 to about 11 % (m11 to 22 %, flagged as poorly determined), and little
-    else." """
+def test_regbot_pins_m22_to_6_percent_and_m11_to_5(regbot):
+    """README: "Over 4.3 s it pins m11, m22 (to about 5 and 6 %) and the inertia entries M11, M22, and little
+    else", with the timing check's +6.62 +/- 1.64 ms not applied: 4.0 std over 10 segments is below the 99.73 %
+    t quantile (4.1; issue 28, it was applied as 4 > 3 std and the figures were 22 and 11 %)."""
     share = {n: regbot["parameters"][n]["std"] / abs(regbot["parameters"][n]["value"]) for n in ("m11", "m22")}
-    assert (round(100 * share["m22"]), round(100 * share["m11"])) == (11, 22)
+    assert (round(100 * share["m22"]), round(100 * share["m11"])) == (6, 5)
+    assert not regbot["diagnostics"]["timing"]["apply"]
+    assert "delay" not in regbot["diagnostics"]
     poor = regbot["diagnostics"]["poorly_determined"]
-    assert "m11" in poor
-    assert "m22" not in poor
-    assert len(poor) >= len(regbot["parameters"]) - 3  # "and little else": m22 and at most two others pinned
+    assert not {"m11", "m22", "M11", "M22"} & set(poor)
+    assert len(poor) >= len(regbot["parameters"]) - 4  # "and little else": those four pinned
 
 
 def test_regbot_prediction_error_2_2_times_noise_flagged(regbot):
