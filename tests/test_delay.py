@@ -337,8 +337,9 @@ def _reversing_result(seed: float, true_delay: float, **kwargs):
 def test_a_delay_the_check_cannot_resolve_is_carried_by_the_std():
     """Reversing, 5 ms late, seed 12: the check puts the delay below 3 std (a reversing log times its efforts to
     1-1.6 ms), so the efforts are used as stamped, which leaves the friction 6-8 % off and m22 at 5 std, unflagged,
-    with nothing said (measured before this term, seeds 12, 13, 17 of 20).  The std now carries what a delay of
-    sqrt(d^2 + s^2) would change (the log identified again so): every parameter within 3 std or flagged, and a
+    with nothing said (measured before this term, seeds 12, 13, 17 of 20).  The log puts the delay beyond 2 std
+    (evidence, not significance), so the std carries what a delay of sqrt(d^2 - s^2) (the unbiased estimate of its
+    size) would change (the log identified again so): every parameter within 3 std or flagged, and a
     warning that names the delay and --delay (20 seeds: all within 3 std or flagged 0.25 -> 1.00)."""
     result, truth = _reversing_result(12, 0.005)
     record = result.diagnostics["timing"]
@@ -346,7 +347,7 @@ def test_a_delay_the_check_cannot_resolve_is_carried_by_the_std():
     assert not record["apply"]
     term = record["timing_term"]
     assert term["found_by"] == "identified again"
-    assert abs(term["delay_s"]) == pytest.approx(np.hypot(record["delay_s"], record["std_s"]))
+    assert abs(term["delay_s"]) == pytest.approx(np.sqrt(record["delay_s"] ** 2 - record["std_s"] ** 2))
     assert any("timing against the speeds is uncertain" in w and "--delay" in w for w in result.warnings)
     flagged = set(result.diagnostics["flagged"])
     for name, (value, std) in result.parameters.items():
@@ -372,15 +373,18 @@ def test_an_on_time_sinusoid_is_not_flagged_for_its_timing():
 
 
 def test_a_log_longer_than_the_window_carries_the_delay_by_the_profiles_slope(monkeypatch):
-    """Beyond the check's window the log is not read whole again: the term is the delay times the profile's slope.
-    Here the window is cut to 10 s of a 40 s reversing log (late 5 ms, seed 12): the term is found so and still
-    leaves every parameter within 3 std or flagged."""
+    """Beyond the check's window the log is not read whole again: it is profiled window by window (the estimates
+    combined by inverse variance), and the term is the delay times the profile's slope.  Here the window is cut to
+    20 001 samples of a 40 s reversing log (late 5 ms, seed 12): two windows cover it (+2.71 +/- 0.91 ms combined,
+    against +2.80 +/- 1.18 ms profiled whole), the term is found so and still leaves every parameter within 3 std
+    or flagged."""
     import wmrid.estimators.delay
 
-    monkeypatch.setattr(wmrid.estimators.delay, "TIMING_WINDOW_SAMPLES", 10_000)
+    monkeypatch.setattr(wmrid.estimators.delay, "TIMING_WINDOW_SAMPLES", 20_001)
     result, truth = _reversing_result(12, 0.005)
     record = result.diagnostics["timing"]
-    assert record["samples_profiled"] == 10_000
+    assert record["windows"] == 2
+    assert record["samples_profiled"] == record["of"] == 40_001
     assert not record["apply"]
     assert record["timing_term"]["found_by"] == "the profile's slope"
     flagged = set(result.diagnostics["flagged"])

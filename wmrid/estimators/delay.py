@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.core.errors import NotIdentifiableError, UsageError, option
+from wmrid.core.errors import NotIdentifiableError, UsageError, WmridError, option
 
 #: Grid step of the profile, s (a fifth of a 1 kHz step would be finer than the refinement needs).
 DELAY_STEP_S = 0.0005
@@ -54,17 +54,34 @@ class DelayEstimate:
     segments: int
     at_edge: bool
     theta0_slope: np.ndarray | None = None
+    method: str = "least squares"
+
+    @property
+    def determined(self) -> bool:
+        """Whether the profile pins the delay: a finite std and, by instrumental variables, a root in the span."""
+        return bool(math.isfinite(self.std) and math.isfinite(self.delay))
 
     @property
     def significant(self) -> bool:
-        return abs(self.delay) > max(SIGNIFICANT_Z * self.std, SIGNIFICANT_S)
+        """|delay| beyond SIGNIFICANT_S and beyond the 99.73 % quantile of Student's t with G - 1 dof times its
+        std (3.0 for a long log; 4.1 for a 4 s log of 10 segments, whose jackknife std is itself uncertain)."""
+        return self.determined and abs(self.delay) > max(significance_factor(self.segments) * self.std, SIGNIFICANT_S)
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "delay_s": self.delay, "std_s": self.std, "significant": self.significant, "segments": self.segments,
-            "at_edge_of_search": self.at_edge,
+            "delay_s": self.delay if math.isfinite(self.delay) else None,
+            "std_s": self.std if math.isfinite(self.std) else None, "significant": self.significant,
+            "segments": self.segments, "at_edge_of_search": self.at_edge, "estimator": self.method,
             "meaning": "> 0: the efforts are stamped later than they acted (read them earlier by this much)",
         }  # fmt: skip
+
+
+def significance_factor(segments: int, coverage: float = 0.9973) -> float:
+    """Standard errors a delay must exceed: Student's t quantile at ``coverage`` with ``segments`` - 1 dof (the
+    jackknife's), at least SIGNIFICANT_Z (the normal's 3)."""
+    from wmrid.estimators.uncertainty import interval_factor
+
+    return max(SIGNIFICANT_Z, interval_factor(coverage, max(int(segments) - 1, 1)))
 
 
 def _refine(grid: np.ndarray, rss: np.ndarray) -> tuple[float, bool]:
@@ -89,13 +106,16 @@ def estimate_delay(
     torque_hold: str = "zoh",
     control_rate: float | None = None,
     cutoff_hz: float | None = None,
+    reference: np.ndarray | None = None,
 ) -> DelayEstimate:
     """The delay of the efforts behind the speeds, with its standard error (see the module docstring).
 
     t (n,) s, eta (n, 2) rad/s, tau (n, 2); span s: search [-span, span]; torque_hold, control_rate: how the
     effort was held (:func:`wmrid.estimators.idim_regression.effort_delay`, applied on top of each candidate);
     cutoff_hz: the filter's (default: IDIM's, from the log, once: :func:`wmrid.estimators.idim.fit_with_cutoff`).
-    Raises NotIdentifiableError when the log is too short.
+    reference (n, 2) rad/s: the logged wheel-speed set-points; given, the delay is the root of an instrumental-variable
+    moment (:func:`_iv_profile`), which a disturbance inside the feedback loop does not bias, instead of the
+    least-squares minimiser.  Raises NotIdentifiableError when the log is too short.
     """
     from wmrid.estimators.idim import fit_with_cutoff, segment_index
     from wmrid.estimators.idim_checks import slow_rows
@@ -145,22 +165,116 @@ def estimate_delay(
         r2 = (resid**2).reshape(-1, 2).sum(axis=1)  # per sample
         per_segment[k] = np.bincount(seg[fast], weights=r2, minlength=g)
     rss = per_segment.sum(axis=1)
-    delay, at_edge = _refine(grid, rss)
-    g = per_segment.shape[1]
-    loo = np.array([_refine(grid, rss - per_segment[:, i])[0] for i in range(g)])
-    std = float(np.sqrt((g - 1) / g * np.sum((loo - loo.mean()) ** 2)))
+    method = "least squares"
+    iv = None
+    if reference is not None:
+        iv = _iv_profile(reg, fast, grid, lambda d: effort(d, times), t, reference, tau, seg[fast], g)
+    if iv is not None:
+        delay, std = iv
+        at_edge = False
+        method = "instrumental variables"
+    else:
+        delay, at_edge = _refine(grid, rss)
+        g = per_segment.shape[1]
+        loo = np.array([_refine(grid, rss - per_segment[:, i])[0] for i in range(g)])
+        std = float(np.sqrt((g - 1) / g * np.sum((loo - loo.mean()) ** 2)))
     # the slope of theta0 in the delay, of the fit on the rows profiled and of the fit on every row (which the
     # observer's estimate, fitted on every sample, follows more closely on a reversing log), the larger of the two
-    fast_slope = _theta0_slope(q, r, lambda d: effort(d, times), delay)
+    at = delay if math.isfinite(delay) else 0.0
+    fast_slope = _theta0_slope(q, r, lambda d: effort(d, times), at)
     every = reg.rows().reshape(-1, x.shape[2])
     q_all, r_all = np.linalg.qr(every)
-    all_slope = _theta0_slope(q_all, r_all, lambda d: effort(d, reg.t), delay)
+    all_slope = _theta0_slope(q_all, r_all, lambda d: effort(d, reg.t), at)
     slope = None
     if fast_slope is not None and all_slope is not None:
         slope = np.where(np.abs(fast_slope) >= np.abs(all_slope), fast_slope, all_slope)
     return DelayEstimate(
-        delay=delay, std=std, grid=grid, rss=rss, segments=g, at_edge=at_edge, theta0_slope=slope
+        delay=delay, std=std, grid=grid, rss=rss, segments=g, at_edge=at_edge, theta0_slope=slope, method=method
     )  # fmt: skip
+
+
+def _iv_profile(
+    reg: Any, fast: np.ndarray, grid: np.ndarray, effort: Any, t: np.ndarray, reference: np.ndarray,
+    tau: np.ndarray, seg: np.ndarray, g: int,
+) -> tuple[float, float] | None:  # fmt: skip
+    """(delay s, its jackknife std s) by instrumental variables, or None when the reference cannot serve (another
+    shape, non-finite, or a first-stage R^2 below :data:`wmrid.estimators.iv.MIN_R2`: it does not describe the motion).
+
+    Why not least squares: inside a feedback loop the controller answers a disturbance d with an effort that lags it
+    by about the loop's time constant (20 ms on the light AMR), so a shifted effort fits part of d, and the RSS
+    profile's minimum moves towards that lag (to the edge of the +/-20 ms search, or -19.6 +/- 2.85 ms applied, on
+    a 200 Hz AMR log on one clock).  The reference was set before the disturbance acted, so a moment built from it
+    is not moved by d.  Model: the effort read d0 later, y(d0) = X phi + e, e uncorrelated with the instruments Z
+    (the IDIM regressor rebuilt from the reference, :func:`wmrid.estimators.iv.instrument_regression`).  For each
+    candidate d, phi(d) = (Z^T X)^-1 Z^T y(d) (IDIM-IV) leaves one more instrument free to test the delay: w = dZ/dt
+    phi(0), the derivative of the effort the reference predicts (a central difference over one logged step, at
+    least 1 ms).  The moment m(d) = w^T (y(d) - X phi(d)) is zero at d0 up to noise and grows through it with slope
+    w^T (I - X (Z^T X)^-1 Z^T) dy/dt, about |w|^2 less its part in the instruments' span, > 0: the delay is the grid
+    interval where m rises through zero (linear interpolation), the one nearest 0 if several.  Its std: the
+    delete-a-segment jackknife of that root (per-segment moments, no refit); infinite when the full log or a
+    jackknife replicate has no root in the span, i.e. the log does not pin the delay.  On logs without a
+    disturbance it agrees with least squares (5 ms late at 1 kHz: +4.96 +/- 0.07 ms against +4.96 +/- 0.07 ms)."""
+    from wmrid.estimators.idim_regression import shifted
+    from wmrid.estimators.iv import MIN_R2, first_stage_r2, instrument_regression
+
+    reference = np.asarray(reference, dtype=np.float64)
+    if reference.shape != (len(t), 2) or not np.all(np.isfinite(reference)):
+        return None
+    try:
+        z = instrument_regression(reg, t, reference, tau)
+        h = max(1e-3, float(np.median(np.diff(t))))
+        z_dot = (
+            instrument_regression(reg, t, shifted(t, reference, -h), tau)
+            - instrument_regression(reg, t, shifted(t, reference, h), tau)
+        ) / (2 * h)
+    except WmridError:
+        return None
+    x = reg.rows()
+    if np.min(first_stage_r2(z, x, np.ones(2))) < MIN_R2:
+        return None
+    p = x.shape[2]
+    xs, zs, zds = (a[fast].reshape(-1, p) for a in (x, z, z_dot))
+    rows_seg = np.repeat(seg, 2)
+
+    def per_segment(col: np.ndarray) -> np.ndarray:
+        return np.bincount(rows_seg, weights=col, minlength=g)
+
+    big_a = np.stack([np.stack([per_segment(zs[:, i] * xs[:, j]) for j in range(p)], axis=1) for i in range(p)], 1)
+    try:
+        phi0 = np.linalg.solve(big_a.sum(axis=0), zs.T @ effort(0.0))
+    except np.linalg.LinAlgError:
+        return None
+    w = zds @ phi0
+    small_a = np.stack([per_segment(w * xs[:, j]) for j in range(p)], axis=1)  # (g, p)
+    big_b = np.empty((len(grid), g, p))
+    small_c = np.empty((len(grid), g))
+    for k, d in enumerate(grid):
+        y = effort(d)
+        big_b[k] = np.stack([per_segment(zs[:, j] * y) for j in range(p)], axis=1)
+        small_c[k] = per_segment(w * y)
+
+    def root(keep: np.ndarray) -> float:
+        try:
+            phi = np.linalg.solve(big_a[keep].sum(axis=0), big_b[:, keep].sum(axis=1).T).T  # (m, p)
+        except np.linalg.LinAlgError:
+            return math.nan
+        m = small_c[:, keep].sum(axis=1) - phi @ small_a[keep].sum(axis=0)
+        up = np.flatnonzero((m[:-1] < 0) & (m[1:] >= 0))
+        if len(up) == 0:
+            return math.nan
+        k = int(up[np.argmin(np.abs(grid[up] + grid[up + 1]))])
+        return float(grid[k] - m[k] * (grid[k + 1] - grid[k]) / (m[k + 1] - m[k]))
+
+    every = np.ones(g, dtype=bool)
+    delay = root(every)
+    loo = np.empty(g)
+    for i in range(g):
+        keep = every.copy()
+        keep[i] = False
+        loo[i] = root(keep)
+    if not (math.isfinite(delay) and np.all(np.isfinite(loo))):
+        return delay, math.inf
+    return delay, float(np.sqrt((g - 1) / g * np.sum((loo - loo.mean()) ** 2)))
 
 
 def _theta0_slope(q: np.ndarray, r: np.ndarray, effort: Any, delay: float) -> np.ndarray | None:
@@ -227,14 +341,17 @@ def timing_check(
     """The record for ``diagnostics["timing"]``: the efforts' delay estimated from the log (:func:`estimate_delay`,
     searched over +/- max(DEFAULT_SPAN_S, 1.2 logged steps), under the given hold), for identify's default timing.
 
-    Keys: "checked"; the estimate (:meth:`DelayEstimate.to_dict`); "apply": significant and not at the edge of the
-    search (identify then identifies with ``delay="auto"``); "slow": the log is slower than SLOW_LOG_HZ;
-    "faster_controller": :func:`faster_controller` (the warning of :func:`apply_delay` then names --control-rate).
+    Keys: "checked"; the estimate (:meth:`DelayEstimate.to_dict`; by instrumental variables when the log carries the
+    wheel-speed reference, else least squares); "apply": significant and not at the edge of the search (identify
+    then identifies with ``delay="auto"``); "slow": the log is slower than SLOW_LOG_HZ; "faster_controller":
+    :func:`faster_controller` (the warning of :func:`apply_delay` then names --control-rate).
     Measured on the light AMR (1 kHz controller, noise): 5 ms late or early at 1 kHz found within 0.1 ms on the
     sinusoid; a 100 Hz log 4.5 ms of the 5 ms half step, a 20 Hz log 24.6 of 25 ms.  The profile costs one
-    regression (0.03 s for 40 s at 1 kHz) on at most the first TIMING_WINDOW_SAMPLES samples, read piece by piece
-    (``samples`` and ``median_step`` s come from the survey).  A log that cannot be profiled (a hole, too short
-    for the filter) is not checked, and the record says why."""
+    regression (0.03 s for 40 s at 1 kHz) per window of at most TIMING_WINDOW_SAMPLES samples, read piece by piece
+    (``samples`` and ``median_step`` s come from the survey); a longer log is profiled window by window and the
+    windows' estimates combined by their inverse variances (:func:`combine`), so the delay's std keeps shrinking
+    as 1/sqrt(T) with the log's length.  A log that cannot be profiled (a hole, too short for the filter) is not
+    checked, and the record says why."""
     from wmrid.core.errors import WmridError
     from wmrid.core.wheel_log import LogStream
 
@@ -242,54 +359,103 @@ def timing_check(
     none = {"checked": False, "apply": False, "slow": slow, "faster_controller": False}
     if samples < 2:
         return {**none, "why": f"{samples} samples"}
-    t, eta, tau = _window(log if isinstance(log, LogStream) else None, log, TIMING_WINDOW_SAMPLES)
-    try:
-        est = estimate_delay(
-            t, eta, tau, span=search_span(t), torque_hold=torque_hold, control_rate=control_rate
-        )  # fmt: skip
-    except WmridError as err:
-        return {**none, "why": str(err)}
+    count = math.ceil(samples / TIMING_WINDOW_SAMPLES)
+    size = math.ceil(samples / count)
+    estimates: list[DelayEstimate] = []
+    profiled = 0
+    first_t = None
+    for t, eta, tau, reference in _windows(log if isinstance(log, LogStream) else None, log, size):
+        if estimates and len(t) < size // 2:  # a short tail adds little and may not fit the filter
+            break
+        try:
+            est = estimate_delay(
+                t, eta, tau, span=search_span(t), torque_hold=torque_hold, control_rate=control_rate,
+                reference=reference,
+            )  # fmt: skip
+        except WmridError as err:
+            if not estimates:
+                return {**none, "why": str(err)}
+            break
+        estimates.append(est)
+        profiled += len(t)
+        first_t = t if first_t is None else first_t
+    assert first_t is not None
+    est = combine(estimates)
     apply = bool(est.significant and not est.at_edge)
-    faster = bool(apply and faster_controller(est, t, torque_hold, control_rate))
-    window = {"samples_profiled": len(t), "of": int(samples)}
+    faster = bool(apply and faster_controller(est, first_t, torque_hold, control_rate))
+    window = {"samples_profiled": profiled, "of": int(samples), "windows": len(estimates)}
     slope = {"theta0_slope_per_s": est.theta0_slope.tolist()} if est.theta0_slope is not None else {}
     record = {"checked": True, **est.to_dict(), "apply": apply, "slow": slow, "faster_controller": faster, **window}
     return {**record, **slope}
 
 
+def combine(estimates: list[DelayEstimate]) -> DelayEstimate:
+    """One estimate from those of consecutive windows of a log (the same delay all along it): the inverse-variance
+    weighted mean and its std (1 / sqrt(sum 1/s_i^2)), the segments summed, at the edge when any window is, and
+    undetermined (infinite std) when any window is; the first window's profile and slope."""
+    first = estimates[0]
+    if len(estimates) == 1:
+        return first
+    stds = np.array([e.std for e in estimates])
+    delays = np.array([e.delay for e in estimates])
+    segments = sum(e.segments for e in estimates)
+    at_edge = any(e.at_edge for e in estimates)
+    if not (np.all(np.isfinite(stds)) and np.all(np.isfinite(delays)) and np.all(stds > 0)):
+        delay, std = float(np.mean(delays)), math.inf
+    else:
+        weights = 1.0 / stds**2
+        delay, std = float(np.sum(weights * delays) / np.sum(weights)), float(1.0 / np.sqrt(np.sum(weights)))
+    return DelayEstimate(
+        delay=delay, std=std, grid=first.grid, rss=first.rss, segments=segments, at_edge=at_edge,
+        theta0_slope=first.theta0_slope, method=first.method,
+    )  # fmt: skip
+
+
 #: A delay the timing check could not resolve is carried by the std when it would move some parameter by more
 #: than this many of its std (the std then grows by more than 4 %); below, the extra identification is skipped.
 MATERIAL_SHIFT = 0.3
+#: Coverage of the evidence a delay left unapplied needs before the std carries it (Student's t with the profile's
+#: G - 1 dof: |d| beyond about 2 std).
+CARRY_COVERAGE = 0.95
 
 
 def unresolved_delay(record: dict[str, Any], theta0_std: np.ndarray) -> float | None:
     """The delay s whose effect the std must carry when the timing check (``record``, :func:`timing_check`) left the
-    efforts as stamped: sign(d) sqrt(d^2 + s^2), the root-mean-square error of taking the delay as 0 when the log
-    puts it at d +/- s; None when the check applied its delay, did not run, ended at the edge of its search, when
-    the log rules out a significant delay (|d| + SIGNIFICANT_Z s <= SIGNIFICANT_S: what is left is below the
-    resolution the check applies, and carrying it grew V_c's std 1.4-1.9 times on every well-specified log of the
-    paper's robot, whose delay it pins to 0.03-0.07 ms), or when that delay would move no parameter by
-    MATERIAL_SHIFT of its std ``theta0_std`` (n0,) (judged by the profile's slope, ``theta0_slope_per_s``).
+    efforts as stamped: sign(d) sqrt(d^2 - s^2), the unbiased estimate of the delay's size when the log puts it at
+    d +/- s (E[d^2] = delta^2 + s^2), when the log gives evidence of a delay: |d| beyond the t quantile at
+    CARRY_COVERAGE (about 2 std) but not significant.  None when the check applied its delay, did not run, ended at
+    the edge of its search or did not pin the delay (an infinite std), when the log shows no such evidence, when it
+    rules out a significant delay (|d| + SIGNIFICANT_Z s <= SIGNIFICANT_S: below the resolution the check applies),
+    or when that delay would move no parameter by MATERIAL_SHIFT of its std ``theta0_std`` (n0,) (judged by the
+    profile's slope, ``theta0_slope_per_s``).
 
-    Why: a delay below SIGNIFICANT_Z std is not applied, but on a log that times its efforts poorly (a slow
-    reversing motion with torque noise: std 1-1.6 ms) a 5 ms delay can fall below that and bias the friction by 7 %
-    at 5 std, with nothing said."""
+    Why: a delay below significance is not applied, but on a log that times its efforts poorly (a slow reversing
+    motion with torque noise: std 1-1.6 ms) a 5 ms delay can fall below it and bias the friction by 7 % at 5 std,
+    with nothing said.  Why not sqrt(d^2 + s^2), what this carried before issue 28: on a log on one clock it
+    carried a delay of the size of its std on every log, so the std of a log that pins its delay poorly (a 200 Hz
+    reversing log with a disturbance inside the loop: s of 5-45 ms) grew 4-5 times against --delay 0; on a log
+    with no delay the term now comes in 5 % of logs, and where it does its size, like s, shrinks as 1/sqrt(T)."""
+    from wmrid.estimators.uncertainty import interval_factor
+
     if not record.get("checked") or record.get("apply") or record.get("at_edge_of_search"):
         return None
     slope = record.get("theta0_slope_per_s")
-    d, s = float(record.get("delay_s", 0.0)), float(record.get("std_s", 0.0))
-    if slope is None or not (math.isfinite(d) and math.isfinite(s)):
+    d, s = record.get("delay_s"), record.get("std_s")
+    if slope is None or d is None or s is None or not (math.isfinite(d) and math.isfinite(s)):
         return None
+    d, s = float(d), float(s)
     if abs(d) + SIGNIFICANT_Z * s <= SIGNIFICANT_S:
         return None  # the log rules out any delay the check would call significant
-    size = math.hypot(d, s)
+    if abs(d) <= interval_factor(CARRY_COVERAGE, max(int(record.get("segments", 2)) - 1, 1)) * s:
+        return None  # no evidence of a delay
+    size = math.sqrt(d * d - s * s)
     slope = np.asarray(slope, dtype=float)
     std = np.asarray(theta0_std, dtype=float)[: len(slope)]
     with np.errstate(divide="ignore", invalid="ignore"):
         shift = np.abs(size * slope[: len(std)]) / std
     if not np.any(np.isfinite(shift) & (shift > MATERIAL_SHIFT)):
         return None
-    return math.copysign(size, d) if d else size
+    return math.copysign(size, d)
 
 
 def unresolved_text(record: dict[str, Any], moved: float) -> str:
@@ -305,19 +471,69 @@ def unresolved_text(record: dict[str, Any], moved: float) -> str:
 def _window(stream: Any, log: Any, most: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(t (m,), eta (m, 2), tau (m, 2)): the first ``most`` samples of a log, from the stream's pieces when it is a
     :class:`wmrid.core.wheel_log.LogStream` (read no further), else sliced from the log in memory."""
+    t, eta, tau, _ = next(_windows(stream, log, most))
+    return t, eta, tau
+
+
+def _reference_of(log: Any, n: int) -> np.ndarray | None:
+    """The log's wheel-speed reference (n, 2) when it has one of that shape (a simulator's ``reference`` may be a
+    pose), else None."""
+    ref = getattr(log, "reference", None)
+    if ref is None:
+        return None
+    ref = np.asarray(ref, dtype=np.float64)
+    return ref if ref.shape == (n, 2) else None
+
+
+def _windows(stream: Any, log: Any, size: int) -> Any:
+    """Consecutive windows (t, eta, tau, reference or None) of at most ``size`` samples covering a log, from the
+    stream's pieces when it is a :class:`wmrid.core.wheel_log.LogStream` (read piece by piece; one window in
+    memory at a time), else sliced from the log in memory."""
     if stream is None:
-        return tuple(np.asarray(a, dtype=np.float64)[:most] for a in (log.t, log.eta, log.tau))  # type: ignore[return-value]
+        arrays = [np.asarray(a, dtype=np.float64) for a in (log.t, log.eta, log.tau)]
+        reference = _reference_of(log, len(arrays[0]))
+        for start in range(0, len(arrays[0]), size):
+            cut = slice(start, start + size)
+            yield (*(a[cut] for a in arrays), None if reference is None else reference[cut])
+        return
     parts: list[Any] = []
     count = 0
+
+    def window(parts: list[Any]) -> tuple[Any, ...]:
+        t = np.concatenate([p.t for p in parts]).astype(np.float64)
+        eta = np.concatenate([p.eta for p in parts]).astype(np.float64)
+        tau = np.concatenate([p.tau for p in parts]).astype(np.float64)
+        refs = [getattr(p, "reference", None) for p in parts]
+        reference = None
+        if all(r is not None for r in refs):
+            reference = np.concatenate(refs).astype(np.float64)
+            reference = reference if reference.shape == (len(t), 2) else None
+        return t, eta, tau, reference
+
     for piece in stream:
         parts.append(piece)
         count += len(piece.t)
-        if count >= most:
-            break
-    t = np.concatenate([p.t for p in parts])[:most]
-    eta = np.concatenate([p.eta for p in parts])[:most]
-    tau = np.concatenate([p.tau for p in parts])[:most]
-    return t.astype(np.float64), eta.astype(np.float64), tau.astype(np.float64)
+        while count >= size:
+            t, eta, tau, reference = window(parts)
+            ref_head = ref_rest = None
+            if reference is not None:
+                ref_head, ref_rest = reference[:size], reference[size:]
+            yield t[:size], eta[:size], tau[:size], ref_head
+            rest = t[size:]
+            parts = [] if len(rest) == 0 else [_Piece(rest, eta[size:], tau[size:], ref_rest)]
+            count = len(rest)
+    if count:
+        yield window(parts)
+
+
+@dataclass(frozen=True)
+class _Piece:
+    """What :func:`_windows` carries over from one window to the next."""
+
+    t: np.ndarray
+    eta: np.ndarray
+    tau: np.ndarray
+    reference: np.ndarray | None
 
 
 def apply_delay(
@@ -338,7 +554,10 @@ def apply_delay(
     source = getattr(whole, "source", "log")
     warnings: list[str] = []
     if delay == "auto":
-        est = estimate_delay(t, eta, tau, span=search_span(t), torque_hold=torque_hold, control_rate=control_rate)
+        est = estimate_delay(
+            t, eta, tau, span=search_span(t), torque_hold=torque_hold, control_rate=control_rate,
+            reference=_reference_of(whole, len(t)),
+        )  # fmt: skip
         record = {"chosen_by": "auto", **est.to_dict()}
         applied = est.delay if est.significant and not est.at_edge else 0.0
         if est.at_edge:
@@ -346,6 +565,12 @@ def apply_delay(
                 f"the delay between efforts and speeds could not be estimated (the fit keeps improving to the edge of "
                 f"the searched +/-{abs(est.grid[0]) * 1e3:g} ms): the model does not fit this log well enough to time "
                 "it; the efforts are used as stamped"
+            )
+        elif not est.determined:
+            warnings.append(
+                "the delay between efforts and speeds could not be estimated (the instrumental-variable moment of the "
+                "logged reference does not cross zero within the searched "
+                f"+/-{abs(est.grid[0]) * 1e3:g} ms): this log does not pin it; the efforts are used as stamped"
             )
         elif est.significant and faster_controller(est, t, torque_hold, control_rate):
             warnings.append(

@@ -188,7 +188,7 @@ def carry_unresolved_delay(
         return result
     theta0 = np.asarray(est.theta0, dtype=float)
     text = unresolved_text(record, moved_delay)
-    if record.get("samples_profiled", 0) < record.get("of", 0):
+    if record.get("samples_profiled", 0) < record.get("of", 0) or record.get("windows", 1) > 1:
         slope = np.zeros_like(theta0)
         slope[:8] = record["theta0_slope_per_s"]
         return with_unresolved_timing(result, moved_delay * slope, moved_delay, "the profile's slope", text, robot)
