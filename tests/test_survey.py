@@ -98,3 +98,21 @@ def test_an_effort_that_opposes_its_speed_is_named_with_the_fix():
     assert len(warnings) == 2
     assert all("mostly opposes its speed" in w and "--flip-effort" in w for w in warnings)
     assert survey(_pieces(t, eta, -tau, 1000), "log").signal_warnings() == []
+
+
+def test_swapped_speed_and_effort_columns_are_named_not_called_an_unsigned_current():
+    """Issue 28: the bundled log read with its speed and effort columns exchanged (the speeds never change sign, the
+    torques do) was diagnosed as 'an unsigned current'; the exchanged columns fit the model far better (R² 0.97
+    against 0.31), and the warning says the columns look swapped.  Real unsigned currents (the BorealTC and DRIVE
+    huskies, tests/test_readme_real_logs.py) fit no better exchanged and keep the magnitude warning."""
+    from pathlib import Path
+
+    import wmrid
+    from wmrid.core.wheel_log import stream_arrays
+
+    sample = Path(__file__).resolve().parents[1] / "sample_logs" / "paper_sinusoid.csv"
+    log = wmrid.read_log(sample, columns="t=t,eta_r=tau_r,eta_l=tau_l,tau_r=eta_r,tau_l=eta_l")
+    warnings = survey(stream_arrays(log), "log").signal_warnings()
+    assert len(warnings) == 2
+    assert all("look swapped; check --columns" in w for w in warnings), warnings
+    assert not any("magnitude" in w for w in warnings)

@@ -32,6 +32,12 @@ _BUCKETS_PER_OCTAVE = 4096
 LOW_SPEED_FRACTION = 0.1
 
 
+#: A wheel whose effort never changes sign is called swapped with its speed (rather than a magnitude) when the
+#: exchanged columns fit the one-wheel model to at least this R², and by this much more than as read.
+SWAPPED_R2 = 0.8
+SWAPPED_GAIN = 0.3
+
+
 @dataclass
 class Survey:
     """Figures of a whole log, gathered piece by piece.
@@ -138,6 +144,14 @@ class Survey:
         for i, wheel in enumerate(("right", "left")):
             other_way = min(self.speed_neg[i], self.speed_pos[i]) / n
             if other_way > 0.05 and (self.effort_neg[i] == 0 or self.effort_pos[i] == 0):
+                fits = self._orientation_fit(i)
+                if fits is not None and fits[1] >= SWAPPED_R2 and fits[1] - fits[0] >= SWAPPED_GAIN:
+                    out.append(
+                        f"the {wheel} wheel's effort never changes sign while its speed does, and the two fit the "
+                        f"model far better exchanged (R² {fits[1]:.2f} against {fits[0]:.2f} as read): the speed and "
+                        "effort columns (or topics) look swapped; check --columns"
+                    )
+                    continue
                 out.append(
                     f"the {wheel} wheel's effort never changes sign while its speed does "
                     f"({100 * other_way:.0f} % of samples the other way): the log holds a magnitude "
@@ -160,6 +174,24 @@ class Survey:
                 f"against the speed's; {fix}"
             )
         return out
+
+    def _orientation_fit(self, i: int) -> tuple[float, float] | None:
+        """(R² as read, R² exchanged) of wheel ``i``'s effort regressed on both wheels' speeds and their derivatives
+        (the model's inertia and viscous terms, Eq. 20, plus a constant) on the sparse samples (one per
+        START_SPACING_S), and of its speed on both efforts and their derivatives; None when too few samples.  An
+        effort follows the speeds' derivatives; exchanged columns fit the other way round."""
+        t = self.sparse_t
+        if len(t) < 20 or np.any(np.diff(t) <= 0):
+            return None
+
+        def r2(x: np.ndarray, y: np.ndarray) -> float:
+            a = np.column_stack([np.gradient(x, t, axis=0), x, np.ones(len(t))])
+            coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+            spread = float(np.sum((y - y.mean()) ** 2))
+            return 1.0 - float(np.sum((y - a @ coef) ** 2)) / spread if spread > 0 else 0.0
+
+        with np.errstate(all="ignore"):
+            return r2(self.sparse_eta, self.sparse_tau[:, i]), r2(self.sparse_tau, self.sparse_eta[:, i])
 
     def _opposes(self, i: int) -> tuple[float, float] | None:
         """(share of the samples with power where effort opposes speed, mean power) of wheel ``i`` when its effort
