@@ -8,6 +8,7 @@
 
     python bench/study_timing_feedback.py                         # (a) 20 seeds reduced + 4 multibody, (b) 6 seeds
     python bench/study_timing_feedback.py --a-seeds 5 --b-seeds 2 --mb-seeds 0 --json /tmp/t.json
+    python bench/study_timing_feedback.py --no-reference --b-seeds 0 --json bench/out/timing_no_reference.json
 
 Logs come from :func:`wmrid.simulate` (seeded) and are identified as :class:`wmrid.core.wheel_log.WheelLog` (their
 wheel-speed reference included, as ``wmrid simulate`` writes it).  At most ``--workers`` processes (default 2).
@@ -28,8 +29,8 @@ INERTIA = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc")
 NOISE = {"eta_noise": 0.02, "tau_noise": 0.01}
 
 
-def case_a(job: tuple[str, int, float, float]) -> dict:
-    engine, seed, caster, duration = job
+def case_a(job: tuple[str, int, float, float, bool]) -> dict:
+    engine, seed, caster, duration, reference = job
     import wmrid
     from wmrid.api.inputs import load_robot
     from wmrid.estimators.identify import identify
@@ -40,6 +41,10 @@ def case_a(job: tuple[str, int, float, float]) -> dict:
         engine=engine, **NOISE,
     )  # fmt: skip
     log = run.log.to_wheel_log()
+    if not reference:  # a field log without the controller's set-points: least squares times the efforts
+        from dataclasses import replace
+
+        log = replace(log, reference=None)
     default = identify(log, amr)
     zero = identify(log, amr, delay=0.0)
     timing = default.diagnostics.get("timing") or {}
@@ -87,14 +92,16 @@ def main() -> None:
     ap.add_argument("--mb-seeds", type=int, default=4, help="multibody (MuJoCo) seeds for (a)")
     ap.add_argument("--caster", type=float, nargs="+", default=[0.02, 0.005], help="N m, for (a)")
     ap.add_argument("--a-duration", type=float, default=40.0)
+    ap.add_argument("--no-reference", action="store_true", help="(a) without the logged wheel-speed reference")
     ap.add_argument("--b-seeds", type=int, default=6)
     ap.add_argument("--b-duration", type=float, default=300.0)
     ap.add_argument("--b-trajectories", default="sinusoid,reversing")
     ap.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
     ap.add_argument("--json", default="bench/out/study_timing_feedback.json")
     args = ap.parse_args()
-    jobs_a = [("reduced", s, c, args.a_duration) for c in args.caster for s in range(args.a_seeds)]
-    jobs_a += [("mujoco", s, c, args.a_duration) for c in args.caster for s in range(args.mb_seeds)]
+    ref = not args.no_reference
+    jobs_a = [("reduced", s, c, args.a_duration, ref) for c in args.caster for s in range(args.a_seeds)]
+    jobs_a += [("mujoco", s, c, args.a_duration, ref) for c in args.caster for s in range(args.mb_seeds)]
     jobs_b = [(s, tr, args.b_duration) for tr in args.b_trajectories.split(",") if tr for s in range(args.b_seeds)]
     t0 = time.perf_counter()
     with ProcessPoolExecutor(max_workers=args.workers) as pool:

@@ -194,3 +194,20 @@ def test_the_multibody_prototype_in_rpm_and_ms():
     for robot in (amr, None):
         ms = wmrid.identify(replace(log, t=np.asarray(log.t) * 1000.0), robot)
         assert ms.diagnostics["units"]["findings"][0]["fix"] == "--time-unit ms"
+
+
+def test_the_report_opens_with_the_verdict(in_rpm, clean):
+    """Markdown and HTML reports put the verdict first: bold, the groups as a list; in red when it says not to use
+    the numbers (issue 28)."""
+    from wmrid.reporting.report import to_html, to_markdown
+
+    doubt = wmrid.report(wmrid.identify(in_rpm, "paper"), figures=False)
+    text_md = to_markdown(doubt)
+    assert text_md.split("\n\n")[1].startswith("**Verdict:** Do not use these numbers:")
+    assert "--speed-unit rpm" in text_md.split("##")[0]
+    page = to_html(doubt)
+    assert page.index("<section class='verdict'>") < page.index("Base parameters (paper Table 3)")
+    assert "color:#b00020" in page.split("<section class='verdict'>")[1].split("</section>")[0]
+    good = to_markdown(wmrid.report(clean, figures=False))
+    assert "**Verdict:** This log determines the inertia, Coriolis coefficient and friction." in good
+    assert "- Inertia (M11, M22, M12): determined" in good

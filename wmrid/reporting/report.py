@@ -54,6 +54,8 @@ class Report:
     notes: list[str]
     residuals: dict[str, Any]
     figures: dict[str, bytes] = field(default_factory=dict)  # name -> SVG bytes, rendered when first needed
+    #: What the log determines (the result's verdict): its summary first, then one line per parameter group.
+    verdict: list[str] = field(default_factory=list)
     figures_png: dict[str, bytes] = field(default_factory=dict)
     figure_notes: dict[str, str] = field(default_factory=dict)  # name -> one sentence under its title
     result: dict[str, Any] = field(default_factory=dict)
@@ -301,16 +303,14 @@ def build_report(
         residuals["torque"] = torque_residual(log, theta0, form)
 
     verdict = data.get("verdict") or {}
-    said = [f"Verdict: {line}" for line in [*(verdict.get("first") or []), verdict.get("summary")] if line]
-    said += [
-        line[0].upper() + line[1:] + "."
-        for line in verdict.get("lines") or [g["text"] for g in verdict.get("groups", [])]
-    ]
-    said += [verdict["units"]] if verdict.get("units") else []
+    said = [line for line in [*(verdict.get("first") or []), verdict.get("summary")] if line]
+    groups = verdict.get("lines") or [g["text"] for g in verdict.get("groups", [])]
+    said += [line[0].upper() + line[1:] + "." for line in groups]
+    said += [verdict["units"][0].upper() + verdict["units"][1:] + "."] if verdict.get("units") else []
     report = Report(
         title=f"wmrid report: {data.get('source', '?')}",
+        verdict=said,
         summary=[
-            *said,
             f"{data['log'].get('samples', '?')} samples, {data['log'].get('duration_s', float('nan')):.3f} s at "
             f"{data['log'].get('rate_hz', float('nan')):.5g} Hz; regressor: {form.kind} form; "
             f"k = {data['settings']['k']:g} 1/s; start: {data['settings']['start']}",
@@ -424,6 +424,18 @@ def _html_cell(value: Any) -> str:
     return f"<td{kind}>{html.escape(text)}</td>"
 
 
+def _html_verdict(lines: list[str]) -> list[str]:
+    """The verdict at the top of the page: its summary in bold (red when it says not to use the numbers), the
+    groups as a list."""
+    if not lines:
+        return []
+    doubt = lines[0].startswith("Do not use")
+    style = " style='color:#b00020'" if doubt else ""
+    items = "".join(f"<li>{html.escape(line)}</li>" for line in lines[1:])
+    return [f"<section class='verdict'><p><strong{style}>Verdict: {html.escape(lines[0])}</strong></p>"
+            + (f"<ul>{items}</ul>" if items else "") + "</section>"]  # fmt: skip
+
+
 def to_html(report: Report) -> str:
     """One self-contained HTML page: inline SVG figures (text kept as text), inline style, nothing fetched."""
     source = str(report.result.get("source", "?"))
@@ -432,6 +444,7 @@ def to_html(report: Report) -> str:
         "<meta name='viewport' content='width=device-width, initial-scale=1'>",
         f"<title>{html.escape(report.title)}</title><style>{_CSS}</style></head><body>",
         f"<header><h1>wmrid report</h1><p class='path'>{html.escape(source)}</p>",
+        *_html_verdict(report.verdict),
         *[f"<p class='small'>{html.escape(s)}</p>" for s in report.summary],
         "</header>",
         "<h2>Base parameters (paper Table 3)</h2>",
@@ -510,6 +523,11 @@ def to_markdown(report: Report) -> str:
     parts = [
         f"# {report.title}",
         "",
+        *(
+            [f"**Verdict:** {report.verdict[0]}", "", *(f"- {line}" for line in report.verdict[1:]), ""]
+            if report.verdict
+            else []
+        ),
         *report.summary,
         "",
         "## Base parameters (paper Table 3)",
