@@ -212,7 +212,7 @@ def robot_findings(
                 fits.append((rms, {"quantity": "effort", "unit": None, "fix": "--effort", "factor": math.exp(le)}))
         fits.sort(key=lambda f: f[0])
         shown = ", ".join(f"{n} {math.exp(y):.3g}x" for n, y in ratios)
-        lead = f"the estimate is {math.exp(rms0):.3g} times off robot '{label}' ({shown})"
+        lead = f"the estimate is {math.exp(rms0):.3g} times off the robot file's {label} values ({shown})"
         if not fits:
             best = [{
                 "quantity": "robot", "unit": None, "fix": None, "doubt": False,
@@ -233,7 +233,7 @@ def robot_findings(
         top = fits[0][1]
         best = [{
             "quantity": top["quantity"], "unit": top["unit"], "fix": top["fix"], "doubt": True,
-            "text": f"{lead}, as a unit mistake makes it: " + "; or ".join(guesses),
+            "text": f"{lead}, as a unit mistake would make it: " + "; or ".join(guesses),
         }]  # fmt: skip
     return best, best_record
 
