@@ -246,10 +246,10 @@ def verdict(result: Any) -> dict[str, Any]:
         if good:
             parts.append(f"this log determines the {_join(good)}")
         if weak:
-            parts.append(f"{'only poorly ' if good else 'poorly '}the {_join(weak)}")
+            parts.append(f"{'' if good else 'this log determines '}the {_join(weak)} only poorly")
         if bad:
             parts.append(f"not the {_join(bad)}")
-        text = ", ".join(parts) if parts else "nothing to judge"
+        text = "; ".join(parts) if parts else "nothing to judge"
         summary = text[0].upper() + text[1:] + "."
         if not good and not weak:
             summary = f"This log determines none of the parameters ({_join(bad)})."
