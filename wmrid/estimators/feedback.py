@@ -183,20 +183,35 @@ def check(result: Any, log: Any, robot: Any = None, switch: bool = True) -> Any:
     label = {"iv": "instrumental-variable (IDIM-IV, the logged reference as instruments)", "idim": "IDIM"}
     record = {"checked": True, "against": other.method, **evidence, **test, "reported": result.method}
     record["other_systematic"] = terms  # its own checks whose difference joined the difference's variance
-    if not test["applied"] or not switch:
+    impossible: set[str] = set()
+    if test["applied"] and switch:  # never report an estimate no robot has (the evidence says it is the worse one)
+        from wmrid.estimators.diagnostics import impossible_parameters
+
+        candidate = with_estimate(result, other, robot)
+        impossible = impossible_parameters(candidate.parameters)
+    if not test["applied"] or not switch or impossible:
         out = widened(result, np.array(list(test["delta"].values())), matched.std, record, robot)
         if not test["applied"]:
             return out
         big = [n for n, r in test["ratio"].items() if r > test["gate"]]
+        other_name = "IDIM-IV" if matched.method == "iv" else "IDIM"
+        why = (
+            f"the {other_name} estimate has values no robot has ({', '.join(sorted(impossible))}), so the observer's "
+            "is kept"
+            if impossible
+            else f"the observer's estimate is kept as --method observer asks (the default, --method auto, reports the "
+            f"{other_name} estimate)"
+        )
         text = (
             f"closed-loop bias: the observer's {', '.join(big)} differ from the {label[matched.method]} estimate by up "
             f"to {test['largest_ratio']:.1f} std of the difference (gate {test['gate']:g}), the mark of a controller "
-            "answering a disturbance through the efforts; the observer's estimate is kept as --method observer asks, "
-            "its std widened by that difference (the default, --method auto, reports the "
-            f"{'IDIM-IV' if matched.method == 'iv' else 'IDIM'} estimate)"
+            f"answering a disturbance through the efforts; {why}, its std widened by that difference"
         )
+        if impossible:
+            record = {**out.diagnostics["feedback"], "not_reported": f"{other_name}: {', '.join(sorted(impossible))}"}
+            out = replace(out, diagnostics={**out.diagnostics, "feedback": record})
         return replace(out, warnings=(text, *out.warnings))
-    out = with_estimate(result, other, robot)
+    out = candidate
     record["reported"] = other.method
     big = [n for n, r in test["ratio"].items() if r > test["gate"]]
     text = (

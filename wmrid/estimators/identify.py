@@ -384,11 +384,15 @@ def _identify(
     hold_warnings = control_rate_check(control_rate, sv, source)
     units = model.base_units(effort_unit)
     early_warnings = []
+    unit_reference: dict[str, Any] = {}  # the robot's values for the units check when its efforts are not N m
     if robot is not None and effort_unit != "N m":
         early_warnings.append(
             f"the effort is in {effort_unit}, not N m, so robot '{robot.name}' (in SI units) neither starts the "
             "estimate nor is compared with it; the start comes from the data"
         )
+        unit_reference["nominal"] = model.named_base(model.base_parameters(robot.nominal))
+        if robot.cad is not None:
+            unit_reference["CAD"] = model.named_base(model.base_parameters(robot.cad))
         robot = None
     geometry: tuple[float, ...] = tuple(given_geometry)
     if caster and robot is not None and robot.casters:
@@ -505,6 +509,8 @@ def _identify(
                 reference[name] = None
         if getattr(robot, "assumed", ()):  # what the robot file left out (said with every result that uses it)
             diagnostics = {**diagnostics, "robot_assumed": list(robot.assumed)}
+    if unit_reference:  # in N m-based units: ratios only (wmrid.estimators.plausibility, effort_free)
+        diagnostics = {**diagnostics, "robot_values": unit_reference}
     # the jackknife's leave-one-segment-out estimates, theta0 to first order (fit.gain): for comparing methods
     segment, n_seg = segments_of(block_mid / max(duration, 1e-300), duration)
     deltas = jackknife_deltas(gamma, theta_u, out.blk_a, out.blk_c, segment, n_seg)

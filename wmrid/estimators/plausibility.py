@@ -37,8 +37,11 @@ from wmrid.core.wheel_log import WHOLE_EFFORTS_NOTE
 MIN_RATE_HZ = 2.0
 #: A plausible logging rate, Hz, for the time unit that would explain a slow log.
 PLAUSIBLE_RATES_HZ = (5.0, 20_000.0)
-#: m/s at the rim no wheeled mobile robot drives (130 km/h).
-MAX_RIM_SPEED = 36.0
+#: m/s at the rim no differential-drive robot drives (54 km/h; the fastest field robots reach about 10 m/s).
+MAX_RIM_SPEED = 15.0
+#: m/s, a typical top rim speed of a wheeled robot: of the units that would bring implausible speeds within
+#: MAX_RIM_SPEED, the one whose top speed is nearest it (in ratio) is named first.
+TYPICAL_RIM_SPEED = 1.5
 #: rad/s at a wheel beyond which, without the robot's radius, the speeds are suspected (about 2900 rpm).
 MAX_WHEEL_SPEED = 300.0
 #: rad/s at a wheel above which, without a robot file to check them, the speeds are said to be fast (a 5 cm wheel at
@@ -94,7 +97,7 @@ def signal_findings(
     """Unit doubts the signals show by themselves (``scales``: :meth:`wmrid.estimators.survey.Survey.scales`;
     ``r`` m: the robot's wheel radius, or None; ``notes``: the log's reading notes, which say when an effort topic held
     whole numbers before it was put on the speed stamps).  Each: {"quantity": "time"|"speed"|"effort", "unit", "fix",
-    "text", "doubt"}."""
+    "text", "doubt"}; "columns" when a wheel's speed and effort fit far better exchanged (``scales["swapped"]``)."""
     out: list[dict[str, Any]] = []
     rate = scales.get("rate_hz")
     duration = scales.get("duration_s") or 0.0
@@ -120,14 +123,19 @@ def signal_findings(
     limit = MAX_RIM_SPEED / r if r else MAX_WHEEL_SPEED
     if speed > limit:
         where = f" ({speed * r:.3g} m/s at the rim of the robot's {r:g} m wheels)" if r else ""
-        for what, s, fix in speed_units(r)[:2]:
-            if speed / s <= limit:
-                text = (
-                    f"the wheel speeds reach {speed:.4g} rad/s{where}, faster than a wheeled robot drives; in {what} "
-                    f"they would reach {speed / s:.4g} rad/s: give {fix}"
-                )
-                out.append({"quantity": "speed", "unit": what, "fix": fix, "text": text, "doubt": True})
-                break
+        fits = [(what, s, fix) for what, s, fix in speed_units(r)[:2] if speed / s <= limit]
+        if r:  # the unit whose top rim speed is most typical first
+            fits.sort(key=lambda f: abs(math.log(speed / f[1] * r / TYPICAL_RIM_SPEED)))
+        if fits:
+            said = [
+                f"in {what} they would reach {speed / s:.4g} rad/s" + (f" ({speed / s * r:.3g} m/s)" if r else "")
+                + f": give {fix}"
+                for what, s, fix in fits
+            ]  # fmt: skip
+            text = f"the wheel speeds reach {speed:.4g} rad/s{where}, faster than a wheeled robot drives; " + (
+                "; or ".join(said)
+            )
+            out.append({"quantity": "speed", "unit": fits[0][0], "fix": fits[0][2], "text": text, "doubt": True})
         else:
             text = (
                 f"the wheel speeds reach {speed:.4g} rad/s{where}, faster than a wheeled robot drives; check their unit"
@@ -136,10 +144,18 @@ def signal_findings(
     elif not r and speed > FAST_WHEEL_SPEED:
         text = (
             f"the wheel speeds reach {speed:.4g} rad/s ({speed * 60 / (2 * math.pi):.3g} rpm), fast for a wheel; if "
-            "they were logged in rpm give --speed-unit rpm (with --robot, wmrid checks them against the wheel radius "
-            "and the robot's parameters)"
+            "they were logged in rpm give --speed-unit rpm (a robot file with the wheel radius lets wmrid check them)"
         )
         out.append({"quantity": "speed", "unit": "rpm", "fix": "--speed-unit rpm", "text": text, "doubt": False})
+    swapped = [w for w, flag in zip(("right", "left"), scales.get("swapped") or (), strict=False) if flag]
+    if swapped:
+        which = (
+            "both wheels' speeds and efforts fit"
+            if len(swapped) == 2
+            else f"the {swapped[0]} wheel's speed and effort fit"
+        )
+        text = f"{which} the model far better exchanged: the columns (or topics) look swapped; check --columns"
+        out.append({"quantity": "columns", "unit": None, "fix": "--columns", "text": text, "doubt": True})
     effort = max(scales.get("effort_max") or [0.0])
     whole = scales.get("effort_whole") or any(WHOLE_EFFORTS_NOTE in note for note in notes)
     if scales.get("effort_unit", "N m") == "N m" and whole and effort >= PWM_MIN:
@@ -173,14 +189,20 @@ def _rms(values: list[float]) -> float:
 
 
 def robot_findings(
-    parameters: dict[str, tuple[float, float]], references: list[tuple[str, dict[str, float]]], r: float | None
+    parameters: dict[str, tuple[float, float]],
+    references: list[tuple[str, dict[str, float]]],
+    r: float | None,
+    effort_free: bool = False,
 ) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
     """Unit doubts from the estimate against the robot file's values.
 
-    ``references``: (label, named base parameters with M11, M12, M22) pairs, nominal then CAD.  Returns
-    (findings as :func:`signal_findings`'s, the comparison record or None when nothing could be compared).
-    The record: {"reference", "rms_factor" (the typical factor between the estimate and the robot's), "compared"
-    (names)}.
+    ``references``: (label, named base parameters with M11, M12, M22) pairs, nominal then CAD.  ``effort_free``:
+    the efforts are not in N m (a current, a PWM command), so every comparison allows a free effort scale and only
+    the ratios between parameters (Vc/M, Fv/M, ...) can show a speed or time unit.  Returns (findings as
+    :func:`signal_findings`'s, the comparison record or None when nothing could be compared).  The record:
+    {"reference", "rms_factor" (the typical factor between the estimate and the robot's, after the free effort
+    scale when ``effort_free``), "compared" (names)}.  An estimate that only a uniform scale explains is the
+    robot file not describing this robot or efforts not in N m: said, not a doubt (nothing tells them apart).
     """
     best_record = None
     best: list[dict[str, Any]] = []
@@ -189,6 +211,10 @@ def robot_findings(
         if not ratios:
             continue
         kinds = {_kind(n) for n, _ in ratios}
+        if effort_free and len(kinds) < 2:
+            continue  # one kind of parameter: its scale is the effort's, nothing to test
+        shift = sum(y for _, y in ratios) / len(ratios) if effort_free else 0.0
+        ratios = [(n, y - shift) for n, y in ratios]
         rms0 = _rms([y for _, y in ratios])
         record = {"reference": label, "rms_factor": math.exp(rms0), "compared": [n for n, _ in ratios]}
         if best_record is not None and record["rms_factor"] >= best_record["rms_factor"]:
@@ -202,17 +228,21 @@ def robot_findings(
         candidates += [("time", what, q, fix, (0.0, math.log(q), 0.0)) for what, q, fix in TIME_UNITS]
         for quantity, what, factor, fix, (ls, lq, _) in candidates:
             residual = [y - (np.dot(_EXPONENTS[_kind(n)], (ls, lq, 0.0))) for n, y in ratios]
+            if effort_free:
+                mean = sum(residual) / len(residual)
+                residual = [v - mean for v in residual]
             rms = _rms(residual)
             if rms <= math.log(CONSISTENT):
                 fits.append((rms, {"quantity": quantity, "unit": what, "fix": fix, "factor": factor}))
-        if len(kinds) >= 2:  # an effort scale is free: it can only be told from a speed or time unit by two kinds
+        if len(kinds) >= 2 and not effort_free:  # a free scale: only two kinds tell it from a speed or time unit
             le = sum(y for _, y in ratios) / len(ratios)
             rms = _rms([y - le for _, y in ratios])
             if rms <= math.log(CONSISTENT) and abs(le) > math.log(CONSISTENT):
                 fits.append((rms, {"quantity": "effort", "unit": None, "fix": "--effort", "factor": math.exp(le)}))
         fits.sort(key=lambda f: f[0])
         shown = ", ".join(f"{n} {math.exp(y):.3g}x" for n, y in ratios)
-        lead = f"the estimate is {math.exp(rms0):.3g} times off the robot file's {label} values ({shown})"
+        scaled = " beyond one common scale (the efforts are not in N m)" if effort_free else ""
+        lead = f"the estimate is {math.exp(rms0):.3g} times off the robot file's {label} values{scaled} ({shown})"
         if not fits:
             best = [{
                 "quantity": "robot", "unit": None, "fix": None, "doubt": False,
@@ -220,17 +250,21 @@ def robot_findings(
                 "--effort) and the robot file",
             }]  # fmt: skip
             continue
-        guesses = []
-        for _, fit in fits[:2]:
-            if fit["quantity"] == "effort":
-                guesses.append(
-                    f"efforts {fit['factor']:.3g} times N m (a PWM command or a current, not a torque: give --effort)"
-                )
-            else:
-                guesses.append(f"{fit['quantity']}s in {fit['unit']} (a factor {fit['factor']:.4g}: give {fit['fix']})")
-        if len(kinds) < 2 and not any(f["quantity"] == "effort" for _, f in fits):
-            guesses.append("or efforts not in N m (give --effort)")
         top = fits[0][1]
+        if top["quantity"] == "effort":
+            best = [{
+                "quantity": "robot", "unit": None, "fix": "--effort", "doubt": False,
+                "text": f"{lead}, every parameter by about the same factor ({top['factor']:.3g}): the robot file does "
+                "not describe this robot, or the efforts are not in N m (a PWM command or a current: give --effort)",
+            }]  # fmt: skip
+            continue
+        guesses = [
+            f"{fit['quantity']}s in {fit['unit']} (a factor {fit['factor']:.4g}: give {fit['fix']})"
+            for _, fit in fits[:2]
+            if fit["quantity"] != "effort"
+        ]
+        if len(kinds) < 2 and not effort_free:
+            guesses.append("efforts not in N m (give --effort)")
         best = [{
             "quantity": top["quantity"], "unit": top["unit"], "fix": top["fix"], "doubt": True,
             "text": f"{lead}, as a unit mistake would make it: " + "; or ".join(guesses),
@@ -244,19 +278,24 @@ def units_check(
     references: list[tuple[str, dict[str, float]]],
     r: float | None,
     notes: tuple[str, ...] | list[str] = (),
+    effort_free: bool = False,
 ) -> dict[str, Any]:
     """The units check of a result: {"findings": [...], "robot": comparison record or None, "doubt": bool}.
 
     ``parameters``: the reported (value, std) by name; ``scales``: the log's (``log_info["scales"]``, None when
-    unknown); ``references``: (label, base parameters by name) of the robot file; ``r`` m: its wheel radius.
+    unknown); ``references``: (label, base parameters by name) of the robot file; ``r`` m: its wheel radius;
+    ``effort_free``: the efforts are not in N m, so the comparison allows them any scale (:func:`robot_findings`).
     ``doubt``: some finding's ``doubt`` (it names a unit that explains the numbers, or the signals cannot be in the
     units they are read in): every parameter is then flagged.  A finding without doubt (fast speeds without a robot
     file to check them, an estimate far from the robot file that no unit explains) is a warning only.
     """
     findings = signal_findings(scales, r, tuple(notes)) if scales else []
-    from_robot, record = robot_findings(parameters, references, r) if references else ([], None)
+    from_robot, record = robot_findings(parameters, references, r, effort_free) if references else ([], None)
     for finding in from_robot:
-        if not any(f["quantity"] == finding["quantity"] for f in findings):
-            findings.append(finding)
+        same = [f for f in findings if f["quantity"] == finding["quantity"]]
+        if any(f["doubt"] for f in same):
+            continue  # the signals already named it
+        findings = [f for f in findings if f not in same] + [finding]
+    findings.sort(key=lambda f: not f["doubt"])
     doubt = any(f["doubt"] for f in findings)
     return {"findings": findings, "robot": record, "doubt": doubt}

@@ -242,9 +242,11 @@ def from_dict(data: Any, source: str = "result") -> IdentificationResult:
     """The result a document of :meth:`IdentificationResult.to_dict` describes (``identify --format json``).
 
     Exact for everything the document holds: ``from_dict(d).to_dict() == d`` for a document ``to_dict`` wrote.
-    What it does not hold comes back as follows: the intermediate parameters' covariance as its diagonal (their
-    std), the history as the decimated one the document keeps (None when it has none), the base parameters'
-    covariance from ``estimate`` (documents before schema 1: the diagonal of the reported std).
+    A document saved before results carried a verdict gets one, made from its numbers (its warnings and flags
+    made again, :func:`wmrid.estimators.verdict.settle`).  What it does not hold comes back as follows: the
+    intermediate parameters' covariance as its diagonal (their std), the history as the decimated one the document
+    keeps (None when it has none), the base parameters' covariance from ``estimate`` (documents before schema 1:
+    the diagonal of the reported std).
     Raises :class:`LogFormatError` naming ``source`` when ``data`` is not a complete result, or one of a newer
     schema.
     """
@@ -332,7 +334,7 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
             )
             for n, e in payload_d.items()
         }
-    return IdentificationResult(
+    result = IdentificationResult(
         source=data.get("source") or source,
         form=form,
         parameters=parameters,
@@ -357,3 +359,8 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
         validation=data.get("validation"),
         verdict=data.get("verdict"),
     )
+    if result.verdict is None:  # saved before the verdict: said from its numbers (wmrid.estimators.verdict)
+        from wmrid.estimators.verdict import settle
+
+        result = settle(result)
+    return result

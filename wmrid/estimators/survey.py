@@ -133,19 +133,38 @@ class Survey:
             "rate_hz": float(1.0 / self.median_step) if self.median_step > 0 else None,
             "duration_s": float(self.duration),
             "effort_unit": self.effort_unit,
+            "swapped": [self._swapped(i) is not None for i in range(2)],
         }
+
+    def _one_signed(self, i: int) -> float | None:
+        """The share of wheel ``i``'s samples turning the other way when its effort never changes sign while its
+        speed does (more than 5 % of them), else None."""
+        other_way = min(self.speed_neg[i], self.speed_pos[i]) / max(self.n, 1)
+        if other_way > 0.05 and (self.effort_neg[i] == 0 or self.effort_pos[i] == 0):
+            return float(other_way)
+        return None
+
+    def _swapped(self, i: int) -> tuple[float, float] | None:
+        """(R² as read, R² exchanged) when wheel ``i``'s effort never changes sign while its speed does and the two
+        fit the model far better exchanged (SWAPPED_R2, SWAPPED_GAIN): speed and effort columns given the other way
+        round; else None."""
+        if self._one_signed(i) is None:
+            return None
+        fits = self._orientation_fit(i)
+        if fits is not None and fits[1] >= SWAPPED_R2 and fits[1] - fits[0] >= SWAPPED_GAIN:
+            return fits
+        return None
 
     def signal_warnings(self) -> list[str]:
         """Warnings about the signals themselves: an effort that never changes sign while the speed does (a
         magnitude, not a signed effort), and an effort that mostly opposes the speed (a sign convention)."""
         out = []
-        n = max(self.n, 1)
         opposing = [self._opposes(i) for i in range(2)]
         for i, wheel in enumerate(("right", "left")):
-            other_way = min(self.speed_neg[i], self.speed_pos[i]) / n
-            if other_way > 0.05 and (self.effort_neg[i] == 0 or self.effort_pos[i] == 0):
-                fits = self._orientation_fit(i)
-                if fits is not None and fits[1] >= SWAPPED_R2 and fits[1] - fits[0] >= SWAPPED_GAIN:
+            other_way = self._one_signed(i)
+            if other_way is not None:
+                fits = self._swapped(i)
+                if fits is not None:
                     out.append(
                         f"the {wheel} wheel's effort never changes sign while its speed does, and the two fit the "
                         f"model far better exchanged (R² {fits[1]:.2f} against {fits[0]:.2f} as read): the speed and "

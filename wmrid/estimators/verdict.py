@@ -54,7 +54,7 @@ GROUPS = (
 LEGEND = {
     "†": "† std widened to cover an error the log shows beyond its noise (model, timing, feedback); it includes it",
     "!": "! flagged: do not trust this std (see the warnings)",
-    "✗": "✗ a value no robot has",
+    "✗": "✗ impossible for a physical robot",
 }
 
 
@@ -67,8 +67,14 @@ def _relative(value: float, std: float) -> float:
 
 
 def _references(result: Any) -> list[tuple[str, dict[str, float]]]:
+    """(label, values) of the robot file for the units check: its nominal and CAD base parameters, also when the
+    result does not show them (efforts not in N m: ``diagnostics["robot_values"]``)."""
     out = []
-    for label, ref in (("nominal", result.nominal), ("CAD", result.reference)):
+    kept = result.diagnostics.get("robot_values") or {}
+    for label, ref in (
+        ("nominal", result.nominal or kept.get("nominal")),
+        ("CAD", result.reference or kept.get("CAD")),
+    ):
         if ref:
             out.append((label, {k: v for k, v in ref.items() if v is not None}))
     return out
@@ -131,9 +137,9 @@ def settle(result: Any, radius: float | None = None) -> Any:
     diagnostics = dict(result.diagnostics)
     previous = diagnostics.get("units") or {}
     r = radius if radius is not None else previous.get("wheel_radius")
-    references = _references(result) if result.log_info.get("effort_unit", "N m") == "N m" else []
+    effort_free = result.log_info.get("effort_unit", "N m") != "N m"
     notes = tuple(result.log_info.get("notes") or ())
-    units = units_check(result.parameters, result.log_info.get("scales"), references, r, notes)
+    units = units_check(result.parameters, result.log_info.get("scales"), _references(result), r, notes, effort_free)
     units["wheel_radius"] = r
     diagnostics["units"] = units
     method = result.method if result.method != "observer" else None
@@ -169,6 +175,31 @@ def _reason(names: tuple[str, ...], result: Any) -> str:
     return "too little excitation: accelerate, brake, turn and reverse more, for longer"
 
 
+#: A parameter whose value the log bounds (|value| + 3 std) below this share of the term's largest effort is
+#: negligible: determined to be small, whatever its relative std.
+NEGLIGIBLE = 0.02
+
+
+def _negligible(name: str, value: float, std: float, result: Any) -> float | None:
+    """The 3-std bound on |``name``| when it is negligible (module constant NEGLIGIBLE), else None.  The term's
+    scale: the largest effort for a Coulomb friction or a caster's drag, over the largest speed for a viscous
+    friction, over its square for Vc (the log's ``scales``); inertia entries are never negligible."""
+    scales = result.log_info.get("scales") or {}
+    effort, speed = max(scales.get("effort_max") or [0.0]), max(scales.get("speed_max") or [0.0])
+    if not (math.isfinite(value) and math.isfinite(std)) or effort <= 0 or speed <= 0:
+        return None
+    if name in ("Fd1", "Fd2", "Cv", "Cw") or (name.startswith("D") and name[1:].isdigit()):
+        scale = effort
+    elif name in ("Fv1", "Fv2"):
+        scale = effort / speed
+    elif name == "Vc":
+        scale = effort / speed**2
+    else:
+        return None
+    bound = abs(value) + 3.0 * std
+    return bound if bound < NEGLIGIBLE * scale else None
+
+
 def _group_sentence(group: str, names: tuple[str, ...], extra: tuple[str, ...], result: Any) -> dict[str, Any] | None:
     params = result.parameters
     present = tuple(n for n in names if n in params)
@@ -178,13 +209,22 @@ def _group_sentence(group: str, names: tuple[str, ...], extra: tuple[str, ...], 
     units = result.diagnostics.get("units") or {}
     misfit = ((result.diagnostics.get("uncertainty") or {}).get("model_error") or {}).get("prediction_misfit") or {}
     rel = {n: _relative(*params[n]) for n in present + tuple(n for n in extra if n in params)}
-    worst = max(present, key=lambda n: rel[n])
+    # a value the log bounds to a negligible share of the effort is determined: it is small, not unknown
+    negligible = {
+        n: bound
+        for n in present
+        if rel[n] > POORLY_DETERMINED and (bound := _negligible(n, *params[n], result)) is not None
+    }
+    judged = tuple(n for n in present if n not in negligible) or present
+    if set(negligible) == set(present):  # all negligible: judged on the bound itself
+        rel.update({n: 0.0 for n in present})
+    worst = max(judged, key=lambda n: rel[n])
     label = f"{group} ({', '.join(present + tuple(n for n in extra if n in params))})"
     record: dict[str, Any] = {"group": group, "parameters": list(present), "worst": worst,
                               "relative_std": rel[worst] if math.isfinite(rel[worst]) else None}  # fmt: skip
     impossible = impossible_parameters(params) & set(present)
     if units.get("doubt"):
-        record.update(status="in doubt", reason="the log's units are in doubt (see the unit check)")
+        record.update(status="in doubt", reason="the log's units or columns are in doubt (see the unit check)")
     elif not math.isfinite(rel[worst]):
         record.update(status="not determined", reason="the log does not excite it: the start value sets it")
     elif impossible:
@@ -202,6 +242,9 @@ def _group_sentence(group: str, names: tuple[str, ...], extra: tuple[str, ...], 
             reason=f"{quality} by its std, but the model does not fit this log (slip, backlash or an effect it leaves "
             "out), so no std covers the error",
         )
+    elif rel[worst] <= POORLY_DETERMINED and len(negligible) == len(present):
+        record.update(status="determined", reason=None)
+        record["negligible"] = negligible
     elif rel[worst] <= POORLY_DETERMINED:
         record.update(status="determined", reason=None)
     elif rel[worst] <= NOT_DETERMINED:
@@ -210,8 +253,14 @@ def _group_sentence(group: str, names: tuple[str, ...], extra: tuple[str, ...], 
         record.update(status="not determined", reason=_reason(present, result) + " (its std exceeds its value)")
     pct = f"{100 * rel[worst]:.2g} %" if math.isfinite(rel[worst]) else "unbounded"
     text = f"{label}: {record['status']}"
-    if record["status"] in ("determined", "poorly determined"):
-        text += f" (std up to {pct} of the value, {worst})"
+    small = ", ".join(f"|{n}| < {b:.2g} {result.units[n]}" for n, b in negligible.items())
+    if record["status"] in ("determined", "poorly determined") and len(negligible) == len(present):
+        text += f" as negligible ({small}, at 3 std: under {100 * NEGLIGIBLE:g} % of the largest effort)"
+    elif record["status"] in ("determined", "poorly determined"):
+        text += f" (std up to {pct} of the value" + (f", {worst})" if len(judged) > 1 else ")")
+        if negligible:
+            text += f"; negligible: {small}"
+            record["negligible"] = negligible
     coupling = [n for n in extra if n in rel and rel[n] > POORLY_DETERMINED and record["status"] == "determined"]
     if coupling:
         text += (
@@ -228,7 +277,9 @@ def _group_sentence(group: str, names: tuple[str, ...], extra: tuple[str, ...], 
 def verdict(result: Any) -> dict[str, Any]:
     """One sentence per parameter group (see the module docstring): {"summary", "groups": [{"group",
     "parameters", "status" ("determined", "poorly determined", "not determined", "in doubt"), "worst",
-    "relative_std", "reason", "text"}]}."""
+    "relative_std", "reason", "text"}], "lines" (the groups' sentences to print), and when there is something to
+    add: "first" (a method switched), "check" (unit findings that are warnings, not doubts), "units" (what units were
+    assumed, when no robot file could check them)}."""
     groups = [_group_sentence(g, names, extra, result) for g, names, extra in GROUPS]
     casters = tuple(result.form.base_names[8:])
     if casters:
@@ -261,15 +312,20 @@ def verdict(result: Any) -> dict[str, Any]:
             f"method: {other}, not the observer: the closed-loop check found the observer's estimate biased by "
             "feedback (see the first warning); --method observer keeps the observer's"
         ]
-    if not _references(result):
-        scales = result.log_info.get("scales") or {}
-        speed, effort = max(scales.get("speed_max") or [0.0]), max(scales.get("effort_max") or [0.0])
-        unit = result.log_info.get("effort_unit", "N m")
-        if scales:
-            out["units"] = (
-                f"units not checked against a robot file (give --robot): speeds read as rad/s (up to {speed:.3g}), "
-                f"efforts as {unit} (up to {effort:.3g})"
-            )
+    said = [f["text"] for f in units.get("findings", []) if not f["doubt"]]
+    if said and not units.get("doubt"):
+        out["check"] = said
+    scales = result.log_info.get("scales") or {}
+    speed, effort = max(scales.get("speed_max") or [0.0]), max(scales.get("effort_max") or [0.0])
+    unit = result.log_info.get("effort_unit", "N m")
+    assumed = f"speeds read as rad/s (up to {speed:.3g}), efforts as {unit} (up to {effort:.3g})"
+    if scales and not _references(result):
+        out["units"] = f"units not checked against a robot file (give --robot): {assumed}"
+    elif scales and unit != "N m":
+        out["units"] = (
+            f"units checked against the robot file only through ratios of its parameters (the efforts are in {unit}, "
+            f"its values in N m): {assumed}"
+        )
     return out
 
 

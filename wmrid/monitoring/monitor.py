@@ -455,7 +455,7 @@ def monitor(log: Any, model_: MonitoredModel, settings: MonitorSettings | None =
             f"({settings.calibration_s:g} s, assumed unchanged) plus a test window; record a longer log or lower "
             f"{option('calibration_s')}"
         )
-    warnings: list[str] = []
+    warnings: list[str] = [model_.doubt] if model_.doubt else []
     changes: list[Change] = []
     segments: list[dict[str, Any]] = []
     prior = np.diag((PRIOR_STD_FACTOR * model_.std) ** 2)

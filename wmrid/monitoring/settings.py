@@ -130,6 +130,8 @@ class MonitoredModel:
     source: str
     std: np.ndarray  # standard errors of p = [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2, drag] (undetermined: 10 x the value)
     form: RegressorForm | None = None
+    #: what the saved result says against its own use (its verdict or flags), a warning of every monitor run
+    doubt: str | None = None
 
 
 def caster_form(form: RegressorForm | None) -> RegressorForm | None:
@@ -209,7 +211,24 @@ def model_from_dict(data: Any, source: str) -> MonitoredModel:
         except LogFormatError as err:
             raise UsageError(f"{option('model')} {err}") from None
     return MonitoredModel(theta0=theta0, parameters=reported, effort_unit=unit, source=source,
-                          std=_std_vector(by_name, stds, columns), form=form)  # fmt: skip
+                          std=_std_vector(by_name, stds, columns), form=form, doubt=_doubt(data, source))  # fmt: skip
+
+
+def _doubt(data: dict[str, Any], source: str) -> str | None:
+    """What the saved result itself says against being used as a model (its verdict: the numbers are not to be
+    used; its flags: stds not to be trusted), as one warning for the monitor, or None."""
+    verdict = data.get("verdict") if isinstance(data.get("verdict"), dict) else {}
+    summary = verdict.get("summary") if isinstance(verdict.get("summary"), str) else ""
+    if summary.startswith("Do not use"):
+        return f"the model {source} says of itself: {summary} Changes judged against it mean little"
+    diagnostics = data.get("diagnostics") if isinstance(data.get("diagnostics"), dict) else {}
+    flagged = [n for n in diagnostics.get("flagged") or [] if isinstance(n, str)]
+    if flagged:
+        return (
+            f"the model {source} flags {', '.join(flagged)}: their std is not to be trusted, so the test's tolerance "
+            "for them is a guess"
+        )
+    return None
 
 
 def _form_of(form_d: Any, source: str, hint: str) -> RegressorForm | None:

@@ -40,6 +40,8 @@ def print_verdict(verdict: dict[str, Any] | None, console: Any, prefix: str = ""
         console.print(f"{prefix}verdict: {line}", style=STYLES["impossible"] if doubt else "bold")
     for line in verdict.get("lines") or [g["text"] for g in verdict["groups"]]:
         console.print(f"{prefix}  {line}")
+    for line in verdict.get("check") or []:
+        console.print(f"{prefix}  check: {line}")
     if verdict.get("units"):
         console.print(f"{prefix}  {verdict['units']}")
 
@@ -84,7 +86,7 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         console.print(payload_statement(result.payload))
     if impossible:
         console.print(
-            "✗ impossible for a physical robot (" + ", ".join(sorted(impossible)) + "): see the warnings",
+            LEGEND["✗"] + " (" + ", ".join(sorted(impossible)) + "): see the warnings",
             style=STYLES["impossible"],
         )
     info = result.log_info

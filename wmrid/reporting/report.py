@@ -306,6 +306,7 @@ def build_report(
     said = [line for line in [*(verdict.get("first") or []), verdict.get("summary")] if line]
     groups = verdict.get("lines") or [g["text"] for g in verdict.get("groups", [])]
     said += [line[0].upper() + line[1:] + "." for line in groups]
+    said += [f"Check: {line}." for line in verdict.get("check") or []]
     said += [verdict["units"][0].upper() + verdict["units"][1:] + "."] if verdict.get("units") else []
     report = Report(
         title=f"wmrid report: {data.get('source', '?')}",
