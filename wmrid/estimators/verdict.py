@@ -37,7 +37,8 @@ from wmrid.estimators.plausibility import units_check
 
 #: Warnings :func:`settle` owns: dropped from the stages' warnings and made again from the final numbers.
 OWNED = (" is poorly determined by this log", "is not positive definite, which no robot has",
-         "friction cannot push; check signs", "unit check: ")  # fmt: skip
+         "friction cannot push; check signs", "drag cannot push; check signs", "unit check: ",
+         "the estimated inertia matrix M is not positive definite")  # fmt: skip
 
 #: Above this relative std a parameter cannot be told from zero: "not determined by this log".
 NOT_DETERMINED = 1.0
