@@ -5,8 +5,9 @@
 
 Cases (MuJoCo multibody prototype, reversing, ball casters of rolling resistance 0.015):
 
-* ``heavy``: the paper robot carrying 60 kg off-centre (``payload="60@0.2,0.1"``) on a mu = 0.6 floor, 40 s at
-  1 kHz, sensor noise 0.02 rad/s and 0.05 N m (about 1 % of its rms torque);
+* ``heavy``: the paper robot carrying 60 kg off-centre (``payload="60@0.2,0.1"``: the rear caster lifts, the front one
+  carries 423 N; ``--payload 60@-0.2,0``: both touch, 25 and 46 N, and trade +-26 N per m/s^2 of acceleration) on a
+  mu = 0.6 floor, 40 s at 1 kHz, sensor noise 0.02 rad/s and 0.05 N m (about 1 % of its rms torque);
 * ``amr``: the light AMR (``examples/small_amr.toml``, issue 11's configuration): 40 s at 200 Hz, floor mu = 1,
   sensor noise 0.02 rad/s and 0.002 N m.
 
@@ -83,11 +84,13 @@ def simulated(case: str, seed: int):
     return log, truth
 
 
-def one(job: tuple[str, int, tuple[str, ...]]) -> list[dict]:
+def one(job: tuple[str, int, tuple[str, ...], str | None]) -> list[dict]:
     sys.path.insert(0, str(ROOT))
     import wmrid
 
-    case, seed, methods = job
+    case, seed, methods, payload = job
+    if payload:
+        CASES["heavy"]["payload"] = payload
     log, truth_file = simulated(case, seed)
     truth = truth_file["parameters"]
     casters = truth_file["settings"]["multibody"]["casters"]
@@ -150,12 +153,15 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--cases", default="heavy,amr")
     ap.add_argument("--methods", default=",".join(METHODS))
+    ap.add_argument("--payload", default=None, help="the heavy case's payload MASS@X,Y instead of 60@0.2,0.1")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", default=str(OUT / "study_caster_heavy.json"))
     args = ap.parse_args()
     cases = args.cases.split(",")
+    if args.payload:
+        CASES["heavy"]["payload"] = args.payload
     methods = tuple(args.methods.split(","))
-    jobs = [(c, s, methods) for c in cases for s in range(args.seeds)]
+    jobs = [(c, s, methods, args.payload) for c in cases for s in range(args.seeds)]
     t0 = time.perf_counter()
     with ProcessPoolExecutor(args.workers) as pool:
         rows = [r for rs in pool.map(one, jobs) for r in rs]
