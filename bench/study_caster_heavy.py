@@ -175,7 +175,8 @@ def main() -> None:
                 continue
             w = s["worst_unflagged"]
             print(
-                f"{c:6s} {m:5s} honest {s['honest']:.2f} accurate {s['accurate']:.2f} flagged-any {s['flagged_any']:.2f}"
+                f"{c:6s} {m:5s} honest {s['honest']:.2f} accurate {s['accurate']:.2f}"
+                f" flagged-any {s['flagged_any']:.2f}"
                 f" | err% med/worst inertia {s['err_inertia_median']:.2f}/{s['err_inertia_worst']:.2f}"
                 f" Vc {s['err_Vc_median']:.2f}/{s['err_Vc_worst']:.2f}"
                 f" friction {s['err_friction_median']:.1f}/{s['err_friction_worst']:.1f}"
