@@ -201,6 +201,17 @@ def _negligible(name: str, value: float, std: float, result: Any) -> float | Non
     return bound if bound < NEGLIGIBLE * scale else None
 
 
+#: Words of the signal warnings that put the efforts' signs in doubt (wmrid.estimators.survey.Survey.signal_warnings).
+SIGN_WARNINGS = ("mostly opposes its speed", "never changes sign while its speed does")
+
+
+def _signs(result: Any) -> str:
+    """A clause naming the efforts' signs when the signal warnings put them in doubt, else ""."""
+    if any(key in w for w in result.warnings for key in SIGN_WARNINGS):
+        return "; the efforts' signs are suspect (see the warnings)"
+    return ""
+
+
 def _group_sentence(group: str, names: tuple[str, ...], extra: tuple[str, ...], result: Any) -> dict[str, Any] | None:
     params = result.parameters
     present = tuple(n for n in names if n in params)
@@ -229,7 +240,9 @@ def _group_sentence(group: str, names: tuple[str, ...], extra: tuple[str, ...], 
     elif not math.isfinite(rel[worst]):
         record.update(status="not determined", reason="the log does not excite it: the start value sets it")
     elif impossible:
-        record.update(status="in doubt", reason=f"{', '.join(sorted(impossible))}: a value no robot has")
+        record.update(
+            status="in doubt", reason=f"{', '.join(sorted(impossible))}: a value no robot has{_signs(result)}"
+        )
     elif misfit.get("applied") and set(present) <= flagged:
         quality = (
             "determined"
@@ -241,7 +254,7 @@ def _group_sentence(group: str, names: tuple[str, ...], extra: tuple[str, ...], 
         record.update(
             status="in doubt",
             reason=f"{quality} by its std, but the model does not fit this log (slip, backlash or an effect it leaves "
-            "out), so no std covers the error",
+            f"out), so no std covers the error{_signs(result)}",
         )
     elif rel[worst] <= POORLY_DETERMINED and len(negligible) == len(present):
         record.update(status="determined", reason=None)
