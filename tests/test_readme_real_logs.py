@@ -448,11 +448,6 @@ def me169_validated() -> dict:
 
 
 @pytest.fixture(scope="module")
-def me169_compare() -> dict:
-    return run_json("compare", ME169_A, *ME169_OPTIONS, "--methods", "observer,idim")
-
-
-@pytest.fixture(scope="module")
 def me169_observer() -> dict:
     return run_json("identify", ME169_A, *ME169_OPTIONS, "--method", "observer")
 
@@ -481,9 +476,12 @@ def test_validate_changes_no_estimate_nor_the_friction_model(me169, me169_valida
     assert me169_validated["validation"]["fit_percent"]["eta_r"] is not None
 
 
-def test_compare_observer_column_is_identify_method_observer(me169_compare, me169_observer):
-    """Issue 28: compare's observer column equals identify --method observer (value and std, every parameter)."""
-    column = me169_compare["methods"]["observer"]["parameters"]
+def test_compare_observer_column_is_identify_method_observer(me169_transfer, me169_observer):
+    """Issue 28: compare's observer column equals identify --method observer (value and std, every parameter; the
+    transfer table's compare gives --friction wheel, the model --friction auto keeps on this log, and --validate,
+    which changes no number)."""
+    assert me169_observer["diagnostics"]["friction"]["model"] == "wheel"
+    column = me169_transfer["14-27-37 -> 14-20-12"]["methods"]["observer"]["parameters"]
     assert set(column) == set(me169_observer["parameters"])
     for name, entry in me169_observer["parameters"].items():
         assert column[name]["value"] == pytest.approx(entry["value"], rel=1e-12), name
@@ -505,10 +503,10 @@ def test_a_verdict_comes_with_every_real_log(which, request):
     assert not all(g["status"] == "determined" for g in groups.values()), verdict["summary"]
 
 
-def test_verdict_in_the_terminal_and_compare(me169_compare):
+def test_verdict_in_the_terminal_and_compare(me169_transfer):
     """The verdict is the first thing the table output prints, and compare gives one per method."""
     out = text(wmrid("identify", REGBOT, *REGBOT_OPTIONS, "--format", "table"))
     assert out.returncode == 0, out.stderr
     assert out.stdout.lstrip().startswith("verdict: ")
-    for name in ("observer", "idim"):
-        assert me169_compare["methods"][name]["verdict"]["summary"]
+    for name in ("observer", "idim", "rls", "oe"):
+        assert me169_transfer["14-27-37 -> 14-20-12"]["methods"][name]["verdict"]["summary"]
