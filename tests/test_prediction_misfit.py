@@ -56,31 +56,61 @@ def gripping():
     return amr_log(1.0)
 
 
-def reference_variances(eta: np.ndarray) -> np.ndarray:
-    """Windows' mean squared second differences / 6, (w, 2), written out with numpy from the whole log."""
-    d2 = np.square(eta[2:] - 2.0 * eta[1:-1] + eta[:-2])
+def reference_variances(eta: np.ndarray, lag: int = 1) -> np.ndarray:
+    """Windows' mean squared second differences at ``lag`` / 6, (w, 2), written out with numpy from the whole log."""
+    d2 = np.square(eta[2 * lag :] - 2.0 * eta[lag:-lag] + eta[: -2 * lag])
     full = len(d2) // WINDOW
     return d2[: full * WINDOW].reshape(full, WINDOW, 2).mean(axis=1) / 6.0
 
 
-def test_noise_floor_kernel_matches_a_numpy_reference_however_the_log_is_cut():
+@pytest.mark.parametrize("lag", [1, 2, 21])
+def test_noise_floor_kernel_matches_a_numpy_reference_however_the_log_is_cut(lag):
     """The compiled pass, fed in pieces of 1, 1, 1, 62, 1, 64, 570 ... samples, gives the windows' variances of
     the whole log written out with numpy, to 1e-12 relative (the sums differ only in rounding), and the same
-    count of windows and speed rms."""
+    count of windows and speed rms; at lag 1 (measured speeds) and at a derivative's window (derived speeds)."""
     from wmrid.estimators.noise_floor import _window_variances
 
     rng = np.random.default_rng(4)
     eta = np.cumsum(rng.normal(0, 0.1, (5000, 2)), axis=0) + rng.normal(0, 0.02, (5000, 2))
-    prev, state = np.zeros((2, 2)), np.zeros(6)
+    prev, state = np.zeros((2 * lag, 2)), np.zeros(7)
     got = []
     for piece in np.array_split(eta, np.cumsum([1, 1, 1, 62, 1, 64, 570, 3])):
         out = np.empty((len(piece) // WINDOW + 1, 2))
         got.append(out[: _window_variances(np.ascontiguousarray(piece), prev, state, out)])
-    expected = reference_variances(eta)
+    expected = reference_variances(eta, lag)
     got = np.concatenate(got)
     assert got.shape == expected.shape
     np.testing.assert_allclose(got, expected, rtol=1e-12)
     np.testing.assert_allclose(np.sqrt(state[4:6] / len(eta)), np.sqrt(np.mean(eta**2, axis=0)), rtol=1e-12)
+
+
+def test_derived_speeds_are_measured_at_the_derivatives_window():
+    """Speeds a Savitzky-Golay derivative made from 2048-count encoder angles: their noise is correlated over the
+    derivative's window (autocorrelation 0.80 at lag 1, within 0.02 of 0 from lag 21), so lag-1 second
+    differences see about a third of it (0.026 of 0.075 rad/s), and the misfit check flagged every encoder log
+    (issue 28).  At the window's lag the floor sees 0.66 of the noise's rms, measured directly as the derived
+    speeds' difference from the derivative of the unquantised angles: the rest is the median of windows, below
+    their mean because the quantisation noise's level changes with the speed along the log.  Pinned: at least
+    1.8 times the lag-1 level and between 0.5 and 1.15 of the rms (the misfit check's gate is 2)."""
+    from wmrid.estimators.noise_floor import derived_lag
+    from wmrid.io.signals import speed_from_position
+
+    rng = np.random.default_rng(7)
+    t = np.arange(40_000) * 1e-3
+    angle = np.column_stack([5 * t + 3 * np.sin(t), 4 * t - 2 * np.cos(0.8 * t)])
+    step = 2 * np.pi / 2048
+    counted = np.floor(angle / step + rng.uniform(0, 1, 2)) * step
+    speed, note = speed_from_position(t, counted)
+    true, _ = speed_from_position(t, angle)
+    noise = np.sqrt(np.mean((speed - true) ** 2, axis=0))
+    lag = derived_lag([note])
+    assert lag == 21  # 20 ms at 1 kHz, made odd
+    floor, white = NoiseFloor(lag), NoiseFloor()
+    floor.feed(speed)
+    white.feed(speed)
+    assert np.all(floor.sigma() >= 1.8 * white.sigma())
+    assert np.all((floor.sigma() > 0.5 * noise) & (floor.sigma() < 1.15 * noise))
+    assert derived_lag(["wheel speeds read as m/s at the rim"]) == 1
 
 
 def test_noise_floor_measures_white_noise_on_a_smooth_motion():

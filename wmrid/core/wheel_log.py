@@ -175,6 +175,10 @@ def stream_arrays(log: Any, rows: int = CHUNK_ROWS) -> LogStream:
 SPLIT_NOTE = "put on the speed stamps"
 
 
+#: The words of the reading note of speeds derived from positions by a Savitzky-Golay derivative, then its window
+#: in samples (:func:`wmrid.io.signals.speed_from_position`; read by :mod:`wmrid.estimators.noise_floor`).
+DERIVED_NOTE = "wheel speeds derived from wheel positions by a Savitzky-Golay cubic derivative over "
+
 #: The words of the note that says a topic's efforts were all whole numbers before they were put on the speed stamps
 #: (PWM counts look like that; interpolation hides it from the units check, :mod:`wmrid.estimators.plausibility`).
 WHOLE_EFFORTS_NOTE = "every effort message holds whole numbers"

@@ -37,6 +37,7 @@ from wmrid.estimators.model_error import (
     record_widening,
     widen,
 )
+from wmrid.estimators.noise_floor import derived_lag
 from wmrid.estimators.observer import ObserverSettings
 from wmrid.estimators.observer_kernel import project_history_box
 from wmrid.estimators.replay import replay_pieces
@@ -424,7 +425,7 @@ def _identify(
     with np.errstate(over="ignore", invalid="ignore"):
         out = replay_pieces(
             ((p.t, p.eta, p.tau) for p in stream), n, duration, settings, max_history=max_history, progress=tick,
-            half_rate=True, low_speed=sv.low_speed(),
+            half_rate=True, low_speed=sv.low_speed(), noise_lag=derived_lag(stream.notes),
         )  # fmt: skip
     theta_u, gamma, gamma_inv = out.theta, out.gamma, out.gamma_inv
     finite = all(np.all(np.isfinite(a)) for a in (theta_u, gamma, gamma_inv, out.blk_a, out.blk_c))

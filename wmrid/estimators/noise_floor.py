@@ -17,7 +17,20 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from wmrid.core.wheel_log import DERIVED_NOTE
 from wmrid.model.kernels import plain
+
+
+def derived_lag(notes) -> int:
+    """The lag (samples) at which a log's speed noise is uncorrelated: the Savitzky-Golay window its reading notes
+    name when the speeds were derived from positions (:data:`DERIVED_NOTE`), else 1 (measured speeds)."""
+    for note in notes or ():
+        if DERIVED_NOTE in note:
+            digits = note.split(DERIVED_NOTE, 1)[1].split(" ", 1)[0]
+            if digits.isdigit() and int(digits) >= 1:
+                return int(digits)
+    return 1
+
 
 #: Second differences per window (the median of windows' mean squares is then unbiased within ~2 %).
 WINDOW = 64
@@ -29,21 +42,27 @@ MIN_WINDOWS = 4
 
 @numba.njit(cache=True, nogil=True)
 def _window_variances(eta, prev, state, out):
-    """One pass over a piece eta (k, 2): second differences continued from ``prev`` (2, 2), the last two samples
-    before it (``state[0]`` of them known), summed in windows of WINDOW; each completed window's mean square / 6
-    goes to ``out`` (k // WINDOW + 1, 2).  state = [samples known (0-2), open window's count, its two sums,
-    two sums of eta^2].  Returns the number of windows completed."""
+    """One pass over a piece eta (k, 2): second differences at lag L = len(prev) // 2, d_i = eta_i - 2 eta_(i-L) +
+    eta_(i-2L), continued from ``prev`` (2L, 2), a ring of the last 2L samples before the piece (``state[0]`` of them
+    known, the oldest at ``state[6]``), summed in windows of WINDOW; each completed window's mean square / 6 goes to
+    ``out`` (k // WINDOW + 1, 2).  state = [samples known (0-2L), open window's count, its two sums, two sums of
+    eta^2, the ring's start].  Returns the number of windows completed."""
+    size = prev.shape[0]
+    lag = size // 2
     known = int(state[0])
     count = int(state[1])
+    start = int(state[6])
     done = 0
     for i in range(eta.shape[0]):
         e0 = eta[i, 0]
         e1 = eta[i, 1]
         state[4] += e0 * e0
         state[5] += e1 * e1
-        if known == 2:
-            d0 = e0 - 2.0 * prev[1, 0] + prev[0, 0]
-            d1 = e1 - 2.0 * prev[1, 1] + prev[0, 1]
+        if known == size:
+            old = start  # eta_(i-2L)
+            mid = (start + lag) % size  # eta_(i-L)
+            d0 = e0 - 2.0 * prev[mid, 0] + prev[old, 0]
+            d1 = e1 - 2.0 * prev[mid, 1] + prev[old, 1]
             state[2] += d0 * d0
             state[3] += d1 * d1
             count += 1
@@ -54,14 +73,16 @@ def _window_variances(eta, prev, state, out):
                 count = 0
                 state[2] = 0.0
                 state[3] = 0.0
+            prev[start, 0] = e0
+            prev[start, 1] = e1
+            start = (start + 1) % size
         else:
+            prev[known, 0] = e0
+            prev[known, 1] = e1
             known += 1
-        prev[0, 0] = prev[1, 0]
-        prev[0, 1] = prev[1, 1]
-        prev[1, 0] = e0
-        prev[1, 1] = e1
     state[0] = known
     state[1] = count
+    state[6] = start
     return done
 
 
@@ -69,12 +90,21 @@ class NoiseFloor:
     """Streaming estimate of each wheel's white speed noise sigma (rad/s) and of the speeds' rms.
 
     ``feed(eta)`` with consecutive pieces (k, 2) rad/s of one log, in order; ``sigma()`` (2,) rad/s, NaN for a
-    wheel with fewer than MIN_WINDOWS windows that show any noise; ``rms()`` (2,) rad/s.
+    wheel with fewer than MIN_WINDOWS windows that show any noise; ``rms()`` (2,) rad/s.  ``lag`` samples: the
+    second differences' spacing; 1 for speeds measured sample by sample, whose noise is white.  Speeds a smoothing
+    derivative made from positions (:func:`derived_lag`) carry noise correlated over its window, which lag-1
+    differences see only a fraction of (about a third for a Savitzky-Golay cubic over 20 ms of a 2048-count
+    encoder): at a lag of the window, the noise samples are uncorrelated again and E d^2 = 6 sigma^2, while a
+    smooth motion adds (lag h)^4 eta''^2, which can only raise the level (the misfit check then errs towards
+    silence, not towards a false flag).
     """
 
-    def __init__(self) -> None:
-        self._prev = np.zeros((2, 2))  # the last two samples seen
-        self._state = np.zeros(6)  # see _window_variances
+    def __init__(self, lag: int = 1) -> None:
+        if not (isinstance(lag, int) and lag >= 1):
+            raise ValueError(f"lag must be a whole number >= 1, got {lag!r}")
+        self.lag = lag
+        self._prev = np.zeros((2 * lag, 2))  # the last 2 lag samples seen (a ring)
+        self._state = np.zeros(7)  # see _window_variances
         self._hist: list[dict[int, int]] = [{}, {}]
         self._windows = np.zeros(2, dtype=np.int64)  # per wheel: windows counted (positive, finite variance)
         self._n = 0

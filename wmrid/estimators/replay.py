@@ -177,6 +177,7 @@ def replay_pieces(
     progress: Callable[[int], None] | None = None,
     half_rate: bool = False,
     low_speed: np.ndarray | None = None,
+    noise_lag: int = 1,
 ) -> ReplayOutput:
     """Run the estimator over a log given as consecutive pieces (t (k,) s, eta (k, 2) rad/s, tau (k, 2)).
 
@@ -184,6 +185,8 @@ def replay_pieces(
     piece plus the history and block sums, whatever n.  ``progress(samples_done)`` after each piece.
     ``half_rate``: also run the estimator on every other sample (``ReplayOutput.theta_half``).
     ``low_speed`` (2,) rad/s: mark the blocks where |eta_i| < low_speed[i] for a wheel (``ReplayOutput.blk_slow``).
+    ``noise_lag`` samples: the spacing of the noise floor's second differences (:class:`wmrid.estimators.noise_floor.
+    NoiseFloor`; 1 for measured speeds, the derivative's window for speeds derived from positions).
     """
     from wmrid.estimators.observer_kernel import observer_chunk
 
@@ -213,7 +216,7 @@ def replay_pieces(
     hold = settings.hold_code
     half = _HalfRate(n, duration, settings, kind) if half_rate and n >= 20 else None
     blk_slow = None if low_speed is None else np.zeros(nb, dtype=bool)
-    floor = NoiseFloor()
+    floor = NoiseFloor(noise_lag)
 
     # The half-rate run goes on a second thread (its compiled kernel releases the GIL), one piece behind at most;
     # the pieces reach it in order, so its result does not depend on the timing.

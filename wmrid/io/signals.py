@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wmrid.core.errors import UsageError, option
+from wmrid.core.wheel_log import DERIVED_NOTE
 
 SPEED_UNITS = ("rad/s", "rpm", "deg/s", "m/s")
 EFFORT_KINDS = ("torque", "current", "pwm", "voltage")
@@ -173,11 +174,9 @@ def speed_from_position(t: np.ndarray, position: np.ndarray, window_s: float = S
         window = max(5, round(window_s / h) | 1)
         window = min(window, len(t) if len(t) % 2 else len(t) - 1)
         speed = savgol_filter(angle, window, polyorder=3, deriv=1, delta=h, axis=0, mode="interp")
-        how = f"a Savitzky-Golay cubic derivative over {window} samples ({window * h * 1e3:.3g} ms)"
-    else:
-        speed = np.gradient(angle, t, axis=0)
-        how = "second-order finite differences (uneven time steps)"
-    return speed, f"wheel speeds derived from wheel positions by {how}"
+        return speed, f"{DERIVED_NOTE}{window} samples ({window * h * 1e3:.3g} ms)"
+    speed = np.gradient(angle, t, axis=0)
+    return speed, "wheel speeds derived from wheel positions by second-order finite differences (uneven time steps)"
 
 
 def convert(
