@@ -440,6 +440,4 @@ def compare(
         *row["warnings"],
     ]
     methods = {m: (row if m == "oe" else first.methods[m]) for m in names}
-    base = first or oe
-    validation = base.validation if first is None or first.validation is None else first.validation
-    return replace(base, methods=methods, validation=validation)
+    return replace(first or oe, methods=methods)

@@ -205,10 +205,11 @@ def diagnose(
 ) -> tuple[dict[str, Any], list[str]]:
     """Excitation and consistency diagnostics, and the warnings they call for.
 
-    Warnings follow from what the log does to the *answer*: a base parameter whose standard error
-    exceeds 10 % of its value is poorly determined, and the partner it cannot be told apart from
-    (correlation above 0.98) is named.  Eigen-directions of the column-scaled information matrix are
-    reported as diagnostics (they say which regressor columns the log does not separate).
+    Warnings follow from what the log does to the *answer*: columns it never excites, parameters it does not
+    determine, estimates held on the box, the structural mismatch.  The warnings that quote a parameter's std
+    (poorly determined, with the partners it cannot be told apart from) are made from the final std, after every
+    term that widens it, by :func:`wmrid.estimators.verdict.settle`.  Eigen-directions of the column-scaled
+    information matrix are reported as diagnostics (they say which regressor columns the log does not separate).
     """
     warnings: list[str] = []
     p = form.n_columns
@@ -232,31 +233,6 @@ def diagnose(
         warnings.append(
             f"the log never excites regressor column(s) {', '.join(dead)}: their parameters stay at the start value"
         )
-    std0 = np.sqrt(np.clip(np.diag(fit.cov), 0, None))
-    safe0 = np.where(std0 > 0, std0, 1.0)
-    corr = fit.cov / np.outer(safe0, safe0)
-    poorly = []
-    pairs = []
-    for idx, name in enumerate(names0):
-        value, std = parameters[name]
-        if idx in undetermined or (math.isfinite(std) and std <= POORLY_DETERMINED * abs(value)):
-            continue
-        poorly.append(name)
-        partners = [
-            f"{names0[j]} (correlation {corr[idx, j]:+.3f})"
-            for j in np.argsort(-np.abs(corr[idx]))
-            if j != idx and abs(corr[idx, j]) > NOT_SEPARABLE
-        ]
-        pairs += [
-            [name, names0[j], float(corr[idx, j])]
-            for j in range(len(names0))
-            if j != idx and abs(corr[idx, j]) > NOT_SEPARABLE
-        ]
-        why = f"; it is not separable from {', '.join(partners)}" if partners else ""
-        warnings.append(f"{name} is poorly determined by this log: {value:.6g} +/- {std:.2g} {units[name]}{why}")
-    derived = derived_poorly_determined(parameters, names0)
-    poorly += derived
-    warnings += [poorly_text(name, parameters[name], units[name]) for name in derived]
     at_bound = [
         n
         for n, v, a, b in zip(form.theta_names(), theta.ravel(), lo.ravel(), hi.ravel(), strict=True)
@@ -288,9 +264,7 @@ def diagnose(
         "lambda_max_gamma": float(lam[-1]),
         "condition_number_scaled": cond,
         "weakest_directions": weakest,
-        "poorly_determined": poorly,
         "undetermined": [names0[j] for j in undetermined],
-        "not_separable": pairs,
         "at_box_boundary": at_bound,
         "start_sensitivity": {name: float(v) for name, v in zip(names0, sens, strict=True)},
         "structural_mismatch": {

@@ -19,14 +19,10 @@ from wmrid.core.wheel_log import LogStream, stream_arrays
 from wmrid.estimators.diagnostics import (
     AUTO_NO_REVERSAL,
     AUTO_P,
-    POORLY_DETERMINED,
     START_RELEVANT,
     caster_drag_test,
     control_rate_check,
-    derived_poorly_determined,
     diagnose,
-    physics_warnings,
-    poorly_text,
     start_sensitivity,
     torque_unexcited,
     unexcited_parameters,
@@ -469,7 +465,7 @@ def _identify(
     diagnostics, warnings = diagnose(
         gamma, alpha, chosen, fit, parameters, theta_cov, sens, undetermined, lo, hi, units, theta, inflation
     )
-    warnings = early_warnings + hold_warnings + sv.signal_warnings() + physics_warnings(parameters) + warnings
+    warnings = early_warnings + hold_warnings + sv.signal_warnings() + warnings
     if inflation["prediction_misfit"]["applied"]:
         warnings.insert(0, misfit_text(inflation["prediction_misfit"]))
     dof = unc["dof"]
@@ -594,25 +590,11 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
         "do not feed back into the efforts",
         "caveat": CLOSED_LOOP_CAVEAT,
     }
-    units = result.units
-    kept = [w for w in result.warnings if " is poorly determined by this log" not in w and "positive definite" not in w
-            and "friction cannot push" not in w]  # fmt: skip
-    poorly = []
+    # the per-parameter warnings (poorly determined, impossible values) are made by settle, from these numbers
     base_names = form.base_names
-    for name in base_names:
-        value, std = parameters[name]
-        if not (math.isfinite(std) and std <= POORLY_DETERMINED * abs(value)):
-            poorly.append(name)
-            kept.append(
-                f"{name} is poorly determined by this log ({est.method}): {value:.6g} +/- {std:.2g} {units[name]}"
-            )
-    undetermined = [j for j, name in enumerate(base_names) if not math.isfinite(parameters[name][1])]
-    derived = derived_poorly_determined(parameters, base_names)
-    poorly += derived
-    kept += [poorly_text(name, parameters[name], units[name], est.method) for name in derived]
-    diagnostics["poorly_determined"] = poorly
-    record_widening(diagnostics, inflation, parameters, [base_names[j] for j in undetermined])
-    warnings = [*kept, *est.warnings, *physics_warnings(parameters)]
+    undetermined = [name for name in base_names if not math.isfinite(parameters[name][1])]
+    record_widening(diagnostics, inflation, parameters, undetermined)
+    warnings = [*result.warnings, *est.warnings]
     payload_est = None
     if result.payload is not None and robot is not None:
         from wmrid.model.payload import payload_with_std

@@ -77,6 +77,8 @@ class Survey:
     speed_max: np.ndarray = field(default_factory=lambda: np.zeros(2))
     effort_max: np.ndarray = field(default_factory=lambda: np.zeros(2))
     effort_fractional: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    #: wheel -> :meth:`_swapped`'s answer, made once (the units check and the signal warnings both ask)
+    _swap_memo: dict[int, tuple[float, float] | None] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def duration(self) -> float:
@@ -148,12 +150,11 @@ class Survey:
         """(R² as read, R² exchanged) when wheel ``i``'s effort never changes sign while its speed does and the two
         fit the model far better exchanged (SWAPPED_R2, SWAPPED_GAIN): speed and effort columns given the other way
         round; else None."""
-        if self._one_signed(i) is None:
-            return None
-        fits = self._orientation_fit(i)
-        if fits is not None and fits[1] >= SWAPPED_R2 and fits[1] - fits[0] >= SWAPPED_GAIN:
-            return fits
-        return None
+        if i not in self._swap_memo:
+            fits = self._orientation_fit(i) if self._one_signed(i) is not None else None
+            swapped = fits is not None and fits[1] >= SWAPPED_R2 and fits[1] - fits[0] >= SWAPPED_GAIN
+            self._swap_memo[i] = fits if swapped else None
+        return self._swap_memo[i]
 
     def signal_warnings(self) -> list[str]:
         """Warnings about the signals themselves: an effort that never changes sign while the speed does (a

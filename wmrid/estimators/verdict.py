@@ -30,8 +30,10 @@ import numpy as np
 from wmrid.estimators.diagnostics import (
     NOT_SEPARABLE,
     POORLY_DETERMINED,
+    derived_poorly_determined,
     impossible_parameters,
     physics_warnings,
+    poorly_text,
 )
 from wmrid.estimators.plausibility import units_check
 
@@ -98,27 +100,24 @@ def _correlations(result: Any) -> tuple[tuple[str, ...], np.ndarray]:
 
 def _poorly_warnings(result: Any, method: str | None) -> tuple[list[str], list[str], list[list[Any]]]:
     """(warnings, names, not-separable pairs) for the reported parameters whose std exceeds POORLY_DETERMINED of
-    their value, the std being the reported one."""
+    their value, the std being the reported one: the base parameters with the partners they cannot be told from,
+    then M11, M12, M22 (:func:`wmrid.estimators.diagnostics.derived_poorly_determined`)."""
     names, corr = _correlations(result)
-    by = f" ({method})" if method else ""
     texts, poorly, pairs = [], [], []
-    for name, (value, std) in result.parameters.items():
+    for i, name in enumerate(names):
+        value, std = result.parameters[name]
         if not math.isfinite(std) or std <= POORLY_DETERMINED * abs(value):
             continue
         poorly.append(name)
-        why = ""
-        if name in names:
-            i = names.index(name)
-            partners = [j for j in np.argsort(-np.abs(corr[i])) if j != i and abs(corr[i, j]) > NOT_SEPARABLE]
-            pairs += [[name, names[j], float(corr[i, j])] for j in partners]
-            if partners:
-                why = "; it is not separable from " + ", ".join(
-                    f"{names[j]} (correlation {corr[i, j]:+.3f})" for j in partners
-                )
-        texts.append(
-            f"{name} is poorly determined by this log{by}: {value:.6g} +/- {std:.2g} {result.units[name]}{why}"
-        )
-    return texts, poorly, pairs
+        partners = [j for j in np.argsort(-np.abs(corr[i])) if j != i and abs(corr[i, j]) > NOT_SEPARABLE]
+        pairs += [[name, names[j], float(corr[i, j])] for j in partners]
+        why = "; it is not separable from " + ", ".join(
+            f"{names[j]} (correlation {corr[i, j]:+.3f})" for j in partners
+        ) if partners else ""  # fmt: skip
+        texts.append(poorly_text(name, (value, std), result.units[name], method) + why)
+    derived = derived_poorly_determined(result.parameters, names)
+    texts += [poorly_text(name, result.parameters[name], result.units[name], method) for name in derived]
+    return texts, poorly + derived, pairs
 
 
 def flagged_names(parameters: dict[str, tuple[float, float]], diagnostics: dict[str, Any]) -> list[str]:
@@ -146,8 +145,7 @@ def settle(result: Any, radius: float | None = None) -> Any:
     method = result.method if result.method != "observer" else None
     poorly_texts, poorly, pairs = _poorly_warnings(result, method)
     diagnostics["poorly_determined"] = poorly
-    if "not_separable" in diagnostics or pairs:
-        diagnostics["not_separable"] = pairs
+    diagnostics["not_separable"] = pairs
     diagnostics["flagged"] = flagged_names(result.parameters, diagnostics)
     kept = [w for w in result.warnings if not any(key in w for key in OWNED)]
     unit_texts = [f"unit check: {f['text']}" for f in units["findings"]]
