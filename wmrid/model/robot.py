@@ -231,6 +231,9 @@ class Robot:
     assumed: tuple[str, ...] = ()
     #: False when the file gave no gear ratio (no rotors): a current log then needs --gear-ratio.
     gear_ratio_known: bool = True
+    #: The [limits] table (``wmrid plan``): name -> value, SI (max_wheel_speed rad/s, max_wheel_accel rad/s^2,
+    #: max_torque N m, max_speed m/s, max_turn_rate rad/s, area [W, H] m); checked by wmrid.design.limits.
+    limits: tuple[tuple[str, object], ...] = ()
 
     @property
     def physical(self) -> bool:
@@ -435,8 +438,46 @@ def robot_from_toml_text(text: str, source: str) -> Robot:
     return Robot(
         name=name, nominal=nominal, cad=cad, torque_constant=motor.get("torque_constant"),
         efficiency=motor.get("efficiency"), casters=casters, unknown_cad=unknown_cad, assumed=tuple(assumed),
-        gear_ratio_known=not unknown_k_r,
+        gear_ratio_known=not unknown_k_r, limits=_parse_limits(data.get("limits"), source),
     )  # fmt: skip
+
+
+#: Keys of a robot file's [limits] table (SI units: rad/s, rad/s^2, N m, m/s, rad/s, and [W, H] m or "WxH").
+LIMIT_KEYS = ("max_wheel_speed", "max_wheel_accel", "max_torque", "max_speed", "max_turn_rate", "area")
+
+
+def _parse_limits(table: object, source: str) -> tuple[tuple[str, object], ...]:
+    """The [limits] table as (key, value) pairs: numbers > 0, and area as [W, H] in m (or the string "WxH")."""
+    if table is None:
+        return ()
+    if not isinstance(table, dict):
+        raise RobotFileError(f"{source}: [limits] must be a table of {', '.join(LIMIT_KEYS)}")
+    unknown = sorted(set(table) - set(LIMIT_KEYS))
+    if unknown:
+        raise RobotFileError(f"{source} [limits]: unknown key(s) {', '.join(unknown)}; known: {', '.join(LIMIT_KEYS)}")
+    out: list[tuple[str, object]] = []
+    for key in LIMIT_KEYS:
+        if key not in table:
+            continue
+        value = table[key]
+        if key == "area":
+            if isinstance(value, str):
+                parts = value.lower().split("x")
+                try:
+                    value = [float(v) for v in parts]
+                except ValueError:
+                    value = None
+            ok = isinstance(value, list) and len(value) == 2
+            ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+            if not ok or not all(math.isfinite(v) and v > 0 for v in value):
+                raise RobotFileError(f'{source} [limits]: area must be [W, H] in metres or "WxH", got {table[key]!r}')
+            out.append((key, (float(value[0]), float(value[1]))))
+            continue
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > 0
+        if not ok:
+            raise RobotFileError(f"{source} [limits]: {key} must be a number > 0, got {value!r}")
+        out.append((key, float(value)))
+    return tuple(out)
 
 
 def _parse_casters(tables: object, source: str) -> tuple[Caster, ...] | None:
@@ -475,6 +516,10 @@ def robot_to_toml(robot: Robot) -> str:
         lines.append("\n[[caster]]")
         for key, value in caster.to_dict().items():
             lines.append(f"{key} = {value!r}" if not isinstance(value, str) else f'{key} = "{value}"')
+    if robot.limits:
+        lines.append("\n[limits]")
+        for key, value in robot.limits:
+            lines.append(f"{key} = {list(value)!r}" if isinstance(value, tuple) else f"{key} = {value!r}")
     if robot.torque_constant is not None or robot.efficiency is not None:
         lines.append("\n[motor]")
         if robot.torque_constant is not None:

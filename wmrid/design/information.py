@@ -1,0 +1,143 @@
+"""The precision a drive will give, before anyone drives it: the covariance of the base parameters theta0 that
+wmrid's observer-based estimator would report on a log of that motion with white sensor noise.
+
+The estimator (:mod:`wmrid.estimators.observer`) is a least-squares fit of u = w theta per wheel, where
+w' = g(eta, tau) - k w is the low-passed regressor (Eq. 27) and u = eta - eta_f, eta_f = k/(s + k) eta.  On a noisy
+log (speed noise e_eta, effort noise e_tau, white, per sample) the residual of wheel i at the true theta is, to first
+order in the noise (the regressor's columns hold the noisy eta and tau)::
+
+    r_i = (1 - L) e_eta,i - (1 / k) L [ sum_j m_ij e_tau,j - sum_l c_il e_eta,l ],   c_il = sum_j m_ij D_jl
+
+with L the unit-gain low-pass k/(s + k) in the observer's zero-order-hold discretisation and D = d(V + F_v eta)/d eta
+the model's speed sensitivity.  The estimate's error is Gamma^-1 sum_n h w_n^T r_n, Gamma = sum h w^T w: linear in
+the noise, so its covariance follows exactly from the ADJOINT filters (the noise sample at m reaches the sum through
+z_m = h sum_n L[n, m] w_n, the time-reversed filter of w), with no Monte Carlo.  The base parameters come from the
+intermediate ones by the minimum-distance fit of :mod:`wmrid.model.base_params`, whose covariance with the best
+weights is (J^T C^-1 J)^-1, J = d theta / d theta0 (complex-step derivative, exact).
+
+What this leaves out, and the reported std includes: a coloured disturbance (caster, slip), the controller's
+response to noise (a simulator's controller sees the true state; a real one sees the noisy speeds), and
+errors-in-variables bias.  The tests check the formula against a Monte Carlo of the same estimator's algebra and
+against wmrid's own identification of simulated logs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import lfilter
+
+from wmrid.model.dynamics import RegressorForm, intermediate_parameters, inverse_inertia, regressor
+
+#: The estimator's default filter gain k, 1/s (``identify --k``).
+DEFAULT_K = 10.0
+
+
+@dataclass(frozen=True)
+class SensorNoise:
+    """White sensor noise of the log to be recorded: eta_std (rad/s) on each wheel speed and tau_std (N m) on each
+    effort, per sample at ``rate`` Hz (the log's rate: the same noise at twice the rate carries twice the
+    information)."""
+
+    eta_std: float
+    tau_std: float
+    rate: float
+
+    def to_dict(self) -> dict[str, float]:
+        return {"eta_std": self.eta_std, "tau_std": self.tau_std, "rate": self.rate}
+
+
+def lowpass(x: np.ndarray, a: float) -> np.ndarray:
+    """y_n = a y_{n-1} + (1 - a) x_{n-1}, y_0 = 0 along axis 0: the unit-gain zero-order-hold low-pass."""
+    return lfilter([0.0, 1.0 - a], [1.0, -a], x, axis=0)
+
+
+def lowpass_adjoint(x: np.ndarray, a: float) -> np.ndarray:
+    """The transpose of :func:`lowpass` as an operator on sequences: (L^T x)_m = (1 - a) sum_{n > m} a^(n-m-1) x_n."""
+    return lowpass(x[::-1], a)[::-1]
+
+
+def speed_sensitivity(eta: np.ndarray, theta0: np.ndarray) -> np.ndarray:
+    """D (n, 2, 2): d(V_j + F_vj eta_j) / d eta_l along eta (n, 2) rad/s, N m s/rad."""
+    vc, fv1, fv2 = theta0[3], theta0[4], theta0[5]
+    e1, e2 = eta[:, 0], eta[:, 1]
+    d = np.empty((len(eta), 2, 2))
+    d[:, 0, 0] = vc * e2 + fv1
+    d[:, 0, 1] = vc * (e1 - 2.0 * e2)
+    d[:, 1, 0] = vc * (e2 - 2.0 * e1)
+    d[:, 1, 1] = vc * e1 + fv2
+    return d
+
+
+def intermediate_jacobian(theta0: np.ndarray, form: RegressorForm) -> np.ndarray:
+    """J (2p, n0) = d theta.ravel() / d theta0, by the complex step (theta is a polynomial in theta0: exact)."""
+    theta0 = np.asarray(theta0, dtype=np.float64)
+    step = 1e-30
+    cols = []
+    for i in range(len(theta0)):
+        x = theta0.astype(complex)
+        x[i] += 1j * step
+        cols.append(np.imag(intermediate_parameters(x, form)).ravel() / step)
+    return np.stack(cols, axis=1)
+
+
+def intermediate_covariance(
+    eta: np.ndarray, tau: np.ndarray, h: float, theta0: np.ndarray, form: RegressorForm, noise: SensorNoise,
+    k: float = DEFAULT_K,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """(C (2p, 2p), Gamma (p, p)): the covariance of the intermediate estimate theta.ravel() and the information
+    matrix Gamma = sum h w^T w, for a log of eta (n, 2) rad/s and tau (n, 2) N m on an even grid of step h s.
+
+    The grid need not be the log's: the noise is scaled to the same intensity (variance x time step), so a coarser
+    grid gives the same answer while the motion is smooth on it."""
+    a = math.exp(-k * h)
+    g = regressor(eta, tau, form)
+    w = lowpass(g, a) / k
+    gamma = h * (w.T @ w)
+    adj = lowpass_adjoint(w, a)  # (n, p)
+    m = inverse_inertia(theta0)
+    sens = speed_sensitivity(eta, theta0)
+    c = m[None, :, 0, None] * sens[:, None, 0, :] + m[None, :, 1, None] * sens[:, None, 1, :]  # (n, 2, 2): c_il
+    # noise intensity on this grid: per-sample variance sigma^2 at the log's rate -> sigma^2 / (rate h) here
+    q_eta = noise.eta_std**2 / (noise.rate * h)
+    q_tau = noise.tau_std**2 / (noise.rate * h)
+    p = w.shape[1]
+    score = np.zeros((2 * p, 2 * p))
+    for src in range(2):  # speed noise of wheel src
+        z = np.empty((len(w), 2 * p))
+        for i in range(2):
+            part = (c[:, i, src] / k)[:, None] * adj
+            if i == src:
+                part = part + (w - adj)
+            z[:, i * p : (i + 1) * p] = h * part
+        score += q_eta * (z.T @ z)
+    for src in range(2):  # effort noise of wheel src
+        z = np.concatenate([-h * m[i, src] / k * adj for i in range(2)], axis=1)
+        score += q_tau * (z.T @ z)
+    inv = np.linalg.inv(gamma)
+    big = np.kron(np.eye(2), inv)
+    cov = big @ score @ big
+    return 0.5 * (cov + cov.T), gamma
+
+
+def base_covariance(
+    cov_theta: np.ndarray, theta0: np.ndarray, form: RegressorForm, jac: np.ndarray | None = None
+) -> np.ndarray:
+    """Cov(theta0) (n0, n0) of the minimum-distance recovery from an intermediate estimate of covariance cov_theta
+    (2p, 2p): (J^T C^-1 J)^-1 (weights C^-1, as :mod:`wmrid.model.base_params` uses); ``jac``: J when known."""
+    jac = intermediate_jacobian(theta0, form) if jac is None else jac
+    info = jac.T @ np.linalg.solve(cov_theta, jac)
+    cov = np.linalg.inv(info)
+    return 0.5 * (cov + cov.T)
+
+
+def predicted_covariance(
+    eta: np.ndarray, tau: np.ndarray, h: float, theta0: np.ndarray, form: RegressorForm, noise: SensorNoise,
+    k: float = DEFAULT_K, jac: np.ndarray | None = None,
+) -> np.ndarray:  # fmt: skip
+    """Cov(theta0) (n0, n0) that the estimator would reach on a log of this motion with this noise (module doc);
+    ``jac``: :func:`intermediate_jacobian` when already known."""
+    cov_theta, _ = intermediate_covariance(eta, tau, h, theta0, form, noise, k)
+    return base_covariance(cov_theta, theta0, form, jac)

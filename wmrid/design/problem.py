@@ -1,0 +1,180 @@
+"""One design problem: a robot's nominal model, the limits, the sensor noise, the base period and harmonics; the
+motion a set of coefficients produces, how close it comes to each limit, and its predicted precision.
+
+The motion is the reference itself: the controller that tracks it (the simulator's, on the nominal model) follows a
+reference that starts on the robot at rest exactly, so on the nominal model the wheel speeds are the reference's and
+the torques are the inverse dynamics tau = M eta' + V(eta) + F_v eta + F_d sgn(eta) of the nominal base parameters.
+A real robot departs from it by its model error and the controller's tracking error; the limits keep a margin for
+both (:data:`wmrid.design.limits.DEFAULT_MARGIN`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from wmrid.design.excitation import Basis, pose_along, wheel_motion
+from wmrid.design.information import DEFAULT_K, SensorNoise, intermediate_jacobian, predicted_covariance
+from wmrid.design.limits import Limits
+from wmrid.model.dynamics import RegressorForm, wheel_torque
+
+#: Criteria: the largest relative std of the base parameters (default), D-optimality (the geometric mean of the
+#: relative covariance's eigenvalues, as a std: det^(1/2n)) and A-optimality (the rms of the relative stds).
+CRITERIA = ("worst", "d", "a")
+
+#: Separability built in (constraints of the search, not hopes): each wheel's direction balance
+#: |mean tanh(eta / (0.1 eta_max))| at most BALANCE (so it turns forward and backward, each about a fifth of the time
+#: or more: F_v and F_d of each direction separate), and |corr(v, w)| at most CORRELATION (m12 and Vc need v and w
+#: to vary independently).
+BALANCE = 0.6
+CORRELATION = 0.5
+
+#: Share of the nominal value's scale below which a parameter's nominal value counts as unknown (0 in a robot file
+#: whose friction is not known): its relative std is then taken against a floor (:func:`parameter_scales`).
+FLOOR_SHARE = 0.02
+
+
+@dataclass(frozen=True)
+class Motion:
+    """A motion on the design grid: t (n,) s; v m/s, w rad/s, dv, dw (n,); eta (n, 2) rad/s, deta (n, 2) rad/s^2,
+    tau (n, 2) N m (nominal inverse dynamics); pose (n, 3) x m, y m, phi rad."""
+
+    t: np.ndarray
+    v: np.ndarray
+    w: np.ndarray
+    dv: np.ndarray
+    dw: np.ndarray
+    eta: np.ndarray
+    deta: np.ndarray
+    tau: np.ndarray
+    pose: np.ndarray
+
+    def peaks(self) -> dict[str, float]:
+        """name -> the largest value over the motion of each limited quantity (:data:`wmrid.design.limits.LIMIT_NAMES`)."""
+        return {
+            "max_wheel_speed": float(np.max(np.abs(self.eta))), "max_wheel_accel": float(np.max(np.abs(self.deta))),
+            "max_torque": float(np.max(np.abs(self.tau))), "max_speed": float(np.max(np.abs(self.v))),
+            "max_turn_rate": float(np.max(np.abs(self.w))), "area_x": float(np.max(np.abs(self.pose[:, 0]))),
+            "area_y": float(np.max(np.abs(self.pose[:, 1]))),
+        }  # fmt: skip
+
+
+def parameter_scales(theta0: np.ndarray, names: tuple[str, ...], r: float, limits: Limits,
+                     tau_scale: float) -> tuple[np.ndarray, list[str]]:  # fmt: skip
+    """(scale (n0,), source per parameter): what each base parameter's std is relative to.
+
+    Its nominal value when that is substantial; else a floor from the robot's own scales, so that an unknown (0)
+    friction or a Coriolis coefficient near 0 still gets a meaningful target: for m12 a twentieth of
+    sqrt(m11 m22); for Vc, F_v, F_d the value whose torque at the plan's wheel speed limit is FLOOR_SHARE of the
+    torque scale ``tau_scale`` (N m: the torque limit, or the nominal torque at the acceleration limit)."""
+    eta_max = limits.max_wheel_speed
+    floors = {
+        "m11": 0.0, "m22": 0.0, "m12": 0.05 * math.sqrt(abs(theta0[0] * theta0[2])),
+        "Vc": FLOOR_SHARE * tau_scale / eta_max**2,
+        "Fv1": FLOOR_SHARE * tau_scale / eta_max, "Fv2": FLOOR_SHARE * tau_scale / eta_max,
+        "Fd1": FLOOR_SHARE * tau_scale, "Fd2": FLOOR_SHARE * tau_scale,
+    }  # fmt: skip
+    scale, source = [], []
+    for name, value in zip(names, theta0, strict=True):
+        floor = floors.get(name, FLOOR_SHARE * tau_scale)  # caster drag: N m at the wheel
+        if abs(value) >= floor and value != 0:
+            scale.append(abs(float(value)))
+            source.append("nominal value")
+        else:
+            scale.append(floor)
+            source.append("floor")
+    return np.array(scale), source
+
+
+class Problem:
+    """A design problem on an even grid (see the module docstring).
+
+    theta0 : (n0,) nominal base parameters; form : the regressor form (general; caster columns with the
+    wheel+caster model); r, b : m; limits; noise; duration, period : s; harmonics : N per channel; ramp : s;
+    grid : Hz of the design grid; k : the estimator's gain (1/s); criterion : one of :data:`CRITERIA`;
+    given_info : (n0, n0) information of logs already identified (inverse covariance), or None.
+    """
+
+    def __init__(
+        self, theta0: np.ndarray, form: RegressorForm, r: float, b: float, limits: Limits, noise: SensorNoise, *,
+        duration: float, period: float, harmonics: int, ramp: float, grid: float, k: float = DEFAULT_K,
+        criterion: str = "worst", given_info: np.ndarray | None = None,
+    ) -> None:  # fmt: skip
+        self.theta0 = np.asarray(theta0, dtype=np.float64)
+        self.form, self.r, self.b, self.limits, self.noise = form, r, b, limits, noise
+        self.duration, self.period, self.harmonics, self.ramp, self.k = duration, period, harmonics, ramp, k
+        self.criterion = criterion
+        self.given_info = given_info
+        n = int(round(duration * grid)) + 1
+        self.t = np.linspace(0.0, duration, n)
+        self.h = duration / (n - 1)
+        self.basis = Basis(self.t, duration, period, harmonics, ramp)
+        self.bounds = limits.bounds()
+        big_m = np.linalg.inv(np.array([[self.theta0[0], self.theta0[1]], [self.theta0[1], self.theta0[2]]]))
+        if limits.max_torque is not None:
+            self.tau_scale = limits.max_torque
+        else:
+            self.tau_scale = float(np.max(np.sum(np.abs(big_m), axis=1))) * limits.max_wheel_accel
+        self.jac = intermediate_jacobian(self.theta0, form)
+        self.scales, self.scale_sources = parameter_scales(self.theta0, form.base_names, r, limits, self.tau_scale)
+
+    def motion_of(self, coefficients: np.ndarray, basis: Basis | None = None) -> Motion:
+        """The motion (:class:`Motion`) of coefficients (2, N, 2) on this problem's grid (or on ``basis``'s)."""
+        basis = basis or self.basis
+        v, w, dv, dw = basis.signals(coefficients)
+        return self.motion_from(basis.t, v, w, dv, dw)
+
+    def motion_from(self, t: np.ndarray, v: np.ndarray, w: np.ndarray, dv: np.ndarray, dw: np.ndarray) -> Motion:
+        """The motion of a reference given as samples (a baseline, a read plan)."""
+        eta, deta = wheel_motion(v, w, dv, dw, self.r, self.b)
+        tau = wheel_torque(eta, deta, self.theta0[:8])
+        return Motion(t, v, w, dv, dw, eta, deta, tau, pose_along(t, v, w))
+
+    def ratios(self, motion: Motion) -> dict[str, float]:
+        """name -> peak / bound for each limit that is set (<= 1: kept, margin included)."""
+        peaks = motion.peaks()
+        return {name: peaks[name] / bound for name, bound in self.bounds.items()}
+
+    def separation(self, motion: Motion) -> dict[str, float]:
+        """name -> value / bound of the separability constraints (<= 1: kept; see :data:`BALANCE`)."""
+        width = 0.1 * self.limits.max_wheel_speed
+        balance = np.abs(np.mean(np.tanh(motion.eta / width), axis=0)) / BALANCE
+        v, w = motion.v - motion.v.mean(), motion.w - motion.w.mean()
+        corr = float(v @ w) / max(math.sqrt(float(v @ v) * float(w @ w)), 1e-300)
+        return {"balance_right": float(balance[0]), "balance_left": float(balance[1]),
+                "corr_v_w": abs(corr) / CORRELATION}  # fmt: skip
+
+    def covariance(self, motion: Motion) -> np.ndarray:
+        """Predicted Cov(theta0) (n0, n0) along the motion, the given logs' information added."""
+        h = float(motion.t[1] - motion.t[0])
+        cov = predicted_covariance(motion.eta, motion.tau, h, self.theta0, self.form, self.noise, self.k, self.jac)
+        if self.given_info is not None:
+            cov = np.linalg.inv(np.linalg.inv(cov) + self.given_info)
+            cov = 0.5 * (cov + cov.T)
+        return cov
+
+    def relative_std(self, cov: np.ndarray) -> np.ndarray:
+        """(n0,) predicted std / scale of each base parameter."""
+        return np.sqrt(np.clip(np.diag(cov), 0.0, None)) / self.scales
+
+    def criterion_value(self, cov: np.ndarray) -> float:
+        """The criterion (:data:`CRITERIA`), as a relative std (smaller is better)."""
+        rel = self.relative_std(cov)
+        if self.criterion == "worst":
+            return float(np.max(rel))
+        if self.criterion == "a":
+            return float(np.sqrt(np.mean(rel**2)))
+        scaled = cov / np.outer(self.scales, self.scales)
+        sign, logdet = np.linalg.slogdet(scaled)
+        return float(np.exp(logdet / (2 * len(rel)))) if sign > 0 else math.inf
+
+    def smooth_objective(self, cov: np.ndarray) -> float:
+        """What the local search minimises: the log of the criterion, the max made smooth (a 16-norm) so that its
+        gradient does not jump between parameters."""
+        if self.criterion != "worst":
+            return math.log(self.criterion_value(cov))
+        rel = self.relative_std(cov)
+        top = float(np.max(rel))
+        return math.log(top) + math.log(float(np.sum((rel / top) ** 16))) / 16.0
