@@ -1,0 +1,255 @@
+"""``wmrid plan``: design the drive that identifies a robot (:func:`plan`) and write it for the robot (:func:`write_plan`).
+
+See :mod:`wmrid.design` for the method.  The robot's nominal set gives the model the plan is designed on; its
+``[limits]`` table gives any limit not passed here; the noise is given, measured from an earlier log
+(``noise_from``: wmrid's own noise-floor estimate, :class:`wmrid.estimators.noise_floor.NoiseFloor`, on its speeds and
+efforts), or defaults (:data:`DEFAULT_ETA_NOISE`, :data:`DEFAULT_TAU_SHARE` of the torque scale, at
+:data:`DEFAULT_LOG_RATE`).  ``given``: results of logs already identified (``wmrid identify --format json``), whose
+information is added, so that the plan targets what they leave poorly determined.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wmrid.core.errors import UsageError, option
+from wmrid.design.information import DEFAULT_K, SensorNoise
+from wmrid.design.limits import DEFAULT_MARGIN, resolve_limits
+from wmrid.design.plan import Plan, make_plan
+from wmrid.model.robot import BaseSet, Robot
+
+__all__ = ["Plan", "plan", "read_plan", "write_plan"]
+
+#: Defaults of the noise the prediction assumes when neither given nor measured: rad/s on each wheel speed, and the
+#: effort noise as a share of the torque scale (the torque limit, or the nominal torque at the acceleration limit),
+#: per sample at DEFAULT_LOG_RATE Hz (ros2_control's joint_states commonly publishes at 50-100 Hz).
+DEFAULT_ETA_NOISE = 0.01
+DEFAULT_TAU_SHARE = 0.01
+DEFAULT_LOG_RATE = 100.0
+
+
+def _number(name: str, value: Any, low: float = 0.0, strict: bool = True) -> float | None:
+    if value is None:
+        return None
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if not ok or value < low or (strict and value == low):
+        raise UsageError(f"{option(name, value)}: must be a number {'>' if strict else '>='} {low:g}")
+    return float(value)
+
+
+def measured_noise(log: Any, robot: Robot | None = None) -> tuple[float, float, float]:
+    """(eta_std rad/s, tau_std N m, rate Hz) of a log: the white-noise floor of its speeds and its efforts (the
+    larger wheel of each), and its median sample rate."""
+    from wmrid.api.inputs import read_log
+    from wmrid.estimators.noise_floor import NoiseFloor
+
+    wheel_log = read_log(log, robot=robot)
+    if wheel_log.effort_unit != "N m":
+        raise UsageError(
+            f"{option('noise_from', str(log))}: its efforts are in {wheel_log.effort_unit}, not N m; the plan's torque "
+            "noise must be in N m (give the log's torque constant, or --tau-noise)"
+        )
+    sigmas = []
+    for signal in (wheel_log.eta, wheel_log.tau):
+        floor = NoiseFloor()
+        floor.feed(np.asarray(signal, dtype=np.float64))
+        sigma = floor.sigma()
+        if not np.any(np.isfinite(sigma)):
+            raise UsageError(f"{option('noise_from', str(log))}: too short or too still to measure its noise")
+        sigmas.append(float(np.nanmax(sigma)))
+    dt = np.diff(np.asarray(wheel_log.t, dtype=np.float64))
+    rate = 1.0 / float(np.median(dt[dt > 0]))
+    return sigmas[0], sigmas[1], rate
+
+
+def _given(
+    given: Any, names: tuple[str, ...], theta0: np.ndarray
+) -> tuple[tuple[np.ndarray, dict[str, Any]], np.ndarray] | tuple[None, np.ndarray]:
+    """((information (n0, n0), description), theta0 updated) from saved results: the inverse of each result's base
+    covariance over the parameters it determines, summed; the nominal values replaced by a result's estimate where it
+    determines them to better than 10 %."""
+    if given is None:
+        return None, theta0
+    from wmrid.estimators.result import IdentificationResult
+    from wmrid.estimators.result import from_dict as result_from_dict
+
+    items = [given] if isinstance(given, (str, os.PathLike, IdentificationResult)) else list(given)
+    info = np.zeros((len(names), len(names)))
+    theta0 = theta0.copy()
+    sources = []
+    for item in items:
+        if isinstance(item, IdentificationResult):
+            result, source = item, "result"
+        else:
+            source = os.fspath(item)
+            try:
+                with open(source, encoding="utf-8") as fh:
+                    data = json.load(fh)
+            except OSError as err:
+                raise UsageError(f"{option('given', source)}: cannot read ({err.strerror or err})") from None
+            except ValueError as err:
+                raise UsageError(f"{option('given', source)}: not a saved result (not JSON: {err})") from None
+            result = result_from_dict(data, source)
+        est = result.estimate
+        if est is None:
+            raise UsageError(f"{option('given', source)}: holds no estimate")
+        their = result.form.base_names if len(est.theta0) == result.form.n_base else names[: len(est.theta0)]
+        cov = np.asarray(est.cov, dtype=np.float64)
+        idx = [i for i, n in enumerate(their) if n in names and np.isfinite(cov[i, i]) and cov[i, i] > 0]
+        if not idx:
+            continue
+        sub = np.linalg.pinv(cov[np.ix_(idx, idx)])
+        where = [names.index(their[i]) for i in idx]
+        info[np.ix_(where, where)] += 0.5 * (sub + sub.T)
+        for i in idx:
+            value, std = float(est.theta0[i]), math.sqrt(cov[i, i])
+            if value != 0 and std < 0.1 * abs(value):
+                theta0[names.index(their[i])] = value
+        sources.append({"source": source, "log": result.log_info.get("source"), "method": est.method,
+                        "parameters": [their[i] for i in idx]})  # fmt: skip
+    return (info, {"results": sources}), theta0
+
+
+def plan(
+    robot: str | os.PathLike[str] | Robot = "paper",
+    *,
+    duration: float | str = 60.0,
+    target_std: float | None = None,
+    rate: float = 50.0,
+    seed: int = 0,
+    max_wheel_speed: float | None = None,
+    max_wheel_accel: float | None = None,
+    max_torque: float | None = None,
+    max_speed: float | None = None,
+    max_turn_rate: float | None = None,
+    area: str | tuple[float, float] | None = None,
+    margin: float = DEFAULT_MARGIN,
+    eta_noise: float | None = None,
+    tau_noise: float | None = None,
+    log_rate: float | None = None,
+    noise_from: str | os.PathLike[str] | None = None,
+    criterion: str = "worst",
+    friction: str = "wheel",
+    given: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | None = None,
+    k: float = DEFAULT_K,
+    progress: Callable[[str], None] | None = None,
+) -> Plan:
+    """Design the drive that identifies ``robot`` best within the limits and predict its precision (``wmrid plan``).
+
+    duration : s, or "auto" with ``target_std`` (percent, e.g. 2 for 2 %): the shortest plan predicted to bring every
+    base parameter's relative std below it.  rate : Hz of the written reference.  Limits (SI; None: the robot file's
+    ``[limits]``, else the defaults of :mod:`wmrid.design.limits`): max_wheel_speed rad/s, max_wheel_accel rad/s^2,
+    max_torque N m per wheel, max_speed m/s, max_turn_rate rad/s, area "WxH" m; margin: the share of each limit kept
+    free.  Noise: eta_noise rad/s, tau_noise N m per sample at log_rate Hz, or measured from ``noise_from``.
+    criterion : "worst" (largest relative std), "d" or "a".  friction : "wheel" or "wheel+caster".  given : saved
+    results of logs already identified.  k : the estimator's gain the prediction assumes (``identify --k``).
+    """
+    from wmrid.api.inputs import load_robot
+    from wmrid.model.dynamics import base_parameters
+
+    robot_obj = load_robot(robot)
+    nominal = robot_obj.nominal
+    r, b = getattr(nominal, "r", None), getattr(nominal, "b", None)
+    if isinstance(nominal, BaseSet) and (r is None or b is None):
+        raise UsageError(
+            f"{option('robot', robot_obj.name)}: a plan needs the wheel radius r and half track b (the [nominal_base] "
+            "table gives neither)"
+        )
+    seed = int(_number("seed", seed, 0.0, strict=False))  # type: ignore[arg-type]
+    rate = _number("rate", rate)  # type: ignore[assignment]
+    for name, value in (("max_wheel_speed", max_wheel_speed), ("max_wheel_accel", max_wheel_accel),
+                        ("max_torque", max_torque), ("max_speed", max_speed), ("max_turn_rate", max_turn_rate)):  # fmt: skip
+        _number(name, value)
+    limits = resolve_limits(
+        r, dict(robot_obj.limits), margin=margin, max_wheel_speed=max_wheel_speed, max_wheel_accel=max_wheel_accel,
+        max_torque=max_torque, max_speed=max_speed, max_turn_rate=max_turn_rate, area=area,
+    )  # fmt: skip
+    theta0 = np.asarray(base_parameters(nominal), dtype=np.float64)
+    big_m = np.linalg.inv(np.array([[theta0[0], theta0[1]], [theta0[1], theta0[2]]]))
+    tau_scale = limits.max_torque or float(np.max(np.sum(np.abs(big_m), axis=1))) * limits.max_wheel_accel
+    if noise_from is not None:
+        if eta_noise is not None or tau_noise is not None:
+            raise UsageError(f"{option('noise_from')} measures the noise: give it or the noise levels, not both")
+        eta_std, tau_std, measured_rate = measured_noise(noise_from, robot_obj)
+        log_rate = log_rate or measured_rate
+        noise_source = f"measured from {os.fspath(noise_from)}"
+    else:
+        eta_std = DEFAULT_ETA_NOISE if eta_noise is None else _number("eta_noise", eta_noise, strict=False)
+        tau_std = DEFAULT_TAU_SHARE * tau_scale if tau_noise is None else _number("tau_noise", tau_noise, strict=False)
+        noise_source = "given" if eta_noise is not None and tau_noise is not None else "default" if (
+            eta_noise is None and tau_noise is None) else "given in part, default in part"  # fmt: skip
+    log_rate = DEFAULT_LOG_RATE if log_rate is None else _number("log_rate", log_rate)
+    if eta_std == 0 and tau_std == 0:  # type: ignore[operator]
+        raise UsageError(f"{option('eta_noise')} and {option('tau_noise')} are both 0: a noise-free log has no std to plan")
+    noise = SensorNoise(float(eta_std), float(tau_std), float(log_rate))  # type: ignore[arg-type]
+    length: float | None
+    if isinstance(duration, str) and duration.strip().lower() == "auto":
+        if target_std is None:
+            raise UsageError(f"{option('duration', 'auto')} needs {option('target_std', 'PCT')}")
+        length = None
+    else:
+        try:
+            length = float(duration)
+        except (TypeError, ValueError):
+            raise UsageError(f"{option('duration', duration)}: a number of seconds, or auto") from None
+        if not math.isfinite(length) or length < 4.0:
+            raise UsageError(f"{option('duration', duration)}: a plan lasts at least 4 s")
+    share = None
+    if target_std is not None:
+        share = _number("target_std", target_std) / 100.0  # type: ignore[operator]
+    names = ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2") + (("Cv", "Cw") if friction == "wheel+caster" else ())
+    given_info, theta0 = _given(given, names, np.concatenate([theta0, np.zeros(len(names) - 8)]))
+    result = make_plan(
+        robot_obj.name, theta0, r, b, limits, noise, duration=length, target_std=share, rate=rate, seed=seed,
+        criterion=criterion, friction=friction, k=k, given=given_info, progress=progress,
+    )  # fmt: skip
+    settings = {**result.settings, "noise_source": noise_source}
+    from dataclasses import replace
+
+    return replace(result, settings=settings)
+
+
+def read_plan(path: str | os.PathLike[str]) -> Plan:
+    """A plan saved as JSON (``wmrid plan -o plan.json`` or ``--format json``)."""
+    source = os.fspath(path)
+    try:
+        data = json.loads(Path(source).read_text(encoding="utf-8"))
+    except OSError as err:
+        raise UsageError(f"{source}: cannot read ({err.strerror or err})") from None
+    except ValueError as err:
+        raise UsageError(f"{source}: not a plan (not JSON: {err})") from None
+    return Plan.from_dict(data, source)
+
+
+#: Suffixes :func:`write_plan` writes: the reference (csv, parquet, mcap) or the prediction (json).
+PLAN_SUFFIXES = (".csv", ".parquet", ".mcap", ".json")
+
+
+def write_plan(
+    result: Plan, path: str | os.PathLike[str], *, topic: str = "/cmd_vel", stamped: bool = False, force: bool = False
+) -> None:
+    """Write a plan by the suffix of ``path``: ``.json`` the prediction (:meth:`Plan.to_dict`); ``.csv``/``.parquet``
+    the reference at the plan's rate (t, v, omega, eta_r, eta_l, x, y, phi); ``.mcap`` a ROS 2 recording of
+    geometry_msgs/msg/Twist (TwistStamped with ``stamped``) on ``topic``.  Atomic; an existing file is kept unless
+    ``force``."""
+    from wmrid.core.atomic import write_text_atomic
+
+    target = os.fspath(path)
+    suffix = Path(target).suffix.lower()
+    if suffix not in PLAN_SUFFIXES:
+        raise UsageError(f"{option('output', target)}: give a file ending in {', '.join(PLAN_SUFFIXES)}")
+    if os.path.exists(target) and not force:
+        raise UsageError(f"{target} exists; give --force to replace it")
+    if suffix == ".json":
+        write_text_atomic(target, json.dumps(result.to_dict(), indent=2) + "\n")
+        return
+    from wmrid.io.reference_files import write_reference
+
+    write_reference(target, result.samples(), topic=topic, stamped=stamped)
