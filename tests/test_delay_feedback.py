@@ -121,3 +121,39 @@ def test_the_unresolved_term_needs_evidence_and_shrinks_with_it():
     assert late == pytest.approx(math.sqrt(8) * 1e-3)
     early = unresolved_delay({**base, "delay_s": -1.5e-3, "std_s": 0.5e-3}, theta0_std)
     assert early == pytest.approx(-math.sqrt(2) * 1e-3)
+
+
+def test_a_jackknife_clipped_at_the_edge_does_not_pin_the_delay():
+    """A replicate whose minimum lies at the edge of the search is the edge, not its minimiser, so a jackknife over
+    clipped replicates understates the spread (issue 28, item 4, without the reference).  The light AMR, 40 s
+    reversing at 200 Hz on one clock, a 0.005 N m caster disturbance inside the loop, no reference, seed 7: over
+    +/-20 ms least squares put the delay at +19.52 +/- 6.07 ms with 8 of 18 replicates at +20 ms (3.2 std: the
+    unresolved-delay term carried 18.6 ms and grew F_v2's std 7.3 times against ``delay=0``); over +/-40 ms, where no
+    replicate is clipped, it is +20.8 +/- 10.9 ms, 1.9 std: no evidence of a delay.  Now the clipped profile does not
+    pin the delay, and nothing is applied or carried."""
+    from wmrid.estimators.delay import _jackknife_std, _refine
+
+    run = wmrid.simulate("amr", trajectory="reversing", duration=40.0, rate=200.0, seed=7, caster=0.005, **NOISE)
+    log = run.log.to_wheel_log()
+    clipped = estimate_delay(log.t, log.eta, log.tau, span=search_span(log.t))
+    assert clipped.method == "least squares"
+    assert not clipped.at_edge
+    assert 0.0 < clipped.delay < 0.02
+    assert not clipped.determined
+    assert not clipped.significant
+    record = {"checked": True, "apply": False, "segments": clipped.segments, **clipped.to_dict()}
+    record["theta0_slope_per_s"] = [1.0] * 8
+    assert unresolved_delay(record, np.full(8, 1e-9)) is None
+    wide = estimate_delay(log.t, log.eta, log.tau, span=0.04)
+    assert wide.determined
+    assert abs(wide.delay) < 2.2 * wide.std  # within the carry quantile (t, 17 dof, 95 %: 2.11)
+    # the rule itself: every replicate inside the grid, a finite jackknife; one at its edge, an infinite std
+    grid = DELAY_STEP_S * np.arange(-4, 5)
+    per_segment = np.stack([(grid - c) ** 2 for c in (0.0, 1e-3, -1e-3, 5e-4)], axis=1)
+    assert math.isfinite(_jackknife_std(grid, per_segment.sum(axis=1), per_segment))
+    per_segment[:, 0] = 60 * (grid + 2e-3) ** 2  # the whole log's minimum stays inside (-0.2 ms) ...
+    per_segment[:, 1] = 50 * (grid - 2e-3) ** 2  # ... but without segment 0 it is at +2 ms, the grid's edge
+    rss = per_segment.sum(axis=1)
+    assert not _refine(grid, rss)[1]
+    assert _refine(grid, rss - per_segment[:, 0])[1]
+    assert _jackknife_std(grid, rss, per_segment) == math.inf
