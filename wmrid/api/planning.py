@@ -117,6 +117,21 @@ def _given(
     return (info, {"results": sources}), theta0
 
 
+def footprint(robot: Robot) -> float:
+    """m: how far the robot reaches from its axle midpoint: its wheels' contacts (the half track b) and its casters'
+    contacts (a robot file's [[caster]] tables, else wmrid's default pair)."""
+    from wmrid.model.robot import default_casters
+
+    nominal = robot.nominal
+    reach = float(nominal.b or 0.0)
+    casters = robot.casters
+    if casters is None and not isinstance(nominal, BaseSet):
+        casters = default_casters(nominal)
+    for caster in casters or ():
+        reach = max(reach, math.hypot(caster.x, caster.y) + getattr(caster, "radius", 0.0))
+    return reach
+
+
 def plan(
     robot: str | os.PathLike[str] | Robot = "paper",
     *,
@@ -168,7 +183,7 @@ def plan(
                         ("max_torque", max_torque), ("max_speed", max_speed), ("max_turn_rate", max_turn_rate)):  # fmt: skip
         _number(name, value)
     limits = resolve_limits(
-        r, dict(robot_obj.limits), margin=margin, max_wheel_speed=max_wheel_speed, max_wheel_accel=max_wheel_accel,
+        r, dict(robot_obj.limits), margin=margin, footprint=footprint(robot_obj), max_wheel_speed=max_wheel_speed, max_wheel_accel=max_wheel_accel,
         max_torque=max_torque, max_speed=max_speed, max_turn_rate=max_turn_rate, area=area,
     )  # fmt: skip
     theta0 = np.asarray(base_parameters(nominal), dtype=np.float64)
@@ -239,17 +254,15 @@ def write_plan(
     the reference at the plan's rate (t, v, omega, eta_r, eta_l, x, y, phi); ``.mcap`` a ROS 2 recording of
     geometry_msgs/msg/Twist (TwistStamped with ``stamped``) on ``topic``.  Atomic; an existing file is kept unless
     ``force``."""
-    from wmrid.core.atomic import write_text_atomic
+    from wmrid.core.atomic import write_json
 
     target = os.fspath(path)
     suffix = Path(target).suffix.lower()
     if suffix not in PLAN_SUFFIXES:
         raise UsageError(f"{option('output', target)}: give a file ending in {', '.join(PLAN_SUFFIXES)}")
-    if os.path.exists(target) and not force:
-        raise UsageError(f"{target} exists; give --force to replace it")
     if suffix == ".json":
-        write_text_atomic(target, json.dumps(result.to_dict(), indent=2) + "\n")
+        write_json(target, result.to_dict(), force=force)
         return
     from wmrid.io.reference_files import write_reference
 
-    write_reference(target, result.samples(), topic=topic, stamped=stamped)
+    write_reference(target, result.samples(), topic=topic, stamped=stamped, force=force)

@@ -24,8 +24,8 @@ LIMIT_NAMES = {
     "max_torque": ("N m", "|wheel torque| (nominal model)"),
     "max_speed": ("m/s", "|forward speed|"),
     "max_turn_rate": ("rad/s", "|turn rate|"),
-    "area_x": ("m", "|x| from the start, half the area's width"),
-    "area_y": ("m", "|y| from the start, half the area's height"),
+    "area_x": ("m", "|x| of the axle midpoint from the start: half the area's width less the robot's reach"),
+    "area_y": ("m", "|y| of the axle midpoint from the start: half the area's height less the robot's reach"),
 }
 
 
@@ -55,6 +55,8 @@ class Limits:
     max_turn_rate: float | None = None
     margin: float = DEFAULT_MARGIN
     sources: dict[str, str] = field(default_factory=dict, compare=False)
+    #: m: how far the robot reaches from its axle midpoint (wheel contacts, casters): the whole robot stays in the area
+    footprint: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("max_wheel_speed", "max_wheel_accel", "max_torque", "max_speed", "max_turn_rate"):
@@ -72,6 +74,14 @@ class Limits:
         if len(area) != 2 or not all(math.isfinite(v) and v > 0 for v in area):
             raise UsageError(f"{option('area')}: must be W x H > 0 in metres")
         object.__setattr__(self, "area", area)
+        room = min(area) * (1.0 - self.margin) / 2.0 - self.footprint
+        if room < 0.05:
+            need = 2.0 * (self.footprint + 0.05) / (1.0 - self.margin)
+            raise UsageError(
+                f"{option('area', f'{area[0]:g}x{area[1]:g}')}: too small for the robot, which reaches "
+                f"{self.footprint:.2g} m from its axle midpoint; with the {100 * self.margin:g} % margin the area must "
+                f"be at least {need:.2g} m on each side to leave it room to move"
+            )
 
     def bounds(self) -> dict[str, float]:
         """name -> the bound the plan keeps to, (1 - margin) x the limit, for each limit that is set (area as half
@@ -82,23 +92,24 @@ class Limits:
             value = getattr(self, name)
             if value is not None:
                 out[name] = keep * value
-        out["area_x"] = keep * self.area[0] / 2.0
-        out["area_y"] = keep * self.area[1] / 2.0
+        out["area_x"] = keep * self.area[0] / 2.0 - self.footprint
+        out["area_y"] = keep * self.area[1] / 2.0 - self.footprint
         return out
 
     def limit(self, name: str) -> float | None:
-        """The limit itself (no margin) of a :data:`LIMIT_NAMES` entry."""
+        """The limit itself (no margin) of a :data:`LIMIT_NAMES` entry (the area's: for the axle midpoint, the
+        robot's footprint taken off)."""
         if name == "area_x":
-            return self.area[0] / 2.0
+            return self.area[0] / 2.0 - self.footprint
         if name == "area_y":
-            return self.area[1] / 2.0
+            return self.area[1] / 2.0 - self.footprint
         return getattr(self, name)
 
     def to_dict(self) -> dict:
         return {
             "max_wheel_speed": self.max_wheel_speed, "max_wheel_accel": self.max_wheel_accel,
             "max_torque": self.max_torque, "max_speed": self.max_speed, "max_turn_rate": self.max_turn_rate,
-            "area": list(self.area), "margin": self.margin, "sources": dict(self.sources),
+            "area": list(self.area), "margin": self.margin, "sources": dict(self.sources), "footprint": self.footprint,
             "units": {"max_wheel_speed": "rad/s", "max_wheel_accel": "rad/s^2", "max_torque": "N m",
                       "max_speed": "m/s", "max_turn_rate": "rad/s", "area": "m"},
         }  # fmt: skip
@@ -109,12 +120,13 @@ class Limits:
             max_wheel_speed=data["max_wheel_speed"], max_wheel_accel=data["max_wheel_accel"],
             area=tuple(data["area"]), max_torque=data.get("max_torque"), max_speed=data.get("max_speed"),
             max_turn_rate=data.get("max_turn_rate"), margin=data.get("margin", DEFAULT_MARGIN),
-            sources=dict(data.get("sources", {})),
+            sources=dict(data.get("sources", {})), footprint=float(data.get("footprint", 0.0)),
         )  # fmt: skip
 
 
 def resolve_limits(
-    wheel_radius: float, file_limits: dict[str, object], *, margin: float = DEFAULT_MARGIN, **flags: object
+    wheel_radius: float, file_limits: dict[str, object], *, margin: float = DEFAULT_MARGIN, footprint: float = 0.0,
+    **flags: object,
 ) -> Limits:
     """The limits from the flags given (None: not given), else the robot file's [limits], else the defaults
     (:data:`DEFAULT_RIM_SPEED` and :data:`DEFAULT_RIM_ACCEL` over the wheel radius, :data:`DEFAULT_AREA`)."""
@@ -136,4 +148,4 @@ def resolve_limits(
         if name not in values:
             values[name] = value
             sources[name] = "default"
-    return Limits(**values, margin=margin, sources=sources)  # type: ignore[arg-type]
+    return Limits(**values, margin=margin, sources=sources, footprint=footprint)  # type: ignore[arg-type]

@@ -21,7 +21,7 @@ from wmrid.core.errors import UsageError, option
 from wmrid.design.excitation import RAMP_SECONDS, Excitation
 from wmrid.design.information import DEFAULT_K, SensorNoise
 from wmrid.design.limits import LIMIT_NAMES, Limits
-from wmrid.design.problem import CRITERIA, Motion, Problem
+from wmrid.design.problem import CORRELATION, CRITERIA, DIRECTION_SHARE, Motion, Problem
 from wmrid.design.search import search
 from wmrid.model.dynamics import RegressorForm, choose_form, named_base
 
@@ -140,19 +140,21 @@ def _limits_used(problem: Problem, motion: Motion) -> dict[str, dict[str, float 
     return out
 
 
-def separability(motion: Motion) -> dict[str, Any]:
-    """What lets the log tell the parameters apart: per wheel, the share of time it turns forward (> 5 % of its peak
-    speed) and backward, and its speed magnitude's 10th/50th/90th percentiles while moving (rad/s) -- F_v and F_d
-    separate when each wheel runs at several speeds in both directions; the correlation of v and w and of |v| and
-    |w| (m12 and Vc need them to vary independently)."""
-    out: dict[str, Any] = {}
+def separability(motion: Motion, wheel_speed_limit: float) -> dict[str, Any]:
+    """What lets the log tell the parameters apart: per wheel, the share of time it turns forward faster than a tenth
+    of the wheel speed limit and backward likewise (the search keeps each >= DIRECTION_SHARE), and its speed
+    magnitude's 10th/50th/90th percentiles while doing so (rad/s) -- F_v and F_d separate when each wheel runs at
+    several speeds in both directions; the correlation of v and w and of |v| and |w| (m12 and Vc need them to vary
+    independently; the search keeps |corr(v, w)| <= CORRELATION)."""
+    out: dict[str, Any] = {"threshold": 0.1 * wheel_speed_limit, "direction_share_min": DIRECTION_SHARE,
+                           "corr_max": CORRELATION}  # fmt: skip
     for j, wheel in enumerate(("right", "left")):
         eta = motion.eta[:, j]
-        moving = np.abs(eta) > 0.05 * max(float(np.max(np.abs(eta))), 1e-12)
+        moving = np.abs(eta) > 0.1 * wheel_speed_limit
         speed = np.abs(eta[moving]) if np.any(moving) else np.zeros(1)
         out[wheel] = {
-            "forward_share": float(np.mean(eta > 0.05 * np.max(np.abs(eta)))),
-            "backward_share": float(np.mean(eta < -0.05 * np.max(np.abs(eta)))),
+            "forward_share": float(np.mean(eta > 0.1 * wheel_speed_limit)),
+            "backward_share": float(np.mean(eta < -0.1 * wheel_speed_limit)),
             "speed_percentiles": [float(v) for v in np.percentile(speed, [10, 50, 90])],
         }
     out["corr_v_w"] = float(np.corrcoef(motion.v, motion.w)[0, 1])
@@ -160,9 +162,9 @@ def separability(motion: Motion) -> dict[str, Any]:
     return out
 
 
-def baseline_motion(problem: Problem, name: str) -> tuple[Motion, float]:
+def baseline_motion(problem: Problem, name: str, area: bool = True) -> tuple[Motion, float]:
     """(motion, factor): the ``wmrid simulate`` trajectory ``name`` over the plan's duration on ``problem``'s grid,
-    slowed down uniformly (speeds times factor <= 1) until it keeps every limit but the area."""
+    slowed down uniformly (speeds times factor <= 1) until it keeps every limit (``area``: the area too)."""
     from wmrid.sim.closed_loop import KIND, reference_state
     from wmrid.sim.simulate import TRAJECTORY_PARAMETERS
 
@@ -172,7 +174,7 @@ def baseline_motion(problem: Problem, name: str) -> tuple[Motion, float]:
     ratios = problem.ratios(problem.motion_from(problem.t, v, w, dv, dw))
     factor = 1.0
     for _ in range(40):
-        worst = max(r for n, r in ratios.items() if not n.startswith("area"))
+        worst = max(r for n, r in ratios.items() if area or not n.startswith("area"))
         if worst <= 1.0 + 1e-9:
             break
         factor *= 0.999 / worst if worst > 1.0 else 1.0
@@ -259,30 +261,7 @@ def make_plan(
         for i, name in enumerate(form.base_names)
     }  # fmt: skip
     say("baselines")
-    baselines = {}
-    for name in BASELINES:
-        base_motion, factor = baseline_motion(fine, name)
-        base_form = choose_form(base_motion.eta)
-        base_form = RegressorForm(base_form.kind, base_form.signs, caster=form.caster) if form.caster else base_form
-        try:
-            base_problem = Problem(
-                theta0, base_form, r, b, limits, noise, duration=fine.duration, period=fine.period,
-                harmonics=HARMONICS, ramp=fine.ramp, grid=min(noise.rate, FINE_GRID), k=k, criterion=criterion,
-                given_info=given_info,
-            )  # fmt: skip
-            base_cov = base_problem.covariance(base_motion)
-            base_rel = base_problem.relative_std(base_cov)
-            base_value = base_problem.criterion_value(base_cov)
-        except np.linalg.LinAlgError:
-            base_rel = np.full(len(theta0), math.inf)
-            base_value = math.inf
-        ratios = fine.ratios(base_motion)
-        baselines[name] = {
-            "value": base_value, "relative": dict(zip(form.base_names, map(float, base_rel), strict=True)),
-            "worst": form.base_names[int(np.argmax(base_rel))], "slowed_by": factor,
-            "leaves_area": bool(ratios["area_x"] > 1.0 / (1.0 - limits.margin) or ratios["area_y"] > 1.0 / (1.0 - limits.margin)),
-            "peaks": base_motion.peaks(), "improvement": base_value / value if value > 0 else math.inf,
-        }  # fmt: skip
+    baselines = {name: _baseline(fine, name, theta0, form, value) for name in BASELINES}
     warnings = []
     if limits.max_torque is None:
         warnings.append(
@@ -308,8 +287,41 @@ def make_plan(
         robot=robot_name, r=float(r), b=float(b), limits=limits, noise=noise,
         excitation=Excitation(problem.duration, problem.period, found.coefficients, problem.ramp), settings=settings,
         predicted=predicted, value=value, limits_used=_limits_used(fine, motion), baselines=baselines,
-        margins=separability(motion), given=None if given is None else given[1], warnings=tuple(warnings),
+        margins=separability(motion, limits.max_wheel_speed), given=None if given is None else given[1], warnings=tuple(warnings),
     )  # fmt: skip
+
+
+def _baseline(fine: Problem, name: str, theta0: np.ndarray, form: RegressorForm, value: float) -> dict[str, Any]:
+    """The prediction for baseline ``name`` within every limit (the area included: that is the comparison), and
+    with the area ignored (how it would do on an open floor), on the plan's fine grid."""
+    out: dict[str, Any] = {}
+    for area in (True, False):
+        motion, factor = baseline_motion(fine, name, area=area)
+        base_form = choose_form(motion.eta)
+        if form.caster:
+            base_form = RegressorForm("general", caster=True)
+        problem = Problem(
+            theta0, base_form, fine.r, fine.b, fine.limits, fine.noise, duration=fine.duration, period=fine.period,
+            harmonics=fine.harmonics, ramp=fine.ramp, grid=fine.t.size / fine.duration, k=fine.k,
+            criterion=fine.criterion, given_info=fine.given_info,
+        )  # fmt: skip
+        try:
+            cov = problem.covariance(motion)
+            rel, crit = problem.relative_std(cov), problem.criterion_value(cov)
+        except np.linalg.LinAlgError:
+            rel, crit = np.full(len(theta0), math.inf), math.inf
+        entry = {
+            "value": crit, "relative": dict(zip(form.base_names, map(float, rel), strict=True)),
+            "worst": form.base_names[int(np.argmax(rel))], "slowed_by": factor, "peaks": motion.peaks(),
+            "improvement": crit / value if value > 0 else math.inf,
+        }  # fmt: skip
+        if area:
+            out.update(entry)
+        else:
+            ratios = fine.ratios(motion)
+            entry["leaves_area"] = bool(max(ratios["area_x"], ratios["area_y"]) > 1.0 / (1.0 - fine.limits.margin))
+            out["area_ignored"] = entry
+    return out
 
 
 def _infeasible(limits: Limits, r: float, b: float) -> str:

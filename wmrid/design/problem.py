@@ -24,11 +24,11 @@ from wmrid.model.dynamics import RegressorForm, wheel_torque
 #: relative covariance's eigenvalues, as a std: det^(1/2n)) and A-optimality (the rms of the relative stds).
 CRITERIA = ("worst", "d", "a")
 
-#: Separability built in (constraints of the search, not hopes): each wheel's direction balance
-#: |mean tanh(eta / (0.1 eta_max))| at most BALANCE (so it turns forward and backward, each about a fifth of the time
-#: or more: F_v and F_d of each direction separate), and |corr(v, w)| at most CORRELATION (m12 and Vc need v and w
-#: to vary independently).
-BALANCE = 0.6
+#: Separability built in (constraints of the search, not hopes): each wheel spends at least DIRECTION_SHARE of the
+#: time turning forward faster than a tenth of the wheel speed limit, and as much backward (a smooth count: a logistic
+#: step a twentieth of the limit wide), so that F_v and F_d separate in each direction; and |corr(v, w)| stays at most
+#: CORRELATION (m12 and Vc need v and w to vary independently).
+DIRECTION_SHARE = 0.2
 CORRELATION = 0.5
 
 #: Share of the nominal value's scale below which a parameter's nominal value counts as unknown (0 in a robot file
@@ -138,13 +138,17 @@ class Problem:
         return {name: peaks[name] / bound for name, bound in self.bounds.items()}
 
     def separation(self, motion: Motion) -> dict[str, float]:
-        """name -> value / bound of the separability constraints (<= 1: kept; see :data:`BALANCE`)."""
-        width = 0.1 * self.limits.max_wheel_speed
-        balance = np.abs(np.mean(np.tanh(motion.eta / width), axis=0)) / BALANCE
+        """name -> value / bound of the separability constraints (<= 1: kept; see :data:`DIRECTION_SHARE`)."""
+        top = self.limits.max_wheel_speed
+        out = {}
+        for j, wheel in enumerate(("right", "left")):
+            for sign, way in ((1.0, "forward"), (-1.0, "backward")):
+                share = float(np.mean(0.5 * (1.0 + np.tanh((sign * motion.eta[:, j] - 0.1 * top) / (0.025 * top)))))
+                out[f"{way}_{wheel}"] = DIRECTION_SHARE / max(share, 1e-9)
         v, w = motion.v - motion.v.mean(), motion.w - motion.w.mean()
         corr = float(v @ w) / max(math.sqrt(float(v @ v) * float(w @ w)), 1e-300)
-        return {"balance_right": float(balance[0]), "balance_left": float(balance[1]),
-                "corr_v_w": abs(corr) / CORRELATION}  # fmt: skip
+        out["corr_v_w"] = abs(corr) / CORRELATION
+        return out
 
     def covariance(self, motion: Motion) -> np.ndarray:
         """Predicted Cov(theta0) (n0, n0) along the motion, the given logs' information added."""

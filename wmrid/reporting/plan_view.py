@@ -1,0 +1,94 @@
+"""A plan in the terminal: the verdict first (what the drive is predicted to determine, against the baselines), then
+the predicted std per parameter, the limits and how close the plan comes to each, what it assumes."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from wmrid.model.dynamics import THETA0_UNITS
+from wmrid.reporting.terminal import print_table, warning
+
+BASELINE_TEXT = {"sinusoid": "the paper's sinusoid", "reversing": "the back-and-forth drive (reversing)"}
+
+
+def _times(x: float | None) -> str:
+    if x is None or x != x:
+        return "-"
+    if x == float("inf"):
+        return "infinitely"
+    return f"{x:.3g}x" if x < 100 else f"{x:.0f}x"
+
+
+def summary(data: dict[str, Any]) -> list[str]:
+    """The plan's verdict in plain sentences (the first lines of every rendering)."""
+    crit = data["criterion"]
+    s = data["settings"]
+    worst = data["predicted"][crit["worst"]]
+    lines = [
+        f"This {s['duration']:g} s drive is predicted to determine every base parameter of {data['robot']} to "
+        f"{100 * worst['relative']:.3g} % of its scale or better (worst: {crit['worst']}, std "
+        f"{worst['std']:.3g} {THETA0_UNITS.get(crit['worst'], '')})."
+    ]
+    parts = []
+    for name, base in data["baselines"].items():
+        text = f"{_times(base['improvement'])} better than {BASELINE_TEXT.get(name, name)}"
+        slowed = base.get("slowed_by", 1.0)
+        if slowed < 0.999:
+            text += f" (slowed to {100 * slowed:.0f} % to keep the limits"
+            open_floor = base.get("area_ignored") or {}
+            if open_floor and open_floor.get("slowed_by", 1.0) > slowed + 1e-9:
+                text += f"; on an open floor {_times(open_floor['improvement'])}"
+            text += ")"
+        parts.append(text)
+    if parts:
+        lines.append("Within the same limits and time: " + "; ".join(parts) + ".")
+    if crit["name"] != "worst":
+        lines.append(f"Criterion: {crit['text']}, {100 * crit['value']:.3g} %.")
+    return lines
+
+
+def print_plan(data: dict[str, Any], console: Any, written: list[str] = ()) -> None:  # type: ignore[assignment]
+    """Render a plan's JSON (:meth:`wmrid.design.plan.Plan.to_dict`) on ``console``."""
+    for line in summary(data):
+        console.print(line)
+    console.print()
+    rows = []
+    for name, p in data["predicted"].items():
+        unit = THETA0_UNITS.get(name, "")
+        rows.append([name, f"{p['nominal']:.4g}", f"{p['std']:.2g}", f"{100 * p['relative']:.3g} %",
+                     f"{p['scale']:.3g} ({'nominal' if p['scale_from'] == 'nominal value' else 'floor'})", unit])  # fmt: skip
+    print_table(console, ["parameter", "nominal", "predicted std", "relative", "scale", "unit"], rows,
+                title="Predicted precision", numeric=(1, 2, 3))  # fmt: skip
+    console.print()
+    lim = data["limits"]
+    rows = []
+    for name, used in data["limits_used"].items():
+        if used["limit"] is None:
+            continue
+        key = "area" if name.startswith("area") else name
+        rows.append([name, f"{used['limit']:.3g} {used['unit']}", f"{used['peak']:.3g}", f"{100 * used['share']:.0f} %",
+                     lim["sources"].get(key, "-")])  # fmt: skip
+    print_table(console, ["limit", "value", "plan's peak", "share", "from"], rows,
+                title=f"Limits (planned to {100 * (1 - lim['margin']):.0f} % of each)", numeric=(1, 2, 3))  # fmt: skip
+    m = data["margins"]
+    console.print()
+    wheels = "; ".join(
+        f"{w} wheel forward {100 * m[w]['forward_share']:.0f} % and backward {100 * m[w]['backward_share']:.0f} % of "
+        f"the time, at {m[w]['speed_percentiles'][0]:.2g}-{m[w]['speed_percentiles'][2]:.2g} rad/s"
+        for w in ("right", "left")
+    )
+    console.print(f"Separable: {wheels}; corr(v, w) = {m['corr_v_w']:.2f}.")
+    noise = data["noise"]
+    s = data["settings"]
+    console.print(
+        f"Assumes: noise {noise['eta_std']:.3g} rad/s and {noise['tau_std']:.3g} N m per sample at {noise['rate']:g} Hz "
+        f"({s.get('noise_source', 'given')}); the robot tracks the reference on its nominal model (wmrid simulate's "
+        f"controller); identification with the observer (k = {s['k']:g} 1/s), friction model {s['friction']}."
+    )
+    if data.get("given"):
+        used = ", ".join(g["source"] for g in data["given"]["results"])
+        console.print(f"Adds the information of: {used}.")
+    for text in data.get("warnings", ()):
+        console.print(warning(text))
+    for path in written:
+        console.print(f"wrote {path}")
