@@ -266,3 +266,36 @@ def write_plan(
     from wmrid.io.reference_files import write_reference
 
     write_reference(target, result.samples(), topic=topic, stamped=stamped, force=force)
+
+
+def plan_document(path: str | os.PathLike[str]) -> Plan | None:
+    """The plan saved at ``path`` when it is one (a JSON document with ``"kind": "plan"``), else None (another saved
+    result, a log): how ``wmrid report`` tells a plan from the rest."""
+    source = os.fspath(path)
+    if source == "-" or not source.lower().endswith(".json") or not os.path.isfile(source):
+        return None
+    try:
+        with open(source, encoding="utf-8") as fh:
+            head = fh.read(4096)
+    except (OSError, UnicodeDecodeError):
+        return None
+    if '"kind": "plan"' not in head and '"kind":"plan"' not in head:
+        return None
+    return read_plan(source)
+
+
+def write_plan_report(result: Plan, path: str | os.PathLike[str], *, force: bool = False) -> None:
+    """The plan's report by suffix: ``.html`` (self-contained, with figures), ``.md`` or ``.json`` (the plan)."""
+    from wmrid.core.atomic import atomic_write_text, write_json
+    from wmrid.reporting.plan_report import to_html, to_markdown
+
+    target = os.fspath(path)
+    suffix = Path(target).suffix.lower()
+    if suffix in (".html", ".htm"):
+        atomic_write_text(target, to_html(result), force=force)
+    elif suffix == ".md":
+        atomic_write_text(target, to_markdown(result), force=force)
+    elif suffix == ".json":
+        write_json(target, result.to_dict(), force=force)
+    else:
+        raise UsageError(f"-o {target}: a plan's report is .html, .md or .json")

@@ -285,10 +285,23 @@ def report(
     delay: DelayOpt = None,
     friction: FrictionOpt = FrictionChoice.auto,
 ) -> None:
-    """Tables (paper Tables 2 and 3), comparison with nominal/CAD/truth, diagnostics and figures for INPUT."""
+    """Tables (paper Tables 2 and 3), comparison with nominal/CAD/truth, diagnostics and figures for INPUT; for a
+    plan (wmrid plan -o plan.json): its path, signals against their limits and predicted precision."""
     from wmrid.api.identification import load_truth
+    from wmrid.api.planning import plan_document, write_plan_report
     from wmrid.api.reporting import REPORT_SUFFIXES, residual_frame, write_report
     from wmrid.api.reporting import report as build
+
+    planned = plan_document(input_)
+    if planned is not None:
+        if output is None:
+            from wmrid.reporting.plan_view import print_plan
+
+            print_plan(planned.to_dict(), console())
+        else:
+            write_plan_report(planned, output, force=force)
+            stderr_console().print(f"wrote {output}")
+        return
 
     suffix = output.suffix.lower() if output is not None else None
     if suffix not in (None, *REPORT_SUFFIXES):

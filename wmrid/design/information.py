@@ -141,3 +141,98 @@ def predicted_covariance(
     ``jac``: :func:`intermediate_jacobian` when already known."""
     cov_theta, _ = intermediate_covariance(eta, tau, h, theta0, form, noise, k)
     return base_covariance(cov_theta, theta0, form, jac)
+
+
+class CovarianceGradient:
+    """The predicted Cov(theta0) of :func:`predicted_covariance` (with a given information added) and the gradient of
+    a scalar function of it with respect to the motion (eta, tau): reverse-mode differentiation of the same algebra,
+    step by step (checked against finite differences in the tests), so that the search needs one forward and one
+    backward pass per gradient instead of one forward pass per coefficient.
+
+    ``forward()`` computes and keeps what ``backward(g0)`` needs; g0 = dJ/dCov(theta0) (n0, n0).
+    """
+
+    def __init__(self, theta0: np.ndarray, form: RegressorForm, noise: SensorNoise, k: float, jac: np.ndarray,
+                 given_info: np.ndarray | None = None) -> None:  # fmt: skip
+        self.theta0, self.form, self.noise, self.k, self.jac, self.given = theta0, form, noise, k, jac, given_info
+        self.m = inverse_inertia(theta0)
+
+    def forward(self, eta: np.ndarray, tau: np.ndarray, h: float) -> np.ndarray:
+        k, m, noise = self.k, self.m, self.noise
+        a = math.exp(-k * h)
+        g = regressor(eta, tau, self.form)
+        w = lowpass(g, a) / k
+        gamma = h * (w.T @ w)
+        adj = lowpass_adjoint(w, a)
+        sens = speed_sensitivity(eta, self.theta0)
+        c = m[None, :, 0, None] * sens[:, None, 0, :] + m[None, :, 1, None] * sens[:, None, 1, :]
+        q_eta = noise.eta_std**2 / (noise.rate * h)
+        q_tau = noise.tau_std**2 / (noise.rate * h)
+        p = w.shape[1]
+        zs, qs = [], []
+        for src in range(2):
+            z = np.empty((len(w), 2 * p))
+            for i in range(2):
+                part = (c[:, i, src] / k)[:, None] * adj
+                if i == src:
+                    part = part + (w - adj)
+                z[:, i * p : (i + 1) * p] = h * part
+            zs.append(z)
+            qs.append(q_eta)
+        for src in range(2):
+            zs.append(np.concatenate([-h * m[i, src] / k * adj for i in range(2)], axis=1))
+            qs.append(q_tau)
+        score = sum(q * (z.T @ z) for q, z in zip(qs, zs, strict=True))
+        inv = np.linalg.inv(gamma)
+        big = np.kron(np.eye(2), inv)
+        cov_t = big @ score @ big
+        cov_t = 0.5 * (cov_t + cov_t.T)
+        c_inv = np.linalg.inv(cov_t)
+        info = self.jac.T @ c_inv @ self.jac
+        if self.given is not None:
+            info = info + self.given
+        cov0 = np.linalg.inv(info)
+        cov0 = 0.5 * (cov0 + cov0.T)
+        self._keep = (a, h, g, w, adj, c, sens, qs, zs, score, inv, big, c_inv, cov0, eta, tau, p)
+        return cov0
+
+    def backward(self, g0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(dJ/deta (n, 2), dJ/dtau (n, 2)) for g0 = dJ/dCov(theta0), symmetric."""
+        a, h, g, w, adj, c, sens, qs, zs, score, inv, big, c_inv, cov0, eta, tau, p = self._keep
+        k, m = self.k, self.m
+        g0 = 0.5 * (g0 + g0.T)
+        g_info = -cov0 @ g0 @ cov0  # cov0 = info^-1
+        g_c = -c_inv @ self.jac @ g_info @ self.jac.T @ c_inv  # info = J^T C^-1 J
+        g_score = big @ g_c @ big  # C = B S B
+        g_big = g_c @ big @ score + score @ big @ g_c
+        g_inv = g_big[:p, :p] + g_big[p:, p:]  # B = I2 (x) Gamma^-1
+        g_gamma = -inv @ g_inv @ inv
+        g_w = 2.0 * h * (w @ g_gamma)  # Gamma = h w^T w
+        g_adj = np.zeros_like(adj)
+        g_c_il = np.zeros_like(c)  # (n, 2, 2)
+        for src in range(4):
+            gz = 2.0 * qs[src] * (zs[src] @ g_score)  # S = sum q z^T z
+            for i in range(2):
+                block = gz[:, i * p : (i + 1) * p]
+                if src < 2:
+                    g_c_il[:, i, src] += (h / k) * np.sum(block * adj, axis=1)
+                    g_adj += (h * c[:, i, src] / k)[:, None] * block
+                    if i == src:
+                        g_w += h * block
+                        g_adj -= h * block
+                else:
+                    g_adj += (-h * m[i, src - 2] / k) * block
+        g_w += lowpass(g_adj, a)  # adj = L^T w: its adjoint is L
+        g_g = lowpass_adjoint(g_w, a) / k  # w = L g / k
+        # g = regressor(eta, tau): [tau1, tau2, eta2^2 - eta1 eta2, eta1^2 - eta1 eta2, -eta1, -eta2, -sgn, -sgn, ...]
+        e1, e2 = eta[:, 0], eta[:, 1]
+        g_tau = g_g[:, 0:2].copy()
+        g_eta = np.empty_like(eta)
+        g_eta[:, 0] = -g_g[:, 2] * e2 + g_g[:, 3] * (2.0 * e1 - e2) - g_g[:, 4]
+        g_eta[:, 1] = g_g[:, 2] * (2.0 * e2 - e1) - g_g[:, 3] * e1 - g_g[:, 5]
+        # c_il = sum_j m_ij D_jl(eta); D's entries are linear in eta (Vc) plus constants (F_v)
+        g_d = np.einsum("ij,nil->njl", m, g_c_il)  # dJ/dD_jl
+        vc = self.theta0[3]
+        g_eta[:, 0] += vc * (g_d[:, 0, 1] - 2.0 * g_d[:, 1, 0] + g_d[:, 1, 1])
+        g_eta[:, 1] += vc * (g_d[:, 0, 0] - 2.0 * g_d[:, 0, 1] + g_d[:, 1, 0])
+        return g_eta, g_tau

@@ -16,7 +16,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from wmrid.design.excitation import Basis, pose_along, wheel_motion
-from wmrid.design.information import DEFAULT_K, SensorNoise, intermediate_jacobian, predicted_covariance
+from wmrid.design.information import (
+    DEFAULT_K,
+    CovarianceGradient,
+    SensorNoise,
+    intermediate_jacobian,
+    predicted_covariance,
+    speed_sensitivity,
+)
 from wmrid.design.limits import Limits
 from wmrid.model.dynamics import RegressorForm, wheel_torque
 
@@ -50,6 +57,14 @@ class Motion:
     deta: np.ndarray
     tau: np.ndarray
     pose: np.ndarray
+
+    def every(self, stride: int) -> Motion:
+        """The motion at every ``stride``-th sample (the pose integrated on the full grid, then sampled)."""
+        if stride == 1:
+            return self
+        sl = slice(None, None, stride)
+        return Motion(self.t[sl], self.v[sl], self.w[sl], self.dv[sl], self.dw[sl], self.eta[sl], self.deta[sl],
+                      self.tau[sl], self.pose[sl])  # fmt: skip
 
     def peaks(self) -> dict[str, float]:
         """name -> the largest value over the motion of each limited quantity (:data:`wmrid.design.limits.LIMIT_NAMES`)."""
@@ -166,6 +181,8 @@ class Problem:
     def criterion_value(self, cov: np.ndarray) -> float:
         """The criterion (:data:`CRITERIA`), as a relative std (smaller is better)."""
         rel = self.relative_std(cov)
+        if not np.all(np.isfinite(rel)):
+            return math.inf
         if self.criterion == "worst":
             return float(np.max(rel))
         if self.criterion == "a":
@@ -174,11 +191,121 @@ class Problem:
         sign, logdet = np.linalg.slogdet(scaled)
         return float(np.exp(logdet / (2 * len(rel)))) if sign > 0 else math.inf
 
+    def objective_sensitivity(self, cov: np.ndarray) -> np.ndarray:
+        """d(smooth objective)/d cov (n0, n0), symmetric: what :class:`Differentiated` back-propagates."""
+        n0 = len(self.scales)
+        diag = np.clip(np.diag(cov), 1e-300, None)
+        if self.criterion == "worst":
+            rel16 = (diag / self.scales**2) ** 8
+            return np.diag(rel16 / (2.0 * diag * np.sum(rel16)))
+        if self.criterion == "a":
+            rel2 = diag / self.scales**2
+            return np.diag(1.0 / (2.0 * n0 * np.mean(rel2) * self.scales**2))
+        return np.linalg.inv(cov) / (2.0 * n0)
+
     def smooth_objective(self, cov: np.ndarray) -> float:
         """What the local search minimises: the log of the criterion, the max made smooth (a 16-norm) so that its
         gradient does not jump between parameters."""
         if self.criterion != "worst":
-            return math.log(self.criterion_value(cov))
+            value = self.criterion_value(cov)
+            return math.log(value) if math.isfinite(value) and value > 0 else math.inf
         rel = self.relative_std(cov)
         top = float(np.max(rel))
+        if not (math.isfinite(top) and top > 0):
+            return math.inf
         return math.log(top) + math.log(float(np.sum((rel / top) ** 16))) / 16.0
+
+
+def _cumtrapz(y: np.ndarray, h: float) -> np.ndarray:
+    """The running trapezoid integral along axis 0, starting at 0 (the pose's integration, :func:`pose_along`)."""
+    out = np.zeros_like(y)
+    out[1:] = np.cumsum(0.5 * h * (y[1:] + y[:-1]), axis=0)
+    return out
+
+
+class Differentiated:
+    """A problem's motion with its Jacobians with respect to the coefficients x = coefficients.ravel() (4N,), for
+    the search's gradients: eta, deta, tau (n, 2, 4N) and the pose's x, y (n, 4N); the criterion's gradient by
+    :class:`wmrid.design.information.CovarianceGradient`."""
+
+    def __init__(self, problem: Problem) -> None:
+        self.problem = problem
+        basis, n = problem.basis, problem.harmonics
+        perm = np.array([ab * n + j for j in range(n) for ab in (0, 1)])  # x-local (harmonic, a/b) -> basis column
+        self.p = basis.s[:, None] * basis.phi[:, perm]
+        self.dp = basis.ds[:, None] * basis.phi[:, perm] + basis.s[:, None] * basis.dphi[:, perm]
+        zero = np.zeros_like(self.p)
+        r, b = problem.r, problem.b
+        self.j_eta = np.stack([np.hstack([self.p, b * self.p]), np.hstack([self.p, -b * self.p])], axis=1) / r
+        self.j_deta = np.stack([np.hstack([self.dp, b * self.dp]), np.hstack([self.dp, -b * self.dp])], axis=1) / r
+        self.j_v, self.j_w = np.hstack([self.p, zero]), np.hstack([zero, self.p])
+        theta0 = problem.theta0
+        self.big_m = np.linalg.inv(np.array([[theta0[0], theta0[1]], [theta0[1], theta0[2]]]))
+        self.grad = CovarianceGradient(theta0, problem.form, problem.noise, problem.k, problem.jac, problem.given_info)
+
+    def tau_jacobian(self, motion: Motion) -> np.ndarray:
+        d = speed_sensitivity(motion.eta, self.problem.theta0)  # (n, 2, 2)
+        return np.einsum("ij,njx->nix", self.big_m, self.j_deta) + np.einsum("nil,nlx->nix", d, self.j_eta)
+
+    def objective(self, x: np.ndarray) -> tuple[float, np.ndarray]:
+        """(the smooth objective, its gradient (4N,)) at x."""
+        pb = self.problem
+        motion = pb.motion_of(x.reshape(2, -1, 2))
+        try:
+            cov = self.grad.forward(motion.eta, motion.tau, pb.h)
+        except np.linalg.LinAlgError:
+            return 1e6, np.zeros_like(x)
+        value = pb.smooth_objective(cov)
+        if not math.isfinite(value):
+            return 1e6, np.zeros_like(x)
+        g0 = pb.objective_sensitivity(cov)
+        g_eta, g_tau = self.grad.backward(g0)
+        j_tau = self.tau_jacobian(motion)
+        return value, np.einsum("ni,nix->x", g_eta, self.j_eta) + np.einsum("ni,nix->x", g_tau, j_tau)
+
+    def constraint_jacobian(self, x: np.ndarray, stride: int = 1) -> np.ndarray:
+        """d(sample constraints)/dx, rows in the order of :func:`wmrid.design.search.sample_constraints` (which
+        takes every ``stride``-th sample; the separability constraints use them all)."""
+        pb = self.problem
+        full = pb.motion_of(x.reshape(2, -1, 2))
+        b = pb.bounds
+        h = pb.h
+        nx = x.size
+        sl = slice(None, None, stride)
+        motion = full.every(stride)
+        j_eta, j_deta = self.j_eta[sl], self.j_deta[sl]
+        rows = [
+            -(np.sign(motion.eta)[:, :, None] * j_eta).reshape(-1, nx) / b["max_wheel_speed"],
+            -(np.sign(motion.deta)[:, :, None] * j_deta).reshape(-1, nx) / b["max_wheel_accel"],
+        ]
+        phi = full.pose[:, 2]
+        j_phi = _cumtrapz(self.j_w, h)
+        cos, sin = np.cos(phi)[:, None], np.sin(phi)[:, None]
+        v = full.v[:, None]
+        j_x = _cumtrapz(self.j_v * cos - v * sin * j_phi, h)[sl]
+        j_y = _cumtrapz(self.j_v * sin + v * cos * j_phi, h)[sl]
+        rows += [-np.sign(motion.pose[:, 0])[:, None] * j_x / b["area_x"],
+                 -np.sign(motion.pose[:, 1])[:, None] * j_y / b["area_y"]]  # fmt: skip
+        if "max_torque" in b:
+            j_tau = self.tau_jacobian(full)[sl]
+            rows.append(-(np.sign(motion.tau)[:, :, None] * j_tau).reshape(-1, nx) / b["max_torque"])
+        if "max_speed" in b:
+            rows.append(-np.sign(motion.v)[:, None] * self.j_v[sl] / b["max_speed"])
+        if "max_turn_rate" in b:
+            rows.append(-np.sign(motion.w)[:, None] * self.j_w[sl] / b["max_turn_rate"])
+        motion = full
+        top = pb.limits.max_wheel_speed
+        for j in range(2):
+            for sign in (1.0, -1.0):
+                z = (sign * motion.eta[:, j] - 0.1 * top) / (0.025 * top)
+                share = float(np.mean(0.5 * (1.0 + np.tanh(z))))
+                d_share = np.mean((0.5 * (1.0 - np.tanh(z) ** 2) * sign / (0.025 * top))[:, None] * self.j_eta[:, j, :], axis=0)
+                rows.append((DIRECTION_SHARE / max(share, 1e-9) ** 2 * d_share)[None, :])
+        vc, wc = motion.v - motion.v.mean(), motion.w - motion.w.mean()
+        sv, sw = float(vc @ vc), float(wc @ wc)
+        norm = math.sqrt(max(sv * sw, 1e-300))
+        corr = float(vc @ wc) / norm
+        jv, jw = self.j_v - self.j_v.mean(axis=0), self.j_w - self.j_w.mean(axis=0)
+        d_corr = (wc @ jv + vc @ jw) / norm - corr * ((vc @ jv) / max(sv, 1e-300) + (wc @ jw) / max(sw, 1e-300))
+        rows.append((-np.sign(corr) / CORRELATION * d_corr)[None, :])
+        return np.vstack(rows)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize
 
-from wmrid.design.problem import Motion, Problem
+from wmrid.design.problem import Differentiated, Motion, Problem
 
 
 @dataclass(frozen=True)
@@ -64,10 +64,16 @@ def constraint_values(problem: Problem, motion: Motion) -> np.ndarray:
     return 1.0 - np.array(ratios)
 
 
+#: The local search constrains every CONSTRAINT_STRIDE-th sample of the design grid (1: all of them; every other
+#: one was tried: half the subproblem's size, but its optima then break the bound between samples and are refused).
+CONSTRAINT_STRIDE = 1
+
+
 def sample_constraints(problem: Problem, motion: Motion) -> np.ndarray:
     """1 - |value| / bound at every sample of every limited quantity (>= 0: kept): smooth in the coefficients, as
     SLSQP needs (the peaks alone jump from one sample to another)."""
     b = problem.bounds
+    motion = motion.every(CONSTRAINT_STRIDE)
     parts = [np.abs(motion.eta).ravel() / b["max_wheel_speed"], np.abs(motion.deta).ravel() / b["max_wheel_accel"],
              np.abs(motion.pose[:, 0]) / b["area_x"], np.abs(motion.pose[:, 1]) / b["area_y"]]  # fmt: skip
     if "max_torque" in b:
@@ -145,14 +151,24 @@ def search(problem: Problem, seed: int = 0, starts: int = 32, refine: int = 4, m
         motion, _ = cache.at(x)
         return sample_constraints(problem, motion)
 
+    diff = Differentiated(problem)
+
     def refined(value0: float, x0: np.ndarray, iterations: int) -> tuple[float, np.ndarray]:
-        """SLSQP from x0 for at most ``iterations``; x0 itself when the result is worse or leaves the limits."""
-        scale = np.full_like(x0, float(np.max(np.abs(x0))))
+        """SLSQP from x0 for at most ``iterations`` (analytic gradients of the objective and of every constraint);
+        x0 itself when the result is worse or leaves the limits."""
+        scale = float(np.max(np.abs(x0)))
+
+        def objective(z: np.ndarray) -> tuple[float, np.ndarray]:
+            value, grad = diff.objective(z * scale)
+            cache.evaluations += 1
+            return value, grad * scale
+
         try:
             out = minimize(
-                lambda z: fun(z * scale), x0 / scale, method="SLSQP",
-                constraints=[{"type": "ineq", "fun": lambda z: sample_cons(z * scale)}],
-                options={"maxiter": iterations, "ftol": 1e-7},
+                objective, x0 / scale, jac=True, method="SLSQP",
+                constraints=[{"type": "ineq", "fun": lambda z: sample_cons(z * scale),
+                              "jac": lambda z: diff.constraint_jacobian(z * scale, CONSTRAINT_STRIDE) * scale}],
+                options={"maxiter": iterations, "ftol": 1e-9},
             )  # fmt: skip
             x = out.x * scale
         except (ValueError, np.linalg.LinAlgError):

@@ -37,10 +37,13 @@ from wmrid.estimators.diagnostics import (
 )
 from wmrid.estimators.plausibility import units_check
 
+#: The start of the warning that names ``wmrid plan`` when a parameter is poorly determined (issue 29).
+PLAN_HINT = "to determine "
+
 #: Warnings :func:`settle` owns: dropped from the stages' warnings and made again from the final numbers.
 OWNED = (" is poorly determined by this log", "is not positive definite, which no robot has",
          "friction cannot push; check signs", "drag cannot push; check signs", "unit check: ",
-         "the estimated inertia matrix M is not positive definite")  # fmt: skip
+         "the estimated inertia matrix M is not positive definite", PLAN_HINT)  # fmt: skip
 
 #: Above this relative std a parameter cannot be told from zero: "not determined by this log".
 NOT_DETERMINED = 1.0
@@ -149,9 +152,19 @@ def settle(result: Any, radius: float | None = None) -> Any:
     diagnostics["flagged"] = flagged_names(result.parameters, diagnostics)
     kept = [w for w in result.warnings if not any(key in w for key in OWNED)]
     unit_texts = [f"unit check: {f['text']}" for f in units["findings"]]
-    warnings = (*unit_texts, *kept, *poorly_texts, *physics_warnings(result.parameters))
+    hint = [plan_hint(poorly)] if poorly else []
+    warnings = (*unit_texts, *kept, *poorly_texts, *hint, *physics_warnings(result.parameters))
     out = replace(result, diagnostics=diagnostics, warnings=warnings)
     return replace(out, verdict=verdict(out))
+
+
+def plan_hint(poorly: list[str]) -> str:
+    """The warning that says how to get the poorly determined parameters: a drive designed for them."""
+    return (
+        f"{PLAN_HINT}{_join(poorly)}, drive the robot as wmrid plan designs it: save this result (--format json -o "
+        "run.json), then wmrid plan --robot ROBOT --given run.json -o next.csv adds what this log holds and targets "
+        "the rest"
+    )
 
 
 def _reason(names: tuple[str, ...], result: Any) -> str:

@@ -1,0 +1,178 @@
+"""``wmrid report plan.json -o plan.html``: a plan on one page -- the verdict, the planned path inside the area, the
+reference and the wheels' speeds, accelerations and torques against their limits over time, and the predicted std
+of each parameter next to the baselines'.  Self-contained HTML (inline SVG), or Markdown without the figures."""
+
+from __future__ import annotations
+
+import html
+import re
+from typing import Any
+
+import numpy as np
+
+from wmrid.reporting.plan_view import BASELINE_TEXT, summary
+
+
+def plan_figures(plan: Any) -> dict[str, Any]:
+    """caption -> matplotlib Figure: the path, the reference (v, w), the wheel speeds, accelerations and torques with
+    their limits (dashed: the limit; dotted: the plan's bound after the margin), the predicted relative std."""
+    from wmrid.design.excitation import wheel_motion
+    from wmrid.model.dynamics import wheel_torque
+    from wmrid.reporting.figures import FIGSIZE, FIGSIZE_STACKED, _new_figure
+
+    s = plan.samples(max(plan.settings["rate"], 50.0))
+    t = s["t"]
+    v, w, dv, dw = plan.excitation.evaluate(t)
+    eta, deta = wheel_motion(v, w, dv, dw, plan.r, plan.b)
+    theta0 = np.array([plan.predicted[n]["nominal"] for n in ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")])
+    tau = wheel_torque(eta, deta, theta0)
+    lim = plan.limits
+    keep = 1.0 - lim.margin
+    out: dict[str, Any] = {}
+
+    fig = _new_figure(FIGSIZE)
+    ax = fig.subplots()
+    wx, wy = lim.area[0] / 2.0, lim.area[1] / 2.0
+    ax.plot([-wx, wx, wx, -wx, -wx], [-wy, -wy, wy, wy, -wy], "k--", lw=1, label="area")
+    bx, by = wx - lim.footprint, wy - lim.footprint
+    ax.plot([-bx, bx, bx, -bx, -bx], [-by, -by, by, by, -by], "k:", lw=1, label="axle midpoint's room (robot's reach)")
+    ax.plot(s["x"], s["y"], color="C0", lw=1.2, label="planned path")
+    ax.plot(0.0, 0.0, "o", color="C2", ms=8, label="start (facing +x)")
+    ax.plot(s["x"][-1], s["y"][-1], "s", color="C3", ms=7, label="end")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper right", fontsize="small")
+    out["Planned path inside the area"] = fig
+
+    fig = _new_figure(FIGSIZE_STACKED)
+    ax1, ax2 = fig.subplots(2, 1, sharex=True)
+    ax1.plot(t, v, color="C0")
+    ax1.set_ylabel("v (m/s)")
+    ax2.plot(t, w, color="C4")
+    ax2.set_ylabel("omega (rad/s)")
+    for ax, value in ((ax1, lim.max_speed), (ax2, lim.max_turn_rate)):
+        if value is not None:
+            for sign in (1, -1):
+                ax.axhline(sign * value, color="k", ls="--", lw=0.8)
+        ax.grid(alpha=0.3)
+    ax2.set_xlabel("t (s)")
+    out["Reference: forward speed and turn rate"] = fig
+
+    for caption, data, value, unit in (
+        ("Wheel speeds against their limit", eta, lim.max_wheel_speed, "rad/s"),
+        ("Wheel accelerations against their limit", deta, lim.max_wheel_accel, "rad/s^2"),
+        ("Wheel torques (nominal model) against their limit", tau, lim.max_torque, "N m"),
+    ):
+        fig = _new_figure(FIGSIZE)
+        ax = fig.subplots()
+        ax.plot(t, data[:, 0], color="C0", lw=1, label="right")
+        ax.plot(t, data[:, 1], color="C1", lw=1, label="left")
+        if value is not None:
+            for sign in (1, -1):
+                ax.axhline(sign * value, color="k", ls="--", lw=0.8, label="limit" if sign > 0 else None)
+                ax.axhline(sign * keep * value, color="k", ls=":", lw=0.8, label="planned bound" if sign > 0 else None)
+        ax.set_xlabel("t (s)")
+        ax.set_ylabel(unit)
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper right", fontsize="small")
+        out[caption] = fig
+
+    fig = _new_figure(FIGSIZE)
+    ax = fig.subplots()
+    names = list(plan.predicted)
+    x = np.arange(len(names))
+    width = 0.8 / (1 + len(plan.baselines))
+    ax.bar(x, [100 * plan.predicted[n]["relative"] for n in names], width, label="this plan", color="C2")
+    for i, (name, base) in enumerate(plan.baselines.items()):
+        values = [100 * base["relative"][n] if base["relative"][n] is not None else np.nan for n in names]
+        ax.bar(x + (i + 1) * width, values, width, label=BASELINE_TEXT.get(name, name), color=f"C{i}")
+    ax.set_yscale("log")
+    ax.set_xticks(x + 0.4 - width / 2, names)
+    ax.set_ylabel("predicted std, % of scale")
+    ax.grid(alpha=0.3, axis="y")
+    ax.legend(loc="upper left", fontsize="small")
+    out["Predicted relative std: this plan and the baselines (same duration and limits)"] = fig
+    return out
+
+
+_CSS = (
+    "body{font-family:system-ui,sans-serif;max-width:1100px;margin:1em auto;padding:0 1em;color:#222}"
+    "table{border-collapse:collapse;margin:.5em 0}td,th{padding:.2em .6em;border-bottom:1px solid #ddd;"
+    "text-align:right;white-space:nowrap}td:first-child,th:first-child{text-align:left}"
+    ".scroll{overflow-x:auto}figure{margin:1em 0}figure svg{max-width:100%;height:auto}"
+    "figcaption{font-weight:600;margin-bottom:.3em}.small{color:#555}"
+)
+
+
+def tables(data: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """The plan's tables (header, rows) from its JSON."""
+    base_names = list(data["baselines"])
+    predicted = {
+        "header": ["parameter", "nominal", "predicted std", "relative", "scale", *[f"{b} (relative)" for b in base_names]],
+        "rows": [[name, f"{p['nominal']:.4g}", f"{p['std']:.3g}", f"{100 * p['relative']:.3g} %",
+                  f"{p['scale']:.3g} ({p['scale_from']})",
+                  *[_pct(data["baselines"][b]["relative"].get(name)) for b in base_names]]
+                 for name, p in data["predicted"].items()],
+    }  # fmt: skip
+    limits = {
+        "header": ["limit", "value", "unit", "plan's peak", "share of the limit", "from"],
+        "rows": [[name, f"{u['limit']:.3g}", u["unit"], f"{u['peak']:.3g}", f"{100 * u['share']:.0f} %",
+                  data["limits"]["sources"].get("area" if name.startswith("area") else name, "-")]
+                 for name, u in data["limits_used"].items() if u["limit"] is not None],
+    }  # fmt: skip
+    return {"Predicted precision": predicted, "Limits": limits}
+
+
+def _pct(x: Any) -> str:
+    return "-" if x is None else f"{100 * x:.3g} %"
+
+
+def to_html(plan: Any) -> str:
+    """One self-contained page (inline SVG, inline style, nothing fetched)."""
+    from wmrid.reporting.figures import render
+
+    data = plan.to_dict()
+    parts = [
+        "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>",
+        "<meta name='viewport' content='width=device-width, initial-scale=1'>",
+        f"<title>wmrid plan: {html.escape(data['robot'])}</title><style>{_CSS}</style></head><body>",
+        f"<header><h1>wmrid plan</h1><p class='small'>robot {html.escape(data['robot'])}, "
+        f"{data['settings']['duration']:g} s, seed {data['settings']['seed']}</p>",
+        "<section class='verdict'>" + "".join(f"<p><strong>{html.escape(s)}</strong></p>" for s in summary(data)),
+        "</section></header>",
+    ]
+    for title, table in tables(data).items():
+        head = "".join(f"<th>{html.escape(str(h))}</th>" for h in table["header"])
+        body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in row) + "</tr>"
+                       for row in table["rows"])  # fmt: skip
+        parts.append(f"<h2>{html.escape(title)}</h2><div class='scroll'><table><thead><tr>{head}</tr></thead>"
+                     f"<tbody>{body}</tbody></table></div>")  # fmt: skip
+    parts.append("<h2>Figures</h2>")
+    for caption, fig in plan_figures(plan).items():
+        text = render(fig, "svg").decode("utf-8")
+        text = text[text.index("<svg") :]
+        text = re.sub(r"<metadata>.*?</metadata>", "", text, flags=re.S)
+        parts.append(f"<figure><figcaption>{html.escape(caption)}</figcaption>{text}</figure>")
+    notes = [*data.get("warnings", ())]
+    noise = data["noise"]
+    notes.append(
+        f"The prediction assumes white noise of {noise['eta_std']:.3g} rad/s and {noise['tau_std']:.3g} N m per sample "
+        f"at {noise['rate']:g} Hz ({data['settings'].get('noise_source', 'given')}), a robot that tracks the reference "
+        "on its nominal model, and identification with wmrid's observer; a coloured disturbance (casters, slip) or a "
+        "controller that reacts to the noise make the achieved std larger."
+    )
+    parts += ["<h2>Notes</h2><ul>", *[f"<li>{html.escape(n)}</li>" for n in notes], "</ul></body></html>"]
+    return "\n".join(parts)
+
+
+def to_markdown(plan: Any) -> str:
+    data = plan.to_dict()
+    lines = [f"# wmrid plan: {data['robot']}", "", *summary(data), ""]
+    for title, table in tables(data).items():
+        lines += [f"## {title}", "", "| " + " | ".join(table["header"]) + " |", "|" + "---|" * len(table["header"])]
+        lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in table["rows"]]
+        lines.append("")
+    lines += [f"- {w}" for w in data.get("warnings", ())]
+    return "\n".join(lines) + "\n"
