@@ -6,6 +6,7 @@ its ground truth together.  ``wmrid simulate`` is these two functions with its f
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -13,7 +14,7 @@ from wmrid.api.inputs import load_robot
 from wmrid.core.errors import UsageError, option
 from wmrid.model.robot import Payload, Robot
 
-__all__ = ["SimulationRun", "simulate", "write_simulation"]
+__all__ = ["SimulationRun", "load_reference", "simulate", "write_simulation"]
 
 
 @dataclass(frozen=True)
@@ -67,11 +68,42 @@ def _change(truth_params, load, duration, load_at, drop_at, friction_fault, faul
     return change, change.before
 
 
+def load_reference(reference: Any, *, topic: str | None = None) -> Any:
+    """The :class:`wmrid.sim.reference.Reference` of ``reference``: a file (.csv, .parquet or .mcap, read by
+    :func:`wmrid.io.reference_files.read_reference`, recorded with its SHA-256), a mapping with ``t`` (s), ``v``
+    (m/s), ``omega`` (rad/s), a tuple (t, v, omega) of (n,) arrays, or a Reference.  ``topic``: an MCAP file's
+    Twist topic (default: the only one)."""
+    from wmrid.sim.reference import Reference
+
+    if isinstance(reference, Reference):
+        return reference
+    if isinstance(reference, (str, os.PathLike)):
+        from wmrid.io.digest import file_digests
+        from wmrid.io.reference_files import read_reference
+
+        t, v, omega = read_reference(reference, topic=topic)
+        sha256 = file_digests(os.fspath(reference))[0]["sha256"]
+        return Reference.from_arrays(t, v, omega, source=os.fspath(reference), sha256=sha256)
+    if topic is not None:
+        raise UsageError(f"{option('reference_topic')} applies to an MCAP reference file only")
+    if isinstance(reference, Mapping):
+        missing = [k for k in ("t", "v", "omega") if k not in reference]
+        if missing:
+            raise UsageError(f"{option('reference')}: no {', '.join(map(repr, missing))}; give t, v and omega")
+        return Reference.from_arrays(reference["t"], reference["v"], reference["omega"])
+    if isinstance(reference, (tuple, list)) and len(reference) == 3:
+        return Reference.from_arrays(*reference)
+    raise UsageError(
+        f"{option('reference')} must be a file, a mapping of t, v, omega or a tuple (t, v, omega), "
+        f"got {type(reference).__name__}"
+    )
+
+
 def simulate(
     robot: str | os.PathLike[str] | Robot = "paper",
     *,
-    trajectory: str = "sinusoid",
-    duration: float = 40.0,
+    trajectory: str | None = None,
+    duration: float | None = None,
     rate: float = 1000.0,
     seed: int = 0,
     payload: str | Payload | None = None,
@@ -91,9 +123,12 @@ def simulate(
     torque_limit: float | None = None,
     gear_ratio: float | None = None,
     rotor_inertia: float | None = None,
+    reference: Any = None,
+    reference_topic: str | None = None,
 ) -> SimulationRun:
     """Simulate ``robot`` (its CAD set is the truth; the controller uses its nominal set) tracking ``trajectory``
-    for ``duration`` s, logged at ``rate`` Hz (control at 1 kHz), with white noise (``eta_noise`` rad/s,
+    (None: "sinusoid") or a ``reference`` (a file or arrays, :func:`load_reference`; not both) for ``duration`` s (None:
+    40 s, or the whole reference), logged at ``rate`` Hz (control at 1 kHz), with white noise (``eta_noise`` rad/s,
     ``tau_noise`` N m), a coloured caster disturbance (``caster`` N m, ``caster_time`` s), encoder quantisation
     (``encoder_cpr``), a ``payload`` ("MASS[@X,Y]" or a :class:`Payload`), and at most one change during the run:
     the payload loaded at ``load_at`` or dropped at ``drop_at`` s, or a friction fault ("right:3") at ``fault_at`` s.
@@ -116,6 +151,19 @@ def simulate(
     elif payload_inertia:
         raise UsageError(f"{option('payload_inertia')} needs {option('payload', 'MASS[@X,Y]')}")
     load_at, drop_at, fault_at = (None if v is None else str(v) for v in (load_at, drop_at, fault_at))
+    ref = None
+    if reference is not None:
+        if trajectory is not None:
+            raise UsageError(
+                f"{option('reference')} and {option('trajectory', trajectory)}: the run tracks one reference; give "
+                "one of them"
+            )
+        ref = load_reference(reference, topic=reference_topic)
+    elif reference_topic is not None:
+        raise UsageError(f"{option('reference_topic')} needs {option('reference')} (an MCAP file)")
+    from wmrid.sim.simulate import plan_duration
+
+    duration = plan_duration(duration, ref)
     change, truth_params = _change(robot_obj.reference, load, duration, load_at, drop_at, friction_fault, fault_at)
     noise = NoiseSettings(
         eta_std=eta_noise, tau_std=tau_noise, caster_std=caster, caster_time=caster_time, encoder_cpr=encoder_cpr
@@ -131,6 +179,7 @@ def simulate(
         sim = simulate_multibody(
             robot_obj.reference, robot_obj.nominal, casters=robot_obj.casters, settings=mb_settings,
             trajectory=trajectory, duration=duration, rate=rate, noise=noise, seed=seed, change=change, payload=load,
+            reference=ref,
         )  # fmt: skip
     elif engine == "reduced":
         given = {"floor_friction": floor_friction, "caster_resistance": caster_resistance, "torque_limit": torque_limit}
@@ -142,7 +191,7 @@ def simulate(
                 )
         sim = run_reduced(
             truth_params, robot_obj.nominal, trajectory=trajectory, duration=duration, rate=rate, noise=noise,
-            seed=seed, change=change,
+            seed=seed, change=change, reference=ref,
         )  # fmt: skip
     else:
         raise UsageError(f"{option('engine')} must be reduced or mujoco, got {engine!r}")

@@ -52,15 +52,21 @@ from wmrid.reporting.terminal import console
 @app.command(
     epilog="Examples:\n\n"
     "wmrid simulate -o sim.csv --duration 20 --eta-noise 0.01\n\n"
-    "wmrid simulate -o loaded.mcap --payload 25@0.1,-0.05 --load-at 30"
+    "wmrid simulate -o loaded.mcap --payload 25@0.1,-0.05 --load-at 30\n\n"
+    "wmrid simulate -o drive.csv --reference plan.csv"
 )
 def simulate(
     output: Annotated[
         str, typer.Option("--output", "-o", help="Log to write: .csv, .parquet or .mcap (- for CSV on stdout).")
     ],
     robot: Annotated[str, typer.Option(help="Robot TOML file or built-in name; its CAD set is the truth.")] = "paper",
-    trajectory: Annotated[Trajectory, typer.Option(help="Reference trajectory.")] = Trajectory.sinusoid,
-    duration: Annotated[float, typer.Option(help="Duration, s, > 0.")] = 40.0,
+    trajectory: Annotated[
+        Trajectory | None, typer.Option(help="Built-in reference trajectory; default sinusoid.", show_default=False)
+    ] = None,
+    duration: Annotated[
+        float | None,
+        typer.Option(help="Duration, s, > 0; default 40, or the whole --reference (at most that).", show_default=False),
+    ] = None,
     rate: Annotated[
         float, typer.Option(help="Log rate, Hz, > 0, a whole number of 1 ms control periods per sample.")
     ] = 1000.0,
@@ -116,6 +122,17 @@ def simulate(
         float | None,
         typer.Option(help="mujoco: clip each wheel torque to +-this, N m, > 0.", rich_help_panel="Multibody prototype"),
     ] = None,
+    reference: Annotated[
+        str | None,
+        typer.Option(
+            help="Track this reference drive instead of --trajectory: a .csv or .parquet file with columns t (s), "
+            "v (m/s), omega (rad/s), or an .mcap of geometry_msgs Twist / TwistStamped messages (e.g. from wmrid "
+            "plan); it starts at the origin facing +x."
+        ),
+    ] = None,
+    reference_topic: Annotated[
+        str | None, typer.Option(help="The Twist topic of an MCAP --reference; default: its only one.")
+    ] = None,
 ) -> None:
     """Simulate the paper's virtual prototype and write a log plus its ground truth (<log>.truth.json).
 
@@ -129,14 +146,15 @@ def simulate(
     from wmrid.api.simulation import write_simulation
 
     with activity("wmrid simulate") as stage:
-        stage(f"{duration:g} s on the {engine.value} model")
+        what = f"{duration:g} s" if duration is not None else "the reference" if reference is not None else "40 s"
+        stage(f"{what} on the {engine.value} model")
         run = run_simulate(
-            robot, trajectory=trajectory.value, duration=duration, rate=rate, seed=seed, payload=payload,
-            payload_inertia=payload_inertia, eta_noise=eta_noise, tau_noise=tau_noise, caster=caster,
-            caster_time=caster_time, encoder_cpr=encoder_cpr, load_at=load_at, drop_at=drop_at,
+            robot, trajectory=None if trajectory is None else trajectory.value, duration=duration, rate=rate,
+            seed=seed, payload=payload, payload_inertia=payload_inertia, eta_noise=eta_noise, tau_noise=tau_noise,
+            caster=caster, caster_time=caster_time, encoder_cpr=encoder_cpr, load_at=load_at, drop_at=drop_at,
             friction_fault=friction_fault, fault_at=fault_at, engine=engine.value, floor_friction=floor_friction,
             caster_resistance=caster_resistance, torque_limit=torque_limit, gear_ratio=gear_ratio,
-            rotor_inertia=rotor_inertia,
+            rotor_inertia=rotor_inertia, reference=reference, reference_topic=reference_topic,
         )  # fmt: skip
         stage(f"writing {output}")
         truth_path = write_simulation(run, output, force=force)

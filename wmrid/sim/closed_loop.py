@@ -14,15 +14,49 @@ if TYPE_CHECKING:
 
 from wmrid.model.kernels import sign
 
-KIND = {"sinusoid": 0, "reversing": 1}
+#: Trajectory kinds of the kernels: the built-ins in closed form, and a table (:mod:`wmrid.sim.reference`).
+KIND = {"sinusoid": 0, "reversing": 1, "reference": 2}
+
+
+@numba.njit(cache=True, nogil=True)
+def table_state(traj, t):
+    """The state of a tabulated reference (kind 2) at time t s: its row when t is on the table's grid (within 1e-6
+    of a step), else the linear interpolation of the two rows around t; before the first row the first, after the
+    last the last.  traj = [step T s, n_rows, n_rows x 7 values row by row] (:func:`wmrid.sim.reference.pack_table`).
+    """
+    step = traj[0]
+    n_rows = int(traj[1])
+    u = t / step
+    k = math.floor(u + 0.5)
+    if abs(u - k) <= 1e-6:  # on the grid (the control times k T)
+        i = min(max(int(k), 0), n_rows - 1)
+        frac = 0.0
+    elif u <= 0.0:
+        i, frac = 0, 0.0
+    elif u >= n_rows - 1:
+        i, frac = n_rows - 1, 0.0
+    else:
+        i = math.floor(u)
+        frac = u - i
+    a = 2 + 7 * i
+    if frac == 0.0:
+        return traj[a], traj[a + 1], traj[a + 2], traj[a + 3], traj[a + 4], traj[a + 5], traj[a + 6]
+    g = 1.0 - frac
+    return (g * traj[a] + frac * traj[a + 7], g * traj[a + 1] + frac * traj[a + 8],
+            g * traj[a + 2] + frac * traj[a + 9], g * traj[a + 3] + frac * traj[a + 10],
+            g * traj[a + 4] + frac * traj[a + 11], g * traj[a + 5] + frac * traj[a + 12],
+            g * traj[a + 6] + frac * traj[a + 13])  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
 def reference_state(kind, traj, t, xr_int, yr_int):
     """Reference at time t: (x_r m, y_r m, phi_r rad, v_r m/s, w_r rad/s, v_r' m/s^2, w_r' rad/s^2).
 
-    For ``reversing`` x_r, y_r are the kernel's integrated values, passed in as xr_int, yr_int.
+    kind 0 sinusoid, 1 reversing, 2 a table (:func:`table_state`).  For ``reversing`` x_r, y_r are the kernel's
+    integrated values, passed in as xr_int, yr_int (the other kinds ignore them).
     """
+    if kind == 2:
+        return table_state(traj, t)
     if kind == 0:
         amp, lam, v0, dv, period = traj[0], traj[1], traj[2], traj[3], traj[4]
         kx = 2.0 * math.pi / lam
@@ -145,7 +179,7 @@ def closed_loop_kernel(kind, traj, plant, ctrl, gains, period, substeps, n_log, 
                        caster_time, plant_after=None, switch=-1):  # fmt: skip
     """Run the closed loop; all arguments plain scalars / float64 arrays.
 
-    kind 0 sinusoid / 1 reversing; traj, plant (10,), ctrl (10,), gains (4,) as documented above;
+    kind 0 sinusoid / 1 reversing / 2 table; traj, plant (10,), ctrl (10,), gains (4,) as documented above;
     period: control period T (s); substeps: RK4 steps per control period; n_log: number of log samples;
     every: control periods per log period; caster_z (n_ctrl, 2) standard normals, n_ctrl = (n_log-1)*every+1;
     caster_std (N m), caster_time (s) of the Ornstein-Uhlenbeck disturbance.

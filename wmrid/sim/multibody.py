@@ -48,6 +48,7 @@ import numpy as np
 from wmrid.core.errors import UsageError, option
 from wmrid.model.robot import Caster, Payload, PhysicalParameters, default_casters
 from wmrid.sim.closed_loop import KIND, control_torque, reference_state, reversing_advance
+from wmrid.sim.reference import Reference
 from wmrid.sim.scenario import NoiseSettings, PlantChange, positive_number
 from wmrid.sim.simulate import SimulatedLog, plan_run
 
@@ -350,15 +351,17 @@ def simulate_multibody(
     *,
     casters: tuple[Caster, ...] | None = None,
     settings: MultibodySettings = MultibodySettings(),
-    trajectory: str = "sinusoid",
-    duration: float = 40.0,
+    trajectory: str | None = None,
+    duration: float | None = None,
     rate: float = 1000.0,
     noise: NoiseSettings = NoiseSettings(),  # noqa: B008 - frozen, so one shared default is safe
     seed: int = 0,
     change: PlantChange | None = None,
     payload: Payload | None = None,
+    reference: Reference | None = None,
 ) -> SimulatedLog:
-    """Simulate the closed loop on the MuJoCo prototype; arguments as :func:`wmrid.sim.simulate.simulate`.
+    """Simulate the closed loop on the MuJoCo prototype; arguments as :func:`wmrid.sim.simulate.simulate` (a
+    ``reference`` is tracked from the origin facing +x, as there).
 
     ``true`` is the robot WITHOUT ``payload``: the payload is its own welded body (carried throughout, or
     loaded or dropped by ``change``, whose before/after must then be ``true`` and ``true.with_payload(payload)``).
@@ -371,7 +374,9 @@ def simulate_multibody(
         raise UsageError("settings must be MultibodySettings")
     if not isinstance(true, PhysicalParameters):
         raise UsageError("true and nominal must be PhysicalParameters")
-    run = plan_run(nominal, trajectory=trajectory, duration=duration, rate=rate, noise=noise, seed=seed)
+    run = plan_run(
+        nominal, trajectory=trajectory, duration=duration, rate=rate, noise=noise, seed=seed, reference=reference
+    )
     period, every, n, n_ctrl = run.period, run.every, run.n, run.n_ctrl
     if n_ctrl > MAX_CONTROL_PERIODS:
         raise UsageError(
@@ -413,7 +418,7 @@ def simulate_multibody(
     plant.set_joint_friction(plant0)
     m, d = plant.model, plant.data
 
-    kind = KIND[trajectory]
+    kind = KIND[run.trajectory]
     traj, ctrl, gains = run.traj, run.ctrl, run.gains
 
     # Settle at rest on the contacts, then start on the reference with its speeds (true r, b).

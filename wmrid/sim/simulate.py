@@ -57,6 +57,13 @@ reference and its wheel speeds equal to the reference's (computed with the TRUE 
   are the integrals of v_r cos phi_r, v_r sin phi_r, integrated in the kernel by RK4 (Simpson's rule,
   since the integrand depends on t only) on the plant's substep grid (error far below 1e-9 m).
 
+A reference drive given as samples (t, v, omega) -- ``simulate --reference plan.csv``, e.g. a plan of ``wmrid plan``
+-- is trajectory kind 2: ``settings["trajectory"]`` is ``"reference"`` and ``settings["trajectory_parameters"]`` its
+file, SHA-256, samples and duration; the kernel looks the reference state up in a table on the control grid built
+from cubic splines of v and omega (:mod:`wmrid.sim.reference`, which states the interpolation and integration
+errors).  It starts at the origin facing +x, the robot on it with its speeds (at rest when v(0) = omega(0) = 0); the
+run lasts the reference's length unless a shorter duration is given.
+
 Noise (:class:`NoiseSettings`): a ``numpy.random.Generator(PCG64(seed))`` draws, in this order and
 always (so each stream depends on the seed and sizes only), standard normals for the velocity noise
 (n, 2), the torque noise (n, 2) and the caster innovations (n_ctrl, 2).  The caster disturbance tau_d
@@ -90,6 +97,7 @@ from wmrid.model.robot import PhysicalParameters
 if TYPE_CHECKING:
     import pandas
 from wmrid.sim.closed_loop import KIND, closed_loop_kernel, reference_wheel_speeds
+from wmrid.sim.reference import TABLE_BYTES_PER_CONTROL_STEP, Reference, pack_table, reference_table
 from wmrid.sim.scenario import NoiseSettings, PlantChange, positive_number
 
 #: Control period used whenever the log rate is at most 1 kHz (the paper's sampling time), s.
@@ -98,6 +106,10 @@ CONTROL_PERIOD = 1e-3
 
 #: Names of the built-in reference trajectories.
 TRAJECTORIES = ("sinusoid", "reversing")
+#: The trajectory name of a run that tracks a given reference (:class:`wmrid.sim.reference.Reference`).
+REFERENCE = "reference"
+#: Duration of a run on a built-in trajectory when none is given, s.
+DEFAULT_DURATION = 40.0
 
 
 #: Parameters of each trajectory (SI units); see the module docstring for the formulas.
@@ -245,30 +257,35 @@ def simulate(
     true: PhysicalParameters,
     nominal: PhysicalParameters,
     *,
-    trajectory: str = "sinusoid",
-    duration: float = 40.0,
+    trajectory: str | None = None,
+    duration: float | None = None,
     rate: float = 1000.0,
     noise: NoiseSettings = NO_NOISE,
     seed: int = 0,
     substeps: int = 4,
     change: PlantChange | None = None,
+    reference: Reference | None = None,
 ) -> SimulatedLog:
     """Simulate the closed loop and return its log.
 
     true : plant parameters (at t = 0); nominal : what the controller believes.
-    trajectory : one of :data:`TRAJECTORIES`.  duration : s (> 0); the log has n = floor(duration * rate) + 1
-    samples at t = 0, 1/rate, ...  rate : log rate in Hz (see :func:`timing`).  noise : see
-    :class:`NoiseSettings`.  seed : non-negative int for ``numpy.random.PCG64``; same seed, same output
-    bit for bit.  substeps : RK4 steps per control period (>= 1).  change : a :class:`PlantChange` whose
-    ``before`` is ``true``, switching the plant to ``change.after`` at the first control period starting
-    at or after ``change.t``, which must come before the last sample; None (default): no change, and the
-    output is exactly that of a simulator without this option.
+    trajectory : one of :data:`TRAJECTORIES` (None: ``sinusoid``); or ``reference`` (also what None means with a
+    ``reference``): track ``reference``, samples of v and omega (:mod:`wmrid.sim.reference`), from its first sample
+    at the origin facing +x. duration : s (> 0; None: :data:`DEFAULT_DURATION`, or the reference's length, which a
+    duration may not exceed); the log has n = floor(duration * rate) + 1 samples at t = 0, 1/rate, ... rate : log
+    rate in Hz (see :func:`timing`). noise : see :class:`NoiseSettings`. seed : non-negative int for
+    ``numpy.random.PCG64``; same seed, same output bit for bit. substeps : RK4 steps per control period (>= 1).
+    change : a :class:`PlantChange` whose ``before`` is ``true``, switching the plant to ``change.after`` at the
+    first control period starting at or after ``change.t``, which must come before the last sample; None (default):
+    no change, and the output is exactly that of a simulator without this option.
     """
     if not isinstance(true, PhysicalParameters):
         raise UsageError("true and nominal must be PhysicalParameters")
     if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
         raise UsageError(f"substeps must be a whole number >= 1, got {substeps!r}")
-    run = plan_run(nominal, trajectory=trajectory, duration=duration, rate=rate, noise=noise, seed=seed)
+    run = plan_run(
+        nominal, trajectory=trajectory, duration=duration, rate=rate, noise=noise, seed=seed, reference=reference
+    )
     period, every, n, n_ctrl = run.period, run.every, run.n, run.n_ctrl
     switch = -1
     if change is not None:
@@ -286,7 +303,7 @@ def simulate(
     plant = _plant_vector(true)
     traj, ctrl, gains, caster_z = run.traj, run.ctrl, run.gains, run.caster_z
 
-    args = (KIND[trajectory], traj, plant, ctrl, gains, period, int(substeps), n, every, caster_z,
+    args = (KIND[run.trajectory], traj, plant, ctrl, gains, period, int(substeps), n, every, caster_z,
             noise.caster_std, noise.caster_time)  # fmt: skip
     if change is None:
         pose, angle, eta_true, tau_applied, refpose, dist = closed_loop_kernel(*args)
@@ -306,7 +323,8 @@ class RunPlan:
 
     period : control period T, s; every : control periods per log period; n : log samples; n_ctrl : control
     periods; eta_z, tau_z (n, 2) and caster_z (n_ctrl, 2): standard normals, drawn in that order from
-    PCG64(seed); traj, ctrl (10,), gains (4,): the kernel's reference, NOMINAL controller and gain vectors.
+    PCG64(seed); traj, ctrl (10,), gains (4,): the kernel's reference, NOMINAL controller and gain vectors;
+    trajectory_parameters: what the settings record of the trajectory (a reference's file, sha256, samples).
     """
 
     nominal: PhysicalParameters
@@ -325,6 +343,7 @@ class RunPlan:
     traj: np.ndarray
     ctrl: np.ndarray
     gains: np.ndarray
+    trajectory_parameters: dict = field(default_factory=dict)
 
     def log(
         self, true: PhysicalParameters, pose: np.ndarray, angle: np.ndarray, eta_true: np.ndarray,
@@ -341,7 +360,7 @@ class RunPlan:
         t = np.arange(self.n) * dt
         settings = {
             "trajectory": self.trajectory,
-            "trajectory_parameters": dict(TRAJECTORY_PARAMETERS[self.trajectory]),
+            "trajectory_parameters": dict(self.trajectory_parameters),
             "duration": self.duration,
             "rate": self.rate,
             "control_period": self.period,
@@ -373,16 +392,18 @@ BYTES_PER_SAMPLE = 900
 BYTES_PER_CONTROL_STEP = 32
 
 
-def check_run_memory(n: int, n_ctrl: int, duration: float, rate: float) -> None:
-    """UsageError before anything is allocated when a run of n samples (n_ctrl control steps) would need more than
-    the memory budget (:mod:`wmrid.core.limits`): ``simulate --duration 1e9`` used to die of "Unable to allocate 14.6
-    TiB"."""
+def check_run_memory(
+    n: int, n_ctrl: int, duration: float, rate: float, per_control_step: int = BYTES_PER_CONTROL_STEP
+) -> None:
+    """UsageError before anything is allocated when a run of n samples (n_ctrl control steps, ``per_control_step``
+    bytes each) would need more than the memory budget (:mod:`wmrid.core.limits`): ``simulate --duration 1e9`` used
+    to die of "Unable to allocate 14.6 TiB"."""
     from wmrid.core.limits import ENV, describe, memory_budget
 
-    need = n * BYTES_PER_SAMPLE + n_ctrl * BYTES_PER_CONTROL_STEP
+    need = n * BYTES_PER_SAMPLE + n_ctrl * per_control_step
     budget = memory_budget()
     if need > budget:
-        longest = budget / (BYTES_PER_SAMPLE + BYTES_PER_CONTROL_STEP * n_ctrl / max(n, 1)) / rate
+        longest = budget / (BYTES_PER_SAMPLE + per_control_step * n_ctrl / max(n, 1)) / rate
         raise UsageError(
             f"{option('duration')} {duration:g} s at {rate:g} Hz is {n:,} samples, about {describe(need)} of memory, "
             "beyond the "
@@ -390,17 +411,58 @@ def check_run_memory(n: int, n_ctrl: int, duration: float, rate: float) -> None:
         )
 
 
+def _run_trajectory(trajectory: str | None, duration: float | None, reference: Reference | None) -> tuple[str, float]:
+    """(trajectory name, duration s) of a run, checked: a built-in name or a reference, not both; a duration that
+    the reference covers."""
+    if reference is None:
+        name = "sinusoid" if trajectory is None else trajectory
+        if name == REFERENCE:
+            raise UsageError(f"trajectory {REFERENCE!r} needs {option('reference')} (the file or samples to track)")
+        if name not in TRAJECTORIES:
+            raise UsageError(f"unknown trajectory {name!r}; choose one of {', '.join(TRAJECTORIES)}")
+        return name, plan_duration(duration)
+    if not isinstance(reference, Reference):
+        raise UsageError(f"reference must be a wmrid.sim.reference.Reference, got {type(reference).__name__}")
+    if trajectory not in (None, REFERENCE):
+        raise UsageError(
+            f"{option('reference')} and {option('trajectory', trajectory)}: the run tracks one reference; give one "
+            "of them"
+        )
+    return REFERENCE, plan_duration(duration, reference)
+
+
+def plan_duration(duration: float | None, reference: Reference | None = None) -> float:
+    """The duration (s) of a run: ``duration`` checked (> 0, and with a ``reference`` at most its length), or when
+    None :data:`DEFAULT_DURATION` (the whole reference with one)."""
+    if reference is None:
+        return positive_number("duration", DEFAULT_DURATION if duration is None else duration)
+    longest = reference.duration
+    if duration is None:
+        return longest
+    duration = positive_number("duration", duration)
+    if duration > longest + 1e-9 * max(1.0, longest):
+        where = f"the reference {reference.source}" if reference.source else "the reference"
+        raise UsageError(
+            f"{option('duration')} {duration:g} s is longer than {where} ({longest:g} s); give at most "
+            f"{longest:g} s, or leave the duration out to run the whole reference"
+        )
+    return duration
+
+
 def plan_run(
-    nominal: PhysicalParameters, *, trajectory: str, duration: float, rate: float, noise: NoiseSettings, seed: int
-) -> RunPlan:
-    """Check a run's settings (UsageError naming the bad one) and draw its random streams; see :class:`RunPlan`."""
-    if trajectory not in TRAJECTORIES:
-        raise UsageError(f"unknown trajectory {trajectory!r}; choose one of {', '.join(TRAJECTORIES)}")
+    nominal: PhysicalParameters, *, trajectory: str | None, duration: float | None, rate: float,
+    noise: NoiseSettings, seed: int, reference: Reference | None = None,
+) -> RunPlan:  # fmt: skip
+    """Check a run's settings (UsageError naming the bad one) and draw its random streams; see :class:`RunPlan`.
+
+    trajectory : a built-in name (None: ``sinusoid``), or None / ``reference`` with a ``reference`` to track, whose
+    table on the control grid becomes the kernel's ``traj``.  duration : s; None: :data:`DEFAULT_DURATION`, or the
+    reference's length (which a duration may not exceed)."""
+    trajectory, duration = _run_trajectory(trajectory, duration, reference)
     if not isinstance(nominal, PhysicalParameters):
         raise UsageError("true and nominal must be PhysicalParameters")
     if not isinstance(noise, NoiseSettings):
         raise UsageError(f"noise must be a NoiseSettings, got {type(noise).__name__}")
-    duration = positive_number("duration", duration)
     period, every = timing(rate)
     rate = float(rate)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
@@ -409,12 +471,18 @@ def plan_run(
     if n < 2:
         raise UsageError(f"duration {duration:g} s at {rate:g} Hz gives fewer than 2 samples")
     n_ctrl = (n - 1) * every + 1
-    check_run_memory(n, n_ctrl, duration, rate)
+    per_step = BYTES_PER_CONTROL_STEP + (TABLE_BYTES_PER_CONTROL_STEP if reference is not None else 0)
+    check_run_memory(n, n_ctrl, duration, rate, per_step)
     rng = np.random.Generator(np.random.PCG64(int(seed)))
     eta_z = rng.standard_normal((n, 2))
     tau_z = rng.standard_normal((n, 2))
     caster_z = rng.standard_normal((n_ctrl, 2))
-    traj = np.array(list(TRAJECTORY_PARAMETERS[trajectory].values()), dtype=np.float64)
+    if reference is None:
+        described = dict(TRAJECTORY_PARAMETERS[trajectory])
+        traj = np.array(list(described.values()), dtype=np.float64)
+    else:
+        described = reference.describe()
+        traj = pack_table(reference_table(reference, period, n_ctrl), period)
     big_nom = model.inertia_matrix(nominal)
     ctrl = np.array(
         [big_nom[0, 0], big_nom[0, 1], big_nom[1, 1], model.coriolis_coefficient(nominal),
@@ -424,5 +492,5 @@ def plan_run(
     return RunPlan(
         nominal=nominal, trajectory=trajectory, duration=duration, rate=rate, noise=noise, seed=int(seed),
         period=period, every=every, n=n, n_ctrl=n_ctrl, eta_z=eta_z, tau_z=tau_z, caster_z=caster_z, traj=traj,
-        ctrl=ctrl, gains=gains,
+        ctrl=ctrl, gains=gains, trajectory_parameters=described,
     )  # fmt: skip
