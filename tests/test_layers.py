@@ -2,7 +2,8 @@
 
 Layers, lowest first (README "Python"): ``core`` (errors, limits, atomic outputs, the log types) -> ``model``
 (dynamics, robot, payload, predictor) -> ``io`` (readers, writers) | ``estimators`` | ``sim`` (siblings: the estimators
-never import a reader, the readers never an estimator) -> ``monitoring`` -> ``reporting`` -> ``api`` (the front door)
+never import a reader, the readers never an estimator) -> ``monitoring`` | ``design`` (``wmrid plan``: experiment design
+on the model, the simulator's built-in trajectories as its baselines) -> ``reporting`` -> ``api`` (the front door)
 -> ``cli``.  Every import counts, including those inside functions and under ``TYPE_CHECKING``.
 """
 
@@ -16,7 +17,18 @@ import pytest
 import wmrid
 
 PACKAGE = Path(wmrid.__file__).parent
-RANK = {"core": 0, "model": 1, "io": 2, "estimators": 2, "sim": 2, "monitoring": 3, "reporting": 4, "api": 5, "cli": 6}
+RANK = {
+    "core": 0,
+    "model": 1,
+    "io": 2,
+    "estimators": 2,
+    "sim": 2,
+    "monitoring": 3,
+    "design": 3,
+    "reporting": 4,
+    "api": 5,
+    "cli": 6,
+}
 
 
 def _layer(module: str) -> str | None:

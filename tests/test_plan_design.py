@@ -50,7 +50,9 @@ def test_jacobian_matches_finite_differences():
             up, down = theta0.copy(), theta0.copy()
             up[i] += step
             down[i] -= step
-            num[:, i] = (d.intermediate_parameters(up, form) - d.intermediate_parameters(down, form)).ravel() / (2 * step)
+            num[:, i] = (d.intermediate_parameters(up, form) - d.intermediate_parameters(down, form)).ravel() / (
+                2 * step
+            )
         assert np.allclose(jac, num, rtol=1e-6, atol=1e-9 * np.max(np.abs(jac)))
 
 
@@ -113,12 +115,14 @@ def test_reference_starts_and_ends_at_rest_and_derivatives_are_exact():
     t = np.linspace(0.0, 24.0, 24001)
     v, w, dv, dw = exc.evaluate(t)
     for x in (v, w, dv, dw):
-        assert abs(x[0]) < 1e-12 and abs(x[-1]) < 1e-9
+        assert abs(x[0]) < 1e-12
+        assert abs(x[-1]) < 1e-9
     assert np.allclose(dv[1:-1], (v[2:] - v[:-2]) / (2e-3), atol=1e-5 * np.max(np.abs(dv)))
     assert np.allclose(dw[1:-1], (w[2:] - w[:-2]) / (2e-3), atol=1e-5 * np.max(np.abs(dw)))
     s, ds = ramp(np.array([0.0, 0.5, 1.0]))
-    assert s.tolist() == [0.0, 0.5, 1.0] and ds[0] == 0.0 and ds[2] == 0.0
-    assert Excitation.from_dict(exc.to_dict()) .coefficients.tolist() == exc.coefficients.tolist()
+    assert s.tolist() == [0.0, 0.5, 1.0]
+    assert (ds[0], ds[2]) == (0.0, 0.0)
+    assert Excitation.from_dict(exc.to_dict()).coefficients.tolist() == exc.coefficients.tolist()
 
 
 def test_pose_integration_converges():
@@ -135,9 +139,10 @@ def test_pose_integration_converges():
 
 def test_limits_from_flags_file_and_defaults():
     limits = resolve_limits(0.16, {"max_torque": 12.0, "area": (3.0, 2.0)}, max_wheel_speed=5.0)
-    assert limits.max_wheel_speed == 5.0 and limits.sources["max_wheel_speed"] == "flag"
-    assert limits.max_torque == 12.0 and limits.sources["max_torque"] == "robot file"
-    assert limits.max_wheel_accel == pytest.approx(1.0 / 0.16) and limits.sources["max_wheel_accel"] == "default"
+    assert (limits.max_wheel_speed, limits.sources["max_wheel_speed"]) == (5.0, "flag")
+    assert (limits.max_torque, limits.sources["max_torque"]) == (12.0, "robot file")
+    assert limits.max_wheel_accel == pytest.approx(1.0 / 0.16)
+    assert limits.sources["max_wheel_accel"] == "default"
     assert limits.area == (3.0, 2.0)
     assert Limits.from_dict(limits.to_dict()) == limits
     assert parse_area("6x3.5") == (6.0, 3.5)

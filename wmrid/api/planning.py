@@ -1,4 +1,4 @@
-"""``wmrid plan``: design the drive that identifies a robot (:func:`plan`) and write it for the robot (:func:`write_plan`).
+"""``wmrid plan``: design the drive that identifies a robot (:func:`plan`); write it for the robot (:func:`write_plan`).
 
 See :mod:`wmrid.design` for the method.  The robot's nominal set gives the model the plan is designed on; its
 ``[limits]`` table gives any limit not passed here; the noise is given, measured from an earlier log
@@ -179,13 +179,13 @@ def plan(
         )
     seed = int(_number("seed", seed, 0.0, strict=False))  # type: ignore[arg-type]
     rate = _number("rate", rate)  # type: ignore[assignment]
-    for name, value in (("max_wheel_speed", max_wheel_speed), ("max_wheel_accel", max_wheel_accel),
-                        ("max_torque", max_torque), ("max_speed", max_speed), ("max_turn_rate", max_turn_rate)):  # fmt: skip
+    given_limits = {"max_wheel_speed": max_wheel_speed, "max_wheel_accel": max_wheel_accel, "max_torque": max_torque,
+                    "max_speed": max_speed, "max_turn_rate": max_turn_rate}  # fmt: skip
+    for name, value in given_limits.items():
         _number(name, value)
     limits = resolve_limits(
-        r, dict(robot_obj.limits), margin=margin, footprint=footprint(robot_obj), max_wheel_speed=max_wheel_speed, max_wheel_accel=max_wheel_accel,
-        max_torque=max_torque, max_speed=max_speed, max_turn_rate=max_turn_rate, area=area,
-    )  # fmt: skip
+        r, dict(robot_obj.limits), margin=margin, footprint=footprint(robot_obj), area=area, **given_limits
+    )
     theta0 = np.asarray(base_parameters(nominal), dtype=np.float64)
     big_m = np.linalg.inv(np.array([[theta0[0], theta0[1]], [theta0[1], theta0[2]]]))
     tau_scale = limits.max_torque or float(np.max(np.sum(np.abs(big_m), axis=1))) * limits.max_wheel_accel
@@ -202,7 +202,9 @@ def plan(
             eta_noise is None and tau_noise is None) else "given in part, default in part"  # fmt: skip
     log_rate = DEFAULT_LOG_RATE if log_rate is None else _number("log_rate", log_rate)
     if eta_std == 0 and tau_std == 0:  # type: ignore[operator]
-        raise UsageError(f"{option('eta_noise')} and {option('tau_noise')} are both 0: a noise-free log has no std to plan")
+        raise UsageError(
+            f"{option('eta_noise')} and {option('tau_noise')} are both 0: a noise-free log has no std to plan"
+        )
     noise = SensorNoise(float(eta_std), float(tau_std), float(log_rate))  # type: ignore[arg-type]
     length: float | None
     if isinstance(duration, str) and duration.strip().lower() == "auto":
@@ -219,7 +221,9 @@ def plan(
     share = None
     if target_std is not None:
         share = _number("target_std", target_std) / 100.0  # type: ignore[operator]
-    names = ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2") + (("Cv", "Cw") if friction == "wheel+caster" else ())
+    names = ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2") + (
+        ("Cv", "Cw") if friction == "wheel+caster" else ()
+    )
     given_info, theta0 = _given(given, names, np.concatenate([theta0, np.zeros(len(names) - 8)]))
     result = make_plan(
         robot_obj.name, theta0, r, b, limits, noise, duration=length, target_std=share, rate=rate, seed=seed,
@@ -265,7 +269,9 @@ def write_plan(
         return
     from wmrid.io.reference_files import write_reference
 
-    write_reference(target, result.samples(), topic=topic, stamped=stamped, force=force)
+    # a stamped plan carries zero stamps: ros2_control's diff_drive_controller drops a TwistStamped older than its
+    # cmd_vel_timeout (0.5 s) and re-stamps only a zero one, and ros2 bag play keeps the stamps as written
+    write_reference(target, result.samples(), topic=topic, stamped=stamped, zero_stamps=stamped, force=force)
 
 
 def plan_document(path: str | os.PathLike[str]) -> Plan | None:

@@ -33,11 +33,14 @@ class PlanFriction(str, Enum):
     "wmrid plan --robot robot.toml --duration auto --target-std 2 -o plan.csv"
 )
 def plan(
-    robot: Annotated[str, typer.Option(help="Robot TOML file or built-in name; its nominal set is planned on.")] = "paper",
+    robot: Annotated[
+        str, typer.Option(help="Robot TOML file or built-in name; its nominal set is planned on.")
+    ] = "paper",
     output: Annotated[
         list[str] | None,
         typer.Option(
-            "--output", "-o",
+            "--output",
+            "-o",
             help="Write the plan; by suffix: .csv or .parquet (t, v, omega, eta_r, eta_l, x, y, phi), .mcap (ROS 2 "
             "geometry_msgs/Twist for ros2 bag play), .json (the prediction). Repeat for several.",
         ),

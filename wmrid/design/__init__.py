@@ -1,1 +1,1 @@
-"""Experiment design: the drive that identifies a robot (``wmrid plan``), its predicted precision, the limits it keeps."""
+"""Experiment design: the drive that identifies a robot (``wmrid plan``), its predicted precision, its limits."""

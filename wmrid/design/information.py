@@ -198,7 +198,7 @@ class CovarianceGradient:
 
     def backward(self, g0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(dJ/deta (n, 2), dJ/dtau (n, 2)) for g0 = dJ/dCov(theta0), symmetric."""
-        a, h, g, w, adj, c, sens, qs, zs, score, inv, big, c_inv, cov0, eta, tau, p = self._keep
+        a, h, _, w, adj, c, _, qs, zs, score, inv, big, c_inv, cov0, eta, _, p = self._keep
         k, m = self.k, self.m
         g0 = 0.5 * (g0 + g0.T)
         g_info = -cov0 @ g0 @ cov0  # cov0 = info^-1

@@ -125,7 +125,11 @@ class Limits:
 
 
 def resolve_limits(
-    wheel_radius: float, file_limits: dict[str, object], *, margin: float = DEFAULT_MARGIN, footprint: float = 0.0,
+    wheel_radius: float,
+    file_limits: dict[str, object],
+    *,
+    margin: float = DEFAULT_MARGIN,
+    footprint: float = 0.0,
     **flags: object,
 ) -> Limits:
     """The limits from the flags given (None: not given), else the robot file's [limits], else the defaults

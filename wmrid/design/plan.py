@@ -77,7 +77,7 @@ class Plan:
         """The reference at ``rate`` Hz (default: the plan's): t (s), v (m/s), omega (rad/s), eta_r, eta_l (rad/s,
         the wheel-speed set-points, nominal r and b), x, y (m), phi (rad) of the predicted pose."""
         rate = float(rate or self.settings["rate"])
-        n = int(round(self.excitation.duration * rate)) + 1
+        n = round(self.excitation.duration * rate) + 1
         t = np.linspace(0.0, self.excitation.duration, n)
         v, w, _, _ = self.excitation.evaluate(t)
         # the pose on a fine grid (at least 200 Hz), read at the plan's rate
@@ -106,7 +106,7 @@ class Plan:
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "plan") -> Plan:
         if not isinstance(data, dict) or data.get("kind") != "plan":
-            raise UsageError(f"{source}: not a plan written by wmrid plan (no \"kind\": \"plan\")")
+            raise UsageError(f'{source}: not a plan written by wmrid plan (no "kind": "plan")')
         if data.get("schema", 0) > SCHEMA:
             raise UsageError(f"{source}: a plan of schema {data['schema']}, newer than this wmrid reads ({SCHEMA})")
         try:
@@ -309,7 +309,8 @@ def make_plan(
         robot=robot_name, r=float(r), b=float(b), limits=limits, noise=noise,
         excitation=Excitation(problem.duration, problem.period, found.coefficients, problem.ramp), settings=settings,
         predicted=predicted, value=value, limits_used=_limits_used(fine, motion), baselines=baselines,
-        margins=separability(motion, limits.max_wheel_speed), given=None if given is None else given[1], warnings=tuple(warnings),
+        margins=separability(motion, limits.max_wheel_speed), given=None if given is None else given[1],
+        warnings=tuple(warnings),
     )  # fmt: skip
 
 

@@ -67,7 +67,7 @@ class Motion:
                       self.tau[sl], self.pose[sl])  # fmt: skip
 
     def peaks(self) -> dict[str, float]:
-        """name -> the largest value over the motion of each limited quantity (:data:`wmrid.design.limits.LIMIT_NAMES`)."""
+        """name -> the largest value of each limited quantity (:data:`wmrid.design.limits.LIMIT_NAMES`)."""
         return {
             "max_wheel_speed": float(np.max(np.abs(self.eta))), "max_wheel_accel": float(np.max(np.abs(self.deta))),
             "max_torque": float(np.max(np.abs(self.tau))), "max_speed": float(np.max(np.abs(self.v))),
@@ -122,7 +122,7 @@ class Problem:
         self.duration, self.period, self.harmonics, self.ramp, self.k = duration, period, harmonics, ramp, k
         self.criterion = criterion
         self.given_info = given_info
-        n = int(round(duration * grid)) + 1
+        n = round(duration * grid) + 1
         self.t = np.linspace(0.0, duration, n)
         self.h = duration / (n - 1)
         self.basis = Basis(self.t, duration, period, harmonics, ramp)
@@ -299,7 +299,9 @@ class Differentiated:
             for sign in (1.0, -1.0):
                 z = (sign * motion.eta[:, j] - 0.1 * top) / (0.025 * top)
                 share = float(np.mean(0.5 * (1.0 + np.tanh(z))))
-                d_share = np.mean((0.5 * (1.0 - np.tanh(z) ** 2) * sign / (0.025 * top))[:, None] * self.j_eta[:, j, :], axis=0)
+                d_share = np.mean(
+                    (0.5 * (1.0 - np.tanh(z) ** 2) * sign / (0.025 * top))[:, None] * self.j_eta[:, j, :], axis=0
+                )
                 rows.append((DIRECTION_SHARE / max(share, 1e-9) ** 2 * d_share)[None, :])
         vc, wc = motion.v - motion.v.mean(), motion.w - motion.w.mean()
         sv, sw = float(vc @ vc), float(wc @ wc)

@@ -110,7 +110,8 @@ def tables(data: dict[str, Any]) -> dict[str, dict[str, Any]]:
     """The plan's tables (header, rows) from its JSON."""
     base_names = list(data["baselines"])
     predicted = {
-        "header": ["parameter", "nominal", "predicted std", "relative", "scale", *[f"{b} (relative)" for b in base_names]],
+        "header": ["parameter", "nominal", "predicted std", "relative", "scale",
+                   *[f"{b} (relative)" for b in base_names]],
         "rows": [[name, f"{p['nominal']:.4g}", f"{p['std']:.3g}", f"{100 * p['relative']:.3g} %",
                   f"{p['scale']:.3g} ({p['scale_from']})",
                   *[_pct(data["baselines"][b]["relative"].get(name)) for b in base_names]]

@@ -55,8 +55,9 @@ def print_plan(data: dict[str, Any], console: Any, written: list[str] = ()) -> N
     rows = []
     for name, p in data["predicted"].items():
         unit = THETA0_UNITS.get(name, "")
+        source = "nominal" if p["scale_from"] == "nominal value" else "floor"
         rows.append([name, f"{p['nominal']:.4g}", f"{p['std']:.2g}", f"{100 * p['relative']:.3g} %",
-                     f"{p['scale']:.3g} ({'nominal' if p['scale_from'] == 'nominal value' else 'floor'})", unit])  # fmt: skip
+                     f"{p['scale']:.3g} ({source})", unit])  # fmt: skip
     print_table(console, ["parameter", "nominal", "predicted std", "relative", "scale", "unit"], rows,
                 title="Predicted precision", numeric=(1, 2, 3))  # fmt: skip
     console.print()
@@ -81,7 +82,8 @@ def print_plan(data: dict[str, Any], console: Any, written: list[str] = ()) -> N
     noise = data["noise"]
     s = data["settings"]
     console.print(
-        f"Assumes: noise {noise['eta_std']:.3g} rad/s and {noise['tau_std']:.3g} N m per sample at {noise['rate']:g} Hz "
+        f"Assumes: noise {noise['eta_std']:.3g} rad/s and {noise['tau_std']:.3g} N m per sample at {noise['rate']:g} Hz"
+        " "
         f"({s.get('noise_source', 'given')}); the robot tracks the reference on its nominal model (wmrid simulate's "
         f"controller); identification with the observer (k = {s['k']:g} 1/s), friction model {s['friction']}."
     )
