@@ -108,6 +108,10 @@ _EXPORTS = {
     "fleet_report": "wmrid.api.fleet_reporting",
     "write_fleet_report": "wmrid.api.fleet_reporting",
     "FleetReport": "wmrid.reporting.fleet_report",
+    "plan": "wmrid.api.planning",
+    "write_plan": "wmrid.api.planning",
+    "read_plan": "wmrid.api.planning",
+    "Plan": "wmrid.design.plan",
 }
 
 __all__ = ["__version__", *sorted(_EXPORTS)]
