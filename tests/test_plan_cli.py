@@ -1,0 +1,150 @@
+"""``wmrid plan`` end to end (issue 29): the command writes a reference a robot can replay (CSV, Parquet, a ROS 2
+MCAP that rosbags and wmrid read back) and its prediction (JSON, report); every written plan keeps its limits; a seed
+gives the same plan; bad limits and impossible requests are answered in one line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import wmrid
+from tests.cliutil import assert_clean_error, wmrid as run
+from wmrid.io.reference_files import read_reference
+
+ROBOT = """name = "tiny"
+[nominal]
+I_p = 0.28
+m_p = 11.0
+d_x = -0.03
+d_y = 0.0
+I_w = 0.0015
+m_w = 0.5
+m_r = 0.1
+I_rm = 2e-05
+I_r = 5e-06
+c_x = 0.03
+c_y = 0.11
+k_r = 20.0
+r = 0.08
+b = 0.2
+F_v1 = 0.004
+F_v2 = 0.005
+F_d1 = 0.02
+F_d2 = 0.025
+
+[limits]
+max_wheel_speed = 10.0
+max_wheel_accel = 10.0
+max_torque = 0.8
+area = "3x3"
+"""
+
+
+@pytest.fixture(scope="module")
+def planned(tmp_path_factory) -> Path:
+    """A 12 s plan of a small robot (limits from its [limits] table) written as CSV, Parquet, MCAP and JSON."""
+    folder = tmp_path_factory.mktemp("plan")
+    robot = folder / "tiny.toml"
+    robot.write_text(ROBOT)
+    proc = run("plan", "--robot", robot, "--duration", "12", "--eta-noise", "0.02", "--tau-noise", "0.005",
+               "--log-rate", "200", "-o", folder / "plan.csv", "-o", folder / "plan.parquet", "-o", folder / "plan.mcap",
+               "-o", folder / "plan.json", "--format", "table")  # fmt: skip
+    assert proc.returncode == 0, proc.stderr.decode()
+    text = " ".join(proc.stdout.decode().split())
+    assert text.startswith("This 12 s drive is predicted to determine every base parameter of tiny")
+    assert "better than the back-and-forth drive (reversing)" in text
+    return folder
+
+
+def test_written_plans_keep_their_limits_and_agree(planned: Path) -> None:
+    """The CSV holds t, v, omega, the wheel set-points and the pose; every sample keeps the limits of the robot file
+    (wheel speed from the set-points; acceleration from a central difference at 50 Hz, within its 0.2 % truncation
+    error; the axle midpoint inside the area less the robot's reach); it starts and ends at rest; Parquet and the
+    MCAP's Twist messages hold the same reference."""
+    frame = pd.read_csv(planned / "plan.csv")
+    assert list(frame.columns) == ["t", "v", "omega", "eta_r", "eta_l", "x", "y", "phi"]
+    data = json.loads((planned / "plan.json").read_text())
+    limits = data["limits"]
+    assert limits["sources"]["max_torque"] == "robot file"
+    assert limits["area"] == [3.0, 3.0]
+    eta = frame[["eta_r", "eta_l"]].to_numpy()
+    assert np.max(np.abs(eta)) <= limits["max_wheel_speed"]
+    accel = np.gradient(eta, frame["t"].to_numpy(), axis=0)[1:-1]
+    assert np.max(np.abs(accel)) <= 1.002 * limits["max_wheel_accel"]
+    reach = limits["footprint"]
+    assert np.max(np.abs(frame[["x", "y"]].to_numpy())) + reach <= 1.5
+    for col in ("v", "omega"):
+        assert abs(frame[col].iloc[0]) < 1e-12
+        assert abs(frame[col].iloc[-1]) < 1e-9
+    used = data["limits_used"]
+    assert used["max_torque"]["share"] <= 1.0
+    assert all(u["share"] <= 1.0 + 1e-9 for u in used.values() if u["share"] is not None)
+    pq = pd.read_parquet(planned / "plan.parquet")
+    np.testing.assert_array_equal(pq.to_numpy(), frame.to_numpy())
+    t, v, omega = read_reference(planned / "plan.mcap")
+    np.testing.assert_allclose(t, frame["t"], atol=1e-9)
+    np.testing.assert_allclose(v, frame["v"], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(omega, frame["omega"], rtol=0, atol=1e-12)
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([planned / "plan.mcap"]) as reader:
+        (connection,) = reader.connections
+        assert (connection.topic, connection.msgtype) == ("/cmd_vel", "geometry_msgs/msg/Twist")
+        xs = [reader.deserialize(raw, connection.msgtype).linear.x for _, _, raw in reader.messages()]
+    np.testing.assert_allclose(xs, frame["v"], atol=1e-12)
+
+
+def test_plan_round_trips_and_reports(planned: Path, tmp_path: Path) -> None:
+    """The JSON reads back into the same plan, whose samples are the CSV's; report turns it into a page."""
+    plan = wmrid.read_plan(planned / "plan.json")
+    again = json.loads(json.dumps(plan.to_dict()))
+    assert again == json.loads((planned / "plan.json").read_text())
+    frame = pd.read_csv(planned / "plan.csv")
+    np.testing.assert_allclose(plan.samples()["v"], frame["v"], atol=1e-12)
+    proc = run("report", planned / "plan.json", "-o", tmp_path / "plan.html")
+    assert proc.returncode == 0, proc.stderr.decode()
+    page = (tmp_path / "plan.html").read_text()
+    assert "This 12 s drive is predicted" in page
+    assert page.count("<svg") == 7
+
+
+def test_a_seed_gives_the_same_plan() -> None:
+    """Two plans with one seed are identical; another seed gives another (still within the limits)."""
+    one = wmrid.plan("amr", duration=6, seed=5, max_torque=1.0)
+    two = wmrid.plan("amr", duration=6, seed=5, max_torque=1.0)
+    np.testing.assert_array_equal(one.excitation.coefficients, two.excitation.coefficients)
+    assert one.predicted == two.predicted
+
+
+def test_given_results_add_their_information(tmp_path: Path) -> None:
+    """A plan with --given predicts a smaller std than without: the saved result's information adds to the plan's."""
+    sim = wmrid.simulate("amr", trajectory="sinusoid", duration=8, rate=200, eta_noise=0.02, tau_noise=0.005, seed=1)
+    result = wmrid.identify(sim.log.to_wheel_log(), "amr")
+    saved = tmp_path / "run.json"
+    saved.write_text(json.dumps(result.to_dict(history=False)))
+    alone = wmrid.plan("amr", duration=6, max_torque=1.0, eta_noise=0.02, tau_noise=0.005, log_rate=200)
+    both = wmrid.plan("amr", duration=6, max_torque=1.0, eta_noise=0.02, tau_noise=0.005, log_rate=200, given=saved)
+    assert both.given["results"][0]["source"] == str(saved)
+    assert both.value < alone.value
+
+
+@pytest.mark.parametrize(
+    ("args", "needles"),
+    [
+        (["--area", "0.5x0.5"], ["--area 0.5x0.5", "too small for the robot"]),
+        (["--area", "4"], ["--area 4", "WxH"]),
+        (["--max-torque", "-2"], ["--max-torque", "> 0"]),
+        (["--margin", "0.95"], ["--margin", "[0, 0.9)"]),
+        (["--duration", "auto"], ["--duration auto", "--target-std"]),
+        (["--duration", "2"], ["--duration 2", "at least 4 s"]),
+        (["--duration", "auto", "--target-std", "0.001"], ["--target-std", "not reachable within 600 s"]),
+        (["--eta-noise", "0", "--tau-noise", "0"], ["both 0"]),
+        (["-o", "plan.txt"], ["plan.txt", ".csv, .parquet, .mcap, .json"]),
+    ],
+)
+def test_bad_requests_are_one_line(args: list[str], needles: list[str], tmp_path: Path) -> None:
+    assert_clean_error(run("plan", "--robot", "amr", "--duration", "6", *args, cwd=tmp_path), 2, *needles)
