@@ -60,3 +60,24 @@ def test_heavy_robot_with_dragging_casters_every_method():
             assert name in flagged or abs(value - truth[name]) <= 3 * std, (method, name, value, std, truth[name])
         for name in INERTIA_VC:
             assert abs(result.parameters[name][0] / truth[name] - 1) < 0.036, (method, name)
+
+
+@pytest.mark.slow
+def test_heavy_robot_with_both_casters_touching_idim_and_iv():
+    """The same robot with the payload at 60@-0.2,0 (both casters touch and trade +-26 N per m/s^2), seed 7 of
+    bench/study_caster_heavy.py --payload 60@-0.2,0: IDIM's and IV's Fv1 is 23 % off (as every method's, the
+    observer's 22 %).  One jackknife grid put its std at 5.7 % (z = 4.1, unflagged; RLS's grid, one segment more,
+    9.3 %); averaged over the grid's shifts (wmrid.estimators.idim.GRID_SHIFTS) it is 8.0 % (z = 2.9), and every
+    parameter is within 3 std or flagged."""
+    run = wmrid.simulate(
+        "paper", engine="mujoco", trajectory="reversing", payload="60@-0.2,0", floor_friction=0.6,
+        caster_resistance=0.015, eta_noise=0.02, tau_noise=0.05, seed=7,
+    )  # fmt: skip
+    truth = run.truth["parameters"]
+    for method in ("idim", "iv"):
+        result = wmrid.identify(run.log, "paper", method=method)
+        assert result.diagnostics["method"]["grid_shifts"] > 1
+        flagged = set(result.diagnostics["flagged"])
+        for name in BASE:
+            value, std = result.parameters[name]
+            assert name in flagged or abs(value - truth[name]) <= 3 * std, (method, name, value, std, truth[name])

@@ -33,7 +33,9 @@ column, another unit, or a robot that does not track it).
 
 Standard errors: the delete-a-segment jackknife over the same contiguous segments as IDIM (the residual is
 coloured), from per-segment moments A_g = Z_g^T X_g and b_g = Z_g^T y_g, phi_(g) = (A - A_g)^-1 (b - b_g) with
-no refit; theta0 = [m11 m12 m22 Vc ...] and its covariance by the delta method as for IDIM.  ``weighted``: the
+no refit, averaged over the segment grid moved by fractions of a segment as for IDIM
+(:data:`wmrid.estimators.idim.GRID_SHIFTS`); theta0 = [m11 m12 m22 Vc ...] and its covariance by the delta method as
+for IDIM.  ``weighted``: the
 rows of wheel j scaled by 1 / s_j, s_j the rms IV residual of its equation in the unweighted fit.
 """
 
@@ -46,7 +48,17 @@ import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError, UsageError, option
 from wmrid.estimators.estimate import BaseEstimate, SegmentEstimates
-from wmrid.estimators.idim import inertia_warnings, jackknife_segments, phi_to_theta0, theta0_covariance
+from wmrid.estimators.idim import (
+    GRID_SHIFTS,
+    JACKKNIFE_TEXT,
+    averaged_covariance,
+    inertia_warnings,
+    jackknife_segments,
+    phi_to_theta0,
+    shifted_groups,
+    sub_segments,
+    theta0_covariance,
+)
 from wmrid.estimators.idim_regression import IdimRegression, effort_delay, idim_regression
 from wmrid.model.dynamics import RegressorForm
 
@@ -92,6 +104,12 @@ def segment_moments(
             big_a[i] += w2[row] * (zi.T @ xi)
             big_b[i] += w2[row] * (zi.T @ y[sel, row])
     return big_a, big_b
+
+
+def grouped_moments(fine_a: np.ndarray, fine_b: np.ndarray, groups: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-segment moments (G, p, p), (G, p) from per-sub-segment ones (G K, p, p), (G K, p): segment i's are the sums
+    over its sub-segments groups[i] (groups (G, K), :func:`wmrid.estimators.idim.shifted_groups`)."""
+    return fine_a[groups].sum(axis=1), fine_b[groups].sum(axis=1)
 
 
 def solve_moments(big_a: np.ndarray, big_b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -160,6 +178,7 @@ def identify_iv(
     z = instrument_regression(reg, t, reference, tau)
     names = reg.phi_names
     seg, g = jackknife_segments(reg.t, grid)
+    sub = sub_segments(reg.t, seg, g, grid)
     ones = np.ones(2)
     r2 = first_stage_r2(z, x, ones)
     weak = [name for name, v in zip(names, r2, strict=True) if v < MIN_R2]
@@ -171,9 +190,10 @@ def identify_iv(
         )
 
     def fit(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        big_a, big_b = segment_moments(z, x, reg.tau, weights, seg, g)
+        fine_a, fine_b = segment_moments(z, x, reg.tau, weights, sub, g * GRID_SHIFTS)
         try:
-            phi, loo, cov = solve_moments(big_a, big_b)
+            phi, loo, _ = solve_moments(*grouped_moments(fine_a, fine_b, shifted_groups(g)[0]))
+            cov = averaged_covariance(lambda groups: solve_moments(*grouped_moments(fine_a, fine_b, groups))[2], g)
         except np.linalg.LinAlgError as err:
             raise NotIdentifiableError(
                 "the instrumental-variable system Z^T X is singular: the log or its reference does not excite "
@@ -208,7 +228,8 @@ def identify_iv(
         "effort_delay_s": delay,
         "instruments": "the IDIM regressor rebuilt from the logged wheel-speed reference",
         "first_stage_r2": {name: float(v) for name, v in zip(names, r2, strict=True)},
-        "uncertainty": "delete-a-segment jackknife over contiguous segments of the log",
+        "grid_shifts": GRID_SHIFTS,
+        "uncertainty": JACKKNIFE_TEXT,
         "phi": {name: float(v) for name, v in zip(names, phi, strict=True)},
         "phi_std": {name: float(v) for name, v in zip(names, std_phi, strict=True)},
     }

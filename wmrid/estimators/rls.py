@@ -36,8 +36,8 @@ so the estimate minimises sum_k lambda^(n-k) |y_k - X_k phi|^2.  Implementation 
 Standard errors:
 
 * lambda = 1: the final estimate is the least-squares one, so the delete-a-segment jackknife of
-  :mod:`wmrid.estimators.idim` applies unchanged (from per-segment sums of X^T X and X^T y the kernel keeps),
-  dof = G - 1.
+  :mod:`wmrid.estimators.idim` applies unchanged (from per-sub-segment sums of X^T X and X^T y the kernel keeps,
+  averaged over the shifted grids as there), dof = G - 1.
 * lambda < 1: a LOCAL statement about the estimate at the end of the log, made from the data in its
   effective window of 1 / (1 - lambda) samples (weights w_k = lambda^(n-k); their effective count
   (sum w)^2 / sum w^2 is (1 + lambda) / (1 - lambda) on a long log).  phi - phi_true ~ P sum_k w_k z_k
@@ -71,10 +71,14 @@ import numpy as np
 from wmrid.core.errors import NotIdentifiableError, UsageError
 from wmrid.estimators.estimate import BaseEstimate
 from wmrid.estimators.idim import (
+    GRID_SHIFTS,
+    JACKKNIFE_TEXT,
+    averaged_covariance,
     inertia_warnings,
     not_identifiable_message,
     phi_to_theta0,
     segment_index,
+    sub_segments,
     theta0_covariance,
 )
 from wmrid.estimators.idim_regression import ROW_LAYOUT, IdimRegression, effort_delay, idim_regression
@@ -188,10 +192,11 @@ def rls_kernel(
     index, phi index, pattern) of each caster column, which adds to phi's entry in row 1 and pattern x itself
     in row 2 (:func:`wmrid.estimators.idim_regression.rows_from_features`; (0, 3) without caster drag); lam the
     forgetting factor;
-    init_pivot the start test (:data:`INIT_PIVOT`); segment (N,) the jackknife segment of each sample;
+    init_pivot the start test (:data:`INIT_PIVOT`); segment (N,) the block in [0, len(blk_a)) of each sample (the
+    jackknife's sub-segments, :func:`wmrid.estimators.idim.sub_segments`);
     block_len samples per batch of the batch means.  Filled in place:
 
-    * blk_a (G, p, p), blk_c (G, p): per-segment scaled X^T X and X^T y;
+    * blk_a (B, p, p), blk_c (B, p): per-block scaled X^T X and X^T y;
     * after every ``stride`` samples and at the last one: hist_idx (m,) the sample index, hist_phi (m, p)
       the scaled estimate, hist_p (m, p, p) P, hist_w2 (m,) sum lambda^(2(n-k)) (NaN before the start);
     * stats (6,): start index (-1: never), trace cap, capped steps, local mean square a priori error of
@@ -350,8 +355,19 @@ def _check_forgetting(forgetting: float) -> float:
     return lam
 
 
-def _jackknife(blk_a: np.ndarray, blk_c: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, int]:
-    """Jackknife covariance (p, p) of phi from per-segment scaled sums (G, p, p) and (G, p), and its dof G - 1."""
+def _jackknife(fine_a: np.ndarray, fine_c: np.ndarray, scale: np.ndarray, g: int) -> tuple[np.ndarray, int]:
+    """Jackknife covariance (p, p) of phi over G segments, averaged over the grid's shifts
+    (:func:`wmrid.estimators.idim.averaged_covariance`), from per-sub-segment scaled sums (G K, p, p) and (G K, p)
+    (:func:`wmrid.estimators.idim.sub_segments`), and its dof G - 1."""
+
+    def one(groups: np.ndarray) -> np.ndarray:
+        return _jackknife_grid(fine_a[groups].sum(axis=1), fine_c[groups].sum(axis=1), scale)
+
+    return averaged_covariance(one, g), g - 1
+
+
+def _jackknife_grid(blk_a: np.ndarray, blk_c: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Jackknife covariance (p, p) of phi from per-segment scaled sums (G, p, p) and (G, p)."""
     g = blk_a.shape[0]
     a = blk_a.sum(axis=0)
     c = blk_c.sum(axis=0)
@@ -363,7 +379,7 @@ def _jackknife(blk_a: np.ndarray, blk_c: np.ndarray, scale: np.ndarray) -> tuple
             loo[i] = np.nan
     centred = loo - loo.mean(axis=0)
     cov = (g - 1) / g * (centred.T @ centred)
-    return 0.5 * (cov + cov.T), g - 1
+    return 0.5 * (cov + cov.T)
 
 
 def _residual_rms(reg: IdimRegression, phi: np.ndarray, chunk: int = 1 << 16) -> np.ndarray:
@@ -403,9 +419,10 @@ def rls_on_regression(
             row2[:, param - 8] += pattern * feats[:, 8 + j]
         ms = np.concatenate([ms, (np.sum(row1**2, axis=0) + np.sum(row2**2, axis=0)) / (2 * n)])
     scale = np.where(ms > 0, np.sqrt(ms), 1.0)
-    segment, g = segment_index(reg.t)
-    blk_a = np.zeros((g, p, p))
-    blk_c = np.zeros((g, p))
+    seg, g = segment_index(reg.t)
+    segment = sub_segments(reg.t, seg, g)  # the kernel's sums per sub-segment: the jackknife averages shifted grids
+    blk_a = np.zeros((g * GRID_SHIFTS, p, p))
+    blk_c = np.zeros((g * GRID_SHIFTS, p))
     stride = max(1, math.ceil(n / history_points))
     m = math.ceil(n / stride)
     hist_idx = np.zeros(m, dtype=np.int64)
@@ -441,8 +458,8 @@ def rls_on_regression(
     warnings = inertia_warnings(phi)
     n_after = n - init
     if lam == 1.0:
-        cov_phi, dof = _jackknife(blk_a, blk_c, scale)
-        std_method = "delete-a-segment jackknife over contiguous segments of the log"
+        cov_phi, dof = _jackknife(blk_a, blk_c, scale, g)
+        std_method = JACKKNIFE_TEXT
         n_weighted = float(n_after)
     else:
         w2 = float(hist_w2[-1])
@@ -480,6 +497,7 @@ def rls_on_regression(
         "residual_rms": [float(v) for v in _residual_rms(reg, phi)],
         "local_prediction_rms": [float(v) for v in np.sqrt(stats[3:5])],
         "segments": int(g),
+        "grid_shifts": GRID_SHIFTS,
         "batches": n_batches,
         "batch_seconds": float(block_len * dt),
         "uncertainty": std_method,
