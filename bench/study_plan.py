@@ -75,7 +75,9 @@ def make(name: str) -> dict:
     spec = ROBOTS[name]
     path = robot_file(name)
     start = time.perf_counter()
-    plan = wmrid.plan(str(path), duration=60.0, eta_noise=spec["eta_noise"], tau_noise=spec["tau_noise"], log_rate=1000.0)
+    plan = wmrid.plan(
+        str(path), duration=60.0, eta_noise=spec["eta_noise"], tau_noise=spec["tau_noise"], log_rate=1000.0
+    )
     seconds = time.perf_counter() - start
     csv = OUT / f"{name}_plan.csv"
     wmrid.write_plan(plan, csv, force=True)
@@ -131,7 +133,9 @@ def summarise(made: dict, rows: list[dict]) -> dict:
     out = {}
     for engine in sorted({r["engine"] for r in rows}):
         sel = [r for r in rows if r["engine"] == engine]
-        ratio = {p: statistics.median(r["parameters"][p]["std"] / plan["predicted"][p]["std"] for r in sel) for p in BASE}
+        ratio = {
+            p: statistics.median(r["parameters"][p]["std"] / plan["predicted"][p]["std"] for r in sel) for p in BASE
+        }
         out[engine] = {
             "seeds": len(sel),
             "determined": sum(not any(p in BASE for p in r["poorly"]) for r in sel),

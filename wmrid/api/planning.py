@@ -216,8 +216,10 @@ def plan(
             length = float(duration)
         except (TypeError, ValueError):
             raise UsageError(f"{option('duration', duration)}: a number of seconds, or auto") from None
-        if not math.isfinite(length) or length < 4.0:
-            raise UsageError(f"{option('duration', duration)}: a plan lasts at least 4 s")
+        from wmrid.design.plan import MIN_DURATION
+
+        if not math.isfinite(length) or length < MIN_DURATION:
+            raise UsageError(f"{option('duration', duration)}: a plan lasts at least {MIN_DURATION:g} s")
     share = None
     if target_std is not None:
         share = _number("target_std", target_std) / 100.0  # type: ignore[operator]
@@ -251,6 +253,13 @@ def read_plan(path: str | os.PathLike[str]) -> Plan:
 PLAN_SUFFIXES = (".csv", ".parquet", ".mcap", ".json")
 
 
+def check_plan_output(path: str | os.PathLike[str]) -> None:
+    """UsageError unless ``path``'s suffix is one :func:`write_plan` writes (checked before the plan is made)."""
+    target = os.fspath(path)
+    if Path(target).suffix.lower() not in PLAN_SUFFIXES:
+        raise UsageError(f"{option('output', target)}: give a file ending in {', '.join(PLAN_SUFFIXES)}")
+
+
 def write_plan(
     result: Plan, path: str | os.PathLike[str], *, topic: str = "/cmd_vel", stamped: bool = False, force: bool = False
 ) -> None:
@@ -261,9 +270,8 @@ def write_plan(
     from wmrid.core.atomic import write_json
 
     target = os.fspath(path)
+    check_plan_output(target)
     suffix = Path(target).suffix.lower()
-    if suffix not in PLAN_SUFFIXES:
-        raise UsageError(f"{option('output', target)}: give a file ending in {', '.join(PLAN_SUFFIXES)}")
     if suffix == ".json":
         write_json(target, result.to_dict(), force=force)
         return

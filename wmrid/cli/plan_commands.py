@@ -87,12 +87,16 @@ def plan(
     force: Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")] = False,
 ) -> None:
     """Design the drive that identifies ROBOT best within its limits, and predict how precise the result will be."""
+    from wmrid.api.planning import check_plan_output, write_plan
     from wmrid.api.planning import plan as make
-    from wmrid.api.planning import write_plan
     from wmrid.core.atomic import output_group
     from wmrid.reporting.plan_view import print_plan
     from wmrid.reporting.render import to_json
 
+    outputs = list(output or [])
+    for path in outputs:
+        if not on_stdout(path):
+            check_plan_output(path)
     with activity("plan") as stage:
         result = make(
             robot, duration=duration, target_std=target_std, rate=rate, seed=seed, max_wheel_speed=max_wheel_speed,
@@ -100,7 +104,6 @@ def plan(
             area=area, margin=margin, eta_noise=eta_noise, tau_noise=tau_noise, log_rate=log_rate,
             noise_from=noise_from, criterion=criterion.value, friction=friction.value, given=given, progress=stage,
         )  # fmt: skip
-    outputs = list(output or [])
     with output_group():
         for path in outputs:
             if not on_stdout(path):

@@ -32,6 +32,8 @@ FINE_GRID = 1000.0
 #: Base period aimed at, s (the plan's duration holds a whole number of them) and harmonics per channel.
 PERIOD_SECONDS = 12.0
 HARMONICS = 6
+#: Shortest plan, s: its ramps from and back to rest take 2 s each, and each wheel must still turn both ways.
+MIN_DURATION = 10.0
 #: Longest plan ``--duration auto`` will design, s.
 MAX_AUTO_DURATION = 600.0
 #: Criterion names as said to a user.
@@ -266,12 +268,12 @@ def make_plan(
         else:
             raise UsageError(f"{option('target_std')}: no plan up to {length:g} s reached it ({100 * value:.3g} %)")
     else:
-        if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration >= 4.0 * 1.0):
-            raise UsageError(f"{option('duration', str(duration))}: a plan lasts at least 4 s")
+        if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration >= MIN_DURATION):
+            raise UsageError(f"{option('duration', f'{duration:g}')}: a plan lasts at least {MIN_DURATION:g} s")
         say(f"plan of {duration:g} s")
         problem, fine, found, value = design(float(duration))
     if not found.feasible:
-        raise UsageError(_infeasible(limits, r, b))
+        raise UsageError(_inseparable(problem.duration))
 
     motion = fine.motion_of(found.coefficients)
     cov = fine.covariance(motion)
@@ -345,6 +347,16 @@ def _baseline(fine: Problem, name: str, theta0: np.ndarray, form: RegressorForm,
             entry["leaves_area"] = bool(max(ratios["area_x"], ratios["area_y"]) > 1.0 / (1.0 - fine.limits.margin))
             out["area_ignored"] = entry
     return out
+
+
+def _inseparable(duration: float) -> str:
+    from wmrid.design.problem import CORRELATION, DIRECTION_SHARE
+
+    return (
+        f"no {duration:g} s drive found that keeps the limits and still separates the parameters (each wheel forward "
+        f"and backward at least {100 * DIRECTION_SHARE:.0f} % of the time, |corr(v, w)| <= {CORRELATION:g}); give a "
+        "longer --duration or wider limits"
+    )
 
 
 def _infeasible(limits: Limits, r: float, b: float) -> str:
