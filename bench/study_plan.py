@@ -89,8 +89,8 @@ def run(job: tuple[str, str, int, str, str]) -> dict:
     import numpy as np
 
     import wmrid
-    from wmrid.api.planning import footprint
     from wmrid.api.inputs import load_robot
+    from wmrid.api.planning import footprint
 
     name, engine, seed, robot_path, csv = job
     spec = ROBOTS[name]
@@ -182,7 +182,8 @@ def main() -> None:
             print(f"{name} {engine}: determined {s['determined']}/{s['seeds']}, truth within 3 std "
                   f"{s['truth_within_3std']}/{s['seeds']} (honest {s['honest']}), limits within 10 % "
                   f"{s['limits_within_10pc']}/{s['seeds']} (worst {s['worst_limit_ratio']:.3f}), in the area "
-                  f"{s['in_area']}/{s['seeds']} (closest {-s['worst_edge_m']:.2f} m from the edge)", flush=True)  # fmt: skip
+                  f"{s['in_area']}/{s['seeds']} (closest {-s['worst_edge_m']:.2f} m from the edge)",
+                  flush=True)  # fmt: skip
             print("   achieved/predicted std (median): " + ", ".join(
                 f"{p} {v:.2f}" for p, v in s["median_std_ratio"].items()), flush=True)  # fmt: skip
         report["robots"][name] = {"plan": made, "rows": rows, "summary": summary}

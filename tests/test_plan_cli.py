@@ -12,7 +12,8 @@ import pandas as pd
 import pytest
 
 import wmrid
-from tests.cliutil import assert_clean_error, wmrid as run
+from tests.cliutil import assert_clean_error
+from tests.cliutil import wmrid as run
 from wmrid.io.reference_files import read_reference
 
 ROBOT = """name = "tiny"
@@ -51,8 +52,8 @@ def planned(tmp_path_factory) -> Path:
     robot = folder / "tiny.toml"
     robot.write_text(ROBOT)
     proc = run("plan", "--robot", robot, "--duration", "12", "--eta-noise", "0.02", "--tau-noise", "0.005",
-               "--log-rate", "200", "-o", folder / "plan.csv", "-o", folder / "plan.parquet", "-o", folder / "plan.mcap",
-               "-o", folder / "plan.json", "--format", "table")  # fmt: skip
+               "--log-rate", "200", "-o", folder / "plan.csv", "-o", folder / "plan.parquet",
+               "-o", folder / "plan.mcap", "-o", folder / "plan.json", "--format", "table")  # fmt: skip
     assert proc.returncode == 0, proc.stderr.decode()
     text = " ".join(proc.stdout.decode().split())
     assert text.startswith("This 12 s drive is predicted to determine every base parameter of tiny")
