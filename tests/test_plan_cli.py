@@ -163,3 +163,18 @@ def test_given_results_add_their_information(planned: Path, tmp_path: Path) -> N
 )
 def test_bad_requests_are_one_line(args: list[str], needles: list[str], tmp_path: Path) -> None:
     assert_clean_error(run("plan", "--robot", "amr", "--duration", "12", *args, cwd=tmp_path), 2, *needles)
+
+
+def test_noise_measured_from_a_log(tmp_path: Path) -> None:
+    """--noise-from measures the white noise of an earlier log's speeds and efforts and its rate with wmrid's noise
+    floor: a simulated log with 0.03 rad/s and 0.2 N m at 200 Hz reads back within 5 % (2,000 samples per wheel: the
+    floor's own scatter is about 2 %)."""
+    from wmrid.api.planning import measured_noise
+
+    log = tmp_path / "old.csv"
+    wmrid.write_simulation(wmrid.simulate("paper", duration=10, rate=200, eta_noise=0.03, tau_noise=0.2), log)
+    eta_std, tau_std, rate = measured_noise(log)
+    assert eta_std == pytest.approx(0.03, rel=0.05)
+    assert tau_std == pytest.approx(0.2, rel=0.05)
+    assert rate == pytest.approx(200.0, rel=1e-9)
+    assert_clean_error(run("plan", "--noise-from", log, "--eta-noise", "0.1", cwd=tmp_path), 2, "--noise-from", "not both")
