@@ -44,6 +44,8 @@ def base_args(name: str, tmp: Path) -> list[str]:
         return [MISSING_LOG, "--model", "/nonexistent/wmrid-test/model.json"]
     if name == "fleet":
         return [MISSING_LOG, "-o", str(tmp / "fleet.parquet")]
+    if name == "plan":
+        return ["--robot", "/nonexistent/wmrid-test/robot.toml"]
     return [MISSING_LOG]
 
 

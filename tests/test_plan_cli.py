@@ -177,4 +177,5 @@ def test_noise_measured_from_a_log(tmp_path: Path) -> None:
     assert eta_std == pytest.approx(0.03, rel=0.05)
     assert tau_std == pytest.approx(0.2, rel=0.05)
     assert rate == pytest.approx(200.0, rel=1e-9)
-    assert_clean_error(run("plan", "--noise-from", log, "--eta-noise", "0.1", cwd=tmp_path), 2, "--noise-from", "not both")
+    proc = run("plan", "--noise-from", log, "--eta-noise", "0.1", cwd=tmp_path)
+    assert_clean_error(proc, 2, "--noise-from", "not both")

@@ -169,6 +169,20 @@ def plan(
     from wmrid.api.inputs import load_robot
     from wmrid.model.dynamics import base_parameters
 
+    # every number is checked before anything is read or searched
+    seed = int(_number("seed", seed, 0.0, strict=False))  # type: ignore[arg-type]
+    rate = _number("rate", rate)  # type: ignore[assignment]
+    given_limits = {"max_wheel_speed": max_wheel_speed, "max_wheel_accel": max_wheel_accel, "max_torque": max_torque,
+                    "max_speed": max_speed, "max_turn_rate": max_turn_rate}  # fmt: skip
+    for name, value in given_limits.items():
+        _number(name, value)
+    ok = isinstance(margin, (int, float)) and not isinstance(margin, bool) and 0.0 <= margin < 0.9
+    if not ok:
+        raise UsageError(f"{option('margin', margin)}: must be a share in [0, 0.9)")
+    _number("eta_noise", eta_noise, strict=False)
+    _number("tau_noise", tau_noise, strict=False)
+    _number("log_rate", log_rate)
+    _number("target_std", target_std)
     robot_obj = load_robot(robot)
     nominal = robot_obj.nominal
     r, b = getattr(nominal, "r", None), getattr(nominal, "b", None)
@@ -177,12 +191,6 @@ def plan(
             f"{option('robot', robot_obj.name)}: a plan needs the wheel radius r and half track b (the [nominal_base] "
             "table gives neither)"
         )
-    seed = int(_number("seed", seed, 0.0, strict=False))  # type: ignore[arg-type]
-    rate = _number("rate", rate)  # type: ignore[assignment]
-    given_limits = {"max_wheel_speed": max_wheel_speed, "max_wheel_accel": max_wheel_accel, "max_torque": max_torque,
-                    "max_speed": max_speed, "max_turn_rate": max_turn_rate}  # fmt: skip
-    for name, value in given_limits.items():
-        _number(name, value)
     limits = resolve_limits(
         r, dict(robot_obj.limits), margin=margin, footprint=footprint(robot_obj), area=area, **given_limits
     )

@@ -47,26 +47,28 @@ def plan(
     ] = None,
     duration: Annotated[str, typer.Option(help="Length of the drive, s, or auto (with --target-std).")] = "60",
     target_std: Annotated[
-        float | None, typer.Option(help="With --duration auto: the largest relative std wanted, percent (e.g. 2).")
+        float | None, typer.Option(help="With --duration auto: the largest relative std wanted, percent, > 0 (e.g. 2).")
     ] = None,
-    rate: Annotated[float, typer.Option(help="Rate of the written reference, Hz.")] = 50.0,
+    rate: Annotated[float, typer.Option(help="Rate of the written reference, Hz, > 0.")] = 50.0,
     seed: Annotated[int, typer.Option(help="Seed of the search's random starts, >= 0.")] = 0,
-    max_wheel_speed: Annotated[float | None, typer.Option(help="Wheel speed limit, rad/s.")] = None,
-    max_wheel_accel: Annotated[float | None, typer.Option(help="Wheel acceleration limit, rad/s^2.")] = None,
+    max_wheel_speed: Annotated[float | None, typer.Option(help="Wheel speed limit, rad/s, > 0.")] = None,
+    max_wheel_accel: Annotated[float | None, typer.Option(help="Wheel acceleration limit, rad/s^2, > 0.")] = None,
     max_torque: Annotated[
-        float | None, typer.Option(help="Torque limit per wheel, N m (torques from the nominal model).")
+        float | None, typer.Option(help="Torque limit per wheel, N m, > 0 (torques from the nominal model).")
     ] = None,
-    max_speed: Annotated[float | None, typer.Option(help="Forward speed limit, m/s.")] = None,
-    max_turn_rate: Annotated[float | None, typer.Option(help="Turn rate limit, rad/s.")] = None,
+    max_speed: Annotated[float | None, typer.Option(help="Forward speed limit, m/s, > 0.")] = None,
+    max_turn_rate: Annotated[float | None, typer.Option(help="Turn rate limit, rad/s, > 0.")] = None,
     area: Annotated[
         str | None,
         typer.Option(help="Floor area WxH, m, centred on the start (the robot at rest facing +x); default 4x4."),
     ] = None,
     margin: Annotated[float, typer.Option(help="Share of each limit kept free, in [0, 0.9).")] = 0.15,
-    eta_noise: Annotated[float | None, typer.Option(help="White noise on each wheel speed, rad/s per sample.")] = None,
-    tau_noise: Annotated[float | None, typer.Option(help="White noise on each effort, N m per sample.")] = None,
+    eta_noise: Annotated[
+        float | None, typer.Option(help="White noise on each wheel speed, rad/s per sample, >= 0.")
+    ] = None,
+    tau_noise: Annotated[float | None, typer.Option(help="White noise on each effort, N m per sample, >= 0.")] = None,
     log_rate: Annotated[
-        float | None, typer.Option(help="Rate of the log to be recorded, Hz (default 100, or --noise-from's).")
+        float | None, typer.Option(help="Rate of the log to be recorded, Hz, > 0 (default 100, or --noise-from's).")
     ] = None,
     noise_from: Annotated[
         str | None, typer.Option(help="Measure the noise (and log rate) from an earlier log of this robot.")
