@@ -21,7 +21,7 @@ from wmrid.core.errors import UsageError, option
 from wmrid.design.excitation import RAMP_SECONDS, Excitation
 from wmrid.design.information import DEFAULT_K, SensorNoise
 from wmrid.design.limits import LIMIT_NAMES, Limits
-from wmrid.design.problem import CORRELATION, CRITERIA, DIRECTION_SHARE, Motion, Problem
+from wmrid.design.problem import CORRELATION, CRITERIA, DIRECTION_SHARE, FLOOR_SHARE, Motion, Problem
 from wmrid.design.search import search
 from wmrid.model.dynamics import RegressorForm, choose_form, named_base
 
@@ -142,12 +142,19 @@ def _limits_used(problem: Problem, motion: Motion) -> dict[str, dict[str, float 
     return out
 
 
-def separability(motion: Motion, wheel_speed_limit: float) -> dict[str, Any]:
+#: Share of the wheel speed limit under which a wheel counts as near standstill (``margins[wheel]["near_zero_share"]``,
+#: over the time between the ramps; a warning above NEAR_ZERO_WARN).
+NEAR_ZERO = 0.03
+NEAR_ZERO_WARN = 0.05
+
+
+def separability(motion: Motion, wheel_speed_limit: float, interior: np.ndarray) -> dict[str, Any]:
     """What lets the log tell the parameters apart: per wheel, the share of time it turns forward faster than a tenth
     of the wheel speed limit and backward likewise (the search keeps each >= DIRECTION_SHARE), and its speed
     magnitude's 10th/50th/90th percentiles while doing so (rad/s) -- F_v and F_d separate when each wheel runs at
     several speeds in both directions; the correlation of v and w and of |v| and |w| (m12 and Vc need them to vary
-    independently; the search keeps |corr(v, w)| <= CORRELATION)."""
+    independently; the search keeps |corr(v, w)| <= CORRELATION); and the share of the time between the ramps each wheel
+    spends within NEAR_ZERO of the limit from standstill."""
     out: dict[str, Any] = {"threshold": 0.1 * wheel_speed_limit, "direction_share_min": DIRECTION_SHARE,
                            "corr_max": CORRELATION}  # fmt: skip
     for j, wheel in enumerate(("right", "left")):
@@ -158,6 +165,7 @@ def separability(motion: Motion, wheel_speed_limit: float) -> dict[str, Any]:
             "forward_share": float(np.mean(eta > 0.1 * wheel_speed_limit)),
             "backward_share": float(np.mean(eta < -0.1 * wheel_speed_limit)),
             "speed_percentiles": [float(v) for v in np.percentile(speed, [10, 50, 90])],
+            "near_zero_share": float(np.mean(np.abs(eta[interior]) < NEAR_ZERO * wheel_speed_limit)),
         }
     out["corr_v_w"] = float(np.corrcoef(motion.v, motion.w)[0, 1])
     out["corr_abs_v_abs_w"] = float(np.corrcoef(np.abs(motion.v), np.abs(motion.w))[0, 1])
@@ -295,9 +303,20 @@ def make_plan(
     floors = [n for n, src in zip(form.base_names, fine.scale_sources, strict=True) if src == "floor"]
     if floors:
         warnings.append(
-            f"the robot file's nominal {', '.join(floors)} {'is' if len(floors) == 1 else 'are'} 0 or near it: "
-            f"{'its' if len(floors) == 1 else 'their'} relative std is taken against a floor (see 'scale')"
+            f"the robot file's nominal {', '.join(floors)} {'is' if len(floors) == 1 else 'are'} 0 or small (its "
+            f"effect under {100 * FLOOR_SHARE:g} % of the torque scale): {'its' if len(floors) == 1 else 'their'} "
+            "relative std is taken against that floor (see 'scale'), so it is smaller than the std over the value"
         )
+    interior = (fine.t > fine.ramp) & (fine.t < fine.duration - fine.ramp)
+    for j, wheel in enumerate(("right", "left")):
+        share = float(np.mean(np.abs(motion.eta[interior, j]) < NEAR_ZERO * limits.max_wheel_speed))
+        if share > NEAR_ZERO_WARN:
+            warnings.append(
+                f"the {wheel} wheel spends {100 * share:.0f} % of the drive within "
+                f"{NEAR_ZERO * limits.max_wheel_speed:.2g} rad/s of standstill, where it may stick and its measured "
+                "sign flips with the noise: both bias the Coulomb friction the estimator fits (measured on simulated plans: F_d up to 4-5 std off), beyond "
+                "what the predicted std covers"
+            )
     if target_std is not None and value > target_std:
         warnings.append(f"the plan predicts {100 * value:.3g} %, above the target {100 * target_std:g} %")
     settings = {
@@ -311,7 +330,7 @@ def make_plan(
         robot=robot_name, r=float(r), b=float(b), limits=limits, noise=noise,
         excitation=Excitation(problem.duration, problem.period, found.coefficients, problem.ramp), settings=settings,
         predicted=predicted, value=value, limits_used=_limits_used(fine, motion), baselines=baselines,
-        margins=separability(motion, limits.max_wheel_speed), given=None if given is None else given[1],
+        margins=separability(motion, limits.max_wheel_speed, interior), given=None if given is None else given[1],
         warnings=tuple(warnings),
     )  # fmt: skip
 
