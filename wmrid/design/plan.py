@@ -314,8 +314,8 @@ def make_plan(
             warnings.append(
                 f"the {wheel} wheel spends {100 * share:.0f} % of the drive within "
                 f"{NEAR_ZERO * limits.max_wheel_speed:.2g} rad/s of standstill, where it may stick and its measured "
-                "sign flips with the noise: both bias the Coulomb friction the estimator fits (measured on simulated plans: F_d up to 4-5 std off), beyond "
-                "what the predicted std covers"
+                "sign flips with the noise: both bias the Coulomb friction the estimator fits (measured on simulated "
+                "plans: F_d up to 4-5 std off), beyond what the predicted std covers"
             )
     if target_std is not None and value > target_std:
         warnings.append(f"the plan predicts {100 * value:.3g} %, above the target {100 * target_std:g} %")
