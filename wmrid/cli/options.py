@@ -31,6 +31,21 @@ class FormChoice(str, Enum):
     general = "general"
 
 
+class Criterion(str, Enum):
+    """``wmrid plan --criterion``: the largest relative std, D- or A-optimality."""
+
+    worst = "worst"
+    d = "d"
+    a = "a"
+
+
+class PlanFriction(str, Enum):
+    """``wmrid plan --friction``: the friction model a plan is designed for."""
+
+    wheel = "wheel"
+    wheel_caster = "wheel+caster"
+
+
 class TimeUnit(str, Enum):
     auto = "auto"
     s = "s"

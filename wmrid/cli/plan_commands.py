@@ -3,26 +3,14 @@
 from __future__ import annotations
 
 import sys
-from enum import Enum
 from typing import Annotated
 
 import typer
 
 from wmrid.cli.app import app
 from wmrid.cli.helpers import activity, on_stdout, warning_summary
-from wmrid.cli.options import OutputFormat
+from wmrid.cli.options import Criterion, OutputFormat, PlanFriction
 from wmrid.reporting.terminal import console
-
-
-class Criterion(str, Enum):
-    worst = "worst"
-    d = "d"
-    a = "a"
-
-
-class PlanFriction(str, Enum):
-    wheel = "wheel"
-    wheel_caster = "wheel+caster"
 
 
 @app.command(

@@ -97,29 +97,39 @@ def intermediate_covariance(
     w = lowpass(g, a) / k
     gamma = h * (w.T @ w)
     adj = lowpass_adjoint(w, a)  # (n, p)
+    _, zs, qs = noise_scores(w, adj, eta, h, theta0, noise, k)
+    score = sum(q * (z.T @ z) for q, z in zip(qs, zs, strict=True))
+    inv = np.linalg.inv(gamma)
+    big = np.kron(np.eye(2), inv)
+    cov = big @ score @ big
+    return 0.5 * (cov + cov.T), gamma
+
+
+def noise_scores(
+    w: np.ndarray, adj: np.ndarray, eta: np.ndarray, h: float, theta0: np.ndarray, noise: SensorNoise, k: float
+) -> tuple[np.ndarray, list[np.ndarray], list[float]]:
+    """(c (n, 2, 2), z per noise source (n, 2p) x 4, intensity per source): how each white noise sample reaches the
+    estimator's score sum h w^T r (module docstring): the speed noise of wheels 1 and 2 (through u and the regressor's
+    speed columns, c_il = sum_j m_ij D_jl), then their effort noise (through the effort columns).  The intensity is
+    the per-sample variance at the log's rate on this grid, sigma^2 / (rate h)."""
     m = inverse_inertia(theta0)
     sens = speed_sensitivity(eta, theta0)
-    c = m[None, :, 0, None] * sens[:, None, 0, :] + m[None, :, 1, None] * sens[:, None, 1, :]  # (n, 2, 2): c_il
-    # noise intensity on this grid: per-sample variance sigma^2 at the log's rate -> sigma^2 / (rate h) here
-    q_eta = noise.eta_std**2 / (noise.rate * h)
-    q_tau = noise.tau_std**2 / (noise.rate * h)
+    c = m[None, :, 0, None] * sens[:, None, 0, :] + m[None, :, 1, None] * sens[:, None, 1, :]
     p = w.shape[1]
-    score = np.zeros((2 * p, 2 * p))
-    for src in range(2):  # speed noise of wheel src
+    zs: list[np.ndarray] = []
+    for src in range(2):
         z = np.empty((len(w), 2 * p))
         for i in range(2):
             part = (c[:, i, src] / k)[:, None] * adj
             if i == src:
                 part = part + (w - adj)
             z[:, i * p : (i + 1) * p] = h * part
-        score += q_eta * (z.T @ z)
-    for src in range(2):  # effort noise of wheel src
-        z = np.concatenate([-h * m[i, src] / k * adj for i in range(2)], axis=1)
-        score += q_tau * (z.T @ z)
-    inv = np.linalg.inv(gamma)
-    big = np.kron(np.eye(2), inv)
-    cov = big @ score @ big
-    return 0.5 * (cov + cov.T), gamma
+        zs.append(z)
+    for src in range(2):
+        zs.append(np.concatenate([-h * m[i, src] / k * adj for i in range(2)], axis=1))
+    q_eta = noise.eta_std**2 / (noise.rate * h)
+    q_tau = noise.tau_std**2 / (noise.rate * h)
+    return c, zs, [q_eta, q_eta, q_tau, q_tau]
 
 
 def base_covariance(
@@ -158,30 +168,14 @@ class CovarianceGradient:
         self.m = inverse_inertia(theta0)
 
     def forward(self, eta: np.ndarray, tau: np.ndarray, h: float) -> np.ndarray:
-        k, m, noise = self.k, self.m, self.noise
+        k, noise = self.k, self.noise
         a = math.exp(-k * h)
         g = regressor(eta, tau, self.form)
         w = lowpass(g, a) / k
         gamma = h * (w.T @ w)
         adj = lowpass_adjoint(w, a)
-        sens = speed_sensitivity(eta, self.theta0)
-        c = m[None, :, 0, None] * sens[:, None, 0, :] + m[None, :, 1, None] * sens[:, None, 1, :]
-        q_eta = noise.eta_std**2 / (noise.rate * h)
-        q_tau = noise.tau_std**2 / (noise.rate * h)
+        c, zs, qs = noise_scores(w, adj, eta, h, self.theta0, noise, k)
         p = w.shape[1]
-        zs, qs = [], []
-        for src in range(2):
-            z = np.empty((len(w), 2 * p))
-            for i in range(2):
-                part = (c[:, i, src] / k)[:, None] * adj
-                if i == src:
-                    part = part + (w - adj)
-                z[:, i * p : (i + 1) * p] = h * part
-            zs.append(z)
-            qs.append(q_eta)
-        for src in range(2):
-            zs.append(np.concatenate([-h * m[i, src] / k * adj for i in range(2)], axis=1))
-            qs.append(q_tau)
         score = sum(q * (z.T @ z) for q, z in zip(qs, zs, strict=True))
         inv = np.linalg.inv(gamma)
         big = np.kron(np.eye(2), inv)
@@ -193,12 +187,12 @@ class CovarianceGradient:
             info = info + self.given
         cov0 = np.linalg.inv(info)
         cov0 = 0.5 * (cov0 + cov0.T)
-        self._keep = (a, h, g, w, adj, c, sens, qs, zs, score, inv, big, c_inv, cov0, eta, tau, p)
+        self._keep = (a, h, w, adj, c, qs, zs, score, inv, big, c_inv, cov0, eta, p)
         return cov0
 
     def backward(self, g0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(dJ/deta (n, 2), dJ/dtau (n, 2)) for g0 = dJ/dCov(theta0), symmetric."""
-        a, h, _, w, adj, c, _, qs, zs, score, inv, big, c_inv, cov0, eta, _, p = self._keep
+        a, h, w, adj, c, qs, zs, score, inv, big, c_inv, cov0, eta, p = self._keep
         k, m = self.k, self.m
         g0 = 0.5 * (g0 + g0.T)
         g_info = -cov0 @ g0 @ cov0  # cov0 = info^-1
