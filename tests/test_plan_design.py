@@ -96,15 +96,17 @@ def test_covariance_matches_a_monte_carlo_of_the_estimator():
 
 def test_covariance_scales_with_noise_intensity_not_grid():
     """The same motion and noise intensity on a grid twice as coarse gives nearly the same covariance (the
-    discretisation of the k = 10 1/s filter at 50 vs 100 Hz: within 12 %), and four times the noise variance per
-    sample gives four times the covariance."""
+    discretisation of the k = 10 1/s filter at 50 vs 100 Hz: within 12 %), and four times the effort noise variance
+    per sample gives four times the covariance."""
     eta, tau, h = _motion(rate=100.0)
     noise = SensorNoise(0.01, 0.05, 100.0)
     fine = predicted_covariance(eta, tau, h, THETA0, GENERAL, noise)
     coarse = predicted_covariance(eta[::2], tau[::2], 2 * h, THETA0, GENERAL, noise)
     assert np.all(np.abs(np.sqrt(np.diag(coarse) / np.diag(fine)) - 1.0) < 0.12)
-    louder = predicted_covariance(eta, tau, h, THETA0, GENERAL, SensorNoise(0.02, 0.1, 100.0))
-    assert np.allclose(louder, 4.0 * fine, rtol=1e-9)
+    # effort noise alone enters linearly; speed noise also sets how often the measured sign flips near standstill
+    quiet = predicted_covariance(eta, tau, h, THETA0, GENERAL, SensorNoise(0.0, 0.05, 100.0))
+    louder = predicted_covariance(eta, tau, h, THETA0, GENERAL, SensorNoise(0.0, 0.1, 100.0))
+    assert np.allclose(louder, 4.0 * quiet, rtol=1e-9)
 
 
 def test_reference_starts_and_ends_at_rest_and_derivatives_are_exact():
@@ -188,3 +190,26 @@ def test_search_gradients_match_finite_differences(criterion: str) -> None:
     # rows whose quantity sits at a kink of |q| (a sign change within the step) are left out
     rows = np.max(np.abs(jac), axis=1) > 1e-6 * np.max(np.abs(jac))
     assert np.max(np.abs(jac[rows] - num_jac[rows])) < 1e-4 * np.max(np.abs(num_jac))
+
+
+def test_sign_flips_near_standstill_cost_information():
+    """A wheel crawling within the speed noise of standstill says little about its Coulomb friction: the measured
+    sign's mean is erf(eta / (sqrt(2) sigma)) and it flips with std sqrt(1 - erf^2) (checked against 20,000 draws),
+    and the predicted std of F_d grows by more than half when the speed noise grows from 0.001 to 0.05 rad/s on a
+    motion that dwells near zero."""
+    from wmrid.design.information import sign_statistics
+
+    rng = np.random.Generator(np.random.PCG64(2))
+    eta = np.array([[0.0, 0.01], [0.02, -0.03], [0.05, 0.2]])
+    mean, sd, _ = sign_statistics(eta, 0.02)
+    draws = np.sign(eta[None] + 0.02 * rng.standard_normal((20000, *eta.shape)))
+    assert np.allclose(draws.mean(axis=0), mean, atol=0.02)
+    assert np.allclose(draws.std(axis=0), sd, atol=0.02)
+    e, _, h = _motion()
+    slow = e * 0.05  # the same motion, 20 times slower: much of it within a few sigma of standstill
+    tau = d.wheel_torque(slow, np.gradient(slow, h, axis=0), THETA0)
+    fd = []
+    for sigma in (0.001, 0.05):
+        cov = predicted_covariance(slow, tau, h, THETA0, GENERAL, SensorNoise(sigma, 0.05, 100.0))
+        fd.append(np.sqrt(cov[6, 6]))
+    assert fd[1] > 1.5 * fd[0]

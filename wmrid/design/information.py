@@ -9,8 +9,12 @@ order in the noise (the regressor's columns hold the noisy eta and tau)::
     r_i = (1 - L) e_eta,i - (1 / k) L [ sum_j m_ij e_tau,j - sum_l c_il e_eta,l ],   c_il = sum_j m_ij D_jl
 
 with L the unit-gain low-pass k/(s + k) in the observer's zero-order-hold discretisation and D = d(V + F_v eta)/d eta
-the model's speed sensitivity.  The estimate's error is Gamma^-1 sum_n h w_n^T r_n, Gamma = sum h w^T w: linear in
-the noise, so its covariance follows exactly from the ADJOINT filters (the noise sample at m reaches the sum through
+the model's speed sensitivity.  The Coulomb columns are the sign of the MEASURED speed, which the noise flips near
+standstill: the regressor is taken at its mean there (-erf(eta / (sqrt(2) sigma)), so a wheel crawling near zero speed
+carries little information on F_d), and the flips are one more white source, of std F_dj sqrt(1 - erf^2), entering
+like effort noise (``coulomb``: the F_d assumed for them).
+
+The estimate's error is Gamma^-1 sum_n h w_n^T r_n, Gamma = sum h w^T w: linear in the noise, so its covariance follows exactly from the ADJOINT filters (the noise sample at m reaches the sum through
 z_m = h sum_n L[n, m] w_n, the time-reversed filter of w), with no Monte Carlo.  The base parameters come from the
 intermediate ones by the minimum-distance fit of :mod:`wmrid.model.base_params`, whose covariance with the best
 weights is (J^T C^-1 J)^-1, J = d theta / d theta0 (complex-step derivative, exact).
@@ -49,6 +53,30 @@ class SensorNoise:
         return {"eta_std": self.eta_std, "tau_std": self.tau_std, "rate": self.rate}
 
 
+def sign_statistics(eta: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(E, sd, dE/deta), each (n, 2): the measured sign sgn(eta + e) of a speed eta (rad/s) under white noise e of std
+    sigma: its mean E = erf(eta / (sqrt(2) sigma)), its std sqrt(1 - E^2), and the mean's slope.  sigma = 0: the sign
+    itself, std 0."""
+    if sigma <= 0:
+        return np.sign(eta), np.zeros_like(eta), np.zeros_like(eta)
+    from scipy.special import erf
+
+    x = eta / (math.sqrt(2.0) * sigma)
+    mean = erf(x)
+    sd = np.sqrt(np.clip(1.0 - mean * mean, 0.0, None))
+    slope = math.sqrt(2.0 / math.pi) / sigma * np.exp(-x * x)
+    return mean, sd, slope
+
+
+def expected_regressor(eta: np.ndarray, tau: np.ndarray, form: RegressorForm, sigma: float) -> np.ndarray:
+    """The regressor g(eta, tau) (n, p) the estimator will see on average: its Coulomb columns -sgn(eta_j) of the
+    MEASURED speed, whose mean near standstill is -erf(eta_j / (sqrt(2) sigma)) rather than -sgn(eta_j)."""
+    g = regressor(eta, tau, form)
+    if form.kind == "general" and sigma > 0:
+        g[:, 6:8] = -sign_statistics(eta, sigma)[0]
+    return g
+
+
 def lowpass(x: np.ndarray, a: float) -> np.ndarray:
     """y_n = a y_{n-1} + (1 - a) x_{n-1}, y_0 = 0 along axis 0: the unit-gain zero-order-hold low-pass."""
     return lfilter([0.0, 1.0 - a], [1.0, -a], x, axis=0)
@@ -85,7 +113,7 @@ def intermediate_jacobian(theta0: np.ndarray, form: RegressorForm) -> np.ndarray
 
 def intermediate_covariance(
     eta: np.ndarray, tau: np.ndarray, h: float, theta0: np.ndarray, form: RegressorForm, noise: SensorNoise,
-    k: float = DEFAULT_K,
+    k: float = DEFAULT_K, coulomb: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """(C (2p, 2p), Gamma (p, p)): the covariance of the intermediate estimate theta.ravel() and the information
     matrix Gamma = sum h w^T w, for a log of eta (n, 2) rad/s and tau (n, 2) N m on an even grid of step h s.
@@ -93,11 +121,11 @@ def intermediate_covariance(
     The grid need not be the log's: the noise is scaled to the same intensity (variance x time step), so a coarser
     grid gives the same answer while the motion is smooth on it."""
     a = math.exp(-k * h)
-    g = regressor(eta, tau, form)
+    g = expected_regressor(eta, tau, form, noise.eta_std)
     w = lowpass(g, a) / k
     gamma = h * (w.T @ w)
     adj = lowpass_adjoint(w, a)  # (n, p)
-    _, zs, qs = noise_scores(w, adj, eta, h, theta0, noise, k)
+    _, zs, qs, _ = noise_scores(w, adj, eta, h, theta0, noise, k, form, coulomb)
     score = sum(q * (z.T @ z) for q, z in zip(qs, zs, strict=True))
     inv = np.linalg.inv(gamma)
     big = np.kron(np.eye(2), inv)
@@ -106,12 +134,23 @@ def intermediate_covariance(
 
 
 def noise_scores(
-    w: np.ndarray, adj: np.ndarray, eta: np.ndarray, h: float, theta0: np.ndarray, noise: SensorNoise, k: float
-) -> tuple[np.ndarray, list[np.ndarray], list[float]]:
+    w: np.ndarray,
+    adj: np.ndarray,
+    eta: np.ndarray,
+    h: float,
+    theta0: np.ndarray,
+    noise: SensorNoise,
+    k: float,
+    form: RegressorForm,
+    coulomb: np.ndarray | None = None,
+) -> tuple[np.ndarray, list[np.ndarray], list[float], np.ndarray]:
     """(c (n, 2, 2), z per noise source (n, 2p) x 4, intensity per source): how each white noise sample reaches the
     estimator's score sum h w^T r (module docstring): the speed noise of wheels 1 and 2 (through u and the regressor's
     speed columns, c_il = sum_j m_ij D_jl), then their effort noise (through the effort columns).  The intensity is
-    the per-sample variance at the log's rate on this grid, sigma^2 / (rate h)."""
+    the per-sample variance at the log's rate on this grid, sigma^2 / (rate h).  With speed noise and the general
+    form, two more sources: each wheel's sign flips (std F_dj sqrt(1 - E^2), ``coulomb`` = F_d, default theta0's),
+    through the Coulomb columns as effort noise goes through the effort columns; the last value returned is F_d
+    (2,) as used."""
     m = inverse_inertia(theta0)
     sens = speed_sensitivity(eta, theta0)
     c = m[None, :, 0, None] * sens[:, None, 0, :] + m[None, :, 1, None] * sens[:, None, 1, :]
@@ -129,7 +168,15 @@ def noise_scores(
         zs.append(np.concatenate([-h * m[i, src] / k * adj for i in range(2)], axis=1))
     q_eta = noise.eta_std**2 / (noise.rate * h)
     q_tau = noise.tau_std**2 / (noise.rate * h)
-    return c, zs, [q_eta, q_eta, q_tau, q_tau]
+    qs = [q_eta, q_eta, q_tau, q_tau]
+    fd = np.abs(np.asarray(theta0[6:8] if coulomb is None else coulomb, dtype=np.float64))
+    if form.kind == "general" and noise.eta_std > 0:
+        _, sd, _ = sign_statistics(eta, noise.eta_std)
+        for src in range(2):
+            zs.append(np.concatenate([(-h * m[i, src] / k * fd[src] * sd[:, src])[:, None] * adj for i in range(2)],
+                                     axis=1))  # fmt: skip
+            qs.append(1.0 / (noise.rate * h))
+    return c, zs, qs, fd
 
 
 def base_covariance(
@@ -145,11 +192,11 @@ def base_covariance(
 
 def predicted_covariance(
     eta: np.ndarray, tau: np.ndarray, h: float, theta0: np.ndarray, form: RegressorForm, noise: SensorNoise,
-    k: float = DEFAULT_K, jac: np.ndarray | None = None,
+    k: float = DEFAULT_K, jac: np.ndarray | None = None, coulomb: np.ndarray | None = None,
 ) -> np.ndarray:  # fmt: skip
     """Cov(theta0) (n0, n0) that the estimator would reach on a log of this motion with this noise (module doc);
-    ``jac``: :func:`intermediate_jacobian` when already known."""
-    cov_theta, _ = intermediate_covariance(eta, tau, h, theta0, form, noise, k)
+    ``jac``: :func:`intermediate_jacobian` when already known; ``coulomb``: the F_d (2,) of the sign flips."""
+    cov_theta, _ = intermediate_covariance(eta, tau, h, theta0, form, noise, k, coulomb)
     return base_covariance(cov_theta, theta0, form, jac)
 
 
@@ -163,18 +210,19 @@ class CovarianceGradient:
     """
 
     def __init__(self, theta0: np.ndarray, form: RegressorForm, noise: SensorNoise, k: float, jac: np.ndarray,
-                 given_info: np.ndarray | None = None) -> None:  # fmt: skip
+                 given_info: np.ndarray | None = None, coulomb: np.ndarray | None = None) -> None:  # fmt: skip
         self.theta0, self.form, self.noise, self.k, self.jac, self.given = theta0, form, noise, k, jac, given_info
+        self.coulomb = coulomb
         self.m = inverse_inertia(theta0)
 
     def forward(self, eta: np.ndarray, tau: np.ndarray, h: float) -> np.ndarray:
         k, noise = self.k, self.noise
         a = math.exp(-k * h)
-        g = regressor(eta, tau, self.form)
+        g = expected_regressor(eta, tau, self.form, noise.eta_std)
         w = lowpass(g, a) / k
         gamma = h * (w.T @ w)
         adj = lowpass_adjoint(w, a)
-        c, zs, qs = noise_scores(w, adj, eta, h, self.theta0, noise, k)
+        c, zs, qs, fd = noise_scores(w, adj, eta, h, self.theta0, noise, k, self.form, self.coulomb)
         p = w.shape[1]
         score = sum(q * (z.T @ z) for q, z in zip(qs, zs, strict=True))
         inv = np.linalg.inv(gamma)
@@ -187,12 +235,16 @@ class CovarianceGradient:
             info = info + self.given
         cov0 = np.linalg.inv(info)
         cov0 = 0.5 * (cov0 + cov0.T)
-        self._keep = (a, h, w, adj, c, qs, zs, score, inv, big, c_inv, cov0, eta, p)
+        self._keep = (a, h, w, adj, c, qs, zs, score, inv, big, c_inv, cov0, eta, p, fd)
         return cov0
 
     def backward(self, g0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(dJ/deta (n, 2), dJ/dtau (n, 2)) for g0 = dJ/dCov(theta0), symmetric."""
-        a, h, w, adj, c, qs, zs, score, inv, big, c_inv, cov0, eta, p = self._keep
+        a, h, w, adj, c, qs, zs, score, inv, big, c_inv, cov0, eta, p, fd = self._keep
+        sigma = self.noise.eta_std
+        flips = self.form.kind == "general" and sigma > 0
+        mean, sd, slope = sign_statistics(eta, sigma)
+        g_sd = np.zeros_like(eta)
         k, m = self.k, self.m
         g0 = 0.5 * (g0 + g0.T)
         g_info = -cov0 @ g0 @ cov0  # cov0 = info^-1
@@ -204,7 +256,7 @@ class CovarianceGradient:
         g_w = 2.0 * h * (w @ g_gamma)  # Gamma = h w^T w
         g_adj = np.zeros_like(adj)
         g_c_il = np.zeros_like(c)  # (n, 2, 2)
-        for src in range(4):
+        for src in range(len(zs)):
             gz = 2.0 * qs[src] * (zs[src] @ g_score)  # S = sum q z^T z
             for i in range(2):
                 block = gz[:, i * p : (i + 1) * p]
@@ -214,8 +266,13 @@ class CovarianceGradient:
                     if i == src:
                         g_w += h * block
                         g_adj -= h * block
-                else:
+                elif src < 4:
                     g_adj += (-h * m[i, src - 2] / k) * block
+                else:  # sign flips of wheel j: z = -(h / k) m_ij F_dj sd_j adj
+                    j = src - 4
+                    scale = -h * m[i, j] / k * fd[j]
+                    g_adj += (scale * sd[:, j])[:, None] * block
+                    g_sd[:, j] += scale * np.sum(block * adj, axis=1)
         g_w += lowpass(g_adj, a)  # adj = L^T w: its adjoint is L
         g_g = lowpass_adjoint(g_w, a) / k  # w = L g / k
         # g = regressor(eta, tau): [tau1, tau2, eta2^2 - eta1 eta2, eta1^2 - eta1 eta2, -eta1, -eta2, -sgn, -sgn, ...]
@@ -224,6 +281,11 @@ class CovarianceGradient:
         g_eta = np.empty_like(eta)
         g_eta[:, 0] = -g_g[:, 2] * e2 + g_g[:, 3] * (2.0 * e1 - e2) - g_g[:, 4]
         g_eta[:, 1] = g_g[:, 2] * (2.0 * e2 - e1) - g_g[:, 3] * e1 - g_g[:, 5]
+        if flips:  # the Coulomb columns -E(eta) and the flips' std sqrt(1 - E^2)
+            g_eta -= g_g[:, 6:8] * slope
+            with np.errstate(divide="ignore", invalid="ignore"):
+                d_sd = np.where(sd > 1e-12, -mean * slope / sd, 0.0)
+            g_eta += g_sd * d_sd
         # c_il = sum_j m_ij D_jl(eta); D's entries are linear in eta (Vc) plus constants (F_v)
         g_d = np.einsum("ij,nil->njl", m, g_c_il)  # dJ/dD_jl
         vc = self.theta0[3]

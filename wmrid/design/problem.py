@@ -134,6 +134,8 @@ class Problem:
             self.tau_scale = float(np.max(np.sum(np.abs(big_m), axis=1))) * limits.max_wheel_accel
         self.jac = intermediate_jacobian(self.theta0, form)
         self.scales, self.scale_sources = parameter_scales(self.theta0, form.base_names, r, limits, self.tau_scale)
+        #: N m: the Coulomb friction the sign flips near standstill are sized with (its scale when the nominal is 0)
+        self.coulomb = self.scales[6:8].copy()
 
     def motion_of(self, coefficients: np.ndarray, basis: Basis | None = None) -> Motion:
         """The motion (:class:`Motion`) of coefficients (2, N, 2) on this problem's grid (or on ``basis``'s)."""
@@ -168,7 +170,8 @@ class Problem:
     def covariance(self, motion: Motion) -> np.ndarray:
         """Predicted Cov(theta0) (n0, n0) along the motion, the given logs' information added."""
         h = float(motion.t[1] - motion.t[0])
-        cov = predicted_covariance(motion.eta, motion.tau, h, self.theta0, self.form, self.noise, self.k, self.jac)
+        cov = predicted_covariance(motion.eta, motion.tau, h, self.theta0, self.form, self.noise, self.k, self.jac,
+                                   self.coulomb)  # fmt: skip
         if self.given_info is not None:
             cov = np.linalg.inv(np.linalg.inv(cov) + self.given_info)
             cov = 0.5 * (cov + cov.T)
@@ -241,7 +244,8 @@ class Differentiated:
         self.j_v, self.j_w = np.hstack([self.p, zero]), np.hstack([zero, self.p])
         theta0 = problem.theta0
         self.big_m = np.linalg.inv(np.array([[theta0[0], theta0[1]], [theta0[1], theta0[2]]]))
-        self.grad = CovarianceGradient(theta0, problem.form, problem.noise, problem.k, problem.jac, problem.given_info)
+        self.grad = CovarianceGradient(theta0, problem.form, problem.noise, problem.k, problem.jac, problem.given_info,
+                                       problem.coulomb)  # fmt: skip
 
     def tau_jacobian(self, motion: Motion) -> np.ndarray:
         d = speed_sensitivity(motion.eta, self.problem.theta0)  # (n, 2, 2)
