@@ -14,8 +14,9 @@ standstill: the regressor is taken at its mean there (-erf(eta / (sqrt(2) sigma)
 carries little information on F_d), and the flips are one more white source, of std F_dj sqrt(1 - erf^2), entering
 like effort noise (``coulomb``: the F_d assumed for them).
 
-The estimate's error is Gamma^-1 sum_n h w_n^T r_n, Gamma = sum h w^T w: linear in the noise, so its covariance follows exactly from the ADJOINT filters (the noise sample at m reaches the sum through
-z_m = h sum_n L[n, m] w_n, the time-reversed filter of w), with no Monte Carlo.  The base parameters come from the
+The estimate's error is Gamma^-1 sum_n h w_n^T r_n, Gamma = sum h w^T w: linear in the noise, so its covariance
+follows exactly from the ADJOINT filters (the noise sample at m reaches the sum through z_m = h sum_n L[n, m] w_n,
+the time-reversed filter of w), with no Monte Carlo.  The base parameters come from the
 intermediate ones by the minimum-distance fit of :mod:`wmrid.model.base_params`, whose covariance with the best
 weights is (J^T C^-1 J)^-1, J = d theta / d theta0 (complex-step derivative, exact).
 
