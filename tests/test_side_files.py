@@ -1,0 +1,95 @@
+"""Files the user did not name, read with care (issue 30, "hangs and unbounded memory"): a rosbag2 folder's
+``metadata.yaml`` that is a link to ``/dev/zero``, a FIFO, or oversized; a FIFO named as a ``.db3``'s ``-wal`` or
+``-shm``; a fleet manifest naming devices or files outside its folder; a glob over a folder with symbolic-link loops.
+
+Every case is the real thing (a real link to a real device, a real FIFO, a real loop) run as a real process under a
+timeout, so that a regression fails instead of hanging the suite; where memory is the point the process's peak
+resident size is measured (``os.wait4``: that child's own, not the largest of all children so far).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from tests.cliutil import COLUMNS
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "sample_logs" / "paper_sinusoid.mcap"
+#: The budget the child processes run under, and the peak resident size they must stay below.
+BUDGET = 256 << 20
+
+
+@dataclass
+class Run:
+    returncode: int
+    stdout: str
+    stderr: str
+    peak_rss: int  # bytes
+
+    def one_error(self, code: int, *needles: str) -> str:
+        """The run failed with exit ``code``, one stderr line starting ``wmrid:`` holding every needle; that line."""
+        assert self.returncode == code, self.stderr
+        assert "Traceback" not in self.stderr
+        lines = self.stderr.strip().splitlines()
+        assert len(lines) == 1, self.stderr
+        assert lines[0].startswith("wmrid:"), lines[0]
+        for needle in needles:
+            assert needle in lines[0], (needle, lines[0])
+        return lines[0]
+
+
+def run(*args: str, timeout: float = 20, cwd: Path | None = None) -> Run:
+    """``python -m wmrid ARGS`` under WMRID_MEMORY_BUDGET=BUDGET, killed (and the test failed) past ``timeout``
+    seconds; its exit code, output and peak resident size."""
+    env = dict(os.environ, COLUMNS=COLUMNS, WMRID_MEMORY_BUDGET=str(BUDGET))
+    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "wmrid", *args], stdin=subprocess.DEVNULL, stdout=out, stderr=err, cwd=cwd, env=env
+        )
+        deadline = time.monotonic() + timeout
+        while True:
+            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+            if pid:
+                break
+            if time.monotonic() > deadline:
+                proc.kill()
+                os.wait4(proc.pid, 0)
+                pytest.fail(f"wmrid {' '.join(args)} still running after {timeout} s (a hang)")
+            time.sleep(0.02)
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        out.seek(0)
+        err.seek(0)
+        return Run(proc.returncode, out.read().decode(), err.read().decode(), usage.ru_maxrss * 1024)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# A rosbag2 folder's metadata.yaml
+
+
+@pytest.mark.parametrize("device", ["/dev/zero", "/dev/urandom"])
+@pytest.mark.parametrize("command", ["identify", "inspect"])
+def test_a_metadata_yaml_linked_to_an_endless_device_is_refused_unread(tmp_path, device, command):
+    folder = tmp_path / "d"
+    folder.mkdir()
+    (folder / "metadata.yaml").symlink_to(device)
+    done = run(command, str(folder))
+    done.one_error(2, f"{folder}/metadata.yaml", "a character device, not a regular file")
+    assert done.peak_rss < BUDGET, done.peak_rss  # was 5.35 GB read whole by rosbags
+
+
+def test_a_metadata_yaml_that_is_a_fifo_or_oversized_is_refused(tmp_path):
+    fifo_folder, big_folder = tmp_path / "fifo", tmp_path / "big"
+    fifo_folder.mkdir()
+    big_folder.mkdir()
+    os.mkfifo(fifo_folder / "metadata.yaml")  # no writer ever comes: a reader that opens it waits forever
+    (big_folder / "metadata.yaml").write_bytes(b"#" * (5 << 20))
+    run("inspect", str(fifo_folder)).one_error(2, "metadata.yaml", "a FIFO")
+    run("inspect", str(big_folder)).one_error(2, "metadata.yaml", "over 4 MiB")
