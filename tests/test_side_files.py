@@ -93,3 +93,44 @@ def test_a_metadata_yaml_that_is_a_fifo_or_oversized_is_refused(tmp_path):
     (big_folder / "metadata.yaml").write_bytes(b"#" * (5 << 20))
     run("inspect", str(fifo_folder)).one_error(2, "metadata.yaml", "a FIFO")
     run("inspect", str(big_folder)).one_error(2, "metadata.yaml", "over 4 MiB")
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# A .db3's write-ahead log and shared-memory index: files beside it the user never named
+
+
+@pytest.fixture(scope="module")
+def small_db3(tmp_path_factory) -> Path:
+    """A rosbag2 sqlite3 recording of the sample's first 6 s, written by rosbags."""
+    from tests import bagutil
+
+    messages = bagutil.recording(SAMPLE)
+    first = messages[0].log_ns
+    folder = bagutil.write_rosbag2(
+        tmp_path_factory.mktemp("db3") / "rec", [m for m in messages if m.log_ns - first < 6e9]
+    )
+    return next(folder.glob("*.db3"))
+
+
+@pytest.mark.parametrize("command", ["identify", "inspect"])
+def test_a_fifo_named_as_the_write_ahead_log_is_ignored_never_opened(tmp_path, small_db3, command):
+    db = tmp_path / "RUN.db3"
+    db.write_bytes(small_db3.read_bytes())
+    os.mkfifo(tmp_path / "RUN.db3-wal")  # no writer ever comes: opening it to read would wait forever
+    os.mkfifo(tmp_path / "RUN.db3-shm")
+    done = run(command, str(db))
+    assert done.returncode == 0, done.stderr
+    assert "(RUN.db3-wal) is a FIFO (named pipe), not a regular file: ignored, never opened" in done.stdout
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["RUN.db3", "RUN.db3-shm", "RUN.db3-wal"]
+
+
+def test_a_device_named_as_the_write_ahead_log_in_a_rosbag2_folder_is_ignored(tmp_path, small_db3):
+    folder = tmp_path / "rec"
+    folder.mkdir()
+    for f in small_db3.parent.iterdir():
+        (folder / f.name).write_bytes(f.read_bytes())
+    (folder / f"{small_db3.name}-wal").symlink_to("/dev/zero")
+    done = run("inspect", str(folder))
+    assert done.returncode == 0, done.stderr
+    assert "is a character device, not a regular file: ignored, never opened" in done.stdout
+    assert done.peak_rss < BUDGET, done.peak_rss
