@@ -134,3 +134,82 @@ def test_a_device_named_as_the_write_ahead_log_in_a_rosbag2_folder_is_ignored(tm
     assert done.returncode == 0, done.stderr
     assert "is a character device, not a regular file: ignored, never opened" in done.stdout
     assert done.peak_rss < BUDGET, done.peak_rss
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# A fleet manifest's logs
+
+
+def _manifest(folder: Path, *rows: str) -> Path:
+    path = folder / "m.csv"
+    path.write_text("log\n" + "".join(f"{r}\n" for r in rows))
+    return path
+
+
+@pytest.mark.parametrize(
+    ("row", "needles"),
+    [
+        ("/dev/zero", ["/dev/zero: resolves to /dev/zero, outside the manifest's folder", "--manifest-root"]),
+        ("/etc/shadow", ["/etc/shadow: resolves to /etc/shadow, outside the manifest's folder"]),
+        ("../../../../../../../../etc/passwd", ["resolves to /etc/passwd, outside the manifest's folder"]),
+        ("link.csv", ["link.csv: resolves to /dev/zero, outside"]),  # a link out of the folder
+        ("pipe.csv", ["pipe.csv is a FIFO (named pipe), not a log"]),
+    ],
+)
+def test_a_manifest_reaches_only_logs_under_its_root(tmp_path, row, needles):
+    (tmp_path / "link.csv").symlink_to("/dev/zero")
+    os.mkfifo(tmp_path / "pipe.csv")
+    done = run("fleet", "--manifest", str(_manifest(tmp_path, "ok.csv", row)), "-o", str(tmp_path / "t.parquet"))
+    done.one_error(2, "m.csv row 3: ", *needles)
+    assert not (tmp_path / "t.parquet").exists()  # refused before a worker started: nothing hashed, nothing written
+
+
+def test_manifest_root_widens_the_rule_but_never_to_devices(tmp_path):
+    from wmrid.io import fleet_table as ft
+
+    inside = tmp_path / "fleet"
+    inside.mkdir()
+    (tmp_path / "logs").mkdir()
+    (tmp_path / "logs" / "R1_2026-01-01.csv").write_text("t\n")
+    (inside / "via_link").symlink_to(tmp_path / "logs")
+    manifest = _manifest(inside, "../logs/R1_2026-01-01.csv", "via_link/R1_2026-01-01.csv")
+    with pytest.raises(ft.UsageError, match="outside the manifest's folder"):
+        ft.read_manifest(manifest)
+    a, b = ft.read_manifest(manifest, root=tmp_path)
+    assert a.log == b.log == str((tmp_path / "logs" / "R1_2026-01-01.csv").resolve())  # the real path, in the table
+    with pytest.raises(ft.UsageError, match="is a character device, not a log"):
+        ft.read_manifest(_manifest(inside, "/dev/zero"), root="/")
+    done = run("fleet", "--manifest", str(_manifest(inside, "/dev/zero")), "--manifest-root", "/", "-o", "t.parquet")
+    done.one_error(2, "row 2: /dev/zero: /dev/zero is a character device, not a log")
+
+
+def _in_thread(function, *args, timeout: float = 10):
+    """function(*args) in a daemon thread, the test failed (not hung) when it has not returned after ``timeout``."""
+    import threading
+
+    out: list = []
+    worker = threading.Thread(target=lambda: out.append(function(*args)), daemon=True)
+    worker.start()
+    worker.join(timeout)
+    assert not worker.is_alive(), f"{function.__name__}{args} still running after {timeout} s (a hang)"
+    return out[0]
+
+
+def test_a_worker_hashes_a_log_boundedly_and_never_a_device_or_fifo(tmp_path):
+    from wmrid.api.fleet import identify_entry
+    from wmrid.io.fleet_table import content_digest
+
+    os.mkfifo(tmp_path / "pipe.csv")
+    spec = {"robot_id": "R1", "options": {}, "options_key": "k", "fit": False, "known_sha256": None}
+    for log, kind in (("/dev/zero", "a character device"), (str(tmp_path / "pipe.csv"), "a FIFO")):
+        row = _in_thread(identify_entry, {**spec, "log": log})
+        assert (
+            row["error"] == f"{log}: cannot be read (it is {kind}{' (named pipe)' * (kind == 'a FIFO')}, not a "
+            "regular file)"
+        )
+        assert row["sha256"] is None
+    (tmp_path / "a.csv").write_bytes(b"x" * 3_000_000)
+    import hashlib
+
+    assert _in_thread(content_digest, str(tmp_path / "a.csv")) == (hashlib.sha256(b"x" * 3_000_000).hexdigest(),
+                                                                    3_000_000)  # fmt: skip

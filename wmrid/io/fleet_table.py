@@ -334,7 +334,10 @@ def _blank(value: Any) -> bool:
 
 
 def read_manifest(
-    path: str | os.PathLike[str], id_pattern: str | None = None, option_names: Sequence[str] = ()
+    path: str | os.PathLike[str],
+    id_pattern: str | None = None,
+    option_names: Sequence[str] = (),
+    root: str | os.PathLike[str] | None = None,
 ) -> list[LogEntry]:
     """The logs a manifest lists (CSV or Parquet, one row per log).
 
@@ -343,6 +346,12 @@ def read_manifest(
     seconds; else from the path or the log), and any of ``option_names`` (per-log options, e.g. ``speed_unit``,
     ``columns``, ``method``: :func:`wmrid.api.fleet.option_columns`); an empty cell is "not given".  Another column
     is refused by name.
+
+    Each log is resolved (symbolic links and ``..`` followed: the entry's ``log`` is the real path) and must lie in
+    ``root`` (default: the manifest's own folder; ``--manifest-root``), so that a manifest reaches only what the
+    user meant to give it: a row resolving outside (``../../etc/passwd``, ``/etc/shadow``, a link out) is refused
+    with its row, and so is one naming a device, a FIFO or a socket (only log files and rosbag2 folders are logs).
+    A log that does not exist is left to its row's error, as before.
     """
     import pandas as pd
 
@@ -370,6 +379,11 @@ def read_manifest(
             f"and the options {', '.join(tuple(option_names))}"
         )
     base = Path(name).parent
+    fence = os.path.realpath(base if root is None else root)
+    if root is not None and not os.path.isdir(fence):
+        raise UsageError(
+            f"{option('manifest_root', os.fspath(root))}: not a folder; give the folder that holds the logs"
+        )
     entries = []
     for i, rec in enumerate(frame.to_dict("records")):
         where = f"{name} row {i + 2}" if not name.lower().endswith(".parquet") else f"{name} row {i}"
@@ -377,6 +391,7 @@ def read_manifest(
             raise UsageError(f"{where}: the log cell is empty")
         log = str(rec["log"]).strip()
         log_path = log if os.path.isabs(log) else str(base / log)
+        real = _confined(log_path, fence, root is None, f"{where}: {log}")
         robot_id, stamp = id_and_time_from_path(log_path, id_pattern)
         source = "path" if stamp is not None else None
         if not _blank(rec.get("robot_id")):
@@ -389,10 +404,28 @@ def read_manifest(
         opts = {
             c: _option_value(c, rec[c], f"{where}: {c}") for c in tuple(option_names) if c in rec and not _blank(rec[c])
         }
-        entries.append(LogEntry(log_path, robot_id, robot, stamp, source, opts))
+        entries.append(LogEntry(real, robot_id, robot, stamp, source, opts))
     if not entries:
         raise UsageError(f"{name}: the manifest lists no log")
     return entries
+
+
+def _confined(log_path: str, fence: str, default_root: bool, where: str) -> str:
+    """The real path of a manifest's log, refused (UsageError naming ``where``) outside the folder ``fence`` or when
+    it names something that is neither a file nor a folder (see :func:`read_manifest`)."""
+    from wmrid.core.side_files import not_regular
+
+    real = os.path.realpath(log_path)
+    if os.path.commonpath([real, fence]) != fence:
+        which = "the manifest's folder" if default_root else option("manifest_root")
+        raise UsageError(
+            f"{where}: resolves to {real}, outside {which} {fence}; a manifest reaches the logs under its root only: "
+            f"move the log there, or give {option('manifest_root')} a folder that holds every log"
+        )
+    kind = not_regular(real)
+    if kind is not None and kind != "a folder":
+        raise UsageError(f"{where}: {real} is {kind}, not a log; a manifest names log files and rosbag2 folders")
+    return real
 
 
 def entries_from_paths(paths: Sequence[str], id_pattern: str | None = None) -> list[LogEntry]:
@@ -406,10 +439,11 @@ def entries_from_paths(paths: Sequence[str], id_pattern: str | None = None) -> l
 
 def content_digest(path: str) -> tuple[str, int]:
     """(SHA-256 hex, bytes) of a log's content: of the file, or of a folder's files (names relative to it, sizes and
-    hashes, in name order), read in blocks."""
+    hashes, in name order), read in blocks up to each file's size; a device or a FIFO is refused unread
+    (:class:`wmrid.core.side_files.NotRegularFile`, an OSError)."""
     from wmrid.io.digest import file_digests
 
-    items = file_digests(path)
+    items = file_digests(path, regular_only=True)  # a device or a FIFO is refused unread (an OSError)
     if len(items) == 1 and not os.path.isdir(path):
         return items[0]["sha256"], int(items[0]["bytes"])
     h = hashlib.sha256()
