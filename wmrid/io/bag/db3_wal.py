@@ -26,6 +26,8 @@ from typing import Any
 import numba
 import numpy as np
 
+from wmrid.core.side_files import NotRegularFile, open_regular
+
 WAL_MAGIC = (0x377F0682, 0x377F0683)
 WAL_VERSION = 3007000
 _HEADER = 32
@@ -108,7 +110,6 @@ def wal_state(db_path: str) -> tuple[WalView | None, str | None]:
     """(:func:`wal_view` of ``db_path``, None) -- or (None, a note) when its write-ahead log exists but cannot be
     read, or is not a regular file (a FIFO would block its reader, a device never end: neither is opened).  Costs
     one stat when there is no log."""
-    from wmrid.core.side_files import NotRegularFile
 
     if not os.path.exists(db_path + "-wal"):
         return None, None
@@ -136,8 +137,6 @@ def wal_view(db_path: str) -> WalView | None:
     """The committed pages of ``db_path``'s write-ahead log, None when there is none with a committed frame (no
     ``-wal`` file, an empty one, another format).  Read once per process while the file is unchanged (its inode,
     size, times and header: a restarted log has new salts).  OSError when the log exists but cannot be read."""
-    from wmrid.core.side_files import open_regular
-
     real = os.path.realpath(db_path)
     wal = real + "-wal"
     try:
@@ -236,8 +235,6 @@ def _vfs_classes() -> tuple[type, type]:
         def __init__(self, view: WalView, name: Any, flags: list[int]):
             super().__init__("", name, flags)
             self.view = view
-            from wmrid.core.side_files import open_regular
-
             self.wal = open_regular(view.path + "-wal")  # closed in xClose
             self.base = os.path.getsize(view.path)
 
