@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 
 from tests.cliutil import COLUMNS
+from wmrid.core.errors import UsageError
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "sample_logs" / "paper_sinusoid.mcap"
@@ -173,11 +174,11 @@ def test_manifest_root_widens_the_rule_but_never_to_devices(tmp_path):
     (tmp_path / "logs" / "R1_2026-01-01.csv").write_text("t\n")
     (inside / "via_link").symlink_to(tmp_path / "logs")
     manifest = _manifest(inside, "../logs/R1_2026-01-01.csv", "via_link/R1_2026-01-01.csv")
-    with pytest.raises(ft.UsageError, match="outside the manifest's folder"):
+    with pytest.raises(UsageError, match="outside the manifest's folder"):
         ft.read_manifest(manifest)
     a, b = ft.read_manifest(manifest, root=tmp_path)
     assert a.log == b.log == str((tmp_path / "logs" / "R1_2026-01-01.csv").resolve())  # the real path, in the table
-    with pytest.raises(ft.UsageError, match="is a character device, not a log"):
+    with pytest.raises(UsageError, match="is a character device, not a log"):
         ft.read_manifest(_manifest(inside, "/dev/zero"), root="/")
     done = run("fleet", "--manifest", str(_manifest(inside, "/dev/zero")), "--manifest-root", "/", "-o", "t.parquet")
     done.one_error(2, "row 2: /dev/zero: /dev/zero is a character device, not a log")
@@ -213,3 +214,47 @@ def test_a_worker_hashes_a_log_boundedly_and_never_a_device_or_fifo(tmp_path):
 
     assert _in_thread(content_digest, str(tmp_path / "a.csv")) == (hashlib.sha256(b"x" * 3_000_000).hexdigest(),
                                                                     3_000_000)  # fmt: skip
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# A recursive glob over symbolic-link loops
+
+
+def _looped_tree(root: Path) -> Path:
+    """L/R1/2026-01-01.csv and L/R2/2026-01-02.csv, with L/a and L/b links to L itself and L/R1/up a link to L."""
+    top = root / "L"
+    for robot, day in (("R1", "2026-01-01"), ("R2", "2026-01-02")):
+        (top / robot).mkdir(parents=True)
+        (top / robot / f"{day}.csv").write_text("t\n")
+    (top / "a").symlink_to(".")
+    (top / "b").symlink_to(".")
+    (top / "R1" / "up").symlink_to("..")
+    (top / "R2" / "zero.csv").symlink_to("/dev/zero")  # a glob result that is a device: not a log
+    return top
+
+
+def test_a_recursive_glob_follows_no_symlink_loop(tmp_path):
+    import glob
+
+    from wmrid.io.fleet_table import find_logs, safe_glob
+
+    top = _looped_tree(tmp_path)
+    found = _in_thread(find_logs, [f"{top}/**/2026*.csv"], timeout=5)
+    assert found == [str(top / "R1" / "2026-01-01.csv"), str(top / "R2" / "2026-01-02.csv")]
+    assert _in_thread(find_logs, [f"{top}/**/*.csv"], timeout=5) == found  # zero.csv (/dev/zero) is no log
+    # without loops, the same matches as glob's own
+    plain = tmp_path / "plain"
+    for sub in ("x/y", "x/.hidden", "z"):
+        (plain / sub).mkdir(parents=True)
+        (plain / sub / "2026-01-01.csv").write_text("t\n")
+    for pattern in ("**/*.csv", "**", "**/", "x/**/*.csv", "*/**/2026*", "**/y/*.csv"):
+        want = sorted(glob.glob(f"{plain}/{pattern}", recursive=True))
+        assert sorted(safe_glob(f"{plain}/{pattern}")) == want, pattern
+    with pytest.raises(UsageError, match="walks more than"):
+        safe_glob(f"{plain}/**/*.csv", limit=2)
+
+
+def test_fleet_over_a_looped_tree_ends(tmp_path):
+    top = _looped_tree(tmp_path)
+    done = run("fleet", f"{top}/**/2027*.csv", "-o", str(tmp_path / "t.parquet"), timeout=10)
+    done.one_error(2, "2027*.csv: the pattern matches no log")  # was: never ends (glob following L/a and L/b)

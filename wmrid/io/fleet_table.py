@@ -204,7 +204,7 @@ def find_logs(paths: Sequence[str]) -> list[str]:
         elif os.path.exists(arg):
             add(arg)
         elif glob.has_magic(arg):
-            matches = sorted(glob.glob(arg, recursive=True))
+            matches = sorted(safe_glob(arg))
             logs = [m for m in matches if os.path.isfile(m) or (Path(m) / "metadata.yaml").is_file()]
             if not logs:
                 raise UsageError(f"{arg}: the pattern matches no log")
@@ -213,6 +213,83 @@ def find_logs(paths: Sequence[str]) -> list[str]:
         else:
             raise UsageError(f"{arg}: no such file or folder")
     return out
+
+
+#: The most folders one pattern's ``**`` may walk (a real fleet's tree holds a few thousand).
+GLOB_FOLDERS = 200_000
+
+
+def safe_glob(pattern: str, limit: int = GLOB_FOLDERS) -> list[str]:
+    """The paths ``pattern`` matches, as ``glob.glob(pattern, recursive=True)`` gives them (``**`` any number of
+    folders, names starting with "." left out) but following no symbolic-link loop: each ``**`` walks every real
+    folder once (by device and inode; a link back up the tree, e.g. ``L/a -> .``, is not entered again, where glob
+    follows it until the path is too long: two such links and it never ends), at most ``limit`` folders in all
+    (UsageError past it)."""
+    left = [limit]
+    return _glob(pattern, left, pattern)
+
+
+def _glob(pattern: str, left: list[int], given: str) -> list[str]:
+    parts = pattern.split("/")
+    if "**" not in parts:  # no recursion: glob walks one folder level per part, and cannot loop
+        return glob.glob(pattern)
+    i = parts.index("**")
+    head = "/".join(parts[:i]) or ("/" if pattern.startswith("/") else "")
+    rest = "/".join(parts[i + 1 :])
+    bases = glob.glob(head) if glob.has_magic(head) else [head]
+    out: list[str] = []
+    for base in bases:
+        for folder in _folders(base, left, given):
+            if not rest and len(parts) > i + 1:  # "**/": the folders alone, as "folder/"
+                if folder:
+                    out.append(os.path.join(folder, ""))
+            elif not rest:  # a trailing **: the folders themselves (the base as "base/"), and their files
+                if folder != base or base:
+                    out.append(folder if folder != base else os.path.join(base, ""))
+                listing = folder or "."
+                out += [os.path.join(folder, n) for n in sorted(os.listdir(listing)) if not n.startswith(".")
+                        and not os.path.isdir(os.path.join(listing, n))]  # fmt: skip
+            else:
+                out += _glob(os.path.join(glob.escape(folder), rest) if folder else rest, left, given)
+    return out
+
+
+def _folders(base: str, left: list[int], given: str) -> list[str]:
+    """``base`` ("" the current folder) and the folders under it (links followed), each real folder once, in name
+    order; ``left[0]`` counts down the folders the pattern may still walk."""
+    out: list[str] = []
+    seen: set[tuple[int, int]] = set()
+    stack = [base]
+    while stack:
+        folder = stack.pop()
+        try:
+            st = os.stat(folder or ".")
+        except OSError:
+            continue
+        if (st.st_dev, st.st_ino) in seen:  # a link back to a folder already walked: a loop, or a second name
+            continue
+        seen.add((st.st_dev, st.st_ino))
+        left[0] -= 1
+        if left[0] < 0:
+            raise UsageError(
+                f"{given}: the pattern walks more than {GLOB_FOLDERS:,} folders; narrow it (a folder instead of **, "
+                "or a longer fixed start)"
+            )
+        out.append(folder)
+        try:
+            with os.scandir(folder or ".") as entries:
+                children = sorted(e.name for e in entries if not e.name.startswith(".") and _is_folder(e))
+        except OSError:
+            continue
+        stack.extend(os.path.join(folder, c) for c in reversed(children))
+    return out
+
+
+def _is_folder(entry: os.DirEntry) -> bool:
+    try:
+        return entry.is_dir()  # follows a link: its target is walked once, whatever name reaches it first
+    except OSError:
+        return False
 
 
 def _logs_in_folder(folder: Path) -> list[str]:
