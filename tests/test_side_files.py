@@ -47,14 +47,32 @@ class Run:
         return lines[0]
 
 
-def run(*args: str, timeout: float = 20, cwd: Path | None = None) -> Run:
-    """``python -m wmrid ARGS`` under WMRID_MEMORY_BUDGET=BUDGET, killed (and the test failed) past ``timeout``
-    seconds; its exit code, output and peak resident size."""
-    env = dict(os.environ, COLUMNS=COLUMNS, WMRID_MEMORY_BUDGET=str(BUDGET))
+def run(
+    *args: str,
+    timeout: float = 20,
+    cwd: Path | None = None,
+    budget: str | None = str(BUDGET),
+    cap: int | None = None,
+    stdin=subprocess.DEVNULL,
+) -> Run:
+    """``python -m wmrid ARGS`` under WMRID_MEMORY_BUDGET=``budget`` (None: unset) and an address-space cap of
+    ``cap`` bytes (RLIMIT_AS, as ``ulimit -v``), killed (and the test failed) past ``timeout`` seconds; its exit
+    code, output and peak resident size."""
+    env = dict(os.environ, COLUMNS=COLUMNS)
+    env.pop("WMRID_MEMORY_BUDGET", None)
+    if budget is not None:
+        env["WMRID_MEMORY_BUDGET"] = budget
+
+    def capped() -> None:
+        import resource
+
+        resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
+
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "wmrid", *args], stdin=subprocess.DEVNULL, stdout=out, stderr=err, cwd=cwd, env=env
-        )
+            [sys.executable, "-m", "wmrid", *args], stdin=stdin, stdout=out, stderr=err, cwd=cwd, env=env,
+            preexec_fn=capped if cap is not None else None,
+        )  # fmt: skip
         deadline = time.monotonic() + timeout
         while True:
             pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
@@ -258,3 +276,43 @@ def test_fleet_over_a_looped_tree_ends(tmp_path):
     top = _looped_tree(tmp_path)
     done = run("fleet", f"{top}/**/2027*.csv", "-o", str(tmp_path / "t.parquet"), timeout=10)
     done.one_error(2, "2027*.csv: the pattern matches no log")  # was: never ends (glob following L/a and L/b)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Endless sources under an address-space cap
+
+#: bytes: the address-space cap of these runs (``ulimit -v``); the default budget is then half of it.
+CAP = 2_000_000_000
+
+
+@pytest.mark.parametrize("how", ["log", "stdin", "model"])
+def test_an_endless_source_under_a_cap_stops_at_a_budget_that_fits_it(tmp_path, how):
+    """Under ``ulimit -v`` below the default budget, /dev/zero (as the log, or ``yes |`` as standard input, or
+    monitor's --model) grew until a MemoryError, reported as "internal error"; the budget now fits the cap (half
+    of it) and the read stops there with the usual line naming the input and the budget."""
+    sample = str(ROOT / "sample_logs" / "paper_sinusoid.csv")
+    if how == "stdin":
+        yes = subprocess.Popen(["yes"], stdout=subprocess.PIPE)
+        try:
+            done = run("identify", "-", budget=None, cap=CAP, stdin=yes.stdout)
+        finally:
+            yes.kill()
+            yes.wait()
+            yes.stdout.close()
+        done.one_error(2, "standard input holds more than 954 MiB, the memory budget (WMRID_MEMORY_BUDGET)")
+    elif how == "log":
+        done = run("identify", "/dev/zero", budget=None, cap=CAP)
+        done.one_error(2, "/dev/zero: it is not a regular file and holds more than 954 MiB, the memory budget")
+    else:
+        done = run("monitor", "--model", "/dev/zero", sample, budget=None, cap=CAP)
+        done.one_error(2, "--model /dev/zero: holds more than 954 MiB (WMRID_MEMORY_BUDGET)")
+    assert "internal error" not in done.stderr
+    assert done.peak_rss < CAP, done.peak_rss
+
+
+def test_a_memory_error_is_one_line_naming_the_input_and_the_budget(tmp_path):
+    """A budget set above the cap (the user's choice): the read fails with MemoryError before the budget, and the
+    line says so, naming the input, the budget and the cap (was "internal error: MemoryError")."""
+    done = run("identify", "/dev/zero", budget="4G", cap=1_500_000_000)
+    line = done.one_error(2, "out of memory reading /dev/zero; the memory budget is 4 GiB (WMRID_MEMORY_BUDGET)")
+    assert "under an address-space cap of 1.4 GiB (ulimit -v)" in line
