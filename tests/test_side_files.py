@@ -4,16 +4,16 @@
 
 Every case is the real thing (a real link to a real device, a real FIFO, a real loop) run as a real process under a
 timeout, so that a regression fails instead of hanging the suite; where memory is the point the process's peak
-resident size is measured (``os.wait4``: that child's own, not the largest of all children so far).
+resident size is measured (by a small launcher process: ``RUSAGE_CHILDREN`` of a process that ran only it).
 """
 
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import tempfile
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -68,25 +68,34 @@ def run(
 
         resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
 
-    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "wmrid", *args], stdin=stdin, stdout=out, stderr=err, cwd=cwd, env=env,
-            preexec_fn=capped if cap is not None else None,
-        )  # fmt: skip
-        deadline = time.monotonic() + timeout
-        while True:
-            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
-            if pid:
-                break
-            if time.monotonic() > deadline:
-                proc.kill()
-                os.wait4(proc.pid, 0)
+    with tempfile.TemporaryDirectory() as scratch:
+        out, err, peak = (os.path.join(scratch, n) for n in ("out", "err", "peak"))
+        with open(out, "wb") as out_fh, open(err, "wb") as err_fh:
+            proc = subprocess.Popen(
+                [sys.executable, "-c", _LAUNCHER, peak, sys.executable, "-m", "wmrid", *args], stdin=stdin,
+                stdout=out_fh, stderr=err_fh, cwd=cwd, env=env, preexec_fn=capped if cap is not None else None,
+                start_new_session=True,
+            )  # fmt: skip
+            try:
+                proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
                 pytest.fail(f"wmrid {' '.join(args)} still running after {timeout} s (a hang)")
-            time.sleep(0.02)
-        proc.returncode = os.waitstatus_to_exitcode(status)
-        out.seek(0)
-        err.seek(0)
-        return Run(proc.returncode, out.read().decode(), err.read().decode(), usage.ru_maxrss * 1024)
+        with open(peak) as fh:
+            peak_rss = int(fh.read()) * 1024
+        return Run(proc.returncode, Path(out).read_text(), Path(err).read_text(), peak_rss)
+
+
+#: A small process that runs the command and writes its peak resident size (KiB) to argv[1]: measured from the
+#: test process itself, a child's ru_maxrss would start at the size of the (large) process it was forked from.
+_LAUNCHER = """
+import resource, subprocess, sys
+code = subprocess.call(sys.argv[2:])
+with open(sys.argv[1], "w") as fh:
+    fh.write(str(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss))
+sys.exit(code if code >= 0 else 128 - code)
+"""
 
 
 # ---------------------------------------------------------------------------------------------------------------
