@@ -94,7 +94,9 @@ def test_a_manifest_with_per_log_options(logs, cluster, tmp_path):
         f"{src},R01,2026-02-01T10:00:00Z,,\n"
         'rpm.csv,R01-copy,2026-02-01T11:00:00Z,rpm,"t=t,eta_r=vr,eta_l=vl,tau_r=tau_r,tau_l=tau_l"\n'
     )
-    run = fleet(manifest=tmp_path / "m.csv", output=tmp_path / "t.parquet", robot="paper", scheduler=cluster)
+    root = os.path.commonpath([logs, tmp_path])  # the first log lies outside the manifest's folder
+    run = fleet(manifest=tmp_path / "m.csv", manifest_root=root, output=tmp_path / "t.parquet", robot="paper",
+                scheduler=cluster)  # fmt: skip
     a, b = run.rows
     assert (a["error"], b["error"]) == (None, None)
     assert b["time_source"] == "manifest"

@@ -98,7 +98,7 @@ def test_manifest_rows_with_options(tmp_path):
         "logs/R9/2026-03-02.mcap,,paper,,,,\n"
         "/abs/c.bag,R3,,1772352000,,,no\n"
     )
-    a, b, c = ft.read_manifest(tmp_path / "m.csv", option_names=OPTIONS)
+    a, b, c = ft.read_manifest(tmp_path / "m.csv", option_names=OPTIONS, root="/")  # /abs/c.bag: outside
     assert a.log == str(tmp_path / "logs" / "a.mcap")
     assert a.robot_id == "R1"
     assert a.robot == str(tmp_path / "robots" / "r.toml")  # relative to the manifest, as the logs

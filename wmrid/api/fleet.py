@@ -418,6 +418,7 @@ def fleet(
     output: str | os.PathLike[str] | None = None,
     *,
     manifest: str | os.PathLike[str] | None = None,
+    manifest_root: str | os.PathLike[str] | None = None,
     robot: str | None = None,
     id_pattern: str | None = None,
     scheduler: str = "local",
@@ -438,6 +439,8 @@ def fleet(
         one row per log (:func:`~wmrid.io.fleet_table.read_manifest`).  Robot id and time of a log without them
         come from ``id_pattern`` or the path's folder and date (:func:`~wmrid.io.fleet_table.id_and_time_from_path`),
         else the log's own first stamp when it is an epoch time.
+    manifest_root : the folder every log of the manifest must resolve into (default: the manifest's own folder); a
+        row outside it, or naming a device or a FIFO, is refused (UsageError naming the row).
     robot : the robot file or built-in name of every log whose manifest row names none.
     scheduler : "local" (a LocalCluster of ``workers`` processes, default one per core) or a scheduler address.
     resume : keep the rows of an existing table whose log, content hash and options are unchanged (not identified
@@ -465,8 +468,10 @@ def fleet(
     if bool(logs) == (manifest is not None):
         raise UsageError(f"give the logs or {option('manifest')}, one of the two")
     given = check_defaults(defaults)
+    if manifest_root is not None and manifest is None:
+        raise UsageError(f"{option('manifest_root')} applies to {option('manifest')} only")
     if manifest is not None:
-        entries = read_manifest(manifest, id_pattern, option_columns())
+        entries = read_manifest(manifest, id_pattern, option_columns(), root=manifest_root)
     else:
         entries = entries_from_paths(logs, id_pattern)
     seen: set[str] = set()

@@ -108,6 +108,12 @@ def main(argv: list[str] | None = None) -> None:
             with contextlib.suppress(OSError, ValueError):
                 os.dup2(os.open(os.devnull, os.O_WRONLY), 1)
         code = ExitStatus.OK
+    except MemoryError:
+        if debug:
+            _leave(argv, saved, previous)
+            raise
+        sys.stderr.write(f"wmrid: error: {_out_of_memory()}\n")
+        code = ExitStatus.USAGE
     except Exception as exc:
         if hasattr(exc, "show") and hasattr(exc, "exit_code"):  # a Click/Typer usage error: its own message
             exc.show()
@@ -172,6 +178,25 @@ def _leave(argv: list[str] | None, saved: Any, previous: Any) -> None:
 
     unguard(saved)
     interrupts.restore(previous)
+
+
+def _out_of_memory() -> str:
+    """The line for a MemoryError: the inputs the command named (its arguments that are existing paths, or "-"), the
+    budget, and the address-space cap when there is one."""
+    from wmrid.core.limits import ENV, address_space_cap, describe, memory_budget
+
+    named = [a for a in _invocation.get() if a == "-" or (not a.startswith("-") and os.path.exists(a))]
+    inputs = ", ".join("standard input" if a == "-" else a for a in named) or "the input"
+    try:
+        budget = f"the memory budget is {describe(memory_budget())} ({ENV})"
+    except WmridError:
+        budget = f"{ENV} is malformed"
+    cap = address_space_cap()
+    limit = f" under an address-space cap of {describe(cap)} (ulimit -v)" if cap is not None else ""
+    return (
+        f"out of memory reading {inputs}; {budget}{limit}: an endless source (/dev/zero, yes |)? save the log to a "
+        f"file, or set {ENV} lower than the memory there is"
+    )
 
 
 def _kept() -> str:

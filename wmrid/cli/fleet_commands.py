@@ -108,7 +108,17 @@ def fleet(
         Path | None,
         typer.Option(
             help="CSV or Parquet, one row per log: log (relative to the manifest), robot_id, robot, time, and any "
-            "identify option by its Python name (speed_unit, columns, method, ...).",
+            "identify option by its Python name (speed_unit, columns, method, ...).  Each log must resolve inside "
+            "--manifest-root and be a file or rosbag2 folder.",
+            rich_help_panel=_RUN_PANEL,
+        ),
+    ] = None,
+    manifest_root: Annotated[
+        Path | None,
+        typer.Option(
+            help="The folder every log of --manifest must resolve into, links and .. followed (a row outside it, or "
+            "naming a device or FIFO, is refused).  [default: the manifest's folder]",
+            show_default=False,
             rich_help_panel=_RUN_PANEL,
         ),
     ] = None,
@@ -226,8 +236,8 @@ def fleet(
     update, finish = _progress()
     try:
         run = run_fleet(
-            logs or (), output, manifest=manifest, robot=robot, id_pattern=id_pattern, scheduler=scheduler,
-            workers=workers, resume=resume, retry_failed=retry_failed, force=force, fit=not no_fit,
+            logs or (), output, manifest=manifest, manifest_root=manifest_root, robot=robot, id_pattern=id_pattern,
+            scheduler=scheduler, workers=workers, resume=resume, retry_failed=retry_failed, force=force, fit=not no_fit,
             batch=batch, checkpoint=checkpoint, progress=update, **given,
         )  # fmt: skip
     except KeyboardInterrupt:

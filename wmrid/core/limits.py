@@ -5,7 +5,9 @@ rows, a CSV header of 10 M columns.  Every size an input declares is checked aga
 allocated; beyond it the input is refused (or the part skipped) with a message naming the budget.
 
 The budget is ``WMRID_MEMORY_BUDGET`` in bytes, with an optional K, M or G suffix (powers of 1024); default 4 GiB,
-or half the machine's memory when that is less.
+or half the machine's memory when that is less, and under an address-space cap (``ulimit -v``, ``prlimit --as``)
+at most half the cap: a budget above the cap let an endless source (``/dev/zero``, ``yes |``) grow until a
+MemoryError instead of stopping at the budget with a line that names it.
 """
 
 from __future__ import annotations
@@ -21,16 +23,30 @@ ENV = "WMRID_MEMORY_BUDGET"
 _SUFFIX = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
 
 
+def address_space_cap() -> int | None:
+    """The soft RLIMIT_AS in bytes (``ulimit -v``), None when there is none."""
+    try:
+        import resource
+
+        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+    except (ImportError, OSError, ValueError, AttributeError):
+        return None
+    return None if soft == resource.RLIM_INFINITY else int(soft)
+
+
 def memory_budget() -> int:
     """The budget in bytes (``WMRID_MEMORY_BUDGET``; default DEFAULT_BUDGET, or half the machine's memory when less,
-    but at least 1 GiB); UsageError for a malformed value."""
+    but at least 1 GiB; under an address-space cap at most half of it, at least 64 MiB); UsageError for a
+    malformed value."""
     text = os.environ.get(ENV, "").strip()
     if not text:
         try:
             half = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2
         except (ValueError, OSError, AttributeError):
             half = DEFAULT_BUDGET
-        return min(DEFAULT_BUDGET, max(half, 1 << 30))
+        budget = min(DEFAULT_BUDGET, max(half, 1 << 30))
+        cap = address_space_cap()
+        return budget if cap is None else min(budget, max(cap // 2, 64 << 20))
     number, suffix = text.rstrip("KMGTkmgtBb"), text[len(text.rstrip("KMGTkmgtBb")) :].upper().rstrip("B")
     try:
         value = int(float(number) * _SUFFIX[suffix])

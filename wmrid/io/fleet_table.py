@@ -204,7 +204,7 @@ def find_logs(paths: Sequence[str]) -> list[str]:
         elif os.path.exists(arg):
             add(arg)
         elif glob.has_magic(arg):
-            matches = sorted(glob.glob(arg, recursive=True))
+            matches = sorted(safe_glob(arg))
             logs = [m for m in matches if os.path.isfile(m) or (Path(m) / "metadata.yaml").is_file()]
             if not logs:
                 raise UsageError(f"{arg}: the pattern matches no log")
@@ -213,6 +213,83 @@ def find_logs(paths: Sequence[str]) -> list[str]:
         else:
             raise UsageError(f"{arg}: no such file or folder")
     return out
+
+
+#: The most folders one pattern's ``**`` may walk (a real fleet's tree holds a few thousand).
+GLOB_FOLDERS = 200_000
+
+
+def safe_glob(pattern: str, limit: int = GLOB_FOLDERS) -> list[str]:
+    """The paths ``pattern`` matches, as ``glob.glob(pattern, recursive=True)`` gives them (``**`` any number of
+    folders, names starting with "." left out) but following no symbolic-link loop: each ``**`` walks every real
+    folder once (by device and inode; a link back up the tree, e.g. ``L/a -> .``, is not entered again, where glob
+    follows it until the path is too long: two such links and it never ends), at most ``limit`` folders in all
+    (UsageError past it)."""
+    left = [limit]
+    return _glob(pattern, left, pattern)
+
+
+def _glob(pattern: str, left: list[int], given: str) -> list[str]:
+    parts = pattern.split("/")
+    if "**" not in parts:  # no recursion: glob walks one folder level per part, and cannot loop
+        return glob.glob(pattern)
+    i = parts.index("**")
+    head = "/".join(parts[:i]) or ("/" if pattern.startswith("/") else "")
+    rest = "/".join(parts[i + 1 :])
+    bases = glob.glob(head) if glob.has_magic(head) else [head]
+    out: list[str] = []
+    for base in bases:
+        for folder in _folders(base, left, given):
+            if not rest and len(parts) > i + 1:  # "**/": the folders alone, as "folder/"
+                if folder:
+                    out.append(os.path.join(folder, ""))
+            elif not rest:  # a trailing **: the folders themselves (the base as "base/"), and their files
+                if folder != base or base:
+                    out.append(folder if folder != base else os.path.join(base, ""))
+                listing = folder or "."
+                out += [os.path.join(folder, n) for n in sorted(os.listdir(listing)) if not n.startswith(".")
+                        and not os.path.isdir(os.path.join(listing, n))]  # fmt: skip
+            else:
+                out += _glob(os.path.join(glob.escape(folder), rest) if folder else rest, left, given)
+    return out
+
+
+def _folders(base: str, left: list[int], given: str) -> list[str]:
+    """``base`` ("" the current folder) and the folders under it (links followed), each real folder once, in name
+    order; ``left[0]`` counts down the folders the pattern may still walk."""
+    out: list[str] = []
+    seen: set[tuple[int, int]] = set()
+    stack = [base]
+    while stack:
+        folder = stack.pop()
+        try:
+            st = os.stat(folder or ".")
+        except OSError:
+            continue
+        if (st.st_dev, st.st_ino) in seen:  # a link back to a folder already walked: a loop, or a second name
+            continue
+        seen.add((st.st_dev, st.st_ino))
+        left[0] -= 1
+        if left[0] < 0:
+            raise UsageError(
+                f"{given}: the pattern walks more than {GLOB_FOLDERS:,} folders; narrow it (a folder instead of **, "
+                "or a longer fixed start)"
+            )
+        out.append(folder)
+        try:
+            with os.scandir(folder or ".") as entries:
+                children = sorted(e.name for e in entries if not e.name.startswith(".") and _is_folder(e))
+        except OSError:
+            continue
+        stack.extend(os.path.join(folder, c) for c in reversed(children))
+    return out
+
+
+def _is_folder(entry: os.DirEntry) -> bool:
+    try:
+        return entry.is_dir()  # follows a link: its target is walked once, whatever name reaches it first
+    except OSError:
+        return False
 
 
 def _logs_in_folder(folder: Path) -> list[str]:
@@ -334,7 +411,10 @@ def _blank(value: Any) -> bool:
 
 
 def read_manifest(
-    path: str | os.PathLike[str], id_pattern: str | None = None, option_names: Sequence[str] = ()
+    path: str | os.PathLike[str],
+    id_pattern: str | None = None,
+    option_names: Sequence[str] = (),
+    root: str | os.PathLike[str] | None = None,
 ) -> list[LogEntry]:
     """The logs a manifest lists (CSV or Parquet, one row per log).
 
@@ -343,6 +423,12 @@ def read_manifest(
     seconds; else from the path or the log), and any of ``option_names`` (per-log options, e.g. ``speed_unit``,
     ``columns``, ``method``: :func:`wmrid.api.fleet.option_columns`); an empty cell is "not given".  Another column
     is refused by name.
+
+    Each log is resolved (symbolic links and ``..`` followed: the entry's ``log`` is the real path) and must lie in
+    ``root`` (default: the manifest's own folder; ``--manifest-root``), so that a manifest reaches only what the
+    user meant to give it: a row resolving outside (``../../etc/passwd``, ``/etc/shadow``, a link out) is refused
+    with its row, and so is one naming a device, a FIFO or a socket (only log files and rosbag2 folders are logs).
+    A log that does not exist is left to its row's error, as before.
     """
     import pandas as pd
 
@@ -370,6 +456,11 @@ def read_manifest(
             f"and the options {', '.join(tuple(option_names))}"
         )
     base = Path(name).parent
+    fence = os.path.realpath(base if root is None else root)
+    if root is not None and not os.path.isdir(fence):
+        raise UsageError(
+            f"{option('manifest_root', os.fspath(root))}: not a folder; give the folder that holds the logs"
+        )
     entries = []
     for i, rec in enumerate(frame.to_dict("records")):
         where = f"{name} row {i + 2}" if not name.lower().endswith(".parquet") else f"{name} row {i}"
@@ -377,6 +468,7 @@ def read_manifest(
             raise UsageError(f"{where}: the log cell is empty")
         log = str(rec["log"]).strip()
         log_path = log if os.path.isabs(log) else str(base / log)
+        real = _confined(log_path, fence, root is None, f"{where}: {log}")
         robot_id, stamp = id_and_time_from_path(log_path, id_pattern)
         source = "path" if stamp is not None else None
         if not _blank(rec.get("robot_id")):
@@ -389,10 +481,28 @@ def read_manifest(
         opts = {
             c: _option_value(c, rec[c], f"{where}: {c}") for c in tuple(option_names) if c in rec and not _blank(rec[c])
         }
-        entries.append(LogEntry(log_path, robot_id, robot, stamp, source, opts))
+        entries.append(LogEntry(real, robot_id, robot, stamp, source, opts))
     if not entries:
         raise UsageError(f"{name}: the manifest lists no log")
     return entries
+
+
+def _confined(log_path: str, fence: str, default_root: bool, where: str) -> str:
+    """The real path of a manifest's log, refused (UsageError naming ``where``) outside the folder ``fence`` or when
+    it names something that is neither a file nor a folder (see :func:`read_manifest`)."""
+    from wmrid.core.side_files import not_regular
+
+    real = os.path.realpath(log_path)
+    if os.path.commonpath([real, fence]) != fence:
+        which = "the manifest's folder" if default_root else option("manifest_root")
+        raise UsageError(
+            f"{where}: resolves to {real}, outside {which} {fence}; a manifest reaches the logs under its root only: "
+            f"move the log there, or give {option('manifest_root')} a folder that holds every log"
+        )
+    kind = not_regular(real)
+    if kind is not None and kind != "a folder":
+        raise UsageError(f"{where}: {real} is {kind}, not a log; a manifest names log files and rosbag2 folders")
+    return real
 
 
 def entries_from_paths(paths: Sequence[str], id_pattern: str | None = None) -> list[LogEntry]:
@@ -406,10 +516,11 @@ def entries_from_paths(paths: Sequence[str], id_pattern: str | None = None) -> l
 
 def content_digest(path: str) -> tuple[str, int]:
     """(SHA-256 hex, bytes) of a log's content: of the file, or of a folder's files (names relative to it, sizes and
-    hashes, in name order), read in blocks."""
+    hashes, in name order), read in blocks up to each file's size; a device or a FIFO is refused unread
+    (:class:`wmrid.core.side_files.NotRegularFile`, an OSError)."""
     from wmrid.io.digest import file_digests
 
-    items = file_digests(path)
+    items = file_digests(path, regular_only=True)  # a device or a FIFO is refused unread (an OSError)
     if len(items) == 1 and not os.path.isdir(path):
         return items[0]["sha256"], int(items[0]["bytes"])
     h = hashlib.sha256()

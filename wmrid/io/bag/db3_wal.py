@@ -18,12 +18,15 @@ the ``.db3`` and ``-wal`` files are only read, the ``-shm`` not even opened.
 
 from __future__ import annotations
 
+import errno
 import os
 from dataclasses import dataclass
 from typing import Any
 
 import numba
 import numpy as np
+
+from wmrid.core.side_files import NotRegularFile, open_regular
 
 WAL_MAGIC = (0x377F0682, 0x377F0683)
 WAL_VERSION = 3007000
@@ -105,11 +108,19 @@ def wal_frames(buf, page_size, big, salt1, salt2, s0, s1, pages, sizes):
 
 def wal_state(db_path: str) -> tuple[WalView | None, str | None]:
     """(:func:`wal_view` of ``db_path``, None) -- or (None, a note) when its write-ahead log exists but cannot be
-    read.  Costs one stat when there is no log."""
+    read, or is not a regular file (a FIFO would block its reader, a device never end: neither is opened).  Costs
+    one stat when there is no log."""
+
     if not os.path.exists(db_path + "-wal"):
         return None, None
     try:
         return wal_view(db_path), None
+    except NotRegularFile as err:
+        return None, (
+            f"{db_path}: the file beside it named as its write-ahead log ({os.path.basename(db_path)}-wal) is "
+            f"{err.kind}, not a regular file: ignored, never opened; the database was read as it is (messages "
+            "recorded after its last checkpoint, if any, are missing)"
+        )
     except OSError as err:
         return None, (
             f"{db_path}: its write-ahead log could not be read ({err.strerror or err}): the messages recorded after "
@@ -129,22 +140,23 @@ def wal_view(db_path: str) -> WalView | None:
     real = os.path.realpath(db_path)
     wal = real + "-wal"
     try:
-        st = os.stat(wal)
+        fh = open_regular(wal)  # a FIFO or a device is never opened for reading (NotRegularFile, an OSError)
     except FileNotFoundError:
         return None
-    with open(wal, "rb") as fh:
+    with fh:
+        st = os.fstat(fh.fileno())
         head = fh.read(_HEADER)
-    key = (st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns, head)
-    known = _cache.get(real)
-    if known is None or known[0] != key:
-        if len(_cache) >= _CACHED:
-            _cache.pop(next(iter(_cache)))
-        known = (key, _read_view(real, wal, head, st.st_size))
-        _cache[real] = known
+        key = (st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns, head)
+        known = _cache.get(real)
+        if known is None or known[0] != key:
+            if len(_cache) >= _CACHED:
+                _cache.pop(next(iter(_cache)))
+            known = (key, _read_view(real, fh, head, st.st_size))
+            _cache[real] = known
     return known[1]
 
 
-def _read_view(db_path: str, wal: str, head: bytes, size: int) -> WalView | None:
+def _read_view(db_path: str, wal: Any, head: bytes, size: int) -> WalView | None:
     if size < _HEADER + _FRAME_HEADER or len(head) < _HEADER:
         return None
     magic, version, page_size, _, salt1, salt2, c1, c2 = (
@@ -161,7 +173,10 @@ def _read_view(db_path: str, wal: str, head: bytes, size: int) -> WalView | None
         return None
     pages = np.zeros(count, dtype=np.int64)
     sizes = np.zeros(count, dtype=np.int64)
-    buf = np.memmap(wal, dtype=np.uint8, mode="r")  # the pages stay in the file: only the headers are kept
+    try:  # the pages stay in the file: only the headers are kept
+        buf = np.memmap(wal, dtype=np.uint8, mode="r", shape=(size,))
+    except ValueError as err:  # shorter than its size a moment ago
+        raise OSError(errno.EIO, "it changed while being read") from err
     valid, current = wal_frames(buf, page_size, big, salt1, salt2, s0, s1, pages, sizes)
     del buf
     commits = np.flatnonzero(sizes[:valid])
@@ -220,7 +235,7 @@ def _vfs_classes() -> tuple[type, type]:
         def __init__(self, view: WalView, name: Any, flags: list[int]):
             super().__init__("", name, flags)
             self.view = view
-            self.wal = open(view.path + "-wal", "rb")  # noqa: SIM115 (closed in xClose)
+            self.wal = open_regular(view.path + "-wal")  # closed in xClose
             self.base = os.path.getsize(view.path)
 
         def _page(self, number: int) -> bytes:

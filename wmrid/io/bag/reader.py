@@ -280,6 +280,38 @@ class _RosbagsState(_BagState):
 MAX_METADATA_VERSION = 9
 
 
+#: bytes: the most a rosbag2 folder's metadata.yaml may hold (a real one is a few kilobytes: about 1 KB a topic and
+#: 200 bytes a storage file).
+METADATA_LIMIT = 4 << 20
+
+
+def metadata_text(folder: str) -> bytes:
+    """The bytes of the rosbag2 folder's ``metadata.yaml``, read by wmrid (the file is not one the user named):
+    LogFormatError when it is not a regular file (a device such as /dev/zero, a FIFO, a link to either) or holds
+    more than :data:`METADATA_LIMIT`; ``b""`` when there is none or it cannot be read (rosbags then says why)."""
+    from wmrid.core.side_files import NotRegularFile, read_regular
+
+    path = os.path.join(folder, "metadata.yaml")
+    try:
+        message = (
+            f"{_braces(path)}: a rosbag2 metadata.yaml over {{size}}; a real one is a few kilobytes: check the file, "
+            "or give the recording's storage files (.db3, .mcap) instead of the folder"
+        )
+        return read_regular(path, METADATA_LIMIT, message, LogFormatError)
+    except NotRegularFile as err:
+        raise LogFormatError(
+            f"{path}: {err.strerror}, so wmrid does not read it (the folder's metadata must be a file); replace it "
+            "with the recording's metadata.yaml, or give the recording's storage files (.db3, .mcap) instead"
+        ) from err
+    except OSError:
+        return b""
+
+
+def _braces(text: str) -> str:
+    """``text`` safe inside a message that is formatted later (str.format)."""
+    return text.replace("{", "{{").replace("}", "}}")
+
+
 def storage_files(path: str, storage: str, magic: bytes) -> list[str] | None:
     """The storage files of one recording path when wmrid's own reader of ``storage`` ("sqlite3" or "mcap") takes
     it: a rosbag2 folder's by its metadata.yaml (that storage, uncompressed, every file present), or the path itself
@@ -290,11 +322,11 @@ def storage_files(path: str, storage: str, magic: bytes) -> list[str] | None:
                 return [path] if fh.read(len(magic)) == magic else None
         except OSError:
             return None
+    text = metadata_text(path)  # refuses a device, a FIFO or an oversized file before rosbags reads it whole
     try:
         from ruamel.yaml import YAML
 
-        with open(os.path.join(path, "metadata.yaml"), encoding="utf-8") as fh:
-            info = YAML(typ="safe").load(fh)["rosbag2_bagfile_information"]
+        info = YAML(typ="safe").load(text.decode("utf-8"))["rosbag2_bagfile_information"]
         if int(info["version"]) > MAX_METADATA_VERSION or info["storage_identifier"] != storage:
             return None
         if str(info.get("compression_mode") or "none").lower() != "none":
@@ -335,6 +367,7 @@ def bag_kind(paths: Sequence[str]) -> str:
 
 def _kind(path: str) -> str:
     if Path(path).is_dir():
+        metadata_text(path)  # a metadata.yaml that is a device, a FIFO or oversized: refused before anything reads it
         return "ros2"
     with open(path, "rb") as fh:
         return "ros1" if fh.read(13).startswith(b"#ROSBAG V2.0") else "ros2"
