@@ -16,6 +16,10 @@ with every inertial and friction parameter 20 % off, alternately up and down, r,
    logged true speeds... of the logged speeds smoothed over 10 ms), |tau| against the limits; how far the whole robot
    (its footprint) came from the area's edge.
 
+``--sequential ETA,TAU`` instead checks sequential design on the paper robot: a 20 s sinusoid with that speed and
+effort noise, identified and saved; a 30 s plan without and with ``given`` (predicted worst relative std of each); the
+second plan driven (seed 101) and identified, and the two results fused by their information (achieved std and z).
+
 Printed per robot and engine: seeds with every parameter determined, with the truth within 3 std, with every limit
 within 10 %, with the path in the area; the median achieved/predicted std ratio per parameter (the issue's 0.5-2x).
 JSON: ``bench/out/study_plan.json``.  Seeded throughout; ``--workers`` processes (default 1).
@@ -152,6 +156,49 @@ def summarise(made: dict, rows: list[dict]) -> dict:
     return out
 
 
+def sequential(eta_noise: float, tau_noise: float) -> dict:
+    """The sequential-design check (module docstring): predicted worst relative std alone and with ``given``, and the
+    fused result of the two logs against the truth."""
+    import numpy as np
+
+    import wmrid
+    from wmrid.estimators.result import from_dict
+
+    robot = str(robot_file("paper"))
+    sim = wmrid.simulate(robot, trajectory="sinusoid", duration=20, rate=1000, eta_noise=eta_noise,
+                         tau_noise=tau_noise, seed=100)  # fmt: skip
+    first = wmrid.identify(sim.log.to_wheel_log(), robot)
+    saved = OUT / f"sequential_first_{eta_noise}_{tau_noise}.json"
+    saved.write_text(json.dumps(first.to_dict(history=False), default=float))
+    first = from_dict(json.loads(saved.read_text()), str(saved))
+    kw = {"duration": 30.0, "eta_noise": eta_noise, "tau_noise": tau_noise, "log_rate": 1000.0}
+    alone, both = wmrid.plan(robot, **kw), wmrid.plan(robot, given=saved, **kw)
+    csv = OUT / "sequential_next.csv"
+    wmrid.write_plan(both, csv, force=True)
+    run2 = wmrid.simulate(robot, reference=str(csv), eta_noise=eta_noise, tau_noise=tau_noise, seed=101, rate=1000.0)
+    second = wmrid.identify(run2.log.to_wheel_log(), robot)
+    truth = np.array([run2.truth["parameters"][n] for n in BASE])
+
+    def est(result):
+        idx = [result.form.base_names.index(n) for n in BASE]
+        return np.asarray(result.estimate.theta0)[idx], np.asarray(result.estimate.cov)[np.ix_(idx, idx)]
+
+    (x1, c1), (x2, c2) = est(first), est(second)
+    info1, info2 = np.linalg.pinv(c1), np.linalg.inv(c2)
+    cov = np.linalg.inv(info1 + info2)
+    x = cov @ (info1 @ x1 + info2 @ x2)
+    std = np.sqrt(np.diag(cov))
+    return {
+        "noise": [eta_noise, tau_noise],
+        "first_relative_std": {n: first.parameters[n][1] / abs(truth[i]) for i, n in enumerate(BASE)},
+        "plan_alone": {"worst": alone.value, "relative": {n: v["relative"] for n, v in alone.predicted.items()}},
+        "plan_given": {"worst": both.value, "relative": {n: v["relative"] for n, v in both.predicted.items()}},
+        "second_relative_std": {n: second.parameters[n][1] / abs(truth[i]) for i, n in enumerate(BASE)},
+        "fused_relative_std": dict(zip(BASE, (std / np.abs(truth)).tolist(), strict=True)),
+        "fused_z": dict(zip(BASE, ((x - truth) / std).tolist(), strict=True)),
+    }
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--robots", default="paper,amr")
@@ -159,7 +206,20 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--json", type=Path, default=ROOT / "bench" / "out" / "study_plan.json")
+    ap.add_argument("--sequential", default=None, help="ETA,TAU: the sequential-design check at that noise instead")
     args = ap.parse_args()
+    if args.sequential:
+        eta_noise, tau_noise = (float(v) for v in args.sequential.split(","))
+        out = sequential(eta_noise, tau_noise)
+        print(f"plan alone: worst {100 * out['plan_alone']['worst']:.3g} %; with --given: worst "
+              f"{100 * out['plan_given']['worst']:.3g} %")  # fmt: skip
+        for key in ("first_relative_std", "second_relative_std", "fused_relative_std"):
+            print(f"{key}: " + ", ".join(f"{n} {100 * v:.3g} %" for n, v in out[key].items()))
+        print("fused z: " + ", ".join(f"{n} {v:+.2f}" for n, v in out["fused_z"].items()))
+        path = args.json.with_name("study_plan_sequential.json")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(out, indent=1, default=float))
+        return None
     report: dict = {"args": vars(args) | {"json": str(args.json)}, "robots": {}}
     for name in args.robots.split(","):
         made = make(name)
