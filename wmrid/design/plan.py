@@ -23,7 +23,7 @@ from wmrid.design.information import DEFAULT_K, SensorNoise
 from wmrid.design.limits import LIMIT_NAMES, Limits
 from wmrid.design.problem import CORRELATION, CRITERIA, DIRECTION_SHARE, FLOOR_SHARE, Motion, Problem
 from wmrid.design.search import search
-from wmrid.model.dynamics import RegressorForm, choose_form, named_base
+from wmrid.model.dynamics import RegressorForm, choose_form
 
 SCHEMA = 1
 #: Hz of the grid the search runs on (the plan's signals stay under 1 Hz) and the finest grid of the final prediction.
@@ -252,14 +252,16 @@ def make_plan(
             raise UsageError(_infeasible(limits, r, b)) from None
         fine = _problem(theta0, form, r, b, limits, noise, length, min(noise.rate, FINE_GRID), criterion,
                         given_info, k)  # fmt: skip
-        return problem, fine, found, fine.criterion_value(fine.covariance(fine.motion_of(found.coefficients)))
+        motion = fine.motion_of(found.coefficients)
+        cov = fine.covariance(motion)
+        return problem, fine, found, fine.criterion_value(cov), motion, cov
 
     if duration is None:
         if target_std is None:
             raise UsageError(f"{option('duration', 'auto')} needs {option('target_std')}")
         length = 30.0
         say(f"trial plan of {length:g} s")
-        problem, fine, found, value = design(length)
+        problem, fine, found, value, motion, cov = design(length)
         for _ in range(6):
             if value <= target_std:
                 break
@@ -272,19 +274,17 @@ def make_plan(
                 )
             length = PERIOD_SECONDS * math.ceil(need / PERIOD_SECONDS)
             say(f"plan of {length:g} s")
-            problem, fine, found, value = design(length)
+            problem, fine, found, value, motion, cov = design(length)
         else:
             raise UsageError(f"{option('target_std')}: no plan up to {length:g} s reached it ({100 * value:.3g} %)")
     else:
         if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration >= MIN_DURATION):
             raise UsageError(f"{option('duration', f'{duration:g}')}: a plan lasts at least {MIN_DURATION:g} s")
         say(f"plan of {duration:g} s")
-        problem, fine, found, value = design(float(duration))
+        problem, fine, found, value, motion, cov = design(float(duration))
     if not found.feasible:
         raise UsageError(_inseparable(problem.duration))
 
-    motion = fine.motion_of(found.coefficients)
-    cov = fine.covariance(motion)
     rel = fine.relative_std(cov)
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     predicted = {
@@ -386,11 +386,3 @@ def _infeasible(limits: Limits, r: float, b: float) -> str:
         f"{bounds['max_wheel_speed']:.3g} rad/s ({bounds['max_wheel_speed'] * r:.3g} m/s at the rim); give a larger "
         f"{option('area')} or check the limits"
     )
-
-
-def theta0_names() -> tuple[str, ...]:
-    return RegressorForm("general").base_names
-
-
-def nominal_table(theta0: np.ndarray) -> dict[str, float]:
-    return named_base(theta0[:8])
