@@ -112,6 +112,38 @@ def intermediate_jacobian(theta0: np.ndarray, form: RegressorForm) -> np.ndarray
     return np.stack(cols, axis=1)
 
 
+@dataclass(frozen=True)
+class _Forward:
+    """What the intermediate covariance is made of, kept for the gradient (:class:`CovarianceGradient`)."""
+
+    a: float
+    w: np.ndarray
+    adj: np.ndarray
+    c: np.ndarray
+    zs: list[np.ndarray]
+    qs: list[float]
+    fd: np.ndarray
+    score: np.ndarray
+    gamma_inv: np.ndarray
+    big: np.ndarray
+    cov: np.ndarray
+    gamma: np.ndarray
+
+
+def _intermediate(eta, tau, h, theta0, form, noise, k, coulomb) -> _Forward:
+    a = math.exp(-k * h)
+    g = expected_regressor(eta, tau, form, noise.eta_std)
+    w = lowpass(g, a) / k
+    gamma = h * (w.T @ w)
+    adj = lowpass_adjoint(w, a)  # (n, p)
+    c, zs, qs, fd = noise_scores(w, adj, eta, h, theta0, noise, k, form, coulomb)
+    score = sum(q * (z.T @ z) for q, z in zip(qs, zs, strict=True))
+    inv = np.linalg.inv(gamma)
+    big = np.kron(np.eye(2), inv)
+    cov = big @ score @ big
+    return _Forward(a, w, adj, c, zs, qs, fd, score, inv, big, 0.5 * (cov + cov.T), gamma)
+
+
 def intermediate_covariance(
     eta: np.ndarray, tau: np.ndarray, h: float, theta0: np.ndarray, form: RegressorForm, noise: SensorNoise,
     k: float = DEFAULT_K, coulomb: np.ndarray | None = None,
@@ -121,17 +153,8 @@ def intermediate_covariance(
 
     The grid need not be the log's: the noise is scaled to the same intensity (variance x time step), so a coarser
     grid gives the same answer while the motion is smooth on it."""
-    a = math.exp(-k * h)
-    g = expected_regressor(eta, tau, form, noise.eta_std)
-    w = lowpass(g, a) / k
-    gamma = h * (w.T @ w)
-    adj = lowpass_adjoint(w, a)  # (n, p)
-    _, zs, qs, _ = noise_scores(w, adj, eta, h, theta0, noise, k, form, coulomb)
-    score = sum(q * (z.T @ z) for q, z in zip(qs, zs, strict=True))
-    inv = np.linalg.inv(gamma)
-    big = np.kron(np.eye(2), inv)
-    cov = big @ score @ big
-    return 0.5 * (cov + cov.T), gamma
+    fwd = _intermediate(eta, tau, h, theta0, form, noise, k, coulomb)
+    return fwd.cov, fwd.gamma
 
 
 def noise_scores(
@@ -217,31 +240,21 @@ class CovarianceGradient:
         self.m = inverse_inertia(theta0)
 
     def forward(self, eta: np.ndarray, tau: np.ndarray, h: float) -> np.ndarray:
-        k, noise = self.k, self.noise
-        a = math.exp(-k * h)
-        g = expected_regressor(eta, tau, self.form, noise.eta_std)
-        w = lowpass(g, a) / k
-        gamma = h * (w.T @ w)
-        adj = lowpass_adjoint(w, a)
-        c, zs, qs, fd = noise_scores(w, adj, eta, h, self.theta0, noise, k, self.form, self.coulomb)
-        p = w.shape[1]
-        score = sum(q * (z.T @ z) for q, z in zip(qs, zs, strict=True))
-        inv = np.linalg.inv(gamma)
-        big = np.kron(np.eye(2), inv)
-        cov_t = big @ score @ big
-        cov_t = 0.5 * (cov_t + cov_t.T)
-        c_inv = np.linalg.inv(cov_t)
+        fwd = _intermediate(eta, tau, h, self.theta0, self.form, self.noise, self.k, self.coulomb)
+        c_inv = np.linalg.inv(fwd.cov)
         info = self.jac.T @ c_inv @ self.jac
         if self.given is not None:
             info = info + self.given
         cov0 = np.linalg.inv(info)
         cov0 = 0.5 * (cov0 + cov0.T)
-        self._keep = (a, h, w, adj, c, qs, zs, score, inv, big, c_inv, cov0, eta, p, fd)
+        self._keep = (fwd, h, c_inv, cov0, eta)
         return cov0
 
     def backward(self, g0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(dJ/deta (n, 2), dJ/dtau (n, 2)) for g0 = dJ/dCov(theta0), symmetric."""
-        a, h, w, adj, c, qs, zs, score, inv, big, c_inv, cov0, eta, p, fd = self._keep
+        fwd, h, c_inv, cov0, eta = self._keep
+        a, w, adj, c, qs, zs, fd = fwd.a, fwd.w, fwd.adj, fwd.c, fwd.qs, fwd.zs, fwd.fd
+        score, inv, big, p = fwd.score, fwd.gamma_inv, fwd.big, fwd.w.shape[1]
         sigma = self.noise.eta_std
         flips = self.form.kind == "general" and sigma > 0
         mean, sd, slope = sign_statistics(eta, sigma)
