@@ -89,14 +89,7 @@ def _given(
             result, source = item, "result"
         else:
             source = os.fspath(item)
-            try:
-                with open(source, encoding="utf-8") as fh:
-                    data = json.load(fh)
-            except OSError as err:
-                raise UsageError(f"{option('given', source)}: cannot read ({err.strerror or err})") from None
-            except ValueError as err:
-                raise UsageError(f"{option('given', source)}: not a saved result (not JSON: {err})") from None
-            result = result_from_dict(data, source)
+            result = result_from_dict(_read_json(source, option("given", source), "a saved result"), source)
         est = result.estimate
         if est is None:
             raise UsageError(f"{option('given', source)}: holds no estimate")
@@ -248,13 +241,24 @@ def plan(
 def read_plan(path: str | os.PathLike[str]) -> Plan:
     """A plan saved as JSON (``wmrid plan -o plan.json`` or ``--format json``)."""
     source = os.fspath(path)
+    return Plan.from_dict(_read_json(source, source, "a plan"), source)
+
+
+def _read_json(path: str, name: str, what: str) -> Any:
+    """The JSON document at ``path`` (an input: never overwritten), read in bounded memory (WMRID_MEMORY_BUDGET);
+    UsageError naming ``name`` when it cannot be read or is not JSON."""
+    from wmrid.core.atomic import register_input
+    from wmrid.core.limits import memory_budget, read_limited
+
+    register_input(path)
     try:
-        data = json.loads(Path(source).read_text(encoding="utf-8"))
+        raw = read_limited(path, memory_budget(), f"{name}: holds more than {{size}} (WMRID_MEMORY_BUDGET)", UsageError)
     except OSError as err:
-        raise UsageError(f"{source}: cannot read ({err.strerror or err})") from None
-    except ValueError as err:
-        raise UsageError(f"{source}: not a plan (not JSON: {err})") from None
-    return Plan.from_dict(data, source)
+        raise UsageError(f"{name}: cannot read ({err.strerror or err})") from None
+    try:
+        return json.loads(raw)
+    except (ValueError, RecursionError) as err:
+        raise UsageError(f"{name}: not {what} (not JSON: {err})") from None
 
 
 #: Suffixes :func:`write_plan` writes: the reference (csv, parquet, mcap) or the prediction (json).
