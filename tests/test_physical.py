@@ -139,5 +139,5 @@ def test_platform_inertia_below_zero_is_refused():
     p = BUILTIN_ROBOTS["paper"].cad
     theta0 = dm.base_parameters(p)
     wide = dataclasses.replace(p, a=1.0)
-    with pytest.raises(UsageError, match="I_p = .* is negative"):
+    with pytest.raises(UsageError, match=r"I_p = .* is negative"):
         physical_from_base(theta0, np.diag((0.01 * theta0) ** 2), wide)
