@@ -1,10 +1,10 @@
 """The package's layers: a module never imports one from a higher layer, nor from a sibling layer of the same rank.
-
 Layers, lowest first (README "Python"): ``core`` (errors, limits, atomic outputs, the log types) -> ``model``
-(dynamics, robot, payload, predictor) -> ``io`` (readers, writers) | ``estimators`` | ``sim`` (siblings: the estimators
-never import a reader, the readers never an estimator) -> ``monitoring`` | ``design`` (``wmrid plan``: experiment design
-on the model, the simulator's built-in trajectories as its baselines) -> ``reporting`` -> ``api`` (the front door)
--> ``cli``.  Every import counts, including those inside functions and under ``TYPE_CHECKING``.
+(dynamics, robot, payload, predictor) -> ``io`` (readers, writers) | ``estimators`` | ``sim`` (siblings: the
+estimators never import a reader, the readers never an estimator) -> ``monitoring`` | ``design`` (``wmrid plan``:
+experiment design on the model, the simulator's built-in trajectories as its baselines) -> ``reporting`` |
+``exports`` (siblings: ``wmrid export``'s writers) -> ``api`` (the front door) -> ``cli``. Every import counts,
+including those inside functions and under ``TYPE_CHECKING``.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ RANK = {
     "monitoring": 3,
     "design": 3,
     "reporting": 4,
+    "exports": 4,
     "api": 5,
     "cli": 6,
 }

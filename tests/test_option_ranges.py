@@ -46,6 +46,8 @@ def base_args(name: str, tmp: Path) -> list[str]:
         return [MISSING_LOG, "-o", str(tmp / "fleet.parquet")]
     if name == "plan":
         return ["--robot", "/nonexistent/wmrid-test/robot.toml"]
+    if name == "export":
+        return ["/nonexistent/wmrid-test/run.json", "-o", str(tmp / "model.yaml")]
     return [MISSING_LOG]
 
 
@@ -64,6 +66,9 @@ CONTEXT = {
     ("simulate", "--floor-friction"): ["--engine", "mujoco"],
     ("simulate", "--caster-resistance"): ["--engine", "mujoco"],
     ("simulate", "--torque-limit"): ["--engine", "mujoco"],
+    ("export", "--gear-ratio"): ["--robot", "{urdf}"],
+    ("export", "--rotor-inertia"): ["--robot", "{urdf}", "--gear-ratio", "30"],
+    ("export", "--wheel-radius"): ["--robot", "{urdf}", "--gear-ratio", "30"],
 }
 
 

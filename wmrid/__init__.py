@@ -112,6 +112,9 @@ _EXPORTS = {
     "write_plan": "wmrid.api.planning",
     "read_plan": "wmrid.api.planning",
     "Plan": "wmrid.design.plan",
+    "export": "wmrid.api.exporting",
+    "ExportResult": "wmrid.api.exporting",
+    "PhysicalEstimate": "wmrid.model.physical",
 }
 
 __all__ = ["__version__", *sorted(_EXPORTS)]

@@ -47,7 +47,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -77,6 +77,9 @@ class UrdfModel:
     left_wheel_joint: str
     wheel_signs: tuple[int, int]
     rotor_joints: tuple[str, str] | None  # (right, left), None when the file has no rotor links
+    #: ((F_v1, F_v2), (F_d1, F_d2)) from the wheel joints' <dynamics damping= friction=> (a missing attribute is 0),
+    #: None when neither wheel joint has a <dynamics> element (what ``wmrid export`` writes; CAD exporters rarely do)
+    dynamics: tuple[tuple[float, float], tuple[float, float]] | None = None
 
 
 def _is_rotor_name(name: str) -> bool:
@@ -381,7 +384,27 @@ def read_urdf(
         left_wheel_joint=left.name,
         wheel_signs=(signs[0], signs[1]),
         rotor_joints=(rotor_pair[0].name, rotor_pair[1].name) if rotor_pair is not None else None,
+        dynamics=_wheel_dynamics(reader, root, (right.name, left.name)),
     )
+
+
+def _wheel_dynamics(
+    reader: Reader, root: Any, joints: tuple[str, str]
+) -> tuple[tuple[float, float], tuple[float, float]] | None:
+    """The wheel joints' <dynamics damping friction> ((right, left) each), None when neither joint has one."""
+    found = {el.get("name"): el.find("dynamics") for el in root.findall("joint") if el.get("name") in joints}
+    if all(found.get(j) is None for j in joints):
+        return None
+    out = []
+    for attr in ("damping", "friction"):
+        pair = []
+        for j in joints:
+            el = found.get(j)
+            text = el.get(attr) if el is not None else None
+            value = float(reader.floats(text, 1, f"joint {j!r} <dynamics {attr}>", (0.0,))[0])
+            pair.append(_check_number(f"joint {j!r} <dynamics {attr}>", value))
+        out.append((pair[0], pair[1]))
+    return out[0], out[1]
 
 
 def robot_from_urdf(path_or_text: str | Path, **options: Any) -> PhysicalParameters:
@@ -416,9 +439,6 @@ def load_robot_urdf(
     from wmrid.core.atomic import register_input
 
     register_input(path)
-    unknown = (("Fv1", "Fv2") if viscous_friction is None else ()) + (
-        ("Fd1", "Fd2") if coulomb_friction is None else ()
-    )
     model = read_urdf(
         path, gear_ratio=gear_ratio, rotor_inertia=rotor_inertia,
         viscous_friction=(0.0, 0.0) if viscous_friction is None else viscous_friction,
@@ -426,6 +446,16 @@ def load_robot_urdf(
         wheel_radius=wheel_radius, wheel_joints=wheel_joints, rotor_joints=rotor_joints,
         symmetry_tolerance=symmetry_tolerance,
     )  # fmt: skip
+    if model.dynamics is not None and (viscous_friction is None or coulomb_friction is None):
+        # the wheel joints' <dynamics> (an exported URDF's identified friction) where no argument gives it
+        given_v = model.dynamics[0] if viscous_friction is None else tuple(viscous_friction)
+        given_d = model.dynamics[1] if coulomb_friction is None else tuple(coulomb_friction)
+        model = replace(model, params=model.params.replace(
+            F_v1=given_v[0], F_v2=given_v[1], F_d1=given_d[0], F_d2=given_d[1]))  # fmt: skip
+        viscous_friction, coulomb_friction = given_v, given_d
+    unknown = (("Fv1", "Fv2") if viscous_friction is None else ()) + (
+        ("Fd1", "Fd2") if coulomb_friction is None else ()
+    )
     if torque_constant is not None:
         torque_constant = _check_number("torque_constant", torque_constant, positive=True)
     if efficiency is not None and not 0 < _check_number("efficiency", efficiency, positive=True) <= 1:

@@ -1,0 +1,274 @@
+"""``wmrid export``: an identification result written as a model a simulator or a controller loads.
+
+:func:`export` takes a result (a saved JSON or an :class:`~wmrid.estimators.result.IdentificationResult`) and the robot
+file it was identified with, computes the physical quantities (:mod:`wmrid.model.physical`: what the log determines,
+what the file gives, what stays undetermined; an unphysical result is refused) and writes, by the output's suffix:
+
+* ``.xml``: MJCF, the multibody prototype with the identified values (:mod:`wmrid.exports.mjcf`);
+* ``.urdf``: the robot's own URDF with only the base link's inertial and the wheel joints' dynamics changed, or a
+  minimal URDF for a TOML robot (:mod:`wmrid.exports.urdf`);
+* ``.yaml`` / ``.yml``: the reduced model for a controller; ``.py``: a dependency-free ``wheel_torques(eta, eta_dot)``
+  (:mod:`wmrid.exports.controller`).
+
+``check``: a log whose torques drive the exported multibody model over windows restarted from the logged speeds
+(:func:`wmrid.sim.multibody.drive_windows`); the fit % per wheel is reported next to the reduced model's on the same
+windows (:func:`wmrid.model.predict.simulate_segments`).  The returned :class:`ExportResult` round-trips through JSON.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wmrid.core.errors import UsageError, option
+from wmrid.model.physical import PhysicalEstimate
+
+#: Suffixes :func:`export` writes, and what each is.
+EXPORT_FORMATS = {
+    ".xml": "MJCF (MuJoCo)", ".urdf": "URDF", ".yaml": "YAML (reduced model)", ".yml": "YAML (reduced model)",
+    ".py": "Python (wheel_torques)",
+}  # fmt: skip
+#: Default length (s) of the windows ``check`` restarts the models over.
+CHECK_WINDOW = 2.0
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    """What :func:`export` wrote: the output path and format, the physical quantities, the provenance, and (with a
+    check log) the fit % per wheel of the exported multibody model and of the reduced model over the same windows."""
+
+    path: str
+    format: str
+    physical: PhysicalEstimate
+    provenance: dict[str, str]
+    check: dict[str, Any] | None = None
+    notes: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "schema": 1, "kind": "export", "path": self.path, "format": self.format,
+            "physical": self.physical.to_dict(), "provenance": dict(self.provenance), "check": self.check,
+            "notes": list(self.notes),
+        }  # fmt: skip
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> ExportResult:
+        return cls(path=str(data["path"]), format=str(data["format"]),
+                   physical=PhysicalEstimate.from_dict(data["physical"]), provenance=dict(data["provenance"]),
+                   check=data.get("check"), notes=tuple(data.get("notes", ())))  # fmt: skip
+
+
+def check_export_output(path: str | os.PathLike[str]) -> str:
+    """The output's suffix (lower case), or UsageError naming the suffixes :func:`export` writes."""
+    target = os.fspath(path)
+    suffix = Path(target).suffix.lower()
+    if suffix not in EXPORT_FORMATS:
+        raise UsageError(
+            f"{option('output', target)}: give a file ending in {', '.join(EXPORT_FORMATS)} (MJCF, URDF, YAML, Python)"
+        )
+    return suffix
+
+
+def _result(result: Any) -> tuple[Any, dict[str, str]]:
+    """(IdentificationResult, provenance) from a result or the path of a saved one."""
+    from wmrid import __version__
+    from wmrid.estimators.result import IdentificationResult
+    from wmrid.estimators.result import from_dict as result_from_dict
+
+    provenance = {"wmrid": __version__}
+    if isinstance(result, IdentificationResult):
+        found = result
+        provenance["result"] = "an IdentificationResult (not saved)"
+    else:
+        from wmrid.api.planning import _read_json
+
+        source = os.fspath(result)
+        data = _read_json(source, f"result {source}", "a saved identification result")
+        found = result_from_dict(data, source)
+        with open(source, "rb") as fh:
+            digest = hashlib.sha256(fh.read()).hexdigest()
+        provenance["result"] = f"{source} (sha256 {digest})"
+    if found.estimate is None:
+        raise UsageError(f"{provenance['result']}: holds no estimate to export")
+    provenance.update({
+        "log": str(found.log_info.get("source", found.source)), "method": str(found.estimate.method),
+        "friction_model": found.form.friction,
+    })  # fmt: skip
+    return found, provenance
+
+
+def _notes(est: PhysicalEstimate) -> dict[str, str]:
+    out = {}
+    for name, q in est.quantities.items():
+        unit = "" if q.unit == "1" else f" {q.unit}"
+        if q.source == "robot file":
+            out[name] = f"{q.value:.6g}{unit} (robot file)"
+            continue
+        std = "undetermined" if not math.isfinite(q.std) else f"{q.std:.3g}"
+        out[name] = f"{q.value:.6g} +/- {std}{unit} ({q.source})"
+    return out
+
+
+def export(
+    result: Any,
+    robot: Any,
+    output: str | os.PathLike[str],
+    *,
+    check: Any = None,
+    window: float = CHECK_WINDOW,
+    gear_ratio: float | None = None,
+    rotor_inertia: float | None = None,
+    wheel_radius: float | None = None,
+    options: Any = None,
+    force: bool = False,
+) -> ExportResult:
+    """Write ``result`` (a saved result's path, or a result) identified with ``robot`` (a robot file, a built-in name,
+    or a URDF with ``gear_ratio``) to ``output`` in the format its suffix names (module docstring); ``check`` a log
+    (path or log, read with ``options``) to drive the exported multibody model with.  Atomic; an existing output is
+    kept unless ``force``.  Raises UsageError (one line) for an unknown suffix, a robot file without physical
+    parameters, an unphysical result, a result whose effort is not a torque."""
+    from wmrid.api.inputs import load_robot
+    from wmrid.core.atomic import atomic_write_bytes, atomic_write_text
+    from wmrid.model.physical import physical_from_base
+    from wmrid.model.robot import PhysicalParameters
+
+    suffix = check_export_output(output)
+    if not (isinstance(window, (int, float)) and math.isfinite(window) and window > 0):
+        raise UsageError(f"{option('window', window)}: give the check's window length in seconds, > 0")
+    robot_obj = load_robot(robot, gear_ratio=gear_ratio, rotor_inertia=rotor_inertia, wheel_radius=wheel_radius)
+    found, provenance = _result(result)
+    if not robot_obj.physical:
+        raise UsageError(
+            f"{option('robot', robot)}: gives base parameters only; an export needs the robot's geometry and masses "
+            "(a robot file with its physical parameters, Table 1, or a URDF)"
+        )
+    unit = found.log_info.get("effort_unit", "N m")
+    if unit != "N m":
+        raise UsageError(
+            f"the result's efforts are in {unit}, not N m: its parameters are not physical masses and inertias; "
+            "identify with torques (--torque-constant for currents) to export it"
+        )
+    # the robot file's masses and geometry taken as known: its CAD set when it has one (the measured robot), else
+    # its nominal set
+    use_cad = isinstance(robot_obj.cad, PhysicalParameters)
+    geometry = robot_obj.cad if use_cad else robot_obj.nominal
+    provenance["robot"] = f"{robot_obj.name} ({'CAD' if use_cad else 'nominal'} set for what the log does not give)"
+    est = found.estimate
+    base_names = found.form.base_names if len(est.theta0) == found.form.n_base else None
+    physical = physical_from_base(np.asarray(est.theta0), np.asarray(est.cov), geometry, base_names)
+    notes = _notes(physical)
+    prov_line = "; ".join(f"{k}: {v}" for k, v in provenance.items())
+    casters = robot_obj.casters
+    from wmrid.exports.controller import controller_model
+
+    cm = controller_model(found, provenance)
+    target = os.fspath(output)
+    said: list[str] = []
+    if suffix == ".xml":
+        from wmrid.exports.mjcf import mjcf_text
+        from wmrid.model.robot import default_casters
+
+        text = mjcf_text(physical.parameters, casters or default_casters(physical.parameters), notes, prov_line,
+                         cm.casters())  # fmt: skip
+        atomic_write_text(target, text, force=force)
+    elif suffix == ".urdf":
+        from wmrid.exports.urdf import minimal_urdf, updated_urdf
+
+        source = os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else ""
+        if source.lower().endswith(".urdf"):
+            with open(source, "rb") as fh:
+                data = fh.read()
+            out = updated_urdf(data, source, physical.parameters, gear_ratio=geometry.k_r,
+                               rotor_inertia=rotor_inertia, wheel_radius=wheel_radius, notes=notes,
+                               provenance=prov_line)  # fmt: skip
+            atomic_write_bytes(target, out, force=force)
+        else:
+            from wmrid.model.robot import default_casters
+
+            text = minimal_urdf(physical.parameters, casters or default_casters(physical.parameters),
+                                robot_obj.name, notes, prov_line)  # fmt: skip
+            atomic_write_text(target, text, force=force)
+            said.append("a TOML robot has no URDF to edit: a minimal URDF was written (read it back with the gear "
+                        f"ratio {geometry.k_r:g})")  # fmt: skip
+    elif suffix in (".yaml", ".yml"):
+        from wmrid.exports.controller import yaml_text
+
+        atomic_write_text(target, yaml_text(cm), force=force)
+    else:
+        from wmrid.exports.controller import python_text
+
+        atomic_write_text(target, python_text(cm), force=force)
+    checked = None
+    if check is not None:
+        checked = check_fit(found, physical, robot_obj, check, window=window, options=options, casters=cm.casters())
+    return ExportResult(path=target, format=EXPORT_FORMATS[suffix], physical=physical, provenance=provenance,
+                        check=checked, notes=tuple(said))  # fmt: skip
+
+
+def check_fit(
+    found: Any, physical: PhysicalEstimate, robot_obj: Any, log: Any, *, window: float, options: Any = None,
+    casters: list[dict[str, float]] | None = None,
+) -> dict[str, Any]:  # fmt: skip
+    """Fit % per wheel of the exported multibody model and of the reduced model, both driven by ``log``'s torques over
+    windows of ``window`` s restarted from its logged speeds (module docstring)."""
+    from wmrid.api.identification import _log
+    from wmrid.model.predict import fit_percent, simulate_segments
+    from wmrid.model.robot import default_casters
+    from wmrid.sim.multibody import drive_windows, static_loads
+
+    wheel_log = _log(log, options, robot_obj, whole=True)
+    if wheel_log.effort_unit != "N m":
+        raise UsageError(f"{option('check', wheel_log.source)}: its efforts are in {wheel_log.effort_unit}, not N m")
+    t, eta, tau = np.asarray(wheel_log.t), np.asarray(wheel_log.eta), np.asarray(wheel_log.tau)
+    if len(t) < 3:
+        raise UsageError(f"{option('check', wheel_log.source)}: has {len(t)} samples; the check needs a log")
+    starts = np.searchsorted(t, np.arange(t[0], t[-1], window))
+    starts = np.unique(starts[starts < len(t) - 1])
+    p = physical.parameters
+    robot_casters = robot_obj.casters or default_casters(p)
+    drag = None
+    if casters:
+        # the identified drag force of each caster, as a coefficient of its static load (what the prototype applies)
+        loads = static_loads(p, robot_casters)[2:]
+        drag = np.zeros(len(robot_casters))
+        for c in casters:
+            k = min(range(len(robot_casters)), key=lambda i: math.hypot(robot_casters[i].x - c["x"],
+                                                                        robot_casters[i].y - c["y"]))  # fmt: skip
+            if loads[k] > 0 and robot_casters[k].kind == "ball":
+                drag[k] = max(c["D"], 0.0) / loads[k]
+    settings = dataclasses.replace(_settings(), caster_resistance=0.0)
+    mj = drive_windows(p, robot_casters, t, eta, tau, starts, drag=drag, settings=settings)
+    est = found.estimate
+    form = found.form if len(est.theta0) == found.form.n_base else None
+    reduced = simulate_segments(t, tau, np.asarray(est.theta0), eta, starts, form=form)
+    fit_mj, fit_red = fit_percent(eta, mj), fit_percent(eta, reduced)
+
+    def clean(v: float) -> float | None:
+        return float(v) if math.isfinite(v) else None
+
+    return {
+        "log": wheel_log.source, "samples": len(t), "window_s": window, "windows": len(starts),
+        "definition": "fit = 100 (1 - ||eta - eta_hat|| / ||eta - mean(eta)||) per wheel, the models restarted from "
+                      "the logged speeds at the start of each window and driven by the logged torques",
+        "multibody": {"eta_r": clean(fit_mj[0]), "eta_l": clean(fit_mj[1])},
+        "reduced": {"eta_r": clean(fit_red[0]), "eta_l": clean(fit_red[1])},
+    }  # fmt: skip
+
+
+def _settings() -> Any:
+    from wmrid.sim.multibody import MultibodySettings
+
+    return MultibodySettings()
+
+
+def write_export_summary(result: ExportResult, path: str | os.PathLike[str], *, force: bool = False) -> None:
+    from wmrid.core.atomic import write_json
+
+    write_json(os.fspath(path), result.to_dict(), force=force)

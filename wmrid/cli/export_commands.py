@@ -1,0 +1,70 @@
+"""``wmrid export``: a translation of its flags into one library call (:func:`wmrid.api.exporting.export`)."""
+
+from __future__ import annotations
+
+import sys
+from typing import Annotated
+
+import typer
+
+from wmrid.cli.app import app
+from wmrid.cli.helpers import activity
+from wmrid.cli.options import GearRatioOpt, OutputFormat, RotorInertiaOpt, WheelRadiusOpt
+from wmrid.reporting.terminal import console
+
+
+@app.command(
+    name="export",
+    epilog="Examples:\n\n"
+    "wmrid export run.json --robot robot.toml -o robot.xml --check run.mcap\n\n"
+    "wmrid export run.json --robot robot.urdf --gear-ratio 100 -o identified.urdf\n\n"
+    "wmrid export run.json --robot amr -o model.yaml\n\n"
+    "wmrid export run.json --robot amr -o feedforward.py",
+)
+def export_command(
+    result: Annotated[str, typer.Argument(help="A saved result (wmrid identify --format json -o run.json).")],
+    output: Annotated[
+        str,
+        typer.Option(
+            "--output",
+            "-o",
+            help="Write the model; by suffix: .xml (MJCF for MuJoCo), .urdf (your URDF with the identified inertial "
+            "and wheel dynamics, or a minimal one for a TOML robot), .yaml (the reduced model for a controller), .py "
+            "(a dependency-free wheel_torques(eta, eta_dot)).",
+        ),
+    ],
+    robot: Annotated[
+        str, typer.Option(help="The robot file the result was identified with (TOML, URDF, or a built-in name).")
+    ] = "paper",
+    gear_ratio: GearRatioOpt = None,
+    rotor_inertia: RotorInertiaOpt = None,
+    wheel_radius: WheelRadiusOpt = None,
+    check: Annotated[
+        str | None,
+        typer.Option(help="A log whose torques drive the exported multibody model; its fit % is reported."),
+    ] = None,
+    window: Annotated[
+        float, typer.Option(help="With --check: the windows the models restart over from the logged speeds, s, > 0.")
+    ] = 2.0,
+    output_format: Annotated[
+        OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
+    ] = OutputFormat.auto,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing output file.")] = False,
+) -> None:
+    """Write an identified robot as a model a simulator or a controller loads, with every value's std."""
+    from wmrid.api.exporting import check_export_output, export
+    from wmrid.reporting.export_view import print_export
+    from wmrid.reporting.render import to_json
+
+    check_export_output(output)
+    with activity("export"):
+        done = export(result, robot, output, check=check, window=window, gear_ratio=gear_ratio,
+                      rotor_inertia=rotor_inertia, wheel_radius=wheel_radius, force=force)  # fmt: skip
+    data = done.to_dict()
+    fmt = output_format.value
+    if fmt == "auto":
+        fmt = "table" if sys.stdout.isatty() else "json"
+    if fmt == "json":
+        sys.stdout.write(to_json(data) + "\n")
+    else:
+        print_export(data, console())
