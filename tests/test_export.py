@@ -230,3 +230,23 @@ def test_cli_refuses_an_unphysical_result(saved, tmp_path, capsys):
     assert "not more than the robot file's wheels" in err
     assert not (tmp_path / "m.xml").exists()
     assert math.isfinite(data["estimate"]["theta0"][0])
+
+
+def test_robot_file_export_rebuilds_the_same_robot(saved, tmp_path):
+    """The exported TOML reads back as a robot whose base parameters are the result's (1e-9 relative) and whose
+    multibody model is the exported MJCF's, element for element (the comment aside)."""
+    from wmrid.model.robot import load_robot
+    from wmrid.sim.multibody import MultibodySettings, build_mjcf
+
+    path, result = saved
+    toml, xml = tmp_path / "identified.toml", tmp_path / "identified.xml"
+    wmrid.export(str(path), "paper", toml)
+    wmrid.export(str(path), "paper", xml)
+    robot = load_robot(str(toml))
+    assert robot.cad is None
+    np.testing.assert_allclose(dm.base_parameters(robot.nominal), np.asarray(result.estimate.theta0), rtol=1e-9)
+    rebuilt = build_mjcf(robot.nominal, robot.casters, MultibodySettings())
+    written = xml.read_text()
+    body = written[written.index("-->") + 4 :]
+    assert body.strip() == rebuilt.partition("\n")[2].strip()
+    assert all(c.resistance == 0.0 for c in robot.casters)  # the result has no caster drag

@@ -8,7 +8,9 @@ what the file gives, what stays undetermined; an unphysical result is refused) a
 * ``.urdf``: the robot's own URDF with only the base link's inertial and the wheel joints' dynamics changed, or a
   minimal URDF for a TOML robot (:mod:`wmrid.exports.urdf`);
 * ``.yaml`` / ``.yml``: the reduced model for a controller; ``.py``: a dependency-free ``wheel_torques(eta, eta_dot)``
-  (:mod:`wmrid.exports.controller`).
+  (:mod:`wmrid.exports.controller`);
+* ``.toml``: a wmrid robot file of the identified robot, which ``wmrid simulate`` reads
+  (:mod:`wmrid.exports.robot_file`).
 
 ``check``: a log whose torques drive the exported multibody model over windows restarted from the logged speeds
 (:func:`wmrid.sim.multibody.drive_windows`); the fit % per wheel is reported next to the reduced model's on the same
@@ -33,7 +35,7 @@ from wmrid.model.physical import PhysicalEstimate
 #: Suffixes :func:`export` writes, and what each is.
 EXPORT_FORMATS = {
     ".xml": "MJCF (MuJoCo)", ".urdf": "URDF", ".yaml": "YAML (reduced model)", ".yml": "YAML (reduced model)",
-    ".py": "Python (wheel_torques)",
+    ".py": "Python (wheel_torques)", ".toml": "wmrid robot file",
 }  # fmt: skip
 #: Default length (s) of the windows ``check`` restarts the models over.
 CHECK_WINDOW = 2.0
@@ -71,7 +73,8 @@ def check_export_output(path: str | os.PathLike[str]) -> str:
     suffix = Path(target).suffix.lower()
     if suffix not in EXPORT_FORMATS:
         raise UsageError(
-            f"{option('output', target)}: give a file ending in {', '.join(EXPORT_FORMATS)} (MJCF, URDF, YAML, Python)"
+            f"{option('output', target)}: give a file ending in {', '.join(EXPORT_FORMATS)} (MJCF, URDF, YAML, "
+            "Python, a wmrid robot file)"
         )
     return suffix
 
@@ -197,6 +200,13 @@ def export(
             atomic_write_text(target, text, force=force)
             said.append("a TOML robot has no URDF to edit: a minimal URDF was written (read it back with the gear "
                         f"ratio {geometry.k_r:g})")  # fmt: skip
+    elif suffix == ".toml":
+        from wmrid.exports.robot_file import robot_file_text
+        from wmrid.sim.multibody import static_loads
+
+        loads = static_loads(physical.parameters, robot_obj.casters or ())[2:].tolist() if robot_obj.casters else []
+        text = robot_file_text(robot_obj, physical.parameters, notes, provenance, cm.casters(), loads)
+        atomic_write_text(target, text, force=force)
     elif suffix in (".yaml", ".yml"):
         from wmrid.exports.controller import yaml_text
 

@@ -30,7 +30,8 @@ def export_command(
             "-o",
             help="Write the model; by suffix: .xml (MJCF for MuJoCo), .urdf (your URDF with the identified inertial "
             "and wheel dynamics, or a minimal one for a TOML robot), .yaml (the reduced model for a controller), .py "
-            "(a dependency-free wheel_torques(eta, eta_dot)).",
+            "(a dependency-free wheel_torques(eta, eta_dot)), .toml (a wmrid robot file of the identified robot, for "
+            "wmrid simulate).",
         ),
     ],
     robot: Annotated[

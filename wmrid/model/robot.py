@@ -24,6 +24,7 @@ reads d_x in metres, like every other length (``tests/test_model.py`` checks thi
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import sys
 from dataclasses import dataclass
@@ -505,7 +506,7 @@ def _parse_casters(tables: object, source: str) -> tuple[Caster, ...] | None:
 
 def robot_to_toml(robot: Robot) -> str:
     """Serialise a robot to the TOML form :func:`load_robot` reads (a round trip)."""
-    lines = [f'name = "{robot.name}"']
+    lines = [f"name = {json.dumps(robot.name)}"]  # a TOML basic string: JSON's escapes are TOML's
     sets = [("nominal", robot.nominal)] + ([("cad", robot.cad)] if robot.cad is not None else [])
     for title, params in sets:
         base = isinstance(params, BaseSet)
@@ -515,7 +516,7 @@ def robot_to_toml(robot: Robot) -> str:
     for caster in robot.casters or ():
         lines.append("\n[[caster]]")
         for key, value in caster.to_dict().items():
-            lines.append(f"{key} = {value!r}" if not isinstance(value, str) else f'{key} = "{value}"')
+            lines.append(f"{key} = {value!r}" if not isinstance(value, str) else f"{key} = {json.dumps(value)}")
     if robot.limits:
         lines.append("\n[limits]")
         for key, value in robot.limits:
