@@ -95,9 +95,11 @@ def _result(result: Any) -> tuple[Any, dict[str, str]]:
         source = os.fspath(result)
         data = _read_json(source, f"result {source}", "a saved identification result")
         found = result_from_dict(data, source)
-        with open(source, "rb") as fh:
-            digest = hashlib.sha256(fh.read()).hexdigest()
-        provenance["result"] = f"{source} (sha256 {digest})"
+        hasher = hashlib.sha256()
+        with open(source, "rb") as fh:  # read once more to name it exactly, in pieces (memory bounded)
+            for piece in iter(lambda: fh.read(1 << 20), b""):
+                hasher.update(piece)
+        provenance["result"] = f"{source} (sha256 {hasher.hexdigest()})"
     if found.estimate is None:
         raise UsageError(f"{provenance['result']}: holds no estimate to export")
     provenance.update({
@@ -186,8 +188,10 @@ def export(
 
         source = os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else ""
         if source.lower().endswith(".urdf"):
-            with open(source, "rb") as fh:
-                data = fh.read()
+            from wmrid.core.limits import ROBOT_FILE_LIMIT, read_limited
+
+            data = read_limited(source, max(ROBOT_FILE_LIMIT, 64 << 20), f"{source}: holds more than {{size}}",
+                                UsageError)  # fmt: skip
             out = updated_urdf(data, source, physical.parameters, gear_ratio=geometry.k_r,
                                rotor_inertia=rotor_inertia, wheel_radius=wheel_radius, notes=notes,
                                provenance=prov_line)  # fmt: skip
