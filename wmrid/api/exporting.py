@@ -235,7 +235,7 @@ def check_fit(
     from wmrid.api.identification import _log
     from wmrid.model.predict import fit_percent, simulate_segments
     from wmrid.model.robot import default_casters
-    from wmrid.sim.multibody import drive_windows, static_loads
+    from wmrid.sim.multibody import drive_windows
 
     wheel_log = _log(log, options, robot_obj, whole=True)
     if wheel_log.effort_unit != "N m":
@@ -247,18 +247,17 @@ def check_fit(
     starts = np.unique(starts[starts < len(t) - 1])
     p = physical.parameters
     robot_casters = robot_obj.casters or default_casters(p)
-    drag = None
+    forces = None
     if casters:
-        # the identified drag force of each caster, as a coefficient of its static load (what the prototype applies)
-        loads = static_loads(p, robot_casters)[2:]
-        drag = np.zeros(len(robot_casters))
+        # the identified drag force D_k of each caster of the geometric model, applied as a constant force against
+        # its contact's motion (the model's own law); a caster of the file at the same place carries it
+        forces = np.zeros(len(robot_casters))
         for c in casters:
             k = min(range(len(robot_casters)), key=lambda i: math.hypot(robot_casters[i].x - c["x"],
                                                                         robot_casters[i].y - c["y"]))  # fmt: skip
-            if loads[k] > 0 and robot_casters[k].kind == "ball":
-                drag[k] = max(c["D"], 0.0) / loads[k]
+            forces[k] += c["D"]
     settings = dataclasses.replace(_settings(), caster_resistance=0.0)
-    mj = drive_windows(p, robot_casters, t, eta, tau, starts, drag=drag, settings=settings)
+    mj = drive_windows(p, robot_casters, t, eta, tau, starts, forces=forces, settings=settings)
     est = found.estimate
     form = found.form if len(est.theta0) == found.form.n_base else None
     reduced = simulate_segments(t, tau, np.asarray(est.theta0), eta, starts, form=form)

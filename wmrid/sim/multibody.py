@@ -275,7 +275,7 @@ class _Plant:
         ]
         self.force6 = np.zeros(6)
 
-    def apply_caster_drag(self, coefficients: np.ndarray) -> None:
+    def apply_caster_drag(self, coefficients: np.ndarray, forces: np.ndarray | None = None) -> None:
         """Set the platform's applied force to the ball casters' rolling drag at the current state.
 
         Each ball caster in contact is pushed with coefficients[i] x its normal load (N) against the
@@ -309,6 +309,20 @@ class _Plant:
             fx, fy, fz = fx + gx, fy + gy, fz + gz
             qx, qy, qz = px - cx, py - cy, pz - cz  # torque about the centre of mass: (point - com) x f
             tx, ty, tz = tx + (qy * gz - qz * gy), ty + (qz * gx - qx * gz), tz + (qx * gy - qy * gx)
+        if forces is not None:  # constant drag forces (N), at each caster's lowest point, in contact or not
+            for geom, i in self.caster_geoms.items():
+                if forces[i] == 0.0:
+                    continue
+                gx_, gy_, gz_ = (float(v) for v in d.geom_xpos[geom])
+                px, py, pz = gx_, gy_, gz_ - float(m.geom_size[geom][0])
+                rx, ry, rz = px - ox, py - oy, pz - oz
+                vx = lx + (wy * rz - wz * ry)
+                vy = ly + (wz * rx - wx * rz)
+                scale = -float(forces[i]) / math.sqrt(vx * vx + vy * vy + DRAG_SPEED**2)
+                gx, gy = scale * vx, scale * vy
+                fx, fy = fx + gx, fy + gy
+                qx, qy, qz = px - cx, py - cy, pz - cz
+                tx, ty, tz = tx - qz * gy, ty + qz * gx, tz + (qx * gy - qy * gx)
         d.xfrc_applied[body, :3] = (fx, fy, fz)
         d.xfrc_applied[body, 3:] = (tx, ty, tz)
 
@@ -583,6 +597,7 @@ def drive_windows(
     starts: np.ndarray,
     *,
     drag: np.ndarray | None = None,
+    forces: np.ndarray | None = None,
     settings: MultibodySettings = MultibodySettings(),
 ) -> np.ndarray:
     """The multibody robot ``p`` driven open loop by logged torques: its wheel speeds (n, 2) rad/s.
@@ -591,8 +606,9 @@ def drive_windows(
     sample interval, starts (G,) increasing sample indices from 0: at each the robot is put back on the flat floor,
     settled on its contacts, at the origin facing +x, moving as the logged speeds say (v = r (eta_1 + eta_2) / 2,
     w = r (eta_1 - eta_2) / (2 b)); then it runs on the torques alone until the next.  ``drag`` (K,): each ball
-    caster's rolling-resistance coefficient (x its normal load, the force against its contact's motion), default
-    none (frictionless casters); swivel casters keep their axle friction.  The MuJoCo step divides each sample
+    caster's rolling-resistance coefficient (x its normal load, the force against its contact's motion); ``forces``
+    (K,) N: a constant drag force per ball caster instead (the identified model's D_k, whatever the load); default
+    neither (frictionless casters); swivel casters keep their axle friction.  The MuJoCo step divides each sample
     interval into whole steps of at most 0.25 ms.  What ``wmrid export --check`` drives an exported MJCF with.
     """
     mujoco = import_mujoco()
@@ -613,7 +629,8 @@ def drive_windows(
         loads = static_loads(p, casters)
         m.dof_frictionloss[adr] = caster_resistance(casters[i], settings) * max(loads[2 + i], 0.0) * casters[i].radius
     coeff = np.zeros(len(casters)) if drag is None else np.asarray(drag, dtype=float)
-    any_drag = bool(np.any(coeff > 0))
+    constant = None if forces is None else np.asarray(forces, dtype=float)
+    any_drag = bool(np.any(coeff > 0)) or (constant is not None and bool(np.any(constant != 0)))
     # settle once at rest; every window starts from this pose
     d.qpos[plant.base_q : plant.base_q + 3] = [0.0, 0.0, p.r]
     d.qpos[plant.base_q + 3 : plant.base_q + 7] = [1.0, 0.0, 0.0, 0.0]
@@ -648,7 +665,7 @@ def drive_windows(
             steps = max(1, round((t[k + 1] - t[k]) / step))
             if any_drag:
                 for _ in range(steps):
-                    plant.apply_caster_drag(coeff)
+                    plant.apply_caster_drag(coeff, constant)
                     mujoco.mj_step(m, d)
             else:
                 mujoco.mj_step(m, d, steps)
