@@ -206,9 +206,12 @@ def export(
                         f"ratio {geometry.k_r:g})")  # fmt: skip
     elif suffix == ".toml":
         from wmrid.exports.robot_file import robot_file_text
-        from wmrid.sim.multibody import static_loads
 
-        loads = static_loads(physical.parameters, robot_obj.casters or ())[2:].tolist() if robot_obj.casters else []
+        loads: list[float] = []
+        if robot_obj.casters and cm.casters():
+            from wmrid.sim.multibody import settled_caster_loads
+
+            loads = settled_caster_loads(physical.parameters, robot_obj.casters).tolist()
         text = robot_file_text(robot_obj, physical.parameters, notes, provenance, cm.casters(), loads)
         atomic_write_text(target, text, force=force)
     elif suffix in (".yaml", ".yml"):

@@ -671,3 +671,23 @@ def drive_windows(
                 mujoco.mj_step(m, d, steps)
             out[k + 1] = d.qvel[v1], d.qvel[v2]
     return out
+
+
+def settled_caster_loads(
+    p: PhysicalParameters, casters: tuple[Caster, ...], settings: MultibodySettings = MultibodySettings()
+) -> np.ndarray:
+    """Each caster's normal load (K,) N on the multibody prototype at rest, settled on its contacts.
+
+    Statics alone cannot say it (two wheels and two casters are four supports: :func:`static_loads` takes the
+    least-norm solution); the prototype's contacts decide it (its sprung casters leave most of the load on the
+    driven wheels), so a drag force per caster becomes the rolling-resistance coefficient that reproduces it here.
+    """
+    mujoco = import_mujoco()
+    casters = tuple(casters)
+    plant = _Plant(mujoco, p, casters, settings, None, 0.00025 * settings.substeps)
+    m, d = plant.model, plant.data
+    d.qpos[plant.base_q : plant.base_q + 3] = [0.0, 0.0, p.r]
+    d.qpos[plant.base_q + 3 : plant.base_q + 7] = [1.0, 0.0, 0.0, 0.0]
+    mujoco.mj_forward(m, d)
+    mujoco.mj_step(m, d, round(SETTLE_SECONDS / plant.timestep))
+    return plant.caster_normals()
