@@ -134,7 +134,9 @@ def test_urdf_export_changes_only_the_inertial_and_the_dynamics(saved, tmp_path)
     the wheel joints' new <dynamics>, every other byte before and after those spans kept; read back, it gives the
     result's base parameters (to 1e-9 relative: the identified values pass through a 2x2 inverse, sums and the
     inertial's rotation)."""
-    path, result = saved
+    result = wmrid.identify(str(SAMPLE), wmrid.load_robot(str(URDF), gear_ratio=100))
+    path = tmp_path / "urdf_run.json"
+    path.write_text(json.dumps(result.to_dict(history=False), default=float))
     out = tmp_path / "identified.urdf"
     done = wmrid.export(str(path), str(URDF), out, gear_ratio=100)
     before, after = _tree(URDF), _tree(out.read_bytes())
@@ -270,3 +272,177 @@ def test_check_applies_the_identified_caster_drag(tmp_path):
     done = wmrid.export(str(saved), "amr", tmp_path / "amr.xml", check=str(log))
     for wheel in ("eta_r", "eta_l"):
         assert abs(done.check["multibody"][wheel] - done.check["reduced"][wheel]) < 1.0, done.check
+
+
+# --- the review's cases --------------------------------------------------------------------------------------------
+
+
+def _save(result, path):
+    path.write_text(json.dumps(result.to_dict(history=False), default=float))
+    return path
+
+
+def test_a_result_of_another_robot_is_refused(saved, tmp_path):
+    """The paper sample's result exported with the light AMR's file would be a 310 kg AMR: refused, no file."""
+    path, _ = saved
+    with pytest.raises(wmrid.WmridError, match="another robot's nominal values"):
+        wmrid.export(str(path), "amr", tmp_path / "x.yaml")
+    assert not (tmp_path / "x.yaml").exists()
+
+
+def test_check_reads_the_log_as_identify_did(tmp_path, capsys):
+    """A result identified from efforts read as currents is checked with the same flags: the multibody fit is within a
+    point of the reduced one (read as torques, the check was 7 % / 0 %)."""
+    pytest.importorskip("mujoco")
+    run = tmp_path / "cur.json"
+    flags = ["--effort", "current", "--torque-constant", "0.5"]
+    with pytest.raises(SystemExit):
+        main(["identify", str(SAMPLE), "--robot", "paper", *flags, "--format", "json", "-o", str(run)])
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_:
+        main(["export", str(run), "--robot", "paper", "-o", str(tmp_path / "c.xml"), "--check", str(SAMPLE), *flags,
+              "--format", "json"])  # fmt: skip
+    assert exit_.value.code == 0
+    check = json.loads(capsys.readouterr().out)["check"]
+    for wheel in ("eta_r", "eta_l"):
+        assert abs(check["multibody"][wheel] - check["reduced"][wheel]) < 1.0, check
+
+
+@pytest.fixture(scope="module")
+def two_term(tmp_path_factory):
+    """A reversing log identified with the two-term caster model (a robot file without caster positions)."""
+    import dataclasses
+
+    from wmrid.api.simulation import write_simulation
+
+    folder = tmp_path_factory.mktemp("two_term")
+    sim = wmrid.simulate("paper", trajectory="reversing", duration=10.0, rate=500.0, eta_noise=0.01, tau_noise=0.05)
+    log = folder / "rev.csv"
+    write_simulation(sim, log)
+    robot = dataclasses.replace(wmrid.load_robot("paper"), casters=None)
+    result = wmrid.identify(str(log), robot, friction="wheel+caster")
+    assert result.form.caster
+    assert not result.form.geometry
+    return _save(result, folder / "run.json"), log, robot
+
+
+def test_the_two_term_caster_drag_is_said_to_be_left_out(two_term, tmp_path):
+    pytest.importorskip("mujoco")
+    path, log, robot = two_term
+    done = wmrid.export(str(path), robot, tmp_path / "r.xml", check=str(log))
+    text = (tmp_path / "r.xml").read_text()
+    assert "two-term caster drag (Cv, Cw) has no place in a multibody model" in text
+    assert any("two-term" in n for n in done.notes)
+    assert done.check["reduced"]["eta_r"] is None
+    assert "Cv, Cw" in done.check["reduced_not_simulated"]
+    assert done.physical.quantities["Cv"].unit == "N m"
+    wmrid.export(str(path), robot, tmp_path / "r.py")  # the controller model keeps it
+    assert "TWO_TERM = (" in (tmp_path / "r.py").read_text()
+
+
+def test_an_undetermined_inertia_is_refused(tmp_path):
+    """The first second of the sample determines nothing: refused, naming what, no file."""
+    short = tmp_path / "short.csv"
+    short.write_text("".join(SAMPLE.read_text().splitlines(keepends=True)[:1001]))
+    result = wmrid.identify(str(short), "paper")
+    path = _save(result, tmp_path / "short.json")
+    with pytest.raises(wmrid.WmridError, match="the log does not determine m11"):
+        wmrid.export(str(path), "paper", tmp_path / "s.yaml")
+    assert not (tmp_path / "s.yaml").exists()
+
+
+@pytest.mark.parametrize("name", ["a---b", "x--", "ctl\x01char", 'q"uote<&>'])
+def test_names_never_break_the_xml(saved, tmp_path, name):
+    """A robot name or path with dashes, a control character or markup: the MJCF and URDF stay well-formed XML and
+    read back."""
+    import dataclasses
+
+    path, _ = saved
+    robot = dataclasses.replace(wmrid.load_robot("paper"), name=name)
+    wmrid.export(str(path), robot, tmp_path / "n.xml")
+    wmrid.export(str(path), robot, tmp_path / "n.urdf")
+    ET.parse(tmp_path / "n.xml")
+    read_urdf((tmp_path / "n.urdf").read_text(), gear_ratio=100)
+
+
+def test_urdf_base_link_without_inertial_gets_the_platform(tmp_path):
+    """A URDF whose base link (the wheels' parent) has no <inertial>: the identified platform is put there (not into
+    the heaviest other link, a caster), the edit reads back to the result's base parameters."""
+    text = URDF.read_text()
+    start = text.index("<inertial>", text.index('<link name="base_link">'))
+    stop = text.index("</inertial>", start) + len("</inertial>")
+    bare = text[:start] + text[stop:]
+    # the platform's mass must still be somewhere for the file to be a robot: a sensor link carries 5 kg
+    bare = bare.replace("</robot>", '<link name="sensor"><inertial><origin xyz="0.2 0 0.3"/><mass value="5"/>'
+                        '<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>'
+                        '<joint name="sensor_joint" type="fixed"><parent link="base_link"/><child link="sensor"/>'
+                        '<origin xyz="0.1 0 0.2"/></joint></robot>')  # fmt: skip
+    robot_path = tmp_path / "bare.urdf"
+    robot_path.write_text(bare)
+    result = wmrid.identify(str(SAMPLE), wmrid.load_robot(str(robot_path), gear_ratio=100))
+    path = _save(result, tmp_path / "bare.json")
+    out = tmp_path / "out.urdf"
+    done = wmrid.export(str(path), str(robot_path), out, gear_ratio=100)
+    assert any("had no mass of its own" in n for n in done.notes)
+    back = read_urdf(out.read_text(), gear_ratio=100)
+    tree = ET.parse(out).getroot()
+    base = next(el for el in tree.findall("link") if el.get("name") == "base_link")
+    assert base.find("inertial") is not None
+    np.testing.assert_allclose(dm.base_parameters(back.params)[:4], np.asarray(result.estimate.theta0)[:4], rtol=1e-9)
+
+
+def test_minimal_urdf_without_rotor_mass_reads_back(tmp_path):
+    """A TOML robot with massless rotors (m_r = 0, I_r > 0): the minimal URDF has no rotor links and reads back with
+    --rotor-inertia, as its note says."""
+    import dataclasses
+
+    robot = wmrid.load_robot("paper")
+    light = dataclasses.replace(robot, nominal=robot.nominal.replace(m_r=0.0, I_rm=0.0),
+                                cad=robot.cad.replace(m_r=0.0, I_rm=0.0))  # fmt: skip
+    result = wmrid.identify(str(SAMPLE), light)
+    path = _save(result, tmp_path / "light.json")
+    done = wmrid.export(str(path), light, tmp_path / "light.urdf")
+    assert any("--rotor-inertia" in n for n in done.notes)
+    back = read_urdf((tmp_path / "light.urdf").read_text(), gear_ratio=100, rotor_inertia=light.cad.I_r)
+    np.testing.assert_allclose(dm.base_parameters(back.params)[:4], np.asarray(result.estimate.theta0)[:4], rtol=1e-9)
+
+
+def test_negative_friction(saved, tmp_path):
+    """An identified F_v1 below 0: the controller formats keep it; a simulator's file writes 0 with a note when it is
+    within 3 std of 0, and refuses further below."""
+    path, _ = saved
+    data = json.loads(path.read_text())
+    std = math.sqrt(data["estimate"]["covariance"][4][4])
+    for value, refused in ((-1.0 * std, False), (-10.0 * std, True)):
+        data["estimate"]["theta0"][4] = value
+        data["nominal"] = json.loads(path.read_text())["nominal"]
+        bad = tmp_path / f"neg{refused}.json"
+        bad.write_text(json.dumps(data))
+        wmrid.export(str(bad), "paper", tmp_path / f"neg{refused}.yaml")
+        if refused:
+            with pytest.raises(wmrid.WmridError, match="more than 3 std below 0"):
+                wmrid.export(str(bad), "paper", tmp_path / "neg.xml")
+        else:
+            done = wmrid.export(str(bad), "paper", tmp_path / "neg.xml")
+            assert done.physical.parameters.F_v1 == 0.0
+            assert any("written as 0" in n for n in done.notes)
+
+
+def test_pwm_results_export_as_controller_models_only(tmp_path):
+    from wmrid.api.inputs import LogOptions
+
+    result = wmrid.identify(str(SAMPLE), "paper", options=LogOptions(effort="pwm"))
+    path = _save(result, tmp_path / "pwm.json")
+    done = wmrid.export(str(path), "paper", tmp_path / "pwm.yaml")
+    assert done.physical is None
+    with pytest.raises(wmrid.WmridError, match="only the controller formats"):
+        wmrid.export(str(path), "paper", tmp_path / "pwm.xml")
+
+
+def test_a_failed_check_leaves_no_file(saved, tmp_path):
+    path, _ = saved
+    for kwargs, says in (({"check": str(tmp_path / "nosuch.csv")}, "nosuch"),
+                         ({"check": str(SAMPLE), "window": 0.005}, "shorter than 10 samples")):  # fmt: skip
+        with pytest.raises(wmrid.WmridError, match=says):
+            wmrid.export(str(path), "paper", tmp_path / "c.xml", **kwargs)
+        assert not (tmp_path / "c.xml").exists()

@@ -47,7 +47,7 @@ def base_args(name: str, tmp: Path) -> list[str]:
     if name == "plan":
         return ["--robot", "/nonexistent/wmrid-test/robot.toml"]
     if name == "export":
-        return ["/nonexistent/wmrid-test/run.json", "-o", str(tmp / "model.yaml")]
+        return ["/nonexistent/wmrid-test/run.json", "-o", str(tmp / "model.yaml"), "--robot", "paper"]
     return [MISSING_LOG]
 
 

@@ -39,6 +39,8 @@ EXPORT_FORMATS = {
 }  # fmt: skip
 #: Default length (s) of the windows ``check`` restarts the models over.
 CHECK_WINDOW = 2.0
+#: The shortest window, in samples of the check log: over fewer, restarting from the logged speeds makes any model fit.
+MIN_WINDOW_SAMPLES = 10
 
 
 @dataclass(frozen=True)
@@ -48,7 +50,7 @@ class ExportResult:
 
     path: str
     format: str
-    physical: PhysicalEstimate
+    physical: PhysicalEstimate | None  # None: a result in PWM/voltage units, or a robot given as base parameters
     provenance: dict[str, str]
     check: dict[str, Any] | None = None
     notes: tuple[str, ...] = ()
@@ -56,14 +58,16 @@ class ExportResult:
     def to_dict(self) -> dict[str, Any]:
         return {
             "schema": 1, "kind": "export", "path": self.path, "format": self.format,
-            "physical": self.physical.to_dict(), "provenance": dict(self.provenance), "check": self.check,
+            "physical": None if self.physical is None else self.physical.to_dict(),
+            "provenance": dict(self.provenance), "check": self.check,
             "notes": list(self.notes),
         }  # fmt: skip
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> ExportResult:
         return cls(path=str(data["path"]), format=str(data["format"]),
-                   physical=PhysicalEstimate.from_dict(data["physical"]), provenance=dict(data["provenance"]),
+                   physical=None if data["physical"] is None else PhysicalEstimate.from_dict(data["physical"]),
+                   provenance=dict(data["provenance"]),
                    check=data.get("check"), notes=tuple(data.get("notes", ())))  # fmt: skip
 
 
@@ -141,7 +145,7 @@ def export(
     parameters, an unphysical result, a result whose effort is not a torque."""
     from wmrid.api.inputs import load_robot
     from wmrid.core.atomic import atomic_write_bytes, atomic_write_text
-    from wmrid.model.physical import physical_from_base
+    from wmrid.exports.controller import controller_model
     from wmrid.model.robot import PhysicalParameters
 
     suffix = check_export_output(output)
@@ -149,39 +153,54 @@ def export(
         raise UsageError(f"{option('window', window)}: give the check's window length in seconds, > 0")
     robot_obj = load_robot(robot, gear_ratio=gear_ratio, rotor_inertia=rotor_inertia, wheel_radius=wheel_radius)
     found, provenance = _result(result)
-    if not robot_obj.physical:
-        raise UsageError(
-            f"{option('robot', robot)}: gives base parameters only; an export needs the robot's geometry and masses "
-            "(a robot file with its physical parameters, Table 1, or a URDF)"
-        )
+    robot_name = os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else robot_obj.name
+    _same_robot(found, robot_obj, robot_name)
+    _determined(found)
+    said: list[str] = []
+    notes_log = [str(n) for n in found.log_info.get("notes", [])]
+    if notes_log:
+        provenance["log_notes"] = " ".join(notes_log)
     unit = found.log_info.get("effort_unit", "N m")
-    if unit != "N m":
-        raise UsageError(
-            f"the result's efforts are in {unit}, not N m: its parameters are not physical masses and inertias; "
-            "identify with torques (--torque-constant for currents) to export it"
-        )
     # the robot file's masses and geometry taken as known: its CAD set when it has one (the measured robot), else
     # its nominal set
     use_cad = isinstance(robot_obj.cad, PhysicalParameters)
     geometry = robot_obj.cad if use_cad else robot_obj.nominal
     provenance["robot"] = f"{robot_obj.name} ({'CAD' if use_cad else 'nominal'} set for what the log does not give)"
-    est = found.estimate
-    base_names = found.form.base_names if len(est.theta0) == found.form.n_base else None
-    physical = physical_from_base(np.asarray(est.theta0), np.asarray(est.cov), geometry, base_names)
-    notes = _notes(physical)
+    cm = controller_model(found, provenance)
+    simulator = suffix in (".xml", ".urdf", ".toml")
+    physical = None
+    if unit != "N m" or not robot_obj.physical:
+        why = (
+            f"the result's efforts are in {unit}, not N m: its parameters are not masses and inertias"
+            if unit != "N m"
+            else f"{option('robot', robot_name)} gives base parameters only, not the geometry and masses"
+        )
+        if simulator or check is not None:
+            raise UsageError(f"{why}; only the controller formats (.yaml, .py) can hold this result")
+        said.append(f"{why}: the physical quantities are left out")
+    else:
+        physical = _physical(found, geometry, simulator, said)
+    if found.form.caster and not found.form.geometry and simulator:
+        said.append(
+            "the two-term caster drag (Cv, Cw) has no place in a multibody model: it is not in this file (the .yaml "
+            "and .py exports keep it)"
+        )
+    checked = None
+    if check is not None:  # before anything is written: a check that cannot run leaves no file behind
+        checked = check_fit(found, physical, robot_obj, check, window=window, options=options, casters=cm.casters())
+        if any(v is not None and v < 0 for m in ("multibody", "reduced") for v in checked[m].values()):
+            said.append("a fit below 0 % predicts the check log worse than its mean: is it a log of this robot?")
+    notes = _notes(physical) if physical is not None else {}
     prov_line = "; ".join(f"{k}: {v}" for k, v in provenance.items())
     casters = robot_obj.casters
-    from wmrid.exports.controller import controller_model
-
-    cm = controller_model(found, provenance)
     target = os.fspath(output)
-    said: list[str] = []
+    extra = list(said)
     if suffix == ".xml":
         from wmrid.exports.mjcf import mjcf_text
         from wmrid.model.robot import default_casters
 
         text = mjcf_text(physical.parameters, casters or default_casters(physical.parameters), notes, prov_line,
-                         cm.casters())  # fmt: skip
+                         cm.casters(), extra)  # fmt: skip
         atomic_write_text(target, text, force=force)
     elif suffix == ".urdf":
         from wmrid.exports.urdf import minimal_urdf, updated_urdf
@@ -192,18 +211,22 @@ def export(
 
             data = read_limited(source, max(ROBOT_FILE_LIMIT, 64 << 20), f"{source}: holds more than {{size}}",
                                 UsageError)  # fmt: skip
+            reread = f"read it back with --gear-ratio {geometry.k_r:g}"
+            if rotor_inertia is not None:
+                reread += f" --rotor-inertia {rotor_inertia:g}"
             out = updated_urdf(data, source, physical.parameters, gear_ratio=geometry.k_r,
                                rotor_inertia=rotor_inertia, wheel_radius=wheel_radius, notes=notes,
-                               provenance=prov_line)  # fmt: skip
+                               provenance=f"{prov_line}; {reread}", said=said)  # fmt: skip
             atomic_write_bytes(target, out, force=force)
         else:
             from wmrid.model.robot import default_casters
 
-            text = minimal_urdf(physical.parameters, casters or default_casters(physical.parameters),
-                                robot_obj.name, notes, prov_line)  # fmt: skip
+            p = physical.parameters
+            reread = f"--gear-ratio {p.k_r:g}" + (f" --rotor-inertia {p.I_r:g}" if p.m_r <= 0 < p.I_r else "")
+            text = minimal_urdf(p, casters or default_casters(p), robot_obj.name, notes, prov_line, extra)
             atomic_write_text(target, text, force=force)
-            said.append("a TOML robot has no URDF to edit: a minimal URDF was written (read it back with the gear "
-                        f"ratio {geometry.k_r:g})")  # fmt: skip
+            kind = "a robot given as an object" if not source else "a TOML robot"
+            said.append(f"{kind} has no URDF to edit: a minimal URDF was written (read it back with {reread})")
     elif suffix == ".toml":
         from wmrid.exports.robot_file import robot_file_text
 
@@ -212,7 +235,7 @@ def export(
             from wmrid.sim.multibody import settled_caster_loads
 
             loads = settled_caster_loads(physical.parameters, robot_obj.casters).tolist()
-        text = robot_file_text(robot_obj, physical.parameters, notes, provenance, cm.casters(), loads)
+        text = robot_file_text(robot_obj, physical.parameters, notes, provenance, cm.casters(), loads, extra)
         atomic_write_text(target, text, force=force)
     elif suffix in (".yaml", ".yml"):
         from wmrid.exports.controller import yaml_text
@@ -222,11 +245,75 @@ def export(
         from wmrid.exports.controller import python_text
 
         atomic_write_text(target, python_text(cm), force=force)
-    checked = None
-    if check is not None:
-        checked = check_fit(found, physical, robot_obj, check, window=window, options=options, casters=cm.casters())
     return ExportResult(path=target, format=EXPORT_FORMATS[suffix], physical=physical, provenance=provenance,
                         check=checked, notes=tuple(said))  # fmt: skip
+
+
+#: Relative difference above which the result's starting M, Vc are not the robot file's: another robot.
+SAME_ROBOT = 1e-6
+
+
+def _same_robot(found: Any, robot_obj: Any, name: str) -> None:
+    """UsageError when the result was started from another robot's nominal set (its M and Vc differ from the file's):
+    its base parameters would be turned into masses with the wrong geometry."""
+    from wmrid.model import dynamics as model
+
+    start = found.nominal or {}
+    if not all(k in start for k in ("m11", "m12", "m22", "Vc")):
+        return
+    try:
+        mine = model.base_parameters(robot_obj.nominal)
+    except Exception:  # a base set without a physical description: nothing to compare with
+        return
+    theirs = np.array([start[k] for k in ("m11", "m12", "m22", "Vc")], dtype=float)
+    scale = np.maximum(np.abs(mine[:4]), 1e-12)
+    worst = int(np.argmax(np.abs(theirs - mine[:4]) / scale))
+    if abs(theirs[worst] - mine[worst]) / scale[worst] > SAME_ROBOT:
+        label = ("m11", "m12", "m22", "Vc")[worst]
+        raise UsageError(
+            f"the result was identified from another robot's nominal values ({label} {theirs[worst]:.6g} there, "
+            f"{mine[worst]:.6g} in {name}): export it with the robot file it was identified with"
+        )
+
+
+def _determined(found: Any) -> None:
+    """UsageError when the log does not determine the inertia or Vc: there is no identified robot to export."""
+    cov = np.asarray(found.estimate.cov, dtype=float)
+    names = ("m11", "m12", "m22", "Vc")
+    missing = [n for i, n in enumerate(names) if not np.isfinite(cov[i, i])]
+    if missing:
+        raise UsageError(
+            f"the log does not determine {', '.join(missing)} (their values are the start's): there is no identified "
+            "robot to export; drive as `wmrid plan` designs it and identify again"
+        )
+
+
+#: A negative identified friction within this many std of 0 is written as 0 in a simulator's file (with a note);
+#: further below, the export is refused.
+NEGATIVE_FRICTION_STD = 3.0
+
+
+def _physical(found: Any, geometry: Any, simulator: bool, said: list[str]) -> PhysicalEstimate:
+    from wmrid.model.physical import physical_from_base
+
+    est = found.estimate
+    base_names = found.form.base_names if len(est.theta0) == found.form.n_base else None
+    meanings = {}
+    if found.form.caster and found.form.geometry:
+        for k in range(found.form.n_casters):
+            x, y = found.form.geometry[2 + 2 * k], found.form.geometry[3 + 2 * k]
+            meanings[f"D{k + 1}"] = (f"rolling drag force of the casters at (+-{abs(x):.4g}, {y:.4g}) m together "
+                                     "(their drag columns are the same)")  # fmt: skip
+    physical = physical_from_base(np.asarray(est.theta0), np.asarray(est.cov), geometry, base_names, meanings)
+    for name in physical.clipped:
+        q = physical.quantities[name]
+        text = f"identified {name} = {q.value:.3g} +/- {q.std:.2g} {q.unit} is negative"
+        if simulator and math.isfinite(q.std) and q.value < -NEGATIVE_FRICTION_STD * q.std:
+            raise UsageError(f"{text}, more than {NEGATIVE_FRICTION_STD:g} std below 0: a simulator cannot hold it "
+                             "(the .yaml and .py exports can)")  # fmt: skip
+        if simulator:
+            said.append(f"{text}; written as 0 (within {NEGATIVE_FRICTION_STD:g} std of it)")
+    return physical
 
 
 def check_fit(
@@ -236,7 +323,7 @@ def check_fit(
     """Fit % per wheel of the exported multibody model and of the reduced model, both driven by ``log``'s torques over
     windows of ``window`` s restarted from its logged speeds (module docstring)."""
     from wmrid.api.identification import _log
-    from wmrid.model.predict import fit_percent, simulate_segments
+    from wmrid.model.predict import fit_percent, simulate_segments, unsimulated
     from wmrid.model.robot import default_casters
     from wmrid.sim.multibody import drive_windows
 
@@ -246,6 +333,12 @@ def check_fit(
     t, eta, tau = np.asarray(wheel_log.t), np.asarray(wheel_log.eta), np.asarray(wheel_log.tau)
     if len(t) < 3:
         raise UsageError(f"{option('check', wheel_log.source)}: has {len(t)} samples; the check needs a log")
+    step = float(np.median(np.diff(t)))
+    if window < MIN_WINDOW_SAMPLES * step:
+        raise UsageError(
+            f"{option('window', window)}: shorter than {MIN_WINDOW_SAMPLES} samples of the check log ({step:.3g} s "
+            "each), where any model fits; give a longer window"
+        )
     starts = np.searchsorted(t, np.arange(t[0], t[-1], window))
     starts = np.unique(starts[starts < len(t) - 1])
     p = physical.parameters
@@ -263,8 +356,12 @@ def check_fit(
     mj = drive_windows(p, robot_casters, t, eta, tau, starts, forces=forces, settings=settings)
     est = found.estimate
     form = found.form if len(est.theta0) == found.form.n_base else None
-    reduced = simulate_segments(t, tau, np.asarray(est.theta0), eta, starts, form=form)
-    fit_mj, fit_red = fit_percent(eta, mj), fit_percent(eta, reduced)
+    why = unsimulated(form)
+    fit_mj = fit_percent(eta, mj)
+    if why:
+        fit_red = np.full(2, np.nan)
+    else:
+        fit_red = fit_percent(eta, simulate_segments(t, tau, np.asarray(est.theta0), eta, starts, form=form))
 
     def clean(v: float) -> float | None:
         return float(v) if math.isfinite(v) else None
@@ -275,6 +372,7 @@ def check_fit(
                       "the logged speeds at the start of each window and driven by the logged torques",
         "multibody": {"eta_r": clean(fit_mj[0]), "eta_l": clean(fit_mj[1])},
         "reduced": {"eta_r": clean(fit_red[0]), "eta_l": clean(fit_red[1])},
+        "reduced_not_simulated": why,
     }  # fmt: skip
 
 

@@ -8,8 +8,34 @@ from typing import Annotated
 import typer
 
 from wmrid.cli.app import app
-from wmrid.cli.helpers import activity
-from wmrid.cli.options import GearRatioOpt, OutputFormat, RotorInertiaOpt, WheelRadiusOpt
+from wmrid.cli.helpers import activity, log_opts
+from wmrid.cli.options import (
+    AlignOpt,
+    AlignRule,
+    EfficiencyOpt,
+    EffortKind,
+    EffortOpt,
+    EffortTopicOpt,
+    EffortUnitOpt,
+    FlipEffortOpt,
+    GearRatioOpt,
+    LeftJointOpt,
+    MirrorLeftOpt,
+    OutputFormat,
+    RightJointOpt,
+    RotorInertiaOpt,
+    SpeedUnit,
+    SpeedUnitOpt,
+    TimeSource,
+    TimeSourceOpt,
+    TimeUnit,
+    TopicOpt,
+    TorqueConstantOpt,
+    VelocityFrom,
+    VelocityFromOpt,
+    VelocityTopicOpt,
+    WheelRadiusOpt,
+)
 from wmrid.reporting.terminal import console
 
 
@@ -35,14 +61,21 @@ def export_command(
         ),
     ],
     robot: Annotated[
-        str, typer.Option(help="The robot file the result was identified with (TOML, URDF, or a built-in name).")
-    ] = "paper",
+        str,
+        typer.Option(
+            help="The robot file the result was identified with (TOML, URDF with --gear-ratio, or a built-in name); "
+            "its geometry and wheel and rotor masses give what the log does not."
+        ),
+    ],
     gear_ratio: GearRatioOpt = None,
     rotor_inertia: RotorInertiaOpt = None,
     wheel_radius: WheelRadiusOpt = None,
     check: Annotated[
         str | None,
-        typer.Option(help="A log whose torques drive the exported multibody model; its fit % is reported."),
+        typer.Option(
+            help="A log whose torques drive the exported multibody model; its fit % is reported. Give it the same "
+            "log-input flags the result was identified with."
+        ),
     ] = None,
     window: Annotated[
         float, typer.Option(help="With --check: the windows the models restart over from the logged speeds, s, > 0.")
@@ -51,6 +84,23 @@ def export_command(
         OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
     ] = OutputFormat.auto,
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing output file.")] = False,
+    columns: Annotated[str | None, typer.Option(help="--check log: column mapping, as for identify.")] = None,
+    time_unit: Annotated[TimeUnit, typer.Option(help="--check log: unit of the time column.")] = TimeUnit.auto,
+    topic: TopicOpt = None,
+    velocity_topic: VelocityTopicOpt = None,
+    effort_topic: EffortTopicOpt = None,
+    right_joint: RightJointOpt = None,
+    left_joint: LeftJointOpt = None,
+    time_source: TimeSourceOpt = TimeSource.auto,
+    align: AlignOpt = AlignRule.linear,
+    velocity_from: VelocityFromOpt = VelocityFrom.auto,
+    speed_unit: SpeedUnitOpt = SpeedUnit.rad_s,
+    effort: EffortOpt = EffortKind.torque,
+    effort_unit: EffortUnitOpt = None,
+    torque_constant: TorqueConstantOpt = None,
+    efficiency: EfficiencyOpt = None,
+    mirror_left: MirrorLeftOpt = False,
+    flip_effort: FlipEffortOpt = False,
 ) -> None:
     """Write an identified robot as a model a simulator or a controller loads, with every value's std."""
     from wmrid.api.exporting import check_export_output, export
@@ -60,7 +110,8 @@ def export_command(
     check_export_output(output)
     with activity("export"):
         done = export(result, robot, output, check=check, window=window, gear_ratio=gear_ratio,
-                      rotor_inertia=rotor_inertia, wheel_radius=wheel_radius, force=force)  # fmt: skip
+                      rotor_inertia=rotor_inertia, wheel_radius=wheel_radius, options=log_opts(locals()),
+                      force=force)  # fmt: skip
     data = done.to_dict()
     fmt = output_format.value
     if fmt == "auto":

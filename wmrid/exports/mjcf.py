@@ -11,12 +11,9 @@ used.
 
 from __future__ import annotations
 
+from wmrid.exports.xml_text import xml_comment
 from wmrid.model.robot import Caster, PhysicalParameters
 from wmrid.sim.multibody import MultibodySettings, build_mjcf
-
-
-def _comment(text: str) -> str:
-    return "<!-- " + text.replace("--", "- -") + " -->"
 
 
 def mjcf_text(
@@ -25,9 +22,10 @@ def mjcf_text(
     notes: dict[str, str],
     provenance: str,
     drags: list[dict[str, float]] | None = None,
+    extra: list[str] | None = None,
 ) -> str:
     """The MJCF document (module docstring).  notes: quantity -> "value +/- std unit (source)"; drags: the geometric
-    caster model's casters ({"x", "y", "D", "D_std"}), when the result has them."""
+    caster model's casters ({"x", "y", "D", "D_std"}), when the result has them; extra: sentences to add."""
     xml = build_mjcf(identified, casters, MultibodySettings())
     lines = [
         "wmrid export: the identified robot as wmrid's multibody prototype builds it (MuJoCo).",
@@ -39,10 +37,12 @@ def mjcf_text(
     if drags:
         lines.append(
             "Ball caster drag (not expressible in MJCF; apply a force of D against each caster contact's horizontal "
-            "velocity): " + "; ".join(f"caster at ({c['x']:.4g}, {c['y']:.4g}) m: D = {c['D']:.4g} +/- "
-                                      f"{c['D_std']:.2g} N" for c in drags) + "."
+            "velocity; one D stands for every caster at (+-x, y), whose drag columns are the same): "
+            + "; ".join(f"casters at (+-{abs(c['x']):.4g}, {c['y']:.4g}) m: D = {c['D']:.4g} +/- {c['D_std']:.2g} N"
+                        for c in drags) + "."
         )  # fmt: skip
     else:
-        lines.append("The casters are frictionless: the result has no caster drag.")
+        lines.append("The casters are frictionless: the result has no caster drag of known position.")
+    lines += [f"{s[0].upper()}{s[1:]}." for s in extra or []]
     head, _, rest = xml.partition("\n")
-    return head + "\n" + _comment("\n     ".join(lines)) + "\n" + rest + "\n"
+    return head + "\n" + xml_comment("\n     ".join(lines)) + "\n" + rest + "\n"

@@ -32,33 +32,48 @@ def robot_file_text(
     provenance: dict[str, str],
     drags: list[dict[str, float]],
     loads: list[float],
+    extra: list[str] | None = None,
 ) -> str:
     """The TOML text (module docstring).  notes: quantity -> "value +/- std unit (source)"; drags: the geometric
-    caster model's casters ({"x", "y", "D"}); loads: each of ``robot``'s casters' normal load at rest on the prototype
-    (:func:`wmrid.sim.multibody.settled_caster_loads`), N."""
-    casters: list[Caster] = []
-    group_drag = [0.0] * len(robot.casters or ())
+    caster model's casters ({"x", "y", "D", "D_std"}); loads: each of ``robot``'s casters' normal load at rest on the
+    prototype (:func:`wmrid.sim.multibody.settled_caster_loads`), N; extra: sentences for the header."""
+    found = robot.casters or ()
+    resistance = [0.0] * len(found)
+    why = ["no identified drag: resistance 0"] * len(found)
     for c in drags:  # a drag D_k stands for every caster with the same columns: the same y and |x| (module docstring)
-        group = [i for i, k in enumerate(robot.casters or ()) if _same_columns(k, c)]
-        total = sum(loads[i] for i in group if robot.casters[i].kind == "ball")
+        group = [i for i, k in enumerate(found) if _same_columns(k, c)]
+        balls = [i for i in group if found[i].kind == "ball"]
+        total = sum(loads[i] for i in balls)
         for i in group:
-            if robot.casters[i].kind == "ball" and total > 0:
-                group_drag[i] = max(c["D"], 0.0) / total  # one coefficient for the group: load-shared
-    for i, caster in enumerate(robot.casters or ()):
-        casters.append(dataclasses.replace(caster, resistance=group_drag[i]))
+            if found[i].kind != "ball":
+                why[i] = f"a swivel caster: the identified drag D = {c['D']:.4g} N is not carried (resistance 0)"
+            elif c["D"] < 0:
+                why[i] = f"identified drag D = {c['D']:.4g} +/- {c['D_std']:.2g} N is negative: resistance 0"
+            elif total <= 0:
+                why[i] = "the prototype's casters of this group carry no load at rest: resistance 0"
+            else:  # one coefficient for the group: the drag shared by load
+                resistance[i] = c["D"] / total
+                why[i] = (f"resistance = D / {total:.4g} N (the group's load at rest on the prototype), D = "
+                          f"{c['D']:.4g} +/- {c['D_std']:.2g} N for the casters at (+-{abs(c['x']):.4g}, "
+                          f"{c['y']:.4g}) m")  # fmt: skip
+    casters = [dataclasses.replace(caster, resistance=resistance[i]) for i, caster in enumerate(found)]
     out = Robot(name=f"{robot.name}_identified", nominal=identified, cad=None, casters=tuple(casters) or None,
                 torque_constant=robot.torque_constant, efficiency=robot.efficiency, limits=robot.limits)  # fmt: skip
     lines = []
     section = None
+    index = -1
     for line in robot_to_toml(out).splitlines():
         if line.startswith("["):
             section = line
+            if line == "[[caster]]":
+                index += 1
         key = line.split("=")[0].strip()
         if section == "[nominal]" and key in notes and "(robot file)" not in notes[key]:
-            line = f"{line}; identified: {notes[key]}"
+            line = f"{line}  # identified: {notes[key]}" if "#" not in line else f"{line}; identified: {notes[key]}"
+        elif section == "[[caster]]" and key == "resistance":
+            line = f"{line}  # {why[index]}"
         lines.append(line)
     head = ["# wmrid export: the identified robot as a wmrid robot file"]
     head += [f"# {k}: {json.dumps(v)}" for k, v in provenance.items()]
-    if not drags:
-        head.append("# the result has no caster drag: the casters' rolling resistance is 0")
+    head += [f"# {json.dumps(e)[1:-1]}" for e in extra or []]
     return "\n".join(head + lines) + "\n"

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wmrid.core.errors import RobotFileError, UsageError
+from wmrid.exports.xml_text import xml_attribute, xml_comment
 from wmrid.model.robot import Caster, PhysicalParameters
 from wmrid.model.urdf import read_urdf
 from wmrid.model.urdf_tree import Reader, load
@@ -45,6 +46,7 @@ class _Spans:
     inertial: dict[str, tuple[int, int]]
     dynamics: dict[str, tuple[int, int]]
     joint_end: dict[str, int]
+    link: dict[str, tuple[int, int]]  # each link element, whole
 
 
 def _spans(data: bytes, source: str) -> _Spans:
@@ -53,6 +55,7 @@ def _spans(data: bytes, source: str) -> _Spans:
     inertial: dict[str, tuple[int, int]] = {}
     dynamics: dict[str, tuple[int, int]] = {}
     joint_end: dict[str, int] = {}
+    link: dict[str, tuple[int, int]] = {}
     owner: list[str | None] = [None]
 
     def start(tag: str, attrs: dict[str, str]) -> None:
@@ -71,6 +74,8 @@ def _spans(data: bytes, source: str) -> _Spans:
             dynamics[str(stack[1][1])] = (begin, stop)
         elif tag == "joint" and len(stack) == 1:
             joint_end[str(owner[0])] = at
+        elif tag == "link" and len(stack) == 1:
+            link[str(owner[0])] = (begin, stop)
 
     parser.StartElementHandler = start
     parser.EndElementHandler = end
@@ -78,7 +83,7 @@ def _spans(data: bytes, source: str) -> _Spans:
         parser.Parse(data, True)
     except xml.parsers.expat.ExpatError as err:
         raise RobotFileError(f"{source}: not well-formed XML ({err})") from None
-    return _Spans(inertial, dynamics, joint_end)
+    return _Spans(inertial, dynamics, joint_end, link)
 
 
 def _indent(data: bytes, at: int) -> str:
@@ -91,9 +96,7 @@ def _fmt(value: float) -> str:
     return repr(float(value))
 
 
-def _comment(text: str) -> str:
-    """An XML comment holding ``text`` (no "--" inside, which XML forbids)."""
-    return "<!-- " + text.replace("--", "- -") + " -->"
+_comment = xml_comment
 
 
 def updated_urdf(
@@ -106,6 +109,7 @@ def updated_urdf(
     wheel_radius: float | None = None,
     notes: dict[str, str] | None = None,
     provenance: str = "",
+    said: list[str] | None = None,
 ) -> bytes:
     """The URDF ``data`` (bytes of ``source``) with the identified platform in its base link's <inertial> and the
     identified friction in its wheel joints' <dynamics> (module docstring).  ``notes``: quantity -> "value +/- std
@@ -124,9 +128,13 @@ def updated_urdf(
     )
     platform_links = [n for n in reader.links if n not in wheel_links | rotor_links]
     own = {n: reader.inertial(n) for n in platform_links}
-    with_mass = [n for n in platform_links if own[n] is not None and own[n].mass > 0]
-    base = max(with_mass, key=lambda n: own[n].mass)
-    others = reader.body([n for n in with_mass if n != base])
+    # the base link: the link the wheels hang from (the root-most platform link), whatever its own mass
+    base = reader.joints[wheel_joints[0]].parent
+    if base not in platform_links:
+        raise UsageError(f"{source}: the wheels hang from {base!r}, which is not a platform link; cannot place the "
+                         "identified platform")  # fmt: skip
+    with_mass = [n for n in platform_links if n != base and own[n] is not None and own[n].mass > 0]
+    others = reader.body(with_mass)
     m_o = others.mass if others is not None else 0.0
     p_right = reader.pose[reader.joints[wheel_joints[0]].child][1]
     p_left = reader.pose[reader.joints[wheel_joints[1]].child][1]
@@ -140,47 +148,78 @@ def updated_urdf(
         )
     target = centre[:2] + np.array([identified.d_x, identified.d_y])
     com_o = others.com[:2] if others is not None else np.zeros(2)
-    com_b = np.array([*(identified.m_p * target - m_o * com_o) / m_b, old.com[2]])
+    height = old.com[2] if old is not None and old.mass > 0 else (others.com[2] if others is not None else centre[2])
+    com_b = np.array([*(identified.m_p * target - m_o * com_o) / m_b, height])
     spread = m_b * float(np.sum((com_b[:2] - target) ** 2))
     if others is not None:
         spread += float(others.inertia[2, 2]) + m_o * float(np.sum((com_o - target) ** 2))
     izz_new = identified.I_p - spread
-    izz_old = float(old.inertia[2, 2])
-    if not izz_new > 0 or not izz_old > 0:
+    if not izz_new > 0:
         raise UsageError(
-            f"{source}: the identified platform yaw inertia I_p = {identified.I_p:.4g} kg m^2 leaves {izz_new:.4g} "
-            f"kg m^2 for {base!r} once its other links and the centre-of-mass offsets are counted; the URDF cannot "
-            "hold this robot"
+            f"{source}: the identified platform yaw inertia I_p = {identified.I_p:.4g} kg m^2 is less than the URDF's "
+            f"other platform links and the offsets of their centres of mass hold ({spread:.4g} kg m^2 about the "
+            "identified centre of mass); the URDF cannot hold this robot"
         )
-    scale = izz_new / izz_old
     el = reader.links[base].find("inertial")
     rot_l, pos_l = reader.pose[base]
     origin = rot_l.T @ (com_b - pos_l)
     keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
-    inertia_el = el.find("inertia")
-    local = {k: float(inertia_el.get(k)) * scale for k in keys}
-    origin_el = el.find("origin")
-    rpy = origin_el.get("rpy") if origin_el is not None and origin_el.get("rpy") is not None else "0 0 0"
+    izz_old = float(old.inertia[2, 2]) if old is not None else 0.0
+    origin_el = el.find("origin") if el is not None else None
+    rpy_text = origin_el.get("rpy") if origin_el is not None and origin_el.get("rpy") is not None else "0 0 0"
+    if izz_old > 0:
+        scale = izz_new / izz_old
+        inertia_el = el.find("inertia")
+        local = {k: float(inertia_el.get(k)) * scale for k in keys}
+        how = (f"the link's tensor is scaled, in its own frame, by {scale:.4g} (its roll and pitch inertias, which no "
+               "wheel log determines, with it)")  # fmt: skip
+        if said is not None and not 0.5 <= scale <= 2.0:
+            said.append(f"{base!r}'s inertia tensor was scaled by {scale:.3g} to hold the identified yaw inertia")
+    else:  # no tensor to scale: a flat plate's (Ixx + Iyy = Izz), in the root frame, carried into the link's
+        rot = rot_l @ reader.origin(el, f"link {base!r} <inertial>")[0] if el is not None else rot_l
+        flat = rot.T @ np.diag([0.5 * izz_new, 0.5 * izz_new, izz_new]) @ rot
+        entries = (flat[0, 0], flat[0, 1], flat[0, 2], flat[1, 1], flat[1, 2], flat[2, 2])
+        local = dict(zip(keys, entries, strict=True))
+        how = "the link had no inertia tensor: a flat plate's is written (roll and pitch inertias are placeholders)"
+        if said is not None:
+            said.append(f"{base!r} had no inertia: a flat plate's tensor holding the identified yaw inertia was "
+                        "written")  # fmt: skip
+    if said is not None and (old is None or old.mass <= 0):
+        said.append(f"the identified platform was put into {base!r}, which had no mass of its own")
 
     spans = _spans(data, source)
-    begin, stop = spans.inertial[base]
-    ind = _indent(data, begin)
-    inner = ind + "  "
     comment = _comment(
         f"wmrid export: the identified platform (m_p, d_x, d_y, I_p) put into this link so that every platform link "
-        f"together has it; the roll and pitch inertias, which no wheel log determines, are scaled with the yaw "
-        f"inertia (x{scale:.4g}) and the height of the centre of mass is kept. "
+        f"together has it; {how}; the height of the centre of mass is kept. "
         + "; ".join(f"{k} = {v}" for k, v in notes.items() if k in ("m_p", "d_x", "d_y", "I_p", "m", "I"))
         + (f". {provenance}" if provenance else "")
     )
-    block = (
-        f"<inertial>\n{inner}{comment}\n"
-        f'{inner}<origin xyz="{_fmt(origin[0])} {_fmt(origin[1])} {_fmt(origin[2])}" rpy="{rpy}"/>\n'
-        f'{inner}<mass value="{_fmt(m_b)}"/>\n'
-        f"{inner}<inertia " + " ".join(f'{k}="{_fmt(local[k])}"' for k in keys) + "/>\n"
-        f"{ind}</inertial>"
-    )
-    edits = [(begin, stop, block)]
+
+    def block(ind: str) -> str:
+        inner = ind + "  "
+        return (
+            f"<inertial>\n{inner}{comment}\n"
+            f'{inner}<origin xyz="{_fmt(origin[0])} {_fmt(origin[1])} {_fmt(origin[2])}" rpy="{rpy_text}"/>\n'
+            f'{inner}<mass value="{_fmt(m_b)}"/>\n'
+            f"{inner}<inertia " + " ".join(f'{k}="{_fmt(local[k])}"' for k in keys) + "/>\n"
+            f"{ind}</inertial>"
+        )
+
+    if base in spans.inertial:
+        begin, stop = spans.inertial[base]
+        edit = (begin, stop, block(_indent(data, begin)))
+    else:  # the link has no <inertial>: one is added (a self-closing <link/> opened up)
+        begin, stop = spans.link[base]
+        ind = _indent(data, begin)
+        element = data[begin:stop].decode("utf-8")
+        if element.rstrip().endswith("/>") and "</link>" not in element:
+            opened = element.rstrip()[:-2].rstrip() + ">"
+            edit = (begin, stop, f"{opened}\n{ind}  {block(ind + '  ')}\n{ind}</link>")
+        else:
+            close = data.rindex(b"</link>", begin, stop)
+            line_start = data.rfind(b"\n", 0, close) + 1
+            edit = (line_start, line_start, f"{ind}  {block(ind + '  ')}\n")
+    edits = [edit]
     for joint, side, fv, fd in ((wheel_joints[0], "1", identified.F_v1, identified.F_d1),
                                 (wheel_joints[1], "2", identified.F_v2, identified.F_d2)):  # fmt: skip
         text = _comment(
@@ -206,10 +245,16 @@ def updated_urdf(
 
 
 def minimal_urdf(
-    identified: PhysicalParameters, casters: tuple[Caster, ...], name: str, notes: dict[str, str], provenance: str
+    identified: PhysicalParameters,
+    casters: tuple[Caster, ...],
+    name: str,
+    notes: dict[str, str],
+    provenance: str,
+    extra: list[str] | None = None,
 ) -> str:
     """A URDF of the identified robot built from its physical parameters (module docstring); read back by
-    :func:`wmrid.model.urdf.read_urdf` with ``gear_ratio = k_r`` to the same base parameters."""
+    :func:`wmrid.model.urdf.read_urdf` with ``gear_ratio = k_r`` (and ``rotor_inertia = I_r`` when the rotors have no
+    mass: then they are not links) to the same base parameters.  extra: sentences for the header comment."""
     p = identified
     flat = lambda yaw: (0.5 * yaw, 0.5 * yaw, yaw)  # noqa: E731 - a plate's tensor from its yaw inertia
 
@@ -226,7 +271,12 @@ def minimal_urdf(
         '<?xml version="1.0" encoding="utf-8"?>\n',
         _comment(f"wmrid export: a minimal URDF of the identified robot {name}. {provenance}") + "\n",
         _comment("; ".join(f"{k} = {v}" for k, v in notes.items())) + "\n",
-        f'<robot name="{_xml_attr(name)}">\n',
+        _comment(
+            "Placeholders no wheel log determines: the centre of mass at the axle's height, roll and pitch inertias "
+            "of a flat plate (Ixx = Iyy = Izz / 2)." + "".join(f" {e[0].upper()}{e[1:]}." for e in extra or [])
+        )
+        + "\n",
+        f'<robot name="{xml_attribute(name)}">\n',
         '  <link name="base_link">\n',
         inertial(p.m_p, (p.d_x, p.d_y, 0.0), flat(p.I_p), "    "),
         "  </link>\n",
@@ -245,7 +295,7 @@ def minimal_urdf(
             f'    <dynamics damping="{_fmt(fv)}" friction="{_fmt(fd)}"/>\n'
             "  </joint>\n",
         ]
-        if p.m_r > 0 or p.I_r > 0:
+        if p.m_r > 0:  # a massless rotor is no URDF link: its I_r is given when reading back
             lines += [
                 f'  <link name="{side}_rotor">\n',
                 inertial(p.m_r, (0.0, 0.0, 0.0), (p.I_rm, p.I_r, p.I_rm), "    "),
@@ -264,7 +314,3 @@ def minimal_urdf(
         ]
     lines.append("</robot>\n")
     return "".join(lines)
-
-
-def _xml_attr(text: str) -> str:
-    return text.replace("&", "&amp;").replace('"', "&quot;").replace("<", "&lt;").replace(">", "&gt;")

@@ -112,12 +112,15 @@ class PhysicalEstimate:
     cov: np.ndarray
     parameters: PhysicalParameters
     undetermined: tuple[str, ...] = UNDETERMINED
+    #: Friction entries identified below 0 and written as 0 in ``parameters`` (a simulator's friction is >= 0).
+    clipped: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         cov = [[float(v) if math.isfinite(v) else None for v in row] for row in np.asarray(self.cov)]
         return {
             "quantities": {k: q.to_dict() for k, q in self.quantities.items()}, "names": list(self.names),
             "cov": cov, "parameters": self.parameters.to_dict(), "undetermined": list(self.undetermined),
+            "clipped": list(self.clipped),
         }  # fmt: skip
 
     @classmethod
@@ -127,6 +130,7 @@ class PhysicalEstimate:
             quantities={k: Quantity.from_dict(v) for k, v in data["quantities"].items()},
             names=tuple(data["names"]), cov=cov.reshape(len(data["names"]), len(data["names"])),
             parameters=PhysicalParameters(**data["parameters"]), undetermined=tuple(data["undetermined"]),
+            clipped=tuple(data.get("clipped", ())),
         )  # fmt: skip
 
 
@@ -183,11 +187,17 @@ def _platform_jacobian(dist: np.ndarray, p: PhysicalParameters) -> np.ndarray:
 
 
 def physical_from_base(
-    theta0: np.ndarray, cov0: np.ndarray, p: PhysicalParameters, base_names: tuple[str, ...] | None = None
+    theta0: np.ndarray,
+    cov0: np.ndarray,
+    p: PhysicalParameters,
+    base_names: tuple[str, ...] | None = None,
+    caster_meanings: dict[str, str] | None = None,
 ) -> PhysicalEstimate:
     """The physical quantities (:class:`PhysicalEstimate`) of base parameters theta0 (n0,) with covariance cov0
     (n0, n0) (a row of NaN with inf on the diagonal: undetermined), on the robot file's geometry ``p``.
 
+    caster_meanings: name -> meaning of each caster-drag parameter (the casters it stands for).  A friction entry
+    below 0 is kept in ``quantities`` and written as 0 in ``parameters`` (listed in ``clipped``).
     Raises :class:`~wmrid.core.errors.UsageError` (one sentence, naming the quantity and why) when the implied
     robot is not physical: M not positive definite, a total mass or yaw inertia not positive, a platform lighter
     than nothing once the file's wheels and rotors are taken off, or a platform yaw inertia below zero.
@@ -233,23 +243,30 @@ def physical_from_base(
     units = model.THETA0_UNITS
     for i, name in enumerate(names):
         if name in DETERMINED:
-            unit, meaning, source = *DETERMINED[name], FROM_LOG_AND_FILE if name in ("m", "I") else FROM_LOG
+            unit, meaning = DETERMINED[name]
+            source = FROM_LOG_AND_FILE  # r, b (and spin for m, I) from the file
         elif name in PLATFORM:
             unit, meaning, source = *PLATFORM[name], FROM_LOG_AND_FILE
         elif name in FRICTION:
             unit, meaning, source = *FRICTION[name], FROM_LOG
+        elif name in ("Cv", "Cw"):
+            unit = units.get(name, "N m")
+            meaning = f"two-term caster drag against {'driving' if name == 'Cv' else 'turning'}, at each wheel"
+            source = FROM_LOG
         else:
-            unit, meaning, source = units.get(name, ""), f"caster {name[1:]}'s rolling drag (force)", FROM_LOG
+            unit, source = units.get(name, "N"), FROM_LOG
+            meaning = (caster_meanings or {}).get(name, f"caster drag force {name}")
         quantities[name] = Quantity(float(values[i]), float(std[i]), unit, meaning, source)
     for name in FROM_FILE_NAMES:
         unit, meaning = PARAMETER_UNITS[name]
         quantities[name] = Quantity(float(getattr(p, name)), 0.0, unit, meaning, FROM_FILE)
+    friction = dict(zip(FRICTION, (float(v) for v in theta0[4:8]), strict=True))
+    clipped = tuple(k for k, v in friction.items() if v < 0)
     identified = dataclasses.replace(
-        p,
-        m_p=float(plat[0]), d_x=float(plat[1]), d_y=float(plat[2]), I_p=float(plat[3]), F_v1=float(theta0[4]),
-        F_v2=float(theta0[5]), F_d1=float(theta0[6]), F_d2=float(theta0[7]),
+        p, m_p=float(plat[0]), d_x=float(plat[1]), d_y=float(plat[2]), I_p=float(plat[3]),
+        **{k: max(v, 0.0) for k, v in friction.items()},
     )  # fmt: skip
-    return PhysicalEstimate(quantities=quantities, names=names, cov=cov, parameters=identified)
+    return PhysicalEstimate(quantities=quantities, names=names, cov=cov, parameters=identified, clipped=clipped)
 
 
 def _propagate(jac: np.ndarray, cov0: np.ndarray) -> np.ndarray:

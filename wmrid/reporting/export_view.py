@@ -16,6 +16,8 @@ def print_export(data: dict[str, Any], console: Any) -> None:
     for note in data.get("notes", []):
         console.print(f"Note: {note}.")
     console.print()
+    if data["physical"] is None:
+        return
     rows = []
     for name, q in data["physical"]["quantities"].items():
         std = q["std"]
@@ -24,14 +26,16 @@ def print_export(data: dict[str, Any], console: Any) -> None:
         if std is None:
             mark = "undetermined"
         elif q["value"] != 0 and std > POORLY * abs(q["value"]):
-            mark = "poorly determined"
+            mark = "poorly"
         else:
             mark = ""
         rel = f"{100 * std / abs(q['value']):.2g} %" if std is not None and q["value"] else "-"
-        rows.append([name, f"{q['value']:.5g}", "-" if std is None else f"{std:.2g}", rel, q["unit"], q["source"],
+        source = "log+file" if q["source"] == "log + robot file" else q["source"]
+        rows.append([name, f"{q['value']:.5g}", "-" if std is None else f"{std:.2g}", rel, q["unit"], source,
                      mark])  # fmt: skip
-    print_table(console, ["quantity", "value", "std", "relative", "unit", "from", ""], rows,
-                title="Physical quantities", numeric=(1, 2, 3))  # fmt: skip
+    print_table(console, ["quantity", "value", "std", "relative", "unit", "from", "determined"], rows,
+                title="Physical quantities (from: the log, or the log with the robot file's geometry)",
+                numeric=(1, 2, 3))  # fmt: skip
     console.print(
         "m: total mass; I: yaw inertia about the axle midpoint O; mp_dy, mp_dx: the first moments m_p d_y and "
         "m_p d_x + 2 m_r c_x; m_p, d_x, d_y, I_p: the platform's mass, centre of mass and yaw inertia about it."
@@ -50,3 +54,5 @@ def print_export(data: dict[str, Any], console: Any) -> None:
         print_table(console, ["model", "fit right", "fit left"], rows,
                     title=f"Check on {check['log']} ({check['windows']} windows of {check['window_s']:g} s)",
                     numeric=(1, 2))  # fmt: skip
+        if check.get("reduced_not_simulated"):
+            console.print(f"The reduced model: {check['reduced_not_simulated']}.")
