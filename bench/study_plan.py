@@ -17,8 +17,12 @@ with every inertial and friction parameter 20 % off, alternately up and down, r,
    (its footprint) came from the area's edge.
 
 ``--sequential ETA,TAU`` instead checks sequential design on the paper robot: a 20 s sinusoid with that speed and
-effort noise, identified and saved; a 30 s plan without and with ``given`` (predicted worst relative std of each); the
-second plan driven (seed 101) and identified, and the two results fused by their information (achieved std and z).
+effort noise (seed 100), identified and saved; a 30 s plan without and with ``given`` (predicted worst relative std
+of each, and of the plan without ``given`` combined with the first log).  Then, on ``--seeds`` seeds, both logs drawn
+again (the plan kept), identified and combined by fixed weights (:func:`combine`: the first as ``plan --given``
+weighs it, the second by the information its plan predicts): per parameter, the predicted std, the spread of the
+estimate across seeds, the median reported std and the rms of z, for the second log alone and for the combination.
+Relative std is over the plan's scale of each parameter throughout (the floor for the paper robot's friction).
 
 Printed per robot and engine: seeds with every parameter determined, with the truth within 3 std, with every limit
 within 10 %, with the path in the area; the median achieved/predicted std ratio per parameter (the issue's 0.5-2x).
@@ -156,13 +160,62 @@ def summarise(made: dict, rows: list[dict]) -> dict:
     return out
 
 
-def sequential(eta_noise: float, tau_noise: float) -> dict:
-    """The sequential-design check (module docstring): predicted worst relative std alone and with ``given``, and the
-    fused result of the two logs against the truth."""
+def _base(result):
+    """(estimate (8,), reported covariance (8, 8), dof) of a result's base parameters, in BASE order."""
+    import numpy as np
+
+    idx = [result.form.base_names.index(n) for n in BASE]
+    est = result.estimate
+    return np.asarray(est.theta0)[idx], np.asarray(est.cov)[np.ix_(idx, idx)], est.dof
+
+
+def combine(results, weights):
+    """The results' estimates combined by fixed weights W_k, and the combination's covariance: sum_k K_k C_k K_k^T,
+    K_k = (sum W)^-1 W_k, linear in each reported C_k (:class:`wmrid.design.information.GivenLogs`)."""
+    import numpy as np
+
+    parts = [_base(r) for r in results]
+    total = np.linalg.inv(sum(weights))
+    gains = [total @ w for w in weights]
+    x = sum(k @ p[0] for k, p in zip(gains, parts, strict=True))
+    cov = sum(k @ p[1] @ k.T for k, p in zip(gains, parts, strict=True))
+    return x, 0.5 * (cov + cov.T)
+
+
+def _sequential_seed(job: tuple[int, str, str, float, float, list]) -> dict:
+    """One seed of the check: the first log weighed as ``plan --given`` weighs it (:func:`given_weight`), the
+    planned one by the information the plan predicts for it (what the plan's prediction assumes)."""
     import numpy as np
 
     import wmrid
-    from wmrid.estimators.result import from_dict
+    from wmrid.design.information import given_weight
+
+    seed, robot, csv, eta_noise, tau_noise, second_info = job
+    noise = {"eta_noise": eta_noise, "tau_noise": tau_noise, "rate": 1000.0}
+    sim1 = wmrid.simulate(robot, trajectory="sinusoid", duration=20, seed=2000 + seed, **noise)
+    first = wmrid.identify(sim1.log.to_wheel_log(), robot)
+    sim2 = wmrid.simulate(robot, reference=csv, seed=3000 + seed, **noise)
+    second = wmrid.identify(sim2.log.to_wheel_log(), robot)
+    _, c1, dof1 = _base(first)
+    x, cov = combine([first, second], [given_weight(c1, dof1), np.asarray(second_info)])
+    x2, c2, _ = _base(second)
+    widened = [bool(r.diagnostics.get("inflated")) for r in (first, second)]
+    return {"seed": seed, "second": x2.tolist(), "second_std": np.sqrt(np.diag(c2)).tolist(), "fused": x.tolist(),
+            "fused_std": np.sqrt(np.diag(cov)).tolist(), "widened": widened,
+            "truth": [sim2.truth["parameters"][n] for n in BASE]}  # fmt: skip
+
+
+def sequential(eta_noise: float, tau_noise: float, seeds: int = 20, workers: int = 1) -> dict:
+    """The sequential-design check (module docstring): predicted worst relative std alone and with ``given``; then,
+    over ``seeds`` seeds, both logs drawn again (the plan kept), identified and combined (:func:`combine`): the
+    spread of the combined estimate across seeds against its reported and its predicted std.  Every relative std is
+    the plan's: std over the plan's scale of the parameter (its nominal value, or the floor where that is small)."""
+    import numpy as np
+
+    import wmrid
+    from wmrid.api.planning import _given
+    from wmrid.design.plan import FINE_GRID, _problem
+    from wmrid.model.dynamics import RegressorForm
 
     robot = str(robot_file("paper"))
     sim = wmrid.simulate(robot, trajectory="sinusoid", duration=20, rate=1000, eta_noise=eta_noise,
@@ -170,33 +223,47 @@ def sequential(eta_noise: float, tau_noise: float) -> dict:
     first = wmrid.identify(sim.log.to_wheel_log(), robot)
     saved = OUT / f"sequential_first_{eta_noise}_{tau_noise}.json"
     saved.write_text(json.dumps(first.to_dict(history=False), default=float))
-    first = from_dict(json.loads(saved.read_text()), str(saved))
     kw = {"duration": 30.0, "eta_noise": eta_noise, "tau_noise": tau_noise, "log_rate": 1000.0}
     alone, both = wmrid.plan(robot, **kw), wmrid.plan(robot, given=saved, **kw)
     csv = OUT / "sequential_next.csv"
     wmrid.write_plan(both, csv, force=True)
-    run2 = wmrid.simulate(robot, reference=str(csv), eta_noise=eta_noise, tau_noise=tau_noise, seed=101, rate=1000.0)
-    second = wmrid.identify(run2.log.to_wheel_log(), robot)
-    truth = np.array([run2.truth["parameters"][n] for n in BASE])
+    scale = np.array([both.predicted[n]["scale"] for n in BASE])
+    # the plans' own predictions: the targeted plan alone, and the untargeted plan combined with the first log
+    theta0 = np.array([both.predicted[n]["nominal"] for n in BASE])
+    given, _ = _given(saved, BASE, theta0)
+    args = (theta0, RegressorForm("general"), both.r, both.b, both.limits, both.noise, 30.0, FINE_GRID, "worst")
+    bare, with_given = _problem(*args, None, both.settings["k"]), _problem(*args, given[0], both.settings["k"])
+    second_cov = bare.covariance(bare.motion_of(both.excitation.coefficients))
+    second_pred = np.sqrt(np.diag(second_cov))
+    alone_with = with_given.criterion_value(with_given.covariance(with_given.motion_of(alone.excitation.coefficients)))
+    fused_pred = np.array([both.predicted[n]["std"] for n in BASE])
+    jobs = [(s, robot, str(csv), eta_noise, tau_noise, np.linalg.inv(second_cov).tolist()) for s in range(seeds)]
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        rows = list(pool.map(_sequential_seed, jobs))
+    truth = np.array(rows[0]["truth"])
 
-    def est(result):
-        idx = [result.form.base_names.index(n) for n in BASE]
-        return np.asarray(result.estimate.theta0)[idx], np.asarray(result.estimate.cov)[np.ix_(idx, idx)]
+    def figures(key: str, pred: np.ndarray) -> dict:
+        x, std = np.array([r[key] for r in rows]), np.array([r[key + "_std"] for r in rows])
+        spread = x.std(axis=0, ddof=1)
+        z = (x - truth) / std
+        return {n: {"predicted": pred[i] / scale[i], "spread": spread[i] / scale[i],
+                    "reported_median": float(np.median(std[:, i])) / scale[i],
+                    "spread_over_predicted": spread[i] / pred[i],
+                    "reported_over_spread": float(np.median(std[:, i])) / spread[i],
+                    "rms_z": float(np.sqrt(np.mean(z[:, i] ** 2))),
+                    "spread_over_truth": spread[i] / abs(truth[i])} for i, n in enumerate(BASE)}  # fmt: skip
 
-    (x1, c1), (x2, c2) = est(first), est(second)
-    info1, info2 = np.linalg.pinv(c1), np.linalg.inv(c2)
-    cov = np.linalg.inv(info1 + info2)
-    x = cov @ (info1 @ x1 + info2 @ x2)
-    std = np.sqrt(np.diag(cov))
+    worst = np.max(np.array([r["fused_std"] for r in rows]) / scale, axis=1)
     return {
-        "noise": [eta_noise, tau_noise],
-        "first_relative_std": {n: first.parameters[n][1] / abs(truth[i]) for i, n in enumerate(BASE)},
-        "plan_alone": {"worst": alone.value, "relative": {n: v["relative"] for n, v in alone.predicted.items()}},
+        "noise": [eta_noise, tau_noise], "seeds": seeds, "scale": dict(zip(BASE, scale.tolist(), strict=True)),
+        "first_relative_std": {n: first.parameters[n][1] / scale[i] for i, n in enumerate(BASE)},
+        "plan_alone": {"worst": alone.value, "with_first_log": alone_with,
+                       "relative": {n: v["relative"] for n, v in alone.predicted.items()}},
         "plan_given": {"worst": both.value, "relative": {n: v["relative"] for n, v in both.predicted.items()}},
-        "second_relative_std": {n: second.parameters[n][1] / abs(truth[i]) for i, n in enumerate(BASE)},
-        "fused_relative_std": dict(zip(BASE, (std / np.abs(truth)).tolist(), strict=True)),
-        "fused_z": dict(zip(BASE, ((x - truth) / std).tolist(), strict=True)),
-    }
+        "second": figures("second", second_pred), "fused": figures("fused", fused_pred),
+        "fused_worst_reported": sorted(worst.tolist()), "fused_below_2pc": int(np.sum(worst < 0.02)),
+        "widened": [sum(r["widened"][j] for r in rows) for j in range(2)],
+    }  # fmt: skip
 
 
 def main() -> None:
@@ -210,12 +277,22 @@ def main() -> None:
     args = ap.parse_args()
     if args.sequential:
         eta_noise, tau_noise = (float(v) for v in args.sequential.split(","))
-        out = sequential(eta_noise, tau_noise)
-        print(f"plan alone: worst {100 * out['plan_alone']['worst']:.3g} %; with --given: worst "
+        out = sequential(eta_noise, tau_noise, args.seeds, args.workers)
+        print(f"plan alone: worst {100 * out['plan_alone']['worst']:.3g} % (combined with the first log "
+              f"{100 * out['plan_alone']['with_first_log']:.3g} %); with --given: worst "
               f"{100 * out['plan_given']['worst']:.3g} %")  # fmt: skip
-        for key in ("first_relative_std", "second_relative_std", "fused_relative_std"):
-            print(f"{key}: " + ", ".join(f"{n} {100 * v:.3g} %" for n, v in out[key].items()))
-        print("fused z: " + ", ".join(f"{n} {v:+.2f}" for n, v in out["fused_z"].items()))
+        for key in ("second", "fused"):
+            print(
+                f"{key} over {out['seeds']} seeds, % of the plan's scale: predicted / spread / reported (median), rms z"
+            )
+            for n, f in out[key].items():
+                print(
+                    f"  {n:4s} {100 * f['predicted']:6.3g} {100 * f['spread']:6.3g} "
+                    f"{100 * f['reported_median']:6.3g}   {f['rms_z']:.2f}"
+                )
+        print(f"fused worst reported std below 2 %: {out['fused_below_2pc']}/{out['seeds']} seeds (median "
+              f"{100 * statistics.median(out['fused_worst_reported']):.3g} %); widened: first {out['widened'][0]}, "
+              f"second {out['widened'][1]}")  # fmt: skip
         path = args.json.with_name("study_plan_sequential.json")
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(out, indent=1, default=float))

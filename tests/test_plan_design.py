@@ -159,14 +159,19 @@ def test_limits_from_flags_file_and_defaults():
 
 @pytest.mark.parametrize("criterion", ["worst", "d", "a"])
 def test_search_gradients_match_finite_differences(criterion: str) -> None:
-    """The analytic gradient of the search's objective (reverse mode through the predicted covariance, a given
-    information added) and the Jacobian of its sample constraints agree with central differences: relative 1e-5 of
+    """The analytic gradient of the search's objective (reverse mode through the predicted covariance, combined
+    with a given log's) and the Jacobian of its sample constraints agree with central differences: relative 1e-5 of
     the largest entry (observed 3e-7; the differences' own error at a step of 1e-6 is ~1e-8)."""
+    from wmrid.design.information import GivenLogs
     from wmrid.design.plan import _problem
     from wmrid.design.problem import Differentiated
     from wmrid.design.search import largest_scale, random_shape, sample_constraints
 
-    given = np.diag(1.0 / (0.01 * np.abs(THETA0) + 1e-3) ** 2)
+    # a given log combined by a weight that is not its inverse covariance (the general sandwich)
+    weight = np.diag(1.0 / (0.01 * np.abs(THETA0) + 1e-3) ** 2)
+    corr = 0.3 ** np.abs(np.subtract.outer(np.arange(8), np.arange(8)))
+    cov = 1.7 * np.sqrt(np.linalg.inv(weight)) @ corr @ np.sqrt(np.linalg.inv(weight))
+    given = GivenLogs(weight, weight @ cov @ weight)
     limits = resolve_limits(PAPER_CAD.r, {}, max_torque=20.0, footprint=0.56)
     noise = SensorNoise(0.02, 0.05, 1000.0)
     pb = _problem(THETA0, GENERAL, PAPER_CAD.r, PAPER_CAD.b, limits, noise, 24.0, 20.0, criterion, given, 10.0)
@@ -213,3 +218,32 @@ def test_sign_flips_near_standstill_cost_information():
         cov = predicted_covariance(slow, tau, h, THETA0, GENERAL, SensorNoise(sigma, 0.05, 100.0))
         fd.append(np.sqrt(cov[6, 6]))
     assert fd[1] > 1.5 * fd[0]
+
+
+def test_given_logs_combine_by_a_sandwich() -> None:
+    """A given log's estimate combined with the planned log's by fixed weights: the combination's covariance is
+    (W + I)^-1 (W C W + I) (W + I)^-1, the textbook (C^-1 + I)^-1 when W = C^-1, and the weight of a covariance with
+    few degrees of freedom shrinks its correlations (none when the degrees of freedom are unknown)."""
+    from wmrid.design.information import GivenLogs, combined_covariance, given_weight
+
+    rng = np.random.Generator(np.random.PCG64(3))
+    a, b = rng.normal(size=(8, 8)), rng.normal(size=(8, 8))
+    cov, info = a @ a.T + 0.1 * np.eye(8), b @ b.T + 0.1 * np.eye(8)
+    weight = np.diag(1.0 / np.diag(cov))
+    k1 = np.linalg.solve(weight + info, weight)
+    k2 = np.linalg.solve(weight + info, info)
+    direct = k1 @ cov @ k1.T + k2 @ np.linalg.inv(info) @ k2.T
+    np.testing.assert_allclose(combined_covariance(info, GivenLogs(weight, weight @ cov @ weight)), direct,
+                               rtol=1e-9, atol=1e-12)  # fmt: skip
+    textbook = np.linalg.inv(np.linalg.inv(cov) + info)
+    np.testing.assert_allclose(combined_covariance(info, GivenLogs.information(np.linalg.inv(cov))), textbook,
+                               rtol=1e-8, atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(given_weight(cov, None), np.linalg.inv(cov), rtol=1e-8, atol=1e-10)
+    d = np.sqrt(np.diag(cov))
+    shrunk = np.linalg.inv(given_weight(cov, 9)) / np.outer(d, d)
+    corr = cov / np.outer(d, d)
+    off = ~np.eye(8, dtype=bool)
+    lam = 1.0 - shrunk[off] / corr[off]
+    assert np.allclose(lam, lam[0])
+    assert 0.0 < lam[0] < 1.0
+    np.testing.assert_allclose(np.diag(shrunk), 1.0)

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import UsageError, option
-from wmrid.design.information import DEFAULT_K, SensorNoise
+from wmrid.design.information import DEFAULT_K, GivenLogs, SensorNoise, given_weight
 from wmrid.design.limits import DEFAULT_MARGIN, resolve_limits
 from wmrid.design.plan import Plan, make_plan
 from wmrid.model.robot import BaseSet, Robot
@@ -71,17 +71,19 @@ def measured_noise(log: Any, robot: Robot | None = None) -> tuple[float, float, 
 
 def _given(
     given: Any, names: tuple[str, ...], theta0: np.ndarray
-) -> tuple[tuple[np.ndarray, dict[str, Any]], np.ndarray] | tuple[None, np.ndarray]:
-    """((information (n0, n0), description), theta0 updated) from saved results: the inverse of each result's base
-    covariance over the parameters it determines, summed; the nominal values replaced by a result's estimate where it
-    determines them to better than 10 %."""
+) -> tuple[tuple[GivenLogs, dict[str, Any]], np.ndarray] | tuple[None, np.ndarray]:
+    """((the given logs (:class:`wmrid.design.information.GivenLogs`), description), theta0 updated) from saved
+    results: each result's base covariance over the parameters it determines and its weight
+    (:func:`wmrid.design.information.given_weight`, from the covariance and its degrees of freedom), summed; the
+    nominal values replaced by a result's estimate where it determines them to better than 10 %."""
     if given is None:
         return None, theta0
     from wmrid.estimators.result import IdentificationResult
     from wmrid.estimators.result import from_dict as result_from_dict
 
     items = [given] if isinstance(given, (str, os.PathLike, IdentificationResult)) else list(given)
-    info = np.zeros((len(names), len(names)))
+    weight = np.zeros((len(names), len(names)))
+    spread = np.zeros((len(names), len(names)))
     theta0 = theta0.copy()
     sources = []
     for item in items:
@@ -98,16 +100,18 @@ def _given(
         idx = [i for i, n in enumerate(their) if n in names and np.isfinite(cov[i, i]) and cov[i, i] > 0]
         if not idx:
             continue
-        sub = np.linalg.pinv(cov[np.ix_(idx, idx)])
+        sub = cov[np.ix_(idx, idx)]
+        sub_weight = given_weight(sub, est.dof)
         where = [names.index(their[i]) for i in idx]
-        info[np.ix_(where, where)] += 0.5 * (sub + sub.T)
+        weight[np.ix_(where, where)] += sub_weight
+        spread[np.ix_(where, where)] += sub_weight @ sub @ sub_weight
         for i in idx:
             value, std = float(est.theta0[i]), math.sqrt(cov[i, i])
             if value != 0 and std < 0.1 * abs(value):
                 theta0[names.index(their[i])] = value
         sources.append({"source": source, "log": result.log_info.get("source"), "method": est.method,
                         "parameters": [their[i] for i in idx]})  # fmt: skip
-    return (info, {"results": sources}), theta0
+    return (GivenLogs(weight, 0.5 * (spread + spread.T)), {"results": sources}), theta0
 
 
 def footprint(robot: Robot) -> float:

@@ -20,6 +20,12 @@ the time-reversed filter of w), with no Monte Carlo.  The base parameters come f
 intermediate ones by the minimum-distance fit of :mod:`wmrid.model.base_params`, whose covariance with the best
 weights is (J^T C^-1 J)^-1, J = d theta / d theta0 (complex-step derivative, exact).
 
+Logs already identified (``plan --given``) enter as :class:`GivenLogs`: their estimate is combined with the planned
+log's by fixed weights, and the combination's covariance is linear in their REPORTED covariance (a sandwich), never
+its inverse: wmrid reports a jackknife covariance with few degrees of freedom (a 20 s log: 9, for 8 parameters),
+whose inverse overstates the information in its weakest directions many times over (the seed-100 sinusoid of
+``bench/study_plan.py --sequential``: eigenvalues 0.07-23 of the true covariance's).
+
 What this leaves out, and the reported std includes: a coloured disturbance (caster, slip), the controller's
 response to noise (a simulator's controller sees the true state; a real one sees the noisy speeds), and
 errors-in-variables bias.  The tests check the formula against a Monte Carlo of the same estimator's algebra and
@@ -52,6 +58,56 @@ class SensorNoise:
 
     def to_dict(self) -> dict[str, float]:
         return {"eta_std": self.eta_std, "tau_std": self.tau_std, "rate": self.rate}
+
+
+@dataclass(frozen=True)
+class GivenLogs:
+    """Logs already identified, as the planned log's estimate will be combined with theirs: weight W (n0, n0) and
+    spread S = sum_k W_k C_k W_k (n0, n0), C_k a log's reported covariance and W_k its weight (:func:`given_weight`).
+    The combined estimate (W + I)^-1 (sum_k W_k x_k + I x) of the planned log's x (information I) has the covariance
+    (W + I)^-1 (S + I) (W + I)^-1 (:func:`combined_covariance`): exact for any fixed weights, and linear in the
+    C_k, so an unbiased reported covariance gives an unbiased prediction.  W = S = C^-1 is the textbook sum of
+    information."""
+
+    weight: np.ndarray
+    spread: np.ndarray
+
+    @classmethod
+    def information(cls, info: np.ndarray) -> GivenLogs:
+        """Given logs known by their exact information (inverse covariance) ``info``: W = S = info."""
+        info = np.asarray(info, dtype=np.float64)
+        return cls(info, info)
+
+
+def given_weight(cov: np.ndarray, dof: float | None) -> np.ndarray:
+    """The weight (n0, n0) of an estimate whose reported covariance ``cov`` (n0, n0, finite, positive diagonal) has
+    ``dof`` degrees of freedom (the jackknife's; None: exact): the inverse of cov with its correlations shrunk towards
+    none, by Schafer & Strimmer's (2005) intensity lambda = sum_{i<j} var(r_ij) / sum_{i<j} r_ij^2, var(r_ij) =
+    (1 - r_ij^2)^2 / dof.  Any fixed weight keeps the combination's covariance honest (:class:`GivenLogs`); this one
+    keeps most of what the correlations tell (a sinusoid pins F_v eta + F_d of each wheel, not F_v and F_d) without
+    trusting the directions that few degrees of freedom cannot resolve."""
+    cov = np.asarray(cov, dtype=np.float64)
+    d = np.sqrt(np.diag(cov))
+    corr = cov / np.outer(d, d)
+    lam = 0.0
+    if dof is not None and len(d) > 1:
+        r = corr[np.triu_indices(len(d), 1)]
+        total = float(np.sum(r * r))
+        lam = 1.0 if total <= 0 or dof <= 0 else min(1.0, float(np.sum((1.0 - r * r) ** 2)) / dof / total)
+    shrunk = (1.0 - lam) * corr + lam * np.eye(len(d))
+    weight = np.linalg.pinv(shrunk) / np.outer(d, d)
+    return 0.5 * (weight + weight.T)
+
+
+def combined_covariance(info: np.ndarray, given: GivenLogs | None) -> np.ndarray:
+    """Cov(theta0) (n0, n0) of the planned log's estimate (information ``info``) combined with the given logs'
+    (:class:`GivenLogs`; None: the planned log alone, info^-1)."""
+    if given is None:
+        cov = np.linalg.inv(info)
+    else:
+        a = np.linalg.inv(given.weight + info)
+        cov = a @ (given.spread + info) @ a
+    return 0.5 * (cov + cov.T)
 
 
 def sign_statistics(eta: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -234,8 +290,8 @@ class CovarianceGradient:
     """
 
     def __init__(self, theta0: np.ndarray, form: RegressorForm, noise: SensorNoise, k: float, jac: np.ndarray,
-                 given_info: np.ndarray | None = None, coulomb: np.ndarray | None = None) -> None:  # fmt: skip
-        self.theta0, self.form, self.noise, self.k, self.jac, self.given = theta0, form, noise, k, jac, given_info
+                 given: GivenLogs | None = None, coulomb: np.ndarray | None = None) -> None:  # fmt: skip
+        self.theta0, self.form, self.noise, self.k, self.jac, self.given = theta0, form, noise, k, jac, given
         self.coulomb = coulomb
         self.m = inverse_inertia(theta0)
 
@@ -243,16 +299,13 @@ class CovarianceGradient:
         fwd = _intermediate(eta, tau, h, self.theta0, self.form, self.noise, self.k, self.coulomb)
         c_inv = np.linalg.inv(fwd.cov)
         info = self.jac.T @ c_inv @ self.jac
-        if self.given is not None:
-            info = info + self.given
-        cov0 = np.linalg.inv(info)
-        cov0 = 0.5 * (cov0 + cov0.T)
-        self._keep = (fwd, h, c_inv, cov0, eta)
+        cov0 = combined_covariance(info, self.given)
+        self._keep = (fwd, h, c_inv, cov0, eta, info)
         return cov0
 
     def backward(self, g0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(dJ/deta (n, 2), dJ/dtau (n, 2)) for g0 = dJ/dCov(theta0), symmetric."""
-        fwd, h, c_inv, cov0, eta = self._keep
+        fwd, h, c_inv, cov0, eta, info = self._keep
         a, w, adj, c, qs, zs, fd = fwd.a, fwd.w, fwd.adj, fwd.c, fwd.qs, fwd.zs, fwd.fd
         score, inv, big, p = fwd.score, fwd.gamma_inv, fwd.big, fwd.w.shape[1]
         sigma = self.noise.eta_std
@@ -261,7 +314,12 @@ class CovarianceGradient:
         g_sd = np.zeros_like(eta)
         k, m = self.k, self.m
         g0 = 0.5 * (g0 + g0.T)
-        g_info = -cov0 @ g0 @ cov0  # cov0 = info^-1
+        if self.given is None:
+            g_info = -cov0 @ g0 @ cov0  # cov0 = info^-1
+        else:  # cov0 = A (S + info) A, A = (W + info)^-1: dA = -A d(info) A
+            aw = np.linalg.inv(self.given.weight + info)
+            mid = (self.given.spread + info) @ aw
+            g_info = aw @ g0 @ aw - aw @ mid @ g0 @ aw - aw @ g0 @ mid.T @ aw
         g_c = -c_inv @ self.jac @ g_info @ self.jac.T @ c_inv  # info = J^T C^-1 J
         g_score = big @ g_c @ big  # C = B S B
         g_big = g_c @ big @ score + score @ big @ g_c

@@ -19,7 +19,7 @@ import numpy as np
 
 from wmrid.core.errors import UsageError, option
 from wmrid.design.excitation import RAMP_SECONDS, Excitation
-from wmrid.design.information import DEFAULT_K, SensorNoise
+from wmrid.design.information import DEFAULT_K, GivenLogs, SensorNoise
 from wmrid.design.limits import LIMIT_NAMES, Limits
 from wmrid.design.problem import CORRELATION, CRITERIA, DIRECTION_SHARE, FLOOR_SHARE, Motion, Problem
 from wmrid.design.search import search
@@ -225,14 +225,15 @@ def make_plan(
     robot_name: str, theta0: np.ndarray, r: float, b: float, limits: Limits, noise: SensorNoise, *,
     duration: float | None = 60.0, target_std: float | None = None, rate: float = 50.0, seed: int = 0,
     criterion: str = "worst", friction: str = "wheel", k: float = DEFAULT_K,
-    given: tuple[np.ndarray, dict[str, Any]] | None = None, progress: Any = None,
+    given: tuple[GivenLogs, dict[str, Any]] | None = None, progress: Any = None,
 ) -> Plan:  # fmt: skip
     """Design and predict a plan (module docstring).
 
     theta0 : (8,) nominal base parameters; r, b : nominal wheel radius and half track (m).  duration : s, or None
     with ``target_std`` (a share, e.g. 0.02): the shortest plan (in whole base periods, at most
-    :data:`MAX_AUTO_DURATION`) predicted to reach it.  rate : Hz of the written reference.  given : (information
-    (n0, n0), description) of logs already identified.  progress : called with a sentence per stage, or None.
+    :data:`MAX_AUTO_DURATION`) predicted to reach it.  rate : Hz of the written reference.  given : (the logs
+    already identified, :class:`wmrid.design.information.GivenLogs`, description).  progress : called with a
+    sentence per stage, or None.
     """
     if criterion not in CRITERIA:
         raise UsageError(f"{option('criterion', criterion)}: choose one of {', '.join(CRITERIA)}")

@@ -19,7 +19,9 @@ from wmrid.design.excitation import Basis, pose_along, wheel_motion
 from wmrid.design.information import (
     DEFAULT_K,
     CovarianceGradient,
+    GivenLogs,
     SensorNoise,
+    combined_covariance,
     intermediate_jacobian,
     predicted_covariance,
     speed_sensitivity,
@@ -109,18 +111,21 @@ class Problem:
     theta0 : (n0,) nominal base parameters; form : the regressor form (general; caster columns with the
     wheel+caster model); r, b : m; limits; noise; duration, period : s; harmonics : N per channel; ramp : s;
     grid : Hz of the design grid; k : the estimator's gain (1/s); criterion : one of :data:`CRITERIA`;
-    given_info : (n0, n0) information of logs already identified (inverse covariance), or None.
+    given_info : logs already identified (:class:`wmrid.design.information.GivenLogs`; an (n0, n0) array: their
+    exact information), or None.
     """
 
     def __init__(
         self, theta0: np.ndarray, form: RegressorForm, r: float, b: float, limits: Limits, noise: SensorNoise, *,
         duration: float, period: float, harmonics: int, ramp: float, grid: float, k: float = DEFAULT_K,
-        criterion: str = "worst", given_info: np.ndarray | None = None,
+        criterion: str = "worst", given_info: GivenLogs | np.ndarray | None = None,
     ) -> None:  # fmt: skip
         self.theta0 = np.asarray(theta0, dtype=np.float64)
         self.form, self.r, self.b, self.limits, self.noise = form, r, b, limits, noise
         self.duration, self.period, self.harmonics, self.ramp, self.k = duration, period, harmonics, ramp, k
         self.criterion = criterion
+        if given_info is not None and not isinstance(given_info, GivenLogs):
+            given_info = GivenLogs.information(given_info)
         self.given_info = given_info
         n = round(duration * grid) + 1
         self.t = np.linspace(0.0, duration, n)
@@ -168,14 +173,14 @@ class Problem:
         return out
 
     def covariance(self, motion: Motion) -> np.ndarray:
-        """Predicted Cov(theta0) (n0, n0) along the motion, the given logs' information added."""
+        """Predicted Cov(theta0) (n0, n0) along the motion, combined with the given logs'
+        (:func:`wmrid.design.information.combined_covariance`)."""
         h = float(motion.t[1] - motion.t[0])
         cov = predicted_covariance(motion.eta, motion.tau, h, self.theta0, self.form, self.noise, self.k, self.jac,
                                    self.coulomb)  # fmt: skip
-        if self.given_info is not None:
-            cov = np.linalg.inv(np.linalg.inv(cov) + self.given_info)
-            cov = 0.5 * (cov + cov.T)
-        return cov
+        if self.given_info is None:
+            return cov
+        return combined_covariance(np.linalg.inv(cov), self.given_info)
 
     def relative_std(self, cov: np.ndarray) -> np.ndarray:
         """(n0,) predicted std / scale of each base parameter."""
