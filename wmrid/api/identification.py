@@ -26,6 +26,8 @@ __all__ = ["CASTER_METHODS", "compare", "identify", "with_validation"]
 
 #: Methods that model caster drag (``friction="wheel+caster"``); output error only with the casters' positions.
 CASTER_METHODS = ("observer", "idim", "iv", "rls", "oe")
+#: Methods that model a caster drag that follows the load (``friction="wheel+caster+load"``).
+LOAD_METHODS = ("observer", "idim", "iv", "rls")
 #: Methods that model a controller faster than the log (``control_rate``).
 CONTROL_RATE_METHODS = ("observer", "idim", "iv", "rls")
 
@@ -115,6 +117,13 @@ def friction_model(friction: str, methods: tuple[str, ...], validating: bool, ro
     if friction not in FRICTION_CHOICES:
         raise UsageError(f"{option('friction')} must be one of {', '.join(FRICTION_CHOICES)}, got {friction!r}")
     positions = robot is not None and bool(robot.casters)
+    if friction == "wheel+caster+load":
+        _refuse_unmodelled("friction", friction, methods, False, LOAD_METHODS)
+        if not positions:
+            raise UsageError(
+                f"{option('friction', 'wheel+caster+load')} needs the casters' positions: give {option('robot')} with "
+                "[[caster]] tables"
+            )
     if friction == "wheel+caster":
         _refuse_unmodelled("friction", friction, methods, False, CASTER_METHODS)
         if "oe" in methods and not positions:
@@ -351,6 +360,7 @@ def run_prepared(
     result = run_observer(
         wheel_log, prep.robot, form=form, k=k, alpha=alpha, box_width=box_width, torque_hold=torque_hold,
         progress=progress, payload=payload, control_rate=control_rate, friction=prep.friction,
+        load_terms=prep.method in LOAD_METHODS,  # output error does not simulate a drag that follows the load
         delay=delay_value(delay), feedback=prep.method == "observer",  # another method is reported as asked
         switch=prep.auto_method,
     )  # fmt: skip
