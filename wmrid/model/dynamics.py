@@ -129,6 +129,8 @@ class RegressorForm:
         """(regressor column, signal) of the columns c(eta) x phi' whose phi' is a derivative: signal 0 for
         phi = v (``dv``), 1 for phi = w (``dw``).  The observer carries them through its filters without
         differentiating (:func:`filter_regressor`)."""
+        if not self.load:
+            return ()
         out = []
         for col, param, _ in self.caster_map:
             if param >= 8 + self.n_casters:
