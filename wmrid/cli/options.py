@@ -310,7 +310,7 @@ FrictionOpt = Annotated[
         "drag, one drag force per caster when --robot lists [[caster]] positions (else two terms, Cv against "
         "speed and Cw against turning), for the observer, idim, rls and oe (oe and --validate need the positions); "
         "wheel+caster+load: also the drag's change with each caster's load as the robot accelerates and turns "
-        "(needs the positions; observer, idim, iv, rls); "
+        "(needs the positions; the observer only); "
         "auto: both, and the caster model when the log shows the drag (a Wald test, p < 0.001; the output says "
         "which and why), then its load terms when the log shows them too.",
     ),
