@@ -26,6 +26,11 @@ __all__ = ["CASTER_METHODS", "compare", "identify", "with_validation"]
 
 #: Methods that model caster drag (``friction="wheel+caster"``); output error only with the casters' positions.
 CASTER_METHODS = ("observer", "idim", "iv", "rls", "oe")
+#: Methods that model a caster drag that follows the load (``friction="wheel+caster+load"``).  IDIM, IV and RLS fit
+#: it too (the observer's closed-loop check runs them on its form), but on the light AMR's reversing MuJoCo log their
+#: std came out too small with it (Fv2 2.9 % off at z = 5.2, where the caster model's std covered its 3.3 %), so
+#: they are not offered it yet.
+LOAD_METHODS = ("observer",)
 #: Methods that model a controller faster than the log (``control_rate``).
 CONTROL_RATE_METHODS = ("observer", "idim", "iv", "rls")
 
@@ -115,6 +120,13 @@ def friction_model(friction: str, methods: tuple[str, ...], validating: bool, ro
     if friction not in FRICTION_CHOICES:
         raise UsageError(f"{option('friction')} must be one of {', '.join(FRICTION_CHOICES)}, got {friction!r}")
     positions = robot is not None and bool(robot.casters)
+    if friction == "wheel+caster+load":
+        _refuse_unmodelled("friction", friction, methods, False, LOAD_METHODS)
+        if not positions:
+            raise UsageError(
+                f"{option('friction', 'wheel+caster+load')} needs the casters' positions: give {option('robot')} with "
+                "[[caster]] tables"
+            )
     if friction == "wheel+caster":
         _refuse_unmodelled("friction", friction, methods, False, CASTER_METHODS)
         if "oe" in methods and not positions:
@@ -351,6 +363,7 @@ def run_prepared(
     result = run_observer(
         wheel_log, prep.robot, form=form, k=k, alpha=alpha, box_width=box_width, torque_hold=torque_hold,
         progress=progress, payload=payload, control_rate=control_rate, friction=prep.friction,
+        load_terms=prep.method in LOAD_METHODS,  # the load terms only where the method models them
         delay=delay_value(delay), feedback=prep.method == "observer",  # another method is reported as asked
         switch=prep.auto_method,
     )  # fmt: skip
@@ -422,7 +435,8 @@ def compare(
     say("the observer's run")
     common = {"torque_hold": torque_hold, "control_rate": control_rate, "delay": delay_value(delay)}
     # the observer's column is identify --method observer's: the closed-loop check widens it, never swaps it
-    observer = run_observer(wheel_log, robot_obj, friction=friction_, switch=False, **common)
+    load_terms = all(m in LOAD_METHODS for m in names)  # the other methods share the observer's model
+    observer = run_observer(wheel_log, robot_obj, friction=friction_, switch=False, load_terms=load_terms, **common)
     wheel_only = "oe" in names and friction_model(friction, ("oe",), validating, robot_obj) != observer.form.friction
     if not wheel_only:
         return run_compare(wheel_log, observer, options_, names, other=other, truth=truth, stage=stage)

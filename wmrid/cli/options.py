@@ -299,6 +299,7 @@ class FrictionChoice(str, Enum):
     auto = "auto"
     wheel = "wheel"
     wheel_caster = "wheel+caster"
+    wheel_caster_load = "wheel+caster+load"
 
 
 FrictionOpt = Annotated[
@@ -308,8 +309,10 @@ FrictionOpt = Annotated[
         help="wheel: viscous and Coulomb friction per wheel (Eqs. 15-17); wheel+caster: also the casters' rolling "
         "drag, one drag force per caster when --robot lists [[caster]] positions (else two terms, Cv against "
         "speed and Cw against turning), for the observer, idim, rls and oe (oe and --validate need the positions); "
+        "wheel+caster+load: also the drag's change with each caster's load as the robot accelerates and turns "
+        "(needs the positions; the observer only); "
         "auto: both, and the caster model when the log shows the drag (a Wald test, p < 0.001; the output says "
-        "which and why).",
+        "which and why), then its load terms when the log shows them too.",
     ),
 ]
 

@@ -285,8 +285,9 @@ AUTO_NO_REVERSAL = (
 )
 
 
-def caster_drag_test(result: IdentificationResult) -> dict[str, Any]:
-    """Wald test of the caster-drag parameters of a ``wheel+caster`` result against zero.
+def caster_drag_test(result: IdentificationResult, names: tuple[str, ...] | None = None) -> dict[str, Any]:
+    """Wald test of the caster-drag parameters of a ``wheel+caster`` result against zero (``names``: these of its
+    parameters instead, e.g. the load terms of ``wheel+caster+load``).
 
     W = d^T C^-1 d over the q drag parameters d with their reported (widened) covariance C, a jackknife estimate
     on B degrees of freedom, so Hotelling's (B - q + 1) W / (B q) ~ F(q, B - q + 1) (chi-square on q when B is
@@ -294,7 +295,7 @@ def caster_drag_test(result: IdentificationResult) -> dict[str, Any]:
     when none is positive; see DRAG_SIGN_Z)}."""
     from scipy.special import chdtrc, fdtrc
 
-    names = result.form.base_names[8:]
+    names = tuple(result.form.base_names[8:] if names is None else names)
     idx = [result.form.base_names.index(n) for n in names]
     values = np.array([result.parameters[n][0] for n in names])
     cov = np.asarray(result.theta0_cov)[np.ix_(idx, idx)]

@@ -84,9 +84,16 @@ def resolve_form(
     choice: Literal["auto", "paper", "general"],
     caster: bool = False,
     geometry: tuple[float, ...] = (),
+    load: bool = False,
 ) -> RegressorForm:
     """The regressor form: ``auto`` picks ``auto`` (the paper form when each wheel keeps one sign); caster drag
-    needs the general form (``geometry``: see :class:`wmrid.model.dynamics.RegressorForm`)."""
+    needs the general form (``geometry``: see :class:`wmrid.model.dynamics.RegressorForm`; ``load``: the drag
+    follows the casters' load, :func:`wmrid.model.dynamics.load_signals`, which needs the geometry)."""
+    if load and not geometry:
+        raise UsageError(
+            f"{option('friction', 'wheel+caster+load')} needs the casters' positions (the robot file's [[caster]] "
+            "tables)"
+        )
     if caster:
         if choice == "paper":
             raise UsageError(
@@ -94,7 +101,8 @@ def resolve_form(
                 "not "
                 "paper"
             )
-        return RegressorForm("general", caster=True, geometry=geometry)
+        signals = model.load_signals(geometry) if load else ()
+        return RegressorForm("general", caster=True, geometry=geometry, load=signals)
     if choice == "auto":
         return auto
     if choice == "paper":
@@ -162,7 +170,8 @@ def identify_log(
     progress: Callable[[int, int], None] | None = None,
     payload: bool = False,
     control_rate: float | None = None,
-    friction: Literal["wheel", "wheel+caster", "auto"] = "wheel",
+    friction: Literal["wheel", "wheel+caster", "wheel+caster+load", "auto"] = "wheel",
+    load_terms: bool = True,
     geometry: tuple[float, ...] = (),
     delay: float | Literal["auto"] | None = None,
     feedback: bool = True,
@@ -184,7 +193,10 @@ def identify_log(
     (also the casters' rolling drag, :func:`wmrid.model.dynamics.caster_columns`: with the robot's casters
     (``robot.casters``) one drag force D_k per caster, else the two-term Cv, Cw; general form only), or
     ``auto``: both, and the caster model when a Wald test puts its drag off zero at p < AUTO_P (never on a log
-    whose wheels keep one sign).  ``diagnostics["friction"]`` states the model and why.
+    whose wheels keep one sign); with the casters' positions and ``load_terms``, then also ``wheel+caster+load``
+    (the drag follows the casters' normal load as it accelerates, :func:`wmrid.model.dynamics.caster_columns`),
+    taken when a Wald test puts its load terms off zero at p < AUTO_P.  ``diagnostics["friction"]`` states the
+    model and why.
     ``geometry`` : (r, b, x_1, y_1, ...) m, the geometric caster model's when no robot lists casters (a
     saved model's ``form.geometry``, say; :func:`caster_geometry` builds it from a robot, whose casters win).
     ``delay`` : s, how late the efforts are stamped against the speeds (two topics, two clocks): they are read
@@ -276,11 +288,11 @@ def identify_log(
                 merged = {**timing_record, **(timed.diagnostics.get("timing") or {})}
                 return replace(timed, diagnostics={**timed.diagnostics, "timing": merged})
 
-    def run(caster: bool) -> IdentificationResult:
+    def run(caster: bool, load: bool = False) -> IdentificationResult:
         try:
             return _identify(
                 stream, sv, robot, form, k, alpha, box_width, max_history, torque_hold, progress, payload,
-                control_rate, caster, geometry,
+                control_rate, caster, geometry, load,
             )  # fmt: skip
         except np.linalg.LinAlgError as err:
             raise NotIdentifiableError(
@@ -318,7 +330,7 @@ def identify_log(
         return result
 
     if friction != "auto":
-        result = run(friction == "wheel+caster")
+        result = run(friction != "wheel", friction == "wheel+caster+load")
         return finish(result, {"model": friction, "chosen_by": "--friction"})
     wheel = run(False)
     if wheel.form.kind == "paper":
@@ -338,11 +350,50 @@ def identify_log(
             f", but {', '.join(choice['negative'])} would push the robot, which no caster does: not a caster's drag "
             "(a sign, a unit, or an effect neither model has), so the wheel model is kept"
         )
-    return finish(chosen, {"model": chosen.form.friction, "chosen_by": "auto", "reason": reason, **choice})
+    record = {"model": chosen.form.friction, "chosen_by": "auto", "reason": reason, **choice}
+    if chosen is caster and caster.form.geometry and load_terms:
+        chosen, record = _with_load(chosen, record, lambda: run(True, True))
+    return finish(chosen, record)
+
+
+def _with_load(
+    caster: IdentificationResult, record: dict[str, Any], run_load: Callable[[], IdentificationResult]
+) -> tuple[IdentificationResult, dict[str, Any]]:
+    """``--friction auto`` after the caster model was chosen: the ``wheel+caster+load`` model too, taken when a Wald
+    test puts its load terms off zero at p < AUTO_P (:func:`caster_drag_test` on them) and the log departs from it
+    no more than from the caster model (its model-error scale S, :func:`wmrid.estimators.model_error.widen`, not
+    larger); the record says why.
+
+    The second condition guards against what the load terms' v' and w' columns cannot tell apart from a load: noise on
+    the speeds.  Their filtered columns carry each sample's speed noise, as the regression's target does, so on noisy
+    logs of a heavy robot the load terms are biased (the paper robot at 0.02 rad/s: D1dv -0.91 N s^2/m for the
+    engine's -0.43, S 189 where the caster model had 133), and the fit moves away from the model instead of towards
+    it."""
+    try:
+        loaded = run_load()
+    except NotIdentifiableError as err:
+        return caster, {**record, "load": {"taken": False, "reason": f"load model failed: {err}"}}
+    test = caster_drag_test(loaded, loaded.form.base_names[8 + loaded.form.n_casters :])
+    scale = [r.diagnostics["uncertainty"]["model_error"]["scale"] for r in (caster, loaded)]
+    shown = test["p_value"] < AUTO_P
+    taken = shown and scale[1] <= scale[0]
+    reason = f"the drag's load terms ({test['text']}) differ from zero at p = {test['p_value']:.2g}" + (
+        f" < {AUTO_P:g}" if shown else f" >= {AUTO_P:g}: not shown by this log"
+    )
+    if shown and not taken:
+        reason += (
+            f", but the log departs further from that model (model-error scale {scale[1]:.3g} against the caster "
+            f"model's {scale[0]:.3g}), so the caster model is kept"
+        )
+    test = {key: test[key] for key in ("statistic", "dof", "p_value")}
+    load = {"taken": taken, "reason": reason, "scale": scale[1], "caster_scale": scale[0], **test}
+    if not taken:
+        return caster, {**record, "load": load}
+    return loaded, {**record, "model": loaded.form.friction, "load": load}
 
 
 #: Friction models of :func:`identify`: ``auto`` lets the log decide between the other two.
-FRICTION_CHOICES = ("wheel", "wheel+caster", "auto")
+FRICTION_CHOICES = ("wheel", "wheel+caster", "wheel+caster+load", "auto")
 
 
 def _with_friction(result: IdentificationResult, friction: dict[str, Any]) -> IdentificationResult:
@@ -365,6 +416,7 @@ def _identify(
     control_rate,
     caster=False,
     given_geometry: tuple[float, ...] = (),
+    load: bool = False,
 ) -> IdentificationResult:
     started = time.perf_counter()
     source = stream.source
@@ -401,7 +453,7 @@ def _identify(
             "reverses and "
             "turns on the spot"
         )
-    chosen = resolve_form(sv.form(), form, caster, geometry)
+    chosen = resolve_form(sv.form(), form, caster, geometry, load)
     n0 = chosen.n_base
     if robot is not None:
         start0 = np.concatenate([model.base_parameters(robot.nominal), np.zeros(n0 - 8)])  # no caster drag known

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import LogFormatError, NotIdentifiableError, UsageError, option
-from wmrid.model.dynamics import RegressorForm, caster_columns
+from wmrid.model.dynamics import RegressorForm, caster_columns, platform_speeds
 
 #: Names of the IDIM parameters phi, in order (SI: kg m^2 for M and Vc, N m s/rad, N m).
 PHI_NAMES = ("M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
@@ -165,19 +165,22 @@ def caster_scales(form: RegressorForm | None) -> np.ndarray:
 
     Two-term model: 1 (a sign, like the Coulomb columns).  Geometric model: D_k's entry in either wheel's row
     is a_k +/- c_k with |a_k| <= r/2 and |c_k| <= (r/(2b)) |(x_k, y_k)| (:func:`wmrid.model.dynamics.caster_columns`),
-    so the scale is the sum of its columns' bounds.  Empty without caster drag.
+    so the scale is the sum of its columns' bounds (a load term's: its caster's, per unit of its signal).  Empty without
+    caster drag.
     """
     cmap = _caster_map(form)
     if not cmap:
         return np.zeros(0)
     assert form is not None
     out = np.zeros(len(phi_names(form)) - 8)
+    big_k = form.n_casters
     for _, param, pattern in cmap:
         if not form.geometry:
             bound = 1.0
-        else:  # caster k = param - 8: a_k has pattern +1, c_k pattern -1
+        else:  # caster k = param - 8 (its load terms' k: see RegressorForm.caster_map): a_k pattern +1, c_k -1
+            k = param - 8 if param < 8 + big_k else (param - 8 - big_k) // len(form.load)
             r, b = form.geometry[0], form.geometry[1]
-            x, y = form.geometry[2 * (param - 8) + 2], form.geometry[2 * (param - 8) + 3]
+            x, y = form.geometry[2 * k + 2], form.geometry[2 * k + 3]
             bound = 0.5 * r if pattern == 1 else r / (2.0 * b) * math.hypot(x, y)
         out[param - 8] += bound
     return out
@@ -204,7 +207,7 @@ def raw_features(eta: np.ndarray, eta_dot: np.ndarray, form: RegressorForm | Non
     cols = [eta_dot, e1 * e2 - e2 * e2, e1 * e2 - e1 * e1, eta, np.sign(eta)]
     if _caster_map(form):
         assert form is not None
-        cols.append(caster_columns(eta, form))
+        cols.append(caster_columns(eta, form, eta_dot))
     return np.column_stack(cols)
 
 
@@ -374,14 +377,19 @@ def idim_regression(
     raw = (e1, e2, e1 * e2 - e2 * e2, e1 * e2 - e1 * e1, np.sign(e1), np.sign(e2), tau[:, 0], tau[:, 1])
     form = form if _caster_map(form) else None
     if form is not None:  # computed from the unfiltered speeds like sgn(eta_i), filtered like every column
-        raw = raw + tuple(caster_columns(eta, form).T)
+        raw = raw + tuple(caster_columns(eta, form, multiplier=True).T)
     filt = np.empty((n, len(raw)))
     for j, col in enumerate(raw):  # one column at a time bounds the filter's temporary memory
         filt[:, j] = filtfilt(sos, col, pad)
     acc = _five_point_derivative(filt[:, 0:2], dt)
     features = np.column_stack([acc[keep], filt[keep][:, [2, 3, 0, 1, 4, 5]]])
     if form is not None:
-        features = np.column_stack([features, filt[keep][:, 8:]])
+        caster = filt[keep][:, 8:]
+        if form.derivative_columns:  # c(eta) phi': the filtered multiplier c times phi' of the filtered speeds
+            rates = platform_speeds(acc[keep], form.geometry[0], form.geometry[1])
+            for col, which in form.derivative_columns:
+                caster[:, col - 8] *= rates[which]
+        features = np.column_stack([features, caster])
     kept_effort = {"effort_grid": filt[:, 6:8].copy(), "t_grid": t.copy()} if keep_effort else {}
     return IdimRegression(
         t=t[keep], features=features, tau=filt[keep][:, 6:8], cutoff_hz=cutoff, order=int(order),

@@ -18,6 +18,14 @@ Discretisation at the log's own (possibly uneven) stamps t_n, h = t_{n+1} - t_n:
   ``torque_hold="zoh"``, x_{n+1} = a x_n + (beta0 + beta1) f_n): that is what a digital controller
   applies, and it is exact for logs of commanded torque such as the paper's virtual prototype.  A
   measured, continuous effort (a filtered current) calls for ``"foh"``.
+* A column c(eta) phi' of g whose phi' is a derivative (the ``wheel+caster+load`` model's drag that follows v'
+  or w', :attr:`wmrid.model.dynamics.RegressorForm.derivative_columns`) is filtered without differentiating:
+  over a step, c linear and phi linear (so phi' = (phi_{n+1} - phi_n) / h, constant), the filter's input is
+  exactly (phi_{n+1} - phi_n) / h (beta0 c_n + beta1 c_{n+1}) (:func:`wmrid.model.dynamics.filter_regressor`).
+  The 1/h cancels against beta ~ h, and summed over steps the differences of phi telescope, so noise on phi
+  enters the filtered column once (with c constant the column is c (phi - exp(-k t) phi_0 - k phi_f), phi_f the
+  filtered phi), never amplified.  Exact under the same first-order hold as every other column; no expansion of
+  M_eff(eta)^-1 is needed, as eta' appears linearly on the right of eta' = g theta (the implicit form).
 * theta_hat then jumps at t_{n+1}; the term w theta_hat' of (26) integrates that jump exactly:
   eta_hat += w_{n+1} (theta_hat_{n+1} - theta_hat_n).
 * Eqs. (33)-(36) are integrated implicitly (rectangle rule at t_{n+1}): Gamma_{n+1} = Gamma_n + h w^T w,
@@ -48,7 +56,7 @@ import numpy as np
 
 from wmrid.core.errors import UsageError, option
 from wmrid.estimators.observer_kernel import foh
-from wmrid.model.dynamics import RegressorForm, regressor
+from wmrid.model.dynamics import RegressorForm, filter_regressor, platform_speeds
 
 #: 1/s: the largest predictor gain: a time constant of 10 us, a hundredth of a 1 kHz step (--k 1e308 used to be
 #: accepted and reported as "the log does not excite the dynamics").
@@ -175,7 +183,7 @@ def initial_state(t0: float, eta0: np.ndarray, tau0: np.ndarray, settings: Obser
     """State at the first sample: w = 0, eta_hat = eta, xi_hat = e = 0, Gamma = alpha I (Eqs. 27, 30, 33)."""
     p = settings.form.n_columns
     eta0 = np.asarray(eta0, dtype=float)
-    g0 = regressor(eta0[None, :], np.asarray(tau0, dtype=float)[None, :], settings.form)[0]
+    g0 = filter_regressor(eta0[None, :], np.asarray(tau0, dtype=float)[None, :], settings.form)[0]
     return ObserverState(
         t=float(t0), eta=eta0.copy(), g=g0, w=np.zeros(p), eta_hat=eta0.copy(), xi_hat=np.zeros(2),
         gamma=settings.alpha * np.eye(p), gamma_inv=np.eye(p) / settings.alpha,
@@ -194,7 +202,7 @@ def observer_step(
     a, phi0, phi1 = foh_weights(k * h)
     b0, b1 = h * phi0, h * phi1
     eta = np.asarray(eta, dtype=float)
-    g = regressor(eta[None, :], np.asarray(tau, dtype=float)[None, :], settings.form)[0]
+    g = filter_regressor(eta[None, :], np.asarray(tau, dtype=float)[None, :], settings.form)[0]
     theta = state.theta
 
     g_in = b0 * state.g + b1 * g  # the filters' input over the step (first-order hold) ...
@@ -203,6 +211,11 @@ def observer_step(
     elif settings.torque_hold == "zoh":  # ... held over the controller's sub-steps
         c0, c1 = substep_weights(k, h, max(1, round(h * settings.control_rate)))
         g_in[:2] = c0 * state.g[:2] + c1 * g[:2]
+    derivative = settings.form.derivative_columns
+    if derivative:  # ... and c(eta) phi' as c linear times phi' = (phi change) / h (dynamics.filter_regressor)
+        rates = platform_speeds((eta - state.eta) / h, settings.form.geometry[0], settings.form.geometry[1])
+        for col, which in derivative:
+            g_in[col] = rates[which] * (b0 * state.g[col] + b1 * g[col])
     w = a * state.w + g_in  # (27)
     eta_hat = a * state.eta_hat + theta @ g_in + k * (b0 * state.eta + b1 * eta)  # (26)
     xi_hat = a * state.xi_hat  # (30)

@@ -18,11 +18,17 @@ from wmrid.model.kernels import sign
 KIND_PAPER = 0
 KIND_GENERAL = 1
 KIND_CASTER = 2  # general plus the caster-drag columns -sgn(eta_1 + eta_2), -sgn(eta_1 - eta_2)
-KIND_CASTER_GEOMETRY = 3  # general plus two columns per caster of known position (wmrid.model.dynamics.caster_columns)
+#: general plus two columns per caster of known position (wmrid.model.dynamics.caster_columns), and two per caster and
+#: load signal of the wheel+caster+load model (the kernel's ``load`` codes; v' and w' filtered by _derivative_inputs)
+KIND_CASTER_GEOMETRY = 3
 
 
 @numba.njit(cache=True, nogil=True)
-def _regressor_into(out, e1, e2, t1, t2, kind, geom):
+def _regressor_into(out, e1, e2, t1, t2, kind, geom, load):
+    """The filters' per-sample input g (:func:`wmrid.model.dynamics.filter_regressor`) into ``out`` (p,).
+
+    load (L,) int64: kind 3's load signals, codes into :data:`wmrid.model.dynamics.LOAD_SIGNALS` (0 dv, 1 w2,
+    2 vw, 3 dw); the columns of dv and dw hold their multiplier (see :func:`_derivative_inputs`)."""
     out[0] = t1
     out[1] = t2
     out[2] = e2 * e2 - e1 * e2
@@ -41,13 +47,49 @@ def _regressor_into(out, e1, e2, t1, t2, kind, geom):
             r, b = geom[0], geom[1]
             v = 0.5 * r * (e1 + e2)
             w = r / (2.0 * b) * (e1 - e2)
-            for k in range((len(geom) - 2) // 2):
+            nk = (len(geom) - 2) // 2
+            nl = len(load)
+            for k in range(nk):
                 x, y = geom[2 + 2 * k], geom[3 + 2 * k]
                 ux = v - w * y
                 uy = w * x
                 norm = math.sqrt(ux * ux + uy * uy + DRAG_SPEED * DRAG_SPEED)
-                out[8 + 2 * k] = -0.5 * r * ux / norm
-                out[9 + 2 * k] = -r / (2.0 * b) * (x * uy - y * ux) / norm
+                cv = 0.5 * r * ux / norm
+                cw = r / (2.0 * b) * (x * uy - y * ux) / norm
+                out[8 + 2 * k] = -cv
+                out[9 + 2 * k] = -cw
+                for j in range(nl):
+                    code = load[j]
+                    s = 1.0  # dv, dw: the multiplier of the derivative
+                    if code == 1:
+                        s = w * w
+                    elif code == 2:
+                        s = v * w
+                    col = 8 + 2 * nk + 2 * (k * nl + j)
+                    out[col] = -cv * s
+                    out[col + 1] = -cw * s
+
+
+@numba.njit(cache=True, nogil=True)
+def _derivative_inputs(gin, g_prev, g, b0, b1, h, de1, de2, geom, load):
+    """Overwrite the filter input of the columns c(eta) phi' (load codes 0: phi = v, 3: phi = w) over a step of h s
+    with (phi_b - phi_a) / h (b0 c_a + b1 c_b): the exact filter input of c phi' when c and phi are linear over the
+    step.  de1, de2: the wheel speeds' change over the step, rad/s."""
+    nl = len(load)
+    if nl == 0:
+        return
+    r, b = geom[0], geom[1]
+    dv = 0.5 * r * (de1 + de2) / h
+    dw = r / (2.0 * b) * (de1 - de2) / h
+    nk = (len(geom) - 2) // 2
+    for k in range(nk):
+        for j in range(nl):
+            code = load[j]
+            if code == 0 or code == 3:
+                d = dv if code == 0 else dw
+                col = 8 + 2 * nk + 2 * (k * nl + j)
+                gin[col] = d * (b0 * g_prev[col] + b1 * g[col])
+                gin[col + 1] = d * (b0 * g_prev[col + 1] + b1 * g[col + 1])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -111,6 +153,7 @@ def observer_chunk(
     blk_ee,
     cursor,
     geom,
+    load,
 ):
     """Advance the estimator over one chunk of samples; every state array is updated in place.
 
@@ -128,7 +171,8 @@ def observer_chunk(
     blk_a (J, p, p) += h w^T w, blk_c (J, 2, p) += h u_i w, blk_uu (J, 2) += h u_i^2, blk_ee (J, 2) += h e_i^2,
     with u = e - xi_hat + w theta the filtered velocity the estimator regresses on.
     cursor (2,) int64 = [next history slot, current block].
-    geom (q,) float64: the caster geometry [r, b, x_1, y_1, ...] of kind 3 (empty otherwise).
+    geom (q,) float64: the caster geometry [r, b, x_1, y_1, ...] of kind 3 (empty otherwise); load (L,) int64: its
+    load signals (:func:`_regressor_into`; empty for none).
     """
     c = t.shape[0]
     p = theta.shape[1]
@@ -149,7 +193,7 @@ def observer_chunk(
         b1 = h * phi1
         e1 = eta[i, 0]
         e2 = eta[i, 1]
-        _regressor_into(g, e1, e2, tau[i, 0], tau[i, 1], kind, geom)
+        _regressor_into(g, e1, e2, tau[i, 0], tau[i, 1], kind, geom, load)
         # the input of the filters over the step: first-order hold, the torques held when zoh
         for j in range(p):
             gin[j] = b0 * g_prev[j] + b1 * g[j]
@@ -161,6 +205,7 @@ def observer_chunk(
             c0, c1 = _substep_weights(k * h, h, sub)
             gin[0] = c0 * g_prev[0] + c1 * g[0]
             gin[1] = c0 * g_prev[1] + c1 * g[1]
+        _derivative_inputs(gin, g_prev, g, b0, b1, h, e1 - st[1], e2 - st[2], geom, load)
         # (27) w and (26) eta_hat with theta held over the step
         for j in range(p):
             w[j] = a * w[j] + gin[j]

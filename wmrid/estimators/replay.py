@@ -13,7 +13,7 @@ import numpy as np
 
 from wmrid.estimators.noise_floor import NoiseFloor
 from wmrid.estimators.observer import ObserverSettings
-from wmrid.model.dynamics import regressor
+from wmrid.model.dynamics import filter_regressor
 from wmrid.model.kernels import plain
 
 CHUNK = 262_144
@@ -104,6 +104,13 @@ def kernel_kind(form) -> int:
     return KIND_GENERAL
 
 
+def load_codes(form) -> np.ndarray:
+    """The kernel's load codes (L,) int64 of ``form`` (indices into :data:`wmrid.model.dynamics.LOAD_SIGNALS`)."""
+    from wmrid.model.dynamics import LOAD_SIGNALS
+
+    return np.array([LOAD_SIGNALS.index(x) for x in form.load], dtype=np.int64)
+
+
 class _HalfRate:
     """A second estimator run on every other sample (global indices 0, 2, 4, ...): the same log at twice the step.
 
@@ -121,6 +128,7 @@ class _HalfRate:
         self.kind = kind
         self.form = settings.form
         self.geom = np.array(settings.form.geometry, dtype=np.float64)
+        self.load = load_codes(settings.form)
         # An effort held over each step of the log is, at twice the step, an effort held by a controller at
         # the log's rate, the dropped sample interpolated (see ObserverSettings.control_rate): the same
         # assumption about the effort, so the two runs differ by their step only.  Whether the effort really
@@ -155,14 +163,14 @@ class _HalfRate:
         skip = 0
         if self.done == 0:
             self.st[:] = [t[0], eta[0, 0], eta[0, 1], eta[0, 0], eta[0, 1], 0.0, 0.0]
-            self.g_prev[:] = regressor(eta[:1], tau[:1], self.form)[0]
+            self.g_prev[:] = filter_regressor(eta[:1], tau[:1], self.form)[0]
             skip = 1
         if len(t) > skip:
             observer_chunk(
                 plain(t[skip:]), plain(eta[skip:]), plain(tau[skip:]),
                 self.done + skip, self.kind, self.hold, self.k, self.st, self.w, self.g_prev, self.theta, self.gamma,
                 self.gamma_inv, self.hist_idx, self.hist_theta, self.hist_e, self.hist_gamma, self.block_end,
-                *self.blk, self.cursor, self.geom,
+                *self.blk, self.cursor, self.geom, self.load,
             )  # fmt: skip
         self.done += len(t)
 
@@ -194,6 +202,7 @@ def replay_pieces(
     p = form.n_columns
     kind = kernel_kind(form)
     geom = np.array(form.geometry, dtype=np.float64)
+    load = load_codes(form)
     hist_idx, block_end = layout(n, duration, settings.k, max_history)
     m, nb = len(hist_idx), len(block_end)
 
@@ -247,7 +256,7 @@ def replay_pieces(
             skip = 0
             if done == 0:  # the first sample starts the predictor and the filter
                 st[:] = [t[0], eta[0, 0], eta[0, 1], eta[0, 0], eta[0, 1], 0.0, 0.0]
-                g_prev[:] = regressor(eta[:1], tau[:1], form)[0]
+                g_prev[:] = filter_regressor(eta[:1], tau[:1], form)[0]
                 if hist_idx[0] == 0:
                     hist_theta[0], hist_e[0], hist_gamma[0] = theta, 0.0, gamma
                     cursor[0] = 1
@@ -255,7 +264,7 @@ def replay_pieces(
             observer_chunk(
                 plain(t[skip:]), plain(eta[skip:]), plain(tau[skip:]), done + skip, kind, hold, float(settings.k), st,
                 w, g_prev, theta, gamma, gamma_inv, hist_idx, hist_theta, hist_e, hist_gamma, block_end, blk_a, blk_c,
-                blk_uu, blk_ee, cursor, geom,
+                blk_uu, blk_ee, cursor, geom, load,
             )  # fmt: skip
             floor.feed(eta)
             if blk_slow is not None:

@@ -30,11 +30,19 @@ from wmrid.model.robot import PhysicalParameters
 THETA0_NAMES = ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
 #: The caster-drag base parameters of the ``wheel+caster`` friction model, appended to theta0.
 CASTER_NAMES = ("Cv", "Cw")
+#: The platform motions a caster's normal load follows (:func:`caster_columns`), in their order everywhere:
+#: v' (m/s^2) and w^2 (rad^2/s^2) move load fore and aft (pitch), v w (m rad/s^2) and w' (rad/s^2) side to side.
+LOAD_SIGNALS = ("dv", "w2", "vw", "dw")
+#: The load signals that are time derivatives, of v and of w (the observer's filters carry them, see
+#: :func:`filter_regressor`).
+DERIVATIVE_SIGNALS = ("dv", "dw")
 THETA0_UNITS = {
     "m11": "1/(kg m^2)", "m12": "1/(kg m^2)", "m22": "1/(kg m^2)", "Vc": "kg m^2",
     "Fv1": "N m s/rad", "Fv2": "N m s/rad", "Fd1": "N m", "Fd2": "N m",
     "M11": "kg m^2", "M12": "kg m^2", "M22": "kg m^2", "Cv": "N m", "Cw": "N m",
     **{f"D{k}": "N" for k in range(1, 9)},
+    **{f"D{k}{sig}": unit for k in range(1, 9) for sig, unit in (
+        ("dv", "N s^2/m"), ("w2", "N s^2/rad^2"), ("vw", "N s^2/(m rad)"), ("dw", "N s^2/rad"))},
 }  # fmt: skip
 
 
@@ -52,6 +60,8 @@ def base_units(effort_unit: str = "N m") -> dict[str, str]:
         "m11": inv, "m12": inv, "m22": inv, "Vc": f"{u} s^2/rad^2", "Fv1": f"{u} s/rad", "Fv2": f"{u} s/rad",
         "Fd1": u, "Fd2": u, "M11": big, "M12": big, "M22": big, "Cv": u, "Cw": u,
         **{f"D{k}": f"{u}/m" for k in range(1, 9)},
+        **{f"D{k}{sig}": f"{u} {unit}" for k in range(1, 9) for sig, unit in (
+            ("dv", "s^2/m^2"), ("w2", "s^2/(m rad^2)"), ("vw", "s^2/(m^2 rad)"), ("dw", "s^2/(m rad)"))},
     }  # fmt: skip
 
 
@@ -66,13 +76,16 @@ class RegressorForm:
     caster : the ``wheel+caster`` friction model.  geometry : () for the two-term model (Cv, Cw: the drag's
     limits driving straight and turning on the spot), or (r, b, x_1, y_1, ..., x_K, y_K) in m: the wheel
     radius, half track and each caster's ground contact in the platform frame, for the exact drag direction
-    of each caster (one parameter per caster, its drag force D_k in N).
+    of each caster (one parameter per caster, its drag force D_k in N).  load : geometric model only, the
+    signals of :data:`LOAD_SIGNALS` the casters' drag follows as their normal load moves with the platform's
+    accelerations (see :func:`caster_columns`): one more parameter per caster and signal, D{k}{signal}.
     """
 
     kind: Literal["paper", "general"] = "paper"
     signs: tuple[int, int] = (1, 1)  # paper form only: the constant sign of eta_1 and eta_2
     caster: bool = False  # the wheel+caster friction model
     geometry: tuple[float, ...] = ()
+    load: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.kind not in ("paper", "general"):
@@ -84,6 +97,12 @@ class RegressorForm:
         if self.geometry and (not self.caster or len(self.geometry) < 4 or len(self.geometry) % 2):
             raise ValueError("caster geometry is (r, b, x_1, y_1, ...) with at least one caster, caster form only")
         object.__setattr__(self, "geometry", tuple(float(v) for v in self.geometry))
+        object.__setattr__(self, "load", tuple(self.load))
+        if self.load and (not self.geometry or any(x not in LOAD_SIGNALS for x in self.load)
+                          or self.load != tuple(x for x in LOAD_SIGNALS if x in self.load)):  # fmt: skip
+            raise ValueError(
+                f"caster load signals are an ordered subset of {LOAD_SIGNALS} with a caster geometry, got {self.load}"
+            )
 
     @property
     def n_casters(self) -> int:
@@ -98,7 +117,27 @@ class RegressorForm:
             return ()
         if not self.geometry:
             return ((8, 8, 1), (9, 9, -1))
-        return tuple(item for k in range(self.n_casters) for item in ((8 + 2 * k, 8 + k, 1), (9 + 2 * k, 8 + k, -1)))
+        big_k = self.n_casters
+        drag = tuple(item for k in range(big_k) for item in ((8 + 2 * k, 8 + k, 1), (9 + 2 * k, 8 + k, -1)))
+        n_load = big_k * len(self.load)  # caster k, signal l: parameter 8 + K + k L + l, columns after the drag's
+        load = tuple(item for j in range(n_load) for item in (
+            (8 + 2 * big_k + 2 * j, 8 + big_k + j, 1), (9 + 2 * big_k + 2 * j, 8 + big_k + j, -1)))  # fmt: skip
+        return drag + load
+
+    @property
+    def derivative_columns(self) -> tuple[tuple[int, int], ...]:
+        """(regressor column, signal) of the columns c(eta) x phi' whose phi' is a derivative: signal 0 for
+        phi = v (``dv``), 1 for phi = w (``dw``).  The observer carries them through its filters without
+        differentiating (:func:`filter_regressor`)."""
+        if not self.load:
+            return ()
+        out = []
+        for col, param, _ in self.caster_map:
+            if param >= 8 + self.n_casters:
+                signal = self.load[(param - 8 - self.n_casters) % len(self.load)]
+                if signal in DERIVATIVE_SIGNALS:
+                    out.append((col, DERIVATIVE_SIGNALS.index(signal)))
+        return tuple(out)
 
     @property
     def n_columns(self) -> int:
@@ -109,7 +148,7 @@ class RegressorForm:
         """Number of base parameters: 8, plus Cv, Cw (two-term caster model) or D_1..D_K (geometric)."""
         if not self.caster:
             return 8
-        return 8 + (self.n_casters if self.geometry else 2)
+        return 8 + (self.n_casters * (1 + len(self.load)) if self.geometry else 2)
 
     @property
     def base_names(self) -> tuple[str, ...]:
@@ -117,7 +156,8 @@ class RegressorForm:
             return THETA0_NAMES
         if not self.geometry:
             return THETA0_NAMES + CASTER_NAMES
-        return THETA0_NAMES + tuple(f"D{k + 1}" for k in range(self.n_casters))
+        drag = tuple(f"D{k + 1}" for k in range(self.n_casters))
+        return THETA0_NAMES + drag + tuple(f"D{k + 1}{x}" for k in range(self.n_casters) for x in self.load)
 
     @property
     def column_names(self) -> tuple[str, ...]:
@@ -127,6 +167,8 @@ class RegressorForm:
             caster: tuple[str, ...] = ("-sgn(eta_1+eta_2)", "-sgn(eta_1-eta_2)")
         else:
             caster = tuple(f"-drag{k + 1}_{part}" for k in range(self.n_casters) for part in ("v", "w"))
+            caster += tuple(f"-drag{k + 1}_{part}*{x}" for k in range(self.n_casters) for x in self.load
+                            for part in ("v", "w"))  # fmt: skip
         return (*_COMMON_COLUMNS, "-sgn(eta_1)", "-sgn(eta_2)", *caster)
 
     def theta_names(self) -> list[str]:
@@ -135,7 +177,10 @@ class RegressorForm:
 
     @property
     def friction(self) -> str:
-        return "wheel+caster" if self.caster else "wheel"
+        """The friction model: ``wheel``, ``wheel+caster``, or ``wheel+caster+load`` (a drag that follows the load)."""
+        if not self.caster:
+            return "wheel"
+        return "wheel+caster+load" if self.load else "wheel+caster"
 
     def to_dict(self) -> dict[str, object]:
         out: dict[str, object] = {
@@ -144,17 +189,34 @@ class RegressorForm:
         if self.geometry:
             out["caster_geometry"] = {"r": self.geometry[0], "b": self.geometry[1], "casters": [
                 list(self.geometry[2 + 2 * k : 4 + 2 * k]) for k in range(self.n_casters)]}  # fmt: skip
+        if self.load:
+            out["caster_load"] = list(self.load)
         return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> RegressorForm:
         """The form recorded by :meth:`to_dict` (an identify result's ``theta.form``), friction model included."""
-        caster = data.get("friction") == "wheel+caster"
+        caster = data.get("friction") in ("wheel+caster", "wheel+caster+load")
         geometry: tuple[float, ...] = ()
         if caster and data.get("caster_geometry"):
             g = data["caster_geometry"]
             geometry = (g["r"], g["b"], *[v for xy in g["casters"] for v in xy])
-        return cls(data["kind"], tuple(data.get("signs", (1, 1))), caster=caster, geometry=geometry)
+        load = tuple(data.get("caster_load", ())) if geometry else ()
+        return cls(data["kind"], tuple(data.get("signs", (1, 1))), caster=caster, geometry=geometry, load=load)
+
+    def without_load(self) -> RegressorForm:
+        """The same form without the load-transfer terms (its first :attr:`n_base` - K L base parameters)."""
+        return RegressorForm(self.kind, self.signs, caster=self.caster, geometry=self.geometry)
+
+
+def load_signals(geometry: tuple[float, ...]) -> tuple[str, ...]:
+    """The load signals (:data:`LOAD_SIGNALS`) of the ``wheel+caster+load`` model for casters at ``geometry``
+    (r, b, x_1, y_1, ...): the pitch's v' and w^2 when every caster is on the centre line (|y_k| < 1 mm: a roll
+    moment is taken by the wheels, whose contacts are the only supports off the line, and w' enters only through
+    the centre of mass's small d_y), all four otherwise."""
+    if all(abs(y) < 1e-3 for y in geometry[3::2]):
+        return ("dv", "w2")
+    return LOAD_SIGNALS
 
 
 def choose_form(eta: np.ndarray) -> RegressorForm:
@@ -283,8 +345,27 @@ def intermediate_parameters(theta0: np.ndarray, form: RegressorForm) -> np.ndarr
     return np.array(rows)
 
 
-def regressor(eta: np.ndarray, tau: np.ndarray, form: RegressorForm) -> np.ndarray:
-    """g(eta, tau) (n, p) of Eq. (25) for eta (n, 2) rad/s and tau (n, 2) N m."""
+def regressor(eta: np.ndarray, tau: np.ndarray, form: RegressorForm, eta_dot: np.ndarray | None = None) -> np.ndarray:
+    """g(eta, tau) (n, p) of Eq. (25) for eta (n, 2) rad/s and tau (n, 2) N m.
+
+    A form whose caster drag follows v' or w' (``form.derivative_columns``) needs eta_dot (n, 2) rad/s^2; the
+    observer, which does not differentiate, uses :func:`filter_regressor` instead."""
+    return _regressor(eta, tau, form, eta_dot, multiplier=False)
+
+
+def filter_regressor(eta: np.ndarray, tau: np.ndarray, form: RegressorForm) -> np.ndarray:
+    """What the observer's filters take per sample (n, p): g(eta, tau) of :func:`regressor`, except that a column
+    c(eta) phi' of ``form.derivative_columns`` holds its multiplier c(eta).
+
+    The filters then take that column's input over a step from t_a to t_b as (phi_b - phi_a) / (t_b - t_a) times the
+    first-order-hold weights of c: the exact filter of c phi' when c and phi are linear over the step, as every
+    column is taken to be (:func:`wmrid.estimators.observer.observer_step`).  No derivative is formed: summed over
+    steps the phi differences telescope, so a noisy phi enters the filtered column once, not divided by the step
+    (with c constant, filtered phi' = phi - k filtered phi, exactly)."""
+    return _regressor(eta, tau, form, None, multiplier=True)
+
+
+def _regressor(eta, tau, form, eta_dot, multiplier):
     e1, e2 = eta[:, 0], eta[:, 1]
     cols = [tau[:, 0], tau[:, 1], e2 * e2 - e1 * e2, e1 * e1 - e1 * e2, -e1, -e2]
     if form.kind == "paper":
@@ -292,8 +373,15 @@ def regressor(eta: np.ndarray, tau: np.ndarray, form: RegressorForm) -> np.ndarr
     else:
         cols += [-np.sign(e1), -np.sign(e2)]
         if form.caster:
-            cols += list(-caster_columns(eta, form).T)
+            cols += list(-caster_columns(eta, form, eta_dot, multiplier=multiplier).T)
     return np.stack(cols, axis=1)
+
+
+def platform_speeds(eta: np.ndarray, r: float, b: float) -> tuple[np.ndarray, np.ndarray]:
+    """(v, w): the platform's forward speed (m/s) and turn rate (rad/s) from eta (..., 2) rad/s (or their
+    derivatives from eta_dot), for wheel radius r and half track b, m."""
+    e1, e2 = eta[..., 0], eta[..., 1]
+    return 0.5 * r * (e1 + e2), r / (2.0 * b) * (e1 - e2)
 
 
 def coriolis_torque(eta: np.ndarray, vc: float) -> np.ndarray:
@@ -302,19 +390,41 @@ def coriolis_torque(eta: np.ndarray, vc: float) -> np.ndarray:
     return vc * np.stack([e1 * e2 - e2 * e2, e1 * e2 - e1 * e1], axis=-1)
 
 
-def friction_torque(eta: np.ndarray, theta0: np.ndarray, form: RegressorForm | None = None) -> np.ndarray:
+def friction_torque(
+    eta: np.ndarray, theta0: np.ndarray, form: RegressorForm | None = None, eta_dot: np.ndarray | None = None
+) -> np.ndarray:
     """F_v eta + F_d sgn(eta) (n, 2), N m, Eqs. (15)-(17), plus the caster drag when theta0 has more than 8
-    entries (``form`` says which caster model; None: the two-term one)."""
+    entries (``form`` says which caster model; None: the two-term one).  A drag that follows v' or w' (the load
+    terms of ``form``) needs eta_dot (n, 2) rad/s^2."""
     fv = theta0[4:6]
     fd = theta0[6:8]
     out = fv * eta + fd * np.sign(eta)
     if len(theta0) > 8:
         form = form if form is not None else RegressorForm("general", caster=True)
-        cols = caster_columns(np.atleast_2d(eta), form)  # (n, q)
-        drag = np.zeros(np.atleast_2d(eta).shape)
+        e2d = np.atleast_2d(eta)
+        cols = caster_columns(e2d, form, None if eta_dot is None else np.atleast_2d(eta_dot))  # (n, q)
+        drag = np.zeros(e2d.shape)
         for j, (_, param, pattern) in enumerate(form.caster_map):
             drag += theta0[param] * cols[:, j : j + 1] * np.array([1.0, float(pattern)])
         out = out + drag.reshape(np.shape(out))
+    return out
+
+
+def load_inertia(eta: np.ndarray, theta0: np.ndarray, form: RegressorForm) -> np.ndarray:
+    """A(eta) (n, 2, 2), kg m^2: the part of the caster drag's wheel torques that is linear in eta' (its v' and w'
+    load terms), so that the drag is friction_torque(eta, theta0, form, eta_dot) = (its value at eta_dot = 0)
+    + A(eta) eta_dot.  Zero without such terms."""
+    eta = np.atleast_2d(eta)
+    out = np.zeros((len(eta), 2, 2))
+    derivative = dict(form.derivative_columns)
+    if not derivative:
+        return out
+    r, b = form.geometry[0], form.geometry[1]
+    grads = (np.array([0.5 * r, 0.5 * r]), np.array([r / (2.0 * b), -r / (2.0 * b)]))  # d v / d eta, d w / d eta
+    mult = caster_columns(eta, form, multiplier=True)
+    for j, (col, param, pattern) in enumerate(form.caster_map):
+        if col in derivative:
+            out += theta0[param] * mult[:, j, None, None] * np.outer([1.0, float(pattern)], grads[derivative[col]])
     return out
 
 
@@ -322,7 +432,9 @@ def friction_torque(eta: np.ndarray, theta0: np.ndarray, form: RegressorForm | N
 DRAG_SPEED = 1e-3
 
 
-def caster_columns(eta: np.ndarray, form: RegressorForm) -> np.ndarray:
+def caster_columns(
+    eta: np.ndarray, form: RegressorForm, eta_dot: np.ndarray | None = None, *, multiplier: bool = False
+) -> np.ndarray:
     """The caster drag's columns (n, q) for eta (n, 2) rad/s, in the order of ``form.caster_map``.
 
     A caster's rolling drag is a force D against the velocity of its contact with the ground.  Mapped to the
@@ -338,19 +450,42 @@ def caster_columns(eta: np.ndarray, form: RegressorForm) -> np.ndarray:
     * Geometric model (r, b and each caster's contact (x_k, y_k) known): its contact moves at
       u = (v - w y_k, w x_k), the drag is -D_k u/|u| (|u| regularised by DRAG_SPEED), so per newton of drag
       a = (r/2) u_x/|u| and c = (r/(2b)) (x_k u_y - y_k u_x)/|u|: exact for a ball caster of constant load.
+      (a and c are r/2 and r/(2b) times d|u|/dv and d|u|/dw: the drag's power is D_k |u|.)
+    * Load transfer (``form.load``): a ball caster's drag is its rolling resistance times its normal load N_k,
+      and N_k moves with the platform's accelerations.  The supports' normal forces balance gravity and the
+      moments of the bodies' inertial forces -m_i a_i, which act at the bodies' heights above the ground; a
+      body at (x_i, y_i) in the platform frame accelerates by a_x = v' - x_i w^2 - y_i w', a_y = v w + x_i w' -
+      y_i w^2 (plus the wheels' and rotors' gyroscopic moment, in v w, and the motors' reaction, in eta'), so
+      with supports whose stiffness does not change with load every caster's load, and its drag, is
+      D_k(t) = D_k + D{k}dv v' + D{k}w2 w^2 + D{k}vw v w + D{k}dw w'  (each term a caster's share of a moment
+      about the ground; a caster on the centre line takes only the pitch's v', w^2 and, through d_y, w').  The
+      drag's columns times each signal are the load term's columns; linear in the new parameters, so the
+      estimator stays linear.  The v' and w' columns need eta_dot (n, 2) rad/s^2; ``multiplier`` leaves them
+      without the derivative (what the observer's filters take, :func:`filter_regressor`).
     """
     e1, e2 = eta[:, 0], eta[:, 1]
     if not form.geometry:
         return np.stack([np.sign(e1 + e2), np.sign(e1 - e2)], axis=1)
     r, b = form.geometry[0], form.geometry[1]
-    v = 0.5 * r * (e1 + e2)
-    w = r / (2.0 * b) * (e1 - e2)
+    v, w = platform_speeds(eta, r, b)
     cols = []
     for k in range(form.n_casters):
         x, y = form.geometry[2 + 2 * k], form.geometry[3 + 2 * k]
         ux, uy = v - w * y, w * x
         norm = np.sqrt(ux * ux + uy * uy + DRAG_SPEED**2)
         cols += [0.5 * r * ux / norm, r / (2.0 * b) * (x * uy - y * ux) / norm]
+    if form.load:
+        signals = {"w2": w * w, "vw": v * w}
+        if not multiplier:
+            if eta_dot is None:
+                raise ValueError("a caster drag that follows v' or w' needs eta_dot")
+            signals["dv"], signals["dw"] = platform_speeds(np.asarray(eta_dot, dtype=float), r, b)
+        else:
+            signals["dv"] = signals["dw"] = np.ones_like(v)
+        drag = list(cols)
+        for k in range(form.n_casters):
+            for x in form.load:
+                cols += [drag[2 * k] * signals[x], drag[2 * k + 1] * signals[x]]
     return np.stack(cols, axis=1)
 
 
@@ -358,9 +493,16 @@ def wheel_acceleration(
     eta: np.ndarray, tau: np.ndarray, theta0: np.ndarray, form: RegressorForm | None = None
 ) -> np.ndarray:
     """The direct model eta_dot (n, 2), rad/s^2, Eq. (20) without disturbance (``form``: the caster model of a
-    theta0 longer than 8, see :func:`friction_torque`)."""
-    rhs = tau - coriolis_torque(eta, theta0[3]) - friction_torque(eta, theta0, form)
-    return rhs @ inverse_inertia(theta0).T
+    theta0 longer than 8, see :func:`friction_torque`).  A drag that follows v' or w' adds A(eta) eta_dot
+    (:func:`load_inertia`) to the inertia's torque: then (M + A(eta)) eta_dot = tau - V - F is solved per sample."""
+    if form is None or not form.derivative_columns or len(theta0) <= 8:
+        rhs = tau - coriolis_torque(eta, theta0[3]) - friction_torque(eta, theta0, form)
+        return rhs @ inverse_inertia(theta0).T
+    eta2 = np.atleast_2d(eta)
+    still = friction_torque(eta2, theta0, form, np.zeros_like(eta2))  # the drag at eta_dot = 0
+    rhs = np.atleast_2d(tau) - coriolis_torque(eta2, theta0[3]) - still
+    big_m = np.linalg.inv(inverse_inertia(theta0)) + load_inertia(eta2, theta0, form)
+    return np.linalg.solve(big_m, rhs[..., None])[..., 0].reshape(np.shape(tau))
 
 
 def wheel_torque(
@@ -368,4 +510,5 @@ def wheel_torque(
 ) -> np.ndarray:
     """The inverse model tau (n, 2), N m, Eq. (9) without disturbance (``form`` as :func:`wheel_acceleration`)."""
     big_m = np.linalg.inv(inverse_inertia(theta0))
-    return eta_dot @ big_m.T + coriolis_torque(eta, theta0[3]) + friction_torque(eta, theta0, form)
+    friction = friction_torque(eta, theta0, form, eta_dot if form is not None and form.load else None)
+    return eta_dot @ big_m.T + coriolis_torque(eta, theta0[3]) + friction

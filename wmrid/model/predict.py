@@ -338,7 +338,16 @@ def unsimulated(form: RegressorForm | None) -> str | None:
             "no fit: the identified caster drag (Cv, Cw) cannot be simulated without the casters' positions; give "
             "a robot file with [[caster]] tables to validate it"
         )
+    if form is not None and form.load:
+        return LOAD_REFUSAL
     return None
+
+
+#: Why the predictor does not simulate the ``wheel+caster+load`` model.
+LOAD_REFUSAL = (
+    "no fit: the predictor does not simulate a caster drag that follows the load (friction wheel+caster+load); "
+    "identify with --friction wheel+caster to validate"
+)
 
 
 def caster_array(theta0: np.ndarray, form: RegressorForm | None) -> np.ndarray:
@@ -354,6 +363,8 @@ def caster_array(theta0: np.ndarray, form: RegressorForm | None) -> np.ndarray:
         return NO_CASTERS
     if not form.geometry:
         raise UsageError(TWO_TERM_REFUSAL)
+    if form.load:
+        raise UsageError(LOAD_REFUSAL)
     geo = form.geometry
     cas = [geo[0], geo[1]]
     for k in range(form.n_casters):

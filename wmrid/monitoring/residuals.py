@@ -51,7 +51,10 @@ class Signals:
         if key not in self._cache:
             if self.eta is None or self.smooth is None:
                 raise ValueError("these signals were made without the log's speeds: no caster columns")
-            cols = self.smooth(model.caster_columns(self.eta, form), which)  # (m, q)
+            eta_dot = None  # a drag that follows v' or w': the speeds' central difference, smoothed with the rest
+            if form.derivative_columns:
+                eta_dot = np.gradient(self.eta, 1.0 / self.log_rate, axis=0)
+            cols = self.smooth(model.caster_columns(self.eta, form, eta_dot), which)  # (m, q)
             extra = np.zeros((len(base), 2, form.n_base - 8))
             for j, (_, param, pattern) in enumerate(form.caster_map):
                 extra[:, 0, param - 8] += cols[:, j]
