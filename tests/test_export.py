@@ -39,11 +39,14 @@ def saved(tmp_path_factory):
 def _forms():
     """(form, theta0) for the wheel model, the two-term caster model and the geometric one with two casters."""
     theta0 = dm.base_parameters(BUILTIN_ROBOTS["paper"].cad)
-    geometric = dm.RegressorForm("general", caster=True, geometry=(0.16, 0.23, 0.5343, 0.02, -0.5343, -0.05))
+    geometry = (0.16, 0.23, 0.5343, 0.02, -0.5343, -0.05)
+    geometric = dm.RegressorForm("general", caster=True, geometry=geometry)
+    loaded = dm.RegressorForm("general", caster=True, geometry=geometry, load=("dv", "w2", "vw", "dw"))
     return [
         (dm.RegressorForm("general"), theta0),
         (dm.RegressorForm("general", caster=True), np.concatenate([theta0, [0.12, -0.03]])),
         (geometric, np.concatenate([theta0, [2.9, 0.4]])),
+        (loaded, np.concatenate([theta0, [2.9, 0.4], [-0.4, 0.05, 0.2, -0.03, 0.1, -0.02, 0.03, 0.01]])),
     ]
 
 
@@ -56,7 +59,7 @@ def _model(form, theta0):
                            provenance={"result": 'odd "name"\nwith a newline', "log": "x.csv"})  # fmt: skip
 
 
-@pytest.mark.parametrize("which", [0, 1, 2], ids=["wheel", "two-term", "geometric"])
+@pytest.mark.parametrize("which", [0, 1, 2, 3], ids=["wheel", "two-term", "geometric", "load"])
 def test_python_function_reproduces_the_inverse_dynamics(tmp_path, which):
     """wheel_torques(eta, eta_dot) of the written .py against wmrid.model.dynamics.wheel_torque on 2,000 random
     states (speeds through zero included): to 1e-12 relative to the torques' scale (the same sums in another order)."""
@@ -76,7 +79,7 @@ def test_python_function_reproduces_the_inverse_dynamics(tmp_path, which):
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.max(np.abs(want)))
 
 
-@pytest.mark.parametrize("which", [0, 1, 2], ids=["wheel", "two-term", "geometric"])
+@pytest.mark.parametrize("which", [0, 1, 2, 3], ids=["wheel", "two-term", "geometric", "load"])
 def test_yaml_reproduces_the_inverse_dynamics(tmp_path, which):
     """The YAML read back by ruamel.yaml: M eta_dot + V + F_v eta + F_d sgn(eta) + drag from its fields (an independent
     evaluation) against wheel_torque to 1e-12; the covariance and values read back exactly."""
@@ -101,11 +104,19 @@ def test_yaml_reproduces_the_inverse_dynamics(tmp_path, which):
     elif drag:
         r, b, eps = drag["r"], drag["b"], drag["regularisation_speed"]
         v, w = 0.5 * r * (e1 + e2), r / (2 * b) * (e1 - e2)
+        dv = 0.5 * r * (eta_dot[:, 0] + eta_dot[:, 1])
+        dw = r / (2 * b) * (eta_dot[:, 0] - eta_dot[:, 1])
+        signals = {"dv": dv, "w2": w * w, "vw": v * w, "dw": dw}
         for c in drag["casters"]:
             ux, uy = v - w * c["y"], w * c["x"]
             norm = np.sqrt(ux**2 + uy**2 + eps**2)
             a, cc = 0.5 * r * ux / norm, r / (2 * b) * (c["x"] * uy - c["y"] * ux) / norm
-            tau += c["D"] * np.stack([a + cc, a - cc], axis=1)
+            force = c["D"] + sum(coef * signals[name] for name, coef in c["load"].items())
+            tau += (
+                force[:, None] * np.stack([a + cc, a - cc], axis=1)
+                if np.ndim(force)
+                else force * np.stack([a + cc, a - cc], axis=1)
+            )
     want = dm.wheel_torque(eta, eta_dot, theta0, form)
     np.testing.assert_allclose(tau, want, rtol=0, atol=1e-12 * np.max(np.abs(want)))
 

@@ -304,6 +304,8 @@ def _physical(found: Any, geometry: Any, simulator: bool, said: list[str]) -> Ph
             x, y = found.form.geometry[2 + 2 * k], found.form.geometry[3 + 2 * k]
             meanings[f"D{k + 1}"] = (f"rolling drag force of the casters at (+-{abs(x):.4g}, {y:.4g}) m together "
                                      "(their drag columns are the same)")  # fmt: skip
+            for sig, what in (("dv", "v'"), ("w2", "w^2"), ("vw", "v w"), ("dw", "w'")):
+                meanings[f"D{k + 1}{sig}"] = f"how D{k + 1} grows with {what} (the casters' load moving)"
     physical = physical_from_base(np.asarray(est.theta0), np.asarray(est.cov), geometry, base_names, meanings)
     for name in physical.clipped:
         q = physical.quantities[name]
@@ -343,8 +345,21 @@ def check_fit(
     starts = np.unique(starts[starts < len(t) - 1])
     p = physical.parameters
     robot_casters = robot_obj.casters or default_casters(p)
-    forces = None
-    if casters:
+    forces, drag = None, None
+    if casters and found.form.load:
+        # a drag that follows the load: the prototype's own law, resistance x the contact's normal load, with the
+        # resistance that gives D_k at rest (shared by the casters of its group, as the robot-file export does)
+        from wmrid.exports.robot_file import _same_columns
+        from wmrid.sim.multibody import settled_caster_loads
+
+        loads = settled_caster_loads(p, robot_casters)
+        drag = np.zeros(len(robot_casters))
+        for c in casters:
+            group = [i for i, k in enumerate(robot_casters) if _same_columns(k, c) and k.kind == "ball"]
+            total = sum(loads[i] for i in group)
+            for i in group:
+                drag[i] = max(c["D"], 0.0) / total if total > 0 else 0.0
+    elif casters:
         # the identified drag force D_k of each caster of the geometric model, applied as a constant force against
         # its contact's motion (the model's own law); a caster of the file at the same place carries it
         forces = np.zeros(len(robot_casters))
@@ -353,7 +368,7 @@ def check_fit(
                                                                         robot_casters[i].y - c["y"]))  # fmt: skip
             forces[k] += c["D"]
     settings = dataclasses.replace(_settings(), caster_resistance=0.0)
-    mj = drive_windows(p, robot_casters, t, eta, tau, starts, forces=forces, settings=settings)
+    mj = drive_windows(p, robot_casters, t, eta, tau, starts, drag=drag, forces=forces, settings=settings)
     est = found.estimate
     form = found.form if len(est.theta0) == found.form.n_base else None
     why = unsimulated(form)

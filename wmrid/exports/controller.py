@@ -61,16 +61,23 @@ class ControllerModel:
         out.update(M11=float(big[0]), M12=float(big[1]), M22=float(big[2]))
         return out
 
-    def casters(self) -> list[dict[str, float]]:
-        """The geometric caster model's casters: [{"x", "y", "D", "D_std"}] (m, m, N); [] otherwise."""
+    def casters(self) -> list[dict[str, Any]]:
+        """The geometric caster model's casters: [{"x", "y", "D", "D_std", "load": {signal: (value, std)}}] (m, m, N;
+        the load terms of ``wheel+caster+load`` in their units, :data:`wmrid.model.dynamics.LOAD_SIGNALS`); []
+        otherwise."""
         if not self.form.caster or not self.form.geometry:
             return []
         std = self.std()
         out = []
-        for k in range(self.form.n_casters):
+        big_k, signals = self.form.n_casters, tuple(self.form.load)
+        for k in range(big_k):
             name = f"D{k + 1}"
             x, y = self.form.geometry[2 + 2 * k], self.form.geometry[3 + 2 * k]
-            out.append({"x": x, "y": y, "D": float(self.theta0[8 + k]), "D_std": std[name]})
+            load = {
+                sig: (float(self.theta0[8 + big_k + k * len(signals) + j]), std[f"{name}{sig}"])
+                for j, sig in enumerate(signals)
+            }
+            out.append({"x": x, "y": y, "D": float(self.theta0[8 + k]), "D_std": std[name], "load": load})
         return out
 
 
@@ -129,13 +136,17 @@ def yaml_text(cm: ControllerModel) -> str:
     if cm.form.caster and cm.form.geometry:
         r, b = cm.form.geometry[:2]
         lines += [
-            "caster_drag:  # each caster's drag force D (N) against the velocity of its contact point (x, y), m",
+            "caster_drag:  # each caster's drag force D (N) against the velocity of its contact point (x, y), m;",
+            "  # with load terms the force is D + sum(load[s] * s) over s in dv = v', w2 = w^2, vw = v w, dw = w'",
+            "  # (v = r (eta_1 + eta_2) / 2, w = r (eta_1 - eta_2) / (2 b)): the drag follows the caster's load",
             "  model: geometric",
             f"  r: {_num(r)}",
             f"  b: {_num(b)}",
             f"  regularisation_speed: {_num(DRAG_SPEED)}  # m/s: |u| -> sqrt(|u|^2 + this^2)",
             "  casters:",
-            *[f"    - {{x: {_num(c['x'])}, y: {_num(c['y'])}, D: {_num(c['D'])}, D_std: {_num(c['D_std'])}}}"
+            *[f"    - {{x: {_num(c['x'])}, y: {_num(c['y'])}, D: {_num(c['D'])}, D_std: {_num(c['D_std'])}, load: "
+              + "{" + ", ".join(f"{sig}: {_num(v)}" for sig, (v, _) in c["load"].items()) + "}, load_std: {"
+              + ", ".join(f"{sig}: {_num(e)}" for sig, (_, e) in c["load"].items()) + "}}"
               for c in cm.casters()],
         ]  # fmt: skip
     elif cm.form.caster:
@@ -170,10 +181,17 @@ def python_text(cm: ControllerModel) -> str:
         r, b = cm.form.geometry[:2]
         geometry = f"R, B = {_py(r)}, {_py(b)}  # m: wheel radius, half track"
         rows = "".join(
-            f"    ({_py(c['x'])}, {_py(c['y'])}, {_py(c['D'])}),  # D std {_std_text(c['D_std'])} N\n"
+            f"    ({_py(c['x'])}, {_py(c['y'])}, {_py(c['D'])}, ("
+            + "".join(f"({sig!r}, {_py(v)}), " for sig, (v, _) in c["load"].items())
+            + f")),  # D std {_std_text(c['D_std'])} N"
+            + "".join(f"; {sig} std {_std_text(e)}" for sig, (_, e) in c["load"].items())
+            + "\n"
             for c in cm.casters()
         )
-        caster = f"CASTERS = (  # (x m, y m, drag force D N) of each caster's contact\n{rows})"
+        caster = (
+            "CASTERS = (  # (x m, y m, drag force D N, load terms ((signal, coefficient), ...)) of each caster\n"
+            f"{rows})"
+        )
     elif cm.form.caster:
         two_term = (
             f"TWO_TERM = ({_py(th[8])}, {_py(th[9])})  # (Cv, Cw) N m, std {_std_text(std['Cv'])}, "
@@ -222,7 +240,10 @@ def wheel_torques(eta, eta_dot):
         t2 += cv * _sgn(e1 + e2) - cw * _sgn(e1 - e2)
     v = 0.5 * R * (e1 + e2)
     w = R / (2.0 * B) * (e1 - e2) if B else 0.0
-    for x, y, force in CASTERS:
+    # the signals a caster's load (and so its drag) follows: v', w^2, v w, w'
+    signals = {{"dv": 0.5 * R * (a1 + a2), "w2": w * w, "vw": v * w, "dw": R / (2.0 * B) * (a1 - a2) if B else 0.0}}
+    for x, y, force, load in CASTERS:
+        force = force + sum(coefficient * signals[name] for name, coefficient in load)
         ux, uy = v - w * y, w * x
         norm = math.sqrt(ux * ux + uy * uy + DRAG_SPEED * DRAG_SPEED)
         a = 0.5 * R * ux / norm
