@@ -1,0 +1,69 @@
+"""Reliability, round three (issue 30), second half: field paths that name message fields only; a full standard
+output; outputs of a run stopped by a signal; Markdown reports that escape what came from an input; MuJoCo's and
+matplotlib's own warnings; fleet failures said on stderr; a read-only install.
+
+Real files, real processes and real signals; ``/dev/full`` stands in for a full filesystem.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tests import bagutil
+from tests.cliutil import assert_clean_error, wmrid
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE_MCAP = ROOT / "sample_logs" / "paper_sinusoid.mcap"
+SAMPLE_CSV = ROOT / "sample_logs" / "paper_sinusoid.csv"
+
+# ---------------------------------------------------------------------------------------------------------------
+# Field paths name message fields and selectors only
+
+
+def _columns(eta_r: str) -> str:
+    return (
+        f"eta_r=/joint_states:{eta_r},eta_l=/joint_states:velocity@left_wheel_joint,"
+        "tau_r=/joint_states:effort@right_wheel_joint,tau_l=/joint_states:effort@left_wheel_joint"
+    )
+
+
+@pytest.fixture(scope="module")
+def short_bags(tmp_path_factory) -> dict[str, Path]:
+    """3 s of the sample as a ROS 1 bag (rosbags' dataclasses), a db3 folder and the MCAP file itself (mcap_ros2's
+    namespaces): the two kinds of decoded message a field path walks."""
+    folder = tmp_path_factory.mktemp("fieldpaths")
+    messages = bagutil.recording(SAMPLE_MCAP)[:3000]
+    return {
+        "ros1": bagutil.write_ros1(folder / "short.bag", messages),
+        "db3": bagutil.write_rosbag2(folder / "db3", messages),
+        "mcap": bagutil.write_rosbag2(folder / "mcapdir", messages, "mcap") / "mcapdir.mcap",
+    }
+
+
+@pytest.mark.parametrize("kind", ["ros1", "db3", "mcap"])
+@pytest.mark.parametrize(
+    ("path", "why"),
+    [
+        ("__class__.__basicsize__", "/joint_states has no field '__class__' (its fields: header, name, position"),
+        ("velocity.size", "/joint_states:velocity is an array, with no field 'size'"),
+        ("velocity.__len__", "with no field '__len__'"),
+        ("velocity", "/joint_states:velocity is an array (an element is [i] or @NAME), not a number"),
+        ("header.stamp", "/joint_states:header.stamp is a message"),
+        ("header.stamp.sec[0]", "/joint_states:header.stamp.sec is a number: it takes no [i] or @NAME"),
+    ],
+)
+def test_a_field_path_reaches_no_python_attribute(short_bags, kind, path, why):
+    """``__class__.__basicsize__`` was accepted (exit 0, m11 = -0.092) and ``velocity.size`` read numpy's attribute;
+    now each is one line naming the path, the topic and the fields there are."""
+    out = wmrid("identify", str(short_bags[kind]), "--columns", _columns(path), "--format", "json")
+    line = assert_clean_error(out, 2, "wmrid:", f"/joint_states:{path}", why)
+    assert "does not name a number of the messages on /joint_states" in line
+
+
+def test_a_good_field_path_still_reads(short_bags):
+    out = wmrid("identify", str(short_bags["db3"]), "--columns", _columns("velocity@right_wheel_joint"), "--format",
+                "json")  # fmt: skip
+    assert out.returncode in (0, 1), out.stderr
+    assert b"Traceback" not in out.stderr
