@@ -7,6 +7,9 @@ Real files, real processes and real signals; ``/dev/full`` stands in for a full 
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -67,3 +70,59 @@ def test_a_good_field_path_still_reads(short_bags):
                 "json")  # fmt: skip
     assert out.returncode in (0, 1), out.stderr
     assert b"Traceback" not in out.stderr
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Standard output on a full filesystem
+
+
+def _run(*args: str, stdout=None, env_extra: dict[str, str] | None = None, preexec=None, timeout: float = 120):
+    env = dict(os.environ, COLUMNS="100", **(env_extra or {}))
+    return subprocess.run(
+        [sys.executable, "-m", "wmrid", *args], stdout=stdout if stdout is not None else subprocess.PIPE,
+        stderr=subprocess.PIPE, env=env, preexec_fn=preexec, timeout=timeout,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("unbuffered", ["1", ""])
+def test_a_short_write_to_standard_output_is_an_error_not_truncated_json(tmp_path, unbuffered):
+    """A file on a filesystem with 16 KB left: the kernel takes the first 16 KB of the JSON, the next write fails.
+    Under ``PYTHONUNBUFFERED=1`` Python dropped the rest of a short write silently (exit 0, truncated JSON); now
+    every byte is written or the run ends 1 with one line.  The file-size limit (RLIMIT_FSIZE) stands in for the
+    full filesystem: the same short write, then EFBIG instead of ENOSPC."""
+    import resource
+
+    def limit() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (16384, 16384))
+
+    target = tmp_path / "out.json"
+    with open(target, "wb") as fh:
+        out = _run("identify", str(SAMPLE_CSV), "--robot", "paper", "--format", "json", stdout=fh,
+                   env_extra={"PYTHONUNBUFFERED": unbuffered}, preexec=limit)  # fmt: skip
+    err = out.stderr.decode()
+    assert out.returncode == 1, err
+    assert err.splitlines() == [err.strip()]
+    assert err.startswith("wmrid: ")
+    assert "cannot write standard output" in err
+    assert "incomplete" in err
+    assert target.stat().st_size == 16384
+
+
+def test_dev_full_as_standard_output_is_one_line_and_a_closed_pipe_stays_quiet():
+    with open("/dev/full", "wb") as full:
+        out = _run("identify", str(SAMPLE_CSV), "--robot", "paper", stdout=full, env_extra={"PYTHONUNBUFFERED": "1"})
+    err = out.stderr.decode()
+    assert out.returncode == 1, err
+    assert err.count("\n") == 1, err
+    assert "No space left on device" in err
+    # | head -c 10: the reader has seen enough, exit 0 and nothing on stderr
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "wmrid", "identify", str(SAMPLE_CSV), "--robot", "paper", "--format", "json"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=dict(os.environ, PYTHONUNBUFFERED="1"),
+    )  # fmt: skip
+    head = proc.stdout.read(10)
+    proc.stdout.close()
+    assert proc.wait(timeout=120) == 0
+    assert head == b'{\n  "schem'
+    with proc.stderr:
+        assert proc.stderr.read() == b""
