@@ -8,8 +8,10 @@ Real files, real processes and real signals; ``/dev/full`` stands in for a full 
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -126,3 +128,49 @@ def test_dev_full_as_standard_output_is_one_line_and_a_closed_pipe_stays_quiet()
     assert head == b'{\n  "schem'
     with proc.stderr:
         assert proc.stderr.read() == b""
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# A signal while identify writes its two outputs
+
+
+@pytest.fixture(scope="module")
+def short_log(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("short") / "s.csv"
+    assert wmrid("simulate", "--duration", "4", "-o", str(path)).returncode == 0
+    return path
+
+
+@pytest.mark.parametrize("signame", ["SIGTERM", "SIGHUP"])
+def test_a_signal_between_the_two_outputs_leaves_neither(tmp_path, short_log, signame):
+    """``identify -o r.json --mcap-out est.mcap``, the signal sent the moment the estimates' temporary file appears
+    (r.json is complete then; before issue 30 it stood alone afterwards).  Now both are committed together at the
+    end: the stop leaves neither, no temporary file, and the line says so."""
+    folder = tmp_path / "out"
+    folder.mkdir()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "wmrid", "identify", str(short_log), "-o", str(folder / "r.json"), "--mcap-out",
+         str(folder / "est.mcap")],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    )  # fmt: skip
+    signalled = False
+    deadline = time.monotonic() + 120
+    while proc.poll() is None and time.monotonic() < deadline:
+        if any(n.startswith(".est.mcap.") for n in os.listdir(folder)):
+            proc.send_signal(getattr(signal, signame))
+            signalled = True
+            break
+    out, err = proc.communicate(timeout=120)
+    if not signalled:
+        pytest.skip("the run ended before the estimates' temporary file could be seen")
+    number = getattr(signal, signame)
+    assert proc.returncode == 128 + number, err
+    assert err.decode() == f"wmrid: terminated by {signame}; no output was written\n"
+    assert os.listdir(folder) == []
+    assert out == b""
+
+
+def test_both_outputs_appear_when_the_run_ends(tmp_path, short_log):
+    out = wmrid("identify", str(short_log), "-o", str(tmp_path / "r.json"), "--mcap-out", str(tmp_path / "e.mcap"))
+    assert out.returncode == 0, out.stderr
+    assert sorted(os.listdir(tmp_path)) == ["e.mcap", "r.json"]
