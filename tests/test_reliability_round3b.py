@@ -7,7 +7,10 @@ Real files, real processes and real signals; ``/dev/full`` stands in for a full 
 
 from __future__ import annotations
 
+import json
 import os
+import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -174,3 +177,88 @@ def test_both_outputs_appear_when_the_run_ends(tmp_path, short_log):
     out = wmrid("identify", str(short_log), "-o", str(tmp_path / "r.json"), "--mcap-out", str(tmp_path / "e.mcap"))
     assert out.returncode == 0, out.stderr
     assert sorted(os.listdir(tmp_path)) == ["e.mcap", "r.json"]
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Markdown reports escape what came from an input
+
+HOSTILE = "x<script>alert(1)</script> <img src=x onerror=alert(2)> <!-- c\n# heading\n| a | b |\n[l](javascript:x) `t`"
+
+
+def _assert_inert(md: str, *needles: str) -> None:
+    """No raw HTML from the input, no line that the input began; the input's words are still there, escaped."""
+    for raw in ("<script", "<img", "<!--", "[l](javascript"):
+        assert raw not in md, raw
+    for line in md.splitlines():  # every line the input could have begun, by the words it holds
+        assert not re.match(r"#+ (heading|owned|x|a note)", line), line
+        assert not line.startswith("| a | b |"), line
+    for needle in needles:
+        assert needle in md, needle
+
+
+def test_a_saved_results_source_notes_and_warnings_are_escaped_in_markdown(tmp_path, short_log):
+    saved = tmp_path / "r.json"
+    assert wmrid("identify", str(short_log), "--no-history", "-o", str(saved)).returncode == 0
+    data = json.loads(saved.read_text())
+    data["source"] = HOSTILE
+    data["warnings"] = ["warning " + HOSTILE]
+    data["log"]["notes"] = ["note " + HOSTILE, "# a note that is a heading"]
+    saved.write_text(json.dumps(data))
+    before = saved.read_bytes()
+    out = wmrid("report", str(saved), "-o", str(tmp_path / "r.md"))
+    assert out.returncode == 0, out.stderr
+    md = (tmp_path / "r.md").read_text()
+    _assert_inert(md, "x&lt;script&gt;alert(1)&lt;/script&gt;", "&lt;!-- c # heading \\| a \\| b \\|")
+    assert saved.read_bytes() == before  # the input is never modified
+
+
+def test_a_log_file_name_is_escaped_in_markdown(tmp_path, short_log):
+    """The log's name reaches the title (the result's source), the result's name the provenance (command line,
+    inputs)."""
+    name = tmp_path / "run<img src=x onerror=alert(1)><!--\n# x `y` |z|.csv"
+    shutil.copy(short_log, name)
+    saved = name.with_suffix(".json")
+    assert wmrid("identify", str(name), "--no-history", "-o", str(saved)).returncode == 0
+    out = wmrid("report", str(saved), "-o", str(tmp_path / "r.md"))
+    assert out.returncode == 0, out.stderr
+    md = (tmp_path / "r.md").read_text()
+    _assert_inert(md, "run&lt;img src=x onerror=alert(1)&gt;&lt;!-- # x")
+    assert "- input <code>" in md  # not a backtick code span: the name holds a backtick and markup
+
+
+def test_a_plans_robot_name_and_warnings_are_escaped_in_markdown(tmp_path):
+    plan = ROOT / "tests" / "data" / "plan_hostile_names.json"
+    out = wmrid("report", str(plan), "-o", str(tmp_path / "p.md"))
+    assert out.returncode == 0, out.stderr
+    md = (tmp_path / "p.md").read_text()
+    _assert_inert(md, "# wmrid plan: amr&lt;script&gt;alert(1)&lt;/script&gt; # owned &lt;!-- x")
+    assert "- &lt;img src=x onerror=alert(2)&gt; # heading from a warning \\| a \\| b" in md
+
+
+def test_a_fleet_tables_robot_ids_are_escaped_in_markdown(tmp_path):
+    from tests.fleetutil import synthetic_rows
+    from wmrid.api.fleet_reporting import fleet_report, write_fleet_report
+
+    rows = synthetic_rows(3, 12)
+    for r in rows:
+        if r["robot_id"] == "R01":
+            r["robot_id"] = "R01<script>x</script>\n# owned"
+    rep = fleet_report(rows, robot="paper", figures=False)
+    write_fleet_report(rep, tmp_path / "f.md")
+    md = (tmp_path / "f.md").read_text()
+    _assert_inert(md, "### R01&lt;script&gt;x&lt;/script&gt; # owned")
+
+
+def test_markdown_escaping_rules():
+    from wmrid.reporting import markdown as md
+
+    assert md.text("a_b *c* [d](e) `f` |g| ~h~ \\") == "a\\_b \\*c\\* \\[d\\](e) \\`f\\` \\|g\\| \\~h\\~ \\\\"
+    assert md.text("<!-- & -->") == "&lt;!-- &amp; --&gt;"
+    assert md.text("one\ntwo\r\nthree\u2028four\x0cfive") == "one two  three four five"
+    for start, escaped in (("# h", "\\# h"), ("- l", "\\- l"), ("+ l", "\\+ l"), ("12. n", "12\\. n"),
+                           ("===", "\\===")):  # fmt: skip
+        assert md.text(start) == escaped
+        assert md.text(start, start=False) == start.replace("|", "\\|")
+    assert md.code("plain run.csv") == "`plain run.csv`"
+    assert md.code("a`b<c") == "<code>a\\`b&lt;c</code>"
+    assert md.table(["a|b"], [["-1", "x\ny"]]) == "| a\\|b |\n|---|\n| -1 | x y |"
