@@ -262,3 +262,40 @@ def test_markdown_escaping_rules():
     assert md.code("plain run.csv") == "`plain run.csv`"
     assert md.code("a`b<c") == "<code>a\\`b&lt;c</code>"
     assert md.table(["a|b"], [["-1", "x\ny"]]) == "| a\\|b |\n|---|\n| -1 | x y |"
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# MuJoCo's own warnings
+
+
+def test_a_floor_friction_out_of_range_is_one_line_before_mujoco_runs(tmp_path):
+    """``--floor-friction 1e308`` printed 4,006 of MuJoCo's ``WARNING:`` lines (and wrote MUJOCO_LOG.TXT into the
+    working folder); now the option's range, (0, 100], is checked first."""
+    pytest.importorskip("mujoco")
+    for value in ("1e308", "100.0001"):
+        out = wmrid("simulate", "--engine", "mujoco", "--floor-friction", value, "--duration", "0.5", "-o",
+                    str(tmp_path / "s.csv"), cwd=tmp_path)  # fmt: skip
+        assert_clean_error(out, 2, "wmrid:", "--floor-friction must be in (0, 100]")
+    assert os.listdir(tmp_path) == []
+
+
+def test_mujocos_warnings_become_part_of_one_error(tmp_path, monkeypatch, capfd):
+    """A run MuJoCo cannot integrate (the range check bypassed to reach the engine): its warnings are counted, the
+    first quoted in the one error; nothing printed by MuJoCo itself, no MUJOCO_LOG.TXT."""
+    pytest.importorskip("mujoco")
+    from wmrid.core.errors import UsageError
+    from wmrid.model.robot import BUILTIN_ROBOTS
+    from wmrid.sim.multibody import MultibodySettings, simulate_multibody
+
+    monkeypatch.chdir(tmp_path)
+    settings = MultibodySettings()
+    object.__setattr__(settings, "floor_friction", 1e308)  # what the range check now refuses
+    amr = BUILTIN_ROBOTS["amr"]
+    with pytest.raises(UsageError, match=r"unstable while the robot settled .* \(MuJoCo: Nan, Inf or huge value"):
+        simulate_multibody(amr.cad, amr.nominal, settings=settings, duration=0.5)
+    captured = capfd.readouterr()
+    assert "WARNING" not in captured.out + captured.err
+    assert os.listdir(tmp_path) == []
+    import mujoco
+
+    assert mujoco.get_mju_user_warning() is None  # MuJoCo's handler put back
