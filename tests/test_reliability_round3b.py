@@ -299,3 +299,28 @@ def test_mujocos_warnings_become_part_of_one_error(tmp_path, monkeypatch, capfd)
     import mujoco
 
     assert mujoco.get_mju_user_warning() is None  # MuJoCo's handler put back
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# fleet-report on forged dates
+
+
+@pytest.mark.parametrize(
+    ("first", "step"),
+    [("0002-12-28", -1), ("0001-01-01", 1), ("9999-12-01", 0)],  # a UserWarning; then matplotlib's "internal error"
+)
+def test_forged_dates_draw_without_matplotlibs_warnings(tmp_path, first, step):
+    """Start times at the ends of matplotlib's date axis (years 1 and 9999): matplotlib's UserWarning on stderr, or
+    its ValueError as "internal error"; now those robots are drawn against their logs' order, quietly."""
+    import datetime as dt
+
+    from tests.fleetutil import synthetic_rows
+    from wmrid.io.fleet_table import write_table
+
+    start = dt.datetime.fromisoformat(first).replace(tzinfo=dt.timezone.utc)
+    rows = [dict(r, start_time=start + dt.timedelta(days=step * i)) for i, r in enumerate(synthetic_rows(2, 3))]
+    table = tmp_path / "t.parquet"
+    write_table(rows, table)
+    out = wmrid("fleet-report", str(table), "-o", str(tmp_path / "r.html"))
+    assert out.returncode == 0, out.stderr
+    assert out.stderr.decode().splitlines() == [f"wrote {tmp_path / 'r.html'}"]
