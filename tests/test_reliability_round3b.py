@@ -351,3 +351,51 @@ def test_a_manifest_of_missing_logs_fails_fast_and_says_so_on_stderr(tmp_path):
     assert table.num_rows == 10_000
     assert table.column("error").null_count == 0
     assert elapsed < 30, elapsed  # about 1 s on an idle machine; a cluster start alone takes longer
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# A read-only install run by a user without a home: private temporary folders
+
+
+@pytest.mark.parametrize("squatted", ["symlink", "world-writable", "file", None])
+def test_the_fallback_cache_folder_is_private(tmp_path, monkeypatch, squatted):
+    """numba's fallback cache lived in ``$TMPDIR/wmrid-numba-cache-UID`` whoever made it: a folder another user made
+    first gave "internal error: cannot cache function" (and its pickles would have been loaded).  Now a folder that
+    is not this user's own private folder is passed over for a fresh one."""
+    import stat as st
+    import tempfile
+
+    import wmrid
+
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    monkeypatch.setattr(tempfile, "tempdir", None)  # tempfile reads TMPDIR again
+    usual = tmp_path / f"wmrid-test-{os.getuid()}"
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    if squatted == "symlink":
+        usual.symlink_to(elsewhere)
+    elif squatted == "world-writable":
+        usual.mkdir()
+        usual.chmod(0o777)
+    elif squatted == "file":
+        usual.write_text("x")
+    folder = Path(wmrid._private_temp_folder("wmrid-test"))
+    info = folder.lstat()
+    assert st.S_ISDIR(info.st_mode)
+    assert info.st_mode & 0o077 == 0
+    assert folder.parent == tmp_path
+    assert (folder == usual) == (squatted is None)
+
+
+def test_matplotlib_without_a_home_is_quiet(tmp_path):
+    """HOME under a file (no folder can be made there, even by root): matplotlib made a temporary folder itself and
+    said so in two lines on stderr on every run; now wmrid gives it a private one under TMPDIR, silently."""
+    (tmp_path / "blocker").write_text("a file")
+    (tmp_path / "tmp").mkdir()
+    env = {k: v for k, v in os.environ.items() if k not in ("MPLCONFIGDIR", "XDG_CONFIG_HOME", "XDG_CACHE_HOME")}
+    env.update(HOME=str(tmp_path / "blocker" / "home"), TMPDIR=str(tmp_path / "tmp"))
+    code = "import os, wmrid, matplotlib; matplotlib.get_cachedir(); print(os.environ['MPLCONFIGDIR'])"
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, env=env, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr == b""
+    assert Path(proc.stdout.decode().strip()).parent == tmp_path / "tmp"
