@@ -49,14 +49,15 @@ def _private_temp_folder(name: str) -> str | None:
     /tmp anyone can make ``NAME-UID`` first: a folder someone else owns is never used (numba's cache holds pickles
     it loads: issue 30 found "cannot cache function" as an internal error there).  None when there is no writable
     temporary directory at all."""
+    import contextlib
     import stat
     import tempfile
 
     uid = _os.getuid() if hasattr(_os, "getuid") else None
     try:
         path = _os.path.join(tempfile.gettempdir(), f"{name}-{uid if uid is not None else 'user'}")
-        if not _os.path.lexists(path):
-            _os.mkdir(path, 0o700)  # FileExistsError (an OSError) when another process made it meanwhile: a fresh one
+        with contextlib.suppress(FileExistsError):  # made before, or by another process just now (fleet workers)
+            _os.mkdir(path, 0o700)
         st = _os.lstat(path)
         mine = uid is None or st.st_uid == uid
         if stat.S_ISDIR(st.st_mode) and mine and not st.st_mode & 0o022 and _os.access(path, _os.W_OK | _os.X_OK):
