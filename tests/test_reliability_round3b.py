@@ -54,7 +54,8 @@ def short_bags(tmp_path_factory) -> dict[str, Path]:
 @pytest.mark.parametrize(
     ("path", "why"),
     [
-        ("__class__.__basicsize__", "/joint_states has no field '__class__' (its fields: header, name, position"),
+        ("__class__.__basicsize__", "no field '__class__' (its fields: header, name, position, velocity, effort)"),
+        ("__msgtype__", "no field '__msgtype__'"),
         ("velocity.size", "/joint_states:velocity is an array, with no field 'size'"),
         ("velocity.__len__", "with no field '__len__'"),
         ("velocity", "/joint_states:velocity is an array (an element is [i] or @NAME), not a number"),

@@ -110,13 +110,14 @@ def message_fields(obj: Any) -> tuple[str, ...] | None:
     from types import SimpleNamespace
 
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return tuple(f.name for f in dataclasses.fields(obj))
-    if isinstance(obj, SimpleNamespace):
+        names = [f.name for f in dataclasses.fields(obj)]
+    elif isinstance(obj, SimpleNamespace):
         slots = type(obj).__dict__.get("__slots__")
-        if isinstance(slots, (list, tuple)):
-            return tuple(str(s) for s in slots)
-        return tuple(k for k in vars(obj) if not k.startswith("_"))
-    return None
+        names = [str(s) for s in slots] if isinstance(slots, (list, tuple)) else list(vars(obj))
+    else:
+        return None
+    # a ROS field name starts with a letter: rosbags' ``__msgtype__`` and the like are the library's, not the message's
+    return tuple(n for n in names if n[:1].isalpha())
 
 
 def _is_array(obj: Any) -> bool:
