@@ -479,8 +479,13 @@ def test_a_field_path_evaluates_as_documented():
     for path, expected in cases.items():
         assert parse(f"/t:{path}").value(msg) == expected, path
     assert parse("/t:interface_values@j.values@current").value(dynamic) == 5.0
-    for missing in ("velocity@c", "arr[3]", "nested.z", "name"):
+    for missing in ("velocity@c", "arr[3]"):  # absent from this message: NaN
         assert np.isnan(parse(f"/t:{missing}").value(msg)), missing
+    from wmrid.io.field_paths import FieldPathError
+
+    for bad in ("nested.z", "name", "nested", "velocity.size", "__class__.__name__", "nested.x.y[0]"):
+        with pytest.raises(FieldPathError, match="does not name a number"):  # no field there, or not a number
+            parse(f"/t:{bad}").value(msg)
     assert np.isnan(parse("/t:interface_values@j.values@effort").value(dynamic))
 
 

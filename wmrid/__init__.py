@@ -38,10 +38,61 @@ def _numba_cache_fallback() -> None:
             continue
         if _os.access(folder, _os.W_OK | _os.X_OK):  # also false on a read-only file system, root or not
             return  # numba can cache here
+    folder = _private_temp_folder("wmrid-numba-cache")
+    if folder is not None:
+        _os.environ["NUMBA_CACHE_DIR"] = folder
+
+
+def _private_temp_folder(name: str) -> str | None:
+    """A folder under the system's temporary directory that only this user can write: ``NAME-UID`` when it is (or
+    can be made) this user's own folder, not writable by others; else a fresh one (``NAME-XXXXXXXX``).  In a shared
+    /tmp anyone can make ``NAME-UID`` first: a folder someone else owns is never used (numba's cache holds pickles
+    it loads: issue 30 found "cannot cache function" as an internal error there).  None when there is no writable
+    temporary directory at all."""
+    import contextlib
+    import stat
     import tempfile
 
-    uid = _os.getuid() if hasattr(_os, "getuid") else "user"
-    _os.environ["NUMBA_CACHE_DIR"] = _os.path.join(tempfile.gettempdir(), f"wmrid-numba-cache-{uid}")
+    uid = _os.getuid() if hasattr(_os, "getuid") else None
+    try:
+        path = _os.path.join(tempfile.gettempdir(), f"{name}-{uid if uid is not None else 'user'}")
+        with contextlib.suppress(FileExistsError):  # made before, or by another process just now (fleet workers)
+            _os.mkdir(path, 0o700)
+        st = _os.lstat(path)
+        mine = uid is None or st.st_uid == uid
+        if stat.S_ISDIR(st.st_mode) and mine and not st.st_mode & 0o022 and _os.access(path, _os.W_OK | _os.X_OK):
+            return path
+        return tempfile.mkdtemp(prefix=f"{name}-")
+    except OSError:  # FileNotFoundError from gettempdir included: no usable temporary directory
+        return None
+
+
+def _could_make(folder: str) -> bool:
+    """Whether ``folder`` is, or could be made, a writable folder (nothing is made: the nearest existing folder on
+    its path is asked); False for a relative path (no HOME: "~" is never a folder in the working directory)."""
+    if not _os.path.isabs(folder):
+        return False
+    path = folder
+    while not _os.path.exists(path):
+        parent = _os.path.dirname(path)
+        if parent == path:
+            return False
+        path = parent
+    return _os.path.isdir(path) and _os.access(path, _os.W_OK | _os.X_OK)
+
+
+def _matplotlib_config_fallback() -> None:
+    """Give matplotlib a writable configuration and cache folder when it would have none (HOME missing or read-only:
+    it made a temporary one itself, and said so in two lines of its own on stderr on every run)."""
+    if _os.environ.get("MPLCONFIGDIR"):
+        return
+    config = _os.environ.get("XDG_CONFIG_HOME") or _os.path.join(_os.path.expanduser("~"), ".config")
+    cache = _os.environ.get("XDG_CACHE_HOME") or _os.path.join(_os.path.expanduser("~"), ".cache")
+    usable = all(_could_make(_os.path.join(base, "matplotlib")) for base in (config, cache))
+    if not usable:
+        folder = _private_temp_folder("wmrid-matplotlib")
+        if folder is not None:
+            _os.environ["MPLCONFIGDIR"] = folder
 
 
 def _under_an_address_space_cap() -> None:
@@ -74,6 +125,7 @@ def _under_an_address_space_cap() -> None:
 
 
 _numba_cache_fallback()
+_matplotlib_config_fallback()
 _under_an_address_space_cap()
 
 

@@ -95,7 +95,7 @@ def main(argv: list[str] | None = None) -> None:
             code = interrupts.exit_code()
             sys.stderr.write(f"wmrid: {_stopped_by()}; {_kept()}\n")
     except KeyboardInterrupt:
-        sys.stderr.write(f"wmrid: {_stopped_by()}\n")
+        sys.stderr.write(f"wmrid: {_stopped_by()}; {_kept()}\n")
         code = interrupts.exit_code()
     except WmridError as exc:
         if debug:

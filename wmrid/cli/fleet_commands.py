@@ -255,6 +255,12 @@ def fleet(
     else:
         _print_summary(summary)
     rows = summary["logs"]
+    if summary["failed"]:  # said on stderr too: the summary may go to a file or a pipe
+        first = " ".join(str(summary["errors"][0]["error"]).split()) if summary["errors"] else "?"
+        sys.stderr.write(
+            f"wmrid: {summary['failed']} of {rows} logs failed (each one's error is in the table's error column); "
+            f"the first: {first}\n"
+        )
     return int(ExitStatus.OK) if summary["failed"] < rows or not rows else int(ExitStatus.NO_RESULT)
 
 
@@ -306,7 +312,7 @@ def _print_summary(summary: dict[str, Any]) -> None:
         return f"{count} {noun}" + ("" if count == 1 else "s")
 
     out.print(
-        f"{summary['table']}: {n(summary['logs'], 'log')} of {n(summary['robots'], 'robot')}; identified "
+        f"{summary['table']}: {n(summary['logs'], 'log')} of {n(summary['robots'], 'robot')}; run "
         f"{summary['identified']} in {summary['wall_s']:.3g} s on {n(summary['workers'], 'worker')}{rate}; resumed "
         f"{summary['resumed']}; failed {summary['failed']}"
     )

@@ -174,7 +174,7 @@ def identify(
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
     from wmrid.api.identification import identify as run_identify
-    from wmrid.core.atomic import write_json
+    from wmrid.core.atomic import output_group, write_json
     from wmrid.reporting.render import print_identification, to_json
 
     if out is not None:
@@ -192,10 +192,11 @@ def identify(
     finally:
         finish()
     payload = result.to_dict(history=history or not no_history)
-    if output is not None:
-        write_json(str(output), payload, force=force)
-    if mcap_out is not None:
-        write_estimates(result, mcap_out, force)
+    with output_group():  # the result and the estimates appear together or not at all (a signal between: neither)
+        if output is not None:
+            write_json(str(output), payload, force=force)
+        if mcap_out is not None:
+            write_estimates(result, mcap_out, force)
     fmt = "json" if on_stdout(output) else output_format.value
     if fmt == "auto":
         fmt = "table" if sys.stdout.isatty() else "json"
@@ -320,13 +321,16 @@ def report(
             control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted,
             forgetting=forgetting, command=invocation(),
         )  # fmt: skip
-        if residuals is not None:
-            from wmrid.io.logs import write_log
+        from wmrid.core.atomic import output_group
 
-            write_log(residual_frame(rep), str(residuals), force=force)
-        if output is not None:
-            stage(f"writing {output}")
-            write_report(rep, output, force=force)
+        with output_group():  # the residuals and the report appear together or not at all
+            if residuals is not None:
+                from wmrid.io.logs import write_log
+
+                write_log(residual_frame(rep), str(residuals), force=force)
+            if output is not None:
+                stage(f"writing {output}")
+                write_report(rep, output, force=force)
     if output is None:
         from wmrid.reporting.render import print_report
 

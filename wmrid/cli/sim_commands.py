@@ -106,7 +106,8 @@ def simulate(
     floor_friction: Annotated[
         float | None,
         typer.Option(
-            help="mujoco: Coulomb friction of the wheels on the floor, > 0 (low values let them slip); default 1.0.",
+            help="mujoco: Coulomb friction of the wheels on the floor, in (0, 100] (low values let them slip); "
+            "default 1.0.",
             rich_help_panel="Multibody prototype",
         ),
     ] = None,

@@ -10,9 +10,12 @@ PATH is fields separated by dots.  A field may be followed by ``[i]`` (element i
 of ``name``, ``names``, ``joint_names`` and ``interface_names`` the message has; so
 ``interface_values@right_wheel_joint.values@velocity`` reads a ros2_control DynamicJointState).  A NAME holding a
 dot or a comma is written in double quotes: ``velocity@"base.wheel_r"`` (``--columns`` splits at commas outside
-quotes; the shell needs the whole option in single quotes then).  A value that is
-absent (a shorter array, a name not in the list) is NaN.  Both speeds come from one topic, and both efforts from
-one topic (the same or another: the efforts are then aligned to the speeds' stamps as for two JointState topics).
+quotes; the shell needs the whole option in single quotes then).  A field is looked up among the fields the
+message's definition declares, never as a Python attribute (``__class__`` or numpy's ``size`` is no field): a step
+naming no field, ``[i]`` on what is not an array, or a path ending at an array or a message is an error naming the
+fields there are.  A value that is absent (a shorter array, a name not in the list) is NaN.  Both speeds come from
+one topic, and both efforts from one topic (the same or another: the efforts are then aligned to the speeds'
+stamps as for two JointState topics).
 Time: each message's ``header.stamp`` when it has one, else its receive (log) time, as ``--time-source`` says.
 The messages are decoded with the message definitions stored in the recording, message by message (about 20 µs
 a message).  ``wmrid inspect`` lists the numeric field paths of every topic.
@@ -28,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.core.errors import UsageError, option
+from wmrid.core.errors import LogFormatError, UsageError, option
 
 #: Arrays of names an ``@NAME`` selector looks up, beside the array it selects from.
 NAME_ARRAYS = ("name", "names", "joint_names", "interface_names")
@@ -45,26 +48,103 @@ class FieldPath:
     steps: tuple[tuple[str, int | None, str | None], ...]
 
     def value(self, msg: Any) -> float:
-        """The number at this path in a decoded message (attributes, lists or arrays), NaN when absent."""
+        """The number at this path in a decoded message, NaN when absent (a shorter array, a name not in the
+        list).  Each step is looked up among the fields its message declares (:func:`message_fields`), never as a
+        Python attribute: a step that names no field of the message, an index or ``@NAME`` on what is not an array,
+        or a path that ends at an array or a message raises :class:`FieldPathError` naming the path, the topic and
+        the fields there are (the same for every message of a topic: they share one definition)."""
         obj = msg
-        for field, index, name in self.steps:
+        for k, (field, index, name) in enumerate(self.steps):
             parent = obj
-            try:
-                obj = getattr(parent, field)
-                if index is not None:
-                    obj = obj[index]
-                elif name is not None:
-                    names = next((getattr(parent, n) for n in NAME_ARRAYS if hasattr(parent, n)), None)
-                    if names is None:
-                        return math.nan
+            declared = message_fields(parent)
+            if declared is None:
+                raise FieldPathError(self, k, f"{_where(self, k)} is {_kind(parent)}, with no field {field!r}")
+            if field not in declared:
+                raise FieldPathError(
+                    self, k, f"{_where(self, k)} has no field {field!r} (its fields: {', '.join(declared) or 'none'})"
+                )
+            obj = getattr(parent, field)
+            if index is None and name is None:
+                continue
+            if not _is_array(obj):
+                raise FieldPathError(self, k, f"{_where(self, k)}.{field} is {_kind(obj)}: it takes no [i] or @NAME")
+            if index is not None:
+                if index >= len(obj):
+                    return math.nan
+                obj = obj[index]
+            else:
+                names = next((getattr(parent, n) for n in NAME_ARRAYS if n in declared), None)
+                if not _is_array(names):
+                    raise FieldPathError(
+                        self, k, f"{_where(self, k)} has no array of names ({', '.join(NAME_ARRAYS)}) for @{name}"
+                    )
+                try:
                     position = [str(n) for n in names].index(name)
                     obj = obj[position]
-            except (AttributeError, IndexError, ValueError, TypeError):
-                return math.nan
-        try:
-            return float(obj)
-        except (TypeError, ValueError):
-            return math.nan
+                except (IndexError, ValueError):
+                    return math.nan
+        if isinstance(obj, (bool, np.bool_)) or not isinstance(obj, (int, float, np.integer, np.floating)):
+            hint = " (an element is [i] or @NAME)" if _is_array(obj) else ""
+            end = len(self.steps)
+            raise FieldPathError(self, end, f"{_where(self, end)} is {_kind(obj)}{hint}, not a number")
+        return float(obj)
+
+
+class FieldPathError(LogFormatError):
+    """A field path that does not name a number of its topic's messages: a step that is no field of the message
+    (a Python or numpy attribute such as ``__class__`` or ``size`` is none), ``[i]`` on what is not an array, a path
+    ending at an array or a message.  Found while the log is read, so it is a LogFormatError: the readers let those
+    through where they skip a damaged record."""
+
+    def __init__(self, path: FieldPath, step: int, why: str):
+        super().__init__(
+            f"{option('columns')}: the field path {path.text} does not name a number of the messages on {path.topic}: "
+            f"{why}; wmrid inspect lists the topic's numeric field paths"
+        )
+
+
+def message_fields(obj: Any) -> tuple[str, ...] | None:
+    """The fields a decoded message declares in its definition (rosbags' dataclasses, mcap_ros2's namespaces with
+    ``__slots__``), in order; None when ``obj`` is not a message (a number, a string, an array)."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        names = [f.name for f in dataclasses.fields(obj)]
+    elif isinstance(obj, SimpleNamespace):
+        slots = type(obj).__dict__.get("__slots__")
+        names = [str(s) for s in slots] if isinstance(slots, (list, tuple)) else list(vars(obj))
+    else:
+        return None
+    # a ROS field name starts with a letter: rosbags' ``__msgtype__`` and the like are the library's, not the message's
+    return tuple(n for n in names if n[:1].isalpha())
+
+
+def _is_array(obj: Any) -> bool:
+    return isinstance(obj, (list, tuple)) or (isinstance(obj, np.ndarray) and obj.ndim == 1)
+
+
+def _kind(obj: Any) -> str:
+    """What a value is, in the words of a message definition."""
+    if message_fields(obj) is not None:
+        return "a message"
+    if _is_array(obj):
+        return "an array"
+    if isinstance(obj, (str, bytes)):
+        return "a string"
+    if isinstance(obj, (bool, np.bool_)):
+        return "a bool"
+    return "a number" if isinstance(obj, (int, float, np.integer, np.floating)) else "not a field value"
+
+
+def _step_text(step: tuple[str, int | None, str | None]) -> str:
+    field, index, name = step
+    return field + (f"[{index}]" if index is not None else f"@{name}" if name is not None else "")
+
+
+def _where(path: FieldPath, k: int) -> str:
+    """The message at step k of a path, as the user wrote it: the topic's message, or ``TOPIC:a.b``."""
+    return path.topic + ("" if k == 0 else ":" + ".".join(_step_text(s) for s in path.steps[:k]))
 
 
 def is_field_path(text: str) -> bool:
@@ -199,8 +279,6 @@ def numeric_paths(fielddefs: Mapping[str, Any], typename: str, limit: int = 40) 
 
 def check_values(series_by_topic: Mapping[str, Any], fs: FieldSignals, source: str) -> None:
     """LogFormatError naming a field path that gave no number in any message of its topic (a misspelt field)."""
-    from wmrid.core.errors import LogFormatError
-
     for field, paths in (("velocity", fs.speed), ("effort", fs.effort)):
         series = series_by_topic.get(paths[0].topic)
         if series is None:

@@ -86,15 +86,21 @@ def render(fig: Figure, fmt: str = "svg") -> bytes:
     """
     if fmt not in FORMATS:
         raise UsageError(f"figure format must be one of {', '.join(FORMATS)}, got {fmt!r}")
+    import warnings
+
     import matplotlib
 
-    _freeze_layout(fig)
     buf = io.BytesIO()
-    if fmt == "svg":
-        with matplotlib.rc_context({"svg.hashsalt": "wmrid", "svg.fonttype": "none"}):
-            fig.savefig(buf, format="svg", metadata={"Date": None})
-    else:
-        fig.savefig(buf, format="png", dpi=PNG_DPI, metadata={"Software": None})
+    # matplotlib's own advice on drawing (a date range its tick locator has no interval for, ...) is for its
+    # programmers, not for wmrid's users: kept off their terminal (issue 30)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # matplotlib attributes them to its caller: wmrid
+        _freeze_layout(fig)
+        if fmt == "svg":
+            with matplotlib.rc_context({"svg.hashsalt": "wmrid", "svg.fonttype": "none"}):
+                fig.savefig(buf, format="svg", metadata={"Date": None})
+        else:
+            fig.savefig(buf, format="png", dpi=PNG_DPI, metadata={"Software": None})
     return buf.getvalue()
 
 

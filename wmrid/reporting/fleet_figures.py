@@ -7,6 +7,7 @@ figure-level title, rendered by :func:`wmrid.reporting.figures.render`.
 
 from __future__ import annotations
 
+import datetime as dt
 import math
 from typing import TYPE_CHECKING, Any
 
@@ -26,13 +27,20 @@ UNITS = {"M11": "kg m²", "M12": "kg m²", "M22": "kg m²", "Vc": "kg m", "Fv1":
 _PANELS = (("M11", "M12", "M22", "Vc"), ("Fv1", "Fv2", "Fd1", "Fd2"))
 
 
+#: Start times a date axis shows (naive UTC); others (a forged 0001-01-01 or 9999-12-31: matplotlib's date axis
+#: ends at years 1 and 9999, and its margins and ticks reach beyond the data) put the logs in their order instead.
+DATE_AXIS_SPAN = (dt.datetime(1900, 1, 1), dt.datetime(2300, 1, 1))
+
+
 def _x(review: RobotReview) -> tuple[Any, str]:
-    """The horizontal axis: the logs' start times, else their order."""
+    """The horizontal axis: the logs' start times (when all lie in :data:`DATE_AXIS_SPAN`), else their order."""
     times = [r["start_time"] for r in review.rows]
     if times and all(t is not None for t in times):
-        import matplotlib.dates as mdates
+        naive = [t.astimezone(dt.timezone.utc).replace(tzinfo=None) if t.tzinfo else t for t in times]
+        if all(DATE_AXIS_SPAN[0] <= t <= DATE_AXIS_SPAN[1] for t in naive):
+            import matplotlib.dates as mdates
 
-        return mdates.date2num([t.replace(tzinfo=None) for t in times]), "date"
+            return mdates.date2num(naive), "date"
     return np.arange(len(review.rows), dtype=float), "log"
 
 

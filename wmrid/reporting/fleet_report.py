@@ -157,24 +157,27 @@ def to_html(rep: FleetReport) -> str:
 
 
 def to_markdown(rep: FleetReport) -> str:
-    """Markdown: the ranked table, findings, PNG figures as data URIs (one file)."""
+    """Markdown: the ranked table, findings, PNG figures as data URIs (one file); the table's path, robot ids and
+    every other string from the table escaped (:mod:`wmrid.reporting.markdown`)."""
+    from wmrid.reporting.markdown import text
+
     review = rep.review
-    parts = [f"# wmrid fleet report: {rep.table}", "", *rep.summary, "", "## Robots ranked by the evidence against "
-             "them", "", _md_table(ranked_table(review))]  # fmt: skip
+    parts = [f"# wmrid fleet report: {text(rep.table, False)}", "", *[text(s) for s in rep.summary], "",
+             "## Robots ranked by the evidence against them", "", _md_table(ranked_table(review))]  # fmt: skip
     for title, group in (("Flagged robots", [rv for rv in review.robots if rv.flagged]),
                          ("Other robots", [rv for rv in review.robots if not rv.flagged])):  # fmt: skip
         parts += ["", f"## {title}"]
         if not group:
             parts += ["", "No robot flagged." if title == "Flagged robots" else "None: every robot is flagged."]
         for rv in group:
-            parts += ["", f"### {rv.robot_id}", "", *[f"- {f}" for f in rv.findings]]
+            parts += ["", f"### {text(rv.robot_id)}", "", *[f"- {text(f)}" for f in rv.findings]]
             if rv.sensitivity_text:
-                parts += ["", f"*{rv.sensitivity_text}*"]
+                parts += ["", f"*{text(rv.sensitivity_text, False)}*"]
             name = f"robot {rv.robot_id}"
             if name in rep.figure_objects:
                 png = base64.b64encode(rep.rendered(name, "png")).decode()
-                parts += ["", f"![{name}](data:image/png;base64,{png})"]
-    parts += ["", "## What a flag means", "", *[f"- {s}" for s in review.statements]]
+                parts += ["", f"![{text(name, False)}](data:image/png;base64,{png})"]
+    parts += ["", "## What a flag means", "", *[f"- {text(s)}" for s in review.statements]]
     parts += md_provenance(rep.provenance)
     return "\n".join(parts) + "\n"
 

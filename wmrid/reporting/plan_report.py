@@ -169,11 +169,13 @@ def to_html(plan: Any) -> str:
 
 
 def to_markdown(plan: Any) -> str:
+    """The plan as Markdown; the robot's name, the tables' cells and the warnings escaped
+    (:mod:`wmrid.reporting.markdown`)."""
+    from wmrid.reporting import markdown as md
+
     data = plan.to_dict()
-    lines = [f"# wmrid plan: {data['robot']}", "", *summary(data), ""]
+    lines = [f"# wmrid plan: {md.text(data['robot'], False)}", "", *[md.text(s) for s in summary(data)], ""]
     for title, table in tables(data).items():
-        lines += [f"## {title}", "", "| " + " | ".join(table["header"]) + " |", "|" + "---|" * len(table["header"])]
-        lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in table["rows"]]
-        lines.append("")
-    lines += [f"- {w}" for w in data.get("warnings", ())]
+        lines += [f"## {md.text(title)}", "", md.table(table["header"], table["rows"]), ""]
+    lines += [f"- {md.text(w)}" for w in data.get("warnings", ())]
     return "\n".join(lines) + "\n"

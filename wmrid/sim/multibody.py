@@ -62,6 +62,8 @@ SUBSTEPS = 4
 SETTLE_SECONDS = 0.5
 #: Default Coulomb friction of the wheels on the floor (rubber on concrete).
 FLOOR_FRICTION = 1.0
+#: The largest floor friction taken (a Coulomb coefficient; MuJoCo's contact solver diverges near 1e100).
+MAX_FLOOR_FRICTION = 100.0
 #: Contact time constant (s) and damping ratio of MuJoCo's soft contacts: stiff (a 2 ms time constant, about
 #: 8 MuJoCo steps) so that the wheels' creep and the platform's sinking are small.
 CONTACT_SOLREF = (0.002, 1.0)
@@ -107,7 +109,11 @@ class MultibodySettings:
     cg_height: float = 0.05
 
     def __post_init__(self) -> None:
-        positive_number("floor_friction", self.floor_friction)
+        if positive_number("floor_friction", self.floor_friction) > MAX_FLOOR_FRICTION:
+            raise UsageError(
+                f"{option('floor_friction')} must be in (0, {MAX_FLOOR_FRICTION:g}], got {self.floor_friction!r} (a "
+                "Coulomb coefficient: about 1 for rubber on concrete; 10 already never slips)"
+            )
         if self.caster_resistance is not None:
             c = self.caster_resistance
             if isinstance(c, bool) or not isinstance(c, (int, float)) or not math.isfinite(c) or c < 0:
@@ -382,8 +388,62 @@ def simulate_multibody(
     A friction fault in ``change`` switches the joint friction.  ``casters`` default to
     :func:`wmrid.model.robot.default_casters`.  The returned log's ``true`` is the plant at t = 0 (with the
     payload when it is carried from the start).
+
+    MuJoCo's own warnings (which it would print, one per step, and append to ``MUJOCO_LOG.TXT`` in the working
+    folder) are counted instead: the first is quoted in the error of a run that diverged, and a run that finished
+    lists their number and the first in its ``multibody`` record (``mujoco_warnings``).
     """
     mujoco = import_mujoco()
+    warned = _Warnings()
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(warned)
+    try:
+        return _simulate(
+            mujoco, warned, true, nominal, casters=casters, settings=settings, trajectory=trajectory,
+            duration=duration, rate=rate, noise=noise, seed=seed, change=change, payload=payload, reference=reference,
+        )  # fmt: skip
+    finally:
+        mujoco.set_mju_user_warning(previous)
+
+
+class _Warnings:
+    """MuJoCo's warnings of one run: how many, and the first (a user warning handler, :func:`simulate_multibody`)."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.first: str | None = None
+
+    def __call__(self, message: str) -> None:
+        self.count += 1
+        if self.first is None:
+            self.first = " ".join(str(message).split())
+
+    def said(self) -> str:
+        return (
+            ""
+            if self.first is None
+            else f" (MuJoCo: {self.first}" + (f"; {self.count} warnings)" if self.count > 1 else ")")
+        )
+
+
+def _simulate(
+    mujoco,
+    warned: _Warnings,
+    true: PhysicalParameters,
+    nominal: PhysicalParameters,
+    *,
+    casters: tuple[Caster, ...] | None,
+    settings: MultibodySettings,
+    trajectory: str | None,
+    duration: float | None,
+    rate: float,
+    noise: NoiseSettings,
+    seed: int,
+    change: PlantChange | None,
+    payload: Payload | None,
+    reference: Reference | None,
+) -> SimulatedLog:
+    """:func:`simulate_multibody`, with MuJoCo's warnings going to ``warned``."""
     if not isinstance(settings, MultibodySettings):
         raise UsageError("settings must be MultibodySettings")
     if not isinstance(true, PhysicalParameters):
@@ -443,6 +503,12 @@ def simulate_multibody(
     d.qpos[plant.base_q + 3 : plant.base_q + 7] = [math.cos(half), 0.0, 0.0, math.sin(half)]
     mujoco.mj_forward(m, d)
     mujoco.mj_step(m, d, round(SETTLE_SECONDS / plant.timestep))
+    bad_qacc = int(mujoco.mjtWarning.mjWARN_BADQACC)
+    if d.warning[bad_qacc].number > 0 or not np.all(np.isfinite(d.qpos)):
+        raise UsageError(
+            "the multibody simulation became unstable while the robot settled on the floor, before t = 0 (the "
+            "integration diverged); check the robot's parameters, its casters and --floor-friction" + warned.said()
+        )
     d.qpos[plant.base_q : plant.base_q + 2] = [ref0[0], ref0[1]]
     tilt = d.qpos[plant.base_q + 3 : plant.base_q + 7].copy()
     yaw_now = math.atan2(2.0 * (tilt[0] * tilt[3] + tilt[1] * tilt[2]), 1.0 - 2.0 * (tilt[2] ** 2 + tilt[3] ** 2))
@@ -466,7 +532,6 @@ def simulate_multibody(
 
     drag = np.array([caster_resistance(c, settings) if c.kind == "ball" else 0.0 for c in casters])
     any_drag = bool(np.any(drag > 0))
-    bad_qacc = int(mujoco.mjtWarning.mjWARN_BADQACC)
     pose = np.empty((n, 3))
     angle = np.empty((n, 2))
     eta = np.empty((n, 2))
@@ -533,7 +598,7 @@ def simulate_multibody(
             raise UsageError(
                 f"the multibody simulation became unstable at t = {t:.3f} s (the platform tipped over or the "
                 "integration diverged); check the robot's parameters and its casters (the centre of mass must lie "
-                "inside the wheels' and casters' support)"
+                "inside the wheels' and casters' support)" + warned.said()
             )
         if kind == 1:
             dx, dy = reversing_advance(traj, t, h)
@@ -560,6 +625,8 @@ def simulate_multibody(
         ],
         "max_slip_speed": float(slip_max),
     }
+    if warned.count:
+        multibody["mujoco_warnings"] = {"count": warned.count, "first": warned.first}
     extra = {"engine": "mujoco", "substeps": settings.substeps, "multibody": multibody}
     return run.log(plant0, pose, angle, eta, tau, refpose, dist, extra, change)
 
