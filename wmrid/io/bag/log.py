@@ -31,6 +31,37 @@ def _magic(path: str) -> bytes:
         return b""
 
 
+#: The magic bytes of the files a folder without metadata.yaml may hold, by suffix.
+_SUFFIX_MAGIC = {".bag": ROS1_MAGIC, ".bag.active": ROS1_MAGIC, ".db3": SQLITE_MAGIC, ".mcap": MCAP_MAGIC}
+
+
+def _readable_head(path: str) -> bytes:
+    """The first 16 bytes of the file ``path`` of a recording, or LogFormatError when it cannot be read (naming the
+    file and the reason: no permission, ...) or is empty."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(16)
+    except OSError as err:
+        raise LogFormatError(f"{path}: cannot be read ({err.strerror or err}); check its permissions") from None
+    if not head:
+        raise LogFormatError(f"{path}: the file is empty (0 bytes); remove it, or give the recording's other files")
+    return head
+
+
+def _check_folder_files(files: list[str]) -> None:
+    """Each of a folder's recording files (found by suffix) readable and of the kind its suffix says: a wrong one is
+    one line naming it (rosbags would stop on it with a message of its own)."""
+    for path in files:
+        head = _readable_head(path)
+        suffix = next(s for s in sorted(_SUFFIX_MAGIC, key=len, reverse=True) if path.lower().endswith(s))
+        if not head.startswith(_SUFFIX_MAGIC[suffix]):
+            kind = {ROS1_MAGIC: "a ROS 1 bag", SQLITE_MAGIC: "an SQLite database", MCAP_MAGIC: "an MCAP file"}
+            raise LogFormatError(
+                f"{path}: a {suffix} file that is not {kind[_SUFFIX_MAGIC[suffix]]} (its first bytes say otherwise); "
+                "remove it from the folder, or give the recording's files"
+            )
+
+
 def is_bag_file(path: str) -> bool:
     """Whether ``path`` is a ROS 1 bag or an SQLite database (a ROS 2 .db3 bag), by its magic bytes."""
     head = _magic(path)
@@ -62,6 +93,7 @@ def recording_paths(paths: Sequence[str]) -> list[str] | None:
                     f"{path}: a folder with no recording in it (no metadata.yaml, .bag, .db3 or .mcap file); give the "
                     "rosbag2 folder, the bag files, or a CSV, Parquet or MCAP log"
                 )
+            _check_folder_files(inside)
             return inside
         return [path] if is_bag_file(path) else None
     seen: dict[tuple[int, int], str] = {}
@@ -76,7 +108,7 @@ def recording_paths(paths: Sequence[str]) -> list[str] | None:
                 f"{path}: the same file as {seen[(st.st_dev, st.st_ino)]}; give each file of the recording once"
             )
         seen[(st.st_dev, st.st_ino)] = path
-        head = _magic(path)
+        head = b"" if os.path.isdir(path) else _readable_head(path)
         if not (os.path.isdir(path) or head.startswith((ROS1_MAGIC, SQLITE_MAGIC, MCAP_MAGIC))):
             raise LogFormatError(
                 f"{path}: several files are read as one recording only when they are bags (ROS 1 .bag, ROS 2 .db3 or "
