@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 
 from tests.cliutil import assert_clean_error, wmrid
-from tests.test_side_files import run
+from tests.test_side_files import BUDGET, run
+from wmrid.core.errors import LogFormatError
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "sample_logs" / "paper_sinusoid.mcap"
@@ -120,3 +121,147 @@ def test_a_folder_with_an_empty_or_foreign_bag_is_one_line(tmp_path, small_db3):
     assert_clean_error(wmrid("identify", str(empty)), 2, f"{empty}/x.bag: the file is empty (0 bytes)")
     # was: internal error: ReaderError: Unrecognized storage format '.bag'
     assert_clean_error(wmrid("inspect", str(foreign)), 2, f"{foreign}/a.bag: a .bag file that is not a ROS 1 bag")
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Compressed CSV: blank lines and long lines bounded as they are read
+
+
+def _written(path: Path, head: bytes, filler: bytes, size: int) -> Path:
+    """``head`` then about ``size`` bytes of ``filler`` repeated; xz-compressed when the name ends in .xz, as one
+    small xz stream per MiB, written again and again (xz files are read across streams), so that hundreds of
+    megabytes take a few milliseconds to make."""
+    import lzma
+
+    block = filler * ((1 << 20) // len(filler))
+    xz = path.suffix == ".xz"
+    with open(path, "wb") as fh:
+        fh.write(lzma.compress(head, preset=0) if xz else head)
+        one = lzma.compress(block, preset=0) if xz else block
+        for _ in range(size // len(block)):
+            fh.write(one)
+    return path
+
+
+def test_a_compressed_csv_of_blank_lines_is_refused_early_in_bounded_memory(tmp_path):
+    """A header and 2 GB of blank lines, xz-compressed, took 41 s and 1.18 GB (the parsers skip blank lines one by
+    one and grow their buffers); here 200 MB of them: refused after the first two million."""
+    log = _written(tmp_path / "blank.csv.xz", b"t,eta_r,eta_l,tau_r,tau_l\n", b"\n", 200_000_000)
+    done = run("identify", str(log))
+    done.one_error(2, f"{log}: more than 1,048,576 blank lines in a row (from byte 25)", "grep -v '^$'")
+    assert done.peak_rss < BUDGET, done.peak_rss
+
+
+def test_blank_lines_and_long_lines_within_the_bounds_are_read(tmp_path):
+    from wmrid.io.csv_log import MAX_LINE_BYTES
+    from wmrid.io.logs import read_log
+
+    rows = CSV.read_bytes().splitlines(keepends=True)
+    spaced = tmp_path / "spaced.csv"  # a million blank lines, and CRLF ones, between the rows: read as the rows
+    spaced.write_bytes(b"".join([rows[0], b"\n" * 1_000_000, *rows[1:500], b"\r\n" * 400_000, *rows[500:1000]]))
+    plain = tmp_path / "plain.csv"
+    plain.write_bytes(b"".join(rows[:1000]))
+    np.testing.assert_array_equal(read_log(spaced).eta, read_log(plain).eta)
+    wide = tmp_path / "wide.csv"  # a comment column of 15 MiB in one row
+    wide.write_bytes(rows[0].rstrip() + b",note\n" + b"".join(r.rstrip() + b",x\n" for r in rows[1:20])
+                     + rows[20].rstrip() + b"," + b"y" * (MAX_LINE_BYTES - 1024) + b"\n")  # fmt: skip
+    assert len(read_log(wide).t) == 20
+
+
+def test_a_csv_line_of_hundreds_of_megabytes_is_refused_as_it_is_read(tmp_path):
+    """One row of 300 MB (xz): was refused only after 1.78 GB and 41 s (the parsers hold a line whole)."""
+    log = _written(tmp_path / "long.csv.xz", b"t,eta_r,eta_l,tau_r,tau_l\n0,1,1,1,1\n", b"1,", 300_000_000)
+    done = run("identify", str(log))
+    done.one_error(2, f"{log}: a line longer than 16 MiB (from byte 36), which no wheel log has")
+    assert done.peak_rss < 320 << 20, done.peak_rss
+
+
+def test_a_long_line_anywhere_is_refused(tmp_path):
+    from wmrid.io.logs import read_log
+
+    rows = CSV.read_bytes().splitlines(keepends=True)
+    log = tmp_path / "long.csv"
+    log.write_bytes(b"".join(rows[:3000]) + b"1," * 20_000_000 + b"\n" + b"".join(rows[3000:3100]))
+    with pytest.raises(LogFormatError, match=r"a line longer than 16 MiB \(from byte [0-9,]+\)"):
+        read_log(log)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# ROS 1 chunks larger than a window: decompressed and walked a window at a time
+
+
+def _field(name: str, value: bytes) -> bytes:
+    text = name.encode() + b"=" + value
+    return len(text).to_bytes(4, "little") + text
+
+
+def _record(fields: list[tuple[str, bytes]], data: bytes) -> bytes:
+    header = b"".join(_field(n, v) for n, v in fields)
+    return len(header).to_bytes(4, "little") + header + len(data).to_bytes(4, "little") + data
+
+
+def _zero_chunk_bag(path: Path, size: int, declared: int | None = None) -> Path:
+    """A ROS 1 bag written record by record: the bag header, a JointState connection, and one lz4 chunk of ``size``
+    zero bytes (8-byte records without an op: nothing to find) declaring ``declared`` (default: the truth): one lz4
+    frame, compressed 16 MiB at a time."""
+    import lz4.frame
+
+    block = bytes(16 << 20)
+    with lz4.frame.LZ4FrameCompressor() as compressor:
+        parts = [compressor.begin()]
+        parts += [compressor.compress(block) for _ in range(size // len(block))]
+        parts += [compressor.compress(block[: size % len(block)]), compressor.flush()]
+    frames = b"".join(parts)
+    u32 = lambda v: int(v).to_bytes(4, "little")  # noqa: E731
+    bag_header = _record([("op", b"\x03"), ("index_pos", bytes(8)), ("conn_count", u32(1)), ("chunk_count", u32(1))],
+                         b"")  # fmt: skip
+    connection = _record(
+        [("op", b"\x07"), ("conn", u32(0)), ("topic", b"/joint_states")],
+        _field("topic", b"/joint_states") + _field("type", b"sensor_msgs/JointState") + _field("md5sum", b"*"),
+    )
+    chunk = _record([("op", b"\x05"), ("compression", b"lz4"), ("size", u32(declared or size))], frames)
+    path.write_bytes(b"#ROSBAG V2.0\n" + bag_header + connection + chunk)
+    return path
+
+
+def test_a_large_ros1_chunk_is_walked_a_window_at_a_time(tmp_path):
+    """A 0.8 MB bag whose honest lz4 chunk decodes to 200 MiB of nothing: was 3.3 GB resident for a 3 GiB one
+    (the chunk decompressed whole, then walked); now a 4 MiB window at a time."""
+    bag = _zero_chunk_bag(tmp_path / "zeros.bag", 200 << 20)
+    assert bag.stat().st_size < 1_000_000
+    done = run("inspect", "--format", "json", str(bag), budget="1G")
+    assert done.returncode == 0, done.stderr
+    assert '"notes": []' in done.stdout
+    assert done.peak_rss < BUDGET, done.peak_rss
+
+
+def test_a_large_ros1_chunk_that_lies_or_passes_the_budget_is_skipped(tmp_path, monkeypatch):
+    from wmrid.io.bag.reader import read_bag
+
+    monkeypatch.setenv("WMRID_MEMORY_BUDGET", "32M")
+    liar = _zero_chunk_bag(tmp_path / "liar.bag", 20 << 20, declared=6 << 20)  # 6 MiB declared, 20 MiB in it
+    (note,) = read_bag([str(liar)]).notes
+    assert note == f"{liar}: a chunk decompressed to {(6 << 20) + 1} bytes, not the {6 << 20} it declares: skipped, " \
+        "its messages are lost"  # fmt: skip
+    over = _zero_chunk_bag(tmp_path / "over.bag", 40 << 20)
+    (note,) = read_bag([str(over)]).notes
+    assert "declares 40 MiB uncompressed, beyond the memory budget of 32 MiB (WMRID_MEMORY_BUDGET)" in note
+
+
+def test_a_recorded_bag_in_one_large_chunk_reads_as_in_small_ones(tmp_path, monkeypatch):
+    """The sample's 40,001 messages in one lz4 chunk of 7 MB, walked in 1 MiB windows (records straddle them), read
+    as the same bag in rosbags' chunks of 1 MiB."""
+    from tests import bagutil
+    from wmrid.io.bag.reader import read_bag
+
+    messages = bagutil.recording(SAMPLE)
+    small = bagutil.write_ros1(tmp_path / "small.bag", messages, compression="lz4")
+    one = bagutil.write_ros1(tmp_path / "one.bag", messages, compression="lz4", chunk_threshold=64 << 20)
+    monkeypatch.setenv("WMRID_MEMORY_BUDGET", "8M")  # windows of 1 MiB
+    a, b = read_bag([str(small)]), read_bag([str(one)])
+    assert not a.notes
+    assert not b.notes
+    (sa,), (sb,) = a.joints.values(), b.joints.values()
+    assert len(sb.log_ns) == 40001
+    for name in ("log_ns", "stamp_ns", "velocity", "effort"):
+        np.testing.assert_array_equal(getattr(sa, name), getattr(sb, name))
