@@ -265,3 +265,75 @@ def test_a_recorded_bag_in_one_large_chunk_reads_as_in_small_ones(tmp_path, monk
     assert len(sb.log_ns) == 40001
     for name in ("log_ns", "stamp_ns", "velocity", "effort"):
         np.testing.assert_array_equal(getattr(sa, name), getattr(sb, name))
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# One clear line where "internal error" came out: fleet tables, robot files
+
+
+def _fleet_table(folder: Path) -> Path:
+    from tests.fleetutil import synthetic_rows
+    from wmrid.io.fleet_table import write_table
+
+    path = folder / "fleet.parquet"
+    write_table(synthetic_rows(robots=2, days=3), path)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("column", "values", "needle"),
+    [
+        ("m11", ["abc"], "column m11 holds string values that cannot be read as double"),
+        ("start_time", ["yesterday"], "column start_time holds string values that cannot be read as timestamp"),
+        ("flags", [1], "column flags holds int64 values that cannot be read as list<element: string>"),
+    ],
+)
+def test_a_fleet_table_with_a_column_of_the_wrong_type_is_one_line(tmp_path, column, values, needle):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(_fleet_table(tmp_path))
+    forged = table.set_column(table.column_names.index(column), column, pa.array(values * len(table)))
+    pq.write_table(forged.replace_schema_metadata(table.schema.metadata), tmp_path / "forged.parquet")
+    line = assert_clean_error(wmrid("fleet-report", str(tmp_path / "forged.parquet"), "-o", str(tmp_path / "r.html")),
+                              2, f"{tmp_path}/forged.parquet: {needle}")  # fmt: skip
+    assert "remake the table with `wmrid fleet`" in line  # was: internal error: ArrowInvalid
+    assert not (tmp_path / "r.html").exists()
+
+
+ROBOT = (ROOT / "examples" / "small_amr.toml").read_text()
+
+
+@pytest.mark.parametrize(
+    ("change", "needle"),
+    [
+        (("m_p = 11.0", "m_p = " + "1" * 5000), "holds an integer of more than 4,300 digits"),
+        (("m_p = 11.0", "m_p = " + "1" * 400), "[nominal] m_p: an integer over 1.8e308"),
+        (("x = 0.2 ", "x = " + "9" * 400 + " "), "[[caster]] 1: x: an integer over 1.8e308"),
+        (("efficiency = 0.9", "efficiency = -" + "9" * 400), "[motor] efficiency: an integer over 1.8e308"),
+    ],
+)
+def test_a_robot_file_with_an_enormous_integer_is_one_line(tmp_path, change, needle):
+    robot = tmp_path / "r.toml"
+    robot.write_text(ROBOT.replace(*change))
+    line = assert_clean_error(wmrid("identify", str(CSV), "--robot", str(robot)), 2, f"{robot}", needle)
+    assert "internal error" not in line  # was ValueError (int from 5000 digits) or OverflowError (int to float)
+
+
+def test_a_robot_has_at_most_sixteen_casters(tmp_path):
+    from dataclasses import replace
+
+    from wmrid.core.errors import RobotFileError
+    from wmrid.model.robot import BUILTIN_ROBOTS, MAX_CASTERS, Caster
+
+    robot = tmp_path / "r.toml"
+    robot.write_text(ROBOT.split("# Ball casters")[0] + "[[caster]]\nx = 0.2\n" * 10_000)
+    out = str(tmp_path / "s.csv")
+    assert_clean_error(  # was MuJoCo's "Could not allocate memory" (internal error) after minutes
+        wmrid("simulate", "--robot", str(robot), "--engine", "mujoco", "--duration", "1", "-o", out),
+        2, f"{robot}: 10,000 [[caster]] tables; wmrid takes at most 16 casters",
+    )  # fmt: skip
+    with pytest.raises(RobotFileError, match="17 casters; wmrid takes at most 16"):
+        replace(BUILTIN_ROBOTS["amr"], casters=tuple(Caster(x=0.01 * i) for i in range(MAX_CASTERS + 1)))
+    sixteen = replace(BUILTIN_ROBOTS["amr"], casters=tuple(Caster(x=0.2, y=0.01 * i - 0.08) for i in range(16)))
+    assert len(sixteen.casters) == MAX_CASTERS
