@@ -337,3 +337,82 @@ def test_a_robot_has_at_most_sixteen_casters(tmp_path):
         replace(BUILTIN_ROBOTS["amr"], casters=tuple(Caster(x=0.01 * i) for i in range(MAX_CASTERS + 1)))
     sixteen = replace(BUILTIN_ROBOTS["amr"], casters=tuple(Caster(x=0.2, y=0.01 * i - 0.08) for i in range(16)))
     assert len(sixteen.casters) == MAX_CASTERS
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# A file without read permission, an output in a read-only folder: wmrid's line, naming the file and the fix
+
+#: Cases run in one process without the power to override file permissions: (arguments, what its line says after
+#: "wmrid: error: " and before the fix).
+_DENIED = "cannot be read (Permission denied)"
+_PERMISSION_CASES = [
+    (["identify", "{d}/noread.csv"], f"{{d}}/noread.csv: {_DENIED}"),
+    (["inspect", "{d}/noread.mcap"], f"{{d}}/noread.mcap: {_DENIED}"),
+    (["identify", "{d}/rec"], f"{{d}}/rec/rec.db3: {_DENIED}"),
+    (["identify", "{d}/bags"], f"{{d}}/bags/b.db3: {_DENIED}"),
+    (["identify", str(CSV), "--robot", "{d}/noread.toml"], f"robot file {{d}}/noread.toml: {_DENIED}"),
+    (["monitor", str(CSV), "--model", "{d}/noread.json"], f"--model {{d}}/noread.json: {_DENIED}"),
+    (["report", str(CSV), "--truth", "{d}/noread.json", "-o", "{d}/r.html"], f"--truth {{d}}/noread.json: {_DENIED}"),
+    (["fleet-report", "{d}/noread.parquet", "-o", "{d}/f.html"], f"{{d}}/noread.parquet: {_DENIED}"),
+    (["simulate", "--duration", "0.5", "-o", "{d}/ro/s.csv"], "cannot write {d}/ro/s.csv: {d}/ro is not writable"),
+]
+
+
+#: Runs each case of argv[1] (JSON) in this process, prints their outcomes (JSON).
+_RUN_CASES = """
+import json, sys
+from tests.cliutil import wmrid
+out = []
+for args in json.loads(sys.argv[1]):
+    done = wmrid(*args)
+    out.append([done.returncode, done.stderr.decode()])
+print(json.dumps(out))
+"""
+
+
+def _without_override() -> list[str]:
+    """The command prefix that runs a process that file permissions stop: as root, without the capabilities that
+    override them (setpriv); as another user, none."""
+    import os
+
+    if os.geteuid() != 0:
+        return []
+    if shutil.which("setpriv") is None:
+        pytest.skip("run as root without setpriv: no way to make a file unreadable to the process")
+    return ["setpriv", "--bounding-set=-dac_override,-dac_read_search"]
+
+
+def test_an_unreadable_input_or_a_read_only_folder_is_wmrids_one_line(tmp_path, small_db3):
+    import json
+    import os
+    import subprocess
+    import sys
+
+    d = tmp_path
+    inputs = {"noread.csv": CSV, "noread.mcap": SAMPLE, "noread.toml": ROOT / "examples" / "small_amr.toml"}
+    for name, source in {**inputs, "noread.json": CSV, "noread.parquet": CSV}.items():
+        shutil.copyfile(source, d / name)
+        os.chmod(d / name, 0)
+    (d / "rec").mkdir()  # a rosbag2 folder whose storage file cannot be read
+    for f in small_db3.parent.iterdir():
+        shutil.copyfile(f, d / "rec" / f.name)
+    os.chmod(d / "rec" / small_db3.name, 0)
+    (d / "bags").mkdir()  # a folder of bags without metadata.yaml
+    shutil.copyfile(small_db3, d / "bags" / "a.db3")
+    shutil.copyfile(small_db3, d / "bags" / "b.db3")
+    os.chmod(d / "bags" / "b.db3", 0)
+    (d / "ro").mkdir()
+    os.chmod(d / "ro", 0o555)
+    cases = [[a.format(d=d) for a in args] for args, _ in _PERMISSION_CASES]
+    done = subprocess.run([*_without_override(), sys.executable, "-c", _RUN_CASES, json.dumps(cases)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    fixes = ("; check its permissions", "; write the output to another folder, or change the folder's permissions")
+    for (args, start), (code, err) in zip(_PERMISSION_CASES, json.loads(done.stdout), strict=True):
+        lines = err.strip().splitlines()
+        assert code == 2, (args, err)
+        assert len(lines) == 1, (args, err)  # was a usage block ("is not readable"), or internal error
+        assert lines[0].startswith("wmrid: error: " + start.format(d=d)), (args, lines[0])
+        assert lines[0].endswith(fixes), (args, lines[0])
+    assert not os.listdir(d / "ro")
+    os.chmod(d / "ro", 0o755)

@@ -56,7 +56,10 @@ def load_truth(truth: dict[str, float] | str | os.PathLike[str] | None) -> dict[
     try:
         with open(path, encoding="utf-8") as fh:
             return {k: float(v) for k, v in json.load(fh)["parameters"].items()}
-    except (OSError, ValueError, KeyError, TypeError, AttributeError, RecursionError) as err:
+    except OSError as err:
+        why = err.strerror or err
+        raise UsageError(f"{option('truth', path)}: cannot be read ({why}); check its permissions") from err
+    except (ValueError, KeyError, TypeError, AttributeError, RecursionError) as err:
         raise UsageError(f"{option('truth', path)}: not a truth file {{'parameters': {{'m11': ...}}}} ({err})") from err
 
 

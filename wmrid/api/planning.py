@@ -254,7 +254,7 @@ def _read_json(path: str, name: str, what: str) -> Any:
     try:
         raw = read_limited(path, memory_budget(), f"{name}: holds more than {{size}} (WMRID_MEMORY_BUDGET)", UsageError)
     except OSError as err:
-        raise UsageError(f"{name}: cannot read ({err.strerror or err})") from None
+        raise UsageError(f"{name}: cannot be read ({err.strerror or err}); check its permissions") from None
     try:
         return json.loads(raw)
     except (ValueError, RecursionError) as err:

@@ -312,7 +312,7 @@ def _read_table(name: str, kind: str) -> tuple[np.ndarray, np.ndarray, np.ndarra
     except (pd.errors.ParserError, UnicodeDecodeError, ValueError) as err:
         raise LogFormatError(f"{name}: cannot be parsed as CSV ({_one_line(err)})") from err
     except OSError as err:
-        raise UsageError(f"cannot read reference {name}: {err.strerror or err}") from err
+        raise UsageError(f"reference {name}: cannot be read ({err.strerror or err}); check its permissions") from err
     frame.columns = [str(c).strip() for c in frame.columns]
     missing = [c for c in REFERENCE_COLUMNS if c not in frame.columns]
     if missing:
@@ -347,7 +347,7 @@ def _read_mcap(name: str, topic: str | None) -> tuple[np.ndarray, np.ndarray, np
     try:
         fh = open(name, "rb")  # noqa: SIM115 - closed below
     except OSError as err:
-        raise UsageError(f"cannot read reference {name}: {err.strerror or err}") from err
+        raise UsageError(f"reference {name}: cannot be read ({err.strerror or err}); check its permissions") from err
     try:
         with fh:
             reader = make_reader(fh)

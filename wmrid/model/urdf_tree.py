@@ -207,7 +207,7 @@ def load(path_or_text: str | Path) -> tuple[ET.Element, str]:
         try:
             data = path.read_bytes()
         except OSError as err:
-            raise RobotFileError(f"{source}: cannot read ({err})") from None
+            raise RobotFileError(f"{source}: cannot be read ({err.strerror or err}); check its permissions") from None
     try:
         root = ET.fromstring(data)
     except ET.ParseError as err:
