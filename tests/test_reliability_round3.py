@@ -416,3 +416,31 @@ def test_an_unreadable_input_or_a_read_only_folder_is_wmrids_one_line(tmp_path, 
         assert lines[0].endswith(fixes), (args, lines[0])
     assert not os.listdir(d / "ro")
     os.chmod(d / "ro", 0o755)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Endless sources without an address-space cap: stopped at the budget with one line (was "internal error")
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["identify", "/dev/urandom"], "/dev/urandom: it is not a regular file and holds more than 64 MiB, the memory"),
+        (["inspect", "/dev/zero"], "/dev/zero: it is not a regular file and holds more than 64 MiB, the memory budget"),
+        (["monitor", str(CSV), "--model", "/dev/zero"], "--model /dev/zero: holds more than 64 MiB (WMRID_MEMORY"),
+        (["identify", "-"], "<stdin>: standard input holds more than 64 MiB, the memory budget (WMRID_MEMORY_BUDGET)"),
+    ],
+)
+def test_an_endless_source_is_one_line_at_the_budget(args, needle):
+    import subprocess
+
+    yes = subprocess.Popen(["yes"], stdout=subprocess.PIPE) if args[-1] == "-" else None
+    try:
+        done = run(*args, budget="64M", stdin=yes.stdout if yes else subprocess.DEVNULL)
+    finally:
+        if yes is not None:
+            yes.kill()
+            yes.wait()
+            yes.stdout.close()
+    done.one_error(2, needle)
+    assert done.peak_rss < BUDGET, done.peak_rss
