@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from wmrid.api.inputs import LogOptions, load_robot, open_log
-from wmrid.core.errors import UsageError, option
+from wmrid.core.errors import UsageError, cannot_read, option
 from wmrid.core.wheel_log import LogStream, WheelLog
 from wmrid.estimators.identify import FRICTION_CHOICES
 from wmrid.estimators.methods import Comparison
@@ -57,8 +57,7 @@ def load_truth(truth: dict[str, float] | str | os.PathLike[str] | None) -> dict[
         with open(path, encoding="utf-8") as fh:
             return {k: float(v) for k, v in json.load(fh)["parameters"].items()}
     except OSError as err:
-        why = err.strerror or err
-        raise UsageError(f"{option('truth', path)}: cannot be read ({why}); check its permissions") from err
+        raise UsageError(f"{option('truth', path)}: {cannot_read(err)}") from err
     except (ValueError, KeyError, TypeError, AttributeError, RecursionError) as err:
         raise UsageError(f"{option('truth', path)}: not a truth file {{'parameters': {{'m11': ...}}}} ({err})") from err
 

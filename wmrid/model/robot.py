@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from wmrid.core.errors import RobotFileError, UsageError, option
+from wmrid.core.errors import RobotFileError, UsageError, cannot_read, option
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -595,8 +595,7 @@ def load_robot(spec: str) -> Robot:
             RobotFileError,
         ).decode("utf-8")  # fmt: skip
     except OSError as err:
-        why = err.strerror or err
-        raise RobotFileError(f"robot file {spec}: cannot be read ({why}); check its permissions") from None
+        raise RobotFileError(f"robot file {spec}: {cannot_read(err)}") from None
     except UnicodeDecodeError as err:
         raise RobotFileError(f"robot file {spec}: not UTF-8 text (byte {err.start}); give a robot TOML file") from None
     return robot_from_toml_text(text, str(path))

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.core.errors import LogFormatError, UsageError, option
+from wmrid.core.errors import LogFormatError, UsageError, cannot_read, option
 from wmrid.model import dynamics as model
 from wmrid.model.dynamics import THETA0_NAMES, RegressorForm
 
@@ -260,9 +260,7 @@ def load_model(path: str | Path) -> MonitoredModel:
             UsageError,
         ).decode("utf-8")  # fmt: skip
     except OSError as err:
-        raise UsageError(
-            f"{option('model')} {path}: cannot be read ({err.strerror or err}); check its permissions"
-        ) from None
+        raise UsageError(f"{option('model')} {path}: {cannot_read(err)}") from None
     except UnicodeDecodeError as err:
         raise UsageError(f"{option('model')} {path}: not an identify result (byte {err.start} is not UTF-8)") from None
     try:
