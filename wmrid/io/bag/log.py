@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 
-from wmrid.core.errors import LogFormatError
+from wmrid.core.errors import LogFormatError, cannot_read
 from wmrid.core.wheel_log import CHUNK_ROWS, LogStream
 from wmrid.io.field_paths import FieldSignals
 from wmrid.io.mcap.joints import TopicSelection
@@ -31,34 +31,36 @@ def _magic(path: str) -> bytes:
         return b""
 
 
-#: The magic bytes of the files a folder without metadata.yaml may hold, by suffix.
-_SUFFIX_MAGIC = {".bag": ROS1_MAGIC, ".bag.active": ROS1_MAGIC, ".db3": SQLITE_MAGIC, ".mcap": MCAP_MAGIC}
+#: The magic bytes of the ROS 1 and sqlite files a folder without metadata.yaml may hold, by suffix (an MCAP file that
+#: a crash left empty or cut in its header is the MCAP reader's to note and skip).
+_SUFFIX_MAGIC = {".bag": ROS1_MAGIC, ".bag.active": ROS1_MAGIC, ".db3": SQLITE_MAGIC}
 
 
 def _readable_head(path: str) -> bytes:
     """The first 16 bytes of the file ``path`` of a recording, or LogFormatError when it cannot be read (naming the
-    file and the reason: no permission, ...) or is empty."""
+    file, the reason and the fix)."""
     try:
         with open(path, "rb") as fh:
-            head = fh.read(16)
+            return fh.read(16)
     except OSError as err:
-        raise LogFormatError(f"{path}: cannot be read ({err.strerror or err}); check its permissions") from None
-    if not head:
-        raise LogFormatError(f"{path}: the file is empty (0 bytes); remove it, or give the recording's other files")
-    return head
+        raise LogFormatError(f"{path}: {cannot_read(err)}") from None
 
 
 def _check_folder_files(files: list[str]) -> None:
-    """Each of a folder's recording files (found by suffix) readable and of the kind its suffix says: a wrong one is
-    one line naming it (rosbags would stop on it with a message of its own)."""
+    """Each of a folder's recording files (found by suffix) readable, and each ROS 1 or sqlite one not empty and of
+    the kind its suffix says: a wrong one is one line naming it (rosbags stopped on it with a message of its own)."""
     for path in files:
         head = _readable_head(path)
-        suffix = next(s for s in sorted(_SUFFIX_MAGIC, key=len, reverse=True) if path.lower().endswith(s))
+        suffix = next((s for s in sorted(_SUFFIX_MAGIC, key=len, reverse=True) if path.lower().endswith(s)), None)
+        if suffix is None:
+            continue
+        if not head:
+            raise LogFormatError(f"{path}: the file is empty (0 bytes); remove it, or give the recording's other files")
         if not head.startswith(_SUFFIX_MAGIC[suffix]):
-            kind = {ROS1_MAGIC: "a ROS 1 bag", SQLITE_MAGIC: "an SQLite database", MCAP_MAGIC: "an MCAP file"}
+            kind = "a ROS 1 bag" if _SUFFIX_MAGIC[suffix] == ROS1_MAGIC else "an SQLite database"
             raise LogFormatError(
-                f"{path}: a {suffix} file that is not {kind[_SUFFIX_MAGIC[suffix]]} (its first bytes say otherwise); "
-                "remove it from the folder, or give the recording's files"
+                f"{path}: a {suffix} file that is not {kind} (its first bytes say otherwise); remove it from the "
+                "folder, or give the recording's files"
             )
 
 
