@@ -41,13 +41,18 @@ def _ros2_store():
     return get_typestore(Stores.ROS2_HUMBLE)
 
 
-def write_ros1(path: Path, messages: list[Message], compression: str | None = None) -> Path:
-    """A ROS 1 bag of the JointState messages (``compression``: None, "bz2" or "lz4" chunks)."""
+def write_ros1(
+    path: Path, messages: list[Message], compression: str | None = None, chunk_threshold: int | None = None
+) -> Path:
+    """A ROS 1 bag of the JointState messages (``compression``: None, "bz2" or "lz4" chunks; ``chunk_threshold``:
+    bytes of records a chunk takes before the next begins, rosbags' 1 MiB by default)."""
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
 
     ros1 = get_typestore(Stores.ROS1_NOETIC)
     writer = Writer(Path(path))
+    if chunk_threshold is not None:
+        writer.chunk_threshold = chunk_threshold
     if compression is not None:
         writer.set_compression(getattr(Writer.CompressionFormat, compression.upper()))
     with writer:

@@ -314,7 +314,7 @@ def test_cli_monitor_table_on_request(cli_files) -> None:
 @pytest.mark.parametrize(
     ("kind", "code", "needles"),
     [
-        ("missing", 2, ["--model", "nope.json", "cannot read"]),
+        ("missing", 2, ["--model", "nope.json", "cannot be read (No such file or directory); check the path"]),
         ("not-json", 2, ["--model", "bad.json", "not JSON"]),
         ("not-a-result", 2, ["--model", "bad.json", "not a wmrid identify result"]),
         ("pwm", 2, ["PWM", "N m"]),

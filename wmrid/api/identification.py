@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from wmrid.api.inputs import LogOptions, load_robot, open_log
-from wmrid.core.errors import UsageError, option
+from wmrid.core.errors import UsageError, cannot_read, option
 from wmrid.core.wheel_log import LogStream, WheelLog
 from wmrid.estimators.identify import FRICTION_CHOICES
 from wmrid.estimators.methods import Comparison
@@ -61,7 +61,9 @@ def load_truth(truth: dict[str, float] | str | os.PathLike[str] | None) -> dict[
     try:
         with open(path, encoding="utf-8") as fh:
             return {k: float(v) for k, v in json.load(fh)["parameters"].items()}
-    except (OSError, ValueError, KeyError, TypeError, AttributeError, RecursionError) as err:
+    except OSError as err:
+        raise UsageError(f"{option('truth', path)}: {cannot_read(err)}") from err
+    except (ValueError, KeyError, TypeError, AttributeError, RecursionError) as err:
         raise UsageError(f"{option('truth', path)}: not a truth file {{'parameters': {{'m11': ...}}}} ({err})") from err
 
 

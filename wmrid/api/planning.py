@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.core.errors import UsageError, option
+from wmrid.core.errors import UsageError, cannot_read, option
 from wmrid.design.information import DEFAULT_K, GivenLogs, SensorNoise, given_weight
 from wmrid.design.limits import DEFAULT_MARGIN, resolve_limits
 from wmrid.design.plan import Plan, make_plan
@@ -258,7 +258,7 @@ def _read_json(path: str, name: str, what: str) -> Any:
     try:
         raw = read_limited(path, memory_budget(), f"{name}: holds more than {{size}} (WMRID_MEMORY_BUDGET)", UsageError)
     except OSError as err:
-        raise UsageError(f"{name}: cannot read ({err.strerror or err})") from None
+        raise UsageError(f"{name}: {cannot_read(err)}") from None
     try:
         return json.loads(raw)
     except (ValueError, RecursionError) as err:

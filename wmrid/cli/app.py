@@ -151,7 +151,20 @@ def command() -> Any:
 
     root = typer.main.get_command(app)
     _verbatim_help(root)
+    _paths_read_by_wmrid(root)
     return root
+
+
+def _paths_read_by_wmrid(cmd: Any) -> None:
+    """Turn off Typer's own readability check of every ``Path`` option and argument of ``cmd`` and its subcommands:
+    a file that cannot be read is then said by wmrid's reader, in one line naming it and the fix (Typer printed a
+    usage block ending "Invalid value for '--truth': path '...' is not readable.")."""
+    for param in getattr(cmd, "params", []):
+        info = getattr(getattr(param, "type_descriptor", None), "parameter_info", None)
+        if getattr(info, "readable", False):
+            info.readable = False
+    for sub in getattr(cmd, "commands", {}).values():
+        _paths_read_by_wmrid(sub)
 
 
 def _verbatim_help(cmd: Any) -> None:

@@ -22,6 +22,7 @@ temporary file removed.  Temporary names keep within NAME_MAX (255 bytes) whatev
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
@@ -146,6 +147,17 @@ def _write_error(path: Path | str, err: OSError) -> OutputWriteError:
     return OutputWriteError(f"cannot write {where}: {err.strerror or err}; nothing was written there in full")
 
 
+def _unwritable(folder: Path, err: OSError) -> str:
+    """Why nothing can be created in ``folder`` (the output's), with the fix."""
+    where = str(folder) if str(folder) not in ("", ".") else "the current folder"
+    if err.errno == errno.EROFS:
+        return f"{where} is on a read-only file system; write the output to another folder"
+    if err.errno in (errno.EACCES, errno.EPERM):
+        return (f"{where} is not writable ({err.strerror}); write the output to another folder, or change the "
+                "folder's permissions")  # fmt: skip
+    return f"{err.strerror or err} (creating a file in {where})"
+
+
 def _exists_error(path: Path) -> OutputExistsError:
     return OutputExistsError(f"{path} exists; use {option('force', True)} to overwrite it")
 
@@ -219,7 +231,7 @@ def atomic_output(path: str | Path, *, force: bool = False, mode: str = "wb") ->
             mode=mode, dir=folder, delete=False, prefix=f".{_short(path.name)}.", suffix=".tmp", **kwargs
         )
     except OSError as err:
-        raise UsageError(f"cannot write {path}: {err.strerror or err}") from err
+        raise UsageError(f"cannot write {path}: {_unwritable(folder, err)}") from err
     tmp = Path(handle.name)
     _LIVE.add(str(tmp))
     try:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import errno
 from collections.abc import Iterator
 from enum import IntEnum
 
@@ -51,6 +52,15 @@ class OutputWriteError(WmridError):
     """An output could not be written (a full disk, a closed or failing stream); nothing partial stands as complete."""
 
     exit_status = ExitStatus.NO_RESULT
+
+
+def cannot_read(err: OSError) -> str:
+    """Why a file could not be opened, with the fix, for a message after its name: "cannot be read (Permission
+    denied); check its permissions", "cannot be read (No such file or directory); check the path"."""
+    why = err.strerror or str(err)
+    fix = {errno.EACCES: "check its permissions", errno.EPERM: "check its permissions", errno.ENOENT: "check the path",
+           errno.EISDIR: "give a file", errno.ELOOP: "fix the link"}.get(err.errno or 0)  # fmt: skip
+    return f"cannot be read ({why})" + (f"; {fix}" if fix else "")
 
 
 class ReaderGone(Exception):

@@ -11,10 +11,11 @@ the line of the file as an editor counts it (header = line 1).
 
 from __future__ import annotations
 
+import io
 import re
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
 
@@ -90,7 +91,7 @@ def _csv_line_finder(source: Source, skip: int = 0, has_header: bool = True) -> 
     """
 
     def where(index: int) -> str:
-        with source.open() as fh:
+        with csv_stream(source, lines=True) as fh:
             seen_header = not has_header
             count = -1
             for lineno, raw in enumerate(fh, start=1):
@@ -189,8 +190,10 @@ def csv_layout(source: Source) -> CsvLayout:
     if int(pd.__version__.split(".")[0]) < 3:  # pandas 3 parses floats exactly by default (and warns on this)
         c_options["float_precision"] = "round_trip"
     try:
-        with source.open() as fh:
+        with csv_stream(source) as fh:
             header = pd.read_csv(fh, nrows=0 if has_header else 1, **c_options)
+    except LogFormatError:
+        raise
     except (ValueError, UnicodeDecodeError) as err:
         raise fail(err) from err
     except DamagedStream as err:
@@ -235,7 +238,7 @@ def csv_chunks(
     def c_engine(skip_rows: int) -> Iterator[tuple[int, dict[str, Any]]]:
         base = 0
         try:  # all columns: usecols would hide ragged rows
-            with source.open() as fh, pd.read_csv(fh, chunksize=rows, **c_options) as reader:
+            with csv_stream(source) as fh, pd.read_csv(fh, chunksize=rows, **c_options) as reader:
                 for frame in reader:
                     n = len(frame)
                     if base + n > skip_rows:
@@ -244,6 +247,8 @@ def csv_chunks(
                         frame.columns = [str(c).strip() for c in frame.columns]
                         yield base + start, {key: _series_values(frame[col]) for key, col in chosen.items()}
                     base += n
+        except LogFormatError:
+            raise
         except (ValueError, UnicodeDecodeError) as err:
             raise layout.fail(err) from err
         except DamagedStream as err:
@@ -276,7 +281,7 @@ def _arrow_csv(
     import pyarrow as pa
     import pyarrow.csv as pcsv
 
-    fh = source.open()
+    fh = csv_stream(source)
     try:
         reader = pcsv.open_csv(
             fh,
@@ -284,6 +289,9 @@ def _arrow_csv(
             parse_options=pcsv.ParseOptions(delimiter=sep),
             convert_options=pcsv.ConvertOptions(include_columns=usecols),
         )
+    except LogFormatError:
+        fh.close()
+        raise
     except (pa.ArrowException, OSError, ValueError) as err:
         fh.close()
         raise _ArrowCsvRefused from err
@@ -303,6 +311,8 @@ def _arrow_csv(
                     yield values(table.slice(0, rows))
                     rest = table.slice(rows)
                     pending, count = rest.to_batches(), rest.num_rows
+    except LogFormatError:
+        raise
     except (pa.ArrowException, OSError, ValueError) as err:
         raise _ArrowCsvRefused from err
     if count:
@@ -329,3 +339,89 @@ def _series_values(series: pandas.Series) -> Any:
 
 #: bytes: the longest first line (header) of a CSV log; a 10 M-column header took 3.4 GB and 75 s to refuse.
 MAX_HEADER_BYTES = 1 << 20
+
+
+#: bytes: the longest line of a CSV log, and the longest run of line ends in a row (blank lines: a million of
+#: them).  The parsers skip blank lines and hold a line whole: a header and 2 GB of blank lines took 41 s and
+#: 1.18 GB, one line of gigabytes would fill memory.  A log past either is refused as it is read: a line over
+#: twice MAX_LINE_BYTES always, one within it never (likewise blank lines and MAX_BLANK_RUN).
+MAX_LINE_BYTES = 16 << 20
+MAX_BLANK_RUN = 1 << 20
+
+_CR_TO_LF = bytes.maketrans(b"\r", b"\n")
+_BLANK_RUN = b"\n" * MAX_BLANK_RUN
+
+
+class _LineGuard(io.RawIOBase):
+    """A CSV log's byte stream that raises LogFormatError (naming the log and the byte reached) once a line passes
+    :data:`MAX_LINE_BYTES` or a run of blank lines :data:`MAX_BLANK_RUN` line ends (each within a factor of two: see
+    there); otherwise the bytes as they are, uncopied.  Each block read costs a few C-speed look-ups: a long line or
+    run holds a whole segment of the limit's length, aligned in the block, that has no line end (or only line ends),
+    and a segment is tested by its first bytes, which differ at once in a log's ordinary text."""
+
+    def __init__(self, raw: BinaryIO, name: str):
+        self._raw, self._name = raw, name
+        self._line = 0  # bytes of the line not yet ended, carried from the blocks before
+        self._run = 0  # line-end bytes in a row at the end of the blocks before
+        self._offset = 0  # bytes read before this block (for the message)
+
+    def readable(self) -> bool:
+        return True
+
+    def read(self, size: int = -1) -> bytes:
+        data = self._raw.read(size)
+        if data:
+            self._check(data)
+            self._offset += len(data)
+        return data
+
+    def readinto(self, buffer: Any) -> int:
+        data = self.read(len(buffer))
+        buffer[: len(data)] = data
+        return len(data)
+
+    def _check(self, block: bytes) -> None:
+        if b"\r" in block:
+            block = block.translate(_CR_TO_LF)
+        first = block.find(b"\n")
+        if first < 0:
+            first = len(block)
+        if self._line + first > MAX_LINE_BYTES:
+            self._refuse(f"a line longer than {MAX_LINE_BYTES >> 20} MiB", self._offset - self._line)
+        for start in range(first, len(block) - MAX_LINE_BYTES + 1, MAX_LINE_BYTES):
+            if block.find(b"\n", start, start + MAX_LINE_BYTES) < 0:
+                self._refuse(f"a line longer than {MAX_LINE_BYTES >> 20} MiB", self._offset + start)
+        if first == len(block):
+            self._line += len(block)
+            self._run = 0
+            return
+        lead = len(block) - len(block.lstrip(b"\n"))
+        if self._run + lead > MAX_BLANK_RUN:
+            self._refuse(f"more than {MAX_BLANK_RUN:,} blank lines in a row", self._offset - self._run)
+        for start in range(lead, len(block) - MAX_BLANK_RUN + 1, MAX_BLANK_RUN):
+            if block.startswith(_BLANK_RUN, start):
+                self._refuse(f"more than {MAX_BLANK_RUN:,} blank lines in a row", self._offset + start)
+        tail = len(block) - len(block.rstrip(b"\n"))
+        self._run = self._run + len(block) if tail == len(block) else tail
+        self._line = len(block) - block.rfind(b"\n") - 1
+
+    def _refuse(self, what: str, where: int) -> None:
+        raise LogFormatError(
+            f"{self._name}: {what} (from byte {max(where, 0):,}), which no "
+            f"wheel log has: wmrid reads lines of at most {MAX_LINE_BYTES >> 20} MiB and at most {MAX_BLANK_RUN:,} "
+            "blank lines in a row; check the file, or remove them (grep -v '^$')"
+        )
+
+    def close(self) -> None:
+        if not self.closed:
+            try:
+                self._raw.close()
+            finally:
+                super().close()
+
+
+def csv_stream(source: Source, lines: bool = False) -> BinaryIO:
+    """The (decompressed) bytes of the CSV log ``source``, its lines and runs of blank lines bounded
+    (:class:`_LineGuard`), to be closed by the caller; ``lines``: buffered, to be read line by line."""
+    guard = _LineGuard(source.open(), source.name)
+    return io.BufferedReader(guard, 1 << 16) if lines else guard  # type: ignore[return-value]

@@ -135,9 +135,14 @@ def read_arrow(path: str | os.PathLike[str], *, as_input: bool = True):
     if as_input:
         register_input(name)
     try:
+        if not os.path.isdir(name):
+            with open(name, "rb"):  # a file that cannot be read is said as such, not in Arrow's words
+                pass
         table = pq.read_table(name)
     except FileNotFoundError:
         raise UsageError(f"{name}: no such fleet table; run `wmrid fleet LOGS -o {name}` first") from None
+    except PermissionError as err:
+        raise LogFormatError(f"{name}: cannot be read ({err.strerror}); check its permissions") from None
     except (OSError, pa.ArrowException) as err:
         raise LogFormatError(f"{name}: not a Parquet fleet table ({_one_line(err)})") from None
     meta = table.schema.metadata or {}
@@ -155,7 +160,20 @@ def read_arrow(path: str | os.PathLike[str], *, as_input: bool = True):
     missing = [n for n in column_names() if n not in table.column_names]
     if missing:
         raise LogFormatError(f"{name}: the fleet table lacks the columns {', '.join(missing)}; remake it")
-    return table.select(list(column_names())).cast(_schema())
+    table = table.select(list(column_names()))
+    schema = _schema()
+    for wanted in schema:  # column by column, so that a column of the wrong type is named (a forged or edited table)
+        column = table.column(wanted.name)
+        if column.type == wanted.type:
+            continue
+        try:
+            column.cast(wanted.type)
+        except (pa.ArrowException, ValueError, TypeError) as err:
+            raise LogFormatError(
+                f"{name}: column {wanted.name} holds {column.type} values that cannot be read as {wanted.type}; remake "
+                "the table with `wmrid fleet`"
+            ) from err
+    return table.cast(schema)
 
 
 def _one_line(err: BaseException) -> str:

@@ -168,12 +168,14 @@ def _inspect_table(source, kind: str) -> TableInventory:
     else:
         import pandas as pd
 
-        from wmrid.io.csv_log import csv_layout
+        from wmrid.io.csv_log import csv_layout, csv_stream
 
         layout = csv_layout(source)
         try:
-            with source.open() as fh:
+            with csv_stream(source) as fh:
                 frame = pd.read_csv(fh, nrows=5, **layout.c_options)
+        except LogFormatError:
+            raise
         except (ValueError, UnicodeDecodeError) as err:
             raise layout.fail(err) from err
         columns = [{"name": str(c).strip(), "type": str(t)} for c, t in frame.dtypes.items()]

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.core.errors import LogFormatError, UsageError
+from wmrid.core.errors import LogFormatError, UsageError, cannot_read
 
 __all__ = [
     "REFERENCE_COLUMNS",
@@ -312,7 +312,7 @@ def _read_table(name: str, kind: str) -> tuple[np.ndarray, np.ndarray, np.ndarra
     except (pd.errors.ParserError, UnicodeDecodeError, ValueError) as err:
         raise LogFormatError(f"{name}: cannot be parsed as CSV ({_one_line(err)})") from err
     except OSError as err:
-        raise UsageError(f"cannot read reference {name}: {err.strerror or err}") from err
+        raise UsageError(f"reference {name}: {cannot_read(err)}") from err
     frame.columns = [str(c).strip() for c in frame.columns]
     missing = [c for c in REFERENCE_COLUMNS if c not in frame.columns]
     if missing:
@@ -347,7 +347,7 @@ def _read_mcap(name: str, topic: str | None) -> tuple[np.ndarray, np.ndarray, np
     try:
         fh = open(name, "rb")  # noqa: SIM115 - closed below
     except OSError as err:
-        raise UsageError(f"cannot read reference {name}: {err.strerror or err}") from err
+        raise UsageError(f"reference {name}: {cannot_read(err)}") from err
     try:
         with fh:
             reader = make_reader(fh)

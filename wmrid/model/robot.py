@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from wmrid.core.errors import RobotFileError, UsageError, option
+from wmrid.core.errors import RobotFileError, UsageError, cannot_read, option
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -216,6 +216,12 @@ def default_casters(p: PhysicalParameters) -> tuple[Caster, ...]:
     return (Caster(x=reach, radius=radius), Caster(x=-reach, radius=radius))
 
 
+#: The most casters a robot may have (a mobile robot has two to six): each is a body of the multibody prototype and
+#: a drag column of ``--friction wheel+caster``; 10,000 of them made MuJoCo fail to allocate its model.
+MAX_CASTERS = 16
+_TOO_MANY_CASTERS = f"wmrid takes at most {MAX_CASTERS} casters (a mobile robot has two to six)"
+
+
 @dataclass(frozen=True)
 class Robot:
     """A named robot: nominal parameters and, when known, CAD (reference) parameters."""
@@ -235,6 +241,10 @@ class Robot:
     #: The [limits] table (``wmrid plan``): name -> value, SI (max_wheel_speed rad/s, max_wheel_accel rad/s^2,
     #: max_torque N m, max_speed m/s, max_turn_rate rad/s, area [W, H] m); checked by wmrid.design.limits.
     limits: tuple[tuple[str, object], ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.casters is not None and len(self.casters) > MAX_CASTERS:
+            raise RobotFileError(f"robot {self.name!r}: {len(self.casters):,} casters; {_TOO_MANY_CASTERS}")
 
     @property
     def physical(self) -> bool:
@@ -396,6 +406,22 @@ def _parse_set(table: object, where: str) -> tuple[PhysicalParameters, list[str]
         raise RobotFileError(f"{where}: {err}") from None
 
 
+def _huge_number(value: object) -> list[Any] | None:
+    """The keys leading to an integer too large for a float in ``value`` (a parsed TOML document), else None."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        return [] if abs(value) > _FLOAT_MAX else None
+    items = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(value, list) else ()
+    for key, item in items:
+        found = _huge_number(item)
+        if found is not None:
+            return [key, *found]
+    return None
+
+
+#: The largest float: an integer beyond it cannot be a parameter (10**400 took Python's float() down with it).
+_FLOAT_MAX = int(sys.float_info.max)
+
+
 def robot_from_toml_text(text: str, source: str) -> Robot:
     try:
         data = tomllib.loads(text)
@@ -403,6 +429,22 @@ def robot_from_toml_text(text: str, source: str) -> Robot:
         raise RobotFileError(f"{source}: not valid TOML ({err})") from None
     except RecursionError:
         raise RobotFileError(f"{source}: nested too deeply to be a robot file; see README 'Robot files'") from None
+    except ValueError:  # an integer of more than 4,300 digits: Python's limit on turning text into an int
+        raise RobotFileError(
+            f"{source}: holds an integer of more than 4,300 digits; a robot file's values are SI numbers such as "
+            "12.5 or 3e-4"
+        ) from None
+    huge = _huge_number(data)
+    if huge is not None:
+        where = " ".join(  # [nominal] m_p, [[caster]] 2: x, [limits] area 1
+            f"[{k}]" if i == 0 and not isinstance(huge[1] if len(huge) > 1 else None, int)
+            else f"[[{k}]]" if i == 0 else f"{k + 1}:" if isinstance(k, int) else str(k)
+            for i, k in enumerate(huge)
+        ).rstrip(":")  # fmt: skip
+        raise RobotFileError(
+            f"{source} {where}: an integer over 1.8e308, more than any number wmrid computes with; give the value in "
+            "SI units, e.g. 12.5 or 3e-4"
+        )
     if ("nominal" in data) == ("nominal_base" in data) or ("cad" in data and "cad_base" in data):
         raise RobotFileError(
             f"{source}: give the nominal parameters as one table, [nominal] (physical, Table 1) or [nominal_base] "
@@ -487,6 +529,8 @@ def _parse_casters(tables: object, source: str) -> tuple[Caster, ...] | None:
         return None
     if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
         raise RobotFileError(f"{source}: casters are [[caster]] tables with x, y, radius, kind, resistance, trail")
+    if len(tables) > MAX_CASTERS:
+        raise RobotFileError(f"{source}: {len(tables):,} [[caster]] tables; {_TOO_MANY_CASTERS}")
     known = {f.name for f in dataclasses.fields(Caster)}
     out = []
     for i, table in enumerate(tables):
@@ -551,6 +595,8 @@ def load_robot(spec: str) -> Robot:
             path, ROBOT_FILE_LIMIT, f"robot {spec!r}: holds more than {{size}}; a robot TOML file is a few kilobytes",
             RobotFileError,
         ).decode("utf-8")  # fmt: skip
-    except (OSError, UnicodeDecodeError) as err:
-        raise RobotFileError(f"robot {spec!r}: cannot read ({err})") from None
+    except OSError as err:
+        raise RobotFileError(f"robot file {spec}: {cannot_read(err)}") from None
+    except UnicodeDecodeError as err:
+        raise RobotFileError(f"robot file {spec}: not UTF-8 text (byte {err.start}); give a robot TOML file") from None
     return robot_from_toml_text(text, str(path))

@@ -12,7 +12,7 @@ from typing import NoReturn
 
 import numpy as np
 
-from wmrid.core.errors import RobotFileError
+from wmrid.core.errors import RobotFileError, cannot_read
 
 _XACRO = "{http://www.ros.org/wiki/xacro}"
 
@@ -207,7 +207,7 @@ def load(path_or_text: str | Path) -> tuple[ET.Element, str]:
         try:
             data = path.read_bytes()
         except OSError as err:
-            raise RobotFileError(f"{source}: cannot read ({err})") from None
+            raise RobotFileError(f"{source}: {cannot_read(err)}") from None
     try:
         root = ET.fromstring(data)
     except ET.ParseError as err:

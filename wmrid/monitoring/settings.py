@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.core.errors import LogFormatError, UsageError, option
+from wmrid.core.errors import LogFormatError, UsageError, cannot_read, option
 from wmrid.model import dynamics as model
 from wmrid.model.dynamics import THETA0_NAMES, RegressorForm
 
@@ -259,8 +259,10 @@ def load_model(path: str | Path) -> MonitoredModel:
             path, memory_budget(), f"--model {path}: holds more than {{size}} (WMRID_MEMORY_BUDGET); is it a result?",
             UsageError,
         ).decode("utf-8")  # fmt: skip
-    except (OSError, UnicodeDecodeError) as err:
-        raise UsageError(f"{option('model')} {path}: cannot read it ({err.__class__.__name__}: {err})") from None
+    except OSError as err:
+        raise UsageError(f"{option('model')} {path}: {cannot_read(err)}") from None
+    except UnicodeDecodeError as err:
+        raise UsageError(f"{option('model')} {path}: not an identify result (byte {err.start} is not UTF-8)") from None
     try:
         data = json.loads(text)
     except RecursionError:

@@ -20,13 +20,14 @@ from __future__ import annotations
 import itertools
 import os
 import urllib.request
-from collections.abc import Generator, Sequence
+from collections.abc import Generator, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from wmrid.core.errors import LogFormatError
+from wmrid.core.limits import describe
 from wmrid.io.bag.db3_wal import wal_state
 from wmrid.io.bag.reader import BATCH, _BagState, _one_line, _Topic, storage_files
 
@@ -120,6 +121,12 @@ def _describe(path: str) -> _File | None:
         return None
     finally:
         db.close()
+    for stamp in (first, last):  # text sorts after every number: MAX finds one anywhere in the table
+        if stamp is not None and type(stamp) is not int:
+            raise LogFormatError(
+                f"{path}: the recording is damaged: its messages table holds a time stamp that is not an integer "
+                f"({repr(stamp)[:60]}); check it (ros2 bag info) or record it again"
+            )
     topics = [(int(i), str(name), str(kind), definitions.get(kind, "")) for i, name, kind, _ in rows]
     return _File(path, topics, None if first is None else int(first), None if last is None else int(last))
 
@@ -171,37 +178,81 @@ class Db3State(_BagState):
     def _file(self, file: _File, ids: dict[int, int], decoded: set[int]) -> Generator[None, None, None]:
         wanted = sorted(t for t, c in ids.items() if c in decoded)
         listed = ",".join(map(str, wanted))
+        # A row's bytes come with it only when they are small (``inline``); a larger one is fetched alone by its
+        # rowid, and one beyond the budget never: octet_length(data) reads the blob's size, not its bytes.
+        inline = max(64 << 10, self.budget // (4 * _ROWS))
         if self.wanted is not None:  # a second pass: the decoded topics only
             if not wanted:
                 return
-            query = f"SELECT topic_id, timestamp, data FROM messages WHERE topic_id IN ({listed}) ORDER BY timestamp"
+            query = (f"SELECT topic_id, timestamp, CASE WHEN octet_length(data) <= {inline} THEN data END, "
+                     f"octet_length(data), rowid FROM messages WHERE topic_id IN ({listed}) "
+                     "ORDER BY timestamp")  # fmt: skip
         else:  # every message counted, the bytes of the decoded topics only
-            query = (f"SELECT topic_id, timestamp, CASE WHEN topic_id IN ({listed}) THEN data ELSE X'' END "
+            query = (f"SELECT topic_id, timestamp, CASE WHEN topic_id NOT IN ({listed}) THEN X'' "
+                     f"WHEN octet_length(data) <= {inline} THEN data END, "
+                     f"CASE WHEN topic_id IN ({listed}) THEN octet_length(data) ELSE 0 END, rowid "
                      "FROM messages ORDER BY timestamp")  # fmt: skip
         table = np.full(max(ids, default=0) + 2, -1, dtype=np.int64)  # topic id -> channel; -1: none
         for topic_id, channel in ids.items():
             table[topic_id] = channel
         db = _connect(file.path)
         try:
-            cursor = db.execute(query)
-            while True:
-                topic_ids: list[int] = []
-                stamps: list[int] = []
-                datas: list[bytes] = []
-                # Rows are taken a few hundred at a time and their tuples dropped at once (see _ROWS).
-                while len(datas) < BATCH and (rows := list(itertools.islice(cursor, _ROWS))):
-                    columns = tuple(zip(*rows, strict=True))
-                    del rows
-                    topic_ids.extend(columns[0])
-                    stamps.extend(columns[1])
-                    datas.extend(columns[2])
-                    del columns
-                if not datas:
-                    break
+            topic_ids: list[int] = []
+            stamps: list[int] = []
+            datas: list[Any] = []
+            held = 0  # bytes in datas: a block holds about a quarter of the budget at most, or one large message
+            for columns, alone in self._pieces(db, db.execute(query), file, table):
+                if alone and datas:
+                    self._block(table, topic_ids, stamps, datas, decoded)
+                    topic_ids, stamps, datas, held = [], [], [], 0
+                    yield
+                topic_ids.extend(columns[0])
+                stamps.extend(columns[1])
+                datas.extend(columns[2])
+                held += sum(columns[3])
+                del columns
+                if alone or len(datas) >= BATCH or held >= self.budget // 4:
+                    self._block(table, topic_ids, stamps, datas, decoded)
+                    topic_ids, stamps, datas, held = [], [], [], 0
+                    yield
+            if datas:
                 self._block(table, topic_ids, stamps, datas, decoded)
                 yield
         finally:
             db.close()
+
+    def _pieces(self, db: Any, cursor: Any, file: _File, table: np.ndarray) -> Iterator[tuple[tuple, bool]]:
+        """The rows of ``cursor`` (topic id, stamp, data, size, rowid) as columns, a few hundred rows at a time
+        (their tuples dropped at once, see _ROWS), and (``alone`` True) each row that sqlite did not hand out
+        inline by itself, its bytes read from the blob into one buffer (a plain fetch holds them twice); a row
+        larger than the memory budget is left out, unread, and said in a note (as an MCAP record of that size is)."""
+        while rows := list(itertools.islice(cursor, _ROWS)):
+            columns = tuple(zip(*rows, strict=True))
+            del rows
+            if None not in columns[2]:
+                yield columns, False
+                continue
+            start = 0
+            for i in [i for i, blob in enumerate(columns[2]) if blob is None]:
+                if start < i:
+                    yield tuple(c[start:i] for c in columns), False
+                start = i + 1
+                topic_id, stamp, _, size, rowid = (c[i] for c in columns)
+                if size > self.budget:
+                    if self.wanted is None:
+                        channel = int(table[topic_id]) if 0 <= topic_id < len(table) - 1 else -1
+                        on = f" on {self.topics[channel].topic}" if channel in self.topics else ""
+                        self.notes.append(
+                            f"{file.path}: a message of {describe(size)}{on} (stamp {stamp} ns), beyond the memory "
+                            f"budget of {describe(self.budget)} (WMRID_MEMORY_BUDGET), was skipped unread"
+                        )
+                    continue
+                blob = bytearray(size)
+                with db.blob_open("main", "messages", "data", rowid, False) as handle:
+                    handle.read_into(blob)
+                yield ((topic_id,), (stamp,), (blob,), (size,), (rowid,)), True
+            if start < len(columns[0]):
+                yield tuple(c[start:] for c in columns), False
 
     def _block(
         self, table: np.ndarray, topic_ids: list[int], stamps: list[int], datas: list[bytes], decoded: set[int]
@@ -212,7 +263,7 @@ class Db3State(_BagState):
         channels = np.where(known, table[np.where(known, ids, len(table) - 1)], -1)
         times = np.fromiter(stamps, dtype=np.int64, count=len(stamps))
         lengths = np.fromiter(map(len, datas), dtype=np.int64, count=len(datas))
-        buf = np.frombuffer(b"".join(datas), dtype=np.uint8)
+        buf = np.frombuffer(datas[0] if len(datas) == 1 else b"".join(datas), dtype=np.uint8)
         starts = np.cumsum(lengths) - lengths
         first = int(channels[0])
         single = first >= 0 and bool((channels == first).all())

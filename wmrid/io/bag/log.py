@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 
-from wmrid.core.errors import LogFormatError
+from wmrid.core.errors import LogFormatError, cannot_read
 from wmrid.core.wheel_log import CHUNK_ROWS, LogStream
 from wmrid.io.field_paths import FieldSignals
 from wmrid.io.mcap.joints import TopicSelection
@@ -29,6 +29,39 @@ def _magic(path: str) -> bytes:
             return fh.read(16)
     except OSError:
         return b""
+
+
+#: The magic bytes of the ROS 1 and sqlite files a folder without metadata.yaml may hold, by suffix (an MCAP file that
+#: a crash left empty or cut in its header is the MCAP reader's to note and skip).
+_SUFFIX_MAGIC = {".bag": ROS1_MAGIC, ".bag.active": ROS1_MAGIC, ".db3": SQLITE_MAGIC}
+
+
+def _readable_head(path: str) -> bytes:
+    """The first 16 bytes of the file ``path`` of a recording, or LogFormatError when it cannot be read (naming the
+    file, the reason and the fix)."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(16)
+    except OSError as err:
+        raise LogFormatError(f"{path}: {cannot_read(err)}") from None
+
+
+def _check_folder_files(files: list[str]) -> None:
+    """Each of a folder's recording files (found by suffix) readable, and each ROS 1 or sqlite one not empty and of
+    the kind its suffix says: a wrong one is one line naming it (rosbags stopped on it with a message of its own)."""
+    for path in files:
+        head = _readable_head(path)
+        suffix = next((s for s in sorted(_SUFFIX_MAGIC, key=len, reverse=True) if path.lower().endswith(s)), None)
+        if suffix is None:
+            continue
+        if not head:
+            raise LogFormatError(f"{path}: the file is empty (0 bytes); remove it, or give the recording's other files")
+        if not head.startswith(_SUFFIX_MAGIC[suffix]):
+            kind = "a ROS 1 bag" if _SUFFIX_MAGIC[suffix] == ROS1_MAGIC else "an SQLite database"
+            raise LogFormatError(
+                f"{path}: a {suffix} file that is not {kind} (its first bytes say otherwise); remove it from the "
+                "folder, or give the recording's files"
+            )
 
 
 def is_bag_file(path: str) -> bool:
@@ -62,6 +95,7 @@ def recording_paths(paths: Sequence[str]) -> list[str] | None:
                     f"{path}: a folder with no recording in it (no metadata.yaml, .bag, .db3 or .mcap file); give the "
                     "rosbag2 folder, the bag files, or a CSV, Parquet or MCAP log"
                 )
+            _check_folder_files(inside)
             return inside
         return [path] if is_bag_file(path) else None
     seen: dict[tuple[int, int], str] = {}
@@ -76,7 +110,7 @@ def recording_paths(paths: Sequence[str]) -> list[str] | None:
                 f"{path}: the same file as {seen[(st.st_dev, st.st_ino)]}; give each file of the recording once"
             )
         seen[(st.st_dev, st.st_ino)] = path
-        head = _magic(path)
+        head = b"" if os.path.isdir(path) else _readable_head(path)
         if not (os.path.isdir(path) or head.startswith((ROS1_MAGIC, SQLITE_MAGIC, MCAP_MAGIC))):
             raise LogFormatError(
                 f"{path}: several files are read as one recording only when they are bags (ROS 1 .bag, ROS 2 .db3 or "

@@ -61,7 +61,12 @@ class BagFiles:
         from rosbags.rosbag2 import Reader as Reader2
 
         self.paths, self.kind = list(paths), kind
-        self.readers = [(Reader1 if kind == "ros1" else Reader2)(Path(p)) for p in paths]
+        self.readers = []
+        for path in self.paths:
+            try:  # rosbags looks at the files already here (a folder's storage files, their suffixes)
+                self.readers.append((Reader1 if kind == "ros1" else Reader2)(Path(path)))
+            except Exception as err:
+                raise self._cannot_open(path, err) from err
         self.topics: dict[int, _Topic] = {}
         self.notes: list[str] = []
         self._by_connection: dict[int, int] = {}  # id(connection) -> channel id
@@ -73,11 +78,7 @@ class BagFiles:
                 try:
                     reader.open()
                 except Exception as err:
-                    what = "a ROS 1 bag" if self.kind == "ros1" else "a ROS 2 recording"
-                    raise LogFormatError(
-                        f"{path}: {what} that rosbags cannot open ({_one_line(err)}); check the recording (rosbag "
-                        "check, ros2 bag info) or record it again"
-                    ) from err
+                    raise self._cannot_open(path, err) from err
                 opened.append(reader)
         except BaseException:
             for reader in opened:
@@ -85,6 +86,13 @@ class BagFiles:
             raise
         self._gather()
         return self
+
+    def _cannot_open(self, path: str, err: Exception) -> LogFormatError:
+        what = "a ROS 1 bag" if self.kind == "ros1" else "a ROS 2 recording"
+        return LogFormatError(
+            f"{path}: {what} that rosbags cannot open ({_one_line(err)}); check the recording (rosbag check, ros2 bag "
+            "info) or record it again"
+        )
 
     def __exit__(self, *exc: object) -> None:
         for reader in self.readers:
@@ -334,6 +342,14 @@ def storage_files(path: str, storage: str, magic: bytes) -> list[str] | None:
         files = [os.path.join(path, PurePath(str(p)).name) for p in info["relative_file_paths"]]
     except Exception:  # no or unreadable metadata, missing keys: rosbags says what is wrong
         return None
+    for file in files:
+        try:
+            with open(file, "rb"):
+                pass
+        except FileNotFoundError:
+            pass
+        except OSError as err:  # no permission: said here, with the file's name (rosbags: "unable to open")
+            raise LogFormatError(f"{file}: cannot be read ({err.strerror or err}); check its permissions") from None
     return files if files and all(os.path.isfile(f) for f in files) else None
 
 
