@@ -1,0 +1,69 @@
+"""Bytes as they arrive: a regular file that grows (read from a remembered offset) and a pipe (standard input).
+
+Neither blocks for longer than the timeout it is given, so the caller can refresh a display, notice that no data
+came for ``--idle`` seconds, and take Ctrl-C between two reads.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import time
+
+#: Bytes read at most at once (a file that is already long is then followed piece by piece: ``--until`` stops
+#: within one such read of the log time asked for).
+READ_BYTES = 1 << 16
+
+
+class FileFeed:
+    """The bytes appended to the regular file ``path`` since the last read.
+
+    The file is opened once; a file that is replaced (a new inode under the name) is not followed to its new self.
+    """
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        self.fd = os.open(path, os.O_RDONLY)
+        self.offset = 0  # bytes handed out so far
+
+    def read(self, limit: int = READ_BYTES) -> bytes:
+        """Up to ``limit`` new bytes, b"" when the file has not grown (never blocks)."""
+        data = os.pread(self.fd, limit, self.offset)
+        self.offset += len(data)
+        return data
+
+    def size(self) -> int:
+        """The file's current size in bytes."""
+        return os.fstat(self.fd).st_size
+
+    def close(self) -> None:
+        if self.fd >= 0:
+            os.close(self.fd)
+            self.fd = -1
+
+
+class PipeFeed:
+    """The bytes that arrive on the file descriptor ``fd`` (standard input, a pipe); ``ended`` once it is closed."""
+
+    def __init__(self, fd: int) -> None:
+        self.fd = fd
+        self.ended = False
+
+    def read(self, timeout: float, limit: int = READ_BYTES) -> bytes:
+        """Up to ``limit`` bytes, waiting at most ``timeout`` s for the first; b"" when none came (or the end)."""
+        if self.ended:
+            return b""
+        deadline = time.monotonic() + max(timeout, 0.0)
+        while True:
+            left = max(deadline - time.monotonic(), 0.0)
+            ready, _, _ = select.select([self.fd], [], [], left)
+            if ready:
+                data = os.read(self.fd, limit)
+                if not data:
+                    self.ended = True
+                return data
+            if left <= 0.0:
+                return b""
+
+    def close(self) -> None:
+        self.ended = True
