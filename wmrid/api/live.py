@@ -30,7 +30,7 @@ from wmrid.core.errors import UsageError, option
 from wmrid.estimators.result import IdentificationResult
 from wmrid.model.robot import Robot
 
-__all__ = ["LiveResult", "LiveRun", "LiveUpdate", "live"]
+__all__ = ["LiveResult", "LiveRun", "LiveUpdate", "check_output", "live"]
 
 #: What the std of a :class:`LiveUpdate` is.
 ONLINE_STD = (
@@ -141,6 +141,7 @@ class LiveRun:
             raise UsageError(f"{option('params')}: {unknown[0]!r} is not one of {', '.join(REPORTED)}")
         args = reader_arguments(options, self.prep.robot)
         self.source = open_live(os.fspath(source), ReaderSettings(**args))
+        _warm_up()
         self.observers: list[tuple[Any, Any]] = []  # (form, OnlineObserver), the one shown first
         self.buffer: list[Any] = []
         self.samples = 0
@@ -267,7 +268,7 @@ class LiveRun:
     def _ended(self, now: float) -> str | None:
         if self.source.ended is not None:
             return f"the source ended ({self.source.ended})"
-        if self.idle is not None and self.source.quiet() >= self.idle:
+        if self.idle is not None and self.samples and self.source.quiet() >= self.idle:  # once data has come
             return f"no data for {self.idle:g} s ({option('idle')})"
         if self.until is not None and self.log_time_s >= self.until:
             return f"{self.log_time_s:.3f} s of log time received ({option('until')} {self.until:g})"
@@ -338,6 +339,44 @@ class LiveRun:
         self.source.close()
 
 
+def _warm_up() -> None:
+    """Load what the first estimate needs before the first message arrives: the readers' libraries and the compiled
+    kernels (numba loads them from its cache on first use, about 1.5 s), run once on a few synthetic samples."""
+    import importlib
+
+    from wmrid.core.wheel_log import WheelLog
+    from wmrid.estimators.identify import default_box
+    from wmrid.estimators.observer import ObserverSettings
+    from wmrid.estimators.online import OnlineObserver, online_estimate
+    from wmrid.estimators.survey import survey
+    from wmrid.model.dynamics import RegressorForm
+
+    for name in ("pandas", "pyarrow.csv", "wmrid.io.csv_log", "wmrid.io.mcap.reader", "wmrid.io.mcap.joints"):
+        importlib.import_module(name)
+    t = np.arange(200) * 1e-3
+    eta = np.column_stack([2.0 + np.sin(40 * t), 2.0 + np.cos(30 * t)])
+    tau = np.column_stack([np.cos(40 * t), np.sin(30 * t)])
+    sv = survey([WheelLog(t=t, eta=eta, tau=tau, source="warm-up")], "warm-up")
+    for form in (RegressorForm("paper"), RegressorForm("general")):
+        theta = sv.data_start(form)
+        lo, hi = default_box(theta, form, 10.0, False)
+        obs = OnlineObserver(ObserverSettings(form=form, theta_init=theta, theta_min=lo, theta_max=hi, k=10.0))
+        with np.errstate(all="ignore"):
+            obs.feed(t, eta, tau)
+            online_estimate(obs)
+
+
+def check_output(path: str | os.PathLike[str], force: bool = False) -> None:
+    """Refuse, before a run that may take hours, an output file that could not be written at its end (an existing file
+    without ``force``, a missing folder); standard output and other streams pass."""
+    from pathlib import Path
+
+    from wmrid.core.atomic import _check_target, stream_fd
+
+    if stream_fd(str(path)) is None:
+        _check_target(Path(path), force)
+
+
 def _renamed(result: IdentificationResult, path: str, name: str) -> IdentificationResult:
     """``result`` of the copy at ``path`` naming the source as the user named it."""
 
@@ -378,7 +417,8 @@ def live(
         (the same :class:`LogOptions` as :func:`wmrid.identify`).
     robot, form, k, alpha, box_width, torque_hold, payload, control_rate, delay, friction, rotor_inertia : as for
         :func:`wmrid.identify` (the final result is ``identify`` with them).
-    every : s of wall time between updates; idle : s without new data that end the run (None: wait); until : s of log
+    every : s of wall time between updates; idle : s without new data that end the run, once samples have come
+        (None: wait); until : s of log
         time after which the run ends; until_std : percent: the run ends once every parameter in ``params`` (default:
         all eight base parameters) has a live relative std below it.
 

@@ -79,7 +79,7 @@ class LiveSource(ABC):
 
     @abstractmethod
     def poll(self, timeout: float) -> list[WheelLog]:
-        """The samples that arrived, waiting at most ``timeout`` s for new bytes (a file is polled, a pipe waited on)."""
+        """The samples that arrived, waiting up to ``timeout`` s for new bytes (a file is polled, a pipe waited on)."""
 
     @abstractmethod
     def final_input(self, natural: bool) -> FinalInput:
@@ -196,7 +196,9 @@ class StdinSource(LiveSource):
                 "(e.g. zcat run.csv.gz | wmrid live -)"
             )
         elif head.startswith(b"PAR1"):
-            raise LogFormatError(f"{STDIN_NAME}: a Parquet file cannot be followed as it arrives; give it to wmrid identify")
+            raise LogFormatError(
+                f"{STDIN_NAME}: a Parquet file cannot be followed as it arrives; give it to wmrid identify"
+            )
         else:
             self.kind = "json" if head.startswith(b"{") else "csv"
         suffix = ".mcap" if self.kind == "mcap" else ".csv"
@@ -221,7 +223,9 @@ class StdinSource(LiveSource):
                 return []
             if not self.head.strip():
                 if self.feed.ended:
-                    raise LogFormatError(f"{STDIN_NAME}: standard input is empty; pipe CSV rows, JSON lines or an MCAP into it")
+                    raise LogFormatError(
+                        f"{STDIN_NAME}: standard input is empty; pipe CSV rows, JSON lines or an MCAP into it"
+                    )
                 return []
             data, self.head = self.head, b""
             self._start()
@@ -243,7 +247,9 @@ class StdinSource(LiveSource):
 
     def final_input(self, natural: bool) -> FinalInput:
         if self.spill is None:
-            raise LogFormatError(f"{STDIN_NAME}: nothing arrived on standard input; pipe CSV rows, JSON lines or an MCAP")
+            raise LogFormatError(
+                f"{STDIN_NAME}: nothing arrived on standard input; pipe CSV rows, JSON lines or an MCAP"
+            )
         self.spill.flush()
         if self.kind == "mcap":  # up to the last whole record
             self.spill.truncate(self.mcap.framer.consumed)

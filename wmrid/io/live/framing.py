@@ -140,7 +140,9 @@ class JsonLines:
             try:
                 obj = json.loads(raw)
             except (ValueError, RecursionError) as err:
-                raise LogFormatError(f"{self.name}: line {self.line} is not JSON ({err}); give one object per line") from err
+                raise LogFormatError(
+                    f"{self.name}: line {self.line} is not JSON ({err}); give one object per line"
+                ) from err
             if not isinstance(obj, dict):
                 raise LogFormatError(
                     f"{self.name}: line {self.line} is {type(obj).__name__}, not an object; give one object per line, "
@@ -156,7 +158,7 @@ class JsonLines:
 def _cell(value: object, key: str, name: str, line: int) -> str:
     if value is None:
         return ""
-    if isinstance(value, bool) or isinstance(value, (dict, list)):
+    if isinstance(value, (bool, dict, list)):
         raise LogFormatError(
             f"{name}: line {line}, key {key!r}: {json.dumps(value)[:40]} is not a number; give flat objects of numbers"
         )
@@ -223,8 +225,8 @@ class McapFramer:
             length = int.from_bytes(buf[pos + 1 : pos + 9], "little")
             if length > self.max_record:
                 raise LogFormatError(
-                    f"{self.name}: a record of {length:,} bytes at byte {self.consumed + pos}, beyond the memory budget "
-                    "(WMRID_MEMORY_BUDGET); a damaged file?"
+                    f"{self.name}: a record of {length:,} bytes at byte {self.consumed + pos}, beyond the memory "
+                    "budget (WMRID_MEMORY_BUDGET); a damaged file?"
                 )
             if len(buf) - pos - 9 < length:
                 break  # torn: wait for the remainder
