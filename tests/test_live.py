@@ -297,6 +297,20 @@ def test_stdin_pipe_json_lines_out(tmp_path, log):
     assert lines[-1]["result"]["parameters"]["m11"]["value"] == pytest.approx(offline.parameters["m11"][0], rel=1e-12)
 
 
+def test_json_lines_on_stdin():
+    """JSON lines on standard input (in process): read as the CSV they turn into; the result is identify's on it."""
+    from tests.cliutil import wmrid as run
+
+    data = SAMPLE.read_bytes().splitlines()[:3001]
+    keys = data[0].decode().split(",")
+    lines = [json.dumps(dict(zip(keys, map(float, row.decode().split(",")), strict=True))) for row in data[1:]]
+    proc = run("live", "-", "--robot", "paper", "--format", "json", stdin=("\n".join(lines) + "\n").encode())
+    assert proc.returncode == 0, proc.stderr.decode()
+    last = json.loads(proc.stdout.decode().splitlines()[-1])
+    offline = run("identify", "-", "--robot", "paper", "--format", "json", stdin=b"\n".join(data) + b"\n")
+    assert last["result"]["parameters"] == json.loads(offline.stdout)["parameters"]
+
+
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
 def test_stop_writes_the_result_so_far(tmp_path, log, signum):
     """Ctrl-C or SIGTERM while a CSV is still being written: -o holds identify's result on the lines read, exit

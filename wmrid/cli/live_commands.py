@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 
 from wmrid.cli.app import app
-from wmrid.cli.helpers import log_opts, on_stdout, stderr_console, warning_summary
+from wmrid.cli.helpers import log_opts, on_stdout, warning_summary
 from wmrid.cli.options import (
     AlignOpt,
     AlignRule,
@@ -185,9 +185,10 @@ def live(
     document = result.to_dict(history=True)
     if output is not None:
         write_json(str(output), document, force=True)  # checked before the run; the run may take hours
-    say = stderr_console()
-    say.print(f"wmrid live: {final.reason}; {final.samples:,} samples received; the result is identify on "
-              f"{final.read_from}" + (f", written to {output}" if output is not None else ""))  # fmt: skip
+    line = (
+        f"wmrid live: {final.reason}; {final.samples:,} samples received; the result is identify on {final.read_from}"
+    )
+    sys.stderr.write(line + (f", written to {output}" if output is not None else "") + "\n")
     if fmt == "json":
         if not on_stdout(output):
             sys.stdout.write(json_line(final.to_dict()) + "\n")

@@ -6,9 +6,11 @@ came for ``--idle`` seconds, and take Ctrl-C between two reads.
 
 from __future__ import annotations
 
+import io
 import os
 import select
 import time
+from typing import BinaryIO
 
 #: Bytes read at most at once (a file that is already long is then followed piece by piece: ``--until`` stops
 #: within one such read of the log time asked for).
@@ -43,16 +45,27 @@ class FileFeed:
 
 
 class PipeFeed:
-    """The bytes that arrive on the file descriptor ``fd`` (standard input, a pipe); ``ended`` once it is closed."""
+    """The bytes that arrive on ``stream`` (standard input's binary stream, a pipe); ``ended`` once it is closed.
 
-    def __init__(self, fd: int) -> None:
-        self.fd = fd
+    A stream with a file descriptor is waited on with select; one without (bytes in memory, as an in-process test
+    gives) is read as it is."""
+
+    def __init__(self, stream: BinaryIO) -> None:
+        self.stream = stream
+        try:
+            self.fd: int | None = stream.fileno()
+        except (OSError, AttributeError, ValueError, io.UnsupportedOperation):
+            self.fd = None
         self.ended = False
 
     def read(self, timeout: float, limit: int = READ_BYTES) -> bytes:
         """Up to ``limit`` bytes, waiting at most ``timeout`` s for the first; b"" when none came (or the end)."""
         if self.ended:
             return b""
+        if self.fd is None:
+            data = self.stream.read(limit)
+            self.ended = not data
+            return data or b""
         deadline = time.monotonic() + max(timeout, 0.0)
         while True:
             left = max(deadline - time.monotonic(), 0.0)

@@ -15,11 +15,13 @@ from __future__ import annotations
 import os
 import re
 import shutil
+import sys
 import tempfile
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import BinaryIO
 
 from wmrid.core.errors import LogFormatError, UsageError
 from wmrid.core.wheel_log import WheelLog
@@ -173,10 +175,14 @@ class StdinSource(LiveSource):
     told apart by the first bytes.  Everything read is spilled to a temporary file as it arrives (JSON lines as
     the CSV they were turned into): the final ``identify`` reads that file."""
 
-    def __init__(self, settings: ReaderSettings, fd: int = 0) -> None:
+    def __init__(self, settings: ReaderSettings, stream: BinaryIO | None = None) -> None:
         super().__init__(STDIN_NAME)
         self.settings = settings
-        self.feed = PipeFeed(fd)
+        if stream is None:
+            if sys.stdin is None or sys.stdin.isatty():
+                raise UsageError("source '-' means standard input, but nothing is piped in; give a file or pipe one in")
+            stream = getattr(sys.stdin, "buffer", sys.stdin)
+        self.feed = PipeFeed(stream)
         self.kind: str | None = None  # "csv", "json" or "mcap"
         self.head = b""
         self.spill_path: str | None = None
@@ -227,8 +233,8 @@ class StdinSource(LiveSource):
                         f"{STDIN_NAME}: standard input is empty; pipe CSV rows, JSON lines or an MCAP into it"
                     )
                 return []
-            data, self.head = self.head, b""
             self._start()
+            data, self.head = self.head, b""
         out = self._take(data)
         if self.feed.ended and self.ended is None:
             self.ended = "the end of standard input"
