@@ -167,6 +167,10 @@ _EXPORTS = {
     "export": "wmrid.api.exporting",
     "ExportResult": "wmrid.api.exporting",
     "PhysicalEstimate": "wmrid.model.physical",
+    "live": "wmrid.api.live",
+    "LiveRun": "wmrid.api.live",
+    "LiveUpdate": "wmrid.api.live",
+    "LiveResult": "wmrid.api.live",
 }
 
 __all__ = ["__version__", *sorted(_EXPORTS)]

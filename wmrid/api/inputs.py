@@ -136,22 +136,30 @@ def open_log(
     Parquet or MCAP file, a ROS 1 or ROS 2 (.db3) bag, a rosbag2 folder, several files of one recording, or ``"-"``
     for standard input (``data``: its bytes, when already read).  ``overrides``: :class:`LogOptions` fields.
     """
-    from wmrid.io.columns import parse_column_mapping
     from wmrid.io.logs import open_log as open_file
+
+    return open_file(_fspaths(path), data=data, **reader_arguments(log_options(options, **overrides), robot))
+
+
+def reader_arguments(options: LogOptions | None, robot: Robot | None = None) -> dict[str, Any]:
+    """The readers' arguments for ``options`` (with ``robot``'s values where they are not given): columns, time_unit,
+    selection, signals and gear_ratio, as :func:`wmrid.io.logs.open_log` and the live readers
+    (:mod:`wmrid.io.live`) take them."""
+    from wmrid.io.columns import parse_column_mapping
     from wmrid.io.mcap.joints import TopicSelection
     from wmrid.io.signals import SignalOptions
 
-    opts = log_options(options, **overrides).with_robot(robot)
+    opts = (options or LogOptions()).with_robot(robot)
     selection = TopicSelection(**_subset(opts, TopicSelection))
     signals = SignalOptions(
         **{**_subset(opts, SignalOptions), "efficiency": 1.0 if opts.efficiency is None else opts.efficiency}
     )
     mapping = parse_column_mapping(opts.columns) if isinstance(opts.columns, str) and opts.columns else opts.columns
     k_r = robot.nominal.k_r if robot is not None and getattr(robot, "gear_ratio_known", True) else None
-    return open_file(
-        _fspaths(path), columns=mapping or None, time_unit=opts.time_unit, selection=selection, signals=signals,
-        gear_ratio=k_r, data=data,
-    )  # fmt: skip
+    return {
+        "columns": mapping or None, "time_unit": opts.time_unit, "selection": selection, "signals": signals,
+        "gear_ratio": k_r,
+    }  # fmt: skip
 
 
 def read_log(

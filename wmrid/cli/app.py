@@ -61,7 +61,7 @@ def main(argv: list[str] | None = None) -> None:
 
     Exit codes: 0 success, 1 no result (or an output that could not be written), 2 usage or unreadable input,
     128 + the signal for Ctrl-C, SIGTERM and SIGHUP (130, 143, 129; temporary files removed either way)."""
-    from wmrid.cli import export_commands, fleet_commands, identify_commands, plan_commands, sim_commands  # noqa: F401  (their commands join ``app`` on import)
+    from wmrid.cli import export_commands, fleet_commands, identify_commands, live_commands, plan_commands, sim_commands  # noqa: F401  (their commands join ``app`` on import)
     from wmrid.cli.streams import finish_output, guard
     from wmrid.core import interrupts
     from wmrid.core.atomic import clear_inputs, track_inputs
@@ -147,7 +147,7 @@ def main(argv: list[str] | None = None) -> None:
 
 def command() -> Any:
     """The click command Typer builds from ``app``, with every help text made verbatim (:func:`_verbatim_help`)."""
-    from wmrid.cli import export_commands, fleet_commands, identify_commands, plan_commands, sim_commands  # noqa: F401  (their commands join ``app`` on import)
+    from wmrid.cli import export_commands, fleet_commands, identify_commands, live_commands, plan_commands, sim_commands  # noqa: F401  (their commands join ``app`` on import)
 
     root = typer.main.get_command(app)
     _verbatim_help(root)

@@ -139,6 +139,16 @@ def restore(previous: dict[int, object]) -> None:
 GRACE_S = 5.0
 #: Called by the watchdog before it exits: each removes what it owns (wmrid.core.atomic registers its temporary files).
 forced_exit_cleanups: list[Callable[[], None]] = []
+#: Monotonic time before which the watchdog leaves the process alone (:func:`extend_grace`).
+_grace_until = 0.0
+
+
+def extend_grace(seconds: float) -> None:
+    """Let the process run up to ``seconds`` more after a stopping signal before the watchdog ends it: for a command
+    that answers the stop itself with work that takes longer than GRACE_S (``wmrid live`` identifying what it has
+    received, to write it); a second signal still stops it at once."""
+    global _grace_until
+    _grace_until = max(_grace_until, time.monotonic() + seconds)
 
 
 def start_watchdog() -> None:
@@ -171,6 +181,8 @@ def start_watchdog() -> None:
             if not stopping:
                 continue  # SIGALRM, the compile retry
             time.sleep(GRACE_S)
+            while time.monotonic() < _grace_until:
+                time.sleep(0.1)
             for cleanup in forced_exit_cleanups:
                 with contextlib.suppress(Exception):
                     cleanup()

@@ -1,0 +1,431 @@
+"""``wmrid live``: identify a robot while it drives, from a log that is still being written.
+
+:func:`live` returns a :class:`LiveRun`: iterating it follows the source (:mod:`wmrid.io.live`), feeds the samples to
+the observer as they arrive (the offline kernel, in pieces: :class:`wmrid.estimators.online.OnlineObserver`) and
+yields a :class:`LiveUpdate` every ``every`` seconds, then, when the source ends (its end, ``idle`` seconds without
+data, ``until`` seconds of log time, ``until_std``), one :class:`LiveResult`.  :meth:`LiveRun.finish` gives that
+result at any moment, e.g. after Ctrl-C.
+
+The final result is :func:`wmrid.api.identification.identify` run on exactly the messages received: on the recording
+itself when it was read to its end, else on a copy of the bytes read (standard input is spilled to a temporary file
+as it arrives), so it is the JSON ``wmrid identify`` writes for them, with every offline check.  The updates before it
+carry what can be computed online: the observer's estimate with its jackknife std (before the offline widening
+terms: model error, discretisation, slow speeds, the closed-loop check, the efforts' timing).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from wmrid.api.identification import prepare
+from wmrid.api.inputs import LogOptions, reader_arguments
+from wmrid.core.errors import UsageError, option
+from wmrid.estimators.result import IdentificationResult
+from wmrid.model.robot import Robot
+
+__all__ = ["LiveResult", "LiveRun", "LiveUpdate", "check_output", "live"]
+
+#: What the std of a :class:`LiveUpdate` is.
+ONLINE_STD = (
+    "delete-a-segment jackknife of the observer's estimate over contiguous segments of the samples received so far "
+    "(the offline std before its widening terms: model error, discretisation, slow speeds, closed-loop check, timing); "
+    "the final result's std is the offline one"
+)
+#: The parameters ``until_std`` watches by default: the eight base parameters.
+BASE = ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
+#: s: how long one poll of the source waits for new data.
+POLL_S = 0.05
+#: Samples gathered before the observer starts (its start value comes from them when no robot is given).
+START_SAMPLES = 50
+#: s: how long the process may take, after Ctrl-C or SIGTERM, to identify what it received and write it.
+FINISH_GRACE_S = 600.0
+
+
+@dataclass(frozen=True)
+class LiveUpdate:
+    """One refresh of a live run.
+
+    parameters : {name: (value, std)} in SI units (empty until the samples determine an estimate); std: ONLINE_STD.
+    samples : received so far; log_time_s : s of log time they span; rate_hz : samples received per second of wall
+    time since the last update; log_rate_hz : samples per second of log time; since_last_data_s : s of wall time since
+    the last bytes arrived; elapsed_s : s since the run started; form : the regressor ("paper", "general",
+    "general+caster"); segments : the jackknife's; notes : what the estimate assumes (e.g. the friction model).
+    """
+
+    source: str
+    elapsed_s: float
+    samples: int
+    log_time_s: float
+    rate_hz: float
+    log_rate_hz: float | None
+    since_last_data_s: float
+    form: str | None
+    parameters: dict[str, tuple[float, float]]
+    segments: int
+    notes: tuple[str, ...] = ()
+
+    def relative_std(self, name: str) -> float:
+        """std / |value| of parameter ``name`` (inf when unknown or zero)."""
+        value, std = self.parameters.get(name, (0.0, math.inf))
+        return std / abs(value) if value != 0 and math.isfinite(std) else math.inf
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON line ``wmrid live`` prints in a pipe."""
+        return {
+            "event": "update", "source": self.source, "elapsed_s": self.elapsed_s, "samples": self.samples,
+            "log_time_s": self.log_time_s, "rate_hz": self.rate_hz, "log_rate_hz": self.log_rate_hz,
+            "since_last_data_s": self.since_last_data_s, "form": self.form,
+            "parameters": {n: {"value": v, "std": s if math.isfinite(s) else None} for n, (v, s) in
+                           self.parameters.items()},
+            "std": ONLINE_STD, "segments": self.segments, "notes": list(self.notes),
+        }  # fmt: skip
+
+
+@dataclass(frozen=True)
+class LiveResult:
+    """How a live run ended: ``result`` (``identify`` on the messages received), ``reason`` (why it ended),
+    ``samples`` and ``log_time_s`` received live, ``read_from`` what the final ``identify`` read, ``stopped`` True when
+    it was stopped (Ctrl-C, SIGTERM) rather than ended."""
+
+    result: IdentificationResult
+    reason: str
+    samples: int
+    log_time_s: float
+    read_from: str
+    stopped: bool = False
+
+    def to_dict(self, history: bool = False) -> dict[str, Any]:
+        """The JSON line ``wmrid live`` prints last in a pipe: the reason and the result (``identify``'s JSON)."""
+        return {
+            "event": "result", "reason": self.reason, "samples": self.samples, "log_time_s": self.log_time_s,
+            "read_from": self.read_from, "result": self.result.to_dict(history=history),
+        }  # fmt: skip
+
+
+def _check(name: str, value: float | None, low: float = 0.0) -> None:
+    if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value) and value > low):
+        raise UsageError(f"{option(name)} must be a number > {low:g}, got {value!r}")
+
+
+class LiveRun:
+    """A live identification (see :func:`live`): iterate it for the updates and the final :class:`LiveResult`."""
+
+    def __init__(self, source: str, robot: Any, settings: dict[str, Any], options: LogOptions | None,
+                 every: float, idle: float | None, until: float | None, until_std: float | None,
+                 params: Sequence[str] | None) -> None:  # fmt: skip
+        from wmrid.io.live.follow import ReaderSettings, open_live
+
+        for name, value in (("every", every), ("idle", idle), ("until", until), ("until_std", until_std)):
+            _check(name, value)
+        if settings.get("validate") is not None:
+            raise UsageError(f"{option('validate')} is not taken by live identification; validate the saved result")
+        self.prep = prepare(options=options, robot=robot, **settings)
+        if self.prep.method != "observer":
+            raise UsageError(f"live identification runs the observer; drop {option('method')}")
+        self.settings = settings
+        self.options = options
+        self.robot = robot
+        self.every, self.idle, self.until, self.until_std = every, idle, until, until_std
+        from wmrid.estimators.result import REPORTED
+
+        self.params = tuple(params) if params else BASE
+        unknown = [p for p in self.params if p not in REPORTED]
+        if unknown:
+            raise UsageError(f"{option('params')}: {unknown[0]!r} is not one of {', '.join(REPORTED)}")
+        args = reader_arguments(options, self.prep.robot)
+        self.source = open_live(os.fspath(source), ReaderSettings(**args))
+        _warm_up()
+        self.observers: list[tuple[Any, Any]] = []  # (form, OnlineObserver), the one shown first
+        self.buffer: list[Any] = []
+        self.samples = 0
+        self.t_first: float | None = None
+        self.t_last: float | None = None
+        self.effort_unit = "N m"
+        self.notes: list[str] = []
+        self.reason: str | None = None
+        self.stopped = False
+        self.started = time.monotonic()
+        self._final: LiveResult | None = None
+        self._last = (self.started, 0)  # (time, samples) at the last update
+
+    # -- the observer ---------------------------------------------------------------------------------------------
+    def _start_observers(self) -> None:
+        from wmrid.core.wheel_log import WheelLog
+        from wmrid.estimators.identify import caster_geometry
+        from wmrid.estimators.survey import survey
+        from wmrid.model.dynamics import RegressorForm
+
+        t = np.concatenate([p.t for p in self.buffer])
+        eta = np.concatenate([p.eta for p in self.buffer])
+        tau = np.concatenate([p.tau for p in self.buffer])
+        self.effort_unit = self.buffer[0].effort_unit
+        sv = survey([WheelLog(t=t, eta=eta, tau=tau, source=self.source.name)], self.source.name, self.effort_unit)
+        choice = self.settings.get("form", "auto")
+        robot = self.prep.robot
+        if self.prep.friction == "wheel+caster":
+            geometry = caster_geometry(robot) if robot is not None and robot.casters else ()
+            forms = [RegressorForm("general", caster=True, geometry=geometry)]
+        else:
+            first = sv.form()
+            forms = [first] if first.kind == "paper" and choice != "general" else []
+            if choice != "paper" or not forms:
+                forms.append(RegressorForm("general"))
+            if self.prep.friction == "auto":
+                self.notes.append("friction: wheel live; the final result chooses between wheel and wheel+caster")
+        if choice == "paper" and forms[0].kind != "paper":
+            self.notes.append("--form paper: a wheel stops or reverses, so the general form is shown live")
+        self.observers = [(f, self._observer(f, sv)) for f in forms]
+        self.buffer = []
+        self._feed_observers(t, eta, tau)
+
+    def _observer(self, form: Any, sv: Any) -> Any:
+        from wmrid.estimators.identify import default_box
+        from wmrid.estimators.observer import ObserverSettings
+        from wmrid.estimators.online import OnlineObserver
+        from wmrid.model import dynamics as model
+
+        robot = self.prep.robot if self.effort_unit == "N m" else None
+        s = self.settings
+        if robot is not None:
+            start0 = np.concatenate([model.base_parameters(robot.nominal), np.zeros(form.n_base - 8)])
+            theta_init = model.intermediate_parameters(start0, form)
+        else:
+            theta_init = sv.data_start(form)
+        lo, hi = default_box(theta_init, form, s.get("box_width", 10.0), robot is not None)
+        settings = ObserverSettings(
+            form=form, theta_init=theta_init, theta_min=lo, theta_max=hi, k=s.get("k", 10.0),
+            alpha=s.get("alpha", 1e-10), torque_hold=s.get("torque_hold", "zoh"), control_rate=s.get("control_rate"),
+        )  # fmt: skip
+        return OnlineObserver(settings)
+
+    def _feed_observers(self, t: np.ndarray, eta: np.ndarray, tau: np.ndarray) -> None:
+        kept = []
+        for form, obs in self.observers:
+            if form.kind == "paper" and len(self.observers) > 1:
+                signs = np.array(form.signs, dtype=float)
+                if not np.all(eta * signs > 0):  # a wheel stopped or reversed: the paper form no longer holds
+                    continue
+            with np.errstate(over="ignore", invalid="ignore"):
+                obs.feed(t, eta, tau)
+            kept.append((form, obs))
+        self.observers = kept
+
+    def _feed(self, piece: Any) -> None:
+        if len(piece) == 0:
+            return
+        if self.t_first is None:
+            self.t_first = float(piece.t[0])
+        self.t_last = float(piece.t[-1])
+        self.samples += len(piece)
+        if not self.observers:
+            self.buffer.append(piece)
+            if sum(len(p) for p in self.buffer) >= START_SAMPLES:
+                self._start_observers()
+            return
+        self._feed_observers(piece.t, piece.eta, piece.tau)
+
+    @property
+    def log_time_s(self) -> float:
+        return 0.0 if self.t_first is None else float(self.t_last - self.t_first)
+
+    # -- the run --------------------------------------------------------------------------------------------------
+    def update(self) -> LiveUpdate:
+        """The live state now."""
+        from wmrid.estimators.online import online_estimate
+
+        now = time.monotonic()
+        form_name, parameters, segments = None, {}, 0
+        if self.observers:
+            form, obs = self.observers[0]
+            form_name = form.kind + ("+caster" if form.caster else "")
+            est = online_estimate(obs)
+            if est is not None:
+                parameters, segments = est.parameters, est.segments
+        since, count = self._last
+        rate = (self.samples - count) / max(now - since, 1e-9)
+        self._last = (now, self.samples)
+        log_rate = (self.samples - 1) / self.log_time_s if self.log_time_s > 0 else None
+        return LiveUpdate(
+            source=self.source.name, elapsed_s=now - self.started, samples=self.samples, log_time_s=self.log_time_s,
+            rate_hz=rate, log_rate_hz=log_rate, since_last_data_s=now - self.source.last_data, form=form_name,
+            parameters=parameters, segments=segments, notes=tuple(self.notes),
+        )  # fmt: skip
+
+    def _poll(self) -> None:
+        from wmrid.core import interrupts
+
+        with interrupts.held():  # a stop lands between two polls: what was read is whole, spilled and counted
+            for piece in self.source.poll(POLL_S):
+                self._feed(piece)
+
+    def _ended(self, now: float) -> str | None:
+        if self.source.ended is not None:
+            return f"the source ended ({self.source.ended})"
+        if self.idle is not None and self.samples and self.source.quiet() >= self.idle:  # once data has come
+            return f"no data for {self.idle:g} s ({option('idle')})"
+        if self.until is not None and self.log_time_s >= self.until:
+            return f"{self.log_time_s:.3f} s of log time received ({option('until')} {self.until:g})"
+        return None
+
+    def _precise(self, upd: LiveUpdate) -> bool:
+        if self.until_std is None or not upd.parameters:
+            return False
+        return all(upd.relative_std(p) * 100.0 < self.until_std for p in self.params)
+
+    def __iter__(self) -> Iterator[LiveUpdate | LiveResult]:
+        if self._final is not None:
+            yield self._final
+            return
+        next_refresh = self.started + self.every
+        while self.reason is None:
+            self._poll()
+            now = time.monotonic()
+            self.reason = self._ended(now)
+            if now >= next_refresh or self.reason is not None:
+                upd = self.update()
+                if self.reason is None and self._precise(upd):
+                    self.reason = (
+                        f"every relative std of {', '.join(self.params)} below {self.until_std:g} % "
+                        f"({option('until_std')})"
+                    )
+                yield upd
+                next_refresh = now + self.every
+        yield self.finish()
+
+    def stop(self, reason: str = "stopped") -> None:
+        """End the run at the next poll (or now, for :meth:`finish`); ``reason`` says why."""
+        if self.reason is None:
+            self.reason = reason
+            self.stopped = True
+
+    def finish(self, stopped_by: str | None = None) -> LiveResult:
+        """The final result: ``identify`` on the messages received (see the module docstring); ``stopped_by`` names a
+        stop (Ctrl-C, SIGTERM), after which the process is given FINISH_GRACE_S to identify and write."""
+        from wmrid.api.identification import identify
+
+        if self._final is not None:
+            return self._final
+        if stopped_by is not None:
+            from wmrid.core import interrupts
+
+            interrupts.extend_grace(FINISH_GRACE_S)
+            self.stop(stopped_by)
+        self.reason = self.reason or "stopped"
+        natural = not self.stopped and (self.source.ended is not None or self.reason.startswith("no data"))
+        final = self.source.final_input(natural)
+        try:
+            kwargs = {k: v for k, v in self.settings.items() if k != "validate"}
+            result = identify(final.path, self.robot, options=self.options, **kwargs)
+        finally:
+            self.source.close()
+        if final.copied:
+            result = _renamed(result, final.path, final.name)
+            read_from = f"a copy of the {self.source.bytes_read:,} bytes read" if final.name != "<stdin>" else (
+                f"the {self.source.bytes_read:,} bytes read from standard input")  # fmt: skip
+        else:
+            read_from = f"{final.name} itself"
+        self._final = LiveResult(result, self.reason, self.samples, self.log_time_s, read_from, self.stopped)
+        return self._final
+
+    def close(self) -> None:
+        """Release the source without a result (its temporary files are removed)."""
+        self.source.close()
+
+
+def _warm_up() -> None:
+    """Load what the first estimate needs before the first message arrives: the readers' libraries and the compiled
+    kernels (numba loads them from its cache on first use, about 1.5 s), run once on a few synthetic samples."""
+    import importlib
+
+    from wmrid.core.wheel_log import WheelLog
+    from wmrid.estimators.identify import default_box
+    from wmrid.estimators.observer import ObserverSettings
+    from wmrid.estimators.online import OnlineObserver, online_estimate
+    from wmrid.estimators.survey import survey
+    from wmrid.model.dynamics import RegressorForm
+
+    for name in ("pandas", "pyarrow.csv", "wmrid.io.csv_log", "wmrid.io.mcap.reader", "wmrid.io.mcap.joints"):
+        importlib.import_module(name)
+    t = np.arange(200) * 1e-3
+    eta = np.column_stack([2.0 + np.sin(40 * t), 2.0 + np.cos(30 * t)])
+    tau = np.column_stack([np.cos(40 * t), np.sin(30 * t)])
+    sv = survey([WheelLog(t=t, eta=eta, tau=tau, source="warm-up")], "warm-up")
+    for form in (RegressorForm("paper"), RegressorForm("general")):
+        theta = sv.data_start(form)
+        lo, hi = default_box(theta, form, 10.0, False)
+        obs = OnlineObserver(ObserverSettings(form=form, theta_init=theta, theta_min=lo, theta_max=hi, k=10.0))
+        with np.errstate(all="ignore"):
+            obs.feed(t, eta, tau)
+            online_estimate(obs)
+
+
+def check_output(path: str | os.PathLike[str], force: bool = False) -> None:
+    """Refuse, before a run that may take hours, an output file that could not be written at its end (an existing file
+    without ``force``, a missing folder); standard output and other streams pass."""
+    from pathlib import Path
+
+    from wmrid.core.atomic import _check_target, stream_fd
+
+    if stream_fd(str(path)) is None:
+        _check_target(Path(path), force)
+
+
+def _renamed(result: IdentificationResult, path: str, name: str) -> IdentificationResult:
+    """``result`` of the copy at ``path`` naming the source as the user named it."""
+
+    def fix(text: Any) -> Any:
+        return text.replace(path, name) if isinstance(text, str) else text
+
+    log_info = dict(result.log_info)
+    if "notes" in log_info:
+        log_info["notes"] = [fix(n) for n in log_info["notes"]]
+    return replace(result, source=name, warnings=tuple(fix(w) for w in result.warnings), log_info=log_info)
+
+
+def live(
+    source: str | os.PathLike[str],
+    robot: str | os.PathLike[str] | Robot | None = None,
+    *,
+    options: LogOptions | None = None,
+    every: float = 1.0,
+    idle: float | None = None,
+    until: float | None = None,
+    until_std: float | None = None,
+    params: Sequence[str] | None = None,
+    form: str = "auto",
+    k: float = 10.0,
+    alpha: float = 1e-10,
+    box_width: float = 10.0,
+    torque_hold: str = "zoh",
+    payload: bool = False,
+    control_rate: float | None = None,
+    delay: float | str | None = None,
+    friction: str = "auto",
+    rotor_inertia: float | None = None,
+) -> LiveRun:
+    """Identify the robot that is writing ``source`` while it writes it.
+
+    source : ``"-"`` (standard input: CSV rows with a header, JSON lines, or an MCAP stream), a CSV file being appended
+        to, an MCAP file being written, or a rosbag2 folder being recorded with MCAP storage; read with ``options``
+        (the same :class:`LogOptions` as :func:`wmrid.identify`).
+    robot, form, k, alpha, box_width, torque_hold, payload, control_rate, delay, friction, rotor_inertia : as for
+        :func:`wmrid.identify` (the final result is ``identify`` with them).
+    every : s of wall time between updates; idle : s without new data that end the run, once samples have come
+        (None: wait); until : s of log
+        time after which the run ends; until_std : percent: the run ends once every parameter in ``params`` (default:
+        all eight base parameters) has a live relative std below it.
+
+    Returns a :class:`LiveRun`; iterating it yields :class:`LiveUpdate` objects, then one :class:`LiveResult`.
+    """
+    settings = {
+        "form": form, "k": k, "alpha": alpha, "box_width": box_width, "torque_hold": torque_hold, "payload": payload,
+        "control_rate": control_rate, "delay": delay, "friction": friction, "rotor_inertia": rotor_inertia,
+    }  # fmt: skip
+    return LiveRun(source, robot, settings, options, every, idle, until, until_std, params)

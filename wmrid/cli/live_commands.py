@@ -1,0 +1,227 @@
+"""``wmrid live``: a translation of its flags into one library call (:func:`wmrid.api.live.live`), the updates shown
+as they come (a live table on a terminal, JSON lines in a pipe), the result written at the end and on a stop."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from wmrid.cli.app import app
+from wmrid.cli.helpers import log_opts, on_stdout, warning_summary
+from wmrid.cli.options import (
+    AlignOpt,
+    AlignRule,
+    ControlRateOpt,
+    DelayOpt,
+    EfficiencyOpt,
+    EffortKind,
+    EffortOpt,
+    EffortTopicOpt,
+    EffortUnitOpt,
+    FlipEffortOpt,
+    FormChoice,
+    FrictionChoice,
+    FrictionOpt,
+    GearRatioOpt,
+    LeftJointOpt,
+    MirrorLeftOpt,
+    OutputFormat,
+    RightJointOpt,
+    RotorInertiaOpt,
+    SpeedUnit,
+    SpeedUnitOpt,
+    TimeSource,
+    TimeSourceOpt,
+    TimeUnit,
+    TopicOpt,
+    TorqueConstantOpt,
+    TorqueHold,
+    VelocityFrom,
+    VelocityFromOpt,
+    VelocityTopicOpt,
+    WheelRadiusOpt,
+)
+from wmrid.reporting.terminal import console
+
+_LIVE_PANEL = "Live (refresh and when to stop)"
+
+
+@app.command(
+    epilog="Examples:\n\n"
+    "ros2 bag record -s mcap -o run /joint_states & wmrid live run/ --robot paper -o result.json\n\n"
+    "wmrid live run.mcap --idle 5 --until-std 1 --params m11,m22,Vc\n\n"
+    "some_logger | wmrid live - --columns t=time,eta_r=vr,eta_l=vl,tau_r=ur,tau_l=ul | jq .parameters"
+)
+def live(
+    source: Annotated[
+        str,
+        typer.Argument(
+            metavar="SOURCE",
+            help="What is being written: - (standard input: CSV rows with a header, JSON lines, or MCAP), a CSV file "
+            "being appended to, an .mcap file being written, or a rosbag2 folder recorded with MCAP storage.",
+        ),
+    ],
+    robot: Annotated[
+        str | None,
+        typer.Option(
+            help="Robot: built-in name ('paper'), TOML file, or URDF (with --gear-ratio); starts the estimate."
+        ),
+    ] = None,
+    every: Annotated[float, typer.Option(help="Seconds between refreshes, > 0.", rich_help_panel=_LIVE_PANEL)] = 1.0,
+    idle: Annotated[
+        float | None,
+        typer.Option(
+            help="End after this many seconds without new data (once samples have come), > 0 (default: wait).",
+            rich_help_panel=_LIVE_PANEL,
+        ),
+    ] = None,
+    until: Annotated[
+        float | None,
+        typer.Option(help="End after this many seconds of log time, > 0.", rich_help_panel=_LIVE_PANEL),
+    ] = None,
+    until_std: Annotated[
+        float | None,
+        typer.Option(
+            "--until-std",
+            metavar="PCT",
+            help="End once every --params parameter's live relative std is below PCT percent, > 0.",
+            rich_help_panel=_LIVE_PANEL,
+        ),
+    ] = None,
+    params: Annotated[
+        str | None,
+        typer.Option(
+            help="Comma-separated parameters --until-std watches (default: m11,m12,m22,Vc,Fv1,Fv2,Fd1,Fd2).",
+            rich_help_panel=_LIVE_PANEL,
+        ),
+    ] = None,
+    output: Annotated[
+        Path | None,
+        typer.Option(
+            "--output", "-o", help="Write the JSON result (identify's) here, at the end and on Ctrl-C or SIGTERM."
+        ),
+    ] = None,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing output file.")] = False,
+    output_format: Annotated[
+        OutputFormat,
+        typer.Option(
+            "--format", help="table (a live table), json (a JSON line per refresh), or auto (table on a terminal)."
+        ),
+    ] = OutputFormat.auto,
+    columns: Annotated[
+        str | None, typer.Option(help="Column mapping NAME=COLUMN, comma-separated, e.g. t=time,eta_r=vr,tau_l=ul.")
+    ] = None,
+    time_unit: Annotated[
+        TimeUnit, typer.Option(help="Time column unit (auto: float s, floats past 1e13 us, 1e16 ns; integer ns).")
+    ] = TimeUnit.auto,
+    form: Annotated[
+        FormChoice, typer.Option(help="Regressor: paper (7 columns, wheels keep one sign), general (8), auto.")
+    ] = FormChoice.auto,
+    k: Annotated[float, typer.Option("--k", help="Observer/filter gain k, 1/s, in (0, 100000].")] = 10.0,
+    alpha: Annotated[float, typer.Option(help="Initial Gamma = alpha I, > 0.")] = 1e-10,
+    box_width: Annotated[
+        float, typer.Option(help="Half-width of the parameter box, in units of max(|theta|, m_ii), in (0, inf].")
+    ] = 10.0,
+    torque_hold: Annotated[TorqueHold, typer.Option(help="Torque between samples: zoh or foh.")] = TorqueHold.zoh,
+    payload: Annotated[
+        bool, typer.Option("--payload", help="The final result also estimates the payload (needs --robot).")
+    ] = False,
+    topic: TopicOpt = None,
+    velocity_topic: VelocityTopicOpt = None,
+    effort_topic: EffortTopicOpt = None,
+    right_joint: RightJointOpt = None,
+    left_joint: LeftJointOpt = None,
+    time_source: TimeSourceOpt = TimeSource.auto,
+    align: AlignOpt = AlignRule.linear,
+    velocity_from: VelocityFromOpt = VelocityFrom.auto,
+    speed_unit: SpeedUnitOpt = SpeedUnit.rad_s,
+    wheel_radius: WheelRadiusOpt = None,
+    effort: EffortOpt = EffortKind.torque,
+    effort_unit: EffortUnitOpt = None,
+    torque_constant: TorqueConstantOpt = None,
+    gear_ratio: GearRatioOpt = None,
+    efficiency: EfficiencyOpt = None,
+    mirror_left: MirrorLeftOpt = False,
+    flip_effort: FlipEffortOpt = False,
+    rotor_inertia: RotorInertiaOpt = None,
+    control_rate: ControlRateOpt = None,
+    delay: DelayOpt = None,
+    friction: FrictionOpt = FrictionChoice.auto,
+) -> None:
+    """Identify the robot while it drives: follow SOURCE as it is written, refresh the estimate ± std every --every
+    seconds, and when it ends (--idle, --until, --until-std, the recording's end, Ctrl-C) give identify's result on
+    the same messages."""
+    from wmrid.api.live import check_output
+    from wmrid.api.live import live as run_live
+    from wmrid.core import interrupts
+    from wmrid.core.atomic import write_json
+    from wmrid.reporting.live_view import json_line
+    from wmrid.reporting.render import print_identification
+
+    if output is not None:
+        check_output(output, force)
+    run = run_live(
+        source, robot, options=log_opts(locals()), every=every, idle=idle, until=until, until_std=until_std,
+        params=[p.strip() for p in params.split(",") if p.strip()] if params else None, form=form.value, k=k,
+        alpha=alpha, box_width=box_width, torque_hold=torque_hold.value, payload=payload, control_rate=control_rate,
+        delay=delay, friction=friction.value, rotor_inertia=rotor_inertia,
+    )  # fmt: skip
+    fmt = "json" if on_stdout(output) else output_format.value
+    if fmt == "auto":
+        fmt = "table" if sys.stdout.isatty() else "json"
+    final = None
+    try:
+        final = _follow(run, fmt)
+    except KeyboardInterrupt:
+        received = interrupts.received
+        final = run.finish(stopped_by="interrupted" if received in (None, 2) else f"signal {received}")
+    finally:
+        if final is None:
+            run.close()
+    result = final.result
+    document = result.to_dict(history=True)
+    if output is not None:
+        write_json(str(output), document, force=True)  # checked before the run; the run may take hours
+    line = (
+        f"wmrid live: {final.reason}; {final.samples:,} samples received; the result is identify on {final.read_from}"
+    )
+    sys.stderr.write(line + (f", written to {output}" if output is not None else "") + "\n")
+    if fmt == "json":
+        if not on_stdout(output):
+            sys.stdout.write(json_line(final.to_dict()) + "\n")
+            sys.stdout.flush()
+        warning_summary(document["warnings"])
+    else:
+        print_identification(result, console())
+    if final.stopped:
+        raise typer.Exit(code=interrupts.exit_code())
+
+
+def _follow(run, fmt: str):
+    """Show the updates of ``run`` as they come; the final :class:`wmrid.api.live.LiveResult`."""
+    from wmrid.api.live import LiveResult
+    from wmrid.reporting.live_view import json_line
+
+    if fmt == "json":
+        for item in run:
+            if isinstance(item, LiveResult):
+                return item
+            sys.stdout.write(json_line(item.to_dict()) + "\n")
+            sys.stdout.flush()
+        return run.finish()
+    from rich.live import Live
+
+    from wmrid.reporting.live_view import live_table
+
+    previous = None
+    with Live(console=console(), auto_refresh=False, transient=True) as view:
+        for item in run:
+            if isinstance(item, LiveResult):
+                return item
+            current = item.to_dict()
+            view.update(live_table(current, previous), refresh=True)
+            previous = current
+    return run.finish()

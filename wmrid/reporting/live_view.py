@@ -1,0 +1,66 @@
+"""The terminal view of ``wmrid live``: estimate ± std per parameter with its trend, and the stream's state.
+
+Built from the plain dicts :meth:`wmrid.api.live.LiveUpdate.to_dict` gives (this layer sits below the api).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+#: Parameters shown, in order (those the update has).
+SHOWN = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
+
+
+def _trend(now: float, before: float | None, std: float | None) -> str:
+    """An arrow when the value moved by more than its std since the last update, else a dot."""
+    if before is None or std is None or not math.isfinite(std):
+        return ""
+    if abs(now - before) <= std:
+        return "·"
+    return "↑" if now > before else "↓"
+
+
+def live_table(update: dict[str, Any], previous: dict[str, Any] | None = None) -> Any:
+    """A rich renderable: a header line (source, samples, rates, log time, time since the last data, form) and a table
+    of each parameter's estimate, std, relative std and trend since ``previous``."""
+    from rich.console import Group
+    from rich.table import Table
+    from rich.text import Text
+
+    rate = update["rate_hz"]
+    log_rate = update.get("log_rate_hz")
+    head = Text(
+        f"{update['source']}: {update['samples']:,} samples, {update['log_time_s']:.1f} s of log"
+        + (f" at {log_rate:.0f} Hz" if log_rate else "")
+        + f"; receiving {rate:.0f} samples/s; last data {update['since_last_data_s']:.1f} s ago"
+        + (f"; form {update['form']}" if update.get("form") else "")
+    )
+    table = Table(box=None, pad_edge=False)
+    for col, justify in (("parameter", "left"), ("estimate", "right"), ("± std", "right"), ("rel. std", "right"),
+                         ("trend", "center")):  # fmt: skip
+        table.add_column(col, justify=justify)  # type: ignore[arg-type]
+    params = update["parameters"]
+    before = (previous or {}).get("parameters", {})
+    if not params:
+        table.add_row("(waiting for enough samples)", "", "", "", "")
+    for name in SHOWN:
+        if name not in params:
+            continue
+        value, std = params[name]["value"], params[name]["std"]
+        rel = f"{100 * std / abs(value):.3g} %" if std is not None and value else ""
+        old = before.get(name, {}).get("value")
+        table.add_row(name, f"{value:.6g}", f"{std:.3g}" if std is not None else "?", rel, _trend(value, old, std))
+    foot = Text("std: jackknife of the live estimate (the final result carries the offline std)", style="dim")
+    parts = [head, table, foot]
+    parts += [Text(f"note: {n}", style="dim") for n in update.get("notes", ())]
+    return Group(*parts)
+
+
+def json_line(obj: Any) -> str:
+    """``obj`` as one line of strict JSON (NaN/inf as null), without the newline: a JSON-lines record."""
+    import json
+
+    from wmrid.core.atomic import _jsonable
+
+    return json.dumps(_jsonable(obj), allow_nan=False, separators=(",", ":"))
