@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from wmrid.estimators.observer import ObserverSettings
-from wmrid.estimators.replay import kernel_kind
-from wmrid.model.dynamics import regressor
+from wmrid.estimators.replay import kernel_kind, load_codes
+from wmrid.model.dynamics import filter_regressor
 from wmrid.model.kernels import plain
 
 #: The most blocks kept; past it neighbours are merged (the jackknife uses at most 40 segments).
@@ -45,6 +45,7 @@ class OnlineObserver:
         self.settings = settings
         self.kind = kernel_kind(form)
         self.geom = np.array(form.geometry, dtype=np.float64)
+        self.load = load_codes(form)
         self.hold = settings.hold_code
         self.k = float(settings.k)
         self.st = np.zeros(7)
@@ -81,7 +82,7 @@ class OnlineObserver:
         skip = 0
         if self.n == 0:  # the first sample starts the predictor and the filter, as in replay_pieces
             self.st[:] = [t[0], eta[0, 0], eta[0, 1], eta[0, 0], eta[0, 1], 0.0, 0.0]
-            self.g_prev[:] = regressor(eta[:1], tau[:1], self.settings.form)[0]
+            self.g_prev[:] = filter_regressor(eta[:1], tau[:1], self.settings.form)[0]
             self.t_first = float(t[0])
             skip = 1
         ts, es, us = t[skip:], eta[skip:], tau[skip:]
@@ -102,7 +103,7 @@ class OnlineObserver:
             observer_chunk(
                 plain(ts), plain(es), plain(us), offset, self.kind, self.hold, self.k, self.st, self.w, self.g_prev,
                 self.theta, self.gamma, self.gamma_inv, self._hist_idx, *self._hist, block_end, *blk, cursor,
-                self.geom,
+                self.geom, self.load,
             )  # fmt: skip
             for j in range(nb):
                 i = self.closed
