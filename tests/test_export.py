@@ -276,13 +276,23 @@ def test_check_applies_the_identified_caster_drag(tmp_path):
     from wmrid.api.simulation import write_simulation
 
     write_simulation(sim, log)
-    result = wmrid.identify(str(log), "amr")
+    result = wmrid.identify(str(log), "amr", friction="wheel+caster")
     assert result.form.caster
     saved = tmp_path / "run.json"
     saved.write_text(json.dumps(result.to_dict(history=False), default=float))
     done = wmrid.export(str(saved), "amr", tmp_path / "amr.xml", check=str(log))
     for wheel in ("eta_r", "eta_l"):
         assert abs(done.check["multibody"][wheel] - done.check["reduced"][wheel]) < 1.0, done.check
+    # auto takes the drag that follows the load here: the predictor cannot simulate it (said), the multibody model
+    # drives it as the prototype's resistance x load, and fits no worse than the constant drag's reduced model
+    auto = wmrid.identify(str(log), "amr")
+    assert auto.form.load
+    saved = tmp_path / "auto.json"
+    saved.write_text(json.dumps(auto.to_dict(history=False), default=float))
+    loaded = wmrid.export(str(saved), "amr", tmp_path / "auto.xml", check=str(log))
+    assert "follows the load" in loaded.check["reduced_not_simulated"]
+    for wheel in ("eta_r", "eta_l"):
+        assert loaded.check["multibody"][wheel] > done.check["reduced"][wheel] - 1.0, loaded.check
 
 
 # --- the review's cases --------------------------------------------------------------------------------------------
@@ -432,7 +442,7 @@ def test_negative_friction(saved, tmp_path):
         wmrid.export(str(bad), "paper", tmp_path / f"neg{refused}.yaml")
         if refused:
             with pytest.raises(wmrid.WmridError, match="more than 3 std below 0"):
-                wmrid.export(str(bad), "paper", tmp_path / "neg.xml")
+                wmrid.export(str(bad), "paper", tmp_path / "refused.xml")
         else:
             done = wmrid.export(str(bad), "paper", tmp_path / "neg.xml")
             assert done.physical.parameters.F_v1 == 0.0

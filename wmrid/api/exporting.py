@@ -144,11 +144,12 @@ def export(
     kept unless ``force``.  Raises UsageError (one line) for an unknown suffix, a robot file without physical
     parameters, an unphysical result, a result whose effort is not a torque."""
     from wmrid.api.inputs import load_robot
-    from wmrid.core.atomic import atomic_write_bytes, atomic_write_text
+    from wmrid.core.atomic import _check_target, atomic_write_bytes, atomic_write_text
     from wmrid.exports.controller import controller_model
     from wmrid.model.robot import PhysicalParameters
 
     suffix = check_export_output(output)
+    _check_target(Path(os.fspath(output)), force)  # before any work: an existing output, a missing folder
     if not (isinstance(window, (int, float)) and math.isfinite(window) and window > 0):
         raise UsageError(f"{option('window', window)}: give the check's window length in seconds, > 0")
     robot_obj = load_robot(robot, gear_ratio=gear_ratio, rotor_inertia=rotor_inertia, wheel_radius=wheel_radius)
