@@ -165,8 +165,10 @@ def test_a_signal_between_the_two_outputs_leaves_neither(tmp_path, short_log, si
             signalled = True
             break
     out, err = proc.communicate(timeout=120)
-    if not signalled:
-        pytest.skip("the run ended before the estimates' temporary file could be seen")
+    if not signalled:  # the run outpaced the poll: then it must have written both outputs, whole
+        assert proc.returncode == 0, err
+        assert sorted(os.listdir(folder)) == ["est.mcap", "r.json"]
+        return
     number = getattr(signal, signame)
     assert proc.returncode == 128 + number, err
     assert err.decode() == f"wmrid: terminated by {signame}; no output was written\n"
