@@ -327,3 +327,13 @@ def test_each_robot_states_the_smallest_changes_it_would_flag(rows, tmp_path):
     assert r01["sensitivity"]["ramp_logs"] == 10
     assert r01["sensitivity"]["step"]["M11"] == pytest.approx(rv.sensitivity["step"]["M11"])
     assert any(s.startswith("Sensitivity:") for s in data["statements"])
+
+
+def test_figure_units_are_the_models():
+    """The fleet figures' panel units come from the model's units table (they said Vc "kg m" and Fv "N m s")."""
+    from wmrid.model.dynamics import THETA0_UNITS
+    from wmrid.reporting.fleet_figures import UNITS
+
+    assert UNITS["Vc"] == "kg m²"
+    assert UNITS["Fv1"] == THETA0_UNITS["Fv1"] == "N m s/rad"
+    assert UNITS["M11"] == "kg m²"

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from wmrid.model.dynamics import THETA0_UNITS
 from wmrid.reporting.figures import _new_figure
 
 if TYPE_CHECKING:
@@ -20,8 +21,12 @@ if TYPE_CHECKING:
 
     from wmrid.monitoring.fleet_review import FleetReview, RobotReview
 
-UNITS = {"M11": "kg m²", "M12": "kg m²", "M22": "kg m²", "Vc": "kg m", "Fv1": "N m s", "Fv2": "N m s",
-         "Fd1": "N m", "Fd2": "N m", "Fw1": "N m", "Fw2": "N m"}  # fmt: skip
+#: The panels' units: the model's own table (``Vc`` kg m², ``Fv`` N m s/rad), and a wheel's friction torque at its
+#: typical speed (Fw, N m).
+UNITS = {
+    **{k: THETA0_UNITS[k].replace("^2", "²") for k in ("M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")},
+    "Fw1": "N m", "Fw2": "N m",
+}  # fmt: skip
 #: The panels, row by row: the inertial parameters and the friction, with each wheel's friction at its typical
 #: speed in a fifth column when the review has it (right wheel's on top).
 _PANELS = (("M11", "M12", "M22", "Vc"), ("Fv1", "Fv2", "Fd1", "Fd2"))
