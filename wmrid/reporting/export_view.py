@@ -28,7 +28,7 @@ def print_export(data: dict[str, Any], console: Any) -> None:
         elif q["value"] != 0 and std > POORLY * abs(q["value"]):
             mark = "poorly"
         else:
-            mark = ""
+            mark = "yes"
         rel = f"{100 * std / abs(q['value']):.2g} %" if std is not None and q["value"] else "-"
         source = "log+file" if q["source"] == "log + robot file" else q["source"]
         rows.append([name, f"{q['value']:.5g}", "-" if std is None else f"{std:.2g}", rel, q["unit"], source,
