@@ -13,7 +13,7 @@ what the file gives, what stays undetermined; an unphysical result is refused) a
   (:mod:`wmrid.exports.robot_file`).
 
 ``check``: a log whose torques drive the exported multibody model over windows restarted from the logged speeds
-(:func:`wmrid.sim.multibody.drive_windows`); the fit % per wheel is reported next to the reduced model's on the same
+(:func:`wmrid.sim.open_loop.drive_windows`); the fit % per wheel is reported next to the reduced model's on the same
 windows (:func:`wmrid.model.predict.simulate_segments`).  The returned :class:`ExportResult` round-trips through JSON.
 """
 
@@ -233,7 +233,7 @@ def export(
 
         loads: list[float] = []
         if robot_obj.casters and cm.casters():
-            from wmrid.sim.multibody import settled_caster_loads
+            from wmrid.sim.open_loop import settled_caster_loads
 
             loads = settled_caster_loads(physical.parameters, robot_obj.casters).tolist()
         text = robot_file_text(robot_obj, physical.parameters, notes, provenance, cm.casters(), loads, extra)
@@ -328,7 +328,7 @@ def check_fit(
     from wmrid.api.identification import _log
     from wmrid.model.predict import fit_percent, simulate_segments, unsimulated
     from wmrid.model.robot import default_casters
-    from wmrid.sim.multibody import drive_windows
+    from wmrid.sim.open_loop import drive_windows
 
     wheel_log = _log(log, options, robot_obj, whole=True)
     if wheel_log.effort_unit != "N m":
@@ -351,7 +351,7 @@ def check_fit(
         # a drag that follows the load: the prototype's own law, resistance x the contact's normal load, with the
         # resistance that gives D_k at rest (shared by the casters of its group, as the robot-file export does)
         from wmrid.exports.robot_file import _same_columns
-        from wmrid.sim.multibody import settled_caster_loads
+        from wmrid.sim.open_loop import settled_caster_loads
 
         loads = settled_caster_loads(p, robot_casters)
         drag = np.zeros(len(robot_casters))

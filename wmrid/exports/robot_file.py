@@ -36,7 +36,7 @@ def robot_file_text(
 ) -> str:
     """The TOML text (module docstring).  notes: quantity -> "value +/- std unit (source)"; drags: the geometric
     caster model's casters ({"x", "y", "D", "D_std"}); loads: each of ``robot``'s casters' normal load at rest on the
-    prototype (:func:`wmrid.sim.multibody.settled_caster_loads`), N; extra: sentences for the header."""
+    prototype (:func:`wmrid.sim.open_loop.settled_caster_loads`), N; extra: sentences for the header."""
     found = robot.casters or ()
     resistance = [0.0] * len(found)
     why = ["no identified drag: resistance 0"] * len(found)
