@@ -19,7 +19,6 @@ windows (:func:`wmrid.model.predict.simulate_segments`).  The returned :class:`E
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import math
 import os
@@ -262,10 +261,7 @@ def _same_robot(found: Any, robot_obj: Any, name: str) -> None:
     start = found.nominal or {}
     if not all(k in start for k in ("m11", "m12", "m22", "Vc")):
         return
-    try:
-        mine = model.base_parameters(robot_obj.nominal)
-    except Exception:  # a base set without a physical description: nothing to compare with
-        return
+    mine = model.base_parameters(robot_obj.nominal)  # a base set gives its theta0
     theirs = np.array([start[k] for k in ("m11", "m12", "m22", "Vc")], dtype=float)
     scale = np.maximum(np.abs(mine[:4]), 1e-12)
     worst = int(np.argmax(np.abs(theirs - mine[:4]) / scale))
@@ -328,6 +324,7 @@ def check_fit(
     from wmrid.api.identification import _log
     from wmrid.model.predict import fit_percent, simulate_segments, unsimulated
     from wmrid.model.robot import default_casters
+    from wmrid.sim.multibody import MultibodySettings
     from wmrid.sim.open_loop import drive_windows
 
     wheel_log = _log(log, options, robot_obj, whole=True)
@@ -350,16 +347,10 @@ def check_fit(
     if casters and found.form.load:
         # a drag that follows the load: the prototype's own law, resistance x the contact's normal load, with the
         # resistance that gives D_k at rest (shared by the casters of its group, as the robot-file export does)
-        from wmrid.exports.robot_file import _same_columns
+        from wmrid.exports.robot_file import group_resistance
         from wmrid.sim.open_loop import settled_caster_loads
 
-        loads = settled_caster_loads(p, robot_casters)
-        drag = np.zeros(len(robot_casters))
-        for c in casters:
-            group = [i for i, k in enumerate(robot_casters) if _same_columns(k, c) and k.kind == "ball"]
-            total = sum(loads[i] for i in group)
-            for i in group:
-                drag[i] = max(c["D"], 0.0) / total if total > 0 else 0.0
+        drag = np.array(group_resistance(robot_casters, casters, settled_caster_loads(p, robot_casters))[0])
     elif casters:
         # the identified drag force D_k of each caster of the geometric model, applied as a constant force against
         # its contact's motion (the model's own law); a caster of the file at the same place carries it
@@ -368,7 +359,7 @@ def check_fit(
             k = min(range(len(robot_casters)), key=lambda i: math.hypot(robot_casters[i].x - c["x"],
                                                                         robot_casters[i].y - c["y"]))  # fmt: skip
             forces[k] += c["D"]
-    settings = dataclasses.replace(_settings(), caster_resistance=0.0)
+    settings = MultibodySettings(caster_resistance=0.0)  # the drag is the identified one, set above
     mj = drive_windows(p, robot_casters, t, eta, tau, starts, drag=drag, forces=forces, settings=settings)
     est = found.estimate
     form = found.form if len(est.theta0) == found.form.n_base else None
@@ -390,12 +381,6 @@ def check_fit(
         "reduced": {"eta_r": clean(fit_red[0]), "eta_l": clean(fit_red[1])},
         "reduced_not_simulated": why,
     }  # fmt: skip
-
-
-def _settings() -> Any:
-    from wmrid.sim.multibody import MultibodySettings
-
-    return MultibodySettings()
 
 
 def write_export_summary(result: ExportResult, path: str | os.PathLike[str], *, force: bool = False) -> None:

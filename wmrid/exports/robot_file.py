@@ -16,6 +16,8 @@ from __future__ import annotations
 import dataclasses
 import json
 
+import numpy as np
+
 from wmrid.model.robot import Caster, PhysicalParameters, Robot, robot_to_toml
 
 
@@ -23,6 +25,34 @@ def _same_columns(caster: Caster, drag: dict[str, float]) -> bool:
     """Whether ``caster`` has the drag columns of the identified caster at (drag["x"], drag["y"]): they depend on y and
     x^2 only (:func:`wmrid.model.dynamics.caster_columns`), so casters at (x, y) and (-x, y) are one parameter."""
     return abs(caster.y - drag["y"]) < 1e-9 and abs(abs(caster.x) - abs(drag["x"])) < 1e-9
+
+
+def group_resistance(
+    casters: tuple[Caster, ...], drags: list[dict[str, float]], loads: list[float] | np.ndarray
+) -> tuple[list[float], list[str]]:
+    """Each caster's rolling-resistance coefficient that gives the identified drags at rest on the prototype, and why
+    (one sentence per caster).  A drag D_k stands for every caster with the same columns (:func:`_same_columns`); the
+    ball casters of that group share one coefficient, D_k over their load at rest (``loads``, N, as
+    :func:`wmrid.sim.open_loop.settled_caster_loads` gives it); a swivel caster, a negative D or a group carrying no
+    load gets 0."""
+    resistance = [0.0] * len(casters)
+    why = ["no identified drag: resistance 0"] * len(casters)
+    for c in drags:
+        group = [i for i, k in enumerate(casters) if _same_columns(k, c)]
+        total = sum(loads[i] for i in group if casters[i].kind == "ball")
+        for i in group:
+            if casters[i].kind != "ball":
+                why[i] = f"a swivel caster: the identified drag D = {c['D']:.4g} N is not carried (resistance 0)"
+            elif c["D"] < 0:
+                why[i] = f"identified drag D = {c['D']:.4g} +/- {c['D_std']:.2g} N is negative: resistance 0"
+            elif total <= 0:
+                why[i] = "the prototype's casters of this group carry no load at rest: resistance 0"
+            else:
+                resistance[i] = c["D"] / total
+                why[i] = (f"resistance = D / {total:.4g} N (the group's load at rest on the prototype), D = "
+                          f"{c['D']:.4g} +/- {c['D_std']:.2g} N for the casters at (+-{abs(c['x']):.4g}, "
+                          f"{c['y']:.4g}) m")  # fmt: skip
+    return resistance, why
 
 
 def robot_file_text(
@@ -38,24 +68,7 @@ def robot_file_text(
     caster model's casters ({"x", "y", "D", "D_std"}); loads: each of ``robot``'s casters' normal load at rest on the
     prototype (:func:`wmrid.sim.open_loop.settled_caster_loads`), N; extra: sentences for the header."""
     found = robot.casters or ()
-    resistance = [0.0] * len(found)
-    why = ["no identified drag: resistance 0"] * len(found)
-    for c in drags:  # a drag D_k stands for every caster with the same columns: the same y and |x| (module docstring)
-        group = [i for i, k in enumerate(found) if _same_columns(k, c)]
-        balls = [i for i in group if found[i].kind == "ball"]
-        total = sum(loads[i] for i in balls)
-        for i in group:
-            if found[i].kind != "ball":
-                why[i] = f"a swivel caster: the identified drag D = {c['D']:.4g} N is not carried (resistance 0)"
-            elif c["D"] < 0:
-                why[i] = f"identified drag D = {c['D']:.4g} +/- {c['D_std']:.2g} N is negative: resistance 0"
-            elif total <= 0:
-                why[i] = "the prototype's casters of this group carry no load at rest: resistance 0"
-            else:  # one coefficient for the group: the drag shared by load
-                resistance[i] = c["D"] / total
-                why[i] = (f"resistance = D / {total:.4g} N (the group's load at rest on the prototype), D = "
-                          f"{c['D']:.4g} +/- {c['D_std']:.2g} N for the casters at (+-{abs(c['x']):.4g}, "
-                          f"{c['y']:.4g}) m")  # fmt: skip
+    resistance, why = group_resistance(found, drags, loads)
     casters = [dataclasses.replace(caster, resistance=resistance[i]) for i, caster in enumerate(found)]
     out = Robot(name=f"{robot.name}_identified", nominal=identified, cad=None, casters=tuple(casters) or None,
                 torque_constant=robot.torque_constant, efficiency=robot.efficiency, limits=robot.limits)  # fmt: skip
