@@ -45,10 +45,10 @@ def _numba_cache_fallback() -> None:
 
 def _private_temp_folder(name: str) -> str | None:
     """A folder under the system's temporary directory that only this user can write: ``NAME-UID`` when it is (or
-    can be made) this user's own folder, not writable by others; else a fresh one (``NAME-XXXXXXXX``).  In a shared
-    /tmp anyone can make ``NAME-UID`` first: a folder someone else owns is never used (numba's cache holds pickles
-    it loads: issue 30 found "cannot cache function" as an internal error there).  None when there is no writable
-    temporary directory at all."""
+    can be made) this user's own folder, not writable by others; else a fresh one (``NAME-`` and eight random
+    characters).  In a shared /tmp anyone can make ``NAME-UID`` first: a folder someone else owns is never used
+    (numba's cache holds pickles it loads: issue 30 found "cannot cache function" as an internal error there).  None
+    when there is no writable temporary directory at all."""
     import contextlib
     import stat
     import tempfile
