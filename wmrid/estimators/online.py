@@ -24,8 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wmrid.estimators.observer import ObserverSettings
-from wmrid.estimators.replay import kernel_kind, load_codes
-from wmrid.model.dynamics import filter_regressor
+from wmrid.estimators.replay import KernelState
 from wmrid.model.kernels import plain
 
 #: The most blocks kept; past it neighbours are merged (the jackknife uses at most 40 segments).
@@ -40,20 +39,11 @@ class OnlineObserver:
     """
 
     def __init__(self, settings: ObserverSettings, block_seconds: float | None = None) -> None:
-        form = settings.form
-        p = form.n_columns
+        p = settings.form.n_columns
         self.settings = settings
-        self.kind = kernel_kind(form)
-        self.geom = np.array(form.geometry, dtype=np.float64)
-        self.load = load_codes(form)
+        self.ks = KernelState.initial(settings)
         self.hold = settings.hold_code
-        self.k = float(settings.k)
-        self.st = np.zeros(7)
-        self.w = np.zeros(p)
-        self.g_prev = np.zeros(p)
-        self.theta = np.array(settings.theta_init, dtype=float)
-        self.gamma = settings.alpha * np.eye(p)
-        self.gamma_inv = np.eye(p) / settings.alpha
+        self.k = self.ks.k
         self.n = 0
         self.t_first = 0.0
         self.t_last = 0.0
@@ -70,6 +60,19 @@ class OnlineObserver:
         self._hist_idx = np.array([-1], dtype=np.int64)
         self._hist = (np.empty((1, 2, p)), np.empty((1, 2)), np.empty((1, p, p)))
 
+    @property
+    def theta(self) -> np.ndarray:
+        """The current estimate (2, p)."""
+        return self.ks.theta
+
+    @property
+    def gamma(self) -> np.ndarray:
+        return self.ks.gamma
+
+    @property
+    def gamma_inv(self) -> np.ndarray:
+        return self.ks.gamma_inv
+
     def feed(self, t: np.ndarray, eta: np.ndarray, tau: np.ndarray) -> None:
         """Advance over the samples t (k,) s (after every sample fed so far), eta (k, 2) rad/s, tau (k, 2)."""
         from wmrid.estimators.observer_kernel import observer_chunk
@@ -79,10 +82,10 @@ class OnlineObserver:
         t = np.ascontiguousarray(t, dtype=np.float64)
         eta = np.ascontiguousarray(eta, dtype=np.float64)
         tau = np.ascontiguousarray(tau, dtype=np.float64)
+        ks = self.ks
         skip = 0
         if self.n == 0:  # the first sample starts the predictor and the filter, as in replay_pieces
-            self.st[:] = [t[0], eta[0, 0], eta[0, 1], eta[0, 0], eta[0, 1], 0.0, 0.0]
-            self.g_prev[:] = filter_regressor(eta[:1], tau[:1], self.settings.form)[0]
+            self.ks.start(t, eta, tau)
             self.t_first = float(t[0])
             skip = 1
         ts, es, us = t[skip:], eta[skip:], tau[skip:]
@@ -97,13 +100,12 @@ class OnlineObserver:
             offset = self.n + skip
             block_end = (offset + local).astype(np.int64)
             nb = len(block_end)
-            p = self.theta.shape[1]
+            p = ks.theta.shape[1]
             blk = (np.zeros((nb, p, p)), np.zeros((nb, 2, p)), np.zeros((nb, 2)), np.zeros((nb, 2)))
             cursor = np.zeros(2, dtype=np.int64)
             observer_chunk(
-                plain(ts), plain(es), plain(us), offset, self.kind, self.hold, self.k, self.st, self.w, self.g_prev,
-                self.theta, self.gamma, self.gamma_inv, self._hist_idx, *self._hist, block_end, *blk, cursor,
-                self.geom, self.load,
+                plain(ts), plain(es), plain(us), offset, ks.kind, self.hold, ks.k, ks.st, ks.w, ks.g_prev, ks.theta,
+                ks.gamma, ks.gamma_inv, self._hist_idx, *self._hist, block_end, *blk, cursor, ks.geom, ks.load,
             )  # fmt: skip
             for j in range(nb):
                 i = self.closed

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -111,6 +112,42 @@ def load_codes(form) -> np.ndarray:
     return np.array([LOAD_SIGNALS.index(x) for x in form.load], dtype=np.int64)
 
 
+@dataclass
+class KernelState:
+    """The compiled observer's running state for one settings (what :func:`wmrid.estimators.observer_kernel.
+    observer_chunk` carries from piece to piece): the kernel kind, caster geometry and load codes of the form, the
+    gain k, the predictor/filter state st (7,), the filters w, g_prev (p,), theta (2, p), Gamma and its inverse
+    (p, p).  Shared by the full-rate replay, its half-rate twin and the online observer."""
+
+    form: Any
+    kind: int
+    geom: np.ndarray
+    load: np.ndarray
+    k: float
+    st: np.ndarray
+    w: np.ndarray
+    g_prev: np.ndarray
+    theta: np.ndarray
+    gamma: np.ndarray
+    gamma_inv: np.ndarray
+
+    @classmethod
+    def initial(cls, settings: ObserverSettings) -> KernelState:
+        form = settings.form
+        p = form.n_columns
+        return cls(
+            form=form, kind=kernel_kind(form), geom=np.array(form.geometry, dtype=np.float64),
+            load=load_codes(form), k=float(settings.k), st=np.zeros(7), w=np.zeros(p), g_prev=np.zeros(p),
+            theta=np.array(settings.theta_init, dtype=float), gamma=settings.alpha * np.eye(p),
+            gamma_inv=np.eye(p) / settings.alpha,
+        )  # fmt: skip
+
+    def start(self, t: np.ndarray, eta: np.ndarray, tau: np.ndarray) -> None:
+        """Start the predictor and the filter at the first sample (t (k,), eta, tau (k, 2), k >= 1)."""
+        self.st[:] = [t[0], eta[0, 0], eta[0, 1], eta[0, 0], eta[0, 1], 0.0, 0.0]
+        self.g_prev[:] = filter_regressor(eta[:1], tau[:1], self.form)[0]
+
+
 class _HalfRate:
     """A second estimator run on every other sample (global indices 0, 2, 4, ...): the same log at twice the step.
 
@@ -122,13 +159,10 @@ class _HalfRate:
     one block.
     """
 
-    def __init__(self, n: int, duration: float, settings: ObserverSettings, kind: int) -> None:
+    def __init__(self, n: int, duration: float, settings: ObserverSettings) -> None:
         p = settings.form.n_columns
         self.n = (n + 1) // 2
-        self.kind = kind
-        self.form = settings.form
-        self.geom = np.array(settings.form.geometry, dtype=np.float64)
-        self.load = load_codes(settings.form)
+        self.ks = KernelState.initial(settings)
         # An effort held over each step of the log is, at twice the step, an effort held by a controller at
         # the log's rate, the dropped sample interpolated (see ObserverSettings.control_rate): the same
         # assumption about the effort, so the two runs differ by their step only.  Whether the effort really
@@ -136,13 +170,6 @@ class _HalfRate:
         self.hold = settings.hold_code
         if self.hold == 0.0 and duration > 0:
             self.hold = (n - 1) / duration
-        self.k = float(settings.k)
-        self.st = np.zeros(7)
-        self.w = np.zeros(p)
-        self.g_prev = np.zeros(p)
-        self.theta = np.array(settings.theta_init, dtype=float)
-        self.gamma = settings.alpha * np.eye(p)
-        self.gamma_inv = np.eye(p) / settings.alpha
         last = np.array([max(self.n - 1, 1)], dtype=np.int64)
         self.hist_idx, self.block_end = last, last.copy()
         self.hist_theta = np.empty((1, 2, p))
@@ -161,16 +188,16 @@ class _HalfRate:
         if len(t) == 0 or self.n < 2:
             return
         skip = 0
+        ks = self.ks
         if self.done == 0:
-            self.st[:] = [t[0], eta[0, 0], eta[0, 1], eta[0, 0], eta[0, 1], 0.0, 0.0]
-            self.g_prev[:] = filter_regressor(eta[:1], tau[:1], self.form)[0]
+            ks.start(t, eta, tau)
             skip = 1
         if len(t) > skip:
             observer_chunk(
                 plain(t[skip:]), plain(eta[skip:]), plain(tau[skip:]),
-                self.done + skip, self.kind, self.hold, self.k, self.st, self.w, self.g_prev, self.theta, self.gamma,
-                self.gamma_inv, self.hist_idx, self.hist_theta, self.hist_e, self.hist_gamma, self.block_end,
-                *self.blk, self.cursor, self.geom, self.load,
+                self.done + skip, ks.kind, self.hold, ks.k, ks.st, ks.w, ks.g_prev, ks.theta, ks.gamma, ks.gamma_inv,
+                self.hist_idx, self.hist_theta, self.hist_e, self.hist_gamma, self.block_end, *self.blk,
+                self.cursor, ks.geom, ks.load,
             )  # fmt: skip
         self.done += len(t)
 
@@ -198,20 +225,10 @@ def replay_pieces(
     """
     from wmrid.estimators.observer_kernel import observer_chunk
 
-    form = settings.form
-    p = form.n_columns
-    kind = kernel_kind(form)
-    geom = np.array(form.geometry, dtype=np.float64)
-    load = load_codes(form)
+    p = settings.form.n_columns
     hist_idx, block_end = layout(n, duration, settings.k, max_history)
     m, nb = len(hist_idx), len(block_end)
-
-    st = np.zeros(7)
-    w = np.zeros(p)
-    g_prev = np.zeros(p)
-    theta = np.array(settings.theta_init, dtype=float)
-    gamma = settings.alpha * np.eye(p)
-    gamma_inv = np.eye(p) / settings.alpha
+    ks = KernelState.initial(settings)
     hist_theta = np.empty((m, 2, p))
     hist_e = np.empty((m, 2))
     hist_gamma = np.empty((m, p, p))
@@ -223,7 +240,7 @@ def replay_pieces(
     blk_ee = np.zeros((nb, 2))
     cursor = np.zeros(2, dtype=np.int64)
     hold = settings.hold_code
-    half = _HalfRate(n, duration, settings, kind) if half_rate and n >= 20 else None
+    half = _HalfRate(n, duration, settings) if half_rate and n >= 20 else None
     blk_slow = None if low_speed is None else np.zeros(nb, dtype=bool)
     floor = NoiseFloor(noise_lag)
 
@@ -255,16 +272,15 @@ def replay_pieces(
                 pending = pool.submit(half.feed, t, eta, tau, done)
             skip = 0
             if done == 0:  # the first sample starts the predictor and the filter
-                st[:] = [t[0], eta[0, 0], eta[0, 1], eta[0, 0], eta[0, 1], 0.0, 0.0]
-                g_prev[:] = filter_regressor(eta[:1], tau[:1], form)[0]
+                ks.start(t, eta, tau)
                 if hist_idx[0] == 0:
-                    hist_theta[0], hist_e[0], hist_gamma[0] = theta, 0.0, gamma
+                    hist_theta[0], hist_e[0], hist_gamma[0] = ks.theta, 0.0, ks.gamma
                     cursor[0] = 1
                 skip = 1
             observer_chunk(
-                plain(t[skip:]), plain(eta[skip:]), plain(tau[skip:]), done + skip, kind, hold, float(settings.k), st,
-                w, g_prev, theta, gamma, gamma_inv, hist_idx, hist_theta, hist_e, hist_gamma, block_end, blk_a, blk_c,
-                blk_uu, blk_ee, cursor, geom, load,
+                plain(t[skip:]), plain(eta[skip:]), plain(tau[skip:]), done + skip, ks.kind, hold, ks.k, ks.st,
+                ks.w, ks.g_prev, ks.theta, ks.gamma, ks.gamma_inv, hist_idx, hist_theta, hist_e, hist_gamma, block_end,
+                blk_a, blk_c, blk_uu, blk_ee, cursor, ks.geom, ks.load,
             )  # fmt: skip
             floor.feed(eta)
             if blk_slow is not None:
@@ -282,9 +298,9 @@ def replay_pieces(
     if done != n:
         raise ValueError(f"replay_pieces: the pieces hold {done} samples, not n = {n}")
     return ReplayOutput(
-        theta=theta, gamma=gamma, gamma_inv=gamma_inv, eta_hat=st[3:5].copy(), hist_idx=hist_idx,
+        theta=ks.theta, gamma=ks.gamma, gamma_inv=ks.gamma_inv, eta_hat=ks.st[3:5].copy(), hist_idx=hist_idx,
         hist_theta=hist_theta, hist_e=hist_e, hist_gamma=hist_gamma, block_end=block_end, blk_a=blk_a,
         blk_c=blk_c, blk_uu=blk_uu, blk_ee=blk_ee, hist_t=hist_t, block_t=block_t,
-        theta_half=None if half is None else half.theta.copy(), blk_slow=blk_slow, noise_sigma=floor.sigma(),
+        theta_half=None if half is None else half.ks.theta.copy(), blk_slow=blk_slow, noise_sigma=floor.sigma(),
         eta_rms=floor.rms(),
     )  # fmt: skip
