@@ -226,14 +226,26 @@ def atomic_output(path: str | Path, *, force: bool = False, mode: str = "wb") ->
     folder = _check_target(path, force)
     file_mode = _new_file_mode(path)
     kwargs: dict[str, Any] = {"encoding": "utf-8"} if mode == "w" else {}
+    handle: IO | None = None
     try:
-        handle = tempfile.NamedTemporaryFile(  # noqa: SIM115 - closed below on every path
-            mode=mode, dir=folder, delete=False, prefix=f".{_short(path.name)}.", suffix=".tmp", **kwargs
-        )
-    except OSError as err:
-        raise UsageError(f"cannot write {path}: {_unwritable(folder, err)}") from err
+        # A stop between the file's creation and its registration would leave it behind (seen once in CI: SIGHUP
+        # the moment the file appeared): the signal waits until the file is known, then is raised in this try.
+        with interrupts.held():
+            try:
+                handle = tempfile.NamedTemporaryFile(  # noqa: SIM115 - closed below on every path
+                    mode=mode, dir=folder, delete=False, prefix=f".{_short(path.name)}.", suffix=".tmp", **kwargs
+                )
+            except OSError as err:
+                raise UsageError(f"cannot write {path}: {_unwritable(folder, err)}") from err
+            _LIVE.add(handle.name)
+    except BaseException:
+        if handle is not None:
+            handle.close()
+            with suppress(OSError):
+                os.unlink(handle.name)
+            _LIVE.discard(handle.name)
+        raise
     tmp = Path(handle.name)
-    _LIVE.add(str(tmp))
     try:
         try:
             try:
