@@ -209,7 +209,7 @@ def csv_layout(source: Source) -> CsvLayout:
 
 
 def csv_chunks(
-    source: Source, mapping: dict[str, str], explicit: set[str], rows: int
+    source: Source, mapping: dict[str, str], explicit: set[str], rows: int, velocity_from: str = "velocity"
 ) -> tuple[Callable[[], Iterator[tuple[int, dict[str, Any]]]], Callable[[int], str], list[str], None]:
     """(chunks, where, notes, None) of a CSV log; ``chunks()`` yields (first data row, columns) of ``rows`` rows.
 
@@ -222,7 +222,7 @@ def csv_chunks(
     layout = csv_layout(source)
     c_options, present, notes = layout.c_options, layout.present, layout.notes
     header = pd.DataFrame(columns=layout.header_columns)
-    chosen = select(present, mapping, explicit, name, notes)
+    chosen = select(present, mapping, explicit, name, notes, velocity_from)
     actual = {str(c).strip(): c for c in header.columns}
     usecols = list(dict.fromkeys(actual[c] for c in chosen.values()))
     plain = (

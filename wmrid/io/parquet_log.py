@@ -20,7 +20,7 @@ from wmrid.io.sources import Source, one_line
 
 
 def parquet_chunks(
-    source: Source, mapping: dict[str, str], explicit: set[str], rows: int
+    source: Source, mapping: dict[str, str], explicit: set[str], rows: int, velocity_from: str = "velocity"
 ) -> tuple[Callable[[], Iterator[tuple[int, dict[str, Any]]]], Callable[[int], str], list[str], str | None]:
     """(chunks, where, notes, time unit hint) of a Parquet log; ``chunks()`` yields (first row, columns)."""
     import pyarrow as pa
@@ -50,7 +50,7 @@ def parquet_chunks(
         except (pa.ArrowException, OSError) as err:
             raise broken(err) from err
     notes: list[str] = []
-    chosen = select(present, mapping, explicit, name, notes)
+    chosen = select(present, mapping, explicit, name, notes, velocity_from)
     twice = sorted({c for c in chosen.values() if present.count(c) > 1})
     if twice:
         raise LogFormatError(
