@@ -606,7 +606,7 @@ def build_base_convergence_figure(
         if math.isfinite(value) and math.isfinite(std) and std > 0.0:
             scale, ylabel, band = std, "(estimate − final) / σ", True
         elif math.isfinite(value) and value != 0.0:
-            scale, ylabel, band = abs(value) / 100.0, "(estimate − final), % of final", False
+            scale, ylabel, band = abs(value) / 100.0, "estimate − final, %", False
         else:
             scale, ylabel, band = 1.0, unit, False
         ref = value if math.isfinite(value) else 0.0
@@ -626,8 +626,7 @@ def build_base_convergence_figure(
         ax.set_title(f"{name}" + (" (zoomed)" if zoomed else "") + f"\n{final} {unit}", fontsize="small")
         if limits:
             ax.set_ylim(limits[0], limits[1])
-        ax.set_ylabel(ylabel, fontsize="small", labelpad=2)
-        ax.tick_params(labelsize="small")
+        ax.set_ylabel(ylabel, labelpad=2)
         ax.yaxis.set_major_locator(MaxNLocator(nbins=5))  # fewer ticks: each costs time to draw
         ax.grid(alpha=0.3)
         if j >= len(names) - ncols:  # no panel below: this one shows the time axis
