@@ -266,7 +266,7 @@ def test_estimates_figure(built, run):
     for n, ax in enumerate(fig.axes):
         i, k = divmod(n, p)
         assert _units_ok(ax.get_ylabel()), ax.get_ylabel()
-        assert f"_{{{i + 1}{k + 1}}}" in ax.get_title()
+        assert figures._subscript(f"{i + 1}{k + 1}") in ax.get_title()
         lines = {line.get_label(): line for line in ax.get_lines()}
         assert set(lines) == {"estimate", "start value", "true value"}
         assert lines["start value"].get_linestyle() == "--"
@@ -274,7 +274,7 @@ def test_estimates_figure(built, run):
         ratio = lines["true value"].get_ydata()[0] / truth_theta[i, k]
         scale = 10.0 ** round(-np.log10(ratio))  # 1 unless the label says 10^n
         assert ratio * scale == pytest.approx(1.0)
-        assert (scale == 1.0) == ("10^" not in ax.get_ylabel())
+        assert (scale == 1.0) == (_display_scale(ax.get_ylabel()) == 1.0)
         assert lines["estimate"].get_ydata()[-1] * scale == pytest.approx(truth_theta[i, k], rel=1e-3, abs=1e-6)
     assert all(ax.get_xlabel() == "time (s)" for ax in fig.axes[p:])
     # the whole truth file is accepted as well as its "parameters" table
@@ -305,7 +305,7 @@ def test_estimates_figure_general_form():
     fig = figures.build_estimates_figure(result, truth)
     assert len(fig.axes) == 16
     assert fig.axes[7].get_ylabel() == "rad/s²"
-    assert fig.axes[15].get_title() == r"$\hat\theta_{28}$"
+    assert fig.axes[15].get_title() == "θ̂₂₈"
 
 
 def test_residuals_figure(built, run):
@@ -319,7 +319,7 @@ def test_residuals_figure(built, run):
     assert legend[1].startswith("left wheel, RMS")
     # the first steps' transient is far above the rest: the axis zooms and says how many samples it left out
     assert "beyond the axis" in legend[2]
-    assert "$10^{-6}$ rad/s" in ax_t.get_ylabel()  # the bulk is ~1e-6 rad/s on this noise-free log
+    assert "10⁻⁶ rad/s" in ax_t.get_ylabel()  # the bulk is ~1e-6 rad/s on this noise-free log
     lo, hi = ax_t.get_ylim()
     assert 1e-6 * (hi - lo) < 0.5 * np.ptp(run.result.history.e)
     assert len(ax_h.patches) == 2  # one step histogram per wheel
@@ -381,7 +381,7 @@ def test_no_figure_title_and_no_source_in_titles(run):
     assert _titles(every["residuals"])[1::3] == ["over time", "distribution"]
     assert every["excitation"].axes[0].get_title() == "smallest eigenvalue of the information matrix Γ"
     assert _titles(every["path"]) == ["", "", ""]
-    assert every["estimates"].axes[0].get_title() == r"$\hat\theta_{11}$"
+    assert every["estimates"].axes[0].get_title() == "θ̂₁₁"
     # the rows' meaning, once in a figure-level title, is in the legend
     legend = [t.get_text() for t in every["estimates"].legends[0].get_texts()]
     assert legend[-1] == "row i: wheel i (1 = right, 2 = left)"
@@ -421,9 +421,10 @@ def test_svg_is_byte_identical_across_builds(run):
 
 
 def _display_scale(label: str) -> float:
-    """The 10^n a panel's values were divided by (its y label says "$10^{n}$ unit"), else 1."""
-    found = re.search(r"\$10\^\{(-?\d+)\}\$", label)
-    return 10.0 ** int(found.group(1)) if found else 1.0
+    """The 10^n a panel's values were divided by (its y label says "10ⁿ unit", in superscript digits), else 1."""
+    found = re.search("10([⁻⁰¹²³⁴⁵⁶⁷⁸⁹]+) ", label)
+    digits = str.maketrans("⁻⁰¹²³⁴⁵⁶⁷⁸⁹", "-0123456789")
+    return 10.0 ** int(found.group(1).translate(digits)) if found else 1.0
 
 
 def _band(ax):
@@ -433,6 +434,8 @@ def _band(ax):
 
 
 def test_base_convergence_figure(built, run):
+    """Each panel in units of its std from the final estimate: the final estimate at 0, its band from -2 to 2, the
+    truth at (true - final) / std; the title gives the final value, std and unit; labels at a readable size."""
     fig = built["convergence"]
     result = run.result
     names = result.form.base_names
@@ -441,28 +444,28 @@ def test_base_convergence_figure(built, run):
     t = result.history.t
     late = t >= t[-1] - 0.7 * (t[-1] - t[0])
     for j, (ax, name) in enumerate(zip(fig.axes, names, strict=True)):
-        assert ax.get_title().split(" ")[0] == name
-        scale = _display_scale(ax.get_ylabel())
-        assert result.units[name] in ax.get_ylabel()
+        value, std = result.parameters[name]
+        assert ax.get_title().split()[0] == name
+        assert ax.get_title().endswith(f"\n{value:.6g} ± {std:.2g} {result.units[name]}")
+        assert ax.get_ylabel() == "(estimate − final) / σ"
         lines = {line.get_label(): line for line in ax.get_lines()}
         assert set(lines) == {"estimate (closed form)", "final estimate", "true value"}
-        value, std = result.parameters[name]
-        assert lines["final estimate"].get_ydata()[0] * scale == pytest.approx(value, rel=1e-12)
-        lo, hi = _band(ax)
-        assert (hi - lo) * scale == pytest.approx(4.0 * std, rel=1e-9)
-        assert (hi + lo) / 2 * scale == pytest.approx(value, rel=1e-12)
-        assert lines["true value"].get_ydata()[0] * scale == pytest.approx(run.truth[name], rel=1e-12)
+        assert lines["final estimate"].get_ydata()[0] == 0.0
+        assert _band(ax) == pytest.approx((-2.0, 2.0), abs=1e-12)
+        true_z = (run.truth[name] - value) / std
+        assert lines["true value"].get_ydata()[0] == pytest.approx(true_z, rel=1e-9)
         assert lines["true value"].get_linestyle() == ":"
         est = lines["estimate (closed form)"]
+        z = (recovered[:, j] - value) / std
         assert est.get_xdata()[-1] == t[-1]
-        assert est.get_ydata()[-1] * scale == pytest.approx(recovered[-1, j], rel=1e-12, abs=1e-15)
+        assert est.get_ydata()[-1] == pytest.approx(z[-1], rel=1e-9, abs=1e-9)
         # the axis shows the band, the truth and the settled trajectory ...
-        y0, y1 = (v * scale for v in ax.get_ylim())
-        shown = np.concatenate([[value - 2 * std, value + 2 * std, run.truth[name]], recovered[late, j]])
+        y0, y1 = ax.get_ylim()
+        shown = np.concatenate([[-2.0, 2.0, true_z], z[late]])
         assert y0 <= shown.min()
         assert shown.max() <= y1
         # ... and says "zoomed" exactly when some of the early transient is off it
-        clipped = bool(np.any((recovered[:, j] < y0) | (recovered[:, j] > y1)))
+        clipped = bool(np.any((z < y0) | (z > y1)))
         assert ("(zoomed)" in ax.get_title()) == clipped
         assert ax.yaxis.get_label().get_fontsize() >= 10
         assert all(label.get_fontsize() >= 10 for label in ax.get_yticklabels())
@@ -484,7 +487,9 @@ def test_base_convergence_figure_without_history_truth_or_std(run):
         labels = {line.get_label() for line in ax.get_lines()}
         assert labels == {"estimate (closed form)", "final estimate"}  # no truth given
         has_band = any(p.get_label() == "final ± 2σ" for p in ax.patches)
-        assert has_band == (ax.get_title().split(" ")[0] not in ("m11", "m12", "m22"))
+        name = ax.get_title().split()[0]
+        assert has_band == (name not in ("m11", "m12", "m22"))
+        assert ax.get_ylabel() == ("estimate − final, %" if name in ("m11", "m12", "m22") else "(estimate − final) / σ")
 
 
 def _synthetic_result(form, transient=True, n=400):
@@ -516,8 +521,8 @@ def test_base_convergence_figure_with_caster_drag(form, n_names):
     fig = figures.build_base_convergence_figure(result, dict(zip(names, theta0, strict=True)))
     assert len(fig.axes) == n_names  # 2 rows of 5, the unused panel removed
     assert {ax.get_subplotspec().get_geometry()[:2] for ax in fig.axes} == {(2, 5)}
-    assert [ax.get_title().split(" ")[0] for ax in fig.axes] == list(names)
-    assert fig.axes[-1].get_ylabel() == {"Cw": "N m", "D1": "N"}[names[-1]]  # caster drag
+    assert [ax.get_title().split()[0] for ax in fig.axes] == list(names)
+    assert fig.axes[-1].get_title().endswith({"Cw": " N m", "D1": " N"}[names[-1]])  # caster drag
     for ax, name in zip(fig.axes, names, strict=True):  # the bottom of each column shows the time axis
         below = any(
             other.get_subplotspec().rowspan.start == 1

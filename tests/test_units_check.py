@@ -9,6 +9,7 @@ the library and the command line; then the pure functions on constructed estimat
 
 from __future__ import annotations
 
+import html
 import math
 import re
 from dataclasses import replace
@@ -233,8 +234,19 @@ def test_the_report_opens_with_the_verdict(in_rpm, clean):
     assert text_md.split("\n\n")[1].startswith("**Verdict:** Do not use these numbers:")
     assert "--speed-unit rpm" in text_md.split("##")[0]
     page = to_html(doubt)
-    assert page.index("<section class='verdict'>") < page.index("Base parameters (paper Table 3)")
-    assert "color:#b00020" in page.split("<section class='verdict'>")[1].split("</section>")[0]
-    good = to_markdown(wmrid.report(clean, figures=False))
+    # the summary box first (issue 33): the verdict, the key numbers, what to do next; red when not to use them
+    box = page.split("<section class='summary bad'>")[1].split("</section>")[0]
+    assert page.index("<section class='summary bad'>") < page.index("Base parameters (paper Table 3)")
+    assert "<p class='headline'>Do not use these numbers:" in box
+    assert doubt.next_steps[0].startswith("Check the log's units and columns first")
+    assert html.escape(doubt.next_steps[0]) in box
+    clean_report = wmrid.report(clean, figures=False)
+    good = to_markdown(clean_report)
     assert "**Verdict:** This log determines the inertia, Coriolis coefficient and friction." in good
     assert "- Inertia (M11, M22, M12): determined" in good
+    assert [name for name, _ in clean_report.key_numbers[:4]] == ["M11", "M22", "M12", "Vc"]
+    assert clean_report.key_numbers[0][1].endswith(" kg m^2")
+    assert " ± " in clean_report.key_numbers[0][1]
+    assert clean_report.next_steps[-1].startswith("Use the numbers:")
+    assert "<section class='summary good'>" in to_html(clean_report)
+    assert "**What to do next**" in good

@@ -378,14 +378,13 @@ def plan(entries: Sequence[LogEntry], defaults: dict[str, Any], robot: str | Non
 def dask_client(scheduler: str, workers: int | None = None) -> Iterator[Any]:
     """A ``distributed.Client``: on a LocalCluster of ``workers`` single-threaded worker processes (default: one per
     core) for ``scheduler="local"``, else connected to the scheduler at that address."""
-    try:
-        import logging
+    import logging
 
-        from distributed import Client, LocalCluster
-    except ImportError as err:  # pragma: no cover - a dependency of wmrid
-        raise UsageError(
-            f"the fleet runs on dask.distributed, which is not installed ({err}); pip install distributed"
-        ) from None
+    from wmrid.core.extras import require
+
+    require("distributed", "fleet")
+    from distributed import Client, LocalCluster
+
     if scheduler == "local":
         n = workers or os.cpu_count() or 1
         cluster = LocalCluster(
@@ -453,7 +452,10 @@ def fleet(
     defaults : identify's keywords and LogOptions fields for every log (a manifest row's own options win).
     """
     from wmrid.core.atomic import register_input
+    from wmrid.core.extras import require
 
+    require("distributed", "fleet")
+    require("pyarrow", "fleet")
     if output is None:
         raise UsageError(f"{option('output')} is required: the Parquet table to write (e.g. fleet.parquet)")
     out = os.fspath(output)

@@ -344,6 +344,7 @@ def _warm_up() -> None:
     kernels (numba loads them from its cache on first use, about 1.5 s), run once on a few synthetic samples."""
     import importlib
 
+    from wmrid.core.extras import available
     from wmrid.core.wheel_log import WheelLog
     from wmrid.estimators.identify import default_box
     from wmrid.estimators.observer import ObserverSettings
@@ -352,7 +353,8 @@ def _warm_up() -> None:
     from wmrid.model.dynamics import RegressorForm
 
     for name in ("pandas", "pyarrow.csv", "wmrid.io.csv_log", "wmrid.io.mcap.reader", "wmrid.io.mcap.joints"):
-        importlib.import_module(name)
+        if name != "pyarrow.csv" or available(name):  # pyarrow: the parquet extra
+            importlib.import_module(name)
     t = np.arange(200) * 1e-3
     eta = np.column_stack([2.0 + np.sin(40 * t), 2.0 + np.cos(30 * t)])
     tau = np.column_stack([np.cos(40 * t), np.sin(30 * t)])

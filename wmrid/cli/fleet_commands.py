@@ -228,6 +228,10 @@ def fleet(
     """Identify every log of a fleet on Dask and write one Parquet table, one row per log: robot id, log, content
     hash, start time, duration, samples, method, every base parameter with its std, flags, warnings, fit, run time,
     and the error of a log that failed (a failed log never ends the run)."""
+    from wmrid.core.extras import require
+
+    require("distributed", "fleet")  # before the fleet's modules, which import pyarrow
+    require("pyarrow", "fleet")
     from wmrid.api.fleet import fleet as run_fleet
 
     given = _given_options(locals())
@@ -366,6 +370,10 @@ def fleet_report(
     """Review a fleet table: per robot, every base parameter over time with ±2σ bands; changes across its logs
     (friction rising: wheel wear?; M or Vc shifting: payload or configuration change) at a stated false-alarm rate;
     robots that stand out from their fleet; the robots ranked by the evidence against them."""
+    from wmrid.core.extras import require
+
+    require("pyarrow", "fleet", "wmrid fleet-report")
+    require("matplotlib", "fleet", "wmrid fleet-report")
     from wmrid.api.fleet_reporting import check_settings, write_fleet_report
     from wmrid.api.fleet_reporting import fleet_report as build
     from wmrid.api.reporting import REPORT_SUFFIXES

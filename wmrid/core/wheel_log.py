@@ -3,6 +3,8 @@
 
 Canonical columns: ``t`` (s), ``eta_r``, ``eta_l`` (rad/s; right wheel = eta_1, left = eta_2), ``tau_r``, ``tau_l``
 (N m); optional pose ``x``, ``y`` (m), ``phi`` (rad) and wheel-speed reference ``eta_ref_r``, ``eta_ref_l`` (rad/s).
+A CSV or Parquet log may give wheel positions ``pos_r``, ``pos_l`` (rad) instead of the speeds; the readers derive the
+speeds from them (:func:`wmrid.io.signals.speed_from_position`).
 """
 
 from __future__ import annotations
@@ -29,7 +31,12 @@ POSE = ("x", "y", "phi")
 REFERENCE = ("eta_ref_r", "eta_ref_l")
 
 
-CANONICAL = REQUIRED + POSE + REFERENCE
+#: Wheel positions (angles, rad; deg or m at the rim with the speed unit deg/s or m/s), read instead of the speeds
+#: eta_r, eta_l when a log has no speeds (or ``velocity_from="position"``).
+POSITION = ("pos_r", "pos_l")
+
+
+CANONICAL = REQUIRED + POSE + REFERENCE + POSITION
 
 
 MIN_SAMPLES = 10

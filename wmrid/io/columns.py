@@ -10,7 +10,10 @@ from wmrid.core.errors import LogFormatError, UsageError, option
 
 if TYPE_CHECKING:
     pass
-from wmrid.core.wheel_log import CANONICAL, POSE, REFERENCE, REQUIRED
+from wmrid.core.wheel_log import CANONICAL, POSE, POSITION, REFERENCE
+
+#: The speed columns, which the position columns (:data:`POSITION`) may replace.
+SPEED = ("eta_r", "eta_l")
 
 
 def suggest(name: str, candidates: list[str] | tuple[str, ...], cutoff: float = 0.6) -> str | None:
@@ -70,6 +73,7 @@ def check_key(key: str, what: str) -> None:
 _SIDE_WORDS = {"r": ("right", "r", "rt", "rgt"), "l": ("left", "l", "lt", "lft")}
 _SPEED_WORDS = ("velocity", "vel", "speed", "omega")
 _EFFORT_WORDS = ("effort", "torque", "tau")
+_POSITION_WORDS = ("position", "pos", "angle")
 #: A column with one of these words is a command, a set-point or a position, not a measured speed or effort.
 _NOT_MEASURED = (
     "cmd", "command", "commanded", "desired", "des", "ref", "reference", "target", "setpoint", "sp", "goal", "position",
@@ -88,43 +92,95 @@ def words(column: str) -> list[str]:
 
 
 def guess_candidates(key: str, columns: list[str]) -> list[str]:
-    """The columns whose names say they hold ``key`` (t, eta_r, eta_l, tau_r, tau_l), in file order.
+    """The columns whose names say they hold ``key`` (t, eta_r, eta_l, tau_r, tau_l, pos_r, pos_l), in file order.
 
-    A wheel signal: a speed word (velocity, vel, speed, omega) or an effort word (effort, torque, tau), one side
-    (right/r/rt or left/l/lt, not both), and no word of a command, set-point or position (cmd, desired, ref,
-    target, position, ...).  Time: a column named ``__time`` (PlotJuggler), else ``time``, ``timestamp``,
-    ``stamp`` (case-insensitive), the first of those names present.
+    A wheel signal: a speed word (velocity, vel, speed, omega), an effort word (effort, torque, tau) or a position
+    word (position, pos, angle), one side (right/r/rt or left/l/lt, not both), no word of the other quantities and no
+    word of a command or set-point (cmd, desired, ref, target, ...; for speeds and efforts also position, pos).
+    Time: a column named ``__time`` (PlotJuggler), else ``time``, ``timestamp``, ``stamp`` (case-insensitive), the
+    first of those names present.
     """
     if key == "t":
         lowered = {c.lower(): c for c in columns}
         return next(([lowered[n]] for n in _TIME_NAMES if n in lowered), [])
-    quantity, other = (_SPEED_WORDS, _EFFORT_WORDS) if key.startswith("eta") else (_EFFORT_WORDS, _SPEED_WORDS)
-    side, opposite = _SIDE_WORDS[key[-1]], _SIDE_WORDS["l" if key[-1] == "r" else "r"]
+    kinds = {"eta": _SPEED_WORDS, "tau": _EFFORT_WORDS, "pos": _POSITION_WORDS}
+    quantity = set(kinds[key[:3]])
+    other = {w for kind, ws in kinds.items() if kind != key[:3] for w in ws}
+    not_measured = set(_NOT_MEASURED) - quantity
+    side, opposite = set(_SIDE_WORDS[key[-1]]), set(_SIDE_WORDS["l" if key[-1] == "r" else "r"])
     out = []
     for column in columns:
         w = set(words(column))
-        measured = not w & set(_NOT_MEASURED)
-        if measured and w & set(quantity) and w & set(side) and not w & set(opposite) and not w & set(other):
+        if w & quantity and w & side and not w & opposite and not w & other and not w & not_measured:
             out.append(column)
     return out
 
 
+def wheel_columns(present: list[str], mapping: dict[str, str], explicit: set[str], velocity_from: str) -> tuple:
+    """The wheel columns a table log is read by: :data:`SPEED` or :data:`POSITION`, or () when ``velocity_from`` is
+    "auto" and the log has neither (both present by name, or each found by :func:`guess_candidates`).
+
+    "velocity": the speeds; "position": the positions; "auto": the speeds when named by ``--columns`` or there (each
+    present by its name or said by some column's name: several candidates are then refused by :func:`select`), else
+    the positions when named or there.
+    """
+    if velocity_from == "position":
+        return POSITION
+    if velocity_from == "velocity" or explicit & set(SPEED):
+        return SPEED
+    if explicit & set(POSITION):
+        return POSITION
+
+    def found(keys: tuple[str, ...]) -> bool:
+        return all(mapping[k] in present or guess_candidates(k, present) for k in keys)
+
+    return SPEED if found(SPEED) else POSITION if found(POSITION) else ()
+
+
 def select(
-    present: list[str], mapping: dict[str, str], explicit: set[str], name: str, notes: list[str] | None = None
+    present: list[str],
+    mapping: dict[str, str],
+    explicit: set[str],
+    name: str,
+    notes: list[str] | None = None,
+    velocity_from: str = "velocity",
 ) -> dict[str, str]:
     """{canonical: column in the file} for the required columns and, when all three exist, the pose.
 
-    When required columns are neither present by their canonical names nor named by ``--columns``, and for
-    each exactly one column says it is that signal (:func:`guess_candidates`), those are used, ``mapping`` is
-    updated with them and ``notes`` says so.  Raises one :class:`LogFormatError` naming every missing column,
-    the columns there are, close matches (or the several columns a guess could not choose between), and the
-    ``--columns`` option that would fix it.
+    The wheel columns are the speeds eta_r, eta_l or, by ``velocity_from`` (:func:`wheel_columns`), the positions
+    pos_r, pos_l: the keys of the result say which.  When required columns are neither present by their canonical
+    names nor named by ``--columns``, and for each exactly one column says it is that signal
+    (:func:`guess_candidates`), those are used, ``mapping`` is updated with them and ``notes`` says so.  Raises one
+    :class:`LogFormatError` naming every missing column, the columns there are, close matches (or the several columns
+    a guess could not choose between), and the ``--columns`` option that would fix it.
     """
-    needed = list(REQUIRED) + [k for k in POSE if k in explicit]
+    wheel = wheel_columns(present, mapping, explicit, velocity_from)
+    try:
+        return _select(present, mapping, explicit, name, notes, ("t", *(wheel or SPEED), "tau_r", "tau_l"))
+    except LogFormatError as err:
+        if not wheel:  # neither speeds nor positions: say both ways out
+            raise LogFormatError(f"{err} (or, for wheel positions, pos_r=...,pos_l=...)") from None
+        if wheel == SPEED and velocity_from == "velocity" and wheel_columns(present, mapping, explicit, "auto"):
+            raise LogFormatError(
+                f"{err}; or derive the speeds from the log's wheel positions with {option('velocity_from', 'auto')}"
+            ) from None
+        raise
+
+
+def _select(
+    present: list[str],
+    mapping: dict[str, str],
+    explicit: set[str],
+    name: str,
+    notes: list[str] | None,
+    required: tuple[str, ...],
+) -> dict[str, str]:
+    """:func:`select` for the required columns ``required``."""
+    needed = list(required) + [k for k in POSE if k in explicit]
     if explicit & set(REFERENCE):  # one reference column named: both are needed
         needed += list(REFERENCE)
     missing = [k for k in needed if mapping[k] not in present]
-    guessable = [k for k in missing if k in REQUIRED and k not in explicit]
+    guessable = [k for k in missing if k in required and k not in explicit]
     if guessable:
         taken = {mapping[k] for k in needed if k not in missing}
         found = {key: guess_candidates(key, [c for c in present if c not in taken]) for key in guessable}
@@ -164,7 +220,7 @@ def select(
             f"{name}: no {label} {', '.join(parts)}; the columns are {shown or 'none'}; "
             f"name the log's columns with {option('columns')} {','.join(fixes)}"
         )
-    chosen = {key: mapping[key] for key in REQUIRED}
+    chosen = {key: mapping[key] for key in required}
     for optional in (POSE, REFERENCE):
         if all(mapping[k] in present for k in optional):
             chosen.update({key: mapping[key] for key in optional})

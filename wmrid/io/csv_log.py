@@ -4,8 +4,9 @@ CSV delimiter (:func:`sniff_delimiter`): among the first 20 non-blank lines, the
 that occurs equally often (at least once) on every line; else the first that occurs in the header;
 else runs of whitespace when the header splits into several words.  A ``;``-delimited file whose data
 rows hold ``digit,digit`` is read with decimal commas (and a note says so).  Comma/tab/semicolon files
-are parsed by the multithreaded pyarrow engine; whitespace, decimal-comma and ``", "``-spaced files, and
-any file pyarrow refuses, by pandas' C engine with round-trip-exact float parsing.  Row numbers in messages are
+are parsed by the multithreaded pyarrow engine when pyarrow is installed (the parquet extra); whitespace,
+decimal-comma and ``", "``-spaced files, any file pyarrow refuses, and every file without pyarrow, by pandas' C
+engine with round-trip-exact float parsing (the same values).  Row numbers in messages are
 the line of the file as an editor counts it (header = line 1).
 """
 
@@ -20,11 +21,11 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 import numpy as np
 
 from wmrid.core.errors import LogFormatError
+from wmrid.core.extras import available
 
 if TYPE_CHECKING:
     import pandas
 from wmrid.io.columns import select
-from wmrid.io.parquet_log import arrow_values
 from wmrid.io.sources import MCAP_MAGIC, PARQUET_MAGIC, SNIFF_BYTES, DamagedStream, Source, one_line
 
 _COMMENT_MARKS = ("%", "#")
@@ -209,7 +210,7 @@ def csv_layout(source: Source) -> CsvLayout:
 
 
 def csv_chunks(
-    source: Source, mapping: dict[str, str], explicit: set[str], rows: int
+    source: Source, mapping: dict[str, str], explicit: set[str], rows: int, velocity_from: str = "velocity"
 ) -> tuple[Callable[[], Iterator[tuple[int, dict[str, Any]]]], Callable[[int], str], list[str], None]:
     """(chunks, where, notes, None) of a CSV log; ``chunks()`` yields (first data row, columns) of ``rows`` rows.
 
@@ -222,11 +223,12 @@ def csv_chunks(
     layout = csv_layout(source)
     c_options, present, notes = layout.c_options, layout.present, layout.notes
     header = pd.DataFrame(columns=layout.header_columns)
-    chosen = select(present, mapping, explicit, name, notes)
+    chosen = select(present, mapping, explicit, name, notes, velocity_from)
     actual = {str(c).strip(): c for c in header.columns}
     usecols = list(dict.fromkeys(actual[c] for c in chosen.values()))
     plain = (
-        c_options["sep"] in (",", "\t", ";")
+        available("pyarrow.csv")  # the parquet extra
+        and c_options["sep"] in (",", "\t", ";")
         and c_options["decimal"] == "."
         and c_options["encoding"] == "utf-8"
         and not layout.spaced
@@ -280,6 +282,8 @@ def _arrow_csv(
     """Column values of ``rows``-row pieces read by pyarrow's streaming CSV reader (raises _ArrowCsvRefused)."""
     import pyarrow as pa
     import pyarrow.csv as pcsv
+
+    from wmrid.io.parquet_log import arrow_values
 
     fh = csv_stream(source)
     try:

@@ -154,6 +154,9 @@ def _inspect_table(source, kind: str) -> TableInventory:
     from wmrid.core.wheel_log import CANONICAL
 
     if kind == "parquet":
+        from wmrid.core.extras import require
+
+        require("pyarrow.parquet", "parquet", f"{source.name}: reading a Parquet log")
         import pyarrow as pa
         import pyarrow.parquet as pq
 

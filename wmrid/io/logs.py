@@ -22,12 +22,23 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from wmrid.core.errors import LogFormatError, UsageError, option
+from wmrid.core.extras import available, require
 from wmrid.io.mcap.joints import TopicSelection
-from wmrid.io.signals import SignalOptions, convert
+from wmrid.io.signals import SignalOptions, convert, position_to_rad, speed_from_position
 
 if TYPE_CHECKING:
     import pandas
-from wmrid.core.wheel_log import CANONICAL, CHUNK_ROWS, MIN_SAMPLES, POSE, REFERENCE, REQUIRED, LogStream, WheelLog
+from wmrid.core.wheel_log import (
+    CANONICAL,
+    CHUNK_ROWS,
+    MIN_SAMPLES,
+    POSE,
+    POSITION,
+    REFERENCE,
+    REQUIRED,
+    LogStream,
+    WheelLog,
+)
 from wmrid.io.bag.log import recording_paths
 from wmrid.io.columns import check_key
 from wmrid.io.csv_log import csv_chunks
@@ -130,10 +141,11 @@ def open_log(
                 "so far; export the set-points as columns of one"
             )
         return read_mcap_log(source, columns or {}, selection or TopicSelection(), signals, gear_ratio, rows)
+    velocity_from = (selection or TopicSelection()).velocity_from
     if kind == "parquet":
-        chunks, where, notes, hint = parquet_chunks(source, mapping, explicit, rows)
+        chunks, where, notes, hint = parquet_chunks(source, mapping, explicit, rows, velocity_from)
     else:
-        chunks, where, notes, hint = csv_chunks(source, mapping, explicit, rows)
+        chunks, where, notes, hint = csv_chunks(source, mapping, explicit, rows, velocity_from)
     effort_unit = "N m" if signals == SignalOptions() else signals.effort_label
 
     def pieces() -> Generator[WheelLog, None, tuple[str, ...]]:
@@ -142,9 +154,13 @@ def open_log(
             merged=mapping["t"].lower() == MERGED_TIME,
         )  # fmt: skip
         signal_notes: list[str] = []
+        held: list[WheelLog] = []  # positions: the whole log, for the derivative's window
         for base, values in chunks():
             piece = assembler.add(values, base)
             if piece is None:
+                continue
+            if assembler.positions:
+                held.append(piece)
                 continue
             if signals != SignalOptions():
                 eta, tau, signal_notes = convert(piece.eta, piece.tau, signals, gear_ratio)
@@ -156,9 +172,45 @@ def open_log(
                     reference=reference,
                 )  # fmt: skip
             yield piece
-        return (*notes, *assembler.finish(), *signal_notes)
+        finished = assembler.finish()
+        if held:
+            signal_notes = yield from _speeds_from_positions(held, mapping, velocity_from, signals, gear_ratio, rows)
+        return (*notes, *finished, *signal_notes)
 
     return LogStream(source.name, effort_unit, pieces)
+
+
+def _speeds_from_positions(
+    held: list[WheelLog],
+    mapping: dict[str, str],
+    velocity_from: str,
+    signals: SignalOptions,
+    gear_ratio: float | None,
+    rows: int,
+) -> Generator[WheelLog, None, list[str]]:
+    """Pieces of ``rows`` samples of a table log read with wheel positions: ``held``, the whole log's pieces with the
+    positions in place of the speeds, differentiated as a bag's positions are (:func:`speed_from_position`, in rad
+    by :func:`position_to_rad`), the signals then converted as any log's; returns the notes."""
+    t = np.concatenate([p.t for p in held])
+    tau = np.concatenate([p.tau for p in held])
+    pose = np.concatenate([p.pose for p in held]) if all(p.pose is not None for p in held) else None
+    reference = np.concatenate([p.reference for p in held]) if all(p.reference is not None for p in held) else None
+    position = position_to_rad(np.concatenate([p.eta for p in held]), signals)
+    speed, note = speed_from_position(t - t[0], position)
+    columns = f"columns {mapping[POSITION[0]]!r} and {mapping[POSITION[1]]!r}"
+    notes = [f"{columns}: {note}" + (" (the log has no speed columns)" if velocity_from == "auto" else "")]
+    speed, converted, more = convert(speed, tau, signals, gear_ratio, speed_in_rad_s=True)
+    if reference is not None and signals != SignalOptions():  # set-points in the speeds' unit and sense
+        reference = convert(reference, tau, signals, gear_ratio)[0]
+    unit = "N m" if signals == SignalOptions() else signals.effort_label
+    for start in range(0, len(t), rows):
+        part = slice(start, start + rows)
+        yield WheelLog(
+            t=t[part], eta=speed[part], tau=converted[part], source=held[0].source, effort_unit=unit,
+            pose=None if pose is None else pose[part],
+            reference=None if reference is None else reference[part],
+        )  # fmt: skip
+    return notes + more
 
 
 def _bag_log(
@@ -253,23 +305,32 @@ class _Assembler:
         self.n = 0
         self.dropped: set[str] = set()  # optional column groups dropped for the rest of the log (_optional)
         self.last_t = 0.0
+        self.positions = False  # the wheel columns are positions (pos_r, pos_l), not speeds
+        self.required = REQUIRED
 
     def add(self, values: dict[str, Any], base: int) -> WheelLog | None:
-        """The piece whose first row is data row ``base`` (0-based) of the file, or None if it has no rows left."""
+        """The piece whose first row is data row ``base`` (0-based) of the file, or None if it has no rows left.
+
+        ``values`` holds the columns :func:`wmrid.io.columns.select` chose: with wheel positions (pos_r, pos_l) in
+        place of the speeds, the piece's ``eta`` holds those positions, as read, for the caller to differentiate.
+        """
         name, mapping = self.name, self.mapping
+        self.positions = POSITION[0] in values
+        self.required = REQUIRED if not self.positions else ("t", *POSITION, "tau_r", "tau_l")
+        required = self.required
         kept = None
 
         def where(i: int) -> str:
             return self.where(base + (int(kept[i]) if kept is not None else i))
 
-        arrays = {key: _numeric(values[key], key, mapping[key], name, where) for key in REQUIRED}
+        arrays = {key: _numeric(values[key], key, mapping[key], name, where) for key in required}
         if self.merged:
             arrays, values, kept = self._other_topics(arrays, values, where)
             if not len(arrays["t"]):
                 return None
-        bad = [(i, key) for key in REQUIRED if (i := _first_nonfinite(arrays[key])) is not None]
+        bad = [(i, key) for key in required if (i := _first_nonfinite(arrays[key])) is not None]
         if bad:  # the first non-finite cell in file order among the required columns
-            i, key = min(bad, key=lambda b: (b[0], REQUIRED.index(b[1])))
+            i, key = min(bad, key=lambda b: (b[0], required.index(b[1])))
             raise LogFormatError(_nonfinite_message(arrays[key], i, mapping[key], name, where))
         stamps = self._stamps(arrays["t"], where)
 
@@ -330,7 +391,7 @@ class _Assembler:
         self.prev_stamp, self.prev_t, self.last_t = stamps[-1], float(t[-1]), float(t[-1])
         self.n += len(t)
 
-        eta = np.column_stack([arrays["eta_r"], arrays["eta_l"]]).astype(np.float64, copy=False)
+        eta = np.column_stack([arrays[required[1]], arrays[required[2]]]).astype(np.float64, copy=False)
         tau = np.column_stack([arrays["tau_r"], arrays["tau_l"]]).astype(np.float64, copy=False)
         pose = self._optional("pose", POSE, values, where, required=False)
         reference = self._optional("reference", REFERENCE, values, where, required=self.reference_required)
@@ -342,7 +403,7 @@ class _Assembler:
         """A merged export's piece without the rows where every wheel speed and effort is empty (rows of other
         topics, which such an export interleaves); (arrays, values, the kept rows' indices or None)."""
         empty = np.ones(len(arrays["t"]), dtype=bool)
-        for key in REQUIRED[1:]:
+        for key in self.required[1:]:
             arr = arrays[key]
             empty &= np.isnan(arr) if arr.dtype.kind == "f" else np.zeros(len(arr), dtype=bool)
         if not empty.any():
@@ -477,9 +538,10 @@ class _Assembler:
             mean_step = (self.last_t - self.first_t) / (self.n - 1)  # the whole log's, not its first piece's
             if mean_step < MIN_PLAUSIBLE_STEP_S:
                 raise LogFormatError(implausible_step(name, tcol, mean_step, self.first_stamp))
-        if any(self.mapping[k] != k for k in REQUIRED):
+        if any(self.mapping[k] != k for k in self.required):
             notes.append(
-                "columns read as " + ", ".join(f"{k} = {self.mapping[k]!r}" for k in REQUIRED if self.mapping[k] != k)
+                "columns read as "
+                + ", ".join(f"{k} = {self.mapping[k]!r}" for k in self.required if self.mapping[k] != k)
             )
         return notes
 
@@ -493,12 +555,13 @@ def _take(values: Any, rows: np.ndarray) -> Any:
 
 def read_metadata(path: str) -> dict[str, str]:
     """The key/value metadata of a Parquet log's schema (without pandas' own), {} for other formats."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
     source = open_source(path)
     if detect_format(path, source.head(8), source.compression) != "parquet":
         return {}
+    require("pyarrow.parquet", "parquet", f"{source.name}: reading a Parquet log")
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
     try:
         with pa.OSFile(source.path, "r") if source.path is not None else pa.BufferReader(source.data) as stream:
             meta = pq.ParquetFile(stream).schema_arrow.metadata or {}
@@ -532,6 +595,7 @@ def write_log(
         with atomic_output(path, force=force, mode="wb") as fh:
             _write_csv(frame, fh, "\t" if suffix == ".tsv" else ",")
     elif suffix in PARQUET_SUFFIXES:
+        require("pyarrow.parquet", "parquet", f"{path}: writing a Parquet log")
         import pyarrow as pa
         import pyarrow.parquet as pq
 
@@ -548,16 +612,17 @@ def write_log(
 def _write_csv(frame: pandas.DataFrame, fh: Any, sep: str) -> None:
     """CSV whose floats read back bit for bit (shortest round-trip repr, as ``repr(float)``).
 
-    All-numeric frames go through pyarrow (about 15x faster than ``DataFrame.to_csv``): floats are
-    formatted by Arrow's shortest round-trip formatter and integral ones get ``.0`` appended, so a float
-    column never reads back as integers (which would change the meaning of a time column).  Anything
-    else (strings, awkward names) goes through pandas with ``float_format=None`` (repr precision).
+    All-numeric frames go through pyarrow when it is installed (the parquet extra; about 15x faster than
+    ``DataFrame.to_csv``): floats are formatted by Arrow's shortest round-trip formatter and integral ones get ``.0``
+    appended, so a float column never reads back as integers (which would change the meaning of a time column).
+    Anything else (strings, awkward names), and everything without pyarrow, goes through pandas with
+    ``float_format=None`` (repr precision: the same values, ``3.0`` for an integral float).
     """
     names = [str(c) for c in frame.columns]
     plain = all(isinstance(dt, np.dtype) and dt.kind in ("i", "u", "f") for dt in frame.dtypes) and not any(
         set(n) & {sep, '"', "\n", "\r"} or n != n.strip() for n in names
     )
-    if not plain or len(set(names)) != len(names):
+    if not plain or len(set(names)) != len(names) or not available("pyarrow.csv"):
         frame.to_csv(fh, index=False, sep=sep, float_format=None, lineterminator="\n", encoding="utf-8")
         return
     import pyarrow as pa

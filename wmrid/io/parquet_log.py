@@ -6,27 +6,25 @@ Row numbers in messages are the 1-based data row.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from wmrid.core.errors import LogFormatError
-
-if TYPE_CHECKING:
-    pass
+from wmrid.core.extras import require
 from wmrid.core.wheel_log import MIN_SAMPLES
 from wmrid.io.columns import select
 from wmrid.io.sources import Source, one_line
 
 
 def parquet_chunks(
-    source: Source, mapping: dict[str, str], explicit: set[str], rows: int
+    source: Source, mapping: dict[str, str], explicit: set[str], rows: int, velocity_from: str = "velocity"
 ) -> tuple[Callable[[], Iterator[tuple[int, dict[str, Any]]]], Callable[[int], str], list[str], str | None]:
     """(chunks, where, notes, time unit hint) of a Parquet log; ``chunks()`` yields (first row, columns)."""
+    name = source.name
+    require("pyarrow.parquet", "parquet", f"{name}: reading a Parquet log")
     import pyarrow as pa
     import pyarrow.parquet as pq
-
-    name = source.name
 
     def opened() -> Any:
         try:
@@ -50,7 +48,7 @@ def parquet_chunks(
         except (pa.ArrowException, OSError) as err:
             raise broken(err) from err
     notes: list[str] = []
-    chosen = select(present, mapping, explicit, name, notes)
+    chosen = select(present, mapping, explicit, name, notes, velocity_from)
     twice = sorted({c for c in chosen.values() if present.count(c) > 1})
     if twice:
         raise LogFormatError(

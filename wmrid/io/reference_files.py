@@ -297,6 +297,9 @@ def _read_table(name: str, kind: str) -> tuple[np.ndarray, np.ndarray, np.ndarra
 
     try:
         if kind == "parquet":
+            from wmrid.core.extras import require
+
+            require("pyarrow.parquet", "parquet", f"{name}: reading a Parquet reference")
             import pyarrow as pa
             import pyarrow.parquet as pq
 

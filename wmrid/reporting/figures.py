@@ -52,13 +52,61 @@ _OUTWEIGH = 100.0
 # Rendering
 
 
-def _new_figure(figsize: tuple[float, float] = FIGSIZE) -> Figure:
+def _new_figure(
+    figsize: tuple[float, float] = FIGSIZE,
+    *,
+    left: float = 0.8,
+    right: float = 0.2,
+    top: float = 0.15,
+    bottom: float = 0.55,
+    gaps: tuple[float, float] = (0.0, 0.0),
+    grid: tuple[int, int] = (1, 1),
+) -> Figure:
+    """A figure whose panels (a ``grid`` of rows x columns) sit at fixed margins, inches: ``left`` (tick labels and
+    the y label), ``right``, ``top`` (titles), ``bottom`` (the x label, and a legend row below it), ``gaps``
+    (between columns, between rows).
+
+    Fixed margins, not matplotlib's constrained layout: laying the report's figures out took 8 of its 18 s
+    (bench/bench_report.py), measuring every tick label again and again; the margins here fit the labels drawn.
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=figsize, layout="constrained")
+    fig = Figure(figsize=figsize)
     FigureCanvasAgg(fig)
+    w, h = figsize
+    rows, cols = grid
+    panel_w = (w - left - right - (cols - 1) * gaps[0]) / cols
+    panel_h = (h - top - bottom - (rows - 1) * gaps[1]) / rows
+    fig.subplots_adjust(
+        left=left / w, right=1 - right / w, top=1 - top / h, bottom=bottom / h,
+        wspace=gaps[0] / panel_w, hspace=gaps[1] / panel_h,
+    )  # fmt: skip
     return fig
+
+
+#: matplotlib settings every figure is built with: titles at a fixed height above their panel (matplotlib otherwise
+#: measures every panel's tick labels to place each title, a fifth of the drawing time).
+_STYLE = {"axes.titley": 1.0, "axes.titlepad": 4.0}
+
+
+def _styled(build: Any) -> Any:
+    """``build`` (a ``build_*`` function) run with :data:`_STYLE`."""
+    import functools
+
+    @functools.wraps(build)
+    def styled(*args: Any, **kwargs: Any) -> Any:
+        import matplotlib
+
+        with matplotlib.rc_context(_STYLE):
+            return build(*args, **kwargs)
+
+    return styled
+
+
+def _legend_below(fig: Figure, handles: list[Any], labels: list[str], ncols: int) -> None:
+    """The legend in one row along the bottom edge (the margin ``bottom`` of :func:`_new_figure` keeps room)."""
+    fig.legend(handles, labels, loc="lower center", ncols=ncols, fontsize="small", frameon=False, borderaxespad=0.2)
 
 
 def _freeze_layout(fig: Figure) -> None:
@@ -113,6 +161,7 @@ def _plot(ax: Axes, t: np.ndarray, y: np.ndarray, **kwargs: Any) -> None:
 # 1. The log: torques and speeds (paper Fig. 6)
 
 
+@_styled
 def build_log_overview(log: Any) -> Figure:
     """Wheel efforts and wheel speeds over time, right and left, two panels sharing the time axis.
 
@@ -124,7 +173,7 @@ def build_log_overview(log: Any) -> Figure:
     tau = np.asarray(log.tau, dtype=np.float64)
     unit = getattr(log, "effort_unit", "N m")
     t = t - t[0]
-    fig = _new_figure(FIGSIZE_STACKED)
+    fig = _new_figure(FIGSIZE_STACKED, bottom=0.85, gaps=(0.0, 0.15), grid=(2, 1))
     ax_tau, ax_eta = fig.subplots(2, 1, sharex=True)
     for j, (wheel, colour) in enumerate(_WHEELS):
         _plot(ax_tau, t, tau[:, j], color=colour, lw=0.9, label=f"{wheel} wheel")
@@ -136,7 +185,7 @@ def build_log_overview(log: Any) -> Figure:
     for ax in (ax_tau, ax_eta):
         ax.grid(alpha=0.3)
     handles, labels = ax_tau.get_legend_handles_labels()
-    fig.legend(handles, labels, loc="outside lower center", fontsize="small", ncols=2)
+    _legend_below(fig, handles, labels, 2)
     ax_eta.set_xlim(t[0], t[-1])
     return fig
 
@@ -150,6 +199,7 @@ def log_overview(log: Any, fmt: str = "svg") -> bytes:
 # 2. The path (paper Fig. 5)
 
 
+@_styled
 def build_path_figure(pose: np.ndarray | None) -> Figure | None:
     """The x-y path (m), equal aspect, start and end marked; None when ``pose`` is None.
 
@@ -163,7 +213,7 @@ def build_path_figure(pose: np.ndarray | None) -> Figure | None:
     x, y = pose[:, 0], pose[:, 1]
     half = MAX_POINTS // 2
     idx = np.union1d(envelope_indices(x, half), envelope_indices(y, half))
-    fig = _new_figure()
+    fig = _new_figure(bottom=0.6)
     ax = fig.subplots()
     ax.plot(x[idx], y[idx], color="C0", lw=1.2, label="path")
     ax.plot(x[0], y[0], "o", color="C2", ms=8, label="start", zorder=3)
@@ -217,7 +267,17 @@ def _display_scale(values: np.ndarray) -> tuple[float, str]:
     exp = math.floor(math.log10(top))
     if -2 <= exp <= 3:
         return 1.0, ""
-    return 10.0**exp, f"$10^{{{exp}}}$ "
+    return 10.0**exp, f"10{_superscript(exp)} "
+
+
+def _superscript(n: int) -> str:
+    """``n`` in superscript digits (``-6`` -> ``⁻⁶``): plain text, not matplotlib's mathtext (parsing it was a third
+    of the report's drawing time)."""
+    return str(n).translate(str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹"))
+
+
+def _subscript(text: str) -> str:
+    return text.translate(str.maketrans("0123456789", "₀₁₂₃₄₅₆₇₈₉"))
 
 
 def _settled_limits(t: np.ndarray, est: np.ndarray, marks: np.ndarray) -> tuple[float, float] | None:
@@ -240,6 +300,7 @@ def _settled_limits(t: np.ndarray, est: np.ndarray, marks: np.ndarray) -> tuple[
     return lo - pad, hi + pad
 
 
+@_styled
 def build_estimates_figure(
     result: IdentificationResult, truth: Mapping[str, Any] | None = None, *, error_mode: bool = False
 ) -> Figure:
@@ -263,9 +324,11 @@ def build_estimates_figure(
     theta_true = true_theta(truth, form) if truth is not None else None
     units = theta_units(form, result.log_info.get("effort_unit", "N m"))
     t = np.asarray(h.t, dtype=np.float64)
-    fig = _new_figure((max(FIGSIZE[0], 1.45 * p), 5.6))
+    fig = _new_figure(
+        (max(FIGSIZE[0], 1.75 * p), 5.6), left=0.75, right=0.1, top=0.3, bottom=0.85, gaps=(0.8, 0.45), grid=(2, p)
+    )
     axes = fig.subplots(2, p, sharex=True, squeeze=False)
-    symbol = r"\tilde\theta" if error_mode else r"\hat\theta"
+    symbol = "θ̃" if error_mode else "θ̂"
     for i in range(2):
         for k in range(p):
             ax = axes[i, k]
@@ -281,7 +344,9 @@ def build_estimates_figure(
             ax.axhline((start[i, k] - ref) / scale, color="0.45", ls="--", lw=1.0, label=label)
             if theta_true is not None and not error_mode:
                 ax.axhline(theta_true[i, k] / scale, color="k", ls=":", lw=1.4, label="true value")
-            ax.set_title(f"${symbol}_{{{i + 1}{k + 1}}}$" + (" (zoomed)" if limits else ""))
+            ax.set_title(
+                f"{symbol}{_subscript(f'{i + 1}{k + 1}')}" + (" (zoomed)" if limits else ""), fontsize="medium"
+            )
             if limits:
                 ax.set_ylim(limits[0] / scale, limits[1] / scale)
             ax.set_ylabel(f"{prefix}{units[k]}", fontsize="small", labelpad=2)
@@ -296,7 +361,7 @@ def build_estimates_figure(
     handles, labels = axes[0, 0].get_legend_handles_labels()
     handles.append(Line2D([], [], ls="none"))  # a text-only entry: what the rows are
     labels.append("row i: wheel i (1 = right, 2 = left)")
-    fig.legend(handles, labels, loc="outside lower center", ncols=len(labels), fontsize="small")
+    _legend_below(fig, handles, labels, len(labels))
     return fig
 
 
@@ -330,6 +395,7 @@ def _robust_limits(values: np.ndarray) -> tuple[float, float]:
     return lo - pad, hi + pad
 
 
+@_styled
 def build_residuals_figure(result: IdentificationResult) -> Figure:
     """The prediction error e = eta - eta_hat (rad/s) over time for both wheels, and its histogram.
 
@@ -344,7 +410,7 @@ def build_residuals_figure(result: IdentificationResult) -> Figure:
     lo, hi = _robust_limits(e.ravel())
     scale, prefix = _display_scale(np.array([lo, hi]))
     lo, hi = lo / scale, hi / scale
-    fig = _new_figure()
+    fig = _new_figure(left=0.9, top=0.35, gaps=(0.3, 0.0), grid=(1, 2))
     ax_t, ax_h = fig.subplots(1, 2, sharey=True, width_ratios=(3, 1))
     bins = np.linspace(lo, hi, 61)
     beyond, extreme = 0, 0.0
@@ -393,6 +459,7 @@ def residuals_figure(result: IdentificationResult, fmt: str = "svg") -> bytes:
 # 5. Excitation
 
 
+@_styled
 def build_excitation_figure(result: IdentificationResult) -> Figure:
     """lambda_min(Gamma) over time on a log axis, against the start weight alpha.
 
@@ -406,9 +473,9 @@ def build_excitation_figure(result: IdentificationResult) -> Figure:
     lam = np.asarray(h.lambda_min, dtype=np.float64)
     lam = np.where(np.isfinite(lam) & (lam > 0), lam, np.nan)
     alpha = float(result.settings.alpha)
-    fig = _new_figure()
+    fig = _new_figure(left=0.9, top=0.35)
     ax = fig.subplots()
-    _plot(ax, t, lam, color="C0", lw=1.3, label=r"$\lambda_{\min}(\Gamma)$")
+    _plot(ax, t, lam, color="C0", lw=1.3, label="λ_min(Γ)")
     ax.axhline(alpha, color="0.45", ls="--", lw=1.0, label=f"α = {alpha:g} (weight of the start value)")
     reached = np.flatnonzero(lam >= _OUTWEIGH * alpha)
     if len(reached):
@@ -418,14 +485,14 @@ def build_excitation_figure(result: IdentificationResult) -> Figure:
             color="C2",
             ls=":",
             lw=1.4,
-            label=rf"$\lambda_{{\min}} \geq {_OUTWEIGH:g}\,\alpha$ from t = {t_x:.3g} s (data outweigh the start)",
+            label=f"λ_min ≥ {_OUTWEIGH:g} α from t = {t_x:.3g} s (data outweigh the start)",
         )
     else:
-        ax.plot([], [], " ", label=rf"$\lambda_{{\min}}$ never reaches {_OUTWEIGH:g} α: the start value still matters")
+        ax.plot([], [], " ", label=f"λ_min never reaches {_OUTWEIGH:g} α: the start value still matters")
     if np.isfinite(lam).any():
         ax.set_yscale("log")
     ax.set_xlabel("time (s)")
-    ax.set_ylabel(r"$\lambda_{\min}(\Gamma)$ (mixed units)")
+    ax.set_ylabel("λ_min(Γ) (mixed units)")
     if len(t) > 1:
         ax.set_xlim(t[0], t[-1])
     ax.grid(alpha=0.3)
@@ -491,19 +558,23 @@ def _finite(x: Any) -> float:
     return v if math.isfinite(v) else math.nan
 
 
+@_styled
 def build_base_convergence_figure(
     result: IdentificationResult, truth: Mapping[str, float] | None = None
 ) -> Figure | None:
     """The base parameters over time, one panel each (2 rows), converging to the final estimate.
 
     Each point of the recorded history theta(t) is turned into base parameters by the closed form
-    :func:`wmrid.model.base_params.direct_recovery` (the start of the reported fit).  The final
-    estimate (``result.parameters``) is a horizontal line with its +-2 std band (no band when the std is
-    undefined), the truth (``truth``: {name: value}, or a truth file with a "parameters" table) a
-    dotted black line.  A panel whose early transient would flatten the rest is zoomed on the band, the
-    truth and the last 70 % of the estimate (its title says "zoomed"; :func:`_zoom_limits`).
-    None when the result has no history.
+    :func:`wmrid.model.base_params.direct_recovery` (the start of the reported fit).  Each panel shows how far the
+    estimate is from the final one in units of its std, (estimate - final) / std: the final estimate is the zero line,
+    its +-2 std band runs from -2 to 2, the truth (``truth``: {name: value}, or a truth file with a "parameters"
+    table) is a dotted black line, and the panel's title gives the final value and std.  Where the std is undefined
+    the distance is in % of the final value (a y label says which).  A panel whose early transient would flatten the
+    rest is zoomed on the band, the truth and the last 70 % of the estimate (its title says "zoomed";
+    :func:`_zoom_limits`).  None when the result has no history.
     """
+    from matplotlib.ticker import MaxNLocator
+
     from wmrid.model.base_params import recover_history
 
     h = result.history
@@ -519,34 +590,44 @@ def build_base_convergence_figure(
     base = recover_history(theta, form)
     table = _truth_table(truth)
     ncols = max(4, -(-len(names) // 2))
-    fig = _new_figure((max(FIGSIZE[0], 2.3 * ncols), 5.8))
+    fig = _new_figure(
+        (max(FIGSIZE[0], 2.3 * ncols), 5.8), left=0.75, right=0.1, top=0.5, bottom=0.85, gaps=(0.75, 0.6),
+        grid=(2, ncols),
+    )  # fmt: skip
     axes = fig.subplots(2, ncols, sharex=True, squeeze=False)
     for ax in axes.flat[len(names) :]:  # unused panels
         ax.remove()
     for j, name in enumerate(names):
         ax = axes.flat[j]
-        est = base[:, j]
         value, std = result.parameters.get(name, (math.nan, math.nan))
         value, std = _finite(value), _finite(std)
-        band = math.isfinite(value) and math.isfinite(std) and std >= 0.0
         true = _finite(table.get(name))
-        marks = [value] + ([value - 2.0 * std, value + 2.0 * std] if band else []) + [true]
+        unit = result.units.get(name, "")
+        if math.isfinite(value) and math.isfinite(std) and std > 0.0:
+            scale, ylabel, band = std, "(estimate − final) / σ", True
+        elif math.isfinite(value) and value != 0.0:
+            scale, ylabel, band = abs(value) / 100.0, "estimate − final, %", False
+        else:
+            scale, ylabel, band = 1.0, unit, False
+        ref = value if math.isfinite(value) else 0.0
+        est = (base[:, j] - ref) / scale
+        true_z = (true - ref) / scale if math.isfinite(true) else math.nan
+        marks = ([0.0] if math.isfinite(value) else []) + ([-2.0, 2.0] if band else []) + [true_z]
         limits = _zoom_limits(t, est, np.array(marks))
-        scale, prefix = _display_scale(np.array(limits[:2]) if limits else np.append(est, marks))
-        _plot(ax, t, est / scale, color="C0", lw=1.2, label="estimate (closed form)")
+        _plot(ax, t, est, color="C0", lw=1.2, label="estimate (closed form)")
         if band:
-            lo, hi = (value - 2.0 * std) / scale, (value + 2.0 * std) / scale
-            ax.axhspan(lo, hi, color="C3", alpha=0.18, lw=0, label="final ± 2σ")
+            ax.axhspan(-2.0, 2.0, color="C3", alpha=0.18, lw=0, label="final ± 2σ")
         if math.isfinite(value):
-            ax.axhline(value / scale, color="C3", lw=1.2, label="final estimate")
-        if math.isfinite(true):
-            ax.axhline(true / scale, color="k", ls=":", lw=1.4, label="true value")
+            ax.axhline(0.0, color="C3", lw=1.2, label="final estimate")
+        if math.isfinite(true_z):
+            ax.axhline(true_z, color="k", ls=":", lw=1.4, label="true value")
         zoomed = bool(limits and limits[2])
-        ax.set_title(name + (" (zoomed)" if zoomed else ""))
+        final = f"{value:.6g} ± {std:.2g}" if band else f"{value:.6g}"
+        ax.set_title(f"{name}" + (" (zoomed)" if zoomed else "") + f"\n{final} {unit}", fontsize="small")
         if limits:
-            ax.set_ylim(limits[0] / scale, limits[1] / scale)
-        ax.set_ylabel(f"{prefix}{result.units.get(name, '')}", labelpad=2)
-        ax.ticklabel_format(axis="y", useMathText=True)  # a zoomed panel's offset as "×10⁻⁶ + 0.24"
+            ax.set_ylim(limits[0], limits[1])
+        ax.set_ylabel(ylabel, labelpad=2)
+        ax.yaxis.set_major_locator(MaxNLocator(nbins=5))  # fewer ticks: each costs time to draw
         ax.grid(alpha=0.3)
         if j >= len(names) - ncols:  # no panel below: this one shows the time axis
             ax.xaxis.set_tick_params(labelbottom=True)
@@ -557,7 +638,7 @@ def build_base_convergence_figure(
     for ax in fig.axes:
         for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
             entries.setdefault(label, handle)
-    fig.legend(list(entries.values()), list(entries), loc="outside lower center", ncols=len(entries))
+    _legend_below(fig, list(entries.values()), list(entries), len(entries))
     return fig
 
 
@@ -578,6 +659,7 @@ def _fit_text(fit: Any) -> str:
     return f"{v:.3g} %" if math.isfinite(v) else "—"
 
 
+@_styled
 def build_speed_fit_figure(
     t: np.ndarray | None, eta: np.ndarray | None, eta_hat: np.ndarray | None, fit: Any
 ) -> Figure | None:
@@ -599,7 +681,7 @@ def build_speed_fit_figure(
     fits = [math.nan, math.nan] if fit is None else list(np.ravel(np.asarray(fit, dtype=object)))
     if len(fits) != 2:
         raise UsageError(f"the speed fit needs one fit per wheel (2,), got {len(fits)}")
-    fig = _new_figure(FIGSIZE_STACKED)
+    fig = _new_figure(FIGSIZE_STACKED, top=0.35, gaps=(0.0, 0.45), grid=(2, 1))
     axes = fig.subplots(2, 1, sharex=True)
     for j, (wheel, colour) in enumerate(_WHEELS):
         ax = axes[j]
@@ -642,6 +724,7 @@ def correlation_matrix(cov: Any) -> np.ndarray:
         return c / np.sqrt(np.outer(d, d))
 
 
+@_styled
 def build_correlation_figure(names: Any, cov: Any) -> Figure | None:
     """The correlations of the base parameters as an annotated heat map; None when fewer than 2 names.
 
@@ -660,7 +743,7 @@ def build_correlation_figure(names: Any, cov: Any) -> Figure | None:
         raise UsageError(f"a covariance of {k} parameters must be ({k}, {k}), got {corr.shape}")
     cmap = matplotlib.colormaps["RdBu_r"].with_extremes(bad="0.75")
     norm = Normalize(vmin=-1.0, vmax=1.0)
-    fig = _new_figure((FIGSIZE[0], max(FIGSIZE[1], 0.5 * k + 1.6)))
+    fig = _new_figure((FIGSIZE[0], max(FIGSIZE[1], 0.5 * k + 1.6)), left=3.0, right=2.6, top=0.2, bottom=0.6)
     ax = fig.subplots()
     edges = np.arange(k + 1) - 0.5
     mesh = ax.pcolormesh(edges, edges, np.ma.masked_invalid(corr), cmap=cmap, norm=norm)

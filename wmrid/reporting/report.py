@@ -31,7 +31,7 @@ import numpy as np
 from wmrid.core.errors import WmridError
 from wmrid.estimators.model_error import std_mark
 from wmrid.estimators.result import from_dict
-from wmrid.estimators.verdict import LEGEND
+from wmrid.estimators.verdict import LEGEND, PLAN_HINT
 from wmrid.model import dynamics as model
 from wmrid.model.dynamics import RegressorForm
 
@@ -64,6 +64,9 @@ class Report:
     provenance: dict[str, Any] = field(default_factory=dict)
     #: name -> matplotlib Figure, rendered by :meth:`rendered` in the format an output needs.
     figure_objects: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
+    #: The summary box at the top: the key numbers (label, value text) and what to do next (:func:`summary_box`).
+    key_numbers: list[tuple[str, str]] = field(default_factory=list)
+    next_steps: list[str] = field(default_factory=list)
     #: The live identification and its log when the report was made from a log (None from a saved result).
     identification: Any = field(default=None, repr=False, compare=False)
     log: Any = field(default=None, repr=False, compare=False)
@@ -319,9 +322,48 @@ def build_report(
         intermediate=intermediate, base=base, payload=payload, diagnostics=statements,
         notes=list(data["log"].get("notes", [])), residuals=residuals, result=data,
     )  # fmt: skip
+    report.key_numbers, report.next_steps = summary_box(data)
     if figures:
         _add_figures(report, rl, log, truth, validation_log)
     return report
+
+
+#: The parameters the summary box shows: the inertia matrix, the Coriolis coefficient and the wheels' friction (the
+#: physical quantities; m11, m12, m22, its inverse, stay in the table).
+KEY_PARAMETERS = ("M11", "M22", "M12", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
+
+
+def summary_box(data: dict[str, Any]) -> tuple[list[tuple[str, str]], list[str]]:
+    """The key numbers (name, "value ± std unit") and the next steps, in words, of an identify JSON document."""
+    params = data["parameters"]
+    flagged = set(data["diagnostics"].get("flagged", []))
+    numbers = []
+    for name in [n for n in KEY_PARAMETERS if n in params] + [n for n in params if n not in (*KEY_PARAMETERS, "m11",
+                                                                                            "m12", "m22")]:  # fmt: skip
+        entry = params[name]
+        std = entry["std"]
+        spread = f" ± {_fmt(std, 2)}" if std is not None and math.isfinite(std) else " (std unknown)"
+        numbers.append((name + (" ⚑" if name in flagged else ""), f"{_fmt(entry['value'])}{spread} {entry['unit']}"))
+    verdict = data.get("verdict") or {}
+    groups = verdict.get("groups", [])
+    steps = []
+    if str(verdict.get("summary", "")).startswith("Do not use"):
+        steps.append("Check the log's units and columns first (see the verdict and the diagnostics): these numbers "
+                     "are not usable as they are.")  # fmt: skip
+    plan = [w for w in data.get("warnings", []) if w.startswith(PLAN_HINT)]
+    if plan:
+        steps.append(plan[0][0].upper() + plan[0][1:] + ".")
+    elif any(g.get("status") in ("poorly determined", "not determined") for g in groups):
+        steps.append("Record a longer log that drives the robot harder (faster turns, both directions): the "
+                     "parameters marked poorly or not determined need more excitation.")  # fmt: skip
+    if flagged:
+        steps.append(f"Do not trust the std of {', '.join(sorted(flagged))} (⚑): the warnings under Diagnostics say "
+                     "why.")  # fmt: skip
+    if not steps or all(g.get("status") == "determined" for g in groups):
+        steps.append("Use the numbers: save the result (wmrid identify LOG --robot ROBOT -o run.json) and turn it into "
+                     "a robot model or a feedforward with wmrid export run.json --robot ROBOT -o robot.urdf (or .xml, "
+                     ".yaml, .py); check later logs against it with wmrid monitor LOG --model run.json.")  # fmt: skip
+    return numbers, steps
 
 
 def _speed_fit(log: Any, theta0: np.ndarray, form: Any, torque_hold: str) -> tuple[np.ndarray, dict[str, Any]]:
@@ -396,11 +438,13 @@ def _add_figures(report: Report, rl: Any, log: Any, truth: dict[str, float] | No
 
 _CSS = """
 *{box-sizing:border-box}
-body{font-family:system-ui,sans-serif;max-width:1200px;margin:1.5em auto;color:#222;padding:0 1em;line-height:1.4}
+body{font-family:system-ui,sans-serif;max-width:1240px;margin:1.5em auto;color:#222;padding:0 1em;line-height:1.4}
 header .path{font-family:ui-monospace,monospace;font-size:0.9em;overflow-wrap:anywhere;color:#444}
 .scroll{overflow-x:auto;max-width:100%;margin:0.5em 0 1.5em}
 table{border-collapse:collapse}
-th,td{padding:0.25em 0.7em;border-bottom:1px solid #ddd;text-align:right;white-space:nowrap}
+table{font-size:0.95em}
+th,td{padding:0.25em 0.55em;border-bottom:1px solid #ddd;text-align:right;white-space:nowrap}
+th{white-space:normal;vertical-align:bottom}
 th:first-child,td:first-child{text-align:left}th{background:#f4f4f4}
 td.wrap{white-space:normal;overflow-wrap:anywhere;text-align:left}
 td.interval{white-space:normal;min-width:6em}
@@ -408,6 +452,13 @@ td.interval{white-space:normal;min-width:6em}
 figure{margin:1.5em 0}figcaption{font-weight:600}figcaption .note{font-weight:400;color:#444}
 figure svg{width:100%;height:auto}li{margin:0.2em 0}.small{color:#555;font-size:0.9em}
 code{font-family:ui-monospace,monospace;overflow-wrap:anywhere}
+.summary{border:1px solid #ccc;border-left:6px solid #2e7d32;border-radius:4px;padding:0.6em 1.1em;margin:1em 0;
+background:#f8faf8}
+.summary.fair{border-left-color:#e69500;background:#fffaf0}.summary.bad{border-left-color:#b00020;background:#fff5f5}
+.summary .headline{font-size:1.15em;font-weight:700;margin:0.3em 0}.summary.bad .headline{color:#b00020}
+.summary .next{font-weight:700;margin:0.8em 0 0.2em}
+.numbers{display:grid;grid-template-columns:repeat(auto-fill,minmax(19em,1fr));gap:0.2em 1.2em;margin:0.6em 0}
+.numbers div{display:flex;gap:0.6em}.numbers dt{font-weight:600;min-width:3.2em}.numbers dd{margin:0;white-space:nowrap}
 """
 
 
@@ -425,16 +476,30 @@ def _html_cell(value: Any) -> str:
     return f"<td{kind}>{html.escape(text)}</td>"
 
 
-def _html_verdict(lines: list[str]) -> list[str]:
-    """The verdict at the top of the page: its summary in bold (red when it says not to use the numbers), the
-    groups as a list."""
-    if not lines:
+def _html_summary(report: Report) -> list[str]:
+    """The summary box at the top of the page: the verdict (red when it says not to use the numbers, amber when some
+    group is not determined), the groups, the key numbers, what to do next."""
+    lines = report.verdict
+    if not lines and not report.key_numbers:
         return []
-    doubt = lines[0].startswith("Do not use")
-    style = " style='color:#b00020'" if doubt else ""
-    items = "".join(f"<li>{html.escape(line)}</li>" for line in lines[1:])
-    return [f"<section class='verdict'><p><strong{style}>Verdict: {html.escape(lines[0])}</strong></p>"
-            + (f"<ul>{items}</ul>" if items else "") + "</section>"]  # fmt: skip
+    groups = (report.result.get("verdict") or {}).get("groups", [])
+    tone = (
+        "bad" if lines and lines[0].startswith("Do not use")
+        else "fair" if any(g.get("status") != "determined" for g in groups) else "good"
+    )  # fmt: skip
+    out = [f"<section class='summary {tone}'>"]
+    if lines:
+        out.append(f"<p class='headline'>{html.escape(lines[0])}</p>")
+        out += ["<ul>", *[f"<li>{html.escape(line)}</li>" for line in lines[1:]], "</ul>"] if lines[1:] else []
+    if report.key_numbers:
+        out.append("<dl class='numbers'>" + "".join(
+            f"<div><dt>{html.escape(k)}</dt><dd>{html.escape(v)}</dd></div>" for k, v in report.key_numbers
+        ) + "</dl>")  # fmt: skip
+    if report.next_steps:
+        out += ["<p class='next'>What to do next</p><ul>"]
+        out += [f"<li>{html.escape(step)}</li>" for step in report.next_steps] + ["</ul>"]
+    out.append("</section>")
+    return ["".join(out)]
 
 
 def to_html(report: Report) -> str:
@@ -445,7 +510,7 @@ def to_html(report: Report) -> str:
         "<meta name='viewport' content='width=device-width, initial-scale=1'>",
         f"<title>{html.escape(report.title)}</title><style>{_CSS}</style></head><body>",
         f"<header><h1>wmrid report</h1><p class='path'>{html.escape(source)}</p>",
-        *_html_verdict(report.verdict),
+        *_html_summary(report),
         *[f"<p class='small'>{html.escape(s)}</p>" for s in report.summary],
         "</header>",
         "<h2>Base parameters (paper Table 3)</h2>",
@@ -529,6 +594,10 @@ def to_markdown(report: Report) -> str:
     if report.verdict:
         verdict = [f"**Verdict:** {text(report.verdict[0], False)}", "", *(f"- {text(v)}" for v in report.verdict[1:])]
         verdict.append("")
+    if report.key_numbers:
+        verdict += [" · ".join(f"**{text(k, False)}** {text(v, False)}" for k, v in report.key_numbers), ""]
+    if report.next_steps:
+        verdict += ["**What to do next**", "", *(f"- {text(step)}" for step in report.next_steps), ""]
     parts = [
         f"# {text(report.title)}",
         "",
@@ -580,6 +649,7 @@ def to_json_dict(report: Report) -> dict[str, Any]:
         residuals["torque"] = {k: v for k, v in report.residuals["torque"].items() if k != "residual"}
     return {
         "title": report.title, "base": report.base, "intermediate": report.intermediate, "payload": report.payload,
+        "key_numbers": [list(pair) for pair in report.key_numbers], "next_steps": report.next_steps,
         "diagnostics": report.diagnostics, "residuals": residuals, "notes": report.notes,
         "result": report.result, "provenance": report.provenance,
     }  # fmt: skip

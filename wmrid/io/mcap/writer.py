@@ -23,6 +23,7 @@ Every file is written atomically (:mod:`wmrid.core.atomic`); an existing file is
 from __future__ import annotations
 
 import json
+import math
 import struct
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -447,8 +448,14 @@ def _json_objects(columns: Mapping[str, np.ndarray]) -> tuple[bytes, list[int]]:
     """One JSON object per row, ``{"name": value, ...}`` in the order of ``columns``, back to back.
 
     columns : {name: (n,) float64}.  Returns the UTF-8 bytes of the n objects and their n + 1 offsets
-    (object i is ``data[offsets[i]:offsets[i + 1]]``).
+    (object i is ``data[offsets[i]:offsets[i + 1]]``).  Formatted by Arrow when pyarrow is installed (the parquet
+    extra; about 10x faster), else by :func:`_json_objects_python`: the same numbers, bit for bit (the texts may
+    differ: Arrow writes ``0.00001`` where ``repr`` writes ``1e-05``).
     """
+    from wmrid.core.extras import available
+
+    if not available("pyarrow.compute"):
+        return _json_objects_python(columns)
     import pyarrow as pa
     import pyarrow.compute as pc
 
@@ -461,6 +468,22 @@ def _json_objects(columns: Mapping[str, np.ndarray]) -> tuple[bytes, list[int]]:
     n = len(joined)
     offsets = np.frombuffer(joined.buffers()[1], dtype=np.int32, count=n + 1, offset=4 * joined.offset)
     return joined.buffers()[2].to_pybytes(), offsets.tolist()
+
+
+def _json_objects_python(columns: Mapping[str, np.ndarray]) -> tuple[bytes, list[int]]:
+    """:func:`_json_objects` without pyarrow: each float as ``repr`` writes it (the shortest text that reads back bit
+    for bit, ``3.0`` for an integral one), ``null`` when not finite."""
+    keys = [("{" if k == 0 else ",") + json.dumps(name) + ":" for k, name in enumerate(columns)]
+    texts = [
+        [repr(v) if math.isfinite(v) else "null" for v in np.asarray(values, dtype=np.float64).tolist()]
+        for values in columns.values()
+    ]
+    rows = [
+        "".join(part for pair in zip(keys, row, strict=True) for part in pair) + "}" for row in zip(*texts, strict=True)
+    ]
+    encoded = [row.encode("utf-8") for row in rows]
+    offsets = np.concatenate([[0], np.cumsum([len(b) for b in encoded], dtype=np.int64)]).tolist()
+    return b"".join(encoded), offsets
 
 
 def write_series_mcap(
