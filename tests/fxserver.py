@@ -4,10 +4,10 @@ foxglove_bridge publishes them), each with its MCAP log time as the frame's time
 
 In the test process (:class:`Publisher`) or as a process of its own, to be killed::
 
-    python -m tests.fxserver RUN.mcap [--port 0] [--start 0] [--stop N] [--speed 1] [--hold 600]
+    python -m tests.fxserver RUN.mcap [--port 0] [--start 0] [--stop N] [--speed 1] [--hold 600] [--wait 120]
 
-prints ``port N`` once it listens, waits for a client to subscribe, publishes messages [start, stop) at ``speed``
-times real time (0: as fast as it can), prints ``done``, and keeps serving for ``hold`` s.
+prints ``port N`` once it listens, waits (up to ``wait`` s) for a client to subscribe, publishes messages [start,
+stop) at ``speed`` times real time (0: as fast as it can), prints ``done``, and keeps serving for ``hold`` s.
 """
 
 from __future__ import annotations
@@ -101,10 +101,11 @@ def main() -> None:
     parser.add_argument("--stop", type=int, default=None)
     parser.add_argument("--speed", type=float, default=1.0)
     parser.add_argument("--hold", type=float, default=600.0)
+    parser.add_argument("--wait", type=float, default=120.0, help="s to wait for a client to subscribe")
     args = parser.parse_args()
     pub = Publisher(read_recording(args.mcap), args.port)
     print(f"port {pub.port}", flush=True)
-    pub.publish(args.start, args.stop, args.speed, timeout=args.hold)
+    pub.publish(args.start, args.stop, args.speed, timeout=args.wait)
     print("done", flush=True)
     time.sleep(args.hold)
     pub.stop()

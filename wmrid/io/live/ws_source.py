@@ -8,13 +8,13 @@ topics of ``--columns`` field paths, a JSON topic) as they are advertised, and w
 decoder every followed recording goes through (:class:`wmrid.io.live.follow._Mcap`), and the final ``identify`` reads
 that file, so its result is ``identify`` on exactly the messages received.
 
-Robustness.  A lost connection (the server killed, the network gone, no answer to pings for PING_S) ends the run
-with :class:`wmrid.core.errors.StreamError` (exit 1, the result so far kept) unless ``reconnect``: then the client
-retries with back-off (BACKOFF_S doubling to BACKOFF_MAX_S) and subscribes again to what the new server advertises;
-messages sent again or out of order after a reconnect are kept in the file as they came, and read as the offline
-reader reads any recording (sorted by time, a repeated stamp keeping the first).  A server that closes the connection
-cleanly (code 1000 or 1001: it was shut down) ends the source.  A malformed frame, or a message that does not decode
-once samples have come, ends the run with one line; the file then keeps what decoded before it.
+Robustness. A lost connection (the server killed, the network gone, no answer to pings for PING_S) ends the run with
+:class:`wmrid.core.errors.StreamError` (exit 1, the result so far kept) unless ``reconnect``: then the client retries
+with back-off (BACKOFF_S doubling to BACKOFF_MAX_S) and subscribes again to what the new server advertises; messages
+sent again or out of order after a reconnect are kept in the file as they came, and read as the offline reader reads any
+recording (sorted by time, a repeated stamp keeping the first). A server that closes the connection cleanly (a close
+frame of code 1000, 1001 or none: it was shut down) ends the source. A malformed frame, or a message that does not
+decode once samples have come, ends the run with one line; the file then keeps what decoded before it.
 """
 
 from __future__ import annotations
@@ -44,8 +44,9 @@ BACKOFF_MAX_S = 8.0
 MAX_FRAME = 64 << 20
 #: frames queued by the receiving thread before it stops reading the socket (the server then buffers).
 QUEUE_FRAMES = 4096
-#: Close codes of a server shut down on purpose (normal closure, going away).
-CLEAN_CLOSE = (1000, 1001)
+#: Close codes of a server shut down on purpose (normal closure, going away, a close frame without a code as the
+#: foxglove-sdk server sends when it stops).
+CLEAN_CLOSE = (1000, 1001, 1005)
 
 
 def check_url(url: str) -> None:
@@ -69,7 +70,9 @@ def _why(err: BaseException) -> str:
         rcvd = err.rcvd
         if rcvd is None:
             return "the connection dropped without a closing handshake (the server was killed or the network failed)"
-        return f"the server closed it (code {rcvd.code}{': ' + rcvd.reason if rcvd.reason else ''})"
+        if rcvd.code == 1005:  # a close frame without a status code
+            return "the server closed the connection"
+        return f"the server closed the connection (code {rcvd.code}{': ' + rcvd.reason if rcvd.reason else ''})"
     if isinstance(err, InvalidStatus):
         return f"the server refused the WebSocket handshake (HTTP {err.response.status_code})"
     if isinstance(err, TimeoutError):
@@ -117,6 +120,7 @@ class WsSource(LiveSource):
             self.conn = self._open()
         except StreamError:
             if not reconnect:
+                self.close()
                 raise
             self._schedule()
             self.events.append(f"{url}: not answering yet; retrying ({option('reconnect', True)})")
@@ -137,6 +141,7 @@ class WsSource(LiveSource):
                 f"{self.url}: cannot connect ({_why(err)}); start foxglove_bridge on the robot (ros2 launch "
                 "foxglove_bridge foxglove_bridge_launch.xml) or check the address and port"
             ) from None
+        conn = conn.__enter__()  # the connection is closed by _drop; entered, as websockets >= 17.1 asks
         if conn.subprotocol not in fx.SUBPROTOCOLS:
             conn.close()
             raise StreamError(
