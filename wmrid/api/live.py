@@ -29,8 +29,9 @@ from wmrid.api.inputs import LogOptions, reader_arguments
 from wmrid.core.errors import UsageError, option
 from wmrid.estimators.result import IdentificationResult
 from wmrid.model.robot import Robot
+from wmrid.monitoring.live_monitor import LiveChange
 
-__all__ = ["LiveResult", "LiveRun", "LiveUpdate", "check_output", "live"]
+__all__ = ["LiveChange", "LiveResult", "LiveRun", "LiveUpdate", "check_output", "live"]
 
 #: What the std of a :class:`LiveUpdate` is.
 ONLINE_STD = (
@@ -123,7 +124,7 @@ class LiveRun:
 
     def __init__(self, source: str, robot: Any, settings: dict[str, Any], options: LogOptions | None,
                  every: float, idle: float | None, until: float | None, until_std: float | None,
-                 params: Sequence[str] | None, reconnect: bool = False) -> None:  # fmt: skip
+                 params: Sequence[str] | None, reconnect: bool = False, monitor: Any = None) -> None:  # fmt: skip
         from wmrid.io.live.follow import ReaderSettings, open_live
 
         for name, value in (("every", every), ("idle", idle), ("until", until), ("until_std", until_std)):
@@ -144,6 +145,8 @@ class LiveRun:
         if unknown:
             raise UsageError(f"{option('params')}: {unknown[0]!r} is not one of {', '.join(REPORTED)}")
         args = reader_arguments(options, self.prep.robot)
+        self.monitor = self._monitor(monitor, ReaderSettings(**args))
+        self.changes: list[LiveChange] = []  # found and not yet handed out
         self.source = open_live(os.fspath(source), ReaderSettings(**args), reconnect)
         _warm_up()
         self.observers: list[tuple[Any, Any]] = []  # (form, OnlineObserver), the one shown first
@@ -159,6 +162,21 @@ class LiveRun:
         self.started = time.monotonic()
         self._final: LiveResult | None = None
         self._last = (self.started, 0)  # (time, samples) at the last update
+
+    # -- the change test -----------------------------------------------------------------------------------------
+    def _monitor(self, model: Any, reader: Any) -> Any:
+        """The change test against ``model`` (a saved identify result: path, dict or result), or None."""
+        if model is None:
+            return None
+        from wmrid.api.monitoring import monitored_model
+        from wmrid.io.signals import SignalOptions
+        from wmrid.monitoring.live_monitor import LiveMonitor
+
+        unit = reader.signals.effort_label if reader.signals != SignalOptions() else "N m"
+        robot = self.prep.robot
+        r, b = (getattr(robot.nominal, "r", None), getattr(robot.nominal, "b", None)) if robot else (None, None)
+        geometry = (r, b) if r and b else None  # a base set may not know them
+        return LiveMonitor(monitored_model(model), geometry=geometry, effort_unit=unit)
 
     # -- the observer ---------------------------------------------------------------------------------------------
     def _start_observers(self) -> None:
@@ -229,6 +247,8 @@ class LiveRun:
             self.t_first = float(piece.t[0])
         self.t_last = float(piece.t[-1])
         self.samples += len(piece)
+        if self.monitor is not None:
+            self.changes += self.monitor.feed(piece.t, piece.eta, piece.tau)
         if not self.observers:
             self.buffer.append(piece)
             if sum(len(p) for p in self.buffer) >= START_SAMPLES:
@@ -260,8 +280,15 @@ class LiveRun:
         return LiveUpdate(
             source=self.source.name, elapsed_s=now - self.started, samples=self.samples, log_time_s=self.log_time_s,
             rate_hz=rate, log_rate_hz=log_rate, since_last_data_s=now - self.source.last_data, form=form_name,
-            parameters=parameters, segments=segments, notes=tuple(self.notes), events=tuple(self.source.take_events()),
+            parameters=parameters, segments=segments, notes=tuple(self.notes), events=tuple(self._events()),
         )  # fmt: skip
+
+    def _events(self) -> list[str]:
+        events = self.source.take_events()
+        if self.monitor is not None and self.monitor.notes:
+            events += self.monitor.notes
+            self.monitor.notes = []
+        return events
 
     def _poll(self, flush: bool = False) -> None:
         """Feed what the source brings in one poll (``flush``: the samples it holds for a larger batch).  A source
@@ -293,18 +320,22 @@ class LiveRun:
             return False
         return all(upd.relative_std(p) * 100.0 < self.until_std for p in self.params)
 
-    def __iter__(self) -> Iterator[LiveUpdate | LiveResult]:
+    def __iter__(self) -> Iterator[LiveUpdate | LiveChange | LiveResult]:
         if self._final is not None:
             yield self._final
             return
         next_refresh = self.started + self.every
         while self.reason is None:
             self._poll()
+            while self.changes:
+                yield self.changes.pop(0)
             now = time.monotonic()
             self.reason = self.reason or self._ended(now)
             if now >= next_refresh or self.reason is not None:
                 if self.reason is None:
                     self._poll(flush=True)
+                while self.changes:
+                    yield self.changes.pop(0)
                 upd = self.update()
                 if self.reason is None and self._precise(upd):
                     self.reason = (
@@ -313,6 +344,8 @@ class LiveRun:
                     )
                 yield upd
                 next_refresh = now + self.every
+        if self.monitor is not None:
+            yield from self.monitor.finish()
         yield self.finish()
 
     def stop(self, reason: str = "stopped") -> None:
@@ -429,6 +462,7 @@ def live(
     friction: str = "auto",
     rotor_inertia: float | None = None,
     reconnect: bool = False,
+    monitor: str | os.PathLike[str] | dict[str, Any] | IdentificationResult | None = None,
 ) -> LiveRun:
     """Identify the robot that is writing ``source`` while it writes it.
 
@@ -442,12 +476,16 @@ def live(
         (None: wait); until : s of log
         time after which the run ends; until_std : percent: the run ends once every parameter in ``params`` (default:
         all eight base parameters) has a live relative std below it; reconnect : a WebSocket source whose connection
-        is lost is retried with back-off (else the run ends, keeping what came: :attr:`LiveResult.failure`).
+        is lost is retried with back-off (else the run ends, keeping what came: :attr:`LiveResult.failure`);
+        monitor : an identified model (a saved ``identify`` result: its path or JSON as a dict, or the result) that
+        the stream is watched against with ``wmrid monitor``'s change test: a :class:`LiveChange` is yielded as soon
+        as the test alarms (:class:`wmrid.monitoring.live_monitor.LiveMonitor`).
 
-    Returns a :class:`LiveRun`; iterating it yields :class:`LiveUpdate` objects, then one :class:`LiveResult`.
+    Returns a :class:`LiveRun`; iterating it yields :class:`LiveUpdate` objects (and :class:`LiveChange` objects with
+    ``monitor``), then one :class:`LiveResult`.
     """
     settings = {
         "form": form, "k": k, "alpha": alpha, "box_width": box_width, "torque_hold": torque_hold, "payload": payload,
         "control_rate": control_rate, "delay": delay, "friction": friction, "rotor_inertia": rotor_inertia,
     }  # fmt: skip
-    return LiveRun(source, robot, settings, options, every, idle, until, until_std, params, reconnect)
+    return LiveRun(source, robot, settings, options, every, idle, until, until_std, params, reconnect, monitor)
