@@ -109,6 +109,17 @@ def live(
             rich_help_panel=_LIVE_PANEL,
         ),
     ] = False,
+    monitor: Annotated[
+        Path | None,
+        typer.Option(
+            "--monitor",
+            metavar="MODEL.json",
+            help="Watch the stream for a change against this identified model (wmrid monitor's test): an alarm line "
+            '(a JSON line with "event": "change" in a pipe) with what moved and, for a payload, its mass (with '
+            "--robot).",
+            rich_help_panel=_LIVE_PANEL,
+        ),
+    ] = None,
     output: Annotated[
         Path | None,
         typer.Option(
@@ -178,7 +189,7 @@ def live(
         source, robot, options=log_opts(locals()), every=every, idle=idle, until=until, until_std=until_std,
         params=[p.strip() for p in params.split(",") if p.strip()] if params else None, form=form.value, k=k,
         alpha=alpha, box_width=box_width, torque_hold=torque_hold.value, payload=payload, control_rate=control_rate,
-        delay=delay, friction=friction.value, rotor_inertia=rotor_inertia, reconnect=reconnect,
+        delay=delay, friction=friction.value, rotor_inertia=rotor_inertia, reconnect=reconnect, monitor=monitor,
     )  # fmt: skip
     fmt = "json" if on_stdout(output) else output_format.value
     if fmt == "auto":
@@ -220,26 +231,33 @@ def live(
 
 def _follow(run, fmt: str):
     """Show the updates of ``run`` as they come; the final :class:`wmrid.api.live.LiveResult`."""
-    from wmrid.api.live import LiveResult
+    from wmrid.api.live import LiveChange, LiveResult
     from wmrid.reporting.live_view import json_line
 
     if fmt == "json":
         for item in run:
             if isinstance(item, LiveResult):
                 return item
+            if isinstance(item, LiveChange):
+                sys.stdout.write(json_line(item.to_dict()) + "\n")
+                sys.stdout.flush()
+                continue
             _events(item.events)
             sys.stdout.write(json_line(item.to_dict()) + "\n")
             sys.stdout.flush()
         return run.finish()
     from rich.live import Live
 
-    from wmrid.reporting.live_view import live_table
+    from wmrid.reporting.live_view import change_line, live_table
 
     previous = None
     with Live(console=console(), auto_refresh=False, transient=True) as view:
         for item in run:
             if isinstance(item, LiveResult):
                 return item
+            if isinstance(item, LiveChange):
+                view.console.print(change_line(item.to_dict()))
+                continue
             _events(item.events)
             current = item.to_dict()
             view.update(live_table(current, previous), refresh=True)
