@@ -179,6 +179,33 @@ def test_server_killed_mid_stream(recording, tmp_path):
     assert json.loads(stdout.decode().splitlines()[-1])["failure"].startswith("lost the connection")
 
 
+def test_server_that_stops_answering(recording, tmp_path):
+    """The server process stopped (SIGSTOP: the socket stays open, nothing answers): the client's pings go unanswered,
+    one line says the server stopped answering, exit 1, the result so far written."""
+    import signal
+
+    path, _, _ = recording
+    server, port = start_server(path, "--speed", "1")
+    out = tmp_path / "r.json"
+    live = start_live(f"ws://127.0.0.1:{port}", "--robot", "paper", "--every", "0.2", "-o", str(out))
+    try:
+        updates_until(live, 1000)
+        server.send_signal(signal.SIGSTOP)
+        _, stderr = live.communicate(timeout=HANG_S)
+    finally:
+        if server.poll() is None:
+            server.send_signal(signal.SIGCONT)
+        stop(server)
+        stop(live)
+    err = stderr.decode()
+    assert live.returncode == 1, err
+    assert "Traceback" not in err
+    lost = [line for line in err.splitlines() if "lost the connection" in line]
+    assert len(lost) == 1, err
+    assert "the server stopped answering (no reply to a ping within 5 s)" in lost[0], err
+    assert json.loads(out.read_text())["log"]["samples"] >= 1000
+
+
 def test_reconnect_to_a_restarted_server(recording):
     """--reconnect: the server killed after 2500 messages, a new one on the same port sends messages 2000 to the end
     (500 again): the run goes on, says what happened, and its result is identify's on the MCAP of all the messages

@@ -68,6 +68,8 @@ def _why(err: BaseException) -> str:
 
     if isinstance(err, ConnectionClosed):
         rcvd = err.rcvd
+        if rcvd is None and err.sent is not None and err.sent.code == 1011:  # websockets' keepalive timeout
+            return f"the server stopped answering (no reply to a ping within {PING_S:g} s)"
         if rcvd is None:
             return "the connection dropped without a closing handshake (the server was killed or the network failed)"
         if rcvd.code == 1005:  # a close frame without a status code
@@ -80,6 +82,18 @@ def _why(err: BaseException) -> str:
     if isinstance(err, OSError) and err.strerror:
         return err.strerror
     return str(err) or type(err).__name__
+
+
+def _quiet_logger() -> Any:
+    """A logger for websockets' own messages that prints nothing: what goes wrong is said once, by the live run (its
+    keepalive would otherwise print a traceback when a server stops answering)."""
+    import logging
+
+    logger = logging.getLogger("wmrid.live.websocket")
+    if not logger.handlers:
+        logger.addHandler(logging.NullHandler())
+        logger.propagate = False
+    return logger
 
 
 class WsSource(LiveSource):
@@ -135,6 +149,7 @@ class WsSource(LiveSource):
             conn = connect(
                 self.url, subprotocols=list(fx.SUBPROTOCOLS), open_timeout=OPEN_TIMEOUT_S, ping_interval=PING_S,
                 ping_timeout=PING_S, close_timeout=1.0, max_size=MAX_FRAME, max_queue=QUEUE_FRAMES, proxy=None,
+                logger=_quiet_logger(),
             )  # type: ignore[arg-type]  # fmt: skip
         except (OSError, TimeoutError, InvalidHandshake, WebSocketException) as err:
             raise StreamError(
