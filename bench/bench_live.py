@@ -109,7 +109,7 @@ def main() -> None:
             target = f"ws://127.0.0.1:{pub.port}"
         else:
             ref = Path(tmp) / "run.csv"
-            lines = data.to_csv(index=False, float_format="%r").encode().splitlines(keepends=True)
+            lines = data.to_csv(index=False).encode().splitlines(keepends=True)
             ref.write_bytes(lines[0])
             fh = open(ref, "ab")  # noqa: SIM115 - closed below
 

@@ -147,6 +147,53 @@ def test_cli_first_estimate_and_clean_close(recording, tmp_path):
     same(wmrid.IdentificationResult.from_dict(json.loads(out.read_text())), offline)
 
 
+def test_json_channel_by_field_paths(tmp_path):
+    """A JSON-encoded channel (the sdk's schemaless JSON channel) read with --topic and --columns field paths, as
+    identify reads a JSON topic of an MCAP: the result is identify's on the same values as a CSV."""
+    import foxglove
+    import pandas as pd
+    from foxglove.websocket import ServerListener
+
+    from wmrid.api.inputs import LogOptions
+
+    whole = wmrid.read_log(str(SAMPLE))
+    n = 3000
+    subscribed = threading.Event()
+
+    class Listener(ServerListener):
+        def on_subscribe(self, client, channel) -> None:
+            subscribed.set()
+
+    context = foxglove.Context()
+    server = foxglove.start_server(host="127.0.0.1", port=0, context=context, server_listener=Listener(),
+                                   message_backlog_size=1 << 20)  # fmt: skip
+    channel = foxglove.Channel("/wheels", message_encoding="json", context=context)
+
+    def publish() -> None:
+        subscribed.wait(HANG_S)
+        for i in range(n):
+            t = float(whole.t[i])
+            wheel = {"vr": float(whole.eta[i, 0]), "vl": float(whole.eta[i, 1])}
+            message = {"time": t, "wheel": wheel, "ur": float(whole.tau[i, 0]), "ul": float(whole.tau[i, 1])}
+            channel.log(message, log_time=int(1e9 * (1 + t)))
+
+    sender = threading.Thread(target=publish, daemon=True)
+    sender.start()
+    options = LogOptions(topic="/wheels", columns="t=time,eta_r=wheel.vr,eta_l=wheel.vl,tau_r=ur,tau_l=ul")
+    try:
+        final = list(wmrid.live(f"ws://127.0.0.1:{server.port}", "paper", options=options, idle=1.0, every=0.3))[-1]
+    finally:
+        server.stop()
+    sender.join(HANG_S)
+    assert final.samples == n
+    path = tmp_path / "same.csv"
+    pd.DataFrame({"t": whole.t[:n], "eta_r": whole.eta[:n, 0], "eta_l": whole.eta[:n, 1], "tau_r": whole.tau[:n, 0],
+                  "tau_l": whole.tau[:n, 1]}).to_csv(path, index=False)  # fmt: skip
+    offline = wmrid.identify(str(path), "paper")
+    for name, (value, _) in offline.parameters.items():
+        assert final.result.parameters[name][0] == pytest.approx(value, rel=1e-9), name
+
+
 # -- robustness ----------------------------------------------------------------------------------------------------
 
 
