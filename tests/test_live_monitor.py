@@ -153,3 +153,16 @@ def test_monitor_model_errors_are_one_line(tmp_path):
     assert len(err.strip().splitlines()) == 1, err
     assert "bad.json" in err, err
     assert "not a wmrid identify result" in err, err
+
+
+def test_alarm_line_on_a_terminal(files):
+    """--format table (the terminal's view): the change is a highlighted line naming its time, kind and mass."""
+    from tests.cliutil import wmrid as run
+
+    model, path, _ = files
+    proc = run("live", str(path), "--robot", "paper", "--monitor", str(model), "--format", "table")
+    out = proc.stdout.decode()
+    assert proc.returncode == 0, proc.stderr.decode()
+    assert "CHANGE at 20.01 s (payload; alarm at 20." in out, out
+    assert "M11 1.41" in out, out
+    assert "payload 2" in " ".join(out.split()), out  # its mass: 2x kg

@@ -1,4 +1,5 @@
-"""``wmrid live``: identify a robot while it drives, from a log that is still being written.
+"""``wmrid live``: identify a robot while it drives, from a log that is still being written or a Foxglove WebSocket
+server (``foxglove_bridge``), and optionally watch it for a change against an identified model.
 
 :func:`live` returns a :class:`LiveRun`: iterating it follows the source (:mod:`wmrid.io.live`), feeds the samples to
 the observer as they arrive (the offline kernel, in pieces: :class:`wmrid.estimators.online.OnlineObserver`) and
@@ -10,7 +11,11 @@ The final result is :func:`wmrid.api.identification.identify` run on exactly the
 itself when it was read to its end, else on a copy of the bytes read (standard input is spilled to a temporary file
 as it arrives), so it is the JSON ``wmrid identify`` writes for them, with every offline check.  The updates before it
 carry what can be computed online: the observer's estimate with its jackknife std (before the offline widening
-terms: model error, discretisation, slow speeds, the closed-loop check, the efforts' timing).
+terms: model error, discretisation, slow speeds, the closed-loop check, the efforts' timing).  With ``monitor`` the
+samples also go through ``wmrid monitor``'s change test as they arrive
+(:class:`wmrid.monitoring.live_monitor.LiveMonitor`), and each change it finds is yielded as a :class:`LiveChange`.
+A source that breaks off (a lost connection, a malformed frame: :class:`wmrid.core.errors.StreamError`) ends the run
+with the result on what came before it (:attr:`LiveResult.failure`).
 """
 
 from __future__ import annotations
