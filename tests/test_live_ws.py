@@ -287,6 +287,26 @@ def test_reconnect_to_a_restarted_server(recording):
         assert final.result.parameters[name][0] == pytest.approx(value, rel=1e-9), name
 
 
+def test_reconnect_waits_for_a_server_not_started_yet(recording):
+    """--reconnect and no server yet: the run waits (saying so) and follows the server once it starts."""
+    import socket
+
+    path, _, _ = recording
+    with socket.socket() as sock:  # a free port, released for the server
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    run = wmrid.live(f"ws://127.0.0.1:{port}", "paper", every=0.2, idle=5.0, reconnect=True)
+    server, _ = start_server(path, "--speed", "0", "--stop", "2000", "--port", str(port))
+    try:
+        items = list(run)
+    finally:
+        stop(server)
+    events = [e for u in items[:-1] for e in u.events]
+    assert events[0] == f"ws://127.0.0.1:{port}: not answering yet; retrying (reconnect=True)"
+    assert f"reconnected to ws://127.0.0.1:{port}" in events
+    assert items[-1].samples == 2000
+
+
 class RawServer:
     """A WebSocket server (the websockets package) that speaks the Foxglove protocol to one client as ``script`` says:
     serverInfo and an advertise of ``rec``'s channel, then, once subscribed, ``good`` messages and ``frames`` (raw
