@@ -340,7 +340,8 @@ def test_bad_input_is_one_line(tmp_path):
     for args, needle in (
         ([str(tmp_path / "missing.csv")], "no such file"),
         ([str(gz)], "compressed"),
-        (["ws://127.0.0.1:8765"], "not built yet"),
+        (["ws://:8765"], "not a WebSocket address"),
+        ([str(SAMPLE), "--reconnect"], "--reconnect is for a WebSocket source"),
         ([str(SAMPLE), "--every", "0"], "--every"),
     ):
         proc = run("live", *args)

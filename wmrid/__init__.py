@@ -169,6 +169,7 @@ _EXPORTS = {
     "PhysicalEstimate": "wmrid.model.physical",
     "live": "wmrid.api.live",
     "LiveRun": "wmrid.api.live",
+    "LiveChange": "wmrid.api.live",
     "LiveUpdate": "wmrid.api.live",
     "LiveResult": "wmrid.api.live",
 }

@@ -1,4 +1,5 @@
-"""``wmrid live``: identify a robot while it drives, from a log that is still being written.
+"""``wmrid live``: identify a robot while it drives, from a log that is still being written or a Foxglove WebSocket
+server (``foxglove_bridge``), and optionally watch it for a change against an identified model.
 
 :func:`live` returns a :class:`LiveRun`: iterating it follows the source (:mod:`wmrid.io.live`), feeds the samples to
 the observer as they arrive (the offline kernel, in pieces: :class:`wmrid.estimators.online.OnlineObserver`) and
@@ -10,7 +11,11 @@ The final result is :func:`wmrid.api.identification.identify` run on exactly the
 itself when it was read to its end, else on a copy of the bytes read (standard input is spilled to a temporary file
 as it arrives), so it is the JSON ``wmrid identify`` writes for them, with every offline check.  The updates before it
 carry what can be computed online: the observer's estimate with its jackknife std (before the offline widening
-terms: model error, discretisation, slow speeds, the closed-loop check, the efforts' timing).
+terms: model error, discretisation, slow speeds, the closed-loop check, the efforts' timing).  With ``monitor`` the
+samples also go through ``wmrid monitor``'s change test as they arrive
+(:class:`wmrid.monitoring.live_monitor.LiveMonitor`), and each change it finds is yielded as a :class:`LiveChange`.
+A source that breaks off (a lost connection, a malformed frame: :class:`wmrid.core.errors.StreamError`) ends the run
+with the result on what came before it (:attr:`LiveResult.failure`).
 """
 
 from __future__ import annotations
@@ -29,8 +34,9 @@ from wmrid.api.inputs import LogOptions, reader_arguments
 from wmrid.core.errors import UsageError, option
 from wmrid.estimators.result import IdentificationResult
 from wmrid.model.robot import Robot
+from wmrid.monitoring.live_monitor import LiveChange
 
-__all__ = ["LiveResult", "LiveRun", "LiveUpdate", "check_output", "live"]
+__all__ = ["LiveChange", "LiveResult", "LiveRun", "LiveUpdate", "check_output", "live"]
 
 #: What the std of a :class:`LiveUpdate` is.
 ONLINE_STD = (
@@ -56,7 +62,8 @@ class LiveUpdate:
     samples : received so far; log_time_s : s of log time they span; rate_hz : samples received per second of wall
     time since the last update; log_rate_hz : samples per second of log time; since_last_data_s : s of wall time since
     the last bytes arrived; elapsed_s : s since the run started; form : the regressor ("paper", "general",
-    "general+caster"); segments : the jackknife's; notes : what the estimate assumes (e.g. the friction model).
+    "general+caster"); segments : the jackknife's; notes : what the estimate assumes (e.g. the friction model);
+    events : what happened to the source since the last update (a connection lost or regained, a server's warning).
     """
 
     source: str
@@ -70,6 +77,7 @@ class LiveUpdate:
     parameters: dict[str, tuple[float, float]]
     segments: int
     notes: tuple[str, ...] = ()
+    events: tuple[str, ...] = ()
 
     def relative_std(self, name: str) -> float:
         """std / |value| of parameter ``name`` (inf when unknown or zero)."""
@@ -84,7 +92,7 @@ class LiveUpdate:
             "since_last_data_s": self.since_last_data_s, "form": self.form,
             "parameters": {n: {"value": v, "std": s if math.isfinite(s) else None} for n, (v, s) in
                            self.parameters.items()},
-            "std": ONLINE_STD, "segments": self.segments, "notes": list(self.notes),
+            "std": ONLINE_STD, "segments": self.segments, "notes": list(self.notes), "events": list(self.events),
         }  # fmt: skip
 
 
@@ -92,7 +100,8 @@ class LiveUpdate:
 class LiveResult:
     """How a live run ended: ``result`` (``identify`` on the messages received), ``reason`` (why it ended),
     ``samples`` and ``log_time_s`` received live, ``read_from`` what the final ``identify`` read, ``stopped`` True when
-    it was stopped (Ctrl-C, SIGTERM) rather than ended."""
+    it was stopped (Ctrl-C, SIGTERM) rather than ended, ``failure`` the source's error when it broke off (a lost
+    connection, a malformed frame; the result is then on what came before it)."""
 
     result: IdentificationResult
     reason: str
@@ -100,12 +109,13 @@ class LiveResult:
     log_time_s: float
     read_from: str
     stopped: bool = False
+    failure: str | None = None
 
     def to_dict(self, history: bool = False) -> dict[str, Any]:
         """The JSON line ``wmrid live`` prints last in a pipe: the reason and the result (``identify``'s JSON)."""
         return {
             "event": "result", "reason": self.reason, "samples": self.samples, "log_time_s": self.log_time_s,
-            "read_from": self.read_from, "result": self.result.to_dict(history=history),
+            "read_from": self.read_from, "failure": self.failure, "result": self.result.to_dict(history=history),
         }  # fmt: skip
 
 
@@ -119,7 +129,7 @@ class LiveRun:
 
     def __init__(self, source: str, robot: Any, settings: dict[str, Any], options: LogOptions | None,
                  every: float, idle: float | None, until: float | None, until_std: float | None,
-                 params: Sequence[str] | None) -> None:  # fmt: skip
+                 params: Sequence[str] | None, reconnect: bool = False, monitor: Any = None) -> None:  # fmt: skip
         from wmrid.io.live.follow import ReaderSettings, open_live
 
         for name, value in (("every", every), ("idle", idle), ("until", until), ("until_std", until_std)):
@@ -140,7 +150,9 @@ class LiveRun:
         if unknown:
             raise UsageError(f"{option('params')}: {unknown[0]!r} is not one of {', '.join(REPORTED)}")
         args = reader_arguments(options, self.prep.robot)
-        self.source = open_live(os.fspath(source), ReaderSettings(**args))
+        self.monitor = self._monitor(monitor, ReaderSettings(**args))
+        self.changes: list[LiveChange] = []  # found and not yet handed out
+        self.source = open_live(os.fspath(source), ReaderSettings(**args), reconnect)
         _warm_up()
         self.observers: list[tuple[Any, Any]] = []  # (form, OnlineObserver), the one shown first
         self.buffer: list[Any] = []
@@ -150,10 +162,26 @@ class LiveRun:
         self.effort_unit = "N m"
         self.notes: list[str] = []
         self.reason: str | None = None
+        self.failure: str | None = None
         self.stopped = False
         self.started = time.monotonic()
         self._final: LiveResult | None = None
         self._last = (self.started, 0)  # (time, samples) at the last update
+
+    # -- the change test -----------------------------------------------------------------------------------------
+    def _monitor(self, model: Any, reader: Any) -> Any:
+        """The change test against ``model`` (a saved identify result: path, dict or result), or None."""
+        if model is None:
+            return None
+        from wmrid.api.monitoring import monitored_model
+        from wmrid.io.signals import SignalOptions
+        from wmrid.monitoring.live_monitor import LiveMonitor
+
+        unit = reader.signals.effort_label if reader.signals != SignalOptions() else "N m"
+        robot = self.prep.robot
+        r, b = (getattr(robot.nominal, "r", None), getattr(robot.nominal, "b", None)) if robot else (None, None)
+        geometry = (r, b) if r and b else None  # a base set may not know them
+        return LiveMonitor(monitored_model(model), geometry=geometry, effort_unit=unit)
 
     # -- the observer ---------------------------------------------------------------------------------------------
     def _start_observers(self) -> None:
@@ -224,6 +252,8 @@ class LiveRun:
             self.t_first = float(piece.t[0])
         self.t_last = float(piece.t[-1])
         self.samples += len(piece)
+        if self.monitor is not None:
+            self.changes += self.monitor.feed(piece.t, piece.eta, piece.tau)
         if not self.observers:
             self.buffer.append(piece)
             if sum(len(p) for p in self.buffer) >= START_SAMPLES:
@@ -255,15 +285,31 @@ class LiveRun:
         return LiveUpdate(
             source=self.source.name, elapsed_s=now - self.started, samples=self.samples, log_time_s=self.log_time_s,
             rate_hz=rate, log_rate_hz=log_rate, since_last_data_s=now - self.source.last_data, form=form_name,
-            parameters=parameters, segments=segments, notes=tuple(self.notes),
+            parameters=parameters, segments=segments, notes=tuple(self.notes), events=tuple(self._events()),
         )  # fmt: skip
 
-    def _poll(self) -> None:
-        from wmrid.core import interrupts
+    def _events(self) -> list[str]:
+        events = self.source.take_events()
+        if self.monitor is not None and self.monitor.notes:
+            events += self.monitor.notes
+            self.monitor.notes = []
+        return events
 
-        with interrupts.held():  # a stop lands between two polls: what was read is whole, spilled and counted
-            for piece in self.source.poll(POLL_S):
-                self._feed(piece)
+    def _poll(self, flush: bool = False) -> None:
+        """Feed what the source brings in one poll (``flush``: the samples it holds for a larger batch).  A source
+        that breaks off (StreamError) after samples came ends the run, keeping them; before, its error is raised."""
+        from wmrid.core import interrupts
+        from wmrid.core.errors import StreamError
+
+        try:
+            with interrupts.held():  # a stop lands between two polls: what was read is whole, spilled and counted
+                for piece in self.source.flush() if flush else self.source.poll(POLL_S):
+                    self._feed(piece)
+        except StreamError as err:
+            if not self.samples:
+                raise
+            self.failure = str(err)
+            self.reason = f"the source broke off ({err})"
 
     def _ended(self, now: float) -> str | None:
         if self.source.ended is not None:
@@ -279,16 +325,22 @@ class LiveRun:
             return False
         return all(upd.relative_std(p) * 100.0 < self.until_std for p in self.params)
 
-    def __iter__(self) -> Iterator[LiveUpdate | LiveResult]:
+    def __iter__(self) -> Iterator[LiveUpdate | LiveChange | LiveResult]:
         if self._final is not None:
             yield self._final
             return
         next_refresh = self.started + self.every
         while self.reason is None:
             self._poll()
+            while self.changes:
+                yield self.changes.pop(0)
             now = time.monotonic()
-            self.reason = self._ended(now)
+            self.reason = self.reason or self._ended(now)
             if now >= next_refresh or self.reason is not None:
+                if self.reason is None:
+                    self._poll(flush=True)
+                while self.changes:
+                    yield self.changes.pop(0)
                 upd = self.update()
                 if self.reason is None and self._precise(upd):
                     self.reason = (
@@ -297,6 +349,8 @@ class LiveRun:
                     )
                 yield upd
                 next_refresh = now + self.every
+        if self.monitor is not None:
+            yield from self.monitor.finish()
         yield self.finish()
 
     def stop(self, reason: str = "stopped") -> None:
@@ -329,9 +383,12 @@ class LiveRun:
             result = _renamed(result, final.path, final.name)
             read_from = f"a copy of the {self.source.bytes_read:,} bytes read" if final.name != "<stdin>" else (
                 f"the {self.source.bytes_read:,} bytes read from standard input")  # fmt: skip
+            read_from = final.what or read_from
         else:
             read_from = f"{final.name} itself"
-        self._final = LiveResult(result, self.reason, self.samples, self.log_time_s, read_from, self.stopped)
+        self._final = LiveResult(
+            result, self.reason, self.samples, self.log_time_s, read_from, self.stopped, self.failure
+        )
         return self._final
 
     def close(self) -> None:
@@ -411,23 +468,31 @@ def live(
     delay: float | str | None = None,
     friction: str = "auto",
     rotor_inertia: float | None = None,
+    reconnect: bool = False,
+    monitor: str | os.PathLike[str] | dict[str, Any] | IdentificationResult | None = None,
 ) -> LiveRun:
     """Identify the robot that is writing ``source`` while it writes it.
 
     source : ``"-"`` (standard input: CSV rows with a header, JSON lines, or an MCAP stream), a CSV file being appended
-        to, an MCAP file being written, or a rosbag2 folder being recorded with MCAP storage; read with ``options``
-        (the same :class:`LogOptions` as :func:`wmrid.identify`).
+        to, an MCAP file being written, a rosbag2 folder being recorded with MCAP storage, or a Foxglove WebSocket
+        server ``"ws://HOST:PORT"`` (foxglove_bridge); read with ``options`` (the same :class:`LogOptions` as
+        :func:`wmrid.identify`: topics, joints, field paths).
     robot, form, k, alpha, box_width, torque_hold, payload, control_rate, delay, friction, rotor_inertia : as for
         :func:`wmrid.identify` (the final result is ``identify`` with them).
     every : s of wall time between updates; idle : s without new data that end the run, once samples have come
         (None: wait); until : s of log
         time after which the run ends; until_std : percent: the run ends once every parameter in ``params`` (default:
-        all eight base parameters) has a live relative std below it.
+        all eight base parameters) has a live relative std below it; reconnect : a WebSocket source whose connection
+        is lost is retried with back-off (else the run ends, keeping what came: :attr:`LiveResult.failure`);
+        monitor : an identified model (a saved ``identify`` result: its path or JSON as a dict, or the result) that
+        the stream is watched against with ``wmrid monitor``'s change test: a :class:`LiveChange` is yielded as soon
+        as the test alarms (:class:`wmrid.monitoring.live_monitor.LiveMonitor`).
 
-    Returns a :class:`LiveRun`; iterating it yields :class:`LiveUpdate` objects, then one :class:`LiveResult`.
+    Returns a :class:`LiveRun`; iterating it yields :class:`LiveUpdate` objects (and :class:`LiveChange` objects with
+    ``monitor``), then one :class:`LiveResult`.
     """
     settings = {
         "form": form, "k": k, "alpha": alpha, "box_width": box_width, "torque_hold": torque_hold, "payload": payload,
         "control_rate": control_rate, "delay": delay, "friction": friction, "rotor_inertia": rotor_inertia,
     }  # fmt: skip
-    return LiveRun(source, robot, settings, options, every, idle, until, until_std, params)
+    return LiveRun(source, robot, settings, options, every, idle, until, until_std, params, reconnect, monitor)

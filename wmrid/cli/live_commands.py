@@ -51,6 +51,7 @@ _LIVE_PANEL = "Live (refresh and when to stop)"
 
 @app.command(
     epilog="Examples:\n\n"
+    "wmrid live ws://robot.local:8765 --robot paper -o result.json  (foxglove_bridge on the robot)\n\n"
     "ros2 bag record -s mcap -o run /joint_states & wmrid live run/ --robot paper -o result.json\n\n"
     "wmrid live run.mcap --idle 5 --until-std 1 --params m11,m22,Vc\n\n"
     "some_logger | wmrid live - --columns t=time,eta_r=vr,eta_l=vl,tau_r=ur,tau_l=ul | jq .parameters"
@@ -60,8 +61,9 @@ def live(
         str,
         typer.Argument(
             metavar="SOURCE",
-            help="What is being written: - (standard input: CSV rows with a header, JSON lines, or MCAP), a CSV file "
-            "being appended to, an .mcap file being written, or a rosbag2 folder recorded with MCAP storage.",
+            help="What is being written: ws://HOST:PORT (a Foxglove WebSocket server: foxglove_bridge), - (standard "
+            "input: CSV rows with a header, JSON lines, or MCAP), a CSV file being appended to, an .mcap file being "
+            "written, or a rosbag2 folder recorded with MCAP storage.",
         ),
     ],
     robot: Annotated[
@@ -95,6 +97,26 @@ def live(
         str | None,
         typer.Option(
             help="Comma-separated parameters --until-std watches (default: m11,m12,m22,Vc,Fv1,Fv2,Fd1,Fd2).",
+            rich_help_panel=_LIVE_PANEL,
+        ),
+    ] = None,
+    reconnect: Annotated[
+        bool,
+        typer.Option(
+            "--reconnect",
+            help="ws:// source: when the connection is lost, retry with back-off (else the run ends, exit 1, keeping "
+            "what came).",
+            rich_help_panel=_LIVE_PANEL,
+        ),
+    ] = False,
+    monitor: Annotated[
+        Path | None,
+        typer.Option(
+            "--monitor",
+            metavar="MODEL.json",
+            help="Watch the stream for a change against this identified model (wmrid monitor's test): an alarm line "
+            '(a JSON line with "event": "change" in a pipe) with what moved and, for a payload, its mass (with '
+            "--robot).",
             rich_help_panel=_LIVE_PANEL,
         ),
     ] = None,
@@ -167,7 +189,7 @@ def live(
         source, robot, options=log_opts(locals()), every=every, idle=idle, until=until, until_std=until_std,
         params=[p.strip() for p in params.split(",") if p.strip()] if params else None, form=form.value, k=k,
         alpha=alpha, box_width=box_width, torque_hold=torque_hold.value, payload=payload, control_rate=control_rate,
-        delay=delay, friction=friction.value, rotor_inertia=rotor_inertia,
+        delay=delay, friction=friction.value, rotor_inertia=rotor_inertia, reconnect=reconnect, monitor=monitor,
     )  # fmt: skip
     fmt = "json" if on_stdout(output) else output_format.value
     if fmt == "auto":
@@ -188,6 +210,11 @@ def live(
     line = (
         f"wmrid live: {final.reason}; {final.samples:,} samples received; the result is identify on {final.read_from}"
     )
+    if final.failure is not None:
+        line = (
+            f"wmrid live: {final.failure}; the result so far ({final.samples:,} samples) is identify on "
+            f"{final.read_from}"
+        )
     sys.stderr.write(line + (f", written to {output}" if output is not None else "") + "\n")
     if fmt == "json":
         if not on_stdout(output):
@@ -198,30 +225,49 @@ def live(
         print_identification(result, console())
     if final.stopped:
         raise typer.Exit(code=interrupts.exit_code())
+    if final.failure is not None:
+        raise typer.Exit(code=1)
 
 
 def _follow(run, fmt: str):
     """Show the updates of ``run`` as they come; the final :class:`wmrid.api.live.LiveResult`."""
-    from wmrid.api.live import LiveResult
+    from wmrid.api.live import LiveChange, LiveResult
     from wmrid.reporting.live_view import json_line
 
     if fmt == "json":
         for item in run:
             if isinstance(item, LiveResult):
                 return item
+            if isinstance(item, LiveChange):
+                sys.stdout.write(json_line(item.to_dict()) + "\n")
+                sys.stdout.flush()
+                continue
+            _events(item.events)
             sys.stdout.write(json_line(item.to_dict()) + "\n")
             sys.stdout.flush()
         return run.finish()
     from rich.live import Live
 
-    from wmrid.reporting.live_view import live_table
+    from wmrid.reporting.live_view import change_line, live_table
 
     previous = None
     with Live(console=console(), auto_refresh=False, transient=True) as view:
         for item in run:
             if isinstance(item, LiveResult):
                 return item
+            if isinstance(item, LiveChange):
+                view.console.print(change_line(item.to_dict()))
+                continue
+            _events(item.events)
             current = item.to_dict()
             view.update(live_table(current, previous), refresh=True)
             previous = current
     return run.finish()
+
+
+def _events(events) -> None:
+    """What happened to the source (a connection lost or regained, a server's warning): a line each on stderr."""
+    for event in events:
+        sys.stderr.write(f"wmrid live: {event}\n")
+    if events:
+        sys.stderr.flush()

@@ -48,6 +48,13 @@ class NotIdentifiableError(WmridError):
     exit_status = ExitStatus.NO_RESULT
 
 
+class StreamError(WmridError):
+    """A live source that broke off: a connection lost or refused, a server that stopped answering or sent malformed
+    frames.  ``wmrid live`` keeps what it received before (its result is written) and exits 1."""
+
+    exit_status = ExitStatus.NO_RESULT
+
+
 class OutputWriteError(WmridError):
     """An output could not be written (a full disk, a closed or failing stream); nothing partial stands as complete."""
 

@@ -57,6 +57,23 @@ def live_table(update: dict[str, Any], previous: dict[str, Any] | None = None) -
     return Group(*parts)
 
 
+def change_line(change: dict[str, Any]) -> Any:
+    """A highlighted line for a change found along the stream (:meth:`wmrid.api.live.LiveChange.to_dict`)."""
+    from rich.text import Text
+
+    moved = (
+        ", ".join(f"{n} {m['before']:.4g} → {m['after']:.4g}" for n, m in change["moved"].items()) or "no term alone"
+    )
+    text = (
+        f"CHANGE at {change['t']:.2f} s ({change['kind']}; alarm at {change['t_alarm']:.2f} s, raised at "
+        f"{change['t_raised']:.2f} s of log): {moved or 'no term significantly alone'}"
+    )
+    payload = change.get("payload")
+    if payload is not None:
+        text += f"; payload {payload['mass']:.3g} ± {payload['std']:.2g} kg (from {change['fit_s']:.1f} s)"
+    return Text(text, style="bold reverse red")
+
+
 def json_line(obj: Any) -> str:
     """``obj`` as one line of strict JSON (NaN/inf as null), without the newline: a JSON-lines record."""
     import json

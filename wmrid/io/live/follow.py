@@ -23,7 +23,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import BinaryIO
 
-from wmrid.core.errors import LogFormatError, UsageError
+from wmrid.core.errors import LogFormatError, UsageError, option
 from wmrid.core.wheel_log import WheelLog
 from wmrid.io.live.decoders import McapDecoder, TableDecoder
 from wmrid.io.live.feeds import READ_BYTES, FileFeed, PipeFeed
@@ -60,11 +60,13 @@ class ReaderSettings:
 @dataclass(frozen=True)
 class FinalInput:
     """What the final ``identify`` reads: ``path`` (a file or a folder), ``copied`` True when it is a copy of the bytes
-    read (in a temporary folder the source removes on close), ``name`` the source as the user named it."""
+    read (in a temporary folder the source removes on close), ``name`` the source as the user named it, ``what`` how a
+    copy is described ("" for the default: the bytes read)."""
 
     path: str
     copied: bool
     name: str
+    what: str = ""
 
 
 class LiveSource(ABC):
@@ -87,6 +89,14 @@ class LiveSource(ABC):
     def final_input(self, natural: bool) -> FinalInput:
         """What the final ``identify`` reads; ``natural``: the run ended by the source's end or ``--idle`` (else a stop:
         Ctrl-C, ``--until``, ``--until-std``), so a file read to its end may be read again by name."""
+
+    def flush(self) -> list[WheelLog]:
+        """The samples of data read but held for a larger batch (called before a refresh); none by default."""
+        return []
+
+    def take_events(self) -> list[str]:
+        """Lines on what happened to the source since the last call (a connection lost or regained); none by default."""
+        return []
 
     def tmpdir(self) -> str:
         if self._tmp is None:
@@ -415,16 +425,18 @@ class Rosbag2Source(LiveSource):
         super().close()
 
 
-def open_live(spec: str, settings: ReaderSettings | None = None) -> LiveSource:
-    """The source ``spec`` names: ``-`` (standard input), a CSV or MCAP file, or a rosbag2 folder (MCAP storage)."""
+def open_live(spec: str, settings: ReaderSettings | None = None, reconnect: bool = False) -> LiveSource:
+    """The source ``spec`` names: ``-`` (standard input), a CSV or MCAP file, a rosbag2 folder (MCAP storage), or a
+    Foxglove WebSocket server ``ws://HOST:PORT`` (``reconnect``: retry when its connection is lost)."""
     settings = settings or ReaderSettings()
+    if spec.startswith(("ws://", "wss://")):
+        from wmrid.io.live.ws_source import WsSource
+
+        return WsSource(spec, settings, reconnect)
+    if reconnect:
+        raise UsageError(f"{spec}: {option('reconnect', True)} is for a WebSocket source (ws://HOST:PORT)")
     if spec == "-":
         return StdinSource(settings)
-    if spec.startswith(("ws://", "wss://")):
-        raise UsageError(
-            f"{spec}: the Foxglove WebSocket source is not built yet (issue 32); record with ros2 bag record -s mcap "
-            "and follow the recording's folder, or pipe the messages into wmrid live -"
-        )
     if not os.path.exists(spec):
         raise LogFormatError(f"{spec}: no such file or folder; give the log being written (or - for standard input)")
     if os.path.isdir(spec):
