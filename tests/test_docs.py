@@ -1,0 +1,277 @@
+"""The documentation site (docs/, mkdocs.yml) says what the code does: the generated command-line reference matches
+the Typer app, the API reference covers every public name, the published result schema holds for every bundled
+sample's identify JSON, every Python and shell example in the docs runs, and the README stays a front page.
+
+Examples: every fenced ``bash``/``sh`` and ``python`` block of a page runs, in order, in a fresh folder holding
+``sample_logs/`` and ``examples/`` (and ``real_logs/``, the logs of ``../shared/real_logs``, where they exist); the
+blocks of one page share that folder (shell) and one namespace (Python), so a page reads as one session.  A block
+that cannot run here is preceded by ``<!-- test: skip REASON -->`` (the reason is required and shown); a page with a
+block preceded by ``<!-- test: slow -->`` is left out of the default run; ``<!-- test: needs real_logs -->`` skips a
+page when ``../shared/real_logs`` is absent."""
+
+from __future__ import annotations
+
+import html
+import importlib.util
+import json
+import os
+import re
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+REAL_LOGS = ROOT.parent / "shared" / "real_logs"
+SCHEMA = DOCS / "reference" / "result.schema.json"
+
+
+def _hook():
+    spec = importlib.util.spec_from_file_location("wmrid_docs_hook", DOCS / "hooks" / "reference.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+HOOK = _hook()
+
+
+# ---- the command-line reference
+
+
+def _normal(text: str) -> str:
+    return " ".join(text.split())
+
+
+def _sections(markdown: str) -> dict[str, str]:
+    """``wmrid CMD`` -> its section of the generated reference."""
+    parts = re.split(r"^## `(wmrid[^`]*)`$", markdown, flags=re.M)
+    return dict(zip(parts[1::2], parts[2::2], strict=True))
+
+
+def test_the_cli_reference_lists_every_command_and_option_of_the_app():
+    """The reference is generated from the app at build time; this walks the app itself and finds each command,
+    each option (with its value, default and help) in the generated page, and nothing the app does not have."""
+    from typer import _click as click
+
+    root = HOOK.cli_app()
+    markdown = HOOK.cli_markdown(root)
+    sections = _sections(markdown)
+    commands = ["wmrid", *(f"wmrid {n}" for n, c in root.commands.items() if not getattr(c, "hidden", False))]
+    assert list(sections) == commands
+    assert {"wmrid identify", "wmrid report", "wmrid live", "wmrid export", "wmrid fleet"} <= set(sections)
+    root_ctx = click.Context(root, info_name="wmrid")
+    for name in commands:
+        cmd = root if name == "wmrid" else root.commands[name.split()[1]]
+        ctx = root_ctx if cmd is root else click.Context(cmd, info_name=cmd.name, parent=root_ctx)
+        section = sections[name]
+        rows = {m.group(1): m.group(0) for m in re.finditer(r"^\| `([^`]+)` \|.*$", section, flags=re.M)}
+        documented = 0
+        for param in cmd.get_params(ctx):
+            if getattr(param, "hidden", False) or "--help" in param.opts:
+                continue
+            record = HOOK.option_record(param, ctx)
+            row = rows.get(record["flags"])
+            assert row is not None, f"{name}: {record['flags']} is not in the reference"
+            if param.param_type_name == "option":
+                assert all(opt in record["flags"].split(", ") for opt in param.opts)
+            plain = _normal(html.unescape(re.sub(r"\\(.)", r"\1", row)))
+            assert _normal(record["help"]) in plain, f"{name} {record['flags']}: help differs"
+            if record["default"]:
+                assert f"| {_normal(record['default'])} |" in plain, f"{name} {record['flags']}: default differs"
+            documented += 1
+        assert documented == len(rows), f"{name}: the reference has options the app does not"
+        if cmd.help:
+            assert _normal(cmd.help) in _normal(html.unescape(re.sub(r"\\(.)", r"\1", section)))
+
+
+def test_the_cli_reference_page_is_the_generated_one():
+    page = (DOCS / "reference" / "cli.md").read_text(encoding="utf-8")
+    assert HOOK.CLI_MARKER in page
+
+
+# ---- the Python API reference
+
+
+def test_the_api_reference_documents_every_public_name_from_its_docstring():
+    import wmrid
+
+    names = HOOK.public_names()
+    assert set(names) == set(wmrid.__all__) - {"__version__"}
+    markdown = HOOK.api_markdown()
+    directives = re.findall(r"^::: (\S+)$", markdown, flags=re.M)
+    assert sorted(directives) == sorted(f"{module}.{name}" for name, module in names.items())
+    assert "Other" not in re.findall(r"^## (.*)$", markdown, flags=re.M), "a public name has no group on the page"
+    for name in names:
+        assert (getattr(wmrid, name).__doc__ or "").strip(), f"wmrid.{name} has no docstring for the reference"
+    assert HOOK.API_MARKER in (DOCS / "reference" / "api.md").read_text(encoding="utf-8")
+
+
+# ---- the result schema
+
+
+@pytest.fixture(scope="module")
+def validator():
+    jsonschema = pytest.importorskip("jsonschema")
+    schema = json.loads(SCHEMA.read_text(encoding="utf-8"))
+    jsonschema.Draft202012Validator.check_schema(schema)
+    return jsonschema.Draft202012Validator(schema)
+
+
+def _problems(validator, document: dict) -> list[str]:
+    return [f"{'/'.join(map(str, e.path))}: {e.message[:200]}" for e in validator.iter_errors(document)]
+
+
+def test_the_schema_is_of_the_version_wmrid_writes():
+    from wmrid.estimators.result import SCHEMA_VERSION
+
+    schema = json.loads(SCHEMA.read_text(encoding="utf-8"))
+    assert schema["properties"]["schema_version"]["const"] == SCHEMA_VERSION
+
+
+SAMPLES = sorted(p.name for p in (ROOT / "sample_logs").glob("*.*") if p.suffix in (".csv", ".mcap", ".parquet"))
+
+
+@pytest.mark.parametrize("sample", SAMPLES)
+def test_every_bundled_samples_identify_json_follows_the_published_schema(validator, sample):
+    """``wmrid identify SAMPLE --format json`` for each bundled sample, with and without a robot."""
+    from tests.cliutil import wmrid
+
+    for extra in ((), ("--robot", "paper")):
+        proc = wmrid("identify", str(ROOT / "sample_logs" / sample), *extra, "--format", "json")
+        assert proc.returncode == 0, proc.stderr
+        document = json.loads(proc.stdout)
+        assert _problems(validator, document) == []
+
+
+def test_the_schema_holds_for_other_methods_a_payload_a_validation_and_no_history(validator):
+    import wmrid
+    from wmrid.reporting.render import to_json
+
+    log = wmrid.read_log(ROOT / "sample_logs" / "paper_sinusoid.csv")
+    results = [
+        wmrid.identify(log, "paper", method="idim", validate=str(ROOT / "sample_logs" / "paper_sinusoid.parquet")),
+        wmrid.identify(log, "paper", payload=True),
+    ]
+    for result in results:
+        for history in (True, False):
+            document = json.loads(to_json(result.to_dict(history=history)))
+            assert _problems(validator, document) == []
+    broken = json.loads(to_json(results[1].to_dict()))
+    del broken["parameters"]["m11"]["std"]
+    assert _problems(validator, broken), "the schema must refuse a parameter without its std"
+
+
+# ---- the examples
+
+
+@dataclass
+class Block:
+    page: str
+    line: int
+    language: str
+    code: str
+    skip: str | None
+    slow: bool
+    needs_real_logs: bool
+
+
+_FENCE = re.compile(r"^```([A-Za-z]*)[^\n]*\n(.*?)^```\s*$", re.S | re.M)
+_MARK = re.compile(r"<!--\s*test:\s*(skip|slow|needs real_logs)\s*(.*?)\s*-->\s*$")
+RUN = {"bash": "shell", "sh": "shell", "shell": "shell", "python": "python", "py": "python"}
+
+
+def doc_blocks(path: Path) -> list[Block]:
+    text = path.read_text(encoding="utf-8")
+    blocks = []
+    for match in _FENCE.finditer(text):
+        language = RUN.get(match.group(1).lower())
+        if language is None:
+            continue
+        before = text[: match.start()].rstrip("\n").splitlines()
+        marks = []
+        while before and _MARK.search(before[-1]):
+            marks.append(_MARK.search(before[-1]).groups())
+            before.pop()
+        skip = next((why or "" for kind, why in marks if kind == "skip"), None)
+        blocks.append(Block(
+            page=str(path.relative_to(ROOT)), line=text[: match.start()].count("\n") + 1, language=language,
+            code=match.group(2), skip=skip, slow=any(kind == "slow" for kind, _ in marks),
+            needs_real_logs=any(kind == "needs real_logs" for kind, _ in marks),
+        ))  # fmt: skip
+    return blocks
+
+
+PAGES = sorted(p for p in DOCS.rglob("*.md") if doc_blocks(p))
+
+
+def _page_param(path: Path):
+    blocks = doc_blocks(path)
+    marks = [pytest.mark.slow] if any(b.slow for b in blocks) else []
+    return pytest.param(path, id=str(path.relative_to(DOCS)), marks=marks)
+
+
+def test_every_skipped_example_says_why():
+    for path in sorted(DOCS.rglob("*.md")):
+        for block in doc_blocks(path):
+            if block.skip is not None:
+                assert len(block.skip) > 10, f"{block.page}:{block.line}: a skipped example needs its reason"
+
+
+def _workdir(tmp_path: Path) -> Path:
+    for name in ("sample_logs", "examples"):
+        (tmp_path / name).symlink_to(ROOT / name)
+    if REAL_LOGS.exists():
+        (tmp_path / "real_logs").symlink_to(REAL_LOGS)
+    return tmp_path
+
+
+@pytest.mark.parametrize("page", [_page_param(p) for p in PAGES])
+def test_the_examples_of_a_docs_page_run(page, tmp_path, monkeypatch):
+    blocks = [b for b in doc_blocks(page) if b.skip is None]
+    if any(b.needs_real_logs for b in doc_blocks(page)) and not REAL_LOGS.exists():
+        pytest.skip("../shared/real_logs is not beside the checkout")
+    work = _workdir(tmp_path)
+    env = {
+        **os.environ,
+        "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
+        "PYTHONPATH": str(ROOT),
+        "COLUMNS": "100",
+        "NO_COLOR": "1",
+    }
+    scope: dict = {"__name__": "__docs__"}
+    monkeypatch.chdir(work)
+    for block in blocks:
+        where = f"{block.page}:{block.line}"
+        if block.language == "shell":
+            proc = subprocess.run(
+                ["bash", "-e", "-o", "pipefail", "-c", block.code], cwd=work, env=env, capture_output=True,
+                text=True, timeout=900, stdin=subprocess.DEVNULL,
+            )  # fmt: skip
+            assert proc.returncode == 0, f"{where} failed ({proc.returncode}):\n{proc.stdout[-2000:]}\n{proc.stderr[-3000:]}"
+        else:
+            exec(compile(block.code, where, "exec"), scope)
+
+
+# ---- the README: a front page that points into the site
+
+
+def test_the_readme_is_a_front_page():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert len(readme.splitlines()) <= 250
+    ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8")
+    test_command = next(line for line in ci.splitlines() if line.startswith("python3 -m venv"))
+    assert test_command in readme.splitlines(), "the README's test command must be the one CI runs"
+    for target in re.findall(r"\]\((docs/[^)#]+)", readme):
+        assert (ROOT / target).exists(), f"the README links to {target}, which does not exist"
+
+
+def test_the_docs_link_only_to_pages_that_exist():
+    """mkdocs --strict checks links between pages; this checks the links from files outside docs/ into it."""
+    for path in [ROOT / "README.md", ROOT / "examples" / "README.md", ROOT / "CHANGELOG.md"]:
+        if path.exists():
+            for target in re.findall(r"\]\(((?:\.\./)?docs/[^)#]+)", path.read_text(encoding="utf-8")):
+                assert (path.parent / target).resolve().exists(), f"{path.name} links to {target}"
