@@ -222,7 +222,7 @@ def test_every_skipped_example_says_why():
 
 
 def _workdir(tmp_path: Path) -> Path:
-    for name in ("sample_logs", "examples"):
+    for name in ("sample_logs", "examples", "bench"):
         (tmp_path / name).symlink_to(ROOT / name)
     if REAL_LOGS.exists():
         (tmp_path / "real_logs").symlink_to(REAL_LOGS)
