@@ -275,3 +275,13 @@ def test_the_docs_link_only_to_pages_that_exist():
         if path.exists():
             for target in re.findall(r"\]\(((?:\.\./)?docs/[^)#]+)", path.read_text(encoding="utf-8")):
                 assert (path.parent / target).resolve().exists(), f"{path.name} links to {target}"
+
+
+def test_the_readme_python_example_runs(tmp_path, monkeypatch):
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    code = re.search(r"```python\n(.*?)```", readme.split("## Python", 1)[1], re.S).group(1)
+    monkeypatch.chdir(_workdir(tmp_path))
+    scope: dict = {}
+    exec(compile(code, "README.md", "exec"), scope)
+    assert scope["value"] == pytest.approx(0.7872544, rel=1e-6)
+    assert (tmp_path / "report.html").read_text(encoding="utf-8").startswith("<!DOCTYPE html>")
