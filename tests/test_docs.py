@@ -251,7 +251,8 @@ def test_the_examples_of_a_docs_page_run(page, tmp_path, monkeypatch):
                 ["bash", "-e", "-o", "pipefail", "-c", block.code], cwd=work, env=env, capture_output=True,
                 text=True, timeout=900, stdin=subprocess.DEVNULL,
             )  # fmt: skip
-            assert proc.returncode == 0, f"{where} failed ({proc.returncode}):\n{proc.stdout[-2000:]}\n{proc.stderr[-3000:]}"
+            output = f"{proc.stdout[-2000:]}\n{proc.stderr[-3000:]}"
+            assert proc.returncode == 0, f"{where} failed ({proc.returncode}):\n{output}"
         else:
             exec(compile(block.code, where, "exec"), scope)
 

@@ -39,14 +39,8 @@ def cli_app() -> Any:
     _wmrid_on_path()
     import typer
 
-    from wmrid.cli import (  # noqa: F401  (their commands join ``app`` on import)
+    from wmrid.cli import (
         app as app_module,
-        export_commands,
-        fleet_commands,
-        identify_commands,
-        live_commands,
-        plan_commands,
-        sim_commands,
     )
 
     return typer.main.get_command(app_module.app)
@@ -84,7 +78,8 @@ def option_record(param: Any, ctx: Any) -> dict[str, str]:
 
 
 def _panel(param: Any) -> str:
-    return getattr(param, "rich_help_panel", None) or ("Arguments" if param.param_type_name == "argument" else "Options")
+    default = "Arguments" if param.param_type_name == "argument" else "Options"
+    return getattr(param, "rich_help_panel", None) or default
 
 
 def command_records(root: Any) -> list[tuple[str, Any, Any]]:
