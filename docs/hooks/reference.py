@@ -131,8 +131,10 @@ def cli_markdown(root: Any | None = None) -> str:
 
 #: How the API page groups the public names (every name of ``wmrid.__all__`` falls in one group).
 API_GROUPS = (
-    ("Reading logs and robots", ("read_log", "open_log", "LogOptions", "inspect", "load_robot", "Robot", "WheelLog",
-                                 "LogStream")),
+    (
+        "Reading logs and robots",
+        ("read_log", "open_log", "LogOptions", "inspect", "load_robot", "Robot", "WheelLog", "LogStream"),
+    ),
     ("Identifying", ("identify", "compare", "IdentificationResult", "BaseEstimate", "ObserverRun", "Comparison")),
     ("Reports", ("report", "write_report", "Report")),
     ("Simulating", ("simulate", "write_simulation", "SimulationRun")),
