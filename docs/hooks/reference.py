@@ -37,12 +37,17 @@ def _wmrid_on_path() -> None:
 def cli_app() -> Any:
     """The click command Typer builds from ``wmrid``'s app, every command joined, help texts as written."""
     _wmrid_on_path()
+    import importlib
+    import pkgutil
+
     import typer
 
-    from wmrid.cli import (
-        app as app_module,
-    )
+    import wmrid.cli
+    from wmrid.cli import app as app_module
 
+    for module in pkgutil.iter_modules(wmrid.cli.__path__):  # each *_commands module joins its commands to ``app``
+        if module.name.endswith("_commands"):
+            importlib.import_module(f"wmrid.cli.{module.name}")
     return typer.main.get_command(app_module.app)
 
 
