@@ -57,7 +57,13 @@ def test_the_cli_reference_lists_every_command_and_option_of_the_app():
     each option (with its value, default and help) in the generated page, and nothing the app does not have."""
     from typer import _click as click
 
+    from wmrid.cli.app import command
+
     root = HOOK.cli_app()
+    running = command()  # the command line as `wmrid` runs it
+    assert list(root.commands) == list(running.commands)
+    for name, cmd in running.commands.items():
+        assert [p.name for p in root.commands[name].params] == [p.name for p in cmd.params]
     markdown = HOOK.cli_markdown(root)
     sections = _sections(markdown)
     commands = ["wmrid", *(f"wmrid {n}" for n, c in root.commands.items() if not getattr(c, "hidden", False))]
