@@ -186,3 +186,19 @@ def on_page_markdown(markdown: str, page: Any, config: Any, files: Any) -> str:
     if SCHEMA_MARKER in markdown:
         markdown = markdown.replace(SCHEMA_MARKER, "```json\n" + SCHEMA.read_text(encoding="utf-8").strip() + "\n```")
     return markdown
+
+
+#: A Sphinx cross-reference role in a docstring as Markdown renders it: :class:`~wmrid.x.Name` becomes
+#: ``:class:<code>~wmrid.x.Name</code>``.
+_ROLE = re.compile(r":(?:class|func|meth|mod|data|attr|exc|obj):<code>(~?)([^<]*)</code>")
+
+
+def on_page_content(html_text: str, page: Any, config: Any, files: Any) -> str:
+    """The docstrings use Sphinx roles (:class:`Name`): shown as the name in code, the role dropped (and with ``~``,
+    the module path, as Sphinx does)."""
+
+    def name(match: re.Match[str]) -> str:
+        target = match.group(2)
+        return f"<code>{target.rsplit('.', 1)[-1] if match.group(1) else target}</code>"
+
+    return _ROLE.sub(name, html_text)
