@@ -12,7 +12,7 @@ truth lies within +/-2 and +/-3 reported standard errors, the mean and spread of
 and the rms and worst relative error. Nominal coverage of +/-2 and +/-3 std under Student's t with the
 jackknife's degrees of freedom is printed for comparison. Runs on all cores (seeded, so the same numbers every
 time). Also counts the seeds whose std wmrid widened for model error, discretisation or low-speed friction
-(README "What the std covers when the model does not hold").
+(docs/explanation/uncertainty.md).
 """
 
 from __future__ import annotations
@@ -112,7 +112,7 @@ def main() -> None:
     widened = [r[4] for r in rows]
     counts = ", ".join(f"{key} {sum(w[key] for w in widened)}" for key in widened[0])
     print(
-        f"seeds whose std was widened (README 'What the std covers'): {sum(any(w.values()) for w in widened)} of "
+        f"seeds whose std was widened (docs/explanation/uncertainty.md): {sum(any(w.values()) for w in widened)} of "
         f"{args.seeds} ({counts}); median std of m11 {100 * np.median(std[:, 0] / np.abs(value[:, 0])):.3g} %"
     )
 

@@ -1,5 +1,5 @@
-"""The fleet report on logs of the MuJoCo multibody prototype (README "Fleets"): physics wmrid's reduced model did
-not derive, casters' rolling drag included.
+"""The fleet report on logs of the MuJoCo multibody prototype (docs/how-to/fleet-dask.md): physics wmrid's reduced
+model did not derive, casters' rolling drag included.
 
     python3 bench/study_mujoco_fleet.py                   # seed 17: ~8 min of simulation, then ~15 s
     python3 bench/study_mujoco_fleet.py --seed-base 18    # another draw of the same fleet

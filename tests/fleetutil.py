@@ -58,9 +58,9 @@ LEVEL = {"M11": 1.41, "M12": -0.455, "M22": 1.49, "Vc": 0.21, "Fv1": 0.010, "Fv2
 SCATTER = {"M11": 3e-4, "M12": 3e-4, "M22": 3e-4, "Vc": 1e-4, "Fv1": 1.5e-4, "Fv2": 2e-4, "Fd1": 6e-4, "Fd2": 5e-4}
 
 
-#: The multibody prototype's friction, as the fleet review sees it (README "Fleets"): each log trades Fv against Fd
-#: (their estimates correlate at -0.95; 15 % of Fv log to log), their sum at the wheels' typical speed (4 rad/s)
-#: scatters by 1 %, and the reported std holds a model error common to every log (3x Fv's value).
+#: The multibody prototype's friction, as the fleet review sees it (docs/how-to/fleet-dask.md): each log trades Fv
+#: against Fd (their estimates correlate at -0.95; 15 % of Fv log to log), their sum at the wheels' typical speed
+#: (4 rad/s) scatters by 1 %, and the reported std holds a model error common to every log (3x Fv's value).
 TRADE = {"speed": 4.0, "fv_scatter": 0.15, "fw_scatter": 0.01, "corr": -0.95, "fv_std": 3.0, "fd_std": 1.0}
 
 

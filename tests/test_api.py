@@ -1,4 +1,4 @@
-"""The library's front door (``wmrid.identify`` and friends): the README's Python example runs, the API and the CLI
+"""The library's front door (``wmrid.identify`` and friends): the Python tour of the docs runs, the API and the CLI
 give the same document, results round-trip through their JSON, and library errors name options as Python names."""
 
 from __future__ import annotations
@@ -34,16 +34,17 @@ def sample_result(sample_log):
     return wmrid.identify(sample_log, wmrid.load_robot("paper"))
 
 
-def test_the_readme_python_example_runs(tmp_path, monkeypatch):
-    """The README's "Python" block, verbatim but for where it writes the report."""
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
-    section = readme.split("## Python", 1)[1]
+def test_the_python_tour_runs(tmp_path, monkeypatch):
+    """The Python API page's tour (docs/reference/api.md, "A tour"; it was the README's "Python" block), verbatim but
+    for where it writes the reports and the fleet table."""
+    page = (ROOT / "docs" / "reference" / "api.md").read_text(encoding="utf-8")
+    section = page.split("## A tour", 1)[1]
     code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
     monkeypatch.chdir(ROOT)
     for name in ("r.html", "fleet.parquet", "fleet.html"):
         code = code.replace(f'"{name}"', repr(str(tmp_path / name)))
     scope: dict = {}
-    exec(compile(code, "README.md", "exec"), scope)
+    exec(compile(code, "docs/reference/api.md", "exec"), scope)
     assert scope["value"] == pytest.approx(0.7872544, rel=1e-6)
     assert 0 < scope["std"] < 1e-5
     assert set(scope["table"].methods) == {"observer", "idim"}

@@ -211,7 +211,7 @@ def test_inspect_shows_a_bag_recording(sample_bags, kind):
 @pytest.mark.skipif(not ME169.exists(), reason="../shared/real_logs is not beside the checkout")
 def test_the_real_me169_bag_in_every_format_identifies_the_same(tmp_path):
     """A real recording (50 Hz, speed and PWM on two topics) converted to each format: the same parameters (the
-    README claims it, so it runs by default: about 3 s)."""
+    docs/how-to/ros-bags.md claims it, so it runs by default: about 3 s)."""
     formats = _formats(tmp_path, bagutil.recording(ME169))
     reference = _identify([ME169], *ME169_OPTIONS)
     for kind in ("ros1", "db3-file", "db3-split", "ros1-two-files", "mcap-folder", "mcap-split"):

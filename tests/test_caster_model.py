@@ -544,7 +544,7 @@ def test_wheel_only_model_is_biased_on_a_caster_log(caster_log, caster_robot):
 
 def test_wheel_only_model_std_is_honest_or_flagged(caster_log, caster_robot):
     """friction="wheel" on the caster log: the structural-mismatch diagnostics flag it (diagnostics["inflated"]
-    non-empty) or the (widened) std keeps each truth within 3 std -- the README's promise for model errors the
+    non-empty) or the (widened) std keeps each truth within 3 std -- the docs' promise for model errors the
     log reveals (this one it reveals: the caster model fits it to 3.5e-5 and puts D1 5900 std off zero).
 
     Until issue 12 this failed (a strict xfail): the structural test has little power here (p = 0.26 on a

@@ -36,7 +36,7 @@ def test_identify_sample_log_json_recovers_the_truth():
         entry = out["parameters"][name]
         assert isinstance(entry["value"], float), name
         assert isinstance(entry["std"], float), name
-        # The paper's worst is 0.234 %; this noise-free log is recovered far better (see README).
+        # The paper's worst is 0.234 %; this noise-free log is recovered far better (see docs/explanation/paper.md).
         assert entry["value"] == pytest.approx(truth[name], rel=5e-4), name
     assert {"theta", "diagnostics"} <= out.keys()
     assert out["theta"]["form"]["kind"] == "paper"

@@ -1,4 +1,4 @@
-"""The example robot files in examples/ load, say what the README says they are, and identify."""
+"""The example robot files in examples/ load, say what examples/README.md says they are, and identify."""
 
 from __future__ import annotations
 

@@ -17,7 +17,7 @@ from wmrid.io import fleet_table as ft
 UTC = dt.timezone.utc
 OPTIONS = option_columns()
 
-#: The table's columns as documented in the README ("Fleets"); a change here is a new schema version.
+#: The table's columns as documented in docs/reference/fleet-table.md; a change here is a new schema version.
 DOCUMENTED = [
     ("robot_id", "string"), ("log", "string"), ("robot", "string"), ("sha256", "string"), ("bytes", "int64"),
     ("start_time", "timestamp[us, tz=UTC]"), ("time_source", "string"), ("duration_s", "double"),

@@ -4,7 +4,8 @@
 Independent references: the IV estimate with the regressor itself as instruments IS least squares (an algebraic
 identity, checked against IDIM's QR solution); the moments' leave-one-segment-out solutions against a refit
 without the segment; the reference speeds of the simulator against its reference pose (test_simulate).  The
-statistical claims (coverage over seeds) are measured by ``bench/bench_coverage.py`` and quoted in the README.
+statistical claims (coverage over seeds) are measured by ``bench/bench_coverage.py`` and quoted in
+docs/explanation/checks.md.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The package's layers: a module never imports one from a higher layer, nor from a sibling layer of the same rank.
 
-Layers, lowest first (README "Python"): ``core`` (errors, limits, atomic outputs, the log types) -> ``model``
+Layers, lowest first (docs/development.md): ``core`` (errors, limits, atomic outputs, the log types) -> ``model``
 (dynamics, robot, payload, predictor) -> ``io`` (readers, writers) | ``estimators`` | ``sim`` (siblings: the
 estimators never import a reader, the readers never an estimator) -> ``monitoring`` | ``design`` (``wmrid plan``:
 experiment design on the model, the simulator's built-in trajectories as its baselines) -> ``reporting`` |

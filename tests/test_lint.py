@@ -20,10 +20,10 @@ def ruff(*args: str) -> subprocess.CompletedProcess:
 
 
 def test_ruff_check():
-    proc = ruff("check", "wmrid", "tests", "bench", "sample_logs")
+    proc = ruff("check", "wmrid", "tests", "bench", "sample_logs", "docs")
     assert proc.returncode == 0, proc.stdout + proc.stderr
 
 
 def test_ruff_format():
-    proc = ruff("format", "--check", "wmrid", "tests", "bench", "sample_logs")
+    proc = ruff("format", "--check", "wmrid", "tests", "bench", "sample_logs", "docs")
     assert proc.returncode == 0, proc.stdout + proc.stderr

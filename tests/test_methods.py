@@ -59,7 +59,7 @@ def test_every_method_gets_the_inertia_and_vc_within_5_percent(comparison: dict)
 
 def test_the_standard_errors_are_finite_and_the_truth_within_4_std(comparison: dict) -> None:
     # 4 std: every method's std is a segment jackknife or sandwich (t with 10-40 dof); a caster in closed loop
-    # biases the inertia terms by up to ~0.7 std (README, Uncertainty), so 4 std, not 3, for one seed.
+    # biases the inertia terms by up to ~0.7 std (docs/explanation/uncertainty.md), so 4 std, not 3, for one seed.
     truth = comparison["truth"]
     for name, row in comparison["methods"].items():
         for key in ("M11", "M12", "M22", "Vc"):

@@ -48,13 +48,13 @@ def test_cad_column_by_hand():
     vc = (60.9 * 0.1781 + 2 * 0.0442 * 0.075) * 0.16**3 / (4 * 0.0529)
     np.testing.assert_allclose(model.inertia_matrix(PAPER_CAD), [[m11, m12], [m12, m22]], rtol=1e-13)
     assert model.coriolis_coefficient(PAPER_CAD) == pytest.approx(vc, rel=1e-13)
-    # The numbers README "Reproducing the paper" quotes:
+    # The numbers docs/explanation/paper.md quotes:
     theta0 = model.base_parameters(PAPER_CAD)
     np.testing.assert_allclose(theta0[:4], [0.787254, 0.240611, 0.744638, 0.210083], atol=6e-7)
 
 
 def test_paper_true_values_disagree_with_its_table1():
-    """The discrepancies README documents: pinned so that they are noticed if the model changes."""
+    """The discrepancies docs/explanation/paper.md documents: pinned so that they are noticed if the model changes."""
     theta0 = model.base_parameters(PAPER_CAD)
     printed_m = np.array([0.798475, 0.246692, 0.754828])
     rel = printed_m / theta0[:3] - 1

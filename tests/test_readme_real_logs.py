@@ -1,8 +1,9 @@
-"""README "Worked examples with real logs" (and the misfit ratios it quotes later), checked on ../shared/real_logs.
+"""docs/how-to/real-logs.md, "Worked examples with real logs" (and the misfit ratios docs/explanation/checks.md
+quotes), checked on ../shared/real_logs.
 
-One test per README statement about these logs: the README's command run in this process, its warnings and its
-figures to the digits the README prints.  When a statement stops holding, this file fails: fix the code or the
-README, never loosen the check.
+One test per statement of those pages about these logs: the page's command run in this process, its warnings and
+its figures to the digits the page prints.  When a statement stops holding, this file fails: fix the code or the
+page, never loosen the check.
 """
 
 from __future__ import annotations
@@ -60,13 +61,13 @@ def me169() -> dict:
 
 
 #: The transfer table is of the wheel-friction model, the one --friction auto keeps on ME169 (its caster drag would
-#: push); said explicitly, as the README's command does.
+#: push); said explicitly, as the docs' command does.
 WHEEL = ("--friction", "wheel")
 
 
 @pytest.fixture(scope="module")
 def me169_transfer() -> dict[str, dict]:
-    """The compare JSON per direction, keyed by the README table's row label."""
+    """The compare JSON per direction, keyed by the docs table's row label."""
     return {
         "14-27-37 -> 14-20-12": run_json("compare", ME169_A, "--validate", ME169_B, *ME169_OPTIONS, *WHEEL),
         "14-20-12 -> 14-27-37": run_json("compare", ME169_B, "--validate", ME169_A, *ME169_OPTIONS, *WHEEL),
@@ -108,7 +109,7 @@ def fit(compare: dict, method: str) -> tuple[float, float]:
 
 
 def test_me169_inspect_shows_three_joint_state_topics():
-    """README 158-161: "ME169 (ROS 2 bag, 50 Hz, speed and PWM on different topics). `wmrid inspect
+    """The page: "ME169 (ROS 2 bag, 50 Hz, speed and PWM on different topics). `wmrid inspect
     wheel_pwm_2022-04-13-14-27-37.mcap` shows three JointState topics. `/wheel_state` has position and velocity, but
     its effort is "zeros". `/wheel_desired` has the PWM effort. `/wheel_command` has velocity set-points only." """
     info = run_json("inspect", ME169_A)
@@ -123,7 +124,7 @@ def test_me169_inspect_shows_three_joint_state_topics():
 
 
 def test_me169_without_options_refuses_and_lists_each_topic():
-    """README 161-162: "With no options wmrid refuses to guess and lists what each topic holds." """
+    """The page: "With no options wmrid refuses to guess and lists what each topic holds." """
     proc = text(wmrid("identify", ME169_A))
     assert proc.returncode == 2
     assert proc.stdout == ""
@@ -138,7 +139,7 @@ def test_me169_without_options_refuses_and_lists_each_topic():
 
 
 def test_me169_split_topics_run_to_the_end_in_pwm_units(me169):
-    """README 162-165: "`wmrid identify wheel_pwm_2022-04-13-14-27-37.mcap --velocity-topic /wheel_state
+    """The page: "`wmrid identify wheel_pwm_2022-04-13-14-27-37.mcap --velocity-topic /wheel_state
     --effort-topic /wheel_desired --right-joint rightwheel --left-joint leftwheel --effort pwm` runs to the end.
     Every parameter is in PWM units and the JSON's `effort_unit` and each unit field say so." """
     assert me169["effort_unit"] == "PWM"
@@ -148,7 +149,7 @@ def test_me169_split_topics_run_to_the_end_in_pwm_units(me169):
 
 
 def test_me169_two_topics_default_to_delay_auto_that_cannot_time_them(me169):
-    """README: "The two topics make `--delay auto` the default, and the warnings say the delay cannot be timed (the
+    """The page: "The two topics make `--delay auto` the default, and the warnings say the delay cannot be timed (the
     fit keeps improving to the edge of the ±24 ms search, 1.2 logged steps)." """
     delay = me169["diagnostics"]["delay"]
     assert delay["chosen_by"] == "auto"
@@ -162,7 +163,7 @@ def test_me169_two_topics_default_to_delay_auto_that_cannot_time_them(me169):
 
 
 def test_me169_predicts_speeds_4_4_times_worse_than_their_noise(me169):
-    """README 166-167: "The model predicts the speeds 4.4 times worse than their noise", and README 960-961: "On the
+    """The page: "The model predicts the speeds 4.4 times worse than their noise", and The page: "On the
     real logs of the worked examples: ME169 4.4 […] (flagged)"."""
     misfit = me169["diagnostics"]["uncertainty"]["model_error"]["prediction_misfit"]
     assert misfit["applied"] is True
@@ -171,7 +172,7 @@ def test_me169_predicts_speeds_4_4_times_worse_than_their_noise(me169):
 
 
 def test_me169_negative_caster_drag_is_not_taken(me169):
-    """README: "--friction auto finds a caster drag off zero (p = 1e-05) but negative (Cv = -6.864, Cw = -5.86 PWM),
+    """The page: "--friction auto finds a caster drag off zero (p = 1e-05) but negative (Cv = -6.864, Cw = -5.86 PWM),
     which no caster exerts, and keeps the wheel model"."""
     friction = me169["diagnostics"]["friction"]
     assert friction["model"] == "wheel"
@@ -183,7 +184,7 @@ def test_me169_negative_caster_drag_is_not_taken(me169):
 
 
 def test_me169_closed_loop_check_keeps_the_observer_with_stds_raised(me169):
-    """README: "the closed-loop check finds the observer's Vc 1.6 std (of the difference) from IDIM's, under its gate
+    """The page: "the closed-loop check finds the observer's Vc 1.6 std (of the difference) from IDIM's, under its gate
     of 3.48, so the observer is kept with its stds raised to cover IDIM's. Where a wheel is slow the model predicts
     the speeds far worse than elsewhere (mean square error 6.2 and 5.1 times, 7.3 and 7.2 jackknife std): friction at
     low speed departs from the model, and every parameter, pinned mostly there, reports the std it has without those
@@ -205,13 +206,13 @@ def test_me169_closed_loop_check_keeps_the_observer_with_stds_raised(me169):
 
 
 def test_me169_every_std_widened_and_flagged(me169):
-    """README 168-169: "every std widened and flagged"."""
+    """The page: "every std widened and flagged"."""
     names = list(me169["parameters"])
     assert me169["diagnostics"]["inflated"] == names
     assert me169["diagnostics"]["flagged"] == names
 
 
-TRANSFER = {  # README's table: fit % right / left on the other bag
+TRANSFER = {  # docs/how-to/real-logs.md's table: fit % right / left on the other bag
     ("14-27-37 -> 14-20-12", "observer"): (-26.9, 0.5),
     ("14-27-37 -> 14-20-12", "idim"): (50.3, 32.0),
     ("14-27-37 -> 14-20-12", "rls"): (50.3, 32.0),
@@ -225,18 +226,18 @@ TRANSFER = {  # README's table: fit % right / left on the other bag
 
 @pytest.mark.parametrize(("row", "method"), list(TRANSFER))
 def test_me169_transfer_table_cells(me169_transfer, row, method):
-    """README: "Identified on one bag and validated on the other (`wmrid compare A.mcap --validate B.mcap` with the
+    """The page: "Identified on one bag and validated on the other (`wmrid compare A.mcap --validate B.mcap` with the
     same options; fit % right / left wheel)": every cell of the table."""
     assert fit(me169_transfer[row], method) == TRANSFER[row, method]
 
 
 def test_me169_observer_on_14_27_37_has_negative_fv1(me169_transfer):
-    """README 179-180: "(the observer's estimate on 14-27-37 even has a negative Fv1)"."""
+    """The page: "(the observer's estimate on 14-27-37 even has a negative Fv1)"."""
     assert me169_transfer["14-27-37 -> 14-20-12"]["methods"]["observer"]["parameters"]["Fv1"]["value"] < 0
 
 
 def test_me169_no_model_predicts_the_other_bag_well_and_oe_transfers_best(me169_transfer):
-    """README: "No model predicts the other bag well: […] and OE, which fits the speeds themselves, transfers best
+    """The page: "No model predicts the other bag well: […] and OE, which fits the speeds themselves, transfers best
     over both directions (best mean and best worst case)." (Every method misses 50 % on some wheel.)"""
     fits = {m: [] for m in ("observer", "idim", "rls", "oe")}
     for compare in me169_transfer.values():
@@ -252,7 +253,7 @@ def test_me169_no_model_predicts_the_other_bag_well_and_oe_transfers_best(me169_
 
 
 def test_regbot_inspect_shows_the_comment_lines_that_number_the_columns():
-    """README 182-183: "REGBOT (whitespace text, 100 Hz, `%` comment header). `wmrid inspect square_1.txt` shows the
+    """The page: "REGBOT (whitespace text, 100 Hz, `%` comment header). `wmrid inspect square_1.txt` shows the
     comment lines that number the columns." """
     info = run_json("inspect", REGBOT)
     assert [c["name"] for c in info["columns"]] == [str(i) for i in range(1, 16)]
@@ -263,7 +264,7 @@ def test_regbot_inspect_shows_the_comment_lines_that_number_the_columns():
 
 
 def test_regbot_reads_rim_speeds_and_currents_and_identifies_in_amperes(regbot):
-    """README 183-187: "`wmrid identify square_1.txt --columns t=1,eta_l=9,eta_r=10,tau_l=7,tau_r=8 --speed-unit m/s
+    """The page: "`wmrid identify square_1.txt --columns t=1,eta_l=9,eta_r=10,tau_l=7,tau_r=8 --speed-unit m/s
     --wheel-radius 0.02975 --effort current --torque-hold foh` reads rim speeds in m/s (r = 0.02975 m […]) and motor
     currents. No torque constant is known, so the result is in amperes. Over 4.3 s […]" """
     notes = regbot["log"]["notes"]
@@ -277,7 +278,7 @@ def test_regbot_reads_rim_speeds_and_currents_and_identifies_in_amperes(regbot):
 
 
 def test_regbot_determines_nothing_and_says_why(regbot):
-    """README: "the timing check puts the currents +6.62 ± 1.64 ms late, 4.0 std over 10 segments: below the
+    """The page: "the timing check puts the currents +6.62 ± 1.64 ms late, 4.0 std over 10 segments: below the
     99.73 % t quantile (4.1), so no delay is applied. --friction auto finds a caster drag off zero (p = 0.00036)
     but negative, and keeps the wheel model; on it the log pins nothing: every std exceeds its value (m11 2.9
     times, m22 3.3 times), and the verdict says the log determines none of the parameters." """
@@ -300,7 +301,7 @@ def test_regbot_determines_nothing_and_says_why(regbot):
 
 
 def test_regbot_prediction_error_2_2_times_noise_flagged(regbot):
-    """README 960-961: "On the real logs of the worked examples: ME169 4.4 and REGBOT 2.2 (flagged)"."""
+    """The page: "On the real logs of the worked examples: ME169 4.4 and REGBOT 2.2 (flagged)"."""
     misfit = regbot["diagnostics"]["uncertainty"]["model_error"]["prediction_misfit"]
     assert misfit["applied"] is True
     assert f"{misfit['ratio']:.1f}" == "2.2"
@@ -311,7 +312,7 @@ def test_regbot_prediction_error_2_2_times_noise_flagged(regbot):
 
 
 def test_vulpi_everything_poorly_determined(vulpi):
-    """README 188-189: "BorealTC vulpi (skid-steer CSV, currents). `--columns
+    """The page: "BorealTC vulpi (skid-steer CSV, currents). `--columns
     t=time,eta_l=velL,eta_r=velR,tau_l=curL,tau_r=curR --effort current`: everything is flagged as poorly
     determined, and the log determines nothing." """
     names = list(vulpi["parameters"])
@@ -325,7 +326,7 @@ def test_vulpi_everything_poorly_determined(vulpi):
 
 
 def test_vulpi_prediction_error_0_94_of_noise(vulpi):
-    """README 961: "BorealTC vulpi 0.94 (its speeds are quantised at 15 Hz)"."""
+    """The page: "BorealTC vulpi 0.94 (its speeds are quantised at 15 Hz)"."""
     misfit = vulpi["diagnostics"]["uncertainty"]["model_error"]["prediction_misfit"]
     assert f"{misfit['ratio']:.2f}" == "0.94"
     assert misfit["applied"] is False
@@ -333,7 +334,7 @@ def test_vulpi_prediction_error_0_94_of_noise(vulpi):
 
 
 def test_borealtc_husky_effort_is_a_magnitude(borealtc_husky):
-    """README 190-192: "BorealTC husky and DRIVE (skid-steer; unsigned or reversed currents). The same options give
+    """The page: "BorealTC husky and DRIVE (skid-steer; unsigned or reversed currents). The same options give
     numbers that wmrid itself disowns. For husky: "the right wheel's effort never changes sign while its speed does
     … the log holds a magnitude, not a signed effort"." """
     assert borealtc_husky["diagnostics"]["flagged"] == list(borealtc_husky["parameters"])
@@ -346,7 +347,7 @@ def test_borealtc_husky_effort_is_a_magnitude(borealtc_husky):
 
 
 def test_drive_husky_effort_is_a_magnitude(drive_husky):
-    """README 191-192, for the DRIVE husky: "the right wheel's effort never changes sign while its speed does … the
+    """The page, for the DRIVE husky: "the right wheel's effort never changes sign while its speed does … the
     log holds a magnitude, not a signed effort" (read with its own columns: ros_time, meas_*_vel, *_wheel_current)."""
     assert warnings_with(
         drive_husky,
@@ -357,7 +358,7 @@ def test_drive_husky_effort_is_a_magnitude(drive_husky):
 
 
 def test_warthog_effort_mostly_opposes_its_speed_and_friction_pushes(drive_warthog):
-    """README: "For warthog: "the left wheel's effort mostly opposes its speed (90 % of the samples with power …) …
+    """The page: "For warthog: "the left wheel's effort mostly opposes its speed (90 % of the samples with power …) …
     only this wheel's: negate its effort in the log", and a negative viscous friction on both wheels ("friction
     cannot push; check signs")." (Only the left wheel opposes, so no flag is offered: --mirror-left would flip the
     speed with the effort, and --flip-effort both wheels.)"""
@@ -370,7 +371,7 @@ def test_warthog_effort_mostly_opposes_its_speed_and_friction_pushes(drive_warth
 
 
 def test_the_vulpi_options_do_not_fit_the_drive_files():
-    """README: the DRIVE files need their own --columns (the BorealTC names are not theirs): with the vulpi options
+    """The page: the DRIVE files need their own --columns (the BorealTC names are not theirs): with the vulpi options
     wmrid says which columns there are and how to name them."""
     out = text(wmrid("identify", DRIVE_WARTHOG, *BOREALTC_OPTIONS))
     assert out.returncode == 2
@@ -379,7 +380,7 @@ def test_the_vulpi_options_do_not_fit_the_drive_files():
 
 
 def test_husky_and_warthog_inverse_inertia_not_positive_definite(borealtc_husky, drive_warthog):
-    """README: "For the BorealTC husky and warthog the inverse inertia is not positive definite." """
+    """The page: "For the BorealTC husky and warthog the inverse inertia is not positive definite." """
     for result in (borealtc_husky, drive_warthog):
         m11, m12, m22 = (result["parameters"][n]["value"] for n in ("m11", "m12", "m22"))
         assert m11 <= 0 or m22 <= 0 or m11 * m22 - m12 * m12 <= 0
@@ -388,7 +389,7 @@ def test_husky_and_warthog_inverse_inertia_not_positive_definite(borealtc_husky,
 
 @pytest.mark.parametrize("path", [DRIVE_HUSKY, DRIVE_WARTHOG], ids=lambda p: p.stem)
 def test_drive_float_ns_time_and_zero_stamp(path, drive_husky, drive_warthog):
-    """README 194-195: "The DRIVE Parquet files stamp time in float nanoseconds, with one row stamped 0. wmrid reads
+    """The page: "The DRIVE Parquet files stamp time in float nanoseconds, with one row stamped 0. wmrid reads
     the time as nanoseconds since the epoch and drops the zero row, and a note says both." """
     result = drive_husky if path == DRIVE_HUSKY else drive_warthog
     rows = run_json("inspect", path)["rows"]
@@ -402,7 +403,7 @@ def test_drive_float_ns_time_and_zero_stamp(path, drive_husky, drive_warthog):
 
 
 def test_talker_exits_2_listing_its_topics_none_a_joint_state():
-    """README 196-197: "`wmrid identify talker.mcap` exits with code 2 and lists the topics it found, none of them a
+    """The page: "`wmrid identify talker.mcap` exits with code 2 and lists the topics it found, none of them a
     JointState." """
     path = CONFORMANCE / "talker.mcap"
     proc = text(wmrid("identify", path))
@@ -421,7 +422,7 @@ def test_talker_exits_2_listing_its_topics_none_a_joint_state():
     "name", ["cdr_test_0.mcap", "talker.mcap", "topics_and_services.mcap", "wrong_rmw_test_0.mcap"]
 )
 def test_inspect_lists_every_topic_of_the_conformance_bags(name):
-    """README 197-198: "`wmrid inspect` lists them all, including the unknown message encoding of
+    """The page: "`wmrid inspect` lists them all, including the unknown message encoding of
     `wrong_rmw_test_0.mcap`." """
     path = CONFORMANCE / name
     topics = run_json("inspect", path)["topics"]

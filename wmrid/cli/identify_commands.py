@@ -99,7 +99,7 @@ def identify(
     ] = FormChoice.auto,
     k: Annotated[
         float,
-        typer.Option("--k", help="Observer/filter gain k of Eqs. 26-30, 1/s, in (0, 100000] (paper: 1; see README)."),
+        typer.Option("--k", help="Observer/filter gain k of Eqs. 26-30, 1/s, in (0, 100000] (paper: 1; see the docs)."),
     ] = 10.0,
     alpha: Annotated[
         float, typer.Option(help="Initial Gamma = alpha I (Eq. 33), > 0: weight of the start value (paper: 5000).")

@@ -278,8 +278,9 @@ DelayOpt = Annotated[
         metavar="auto|SECONDS",
         help="The efforts are stamped SECONDS later than the speeds (two topics, two clocks; negative: earlier): "
         "read them that much earlier.  auto: estimate the delay from the log and apply it when significant (the "
-        "output states it).  Reads the log into memory.  Default: as stamped, or auto when the efforts come from "
-        "another topic than the speeds.",
+        "output states it).  Reads the log into memory.  Default: the timing check estimates the delay on every log of "
+        "up to 2 M samples and applies it when significant, as auto does (always auto when the efforts come from "
+        "another topic than the speeds); 0: as stamped.",
     ),
 ]
 

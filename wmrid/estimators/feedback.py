@@ -22,7 +22,7 @@ a difference they explain is not feedback, and an estimate is never reported for
 stated uncertainty.
 
 Measured (``bench/bench_coverage.py --robot amr --caster 0.02 --eta-noise 0.02 --tau-noise 0.01``, 20 seeds): see
-the README section "Closed-loop bias".
+docs/explanation/checks.md, "The closed-loop check".
 """
 
 from __future__ import annotations
@@ -239,7 +239,7 @@ def widened(result: Any, delta: np.ndarray, other_std: np.ndarray, record: dict[
     C + delta delta^T, C the observer's own with its rows and columns scaled up to the other method's std
     (other_std (n0,)): in closed loop the observer's jackknife understates its spread as well.  Below the gate
     delta holds the part of the feedback bias too small to prove on this log.  Measured on the light AMR's 40 s
-    logs (README "Closed-loop bias"): m11 beyond 3 std in 18 % of seeds without the term, 3 % with it.
+    logs (docs/explanation/checks.md): m11 beyond 3 std in 18 % of seeds without the term, 3 % with it.
     The parameters it widens by more than INFLATION_MARK are marked inflated.
     """
     from wmrid.estimators.widening import with_covariance

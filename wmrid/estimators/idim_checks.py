@@ -1,4 +1,4 @@
-"""IDIM under alternative admissible choices: what its jackknife cannot see (README "What the std covers").
+"""IDIM under alternative admissible choices: what its jackknife cannot see (docs/explanation/uncertainty.md).
 
 The jackknife measures how IDIM's estimate varies along a log; an error that is the same all along it is
 invisible to it, as for the observer (:mod:`wmrid.estimators.model_error`).  Two such errors have their own signature in

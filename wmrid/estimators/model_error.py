@@ -1,5 +1,5 @@
-"""What the standard errors cover when the model does not hold: the three widenings of README "What the std
-covers when the model does not hold".
+"""What the standard errors cover when the model does not hold: the three widenings of
+docs/explanation/uncertainty.md ("Errors the jackknife cannot see").
 
 The jackknife (:mod:`wmrid.estimators.uncertainty`) measures how the estimate varies along a log; an error that is the
 same all along it is invisible to it.  Three such errors are measured here, each from what the compiled
@@ -35,7 +35,7 @@ from wmrid.model.dynamics import RegressorForm
 #: MISMATCH_RELEVANT of max |theta|.
 MISMATCH_P = 1e-3
 MISMATCH_RELEVANT = 1e-5
-#: Model-error inflation (README "Uncertainty"): when the structural-mismatch test rejects at INFLATE_P, every
+#: Model-error inflation (uncertainty.md): when the structural-mismatch test rejects at INFLATE_P, every
 #: variance is multiplied by S^2 = 1 + T^2 (:func:`model_error_scale`).  A scale at least INFLATION_MARK marks
 #: the parameters as inflated.
 INFLATION_MARK = 1.05
@@ -133,7 +133,7 @@ PREDICTION_MISFIT_NOTE = (
 
 
 def prediction_misfit(pe_rms: np.ndarray, sigma: np.ndarray | None, eta_rms: np.ndarray | None) -> dict[str, Any]:
-    """Whether the observer's prediction error is far above the speed sensors' noise (README "Uncertainty").
+    """Whether the observer's prediction error is far above the speed sensors' noise (docs/explanation/uncertainty.md).
 
     pe_rms (2,) rad/s: rms of e = eta - eta_hat over the log's samples; sigma (2,) rad/s: the speeds' white-noise
     level (:class:`wmrid.estimators.noise_floor.NoiseFloor`; NaN where unknown); eta_rms (2,) rad/s.  Where the model
@@ -228,7 +228,7 @@ def slow_speed_term(
     cov0: np.ndarray,
     scale2: float = 1.0,
 ) -> dict[str, Any]:
-    """Whether friction near zero speed departs from the model enough to matter (README "Uncertainty").
+    """Whether friction near zero speed departs from the model enough to matter (docs/explanation/uncertainty.md).
 
     The base parameters from the log without its slow-wheel parts
     (:func:`wmrid.estimators.uncertainty.slow_speed_difference`)
@@ -319,7 +319,7 @@ def slow_residual(
 
 
 def model_error_scale(fit: Any, relative_misfit: float = math.inf) -> dict[str, Any]:
-    """The model-error scale factor of a minimum-distance fit (README "Uncertainty").
+    """The model-error scale factor of a minimum-distance fit (docs/explanation/uncertainty.md).
 
     theta (2p numbers) must lie on the n0-dimensional surface theta = f(theta0) (Eqs. 23-24).  A model error
     moves it by a bias b; the fit sees only the part of b off the surface, the misfit rho, whose size in units

@@ -3,7 +3,7 @@
 The observer's prediction error e = eta - eta_hat (:mod:`wmrid.estimators.observer_kernel`) is, where the model holds,
 the speed sensors' noise and little else: the predictor follows the speeds with a slow gain, so
 rms(e) ~ sigma.  Where the model fails -- wheels that slip, backlash, a current loop the model leaves out --
-e grows far beyond sigma (README "What the std covers when the model does not hold").  sigma itself comes
+e grows far beyond sigma (docs/explanation/checks.md, "Slip and other gross misfit").  sigma itself comes
 from the second differences d_i = eta_i - 2 eta_(i-1) + eta_(i-2): white noise of variance sigma^2 gives
 E d^2 = 6 sigma^2, while a smooth motion adds only (h^2 eta'')^2, negligible at the rates robots log.
 

@@ -74,7 +74,7 @@ def _schema():
 
 
 def schema():
-    """The table's pyarrow schema (columns in order; see the README's "Fleets")."""
+    """The table's pyarrow schema (columns in order; see docs/reference/fleet-table.md)."""
     return _schema()
 
 

@@ -428,7 +428,7 @@ def robot_from_toml_text(text: str, source: str) -> Robot:
     except tomllib.TOMLDecodeError as err:
         raise RobotFileError(f"{source}: not valid TOML ({err})") from None
     except RecursionError:
-        raise RobotFileError(f"{source}: nested too deeply to be a robot file; see README 'Robot files'") from None
+        raise RobotFileError(f"{source}: nested too deeply to be a robot file; see reference/robot-file.md") from None
     except ValueError:  # an integer of more than 4,300 digits: Python's limit on turning text into an int
         raise RobotFileError(
             f"{source}: holds an integer of more than 4,300 digits; a robot file's values are SI numbers such as "

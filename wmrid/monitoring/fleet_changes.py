@@ -200,7 +200,7 @@ def friction_at(
     A log determines Fv and Fd badly apart (their estimates correlate at -0.9 to -0.99 when the wheel's speed keeps
     away from zero: a higher Fv with a lower Fd fits almost as well) and their sum at the log's mean speed well: in
     linear regression the prediction at the regressor's mean is the best determined.  On the multibody prototype's
-    logs Fv and Fd scatter by 3-29 % from log to log and Fw by 0.7-1.7 % (README "Fleets")."""
+    logs Fv and Fd scatter by 3-29 % from log to log and Fw by 0.7-1.7 % (docs/how-to/fleet-dask.md)."""
     var = fd_std**2 + (omega * fv_std) ** 2 + 2.0 * omega * corr * fv_std * fd_std
     return fd + omega * fv, np.sqrt(np.clip(var, 0.0, None))
 
