@@ -342,12 +342,34 @@ def test_other_topics_of_a_ros1_bag_are_listed_with_their_counts(tmp_path):
     assert by_topic["/joint_states"]["messages"] == 500
 
 
+#: Seconds of the sample the DynamicJointState and vendor-message bags hold.  Those are read message by message in
+#: Python (field paths: about 0.1 ms a message, 3 s for the whole sample's two topics, read four times by one test),
+#: and what their tests check is that each gives exactly the log and the parameters of the JointState recording of
+#: the same messages, whatever its length: its first 10 s (10,001 messages a topic, over a reading batch) suffice.
+SHORT_S = 10
+
+
 @pytest.fixture(scope="module")
-def dynamic_bags(tmp_path_factory):
-    """The sample as ros2_control's DynamicJointState (/dynamic_joint_states), in a db3 folder and an MCAP file,
-    with an 'effort' interface, and in a db3 folder with a 'current' one instead."""
-    folder = tmp_path_factory.mktemp("dynamic")
+def short_messages() -> list[bagutil.Message]:
+    """The sample's JointState messages of its first SHORT_S seconds."""
     messages = bagutil.recording(SAMPLE)
+    return [m for m in messages if m.log_ns - messages[0].log_ns <= SHORT_S * 1_000_000_000]
+
+
+@pytest.fixture(scope="module")
+def short_sample(tmp_path_factory, short_messages) -> tuple[Path, dict]:
+    """Those messages as an MCAP file (a rosbag2 folder's, read by wmrid's MCAP reader), and its identification:
+    what the bags of the same messages in other message types must give."""
+    path = bagutil.write_rosbag2(tmp_path_factory.mktemp("short") / "mcapdir", short_messages, "mcap") / "mcapdir.mcap"
+    return path, _identify([path])
+
+
+@pytest.fixture(scope="module")
+def dynamic_bags(tmp_path_factory, short_messages):
+    """The sample (its first SHORT_S seconds) as ros2_control's DynamicJointState (/dynamic_joint_states), in a db3
+    folder and an MCAP file, with an 'effort' interface, and in a db3 folder with a 'current' one instead."""
+    folder = tmp_path_factory.mktemp("dynamic")
+    messages = short_messages
     store = bagutil.dynamic_store()
     effort = bagutil.as_dynamic(messages)
     return {
@@ -357,26 +379,27 @@ def dynamic_bags(tmp_path_factory):
     }
 
 
-def test_dynamic_joint_state_is_read_like_a_joint_state(dynamic_bags, sample_result):
+def test_dynamic_joint_state_is_read_like_a_joint_state(dynamic_bags, short_sample):
     """The issue's "done when": a ros2_control DynamicJointState bag identifies, with no option, to the
     parameters of the JointState recording it holds; the MCAP file (through wmrid's MCAP reader) gives the same
     log, sample for sample."""
+    sample, sample_result = short_sample
     result = _identify([dynamic_bags["db3"]])
     assert result["parameters"] == sample_result["parameters"]
     assert any("DynamicJointState (ros2_control), read like a JointState" in n for n in result["log"]["notes"])
-    reference = read_log(str(SAMPLE))
+    reference = read_log(str(sample))
     log = read_log(str(dynamic_bags["mcap"]))
     assert np.array_equal(log.eta, reference.eta)
     assert np.array_equal(log.tau, reference.tau)
     assert any("DynamicJointState (ros2_control)" in n for n in log.notes)
 
 
-def test_a_current_interface_stands_for_the_effort(dynamic_bags, sample_result):
+def test_a_current_interface_stands_for_the_effort(dynamic_bags, short_sample):
     """Interfaces position, velocity, current: the current is the effort, converted by --effort current (here
     with k_t = k_r = 1, so the same numbers as the torque)."""
     options = ("--effort", "current", "--torque-constant", "1", "--gear-ratio", "1")
     result = _identify([dynamic_bags["current"]], *options)
-    assert result["parameters"] == sample_result["parameters"]
+    assert result["parameters"] == short_sample[1]["parameters"]
     assert any("its 'current' interface is read as the effort" in n for n in result["log"]["notes"])
 
 
@@ -388,11 +411,12 @@ AS_TORQUE = ("--effort", "current", "--torque-constant", "1", "--gear-ratio", "1
 
 
 @pytest.fixture(scope="module")
-def vendor_bags(tmp_path_factory):
+def vendor_bags(tmp_path_factory, short_messages):
     """Speeds in a JointState (/wheel_state), currents in a vendor message (/motor_state, acme_msgs/MotorState):
-    a db3 folder, an MCAP file and a ROS 1 bag, each with the message definitions stored."""
+    a db3 folder, an MCAP file and a ROS 1 bag, each with the message definitions stored (the sample's first SHORT_S
+    seconds)."""
     folder = tmp_path_factory.mktemp("vendor")
-    messages = bagutil.as_wheel_and_motor(bagutil.recording(SAMPLE))
+    messages = bagutil.as_wheel_and_motor(short_messages)
     store = bagutil.motor_store()
     return {
         "db3": bagutil.write_rosbag2(folder / "db3", messages, store=store),
@@ -401,13 +425,13 @@ def vendor_bags(tmp_path_factory):
     }
 
 
-def test_signals_by_field_path_from_a_vendor_message(vendor_bags, sample_result):
+def test_signals_by_field_path_from_a_vendor_message(vendor_bags, short_sample):
     """The issue's "done when": speeds in one message type, currents in another, identified with documented
     options (--columns with TOPIC:FIELD paths); the efforts put on the speeds' stamps (the same stamps here, so
     the figures are the sample's exactly).  The MCAP file and the ROS 1 bag give the db3's log, sample for
     sample and note for note."""
     result = _identify([vendor_bags["db3"]], "--columns", VENDOR_COLUMNS, *AS_TORQUE)
-    assert result["parameters"] == sample_result["parameters"]
+    assert result["parameters"] == short_sample[1]["parameters"]
     notes = " | ".join(result["log"]["notes"])
     assert "wheel signals read by field path (effort /motor_state:right.current" in notes
     assert "speed read from /wheel_state, effort from /motor_state" in notes
@@ -423,7 +447,7 @@ def test_signals_by_field_path_from_a_vendor_message(vendor_bags, sample_result)
         assert log.notes == reference.notes, kind
 
 
-def test_a_dynamic_joint_state_by_field_path(dynamic_bags, sample_result):
+def test_a_dynamic_joint_state_by_field_path(dynamic_bags, short_sample):
     """ros2_control's interfaces reached by path: interface_values@JOINT.values@INTERFACE."""
     columns = ",".join(
         f"{key}=/dynamic_joint_states:interface_values@{side}_wheel_joint.values@{interface}"
@@ -431,7 +455,7 @@ def test_a_dynamic_joint_state_by_field_path(dynamic_bags, sample_result):
                                      ("tau_r", "right", "effort"), ("tau_l", "left", "effort"))
     )  # fmt: skip
     result = _identify([dynamic_bags["db3"]], "--columns", columns)
-    assert result["parameters"] == sample_result["parameters"]
+    assert result["parameters"] == short_sample[1]["parameters"]
 
 
 def test_bad_field_paths_are_one_clear_error(vendor_bags):

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cliutil import assert_clean_error, process, wmrid
+from cliutil import assert_clean_error, process, text, wmrid
 
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
@@ -134,6 +134,24 @@ def test_help_and_version():
     assert b"identify" in proc.stdout
     assert b"simulate" in proc.stdout
     assert wmrid("--version").stdout.startswith(b"wmrid ")
+
+
+def test_the_command_is_built_once_and_answers_alike_every_time():
+    """``command()`` (Typer's build of the app, 50 ms) is made once per process: the same object each call, its help
+    texts escaped once (the brackets still shown as written after reuse), and a run after a refused one answers as
+    the first did."""
+    from wmrid.cli.app import command
+
+    assert command() is command()
+    first = text(wmrid("identify", "--help", columns="80"))
+    refused = text(wmrid("identify", "/nonexistent/wmrid-test/log.csv", "--k=-1"))
+    assert refused.returncode == 2
+    assert "--k" in refused.stderr
+    again = text(wmrid("identify", "--help", columns="80"))
+    assert first.returncode == again.returncode == 0
+    assert "[m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2]" in first.stdout
+    assert again.stdout == first.stdout
+    assert text(wmrid("identify", "/nonexistent/wmrid-test/log.csv", "--k=-1")).stderr == refused.stderr
 
 
 def test_simulate_writes_log_and_truth_then_identify_recovers_it(tmp_path):

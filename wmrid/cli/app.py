@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import functools
 import os
 import signal
 import sys
@@ -145,8 +146,13 @@ def main(argv: list[str] | None = None) -> None:
     sys.exit(int(code))
 
 
+@functools.cache
 def command() -> Any:
-    """The click command Typer builds from ``app``, with every help text made verbatim (:func:`_verbatim_help`)."""
+    """The click command Typer builds from ``app``, with every help text made verbatim (:func:`_verbatim_help`).
+
+    Built once per process and kept: Typer's build reads the annotations of every command (about 50 ms), which an
+    in-process caller running :func:`main` many times (the tests, a script) paid on every call.  Click makes a fresh
+    context for each run, so nothing of one run is left on the command for the next."""
     from wmrid.cli import export_commands, fleet_commands, identify_commands, live_commands, plan_commands, sim_commands  # noqa: F401  (their commands join ``app`` on import)
 
     root = typer.main.get_command(app)
