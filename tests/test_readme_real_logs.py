@@ -185,15 +185,23 @@ def test_me169_negative_caster_drag_is_not_taken(me169):
 
 def test_me169_closed_loop_check_keeps_the_observer_with_stds_raised(me169):
     """The page: "the closed-loop check finds the observer's Vc 1.6 std (of the difference) from IDIM's, under its gate
-    of 3.48, so the observer is kept with its stds raised to cover IDIM's: m11 = 0.023 ± 0.26 (rad/s²)/PWM" """
+    of 3.48, so the observer is kept with its stds raised to cover IDIM's. Where a wheel is slow the model predicts
+    the speeds far worse than elsewhere (mean square error 6.2 and 5.1 times, 7.3 and 7.2 jackknife std): friction at
+    low speed departs from the model, and every parameter, pinned mostly there, reports the std it has without those
+    parts: m11 = 0.023 ± 47 (rad/s²)/PWM" """
     feedback = me169["diagnostics"]["feedback"]
     assert feedback["checked"] is True
     assert feedback["against"] == "idim"
     assert feedback["largest"] == "Vc"
     assert (f"{feedback['largest_ratio']:.1f}", f"{feedback['gate']:.2f}") == ("1.6", "3.48")
     assert feedback["reported"] == me169["method"] == "observer"
+    slow = me169["diagnostics"]["uncertainty"]["model_error"]["slow_speed"]
+    assert [f"{r:.1f}" for r in slow["residual_ratio"]] == ["6.2", "5.1"]
+    assert [f"{z:.1f}" for z in slow["residual_z"]] == ["7.3", "7.2"]
+    assert slow["applied"] is True
+    assert slow["fragile"] == ["m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2"]
     m11 = me169["parameters"]["m11"]
-    assert (f"{m11['value']:.3f}", f"{m11['std']:.2f}") == ("0.023", "0.26")
+    assert (f"{m11['value']:.3f}", f"{m11['std']:.0f}") == ("0.023", "47")
     assert m11["unit"] == "(rad/s^2)/PWM"
 
 

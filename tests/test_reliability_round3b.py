@@ -402,3 +402,26 @@ def test_matplotlib_without_a_home_is_quiet(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == b""
     assert Path(proc.stdout.decode().strip()).parent == tmp_path / "tmp"
+
+
+@pytest.mark.parametrize(
+    "entry",
+    ["from wmrid.cli import main; main(['--version'])", "import runpy; runpy.run_module('wmrid', run_name='__main__')"],
+)
+def test_ctrl_c_while_the_cli_is_still_importing_is_one_line(entry):
+    """Ctrl-C before the application has installed its handling (seen in CI on a loaded machine: the signal landed
+    inside typer's import and the default handler printed a traceback): one line, exit 130.  The process sends
+    SIGINT to itself the moment typer starts importing (an import hook placed before wmrid is imported), so the
+    stop falls there every time; both entry points, the console script's ``main`` and ``python -m wmrid``."""
+    hook = (
+        "import os, signal, sys\n"
+        "class Stop:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name == 'typer':\n"
+        "            os.kill(os.getpid(), signal.SIGINT)\n"
+        "        return None\n"
+        "sys.meta_path.insert(0, Stop())\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", hook + entry], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 130, proc.stderr
+    assert proc.stderr == "wmrid: interrupted; no output was written\n"

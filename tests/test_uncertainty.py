@@ -76,3 +76,39 @@ def test_segment_count_bounds():
     assert segment_count(3.0, 4000) == 10
     assert segment_count(3600.0, 65536) == 40
     assert segment_count(3.0, 4) == 4
+
+
+def test_slow_residual_is_the_ratio_of_mean_square_errors_with_its_jackknife():
+    """slow_residual on block sums made by hand: 40 blocks of 0.1 s over 4 segments, the slow ones (every 4th)
+    with 2.25 times the error power of the others on wheel 0 and the same on wheel 1: ratio exactly (2.25, 1.0), the
+    jackknife std of the log-ratio zero for exactly proportional blocks (z infinite is reported as 0) and the slow
+    parts departing on wheel 0 only when the segments scatter; a second case with a ratio of 1.2 does not depart."""
+    from types import SimpleNamespace
+
+    from wmrid.estimators.model_error import slow_residual
+
+    rng = np.random.default_rng(4)
+    n = 40
+    ends = 0.1 * np.arange(1, n + 1)
+    slow = np.arange(n) % 4 == 0
+    segment = np.arange(n) // 10
+    for factor, departs in ((2.25, True), (1.2, False)):
+        power = np.where(slow[:, None], [factor, 1.0], [1.0, 1.0]) * rng.uniform(0.9, 1.1, size=(n, 1))
+        out = SimpleNamespace(blk_ee=0.1 * power, block_t=ends)
+        got = slow_residual(out, slow, segment, 4, 4.0)
+        exact = (power[slow].mean(axis=0) / power[~slow].mean(axis=0)).tolist()
+        assert got["ratio"] == pytest.approx(exact, rel=1e-12)
+        assert got["departs"] is departs
+        assert got["z"][0] > 1.0  # proportional noise on both groups: the slow excess is many jackknife std
+
+
+def test_slow_parts_fit_like_the_rest_where_the_model_holds():
+    """wmrid's simulator (the model holds), the light AMR reversing 30 s with speed noise 0.02 rad/s: the slow parts'
+    prediction error is the noise, as elsewhere (measured 1.04 and 1.04; asserted within 0.8-1.25, well under the
+    gate of 1.5).  (The difference of the estimates passes its gate of 3 std on this seed, 3.57: the about 5 % of
+    well-specified logs that gate lets through by chance; the residual test does not add to them.)"""
+    import wmrid
+
+    sim = wmrid.simulate("amr", trajectory="reversing", duration=30.0, seed=3, eta_noise=0.02, tau_noise=0.01)
+    slow = wmrid.identify(sim.log.to_wheel_log(), "amr").diagnostics["uncertainty"]["model_error"]["slow_speed"]
+    assert all(0.8 < r < 1.25 for r in slow["residual_ratio"]), slow["residual_ratio"]

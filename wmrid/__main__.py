@@ -1,3 +1,3 @@
-from wmrid.cli.app import main
+from wmrid.cli import main
 
 main()

@@ -179,7 +179,8 @@ def slow_speed_difference(
     covariance comes from the same delete-a-segment jackknife, applied to the difference.
 
     Returns None when no block (or every block) is left out; else {"delta": (2p,), "cov": (2p, 2p),
-    "cov_without": (2p, 2p) the jackknife covariance of theta_x itself, "fraction": share of blocks left out}.
+    "cov_without": (2p, 2p) the jackknife covariance of theta_x itself, "fraction": share of blocks left out,
+    "left_out": (J,) bool, those blocks}.
     """
     nb = len(blk_slow)
     if not np.any(blk_slow):
@@ -214,5 +215,5 @@ def slow_speed_difference(
     cov_x = scale * (centred_x.T @ centred_x)
     return {
         "delta": (theta_x - theta).ravel(), "cov": 0.5 * (cov + cov.T), "cov_without": 0.5 * (cov_x + cov_x.T),
-        "fraction": float(left_out.mean()),
+        "fraction": float(left_out.mean()), "left_out": left_out,
     }  # fmt: skip
