@@ -286,6 +286,7 @@ def _arrow_csv(
     from wmrid.io.parquet_log import arrow_values
 
     fh = csv_stream(source)
+    fh.defer_errors()  # type: ignore[attr-defined]  # (a _LineGuard) pyarrow reads on its own threads
     try:
         reader = pcsv.open_csv(
             fh,
@@ -298,6 +299,7 @@ def _arrow_csv(
         raise
     except (pa.ArrowException, OSError, ValueError) as err:
         fh.close()
+        fh.raise_deferred()  # type: ignore[attr-defined]
         raise _ArrowCsvRefused from err
     pending: list[Any] = []
     count = 0
@@ -308,6 +310,7 @@ def _arrow_csv(
     try:
         with fh, reader:
             for batch in reader:
+                fh.raise_deferred()  # type: ignore[attr-defined]
                 pending.append(batch)
                 count += batch.num_rows
                 while count >= rows:  # pieces of exactly ``rows`` rows, whatever pyarrow's block size
@@ -318,7 +321,9 @@ def _arrow_csv(
     except LogFormatError:
         raise
     except (pa.ArrowException, OSError, ValueError) as err:
+        fh.raise_deferred()  # type: ignore[attr-defined]
         raise _ArrowCsvRefused from err
+    fh.raise_deferred()  # type: ignore[attr-defined]
     if count:
         yield values(pa.Table.from_batches(pending))
 
@@ -368,14 +373,32 @@ class _LineGuard(io.RawIOBase):
         self._line = 0  # bytes of the line not yet ended, carried from the blocks before
         self._run = 0  # line-end bytes in a row at the end of the blocks before
         self._offset = 0  # bytes read before this block (for the message)
+        self._defer = False  # keep a refusal for raise_deferred() and read as at the end instead of raising
+        self.deferred: LogFormatError | None = None
+
+    def defer_errors(self) -> None:
+        """Keep a refusal instead of raising it, and read as at the end from then on; the reader's own thread then
+        raises it with :meth:`raise_deferred`.  For pyarrow's CSV reader, which reads on its I/O threads: an exception
+        raised there while the process exits left a thread behind, and the process aborted ("terminate called
+        without an active exception", exit 134, after the right message; seen once under load)."""
+        self._defer = True
+
+    def raise_deferred(self) -> None:
+        """Raise the refusal kept by :meth:`defer_errors`, if any."""
+        if self.deferred is not None:
+            raise self.deferred
 
     def readable(self) -> bool:
         return True
 
     def read(self, size: int = -1) -> bytes:
+        if self.deferred is not None:
+            return b""
         data = self._raw.read(size)
         if data:
             self._check(data)
+            if self.deferred is not None:
+                return b""
             self._offset += len(data)
         return data
 
@@ -385,6 +408,14 @@ class _LineGuard(io.RawIOBase):
         return len(data)
 
     def _check(self, block: bytes) -> None:
+        try:
+            self._check_block(block)
+        except LogFormatError as err:
+            if not self._defer:
+                raise
+            self.deferred = err
+
+    def _check_block(self, block: bytes) -> None:
         if b"\r" in block:
             block = block.translate(_CR_TO_LF)
         first = block.find(b"\n")
