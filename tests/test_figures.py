@@ -30,7 +30,7 @@ from wmrid.model.dynamics import (
     named_base,
 )
 from wmrid.model.robot import BUILTIN_ROBOTS
-from wmrid.reporting import decimate, figures
+from wmrid.reporting import decimate, figures, fit_figures
 from wmrid.reporting.decimate import MAX_POINTS, decimate_for_display
 from wmrid.sim.simulate import simulate
 
@@ -63,11 +63,11 @@ def _all_figures(run):
         "path": figures.build_path_figure(run.sim.pose),
         "estimates": figures.build_estimates_figure(run.result, run.truth),
         "errors": figures.build_estimates_figure(run.result, run.truth, error_mode=True),
-        "residuals": figures.build_residuals_figure(run.result),
-        "excitation": figures.build_excitation_figure(run.result),
+        "residuals": fit_figures.build_residuals_figure(run.result),
+        "excitation": fit_figures.build_excitation_figure(run.result),
         "convergence": figures.build_base_convergence_figure(run.result, run.truth),
-        "speed_fit": figures.build_speed_fit_figure(run.log.t, run.log.eta, _model_speeds(run.log), [97.1, 95.0]),
-        "correlation": figures.build_correlation_figure(run.result.form.base_names, run.result.theta0_cov),
+        "speed_fit": fit_figures.build_speed_fit_figure(run.log.t, run.log.eta, _model_speeds(run.log), [97.1, 95.0]),
+        "correlation": fit_figures.build_correlation_figure(run.result.form.base_names, run.result.theta0_cov),
     }
 
 
@@ -182,8 +182,8 @@ BOTH = ("svg", "png")
             ("svg",),
             lambda run, fmt: figures.estimates_figure(run.result, run.truth, error_mode=True, fmt=fmt),
         ),
-        ("residuals", BOTH, lambda run, fmt: figures.residuals_figure(run.result, fmt=fmt)),
-        ("excitation", BOTH, lambda run, fmt: figures.excitation_figure(run.result, fmt=fmt)),
+        ("residuals", BOTH, lambda run, fmt: fit_figures.residuals_figure(run.result, fmt=fmt)),
+        ("excitation", BOTH, lambda run, fmt: fit_figures.excitation_figure(run.result, fmt=fmt)),
         pytest.param(
             "convergence",
             BOTH,
@@ -193,12 +193,14 @@ BOTH = ("svg", "png")
         (
             "speed_fit",
             BOTH,
-            lambda run, fmt: figures.speed_fit_figure(run.log.t, run.log.eta, _model_speeds(run.log), [97.1, 95], fmt),
+            lambda run, fmt: fit_figures.speed_fit_figure(
+                run.log.t, run.log.eta, _model_speeds(run.log), [97.1, 95], fmt
+            ),
         ),
         (
             "correlation",
             BOTH,
-            lambda run, fmt: figures.correlation_figure(run.result.form.base_names, run.result.theta0_cov, fmt),
+            lambda run, fmt: fit_figures.correlation_figure(run.result.form.base_names, run.result.theta0_cov, fmt),
         ),
     ],
 )
@@ -577,7 +579,7 @@ def test_speed_fit_figure():
     rng = np.random.default_rng(3)
     t = np.linspace(0.0, 2.0, 50)
     eta, eta_hat = rng.standard_normal((50, 2)), rng.standard_normal((50, 2))
-    fig = figures.build_speed_fit_figure(t, eta, eta_hat, [97.123, math.nan])
+    fig = fit_figures.build_speed_fit_figure(t, eta, eta_hat, [97.123, math.nan])
     top, bottom = fig.axes
     assert top.get_title() == "right wheel: fit 97.1 %"
     assert bottom.get_title() == "left wheel: fit —"
@@ -596,13 +598,14 @@ def test_speed_fit_figure():
         assert model.get_linestyle() == "--"
         assert [x.get_text() for x in ax.get_legend().get_texts()] == ["measured", "model"]
         assert all(label.get_fontsize() >= 10 for label in ax.get_yticklabels())
-    titles = [figures.build_speed_fit_figure(t, eta, eta_hat, f).axes[0].get_title() for f in ([100, 0], [5.2345, 0])]
+    fits = ([100, 0], [5.2345, 0])
+    titles = [fit_figures.build_speed_fit_figure(t, eta, eta_hat, f).axes[0].get_title() for f in fits]
     assert titles == ["right wheel: fit 100 %", "right wheel: fit 5.23 %"]
-    assert figures.build_speed_fit_figure(t, eta, eta_hat, None).axes[1].get_title() == "left wheel: fit —"
-    assert figures.build_speed_fit_figure(t, eta, None, [1, 2]) is None
-    assert figures.speed_fit_figure(t, eta, None, [1, 2]) is None
+    assert fit_figures.build_speed_fit_figure(t, eta, eta_hat, None).axes[1].get_title() == "left wheel: fit —"
+    assert fit_figures.build_speed_fit_figure(t, eta, None, [1, 2]) is None
+    assert fit_figures.speed_fit_figure(t, eta, None, [1, 2]) is None
     with pytest.raises(UsageError):
-        figures.build_speed_fit_figure(t, eta, eta_hat[:10], [1, 2])
+        fit_figures.build_speed_fit_figure(t, eta, eta_hat[:10], [1, 2])
 
 
 def test_speed_fit_figure_decimates_long_logs(built, run):
@@ -626,7 +629,7 @@ def test_correlation_figure(run):
     cov = np.array(run.result.theta0_cov, dtype=object)
     cov[2, 5] = cov[5, 2] = None  # undefined covariances
     cov[0, 7] = cov[7, 0] = math.nan
-    fig = figures.build_correlation_figure(names, cov.tolist())
+    fig = fit_figures.build_correlation_figure(names, cov.tolist())
     ax, bar = fig.axes
     c = np.array(run.result.theta0_cov, dtype=float)
     expected = c / np.sqrt(np.outer(np.diag(c), np.diag(c)))  # computed here, independently
@@ -656,19 +659,19 @@ def test_correlation_figure(run):
 
 
 def test_correlation_figure_edge_cases():
-    assert figures.build_correlation_figure(["m11"], [[1.0]]) is None
-    assert figures.correlation_figure([], []) is None
+    assert fit_figures.build_correlation_figure(["m11"], [[1.0]]) is None
+    assert fit_figures.correlation_figure([], []) is None
     # a parameter whose variance is undefined or zero: its whole row and column are undefined
     cov = [[4.0, 1.0, None], [1.0, 1.0, 0.5], [None, 0.5, 0.0]]
-    fig = figures.build_correlation_figure(["a", "b", "c"], cov)
+    fig = fit_figures.build_correlation_figure(["a", "b", "c"], cov)
     cells = {tuple(round(v) for v in t.get_position())[::-1]: t.get_text() for t in fig.axes[0].texts}
     assert cells[(0, 1)] == cells[(1, 0)] == "0.50"
     assert cells[(0, 0)] == cells[(1, 1)] == "1.00"
     assert all(cells[(2, j)] == cells[(j, 2)] == "—" for j in range(3))
-    np.testing.assert_allclose(figures.correlation_matrix([[4.0, -2.0], [-2.0, 4.0]]), [[1.0, -0.5], [-0.5, 1.0]])
+    np.testing.assert_allclose(fit_figures.correlation_matrix([[4.0, -2.0], [-2.0, 4.0]]), [[1.0, -0.5], [-0.5, 1.0]])
     assert (
-        figures.build_correlation_figure(["a", "b"], [[1.0, -0.999], [-0.999, 1.0]]).axes[0].texts[1].get_text()
+        fit_figures.build_correlation_figure(["a", "b"], [[1.0, -0.999], [-0.999, 1.0]]).axes[0].texts[1].get_text()
         == "−1.00"
     )
     with pytest.raises(UsageError):
-        figures.build_correlation_figure(["a", "b", "c"], np.eye(2))
+        fit_figures.build_correlation_figure(["a", "b", "c"], np.eye(2))

@@ -379,6 +379,7 @@ def _speed_fit(log: Any, theta0: np.ndarray, form: Any, torque_hold: str) -> tup
 def _add_figures(report: Report, rl: Any, log: Any, truth: dict[str, float] | None, validation_log: Any) -> None:
     """The report's figures, each under a short title with a sentence saying what it shows (``figure_notes``)."""
     from wmrid.reporting import figures as fg
+    from wmrid.reporting import fit_figures as ff
 
     def both(name: str, fig: Any, note: str) -> None:
         if fig is None:
@@ -403,7 +404,7 @@ def _add_figures(report: Report, rl: Any, log: Any, truth: dict[str, float] | No
         except WmridError as err:  # a model the simulator cannot run (a two-term caster drag): said, not drawn
             report.diagnostics.append(f"{title}: not drawn: {err}")
             continue
-        figure = fg.build_speed_fit_figure(np.asarray(wheel_log.t), np.asarray(wheel_log.eta), eta_hat, fit["fit"])
+        figure = ff.build_speed_fit_figure(np.asarray(wheel_log.t), np.asarray(wheel_log.eta), eta_hat, fit["fit"])
         note = (
             f"On the {which} log ({getattr(wheel_log, 'source', '')}): fit {_fmt(fit['fit'][0], 3)} % right, "
             f"{_fmt(fit['fit'][1], 3)} % left (100 (1 − ‖η − η̂‖ / ‖η − mean η‖)); {fit['predictor']}."
@@ -412,7 +413,7 @@ def _add_figures(report: Report, rl: Any, log: Any, truth: dict[str, float] | No
     estimate = data.get("estimate")
     if estimate and estimate.get("covariance"):
         cov = np.array([[math.nan if v is None else v for v in row] for row in estimate["covariance"]], dtype=float)
-        both("Parameter correlations", fg.build_correlation_figure(list(estimate["names"]), cov),
+        both("Parameter correlations", ff.build_correlation_figure(list(estimate["names"]), cov),
              "Correlations of the base parameters' estimates (from their covariance): near ±1, the log moves the "
              "two together and tells them apart poorly.")  # fmt: skip
     if log is not None:
@@ -426,9 +427,9 @@ def _add_figures(report: Report, rl: Any, log: Any, truth: dict[str, float] | No
         if truth is not None:
             both("Estimation errors over time (paper Fig. 7)", fg.build_estimates_figure(rl, truth, error_mode=True),
                  "θ̂ − θ of the intermediate parameters against the truth.")  # fmt: skip
-        both("Prediction errors", fg.build_residuals_figure(rl),
+        both("Prediction errors", ff.build_residuals_figure(rl),
              "The estimator's prediction errors of the wheel speeds, over time and their distribution.")  # fmt: skip
-        both("Excitation: λ_min(Γ) over time", fg.build_excitation_figure(rl),
+        both("Excitation: λ_min(Γ) over time", ff.build_excitation_figure(rl),
              "The smallest eigenvalue of the information matrix Γ: the data outweigh the start value once it is "
              "well above α.")  # fmt: skip
 
