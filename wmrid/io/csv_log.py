@@ -4,7 +4,7 @@ CSV delimiter (:func:`sniff_delimiter`): among the first 20 non-blank lines, the
 that occurs equally often (at least once) on every line; else the first that occurs in the header;
 else runs of whitespace when the header splits into several words.  A ``;``-delimited file whose data
 rows hold ``digit,digit`` is read with decimal commas (and a note says so).  Comma/tab/semicolon files
-are parsed by the multithreaded pyarrow engine when pyarrow is installed (the parquet extra); whitespace,
+are parsed by the pyarrow engine (on one thread) when pyarrow is installed (the parquet extra); whitespace,
 decimal-comma and ``", "``-spaced files, any file pyarrow refuses, and every file without pyarrow, by pandas' C
 engine with round-trip-exact float parsing (the same values).  Row numbers in messages are
 the line of the file as an editor counts it (header = line 1).
@@ -290,7 +290,11 @@ def _arrow_csv(
     try:
         reader = pcsv.open_csv(
             fh,
-            read_options=pcsv.ReadOptions(block_size=1 << 24, use_threads=True),
+            # One thread: with pyarrow's threads reading ahead through this Python stream, a log refused part-way
+            # (a 300 MB line in an xz file, under WMRID_MEMORY_BUDGET) made the process abort at exit after the
+            # right message, "terminate called without an active exception", exit 134: 2 full test runs of 4 under
+            # load, 1 in 12 concurrent runs by hand.
+            read_options=pcsv.ReadOptions(block_size=1 << 24, use_threads=False),
             parse_options=pcsv.ParseOptions(delimiter=sep),
             convert_options=pcsv.ConvertOptions(include_columns=usecols),
         )
