@@ -9,6 +9,18 @@ import pickle
 
 import pytest
 
+if "PYTEST_XDIST_WORKER" in os.environ and not {"OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"} & set(os.environ):
+    # The workers use every core already (-n auto): OpenBLAS's own threads (one per core, in numpy's copy and in
+    # scipy's) only compete with the other workers and spin while they wait, about 15 % of the run's CPU time.  Each
+    # copy reads the count when it loads, here; the commands the tests start keep their default (a count the user set
+    # is left alone).
+    os.environ["OPENBLAS_NUM_THREADS"] = "1"
+    try:
+        import numpy  # noqa: F401
+        import scipy.linalg  # noqa: F401
+    finally:
+        del os.environ["OPENBLAS_NUM_THREADS"]
+
 from tests.open_loop import open_loop_log
 
 

@@ -153,3 +153,30 @@ def test_a_stop_the_moment_the_temporary_file_appears_leaves_nothing(tmp_path, m
     finally:
         interrupts.restore(previous)
     assert os.listdir(tmp_path) == []
+
+
+def test_a_stop_just_after_the_temporary_file_is_registered_leaves_nothing(tmp_path, monkeypatch):
+    """SIGTERM handled after the temporary file is created and registered, before its writing starts (a busy machine
+    let CI's ``identify -o r.json --mcap-out est.mcap`` stopped the moment ``.est.mcap.*.tmp`` appeared leave that
+    file behind, after the fix above): the stop is raised there and the folder is left empty.  Sent by the process to
+    itself from inside the one call between the two, the temporary name made a path."""
+    import signal
+
+    from wmrid.core import atomic, interrupts
+
+    real = atomic.Path
+
+    def path_then_stopped(*args):
+        made = real(*args)
+        if made.name.endswith(".tmp"):
+            os.kill(os.getpid(), signal.SIGTERM)  # handled at the next bytecode: still inside this call
+        return made
+
+    monkeypatch.setattr(atomic, "Path", path_then_stopped)
+    previous = interrupts.install()
+    try:
+        with pytest.raises(interrupts.Terminated), atomic_output(tmp_path / "out.bin") as handle:
+            handle.write(b"never")
+    finally:
+        interrupts.restore(previous)
+    assert os.listdir(tmp_path) == []

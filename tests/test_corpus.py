@@ -335,8 +335,21 @@ def test_broken_log_gets_a_clear_answer(tmp_path, case: Case):
     assert _finite_numbers([v for v in values if v is not None]), f"non-finite parameters: {values}"
 
 
+def _handlers_installed(pid: int) -> bool:
+    """Whether process ``pid`` runs a wmrid command: its signal handlers are in (SIGTERM caught, which Python alone
+    does not catch; read from /proc, and True where there is none)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return True
+    caught = next((line.split()[1] for line in status.splitlines() if line.startswith("SigCgt:")), None)
+    return caught is None or bool(int(caught, 16) >> (signal.SIGTERM - 1) & 1)
+
+
 def _interrupted(args: list[str], delay: float, cwd: Path, timeout: float) -> subprocess.CompletedProcess:
-    """``wmrid ARGS`` in a subprocess, sent SIGINT after ``delay`` s (stdin a pipe, left open); its outcome."""
+    """``wmrid ARGS`` in a subprocess, sent SIGINT ``delay`` s after the command has started (stdin a pipe, left
+    open); its outcome.  The delay counts from wmrid's signal handlers being in: a Ctrl-C in Python's own start-up
+    and imports is Python's (a traceback), which a loaded machine stretched past 0.5 s."""
     proc = subprocess.Popen(
         [sys.executable, "-m", "wmrid", *args],
         stdin=subprocess.PIPE,
@@ -346,6 +359,9 @@ def _interrupted(args: list[str], delay: float, cwd: Path, timeout: float) -> su
         cwd=cwd,
     )
     try:
+        deadline = time.monotonic() + 60
+        while proc.poll() is None and not _handlers_installed(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.01)
         time.sleep(delay)
         proc.send_signal(signal.SIGINT)
         stdout, stderr = proc.communicate(timeout=timeout)
@@ -359,7 +375,7 @@ def _interrupted(args: list[str], delay: float, cwd: Path, timeout: float) -> su
 @pytest.mark.slow  # a real process interrupted (3 s); SIGTERM/SIGHUP stay in the default run
 def test_interrupt_exits_130(tmp_path):
     """Ctrl-C while wmrid waits for a log on standard input: exit 130, one short line, no traceback."""
-    # 3 s: past the imports, now blocked reading standard input
+    # 3 s into the command: past its imports, now blocked reading standard input
     proc = _interrupted(["identify", "-", "--format", "json"], 3.0, tmp_path, timeout=120)
     stdout, stderr = proc.stdout, proc.stderr
     assert "Traceback" not in stderr, stderr

@@ -251,6 +251,24 @@ def test_the_jackknife_is_averaged_over_shifted_grids(noisy_closed_loop):
     assert max(spread) / min(spread) > 1.05
 
 
+def test_a_fit_without_its_covariance_is_the_same_fit(noisy_closed_loop):
+    """``covariance=False`` (the delay estimate's, which keeps only the cutoff) leaves the covariance out and nothing
+    else: the same cutoff, lowerings, cutoff check, estimate, leave-one-out solutions and factors, bit for bit."""
+    sim = noisy_closed_loop
+    reg, fit, cut, lowered = idim.fit_with_cutoff(sim.t, sim.eta, sim.tau, None)
+    reg_, fit_, cut_, lowered_ = idim.fit_with_cutoff(sim.t, sim.eta, sim.tau, None, covariance=False)
+    assert fit_.cov is None
+    assert fit.cov.shape == (8, 8)
+    assert reg_.cutoff_hz == reg.cutoff_hz
+    assert (json.dumps(cut_), lowered_) == (json.dumps(cut), lowered)
+    assert len(fit_.factors) == len(fit.factors)
+    pairs = [(fit_.phi, fit.phi), (fit_.loo, fit.loo), (fit_.seg, fit.seg)]
+    pairs += list(zip(fit_.factors, fit.factors, strict=True))
+    for a, b in pairs:
+        np.testing.assert_array_equal(a, b)
+    assert fit_.diagnostics == fit.diagnostics
+
+
 def test_jackknife_std_is_honest():
     # 20 seeds of white noise (0.01 rad/s on eta, 0.02 N m on tau) on one 20 s open-loop log (default
     # cutoff ~2 Hz, G = 10 segments, dof 9).  If the std were right, |t_9| < 3 would hold for 98.5 % of

@@ -1,9 +1,10 @@
 """Long MCAP recordings are streamed: the pieces of ``open_log(bag, rows=small)`` join to exactly what the
 whole decode gives (t, eta, tau, notes), and identify on the stream equals identify on the whole log.
 
-Every test runs twice (:func:`second_pass`): with the survey reading the parts the scan kept (the default for
-recordings of up to about 70 min), and with ``_MCAP_REPLAY_BYTES = 0``, the file decoded again on every pass
-(longer recordings).
+Every test that reads a log through ``open_log`` runs twice (:func:`second_pass`): with the survey reading the parts
+the scan kept (the default for recordings of up to about 70 min), and with ``_MCAP_REPLAY_BYTES = 0``, the file
+decoded again on every pass (longer recordings).  The few that never reach ``open_log`` (the scan and the whole
+decode alone, which that setting does not reach) run once (:data:`ONE_PASS`).
 
 The reference is :func:`wmrid.io.logs.read_log` with the default piece size, which decodes these small bags
 whole (the path tests/test_mcap_read.py checks against mcap_ros2's generic decoder); with a small ``rows``
@@ -37,6 +38,10 @@ from wmrid.sim.simulate import simulate
 PAPER = BUILTIN_ROBOTS["paper"]
 T0 = 1_700_000_000 * 10**9
 NAMES = ["left_wheel_joint", "right_wheel_joint"]
+
+
+#: For a test that reads no log through ``open_log``: the second pass would run it again unchanged.
+ONE_PASS = pytest.mark.parametrize("second_pass", ["replayed"])
 
 
 @pytest.fixture(autouse=True, params=["replayed", "decoded again"])
@@ -299,6 +304,7 @@ def test_a_short_bag_is_decoded_whole_in_one_pass(tmp_path):
     assert not scan_mcap(str(path), keep=100).complete
 
 
+@ONE_PASS
 def test_summaries_agree_with_the_decoded_series(tmp_path):
     msgs = single_topic_messages(1500, zero_stamps=True) + [m for m in split_messages(1500) if m[0] != "/wheel_state"]
     msgs.sort(key=lambda m: m[1])
@@ -381,6 +387,7 @@ def test_a_file_that_changes_between_passes_is_refused(tmp_path, monkeypatch):
         list(stream)
 
 
+@ONE_PASS
 @pytest.mark.parametrize("seed", range(6))
 def test_the_median_step_is_exact_from_the_histogram_and_a_second_look(seed):
     from wmrid.io.mcap.joint_stream import _StepMedian
@@ -402,6 +409,7 @@ def test_the_median_step_is_exact_from_the_histogram_and_a_second_look(seed):
     assert median.value() == float(np.median(steps))
 
 
+@ONE_PASS
 def test_many_joints_a_message_count_against_the_memory_budget_in_bytes(tmp_path, monkeypatch):
     """Few messages of many joints are large: the scan stops keeping them past a quarter of the budget (bytes,
     not only messages), and a whole read beyond the budget is refused by name (a 2.4 MB bag of 4096-joint

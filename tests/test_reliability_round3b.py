@@ -24,7 +24,6 @@ from tests.cliutil import assert_clean_error, wmrid
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE_MCAP = ROOT / "sample_logs" / "paper_sinusoid.mcap"
-SAMPLE_CSV = ROOT / "sample_logs" / "paper_sinusoid.csv"
 
 # ---------------------------------------------------------------------------------------------------------------
 # Field paths name message fields and selectors only
@@ -91,7 +90,7 @@ def _run(*args: str, stdout=None, env_extra: dict[str, str] | None = None, preex
 
 
 @pytest.mark.parametrize("unbuffered", ["1", ""])
-def test_a_short_write_to_standard_output_is_an_error_not_truncated_json(tmp_path, unbuffered):
+def test_a_short_write_to_standard_output_is_an_error_not_truncated_json(tmp_path, short_log, unbuffered):
     """A file on a filesystem with 16 KB left: the kernel takes the first 16 KB of the JSON, the next write fails.
     Under ``PYTHONUNBUFFERED=1`` Python dropped the rest of a short write silently (exit 0, truncated JSON); now
     every byte is written or the run ends 1 with one line.  The file-size limit (RLIMIT_FSIZE) stands in for the
@@ -103,7 +102,7 @@ def test_a_short_write_to_standard_output_is_an_error_not_truncated_json(tmp_pat
 
     target = tmp_path / "out.json"
     with open(target, "wb") as fh:
-        out = _run("identify", str(SAMPLE_CSV), "--robot", "paper", "--format", "json", stdout=fh,
+        out = _run("identify", str(short_log), "--robot", "paper", "--format", "json", stdout=fh,
                    env_extra={"PYTHONUNBUFFERED": unbuffered}, preexec=limit)  # fmt: skip
     err = out.stderr.decode()
     assert out.returncode == 1, err
@@ -114,16 +113,16 @@ def test_a_short_write_to_standard_output_is_an_error_not_truncated_json(tmp_pat
     assert target.stat().st_size == 16384
 
 
-def test_dev_full_as_standard_output_is_one_line_and_a_closed_pipe_stays_quiet():
+def test_dev_full_as_standard_output_is_one_line_and_a_closed_pipe_stays_quiet(short_log):
     with open("/dev/full", "wb") as full:
-        out = _run("identify", str(SAMPLE_CSV), "--robot", "paper", stdout=full, env_extra={"PYTHONUNBUFFERED": "1"})
+        out = _run("identify", str(short_log), "--robot", "paper", stdout=full, env_extra={"PYTHONUNBUFFERED": "1"})
     err = out.stderr.decode()
     assert out.returncode == 1, err
     assert err.count("\n") == 1, err
     assert "No space left on device" in err
     # | head -c 10: the reader has seen enough, exit 0 and nothing on stderr
     proc = subprocess.Popen(
-        [sys.executable, "-m", "wmrid", "identify", str(SAMPLE_CSV), "--robot", "paper", "--format", "json"],
+        [sys.executable, "-m", "wmrid", "identify", str(short_log), "--robot", "paper", "--format", "json"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=dict(os.environ, PYTHONUNBUFFERED="1"),
     )  # fmt: skip
     head = proc.stdout.read(10)
@@ -140,6 +139,8 @@ def test_dev_full_as_standard_output_is_one_line_and_a_closed_pipe_stays_quiet()
 
 @pytest.fixture(scope="module")
 def short_log(tmp_path_factory) -> Path:
+    """A 4 s simulated log (CSV): what the processes below identify (its JSON result is 170 kB, past the 16 kB of
+    the short write; the bundled 40 s sample cost each process half a second more)."""
     path = tmp_path_factory.mktemp("short") / "s.csv"
     assert wmrid("simulate", "--duration", "4", "-o", str(path)).returncode == 0
     return path

@@ -227,7 +227,7 @@ def atomic_output(path: str | Path, *, force: bool = False, mode: str = "wb") ->
     file_mode = _new_file_mode(path)
     kwargs: dict[str, Any] = {"encoding": "utf-8"} if mode == "w" else {}
     handle: IO | None = None
-    try:
+    try:  # one try from the creation to the end: a stop anywhere in between removes the temporary file
         # A stop between the file's creation and its registration would leave it behind (seen once in CI: SIGHUP
         # the moment the file appeared): the signal waits until the file is known, then is raised in this try.
         with interrupts.held():
@@ -238,15 +238,7 @@ def atomic_output(path: str | Path, *, force: bool = False, mode: str = "wb") ->
             except OSError as err:
                 raise UsageError(f"cannot write {path}: {_unwritable(folder, err)}") from err
             _LIVE.add(handle.name)
-    except BaseException:
-        if handle is not None:
-            handle.close()
-            with suppress(OSError):
-                os.unlink(handle.name)
-            _LIVE.discard(handle.name)
-        raise
-    tmp = Path(handle.name)
-    try:
+        tmp = Path(handle.name)
         try:
             try:
                 yield handle
@@ -265,9 +257,11 @@ def atomic_output(path: str | Path, *, force: bool = False, mode: str = "wb") ->
         _commit(tmp, path, force)
         _LIVE.discard(str(tmp))
     except BaseException:
-        with suppress(OSError):
-            os.unlink(tmp)
-        _LIVE.discard(str(tmp))
+        if handle is not None:
+            handle.close()
+            with suppress(OSError):
+                os.unlink(handle.name)
+            _LIVE.discard(handle.name)
         raise
     _fsync_folder(folder)
 

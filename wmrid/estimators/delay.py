@@ -152,7 +152,7 @@ def estimate_delay(
     hold = effort_delay(t, torque_hold, control_rate)
     if cutoff_hz is None:  # IDIM's: the default, lowered while the estimate moves with it (errors in variables)
         try:
-            cutoff_hz = fit_with_cutoff(t, eta, tau, None, delay=hold)[0].cutoff_hz
+            cutoff_hz = fit_with_cutoff(t, eta, tau, None, delay=hold, covariance=False)[0].cutoff_hz
         except NotIdentifiableError:
             cutoff_hz = default_cutoff(eta, (len(t) - 1) / max(t[-1] - t[0], 1e-300))
     n_steps = round(span / DELAY_STEP_S)

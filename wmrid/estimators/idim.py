@@ -252,13 +252,13 @@ def jackknife_segments(t: np.ndarray, grid: tuple[float, float, int] | None = No
 class RegressionFit:
     """A least-squares fit of an IDIM regression (:func:`fit_regression`).
 
-    phi (p,), cov (p, p) its jackknife covariance, loo (G, p) the leave-one-segment-out solutions; factors: the
-    per-segment triangular factors of the (weighted) rows, seg (N,) each row's segment in [0, G); diagnostics and
-    warnings as JSON-ready dict and plain-English list.
+    phi (p,), cov (p, p) its jackknife covariance (None when not asked for), loo (G, p) the leave-one-segment-out
+    solutions; factors: the per-segment triangular factors of the (weighted) rows, seg (N,) each row's segment in
+    [0, G); diagnostics and warnings as JSON-ready dict and plain-English list.
     """
 
     phi: np.ndarray
-    cov: np.ndarray
+    cov: np.ndarray | None
     loo: np.ndarray
     factors: list[np.ndarray]
     seg: np.ndarray
@@ -267,13 +267,16 @@ class RegressionFit:
 
 
 def fit_regression(
-    reg: IdimRegression, *, weighted: bool = False, grid: tuple[float, float, int] | None = None
-) -> RegressionFit:
+    reg: IdimRegression, *, weighted: bool = False, grid: tuple[float, float, int] | None = None,
+    covariance: bool = True,
+) -> RegressionFit:  # fmt: skip
     """Least squares of phi on a regression (:class:`RegressionFit`), p = len(reg.phi_names) (8, plus the caster
     parameters of ``reg.form``).
 
     weighted : two-step weighted LS, wheel j's rows scaled by 1 / s_j (s_j its OLS rms residual, N m).
-    grid : the jackknife's segments (:func:`jackknife_segments`).
+    grid : the jackknife's segments (:func:`jackknife_segments`).  covariance : False leaves the jackknife
+    covariance out (``cov`` None: GRID_SHIFTS jackknifes, a fifth of the fit's time, for a caller that needs only
+    the estimate, its factors or the cutoff).
     Raises NotIdentifiableError when the regressor is rank deficient.
     """
     seg, g = jackknife_segments(reg.t, grid)
@@ -313,7 +316,9 @@ def fit_regression(
         rms = residual_rms(phi)
     fac = grouped(fine, shifted_groups(g)[0])
     loo, _ = jackknife_from_factors(fac)
-    cov = averaged_covariance(lambda groups: jackknife_from_factors(grouped(fine, groups))[1], g)
+    cov = None
+    if covariance:
+        cov = averaged_covariance(lambda groups: jackknife_from_factors(grouped(fine, groups))[1], g)
     diagnostics: dict[str, Any] = {
         **reg.info(),
         "rows": 2 * len(reg.t),
@@ -399,20 +404,21 @@ def _lower_cutoff(
 def fit_with_cutoff(
     t: np.ndarray, eta: np.ndarray, tau: np.ndarray, cutoff_hz: float | None, *, weighted: bool = False,
     decimate: bool = True, order: int = 4, form: RegressorForm | None = None, delay: float = 0.0,
-    grid: tuple[float, float, int] | None = None,
+    grid: tuple[float, float, int] | None = None, covariance: bool = True,
 ) -> tuple[IdimRegression, RegressionFit, dict[str, Any], list[dict[str, Any]]]:  # fmt: skip
     """IDIM's regression, its fit and its cutoff check (:func:`wmrid.estimators.idim_checks.cutoff_check`) at
     ``cutoff_hz``, or at the default cutoff lowered while the estimate moves with it (:func:`_lower_cutoff`).
 
     Returns (regression, fit, cutoff check, the lowerings made: [{"from_hz", "to_hz", "largest_ratio", "rule"}]).
-    Arguments as :func:`identify_idim`'s (``delay``: its effort delay, s).
+    Arguments as :func:`identify_idim`'s (``delay``: its effort delay, s); covariance : as :func:`fit_regression`'s
+    (the cutoff check and the lowering do not use it).
     """
     from wmrid.estimators.idim_checks import cutoff_check
 
     reg = idim_regression(t, eta, tau, cutoff_hz, decimate, order=order, form=form, effort_delay=delay)
     lowered: list[dict[str, Any]] = []
     while True:
-        fit = fit_regression(reg, weighted=weighted, grid=grid)
+        fit = fit_regression(reg, weighted=weighted, grid=grid, covariance=covariance)
         weights = np.asarray(fit.diagnostics["weights"])
         t0, span = (float(reg.t[0]), float(reg.t[-1] - reg.t[0])) if grid is None else (grid[0], grid[1])
         cut = cutoff_check(t, eta, tau, reg, fit.factors, weights, fit.seg, len(fit.factors), decimate, delay,
