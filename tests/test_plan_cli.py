@@ -196,3 +196,56 @@ def test_noise_measured_from_a_log(tmp_path: Path) -> None:
     assert rate == pytest.approx(200.0, rel=1e-9)
     proc = run("plan", "--noise-from", log, "--eta-noise", "0.1", cwd=tmp_path)
     assert_clean_error(proc, 2, "--noise-from", "not both")
+
+
+CASTERS = """
+[[caster]]
+x = 0.2
+y = 0.0
+radius = 0.025
+kind = "ball"
+resistance = 0.015
+
+[[caster]]
+x = -0.2
+y = 0.0
+radius = 0.025
+kind = "ball"
+resistance = 0.015
+"""
+
+
+def test_a_robot_with_casters_is_planned_for_their_drag(planned: Path, tmp_path: Path) -> None:
+    """A robot file with [[caster]] tables: --friction auto predicts for the model identify's auto fits when the
+    drag shows (wheel+caster+load): the two mirrored casters' drag D1 (nominal: 0.015 x their load at rest, by
+    least-norm statics: 0.015 x the weight less the wheels' share) and its two load terms, which the criterion does not
+    count (nuisance parameters); the JSON round-trips.  A robot file without casters keeps the eight (auto: wheel), and
+    --friction wheel+caster+load on it is one line."""
+    from wmrid.sim.multibody import static_loads
+
+    robot = tmp_path / "casters.toml"
+    robot.write_text(ROBOT.replace('name = "tiny"', 'name = "casters"') + CASTERS)
+    kw = {"duration": 12, "eta_noise": 0.02, "tau_noise": 0.005, "log_rate": 200}
+    plan = wmrid.plan(robot, **kw)
+    assert plan.settings["friction"] == "wheel+caster+load"
+    assert list(plan.predicted) == ["m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2", "D1", "D1dv", "D1w2"]
+    counted = {n for n, v in plan.predicted.items() if v["counted"]}
+    assert counted == set(plan.predicted) - {"D1dv", "D1w2"}
+    assert plan.worst in counted
+    assert plan.value == pytest.approx(max(plan.predicted[n]["relative"] for n in counted), rel=1e-12)
+    from wmrid.api.inputs import load_robot
+
+    parsed = load_robot(robot)
+    drag = 0.015 * float(sum(static_loads(parsed.nominal, parsed.casters)[2:]))
+    assert plan.predicted["D1"]["nominal"] == pytest.approx(drag, rel=1e-12)
+    assert wmrid.read_plan(_saved(plan, tmp_path)).predicted == plan.predicted
+    assert list(wmrid.read_plan(planned / "plan.json").predicted) == list(plan.predicted)[:8]  # no casters: wheel
+    proc = run("plan", "--robot", planned / "tiny.toml", "--duration", "12", "--friction", "wheel+caster+load",
+               cwd=tmp_path)  # fmt: skip
+    assert_clean_error(proc, 2, "--friction wheel+caster+load", "[[caster]]")
+
+
+def _saved(plan, folder: Path) -> Path:
+    path = folder / "saved_plan.json"
+    wmrid.write_plan(plan, path, force=True)
+    return path

@@ -148,7 +148,7 @@ def plan(
     log_rate: float | None = None,
     noise_from: str | os.PathLike[str] | None = None,
     criterion: str = "worst",
-    friction: str = "wheel",
+    friction: str = "auto",
     given: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | None = None,
     k: float = DEFAULT_K,
     progress: Callable[[str], None] | None = None,
@@ -160,8 +160,11 @@ def plan(
     ``[limits]``, else the defaults of :mod:`wmrid.design.limits`): max_wheel_speed rad/s, max_wheel_accel rad/s^2,
     max_torque N m per wheel, max_speed m/s, max_turn_rate rad/s, area "WxH" m; margin: the share of each limit kept
     free.  Noise: eta_noise rad/s, tau_noise N m per sample at log_rate Hz, or measured from ``noise_from``.
-    criterion : "worst" (largest relative std), "d" or "a".  friction : "wheel" or "wheel+caster".  given : saved
-    results of logs already identified.  k : the estimator's gain the prediction assumes (``identify --k``).
+    criterion : "worst" (largest relative std), "d" or "a".  friction : the model identify will fit, which the
+    prediction is for: "auto" (a robot file with [[caster]] tables: "wheel+caster+load", what ``identify --friction
+    auto`` chooses when the casters' drag shows; else "wheel"), "wheel", "wheel+caster" (each caster's drag with
+    their positions, the two-term Cv, Cw without) or "wheel+caster+load".  given : saved results of logs already
+    identified.  k : the estimator's gain the prediction assumes (``identify --k``).
     """
     from wmrid.api.inputs import load_robot
     from wmrid.model.dynamics import base_parameters
@@ -228,18 +231,70 @@ def plan(
     share = None
     if target_std is not None:
         share = _number("target_std", target_std) / 100.0  # type: ignore[operator]
-    names = ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2") + (
-        ("Cv", "Cw") if friction == "wheel+caster" else ()
-    )
-    given_info, theta0 = _given(given, names, np.concatenate([theta0, np.zeros(len(names) - 8)]))
+    friction, geometry, drag = _friction(friction, robot_obj)
+    form = _form(friction, geometry)
+    names = form.base_names
+    start = np.concatenate([theta0, drag, np.zeros(len(names) - 8 - len(drag))])
+    given_info, theta0 = _given(given, names, start)
     result = make_plan(
-        robot_obj.name, theta0, r, b, limits, noise, duration=length, target_std=share, rate=rate, seed=seed,
-        criterion=criterion, friction=friction, k=k, given=given_info, progress=progress,
+        robot_obj.name, theta0[:8], r, b, limits, noise, duration=length, target_std=share, rate=rate, seed=seed,
+        criterion=criterion, friction=friction, k=k, given=given_info, progress=progress, geometry=geometry,
+        drag=tuple(theta0[8 : 8 + len(drag)]),
     )  # fmt: skip
     settings = {**result.settings, "noise_source": noise_source}
     from dataclasses import replace
 
     return replace(result, settings=settings)
+
+
+#: ``plan --friction`` choices.
+FRICTIONS = ("auto", "wheel", "wheel+caster", "wheel+caster+load")
+
+
+def _friction(friction: str, robot: Robot) -> tuple[str, tuple[float, ...], tuple[float, ...]]:
+    """(friction model, caster geometry (r, b, x_1, y_1, ...) m or (), each geometric caster's nominal drag N): what
+    ``plan --friction`` means for ``robot``.  The nominal drag of a caster is its rolling resistance times its load
+    at rest (least-norm statics; mirrored casters, which the log cannot tell apart, summed)."""
+    if friction not in FRICTIONS:
+        raise UsageError(f"{option('friction', friction)}: choose one of {', '.join(FRICTIONS)}")
+    from wmrid.estimators.identify import caster_geometry
+
+    casters = tuple(robot.casters or ())
+    if friction == "auto":
+        friction = "wheel+caster+load" if casters else "wheel"
+    if friction == "wheel" or not casters:
+        if friction == "wheel+caster+load":
+            raise UsageError(
+                f"{option('friction', friction)} needs the casters' positions (the robot file's [[caster]] tables)"
+            )
+        return friction, (), ()
+    if isinstance(robot.nominal, BaseSet):
+        raise UsageError(
+            f"{option('friction', friction)}: the casters' drag needs the robot's masses (a [nominal] table of "
+            "physical parameters), not a [nominal_base] table; or plan with --friction wheel"
+        )
+    from wmrid.sim.multibody import static_loads
+
+    geometry = caster_geometry(robot)
+    loads = static_loads(robot.nominal, casters)[2:]
+    drag = [0.0] * ((len(geometry) - 2) // 2)
+    for caster, load in zip(casters, loads, strict=True):
+        for k in range(len(drag)):
+            if abs(abs(caster.x) - geometry[2 + 2 * k]) < 1e-3 and abs(caster.y - geometry[3 + 2 * k]) < 1e-3:
+                drag[k] += caster.resistance * max(float(load), 0.0)
+                break
+    return friction, geometry, tuple(drag)
+
+
+def _form(friction: str, geometry: tuple[float, ...]) -> Any:
+    from wmrid.model.dynamics import RegressorForm, load_signals
+
+    if friction == "wheel":
+        return RegressorForm("general")
+    if not geometry:
+        return RegressorForm("general", caster=True)
+    return RegressorForm("general", caster=True, geometry=geometry,
+                         load=load_signals(geometry) if friction == "wheel+caster+load" else ())  # fmt: skip
 
 
 def read_plan(path: str | os.PathLike[str]) -> Plan:

@@ -40,10 +40,12 @@ class Criterion(str, Enum):
 
 
 class PlanFriction(str, Enum):
-    """``wmrid plan --friction``: the friction model a plan is designed for."""
+    """``wmrid plan --friction``: the friction model identify will fit, which the plan's prediction is made for."""
 
+    auto = "auto"
     wheel = "wheel"
     wheel_caster = "wheel+caster"
+    wheel_caster_load = "wheel+caster+load"
 
 
 class TimeUnit(str, Enum):

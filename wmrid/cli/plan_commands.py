@@ -64,7 +64,13 @@ def plan(
     criterion: Annotated[
         Criterion, typer.Option(help="worst (largest relative std), d (D-optimal) or a (A-optimal).")
     ] = Criterion.worst,
-    friction: Annotated[PlanFriction, typer.Option(help="Friction model to plan for.")] = PlanFriction.wheel,
+    friction: Annotated[
+        PlanFriction,
+        typer.Option(
+            help="The friction model identify will fit, which the prediction is for. auto: the casters' drag, "
+            "following their load, when the robot file lists [[caster]] tables; else the wheels' alone."
+        ),
+    ] = PlanFriction.auto,
     given: Annotated[
         list[str] | None,
         typer.Option(help="A saved result (identify --format json) whose information the plan adds. Repeatable."),

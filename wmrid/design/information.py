@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import lfilter
 
-from wmrid.model.dynamics import RegressorForm, intermediate_parameters, inverse_inertia, regressor
+from wmrid.model.dynamics import RegressorForm, caster_columns, intermediate_parameters, inverse_inertia, regressor
 
 #: The estimator's default filter gain k, 1/s (``identify --k``).
 DEFAULT_K = 10.0
@@ -125,10 +125,17 @@ def sign_statistics(eta: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarr
     return mean, sd, slope
 
 
-def expected_regressor(eta: np.ndarray, tau: np.ndarray, form: RegressorForm, sigma: float) -> np.ndarray:
+def expected_regressor(
+    eta: np.ndarray, tau: np.ndarray, form: RegressorForm, sigma: float, eta_dot: np.ndarray | None = None
+) -> np.ndarray:
     """The regressor g(eta, tau) (n, p) the estimator will see on average: its Coulomb columns -sgn(eta_j) of the
-    MEASURED speed, whose mean near standstill is -erf(eta_j / (sqrt(2) sigma)) rather than -sgn(eta_j)."""
-    g = regressor(eta, tau, form)
+    MEASURED speed, whose mean near standstill is -erf(eta_j / (sqrt(2) sigma)) rather than -sgn(eta_j).  A caster
+    drag that follows the load (``form.load``) needs the motion's eta_dot (n, 2) rad/s^2 for its v' and w' columns.
+
+    The casters' drag columns (``form.caster``) are taken at the true motion: the noise that reaches the estimate
+    through them (their direction turns with the measured speeds, and the load terms' v' and w' are made from them)
+    is left out of the prediction, as the flips of the two-term model's signs are."""
+    g = regressor(eta, tau, form, eta_dot)
     if form.kind == "general" and sigma > 0:
         g[:, 6:8] = -sign_statistics(eta, sigma)[0]
     return g
@@ -186,13 +193,13 @@ class _Forward:
     gamma: np.ndarray
 
 
-def _intermediate(eta, tau, h, theta0, form, noise, k, coulomb) -> _Forward:
+def _intermediate(eta, tau, h, theta0, form, noise, k, coulomb, eta_dot=None) -> _Forward:
     a = math.exp(-k * h)
-    g = expected_regressor(eta, tau, form, noise.eta_std)
+    g = expected_regressor(eta, tau, form, noise.eta_std, eta_dot)
     w = lowpass(g, a) / k
     gamma = h * (w.T @ w)
     adj = lowpass_adjoint(w, a)  # (n, p)
-    c, zs, qs, fd = noise_scores(w, adj, eta, h, theta0, noise, k, form, coulomb)
+    c, zs, qs, fd = noise_scores(w, adj, eta, h, theta0, noise, k, form, coulomb, eta_dot)
     score = sum(q * (z.T @ z) for q, z in zip(qs, zs, strict=True))
     inv = np.linalg.inv(gamma)
     big = np.kron(np.eye(2), inv)
@@ -202,14 +209,15 @@ def _intermediate(eta, tau, h, theta0, form, noise, k, coulomb) -> _Forward:
 
 def intermediate_covariance(
     eta: np.ndarray, tau: np.ndarray, h: float, theta0: np.ndarray, form: RegressorForm, noise: SensorNoise,
-    k: float = DEFAULT_K, coulomb: np.ndarray | None = None,
+    k: float = DEFAULT_K, coulomb: np.ndarray | None = None, eta_dot: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """(C (2p, 2p), Gamma (p, p)): the covariance of the intermediate estimate theta.ravel() and the information
-    matrix Gamma = sum h w^T w, for a log of eta (n, 2) rad/s and tau (n, 2) N m on an even grid of step h s.
+    matrix Gamma = sum h w^T w, for a log of eta (n, 2) rad/s and tau (n, 2) N m on an even grid of step h s
+    (eta_dot (n, 2) rad/s^2: for a caster drag that follows the load, :func:`expected_regressor`).
 
     The grid need not be the log's: the noise is scaled to the same intensity (variance x time step), so a coarser
     grid gives the same answer while the motion is smooth on it."""
-    fwd = _intermediate(eta, tau, h, theta0, form, noise, k, coulomb)
+    fwd = _intermediate(eta, tau, h, theta0, form, noise, k, coulomb, eta_dot)
     return fwd.cov, fwd.gamma
 
 
@@ -223,6 +231,7 @@ def noise_scores(
     k: float,
     form: RegressorForm,
     coulomb: np.ndarray | None = None,
+    eta_dot: np.ndarray | None = None,
 ) -> tuple[np.ndarray, list[np.ndarray], list[float], np.ndarray]:
     """(c (n, 2, 2), z per noise source (n, 2p) x 4, intensity per source): how each white noise sample reaches the
     estimator's score sum h w^T r (module docstring): the speed noise of wheels 1 and 2 (through u and the regressor's
@@ -230,9 +239,13 @@ def noise_scores(
     the per-sample variance at the log's rate on this grid, sigma^2 / (rate h).  With speed noise and the general
     form, two more sources: each wheel's sign flips (std F_dj sqrt(1 - E^2), ``coulomb`` = F_d, default theta0's),
     through the Coulomb columns as effort noise goes through the effort columns; the last value returned is F_d
-    (2,) as used."""
+    (2,) as used.  With the casters' geometric model, D also holds the drag's slope across the speed noise
+    (:func:`drag_secant`): the drag's direction is taken from the measured speeds.  eta_dot (n, 2) rad/s^2: for a
+    drag that follows the load."""
     m = inverse_inertia(theta0)
     sens = speed_sensitivity(eta, theta0)
+    if form.geometry and noise.eta_std > 0:
+        sens = sens + drag_secant(eta, eta_dot, theta0, form, noise.eta_std)
     c = m[None, :, 0, None] * sens[:, None, 0, :] + m[None, :, 1, None] * sens[:, None, 1, :]
     p = w.shape[1]
     zs: list[np.ndarray] = []
@@ -273,10 +286,12 @@ def base_covariance(
 def predicted_covariance(
     eta: np.ndarray, tau: np.ndarray, h: float, theta0: np.ndarray, form: RegressorForm, noise: SensorNoise,
     k: float = DEFAULT_K, jac: np.ndarray | None = None, coulomb: np.ndarray | None = None,
+    eta_dot: np.ndarray | None = None,
 ) -> np.ndarray:  # fmt: skip
     """Cov(theta0) (n0, n0) that the estimator would reach on a log of this motion with this noise (module doc);
-    ``jac``: :func:`intermediate_jacobian` when already known; ``coulomb``: the F_d (2,) of the sign flips."""
-    cov_theta, _ = intermediate_covariance(eta, tau, h, theta0, form, noise, k, coulomb)
+    ``jac``: :func:`intermediate_jacobian` when already known; ``coulomb``: the F_d (2,) of the sign flips; eta_dot
+    (n, 2) rad/s^2: the motion's wheel accelerations, for a caster drag that follows the load."""
+    cov_theta, _ = intermediate_covariance(eta, tau, h, theta0, form, noise, k, coulomb, eta_dot)
     return base_covariance(cov_theta, theta0, form, jac)
 
 
@@ -295,17 +310,20 @@ class CovarianceGradient:
         self.coulomb = coulomb
         self.m = inverse_inertia(theta0)
 
-    def forward(self, eta: np.ndarray, tau: np.ndarray, h: float) -> np.ndarray:
-        fwd = _intermediate(eta, tau, h, self.theta0, self.form, self.noise, self.k, self.coulomb)
+    def forward(self, eta: np.ndarray, tau: np.ndarray, h: float, eta_dot: np.ndarray | None = None) -> np.ndarray:
+        """Cov(theta0) along eta (n, 2) rad/s, tau (n, 2) N m on a grid of step h s (eta_dot (n, 2) rad/s^2: for a
+        caster drag that follows the load)."""
+        fwd = _intermediate(eta, tau, h, self.theta0, self.form, self.noise, self.k, self.coulomb, eta_dot)
         c_inv = np.linalg.inv(fwd.cov)
         info = self.jac.T @ c_inv @ self.jac
         cov0 = combined_covariance(info, self.given)
-        self._keep = (fwd, h, c_inv, cov0, eta, info)
+        self._keep = (fwd, h, c_inv, cov0, eta, info, eta_dot)
         return cov0
 
-    def backward(self, g0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(dJ/deta (n, 2), dJ/dtau (n, 2)) for g0 = dJ/dCov(theta0), symmetric."""
-        fwd, h, c_inv, cov0, eta, info = self._keep
+    def backward(self, g0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(dJ/deta (n, 2), dJ/dtau (n, 2), dJ/deta_dot (n, 2)) for g0 = dJ/dCov(theta0), symmetric (the last is
+        zero unless the casters' drag follows the load)."""
+        fwd, h, c_inv, cov0, eta, info, eta_dot = self._keep
         a, w, adj, c, qs, zs, fd = fwd.a, fwd.w, fwd.adj, fwd.c, fwd.qs, fwd.zs, fwd.fd
         score, inv, big, p = fwd.score, fwd.gamma_inv, fwd.big, fwd.w.shape[1]
         sigma = self.noise.eta_std
@@ -363,4 +381,78 @@ class CovarianceGradient:
         vc = self.theta0[3]
         g_eta[:, 0] += vc * (g_d[:, 0, 1] - 2.0 * g_d[:, 1, 0] + g_d[:, 1, 1])
         g_eta[:, 1] += vc * (g_d[:, 0, 0] - 2.0 * g_d[:, 0, 1] + g_d[:, 1, 0])
-        return g_eta, g_tau
+        g_deta = np.zeros_like(eta)
+        if self.form.geometry and sigma > 0:  # D also holds the drag's secant: its slopes by the complex step
+            step = 1e-30
+            for j in range(2):
+                x = eta.astype(complex)
+                x[:, j] += 1j * step
+                slope = np.imag(drag_secant(x, eta_dot, self.theta0, self.form, sigma)) / step
+                g_eta[:, j] += np.einsum("njl,njl->n", g_d, slope)
+                if self.form.derivative_columns and eta_dot is not None:
+                    y = eta_dot.astype(complex)
+                    y[:, j] += 1j * step
+                    slope = np.imag(drag_secant(eta, y, self.theta0, self.form, sigma)) / step
+                    g_deta[:, j] += np.einsum("njl,njl->n", g_d, slope)
+        if self.form.geometry:  # the casters' drag columns -caster_columns(eta, eta_dot), after the 8 wheel columns
+            d_eta, d_deta = caster_slopes(eta, eta_dot, self.form)
+            g_cols = g_g[:, 8:]
+            g_eta -= np.einsum("nq,nqj->nj", g_cols, d_eta)
+            g_deta -= np.einsum("nq,nqj->nj", g_cols, d_deta)
+        return g_eta, g_tau, g_deta
+
+
+def caster_slopes(
+    eta: np.ndarray, eta_dot: np.ndarray | None, form: RegressorForm
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """(d col / d eta, d col / d eta_dot), each (n, q, 2): the slopes of the geometric caster model's columns
+    (:func:`wmrid.model.dynamics.caster_columns`, q of them) along eta (n, 2) rad/s and eta_dot (n, 2) rad/s^2 (needed
+    when the drag follows the load).  d/d eta by the complex step (the columns are analytic in eta: exact); a load
+    column drag x v' or drag x w' is linear in eta_dot, its slope the drag column times dv/deta_dot = r/2 [1, 1] or
+    dw/deta_dot = r/(2b) [1, -1]."""
+    step = 1e-30
+    d_eta = np.empty((len(eta), len(form.caster_map), 2))
+    for j in range(2):
+        x = eta.astype(complex)
+        x[:, j] += 1j * step
+        d_eta[:, :, j] = np.imag(caster_columns(x, form, eta_dot)) / step
+    d_deta = np.zeros_like(d_eta)
+    if form.derivative_columns:
+        r, b = form.geometry[0], form.geometry[1]
+        slope = {0: np.array([0.5 * r, 0.5 * r]), 1: np.array([r / (2.0 * b), -r / (2.0 * b)])}
+        multiplier = caster_columns(eta, form, multiplier=True)
+        for col, signal in form.derivative_columns:
+            q = col - 8
+            d_deta[:, q, :] = multiplier[:, q, None] * slope[signal]
+    return d_eta, d_deta
+
+
+def drag_secant(
+    eta: np.ndarray, eta_dot: np.ndarray | None, theta0: np.ndarray, form: RegressorForm, sigma: float
+) -> np.ndarray:  # fmt: skip
+    """(n, 2, 2) N m s/rad: how speed noise of std sigma (rad/s) moves the geometric caster model's wheel torques
+    sum_q theta0[param_q] col_q(eta) [1, pattern_q] when their direction is taken from the measured speeds: the
+    secant (drag(eta + sigma e_l) - drag(eta - sigma e_l)) / (2 sigma) along each wheel l.  Far from a stop it is
+    the drag's slope (small); where a caster's contact crawls within the noise the measured direction swings, and
+    the secant is as large as the drag over the noise (a sign flip of the drag, as the wheels' Coulomb columns
+    have), without the slope's 1 / speed blow-up.  Analytic in eta (and eta_dot): :meth:`CovarianceGradient.backward`
+    differentiates it by the complex step."""
+    weights = np.array([[theta0[param], theta0[param] * pattern] for _, param, pattern in form.caster_map])  # (q, 2)
+    out = np.empty((*eta.shape, 2), dtype=np.result_type(eta, eta_dot if eta_dot is not None else 0.0, float))
+    for ell in range(2):
+        up, down = eta.copy(), eta.copy()
+        up[:, ell] += sigma
+        down[:, ell] -= sigma
+        diff = (caster_columns(up, form, eta_dot) - caster_columns(down, form, eta_dot)) / (2.0 * sigma)
+        out[:, :, ell] = diff @ weights
+    return out
+
+
+def drag_slopes(
+    eta: np.ndarray, eta_dot: np.ndarray | None, theta0: np.ndarray, form: RegressorForm
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """(d drag / d eta, d drag / d eta_dot), each (n, 2, 2) N m s/rad and N m s^2/rad: the slopes of the geometric
+    caster model's wheel torques sum_q theta0[param_q] col_q [1, pattern_q] (:func:`caster_slopes`)."""
+    d_eta, d_deta = caster_slopes(eta, eta_dot, form)
+    weights = np.array([[theta0[param], theta0[param] * pattern] for _, param, pattern in form.caster_map])  # (q, 2)
+    return np.einsum("qi,nqj->nij", weights, d_eta), np.einsum("qi,nqj->nij", weights, d_deta)

@@ -23,7 +23,7 @@ from wmrid.design.information import DEFAULT_K, GivenLogs, SensorNoise
 from wmrid.design.limits import LIMIT_NAMES, Limits
 from wmrid.design.problem import CORRELATION, CRITERIA, DIRECTION_SHARE, FLOOR_SHARE, Motion, Problem
 from wmrid.design.search import search
-from wmrid.model.dynamics import RegressorForm, choose_form
+from wmrid.model.dynamics import RegressorForm, choose_form, load_signals
 
 SCHEMA = 1
 #: Hz of the grid the search runs on (the plan's signals stay under 1 Hz) and the finest grid of the final prediction.
@@ -72,8 +72,9 @@ class Plan:
 
     @property
     def worst(self) -> str:
-        """The base parameter with the largest predicted relative std."""
-        return max(self.predicted, key=lambda n: self.predicted[n]["relative"])
+        """The base parameter with the largest predicted relative std (of those the criterion counts)."""
+        counted = [n for n, v in self.predicted.items() if v.get("counted", True)]
+        return max(counted, key=lambda n: self.predicted[n]["relative"])
 
     def samples(self, rate: float | None = None) -> dict[str, np.ndarray]:
         """The reference at ``rate`` Hz (default: the plan's): t (s), v (m/s), omega (rad/s), eta_r, eta_l (rad/s,
@@ -226,21 +227,40 @@ def make_plan(
     duration: float | None = 60.0, target_std: float | None = None, rate: float = 50.0, seed: int = 0,
     criterion: str = "worst", friction: str = "wheel", k: float = DEFAULT_K,
     given: tuple[GivenLogs, dict[str, Any]] | None = None, progress: Any = None,
+    geometry: tuple[float, ...] = (), drag: tuple[float, ...] = (),
 ) -> Plan:  # fmt: skip
     """Design and predict a plan (module docstring).
 
     theta0 : (8,) nominal base parameters; r, b : nominal wheel radius and half track (m).  duration : s, or None
     with ``target_std`` (a share, e.g. 0.02): the shortest plan (in whole base periods, at most
-    :data:`MAX_AUTO_DURATION`) predicted to reach it.  rate : Hz of the written reference.  given : (the logs
-    already identified, :class:`wmrid.design.information.GivenLogs`, description).  progress : called with a
-    sentence per stage, or None.
+    :data:`MAX_AUTO_DURATION`) predicted to reach it.  rate : Hz of the written reference.  friction : the model
+    identify will fit, which the prediction is made for: ``wheel``, ``wheel+caster`` (with ``geometry`` (r, b, x_1,
+    y_1, ...) m: each caster's drag D_k, nominal ``drag`` N per caster of the geometry; without: the two-term
+    Cv, Cw) or ``wheel+caster+load`` (the geometric model whose drag follows the load).  given : (the logs already
+    identified, :class:`wmrid.design.information.GivenLogs` over the prediction's parameters, description).
+    progress : called with a sentence per stage, or None.
     """
     if criterion not in CRITERIA:
         raise UsageError(f"{option('criterion', criterion)}: choose one of {', '.join(CRITERIA)}")
-    if friction not in ("wheel", "wheel+caster"):
-        raise UsageError(f"{option('friction', friction)}: a plan models wheel or wheel+caster friction")
-    form = RegressorForm("general", caster=friction == "wheel+caster")
-    theta0 = np.concatenate([np.asarray(theta0, dtype=np.float64)[:8], np.zeros(form.n_base - 8)])
+    if friction not in ("wheel", "wheel+caster", "wheel+caster+load"):
+        raise UsageError(
+            f"{option('friction', friction)}: a plan models wheel, wheel+caster or wheel+caster+load friction"
+        )
+    if friction == "wheel+caster+load" and not geometry:
+        raise UsageError(
+            f"{option('friction', friction)} needs the casters' positions (the robot file's [[caster]] tables)"
+        )
+    if friction == "wheel":
+        form = RegressorForm("general")
+    elif not geometry:
+        form = RegressorForm("general", caster=True)
+    else:
+        form = RegressorForm("general", caster=True, geometry=geometry,
+                             load=load_signals(geometry) if friction == "wheel+caster+load" else ())  # fmt: skip
+        if len(drag) != form.n_casters:
+            raise ValueError(f"drag holds {len(drag)} values for {form.n_casters} casters")
+    theta0 = np.asarray(theta0, dtype=np.float64)[:8]
+    theta0 = np.concatenate([theta0, np.asarray(drag, dtype=np.float64), np.zeros(form.n_base - 8 - len(drag))])
     given_info = None if given is None else given[0]
     say = progress or (lambda _text: None)
     started = time.perf_counter()
@@ -290,7 +310,7 @@ def make_plan(
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     predicted = {
         name: {"nominal": float(theta0[i]), "scale": float(fine.scales[i]), "scale_from": fine.scale_sources[i],
-               "std": float(std[i]), "relative": float(rel[i])}
+               "std": float(std[i]), "relative": float(rel[i]), "counted": i < fine.judged}
         for i, name in enumerate(form.base_names)
     }  # fmt: skip
     say("baselines")
@@ -338,27 +358,36 @@ def make_plan(
 
 def _baseline(fine: Problem, name: str, theta0: np.ndarray, form: RegressorForm, value: float) -> dict[str, Any]:
     """The prediction for baseline ``name`` within every limit (the area included: that is the comparison), and
-    with the area ignored (how it would do on an open floor), on the plan's fine grid."""
+    with the area ignored (how it would do on an open floor), on the plan's fine grid.  Each is predicted under the
+    model identify fits to that log: the plan's, except that wheels that never reverse get the paper's form and no
+    caster drag (it cannot be told from F_d there), so the drag's parameters are then undetermined (inf) and not
+    counted."""
     out: dict[str, Any] = {}
     for area in (True, False):
         motion, factor = baseline_motion(fine, name, area=area)
         base_form = choose_form(motion.eta)
-        if form.caster:
-            base_form = RegressorForm("general", caster=True)
+        if base_form.kind == "general":
+            base_form = form
+        n = base_form.n_base
+        given = fine.given_info
+        if given is not None and n < len(theta0):
+            given = GivenLogs(given.weight[:n, :n], given.spread[:n, :n])
         problem = Problem(
-            theta0, base_form, fine.r, fine.b, fine.limits, fine.noise, duration=fine.duration, period=fine.period,
-            harmonics=fine.harmonics, ramp=fine.ramp, grid=fine.t.size / fine.duration, k=fine.k,
-            criterion=fine.criterion, given_info=fine.given_info,
+            theta0[:n], base_form, fine.r, fine.b, fine.limits, fine.noise, duration=fine.duration,
+            period=fine.period, harmonics=fine.harmonics, ramp=fine.ramp, grid=fine.t.size / fine.duration, k=fine.k,
+            criterion=fine.criterion, given_info=given,
         )  # fmt: skip
+        rel = np.full(len(theta0), math.inf)
         try:
             cov = problem.covariance(motion)
-            rel, crit = problem.relative_std(cov), problem.criterion_value(cov)
+            rel[:n], crit = problem.relative_std(cov), problem.criterion_value(cov)
         except np.linalg.LinAlgError:
-            rel, crit = np.full(len(theta0), math.inf), math.inf
+            crit = math.inf
+        counted = rel[: min(n, fine.judged)]
         entry = {
             "value": crit, "relative": dict(zip(form.base_names, map(float, rel), strict=True)),
-            "worst": form.base_names[int(np.argmax(rel))], "slowed_by": factor, "peaks": motion.peaks(),
-            "improvement": crit / value if value > 0 else math.inf,
+            "worst": form.base_names[int(np.argmax(counted))], "slowed_by": factor, "peaks": motion.peaks(),
+            "improvement": crit / value if value > 0 else math.inf, "friction": base_form.friction,
         }  # fmt: skip
         if area:
             out.update(entry)

@@ -22,6 +22,7 @@ from wmrid.design.information import (
     GivenLogs,
     SensorNoise,
     combined_covariance,
+    drag_slopes,
     intermediate_jacobian,
     predicted_covariance,
     speed_sensitivity,
@@ -141,6 +142,9 @@ class Problem:
         self.scales, self.scale_sources = parameter_scales(self.theta0, form.base_names, r, limits, self.tau_scale)
         #: N m: the Coulomb friction the sign flips near standstill are sized with (its scale when the nominal is 0)
         self.coulomb = self.scales[6:8].copy()
+        #: how many of the base parameters the criterion counts: all but a caster load model's terms (the drag's
+        #: change with the platform's accelerations: nuisance parameters, not the robot's model)
+        self.judged = form.n_base - form.n_casters * len(form.load)
 
     def motion_of(self, coefficients: np.ndarray, basis: Basis | None = None) -> Motion:
         """The motion (:class:`Motion`) of coefficients (2, N, 2) on this problem's grid (or on ``basis``'s)."""
@@ -151,7 +155,10 @@ class Problem:
     def motion_from(self, t: np.ndarray, v: np.ndarray, w: np.ndarray, dv: np.ndarray, dw: np.ndarray) -> Motion:
         """The motion of a reference given as samples (a baseline, a read plan)."""
         eta, deta = wheel_motion(v, w, dv, dw, self.r, self.b)
-        tau = wheel_torque(eta, deta, self.theta0[:8])
+        # the search's own forms (wheel, two-term casters of nominal 0) need no drag; a geometric caster model's
+        # nominal drag is in the efforts the prediction sees
+        tau = wheel_torque(eta, deta, self.theta0, self.form) if self.form.geometry else wheel_torque(
+            eta, deta, self.theta0[:8])  # fmt: skip
         return Motion(t, v, w, dv, dw, eta, deta, tau, pose_along(t, v, w))
 
     def ratios(self, motion: Motion) -> dict[str, float]:
@@ -177,7 +184,7 @@ class Problem:
         (:func:`wmrid.design.information.combined_covariance`)."""
         h = float(motion.t[1] - motion.t[0])
         cov = predicted_covariance(motion.eta, motion.tau, h, self.theta0, self.form, self.noise, self.k, self.jac,
-                                   self.coulomb)  # fmt: skip
+                                   self.coulomb, motion.deta if self.form.load else None)  # fmt: skip
         if self.given_info is None:
             return cov
         return combined_covariance(np.linalg.inv(cov), self.given_info)
@@ -188,28 +195,35 @@ class Problem:
 
     def criterion_value(self, cov: np.ndarray) -> float:
         """The criterion (:data:`CRITERIA`), as a relative std (smaller is better)."""
-        rel = self.relative_std(cov)
+        rel = self.relative_std(cov)[: self.judged]
         if not np.all(np.isfinite(rel)):
             return math.inf
         if self.criterion == "worst":
             return float(np.max(rel))
         if self.criterion == "a":
             return float(np.sqrt(np.mean(rel**2)))
-        scaled = cov / np.outer(self.scales, self.scales)
+        sub = slice(0, self.judged)
+        scaled = cov[sub, sub] / np.outer(self.scales[sub], self.scales[sub])
         sign, logdet = np.linalg.slogdet(scaled)
         return float(np.exp(logdet / (2 * len(rel)))) if sign > 0 else math.inf
 
     def objective_sensitivity(self, cov: np.ndarray) -> np.ndarray:
-        """d(smooth objective)/d cov (n0, n0), symmetric: what :class:`Differentiated` back-propagates."""
-        n0 = len(self.scales)
-        diag = np.clip(np.diag(cov), 1e-300, None)
+        """d(smooth objective)/d cov (n0, n0), symmetric: what :class:`Differentiated` back-propagates (zero on the
+        parameters the criterion does not count)."""
+        n = self.judged
+        sub, scales = cov[:n, :n], self.scales[:n]
+        diag = np.clip(np.diag(sub), 1e-300, None)
         if self.criterion == "worst":
-            rel16 = (diag / self.scales**2) ** 8
-            return np.diag(rel16 / (2.0 * diag * np.sum(rel16)))
-        if self.criterion == "a":
-            rel2 = diag / self.scales**2
-            return np.diag(1.0 / (2.0 * n0 * np.mean(rel2) * self.scales**2))
-        return np.linalg.inv(cov) / (2.0 * n0)
+            rel16 = (diag / scales**2) ** 8
+            part = np.diag(rel16 / (2.0 * diag * np.sum(rel16)))
+        elif self.criterion == "a":
+            rel2 = diag / scales**2
+            part = np.diag(1.0 / (2.0 * n * np.mean(rel2) * scales**2))
+        else:
+            part = np.linalg.inv(sub) / (2.0 * n)
+        out = np.zeros_like(cov)
+        out[:n, :n] = part
+        return out
 
     def smooth_objective(self, cov: np.ndarray) -> float:
         """What the local search minimises: the log of the criterion, the max made smooth (a 16-norm) so that its
@@ -217,7 +231,7 @@ class Problem:
         if self.criterion != "worst":
             value = self.criterion_value(cov)
             return math.log(value) if math.isfinite(value) and value > 0 else math.inf
-        rel = self.relative_std(cov)
+        rel = self.relative_std(cov)[: self.judged]
         top = float(np.max(rel))
         if not (math.isfinite(top) and top > 0):
             return math.inf
@@ -253,24 +267,30 @@ class Differentiated:
                                        problem.coulomb)  # fmt: skip
 
     def tau_jacobian(self, motion: Motion) -> np.ndarray:
-        d = speed_sensitivity(motion.eta, self.problem.theta0)  # (n, 2, 2)
-        return np.einsum("ij,njx->nix", self.big_m, self.j_deta) + np.einsum("nil,nlx->nix", d, self.j_eta)
+        pb = self.problem
+        d = speed_sensitivity(motion.eta, pb.theta0)  # (n, 2, 2)
+        big_m = np.broadcast_to(self.big_m, d.shape)
+        if pb.form.geometry:  # the casters' nominal drag is in the efforts (Problem.motion_from)
+            d_eta, d_deta = drag_slopes(motion.eta, motion.deta, pb.theta0, pb.form)
+            d, big_m = d + d_eta, big_m + d_deta
+        return np.einsum("nij,njx->nix", big_m, self.j_deta) + np.einsum("nil,nlx->nix", d, self.j_eta)
 
     def objective(self, x: np.ndarray) -> tuple[float, np.ndarray]:
         """(the smooth objective, its gradient (4N,)) at x."""
         pb = self.problem
         motion = pb.motion_of(x.reshape(2, -1, 2))
         try:
-            cov = self.grad.forward(motion.eta, motion.tau, pb.h)
+            cov = self.grad.forward(motion.eta, motion.tau, pb.h, motion.deta if pb.form.load else None)
         except np.linalg.LinAlgError:
             return 1e6, np.zeros_like(x)
         value = pb.smooth_objective(cov)
         if not math.isfinite(value):
             return 1e6, np.zeros_like(x)
         g0 = pb.objective_sensitivity(cov)
-        g_eta, g_tau = self.grad.backward(g0)
+        g_eta, g_tau, g_deta = self.grad.backward(g0)
         j_tau = self.tau_jacobian(motion)
-        return value, np.einsum("ni,nix->x", g_eta, self.j_eta) + np.einsum("ni,nix->x", g_tau, j_tau)
+        return value, (np.einsum("ni,nix->x", g_eta, self.j_eta) + np.einsum("ni,nix->x", g_tau, j_tau)
+                       + np.einsum("ni,nix->x", g_deta, self.j_deta))  # fmt: skip
 
     def constraint_jacobian(self, x: np.ndarray, stride: int = 1) -> np.ndarray:
         """d(sample constraints)/dx, rows in the order of :func:`wmrid.design.search.sample_constraints` (which

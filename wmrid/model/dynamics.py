@@ -479,7 +479,8 @@ def caster_columns(
         if not multiplier:
             if eta_dot is None:
                 raise ValueError("a caster drag that follows v' or w' needs eta_dot")
-            signals["dv"], signals["dw"] = platform_speeds(np.asarray(eta_dot, dtype=float), r, b)
+            # (complex eta_dot kept: the plan's gradient takes the complex step through it)
+            signals["dv"], signals["dw"] = platform_speeds(np.asarray(eta_dot) * 1.0, r, b)
         else:
             signals["dv"] = signals["dw"] = np.ones_like(v)
         drag = list(cols)
