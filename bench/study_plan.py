@@ -147,13 +147,13 @@ def prediction_for(robot_path: str, csv: str, form, spec: dict) -> dict[str, flo
 
     import wmrid
     from wmrid.api.inputs import load_robot
-    from wmrid.api.planning import _form, _friction
-    from wmrid.design.plan import FINE_GRID, _problem
+    from wmrid.api.planning import _friction
+    from wmrid.design.plan import FINE_GRID, _problem, plan_form
 
     plan = wmrid.read_plan(Path(csv).with_suffix(".json"))
     robot = load_robot(robot_path)
     friction, geometry, drag = _friction(form.friction, robot)
-    pform = _form(friction, geometry)
+    pform = plan_form(friction, geometry)
     theta0 = np.concatenate([[plan.predicted[n]["nominal"] for n in BASE], drag,
                              np.zeros(pform.n_base - 8 - len(drag))])  # fmt: skip
     pb = _problem(theta0, pform, plan.r, plan.b, plan.limits, plan.noise, plan.excitation.duration,

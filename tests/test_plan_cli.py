@@ -239,6 +239,13 @@ def test_a_robot_with_casters_is_planned_for_their_drag(planned: Path, tmp_path:
     drag = 0.015 * float(sum(static_loads(parsed.nominal, parsed.casters)[2:]))
     assert plan.predicted["D1"]["nominal"] == pytest.approx(drag, rel=1e-12)
     assert wmrid.read_plan(_saved(plan, tmp_path)).predicted == plan.predicted
+    from wmrid.reporting.plan_view import summary
+
+    said = " ".join(summary(plan.to_dict()))
+    assert "(D1dv " in said
+    assert "not counted" in said
+    assert plan.form.friction == "wheel+caster+load"
+    assert plan.form.n_base == len(plan.predicted)
     assert list(wmrid.read_plan(planned / "plan.json").predicted) == list(plan.predicted)[:8]  # no casters: wheel
     proc = run("plan", "--robot", planned / "tiny.toml", "--duration", "12", "--friction", "wheel+caster+load",
                cwd=tmp_path)  # fmt: skip

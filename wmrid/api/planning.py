@@ -22,7 +22,7 @@ import numpy as np
 from wmrid.core.errors import UsageError, cannot_read, option
 from wmrid.design.information import DEFAULT_K, GivenLogs, SensorNoise, given_weight
 from wmrid.design.limits import DEFAULT_MARGIN, resolve_limits
-from wmrid.design.plan import Plan, make_plan
+from wmrid.design.plan import Plan, make_plan, plan_form
 from wmrid.model.robot import BaseSet, Robot
 
 __all__ = ["Plan", "plan", "read_plan", "write_plan"]
@@ -232,7 +232,7 @@ def plan(
     if target_std is not None:
         share = _number("target_std", target_std) / 100.0  # type: ignore[operator]
     friction, geometry, drag = _friction(friction, robot_obj)
-    form = _form(friction, geometry)
+    form = plan_form(friction, geometry)
     names = form.base_names
     start = np.concatenate([theta0, drag, np.zeros(len(names) - 8 - len(drag))])
     given_info, theta0 = _given(given, names, start)
@@ -284,17 +284,6 @@ def _friction(friction: str, robot: Robot) -> tuple[str, tuple[float, ...], tupl
                 drag[k] += caster.resistance * max(float(load), 0.0)
                 break
     return friction, geometry, tuple(drag)
-
-
-def _form(friction: str, geometry: tuple[float, ...]) -> Any:
-    from wmrid.model.dynamics import RegressorForm, load_signals
-
-    if friction == "wheel":
-        return RegressorForm("general")
-    if not geometry:
-        return RegressorForm("general", caster=True)
-    return RegressorForm("general", caster=True, geometry=geometry,
-                         load=load_signals(geometry) if friction == "wheel+caster+load" else ())  # fmt: skip
 
 
 def read_plan(path: str | os.PathLike[str]) -> Plan:

@@ -71,6 +71,11 @@ class Plan:
     warnings: tuple[str, ...] = field(default=())
 
     @property
+    def form(self) -> RegressorForm:
+        """The regressor form the prediction is for (``settings["friction"]``, the casters' geometry when given)."""
+        return plan_form(self.settings.get("friction", "wheel"), tuple(self.settings.get("caster_geometry") or ()))
+
+    @property
     def worst(self) -> str:
         """The base parameter with the largest predicted relative std (of those the criterion counts)."""
         counted = [n for n, v in self.predicted.items() if v.get("counted", True)]
@@ -124,6 +129,18 @@ class Plan:
             )  # fmt: skip
         except (KeyError, TypeError, ValueError) as err:
             raise UsageError(f"{source}: not a valid plan ({type(err).__name__}: {err})") from None
+
+
+def plan_form(friction: str, geometry: tuple[float, ...] = ()) -> RegressorForm:
+    """The regressor form a plan predicts for: ``friction`` "wheel", "wheel+caster" (each caster's drag with the
+    casters' ``geometry`` (r, b, x_1, y_1, ...) m, the two-term Cv, Cw without) or "wheel+caster+load" (the geometric
+    drag that follows the load; needs the geometry)."""
+    if friction == "wheel":
+        return RegressorForm("general")
+    if not geometry:
+        return RegressorForm("general", caster=True)
+    return RegressorForm("general", caster=True, geometry=geometry,
+                         load=load_signals(geometry) if friction == "wheel+caster+load" else ())  # fmt: skip
 
 
 def period_for(duration: float) -> float:
@@ -250,15 +267,9 @@ def make_plan(
         raise UsageError(
             f"{option('friction', friction)} needs the casters' positions (the robot file's [[caster]] tables)"
         )
-    if friction == "wheel":
-        form = RegressorForm("general")
-    elif not geometry:
-        form = RegressorForm("general", caster=True)
-    else:
-        form = RegressorForm("general", caster=True, geometry=geometry,
-                             load=load_signals(geometry) if friction == "wheel+caster+load" else ())  # fmt: skip
-        if len(drag) != form.n_casters:
-            raise ValueError(f"drag holds {len(drag)} values for {form.n_casters} casters")
+    form = plan_form(friction, geometry)
+    if form.geometry and len(drag) != form.n_casters:
+        raise ValueError(f"drag holds {len(drag)} values for {form.n_casters} casters")
     theta0 = np.asarray(theta0, dtype=np.float64)[:8]
     theta0 = np.concatenate([theta0, np.asarray(drag, dtype=np.float64), np.zeros(form.n_base - 8 - len(drag))])
     given_info = None if given is None else given[0]
@@ -342,7 +353,8 @@ def make_plan(
         warnings.append(f"the plan predicts {100 * value:.3g} %, above the target {100 * target_std:g} %")
     settings = {
         "duration": problem.duration, "period": problem.period, "harmonics": HARMONICS, "ramp": problem.ramp,
-        "rate": float(rate), "seed": int(seed), "criterion": criterion, "friction": friction, "k": k,
+        "rate": float(rate), "seed": int(seed), "criterion": criterion, "friction": friction,
+        "caster_geometry": list(form.geometry), "k": k,
         "target_std": target_std, "search_grid": SEARCH_GRID, "prediction_grid": fine.t.size / fine.duration,
         "starts": found.starts, "evaluations": found.evaluations,
         "seconds": time.perf_counter() - started, "parameter_names": list(form.base_names),

@@ -24,8 +24,8 @@ def plan_figures(plan: Any) -> dict[str, Any]:
     t = s["t"]
     v, w, dv, dw = plan.excitation.evaluate(t)
     eta, deta = wheel_motion(v, w, dv, dw, plan.r, plan.b)
-    theta0 = np.array([plan.predicted[n]["nominal"] for n in ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")])
-    tau = wheel_torque(eta, deta, theta0)
+    theta0 = np.array([p["nominal"] for p in plan.predicted.values()])
+    tau = wheel_torque(eta, deta, theta0, plan.form) if plan.form.geometry else wheel_torque(eta, deta, theta0[:8])
     lim = plan.limits
     keep = 1.0 - lim.margin
     out: dict[str, Any] = {}
@@ -86,7 +86,8 @@ def plan_figures(plan: Any) -> dict[str, Any]:
     width = 0.8 / (1 + len(plan.baselines))
     ax.bar(x, [100 * plan.predicted[n]["relative"] for n in names], width, label="this plan", color="C2")
     for i, (name, base) in enumerate(plan.baselines.items()):
-        values = [100 * base["relative"][n] if base["relative"][n] is not None else np.nan for n in names]
+        # a parameter the baseline's log cannot determine (None, or inf in memory) has no bar
+        values = [100 * v if v is not None and np.isfinite(v) else np.nan for v in map(base["relative"].get, names)]
         ax.bar(x + (i + 1) * width, values, width, label=BASELINE_TEXT.get(name, name), color=f"C{i}")
     ax.set_yscale("log")
     ax.set_xticks(x + 0.4 - width / 2, names)
@@ -161,8 +162,9 @@ def to_html(plan: Any) -> str:
     notes.append(
         f"The prediction assumes white noise of {noise['eta_std']:.3g} rad/s and {noise['tau_std']:.3g} N m per sample "
         f"at {noise['rate']:g} Hz ({data['settings'].get('noise_source', 'given')}), a robot that tracks the reference "
-        "on its nominal model, and identification with wmrid's observer; a coloured disturbance (casters, slip) or a "
-        "controller that reacts to the noise make the achieved std larger."
+        f"on its nominal model, and identification with wmrid's observer fitting the {data['settings']['friction']} "
+        "friction model; a coloured disturbance (a rough floor, slip) or a controller that reacts to the noise make "
+        "the achieved std larger."
     )
     parts += ["<h2>Notes</h2><ul>", *[f"<li>{html.escape(n)}</li>" for n in notes], "</ul></body></html>"]
     return "\n".join(parts)

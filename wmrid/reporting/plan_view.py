@@ -42,6 +42,13 @@ def summary(data: dict[str, Any]) -> list[str]:
         parts.append(text)
     if parts:
         lines.append("Within the same limits and time: " + "; ".join(parts) + ".")
+    aside = [(n, p) for n, p in data["predicted"].items() if not p.get("counted", True)]
+    if aside:
+        lines.append(
+            "How the casters' drag follows their load ("
+            + ", ".join(f"{n} {100 * p['relative']:.3g} %" for n, p in aside)
+            + ") is predicted too, but not counted: it describes the drag's change, not the robot."
+        )
     if crit["name"] != "worst":
         lines.append(f"Criterion: {crit['text']}, {100 * crit['value']:.3g} %.")
     return lines
