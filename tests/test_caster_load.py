@@ -255,13 +255,14 @@ def test_kernel_regressor_is_the_filter_regressor(name):
 
 def test_derivative_column_is_the_exact_filter():
     """The readable step's filtered regressor w of a column c(eta) phi' (phi = v, and phi = w) equals the filter
-    integral int exp(-k (t - s)) c(s) phi'(s) ds of the samples' linear interpolants, computed here by 8-point
-    Gauss-Legendre on each step (exact: on a step c is linear, phi' constant, the weight an exponential, smooth)
-    over 2 s of a reversing log, uneven steps: to 1e-10 of the column's filtered size (the recursion and the
-    quadrature add ~2000 terms in different orders; measured 1e-14).  No derivative of the speeds was formed: with
-    c constant (driving straight at v > 0: c = r/2) the same integral is phi - exp(-k t) phi_0 - k (filtered phi):
-    to 1e-5 (c = (r/2) v / sqrt(v^2 + DRAG_SPEED^2) is constant to DRAG_SPEED^2 / (2 v^2) < 2e-6 here; measured
-    2e-7)."""
+    integral int exp(-k (t - s)) c(s) phi'(s - h_prev) ds of the samples' linear interpolants, phi' taken one step late
+    (DERIVATIVE_LAG: phi's rate over the previous step; 0 over the first), computed here by 8-point Gauss-Legendre on
+    each step (exact: on a step c is linear, phi' constant, the weight an exponential, smooth) over 2 s of a
+    reversing log, uneven steps: to 1e-10 of the column's filtered size (the recursion and the quadrature add ~2000
+    terms in different orders; measured 1e-14).  No derivative of the speeds was formed: with c constant (driving
+    straight at v > 0: c = r/2) the same integral is, one step late, phi - exp(-k t) phi_0 - k (filtered phi) of the
+    speeds delayed by a step: to 1e-5 (c = (r/2) v / sqrt(v^2 + DRAG_SPEED^2) is constant to DRAG_SPEED^2 / (2 v^2)
+    < 2e-6 here)."""
     log = open_loop_log(duration=2.0, reversing=True, uneven=True)
     form = LOAD3
     settings = _settings(form)
@@ -277,7 +278,10 @@ def test_derivative_column_is_the_exact_filter():
         h = t1 - t0
         s = t0 + 0.5 * h * (nodes + 1.0)
         frac = (s - t0) / h
-        rates = kinematics((log.eta[i] - log.eta[i - 1])[None, :] / h, r, b)
+        if i == 1:
+            rates = kinematics(np.zeros((1, 2)), r, b)
+        else:
+            rates = kinematics((log.eta[i - 1] - log.eta[i - 2])[None, :] / (t0 - log.t[i - 2]), r, b)
         for col, which in form.derivative_columns:
             c = (1.0 - frac) * mult[i - 1, col] + frac * mult[i, col]
             filt[col] = (
@@ -293,15 +297,16 @@ def test_derivative_column_is_the_exact_filter():
     settings = _settings(LOAD1)
     state = initial_state(t[0], eta[0], tau[0], settings)
     v = R * speed
+    v_late = np.concatenate([[v[0]], v[:-1]])  # phi one step late (an even grid): the first step's rate is 0
     v_filt = 0.0
     for i in range(1, len(t)):
         state = observer_step(state, t[i], eta[i], tau[i], settings)
         h = t[i] - t[i - 1]
         s = t[i - 1] + 0.5 * h * (nodes + 1.0)
-        lin = v[i - 1] + (s - t[i - 1]) / h * (v[i] - v[i - 1])
+        lin = v_late[i - 1] + (s - t[i - 1]) / h * (v_late[i] - v_late[i - 1])
         v_filt = np.exp(-k * h) * v_filt + 0.5 * h * np.sum(weights * np.exp(-k * (t[i] - s)) * lin)
     c = -0.5 * R * v[0] / np.sqrt(v[0] ** 2 + model.DRAG_SPEED**2)
-    expected = c * (v[-1] - np.exp(-k * (t[-1] - t[0])) * v[0] - k * v_filt)
+    expected = c * (v_late[-1] - np.exp(-k * (t[-1] - t[0])) * v_late[0] - k * v_filt)
     assert state.w[10] == pytest.approx(expected, rel=1e-5)  # c = (r/2) v/sqrt(v^2 + DRAG_SPEED^2) moves by < 2e-6
 
 

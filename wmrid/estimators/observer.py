@@ -20,12 +20,16 @@ Discretisation at the log's own (possibly uneven) stamps t_n, h = t_{n+1} - t_n:
   measured, continuous effort (a filtered current) calls for ``"foh"``.
 * A column c(eta) phi' of g whose phi' is a derivative (the ``wheel+caster+load`` model's drag that follows v'
   or w', :attr:`wmrid.model.dynamics.RegressorForm.derivative_columns`) is filtered without differentiating:
-  over a step, c linear and phi linear (so phi' = (phi_{n+1} - phi_n) / h, constant), the filter's input is
-  exactly (phi_{n+1} - phi_n) / h (beta0 c_n + beta1 c_{n+1}) (:func:`wmrid.model.dynamics.filter_regressor`).
-  The 1/h cancels against beta ~ h, and summed over steps the differences of phi telescope, so noise on phi
-  enters the filtered column once (with c constant the column is c (phi - exp(-k t) phi_0 - k phi_f), phi_f the
-  filtered phi), never amplified.  Exact under the same first-order hold as every other column; no expansion of
-  M_eff(eta)^-1 is needed, as eta' appears linearly on the right of eta' = g theta (the implicit form).
+  over a step, c linear and phi linear, the filter's input is phi' (beta0 c_n + beta1 c_{n+1})
+  (:func:`wmrid.model.dynamics.filter_regressor`), phi' being phi's rate over the PREVIOUS step,
+  (phi_n - phi_{n-1}) / (t_n - t_{n-1}): phi' one step late (:data:`wmrid.model.dynamics.DERIVATIVE_LAG`).
+  The change over this step would hold this sample's speed noise e_{n+1} at full weight (the 1/h cancels against
+  beta ~ h), and the prediction error eta_{n+1} - eta_hat holds it too: the regressor's noise would correlate with
+  the residual's and bias the estimate whatever the drag's true load terms (the paper robot's MuJoCo plan log,
+  0.02 rad/s: the structural mismatch T2 532 on 17 dof with the load terms' truth zero, 112 one step late).
+  Summed over steps the differences of phi telescope, so noise on phi enters the filtered column once, never
+  amplified.  No expansion of M_eff(eta)^-1 is needed, as eta' appears linearly on the right of eta' = g theta
+  (the implicit form).
 * theta_hat then jumps at t_{n+1}; the term w theta_hat' of (26) integrates that jump exactly:
   eta_hat += w_{n+1} (theta_hat_{n+1} - theta_hat_n).
 * Eqs. (33)-(36) are integrated implicitly (rectangle rule at t_{n+1}): Gamma_{n+1} = Gamma_n + h w^T w,
@@ -164,7 +168,8 @@ class ObserverState:
 
     w (p,), eta_hat (2,) rad/s, xi_hat (2,) rad/s, gamma and gamma_inv (p, p), theta (2, p) the
     unconstrained estimate, g (p,) and eta (2,) of the last sample, e_prior (2,) rad/s the prediction
-    error at the last sample before its update.
+    error at the last sample before its update, eta_rate (2,) rad/s^2 eta's rate of change over the last step (what
+    the next step's derivative columns take, :data:`wmrid.model.dynamics.DERIVATIVE_LAG`).
     """
 
     t: float
@@ -177,6 +182,7 @@ class ObserverState:
     gamma_inv: np.ndarray
     theta: np.ndarray
     e_prior: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    eta_rate: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
 
 def initial_state(t0: float, eta0: np.ndarray, tau0: np.ndarray, settings: ObserverSettings) -> ObserverState:
@@ -213,7 +219,8 @@ def observer_step(
         g_in[:2] = c0 * state.g[:2] + c1 * g[:2]
     derivative = settings.form.derivative_columns
     if derivative:  # ... and c(eta) phi' as c linear times phi' = (phi change) / h (dynamics.filter_regressor)
-        rates = platform_speeds((eta - state.eta) / h, settings.form.geometry[0], settings.form.geometry[1])
+        # the previous step's change: this step's carries this sample's noise, as the prediction error does
+        rates = platform_speeds(state.eta_rate, settings.form.geometry[0], settings.form.geometry[1])
         for col, which in derivative:
             g_in[col] = rates[which] * (b0 * state.g[col] + b1 * g[col])
     w = a * state.w + g_in  # (27)
@@ -232,7 +239,7 @@ def observer_step(
     eta_hat = eta_hat + d_theta @ w  # the w theta_hat' term of (26)
     return ObserverState(
         t=float(t), eta=eta, g=g, w=w, eta_hat=eta_hat, xi_hat=xi_hat,
-        gamma=gamma, gamma_inv=gamma_inv, theta=theta_new, e_prior=e_prior,
+        gamma=gamma, gamma_inv=gamma_inv, theta=theta_new, e_prior=e_prior, eta_rate=(eta - state.eta) / h,
     )  # fmt: skip
 
 

@@ -73,8 +73,9 @@ def _regressor_into(out, e1, e2, t1, t2, kind, geom, load):
 @numba.njit(cache=True, nogil=True)
 def _derivative_inputs(gin, g_prev, g, b0, b1, h, de1, de2, geom, load):
     """Overwrite the filter input of the columns c(eta) phi' (load codes 0: phi = v, 3: phi = w) over a step of h s
-    with (phi_b - phi_a) / h (b0 c_a + b1 c_b): the exact filter input of c phi' when c and phi are linear over the
-    step.  de1, de2: the wheel speeds' change over the step, rad/s."""
+    with phi' (b0 c_a + b1 c_b) / h.  de1, de2: h times the wheel speeds' rate of change over the PREVIOUS step,
+    rad/s (the caller keeps that rate; :data:`wmrid.model.dynamics.DERIVATIVE_LAG`): the change over this step would
+    carry this sample's speed noise, which the prediction error carries too, and the two would correlate."""
     nl = len(load)
     if nl == 0:
         return
@@ -163,7 +164,9 @@ def observer_chunk(
     from each sample to the next (zoh); f > 0 held by a controller running at f Hz, round(h f) sub-steps
     per step, whose unlogged
     values lie on the line between the logged ones (see :func:`_substep_weights`).
-    st (7,) = [t_prev, eta_prev (2), eta_hat (2), xi_hat (2)]; w, g_prev (p,); theta (2, p) unconstrained
+    st (9,) = [t_prev, eta_prev (2), eta_hat (2), xi_hat (2), eta's rate of change over the previous step (2)]; w,
+    g_prev (p,);
+    theta (2, p) unconstrained
     estimate; gamma, gamma_inv (p, p).
     hist_idx (m,) increasing global sample indices to record into hist_theta (m, 2, p), hist_e (m, 2)
     (prior prediction error, rad/s), hist_gamma (m, p, p).  block_end (J,) increasing global indices, the
@@ -205,7 +208,7 @@ def observer_chunk(
             c0, c1 = _substep_weights(k * h, h, sub)
             gin[0] = c0 * g_prev[0] + c1 * g[0]
             gin[1] = c0 * g_prev[1] + c1 * g[1]
-        _derivative_inputs(gin, g_prev, g, b0, b1, h, e1 - st[1], e2 - st[2], geom, load)
+        _derivative_inputs(gin, g_prev, g, b0, b1, h, h * st[7], h * st[8], geom, load)
         # (27) w and (26) eta_hat with theta held over the step
         for j in range(p):
             w[j] = a * w[j] + gin[j]
@@ -265,6 +268,8 @@ def observer_chunk(
                 blk_a[bj, r, j] += wr * w[j]
         for j in range(p):
             g_prev[j] = g[j]
+        st[7] = (e1 - st[1]) / h
+        st[8] = (e2 - st[2]) / h
         st[0] = t[i]
         st[1] = e1
         st[2] = e2

@@ -116,7 +116,7 @@ def load_codes(form) -> np.ndarray:
 class KernelState:
     """The compiled observer's running state for one settings (what :func:`wmrid.estimators.observer_kernel.
     observer_chunk` carries from piece to piece): the kernel kind, caster geometry and load codes of the form, the
-    gain k, the predictor/filter state st (7,), the filters w, g_prev (p,), theta (2, p), Gamma and its inverse
+    gain k, the predictor/filter state st (9,), the filters w, g_prev (p,), theta (2, p), Gamma and its inverse
     (p, p).  Shared by the full-rate replay, its half-rate twin and the online observer."""
 
     form: Any
@@ -137,14 +137,14 @@ class KernelState:
         p = form.n_columns
         return cls(
             form=form, kind=kernel_kind(form), geom=np.array(form.geometry, dtype=np.float64),
-            load=load_codes(form), k=float(settings.k), st=np.zeros(7), w=np.zeros(p), g_prev=np.zeros(p),
+            load=load_codes(form), k=float(settings.k), st=np.zeros(9), w=np.zeros(p), g_prev=np.zeros(p),
             theta=np.array(settings.theta_init, dtype=float), gamma=settings.alpha * np.eye(p),
             gamma_inv=np.eye(p) / settings.alpha,
         )  # fmt: skip
 
     def start(self, t: np.ndarray, eta: np.ndarray, tau: np.ndarray) -> None:
         """Start the predictor and the filter at the first sample (t (k,), eta, tau (k, 2), k >= 1)."""
-        self.st[:] = [t[0], eta[0, 0], eta[0, 1], eta[0, 0], eta[0, 1], 0.0, 0.0]
+        self.st[:] = [t[0], eta[0, 0], eta[0, 1], eta[0, 0], eta[0, 1], 0.0, 0.0, 0.0, 0.0]
         self.g_prev[:] = filter_regressor(eta[:1], tau[:1], self.form)[0]
 
 

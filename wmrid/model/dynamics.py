@@ -353,13 +353,19 @@ def regressor(eta: np.ndarray, tau: np.ndarray, form: RegressorForm, eta_dot: np
     return _regressor(eta, tau, form, eta_dot, multiplier=False)
 
 
+#: Samples by which the observer's derivative columns (c(eta) v', c(eta) w') take phi' late: the change of the speeds
+#: over the previous step, not the current one, whose noise the prediction error carries too (see
+#: :mod:`wmrid.estimators.observer`).  A lag of one step errs by about h phi'' / phi' of the column (1 ms at 1 kHz).
+DERIVATIVE_LAG = 1
+
+
 def filter_regressor(eta: np.ndarray, tau: np.ndarray, form: RegressorForm) -> np.ndarray:
     """What the observer's filters take per sample (n, p): g(eta, tau) of :func:`regressor`, except that a column
     c(eta) phi' of ``form.derivative_columns`` holds its multiplier c(eta).
 
-    The filters then take that column's input over a step from t_a to t_b as (phi_b - phi_a) / (t_b - t_a) times the
-    first-order-hold weights of c: the exact filter of c phi' when c and phi are linear over the step, as every
-    column is taken to be (:func:`wmrid.estimators.observer.observer_step`).  No derivative is formed: summed over
+    The filters then take that column's input over a step from t_a to t_b as phi's rate of change over the step
+    before it times the first-order-hold weights of c (:data:`DERIVATIVE_LAG`;
+    :func:`wmrid.estimators.observer.observer_step`).  No derivative is formed: summed over
     steps the phi differences telescope, so a noisy phi enters the filtered column once, not divided by the step
     (with c constant, filtered phi' = phi - k filtered phi, exactly)."""
     return _regressor(eta, tau, form, None, multiplier=True)
