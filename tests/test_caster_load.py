@@ -238,19 +238,25 @@ def _settings(form: RegressorForm, k: float = 3.0, hold: str = "zoh") -> Observe
 @pytest.mark.parametrize("name", list(LOAD_FORMS))
 def test_kernel_regressor_is_the_filter_regressor(name):
     """observer_kernel._regressor_into with the load codes equals filter_regressor on ~450 samples with the special
-    speeds: to 1e-14 of each column's largest entry (the same arithmetic in the same order; measured exact)."""
+    speeds: to 1e-14 of each column's largest entry (the same arithmetic in the same order; measured exact).  Both
+    with the drag's direction taken from the measured speeds and from other ones (the sign speeds,
+    :mod:`wmrid.estimators.sign_speed`: here the measured speeds shuffled, so that direction and load signals differ)."""
     form = LOAD_FORMS[name]
     assert kernel_kind(form) == KIND_CASTER_GEOMETRY
     rng = np.random.default_rng(15)
     eta = speed_samples(rng)
     tau = rng.normal(0.0, 2.0, size=eta.shape)
-    expected = model.filter_regressor(eta, tau, form)
     geom, load = np.array(form.geometry), load_codes(form)
     out = np.empty(form.n_columns)
-    for i in range(len(eta)):
-        _regressor_into(out, eta[i, 0], eta[i, 1], tau[i, 0], tau[i, 1], KIND_CASTER_GEOMETRY, geom, load)
+    for signs in (eta, eta[rng.permutation(len(eta))]):
+        expected = model.filter_regressor(eta, tau, form, signs)
         scale = np.maximum(np.max(np.abs(expected), axis=0), 1e-300)
-        assert np.all(np.abs(out - expected[i]) <= 1e-14 * scale)
+        for i in range(len(eta)):
+            _regressor_into(
+                out, eta[i, 0], eta[i, 1], signs[i, 0], signs[i, 1], tau[i, 0], tau[i, 1], KIND_CASTER_GEOMETRY, geom,
+                load,
+            )  # fmt: skip
+            assert np.all(np.abs(out - expected[i]) <= 1e-14 * scale)
 
 
 def test_derivative_column_is_the_exact_filter():

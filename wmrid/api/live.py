@@ -217,6 +217,7 @@ class LiveRun:
         from wmrid.estimators.identify import default_box
         from wmrid.estimators.observer import ObserverSettings
         from wmrid.estimators.online import OnlineObserver
+        from wmrid.estimators.sign_speed import sign_half_window
         from wmrid.model import dynamics as model
 
         robot = self.prep.robot if self.effort_unit == "N m" else None
@@ -231,7 +232,7 @@ class LiveRun:
             form=form, theta_init=theta_init, theta_min=lo, theta_max=hi, k=s.get("k", 10.0),
             alpha=s.get("alpha", 1e-10), torque_hold=s.get("torque_hold", "zoh"), control_rate=s.get("control_rate"),
         )  # fmt: skip
-        return OnlineObserver(settings)
+        return OnlineObserver(settings, sign_half_window=sign_half_window(sv.n, sv.duration))
 
     def _feed_observers(self, t: np.ndarray, eta: np.ndarray, tau: np.ndarray) -> None:
         kept = []

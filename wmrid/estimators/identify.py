@@ -38,6 +38,7 @@ from wmrid.estimators.observer import ObserverSettings
 from wmrid.estimators.observer_kernel import project_history_box
 from wmrid.estimators.replay import replay_pieces
 from wmrid.estimators.result import History, IdentificationResult, LogLike, ObserverRun, finite_or_none, reported_names
+from wmrid.estimators.sign_speed import sign_half_window
 from wmrid.estimators.survey import Survey, survey
 from wmrid.estimators.uncertainty import estimate_covariances, interval_factor, jackknife_deltas, segments_of
 from wmrid.estimators.widening import carry_unresolved_delay, with_hold_term, with_timing_term
@@ -502,6 +503,7 @@ def _identify(
         out = replay_pieces(
             ((p.t, p.eta, p.tau) for p in stream), n, duration, settings, max_history=max_history, progress=tick,
             half_rate=True, low_speed=sv.low_speed(), noise_lag=derived_lag(stream.notes),
+            sign_half_window=sign_half_window(n, duration),
         )  # fmt: skip
     theta_u, gamma, gamma_inv = out.theta, out.gamma, out.gamma_inv
     finite = all(np.all(np.isfinite(a)) for a in (theta_u, gamma, gamma_inv, out.blk_a, out.blk_c))

@@ -185,11 +185,15 @@ class ObserverState:
     eta_rate: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
 
-def initial_state(t0: float, eta0: np.ndarray, tau0: np.ndarray, settings: ObserverSettings) -> ObserverState:
-    """State at the first sample: w = 0, eta_hat = eta, xi_hat = e = 0, Gamma = alpha I (Eqs. 27, 30, 33)."""
+def initial_state(
+    t0: float, eta0: np.ndarray, tau0: np.ndarray, settings: ObserverSettings, eta_sign0: np.ndarray | None = None
+) -> ObserverState:
+    """State at the first sample: w = 0, eta_hat = eta, xi_hat = e = 0, Gamma = alpha I (Eqs. 27, 30, 33).
+    eta_sign0 (2,) rad/s: the speed its sign columns are taken from (:mod:`wmrid.estimators.sign_speed`; None: eta0)."""
     p = settings.form.n_columns
     eta0 = np.asarray(eta0, dtype=float)
-    g0 = filter_regressor(eta0[None, :], np.asarray(tau0, dtype=float)[None, :], settings.form)[0]
+    s0 = None if eta_sign0 is None else np.asarray(eta_sign0, dtype=float)[None, :]
+    g0 = filter_regressor(eta0[None, :], np.asarray(tau0, dtype=float)[None, :], settings.form, s0)[0]
     return ObserverState(
         t=float(t0), eta=eta0.copy(), g=g0, w=np.zeros(p), eta_hat=eta0.copy(), xi_hat=np.zeros(2),
         gamma=settings.alpha * np.eye(p), gamma_inv=np.eye(p) / settings.alpha,
@@ -198,9 +202,15 @@ def initial_state(t0: float, eta0: np.ndarray, tau0: np.ndarray, settings: Obser
 
 
 def observer_step(
-    state: ObserverState, t: float, eta: np.ndarray, tau: np.ndarray, settings: ObserverSettings
+    state: ObserverState,
+    t: float,
+    eta: np.ndarray,
+    tau: np.ndarray,
+    settings: ObserverSettings,
+    eta_sign: np.ndarray | None = None,
 ) -> ObserverState:
-    """Advance the estimator to a new sample (t s, eta (2,) rad/s, tau (2,) N m). Pure: returns a new state."""
+    """Advance the estimator to a new sample (t s, eta (2,) rad/s, tau (2,) N m). Pure: returns a new state.
+    eta_sign (2,) rad/s: the speed the sign columns are taken from (:mod:`wmrid.estimators.sign_speed`; None: eta)."""
     h = t - state.t
     if not h > 0:
         raise ValueError(f"time must increase: {state.t} -> {t}")
@@ -208,7 +218,8 @@ def observer_step(
     a, phi0, phi1 = foh_weights(k * h)
     b0, b1 = h * phi0, h * phi1
     eta = np.asarray(eta, dtype=float)
-    g = filter_regressor(eta[None, :], np.asarray(tau, dtype=float)[None, :], settings.form)[0]
+    s = None if eta_sign is None else np.asarray(eta_sign, dtype=float)[None, :]
+    g = filter_regressor(eta[None, :], np.asarray(tau, dtype=float)[None, :], settings.form, s)[0]
     theta = state.theta
 
     g_in = b0 * state.g + b1 * g  # the filters' input over the step (first-order hold) ...

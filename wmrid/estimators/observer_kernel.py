@@ -24,11 +24,13 @@ KIND_CASTER_GEOMETRY = 3
 
 
 @numba.njit(cache=True, nogil=True)
-def _regressor_into(out, e1, e2, t1, t2, kind, geom, load):
+def _regressor_into(out, e1, e2, s1, s2, t1, t2, kind, geom, load):
     """The filters' per-sample input g (:func:`wmrid.model.dynamics.filter_regressor`) into ``out`` (p,).
 
-    load (L,) int64: kind 3's load signals, codes into :data:`wmrid.model.dynamics.LOAD_SIGNALS` (0 dv, 1 w2,
-    2 vw, 3 dw); the columns of dv and dw hold their multiplier (see :func:`_derivative_inputs`)."""
+    e1, e2 rad/s: the measured speeds; s1, s2 rad/s: the speeds the sign columns and the casters' drag directions
+    are taken from (:mod:`wmrid.estimators.sign_speed`).  load (L,) int64: kind 3's load signals, codes into
+    :data:`wmrid.model.dynamics.LOAD_SIGNALS` (0 dv, 1 w2, 2 vw, 3 dw); the columns of dv and dw hold their
+    multiplier (see :func:`_derivative_inputs`)."""
     out[0] = t1
     out[1] = t2
     out[2] = e2 * e2 - e1 * e2
@@ -38,21 +40,23 @@ def _regressor_into(out, e1, e2, t1, t2, kind, geom, load):
     if kind == KIND_PAPER:
         out[6] = -1.0
     else:
-        out[6] = -sign(e1)
-        out[7] = -sign(e2)
+        out[6] = -sign(s1)
+        out[7] = -sign(s2)
         if kind == KIND_CASTER:
-            out[8] = -sign(e1 + e2)
-            out[9] = -sign(e1 - e2)
+            out[8] = -sign(s1 + s2)
+            out[9] = -sign(s1 - s2)
         elif kind == KIND_CASTER_GEOMETRY:  # geom = [r, b, x_1, y_1, ...]
             r, b = geom[0], geom[1]
             v = 0.5 * r * (e1 + e2)
             w = r / (2.0 * b) * (e1 - e2)
+            vs = 0.5 * r * (s1 + s2)  # the drag's direction from the sign speeds, its load signals from the measured
+            ws = r / (2.0 * b) * (s1 - s2)
             nk = (len(geom) - 2) // 2
             nl = len(load)
             for k in range(nk):
                 x, y = geom[2 + 2 * k], geom[3 + 2 * k]
-                ux = v - w * y
-                uy = w * x
+                ux = vs - ws * y
+                uy = ws * x
                 norm = math.sqrt(ux * ux + uy * uy + DRAG_SPEED * DRAG_SPEED)
                 cv = 0.5 * r * ux / norm
                 cw = r / (2.0 * b) * (x * uy - y * ux) / norm
@@ -132,6 +136,7 @@ def _substep_weights(x, h, m):
 def observer_chunk(
     t,
     eta,
+    eta_sign,
     tau,
     offset,
     kind,
@@ -159,7 +164,9 @@ def observer_chunk(
     """Advance the estimator over one chunk of samples; every state array is updated in place.
 
     t (c,) s, eta and tau (c, 2): samples with global indices offset .. offset + c - 1 (offset >= 1; the
-    first sample of the log is the initial state).  kind 0 paper / 1 general / 2 general with caster drag.
+    first sample of the log is the initial state); eta_sign (c, 2) rad/s: the speeds the sign-like columns are
+    taken from (:mod:`wmrid.estimators.sign_speed`; eta itself for none).  kind 0 paper / 1 general / 2 general
+    with caster drag.
     hold: how the torque columns of g vary between samples: -1 linearly like the others (foh); 0 held
     from each sample to the next (zoh); f > 0 held by a controller running at f Hz, round(h f) sub-steps
     per step, whose unlogged
@@ -196,7 +203,7 @@ def observer_chunk(
         b1 = h * phi1
         e1 = eta[i, 0]
         e2 = eta[i, 1]
-        _regressor_into(g, e1, e2, tau[i, 0], tau[i, 1], kind, geom, load)
+        _regressor_into(g, e1, e2, eta_sign[i, 0], eta_sign[i, 1], tau[i, 0], tau[i, 1], kind, geom, load)
         # the input of the filters over the step: first-order hold, the torques held when zoh
         for j in range(p):
             gin[j] = b0 * g_prev[j] + b1 * g[j]

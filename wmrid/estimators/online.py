@@ -25,6 +25,7 @@ import numpy as np
 
 from wmrid.estimators.observer import ObserverSettings
 from wmrid.estimators.replay import KernelState
+from wmrid.estimators.sign_speed import SignSpeeds
 from wmrid.model.kernels import plain
 
 #: The most blocks kept; past it neighbours are merged (the jackknife uses at most 40 segments).
@@ -38,7 +39,9 @@ class OnlineObserver:
     s; the blocks' sums (J, p, p), (J, 2, p), (J, 2), (J, 2) and end times (J,) s are :meth:`blocks`.
     """
 
-    def __init__(self, settings: ObserverSettings, block_seconds: float | None = None) -> None:
+    def __init__(
+        self, settings: ObserverSettings, block_seconds: float | None = None, sign_half_window: int = 0
+    ) -> None:
         p = settings.form.n_columns
         self.settings = settings
         self.ks = KernelState.initial(settings)
@@ -58,6 +61,8 @@ class OnlineObserver:
         self._bucket = 0  # the open block's bucket: floor((t - t_first) / block_seconds)
         # the kernel's history: one slot it never reaches (no history is kept online)
         self._hist_idx = np.array([-1], dtype=np.int64)
+        # the sign columns' centred mean (wmrid.estimators.sign_speed): samples reach the kernel that many late
+        self._signs = SignSpeeds(sign_half_window)
         self._hist = (np.empty((1, 2, p)), np.empty((1, 2)), np.empty((1, p, p)))
 
     @property
@@ -74,7 +79,16 @@ class OnlineObserver:
         return self.ks.gamma_inv
 
     def feed(self, t: np.ndarray, eta: np.ndarray, tau: np.ndarray) -> None:
-        """Advance over the samples t (k,) s (after every sample fed so far), eta (k, 2) rad/s, tau (k, 2)."""
+        """Advance over the samples t (k,) s (after every sample fed so far), eta (k, 2) rad/s, tau (k, 2); with a
+        sign window of h samples the last h wait for their successors (or :meth:`finish`)."""
+        if len(t):
+            self._advance(*self._signs.feed(t, eta, tau))
+
+    def finish(self) -> None:
+        """Advance over the samples the sign window still holds back (the stream has ended)."""
+        self._advance(*self._signs.finish())
+
+    def _advance(self, t: np.ndarray, eta: np.ndarray, tau: np.ndarray, eta_sign: np.ndarray) -> None:
         from wmrid.estimators.observer_kernel import observer_chunk
 
         if len(t) == 0:
@@ -82,13 +96,14 @@ class OnlineObserver:
         t = np.ascontiguousarray(t, dtype=np.float64)
         eta = np.ascontiguousarray(eta, dtype=np.float64)
         tau = np.ascontiguousarray(tau, dtype=np.float64)
+        eta_sign = np.ascontiguousarray(eta_sign, dtype=np.float64)
         ks = self.ks
         skip = 0
         if self.n == 0:  # the first sample starts the predictor and the filter, as in replay_pieces
-            self.ks.start(t, eta, tau)
+            self.ks.start(t, eta, tau, eta_sign)
             self.t_first = float(t[0])
             skip = 1
-        ts, es, us = t[skip:], eta[skip:], tau[skip:]
+        ts, es, us, ss = t[skip:], eta[skip:], tau[skip:], eta_sign[skip:]
         c = len(ts)
         if c:
             bucket = np.floor((ts - self.t_first) / self.block_seconds).astype(np.int64)
@@ -104,8 +119,9 @@ class OnlineObserver:
             blk = (np.zeros((nb, p, p)), np.zeros((nb, 2, p)), np.zeros((nb, 2)), np.zeros((nb, 2)))
             cursor = np.zeros(2, dtype=np.int64)
             observer_chunk(
-                plain(ts), plain(es), plain(us), offset, ks.kind, self.hold, ks.k, ks.st, ks.w, ks.g_prev, ks.theta,
-                ks.gamma, ks.gamma_inv, self._hist_idx, *self._hist, block_end, *blk, cursor, ks.geom, ks.load,
+                plain(ts), plain(es), plain(ss), plain(us), offset, ks.kind, self.hold, ks.k, ks.st, ks.w, ks.g_prev,
+                ks.theta, ks.gamma, ks.gamma_inv, self._hist_idx, *self._hist, block_end, *blk, cursor, ks.geom,
+                ks.load,
             )  # fmt: skip
             for j in range(nb):
                 i = self.closed

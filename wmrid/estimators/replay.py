@@ -14,6 +14,7 @@ import numpy as np
 
 from wmrid.estimators.noise_floor import NoiseFloor
 from wmrid.estimators.observer import ObserverSettings
+from wmrid.estimators.sign_speed import SignSpeeds
 from wmrid.model.dynamics import filter_regressor
 from wmrid.model.kernels import plain
 
@@ -85,13 +86,18 @@ def replay(
     max_history: int = 20000,
     chunk: int = CHUNK,
     progress: Callable[[int], None] | None = None,
+    sign_half_window: int = 0,
 ) -> ReplayOutput:
-    """Run the estimator over t (n,) s, eta (n, 2) rad/s, tau (n, 2) N m; ``progress(samples_done)``."""
+    """Run the estimator over t (n,) s, eta (n, 2) rad/s, tau (n, 2) N m; ``progress(samples_done)``;
+    ``sign_half_window``: see :func:`replay_pieces`."""
     t = np.ascontiguousarray(t, dtype=np.float64)
     eta = np.ascontiguousarray(eta, dtype=np.float64)
     tau = np.ascontiguousarray(tau, dtype=np.float64)
     pieces = ((t[i : i + chunk], eta[i : i + chunk], tau[i : i + chunk]) for i in range(0, len(t), chunk))
-    return replay_pieces(pieces, len(t), float(t[-1] - t[0]), settings, max_history=max_history, progress=progress)
+    return replay_pieces(
+        pieces, len(t), float(t[-1] - t[0]), settings, max_history=max_history, progress=progress,
+        sign_half_window=sign_half_window,
+    )  # fmt: skip
 
 
 def kernel_kind(form) -> int:
@@ -142,10 +148,10 @@ class KernelState:
             gamma_inv=np.eye(p) / settings.alpha,
         )  # fmt: skip
 
-    def start(self, t: np.ndarray, eta: np.ndarray, tau: np.ndarray) -> None:
-        """Start the predictor and the filter at the first sample (t (k,), eta, tau (k, 2), k >= 1)."""
+    def start(self, t: np.ndarray, eta: np.ndarray, tau: np.ndarray, eta_sign: np.ndarray) -> None:
+        """Start the predictor and the filter at the first sample (t (k,), eta, tau, eta_sign (k, 2), k >= 1)."""
         self.st[:] = [t[0], eta[0, 0], eta[0, 1], eta[0, 0], eta[0, 1], 0.0, 0.0, 0.0, 0.0]
-        self.g_prev[:] = filter_regressor(eta[:1], tau[:1], self.form)[0]
+        self.g_prev[:] = filter_regressor(eta[:1], tau[:1], self.form, eta_sign[:1])[0]
 
 
 class _HalfRate:
@@ -179,22 +185,23 @@ class _HalfRate:
         self.cursor = np.zeros(2, dtype=np.int64)
         self.done = 0  # decimated samples consumed
 
-    def feed(self, t: np.ndarray, eta: np.ndarray, tau: np.ndarray, start: int) -> None:
-        """Samples with global indices start .. start + len(t) - 1; only the even ones are used."""
+    def feed(self, t: np.ndarray, eta: np.ndarray, tau: np.ndarray, eta_sign: np.ndarray, start: int) -> None:
+        """Samples with global indices start .. start + len(t) - 1; only the even ones are used (their sign speeds
+        are the full-rate run's: the same centred mean of the measured speeds)."""
         from wmrid.estimators.observer_kernel import observer_chunk
 
         first = start % 2  # offset of the first even global index within this piece
-        t, eta, tau = t[first::2], eta[first::2], tau[first::2]
+        t, eta, tau, eta_sign = t[first::2], eta[first::2], tau[first::2], eta_sign[first::2]
         if len(t) == 0 or self.n < 2:
             return
         skip = 0
         ks = self.ks
         if self.done == 0:
-            ks.start(t, eta, tau)
+            ks.start(t, eta, tau, eta_sign)
             skip = 1
         if len(t) > skip:
             observer_chunk(
-                plain(t[skip:]), plain(eta[skip:]), plain(tau[skip:]),
+                plain(t[skip:]), plain(eta[skip:]), plain(eta_sign[skip:]), plain(tau[skip:]),
                 self.done + skip, ks.kind, self.hold, ks.k, ks.st, ks.w, ks.g_prev, ks.theta, ks.gamma, ks.gamma_inv,
                 self.hist_idx, self.hist_theta, self.hist_e, self.hist_gamma, self.block_end, *self.blk,
                 self.cursor, ks.geom, ks.load,
@@ -213,6 +220,7 @@ def replay_pieces(
     half_rate: bool = False,
     low_speed: np.ndarray | None = None,
     noise_lag: int = 1,
+    sign_half_window: int = 0,
 ) -> ReplayOutput:
     """Run the estimator over a log given as consecutive pieces (t (k,) s, eta (k, 2) rad/s, tau (k, 2)).
 
@@ -222,6 +230,9 @@ def replay_pieces(
     ``low_speed`` (2,) rad/s: mark the blocks where |eta_i| < low_speed[i] for a wheel (``ReplayOutput.blk_slow``).
     ``noise_lag`` samples: the spacing of the noise floor's second differences (:class:`wmrid.estimators.noise_floor.
     NoiseFloor`; 1 for measured speeds, the derivative's window for speeds derived from positions).
+    ``sign_half_window`` samples: the sign columns take the sign of a centred mean of the speeds over twice this
+    plus one (:mod:`wmrid.estimators.sign_speed`; 0: of the measured speeds); the pieces then reach the kernel that
+    many samples late, the last ones when the pieces end.
     """
     from wmrid.estimators.observer_kernel import observer_chunk
 
@@ -252,44 +263,53 @@ def replay_pieces(
         from concurrent.futures import ThreadPoolExecutor
 
         pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wmrid-half-rate")
+    signs = SignSpeeds(sign_half_window)
     done = 0
+
+    def advance(t: np.ndarray, eta: np.ndarray, tau: np.ndarray, es: np.ndarray) -> None:
+        nonlocal done, pending
+        k = len(t)
+        if k == 0:
+            return
+        t = np.ascontiguousarray(t, dtype=np.float64)
+        eta = np.ascontiguousarray(eta, dtype=np.float64)
+        tau = np.ascontiguousarray(tau, dtype=np.float64)
+        es = np.ascontiguousarray(es, dtype=np.float64)
+        for idx, out in ((hist_idx, hist_t), (block_end, block_t)):
+            lo, hi = np.searchsorted(idx, [done, done + k])
+            out[lo:hi] = t[idx[lo:hi] - done]
+        if half is not None and pool is None:
+            half.feed(t, eta, tau, es, done)
+        elif half is not None:  # on its thread, while this one runs the full-rate kernel on the same piece
+            if pending is not None:
+                pending.result()
+            pending = pool.submit(half.feed, t, eta, tau, es, done)
+        skip = 0
+        if done == 0:  # the first sample starts the predictor and the filter
+            ks.start(t, eta, tau, es)
+            if hist_idx[0] == 0:
+                hist_theta[0], hist_e[0], hist_gamma[0] = ks.theta, 0.0, ks.gamma
+                cursor[0] = 1
+            skip = 1
+        observer_chunk(
+            plain(t[skip:]), plain(eta[skip:]), plain(es[skip:]), plain(tau[skip:]), done + skip, ks.kind, hold, ks.k,
+            ks.st, ks.w, ks.g_prev, ks.theta, ks.gamma, ks.gamma_inv, hist_idx, hist_theta, hist_e, hist_gamma,
+            block_end, blk_a, blk_c, blk_uu, blk_ee, cursor, ks.geom, ks.load,
+        )  # fmt: skip
+        floor.feed(eta)
+        if blk_slow is not None:
+            slow = np.flatnonzero(np.any(np.abs(eta) < low_speed, axis=1))
+            if len(slow):
+                blk_slow[np.minimum(np.searchsorted(block_end, done + slow), nb - 1)] = True
+        done += k
+        if progress is not None:
+            progress(done)
+
     try:
         for t, eta, tau in pieces:
-            k = len(t)
-            if k == 0:
-                continue
-            t = np.ascontiguousarray(t, dtype=np.float64)
-            eta = np.ascontiguousarray(eta, dtype=np.float64)
-            tau = np.ascontiguousarray(tau, dtype=np.float64)
-            for idx, out in ((hist_idx, hist_t), (block_end, block_t)):
-                lo, hi = np.searchsorted(idx, [done, done + k])
-                out[lo:hi] = t[idx[lo:hi] - done]
-            if half is not None and pool is None:
-                half.feed(t, eta, tau, done)
-            elif half is not None:  # on its thread, while this one runs the full-rate kernel on the same piece
-                if pending is not None:
-                    pending.result()
-                pending = pool.submit(half.feed, t, eta, tau, done)
-            skip = 0
-            if done == 0:  # the first sample starts the predictor and the filter
-                ks.start(t, eta, tau)
-                if hist_idx[0] == 0:
-                    hist_theta[0], hist_e[0], hist_gamma[0] = ks.theta, 0.0, ks.gamma
-                    cursor[0] = 1
-                skip = 1
-            observer_chunk(
-                plain(t[skip:]), plain(eta[skip:]), plain(tau[skip:]), done + skip, ks.kind, hold, ks.k, ks.st,
-                ks.w, ks.g_prev, ks.theta, ks.gamma, ks.gamma_inv, hist_idx, hist_theta, hist_e, hist_gamma, block_end,
-                blk_a, blk_c, blk_uu, blk_ee, cursor, ks.geom, ks.load,
-            )  # fmt: skip
-            floor.feed(eta)
-            if blk_slow is not None:
-                slow = np.flatnonzero(np.any(np.abs(eta) < low_speed, axis=1))
-                if len(slow):
-                    blk_slow[np.minimum(np.searchsorted(block_end, done + slow), nb - 1)] = True
-            done += k
-            if progress is not None:
-                progress(done)
+            if len(t):
+                advance(*signs.feed(t, eta, tau))
+        advance(*signs.finish())
         if pending is not None:
             pending.result()
     finally:

@@ -359,7 +359,9 @@ def regressor(eta: np.ndarray, tau: np.ndarray, form: RegressorForm, eta_dot: np
 DERIVATIVE_LAG = 1
 
 
-def filter_regressor(eta: np.ndarray, tau: np.ndarray, form: RegressorForm) -> np.ndarray:
+def filter_regressor(
+    eta: np.ndarray, tau: np.ndarray, form: RegressorForm, eta_sign: np.ndarray | None = None
+) -> np.ndarray:
     """What the observer's filters take per sample (n, p): g(eta, tau) of :func:`regressor`, except that a column
     c(eta) phi' of ``form.derivative_columns`` holds its multiplier c(eta).
 
@@ -367,19 +369,23 @@ def filter_regressor(eta: np.ndarray, tau: np.ndarray, form: RegressorForm) -> n
     before it times the first-order-hold weights of c (:data:`DERIVATIVE_LAG`;
     :func:`wmrid.estimators.observer.observer_step`).  No derivative is formed: summed over
     steps the phi differences telescope, so a noisy phi enters the filtered column once, not divided by the step
-    (with c constant, filtered phi' = phi - k filtered phi, exactly)."""
-    return _regressor(eta, tau, form, None, multiplier=True)
+    (with c constant, filtered phi' = phi - k filtered phi, exactly).
+
+    eta_sign (n, 2) rad/s: the speeds the sign columns and the casters' drag directions are taken from (the
+    observer's short centred mean, :mod:`wmrid.estimators.sign_speed`); None: eta."""
+    return _regressor(eta, tau, form, None, multiplier=True, eta_sign=eta_sign)
 
 
-def _regressor(eta, tau, form, eta_dot, multiplier):
+def _regressor(eta, tau, form, eta_dot, multiplier, eta_sign=None):
     e1, e2 = eta[:, 0], eta[:, 1]
+    sgn = eta if eta_sign is None else eta_sign
     cols = [tau[:, 0], tau[:, 1], e2 * e2 - e1 * e2, e1 * e1 - e1 * e2, -e1, -e2]
     if form.kind == "paper":
         cols.append(-np.ones_like(e1))
     else:
-        cols += [-np.sign(e1), -np.sign(e2)]
+        cols += [-np.sign(sgn[:, 0]), -np.sign(sgn[:, 1])]
         if form.caster:
-            cols += list(-caster_columns(eta, form, eta_dot, multiplier=multiplier).T)
+            cols += list(-caster_columns(eta, form, eta_dot, multiplier=multiplier, eta_sign=eta_sign).T)
     return np.stack(cols, axis=1)
 
 
@@ -439,7 +445,12 @@ DRAG_SPEED = 1e-3
 
 
 def caster_columns(
-    eta: np.ndarray, form: RegressorForm, eta_dot: np.ndarray | None = None, *, multiplier: bool = False
+    eta: np.ndarray,
+    form: RegressorForm,
+    eta_dot: np.ndarray | None = None,
+    *,
+    multiplier: bool = False,
+    eta_sign: np.ndarray | None = None,
 ) -> np.ndarray:
     """The caster drag's columns (n, q) for eta (n, 2) rad/s, in the order of ``form.caster_map``.
 
@@ -468,16 +479,20 @@ def caster_columns(
       drag's columns times each signal are the load term's columns; linear in the new parameters, so the
       estimator stays linear.  The v' and w' columns need eta_dot (n, 2) rad/s^2; ``multiplier`` leaves them
       without the derivative (what the observer's filters take, :func:`filter_regressor`).
+
+    eta_sign (n, 2) rad/s: the speeds the drag's direction (the signs, u/|u|) is taken from; the load signals keep
+    eta (None: eta for both).
     """
-    e1, e2 = eta[:, 0], eta[:, 1]
+    s = eta if eta_sign is None else eta_sign
     if not form.geometry:
-        return np.stack([np.sign(e1 + e2), np.sign(e1 - e2)], axis=1)
+        return np.stack([np.sign(s[:, 0] + s[:, 1]), np.sign(s[:, 0] - s[:, 1])], axis=1)
     r, b = form.geometry[0], form.geometry[1]
     v, w = platform_speeds(eta, r, b)
+    vs, ws = platform_speeds(s, r, b)
     cols = []
     for k in range(form.n_casters):
         x, y = form.geometry[2 + 2 * k], form.geometry[3 + 2 * k]
-        ux, uy = v - w * y, w * x
+        ux, uy = vs - ws * y, ws * x
         norm = np.sqrt(ux * ux + uy * uy + DRAG_SPEED**2)
         cols += [0.5 * r * ux / norm, r / (2.0 * b) * (x * uy - y * ux) / norm]
     if form.load:
