@@ -240,7 +240,8 @@ def test_kernel_regressor_is_the_filter_regressor(name):
     """observer_kernel._regressor_into with the load codes equals filter_regressor on ~450 samples with the special
     speeds: to 1e-14 of each column's largest entry (the same arithmetic in the same order; measured exact).  Both
     with the drag's direction taken from the measured speeds and from other ones (the sign speeds,
-    :mod:`wmrid.estimators.sign_speed`: here the measured speeds shuffled, so that direction and load signals differ)."""
+    :mod:`wmrid.estimators.sign_speed`: here the measured speeds shuffled, so that direction and load signals
+    differ)."""
     form = LOAD_FORMS[name]
     assert kernel_kind(form) == KIND_CASTER_GEOMETRY
     rng = np.random.default_rng(15)

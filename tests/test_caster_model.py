@@ -321,7 +321,8 @@ def test_kernel_regressor_is_the_model_regressor(name):
     got = np.empty_like(expected)
     out = np.empty(form.n_columns)
     for i in range(len(eta)):
-        _regressor_into(out, eta[i, 0], eta[i, 1], tau[i, 0], tau[i, 1], kind, geom, np.zeros(0, dtype=np.int64))
+        e1, e2 = eta[i]  # the sign speeds are the speeds themselves here
+        _regressor_into(out, e1, e2, e1, e2, tau[i, 0], tau[i, 1], kind, geom, np.zeros(0, dtype=np.int64))
         got[i] = out
     scale = np.maximum(np.max(np.abs(expected), axis=0), 1e-300)
     assert np.all(np.abs(got - expected) <= 1e-14 * scale)
