@@ -512,7 +512,7 @@ def _confined(log_path: str, fence: str, default_root: bool, where: str, folders
     """The real path of a manifest's log, refused (UsageError naming ``where``) outside the folder ``fence`` or when
     it names something that is neither a file nor a folder (see :func:`read_manifest`).  ``folders``: the real
     paths of folders resolved so far (filled here)."""
-    from wmrid.core.side_files import not_regular
+    from wmrid.core.side_files import LOOP, broken_link, not_regular
 
     real = _realpath(log_path, folders if folders is not None else {})
     if real != fence and not real.startswith(fence.rstrip(os.sep) + os.sep):  # os.path.commonpath, 5x faster
@@ -521,7 +521,7 @@ def _confined(log_path: str, fence: str, default_root: bool, where: str, folders
             f"{where}: resolves to {real}, outside {which} {fence}; a manifest reaches the logs under its root only: "
             f"move the log there, or give {option('manifest_root')} a folder that holds every log"
         )
-    kind = not_regular(real)
+    kind = not_regular(real) or (LOOP if broken_link(real) == LOOP else None)  # a link to nothing: a missing log
     if kind is not None and kind != "a folder":
         raise UsageError(f"{where}: {real} is {kind}, not a log; a manifest names log files and rosbag2 folders")
     return real
