@@ -259,6 +259,21 @@ def test_manifest_root_widens_the_rule_but_never_to_devices(tmp_path):
     (inside / "loop.csv").symlink_to("loop.csv")  # was a row failing as "No such file or directory"
     with pytest.raises(UsageError, match=r"row 2: loop.csv: .*/loop.csv is a loop of symbolic links, not a log"):
         ft.read_manifest(_manifest(inside, "loop.csv"))
+    # the robot cells too: a FIFO there hung the worker that loaded it, /etc/shadow was read as TOML
+    os.mkfifo(inside / "robot.toml")
+    (inside / "R1_2026-01-01.csv").write_text("t\n")
+    robots = inside / "robots.csv"
+    for cell, needle in [
+        ("robot.toml", "row 2: robot robot.toml: .*/robot.toml is a FIFO \\(named pipe\\), not a robot file"),
+        ("/etc/shadow", "row 2: robot /etc/shadow: resolves to /etc/shadow, outside manifest_root "),
+        ("../logs", "row 2: robot ../logs: .*/logs is a folder, not a robot file"),
+    ]:
+        robots.write_text(f"log,robot\nR1_2026-01-01.csv,{cell}\n")
+        with pytest.raises(UsageError, match=needle):
+            ft.read_manifest(robots, root=tmp_path)
+    robots.write_text("log,robot\nR1_2026-01-01.csv,paper\nR1_2026-01-01.csv,via_link/../fleet/m.csv\n")
+    paper, linked = ft.read_manifest(robots, root=tmp_path)
+    assert (paper.robot, linked.robot) == ("paper", str((inside / "m.csv").resolve()))  # a name; a real path
     done = run("fleet", "--manifest", str(_manifest(inside, "/dev/zero")), "--manifest-root", "/", "-o", "t.parquet")
     done.one_error(2, "row 2: /dev/zero: /dev/zero is a character device, not a log")
 

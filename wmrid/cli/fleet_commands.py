@@ -109,15 +109,16 @@ def fleet(
         typer.Option(
             help="CSV or Parquet, one row per log: log (relative to the manifest), robot_id, robot, time, and any "
             "identify option by its Python name (speed_unit, columns, method, ...).  Each log must resolve inside "
-            "--manifest-root and be a file or rosbag2 folder.",
+            "--manifest-root and be a file or rosbag2 folder; a robot cell is a built-in name or a robot file "
+            "there.",
             rich_help_panel=_RUN_PANEL,
         ),
     ] = None,
     manifest_root: Annotated[
         Path | None,
         typer.Option(
-            help="The folder every log of --manifest must resolve into, links and .. followed (a row outside it, or "
-            "naming a device or FIFO, is refused).  [default: the manifest's folder]",
+            help="The folder every log and robot file of --manifest must resolve into, links and .. followed (a row "
+            "outside it, or naming a device, FIFO or loop of links, is refused).  [default: the manifest's folder]",
             show_default=False,
             rich_help_panel=_RUN_PANEL,
         ),
