@@ -213,6 +213,24 @@ def test_a_rosbag2_folders_storage_file_that_is_not_a_file_is_refused_unopened(t
     assert sorted(p.name for p in folder.iterdir()) == sorted([meta.name, db.name])
 
 
+@pytest.mark.parametrize(
+    ("make", "kind"),
+    [(os.mkfifo, "a FIFO (named pipe)"), (lambda p: p.symlink_to("/dev/zero"), "a character device"),
+     (lambda p: p.symlink_to(p.name), "a loop of symbolic links")],
+)  # fmt: skip
+def test_a_followed_recording_folders_mcap_file_that_is_not_a_file_is_refused_unopened(tmp_path, make, kind):
+    """``wmrid live FOLDER`` opens the folder's NAME_0.mcap, NAME_1.mcap, ... as they appear: a FIFO so named waited
+    forever, a loop of links was an "internal error"; now each is one line before it is opened."""
+    from wmrid.core.errors import LogFormatError
+    from wmrid.io.live.follow import open_live
+
+    make(tmp_path / "rec_0.mcap")
+    source = open_live(str(tmp_path))
+    err = _raised(source.poll, 0.01)
+    assert isinstance(err, LogFormatError), err
+    assert str(err).startswith(f"{tmp_path}/rec_0.mcap: it is {kind}, not a regular file, so wmrid does not open it")
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # A fleet manifest's logs
 
