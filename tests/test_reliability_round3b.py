@@ -351,6 +351,7 @@ def test_a_manifest_of_missing_logs_fails_fast_and_says_so_on_stderr(tmp_path):
     assert "missing_0.csv: cannot be read (No such file or directory)" in lines[0]
     summary = json.loads(out.stdout)
     assert (summary["logs"], summary["failed"], summary["workers"]) == (10_000, 10_000, 0)
+    assert (summary["run"], summary["identified"]) == (10_000, 0)  # was "identified": 10000 beside "failed": 10000
     table = pq.read_table(tmp_path / "t.parquet", columns=["log", "error"])
     assert table.num_rows == 10_000
     assert table.column("error").null_count == 0

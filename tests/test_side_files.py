@@ -165,6 +165,73 @@ def test_a_device_named_as_the_write_ahead_log_in_a_rosbag2_folder_is_ignored(tm
 
 
 # ---------------------------------------------------------------------------------------------------------------
+# A rosbag2 folder's storage files: named by its metadata.yaml, not by the user
+
+
+def _raised(function, *args, timeout: float = 10) -> BaseException | None:
+    """The exception function(*args) raised (None: it returned), the test failed (not hung) past ``timeout``."""
+
+    def call() -> BaseException | None:
+        try:
+            function(*args)
+        except BaseException as err:  # what it was, for the test to look at
+            return err
+        return None
+
+    return _in_thread(call, timeout=timeout)
+
+
+@pytest.mark.parametrize(
+    ("what", "needle"),
+    [
+        ("fifo", "{db}: it is a FIFO (named pipe), not a regular file, so wmrid does not open it"),  # was a hang
+        ("device", "{db}: it is a character device, not a regular file, so wmrid does not open it"),
+        ("loop", "{db}: it is a loop of symbolic links, not a regular file"),
+        ("metadata loop", "{meta}: it is a loop of symbolic links, so wmrid does not read it"),  # was: read as a
+        ("metadata to nothing", "{meta}: it is a symbolic link to gone.yaml, which does not exist"),  # folder of files
+    ],
+)
+def test_a_rosbag2_folders_storage_file_that_is_not_a_file_is_refused_unopened(tmp_path, small_db3, what, needle):
+    from wmrid.core.errors import LogFormatError
+    from wmrid.io.logs import read_log
+
+    folder = tmp_path / "rec"
+    folder.mkdir()
+    meta, db = folder / "metadata.yaml", folder / small_db3.name
+    if what.startswith("metadata"):
+        meta.symlink_to("metadata.yaml" if what == "metadata loop" else "gone.yaml")
+        db.write_bytes(small_db3.read_bytes())
+    else:
+        meta.write_bytes((small_db3.parent / "metadata.yaml").read_bytes())
+        if what == "fifo":
+            os.mkfifo(db)  # no writer ever comes: opening it to read would wait forever
+        else:
+            db.symlink_to("/dev/zero" if what == "device" else db.name)
+    err = _raised(read_log, folder)
+    assert isinstance(err, LogFormatError), err
+    assert needle.format(db=db, meta=meta) in str(err)
+    assert sorted(p.name for p in folder.iterdir()) == sorted([meta.name, db.name])
+
+
+@pytest.mark.parametrize(
+    ("make", "kind"),
+    [(os.mkfifo, "a FIFO (named pipe)"), (lambda p: p.symlink_to("/dev/zero"), "a character device"),
+     (lambda p: p.symlink_to(p.name), "a loop of symbolic links")],
+)  # fmt: skip
+def test_a_followed_recording_folders_mcap_file_that_is_not_a_file_is_refused_unopened(tmp_path, make, kind):
+    """``wmrid live FOLDER`` opens the folder's NAME_0.mcap, NAME_1.mcap, ... as they appear: a FIFO so named waited
+    forever, a loop of links was an "internal error"; now each is one line before it is opened."""
+    from wmrid.core.errors import LogFormatError
+    from wmrid.io.live.follow import open_live
+
+    make(tmp_path / "rec_0.mcap")
+    source = open_live(str(tmp_path))
+    err = _raised(source.poll, 0.01)
+    assert isinstance(err, LogFormatError), err
+    assert str(err).startswith(f"{tmp_path}/rec_0.mcap: it is {kind}, not a regular file, so wmrid does not open it")
+
+
+# ---------------------------------------------------------------------------------------------------------------
 # A fleet manifest's logs
 
 
@@ -207,6 +274,24 @@ def test_manifest_root_widens_the_rule_but_never_to_devices(tmp_path):
     assert a.log == b.log == str((tmp_path / "logs" / "R1_2026-01-01.csv").resolve())  # the real path, in the table
     with pytest.raises(UsageError, match="is a character device, not a log"):
         ft.read_manifest(_manifest(inside, "/dev/zero"), root="/")
+    (inside / "loop.csv").symlink_to("loop.csv")  # was a row failing as "No such file or directory"
+    with pytest.raises(UsageError, match=r"row 2: loop.csv: .*/loop.csv is a loop of symbolic links, not a log"):
+        ft.read_manifest(_manifest(inside, "loop.csv"))
+    # the robot cells too: a FIFO there hung the worker that loaded it, /etc/shadow was read as TOML
+    os.mkfifo(inside / "robot.toml")
+    (inside / "R1_2026-01-01.csv").write_text("t\n")
+    robots = inside / "robots.csv"
+    for cell, needle in [
+        ("robot.toml", "row 2: robot robot.toml: .*/robot.toml is a FIFO \\(named pipe\\), not a robot file"),
+        ("/etc/shadow", "row 2: robot /etc/shadow: resolves to /etc/shadow, outside manifest_root "),
+        ("../logs", "row 2: robot ../logs: .*/logs is a folder, not a robot file"),
+    ]:
+        robots.write_text(f"log,robot\nR1_2026-01-01.csv,{cell}\n")
+        with pytest.raises(UsageError, match=needle):
+            ft.read_manifest(robots, root=tmp_path)
+    robots.write_text("log,robot\nR1_2026-01-01.csv,paper\nR1_2026-01-01.csv,via_link/../fleet/m.csv\n")
+    paper, linked = ft.read_manifest(robots, root=tmp_path)
+    assert (paper.robot, linked.robot) == ("paper", str((inside / "m.csv").resolve()))  # a name; a real path
     done = run("fleet", "--manifest", str(_manifest(inside, "/dev/zero")), "--manifest-root", "/", "-o", "t.parquet")
     done.one_error(2, "row 2: /dev/zero: /dev/zero is a character device, not a log")
 

@@ -109,15 +109,16 @@ def fleet(
         typer.Option(
             help="CSV or Parquet, one row per log: log (relative to the manifest), robot_id, robot, time, and any "
             "identify option by its Python name (speed_unit, columns, method, ...).  Each log must resolve inside "
-            "--manifest-root and be a file or rosbag2 folder.",
+            "--manifest-root and be a file or rosbag2 folder; a robot cell is a built-in name or a robot file "
+            "there.",
             rich_help_panel=_RUN_PANEL,
         ),
     ] = None,
     manifest_root: Annotated[
         Path | None,
         typer.Option(
-            help="The folder every log of --manifest must resolve into, links and .. followed (a row outside it, or "
-            "naming a device or FIFO, is refused).  [default: the manifest's folder]",
+            help="The folder every log and robot file of --manifest must resolve into, links and .. followed (a row "
+            "outside it, or naming a device, FIFO or loop of links, is refused).  [default: the manifest's folder]",
             show_default=False,
             rich_help_panel=_RUN_PANEL,
         ),
@@ -300,9 +301,12 @@ def _summary(run: Any, output: Path) -> dict[str, Any]:
     failed = table.filter(pc.is_valid(table["error"])).select(["log", "error"])
     errors = failed.slice(0, 100).to_pylist()  # the first 100; the table has them all
     rate = run.identified / run.wall_s if run.wall_s > 0 else None
+    # "run": the logs this run tried (FleetRun.identified); "identified": those of them that gave a result (a run of
+    # 1 log that failed said "identified 1, failed 1"); "failed": every row of the table with an error
     return {
         "table": str(output), "logs": table.num_rows, "robots": pc.count_distinct(table["robot_id"]).as_py(),
-        "identified": run.identified, "resumed": run.skipped, "failed": failed.num_rows, "workers": run.workers,
+        "run": run.identified, "identified": run.identified - run.failed, "resumed": run.skipped,
+        "failed": failed.num_rows, "workers": run.workers,
         "scheduler": run.scheduler, "wall_s": round(run.wall_s, 3), "logs_per_s": rate, "errors": errors,
         "notes": run.notes, "command": invocation(),
     }  # fmt: skip
@@ -317,8 +321,8 @@ def _print_summary(summary: dict[str, Any]) -> None:
 
     out.print(
         f"{summary['table']}: {n(summary['logs'], 'log')} of {n(summary['robots'], 'robot')}; run "
-        f"{summary['identified']} in {summary['wall_s']:.3g} s on {n(summary['workers'], 'worker')}{rate}; resumed "
-        f"{summary['resumed']}; failed {summary['failed']}"
+        f"{summary['run']} in {summary['wall_s']:.3g} s on {n(summary['workers'], 'worker')}{rate}, identified "
+        f"{summary['identified']}; resumed {summary['resumed']}; failed {summary['failed']}"
     )
     for note in summary["notes"]:
         out.print(f"note: {note}")

@@ -48,6 +48,32 @@ def not_regular(path: str | os.PathLike) -> str | None:
     return None if stat.S_ISREG(st.st_mode) else file_kind(st.st_mode)
 
 
+#: What :func:`broken_link` says of a loop of symbolic links.
+LOOP = "a loop of symbolic links"
+
+
+def broken_link(path: str | os.PathLike) -> str | None:
+    """What ``path`` is when it is a symbolic link that leads to no file: "a loop of symbolic links", or "a symbolic
+    link to TARGET, which does not exist"; None otherwise (no link, a link that leads somewhere, or nothing there).
+    Opens nothing; a loop is found by the system's own limit on links followed (ELOOP), never walked here."""
+    name = os.fspath(path)
+    try:
+        os.stat(name)
+        return None
+    except OSError as err:
+        if err.errno == errno.ELOOP:
+            return LOOP
+        if not os.path.islink(name):
+            return None
+        try:
+            target = os.readlink(name)
+        except OSError:
+            target = "?"
+        return f"a symbolic link to {target}, which does not exist"
+    except ValueError:  # a NUL in the name
+        return None
+
+
 def open_regular(path: str | os.PathLike) -> BinaryIO:
     """``path`` opened for reading in binary, only if it is a regular file: :class:`NotRegularFile` otherwise (before
     anything is read, and without waiting on a FIFO).  Other OSErrors (missing, no permission) pass through."""

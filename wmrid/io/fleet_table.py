@@ -499,8 +499,8 @@ def read_manifest(
         if not _blank(rec.get("time")):
             stamp, source = parse_time(rec["time"], f"{where}: time"), "manifest"
         robot = None if _blank(rec.get("robot")) else str(rec["robot"]).strip()
-        if robot is not None and not os.path.isabs(robot) and (base / robot).exists():
-            robot = str(base / robot)
+        if robot is not None:
+            robot = _manifest_robot(robot, base, fence, root is None, f"{where}: robot {robot}", folders)
         opts = {c: _option_value(c, rec[c], f"{where}: {c}") for c in present if not _blank(rec[c])}
         entries.append(LogEntry(real, robot_id, robot, stamp, source, opts))
     if not entries:
@@ -508,23 +508,41 @@ def read_manifest(
     return entries
 
 
-def _confined(log_path: str, fence: str, default_root: bool, where: str, folders: dict[str, str] | None = None) -> str:
+def _confined(
+    log_path: str, fence: str, default_root: bool, where: str, folders: dict[str, str] | None = None,
+    robot: bool = False,
+) -> str:  # fmt: skip
     """The real path of a manifest's log, refused (UsageError naming ``where``) outside the folder ``fence`` or when
     it names something that is neither a file nor a folder (see :func:`read_manifest`).  ``folders``: the real
-    paths of folders resolved so far (filled here)."""
-    from wmrid.core.side_files import not_regular
+    paths of folders resolved so far (filled here).  ``robot``: a robot file, which a folder is not either."""
+    from wmrid.core.side_files import LOOP, broken_link, not_regular
 
+    thing = "robot file" if robot else "log"
     real = _realpath(log_path, folders if folders is not None else {})
     if real != fence and not real.startswith(fence.rstrip(os.sep) + os.sep):  # os.path.commonpath, 5x faster
         which = "the manifest's folder" if default_root else option("manifest_root")
         raise UsageError(
-            f"{where}: resolves to {real}, outside {which} {fence}; a manifest reaches the logs under its root only: "
-            f"move the log there, or give {option('manifest_root')} a folder that holds every log"
+            f"{where}: resolves to {real}, outside {which} {fence}; a manifest reaches the logs and robot files "
+            f"under its root only: move the {thing} there, or give {option('manifest_root')} a folder that holds "
+            f"every {thing}"
         )
-    kind = not_regular(real)
-    if kind is not None and kind != "a folder":
-        raise UsageError(f"{where}: {real} is {kind}, not a log; a manifest names log files and rosbag2 folders")
+    kind = not_regular(real) or (LOOP if broken_link(real) == LOOP else None)  # a link to nothing: a missing log
+    if kind is not None and (robot or kind != "a folder"):
+        names = "a built-in robot or a robot file in its robot cells" if robot else "log files and rosbag2 folders"
+        raise UsageError(f"{where}: {real} is {kind}, not a {thing}; a manifest names {names}")
     return real
+
+
+def _manifest_robot(robot: str, base: Path, fence: str, default_root: bool, where: str, folders: dict[str, str]) -> str:
+    """A manifest's robot cell: a built-in robot's name as it is; else a robot file, relative to the manifest as the
+    logs are, resolved and kept inside the root, refused unless a regular file (:func:`_confined`: a FIFO named
+    there hung the worker that loaded it; /etc/shadow was read as TOML).  A file that is not there is left to the
+    worker to name."""
+    from wmrid.model.robot import BUILTIN_ROBOTS
+
+    if robot in BUILTIN_ROBOTS:
+        return robot
+    return _confined(robot if os.path.isabs(robot) else str(base / robot), fence, default_root, where, folders, True)
 
 
 def _realpath(path: str, folders: dict[str, str]) -> str:

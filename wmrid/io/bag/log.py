@@ -84,7 +84,7 @@ def recording_paths(paths: Sequence[str]) -> list[str] | None:
         if path == "-" or not os.path.exists(path):
             return None
         if os.path.isdir(path):
-            if os.path.exists(os.path.join(path, "metadata.yaml")):
+            if os.path.lexists(os.path.join(path, "metadata.yaml")):  # a broken link too: the reader refuses it
                 return [path]
             inside = sorted(
                 os.path.join(path, f) for f in os.listdir(path)

@@ -295,17 +295,24 @@ METADATA_LIMIT = 4 << 20
 
 def metadata_text(folder: str) -> bytes:
     """The bytes of the rosbag2 folder's ``metadata.yaml``, read by wmrid (the file is not one the user named):
-    LogFormatError when it is not a regular file (a device such as /dev/zero, a FIFO, a link to either) or holds
-    more than :data:`METADATA_LIMIT`; ``b""`` when there is none or it cannot be read (rosbags then says why)."""
-    from wmrid.core.side_files import NotRegularFile, read_regular
+    LogFormatError when it is not a regular file (a device such as /dev/zero, a FIFO, a link to either, a loop of
+    links) or holds more than :data:`METADATA_LIMIT`, or when a storage file it lists is not a regular file
+    (:func:`_check_listed_files`); ``b""`` when there is none or it cannot be read (rosbags then says why)."""
+    from wmrid.core.side_files import NotRegularFile, broken_link, read_regular
 
     path = os.path.join(folder, "metadata.yaml")
+    broken = broken_link(path)
+    if broken is not None:
+        raise LogFormatError(
+            f"{path}: it is {broken}, so wmrid does not read it (the folder's metadata must be a file); fix the link, "
+            "or give the recording's storage files (.db3, .mcap) instead"
+        )
     try:
         message = (
             f"{_braces(path)}: a rosbag2 metadata.yaml over {{size}}; a real one is a few kilobytes: check the file, "
             "or give the recording's storage files (.db3, .mcap) instead of the folder"
         )
-        return read_regular(path, METADATA_LIMIT, message, LogFormatError)
+        text = read_regular(path, METADATA_LIMIT, message, LogFormatError)
     except NotRegularFile as err:
         raise LogFormatError(
             f"{path}: {err.strerror}, so wmrid does not read it (the folder's metadata must be a file); replace it "
@@ -313,6 +320,34 @@ def metadata_text(folder: str) -> bytes:
         ) from err
     except OSError:
         return b""
+    _check_listed_files(folder, text)
+    return text
+
+
+def _check_listed_files(folder: str, text: bytes) -> None:
+    """Refuse (LogFormatError, before anything opens them) the storage files ``metadata.yaml`` lists that are not
+    regular files: a FIFO (opening one waits for a writer, forever when none comes), a device (``/dev/zero`` never
+    ends), a socket or folder, a loop of links (a missing file, or a link to nothing, the readers name).  The user
+    named the folder, not these files.  Each is looked up by its name in the folder, as rosbags and wmrid's readers
+    find it (a listed ``../x`` is ``x`` in the folder).  Metadata that cannot be parsed is left to the readers."""
+    from wmrid.core.side_files import LOOP, broken_link, not_regular
+
+    try:
+        from ruamel.yaml import YAML
+
+        listed = YAML(typ="safe").load(text.decode("utf-8"))["rosbag2_bagfile_information"]["relative_file_paths"]
+        names = [PurePath(str(p)).name for p in listed]
+    except Exception:  # not YAML, not rosbag2 metadata, no file list: the readers say so
+        return
+    for name in names:
+        file = os.path.join(folder, name)
+        kind = not_regular(file) or (LOOP if broken_link(file) == LOOP else None)  # one missing: the readers say
+        if kind is not None:
+            raise LogFormatError(
+                f"{file}: it is {kind}, not a regular file, so wmrid does not open it (the folder's metadata.yaml "
+                "lists it as a storage file of the recording); put the recording's file there, or give its storage "
+                "files (.db3, .mcap) instead of the folder"
+            )
 
 
 def _braces(text: str) -> str:

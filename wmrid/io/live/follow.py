@@ -380,6 +380,19 @@ class Rosbag2Source(LiveSource):
     def _metadata(self) -> bool:
         return os.path.isfile(os.path.join(self.folder, "metadata.yaml"))
 
+    def _refuse_odd(self, path: str) -> None:
+        """LogFormatError, before it is opened, when the folder's ``path`` (named NAME.mcap, a file the user did not
+        name) is not a regular file: a FIFO (opening it waited forever), a device, a loop of links or a link to
+        nothing (an "internal error" on opening)."""
+        from wmrid.core.side_files import broken_link, not_regular
+
+        kind = not_regular(path) or broken_link(path)
+        if kind is not None:
+            raise LogFormatError(
+                f"{path}: it is {kind}, not a regular file, so wmrid does not open it (a file of the recording "
+                f"{self.folder} by its name); remove it from the folder, or follow the recording's MCAP file itself"
+            )
+
     def poll(self, timeout: float) -> list[WheelLog]:
         if self.current is None:
             pending = [f for f in self._files() if f not in self.done]
@@ -391,6 +404,7 @@ class Rosbag2Source(LiveSource):
                     time.sleep(timeout)
                 return []
             self.current = pending[0]
+            self._refuse_odd(self.current)
             self.feed = FileFeed(self.current)
             self.mcap = _Mcap(self.current, self.decoder)
         data = self.feed.read()
