@@ -152,7 +152,7 @@ def test_cli_first_estimate_and_clean_close(recording, tmp_path):
     """The command line against the sdk's server in a process of its own, messages sent faster than real time: JSON
     lines, the result written by -o equal to identify's; the server shut down (a clean close) ends the source."""
     path, _, offline = recording
-    server, port = start_server(path, "--speed", "4", "--hold", "5")
+    server, port = start_server(path, "--speed", "4", "--hold", "2")
     out = tmp_path / "r.json"
     live = start_live(f"ws://127.0.0.1:{port}", "--robot", "paper", "--every", "0.2", "-o", str(out))
     try:
