@@ -4,10 +4,12 @@ foxglove_bridge publishes them), each with its MCAP log time as the frame's time
 
 In the test process (:class:`Publisher`) or as a process of its own, to be killed::
 
-    python -m tests.fxserver RUN.mcap [--port 0] [--start 0] [--stop N] [--speed 1] [--hold 600] [--wait 120]
+    python -m tests.fxserver RUN.mcap [--port 0] [--start 0] [--stop N] [--speed 1] [--hold 600] [--wait 120] [--go]
 
 prints ``port N`` once it listens, waits (up to ``wait`` s) for a client to subscribe, publishes messages [start,
-stop) at ``speed`` times real time (0: as fast as it can), prints ``done``, and keeps serving for ``hold`` s.
+stop) at ``speed`` times real time (0: as fast as it can), prints ``done``, and keeps serving for ``hold`` s.  With
+``--go`` it first reads the MCAP and loads the server, prints ``ready`` and listens only once a line comes on its
+standard input: a server started ahead that takes a port at a moment the test chooses.
 """
 
 from __future__ import annotations
@@ -102,8 +104,15 @@ def main() -> None:
     parser.add_argument("--speed", type=float, default=1.0)
     parser.add_argument("--hold", type=float, default=600.0)
     parser.add_argument("--wait", type=float, default=120.0, help="s to wait for a client to subscribe")
+    parser.add_argument("--go", action="store_true", help="listen only once a line comes on standard input")
     args = parser.parse_args()
-    pub = Publisher(read_recording(args.mcap), args.port)
+    rec = read_recording(args.mcap)
+    if args.go:
+        import foxglove  # noqa: F401  (loaded before the wait: listening is then immediate)
+
+        print("ready", flush=True)
+        sys.stdin.readline()
+    pub = Publisher(rec, args.port)
     print(f"port {pub.port}", flush=True)
     pub.publish(args.start, args.stop, args.speed, timeout=args.wait)
     print("done", flush=True)

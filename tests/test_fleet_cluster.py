@@ -190,8 +190,9 @@ def _start(args: list[str], log: Path) -> subprocess.Popen:
 
 
 def test_the_same_command_against_a_scheduler_started_separately(logs, cluster, tmp_path):
-    # `dask scheduler` and `dask worker`, two processes of their own, as on a real cluster; the command is the one run
-    # on the LocalCluster, with only --scheduler changed, and it writes the same table (but for run times and workers)
+    # `dask scheduler` and `dask worker`, two processes of their own, as on a real cluster (the worker without a nanny
+    # process: a nanny's restart of a killed worker is the LocalCluster test's); the command is the one run on the
+    # LocalCluster, with only --scheduler changed, and it writes the same table (but for run times and workers)
     sched_file = tmp_path / "scheduler.json"
     scheduler = _start(["scheduler", "--host", "127.0.0.1", "--port", "0", "--dashboard-address", "127.0.0.1:0",
                         "--scheduler-file", str(sched_file)], tmp_path / "scheduler.log")  # fmt: skip
@@ -201,7 +202,7 @@ def test_the_same_command_against_a_scheduler_started_separately(logs, cluster, 
         while not sched_file.exists() and time.monotonic() < deadline:
             time.sleep(0.1)
         address = json.loads(sched_file.read_text())["address"]
-        worker = _start(["worker", address, "--nworkers", "1", "--nthreads", "1", "--no-dashboard"],
+        worker = _start(["worker", address, "--nworkers", "1", "--nthreads", "1", "--no-dashboard", "--no-nanny"],
                         tmp_path / "worker.log")  # fmt: skip
         args = ["fleet", str(logs / "R02"), "--robot", "paper", "--no-fit", "--format", "json"]
         proc = wmrid(*args, "--scheduler", address, "-o", str(tmp_path / "remote.parquet"))

@@ -68,6 +68,27 @@ def start_server(path: Path, *args: str) -> tuple[subprocess.Popen, int]:
     return proc, int(line.split()[1])
 
 
+def ready_server(path: Path, *args: str) -> subprocess.Popen:
+    """tests/fxserver.py as a process of its own, serving ``path`` once :func:`go` says so (``--go``): started and
+    loaded ahead, so that it takes its port the moment the test chooses (no process start in between)."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "tests.fxserver", str(path), *args, "--go"], stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)),
+    )  # fmt: skip
+    line = proc.stdout.readline().decode()
+    assert line == "ready\n", (line, proc.stderr.read().decode() if proc.poll() is not None else "")
+    return proc
+
+
+def go(proc: subprocess.Popen) -> int:
+    """The server of :func:`ready_server` listens: its port."""
+    proc.stdin.write(b"go\n")
+    proc.stdin.flush()
+    line = proc.stdout.readline().decode()
+    assert line.startswith("port "), (line, proc.stderr.read().decode() if proc.poll() is not None else "")
+    return int(line.split()[1])
+
+
 def stop(proc: subprocess.Popen | None) -> None:
     """Kill ``proc`` (if it still runs) and close its pipes."""
     if proc is None:
@@ -131,7 +152,7 @@ def test_cli_first_estimate_and_clean_close(recording, tmp_path):
     """The command line against the sdk's server in a process of its own, messages sent faster than real time: JSON
     lines, the result written by -o equal to identify's; the server shut down (a clean close) ends the source."""
     path, _, offline = recording
-    server, port = start_server(path, "--speed", "4", "--hold", "5")
+    server, port = start_server(path, "--speed", "4", "--hold", "2")
     out = tmp_path / "r.json"
     live = start_live(f"ws://127.0.0.1:{port}", "--robot", "paper", "--every", "0.2", "-o", str(out))
     try:
@@ -259,10 +280,13 @@ def test_reconnect_to_a_restarted_server(recording):
     (the repeated ones read as the offline reader reads them: sorted, a repeated stamp keeping the first)."""
     path, _, offline = recording
     first, port = start_server(path, "--speed", "0", "--stop", "2500")
-    second = None
+    second, restarted = None, False
     try:
-        # --idle counts while the connection is down too: long enough for the new server to start
-        run = wmrid.live(f"ws://127.0.0.1:{port}", "paper", every=0.2, idle=8.0, reconnect=True)
+        # the new server's process is started and loaded ahead; it takes the port once the first is killed
+        second = ready_server(path, "--speed", "0", "--start", "2000", "--port", str(port))
+        # --idle counts while the connection is down too: 4 s covers the first three reconnection attempts (0.25,
+        # 0.75 and 1.75 s after the loss) where the new server listens within milliseconds of the kill
+        run = wmrid.live(f"ws://127.0.0.1:{port}", "paper", every=0.2, idle=4.0, reconnect=True)
         events = []
         final = None
         for item in run:
@@ -270,10 +294,10 @@ def test_reconnect_to_a_restarted_server(recording):
                 final = item
                 break
             events += item.events
-            if second is None and item.samples >= 2500:
+            if not restarted and item.samples >= 2500:
                 stop(first)
-                second, port2 = start_server(path, "--speed", "0", "--start", "2000", "--port", str(port))
-                assert port2 == port
+                restarted = True
+                assert go(second) == port
     finally:
         stop(first)
         stop(second)
@@ -295,9 +319,12 @@ def test_reconnect_waits_for_a_server_not_started_yet(recording):
     with socket.socket() as sock:  # a free port, released for the server
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
-    run = wmrid.live(f"ws://127.0.0.1:{port}", "paper", every=0.2, idle=5.0, reconnect=True)
-    server, _ = start_server(path, "--speed", "0", "--stop", "2000", "--port", str(port))
+    server = ready_server(path, "--speed", "0", "--stop", "2000", "--port", str(port))  # loaded, not listening
+    # --idle: 3 s covers the reconnection attempts 0.25, 0.75 and 1.75 s after the first; the server listens as the
+    # run starts
+    run = wmrid.live(f"ws://127.0.0.1:{port}", "paper", every=0.2, idle=3.0, reconnect=True)
     try:
+        assert go(server) == port
         items = list(run)
     finally:
         stop(server)

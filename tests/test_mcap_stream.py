@@ -14,6 +14,7 @@ the same bags are over the whole-decode limit and take the streaming path.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -112,6 +113,21 @@ def _streamed(path: Path, rows: int, **kwargs):
     return stream, stream.read()
 
 
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    """``written(name, messages, **options)``: the path of ``messages`` written as :func:`write_messages` does, once per
+    module and name (the tests below only read these files, each with several piece sizes and on both passes)."""
+    folder = tmp_path_factory.mktemp("written")
+    paths: dict[str, Path] = {}
+
+    def write(name: str, messages: Callable[[], list], **options) -> Path:
+        if name not in paths:
+            paths[name] = write_messages(folder / f"{name}.mcap", messages(), **options)
+        return paths[name]
+
+    return write
+
+
 @pytest.mark.parametrize(
     ("compression", "chunked"),
     [
@@ -123,8 +139,9 @@ def _streamed(path: Path, rows: int, **kwargs):
     ids=["zstd", "lz4", "uncompressed", "unchunked"],
 )
 @pytest.mark.parametrize("rows", [7, 333])
-def test_single_topic_pieces_join_to_the_whole_decode(tmp_path, compression, chunked, rows):
-    path = write_messages(tmp_path / "one.mcap", single_topic_messages(), compression, chunked)
+def test_single_topic_pieces_join_to_the_whole_decode(written, compression, chunked, rows):
+    name = f"one-{compression.name}-{'chunked' if chunked else 'unchunked'}"
+    path = written(name, single_topic_messages, compression=compression, chunked=chunked)
     whole = read_log(str(path))
     assert any("messages repeat the previous time stamp" in n for n in whole.notes)
     assert any("without the wheel speed" in n for n in whole.notes)
@@ -177,8 +194,8 @@ def split_messages(
 @pytest.mark.parametrize("rule", ["linear", "zoh"])
 @pytest.mark.parametrize("time_source", ["auto", "log"])
 @pytest.mark.parametrize("rows", [5, 256])
-def test_split_topics_pieces_join_to_the_whole_decode(tmp_path, rule, time_source, rows):
-    path = write_messages(tmp_path / "split.mcap", split_messages())
+def test_split_topics_pieces_join_to_the_whole_decode(written, rule, time_source, rows):
+    path = written("split", split_messages)
     sel = TopicSelection(
         velocity_topic="/wheel_state", effort_topic="/wheel_effort", align=rule, time_source=time_source
     )

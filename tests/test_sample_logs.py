@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 from pathlib import Path
 
@@ -26,8 +25,15 @@ NAMES = [
 
 @pytest.fixture(scope="module")
 def regenerated(tmp_path_factory) -> Path:
+    """``python sample_logs/make_samples.py OUT`` run as that script, in this process (runpy: ``__main__``, its
+    arguments; a process of its own cost 2 s of imports and compiled kernels loaded again)."""
+    import runpy
+
     out = tmp_path_factory.mktemp("samples")
-    subprocess.run([sys.executable, str(SAMPLES / "make_samples.py"), str(out)], check=True, capture_output=True)
+    script = str(SAMPLES / "make_samples.py")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(sys, "argv", [script, str(out)])
+        runpy.run_path(script, run_name="__main__")
     return out
 
 
