@@ -232,3 +232,20 @@ def test_inspect_csv_and_parquet(tmp_path):
     info = json.loads(wmrid("inspect", str(commented), "--format", "json").stdout)
     assert [c["name"] for c in info["columns"]] == ["1", "2", "3"]
     assert info["comments"] == ["% 1 time", "% 2 3 wheel velocity left right"]
+
+
+def test_fleet_records_no_options_when_none_are_given():
+    """wmrid fleet's "options" column holds only the flags given a value other than identify's default, and the
+    library's fleet() records {} for a call without options: the command's own defaults give {} too, so a table the
+    command wrote is resumed by the library (and back) without identifying its logs again.  (The command's table
+    said {"method": "auto"} while identify's default had become "auto": resume then matched nothing.)"""
+    import inspect
+
+    from wmrid.cli.fleet_commands import _given_options
+    from wmrid.cli.fleet_commands import fleet as fleet_command
+
+    defaults = {
+        name: param.default.default if hasattr(param.default, "default") else param.default
+        for name, param in inspect.signature(fleet_command).parameters.items()
+    }
+    assert _given_options(defaults) == {}

@@ -59,7 +59,7 @@ _RUN_PANEL = "The fleet run"
 #: identify's settings as ``wmrid fleet`` passes them: only those given a value other than identify's default, so
 #: that the table's "options" column says what was asked and nothing else.
 _IDENTIFY_DEFAULTS = {
-    "method": "observer", "form": "auto", "k": 10.0, "alpha": 1e-10, "box_width": 10.0, "torque_hold": "zoh",
+    "method": "auto", "form": "auto", "k": 10.0, "alpha": 1e-10, "box_width": 10.0, "torque_hold": "zoh",
     "control_rate": None, "delay": None, "friction": "auto", "cutoff": None, "weighted": False, "forgetting": 1.0,
     "rotor_inertia": None,
 }  # fmt: skip
