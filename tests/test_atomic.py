@@ -136,8 +136,6 @@ def test_a_stop_the_moment_the_temporary_file_appears_leaves_nothing(tmp_path, m
     import signal
     import tempfile
 
-    from wmrid.core import interrupts
-
     real = tempfile.NamedTemporaryFile
 
     def created_then_stopped(*args, **kwargs):
@@ -146,13 +144,7 @@ def test_a_stop_the_moment_the_temporary_file_appears_leaves_nothing(tmp_path, m
         return handle
 
     monkeypatch.setattr(tempfile, "NamedTemporaryFile", created_then_stopped)
-    previous = interrupts.install()
-    try:
-        with pytest.raises(interrupts.Terminated), atomic_output(tmp_path / "out.bin") as handle:
-            handle.write(b"never")
-    finally:
-        interrupts.restore(previous)
-    assert os.listdir(tmp_path) == []
+    _stopped_writing_leaves_nothing(tmp_path)
 
 
 def test_a_stop_just_after_the_temporary_file_is_registered_leaves_nothing(tmp_path, monkeypatch):
@@ -162,7 +154,7 @@ def test_a_stop_just_after_the_temporary_file_is_registered_leaves_nothing(tmp_p
     itself from inside the one call between the two, the temporary name made a path."""
     import signal
 
-    from wmrid.core import atomic, interrupts
+    from wmrid.core import atomic
 
     real = atomic.Path
 
@@ -173,10 +165,18 @@ def test_a_stop_just_after_the_temporary_file_is_registered_leaves_nothing(tmp_p
         return made
 
     monkeypatch.setattr(atomic, "Path", path_then_stopped)
+    _stopped_writing_leaves_nothing(tmp_path)
+
+
+def _stopped_writing_leaves_nothing(folder):
+    """With wmrid's signal handlers installed, an atomic output into ``folder`` is stopped (the SIGTERM the patched
+    call sends) and the folder is left empty."""
+    from wmrid.core import interrupts
+
     previous = interrupts.install()
     try:
-        with pytest.raises(interrupts.Terminated), atomic_output(tmp_path / "out.bin") as handle:
+        with pytest.raises(interrupts.Terminated), atomic_output(folder / "out.bin") as handle:
             handle.write(b"never")
     finally:
         interrupts.restore(previous)
-    assert os.listdir(tmp_path) == []
+    assert os.listdir(folder) == []
