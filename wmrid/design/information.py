@@ -427,6 +427,11 @@ def caster_slopes(
     return d_eta, d_deta
 
 
+def _drag_weights(theta0: np.ndarray, form: RegressorForm) -> np.ndarray:
+    """(q, 2): the wheel torques per unit of each caster column, theta0[param] [1, pattern] (``form.caster_map``)."""
+    return np.array([[theta0[param], theta0[param] * pattern] for _, param, pattern in form.caster_map])
+
+
 def drag_secant(
     eta: np.ndarray, eta_dot: np.ndarray | None, theta0: np.ndarray, form: RegressorForm, sigma: float
 ) -> np.ndarray:  # fmt: skip
@@ -437,7 +442,7 @@ def drag_secant(
     the secant is as large as the drag over the noise (a sign flip of the drag, as the wheels' Coulomb columns
     have), without the slope's 1 / speed blow-up.  Analytic in eta (and eta_dot): :meth:`CovarianceGradient.backward`
     differentiates it by the complex step."""
-    weights = np.array([[theta0[param], theta0[param] * pattern] for _, param, pattern in form.caster_map])  # (q, 2)
+    weights = _drag_weights(theta0, form)
     out = np.empty((*eta.shape, 2), dtype=np.result_type(eta, eta_dot if eta_dot is not None else 0.0, float))
     for ell in range(2):
         up, down = eta.copy(), eta.copy()
@@ -454,5 +459,5 @@ def drag_slopes(
     """(d drag / d eta, d drag / d eta_dot), each (n, 2, 2) N m s/rad and N m s^2/rad: the slopes of the geometric
     caster model's wheel torques sum_q theta0[param_q] col_q [1, pattern_q] (:func:`caster_slopes`)."""
     d_eta, d_deta = caster_slopes(eta, eta_dot, form)
-    weights = np.array([[theta0[param], theta0[param] * pattern] for _, param, pattern in form.caster_map])  # (q, 2)
+    weights = _drag_weights(theta0, form)
     return np.einsum("qi,nqj->nij", weights, d_eta), np.einsum("qi,nqj->nij", weights, d_deta)
