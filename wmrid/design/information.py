@@ -9,10 +9,13 @@ order in the noise (the regressor's columns hold the noisy eta and tau)::
     r_i = (1 - L) e_eta,i - (1 / k) L [ sum_j m_ij e_tau,j - sum_l c_il e_eta,l ],   c_il = sum_j m_ij D_jl
 
 with L the unit-gain low-pass k/(s + k) in the observer's zero-order-hold discretisation and D = d(V + F_v eta)/d eta
-the model's speed sensitivity.  The Coulomb columns are the sign of the MEASURED speed, which the noise flips near
-standstill: the regressor is taken at its mean there (-erf(eta / (sqrt(2) sigma)), so a wheel crawling near zero speed
-carries little information on F_d), and the flips are one more white source, of std F_dj sqrt(1 - erf^2), entering
-like effort noise (``coulomb``: the F_d assumed for them).
+the model's speed sensitivity.  The Coulomb columns are the sign of a MEASURED speed, a 20 ms centred mean of it
+(:mod:`wmrid.estimators.sign_speed`; noise sigma_s = sigma / sqrt(n_w), :attr:`SensorNoise.sign_std`), which the noise
+flips near standstill: the regressor is taken at its mean there (-erf(eta / (sqrt(2) sigma_s)), so a wheel crawling
+near zero speed carries little information on F_d), and the flips are one more source, of std F_dj sqrt(1 - erf^2),
+entering like effort noise (``coulomb``: the F_d assumed for them), with the intensity of flips that last as long as
+the mean's noise keeps its sign (:attr:`SensorNoise.flip_intensity`: 15 times a white flip's at 1 kHz; checked
+against a Monte Carlo of the estimator with those signs).
 
 The estimate's error is Gamma^-1 sum_n h w_n^T r_n, Gamma = sum h w^T w: linear in the noise, so its covariance
 follows exactly from the ADJOINT filters (the noise sample at m reaches the sum through z_m = h sum_n L[n, m] w_n,
@@ -40,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import lfilter
 
+from wmrid.estimators.sign_speed import sign_half_window
 from wmrid.model.dynamics import RegressorForm, caster_columns, intermediate_parameters, inverse_inertia, regressor
 
 #: The estimator's default filter gain k, 1/s (``identify --k``).
@@ -58,6 +62,29 @@ class SensorNoise:
 
     def to_dict(self) -> dict[str, float]:
         return {"eta_std": self.eta_std, "tau_std": self.tau_std, "rate": self.rate}
+
+    @property
+    def sign_window(self) -> int:
+        """n_w: how many samples the speed the estimator takes its signs and drag directions from averages (a
+        centred mean SIGN_WINDOW_S wide at the log's rate, :mod:`wmrid.estimators.sign_speed`; 1 at 50 Hz and
+        slower)."""
+        return 2 * sign_half_window(round(self.rate) + 1, 1.0) + 1
+
+    @property
+    def sign_std(self) -> float:
+        """rad/s: the noise on that mean, eta_std / sqrt(n_w)."""
+        return self.eta_std / math.sqrt(self.sign_window)
+
+    @property
+    def flip_intensity(self) -> float:
+        """How much more a sign flip weighs than a white one, per sample: a flip lasts as long as the mean's noise
+        keeps its sign, so the flips' sum over a stretch much longer than the window (the filter's 1/k) has the
+        variance of white flips times sum_k (2/pi) arcsin(rho_k), rho_k = 1 - |k| / n_w the mean's autocorrelation
+        (the arcsine law of the sign of a Gaussian pair; exact at a zero crossing, where the flips happen).  n_w = 1:
+        1; 21 samples (1 kHz): 15.3."""
+        n = self.sign_window
+        lags = np.arange(-(n - 1), n)
+        return float(np.sum(2.0 / math.pi * np.arcsin((n - np.abs(lags)) / n)))
 
 
 @dataclass(frozen=True)
@@ -195,7 +222,7 @@ class _Forward:
 
 def _intermediate(eta, tau, h, theta0, form, noise, k, coulomb, eta_dot=None) -> _Forward:
     a = math.exp(-k * h)
-    g = expected_regressor(eta, tau, form, noise.eta_std, eta_dot)
+    g = expected_regressor(eta, tau, form, noise.sign_std, eta_dot)
     w = lowpass(g, a) / k
     gamma = h * (w.T @ w)
     adj = lowpass_adjoint(w, a)  # (n, p)
@@ -245,7 +272,7 @@ def noise_scores(
     m = inverse_inertia(theta0)
     sens = speed_sensitivity(eta, theta0)
     if form.geometry and noise.eta_std > 0:
-        sens = sens + drag_secant(eta, eta_dot, theta0, form, noise.eta_std)
+        sens = sens + drag_secant(eta, eta_dot, theta0, form, noise.sign_std)
     c = m[None, :, 0, None] * sens[:, None, 0, :] + m[None, :, 1, None] * sens[:, None, 1, :]
     p = w.shape[1]
     zs: list[np.ndarray] = []
@@ -264,11 +291,11 @@ def noise_scores(
     qs = [q_eta, q_eta, q_tau, q_tau]
     fd = np.abs(np.asarray(theta0[6:8] if coulomb is None else coulomb, dtype=np.float64))
     if form.kind == "general" and noise.eta_std > 0:
-        _, sd, _ = sign_statistics(eta, noise.eta_std)
+        _, sd, _ = sign_statistics(eta, noise.sign_std)
         for src in range(2):
             zs.append(np.concatenate([(-h * m[i, src] / k * fd[src] * sd[:, src])[:, None] * adj for i in range(2)],
                                      axis=1))  # fmt: skip
-            qs.append(1.0 / (noise.rate * h))
+            qs.append(noise.flip_intensity / (noise.rate * h))
     return c, zs, qs, fd
 
 
@@ -326,7 +353,7 @@ class CovarianceGradient:
         fwd, h, c_inv, cov0, eta, info, eta_dot = self._keep
         a, w, adj, c, qs, zs, fd = fwd.a, fwd.w, fwd.adj, fwd.c, fwd.qs, fwd.zs, fwd.fd
         score, inv, big, p = fwd.score, fwd.gamma_inv, fwd.big, fwd.w.shape[1]
-        sigma = self.noise.eta_std
+        sigma = self.noise.sign_std
         flips = self.form.kind == "general" and sigma > 0
         mean, sd, slope = sign_statistics(eta, sigma)
         g_sd = np.zeros_like(eta)

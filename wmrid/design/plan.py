@@ -279,7 +279,11 @@ def make_plan(
     def design(length: float):
         problem = _problem(theta0, form, r, b, limits, noise, length, SEARCH_GRID, criterion, given_info, k)
         try:
-            found = search(problem, seed=seed)
+            warm: tuple[np.ndarray, ...] = ()
+            if given_info is not None:  # the plan that ignores them is a start: a --given plan is never worse
+                bare = _problem(theta0, form, r, b, limits, noise, length, SEARCH_GRID, criterion, None, k)
+                warm = (search(bare, seed=seed).coefficients,)
+            found = search(problem, seed=seed, warm=warm)
         except ValueError:
             raise UsageError(_infeasible(limits, r, b)) from None
         fine = _problem(theta0, form, r, b, limits, noise, length, min(noise.rate, FINE_GRID), criterion,
