@@ -18,11 +18,12 @@ with every inertial and friction parameter 20 % off, alternately up and down, r,
 
 ``--sequential ETA,TAU`` instead checks sequential design on the paper robot: a 20 s sinusoid with that speed and
 effort noise (seed 100), identified and saved; a 30 s plan without and with ``given`` (predicted worst relative std
-of each, and of the plan without ``given`` combined with the first log).  Then, on ``--seeds`` seeds, both logs drawn
-again (the plan kept), identified and combined by fixed weights (:func:`combine`: the first as ``plan --given``
-weighs it, the second by the information its plan predicts): per parameter, the predicted std, the spread of the
-estimate across seeds, the median reported std and the rms of z, for the second log alone and for the combination.
-Relative std is over the plan's scale of each parameter throughout (the floor for the paper robot's friction).
+of each, and of the plan without ``given`` combined with the first log).  Then, on ``--seeds`` seeds, the logs drawn
+again (the plans kept): the first identified; the plan without ``given`` identified alone; the plan with ``given``
+identified alone and with ``wmrid.identify(log, robot, given=first)`` (what ``wmrid identify B --given A.json``
+reports: :mod:`wmrid.estimators.combination`).  Per parameter: the predicted std, the spread of the estimate across
+seeds, the median reported std and the rms of z, for each.  Relative std is over the plan's scale of each parameter
+throughout (the floor for the paper robot's friction).  JSON: ``bench/out/study_plan_sequential_ETA_TAU.json``.
 
 Printed per robot and engine: seeds with every parameter determined, with the truth within 3 std, with every limit
 within 10 %, with the path in the area; the median achieved/predicted std ratio per parameter (the issue's 0.5-2x).
@@ -195,46 +196,36 @@ def _base(result):
     return np.asarray(est.theta0)[idx], np.asarray(est.cov)[np.ix_(idx, idx)], est.dof
 
 
-def combine(results, weights):
-    """The results' estimates combined by fixed weights W_k, and the combination's covariance: sum_k K_k C_k K_k^T,
-    K_k = (sum W)^-1 W_k, linear in each reported C_k (:class:`wmrid.design.information.GivenLogs`)."""
-    import numpy as np
-
-    parts = [_base(r) for r in results]
-    total = np.linalg.inv(sum(weights))
-    gains = [total @ w for w in weights]
-    x = sum(k @ p[0] for k, p in zip(gains, parts, strict=True))
-    cov = sum(k @ p[1] @ k.T for k, p in zip(gains, parts, strict=True))
-    return x, 0.5 * (cov + cov.T)
-
-
-def _sequential_seed(job: tuple[int, str, str, float, float, list]) -> dict:
-    """One seed of the check: the first log weighed as ``plan --given`` weighs it (:func:`given_weight`), the
-    planned one by the information the plan predicts for it (what the plan's prediction assumes)."""
+def _sequential_seed(job: tuple[int, str, str, str, float, float]) -> dict:
+    """One seed of the check: the logs drawn again, the first identified; the plan without ``given`` identified; the
+    plan with ``given`` identified alone and with ``given`` the first's result (``wmrid identify B --given A.json``)."""
     import numpy as np
 
     import wmrid
-    from wmrid.design.information import given_weight
 
-    seed, robot, csv, eta_noise, tau_noise, second_info = job
+    seed, robot, csv, alone_csv, eta_noise, tau_noise = job
     noise = {"eta_noise": eta_noise, "tau_noise": tau_noise, "rate": 1000.0}
     sim1 = wmrid.simulate(robot, trajectory="sinusoid", duration=20, seed=2000 + seed, **noise)
     first = wmrid.identify(sim1.log.to_wheel_log(), robot)
     sim2 = wmrid.simulate(robot, reference=csv, seed=3000 + seed, **noise)
     second = wmrid.identify(sim2.log.to_wheel_log(), robot)
-    _, c1, dof1 = _base(first)
-    x, cov = combine([first, second], [given_weight(c1, dof1), np.asarray(second_info)])
-    x2, c2, _ = _base(second)
-    widened = [bool(r.diagnostics.get("inflated")) for r in (first, second)]
-    return {"seed": seed, "second": x2.tolist(), "second_std": np.sqrt(np.diag(c2)).tolist(), "fused": x.tolist(),
-            "fused_std": np.sqrt(np.diag(cov)).tolist(), "widened": widened,
-            "truth": [sim2.truth["parameters"][n] for n in BASE]}  # fmt: skip
+    both = wmrid.identify(sim2.log.to_wheel_log(), robot, given=first)
+    alone = wmrid.identify(wmrid.simulate(robot, reference=alone_csv, seed=4000 + seed, **noise).log.to_wheel_log(),
+                           robot)  # fmt: skip
+    out = {"seed": seed, "truth": [sim2.truth["parameters"][n] for n in BASE], "fused_dof": both.estimate.dof,
+           "first_poorly": first.diagnostics.get("poorly_determined", []),
+           "widened": [bool(r.diagnostics.get("inflated")) for r in (first, second)]}  # fmt: skip
+    for key, result in (("second", second), ("fused", both), ("alone", alone)):
+        x, cov, _ = _base(result)
+        out[key], out[key + "_std"] = x.tolist(), np.sqrt(np.diag(cov)).tolist()
+    return out
 
 
 def sequential(eta_noise: float, tau_noise: float, seeds: int = 20, workers: int = 1) -> dict:
     """The sequential-design check (module docstring): predicted worst relative std alone and with ``given``; then,
-    over ``seeds`` seeds, both logs drawn again (the plan kept), identified and combined (:func:`combine`): the
-    spread of the combined estimate across seeds against its reported and its predicted std.  Every relative std is
+    over ``seeds`` seeds, the logs drawn again (the plans kept) and identified, the planned one also combined with the
+    first (:func:`_sequential_seed`): the spread of each estimate across seeds against its reported and its predicted
+    std.  Every relative std is
     the plan's: std over the plan's scale of the parameter (its nominal value, or the floor where that is small)."""
     import numpy as np
 
@@ -264,7 +255,10 @@ def sequential(eta_noise: float, tau_noise: float, seeds: int = 20, workers: int
     second_pred = np.sqrt(np.diag(second_cov))
     alone_with = with_given.criterion_value(with_given.covariance(with_given.motion_of(alone.excitation.coefficients)))
     fused_pred = np.array([both.predicted[n]["std"] for n in BASE])
-    jobs = [(s, robot, str(csv), eta_noise, tau_noise, np.linalg.inv(second_cov).tolist()) for s in range(seeds)]
+    alone_csv = OUT / "sequential_alone.csv"
+    wmrid.write_plan(alone, alone_csv, force=True)
+    alone_pred = np.array([alone.predicted[n]["std"] for n in BASE])
+    jobs = [(s, robot, str(csv), str(alone_csv), eta_noise, tau_noise) for s in range(seeds)]
     with ProcessPoolExecutor(max_workers=workers) as pool:
         rows = list(pool.map(_sequential_seed, jobs))
     truth = np.array(rows[0]["truth"])
@@ -288,8 +282,12 @@ def sequential(eta_noise: float, tau_noise: float, seeds: int = 20, workers: int
                        "relative": {n: v["relative"] for n, v in alone.predicted.items()}},
         "plan_given": {"worst": both.value, "relative": {n: v["relative"] for n, v in both.predicted.items()}},
         "second": figures("second", second_pred), "fused": figures("fused", fused_pred),
+        "alone": figures("alone", alone_pred),
+        "alone_worst_reported": sorted(np.max(np.array([r["alone_std"] for r in rows]) / scale, axis=1).tolist()),
         "fused_worst_reported": sorted(worst.tolist()), "fused_below_2pc": int(np.sum(worst < 0.02)),
         "widened": [sum(r["widened"][j] for r in rows) for j in range(2)],
+        "first_friction_poorly": sum(all(n in r["first_poorly"] for n in ("Fv1", "Fv2", "Fd1", "Fd2")) for r in rows),
+        "first_poorly_seed100": first.diagnostics.get("poorly_determined", []),
     }  # fmt: skip
 
 
@@ -308,7 +306,7 @@ def main() -> None:
         print(f"plan alone: worst {100 * out['plan_alone']['worst']:.3g} % (combined with the first log "
               f"{100 * out['plan_alone']['with_first_log']:.3g} %); with --given: worst "
               f"{100 * out['plan_given']['worst']:.3g} %")  # fmt: skip
-        for key in ("second", "fused"):
+        for key in ("alone", "second", "fused"):
             print(
                 f"{key} over {out['seeds']} seeds, % of the plan's scale: predicted / spread / reported (median), rms z"
             )
@@ -320,7 +318,10 @@ def main() -> None:
         print(f"fused worst reported std below 2 %: {out['fused_below_2pc']}/{out['seeds']} seeds (median "
               f"{100 * statistics.median(out['fused_worst_reported']):.3g} %); widened: first {out['widened'][0]}, "
               f"second {out['widened'][1]}")  # fmt: skip
-        path = args.json.with_name("study_plan_sequential.json")
+        alone_median = 100 * statistics.median(out["alone_worst_reported"])
+        print(f"plan without --given, worst reported std: median {alone_median:.3g} %; first log's friction all poorly "
+              f"determined on {out['first_friction_poorly']}/{out['seeds']} seeds")  # fmt: skip
+        path = args.json.with_name(f"study_plan_sequential_{eta_noise:g}_{tau_noise:g}.json")
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(out, indent=1, default=float))
         return None

@@ -281,7 +281,8 @@ def test_given_logs_combine_by_a_sandwich() -> None:
     """A given log's estimate combined with the planned log's by fixed weights: the combination's covariance is
     (W + I)^-1 (W C W + I) (W + I)^-1, the textbook (C^-1 + I)^-1 when W = C^-1, and the weight of a covariance with
     few degrees of freedom shrinks its correlations (none when the degrees of freedom are unknown)."""
-    from wmrid.design.information import GivenLogs, combined_covariance, given_weight
+    from wmrid.design.information import GivenLogs, combined_covariance
+    from wmrid.estimators.combination import given_weight
 
     rng = np.random.Generator(np.random.PCG64(3))
     a, b = rng.normal(size=(8, 8)), rng.normal(size=(8, 8))

@@ -93,10 +93,10 @@ def _result(result: Any) -> tuple[Any, dict[str, str]]:
         found = result
         provenance["result"] = "an IdentificationResult (not saved)"
     else:
-        from wmrid.api.planning import _read_json
+        from wmrid.api.inputs import read_json_input
 
         source = os.fspath(result)
-        data = _read_json(source, f"result {source}", "a saved identification result")
+        data = read_json_input(source, f"result {source}", "a saved identification result")
         found = result_from_dict(data, source)
         hasher = hashlib.sha256()
         with open(source, "rb") as fh:  # read once more to name it exactly, in pieces (memory bounded)

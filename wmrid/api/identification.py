@@ -14,7 +14,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
-from wmrid.api.inputs import LogOptions, load_robot, open_log
+from wmrid.api.inputs import LogOptions, given_results, load_robot, open_log
 from wmrid.core.errors import UsageError, cannot_read, option
 from wmrid.core.wheel_log import LogStream, WheelLog
 from wmrid.estimators.identify import FRICTION_CHOICES
@@ -231,6 +231,7 @@ def identify(
     weighted: bool = False,
     forgetting: float = 1.0,
     rotor_inertia: float | None = None,
+    given: Any = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> IdentificationResult:
     """The base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded ``log``.
@@ -246,6 +247,9 @@ def identify(
     form, k, alpha, box_width, torque_hold, payload, control_rate, delay, friction : the observer's settings (see
         ``wmrid identify --help``; ``delay``: None, "auto" or seconds).
     cutoff, weighted, forgetting : the classical methods' settings.
+    given : results of earlier logs of the same robot (paths of saved results, ``wmrid identify --format json``, or
+        :class:`IdentificationResult` objects; one or several): the result is this log's estimate combined with
+        theirs (:mod:`wmrid.estimators.combination`; what ``wmrid plan --given`` predicts).
     progress : called as progress(done, total) samples while the observer replays the log.
 
     Returns an :class:`IdentificationResult`; ``result.parameters[name]`` is (value, std) in SI units.
@@ -256,11 +260,13 @@ def identify(
         weighted=weighted, forgetting=forgetting, torque_hold=torque_hold, control_rate=control_rate,
         friction=friction, stdin_check=no_two, k=k, alpha=alpha, box_width=box_width,
     )  # fmt: skip
+    earlier = given_results(given)  # read (and refused) before the log
     # the observer streams the log; the classical methods filter and simulate the whole log
     wheel_log = _log(log, options, prep.robot, whole=prep.method != "observer")
     return run_prepared(
         wheel_log, prep, validate=validate, options=options, form=form, k=k, alpha=alpha, box_width=box_width,
         torque_hold=torque_hold, payload=payload, control_rate=control_rate, delay=delay, progress=progress,
+        given=earlier,
     )  # fmt: skip
 
 
@@ -356,10 +362,12 @@ def run_prepared(
     control_rate: float | None = None,
     delay: float | str | None = None,
     progress: Callable[[int, int], None] | None = None,
+    given: Sequence[tuple[IdentificationResult, str]] = (),
     **_: Any,
 ) -> IdentificationResult:
     """:func:`identify` on a log already read, with what :func:`prepare` checked and loaded; other keywords of
-    :func:`identify` are accepted and ignored (:func:`prepare` used them)."""
+    :func:`identify` are accepted and ignored (:func:`prepare` used them).  ``given``: earlier results already read
+    (:func:`wmrid.api.inputs.given_results`), combined with this log's before it is validated."""
     from wmrid.estimators.identify import identify as run_observer
 
     result = run_observer(
@@ -376,6 +384,10 @@ def run_prepared(
         from wmrid.estimators.methods import run
 
         result = run(prep.method, wheel_log, result, prep.method_options, prep.robot)
+    if given:
+        from wmrid.estimators.combination import combined_result
+
+        result = combined_result(result, given, robot=prep.robot)
     if validate is not None:
         result = with_validation(result, validate, options, robot=prep.robot, torque_hold=torque_hold)
     return result

@@ -186,3 +186,43 @@ def inspect(path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]) -> 
     from wmrid.io.inspect import inspect_log
 
     return inspect_log(_fspaths(path))
+
+
+def read_json_input(path: str, name: str, what: str) -> Any:
+    """The JSON document at ``path`` (an input: never overwritten), read in bounded memory (WMRID_MEMORY_BUDGET);
+    UsageError naming ``name`` when it cannot be read or is not JSON."""
+    import json
+
+    from wmrid.core.atomic import register_input
+    from wmrid.core.errors import cannot_read
+    from wmrid.core.limits import memory_budget, read_limited
+
+    register_input(path)
+    try:
+        raw = read_limited(path, memory_budget(), f"{name}: holds more than {{size}} (WMRID_MEMORY_BUDGET)", UsageError)
+    except OSError as err:
+        raise UsageError(f"{name}: {cannot_read(err)}") from None
+    try:
+        return json.loads(raw)
+    except (ValueError, RecursionError) as err:
+        raise UsageError(f"{name}: not {what} (not JSON: {err})") from None
+
+
+def given_results(given: Any) -> list[tuple[Any, str]]:
+    """[(result, where it came from)] of ``--given``: saved results (``wmrid identify --format json``) by path, or
+    :class:`~wmrid.estimators.result.IdentificationResult` objects ("result"); one or a sequence; None: none."""
+    if given is None:
+        return []
+    from wmrid.estimators.result import IdentificationResult
+    from wmrid.estimators.result import from_dict as result_from_dict
+
+    items = [given] if isinstance(given, (str, os.PathLike, IdentificationResult)) else list(given)
+    out = []
+    for item in items:
+        if isinstance(item, IdentificationResult):
+            out.append((item, "result"))
+            continue
+        source = os.fspath(item)
+        out.append((result_from_dict(read_json_input(source, option("given", source), "a saved result"), source),
+                    source))  # fmt: skip
+    return out

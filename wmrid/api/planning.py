@@ -10,7 +10,6 @@ information is added, so that the plan targets what they leave poorly determined
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Callable, Sequence
@@ -19,10 +18,12 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.core.errors import UsageError, cannot_read, option
-from wmrid.design.information import DEFAULT_K, GivenLogs, SensorNoise, given_weight
+from wmrid.api.inputs import given_results, read_json_input
+from wmrid.core.errors import UsageError, option
+from wmrid.design.information import DEFAULT_K, GivenLogs, SensorNoise
 from wmrid.design.limits import DEFAULT_MARGIN, resolve_limits
 from wmrid.design.plan import Plan, make_plan, plan_form
+from wmrid.estimators.combination import Part, shared_names
 from wmrid.model.robot import BaseSet, Robot
 
 __all__ = ["Plan", "plan", "read_plan", "write_plan"]
@@ -73,35 +74,28 @@ def _given(
     given: Any, names: tuple[str, ...], theta0: np.ndarray
 ) -> tuple[tuple[GivenLogs, dict[str, Any]], np.ndarray] | tuple[None, np.ndarray]:
     """((the given logs (:class:`wmrid.design.information.GivenLogs`), description), theta0 updated) from saved
-    results: each result's base covariance over the parameters it determines and its weight
-    (:func:`wmrid.design.information.given_weight`, from the covariance and its degrees of freedom), summed; the
-    nominal values replaced by a result's estimate where it determines them to better than 10 %."""
+    results: each result's base covariance over the parameters it determines and means as the plan does
+    (:func:`wmrid.estimators.combination.shared_names`), and its weight (:meth:`wmrid.estimators.combination.Part.
+    weight`), summed: what ``wmrid identify --given`` will combine; the nominal values replaced by a result's estimate
+    where it determines them to better than 10 %."""
     if given is None:
         return None, theta0
-    from wmrid.estimators.result import IdentificationResult
-    from wmrid.estimators.result import from_dict as result_from_dict
-
-    items = [given] if isinstance(given, (str, os.PathLike, IdentificationResult)) else list(given)
     weight = np.zeros((len(names), len(names)))
     spread = np.zeros((len(names), len(names)))
     theta0 = theta0.copy()
     sources = []
-    for item in items:
-        if isinstance(item, IdentificationResult):
-            result, source = item, "result"
-        else:
-            source = os.fspath(item)
-            result = result_from_dict(_read_json(source, option("given", source), "a saved result"), source)
+    for result, source in given_results(given):
         est = result.estimate
         if est is None:
             raise UsageError(f"{option('given', source)}: holds no estimate")
         their = result.form.base_names if len(est.theta0) == result.form.n_base else names[: len(est.theta0)]
         cov = np.asarray(est.cov, dtype=np.float64)
-        idx = [i for i, n in enumerate(their) if n in names and np.isfinite(cov[i, i]) and cov[i, i] > 0]
+        shared = shared_names(their, names)  # a result of another friction model: its inertia and Vc only
+        idx = [i for i, n in enumerate(their) if n in shared and np.isfinite(cov[i, i]) and cov[i, i] > 0]
         if not idx:
             continue
         sub = cov[np.ix_(idx, idx)]
-        sub_weight = given_weight(sub, est.dof)
+        sub_weight = Part(np.asarray(est.theta0), cov, est.dof, tuple(idx), est.weight_cov).weight()
         where = [names.index(their[i]) for i in idx]
         weight[np.ix_(where, where)] += sub_weight
         spread[np.ix_(where, where)] += sub_weight @ sub @ sub_weight
@@ -289,24 +283,7 @@ def _friction(friction: str, robot: Robot) -> tuple[str, tuple[float, ...], tupl
 def read_plan(path: str | os.PathLike[str]) -> Plan:
     """A plan saved as JSON (``wmrid plan -o plan.json`` or ``--format json``)."""
     source = os.fspath(path)
-    return Plan.from_dict(_read_json(source, source, "a plan"), source)
-
-
-def _read_json(path: str, name: str, what: str) -> Any:
-    """The JSON document at ``path`` (an input: never overwritten), read in bounded memory (WMRID_MEMORY_BUDGET);
-    UsageError naming ``name`` when it cannot be read or is not JSON."""
-    from wmrid.core.atomic import register_input
-    from wmrid.core.limits import memory_budget, read_limited
-
-    register_input(path)
-    try:
-        raw = read_limited(path, memory_budget(), f"{name}: holds more than {{size}} (WMRID_MEMORY_BUDGET)", UsageError)
-    except OSError as err:
-        raise UsageError(f"{name}: {cannot_read(err)}") from None
-    try:
-        return json.loads(raw)
-    except (ValueError, RecursionError) as err:
-        raise UsageError(f"{name}: not {what} (not JSON: {err})") from None
+    return Plan.from_dict(read_json_input(source, source, "a plan"), source)
 
 
 #: Suffixes :func:`write_plan` writes: the reference (csv, parquet, mcap) or the prediction (json).

@@ -171,6 +171,14 @@ def identify(
     control_rate: ControlRateOpt = None,
     delay: DelayOpt = None,
     friction: FrictionOpt = FrictionChoice.auto,
+    given: Annotated[
+        list[str] | None,
+        typer.Option(
+            metavar="RESULT",
+            help="A saved result of an earlier log of this robot (--format json -o run.json) to combine with this "
+            "log's, as wmrid plan --given predicted. Repeatable.",
+        ),
+    ] = None,
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
     from wmrid.api.identification import identify as run_identify
@@ -187,7 +195,7 @@ def identify(
             options=log_opts(locals()), form=form.value, k=k, alpha=alpha,
             box_width=box_width, torque_hold=torque_hold.value, payload=payload, control_rate=control_rate,
             delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted, forgetting=forgetting,
-            progress=progress_cb,
+            given=given, progress=progress_cb,
         )  # fmt: skip
     finally:
         finish()

@@ -50,10 +50,12 @@ def derived_poorly_determined(parameters: dict[str, tuple[float, float]], base_n
     return out
 
 
-def poorly_text(name: str, pair: tuple[float, float], unit: str, method: str | None = None) -> str:
+def poorly_text(name: str, pair: tuple[float, float], unit: str, method: str | None = None, logs: int = 1) -> str:
+    """The warning for a poorly determined parameter; ``logs`` > 1: a combination of that many logs' results."""
     value, std = pair
     by = f" ({method})" if method else ""
-    return f"{name} is poorly determined by this log{by}: {value:.6g} +/- {std:.2g} {unit}"
+    what = "this log" if logs <= 1 else "these logs"
+    return f"{name} is poorly determined by {what}{by}: {value:.6g} +/- {std:.2g} {unit}"
 
 
 def impossible_parameters(parameters: dict[str, tuple[float, float]]) -> set[str]:

@@ -50,6 +50,10 @@ class BaseEstimate:
     diagnostics : method-specific figures (JSON-ready).
     warnings : plain-English warnings about this estimate.
     segments : the leave-one-segment-out estimates behind the jackknife std, when the method keeps them.
+    weight_cov : (n0, n0) the covariance the method's own weighting implies (the observer's Newey-West sandwich
+        through the minimum-distance fit), estimated from every block of the log and so far steadier than ``cov``:
+        what another log's estimate is combined with this one by (:mod:`wmrid.estimators.combination`); None when
+        the method has none.  Not a std to report (it leaves out what the jackknife covers).
     """
 
     method: str
@@ -60,6 +64,7 @@ class BaseEstimate:
     diagnostics: dict[str, Any] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
     segments: SegmentEstimates | None = field(default=None, repr=False, compare=False)
+    weight_cov: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         n0 = np.shape(self.theta0)[0] if np.ndim(self.theta0) == 1 else -1

@@ -603,9 +603,23 @@ def _identify(
         ),
         nominal=nominal, reference=reference, units=units, payload=payload_est,
         estimate=BaseEstimate(
-            "observer", fit.theta0.copy(), cov0, dof=dof, seconds=time.perf_counter() - started, segments=loo
+            "observer", fit.theta0.copy(), cov0, dof=dof, seconds=time.perf_counter() - started, segments=loo,
+            weight_cov=weighting_covariance(fit.gain, weight_cov, cov0),
         ),
     )  # fmt: skip
+
+
+def weighting_covariance(gain: np.ndarray, weight_cov: np.ndarray, cov0: np.ndarray) -> np.ndarray:
+    """(n0, n0): the Newey-West covariance of theta (2p, 2p) through the minimum-distance gain (n0, 2p), G W G^T;
+    a parameter the reported covariance ``cov0`` leaves undetermined (a non-finite diagonal) is left so here too
+    (NaN row and column, +inf on the diagonal)."""
+    out = gain @ weight_cov @ gain.T
+    out = 0.5 * (out + out.T)
+    bad = ~np.isfinite(np.diag(cov0)) | ~np.isfinite(np.diag(out))
+    out[bad, :] = np.nan
+    out[:, bad] = np.nan
+    out[bad, bad] = np.inf
+    return out
 
 
 #: Diagnostics that describe the observer's run on the log (kept, and listed as such, under another method).

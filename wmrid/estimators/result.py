@@ -219,14 +219,18 @@ def finite_or_none(x: float) -> float | None:
 
 def estimate_dict(est: BaseEstimate, names: tuple[str, ...]) -> dict[str, Any]:
     """The method-neutral estimate as JSON: theta0 in ``names`` order with its full covariance (null where the log
-    does not determine a parameter), the method and its degrees of freedom."""
-    return {
+    does not determine a parameter), the method and its degrees of freedom; the weighting covariance when the method
+    has one (:attr:`BaseEstimate.weight_cov`)."""
+    out = {
         "method": est.method,
         "names": list(names[: len(est.theta0)]),
         "theta0": [finite_or_none(v) for v in est.theta0],
         "covariance": [[finite_or_none(v) for v in row] for row in est.cov],
         "dof": est.dof,
     }
+    if est.weight_cov is not None:
+        out["weight_covariance"] = [[finite_or_none(v) for v in row] for row in est.weight_cov]
+    return out
 
 
 def _floats(values: Any) -> np.ndarray:
@@ -309,7 +313,11 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
         cov[~np.isfinite(cov)] = math.nan
         undetermined = np.isnan(np.diag(cov))
         cov[np.diag_indices_from(cov)] = np.where(undetermined, math.inf, np.diag(cov))
-        estimate = BaseEstimate(method=est_d["method"], theta0=_floats(est_d["theta0"]), cov=cov, dof=est_d.get("dof"))
+        weight_cov = None
+        if est_d.get("weight_covariance") is not None:
+            weight_cov = np.array([_floats(row) for row in est_d["weight_covariance"]], dtype=float).reshape(cov.shape)
+        estimate = BaseEstimate(method=est_d["method"], theta0=_floats(est_d["theta0"]), cov=cov, dof=est_d.get("dof"),
+                                weight_cov=weight_cov)  # fmt: skip
         theta0_cov = cov
     else:
         std = np.array([parameters.get(n, (math.nan, math.inf))[1] for n in base])

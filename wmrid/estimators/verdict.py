@@ -41,9 +41,12 @@ from wmrid.estimators.plausibility import units_check
 PLAN_HINT = "to determine "
 
 #: Warnings :func:`settle` owns: dropped from the stages' warnings and made again from the final numbers.
-OWNED = (" is poorly determined by this log", "is not positive definite, which no robot has",
-         "friction cannot push; check signs", "drag cannot push; check signs", "unit check: ",
-         "the estimated inertia matrix M is not positive definite", PLAN_HINT)  # fmt: skip
+OWNED = (
+    " is poorly determined by this log", " is poorly determined by these logs",
+    "is not positive definite, which no robot has", "friction cannot push; check signs",
+    "drag cannot push; check signs", "unit check: ", "the estimated inertia matrix M is not positive definite",
+    PLAN_HINT,
+)  # fmt: skip
 
 #: Above this relative std a parameter cannot be told from zero: "not determined by this log".
 NOT_DETERMINED = 1.0
@@ -106,6 +109,7 @@ def _poorly_warnings(result: Any, method: str | None) -> tuple[list[str], list[s
     their value, the std being the reported one: the base parameters with the partners they cannot be told from,
     then M11, M12, M22 (:func:`wmrid.estimators.diagnostics.derived_poorly_determined`)."""
     names, corr = _correlations(result)
+    logs = 1 + len((result.diagnostics.get("combined") or {}).get("results") or [])
     texts, poorly, pairs = [], [], []
     for i, name in enumerate(names):
         value, std = result.parameters[name]
@@ -117,9 +121,9 @@ def _poorly_warnings(result: Any, method: str | None) -> tuple[list[str], list[s
         why = "; it is not separable from " + ", ".join(
             f"{names[j]} (correlation {corr[i, j]:+.3f})" for j in partners
         ) if partners else ""  # fmt: skip
-        texts.append(poorly_text(name, (value, std), result.units[name], method) + why)
+        texts.append(poorly_text(name, (value, std), result.units[name], method, logs) + why)
     derived = derived_poorly_determined(result.parameters, names)
-    texts += [poorly_text(name, result.parameters[name], result.units[name], method) for name in derived]
+    texts += [poorly_text(name, result.parameters[name], result.units[name], method, logs) for name in derived]
     return texts, poorly + derived, pairs
 
 
@@ -163,7 +167,7 @@ def plan_hint(poorly: list[str]) -> str:
     return (
         f"{PLAN_HINT}{_join(poorly)}, drive the robot as wmrid plan designs it: save this result (--format json -o "
         "run.json), then wmrid plan --robot ROBOT --given run.json -o next.csv adds what this log holds and targets "
-        "the rest"
+        "the rest; identify that drive's log with --given run.json to combine the two"
     )
 
 
