@@ -401,6 +401,10 @@ def compare(
     validate: LogInput | None = None,
     truth: dict[str, float] | str | os.PathLike[str] | None = None,
     options: LogOptions | None = None,
+    form: str = "auto",
+    k: float = 10.0,
+    alpha: float = 1e-10,
+    box_width: float = 10.0,
     torque_hold: str = "zoh",
     control_rate: float | None = None,
     delay: float | str | None = None,
@@ -415,7 +419,9 @@ def compare(
     estimates, standard errors, flags, errors against ``truth`` (base parameters by name), fit on ``validate``,
     run time, as a :class:`~wmrid.estimators.methods.Comparison` (``to_dict``: the document ``wmrid compare
     --format json`` prints).  Each method identifies the same friction
-    model; the observer's own estimate is shown as it is (no closed-loop substitution).  ``stage``: called with
+    model; the observer's own estimate is shown as it is (no closed-loop substitution).  ``form``, ``k``,
+    ``alpha``, ``box_width``, ``torque_hold``: the observer's settings, as for :func:`identify` (every method starts
+    from the observer's run).  ``stage``: called with
     what it does now (reading the log, each method), for a progress display."""
     from wmrid.estimators.identify import identify as run_observer
     from wmrid.estimators.methods import METHODS, check_method
@@ -424,6 +430,7 @@ def compare(
     names = tuple(check_method(m.strip()) for m in (METHODS if methods is None else methods) if m.strip())
     if not names:
         raise UsageError(f"{option('methods')} names no method; give e.g. observer,idim")
+    check_numbers(k=k, alpha=alpha, box_width=box_width)
     options_ = method_options(cutoff, weighted, forgetting, torque_hold)
     validating = validate is not None
     check_control_rate(control_rate, names, validating)
@@ -447,7 +454,8 @@ def compare(
                 f"{option('log')}'s in {wheel_log.effort_unit}; give both logs in the same units"
             )
     say("the observer's run")
-    common = {"torque_hold": torque_hold, "control_rate": control_rate, "delay": delay_value(delay)}
+    common = {"torque_hold": torque_hold, "control_rate": control_rate, "delay": delay_value(delay), "form": form,
+              "k": k, "alpha": alpha, "box_width": box_width}  # fmt: skip
     # the observer's column is identify --method observer's: the closed-loop check widens it, never swaps it
     load_terms = all(m in LOAD_METHODS for m in names)  # the other methods share the observer's model
     observer = run_observer(wheel_log, robot_obj, friction=friction_, switch=False, load_terms=load_terms, **common)

@@ -11,7 +11,7 @@ from dataclasses import replace
 from typing import Any
 
 from wmrid.api.identification import check_numbers, identify, no_two_stdin, prepare, run_prepared
-from wmrid.api.inputs import LogOptions, read_log
+from wmrid.api.inputs import LogOptions, given_results, read_log
 from wmrid.core.errors import LogFormatError, UsageError, WmridError, option
 from wmrid.core.wheel_log import LogStream, WheelLog
 from wmrid.estimators.result import IdentificationResult, from_dict
@@ -111,16 +111,18 @@ def _report(result, log, truth, figures, options, robot, rotor_inertia, identify
         source = open_source(os.fspath(result))
         inputs, data = [os.fspath(result)], source.data
         if source.head(64).lstrip().startswith(b"{"):
-            if validate is not None or method not in ("auto", "observer"):
+            if validate is not None or method not in ("auto", "observer") or identify_options.get("given"):
                 raise UsageError(
-                    f"{source.name}: {option('validate')} and {option('method')} need a log as INPUT, not a saved "
-                    "result; run `wmrid identify LOG --method ... --validate OTHER --format json` and report its output"
+                    f"{source.name}: {option('validate')}, {option('method')} and {option('given')} need a log as "
+                    "INPUT, not a saved result; run `wmrid identify LOG --method ... --validate OTHER --format json` "
+                    "and report its output"
                 )
             return _from_saved(_parse_saved(source), source.name, truth, figures), inputs, data
         # a log: the checks identify() makes, before the log is read
         prep = prepare(options=options, robot=robot, rotor_inertia=rotor_inertia, **identify_options)
+        earlier = given_results(identify_options.get("given"))  # read (and refused) before the log
         wheel_log = read_log(os.fspath(result), options, robot=prep.robot, data=source.data)
-        identified = run_prepared(wheel_log, prep, options=options, **identify_options)
+        identified = run_prepared(wheel_log, prep, options=options, **{**identify_options, "given": earlier})
         robot_obj = prep.robot
     else:
         wheel_log = result.read() if isinstance(result, LogStream) else result

@@ -16,6 +16,9 @@ from wmrid.cli.helpers import activity, log_opts, stderr_console
 from wmrid.cli.options import (
     AlignOpt,
     AlignRule,
+    AlphaOpt,
+    BoxWidthOpt,
+    ColumnsOpt,
     ControlRateOpt,
     CutoffOpt,
     DelayOpt,
@@ -27,9 +30,11 @@ from wmrid.cli.options import (
     FlipEffortOpt,
     ForgettingOpt,
     FormChoice,
+    FormOpt,
     FrictionChoice,
     FrictionOpt,
     GearRatioOpt,
+    KOpt,
     LeftJointOpt,
     MethodChoice,
     MethodOpt,
@@ -42,9 +47,11 @@ from wmrid.cli.options import (
     TimeSource,
     TimeSourceOpt,
     TimeUnit,
+    TimeUnitOpt,
     TopicOpt,
     TorqueConstantOpt,
     TorqueHold,
+    TorqueHoldOpt,
     VelocityFrom,
     VelocityFromOpt,
     VelocityTopicOpt,
@@ -83,12 +90,13 @@ def _given_options(params: dict[str, Any]) -> dict[str, Any]:
 
 
 @app.command(
+    name="fleet",
     epilog="Examples:\n\n"
     "wmrid fleet logs/ --robot paper -o fleet.parquet\n\n"
     "wmrid fleet --manifest fleet.csv -o fleet.parquet --resume\n\n"
-    "wmrid fleet 'logs/*/*.mcap' --scheduler tcp://10.0.0.5:8786 -o fleet.parquet"
+    "wmrid fleet 'logs/*/*.mcap' --scheduler tcp://10.0.0.5:8786 -o fleet.parquet",
 )
-def fleet(
+def fleet_command(
     logs: Annotated[
         list[str] | None,
         typer.Argument(
@@ -191,15 +199,13 @@ def fleet(
         str | None,
         typer.Option(help="Robot of every log whose manifest row names none: built-in name, TOML or URDF file."),
     ] = None,
-    columns: Annotated[str | None, typer.Option(help="Column mapping, as for identify.")] = None,
-    time_unit: Annotated[TimeUnit, typer.Option(help="Unit of the time column.")] = TimeUnit.auto,
-    form: Annotated[FormChoice, typer.Option(help="Regressor form, as for identify.")] = FormChoice.auto,
-    k: Annotated[float, typer.Option("--k", help="Observer gain, 1/s, in (0, 100000].")] = 10.0,
-    alpha: Annotated[float, typer.Option(help="Initial Gamma = alpha I, > 0.")] = 1e-10,
-    box_width: Annotated[
-        float, typer.Option(help="Half-width of the parameter box, in (0, inf] (inf: no box).")
-    ] = 10.0,
-    torque_hold: Annotated[TorqueHold, typer.Option(help="zoh or foh.")] = TorqueHold.zoh,
+    columns: ColumnsOpt = None,
+    time_unit: TimeUnitOpt = TimeUnit.auto,
+    form: FormOpt = FormChoice.auto,
+    k: KOpt = 10.0,
+    alpha: AlphaOpt = 1e-10,
+    box_width: BoxWidthOpt = 10.0,
+    torque_hold: TorqueHoldOpt = TorqueHold.zoh,
     topic: TopicOpt = None,
     velocity_topic: VelocityTopicOpt = None,
     effort_topic: EffortTopicOpt = None,
@@ -333,12 +339,12 @@ def _print_summary(summary: dict[str, Any]) -> None:
 
 
 @app.command(
-    "fleet-report",
+    name="fleet-report",
     epilog="Examples:\n\n"
     "wmrid fleet-report fleet.parquet -o fleet.html\n\n"
     "wmrid fleet-report fleet.parquet --robot paper --alpha 0.0001 -o fleet.json",
 )
-def fleet_report(
+def fleet_report_command(
     table: Annotated[str, typer.Argument(metavar="TABLE", help="The Parquet table of `wmrid fleet`.")],
     output: Annotated[
         Path | None,

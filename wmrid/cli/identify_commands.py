@@ -23,6 +23,9 @@ from wmrid.cli.helpers import (
 from wmrid.cli.options import (
     AlignOpt,
     AlignRule,
+    AlphaOpt,
+    BoxWidthOpt,
+    ColumnsOpt,
     ControlRateOpt,
     CutoffOpt,
     DelayOpt,
@@ -34,14 +37,18 @@ from wmrid.cli.options import (
     FlipEffortOpt,
     ForgettingOpt,
     FormChoice,
+    FormOpt,
     FrictionChoice,
     FrictionOpt,
     GearRatioOpt,
+    GivenOpt,
+    KOpt,
     LeftJointOpt,
     MethodChoice,
     MethodOpt,
     MirrorLeftOpt,
     OutputFormat,
+    PayloadOpt,
     RightJointOpt,
     RotorInertiaOpt,
     SpeedUnit,
@@ -49,9 +56,11 @@ from wmrid.cli.options import (
     TimeSource,
     TimeSourceOpt,
     TimeUnit,
+    TimeUnitOpt,
     TopicOpt,
     TorqueConstantOpt,
     TorqueHold,
+    TorqueHoldOpt,
     ValidateOpt,
     VelocityFrom,
     VelocityFromOpt,
@@ -74,12 +83,13 @@ def one_or_many(paths: list[str]) -> str | list[str]:
 
 
 @app.command(
+    name="identify",
     epilog="Examples:\n\n"
     "wmrid identify run.mcap --robot paper\n\n"
     "wmrid identify run.bag --velocity-topic /wheel_state --effort-topic /wheel_cmd --format json | jq .parameters\n\n"
-    "wmrid identify log.csv.gz --columns t=time,eta_r=vr,eta_l=vl,tau_r=ur,tau_l=ul -o result.json"
+    "wmrid identify log.csv.gz --columns t=time,eta_r=vr,eta_l=vl,tau_r=ur,tau_l=ul -o result.json",
 )
-def identify(
+def identify_command(
     log: Annotated[list[str], typer.Argument(metavar="LOG...", help=LOG_HELP)],
     robot: Annotated[
         str | None,
@@ -87,34 +97,13 @@ def identify(
             help="Robot: built-in name ('paper'), TOML file, or URDF (with --gear-ratio); starts the estimate."
         ),
     ] = None,
-    columns: Annotated[
-        str | None, typer.Option(help="Column mapping NAME=COLUMN, comma-separated, e.g. t=time,eta_r=vr,tau_l=ul.")
-    ] = None,
-    time_unit: Annotated[
-        TimeUnit,
-        typer.Option(help="Time column unit (auto: float s, floats past 1e13 us, 1e16 ns; integer ns)."),
-    ] = TimeUnit.auto,
-    form: Annotated[
-        FormChoice, typer.Option(help="Regressor: paper (7 columns, wheels keep one sign), general (8), auto.")
-    ] = FormChoice.auto,
-    k: Annotated[
-        float,
-        typer.Option("--k", help="Observer/filter gain k of Eqs. 26-30, 1/s, in (0, 100000] (paper: 1; see the docs)."),
-    ] = 10.0,
-    alpha: Annotated[
-        float, typer.Option(help="Initial Gamma = alpha I (Eq. 33), > 0: weight of the start value (paper: 5000).")
-    ] = 1e-10,
-    box_width: Annotated[
-        float,
-        typer.Option(
-            help="Half-width of the parameter box around the nominal values, in units of max(|theta|, m_ii), "
-            "in (0, inf] (inf: no box)."
-        ),
-    ] = 10.0,
-    torque_hold: Annotated[
-        TorqueHold,
-        typer.Option(help="Torque between samples: zoh (held, as a digital controller applies it) or foh (linear)."),
-    ] = TorqueHold.zoh,
+    columns: ColumnsOpt = None,
+    time_unit: TimeUnitOpt = TimeUnit.auto,
+    form: FormOpt = FormChoice.auto,
+    k: KOpt = 10.0,
+    alpha: AlphaOpt = 1e-10,
+    box_width: BoxWidthOpt = 10.0,
+    torque_hold: TorqueHoldOpt = TorqueHold.zoh,
     output_format: Annotated[
         OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
     ] = OutputFormat.auto,
@@ -138,13 +127,7 @@ def identify(
     ] = False,
     history: Annotated[bool, typer.Option("--history", hidden=True, help="Keep the history (the default).")] = False,
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing output file.")] = False,
-    payload: Annotated[
-        bool,
-        typer.Option(
-            "--payload",
-            help="Also estimate the payload carried (mass, x, y, inertia) against --robot's unloaded parameters.",
-        ),
-    ] = False,
+    payload: PayloadOpt = False,
     topic: TopicOpt = None,
     velocity_topic: VelocityTopicOpt = None,
     effort_topic: EffortTopicOpt = None,
@@ -171,14 +154,7 @@ def identify(
     control_rate: ControlRateOpt = None,
     delay: DelayOpt = None,
     friction: FrictionOpt = FrictionChoice.auto,
-    given: Annotated[
-        list[str] | None,
-        typer.Option(
-            metavar="RESULT",
-            help="A saved result of an earlier log of this robot (--format json -o run.json) to combine with this "
-            "log's, as wmrid plan --given predicted. Repeatable.",
-        ),
-    ] = None,
+    given: GivenOpt = None,
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
     from wmrid.api.identification import identify as run_identify
@@ -216,8 +192,10 @@ def identify(
         print_identification(result, console())
 
 
-@app.command(epilog="Examples:\n\nwmrid inspect run.mcap\n\nwmrid inspect rosbag2_folder/ --format json")
-def inspect(
+@app.command(
+    name="inspect", epilog="Examples:\n\nwmrid inspect run.mcap\n\nwmrid inspect rosbag2_folder/ --format json"
+)
+def inspect_command(
     log: Annotated[list[str], typer.Argument(metavar="LOG...", help=LOG_HELP)],
     output_format: Annotated[
         OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
@@ -238,11 +216,12 @@ def inspect(
 
 
 @app.command(
+    name="report",
     epilog="Examples:\n\n"
     "wmrid report run.mcap --robot paper -o report.html\n\n"
-    "wmrid identify run.mcap -o result.json; wmrid report result.json -o report.md"
+    "wmrid identify run.mcap -o result.json; wmrid report result.json -o report.md",
 )
-def report(
+def report_command(
     input_: Annotated[
         str,
         typer.Argument(
@@ -259,13 +238,15 @@ def report(
         Path | None, typer.Option(help="Export the prediction errors over time (t, e_r, e_l) as .csv or .parquet.")
     ] = None,
     robot: Annotated[str | None, typer.Option(help="Robot (name, TOML or URDF), as for identify.")] = None,
-    columns: Annotated[str | None, typer.Option(help="Column mapping, as for identify.")] = None,
-    time_unit: Annotated[TimeUnit, typer.Option(help="Unit of the time column.")] = TimeUnit.auto,
-    form: Annotated[FormChoice, typer.Option(help="Regressor form, as for identify.")] = FormChoice.auto,
-    k: Annotated[float, typer.Option("--k", help="Observer gain, 1/s, in (0, 100000].")] = 10.0,
-    alpha: Annotated[float, typer.Option(help="Initial Gamma = alpha I, > 0.")] = 1e-10,
-    torque_hold: Annotated[TorqueHold, typer.Option(help="zoh or foh.")] = TorqueHold.zoh,
-    payload: Annotated[bool, typer.Option("--payload", help="Also estimate the payload (needs --robot).")] = False,
+    columns: ColumnsOpt = None,
+    time_unit: TimeUnitOpt = TimeUnit.auto,
+    form: FormOpt = FormChoice.auto,
+    k: KOpt = 10.0,
+    alpha: AlphaOpt = 1e-10,
+    box_width: BoxWidthOpt = 10.0,
+    torque_hold: TorqueHoldOpt = TorqueHold.zoh,
+    payload: PayloadOpt = False,
+    given: GivenOpt = None,
     force: Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")] = False,
     topic: TopicOpt = None,
     velocity_topic: VelocityTopicOpt = None,
@@ -325,9 +306,9 @@ def report(
         rep = build(
             input_, truth=truth_params, figures=drawn, rotor_inertia=rotor_inertia,
             options=opts, robot=robot, method=method.value,
-            validate=validate, form=form.value, k=k, alpha=alpha, torque_hold=torque_hold.value, payload=payload,
-            control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted,
-            forgetting=forgetting, command=invocation(),
+            validate=validate, form=form.value, k=k, alpha=alpha, box_width=box_width, torque_hold=torque_hold.value,
+            payload=payload, control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff,
+            weighted=weighted, forgetting=forgetting, given=given, command=invocation(),
         )  # fmt: skip
         from wmrid.core.atomic import output_group
 
@@ -348,11 +329,12 @@ def report(
 
 
 @app.command(
+    name="compare",
     epilog="Examples:\n\n"
     "wmrid compare run.mcap --robot paper\n\n"
-    "wmrid compare sim.csv --truth sim.csv.truth.json --methods observer,idim,oe --validate other.csv"
+    "wmrid compare sim.csv --truth sim.csv.truth.json --methods observer,idim,oe --validate other.csv",
 )
-def compare(
+def compare_command(
     log: Annotated[list[str], typer.Argument(metavar="LOG...", help=LOG_HELP)],
     robot: Annotated[
         str | None, typer.Option(help="Robot (name, TOML or URDF): starts the observer and gives nominal/CAD values.")
@@ -366,9 +348,13 @@ def compare(
     methods: Annotated[
         str, typer.Option(help="Comma-separated methods to run, of observer, idim, iv, rls, oe.")
     ] = "observer,idim,rls,oe",
-    columns: Annotated[str | None, typer.Option(help="Column mapping, as for identify.")] = None,
-    time_unit: Annotated[TimeUnit, typer.Option(help="Unit of the time column.")] = TimeUnit.auto,
-    torque_hold: Annotated[TorqueHold, typer.Option(help="zoh or foh (observer and oe).")] = TorqueHold.zoh,
+    columns: ColumnsOpt = None,
+    time_unit: TimeUnitOpt = TimeUnit.auto,
+    form: FormOpt = FormChoice.auto,
+    k: KOpt = 10.0,
+    alpha: AlphaOpt = 1e-10,
+    box_width: BoxWidthOpt = 10.0,
+    torque_hold: TorqueHoldOpt = TorqueHold.zoh,
     cutoff: CutoffOpt = None,
     weighted: WeightedOpt = False,
     forgetting: ForgettingOpt = 1.0,
@@ -409,9 +395,9 @@ def compare(
     with activity("wmrid compare") as stage:
         data = run_compare(
             one_or_many(log), robot, methods=methods.split(","), validate=validate, truth=truth,
-            rotor_inertia=rotor_inertia, options=opts, torque_hold=torque_hold.value,
-            control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted,
-            forgetting=forgetting, stage=stage,
+            rotor_inertia=rotor_inertia, options=opts, form=form.value, k=k, alpha=alpha, box_width=box_width,
+            torque_hold=torque_hold.value, control_rate=control_rate, delay=delay, friction=friction.value,
+            cutoff=cutoff, weighted=weighted, forgetting=forgetting, stage=stage,
         ).to_dict()  # fmt: skip
     if output is not None:
         write_json(str(output), data, force=force)

@@ -14,6 +14,9 @@ from wmrid.cli.helpers import log_opts, on_stdout, warning_summary
 from wmrid.cli.options import (
     AlignOpt,
     AlignRule,
+    AlphaOpt,
+    BoxWidthOpt,
+    ColumnsOpt,
     ControlRateOpt,
     DelayOpt,
     EfficiencyOpt,
@@ -23,12 +26,15 @@ from wmrid.cli.options import (
     EffortUnitOpt,
     FlipEffortOpt,
     FormChoice,
+    FormOpt,
     FrictionChoice,
     FrictionOpt,
     GearRatioOpt,
+    KOpt,
     LeftJointOpt,
     MirrorLeftOpt,
     OutputFormat,
+    PayloadOpt,
     RightJointOpt,
     RotorInertiaOpt,
     SpeedUnit,
@@ -36,9 +42,11 @@ from wmrid.cli.options import (
     TimeSource,
     TimeSourceOpt,
     TimeUnit,
+    TimeUnitOpt,
     TopicOpt,
     TorqueConstantOpt,
     TorqueHold,
+    TorqueHoldOpt,
     VelocityFrom,
     VelocityFromOpt,
     VelocityTopicOpt,
@@ -50,13 +58,14 @@ _LIVE_PANEL = "Live (refresh and when to stop)"
 
 
 @app.command(
+    name="live",
     epilog="Examples:\n\n"
     "wmrid live ws://robot.local:8765 --robot paper -o result.json  (foxglove_bridge on the robot)\n\n"
     "ros2 bag record -s mcap -o run /joint_states & wmrid live run/ --robot paper -o result.json\n\n"
     "wmrid live run.mcap --idle 5 --until-std 1 --params m11,m22,Vc\n\n"
-    "some_logger | wmrid live - --columns t=time,eta_r=vr,eta_l=vl,tau_r=ur,tau_l=ul | jq .parameters"
+    "some_logger | wmrid live - --columns t=time,eta_r=vr,eta_l=vl,tau_r=ur,tau_l=ul | jq .parameters",
 )
-def live(
+def live_command(
     source: Annotated[
         str,
         typer.Argument(
@@ -133,24 +142,14 @@ def live(
             "--format", help="table (a live table), json (a JSON line per refresh), or auto (table on a terminal)."
         ),
     ] = OutputFormat.auto,
-    columns: Annotated[
-        str | None, typer.Option(help="Column mapping NAME=COLUMN, comma-separated, e.g. t=time,eta_r=vr,tau_l=ul.")
-    ] = None,
-    time_unit: Annotated[
-        TimeUnit, typer.Option(help="Time column unit (auto: float s, floats past 1e13 us, 1e16 ns; integer ns).")
-    ] = TimeUnit.auto,
-    form: Annotated[
-        FormChoice, typer.Option(help="Regressor: paper (7 columns, wheels keep one sign), general (8), auto.")
-    ] = FormChoice.auto,
-    k: Annotated[float, typer.Option("--k", help="Observer/filter gain k, 1/s, in (0, 100000].")] = 10.0,
-    alpha: Annotated[float, typer.Option(help="Initial Gamma = alpha I, > 0.")] = 1e-10,
-    box_width: Annotated[
-        float, typer.Option(help="Half-width of the parameter box, in units of max(|theta|, m_ii), in (0, inf].")
-    ] = 10.0,
-    torque_hold: Annotated[TorqueHold, typer.Option(help="Torque between samples: zoh or foh.")] = TorqueHold.zoh,
-    payload: Annotated[
-        bool, typer.Option("--payload", help="The final result also estimates the payload (needs --robot).")
-    ] = False,
+    columns: ColumnsOpt = None,
+    time_unit: TimeUnitOpt = TimeUnit.auto,
+    form: FormOpt = FormChoice.auto,
+    k: KOpt = 10.0,
+    alpha: AlphaOpt = 1e-10,
+    box_width: BoxWidthOpt = 10.0,
+    torque_hold: TorqueHoldOpt = TorqueHold.zoh,
+    payload: PayloadOpt = False,
     topic: TopicOpt = None,
     velocity_topic: VelocityTopicOpt = None,
     effort_topic: EffortTopicOpt = None,

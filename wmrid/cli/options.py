@@ -413,3 +413,48 @@ FalseAlarmRateOpt = Annotated[
         rich_help_panel=_MONITOR_PANEL,
     ),
 ]
+
+
+#: The observer's settings and the table options, declared once for every command that identifies a log (issue 31).
+ColumnsOpt = Annotated[
+    str | None, typer.Option(help="Column mapping NAME=COLUMN, comma-separated, e.g. t=time,eta_r=vr,tau_l=ul.")
+]
+TimeUnitOpt = Annotated[
+    TimeUnit, typer.Option(help="Time column unit (auto: float s, floats past 1e13 us, 1e16 ns; integer ns).")
+]
+FormOpt = Annotated[
+    FormChoice, typer.Option(help="Regressor: paper (7 columns, wheels keep one sign), general (8), auto.")
+]
+KOpt = Annotated[
+    float,
+    typer.Option("--k", help="Observer/filter gain k of Eqs. 26-30, 1/s, in (0, 100000] (paper: 1; see the docs)."),
+]
+AlphaOpt = Annotated[
+    float, typer.Option(help="Initial Gamma = alpha I (Eq. 33), > 0: weight of the start value (paper: 5000).")
+]
+BoxWidthOpt = Annotated[
+    float,
+    typer.Option(
+        help="Half-width of the parameter box around the nominal values, in units of max(|theta|, m_ii), "
+        "in (0, inf] (inf: no box)."
+    ),
+]
+TorqueHoldOpt = Annotated[
+    TorqueHold,
+    typer.Option(help="Torque between samples: zoh (held, as a digital controller applies it) or foh (linear)."),
+]
+PayloadOpt = Annotated[
+    bool,
+    typer.Option(
+        "--payload",
+        help="Also estimate the payload carried (mass, x, y, inertia) against --robot's unloaded parameters.",
+    ),
+]
+GivenOpt = Annotated[
+    list[str] | None,
+    typer.Option(
+        metavar="RESULT",
+        help="A saved result of an earlier log of this robot (--format json -o run.json) to combine with this "
+        "log's, as wmrid plan --given predicted. Repeatable.",
+    ),
+]

@@ -14,13 +14,14 @@ from wmrid.reporting.terminal import console
 
 
 @app.command(
+    name="plan",
     epilog="Examples:\n\n"
     "wmrid plan --robot robot.toml --max-torque 20 -o plan.csv -o plan.json\n\n"
     "wmrid plan --robot amr --area 3x3 --noise-from old_run.mcap -o plan.mcap\n\n"
     "wmrid plan --robot robot.toml --given first_run.json --duration 30 -o next.csv\n\n"
-    "wmrid plan --robot robot.toml --duration auto --target-std 2 -o plan.csv"
+    "wmrid plan --robot robot.toml --duration auto --target-std 2 -o plan.csv",
 )
-def plan(
+def plan_command(
     robot: Annotated[
         str, typer.Option(help="Robot TOML file or built-in name; its nominal set is planned on.")
     ] = "paper",

@@ -14,6 +14,7 @@ from wmrid.cli.options import (
     AlignOpt,
     AlignRule,
     CalibrationOpt,
+    ColumnsOpt,
     DropAtOpt,
     EfficiencyOpt,
     EffortKind,
@@ -38,6 +39,7 @@ from wmrid.cli.options import (
     TimeSource,
     TimeSourceOpt,
     TimeUnit,
+    TimeUnitOpt,
     TopicOpt,
     TorqueConstantOpt,
     Trajectory,
@@ -50,12 +52,13 @@ from wmrid.reporting.terminal import console
 
 
 @app.command(
+    name="simulate",
     epilog="Examples:\n\n"
     "wmrid simulate -o sim.csv --duration 20 --eta-noise 0.01\n\n"
     "wmrid simulate -o loaded.mcap --payload 25@0.1,-0.05 --load-at 30\n\n"
-    "wmrid simulate -o drive.csv --reference plan.csv"
+    "wmrid simulate -o drive.csv --reference plan.csv",
 )
-def simulate(
+def simulate_command(
     output: Annotated[
         str, typer.Option("--output", "-o", help="Log to write: .csv, .parquet or .mcap (- for CSV on stdout).")
     ],
@@ -166,17 +169,18 @@ def simulate(
 
 
 @app.command(
-    epilog="Examples:\n\nwmrid identify monday.mcap -o model.json; wmrid monitor friday.mcap --model model.json"
+    name="monitor",
+    epilog="Examples:\n\nwmrid identify monday.mcap -o model.json; wmrid monitor friday.mcap --model model.json",
 )
-def monitor(
+def monitor_command(
     log: Annotated[
         str, typer.Argument(metavar="LOG", help="Log file (.csv, .parquet, .mcap) or - for standard input.")
     ],
     model: MonitorModelOpt,
     calibration: CalibrationOpt = 10.0,
     false_alarm_rate: FalseAlarmRateOpt = 0.1,
-    columns: Annotated[str | None, typer.Option(help="Column mapping, as for identify.")] = None,
-    time_unit: Annotated[TimeUnit, typer.Option(help="Unit of the time column.")] = TimeUnit.auto,
+    columns: ColumnsOpt = None,
+    time_unit: TimeUnitOpt = TimeUnit.auto,
     output_format: Annotated[
         OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
     ] = OutputFormat.auto,

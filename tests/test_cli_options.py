@@ -1,0 +1,70 @@
+"""Options declared once (wmrid/cli/options.py; issue 31): every command that identifies a log offers the log and
+observer flags ``wmrid identify`` offers, spelled and explained the same, unless this file says why not."""
+
+from __future__ import annotations
+
+from wmrid.cli.app import command
+
+#: identify's own outputs: what it writes, not how it reads or identifies a log.
+OUTPUTS = {"output", "output_format", "force", "mcap_out", "out", "history", "no_history"}
+#: The flags of identify a command leaves out, and why.
+NOT_OFFERED = {
+    "compare": {
+        "method": "compare runs every method of --methods",
+        "payload": "the comparison's table holds the base parameters of each method, not a payload",
+        "given": "each method's estimate is shown as this log gives it",
+    },
+    "report": {"log": "report's INPUT is a log or a saved result"},
+    "fleet": {
+        "log": "fleet's LOGS are many",
+        "payload": "a fleet's table holds the base parameters; a payload is monitor's",
+        "validate": "each log of a fleet is its own; fleet-report compares them",
+        "given": "each log of a fleet is identified on its own",
+    },
+    "live": {
+        "log": "live's SOURCE is a stream",
+        "method": "live runs the observer, the online estimator",
+        "cutoff": "a classical method's setting (live runs the observer)",
+        "weighted": "a classical method's setting (live runs the observer)",
+        "forgetting": "a classical method's setting (live runs the observer)",
+        "validate": "live follows one source",
+        "given": "live reports the source as it comes",
+    },
+    "monitor": {
+        name: "monitor replays the observer with the settings its --model was identified with"
+        for name in ("robot", "form", "k", "alpha", "box_width", "torque_hold", "payload", "method", "cutoff",
+                     "weighted", "forgetting", "validate", "control_rate", "delay", "friction", "given",
+                     "rotor_inertia")
+    },
+}  # fmt: skip
+#: Flags whose help names the command's own role (the robot's, the first argument's).
+OWN_WORDS = {"robot", "log"}
+
+
+def test_every_command_that_identifies_offers_identifys_flags() -> None:
+    root = command()
+    identify = {p.name: p for p in root.commands["identify"].params}
+    for name, exempt in NOT_OFFERED.items():
+        params = {p.name: p for p in root.commands[name].params}
+        missing = set(identify) - set(params) - set(exempt) - OUTPUTS
+        assert not missing, (name, sorted(missing))
+        for flag in (set(identify) & set(params)) - OUTPUTS - OWN_WORDS:
+            ours, theirs = params[flag], identify[flag]
+            assert ours.opts == theirs.opts, (name, flag)
+            assert getattr(ours, "help", None) == getattr(theirs, "help", None), (name, flag)
+
+
+def test_compare_passes_the_observers_settings(tmp_path) -> None:
+    """``compare --k 2`` runs the observer with k = 2, as ``identify --k 2 --method observer`` does."""
+    import json
+    from pathlib import Path
+
+    from cliutil import wmrid
+
+    sample = Path(__file__).resolve().parents[1] / "sample_logs" / "paper_sinusoid.csv"
+    args = (str(sample), "--robot", "paper", "--k", "2", "--format", "json")
+    compared = json.loads(wmrid("compare", *args, "--methods", "observer").stdout)
+    identified = json.loads(wmrid("identify", *args, "--method", "observer").stdout)
+    for name, entry in compared["methods"]["observer"]["parameters"].items():
+        assert entry["value"] == identified["parameters"][name]["value"], name
+    assert identified["settings"]["k"] == 2.0
