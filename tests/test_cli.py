@@ -242,7 +242,7 @@ def test_fleet_records_no_options_when_none_are_given():
     import inspect
 
     from wmrid.cli.fleet_commands import _given_options
-    from wmrid.cli.fleet_commands import fleet as fleet_command
+    from wmrid.cli.fleet_commands import fleet_command
 
     defaults = {
         name: param.default.default if hasattr(param.default, "default") else param.default

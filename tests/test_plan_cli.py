@@ -45,8 +45,23 @@ area = "3x3"
 """
 
 
+@pytest.fixture(scope="module", autouse=True)
+def _a_shorter_search():
+    """These tests check what the command writes and holds, not the search's last 10 %: every plan here refines 4
+    starts and polishes 1 (the search before its REFINE 12 and POLISH 2, half the time; ``bench/bench_plan.py`` and
+    ``bench/study_plan.py`` measure the full one)."""
+    import functools
+
+    from wmrid.design import plan as design
+    from wmrid.design.search import search
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(design, "search", functools.partial(search, refine=4, polish=1))
+        yield
+
+
 @pytest.fixture(scope="module")
-def planned(tmp_path_factory) -> Path:
+def planned(tmp_path_factory, _a_shorter_search) -> Path:
     """A 12 s plan of a small robot (limits from its [limits] table) written as CSV, Parquet, MCAP and JSON."""
     folder = tmp_path_factory.mktemp("plan")
     robot = folder / "tiny.toml"
