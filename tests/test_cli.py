@@ -241,8 +241,7 @@ def test_fleet_records_no_options_when_none_are_given():
     said {"method": "auto"} while identify's default had become "auto": resume then matched nothing.)"""
     import inspect
 
-    from wmrid.cli.fleet_commands import _given_options
-    from wmrid.cli.fleet_commands import fleet_command
+    from wmrid.cli.fleet_commands import _given_options, fleet_command
 
     defaults = {
         name: param.default.default if hasattr(param.default, "default") else param.default
