@@ -94,3 +94,27 @@ def test_gauss_newton_matches_scipy_least_squares(form):
     ref = least_squares(residual, start, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15).x
     np.testing.assert_allclose(got, ref, rtol=1e-9)
     assert np.sum(residual(got) ** 2) <= np.sum(residual(ref) ** 2) * (1 + 1e-12)
+
+
+def test_weighting_covariance_is_the_weights_own_information_inverse():
+    """G W G^T with G the minimum-distance gain for the weights W (theta's covariance) is (J^T W^-1 J)^-1, the
+    closed form (to 1e-8 relative); a parameter the reported covariance leaves undetermined stays so."""
+    from wmrid.model.base_params import weighting_covariance
+
+    form = RegressorForm("general")
+    theta0 = model.base_parameters(PAPER_CAD)
+    theta = model.intermediate_parameters(theta0, form)
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(theta.size, theta.size))
+    weights = (a @ a.T / theta.size + np.eye(theta.size)) * 1e-8
+    fit = fit_base_parameters(theta, weights, form)
+    jac = jacobian_intermediate(fit.theta0, form)
+    closed = np.linalg.inv(jac.T @ np.linalg.solve(weights, jac))
+    out = weighting_covariance(fit.gain, weights, fit.cov)
+    np.testing.assert_allclose(out, closed, rtol=1e-8, atol=1e-8 * np.max(np.abs(closed)))
+    cov0 = fit.cov.copy()
+    cov0[2, 2] = np.inf
+    held = weighting_covariance(fit.gain, weights, cov0)
+    assert held[2, 2] == np.inf
+    assert np.isnan(held[2, 0])
+    assert np.isnan(held[0, 2])

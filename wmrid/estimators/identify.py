@@ -43,7 +43,7 @@ from wmrid.estimators.survey import Survey, survey
 from wmrid.estimators.uncertainty import estimate_covariances, interval_factor, jackknife_deltas, segments_of
 from wmrid.estimators.widening import carry_unresolved_delay, with_hold_term, with_timing_term
 from wmrid.model import dynamics as model
-from wmrid.model.base_params import derived_with_std, fit_base_parameters
+from wmrid.model.base_params import derived_with_std, fit_base_parameters, weighting_covariance
 from wmrid.model.dynamics import RegressorForm
 from wmrid.model.robot import Robot
 
@@ -607,19 +607,6 @@ def _identify(
             weight_cov=weighting_covariance(fit.gain, weight_cov, cov0),
         ),
     )  # fmt: skip
-
-
-def weighting_covariance(gain: np.ndarray, weight_cov: np.ndarray, cov0: np.ndarray) -> np.ndarray:
-    """(n0, n0): the Newey-West covariance of theta (2p, 2p) through the minimum-distance gain (n0, 2p), G W G^T;
-    a parameter the reported covariance ``cov0`` leaves undetermined (a non-finite diagonal) is left so here too
-    (NaN row and column, +inf on the diagonal)."""
-    out = gain @ weight_cov @ gain.T
-    out = 0.5 * (out + out.T)
-    bad = ~np.isfinite(np.diag(cov0)) | ~np.isfinite(np.diag(out))
-    out[bad, :] = np.nan
-    out[:, bad] = np.nan
-    out[bad, bad] = np.inf
-    return out
 
 
 #: Diagnostics that describe the observer's run on the log (kept, and listed as such, under another method).

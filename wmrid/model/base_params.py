@@ -236,3 +236,16 @@ def derived_with_std(
         std = float(np.sqrt(max(cov_m[idx, idx], 0.0))) if finite else math.inf
         out[name] = (float(value), std)
     return out
+
+
+def weighting_covariance(gain: np.ndarray, weight_cov: np.ndarray, cov0: np.ndarray) -> np.ndarray:
+    """(n0, n0): the Newey-West covariance of theta (2p, 2p) through the minimum-distance gain (n0, 2p), G W G^T;
+    a parameter the reported covariance ``cov0`` leaves undetermined (a non-finite diagonal) is left so here too
+    (NaN row and column, +inf on the diagonal)."""
+    out = gain @ weight_cov @ gain.T
+    out = 0.5 * (out + out.T)
+    bad = ~np.isfinite(np.diag(cov0)) | ~np.isfinite(np.diag(out))
+    out[bad, :] = np.nan
+    out[:, bad] = np.nan
+    out[bad, bad] = np.inf
+    return out
