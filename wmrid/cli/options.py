@@ -9,97 +9,45 @@ from typing import Annotated
 
 import typer
 
+from wmrid.core.choices import (
+    AlignRule,
+    Criterion,
+    EffortKind,
+    Engine,
+    SpeedUnit,
+    TimeSource,
+    TimeUnit,
+    TorqueHold,
+    Trajectory,
+    VelocityFrom,
+)
+from wmrid.core.choices import Form as FormChoice
+from wmrid.core.choices import Friction as FrictionChoice
+from wmrid.core.choices import Friction as PlanFriction
+from wmrid.core.choices import Method as MethodChoice
+
+__all__ = [
+    "AlignRule",
+    "Criterion",
+    "EffortKind",
+    "Engine",
+    "FormChoice",
+    "FrictionChoice",
+    "MethodChoice",
+    "PlanFriction",
+    "SpeedUnit",
+    "TimeSource",
+    "TimeUnit",
+    "TorqueHold",
+    "Trajectory",
+    "VelocityFrom",
+]  # fmt: skip  (the choices the commands import from here, declared in the library: wmrid.core.choices)
+
 
 class OutputFormat(str, Enum):
     auto = "auto"
     table = "table"
     json = "json"
-
-
-class MethodChoice(str, Enum):
-    auto = "auto"
-    observer = "observer"
-    idim = "idim"
-    iv = "iv"
-    rls = "rls"
-    oe = "oe"
-
-
-class FormChoice(str, Enum):
-    auto = "auto"
-    paper = "paper"
-    general = "general"
-
-
-class Criterion(str, Enum):
-    """``wmrid plan --criterion``: the largest relative std, D- or A-optimality."""
-
-    worst = "worst"
-    d = "d"
-    a = "a"
-
-
-class PlanFriction(str, Enum):
-    """``wmrid plan --friction``: the friction model identify will fit, which the plan's prediction is made for."""
-
-    auto = "auto"
-    wheel = "wheel"
-    wheel_caster = "wheel+caster"
-    wheel_caster_load = "wheel+caster+load"
-
-
-class TimeUnit(str, Enum):
-    auto = "auto"
-    s = "s"
-    ms = "ms"
-    us = "us"
-    ns = "ns"
-
-
-class TorqueHold(str, Enum):
-    zoh = "zoh"
-    foh = "foh"
-
-
-class Trajectory(str, Enum):
-    sinusoid = "sinusoid"
-    reversing = "reversing"
-
-
-class Engine(str, Enum):
-    reduced = "reduced"
-    mujoco = "mujoco"
-
-
-class TimeSource(str, Enum):
-    auto = "auto"
-    header = "header"
-    log = "log"
-
-
-class AlignRule(str, Enum):
-    zoh = "zoh"
-    linear = "linear"
-
-
-class VelocityFrom(str, Enum):
-    auto = "auto"
-    velocity = "velocity"
-    position = "position"
-
-
-class SpeedUnit(str, Enum):
-    rad_s = "rad/s"
-    rpm = "rpm"
-    deg_s = "deg/s"
-    m_s = "m/s"
-
-
-class EffortKind(str, Enum):
-    torque = "torque"
-    current = "current"
-    pwm = "pwm"
-    voltage = "voltage"
 
 
 _LOG_PANEL = "Log input (bag topics, units, effort)"
@@ -296,13 +244,6 @@ ControlRateOpt = Annotated[
         "sub-steps, the unlogged values interpolated (e.g. a 1 kHz controller logged at 100 Hz).",
     ),
 ]
-
-
-class FrictionChoice(str, Enum):
-    auto = "auto"
-    wheel = "wheel"
-    wheel_caster = "wheel+caster"
-    wheel_caster_load = "wheel+caster+load"
 
 
 FrictionOpt = Annotated[

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wmrid.core.choices import Criterion, values
 from wmrid.design.excitation import Basis, pose_along, wheel_motion
 from wmrid.design.information import (
     DEFAULT_K,
@@ -32,7 +33,7 @@ from wmrid.model.dynamics import RegressorForm, wheel_torque
 
 #: Criteria: the largest relative std of the base parameters (default), D-optimality (the geometric mean of the
 #: relative covariance's eigenvalues, as a std: det^(1/2n)) and A-optimality (the rms of the relative stds).
-CRITERIA = ("worst", "d", "a")
+CRITERIA = values(Criterion)
 
 #: Separability built in (constraints of the search, not hopes): each wheel spends at least DIRECTION_SHARE of the
 #: time turning forward faster than a tenth of the wheel speed limit, and as much backward (a smooth count: a logistic

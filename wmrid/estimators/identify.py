@@ -14,6 +14,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from wmrid.core.choices import Friction, values
 from wmrid.core.errors import NotIdentifiableError, UsageError, WmridError, option
 from wmrid.core.wheel_log import LogStream, stream_arrays
 from wmrid.estimators.diagnostics import (
@@ -422,7 +423,7 @@ def _with_load(
 
 
 #: Friction models of :func:`identify`: ``auto`` lets the log decide between the other two.
-FRICTION_CHOICES = ("wheel", "wheel+caster", "wheel+caster+load", "auto")
+FRICTION_CHOICES = (*values(Friction, without=("auto",)), "auto")
 
 
 def _with_friction(result: IdentificationResult, friction: dict[str, Any]) -> IdentificationResult:

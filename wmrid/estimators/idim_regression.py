@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from wmrid.core.choices import TorqueHold, values
 from wmrid.core.errors import LogFormatError, NotIdentifiableError, UsageError, option
 from wmrid.model.dynamics import RegressorForm, caster_columns, platform_speeds
 
@@ -421,7 +422,7 @@ def effort_delay(t: np.ndarray, torque_hold: str = "zoh", control_rate: float | 
     (held over each logged step: half the median step t (n,) s), "foh" (linear between samples: 0);
     ``control_rate`` Hz: held by a controller at that rate (half its period), whatever the log's rate.
     """
-    if torque_hold not in ("zoh", "foh"):
+    if torque_hold not in values(TorqueHold):
         raise UsageError(f"{option('torque_hold')} must be zoh or foh, got {torque_hold!r}")
     if control_rate is not None:
         return 0.5 / float(control_rate)

@@ -15,13 +15,14 @@ from typing import Any
 
 import numpy as np
 
+from wmrid.core.choices import Method, values
 from wmrid.core.errors import UsageError, WmridError, option
 from wmrid.estimators.estimate import BaseEstimate
 from wmrid.estimators.identify import with_estimate
 from wmrid.estimators.result import IdentificationResult
 from wmrid.model.robot import Robot
 
-METHODS = ("observer", "idim", "iv", "rls", "oe")
+METHODS = values(Method, without=("auto",))
 #: The smallest RLS forgetting factor: a memory of 1/(1 - lambda) = 50 samples, about six per parameter.
 MIN_FORGETTING = 0.98
 DESCRIPTIONS = {

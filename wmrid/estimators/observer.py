@@ -58,6 +58,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from wmrid.core.choices import TorqueHold, values
 from wmrid.core.errors import UsageError, option
 from wmrid.estimators.observer_kernel import foh
 from wmrid.model.dynamics import RegressorForm, filter_regressor, platform_speeds
@@ -140,7 +141,7 @@ class ObserverSettings:
 
     def __post_init__(self) -> None:
         p = self.form.n_columns
-        if self.torque_hold not in ("zoh", "foh"):
+        if self.torque_hold not in values(TorqueHold):
             raise UsageError(f"{option('torque_hold')} must be zoh or foh, got {self.torque_hold!r}")
         check_gains(self.k, self.alpha, self.control_rate)
         if self.control_rate is not None and self.torque_hold != "zoh":

@@ -89,6 +89,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from scipy.optimize import least_squares
 
+from wmrid.core.choices import TorqueHold, values
 from wmrid.core.errors import NotIdentifiableError, UsageError
 from wmrid.estimators.estimate import BaseEstimate
 from wmrid.estimators.uncertainty import segment_count
@@ -217,7 +218,7 @@ def identify_oe(
         raise UsageError("t, eta, tau and theta0_start must be finite")
     if not np.all(np.diff(t) > 0):
         raise UsageError("t must be strictly increasing")
-    if torque_hold not in ("zoh", "foh"):
+    if torque_hold not in values(TorqueHold):
         raise UsageError(f"torque_hold must be zoh or foh, got {torque_hold!r}")
     if segment_seconds is not None and not (math.isfinite(segment_seconds) and segment_seconds > 0):
         raise UsageError(f"segment_seconds must be a finite number > 0 (s) or None, got {segment_seconds}")

@@ -21,11 +21,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wmrid.core.choices import EffortKind, SpeedUnit, values
 from wmrid.core.errors import UsageError, option
 from wmrid.core.wheel_log import DERIVED_NOTE
 
-SPEED_UNITS = ("rad/s", "rpm", "deg/s", "m/s")
-EFFORT_KINDS = ("torque", "current", "pwm", "voltage")
+SPEED_UNITS = values(SpeedUnit)
+EFFORT_KINDS = values(EffortKind)
 #: Window of the Savitzky-Golay differentiator, s (at least 5 samples).
 SMOOTHING_S = 0.02
 

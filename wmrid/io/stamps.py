@@ -15,11 +15,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from wmrid.core.choices import TimeUnit, values
+
 if TYPE_CHECKING:
     pass
 
 
-TIME_UNITS = ("auto", "s", "ms", "us", "ns")
+TIME_UNITS = values(TimeUnit)
 
 
 NS_PER_UNIT = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}

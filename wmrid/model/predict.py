@@ -62,6 +62,7 @@ import math
 import numba
 import numpy as np
 
+from wmrid.core.choices import TorqueHold, values
 from wmrid.core.errors import UsageError
 from wmrid.model.dynamics import DRAG_SPEED as DRAG_SPEED_MODEL
 from wmrid.model.dynamics import RegressorForm
@@ -317,7 +318,7 @@ def simulate_kernel(t, tau, theta0, starts, eta_start, foh, max_step, cas):
 
 
 def _check_hold(torque_hold: str) -> bool:
-    if torque_hold not in ("zoh", "foh"):
+    if torque_hold not in values(TorqueHold):
         raise UsageError(f"torque_hold must be zoh or foh, got {torque_hold!r}")
     return torque_hold == "foh"
 

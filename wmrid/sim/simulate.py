@@ -89,6 +89,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from wmrid.core.choices import Trajectory, values
 from wmrid.core.errors import UsageError, option
 from wmrid.core.wheel_log import WheelLog
 from wmrid.model import dynamics as model
@@ -105,7 +106,7 @@ CONTROL_PERIOD = 1e-3
 
 
 #: Names of the built-in reference trajectories.
-TRAJECTORIES = ("sinusoid", "reversing")
+TRAJECTORIES = values(Trajectory)
 #: The trajectory name of a run that tracks a given reference (:class:`wmrid.sim.reference.Reference`).
 REFERENCE = "reference"
 #: Duration of a run on a built-in trajectory when none is given, s.

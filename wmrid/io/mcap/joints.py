@@ -42,19 +42,20 @@ from typing import Any
 
 import numpy as np
 
+from wmrid.core.choices import AlignRule, TimeSource, VelocityFrom, values
 from wmrid.core.errors import LogFormatError, UsageError, option
 from wmrid.core.wheel_log import SPLIT_NOTE, whole_efforts
 from wmrid.io.mcap.contents import JointSeries, JointSummary, JsonSeries, McapContents
 from wmrid.io.mcap.records import JOINT_STATE
 from wmrid.io.signals import SignalOptions, convert, position_to_rad, speed_from_position
 
-TIME_SOURCES = ("auto", "header", "log")
+TIME_SOURCES = values(TimeSource)
 
 
-ALIGN_RULES = ("zoh", "linear")
+ALIGN_RULES = values(AlignRule)
 
 
-VELOCITY_FROM = ("auto", "velocity", "position")
+VELOCITY_FROM = values(VelocityFrom)
 
 
 @dataclass(frozen=True)
