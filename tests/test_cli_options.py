@@ -68,3 +68,26 @@ def test_compare_passes_the_observers_settings(tmp_path) -> None:
     for name, entry in compared["methods"]["observer"]["parameters"].items():
         assert entry["value"] == identified["parameters"][name]["value"], name
     assert identified["settings"]["k"] == 2.0
+
+
+def test_every_choice_the_command_line_offers_is_the_librarys() -> None:
+    """Each option with a fixed set of values offers one of wmrid.core.choices' enums (or the output format, the
+    command line's own) as it is: no command keeps a list of its own that the library's checks could drift from."""
+    import enum
+
+    from wmrid.cli.options import OutputFormat
+    from wmrid.core import choices
+
+    library = {
+        item
+        for item in vars(choices).values()
+        if isinstance(item, type) and issubclass(item, enum.Enum) and item.__module__ == choices.__name__
+    }
+    seen = 0
+    for name, sub in command().commands.items():
+        for param in sub.params:
+            described = getattr(param, "type_descriptor", None)
+            if described is not None and described.is_choice:
+                seen += 1
+                assert described.annotation in library | {OutputFormat}, (name, param.name, described.annotation)
+    assert seen > 30
