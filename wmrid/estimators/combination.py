@@ -32,10 +32,12 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import UsageError, option
-from wmrid.estimators.result import IdentificationResult, reported_names
+from wmrid.estimators.result import IdentificationResult, finite_or_none, reported_names
 from wmrid.estimators.uncertainty import interval_factor
+from wmrid.estimators.verdict import settle
 from wmrid.model.base_params import derived_with_std
 from wmrid.model.dynamics import default_base_names
+from wmrid.model.payload import payload_with_std
 
 __all__ = [
     "COMBINED_NOTE", "SHARED_ALWAYS", "combine", "combined_result", "given_weight", "shared_names",
@@ -265,9 +267,6 @@ def combined_result(
     them is made again from those numbers (:func:`wmrid.estimators.verdict.settle`).  ``diagnostics["combined"]``
     records the results combined, which parameters each gave, and this log's own estimate.  ``robot``: for a
     payload estimate, the unloaded robot."""
-    from wmrid.estimators.identify import finite_or_none
-    from wmrid.estimators.verdict import settle
-
     est = result.estimate
     if est is None:
         raise ValueError("the result holds no estimate")
@@ -345,8 +344,6 @@ def combined_result(
         )
     payload = result.payload
     if payload is not None and robot is not None:
-        from wmrid.model.payload import payload_with_std
-
         payload = payload_with_std(x, cov, robot.reference)
     return settle(replace(
         result, parameters=parameters, theta0_cov=cov, estimate=combined_est, diagnostics=diagnostics,
