@@ -182,7 +182,6 @@ KNOWN_LOOPS = {
     ("wmrid.estimators.idim", "wmrid.estimators.idim_checks"): "issue 31 step 2: IDIM's checks refit IDIM",
     ("wmrid.io.bag.db3_file", "wmrid.io.bag.mcap_files", "wmrid.io.bag.reader", "wmrid.io.bag.ros1_file"):
         "issue 31 step 4: the format readers share the reader's state (to move into a module of its own)",
-    ("wmrid.io.live.follow", "wmrid.io.live.ws_source"): "issue 31 step 4: the WebSocket source reuses follow's feed",
 }  # fmt: skip
 
 

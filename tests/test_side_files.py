@@ -222,7 +222,7 @@ def test_a_followed_recording_folders_mcap_file_that_is_not_a_file_is_refused_un
     """``wmrid live FOLDER`` opens the folder's NAME_0.mcap, NAME_1.mcap, ... as they appear: a FIFO so named waited
     forever, a loop of links was an "internal error"; now each is one line before it is opened."""
     from wmrid.core.errors import LogFormatError
-    from wmrid.io.live.follow import open_live
+    from wmrid.io.live.sources import open_live
 
     make(tmp_path / "rec_0.mcap")
     source = open_live(str(tmp_path))

@@ -130,7 +130,8 @@ class LiveRun:
     def __init__(self, source: str, robot: Any, settings: dict[str, Any], options: LogOptions | None,
                  every: float, idle: float | None, until: float | None, until_std: float | None,
                  params: Sequence[str] | None, reconnect: bool = False, monitor: Any = None) -> None:  # fmt: skip
-        from wmrid.io.live.follow import ReaderSettings, open_live
+        from wmrid.io.live.follow import ReaderSettings
+        from wmrid.io.live.sources import open_live
 
         for name, value in (("every", every), ("idle", idle), ("until", until), ("until_std", until_std)):
             _check(name, value)

@@ -1,13 +1,13 @@
 """Sources followed while they are written, each read by wmrid's own readers as it grows.
 
-:func:`open_live` takes what ``wmrid live`` is given: ``-`` (standard input: CSV rows with a header, JSON lines, or an
-MCAP stream), a CSV file being appended to, an MCAP file being written (chunked or not), or a rosbag2 folder being
-recorded with MCAP storage (split into several files: each new file is picked up once the one before has its
-footer).  :meth:`LiveSource.poll` hands out the new wheel samples; ``ended`` says why a source ended by itself (the end
-of standard input, the MCAP footer, the recorder's metadata.yaml); :meth:`LiveSource.final_input` gives what the
-final ``identify`` reads: the recording itself when it was read to its end, else a copy of exactly the bytes read
-(standard input is spilled to a temporary file as it arrives; a file still being written is copied up to its last
-whole line or record), so the final result is ``identify`` on the same messages.
+:func:`wmrid.io.live.sources.open_live` takes what ``wmrid live`` is given: ``-`` (standard input: CSV rows with a
+header, JSON lines, or an MCAP stream), a CSV file being appended to, an MCAP file being written (chunked or not), or
+a rosbag2 folder being recorded with MCAP storage (split into several files: each new file is picked up once the one
+before has its footer).  :meth:`LiveSource.poll` hands out the new wheel samples; ``ended`` says why a source ended
+by itself (the end of standard input, the MCAP footer, the recorder's metadata.yaml); :meth:`LiveSource.final_input`
+gives what the final ``identify`` reads: the recording itself when it was read to its end, else a copy of exactly the
+bytes read (standard input is spilled to a temporary file as it arrives; a file still being written is copied up to
+its last whole line or record), so the final result is ``identify`` on the same messages.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import BinaryIO
 
-from wmrid.core.errors import LogFormatError, UsageError, option
+from wmrid.core.errors import LogFormatError, UsageError
 from wmrid.core.wheel_log import WheelLog
 from wmrid.io.live.decoders import McapDecoder, TableDecoder
 from wmrid.io.live.feeds import READ_BYTES, FileFeed, PipeFeed
@@ -439,38 +439,13 @@ class Rosbag2Source(LiveSource):
         super().close()
 
 
-def open_live(spec: str, settings: ReaderSettings | None = None, reconnect: bool = False) -> LiveSource:
-    """The source ``spec`` names: ``-`` (standard input), a CSV or MCAP file, a rosbag2 folder (MCAP storage), or a
-    Foxglove WebSocket server ``ws://HOST:PORT`` (``reconnect``: retry when its connection is lost)."""
-    settings = settings or ReaderSettings()
-    if spec.startswith(("ws://", "wss://")):
-        from wmrid.io.live.ws_source import WsSource
-
-        return WsSource(spec, settings, reconnect)
-    if reconnect:
-        raise UsageError(f"{spec}: {option('reconnect', True)} is for a WebSocket source (ws://HOST:PORT)")
-    if spec == "-":
-        return StdinSource(settings)
-    if not os.path.exists(spec):
-        raise LogFormatError(f"{spec}: no such file or folder; give the log being written (or - for standard input)")
-    if os.path.isdir(spec):
-        return Rosbag2Source(spec, settings)
-    if not os.path.isfile(spec):
-        raise LogFormatError(f"{spec}: not a regular file; give the log being written, or - for a pipe")
-    from wmrid.core.atomic import register_input
-
-    register_input(spec)  # an output of this command may not be this file
-    with open(spec, "rb") as fh:
-        head = fh.read(8)
-    if head.startswith(MAGIC[:1]) or (not head and spec.lower().endswith(".mcap")):
-        return McapFileSource(spec, settings)
-    if compression_of(head) is not None:
-        raise LogFormatError(f"{spec}: a compressed file cannot be followed as it grows; give it to wmrid identify")
-    if head.startswith(b"PAR1") or spec.lower().endswith((".parquet", ".pq")):
-        raise LogFormatError(f"{spec}: a Parquet file cannot be followed as it grows; give it to wmrid identify")
-    if head.lstrip().startswith(b"{"):
-        raise LogFormatError(f"{spec}: JSON lines are followed on standard input only: tail -f {spec} | wmrid live -")
-    return CsvFileSource(spec, settings)
-
-
-__all__ = ["READ_BYTES", "FinalInput", "LiveSource", "ReaderSettings", "open_live"]
+__all__ = [
+    "READ_BYTES",
+    "CsvFileSource",
+    "FinalInput",
+    "LiveSource",
+    "McapFileSource",
+    "ReaderSettings",
+    "Rosbag2Source",
+    "StdinSource",
+]
