@@ -87,7 +87,18 @@ import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError
 from wmrid.estimators.estimate import BaseEstimate, SegmentEstimates
-from wmrid.estimators.idim_regression import LOW_CUTOFF_HZ, PHI_NAMES, IdimRegression, effort_delay, idim_regression
+from wmrid.estimators.idim_checks import CUTOFF_RATIO, cutoff_check, slow_speed_check
+from wmrid.estimators.idim_regression import (
+    LOW_CUTOFF_HZ,
+    PHI_NAMES,
+    IdimRegression,
+    effort_delay,
+    idim_regression,
+    phi_to_theta0,
+    qr_r,
+    segment_factors,
+    solve_r,
+)
 from wmrid.estimators.uncertainty import segment_count
 from wmrid.model import dynamics as model
 from wmrid.model.dynamics import RegressorForm
@@ -103,43 +114,6 @@ def segment_index(t: np.ndarray) -> tuple[np.ndarray, int]:
     g = segment_count(duration, len(t))
     pos = (t - t[0]) / max(duration, 1e-300)
     return np.minimum((pos * g).astype(np.int64), g - 1), g
-
-
-def segment_factors(
-    rows: np.ndarray, tau: np.ndarray, weights: np.ndarray, seg: np.ndarray, g: int, keep: np.ndarray | None = None
-) -> list[np.ndarray]:
-    """Triangular factors R_g (p + 1, p + 1) of [X y] per segment (see
-    :func:`wmrid.estimators.idim.jackknife_from_factors`).
-
-    rows (N, 2, p), tau (N, 2), weights (2,) per wheel, seg (N,) in [0, g); keep (N,) bool: rows used.
-    """
-    p = rows.shape[2]
-    out = []
-    for i in range(g):
-        sel = seg == i
-        if keep is not None:
-            sel &= keep
-        x = rows[sel] * weights[None, :, None]
-        y = tau[sel] * weights[None, :]
-        out.append(_qr_r(np.column_stack([x.reshape(-1, p), y.reshape(-1)])))
-    return out
-
-
-def _qr_r(a: np.ndarray) -> np.ndarray:
-    """R (c, c) of the QR factorisation of a (m, c), zero-padded when m < c."""
-    r = np.linalg.qr(a, mode="r")
-    if r.shape[0] < a.shape[1]:
-        r = np.vstack([r, np.zeros((a.shape[1] - r.shape[0], a.shape[1]))])
-    return r
-
-
-def solve_r(r: np.ndarray) -> np.ndarray:
-    """phi (p,) from the stacked triangular factors (.., p + 1) of [X y]."""
-    from scipy.linalg import solve_triangular
-
-    p = r.shape[1] - 1
-    big = _qr_r(r)
-    return solve_triangular(big[:p, :p], big[:p, p])
 
 
 def not_identifiable_message(info_scaled: np.ndarray, names: tuple[str, ...] = PHI_NAMES) -> str | None:
@@ -179,7 +153,6 @@ def jackknife_from_factors(factors: list[np.ndarray]) -> tuple[np.ndarray, np.nd
 
 #: theta0 (..., p) = [m11 m12 m22 Vc ...] from phi (..., p) = [M11 M12 M22 Vc ...] (m = M^-1; every entry after the
 #: third, the caster parameters too, is the same in both): the model's one conversion.
-phi_to_theta0 = model.invert_inertia_entries
 #: d theta0 / d phi (p, p) at phi: the 2x2 inverse's derivative dm = -m dM m, identity elsewhere.
 theta0_jacobian = model.invert_inertia_jacobian
 
@@ -287,7 +260,7 @@ def fit_regression(
     rows = reg.rows()
 
     def grouped(fine: list[np.ndarray], groups: np.ndarray) -> list[np.ndarray]:
-        return [_qr_r(np.vstack([fine[i] for i in idx])) for idx in groups]
+        return [qr_r(np.vstack([fine[i] for i in idx])) for idx in groups]
 
     def factors(weights: np.ndarray) -> list[np.ndarray]:
         # per sub-segment; the jackknife's own segments' factors are those of their sub-segments stacked
@@ -298,7 +271,7 @@ def fit_regression(
 
     ones = np.ones(2)
     fine = factors(ones)
-    r_all = _qr_r(np.vstack(fine))
+    r_all = qr_r(np.vstack(fine))
     rs = r_all[:p, :p] / scale[None, :]
     reason = not_identifiable_message(rs.T @ rs, reg.phi_names)
     if reason is not None:
@@ -367,7 +340,6 @@ def _lower_cutoff(
     most MAX_LOWERINGS times and never below the default's lower bound
     (:func:`wmrid.estimators.idim_regression.cutoff_bounds`).  Only the default cutoff is lowered (``default``).
     """
-    from wmrid.estimators.idim_checks import CUTOFF_RATIO
     from wmrid.estimators.idim_regression import cutoff_bounds
 
     if not default or len(lowered) >= MAX_LOWERINGS or cut.get("delta") is None:
@@ -413,7 +385,6 @@ def fit_with_cutoff(
     Arguments as :func:`identify_idim`'s (``delay``: its effort delay, s); covariance : as :func:`fit_regression`'s
     (the cutoff check and the lowering do not use it).
     """
-    from wmrid.estimators.idim_checks import cutoff_check
 
     reg = idim_regression(t, eta, tau, cutoff_hz, decimate, order=order, form=form, effort_delay=delay)
     lowered: list[dict[str, Any]] = []
@@ -459,7 +430,6 @@ def identify_idim(
     phi = [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2, caster...] and its standard errors.
     Raises NotIdentifiableError when the log does not excite the dynamics.
     """
-    from wmrid.estimators.idim_checks import slow_speed_check
 
     start = time.perf_counter()
     delay = effort_delay(t, torque_hold, control_rate)

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError, UsageError
+from wmrid.estimators.idim_regression import phi_to_theta0, segment_factors, solve_r
 
 #: The second fit's cutoff is the first's divided by this.
 CUTOFF_RATIO = math.sqrt(2.0)
@@ -51,7 +52,6 @@ def difference(fac_a: list[np.ndarray], fac_b: list[np.ndarray], gate: float) ->
     fac_a, fac_b: the two fits' per-segment factors over the same g segments.  Returns {"applied": some
     |delta_j| > gate sd_j, "delta" (p,) theta0 units, "sd" (p,), "largest_ratio"}.
     """
-    from wmrid.estimators.idim import phi_to_theta0, solve_r
 
     g = len(fac_a)
     singular = {"applied": False, "delta": None, "sd": None, "largest_ratio": None, "why": "a refit was singular"}
@@ -92,7 +92,6 @@ def cutoff_check(
     effort delay, s.  Skipped (not
     applied, with "why") when the log is too short for the lower cutoff's transient.
     """
-    from wmrid.estimators.idim import segment_factors
     from wmrid.estimators.idim_regression import idim_regression
 
     low = reg.cutoff_hz / CUTOFF_RATIO
@@ -127,7 +126,6 @@ def slow_speed_check(
     """The estimate with every row (its per-segment factors ``fac``) against the one without the slow rows
     (:func:`slow_rows`, :func:`difference`); skipped when no row is slow or fewer than MIN_KEPT of them remain, or
     the rest leaves a segment empty."""
-    from wmrid.estimators.idim import segment_factors
 
     none = {"applied": False, "delta": None, "sd": None, "largest_ratio": None}
     slow = slow_rows(reg, eta)

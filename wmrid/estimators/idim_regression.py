@@ -13,7 +13,7 @@ import numpy as np
 
 from wmrid.core.choices import TorqueHold, values
 from wmrid.core.errors import LogFormatError, NotIdentifiableError, UsageError, option
-from wmrid.model.dynamics import RegressorForm, caster_columns, platform_speeds
+from wmrid.model.dynamics import RegressorForm, caster_columns, invert_inertia_entries, platform_speeds
 
 #: Names of the IDIM parameters phi, in order (SI: kg m^2 for M and Vc, N m s/rad, N m).
 PHI_NAMES = ("M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
@@ -442,3 +442,44 @@ def phi_scales(features: np.ndarray, cutoff_hz: float) -> np.ndarray:
     s = s if s > 0 else 1.0
     acc = s * 2.0 * math.pi * cutoff_hz
     return np.array([acc, acc, acc, s * s, s, s, 1.0, 1.0])
+
+
+#: theta0 from IDIM's phi (the inertia entries inverted).
+phi_to_theta0 = invert_inertia_entries
+
+
+def segment_factors(
+    rows: np.ndarray, tau: np.ndarray, weights: np.ndarray, seg: np.ndarray, g: int, keep: np.ndarray | None = None
+) -> list[np.ndarray]:
+    """Triangular factors R_g (p + 1, p + 1) of [X y] per segment (see
+    :func:`wmrid.estimators.idim.jackknife_from_factors`).
+
+    rows (N, 2, p), tau (N, 2), weights (2,) per wheel, seg (N,) in [0, g); keep (N,) bool: rows used.
+    """
+    p = rows.shape[2]
+    out = []
+    for i in range(g):
+        sel = seg == i
+        if keep is not None:
+            sel &= keep
+        x = rows[sel] * weights[None, :, None]
+        y = tau[sel] * weights[None, :]
+        out.append(qr_r(np.column_stack([x.reshape(-1, p), y.reshape(-1)])))
+    return out
+
+
+def qr_r(a: np.ndarray) -> np.ndarray:
+    """R (c, c) of the QR factorisation of a (m, c), zero-padded when m < c."""
+    r = np.linalg.qr(a, mode="r")
+    if r.shape[0] < a.shape[1]:
+        r = np.vstack([r, np.zeros((a.shape[1] - r.shape[0], a.shape[1]))])
+    return r
+
+
+def solve_r(r: np.ndarray) -> np.ndarray:
+    """phi (p,) from the stacked triangular factors (.., p + 1) of [X y]."""
+    from scipy.linalg import solve_triangular  # start-up time: scipy.linalg only when IDIM runs
+
+    p = r.shape[1] - 1
+    big = qr_r(r)
+    return solve_triangular(big[:p, :p], big[:p, p])
