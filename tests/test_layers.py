@@ -177,10 +177,6 @@ KNOWN_LOOPS = {
         "start-up time: the command modules register on the app, which imports them only when it builds the command",
     ("wmrid.estimators.feedback", "wmrid.estimators.identify", "wmrid.estimators.widening"):
         "issue 31 step 2: identify re-runs itself for the closed-loop check and the widenings (to become a pipeline)",
-    ("wmrid.estimators.diagnostics", "wmrid.estimators.model_error", "wmrid.estimators.result",
-     "wmrid.estimators.verdict"): "issue 31 step 3: the result re-decides flags at print time (to become typed)",
-    ("wmrid.io.bag.db3_file", "wmrid.io.bag.mcap_files", "wmrid.io.bag.reader", "wmrid.io.bag.ros1_file"):
-        "issue 31 step 4: the format readers share the reader's state (to move into a module of its own)",
 }  # fmt: skip
 
 

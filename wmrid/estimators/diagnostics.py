@@ -5,23 +5,21 @@ warnings they call for (:func:`diagnose`).
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from wmrid.core.errors import UsageError, option
-from wmrid.estimators.model_error import (
-    MISMATCH_P,
-    MISMATCH_RELEVANT,
-)
 
 #: A direction of the column-scaled information whose eigenvalue is below this fraction of the largest is
 #: not excited at all (double precision resolves about 1e-16; real logs' weakest directions are ~1e-8).
 UNEXCITED = 1e-12
 
-if TYPE_CHECKING:
-    from wmrid.estimators.result import IdentificationResult
 
+#: Structural mismatch is reported when its p-value is below MISMATCH_P and the misfit exceeds
+#: MISMATCH_RELEVANT of max |theta| (:mod:`wmrid.estimators.model_error` widens the std at its own level).
+MISMATCH_P = 1e-3
+MISMATCH_RELEVANT = 1e-5
 
 #: A base parameter whose standard error exceeds this fraction of its magnitude is called poorly determined.
 POORLY_DETERMINED = 0.1
@@ -73,6 +71,18 @@ def impossible_parameters(parameters: dict[str, tuple[float, float]]) -> set[str
             if value < 0 and math.isfinite(std) and value < -3 * std:
                 out.add(name)
     return out
+
+
+def flagged_names(parameters: dict[str, tuple[float, float]], diagnostics: dict[str, Any]) -> list[str]:
+    """The parameters whose std is not to be trusted (:mod:`wmrid.estimators.verdict`): a std not defined, an
+    impossible value, or every one when the log's misfit or units put every std in doubt; in the parameters' order."""
+    misfit = ((diagnostics.get("uncertainty") or {}).get("model_error") or {}).get("prediction_misfit") or {}
+    units = diagnostics.get("units") or {}
+    out = {n for n, (_, std) in parameters.items() if not math.isfinite(std)}
+    out |= impossible_parameters(parameters)
+    if misfit.get("applied") or units.get("doubt"):
+        out |= set(parameters)
+    return [n for n in parameters if n in out]
 
 
 #: The wheels' friction; every one resists motion, so none is negative.
@@ -287,7 +297,7 @@ AUTO_NO_REVERSAL = (
 )
 
 
-def caster_drag_test(result: IdentificationResult, names: tuple[str, ...] | None = None) -> dict[str, Any]:
+def caster_drag_test(result: Any, names: tuple[str, ...] | None = None) -> dict[str, Any]:
     """Wald test of the caster-drag parameters of a ``wheel+caster`` result against zero (``names``: these of its
     parameters instead, e.g. the load terms of ``wheel+caster+load``).
 

@@ -25,16 +25,13 @@ from typing import Any
 
 import numpy as np
 
+from wmrid.estimators.diagnostics import MISMATCH_RELEVANT, flagged_names
 from wmrid.estimators.observer_kernel import project_history_box
 from wmrid.estimators.uncertainty import FILTER_MEMORY, segments_of, slow_speed_difference
 from wmrid.model import dynamics as model
 from wmrid.model.base_params import BaseFit, fit_base_parameters
 from wmrid.model.dynamics import RegressorForm
 
-#: Structural mismatch is reported when its p-value is below MISMATCH_P and the misfit exceeds
-#: MISMATCH_RELEVANT of max |theta|.
-MISMATCH_P = 1e-3
-MISMATCH_RELEVANT = 1e-5
 #: Model-error inflation (uncertainty.md): when the structural-mismatch test rejects at INFLATE_P, every
 #: variance is multiplied by S^2 = 1 + T^2 (:func:`model_error_scale`).  A scale at least INFLATION_MARK marks
 #: the parameters as inflated.
@@ -359,7 +356,7 @@ def record_widening(
 ) -> None:
     """Put the model-error scale in ``diagnostics["uncertainty"]["model_error"]`` and list the parameters whose
     std it widened (``diagnostics["inflated"]``) and the parameters whose std is not to be trusted (``"flagged"``,
-    :func:`wmrid.estimators.verdict.flagged_names`)."""
+    :func:`wmrid.estimators.diagnostics.flagged_names`)."""
     scale = inflation["scale"]
     skip = set(undetermined)
     disc = inflation.get("discretisation") or {}
@@ -389,8 +386,6 @@ def record_widening(
         or "the model holds within the log's noise, and the step is fine enough: no widening",
     }
     diagnostics["inflated"] = inflated
-    from wmrid.estimators.verdict import flagged_names
-
     diagnostics["flagged"] = flagged_names(parameters, diagnostics)
 
 

@@ -31,6 +31,7 @@ from wmrid.estimators.diagnostics import (
     NOT_SEPARABLE,
     POORLY_DETERMINED,
     derived_poorly_determined,
+    flagged_names,
     impossible_parameters,
     physics_warnings,
     poorly_text,
@@ -125,17 +126,6 @@ def _poorly_warnings(result: Any, method: str | None) -> tuple[list[str], list[s
     derived = derived_poorly_determined(result.parameters, names)
     texts += [poorly_text(name, result.parameters[name], result.units[name], method, logs) for name in derived]
     return texts, poorly + derived, pairs
-
-
-def flagged_names(parameters: dict[str, tuple[float, float]], diagnostics: dict[str, Any]) -> list[str]:
-    """The parameters whose std is not to be trusted (see the module docstring), in the parameters' order."""
-    misfit = ((diagnostics.get("uncertainty") or {}).get("model_error") or {}).get("prediction_misfit") or {}
-    units = diagnostics.get("units") or {}
-    out = {n for n, (_, std) in parameters.items() if not math.isfinite(std)}
-    out |= impossible_parameters(parameters)
-    if misfit.get("applied") or units.get("doubt"):
-        out |= set(parameters)
-    return [n for n in parameters if n in out]
 
 
 def settle(result: Any, radius: float | None = None) -> Any:

@@ -36,7 +36,7 @@ def with_covariance(
     """(``result`` reporting its estimate with the covariance ``cov`` (n0, n0), the parameters it widened): their std
     recomputed (:func:`wmrid.model.base_params.derived_with_std`), ``theta0_cov`` and the payload's std (with ``robot``)
     too, the parameters grown beyond INFLATION_MARK times the old std added to ``diagnostics["inflated"]`` (a widened
-    std is trusted: ``["flagged"]`` is made again, :func:`wmrid.estimators.verdict.flagged_names`), and ``note``
+    std is trusted: ``["flagged"]`` is made again, :func:`wmrid.estimators.diagnostics.flagged_names`), and ``note``
     (what widened them) to the meaning of the widening mark (``diagnostics["uncertainty"]["model_error"]["meaning"]``)
     when any grew.  The one place a term (timing, hold,
     closed loop) widens a result.  ``mark``: the growth that marks a parameter (default INFLATION_MARK)."""
@@ -61,7 +61,7 @@ def with_covariance(
         unc["model_error"] = model_error
         diagnostics["uncertainty"] = unc
     diagnostics["inflated"] = [n for n in parameters if n in set(diagnostics.get("inflated", [])) | set(grown)]
-    from wmrid.estimators.verdict import flagged_names
+    from wmrid.estimators.diagnostics import flagged_names
 
     diagnostics["flagged"] = flagged_names(parameters, diagnostics)
     payload = result.payload

@@ -8,7 +8,7 @@ through generators.  Here the file is opened read-only with apsw (the SQLite bin
 ``topics`` and ``message_definitions`` tables give the topics, and one query in timestamp order (rosbags' order:
 the ``timestamp_idx`` index) returns every message, with the bytes of the JointState topics only; the counts and
 time ranges of the other topics come from the same pass.  The JointState messages are decoded as for rosbags'
-reads (:class:`wmrid.io.bag.reader._BagState`: the compiled CDR kernel, rosbags' deserialiser for the rest).
+reads (:class:`wmrid.io.bag.state._BagState`: the compiled CDR kernel, rosbags' deserialiser for the rest).
 
 What this reader does not take -- a compressed recording, MCAP storage, a serialisation other than CDR, a file
 that is not an SQLite database with rosbag2's tables, recordings that overlap in time -- :func:`db3_files` leaves to
@@ -29,7 +29,7 @@ import numpy as np
 from wmrid.core.errors import LogFormatError
 from wmrid.core.limits import describe
 from wmrid.io.bag.db3_wal import wal_state
-from wmrid.io.bag.reader import BATCH, _BagState, _one_line, _Topic, storage_files
+from wmrid.io.bag.state import BATCH, _BagState, _one_line, _Topic, storage_files
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
 #: sqlite rows fetched at a time (below the garbage collector's threshold of 700 live allocations: holding a whole

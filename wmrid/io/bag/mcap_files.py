@@ -9,7 +9,7 @@ file's channels mapped by topic to the recording's (a topic is one channel whate
 in), and the files taken in the order of their first message.  A file cut short gives a note naming it and the bytes
 lost; one that ends between two records without MCAP's footer, a note that it was not closed; one the crash left
 before its first whole record (empty, the magic bytes alone, part of the header record) is skipped with a note.  The
-JointState messages are decoded as for rosbags' reads (:class:`wmrid.io.bag.reader._BagState`: the compiled CDR
+JointState messages are decoded as for rosbags' reads (:class:`wmrid.io.bag.state._BagState`: the compiled CDR
 kernel, rosbags' deserialiser with the definitions stored in the files for the rest), so a recording whose files
 hold their messages in log-time order reads the same through either (rosbags merges a file's chunks by log time;
 wmrid keeps the file's order, as it does for a single .mcap).
@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import LogFormatError
-from wmrid.io.bag.reader import _BagState, _Topic, storage_files
+from wmrid.io.bag.state import _BagState, _Topic, storage_files
 from wmrid.io.mcap.joint_batches import DYNAMIC_JOINT_STATE_NAMES
 from wmrid.io.mcap.reader import (
     _SCAN_WINDOW,

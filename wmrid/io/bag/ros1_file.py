@@ -5,7 +5,7 @@ rosbags reads a bag message by message in Python (7.3 s for a 10-minute 1 kHz Jo
 machine, ``bench/bench_bags.py``); this reader scans each decompressed chunk with
 :func:`wmrid.io.bag.ros1_records.ros1_records` and hands its JointState messages to
 :func:`wmrid.io.bag.ros1_records.ros1_joint_states`.  rosbags still deserialises what the kernel does not decode
-(:class:`wmrid.io.bag.reader._BagState`), with the definitions from the bag's connection records.
+(:class:`wmrid.io.bag.state._BagState`), with the definitions from the bag's connection records.
 
 Format: ``#ROSBAG V2.0`` then records (uint32 header length, ``name=value`` fields, uint32 data length, data).
 Connection records (op 7) give a connection's topic, type and message definition; chunk records (op 5; none, bz2
@@ -27,8 +27,8 @@ import numpy as np
 
 from wmrid.core.errors import LogFormatError
 from wmrid.core.limits import describe
-from wmrid.io.bag.reader import _BagState, _Topic
 from wmrid.io.bag.ros1_records import OP_CHUNK, OP_CHUNK_INFO, OP_CONNECTION, OP_MESSAGE, ros1_records
+from wmrid.io.bag.state import _BagState, _Topic
 from wmrid.io.mcap.reader import cut_short_note, page_releaser
 from wmrid.io.mcap.records import BOMB_FLOOR, BOMB_RATIO
 
