@@ -1,5 +1,5 @@
 """Options declared once (wmrid/cli/options.py; issue 31): every command that identifies a log offers the log and
-observer flags ``wmrid identify`` offers, spelled and explained the same, unless this file says why not."""
+observer flags ``wmrid identify`` offers, spelled, explained and defaulted the same, unless this file says why not."""
 
 from __future__ import annotations
 
@@ -52,6 +52,7 @@ def test_every_command_that_identifies_offers_identifys_flags() -> None:
             ours, theirs = params[flag], identify[flag]
             assert ours.opts == theirs.opts, (name, flag)
             assert getattr(ours, "help", None) == getattr(theirs, "help", None), (name, flag)
+            assert ours.default == theirs.default, (name, flag)
 
 
 def test_compare_passes_the_observers_settings(tmp_path) -> None:
