@@ -183,3 +183,34 @@ def test_identify_given_combines_two_logs(tmp_path) -> None:
     amps = tmp_path / "amps.json"
     amps.write_text(json.dumps(data))
     assert_clean_error(wmrid("identify", str(b), "--robot", "paper", "--given", str(amps)), 2, str(amps), "same units")
+
+
+def test_edge_cases_combine_without_error() -> None:
+    """Fewer degrees of freedom than parameters (a jackknife of 2 segments: dof 1 for 4 parameters) combine without
+    error (their correlations not trusted at all); a log known exactly leaves the others' degrees of freedom; a
+    parameter only one log gives keeps that log's own std (nothing to widen)."""
+    rng = np.random.Generator(np.random.PCG64(4))
+    c = _covariance(rng, 4)
+    every = tuple(range(4))
+    _, cov, dof, _ = combine([Part(np.zeros(4), c, 1, every), Part(np.ones(4), c, 1, every)], 4)
+    assert np.all(np.isfinite(cov))
+    assert dof is not None
+    assert combine([Part(np.zeros(4), c, 9, every), Part(np.ones(4), c, None, every)], 4)[2] >= 9
+    _, alone, _, _ = combine([Part(np.zeros(4), c, 9, every), Part(np.ones(4), c, 9, ())], 4)
+    np.testing.assert_allclose(alone, c, rtol=1e-12)
+
+
+def test_a_methods_estimate_carries_the_std_it_reports(tmp_path) -> None:
+    """A method other than the observer reports the observer's widening of the std (here a model-error scale); its
+    estimate's covariance, which the JSON saves and --given combines, is that widened one too."""
+    import wmrid as lib
+
+    log = tmp_path / "a.csv"
+    proc = wmrid("simulate", "-o", str(log), "--duration", "20", "--seed", "1", "--rate", "200",
+                 "--eta-noise", "0.05", "--tau-noise", "0.2")  # fmt: skip
+    assert proc.returncode == 0, proc.stderr.decode()
+    result = lib.identify(str(log), "paper", method="idim")
+    assert result.diagnostics["uncertainty"]["model_error"]["scale"] > 2
+    np.testing.assert_allclose(result.estimate.cov, result.theta0_cov, rtol=1e-12)
+    std = np.sqrt(np.diag(result.estimate.cov))[:8]
+    assert std == pytest.approx([result.parameters[n][1] for n in BASE], rel=1e-9)

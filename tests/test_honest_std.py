@@ -101,12 +101,17 @@ def test_multibody_paper_robot_acceptance(paper_multibody):
 
 def test_other_methods_inherit_the_model_error_scale(paper_multibody):
     """The log departs from the model whichever method reads it: IDIM's covariance is scaled by the observer's S^2
-    (its std grows by S exactly), and its parameters are marked as widened."""
+    (its std grows by S exactly over IDIM's own), its parameters are marked as widened, and the estimate it reports
+    (saved in the JSON, combined by --given) carries that widened covariance."""
+    from wmrid.estimators.methods import estimate
+
     observer = identify(as_log(paper_multibody), PAPER, feedback=False)
     idim = run("idim", as_log(paper_multibody), observer, MethodOptions(), PAPER)
+    own = estimate("idim", as_log(paper_multibody), observer, MethodOptions())
     scale = observer.diagnostics["uncertainty"]["model_error"]["scale"]
     assert scale > 5
-    assert np.allclose(np.sqrt(np.diag(idim.theta0_cov)), np.asarray(idim.estimate.std) * scale, rtol=1e-12)
+    assert np.allclose(np.sqrt(np.diag(idim.theta0_cov)), np.asarray(own.std) * scale, rtol=1e-12)
+    np.testing.assert_array_equal(idim.estimate.cov, idim.theta0_cov)
     assert set(idim.diagnostics["inflated"]) == set(BASE)
 
 

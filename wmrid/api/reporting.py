@@ -144,7 +144,12 @@ def _provenance(command, inputs, data, options, robot, rotor_inertia, identify_o
 
     from wmrid.io.digest import file_digests
 
-    given: dict[str, Any] = {k: v for k, v in identify_options.items() if v is not None}
+    given: dict[str, Any] = {k: v for k, v in identify_options.items() if v is not None and k != "given"}
+    earlier = identify_options.get("given") or []
+    earlier = [earlier] if not isinstance(earlier, (list, tuple)) else list(earlier)
+    if earlier:  # --given: its files by path (a result passed in memory as "result"), and among the inputs hashed
+        given["given"] = [os.fspath(g) if isinstance(g, (str, os.PathLike)) else "result" for g in earlier]
+        inputs = [*inputs, *(os.fspath(g) for g in earlier if isinstance(g, (str, os.PathLike)))]
     if options is not None:
         defaults = LogOptions()
         given.update({f.name: getattr(options, f.name) for f in dataclasses.fields(LogOptions)

@@ -280,7 +280,7 @@ def make_plan(
         problem = _problem(theta0, form, r, b, limits, noise, length, SEARCH_GRID, criterion, given_info, k)
         try:
             warm: tuple[np.ndarray, ...] = ()
-            if given_info is not None:  # the plan that ignores them is a start: a --given plan is never worse
+            if given_info is not None:  # the plan that ignores them is a start (never worse on the search grid)
                 bare = _problem(theta0, form, r, b, limits, noise, length, SEARCH_GRID, criterion, None, k)
                 warm = (search(bare, seed=seed).coefficients,)
             found = search(problem, seed=seed, warm=warm)

@@ -56,7 +56,8 @@ def given_weight(cov: np.ndarray, dof: float | None) -> np.ndarray:
     none, by Schafer & Strimmer's (2005) intensity lambda = sum_{i<j} var(r_ij) / sum_{i<j} r_ij^2, var(r_ij) =
     (1 - r_ij^2)^2 / dof.  Any fixed weight keeps the combination's covariance honest (module docstring); this one
     keeps most of what the correlations tell (a sinusoid pins F_v eta + F_d of each wheel, not F_v and F_d) without
-    trusting the directions that few degrees of freedom cannot resolve."""
+    trusting the directions that few degrees of freedom cannot resolve (fewer degrees of freedom than parameters: no
+    correlation at all, the covariance being singular)."""
     cov = np.asarray(cov, dtype=np.float64)
     d = np.sqrt(np.diag(cov))
     corr = cov / np.outer(d, d)
@@ -64,7 +65,7 @@ def given_weight(cov: np.ndarray, dof: float | None) -> np.ndarray:
     if dof is not None and len(d) > 1:
         r = corr[np.triu_indices(len(d), 1)]
         total = float(np.sum(r * r))
-        lam = 1.0 if total <= 0 or dof <= 0 else min(1.0, float(np.sum((1.0 - r * r) ** 2)) / dof / total)
+        lam = 1.0 if total <= 0 or dof < len(d) else min(1.0, float(np.sum((1.0 - r * r) ** 2)) / dof / total)
     shrunk = (1.0 - lam) * corr + lam * np.eye(len(d))
     weight = np.linalg.pinv(shrunk) / np.outer(d, d)
     return 0.5 * (weight + weight.T)
@@ -163,16 +164,18 @@ def combine(
         shares.append(np.diag(gain @ sub @ gain.T))
         dofs.append(part.dof)
     total = np.sum(shares, axis=0)
-    if weight_noise and random_weights:
+    contributing = sum(1 for part in parts if part.used)
+    if weight_noise and random_weights and contributing > 1:  # one log alone: its own std, nothing to widen
         scale = np.sqrt(weight_noise_factor(parts, det))
         cov[np.ix_(d, d)] *= np.outer(scale, scale)
-    if any(v is None for v in dofs):
+    if all(v is None for v in dofs):
         return x, cov, None, det
-    denom = np.sum([s * s / max(v, 1) for s, v in zip(shares, dofs, strict=True)], axis=0)
+    # a log known exactly (dof None) adds no term to the denominator
+    denom = np.sum([s * s / max(v, 1) for s, v in zip(shares, dofs, strict=True) if v is not None], axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
         nu = np.where(denom > 0, total * total / denom, np.inf)
     smallest = float(np.min(nu))
-    return x, cov, (math.floor(smallest) if math.isfinite(smallest) else max(dofs)), det
+    return x, cov, (math.floor(smallest) if math.isfinite(smallest) else max(v for v in dofs if v is not None)), det
 
 
 #: Draws of the parametric bootstrap of :func:`weight_noise_factor` (its own spread on a variance ratio: 3 %).
@@ -192,6 +195,8 @@ def _weights(covs: np.ndarray, dof: float | None) -> np.ndarray:
         total = np.sum(r * r, axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
             lam = np.where(total > 0, np.minimum(1.0, np.sum((1.0 - r * r) ** 2, axis=1) / dof / total), 1.0)
+        if dof < m:
+            lam = np.ones(len(covs))
     shrunk = (1.0 - lam)[:, None, None] * corr + lam[:, None, None] * np.eye(m)
     weight = np.linalg.pinv(shrunk) / outer
     return 0.5 * (weight + np.swapaxes(weight, 1, 2))
@@ -230,7 +235,7 @@ def weight_noise_factor(parts: Sequence[Part], det: Sequence[int], seed: int = 0
         weight[:, rows[0], rows[1]] += w
         spread[:, rows[0], rows[1]] += w @ drawn @ w
         wx[:, at] += np.einsum("bij,bj->bi", w, x)
-    a = np.linalg.inv(weight)
+    a = np.linalg.pinv(weight)
     combined = np.einsum("bij,bj->bi", a, wx)
     formula = np.einsum("bii->bi", a @ spread @ a)
     factor = np.var(combined, axis=0, ddof=1) / np.mean(formula, axis=0)

@@ -688,7 +688,7 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
 
     return settle(replace(
         result, parameters=parameters, theta0_cov=cov, diagnostics=diagnostics, warnings=tuple(warnings),
-        payload=payload_est, method=est.method, estimate=est,
+        payload=payload_est, method=est.method, estimate=replace(est, cov=cov),
     ))  # fmt: skip
 
 

@@ -316,6 +316,8 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
         weight_cov = None
         if est_d.get("weight_covariance") is not None:
             weight_cov = np.array([_floats(row) for row in est_d["weight_covariance"]], dtype=float).reshape(cov.shape)
+            unset = np.isnan(np.diag(weight_cov))  # undetermined: NaN row and column, +inf on the diagonal
+            weight_cov[np.diag_indices_from(weight_cov)] = np.where(unset, math.inf, np.diag(weight_cov))
         estimate = BaseEstimate(method=est_d["method"], theta0=_floats(est_d["theta0"]), cov=cov, dof=est_d.get("dof"),
                                 weight_cov=weight_cov)  # fmt: skip
         theta0_cov = cov
