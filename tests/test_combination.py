@@ -154,6 +154,8 @@ def test_identify_given_combines_two_logs(tmp_path) -> None:
     assert proc.returncode == 0, proc.stderr.decode()
     out = json.loads(proc.stdout)
     assert out["warnings"][0].startswith(f"combined with 1 earlier result ({first})")
+    assert out["verdict"]["summary"].startswith("These logs determine")
+    assert "combined with 1 earlier result's" in out["diagnostics"]["uncertainty"]["method"]
     own = out["diagnostics"]["combined"]["this_log"]
     theirs = json.loads(first.read_text())["parameters"]
     truth = json.loads((tmp_path / "b.csv.truth.json").read_text())["parameters"]

@@ -337,6 +337,12 @@ def combined_result(
         "99.7%": interval_factor(0.9973, dof) if dof else 2.999977,
     }
     uncertainty["combined"] = f"the combination of {len(records) + 1} logs' estimates (diagnostics.combined)"
+    own_method = uncertainty.get("method") or "this log's std"
+    uncertainty["method"] = (
+        f"this log's ({own_method}) combined with {len(records)} earlier result{'s' if len(records) != 1 else ''}'s "
+        "by fixed weights, degrees of freedom by Welch-Satterthwaite"
+    )
+    uncertainty["segments"] = None  # the combination's are not one log's segments
     diagnostics["uncertainty"] = uncertainty
     files = ", ".join(r["source"] for r in records)
     note = f"{COMBINED_NOTE} {len(records)} earlier result{'s' if len(records) != 1 else ''} ({files}): the estimates "

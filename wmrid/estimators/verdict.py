@@ -313,16 +313,17 @@ def verdict(result: Any) -> dict[str, Any]:
         weak = [g["group"] for g in groups if g["status"] == "poorly determined"]
         bad = [g["group"] for g in groups if g["status"] in ("not determined", "in doubt")]
         parts = []
+        subject = "these logs determine" if result.diagnostics.get("combined") else "this log determines"
         if good:
-            parts.append(f"this log determines the {_join(good)}")
+            parts.append(f"{subject} the {_join(good)}")
         if weak:
-            parts.append(f"{'' if good else 'this log determines '}the {_join(weak)} only poorly")
+            parts.append(f"{'' if good else subject + ' '}the {_join(weak)} only poorly")
         if bad:
             parts.append(f"not the {_join(bad)}")
         text = "; ".join(parts) if parts else "nothing to judge"
         summary = text[0].upper() + text[1:] + "."
         if not good and not weak:
-            summary = f"This log determines none of the parameters ({_join(bad)})."
+            summary = f"{subject[0].upper() + subject[1:]} none of the parameters ({_join(bad)})."
     out: dict[str, Any] = {"summary": summary, "groups": groups, "lines": lines(groups)}
     feedback = result.diagnostics.get("feedback") or {}
     if feedback.get("reported") and feedback["reported"] != "observer" and result.method == feedback["reported"]:
