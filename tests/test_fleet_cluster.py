@@ -199,9 +199,14 @@ def test_the_same_command_against_a_scheduler_started_separately(logs, cluster, 
     worker = None
     try:
         deadline = time.monotonic() + 60
-        while not sched_file.exists() and time.monotonic() < deadline:
-            time.sleep(0.1)
-        address = json.loads(sched_file.read_text())["address"]
+        address = None
+        while address is None and time.monotonic() < deadline:
+            # the scheduler creates the file, then writes it: wait for a whole JSON document, not just the file
+            try:
+                address = json.loads(sched_file.read_text())["address"]
+            except (OSError, ValueError, KeyError):
+                time.sleep(0.1)
+        assert address is not None, (tmp_path / "scheduler.log").read_text()
         worker = _start(["worker", address, "--nworkers", "1", "--nthreads", "1", "--no-dashboard", "--no-nanny"],
                         tmp_path / "worker.log")  # fmt: skip
         args = ["fleet", str(logs / "R02"), "--robot", "paper", "--no-fit", "--format", "json"]
