@@ -58,17 +58,7 @@ def given_weight(cov: np.ndarray, dof: float | None) -> np.ndarray:
     keeps most of what the correlations tell (a sinusoid pins F_v eta + F_d of each wheel, not F_v and F_d) without
     trusting the directions that few degrees of freedom cannot resolve (fewer degrees of freedom than parameters: no
     correlation at all, the covariance being singular)."""
-    cov = np.asarray(cov, dtype=np.float64)
-    d = np.sqrt(np.diag(cov))
-    corr = cov / np.outer(d, d)
-    lam = 0.0
-    if dof is not None and len(d) > 1:
-        r = corr[np.triu_indices(len(d), 1)]
-        total = float(np.sum(r * r))
-        lam = 1.0 if total <= 0 or dof < len(d) else min(1.0, float(np.sum((1.0 - r * r) ** 2)) / dof / total)
-    shrunk = (1.0 - lam) * corr + lam * np.eye(len(d))
-    weight = np.linalg.pinv(shrunk) / np.outer(d, d)
-    return 0.5 * (weight + weight.T)
+    return _weights(np.asarray(cov, dtype=np.float64)[None], dof)[0]
 
 
 def shared_names(theirs: Sequence[str], ours: Sequence[str]) -> tuple[str, ...]:
@@ -140,7 +130,7 @@ def combine(
         weight[np.ix_(idx, idx)] += w
         spread[np.ix_(idx, idx)] += w @ sub @ w
         wx[idx] += w @ np.asarray(part.theta0, dtype=np.float64)[idx]
-        weights.append(w)
+        weights.append((w, sub))
     det = tuple(i for i in range(n0) if weight[i, i] > 0)
     x = np.full(n0, np.nan)
     cov = np.full((n0, n0), np.nan)
@@ -154,13 +144,11 @@ def combine(
     cov[np.ix_(d, d)] = 0.5 * (sub_cov + sub_cov.T)
     # Welch-Satterthwaite: var_j = sum_k v_kj, v_kj the share of log k (K_k C_k K_k^T, K_k = A W_k)
     shares, dofs = [], []
-    for part, w in zip(parts, weights, strict=True):
-        if w is None:
+    for part, held in zip(parts, weights, strict=True):
+        if held is None:
             continue
-        idx = list(part.used)
-        place = [d.index(i) for i in idx]
-        gain = a[:, place] @ w
-        sub = np.asarray(part.cov, dtype=np.float64)[np.ix_(idx, idx)]
+        w, sub = held
+        gain = a[:, [d.index(i) for i in part.used]] @ w
         shares.append(np.diag(gain @ sub @ gain.T))
         dofs.append(part.dof)
     total = np.sum(shares, axis=0)
@@ -183,7 +171,7 @@ WEIGHT_DRAWS = 2000
 
 
 def _weights(covs: np.ndarray, dof: float | None) -> np.ndarray:
-    """:func:`given_weight` of a stack of covariances (B, m, m)."""
+    """:func:`given_weight` of each of a stack of covariances (B, m, m)."""
     d = np.sqrt(np.einsum("bii->bi", covs))
     outer = d[:, :, None] * d[:, None, :]
     corr = covs / outer
