@@ -25,9 +25,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from wmrid.estimators.identify import identify
 from wmrid.model.dynamics import THETA0_NAMES
 from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.pipeline.identify import identify
 from wmrid.sim.scenario import NoiseSettings
 from wmrid.sim.simulate import simulate
 

@@ -8,8 +8,8 @@ Measures, for each ``--duration`` (default one hour = 3.6 M samples):
     reading, replay and reporting included) and peak RSS.  The JSON output is checked to parse and to
     hold ``parameters``.
 (b) in-process, the parts alone: ``wmrid.io.logs.read_log``; the sample-by-sample ``wmrid.estimators.replay.replay``
-    with settings built as ``wmrid.estimators.identify.identify`` builds them (JIT compile excluded by a warm-up
-    call on a short slice), in samples/s; and the whole ``wmrid.estimators.identify.identify`` call (replay plus
+    with settings built as ``wmrid.pipeline.identify.identify`` builds them (JIT compile excluded by a warm-up
+    call on a short slice), in samples/s; and the whole ``wmrid.pipeline.identify.identify`` call (replay plus
     covariance, base-parameter fit and diagnostics).
 
 The log is simulated (seed ``--seed``) into bench/out/ the first time; later runs reuse it.
@@ -51,12 +51,13 @@ def end_to_end(path, n: int, repeat: int) -> dict:
 
 
 def in_process(path, repeat: int) -> dict:
-    from wmrid.estimators.identify import default_box, identify, resolve_form
     from wmrid.estimators.observer import ObserverSettings
+    from wmrid.estimators.observer_pass import default_box, resolve_form
     from wmrid.estimators.replay import replay
     from wmrid.io.logs import read_log
     from wmrid.model import dynamics as model
     from wmrid.model.robot import BUILTIN_ROBOTS
+    from wmrid.pipeline.identify import identify
 
     def best(fn) -> float:  # median wall time of fn() over `repeat` calls
         times = []

@@ -33,10 +33,10 @@ def main() -> None:
     ap.add_argument("--levels", nargs="+", default=list(LEVELS), help=f"noise levels of {list(LEVELS)}")
     args = ap.parse_args()
 
-    from wmrid.estimators.identify import identify
     from wmrid.estimators.methods import METHODS, MethodOptions, compare
     from wmrid.model import dynamics as model
     from wmrid.model.robot import BUILTIN_ROBOTS
+    from wmrid.pipeline.identify import identify
     from wmrid.sim.scenario import NoiseSettings
     from wmrid.sim.simulate import simulate
 

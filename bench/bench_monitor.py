@@ -37,11 +37,11 @@ import numpy as np
 from _common import sim_log
 from scipy.stats import f as f_dist
 
-from wmrid.estimators.identify import identify
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
 from wmrid.monitoring.monitor import monitor
 from wmrid.monitoring.settings import DOF, MonitorSettings, model_from_dict
+from wmrid.pipeline.identify import identify
 from wmrid.sim.scenario import NoiseSettings, PlantChange
 from wmrid.sim.simulate import simulate
 

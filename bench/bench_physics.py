@@ -265,9 +265,9 @@ def run_job(job: Job) -> dict[str, Any]:
     from wmrid.core.errors import WmridError
     from wmrid.core.wheel_log import WheelLog
     from wmrid.estimators import feedback, methods
-    from wmrid.estimators.identify import identify
     from wmrid.model import dynamics as model
     from wmrid.model.robot import BUILTIN_ROBOTS, PhysicalParameters
+    from wmrid.pipeline.identify import identify
 
     row: dict[str, Any] = {"case": dataclasses.asdict(job.case), "seed": job.seed, "clean": job.clean}
     try:

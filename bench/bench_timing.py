@@ -45,10 +45,10 @@ def one(job: tuple[str, str, str, int, float]) -> dict:
     engine, trajectory, fault, seed, duration = job
     delay = FAULTS[fault]
     rate = RATES.get(fault, 1000.0)
-    from wmrid.estimators.identify import identify
     from wmrid.estimators.idim_regression import shifted
     from wmrid.model import dynamics as model
     from wmrid.model.robot import BUILTIN_ROBOTS
+    from wmrid.pipeline.identify import identify
     from wmrid.sim.scenario import NoiseSettings
     from wmrid.sim.simulate import simulate
 

@@ -8,7 +8,7 @@ nominal column.  wmrid columns:
   (``model.intermediate_parameters(model.base_parameters(robot.nominal), form)``);
 * true: Table 1's CAD column plus the paper's friction F_v = diag(0.01, 0.015), F_d = diag(0.045, 0.04)
   through the same equations;
-* estimate: ``wmrid.estimators.identify.identify`` on ``sample_logs/paper_sinusoid.parquet`` with the built-in
+* estimate: ``wmrid.pipeline.identify.identify`` on ``sample_logs/paper_sinusoid.parquet`` with the built-in
   ``paper`` robot, once with wmrid's defaults and once with the paper's own settings k = 1, alpha = 5000.
 
 Error % is |estimate - true| / |true| * 100 (as in the paper), each against its own "true" column.
@@ -22,10 +22,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from wmrid.estimators.identify import identify
 from wmrid.io.logs import read_log
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.pipeline.identify import identify
 
 ROOT = Path(__file__).resolve().parent.parent
 LOG = ROOT / "sample_logs" / "paper_sinusoid.parquet"

@@ -33,7 +33,7 @@ def case_a(job: tuple[str, int, float, float, bool]) -> dict:
     engine, seed, caster, duration, reference = job
     import wmrid
     from wmrid.api.inputs import load_robot
-    from wmrid.estimators.identify import identify
+    from wmrid.pipeline.identify import identify
 
     amr = load_robot("examples/small_amr.toml")
     run = wmrid.simulate(
@@ -64,7 +64,7 @@ def case_b(job: tuple[int, str, float]) -> dict:
     import wmrid
     from wmrid.api.inputs import load_robot
     from wmrid.core.wheel_log import WheelLog
-    from wmrid.estimators.identify import identify
+    from wmrid.pipeline.identify import identify
 
     robot = load_robot("paper")
     run = wmrid.simulate("paper", trajectory=trajectory, duration=duration, seed=seed, **NOISE)

@@ -39,7 +39,6 @@ from tests.test_caster_model import (
     speed_samples,
     synthetic_log,
 )
-from wmrid.estimators.identify import identify
 from wmrid.estimators.observer import ObserverSettings, initial_state, observer_step
 from wmrid.estimators.observer_kernel import KIND_CASTER_GEOMETRY, _regressor_into
 from wmrid.estimators.replay import kernel_kind, load_codes, replay
@@ -47,6 +46,7 @@ from wmrid.model import dynamics as model
 from wmrid.model.base_params import direct_recovery, fit_base_parameters, jacobian_intermediate
 from wmrid.model.dynamics import RegressorForm
 from wmrid.model.robot import AMR_CAD, AMR_NOMINAL, PAPER_NOMINAL, Caster, Robot
+from wmrid.pipeline.identify import identify
 
 R, B = ONE_CASTER[0], ONE_CASTER[1]
 LOAD1 = RegressorForm("general", caster=True, geometry=ONE_CASTER, load=("dv", "w2"))

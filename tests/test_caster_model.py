@@ -21,7 +21,6 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from wmrid.estimators.identify import caster_geometry, identify
 from wmrid.estimators.observer_kernel import DRAG_SPEED as KERNEL_DRAG_SPEED
 from wmrid.estimators.observer_kernel import (
     KIND_CASTER,
@@ -30,11 +29,13 @@ from wmrid.estimators.observer_kernel import (
     KIND_PAPER,
     _regressor_into,
 )
+from wmrid.estimators.observer_pass import caster_geometry
 from wmrid.estimators.replay import kernel_kind
 from wmrid.model import dynamics as model
 from wmrid.model.base_params import derived_with_std, direct_recovery, fit_base_parameters, jacobian_intermediate
 from wmrid.model.dynamics import RegressorForm
 from wmrid.model.robot import AMR_NOMINAL, Caster, Robot
+from wmrid.pipeline.identify import identify
 
 #: m/s: the speed below which a caster's drag direction is regularised, |u| -> sqrt(|u|^2 + DRAG_SPEED^2)
 #: (restated here, not imported: test_drag_speed_is_one_millimetre_per_second checks the model agrees).

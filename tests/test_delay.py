@@ -89,9 +89,9 @@ def test_identify_applies_an_estimated_delay(late_log):
     delay is applied as given; a log on time is left as stamped, with no warning."""
     from types import SimpleNamespace
 
-    from wmrid.estimators.identify import identify
     from wmrid.estimators.methods import MethodOptions, run
     from wmrid.model import dynamics as model
+    from wmrid.pipeline.identify import identify
 
     sim, log = late_log
     truth = model.named_base(model.base_parameters(AMR.cad))
@@ -146,7 +146,7 @@ def test_a_controller_faster_than_the_log_is_named():
     -0.54 ms) and the warning is gone."""
     from types import SimpleNamespace
 
-    from wmrid.estimators.identify import identify
+    from wmrid.pipeline.identify import identify
 
     sim = simulate_multibody(
         AMR.cad, AMR.nominal, settings=MultibodySettings(caster_resistance=0.0), duration=20.0, rate=100.0,
@@ -170,8 +170,8 @@ def test_the_delays_uncertainty_is_in_the_std():
     term every parameter is within 3 std or flagged, and the friction std grows."""
     from types import SimpleNamespace
 
-    from wmrid.estimators.identify import identify
     from wmrid.model import dynamics as model
+    from wmrid.pipeline.identify import identify
 
     sim = simulate_multibody(
         AMR.cad, AMR.nominal, settings=MultibodySettings(caster_resistance=0.0), duration=20.0, noise=NOISE, seed=0
@@ -198,7 +198,7 @@ def test_a_slow_log_of_a_faster_controller_is_named_by_default(rate):
     parameter is beyond 3 std unflagged."""
     from types import SimpleNamespace
 
-    from wmrid.estimators.identify import identify
+    from wmrid.pipeline.identify import identify
 
     sim = simulate(AMR.cad, AMR.nominal, duration=40.0, rate=rate, noise=NOISE, seed=1)
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="slow", notes=())
@@ -227,7 +227,7 @@ def test_a_late_or_early_effort_is_timed_by_default(true_delay):
     and the friction comes out within 5 % (measured 0.6 %, against 8-9 % as stamped)."""
     from types import SimpleNamespace
 
-    from wmrid.estimators.identify import identify
+    from wmrid.pipeline.identify import identify
 
     sim = simulate(AMR.cad, AMR.nominal, duration=30.0, noise=NOISE, seed=3)
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=shifted(sim.t, sim.tau, true_delay), source="late", notes=())
@@ -244,7 +244,7 @@ def test_a_slow_log_with_a_hole_is_not_refused_by_the_timing_check():
     (its record says why) and the log identified as before."""
     from types import SimpleNamespace
 
-    from wmrid.estimators.identify import identify
+    from wmrid.pipeline.identify import identify
 
     sim = simulate(AMR.cad, AMR.nominal, duration=30.0, rate=100.0, noise=NOISE, seed=1)
     keep = (sim.t < 10.0) | (sim.t > 10.5)
@@ -261,7 +261,7 @@ def test_a_slow_reversing_log_carries_the_hold_in_its_std():
     within 3 std or flagged (was 45-50 % of seeds), and the warning names --control-rate."""
     from types import SimpleNamespace
 
-    from wmrid.estimators.identify import identify
+    from wmrid.pipeline.identify import identify
 
     sim = simulate(AMR.cad, AMR.nominal, trajectory="reversing", duration=40.0, rate=100.0, noise=NOISE, seed=0)
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="slow", notes=())
@@ -282,7 +282,7 @@ def test_speeds_from_backward_differences_are_named():
     seeds), applies it, and the warning names backward differences rather than two clocks."""
     from types import SimpleNamespace
 
-    from wmrid.estimators.identify import identify
+    from wmrid.pipeline.identify import identify
 
     noise = NoiseSettings(eta_std=0.02, tau_std=0.01, encoder_cpr=2**20)
     sim = simulate(AMR.cad, AMR.nominal, duration=40.0, noise=noise, seed=1)
@@ -329,8 +329,8 @@ def test_the_profiles_slope_is_idims_sensitivity_to_the_delay():
 def _reversing_result(seed: float, true_delay: float, **kwargs):
     from types import SimpleNamespace
 
-    from wmrid.estimators.identify import identify
     from wmrid.model import dynamics as model
+    from wmrid.pipeline.identify import identify
 
     sim = simulate(AMR.cad, AMR.nominal, trajectory="reversing", duration=40.0, noise=NOISE, seed=seed)
     truth = model.named_base(model.base_parameters(sim.true))
@@ -366,7 +366,7 @@ def test_an_on_time_sinusoid_is_not_flagged_for_its_timing():
     such log, and a flag on every log would mean nothing)."""
     from types import SimpleNamespace
 
-    from wmrid.estimators.identify import identify
+    from wmrid.pipeline.identify import identify
 
     sim = simulate(AMR.cad, AMR.nominal, duration=30.0, noise=NOISE, seed=1)
     result = identify(SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="s", notes=()), AMR)
@@ -449,7 +449,7 @@ def test_a_casters_drag_is_not_read_as_a_delay_on_the_multibody_prototype(tmp_pa
     from wmrid.api.simulation import load_reference
     from wmrid.core.wheel_log import stream_arrays
     from wmrid.estimators.delay import DELAY_RESOLUTION_S, with_drag
-    from wmrid.estimators.identify import delay_profile_form
+    from wmrid.estimators.observer_pass import delay_profile_form
     from wmrid.estimators.survey import survey
 
     paper = BUILTIN_ROBOTS["paper"]

@@ -43,7 +43,7 @@ def test_a_disturbance_inside_the_loop_is_not_taken_for_a_delay(disturbed):
     (no root in the span, in 5 of those 6 seeds): nothing is significant, and the default identify applies no delay
     and carries no timing term, so no std is more than 1.5 times that of ``delay=0`` (the hold term of a 200 Hz log
     is still carried: measured up to 1.4 times)."""
-    from wmrid.estimators.identify import identify
+    from wmrid.pipeline.identify import identify
 
     log = disturbed
     span = search_span(log.t)
@@ -69,7 +69,7 @@ def test_the_instrumental_variables_find_a_real_delay(true_delay):
     instrumental-variable root is within 0.5 ms (measured +4.96 +/- 0.07 ms on 40 s, as least squares) and
     significant, and the default identify applies it."""
     from wmrid.core.wheel_log import WheelLog
-    from wmrid.estimators.identify import identify
+    from wmrid.pipeline.identify import identify
 
     log = wmrid.simulate("amr", duration=20.0, seed=1, **NOISE).log.to_wheel_log()
     late = WheelLog(t=log.t, eta=log.eta, tau=shifted(log.t, log.tau, true_delay), source="late",

@@ -11,9 +11,9 @@ import pytest
 import wmrid
 from tests.encoder_log import encoder_mcap
 from wmrid.estimators import feedback, idim
-from wmrid.estimators.identify import identify
 from wmrid.model.dynamics import THETA0_NAMES
 from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.pipeline.identify import identify
 
 JUDGED = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc")
 

@@ -19,7 +19,6 @@ from hypothesis import strategies as st
 from matplotlib.colors import to_rgba
 
 from wmrid.core.errors import UsageError
-from wmrid.estimators.identify import identify
 from wmrid.model.base_params import direct_recovery
 from wmrid.model.dynamics import (
     THETA0_NAMES,
@@ -30,6 +29,7 @@ from wmrid.model.dynamics import (
     named_base,
 )
 from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.pipeline.identify import identify
 from wmrid.reporting import decimate, figures, fit_figures
 from wmrid.reporting.decimate import MAX_POINTS, decimate_for_display
 from wmrid.sim.simulate import simulate

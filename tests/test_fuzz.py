@@ -13,10 +13,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from wmrid.core.errors import WmridError
-from wmrid.estimators.identify import identify
 from wmrid.io.logs import read_log, write_log
 from wmrid.io.mcap.writer import write_joint_state_mcap
 from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.pipeline.identify import identify
 from wmrid.sim.simulate import simulate
 
 #: Wall-clock bound per example, s (a 200-sample log reads and identifies in about 0.05 s).

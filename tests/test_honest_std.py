@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 
 from wmrid.cli.app import main
-from wmrid.estimators.identify import identify
 from wmrid.estimators.methods import MethodOptions, run
 from wmrid.estimators.model_error import model_error_scale
 from wmrid.io.logs import read_log
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.pipeline.identify import identify
 from wmrid.sim.multibody import MultibodySettings, simulate_multibody
 from wmrid.sim.scenario import NoiseSettings
 from wmrid.sim.simulate import simulate

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from tests.open_loop import open_loop_log
-from wmrid.estimators.identify import identify
 from wmrid.estimators.result import REPORTED
 from wmrid.model.dynamics import THETA0_NAMES
 from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.pipeline.identify import identify
 
 PAPER = BUILTIN_ROBOTS["paper"]
 

@@ -13,10 +13,10 @@ from scipy.integrate import solve_ivp
 from tests.open_loop import open_loop_log
 from wmrid.core.errors import NotIdentifiableError
 from wmrid.estimators import idim, idim_regression
-from wmrid.estimators.identify import identify
 from wmrid.estimators.methods import MethodOptions, run
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
+from wmrid.pipeline.identify import identify
 
 AMR = BUILTIN_ROBOTS["amr"]
 #: Two casters at distinct places (not mirrored, so each has its own D): (x, y) m in the platform frame.

@@ -26,10 +26,10 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from tests.open_loop import open_loop_log
-from wmrid.estimators.identify import identify
 from wmrid.estimators.result import REPORTED
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
+from wmrid.pipeline.identify import identify
 from wmrid.sim.simulate import simulate
 
 PAPER = BUILTIN_ROBOTS["paper"]

@@ -20,13 +20,13 @@ from wmrid.cli.app import main
 from wmrid.core.errors import NotIdentifiableError, UsageError
 from wmrid.estimators.estimate import BaseEstimate, SegmentEstimates
 from wmrid.estimators.feedback import difference_test
-from wmrid.estimators.identify import identify
 from wmrid.estimators.idim import identify_idim, segment_index
 from wmrid.estimators.idim_regression import idim_regression
 from wmrid.estimators.iv import identify_iv, segment_moments, solve_moments
 from wmrid.io.logs import read_log, write_log
 from wmrid.model.dynamics import THETA0_NAMES
 from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.pipeline.identify import identify
 from wmrid.sim.scenario import NoiseSettings
 from wmrid.sim.simulate import simulate
 

@@ -2,7 +2,8 @@
 
 Layers, lowest first (docs/development.md): ``core`` (errors, limits, atomic outputs, the log types) -> ``model``
 (dynamics, robot, payload, predictor) -> ``io`` (readers, writers) | ``estimators`` | ``sim`` (siblings: the
-estimators never import a reader, the readers never an estimator) -> ``monitoring`` | ``design`` (``wmrid plan``:
+estimators never import a reader, the readers never an estimator) -> ``pipeline`` (the identification's route over
+the estimators) -> ``monitoring`` | ``design`` (``wmrid plan``:
 experiment design on the model, the simulator's built-in trajectories as its baselines) -> ``reporting`` |
 ``exports`` (siblings: ``wmrid export``'s writers) -> ``api`` (the front door) -> ``cli``. Every import counts,
 including those inside functions and under ``TYPE_CHECKING``.
@@ -24,12 +25,13 @@ RANK = {
     "io": 2,
     "estimators": 2,
     "sim": 2,
-    "monitoring": 3,
-    "design": 3,
-    "reporting": 4,
-    "exports": 4,
-    "api": 5,
-    "cli": 6,
+    "pipeline": 3,
+    "monitoring": 4,
+    "design": 4,
+    "reporting": 5,
+    "exports": 5,
+    "api": 6,
+    "cli": 7,
 }
 
 
@@ -175,8 +177,6 @@ KNOWN_LOOPS = {
     ("wmrid.cli.app", "wmrid.cli.export_commands", "wmrid.cli.fleet_commands", "wmrid.cli.identify_commands",
      "wmrid.cli.live_commands", "wmrid.cli.plan_commands", "wmrid.cli.sim_commands"):
         "start-up time: the command modules register on the app, which imports them only when it builds the command",
-    ("wmrid.estimators.feedback", "wmrid.estimators.identify", "wmrid.estimators.widening"):
-        "issue 31 step 2: identify re-runs itself for the closed-loop check and the widenings (to become a pipeline)",
 }  # fmt: skip
 
 

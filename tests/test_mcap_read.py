@@ -19,13 +19,13 @@ from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2Writer
 
 from wmrid.core.errors import LogFormatError
-from wmrid.estimators.identify import identify
 from wmrid.io.logs import read_log, write_log
 from wmrid.io.mcap.joints import TopicSelection
 from wmrid.io.mcap.reader import read_mcap
 from wmrid.io.mcap.writer import JOINT_STATE_MSGDEF, write_joint_state_mcap
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.pipeline.identify import identify
 from wmrid.sim.scenario import NoiseSettings
 from wmrid.sim.simulate import simulate
 

@@ -25,7 +25,6 @@ from mcap_ros2.writer import Writer as Ros2Writer
 from wmrid.core import wheel_log
 from wmrid.core.errors import LogFormatError
 from wmrid.core.wheel_log import stream_arrays
-from wmrid.estimators.identify import identify
 from wmrid.io.logs import open_log, read_log
 from wmrid.io.mcap import log as mcap_log
 from wmrid.io.mcap.joints import TopicSelection
@@ -34,6 +33,7 @@ from wmrid.io.mcap.records import scan as _scan
 from wmrid.io.mcap.writer import JOINT_STATE_MSGDEF, write_joint_state_mcap
 from wmrid.io.signals import SignalOptions
 from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.pipeline.identify import identify
 from wmrid.sim.simulate import simulate
 
 PAPER = BUILTIN_ROBOTS["paper"]

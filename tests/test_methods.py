@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 from wmrid.core.errors import UsageError
-from wmrid.estimators.identify import identify
 from wmrid.estimators.methods import METHODS, MethodOptions, compare
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
+from wmrid.pipeline.identify import identify
 from wmrid.sim.scenario import NoiseSettings
 from wmrid.sim.simulate import simulate
 

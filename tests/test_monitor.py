@@ -19,13 +19,13 @@ from scipy.stats import chi2
 
 from wmrid.core.atomic import write_json
 from wmrid.core.errors import NotIdentifiableError, UsageError
-from wmrid.estimators.identify import identify
 from wmrid.io.logs import write_log
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
 from wmrid.monitoring.glr import ModelError, NoiseModel, window_grid, window_statistics
 from wmrid.monitoring.monitor import monitor
 from wmrid.monitoring.settings import MonitorSettings, load_model, model_from_dict
+from wmrid.pipeline.identify import identify
 from wmrid.sim.scenario import NoiseSettings, PlantChange
 from wmrid.sim.simulate import simulate
 

@@ -57,7 +57,7 @@ def test_identify_finds_a_25_kg_payload_in_a_noisy_simulated_log(tmp_path):
     # Issue 4: mass within 1 %, x and y within 5 mm, inertia within 10 %, truth within the uncertainty.
     from types import SimpleNamespace
 
-    from wmrid.estimators.identify import identify
+    from wmrid.pipeline.identify import identify
     from wmrid.sim.scenario import NoiseSettings
     from wmrid.sim.simulate import simulate
 

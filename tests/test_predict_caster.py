@@ -11,11 +11,11 @@ import pytest
 from tests.open_loop import open_loop_log
 from tests.test_idim_caster import GEOMETRIC, TWO_TERM, caster_log  # noqa: F401  (caster_log: a fixture)
 from wmrid.core.errors import UsageError
-from wmrid.estimators.identify import identify
 from wmrid.estimators.output_error import identify_oe
 from wmrid.model import dynamics as model
 from wmrid.model.predict import simulate_segments, simulate_speeds, validation_fit
 from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
+from wmrid.pipeline.identify import identify
 
 AMR = BUILTIN_ROBOTS["amr"]
 

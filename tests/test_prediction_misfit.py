@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 
 from wmrid.cli.app import main
-from wmrid.estimators.identify import identify
 from wmrid.estimators.methods import MethodOptions, run
 from wmrid.estimators.model_error import MISFIT_FLOOR, MISFIT_RATIO, prediction_misfit
 from wmrid.estimators.noise_floor import WINDOW, NoiseFloor
 from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.pipeline.identify import identify
 from wmrid.sim.multibody import MultibodySettings, simulate_multibody
 from wmrid.sim.scenario import NoiseSettings
 from wmrid.sim.simulate import simulate

@@ -17,9 +17,9 @@ from tests.test_idim_caster import (  # noqa: F401 (caster_log: a fixture)
     phi_of,
 )
 from wmrid.estimators import idim, idim_regression, rls
-from wmrid.estimators.identify import identify
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.pipeline.identify import identify
 
 AMR = BUILTIN_ROBOTS["amr"]
 

@@ -88,9 +88,9 @@ def test_mcap_sample_is_unchanged(regenerated):
 
 
 def test_the_three_samples_give_the_same_parameters():
-    from wmrid.estimators.identify import identify
     from wmrid.io.logs import read_log
     from wmrid.model.robot import BUILTIN_ROBOTS
+    from wmrid.pipeline.identify import identify
 
     robot = BUILTIN_ROBOTS["paper"]
     mcap = identify(read_log(str(SAMPLES / "paper_sinusoid.mcap")), robot)

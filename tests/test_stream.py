@@ -14,9 +14,9 @@ import pytest
 
 from wmrid.core import wheel_log
 from wmrid.core.errors import LogFormatError
-from wmrid.estimators.identify import identify
 from wmrid.io.logs import open_log, read_log
 from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.pipeline.identify import identify
 
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_logs"
 

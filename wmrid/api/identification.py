@@ -17,8 +17,8 @@ from typing import Any
 from wmrid.api.inputs import LogOptions, given_results, load_robot, open_log
 from wmrid.core.errors import UsageError, cannot_read, option
 from wmrid.core.wheel_log import LogStream, WheelLog
-from wmrid.estimators.identify import FRICTION_CHOICES
 from wmrid.estimators.methods import Comparison
+from wmrid.estimators.options import FRICTION_CHOICES
 from wmrid.estimators.result import IdentificationResult
 from wmrid.model.robot import Robot
 
@@ -337,8 +337,8 @@ def check_numbers(
 ) -> None:  # fmt: skip
     """Refuse the numbers of :func:`identify`'s settings that no log can make right (k, alpha, box width, control
     rate, cutoff, forgetting factor, rotor inertia), before any file is opened; other keywords are ignored."""
-    from wmrid.estimators.identify import check_box_width
     from wmrid.estimators.observer import check_gains
+    from wmrid.estimators.options import check_box_width
 
     if rotor_inertia is not None and not (math.isfinite(rotor_inertia) and rotor_inertia >= 0):
         raise UsageError(f"{option('rotor_inertia')} must be a finite number >= 0 (kg m^2), got {rotor_inertia!r}")
@@ -368,7 +368,7 @@ def run_prepared(
     """:func:`identify` on a log already read, with what :func:`prepare` checked and loaded; other keywords of
     :func:`identify` are accepted and ignored (:func:`prepare` used them).  ``given``: earlier results already read
     (:func:`wmrid.api.inputs.given_results`), combined with this log's before it is validated."""
-    from wmrid.estimators.identify import identify as run_observer
+    from wmrid.pipeline.identify import identify as run_observer
 
     result = run_observer(
         wheel_log, prep.robot, form=form, k=k, alpha=alpha, box_width=box_width, torque_hold=torque_hold,
@@ -423,9 +423,9 @@ def compare(
     ``alpha``, ``box_width``, ``torque_hold``: the observer's settings, as for :func:`identify` (every method starts
     from the observer's run).  ``stage``: called with
     what it does now (reading the log, each method), for a progress display."""
-    from wmrid.estimators.identify import identify as run_observer
     from wmrid.estimators.methods import METHODS, check_method
     from wmrid.estimators.methods import compare as run_compare
+    from wmrid.pipeline.identify import identify as run_observer
 
     names = tuple(check_method(m.strip()) for m in (METHODS if methods is None else methods) if m.strip())
     if not names:

@@ -187,7 +187,7 @@ class LiveRun:
     # -- the observer ---------------------------------------------------------------------------------------------
     def _start_observers(self) -> None:
         from wmrid.core.wheel_log import WheelLog
-        from wmrid.estimators.identify import caster_geometry
+        from wmrid.estimators.observer_pass import caster_geometry
         from wmrid.estimators.survey import survey
         from wmrid.model.dynamics import RegressorForm
 
@@ -215,8 +215,8 @@ class LiveRun:
         self._feed_observers(t, eta, tau)
 
     def _observer(self, form: Any, sv: Any) -> Any:
-        from wmrid.estimators.identify import default_box
         from wmrid.estimators.observer import ObserverSettings
+        from wmrid.estimators.observer_pass import default_box
         from wmrid.estimators.online import OnlineObserver
         from wmrid.estimators.sign_speed import sign_half_window
         from wmrid.model import dynamics as model
@@ -405,8 +405,8 @@ def _warm_up() -> None:
 
     from wmrid.core.extras import available
     from wmrid.core.wheel_log import WheelLog
-    from wmrid.estimators.identify import default_box
     from wmrid.estimators.observer import ObserverSettings
+    from wmrid.estimators.observer_pass import default_box
     from wmrid.estimators.online import OnlineObserver, online_estimate
     from wmrid.estimators.survey import survey
     from wmrid.model.dynamics import RegressorForm

@@ -251,7 +251,7 @@ def _friction(friction: str, robot: Robot) -> tuple[str, tuple[float, ...], tupl
     at rest (least-norm statics; mirrored casters, which the log cannot tell apart, summed)."""
     if friction not in FRICTIONS:
         raise UsageError(f"{option('friction', friction)}: choose one of {', '.join(FRICTIONS)}")
-    from wmrid.estimators.identify import caster_geometry
+    from wmrid.estimators.observer_pass import caster_geometry
 
     casters = tuple(robot.casters or ())
     if friction == "auto":

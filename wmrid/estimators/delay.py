@@ -137,7 +137,7 @@ def estimate_delay(
     reference (n, 2) rad/s: the logged wheel-speed set-points; given, the delay is the root of an instrumental-variable
     moment (:func:`_iv_profile`), which a disturbance inside the feedback loop does not bias, instead of the
     least-squares minimiser.  form : the friction model profiled (a :class:`wmrid.model.dynamics.RegressorForm` with
-    caster drag, :func:`wmrid.estimators.identify.delay_profile_form`; None: the wheels' friction only).  Raises
+    caster drag, :func:`wmrid.estimators.observer_pass.delay_profile_form`; None: the wheels' friction only).  Raises
     NotIdentifiableError when the log is too short.
     """
     from wmrid.estimators.idim import fit_with_cutoff, segment_index
@@ -614,7 +614,7 @@ def apply_delay(
     log: Any, delay: float | str, torque_hold: str, control_rate: float | None, form: Any = None
 ) -> tuple[Any, dict[str, Any], list[str]]:
     """(the log in memory with its efforts read ``delay`` s earlier, the record for ``diagnostics["delay"]``,
-    warnings) for :func:`wmrid.estimators.identify.identify`.
+    warnings) for :func:`wmrid.pipeline.identify.identify`.
 
     ``delay``: seconds, or "auto" (:func:`estimate_delay`; applied only when significant and not at the edge
     of the search; ``form`` the friction model profiled).  The warnings name the likely cause: two clocks, or a

@@ -1,6 +1,6 @@
 """The result every identification method returns: base parameters with their covariance.
 
-The observer (:mod:`wmrid.estimators.identify`), IDIM least squares (:mod:`wmrid.estimators.idim`), recursive least
+The observer (:mod:`wmrid.estimators.observer_pass`), IDIM least squares (:mod:`wmrid.estimators.idim`), recursive least
 squares
 (:mod:`wmrid.estimators.rls`) and output error (:mod:`wmrid.estimators.output_error`) all end in a
 :class:`BaseEstimate`, so

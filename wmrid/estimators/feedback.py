@@ -16,7 +16,8 @@ segments, so the difference delta = theta0_observer - theta0_other has a delete-
 (the classical Hausman variance V_IV - V_LS needs the least-squares estimate to be efficient, which the observer
 on coloured residuals is not).  When some |delta_j| exceeds the gate (FAMILY_ALPHA) in its jackknife std, wmrid
 says so and reports the second estimate, with its own standard errors and checks
-(:func:`wmrid.estimators.identify.with_estimate`).  The second estimate's own errors that its checks measured (IDIM's
+(:func:`wmrid.estimators.substitution.with_estimate`).
+The second estimate's own errors that its checks measured (IDIM's
 movement with its filter, the errors in variables of noisy speeds) join that std first (:func:`systematic_variance`):
 a difference they explain is not feedback, and an estimate is never reported for a difference within its own
 stated uncertainty.
@@ -101,8 +102,8 @@ def systematic_variance(other: BaseEstimate) -> tuple[np.ndarray, list[str]]:
     log, so it shows in the difference from the observer exactly as a feedback bias would.  Its mark is that the
     estimate moves with the filter's band (the cutoff check); a difference that this movement can explain is not
     evidence of feedback.  These are the terms the reported estimate's covariance takes in
-    (:func:`wmrid.estimators.identify.with_estimate`), so a difference called feedback is beyond the other estimate's
-    own stated uncertainty too.
+    (:func:`wmrid.estimators.substitution.with_estimate`), so a difference called feedback is beyond the other
+    estimate's own stated uncertainty too.
     """
     out = np.zeros(len(other.theta0))
     used = []
@@ -152,7 +153,7 @@ def check(result: Any, log: Any, robot: Any = None, switch: bool = True) -> Any:
     record says why).
     """
     from wmrid.core.wheel_log import LogStream
-    from wmrid.estimators.identify import with_estimate
+    from wmrid.estimators.substitution import with_estimate
 
     est = result.estimate
     if est is None or est.segments is None or result.method != "observer":

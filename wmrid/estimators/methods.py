@@ -4,7 +4,7 @@ Every method takes a log in memory (t (n,) s, eta (n, 2) rad/s, tau (n, 2) N m) 
 :class:`wmrid.estimators.estimate.BaseEstimate`.  The observer runs first in every case: it streams the log, checks
 its excitation and gives the start of ``oe`` (which removes the output-error method's initial-guess
 problem); :func:`run` then reports the chosen method's estimate through
-:func:`wmrid.estimators.identify.with_estimate`.
+:func:`wmrid.estimators.substitution.with_estimate`.
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ import numpy as np
 from wmrid.core.choices import Method, values
 from wmrid.core.errors import UsageError, WmridError, option
 from wmrid.estimators.estimate import BaseEstimate
-from wmrid.estimators.identify import with_estimate
 from wmrid.estimators.result import IdentificationResult
+from wmrid.estimators.substitution import with_estimate
 from wmrid.model.robot import Robot
 
 METHODS = values(Method, without=("auto",))
@@ -208,7 +208,7 @@ def compare(
             stage(f"{name} ({i} of {len(names)})")
         est = estimate(name, log, observer, options)
         # the same honest std, flags and warnings as ``identify --method NAME``
-        # (wmrid.estimators.identify.with_estimate)
+        # (wmrid.estimators.substitution.with_estimate)
         result = observer if name == "observer" else with_estimate(observer, est)
         params = {}
         for key, (value, std) in result.parameters.items():

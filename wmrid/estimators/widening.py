@@ -4,8 +4,8 @@ The jackknife sees how an estimate varies along a log; an error the same all alo
 errors are measured by identifying the log another admissible way and taking the change delta of theta0:
 
 * the timing term: the efforts' estimated delay moved by its resolution (:func:`with_timing_term`), or, when the
-  timing check left them as stamped, moved to the delay the log cannot rule out (:func:`carry_unresolved_delay`,
-  :func:`with_unresolved_timing`);
+  timing check left them as stamped, moved to the delay the log cannot rule out
+  (:func:`wmrid.pipeline.timing.carry_unresolved_delay`, :func:`with_unresolved_timing`);
 * the hold term: a slow log read under foh instead of zoh when its controller's rate is unknown
   (:func:`with_hold_term`);
 * the closed-loop term: the observer against IDIM/IV (:func:`wmrid.estimators.feedback.widened`).
@@ -160,47 +160,3 @@ def with_timing_term(
     diagnostics = dict(widened.diagnostics)
     diagnostics["delay"] = {**record, "timing_term": {"step_s": step, "delta": delta.tolist(), "widened": grown}}
     return replace(widened, diagnostics=diagnostics, warnings=tuple(warnings) + tuple(base.warnings))
-
-
-def carry_unresolved_delay(
-    result: IdentificationResult, record: dict[str, Any], log: Any, robot: Robot | None, form: Any, k: Any, alpha: Any,
-    box_width: Any, max_history: Any, torque_hold: str, control_rate: float | None, geometry: Any,
-) -> IdentificationResult:  # fmt: skip
-    """``result`` with the timing term of a delay the timing check could not resolve (:func:`wmrid.estimators.delay.
-    unresolved_delay`), carried by the std (:func:`wmrid.estimators.widening.with_unresolved_timing`): the change of
-    theta0
-    when the log is identified again with its efforts read that much earlier; for a log longer than the check's
-    window (whose whole would have to be read into memory), that delay times the profile's least-squares slope
-    (within a factor 0.8-1.9 of the observer's for the friction, measured on the light AMR).  Unchanged when
-    there is none to carry, and when the result models caster drag: the profile fits the wheels' friction only,
-    and on a caster log its std measures that misfit rather than the timing (0.8 ms on a noise-free log that the
-    caster model fits to 3.5e-5, which widened every std 50 times)."""
-    from wmrid.core.errors import WmridError
-    from wmrid.estimators.delay import unresolved_delay, unresolved_text
-    from wmrid.estimators.identify import identify
-
-    est = result.estimate
-    assert est is not None
-    if result.form.caster:
-        return result
-    moved_delay = unresolved_delay(record, np.sqrt(np.maximum(np.diag(np.asarray(est.cov, dtype=float)), 0.0)))
-    if moved_delay is None:
-        return result
-    theta0 = np.asarray(est.theta0, dtype=float)
-    text = unresolved_text(record, moved_delay)
-    if record.get("samples_profiled", 0) < record.get("of", 0) or record.get("windows", 1) > 1:
-        slope = np.zeros_like(theta0)
-        slope[:8] = record["theta0_slope_per_s"]
-        return with_unresolved_timing(result, moved_delay * slope, moved_delay, "the profile's slope", text, robot)
-    try:
-        moved = identify(
-            log, robot, form=form, k=k, alpha=alpha, box_width=box_width, max_history=max_history,
-            torque_hold=torque_hold, control_rate=control_rate, friction=result.form.friction, geometry=geometry,
-            delay=moved_delay, feedback=False, timing=False,
-        )  # fmt: skip
-    except WmridError:
-        return result
-    if moved.estimate is None or len(moved.estimate.theta0) != len(theta0):
-        return result
-    delta = np.asarray(moved.estimate.theta0, dtype=float) - theta0
-    return with_unresolved_timing(result, delta, moved_delay, "identified again", text, robot)

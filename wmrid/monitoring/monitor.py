@@ -51,7 +51,7 @@ model identified on another log, margin 1 gave 4.2, 0.78 and 0.31 false alarms p
 
 After an alarm.  The change time is the maximum-likelihood one, the start j maximising S(j, k) with k one
 second (``locate_s``) past the alarm.  A new segment starts there: its model is identified
-(:func:`wmrid.estimators.identify.identify`, without a robot file) on its first ``calibration_s`` (again each time its
+(:func:`wmrid.pipeline.identify.identify`, without a robot file) on its first ``calibration_s`` (again each time its
 span doubles), its noise model is fitted on the same span from cross-fitted residuals (each half's
 residual from the model identified on the other half, so that the noise model sees a model's estimation
 error and not an in-sample fit), and the test restarts, so that a second change (the payload dropped
@@ -240,7 +240,7 @@ def _identify_span(log: Any, t_start: float, t_end: float, unit: str, friction: 
     positions ``geometry`` ((r, b, x_1, y_1, ...), its ``form.geometry``), else with the two-term caster model
     (Cv, Cw); where that is not identifiable (the wheels never stop or reverse: the drag then adds to the
     Coulomb friction) the wheel friction model is used instead, and why is appended to ``notes``."""
-    from wmrid.estimators.identify import identify
+    from wmrid.pipeline.identify import identify
 
     seg = _segment_log(log, t_start, t_end, unit)
     span = float(seg.t[-1]) if len(seg.t) else 0.0

@@ -1,0 +1,75 @@
+"""The observer's options, declared and checked once (:class:`ObserverOptions`).
+
+Every command that runs the observer (identify, compare, report, fleet, monitor, live) takes these; the command line
+turns its flags into one, the library's functions take one, and nothing checks them again downstream.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from wmrid.core.choices import Form, Friction, TorqueHold, values
+from wmrid.core.errors import UsageError, option
+
+#: Friction models: ``auto`` lets the log decide between the others (:mod:`wmrid.pipeline.friction`).
+FRICTION_CHOICES = (*values(Friction, without=("auto",)), "auto")
+#: The observer's history is decimated to at most this many samples (the convergence figures and JSON history).
+MAX_HISTORY = 20000
+
+
+def check_box_width(box_width: float) -> None:
+    """Refuse a box half-width that is not a number > 0 (inf: no box)."""
+    if not (isinstance(box_width, (int, float)) and box_width > 0):  # NaN fails too
+        raise UsageError(f"{option('box_width')} must be a number > 0 (inf: no box), got {box_width!r}")
+
+
+def check_delay(delay: float | str | None) -> None:
+    """Refuse a delay that is neither None, "auto" nor a finite number of seconds."""
+    if delay is None or delay == "auto":
+        return
+    if isinstance(delay, bool) or not isinstance(delay, (int, float)) or not math.isfinite(delay):
+        raise UsageError(f"{option('delay')} must be auto or a number of seconds, got {delay!r}")
+
+
+@dataclass(frozen=True)
+class ObserverOptions:
+    """How the observer reads a log (Eqs. 26-37), checked when made.
+
+    form : "auto" (the paper's 7 columns when each wheel keeps one sign, else the general 8), "paper" or "general".
+    k : 1/s, the state predictor's and filter's gain, in (0, MAX_K].  alpha : the start value's weight, Gamma(0) =
+    alpha I, > 0.  box_width : the parameter box's half-width in units of the start value (inf: no box;
+    :func:`wmrid.estimators.observer_pass.default_box`).  torque_hold : "zoh" (each effort held over its step) or
+    "foh" (linear between samples).  control_rate : Hz, the rate of a controller faster than the log that held the
+    effort (None: the log's own).  delay : s, how late the efforts are stamped against the speeds: read that much
+    earlier; "auto": estimated and applied when significant; None: as stamped unless the timing check finds
+    otherwise.  friction : "wheel" (Eqs. 15-17), "wheel+caster", "wheel+caster+load" or "auto" (the log decides).
+    max_history : the history kept for figures, samples.
+    """
+
+    form: str = "auto"
+    k: float = 10.0
+    alpha: float = 1e-10
+    box_width: float = 10.0
+    torque_hold: str = "zoh"
+    control_rate: float | None = None
+    delay: float | str | None = None
+    friction: str = "auto"
+    max_history: int = MAX_HISTORY
+
+    def __post_init__(self) -> None:
+        from wmrid.estimators.observer import check_gains
+
+        check_gains(self.k, self.alpha, self.control_rate)
+        check_box_width(self.box_width)
+        if self.torque_hold not in values(TorqueHold):
+            raise UsageError(f"{option('torque_hold')} must be zoh or foh, got {self.torque_hold!r}")
+        if self.form not in values(Form):
+            raise UsageError(f"{option('form')} must be auto, paper or general, got {self.form!r}")
+        if self.friction not in FRICTION_CHOICES:
+            raise UsageError(
+                f"{option('friction')} must be one of {', '.join(FRICTION_CHOICES)}, got {self.friction!r}"
+            )
+        check_delay(self.delay)
+        if not (isinstance(self.max_history, int) and self.max_history >= 2):
+            raise UsageError(f"max_history must be an integer >= 2, got {self.max_history!r}")

@@ -1,0 +1,207 @@
+"""The identification of one log, step by step (:func:`identify_log`).
+
+The route, each step a function that returns a record and re-enters nothing:
+
+1. the options, checked when made (:class:`wmrid.estimators.options.ObserverOptions`) and the payload's needs;
+2. the efforts' timing decided (:func:`wmrid.pipeline.timing.decide_timing`): split topics, or the timing check;
+   when it finds a significant delay, or the user asks for one (``delay``), the delay is estimated on the whole log
+   and applied (:func:`_delayed`), with a pass at the delay moved by its resolution for the timing term;
+3. the observer's passes the friction model needs (:func:`wmrid.pipeline.friction.choose_friction`: one to three);
+4. the widenings: the unresolved delay (:func:`wmrid.pipeline.timing.carry_unresolved_delay`), the closed-loop check
+   (:func:`wmrid.estimators.feedback.check`), the hold term of a slow log (:func:`wmrid.estimators.widening.
+   with_hold_term`, a pass under foh);
+5. every statement about the parameters made from the final numbers (:func:`wmrid.estimators.verdict.settle`).
+
+The chosen method's fit, the combination with earlier results and the validation follow in
+:func:`wmrid.api.identification.run_prepared`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+from wmrid.core.errors import UsageError, WmridError, option
+from wmrid.core.wheel_log import LogStream, stream_arrays
+from wmrid.estimators.delay import DELAY_RESOLUTION_S, apply_delay
+from wmrid.estimators.feedback import check as feedback_check
+from wmrid.estimators.observer_pass import delay_profile_form
+from wmrid.estimators.options import ObserverOptions
+from wmrid.estimators.result import IdentificationResult, LogLike
+from wmrid.estimators.survey import survey
+from wmrid.estimators.verdict import settle
+from wmrid.estimators.widening import with_hold_term, with_timing_term
+from wmrid.model.robot import Robot
+from wmrid.pipeline.friction import choose_friction
+from wmrid.pipeline.timing import Timing, carry_unresolved_delay, decide_timing, observe_at, surveyed
+
+
+@dataclass(frozen=True)
+class Steps:
+    """Which steps run beyond the observer's passes (wmrid's commands set them; the defaults run them all).
+
+    payload : also estimate the payload the robot carries (needs the robot's physical parameters).  load_terms :
+    friction auto may take the casters' load terms (the methods that model them).  geometry : (r, b, x_1, y_1, ...) m,
+    the casters' for the caster model when no robot lists them.  feedback : the closed-loop check.  switch : it may
+    report IDIM/IDIM-IV instead of the observer (``--method auto``).  timing : time the efforts (split topics, the
+    timing check, the hold and unresolved-delay terms) when no delay is given.
+    """
+
+    payload: bool = False
+    load_terms: bool = True
+    geometry: tuple[float, ...] = ()
+    feedback: bool = True
+    switch: bool = True
+    timing: bool = True
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "geometry", tuple(float(v) for v in self.geometry))
+
+
+OBSERVER_FIELDS = frozenset(f.name for f in fields(ObserverOptions))
+
+
+def identify(log: LogLike | LogStream, robot: Robot | None = None, **settings: Any) -> IdentificationResult:
+    """:func:`identify_log` with its options as keywords: those of :class:`ObserverOptions` (``friction`` defaults to
+    "wheel" here), of :class:`Steps`, and ``progress``."""
+    progress = settings.pop("progress", None)
+    observer = {name: settings.pop(name) for name in list(settings) if name in OBSERVER_FIELDS}
+    observer.setdefault("friction", "wheel")
+    return identify_log(log, robot, ObserverOptions(**observer), Steps(**settings), progress)
+
+
+def identify_log(
+    log: LogLike | LogStream,
+    robot: Robot | None,
+    options: ObserverOptions,
+    steps: Steps = Steps(),
+    progress: Callable[[int, int], None] | None = None,
+) -> IdentificationResult:
+    """The base parameters of the robot that recorded ``log`` (the module's route).
+
+    log : a :class:`wmrid.core.wheel_log.LogStream` (read in passes, in bounded memory, unless its efforts must be
+    shifted), or a log in memory: t (n,) s strictly increasing, eta (n, 2) rad/s [right, left], tau (n, 2) N m.
+    robot : the nominal values that start the estimate and centre the box (None: from the data and physics).
+    ``progress(samples_done, samples)`` during the observer's passes."""
+    _check_payload(robot, steps.payload)
+    if options.delay is not None:
+        return _settled(_delayed(log, robot, options, steps, progress), robot)
+    stream, sv = surveyed(log)
+    timing = Timing()
+    if steps.timing:
+        timing = decide_timing(log, stream, sv, robot, options, steps.geometry, steps.load_terms)
+        if timing.split or timing.apply:  # time the efforts by default
+            # (as it stands, the load terms are open to friction auto here whatever steps.load_terms says)
+            timed_steps = replace(steps, load_terms=True)
+            try:
+                timed = _settled(_delayed(log, robot, replace(options, delay="auto"), timed_steps, progress), robot)
+            except WmridError as err:  # e.g. a hole IDIM's filter cannot bridge: as stamped, and say so
+                timing = timing.failed(err)
+            else:
+                if timing.record is not None:  # the window's record, with what the timed run found (its hold term)
+                    merged = {**timing.record, **(timed.diagnostics.get("timing") or {})}
+                    timed = replace(timed, diagnostics={**timed.diagnostics, "timing": merged})
+                return _settled(timed, robot)
+    return _settled(_friction_and_terms(log, stream, sv, robot, options, steps, progress, timing), robot)
+
+
+def _settled(result: IdentificationResult, robot: Robot | None) -> IdentificationResult:
+    radius = None if robot is None else getattr(robot.nominal, "r", None)
+    return settle(result, radius=None if radius is None else float(radius))
+
+
+def _check_payload(robot: Robot | None, payload: bool) -> None:
+    if payload and robot is None:
+        raise UsageError(
+            f"{option('payload')} needs {option('robot')}: the payload is what the log shows beyond the unloaded robot"
+        )
+    if payload and robot is not None and not robot.physical:
+        raise UsageError(
+            f"{option('payload')} needs the robot's physical parameters (masses, inertias, geometry); "
+            f"robot {robot.name!r} gives base parameters only"
+        )
+
+
+def _delayed(
+    log: Any,
+    robot: Robot | None,
+    options: ObserverOptions,
+    steps: Steps,
+    progress: Callable[[int, int], None] | None,
+) -> IdentificationResult:
+    """The log's efforts read ``options.delay`` s earlier (the whole log in memory), then identified.  "auto": the
+    delay estimated on the whole log (:func:`wmrid.estimators.delay.apply_delay`, profiled with the richest friction
+    model allowed); applied when significant, with the timing term: a pass at the delay moved by its resolution,
+    whose change the std carries (:func:`wmrid.estimators.widening.with_timing_term`)."""
+    delay = options.delay
+    original = log.read() if isinstance(log, LogStream) else log  # read once: shifting needs the whole log
+    profile = None
+    if delay == "auto":
+        whole = stream_arrays(original)
+        auto_form = survey(whole, whole.source, whole.effort_unit).form()
+        profile = delay_profile_form(auto_form, options.friction, robot, steps.geometry, steps.load_terms)
+    shifted, record, warnings = apply_delay(original, delay, options.torque_hold, options.control_rate, profile)
+    applied = record["applied_s"]
+    if delay == "auto" and applied:
+        step = max(DELAY_RESOLUTION_S, 2.0 * record["std_s"])
+        # (as it stands, this pass opens the load terms to friction auto whatever steps.load_terms says)
+        plain = Steps(payload=steps.payload, geometry=steps.geometry, feedback=False, timing=False)
+        stream, sv = surveyed(shifted)
+        base = _friction_and_terms(shifted, stream, sv, robot, replace(options, delay=None), plain, progress, Timing())
+        base = _settled(base, robot)
+        at = replace(options, friction=base.form.friction, delay=applied + step)
+        moved = observe_at(original, robot, at, steps.geometry, payload=steps.payload)
+        return _checked(with_timing_term(base, moved, record, warnings, step, robot), shifted, robot, steps)
+    stream, sv = surveyed(shifted)
+    timing = Timing(delay_record=record, delay_warnings=tuple(warnings))
+    if steps.timing and delay == "auto":
+        timing = decide_timing(
+            shifted, stream, sv, robot, options, steps.geometry, steps.load_terms, delay_record=record,
+            delay_warnings=tuple(warnings),
+        )  # fmt: skip
+    return _friction_and_terms(shifted, stream, sv, robot, options, steps, progress, timing)
+
+
+def _checked(result: IdentificationResult, log: Any, robot: Robot | None, steps: Steps) -> IdentificationResult:
+    return feedback_check(result, log, robot, switch=steps.switch) if steps.feedback else result
+
+
+def _friction_and_terms(
+    log: Any,
+    stream: LogStream,
+    sv: Any,
+    robot: Robot | None,
+    options: ObserverOptions,
+    steps: Steps,
+    progress: Callable[[int, int], None] | None,
+    timing: Timing,
+) -> IdentificationResult:
+    """The friction model chosen (its passes), the timing's records and warnings, the unresolved-delay term, the
+    closed-loop check and the hold term."""
+    result, friction_record = choose_friction(
+        stream, sv, robot, options, geometry=steps.geometry, payload=steps.payload, load_terms=steps.load_terms,
+        progress=progress,
+    )  # fmt: skip
+    diagnostics = {**result.diagnostics, "friction": friction_record}
+    if timing.record is not None:
+        diagnostics["timing"] = timing.record
+    warnings = (*timing.warnings, *result.warnings)
+    if timing.delay_record is not None:
+        diagnostics["delay"] = timing.delay_record
+        warnings = (*timing.delay_warnings, *warnings)
+    result = replace(result, diagnostics=diagnostics, warnings=warnings)
+    rec = timing.record or {}
+    if result.estimate is not None:
+        result = carry_unresolved_delay(result, rec, log, robot, options, steps.geometry)
+    observer = result.estimate
+    result = _checked(result, log, robot, steps)
+    # a faster controller found and timed settles the hold; found but not timed (the re-run failed), it does not
+    timed_controller = bool(rec.get("faster_controller")) and not timing.warnings
+    unknown_hold = options.torque_hold == "zoh" and options.control_rate is None and not timed_controller
+    if rec.get("checked") and rec.get("slow") and unknown_hold and observer is not None:
+        # a slow log whose controller rate is unknown: the truth lies between a hold at the log's rate (zoh) and a
+        # controller much faster than the log (foh); that bracket, the std carries (the hold term)
+        foh = replace(options, torque_hold="foh", friction=result.form.friction, delay=None)
+        result = with_hold_term(result, observer, observe_at(log, robot, foh, steps.geometry), robot)
+    return result
