@@ -137,6 +137,8 @@ CASES = (
     Case("slow_50hz_control_rate", _simulated("slow", *CLOSED, "rate", "50"), (*PAPER, "--control-rate", "1000")),
     Case("mujoco_amr_auto", _simulated("amr", *MUJOCO), AMR),
     Case("mujoco_amr_wheel_idim", _simulated("amr", *MUJOCO), (*AMR, "--friction", "wheel", "--method", "idim")),
+    Case("mujoco_amr_late_idim", _simulated("amr_late", *MUJOCO, shift_s=0.012), (*AMR, "--method", "idim")),
+    Case("mujoco_amr_late_auto", _simulated("amr_late", *MUJOCO, shift_s=0.012), AMR),
     Case("me169_auto", ME169_A, ME169, needs_real=True),
     Case("me169_idim", ME169_A, (*ME169, "--method", "idim"), needs_real=True),
     Case("me169_wheel", ME169_B, (*ME169, "--friction", "wheel"), needs_real=True),

@@ -92,10 +92,8 @@ def identify_log(
     if steps.timing:
         timing = decide_timing(log, stream, sv, robot, options, steps.geometry, steps.load_terms)
         if timing.split or timing.apply:  # time the efforts by default
-            # (as it stands, the load terms are open to friction auto here whatever steps.load_terms says)
-            timed_steps = replace(steps, load_terms=True)
             try:
-                timed = _settled(_delayed(log, robot, replace(options, delay="auto"), timed_steps, progress), robot)
+                timed = _settled(_delayed(log, robot, replace(options, delay="auto"), steps, progress), robot)
             except WmridError as err:  # e.g. a hole IDIM's filter cannot bridge: as stamped, and say so
                 timing = timing.failed(err)
             else:
@@ -145,8 +143,7 @@ def _delayed(
     applied = record["applied_s"]
     if delay == "auto" and applied:
         step = max(DELAY_RESOLUTION_S, 2.0 * record["std_s"])
-        # (as it stands, this pass opens the load terms to friction auto whatever steps.load_terms says)
-        plain = Steps(payload=steps.payload, geometry=steps.geometry, feedback=False, timing=False)
+        plain = replace(steps, feedback=False, timing=False)
         stream, sv = surveyed(shifted)
         base = _friction_and_terms(shifted, stream, sv, robot, replace(options, delay=None), plain, progress, Timing())
         base = _settled(base, robot)
