@@ -75,7 +75,9 @@ def test_the_api_and_the_cli_give_the_same_document(sample_result):
 @pytest.mark.parametrize("method", ["observer", "idim", "oe"])
 def test_a_result_round_trips_through_its_json(sample_log, method):
     """from_dict(to_dict) gives the same document, through real JSON text; the estimate keeps its covariance."""
-    result = wmrid.identify(sample_log, "paper", method=method, payload=method == "observer")
+    result = wmrid.identify(
+        sample_log, "paper", method=method, observer=wmrid.ObserverOptions(payload=method == "observer")
+    )
     doc = json.loads(to_json(result.to_dict()))
     assert doc["schema_version"] == SCHEMA_VERSION
     back = from_dict(doc, "saved.json")
@@ -112,11 +114,11 @@ def test_a_result_saved_before_schema_versions_reads_as_version_1(sample_result)
 
 def test_library_errors_name_options_as_python_names(sample_log):
     with pytest.raises(UsageError, match=r"friction='wheel\+caster' with method='oe' needs"):
-        wmrid.identify(sample_log, method="oe", friction="wheel+caster")
+        wmrid.identify(sample_log, method="oe", observer=wmrid.ObserverOptions(friction="wheel+caster"))
     with pytest.raises(UsageError, match=r"control_rate is modelled by the observer, idim, iv and rls only"):
-        wmrid.identify(sample_log, method="oe", control_rate=1000.0)
+        wmrid.identify(sample_log, method="oe", observer=wmrid.ObserverOptions(control_rate=1000.0))
     with pytest.raises(UsageError, match="delay must be auto or a number of seconds, got 'soon'"):
-        wmrid.identify(sample_log, delay="soon")
+        wmrid.ObserverOptions(delay="soon")
     with pytest.raises(UsageError, match="unknown log option 'speed'"):
         wmrid.read_log(SAMPLE, speed="rpm")
 

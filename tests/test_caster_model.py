@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from wmrid.estimators.observer_kernel import DRAG_SPEED as KERNEL_DRAG_SPEED
 from wmrid.estimators.observer_kernel import (
+    DRAG_SPEED as KERNEL_DRAG_SPEED,
     KIND_CASTER,
     KIND_CASTER_GEOMETRY,
     KIND_GENERAL,

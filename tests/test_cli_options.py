@@ -11,7 +11,6 @@ OUTPUTS = {"output", "output_format", "force", "mcap_out", "out", "history", "no
 NOT_OFFERED = {
     "compare": {
         "method": "compare runs every method of --methods",
-        "payload": "the comparison's table holds the base parameters of each method, not a payload",
         "given": "each method's estimate is shown as this log gives it",
     },
     "report": {"log": "report's INPUT is a log or a saved result"},

@@ -147,8 +147,10 @@ def test_the_schema_holds_for_other_methods_a_payload_a_validation_and_no_histor
 
     log = wmrid.read_log(ROOT / "sample_logs" / "paper_sinusoid.csv")
     results = [
-        wmrid.identify(log, "paper", method="idim", validate=str(ROOT / "sample_logs" / "paper_sinusoid.parquet")),
-        wmrid.identify(log, "paper", payload=True),
+        wmrid.validate(
+            wmrid.identify(log, "paper", method="idim"), str(ROOT / "sample_logs" / "paper_sinusoid.parquet")
+        ),
+        wmrid.identify(log, "paper", observer=wmrid.ObserverOptions(payload=True)),
     ]
     for result in results:
         for history in (True, False):

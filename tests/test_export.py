@@ -30,7 +30,7 @@ URDF = ROOT / "examples" / "paper_robot.urdf"
 def saved(tmp_path_factory):
     """The bundled sample identified with the paper robot, saved as JSON, and --validate's fit on itself."""
     folder = tmp_path_factory.mktemp("export")
-    result = wmrid.identify(str(SAMPLE), "paper", validate=str(SAMPLE))
+    result = wmrid.validate(wmrid.identify(str(SAMPLE), "paper"), str(SAMPLE))
     path = folder / "run.json"
     path.write_text(json.dumps(result.to_dict(history=False), default=float))
     return path, result
@@ -276,7 +276,7 @@ def test_check_applies_the_identified_caster_drag(tmp_path):
     from wmrid.api.simulation import write_simulation
 
     write_simulation(sim, log)
-    result = wmrid.identify(str(log), "amr", friction="wheel+caster")
+    result = wmrid.identify(str(log), "amr", observer=wmrid.ObserverOptions(friction="wheel+caster"))
     assert result.form.caster
     saved = tmp_path / "run.json"
     saved.write_text(json.dumps(result.to_dict(history=False), default=float))
@@ -341,7 +341,7 @@ def two_term(tmp_path_factory):
     log = folder / "rev.csv"
     write_simulation(sim, log)
     robot = dataclasses.replace(wmrid.load_robot("paper"), casters=None)
-    result = wmrid.identify(str(log), robot, friction="wheel+caster")
+    result = wmrid.identify(str(log), robot, observer=wmrid.ObserverOptions(friction="wheel+caster"))
     assert result.form.caster
     assert not result.form.geometry
     return _save(result, folder / "run.json"), log, robot

@@ -13,8 +13,7 @@ import os
 import struct
 
 import pytest
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
+from hypothesis import HealthCheck, given, settings, strategies as st
 
 from wmrid.core.errors import WmridError
 from wmrid.io.logs import read_log

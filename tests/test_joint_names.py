@@ -7,8 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 from rosbags.typesys import Stores, get_typestore
 
 from wmrid.io.mcap.records import cdr_joint_names, ros1_joint_names

@@ -14,8 +14,7 @@ import wmrid.monitoring.monitor as mon
 from wmrid.core.errors import UsageError
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
-from wmrid.monitoring import glr, residuals
-from wmrid.monitoring import settings as mon_settings
+from wmrid.monitoring import glr, residuals, settings as mon_settings
 from wmrid.pipeline.identify import identify
 from wmrid.sim.scenario import NoiseSettings, PlantChange
 from wmrid.sim.simulate import simulate

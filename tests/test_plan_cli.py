@@ -12,8 +12,7 @@ import pandas as pd
 import pytest
 
 import wmrid
-from tests.cliutil import assert_clean_error
-from tests.cliutil import wmrid as run
+from tests.cliutil import assert_clean_error, wmrid as run
 from wmrid.io.reference_files import read_reference
 
 ROBOT = """name = "tiny"

@@ -15,8 +15,7 @@ import types
 import numba
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 from rosbags.rosbag1 import Reader, Writer
 from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore

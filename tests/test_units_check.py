@@ -19,8 +19,7 @@ import numpy as np
 import pytest
 
 import wmrid
-from tests.cliutil import text
-from tests.cliutil import wmrid as cli
+from tests.cliutil import text, wmrid as cli
 from wmrid.estimators.plausibility import robot_findings, signal_findings
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -8,11 +8,12 @@ The public API, loaded on first use so that ``import wmrid`` stays fast::
     value, std = result.parameters["m11"]
 
 Layers, lowest first: :mod:`wmrid.core`, :mod:`wmrid.model`, then :mod:`wmrid.io`, :mod:`wmrid.estimators` and
-:mod:`wmrid.sim` side by side, :mod:`wmrid.monitoring`, :mod:`wmrid.reporting`, :mod:`wmrid.api` and the command line
-:mod:`wmrid.cli` on top.
+:mod:`wmrid.sim` side by side, :mod:`wmrid.pipeline`, :mod:`wmrid.monitoring` and :mod:`wmrid.design`,
+:mod:`wmrid.reporting`, :mod:`wmrid.api` and the command line :mod:`wmrid.cli` on top.
 """
 
 import os as _os
+from typing import TYPE_CHECKING as _TYPE_CHECKING
 
 __version__ = "0.1.0"
 
@@ -137,6 +138,10 @@ _EXPORTS = {
     "read_log": "wmrid.api.inputs",
     "identify": "wmrid.api.identification",
     "compare": "wmrid.api.identification",
+    "validate": "wmrid.api.identification",
+    "ObserverOptions": "wmrid.estimators.options",
+    "MethodOptions": "wmrid.estimators.methods",
+    "Identification": "wmrid.api.reporting",
     "inspect": "wmrid.api.inputs",
     "Comparison": "wmrid.estimators.methods",
     "simulate": "wmrid.api.simulation",
@@ -173,6 +178,99 @@ _EXPORTS = {
     "LiveUpdate": "wmrid.api.live",
     "LiveResult": "wmrid.api.live",
 }
+
+if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (the same names as _EXPORTS)
+    from wmrid.api.exporting import (
+        ExportResult as ExportResult,
+        export as export,
+    )
+    from wmrid.api.fleet import (
+        FleetRun as FleetRun,
+        fleet as fleet,
+    )
+    from wmrid.api.fleet_reporting import (
+        fleet_report as fleet_report,
+        write_fleet_report as write_fleet_report,
+    )
+    from wmrid.api.identification import (
+        compare as compare,
+        identify as identify,
+        validate as validate,
+    )
+    from wmrid.api.inputs import (
+        LogOptions as LogOptions,
+        inspect as inspect,
+        load_robot as load_robot,
+        open_log as open_log,
+        read_log as read_log,
+    )
+    from wmrid.api.live import (
+        LiveChange as LiveChange,
+        LiveResult as LiveResult,
+        LiveRun as LiveRun,
+        LiveUpdate as LiveUpdate,
+        live as live,
+    )
+    from wmrid.api.monitoring import (
+        monitor as monitor,
+    )
+    from wmrid.api.planning import (
+        plan as plan,
+        read_plan as read_plan,
+        write_plan as write_plan,
+    )
+    from wmrid.api.reporting import (
+        Identification as Identification,
+        report as report,
+        write_report as write_report,
+    )
+    from wmrid.api.simulation import (
+        SimulationRun as SimulationRun,
+        simulate as simulate,
+        write_simulation as write_simulation,
+    )
+    from wmrid.core.errors import (
+        WmridError as WmridError,
+    )
+    from wmrid.core.wheel_log import (
+        LogStream as LogStream,
+        WheelLog as WheelLog,
+    )
+    from wmrid.design.plan import (
+        Plan as Plan,
+    )
+    from wmrid.estimators.estimate import (
+        BaseEstimate as BaseEstimate,
+    )
+    from wmrid.estimators.methods import (
+        Comparison as Comparison,
+        MethodOptions as MethodOptions,
+    )
+    from wmrid.estimators.options import (
+        ObserverOptions as ObserverOptions,
+    )
+    from wmrid.estimators.result import (
+        IdentificationResult as IdentificationResult,
+        ObserverRun as ObserverRun,
+    )
+    from wmrid.model.physical import (
+        PhysicalEstimate as PhysicalEstimate,
+    )
+    from wmrid.model.robot import (
+        Robot as Robot,
+    )
+    from wmrid.monitoring.monitor import (
+        MonitorResult as MonitorResult,
+    )
+    from wmrid.monitoring.settings import (
+        MonitorSettings as MonitorSettings,
+    )
+    from wmrid.reporting.fleet_report import (
+        FleetReport as FleetReport,
+    )
+    from wmrid.reporting.report import (
+        Report as Report,
+    )
 
 __all__ = ["__version__", *sorted(_EXPORTS)]
 

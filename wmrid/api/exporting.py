@@ -85,8 +85,7 @@ def check_export_output(path: str | os.PathLike[str]) -> str:
 def _result(result: Any) -> tuple[Any, dict[str, str]]:
     """(IdentificationResult, provenance) from a result or the path of a saved one."""
     from wmrid import __version__
-    from wmrid.estimators.result import IdentificationResult
-    from wmrid.estimators.result import from_dict as result_from_dict
+    from wmrid.estimators.result import IdentificationResult, from_dict as result_from_dict
 
     provenance = {"wmrid": __version__}
     if isinstance(result, IdentificationResult):

@@ -243,7 +243,7 @@ def identify_entry(spec: dict[str, Any]) -> dict[str, Any]:
         row["speed_r"], row["speed_l"] = seen.mean_speed()
         first = seen.first
         if spec.get("fit", True):
-            row.update(_fit(result, log, robot, spec["options"].get("torque_hold", "zoh")))
+            row.update(_fit(result, log, robot))
         if row["start_time"] is None and first is not None and first >= EPOCH_START_S:
             row["start_time"] = dt.datetime.fromtimestamp(first, tz=dt.timezone.utc)
             row["time_source"] = "log"
@@ -295,31 +295,33 @@ def _split_options(options: dict[str, Any]) -> tuple[dict[str, Any], dict[str, A
 def _identify(spec: dict[str, Any]) -> tuple[Any, _Seen, Any, Any]:
     """(result, what its pieces showed (first stamp, wheel speeds), the prepared robot, the log as read: a stream or
     a whole log)."""
-    from wmrid.api.identification import prepare, run_prepared
+    from wmrid.api.identification import prepare, run_prepared, settings_from
     from wmrid.api.inputs import LogOptions, open_log
 
     log_opts, run_opts = _split_options(spec["options"])
     options = LogOptions(**log_opts)
-    prep = prepare(options=options, robot=spec.get("robot"), **run_opts)
+    rotor_inertia = run_opts.pop("rotor_inertia", None)
+    method, observer, fit = settings_from(run_opts)
+    prep = prepare(method, observer, fit, options=options, robot=spec.get("robot"), rotor_inertia=rotor_inertia)
     seen = _Seen()
     stream = _watched_stream(open_log(spec["log"], options, robot=prep.robot), seen)
     wheel_log = stream if prep.method == "observer" else stream.read()
-    result = run_prepared(wheel_log, prep, options=options, **run_opts)
+    result = run_prepared(wheel_log, prep)
     return result, seen, prep.robot, wheel_log
 
 
-def _fit(result: Any, log: Any, robot: Any, torque_hold: str) -> dict[str, Any]:
+def _fit(result: Any, log: Any, robot: Any) -> dict[str, Any]:
     """fit_r, fit_l: % fit of the identified model's simulated wheel speeds on the log it was identified from (None
     above :data:`FIT_MAX_SAMPLES` samples, or where the predictor cannot run the model).  A stream of that size
     kept its pieces from the identification: the file is not read again."""
-    from wmrid.api.identification import with_validation
+    from wmrid.api.identification import validate
 
     samples = result.log_info.get("samples") or 0
     if samples > FIT_MAX_SAMPLES:
         return {}
     try:
         whole = log.read() if hasattr(log, "read") else log
-        checked = with_validation(result, whole, robot=robot, torque_hold=torque_hold)
+        checked = validate(result, whole, robot=robot)
     except Exception:  # the fit is an extra: its failure never discards the identification
         return {}
     fit = checked.validation["fit_percent"]
@@ -342,7 +344,7 @@ def _robot_digest(robot: str | None, cache: dict[str, str | None]) -> str | None
 def check_defaults(defaults: dict[str, Any]) -> dict[str, Any]:
     """The run-wide options (identify's keywords and LogOptions fields, None = not given), checked as ``identify``
     checks them before any log is read."""
-    from wmrid.api.identification import check_numbers
+    from wmrid.api.identification import check_rotor_inertia, settings_from
     from wmrid.api.inputs import LogOptions
     from wmrid.estimators.methods import check_method
 
@@ -353,7 +355,8 @@ def check_defaults(defaults: dict[str, Any]) -> dict[str, Any]:
     given = {k: v for k, v in defaults.items() if v is not None}
     log_opts, run_opts = _split_options(given)
     LogOptions(**log_opts)
-    check_numbers(**run_opts)
+    check_rotor_inertia(run_opts.pop("rotor_inertia", None))
+    settings_from(run_opts)
     if run_opts.get("method", "auto") != "auto":
         check_method(run_opts["method"])
     return given

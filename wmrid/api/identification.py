@@ -11,18 +11,18 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 from wmrid.api.inputs import LogOptions, given_results, load_robot, open_log
 from wmrid.core.errors import UsageError, cannot_read, option
 from wmrid.core.wheel_log import LogStream, WheelLog
-from wmrid.estimators.methods import Comparison
-from wmrid.estimators.options import FRICTION_CHOICES
+from wmrid.estimators.methods import Comparison, MethodOptions
+from wmrid.estimators.options import FRICTION_CHOICES, ObserverOptions
 from wmrid.estimators.result import IdentificationResult
 from wmrid.model.robot import Robot
 
-__all__ = ["CASTER_METHODS", "compare", "identify", "with_validation"]
+__all__ = ["CASTER_METHODS", "compare", "identify", "validate"]
 
 #: Methods that model caster drag (``friction="wheel+caster"``); output error only with the casters' positions.
 CASTER_METHODS = ("observer", "idim", "iv", "rls", "oe")
@@ -165,10 +165,37 @@ def delay_value(delay: float | str | None) -> float | str | None:
         raise UsageError(f"{option('delay')} must be auto or a number of seconds, got {text!r}") from None
 
 
-def method_options(cutoff: float | None, weighted: bool, forgetting: float, torque_hold: str) -> Any:
-    from wmrid.estimators.methods import MethodOptions
+#: The classical methods' settings by their command-line names: MethodOptions' fields.
+FIT_NAMES = {"cutoff": "cutoff_hz", "weighted": "weighted", "forgetting": "forgetting"}
+#: The observer's settings by name: ObserverOptions' fields a user sets.
+OBSERVER_NAMES = tuple(f.name for f in fields(ObserverOptions) if f.name != "max_history")
+#: identify's settings by name (a fleet manifest's columns, the command line's flags): the method, the observer's
+#: options, the classical methods'.
+SETTING_NAMES = ("method", *OBSERVER_NAMES, *FIT_NAMES)
 
-    return MethodOptions(cutoff_hz=cutoff, weighted=weighted, forgetting=forgetting, torque_hold=torque_hold)
+
+def settings_from(flat: dict[str, Any]) -> tuple[str, ObserverOptions, MethodOptions]:
+    """(method, observer options, classical methods' options) from settings by name (:data:`SETTING_NAMES`; None:
+    the default; ``delay`` also as text), each checked once as its object is made; another name is refused."""
+    unknown = sorted(set(flat) - set(SETTING_NAMES))
+    if unknown:
+        raise UsageError(f"unknown setting {unknown[0]!r}; the settings are {', '.join(SETTING_NAMES)}")
+    given = {k: v for k, v in flat.items() if v is not None}
+    if "delay" in given:
+        given["delay"] = delay_value(given["delay"])
+    observer = ObserverOptions(**{k: v for k, v in given.items() if k in OBSERVER_NAMES})
+    fit = MethodOptions(**{FIT_NAMES[k]: v for k, v in given.items() if k in FIT_NAMES})
+    return str(given.get("method", "auto")), observer, fit
+
+
+def settings_given(method: str, observer: ObserverOptions, fit: MethodOptions) -> dict[str, Any]:
+    """The settings that differ from their defaults, by name (:data:`SETTING_NAMES`): what a report's provenance
+    records."""
+    out: dict[str, Any] = {} if method == "auto" else {"method": method}
+    plain_observer, plain_fit = ObserverOptions(), MethodOptions()
+    out.update({k: getattr(observer, k) for k in OBSERVER_NAMES if getattr(observer, k) != getattr(plain_observer, k)})
+    out.update({k: getattr(fit, f) for k, f in FIT_NAMES.items() if getattr(fit, f) != getattr(plain_fit, f)})
+    return out
 
 
 def no_two_stdin(log: Any, validate_log: Any, what: str) -> None:
@@ -176,23 +203,34 @@ def no_two_stdin(log: Any, validate_log: Any, what: str) -> None:
         raise UsageError(f"{what} and {option('validate')} cannot both be standard input; give one of them as a file")
 
 
-def with_validation(
+def check_validation(log: Any, other: Any, observer: ObserverOptions, methods: tuple[str, ...], what: str) -> None:
+    """Before anything is read: refuse what ``--validate OTHER`` cannot do with these settings (a controller rate,
+    which its predictor does not model; ``log`` and ``other`` both standard input).  Nothing when ``other`` is None."""
+    if other is None:
+        return
+    check_control_rate(observer.control_rate, tuple("observer" if m == "auto" else m for m in methods), True)
+    no_two_stdin(log, other, what)
+
+
+def validate(
     result: IdentificationResult,
-    other: LogInput,
+    log: LogInput,
     options: LogOptions | None = None,
     *,
     robot: Robot | None = None,
-    torque_hold: str = "zoh",
 ) -> IdentificationResult:
-    """``result`` with ``validation``: the fit % per wheel of its model's simulated wheel speeds on log ``other``
-    (read with the same ``options``)."""
+    """``result`` with ``validation``: the fit % per wheel of its model's simulated wheel speeds on ``log`` (another
+    log of the same robot, read with ``options``; ``robot`` fills in its units as for identify), the effort held as
+    the result's observer held it.  The estimate is unchanged: validation only adds output."""
     from wmrid.model.predict import unsimulated, validation_fit
 
-    other_log = _log(other, options, robot, whole=True)
+    if result.settings.control_rate is not None:  # the predictor holds each logged effort over its whole step
+        check_control_rate(result.settings.control_rate, (), True)
+    other_log = _log(log, options, robot, whole=True)
     unit = result.log_info.get("effort_unit", "N m")
     if other_log.effort_unit != unit:
         raise UsageError(
-            f"{option('validate', _given(other))}: its effort is in {other_log.effort_unit}, "
+            f"{option('validate', _given(log))}: its effort is in {other_log.effort_unit}, "
             f"the identified model's in {unit}; give both logs in the same units"
         )
     theta0 = result.estimate.theta0
@@ -205,6 +243,7 @@ def with_validation(
     if why:
         validation.update({"fit_percent": {"eta_r": None, "eta_l": None}, "predictor": None, "not_simulated": why})
         return replace(result, validation=validation, warnings=(*result.warnings, f"--validate: {why}"))
+    torque_hold = result.settings.torque_hold
     fit = validation_fit(other_log.t, other_log.eta, other_log.tau, theta0, torque_hold, form=form)
     validation["fit_percent"] = {w: fit[w] if math.isfinite(fit[w]) else None for w in ("eta_r", "eta_l")}
     validation["predictor"] = fit["predictor"]
@@ -216,108 +255,85 @@ def identify(
     robot: str | os.PathLike[str] | Robot | None = None,
     *,
     method: str = "auto",
-    validate: LogInput | None = None,
     options: LogOptions | None = None,
-    form: str = "auto",
-    k: float = 10.0,
-    alpha: float = 1e-10,
-    box_width: float = 10.0,
-    torque_hold: str = "zoh",
-    payload: bool = False,
-    control_rate: float | None = None,
-    delay: float | str | None = None,
-    friction: str = "auto",
-    cutoff: float | None = None,
-    weighted: bool = False,
-    forgetting: float = 1.0,
-    rotor_inertia: float | None = None,
+    observer: ObserverOptions | None = None,
+    fit: MethodOptions | None = None,
     given: Any = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> IdentificationResult:
     """The base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded ``log``.
 
-    log : a path (CSV, Parquet, MCAP; ``"-"`` standard input), read with ``options``, or a log already read.
-    robot : a built-in name, a robot file (TOML, URDF) or a :class:`Robot`: the start value, the nominal/CAD
-        values to compare with, and the defaults of the log's units.  None: a start value from the data.  A URDF
-        takes its gear ratio from ``options.gear_ratio`` and ``rotor_inertia`` (kg m^2) when it has no rotor links.
+    log : a path (CSV, Parquet, MCAP, a bag; ``"-"`` standard input), read with ``options``
+        (:class:`~wmrid.api.inputs.LogOptions`), or a log already read.
+    robot : a built-in name, a robot file (TOML; a URDF with ``options.gear_ratio``) or a :class:`Robot`
+        (:func:`wmrid.load_robot`): the start value, the nominal/CAD values to compare with, and the defaults of the
+        log's units.  None: a start value from the data.
     method : "auto" (the observer, or the IDIM/IDIM-IV estimate when the closed-loop check finds the observer's
         biased by feedback, said in the first warning), "observer" (the paper's, always reported), "idim", "iv",
         "rls" or "oe" (:data:`wmrid.estimators.methods.METHODS`): a method named is the method reported.
-    validate : a second log (path or log) to predict with the identified model; its fit % is in ``validation``.
-    form, k, alpha, box_width, torque_hold, payload, control_rate, delay, friction : the observer's settings (see
-        ``wmrid identify --help``; ``delay``: None, "auto" or seconds).
-    cutoff, weighted, forgetting : the classical methods' settings.
+    observer : the observer's options (:class:`~wmrid.estimators.options.ObserverOptions`: form, gains, box, hold,
+        control rate, delay, friction model, payload); every method starts from the observer's run.
+    fit : the classical methods' options (:class:`~wmrid.estimators.methods.MethodOptions`: cutoff, weighting,
+        forgetting factor).
     given : results of earlier logs of the same robot (paths of saved results, ``wmrid identify --format json``, or
         :class:`IdentificationResult` objects; one or several): the result is this log's estimate combined with
         theirs (:mod:`wmrid.estimators.combination`; what ``wmrid plan --given`` predicts).
     progress : called as progress(done, total) samples while the observer replays the log.
 
     Returns an :class:`IdentificationResult`; ``result.parameters[name]`` is (value, std) in SI units.
+    :func:`validate` predicts another log with it.
     """
-    no_two = (log, option("log"))
-    prep = prepare(
-        method=method, validate=validate, options=options, robot=robot, rotor_inertia=rotor_inertia, cutoff=cutoff,
-        weighted=weighted, forgetting=forgetting, torque_hold=torque_hold, control_rate=control_rate,
-        friction=friction, stdin_check=no_two, k=k, alpha=alpha, box_width=box_width,
-    )  # fmt: skip
+    prep = prepare(method, observer, fit, options=options, robot=robot)
     earlier = given_results(given)  # read (and refused) before the log
     # the observer streams the log; the classical methods filter and simulate the whole log
     wheel_log = _log(log, options, prep.robot, whole=prep.method != "observer")
-    return run_prepared(
-        wheel_log, prep, validate=validate, options=options, form=form, k=k, alpha=alpha, box_width=box_width,
-        torque_hold=torque_hold, payload=payload, control_rate=control_rate, delay=delay, progress=progress,
-        given=earlier,
-    )  # fmt: skip
+    return run_prepared(wheel_log, prep, progress=progress, given=earlier)
 
 
 @dataclass(frozen=True)
 class Prepared:
-    """What :func:`prepare` checked and loaded: the method, its options, the robot and the friction model."""
+    """What :func:`prepare` checked and loaded: the method, its options, the robot, the observer's options with the
+    friction model settled."""
 
     method: str
-    method_options: Any
+    fit: MethodOptions
     robot: Robot | None
-    friction: str
+    observer: ObserverOptions
     #: the method was left to wmrid (``method="auto"``): the closed-loop check may report IDIM or IDIM-IV instead of
     #: the observer, and says so first; a method the user names is the method reported
     auto_method: bool = False
     #: why ``friction="auto"`` was settled before the log was read (a method that cannot model caster drag), or None
     friction_reason: str | None = None
 
+    @property
+    def friction(self) -> str:
+        return self.observer.friction
+
 
 def prepare(
-    *,
     method: str = "auto",
-    validate: LogInput | None = None,
+    observer: ObserverOptions | None = None,
+    fit: MethodOptions | None = None,
+    *,
     options: LogOptions | None = None,
     robot: str | os.PathLike[str] | Robot | None = None,
     rotor_inertia: float | None = None,
-    cutoff: float | None = None,
-    weighted: bool = False,
-    forgetting: float = 1.0,
-    torque_hold: str = "zoh",
-    control_rate: float | None = None,
-    friction: str = "auto",
-    stdin_check: tuple[Any, str] | None = None,
-    k: float = 10.0,
-    alpha: float = 1e-10,
-    box_width: float = 10.0,
-    **_: Any,
+    validating: bool = False,
 ) -> Prepared:
-    """The checks :func:`identify` makes before it reads anything, in the command line's order (the observer's
-    numbers, method options, control rate, two standard inputs when ``stdin_check`` = (log, its name) is given,
-    robot, friction model); other keywords of :func:`identify` are accepted and ignored."""
+    """The checks :func:`identify` makes before it reads anything, in the command line's order (the method, the
+    rotor inertia, the control rate where the method models it, the robot, the friction model); the options
+    objects checked themselves when made.  ``rotor_inertia``: a URDF robot's (kg m^2, when it has no rotor links);
+    ``validating``: a validation follows (:func:`check_validation`)."""
     from wmrid.estimators.methods import check_method
 
-    check_numbers(k=k, alpha=alpha, box_width=box_width, control_rate=control_rate, rotor_inertia=rotor_inertia)
+    observer = observer if observer is not None else ObserverOptions()
+    fit = fit if fit is not None else MethodOptions()
+    check_rotor_inertia(rotor_inertia)
     auto_method = method == "auto"
     method = "observer" if auto_method else check_method(method)
-    validating = validate is not None
-    options_ = method_options(cutoff, weighted, forgetting, torque_hold)
-    check_control_rate(control_rate, (method,), validating)
-    if stdin_check is not None:
-        no_two_stdin(stdin_check[0], validate, stdin_check[1])
+    check_control_rate(observer.control_rate, (method,), validating)
     robot_obj = robot_for(robot, options, rotor_inertia)
+    friction = observer.friction
     model = friction_model(friction, (method,), validating, robot_obj)
     reason = None
     if friction == "auto" and model != "auto":
@@ -327,69 +343,44 @@ def prepare(
             else f"{option('method', method)} simulates the drag, which needs the casters' positions (a robot file "
             "with [[caster]] tables)"
         )
-    return Prepared(method, options_, robot_obj, model, auto_method, reason)
+    return Prepared(method, fit, robot_obj, replace(observer, friction=model), auto_method, reason)
 
 
-def check_numbers(
-    *, k: float = 10.0, alpha: float = 1e-10, box_width: float = 10.0, control_rate: float | None = None,
-    cutoff: float | None = None, weighted: bool = False, forgetting: float = 1.0, torque_hold: str = "zoh",
-    rotor_inertia: float | None = None, **_: Any,
-) -> None:  # fmt: skip
-    """Refuse the numbers of :func:`identify`'s settings that no log can make right (k, alpha, box width, control
-    rate, cutoff, forgetting factor, rotor inertia), before any file is opened; other keywords are ignored."""
-    from wmrid.estimators.observer import check_gains
-    from wmrid.estimators.options import check_box_width
-
+def check_rotor_inertia(rotor_inertia: float | None) -> None:
+    """Refuse a rotor inertia that is not a finite number >= 0 kg m^2 (None: none)."""
     if rotor_inertia is not None and not (math.isfinite(rotor_inertia) and rotor_inertia >= 0):
         raise UsageError(f"{option('rotor_inertia')} must be a finite number >= 0 (kg m^2), got {rotor_inertia!r}")
-    check_gains(k, alpha, control_rate)
-    check_box_width(box_width)
-    method_options(cutoff, weighted, forgetting, torque_hold)
 
 
 def run_prepared(
     wheel_log: WheelLog | LogStream,
     prep: Prepared,
     *,
-    validate: LogInput | None = None,
-    options: LogOptions | None = None,
-    form: str = "auto",
-    k: float = 10.0,
-    alpha: float = 1e-10,
-    box_width: float = 10.0,
-    torque_hold: str = "zoh",
-    payload: bool = False,
-    control_rate: float | None = None,
-    delay: float | str | None = None,
     progress: Callable[[int, int], None] | None = None,
     given: Sequence[tuple[IdentificationResult, str]] = (),
-    **_: Any,
 ) -> IdentificationResult:
-    """:func:`identify` on a log already read, with what :func:`prepare` checked and loaded; other keywords of
-    :func:`identify` are accepted and ignored (:func:`prepare` used them).  ``given``: earlier results already read
-    (:func:`wmrid.api.inputs.given_results`), combined with this log's before it is validated."""
-    from wmrid.pipeline.identify import identify as run_observer
+    """:func:`identify` on a log already read, with what :func:`prepare` checked and loaded: the pipeline
+    (:func:`wmrid.pipeline.identify.identify_log`), then the chosen method's fit, then the combination with
+    ``given`` (earlier results already read, :func:`wmrid.api.inputs.given_results`)."""
+    from wmrid.pipeline.identify import Steps, identify_log
 
-    result = run_observer(
-        wheel_log, prep.robot, form=form, k=k, alpha=alpha, box_width=box_width, torque_hold=torque_hold,
-        progress=progress, payload=payload, control_rate=control_rate, friction=prep.friction,
+    steps = Steps(
         load_terms=prep.method in LOAD_METHODS,  # the load terms only where the method models them
-        delay=delay_value(delay), feedback=prep.method == "observer",  # another method is reported as asked
+        feedback=prep.method == "observer",  # another method is reported as asked
         switch=prep.auto_method,
     )  # fmt: skip
+    result = identify_log(wheel_log, prep.robot, prep.observer, steps, progress)
     if prep.friction_reason:
         friction_record = {"model": prep.friction, "chosen_by": "auto", "reason": prep.friction_reason}
         result = replace(result, diagnostics={**result.diagnostics, "friction": friction_record})
     if prep.method != "observer":
         from wmrid.estimators.methods import run
 
-        result = run(prep.method, wheel_log, result, prep.method_options, prep.robot)
+        result = run(prep.method, wheel_log, result, prep.fit, prep.robot)
     if given:
         from wmrid.estimators.combination import combined_result
 
         result = combined_result(result, given, robot=prep.robot)
-    if validate is not None:
-        result = with_validation(result, validate, options, robot=prep.robot, torque_hold=torque_hold)
     return result
 
 
@@ -398,49 +389,38 @@ def compare(
     robot: str | os.PathLike[str] | Robot | None = None,
     *,
     methods: tuple[str, ...] | list[str] | None = None,
+    options: LogOptions | None = None,
+    observer: ObserverOptions | None = None,
+    fit: MethodOptions | None = None,
     validate: LogInput | None = None,
     truth: dict[str, float] | str | os.PathLike[str] | None = None,
-    options: LogOptions | None = None,
-    form: str = "auto",
-    k: float = 10.0,
-    alpha: float = 1e-10,
-    box_width: float = 10.0,
-    torque_hold: str = "zoh",
-    control_rate: float | None = None,
-    delay: float | str | None = None,
-    friction: str = "auto",
-    cutoff: float | None = None,
-    weighted: bool = False,
-    forgetting: float = 1.0,
-    rotor_inertia: float | None = None,
     stage: Callable[[str], None] | None = None,
 ) -> Comparison:
     """Every method in ``methods`` (default: all of :data:`wmrid.estimators.methods.METHODS`) on the same log:
     estimates, standard errors, flags, errors against ``truth`` (base parameters by name), fit on ``validate``,
     run time, as a :class:`~wmrid.estimators.methods.Comparison` (``to_dict``: the document ``wmrid compare
-    --format json`` prints).  Each method identifies the same friction
-    model; the observer's own estimate is shown as it is (no closed-loop substitution).  ``form``, ``k``,
-    ``alpha``, ``box_width``, ``torque_hold``: the observer's settings, as for :func:`identify` (every method starts
-    from the observer's run).  ``stage``: called with
+    --format json`` prints).  Each method identifies the same friction model; the observer's own estimate is shown as
+    it is (no closed-loop substitution).  ``observer``, ``fit``: the options, as for :func:`identify` (every method
+    starts from the observer's run; with ``observer.payload`` each row has its payload).  ``stage``: called with
     what it does now (reading the log, each method), for a progress display."""
-    from wmrid.estimators.methods import METHODS, check_method
-    from wmrid.estimators.methods import compare as run_compare
-    from wmrid.pipeline.identify import identify as run_observer
+    from wmrid.estimators.methods import METHODS, check_method, compare as run_compare
+    from wmrid.pipeline.identify import Steps, identify_log
 
+    observer = observer if observer is not None else ObserverOptions()
+    fit = fit if fit is not None else MethodOptions()
     names = tuple(check_method(m.strip()) for m in (METHODS if methods is None else methods) if m.strip())
     if not names:
         raise UsageError(f"{option('methods')} names no method; give e.g. observer,idim")
-    check_numbers(k=k, alpha=alpha, box_width=box_width)
-    options_ = method_options(cutoff, weighted, forgetting, torque_hold)
     validating = validate is not None
-    check_control_rate(control_rate, names, validating)
+    check_control_rate(observer.control_rate, names, validating)
     no_two_stdin(log, validate, option("log"))
     truth = load_truth(truth)
-    robot_obj = robot_for(robot, options, rotor_inertia)
+    robot_obj = robot_for(robot, options, None)
     # every method with the friction model identify --method NAME would use: the ones that model caster drag share
     # the observer's (auto: chosen by its drag test); output error without the casters' positions cannot simulate the
     # two-term drag and is run on the wheel-friction model, which its row says
     drag_methods = tuple(m for m in names if m != "oe") or names
+    friction = observer.friction
     friction_ = friction_model(friction, drag_methods, validating, robot_obj)
     say = stage or (lambda text: None)
     say("reading the log")
@@ -454,24 +434,23 @@ def compare(
                 f"{option('log')}'s in {wheel_log.effort_unit}; give both logs in the same units"
             )
     say("the observer's run")
-    common = {"torque_hold": torque_hold, "control_rate": control_rate, "delay": delay_value(delay), "form": form,
-              "k": k, "alpha": alpha, "box_width": box_width}  # fmt: skip
     # the observer's column is identify --method observer's: the closed-loop check widens it, never swaps it
     load_terms = all(m in LOAD_METHODS for m in names)  # the other methods share the observer's model
-    observer = run_observer(wheel_log, robot_obj, friction=friction_, switch=False, load_terms=load_terms, **common)
-    wheel_only = "oe" in names and friction_model(friction, ("oe",), validating, robot_obj) != observer.form.friction
-    if not wheel_only:
-        return run_compare(wheel_log, observer, options_, names, other=other, truth=truth, stage=stage)
-    shared = tuple(m for m in names if m != "oe")
-    first = (
-        run_compare(wheel_log, observer, options_, shared, other=other, truth=truth, stage=stage) if shared else None
+    observed = identify_log(
+        wheel_log, robot_obj, replace(observer, friction=friction_), Steps(load_terms=load_terms, switch=False)
     )
+    wheel_only = "oe" in names and friction_model(friction, ("oe",), validating, robot_obj) != observed.form.friction
+    common = {"other": other, "truth": truth, "stage": stage, "robot": robot_obj}
+    if not wheel_only:
+        return run_compare(wheel_log, observed, fit, names, **common)
+    shared = tuple(m for m in names if m != "oe")
+    first = run_compare(wheel_log, observed, fit, shared, **common) if shared else None
     say("the observer's run with wheel friction (for oe)")
-    plain = run_observer(wheel_log, robot_obj, friction="wheel", feedback=False, **common)
-    oe = run_compare(wheel_log, plain, options_, ("oe",), other=other, truth=truth, stage=stage)
+    plain = identify_log(wheel_log, robot_obj, replace(observer, friction="wheel"), Steps(feedback=False))
+    oe = run_compare(wheel_log, plain, fit, ("oe",), **common)
     row = dict(oe.methods["oe"])
     row["warnings"] = [
-        f"friction: wheel, not the observer's {observer.form.friction}: output error simulates the drag, which needs "
+        f"friction: wheel, not the observer's {observed.form.friction}: output error simulates the drag, which needs "
         "the casters' positions (a robot file with [[caster]] tables)",
         *row["warnings"],
     ]

@@ -213,8 +213,7 @@ def given_results(given: Any) -> list[tuple[Any, str]]:
     :class:`~wmrid.estimators.result.IdentificationResult` objects ("result"); one or a sequence; None: none."""
     if given is None:
         return []
-    from wmrid.estimators.result import IdentificationResult
-    from wmrid.estimators.result import from_dict as result_from_dict
+    from wmrid.estimators.result import IdentificationResult, from_dict as result_from_dict
 
     items = [given] if isinstance(given, (str, os.PathLike, IdentificationResult)) else list(given)
     out = []

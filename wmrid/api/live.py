@@ -32,6 +32,7 @@ import numpy as np
 from wmrid.api.identification import prepare
 from wmrid.api.inputs import LogOptions, reader_arguments
 from wmrid.core.errors import UsageError, option
+from wmrid.estimators.options import ObserverOptions
 from wmrid.estimators.result import IdentificationResult
 from wmrid.model.robot import Robot
 from wmrid.monitoring.live_monitor import LiveChange
@@ -127,20 +128,17 @@ def _check(name: str, value: float | None, low: float = 0.0) -> None:
 class LiveRun:
     """A live identification (see :func:`live`): iterate it for the updates and the final :class:`LiveResult`."""
 
-    def __init__(self, source: str, robot: Any, settings: dict[str, Any], options: LogOptions | None,
-                 every: float, idle: float | None, until: float | None, until_std: float | None,
-                 params: Sequence[str] | None, reconnect: bool = False, monitor: Any = None) -> None:  # fmt: skip
+    def __init__(self, source: str, robot: Any, observer: ObserverOptions, rotor_inertia: float | None,
+                 options: LogOptions | None, every: float, idle: float | None, until: float | None,
+                 until_std: float | None, params: Sequence[str] | None, reconnect: bool = False,
+                 monitor: Any = None) -> None:  # fmt: skip
         from wmrid.io.live.follow import ReaderSettings
         from wmrid.io.live.sources import open_live
 
         for name, value in (("every", every), ("idle", idle), ("until", until), ("until_std", until_std)):
             _check(name, value)
-        if settings.get("validate") is not None:
-            raise UsageError(f"{option('validate')} is not taken by live identification; validate the saved result")
-        self.prep = prepare(options=options, robot=robot, **settings)
-        if self.prep.method != "observer":
-            raise UsageError(f"live identification runs the observer; drop {option('method')}")
-        self.settings = settings
+        self.prep = prepare("auto", observer, options=options, robot=robot, rotor_inertia=rotor_inertia)
+        self.settings = observer
         self.options = options
         self.robot = robot
         self.every, self.idle, self.until, self.until_std = every, idle, until, until_std
@@ -196,7 +194,7 @@ class LiveRun:
         tau = np.concatenate([p.tau for p in self.buffer])
         self.effort_unit = self.buffer[0].effort_unit
         sv = survey([WheelLog(t=t, eta=eta, tau=tau, source=self.source.name)], self.source.name, self.effort_unit)
-        choice = self.settings.get("form", "auto")
+        choice = self.settings.form
         robot = self.prep.robot
         if self.prep.friction == "wheel+caster":
             geometry = caster_geometry(robot) if robot is not None and robot.casters else ()
@@ -228,10 +226,10 @@ class LiveRun:
             theta_init = model.intermediate_parameters(start0, form)
         else:
             theta_init = sv.data_start(form)
-        lo, hi = default_box(theta_init, form, s.get("box_width", 10.0), robot is not None)
+        lo, hi = default_box(theta_init, form, s.box_width, robot is not None)
         settings = ObserverSettings(
-            form=form, theta_init=theta_init, theta_min=lo, theta_max=hi, k=s.get("k", 10.0),
-            alpha=s.get("alpha", 1e-10), torque_hold=s.get("torque_hold", "zoh"), control_rate=s.get("control_rate"),
+            form=form, theta_init=theta_init, theta_min=lo, theta_max=hi, k=s.k, alpha=s.alpha,
+            torque_hold=s.torque_hold, control_rate=s.control_rate,
         )  # fmt: skip
         return OnlineObserver(settings, sign_half_window=sign_half_window(sv.n, sv.duration))
 
@@ -377,8 +375,7 @@ class LiveRun:
         natural = not self.stopped and (self.source.ended is not None or self.reason.startswith("no data"))
         final = self.source.final_input(natural)
         try:
-            kwargs = {k: v for k, v in self.settings.items() if k != "validate"}
-            result = identify(final.path, self.robot, options=self.options, **kwargs)
+            result = identify(final.path, self.prep.robot, options=self.options, observer=self.settings)
         finally:
             self.source.close()
         if final.copied:
@@ -460,15 +457,7 @@ def live(
     until: float | None = None,
     until_std: float | None = None,
     params: Sequence[str] | None = None,
-    form: str = "auto",
-    k: float = 10.0,
-    alpha: float = 1e-10,
-    box_width: float = 10.0,
-    torque_hold: str = "zoh",
-    payload: bool = False,
-    control_rate: float | None = None,
-    delay: float | str | None = None,
-    friction: str = "auto",
+    observer: ObserverOptions | None = None,
     rotor_inertia: float | None = None,
     reconnect: bool = False,
     monitor: str | os.PathLike[str] | dict[str, Any] | IdentificationResult | None = None,
@@ -479,8 +468,8 @@ def live(
         to, an MCAP file being written, a rosbag2 folder being recorded with MCAP storage, or a Foxglove WebSocket
         server ``"ws://HOST:PORT"`` (foxglove_bridge); read with ``options`` (the same :class:`LogOptions` as
         :func:`wmrid.identify`: topics, joints, field paths).
-    robot, form, k, alpha, box_width, torque_hold, payload, control_rate, delay, friction, rotor_inertia : as for
-        :func:`wmrid.identify` (the final result is ``identify`` with them).
+    robot, observer : as for :func:`wmrid.identify` (the final result is ``identify`` with them; a URDF robot's
+        ``rotor_inertia`` kg m^2 when it has no rotor links).
     every : s of wall time between updates; idle : s without new data that end the run, once samples have come
         (None: wait); until : s of log
         time after which the run ends; until_std : percent: the run ends once every parameter in ``params`` (default:
@@ -493,8 +482,7 @@ def live(
     Returns a :class:`LiveRun`; iterating it yields :class:`LiveUpdate` objects (and :class:`LiveChange` objects with
     ``monitor``), then one :class:`LiveResult`.
     """
-    settings = {
-        "form": form, "k": k, "alpha": alpha, "box_width": box_width, "torque_hold": torque_hold, "payload": payload,
-        "control_rate": control_rate, "delay": delay, "friction": friction, "rotor_inertia": rotor_inertia,
-    }  # fmt: skip
-    return LiveRun(source, robot, settings, options, every, idle, until, until_std, params, reconnect, monitor)
+    observer = observer if observer is not None else ObserverOptions()
+    return LiveRun(
+        source, robot, observer, rotor_inertia, options, every, idle, until, until_std, params, reconnect, monitor
+    )

@@ -4,21 +4,29 @@ HTML, Markdown or JSON by the file's suffix."""
 
 from __future__ import annotations
 
-import inspect
 import json
 import os
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
-from wmrid.api.identification import check_numbers, identify, no_two_stdin, prepare, run_prepared
+from wmrid.api.identification import (
+    check_rotor_inertia,
+    check_validation,
+    prepare,
+    run_prepared,
+    settings_given,
+    validate as validated,
+)
 from wmrid.api.inputs import LogOptions, given_results, read_log
 from wmrid.core.errors import LogFormatError, UsageError, WmridError, option
 from wmrid.core.wheel_log import LogStream, WheelLog
+from wmrid.estimators.methods import MethodOptions
+from wmrid.estimators.options import ObserverOptions
 from wmrid.estimators.result import IdentificationResult, from_dict
 from wmrid.model.robot import Robot
 from wmrid.reporting.report import Report, build_report
 
-__all__ = ["report", "residual_frame", "write_report"]
+__all__ = ["Identification", "report", "residual_frame", "write_report"]
 
 #: Report formats by the output's suffix.
 REPORT_SUFFIXES = (".html", ".htm", ".md", ".json")
@@ -69,14 +77,14 @@ def report(
     robot: str | os.PathLike[str] | Robot | None = None,
     rotor_inertia: float | None = None,
     command: str | None = None,
-    **identify_options: Any,
+    identification: Identification | None = None,
 ) -> Report:
     """The report of an identification.
 
     result : an :class:`IdentificationResult`; a saved ``identify --format json`` document (a dict, or a path to
-        one; ``"-"`` standard input); or a log (a path, or a log in memory), identified here on ``robot`` with
-        ``identify_options`` (the keywords of :func:`wmrid.api.identification.identify`: ``method``, ``validate``,
-        ...).  The robot is loaded only for a log (a saved result carries its nominal and CAD values).
+        one; ``"-"`` standard input); or a log (a path, or a log in memory), identified here on ``robot`` as
+        ``identification`` says (:class:`Identification`: the method, the options, a log to validate on, earlier
+        results).  The robot is loaded only for a log (a saved result carries its nominal and CAD values).
     log : the identified log in memory, for the torque residual and the figures of the signals.
     truth : true base parameters by name (a simulator's ``truth["parameters"]``), for the error columns.
     figures : build the figures (matplotlib; each is rendered, the slow part, only in the format an output needs).
@@ -85,49 +93,65 @@ def report(
     ``report.provenance``: wmrid's version, the time (UTC), the command, the options given, and each input file's
     size and SHA-256.
     """
-    rep, inputs, data = _report(result, log, truth, figures, options, robot, rotor_inertia, identify_options)
-    return replace(rep, provenance=_provenance(command, inputs, data, options, robot, rotor_inertia, identify_options))
+    how = identification if identification is not None else Identification()
+    rep, inputs, data = _report(result, log, truth, figures, options, robot, rotor_inertia, how)
+    return replace(rep, provenance=_provenance(command, inputs, data, options, robot, rotor_inertia, how))
 
 
-def _report(result, log, truth, figures, options, robot, rotor_inertia, identify_options):
+@dataclass(frozen=True)
+class Identification:
+    """How :func:`report` identifies a log it is given: ``method`` and the options as for
+    :func:`wmrid.api.identification.identify`, ``validate`` another log to predict, ``given`` earlier results."""
+
+    method: str = "auto"
+    observer: ObserverOptions = field(default_factory=ObserverOptions)
+    fit: MethodOptions = field(default_factory=MethodOptions)
+    validate: Any = None
+    given: Any = None
+
+
+def _report(result, log, truth, figures, options, robot, rotor_inertia, how: Identification):
     """(report, the input paths to record, the standard input's bytes or None)."""
     if isinstance(result, IdentificationResult):
         rep = build_report(result.to_dict(), result=result, log=log, truth=truth, figures=figures)
         return replace(rep, identification=result, log=log), [], None
     if isinstance(result, dict):
         return _from_saved(dict(result), str(result.get("source") or "result"), truth, figures), [], None
-    unknown = sorted(set(identify_options) - set(inspect.signature(identify).parameters))
-    if unknown:  # prepare() and run_prepared() take identify()'s keywords and ignore the other's
-        raise TypeError(f"report() got unexpected keyword arguments {unknown}")
-    validate = identify_options.get("validate")
-    method = identify_options.get("method", "auto")
-    check_numbers(rotor_inertia=rotor_inertia, **identify_options)  # before INPUT is opened, as identify does
+    validate, method = how.validate, how.method
+    check_rotor_inertia(rotor_inertia)  # before INPUT is opened, as identify does
     inputs: list[Any] = []
     data = None
     if isinstance(result, (str, os.PathLike)):
         from wmrid.io.sources import open_source
 
-        no_two_stdin(result, validate, option("input_"))
+        check_validation(result, validate, how.observer, (method,), option("input_"))
         source = open_source(os.fspath(result))
         inputs, data = [os.fspath(result)], source.data
         if source.head(64).lstrip().startswith(b"{"):
-            if validate is not None or method not in ("auto", "observer") or identify_options.get("given"):
+            if validate is not None or method not in ("auto", "observer") or how.given:
                 raise UsageError(
                     f"{source.name}: {option('validate')}, {option('method')} and {option('given')} need a log as "
                     "INPUT, not a saved result; run `wmrid identify LOG --method ... --validate OTHER --format json` "
                     "and report its output"
                 )
             return _from_saved(_parse_saved(source), source.name, truth, figures), inputs, data
-        # a log: the checks identify() makes, before the log is read
-        prep = prepare(options=options, robot=robot, rotor_inertia=rotor_inertia, **identify_options)
-        earlier = given_results(identify_options.get("given"))  # read (and refused) before the log
+    else:
+        check_validation(result, validate, how.observer, (method,), option("input_"))
+        source = None
+    # a log: the checks identify() makes, before the log is read
+    prep = prepare(
+        method, how.observer, how.fit, options=options, robot=robot, rotor_inertia=rotor_inertia,
+        validating=validate is not None,
+    )  # fmt: skip
+    earlier = given_results(how.given)  # read (and refused) before the log
+    if source is not None:
         wheel_log = read_log(os.fspath(result), options, robot=prep.robot, data=source.data)
-        identified = run_prepared(wheel_log, prep, options=options, **{**identify_options, "given": earlier})
-        robot_obj = prep.robot
     else:
         wheel_log = result.read() if isinstance(result, LogStream) else result
-        identified = identify(wheel_log, robot, options=options, rotor_inertia=rotor_inertia, **identify_options)
-        robot_obj = robot if isinstance(robot, Robot) else None
+    identified = run_prepared(wheel_log, prep, given=earlier)
+    if validate is not None:
+        identified = validated(identified, validate, options, robot=prep.robot)
+    robot_obj = prep.robot
     validation_log = validate if isinstance(validate, WheelLog) else None
     if isinstance(validate, (str, os.PathLike)) and os.fspath(validate) != "-":
         inputs.append(os.fspath(validate))
@@ -138,14 +162,16 @@ def _report(result, log, truth, figures, options, robot, rotor_inertia, identify
     return replace(rep, identification=identified, log=wheel_log), inputs, data
 
 
-def _provenance(command, inputs, data, options, robot, rotor_inertia, identify_options) -> dict[str, Any]:
+def _provenance(command, inputs, data, options, robot, rotor_inertia, how: Identification) -> dict[str, Any]:
     """What a colleague needs to make the report again: version, time, command, options, inputs and their hashes."""
     import dataclasses
 
     from wmrid.io.digest import file_digests
 
-    given: dict[str, Any] = {k: v for k, v in identify_options.items() if v is not None and k != "given"}
-    earlier = identify_options.get("given") or []
+    given: dict[str, Any] = settings_given(how.method, how.observer, how.fit)
+    if how.validate is not None:
+        given["validate"] = how.validate
+    earlier = how.given or []
     earlier = [earlier] if not isinstance(earlier, (list, tuple)) else list(earlier)
     if earlier:  # --given: its files by path (a result passed in memory as "result"), and among the inputs hashed
         given["given"] = [os.fspath(g) if isinstance(g, (str, os.PathLike)) else "result" for g in earlier]

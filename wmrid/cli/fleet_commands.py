@@ -384,8 +384,7 @@ def fleet_report_command(
 
     require("pyarrow", "fleet", "wmrid fleet-report")
     require("matplotlib", "fleet", "wmrid fleet-report")
-    from wmrid.api.fleet_reporting import check_settings, write_fleet_report
-    from wmrid.api.fleet_reporting import fleet_report as build
+    from wmrid.api.fleet_reporting import check_settings, fleet_report as build, write_fleet_report
     from wmrid.api.reporting import REPORT_SUFFIXES
     from wmrid.reporting.fleet_report import ranked_table, to_json_dict
 

@@ -21,6 +21,32 @@ def log_opts(params: dict):
     return LogOptions(**{n: params[n].value if isinstance(params[n], Enum) else params[n] for n in LOG_OPTION_NAMES})
 
 
+def observer_opts(params: dict):
+    """The :class:`wmrid.estimators.options.ObserverOptions` of a command's observer flags (``locals()``; a command
+    without ``--payload`` estimates none), checked once as it is made; ``--delay``'s text parsed."""
+    from wmrid.api.identification import OBSERVER_NAMES, delay_value
+    from wmrid.estimators.options import ObserverOptions
+
+    given = {n: params[n].value if isinstance(params[n], Enum) else params[n] for n in OBSERVER_NAMES if n in params}
+    return ObserverOptions(**{**given, "delay": delay_value(given.get("delay"))})
+
+
+def fit_opts(params: dict):
+    """The :class:`wmrid.estimators.methods.MethodOptions` of a command's classical-method flags (``locals()``)."""
+    from wmrid.api.identification import FIT_NAMES
+    from wmrid.estimators.methods import MethodOptions
+
+    return MethodOptions(**{field: params[name] for name, field in FIT_NAMES.items()})
+
+
+def check_rotor(rotor_inertia: float | None) -> float | None:
+    """``--rotor-inertia``, refused unless a finite number >= 0 kg m^2."""
+    from wmrid.api.identification import check_rotor_inertia
+
+    check_rotor_inertia(rotor_inertia)
+    return rotor_inertia
+
+
 def stderr_console():
     from wmrid.reporting.terminal import console
 

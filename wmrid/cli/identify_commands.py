@@ -12,8 +12,11 @@ import typer
 from wmrid.cli.app import app, invocation
 from wmrid.cli.helpers import (
     activity,
+    check_rotor,
     deprecated_option,
+    fit_opts,
     log_opts,
+    observer_opts,
     on_stdout,
     progress,
     stderr_console,
@@ -157,22 +160,25 @@ def identify_command(
     given: GivenOpt = None,
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
-    from wmrid.api.identification import identify as run_identify
+    from wmrid.api.identification import check_validation, identify as run_identify, robot_for, validate as run_validate
     from wmrid.core.atomic import output_group, write_json
     from wmrid.reporting.render import print_identification, to_json
 
     if out is not None:
         deprecated_option("--out", "--mcap-out")
         mcap_out = mcap_out or out
+    options, observer, fit = log_opts(locals()), observer_opts(locals()), fit_opts(locals())
+    logs = one_or_many(log)
+    check_validation(logs, validate, observer, (method.value,), "LOG")
+    robot_obj = robot_for(robot, options, check_rotor(rotor_inertia))
     progress_cb, finish = progress("identify")
     try:
         result = run_identify(
-            one_or_many(log), robot, method=method.value, rotor_inertia=rotor_inertia, validate=validate,
-            options=log_opts(locals()), form=form.value, k=k, alpha=alpha,
-            box_width=box_width, torque_hold=torque_hold.value, payload=payload, control_rate=control_rate,
-            delay=delay, friction=friction.value, cutoff=cutoff, weighted=weighted, forgetting=forgetting,
-            given=given, progress=progress_cb,
+            logs, robot_obj, method=method.value, options=options, observer=observer, fit=fit, given=given,
+            progress=progress_cb,
         )  # fmt: skip
+        if validate is not None:
+            result = run_validate(result, validate, options, robot=robot_obj)
     finally:
         finish()
     payload = result.to_dict(history=history or not no_history)
@@ -279,8 +285,7 @@ def report_command(
     plan (wmrid plan -o plan.json): its path, signals against their limits and predicted precision."""
     from wmrid.api.identification import load_truth
     from wmrid.api.planning import plan_document, write_plan_report
-    from wmrid.api.reporting import REPORT_SUFFIXES, residual_frame, write_report
-    from wmrid.api.reporting import report as build
+    from wmrid.api.reporting import REPORT_SUFFIXES, Identification, report as build, residual_frame, write_report
 
     planned = plan_document(input_)
     if planned is not None:
@@ -299,16 +304,14 @@ def report_command(
     truth_params = load_truth(truth)
     if input_ == "-" and validate == "-":
         raise UsageError("INPUT and --validate cannot both be standard input; give one of them as a file")
+    how = Identification(method.value, observer_opts(locals()), fit_opts(locals()), validate, given)
     opts = log_opts(locals())
     with activity("wmrid report") as stage:
         drawn = suffix in (".html", ".htm", ".md")  # the outputs that show figures
         stage("identifying" + (" and drawing the figures" if drawn else ""))
         rep = build(
-            input_, truth=truth_params, figures=drawn, rotor_inertia=rotor_inertia,
-            options=opts, robot=robot, method=method.value,
-            validate=validate, form=form.value, k=k, alpha=alpha, box_width=box_width, torque_hold=torque_hold.value,
-            payload=payload, control_rate=control_rate, delay=delay, friction=friction.value, cutoff=cutoff,
-            weighted=weighted, forgetting=forgetting, given=given, command=invocation(),
+            input_, truth=truth_params, figures=drawn, rotor_inertia=rotor_inertia, options=opts, robot=robot,
+            identification=how, command=invocation(),
         )  # fmt: skip
         from wmrid.core.atomic import output_group
 
@@ -355,6 +358,7 @@ def compare_command(
     alpha: AlphaOpt = 1e-10,
     box_width: BoxWidthOpt = 10.0,
     torque_hold: TorqueHoldOpt = TorqueHold.zoh,
+    payload: PayloadOpt = False,
     cutoff: CutoffOpt = None,
     weighted: WeightedOpt = False,
     forgetting: ForgettingOpt = 1.0,
@@ -387,17 +391,16 @@ def compare_command(
 ) -> None:
     """Run every identification method on LOG: estimates, standard errors, errors against --truth, fit on
     --validate OTHER, run time.  Every method identifies the same friction model (--friction)."""
-    from wmrid.api.identification import compare as run_compare
+    from wmrid.api.identification import compare as run_compare, robot_for
     from wmrid.core.atomic import write_json
     from wmrid.reporting.render import print_comparison, to_json
 
-    opts = log_opts(locals())
+    opts, observer, fit = log_opts(locals()), observer_opts(locals()), fit_opts(locals())
+    robot_obj = robot_for(robot, opts, check_rotor(rotor_inertia))
     with activity("wmrid compare") as stage:
         data = run_compare(
-            one_or_many(log), robot, methods=methods.split(","), validate=validate, truth=truth,
-            rotor_inertia=rotor_inertia, options=opts, form=form.value, k=k, alpha=alpha, box_width=box_width,
-            torque_hold=torque_hold.value, control_rate=control_rate, delay=delay, friction=friction.value,
-            cutoff=cutoff, weighted=weighted, forgetting=forgetting, stage=stage,
+            one_or_many(log), robot_obj, methods=methods.split(","), options=opts, observer=observer, fit=fit,
+            validate=validate, truth=truth, stage=stage,
         ).to_dict()  # fmt: skip
     if output is not None:
         write_json(str(output), data, force=force)

@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 
 from wmrid.cli.app import app
-from wmrid.cli.helpers import log_opts, on_stdout, warning_summary
+from wmrid.cli.helpers import log_opts, observer_opts, on_stdout, warning_summary
 from wmrid.cli.options import (
     AlignOpt,
     AlignRule,
@@ -175,8 +175,7 @@ def live_command(
     """Identify the robot while it drives: follow SOURCE as it is written, refresh the estimate ± std every --every
     seconds, and when it ends (--idle, --until, --until-std, the recording's end, Ctrl-C) give identify's result on
     the same messages."""
-    from wmrid.api.live import check_output
-    from wmrid.api.live import live as run_live
+    from wmrid.api.live import check_output, live as run_live
     from wmrid.core import interrupts
     from wmrid.core.atomic import write_json
     from wmrid.reporting.live_view import json_line
@@ -186,9 +185,8 @@ def live_command(
         check_output(output, force)
     run = run_live(
         source, robot, options=log_opts(locals()), every=every, idle=idle, until=until, until_std=until_std,
-        params=[p.strip() for p in params.split(",") if p.strip()] if params else None, form=form.value, k=k,
-        alpha=alpha, box_width=box_width, torque_hold=torque_hold.value, payload=payload, control_rate=control_rate,
-        delay=delay, friction=friction.value, rotor_inertia=rotor_inertia, reconnect=reconnect, monitor=monitor,
+        params=[p.strip() for p in params.split(",") if p.strip()] if params else None,
+        observer=observer_opts(locals()), rotor_inertia=rotor_inertia, reconnect=reconnect, monitor=monitor,
     )  # fmt: skip
     fmt = "json" if on_stdout(output) else output_format.value
     if fmt == "auto":

@@ -14,6 +14,10 @@ from wmrid.core.choices import (
     Criterion,
     EffortKind,
     Engine,
+    Form as FormChoice,
+    Friction as FrictionChoice,
+    Friction as PlanFriction,
+    Method as MethodChoice,
     SpeedUnit,
     TimeSource,
     TimeUnit,
@@ -21,10 +25,6 @@ from wmrid.core.choices import (
     Trajectory,
     VelocityFrom,
 )
-from wmrid.core.choices import Form as FormChoice
-from wmrid.core.choices import Friction as FrictionChoice
-from wmrid.core.choices import Friction as PlanFriction
-from wmrid.core.choices import Method as MethodChoice
 
 __all__ = [
     "AlignRule",

@@ -84,8 +84,7 @@ def plan_command(
     force: Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")] = False,
 ) -> None:
     """Design the drive that identifies ROBOT best within its limits, and predict how precise the result will be."""
-    from wmrid.api.planning import check_plan_output, write_plan
-    from wmrid.api.planning import plan as make
+    from wmrid.api.planning import check_plan_output, plan as make, write_plan
     from wmrid.core.atomic import output_group
     from wmrid.reporting.plan_view import print_plan
     from wmrid.reporting.render import to_json

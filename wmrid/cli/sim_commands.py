@@ -146,8 +146,7 @@ def simulate_command(
     are those at t = 0; its settings.change holds both parameter sets ("before", "after", base and
     physical), the requested time t and the switch time t_switch (s).
     """
-    from wmrid.api.simulation import simulate as run_simulate
-    from wmrid.api.simulation import write_simulation
+    from wmrid.api.simulation import simulate as run_simulate, write_simulation
 
     with activity("wmrid simulate") as stage:
         what = f"{duration:g} s" if duration is not None else "the reference" if reference is not None else "40 s"

@@ -18,7 +18,7 @@ import numpy as np
 from wmrid.core.choices import Method, values
 from wmrid.core.errors import UsageError, WmridError, option
 from wmrid.estimators.estimate import BaseEstimate
-from wmrid.estimators.result import IdentificationResult
+from wmrid.estimators.result import IdentificationResult, payload_dict
 from wmrid.estimators.substitution import with_estimate
 from wmrid.model.robot import Robot
 
@@ -42,14 +42,14 @@ class MethodOptions:
     cutoff_hz : IDIM/RLS low-pass cutoff, Hz (None: from the log, see
     :func:`wmrid.estimators.idim_regression.default_cutoff`).
     weighted : IDIM two-step weighted least squares.  forgetting : RLS forgetting factor in (0, 1].
-    torque_hold : how the effort was held between samples ("zoh" or "foh"): OE simulates it, IDIM and RLS read
-    the efforts half a hold period earlier under "zoh" (:func:`wmrid.estimators.idim_regression.effort_delay`).
+    How the effort was held between samples is the observer's (its ``torque_hold`` and ``control_rate``,
+    :class:`wmrid.estimators.options.ObserverOptions`): OE simulates it, IDIM and RLS read the efforts half a hold
+    period earlier under "zoh" (:func:`wmrid.estimators.idim_regression.effort_delay`).
     """
 
     cutoff_hz: float | None = None
     weighted: bool = False
     forgetting: float = 1.0
-    torque_hold: str = "zoh"
 
     def __post_init__(self) -> None:
         if self.cutoff_hz is not None and not (np.isfinite(self.cutoff_hz) and self.cutoff_hz > 0):
@@ -100,7 +100,7 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
 
             # the observer's form: IDIM models the casters' drag too when the observer does (wheel+caster)
             # and the effort held as the observer assumed (--torque-hold, --control-rate)
-            hold = {"torque_hold": options.torque_hold, "control_rate": observer.settings.control_rate}
+            hold = {"torque_hold": observer.settings.torque_hold, "control_rate": observer.settings.control_rate}
             return identify_idim(
                 t, eta, tau, cutoff_hz=options.cutoff_hz, weighted=options.weighted, form=observer.form, **hold
             )
@@ -114,7 +114,7 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
                     "columns "
                     f"eta_ref_r, eta_ref_l, or name yours with {option('columns')} eta_ref_r=...,eta_ref_l=..."
                 )
-            hold = {"torque_hold": options.torque_hold, "control_rate": observer.settings.control_rate}
+            hold = {"torque_hold": observer.settings.torque_hold, "control_rate": observer.settings.control_rate}
             return identify_iv(
                 t, eta, tau, reference, cutoff_hz=options.cutoff_hz, weighted=options.weighted, form=observer.form,
                 **hold,
@@ -122,7 +122,7 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
         if name == "rls":
             from wmrid.estimators.rls import identify_rls
 
-            hold = {"torque_hold": options.torque_hold, "control_rate": observer.settings.control_rate}
+            hold = {"torque_hold": observer.settings.torque_hold, "control_rate": observer.settings.control_rate}
             return identify_rls(
                 t, eta, tau, forgetting=options.forgetting, cutoff_hz=options.cutoff_hz, form=observer.form, **hold
             )
@@ -130,7 +130,12 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
 
         assert observer.estimate is not None
         est = identify_oe(
-            t, eta, tau, np.asarray(observer.estimate.theta0), torque_hold=options.torque_hold, form=observer.form
+            t,
+            eta,
+            tau,
+            np.asarray(observer.estimate.theta0),
+            torque_hold=observer.settings.torque_hold,
+            form=observer.form,
         )
         diagnostics = {
             **est.diagnostics,
@@ -187,6 +192,7 @@ def compare(
     other: Any = None,
     truth: dict[str, float] | None = None,
     stage: Callable[[str], None] | None = None,
+    robot: Robot | None = None,
 ) -> Comparison:
     """Every method in ``names`` on ``log`` (in memory; ``observer`` is the observer's result on it), JSON-ready.
 
@@ -196,7 +202,8 @@ def compare(
     warnings are those ``identify --method NAME`` reports (model-error widenings included); the parameters are
     the form's (caster drag too under ``--friction wheel+caster``).  ``other`` : a second
     log to validate each model on (:func:`wmrid.model.predict.validation_fit`); ``truth`` : true base parameters.
-    ``stage`` : called with each method's name as it starts (a progress display).
+    ``stage`` : called with each method's name as it starts (a progress display).  ``robot``: the robot the
+    observer's run estimated a payload against (its row's ``"payload"``, when the observer's result has one).
     """
     from wmrid.estimators.model_error import std_mark
     from wmrid.model.predict import unsimulated, validation_fit
@@ -209,7 +216,7 @@ def compare(
         est = estimate(name, log, observer, options)
         # the same honest std, flags and warnings as ``identify --method NAME``
         # (wmrid.estimators.substitution.with_estimate)
-        result = observer if name == "observer" else with_estimate(observer, est)
+        result = observer if name == "observer" else with_estimate(observer, est, robot)
         params = {}
         for key, (value, std) in result.parameters.items():
             entry = {"value": value, "std": std if np.isfinite(std) else None, "unit": observer.units[key]}
@@ -225,6 +232,8 @@ def compare(
             "warnings": list(result.warnings),
             "verdict": result.verdict,
         }
+        if result.payload is not None:
+            row["payload"] = payload_dict(result.payload)
         if other is not None:
             form = observer.form if len(est.theta0) == observer.form.n_base else None
             why = unsimulated(form)
@@ -232,7 +241,7 @@ def compare(
                 row["validation"] = {"fit_percent": {"eta_r": None, "eta_l": None}, "not_simulated": why}
             else:
                 fit = validation_fit(
-                    other.t, other.eta, other.tau, np.asarray(est.theta0), options.torque_hold, form=form
+                    other.t, other.eta, other.tau, np.asarray(est.theta0), observer.settings.torque_hold, form=form
                 )
                 fit_percent = {w: fit[w] if np.isfinite(fit[w]) else None for w in ("eta_r", "eta_l")}
                 row["validation"] = {"fit_percent": fit_percent}

@@ -174,14 +174,13 @@ def observe(
     robot: Robot | None,
     options: ObserverOptions,
     geometry: tuple[float, ...] = (),
-    payload: bool = False,
     progress: Callable[[int, int], None] | None = None,
 ) -> IdentificationResult:
     """One replay of the observer over ``stream`` (surveyed as ``sv``, :func:`wmrid.estimators.survey.survey`) with
     ``options`` as they are: its friction model named (not "auto"), its delay already applied to the log (the
     pipeline's business).  ``robot`` starts the estimate and centres the box (None: the data, physics); ``geometry``
-    (r, b, x_1, y_1, ...) m the casters' when no robot lists them (a saved model's); ``payload``: also estimate the
-    payload against the robot's unloaded parameters; ``progress(samples_done, samples)``.
+    (r, b, x_1, y_1, ...) m the casters' when no robot lists them (a saved model's); ``progress(samples_done,
+    samples)``.
 
     Raises :class:`NotIdentifiableError` for a log that supports no estimate (too short, a hole, not excited, a
     singular system, a divergence)."""
@@ -189,7 +188,7 @@ def observe(
         raise ValueError(f"observe runs one friction model, not {options.friction!r}")
     caster, load = MODELS[options.friction]
     try:
-        return _observe(stream, sv, robot, options, caster, load, geometry, payload, progress)
+        return _observe(stream, sv, robot, options, caster, load, geometry, progress)
     except np.linalg.LinAlgError as err:
         raise NotIdentifiableError(
             f"{stream.source}: the log does not support an estimate (a singular system: {err}); it is too short, "
@@ -205,11 +204,11 @@ def _observe(
     caster: bool,
     load: bool,
     given_geometry: tuple[float, ...],
-    payload: bool,
     progress: Callable[[int, int], None] | None,
 ) -> IdentificationResult:
     form, k, alpha, box_width = options.form, options.k, options.alpha, options.box_width
     torque_hold, control_rate, max_history = options.torque_hold, options.control_rate, options.max_history
+    payload = options.payload
     started = time.perf_counter()
     source = stream.source
     effort_unit = stream.effort_unit

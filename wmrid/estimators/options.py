@@ -44,7 +44,9 @@ class ObserverOptions:
     effort (None: the log's own).  delay : s, how late the efforts are stamped against the speeds: read that much
     earlier; "auto": estimated and applied when significant; None: as stamped unless the timing check finds
     otherwise.  friction : "wheel" (Eqs. 15-17), "wheel+caster", "wheel+caster+load" or "auto" (the log decides).
-    max_history : the history kept for figures, samples.
+    payload : also estimate the payload the robot carries, from the estimate against the robot's unloaded parameters
+    (:mod:`wmrid.model.payload`; needs a robot with physical parameters).  max_history : the history kept for
+    figures, samples.
     """
 
     form: str = "auto"
@@ -55,6 +57,7 @@ class ObserverOptions:
     control_rate: float | None = None
     delay: float | str | None = None
     friction: str = "auto"
+    payload: bool = False
     max_history: int = MAX_HISTORY
 
     def __post_init__(self) -> None:

@@ -185,12 +185,7 @@ class IdentificationResult:
         if self.validation is not None:
             out["validation"] = self.validation
         if self.payload is not None:
-            from wmrid.model.payload import PAYLOAD_UNITS
-
-            out["payload"] = {
-                name: {"value": v, "std": finite_or_none(e), "unit": PAYLOAD_UNITS[name]}
-                for name, (v, e) in self.payload.items()
-            }
+            out["payload"] = payload_dict(self.payload)
         if self.nominal is not None:
             out["nominal"] = self.nominal
         if self.reference is not None:
@@ -374,3 +369,13 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
 
         result = settle(result)
     return result
+
+
+def payload_dict(payload: dict[str, tuple[float, float]]) -> dict[str, dict[str, Any]]:
+    """A payload estimate {name: (value, std)} as JSON: {name: {"value", "std", "unit"}} (mass kg, x m, y m, inertia
+    kg m^2; std None when not finite)."""
+    from wmrid.model.payload import PAYLOAD_UNITS
+
+    return {
+        name: {"value": v, "std": finite_or_none(e), "unit": PAYLOAD_UNITS[name]} for name, (v, e) in payload.items()
+    }

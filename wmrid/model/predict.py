@@ -64,8 +64,7 @@ import numpy as np
 
 from wmrid.core.choices import TorqueHold, values
 from wmrid.core.errors import UsageError
-from wmrid.model.dynamics import DRAG_SPEED as DRAG_SPEED_MODEL
-from wmrid.model.dynamics import RegressorForm
+from wmrid.model.dynamics import DRAG_SPEED as DRAG_SPEED_MODEL, RegressorForm
 from wmrid.model.kernels import plain
 
 #: Default longest RK4 substep, s (one substep per sample at 1 kHz; see the module docstring).

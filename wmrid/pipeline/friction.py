@@ -24,7 +24,6 @@ def choose_friction(
     options: ObserverOptions,
     *,
     geometry: tuple[float, ...] = (),
-    payload: bool = False,
     load_terms: bool = True,
     progress: Callable[[int, int], None] | None = None,
 ) -> tuple[IdentificationResult, dict[str, Any]]:
@@ -35,7 +34,7 @@ def choose_friction(
     ``wheel+caster+load`` (:func:`_with_load`).  Each pass: :func:`wmrid.estimators.observer_pass.observe`."""
 
     def run(model: str) -> IdentificationResult:
-        return observe(stream, sv, robot, replace(options, friction=model), geometry, payload, progress)
+        return observe(stream, sv, robot, replace(options, friction=model), geometry, progress)
 
     friction = options.friction
     if friction != "auto":

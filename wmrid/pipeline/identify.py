@@ -2,7 +2,7 @@
 
 The route, each step a function that returns a record and re-enters nothing:
 
-1. the options, checked when made (:class:`wmrid.estimators.options.ObserverOptions`) and the payload's needs;
+1. the options, checked when made (:class:`wmrid.estimators.options.ObserverOptions`), and what the payload needs;
 2. the efforts' timing decided (:func:`wmrid.pipeline.timing.decide_timing`): split topics, or the timing check;
    when it finds a significant delay, or the user asks for one (``delay``), the delay is estimated on the whole log
    and applied (:func:`_delayed`), with a pass at the delay moved by its resolution for the timing term;
@@ -41,14 +41,12 @@ from wmrid.pipeline.timing import Timing, carry_unresolved_delay, decide_timing,
 class Steps:
     """Which steps run beyond the observer's passes (wmrid's commands set them; the defaults run them all).
 
-    payload : also estimate the payload the robot carries (needs the robot's physical parameters).  load_terms :
-    friction auto may take the casters' load terms (the methods that model them).  geometry : (r, b, x_1, y_1, ...) m,
-    the casters' for the caster model when no robot lists them.  feedback : the closed-loop check.  switch : it may
-    report IDIM/IDIM-IV instead of the observer (``--method auto``).  timing : time the efforts (split topics, the
-    timing check, the hold and unresolved-delay terms) when no delay is given.
+    load_terms : friction auto may take the casters' load terms (the methods that model them).  geometry : (r, b,
+    x_1, y_1, ...) m, the casters' for the caster model when no robot lists them.  feedback : the closed-loop
+    check.  switch : it may report IDIM/IDIM-IV instead of the observer (``--method auto``).  timing : time the
+    efforts (split topics, the timing check, the hold and unresolved-delay terms) when no delay is given.
     """
 
-    payload: bool = False
     load_terms: bool = True
     geometry: tuple[float, ...] = ()
     feedback: bool = True
@@ -84,7 +82,7 @@ def identify_log(
     shifted), or a log in memory: t (n,) s strictly increasing, eta (n, 2) rad/s [right, left], tau (n, 2) N m.
     robot : the nominal values that start the estimate and centre the box (None: from the data and physics).
     ``progress(samples_done, samples)`` during the observer's passes."""
-    _check_payload(robot, steps.payload)
+    _check_payload(robot, options.payload)
     if options.delay is not None:
         return _settled(_delayed(log, robot, options, steps, progress), robot)
     stream, sv = surveyed(log)
@@ -148,7 +146,7 @@ def _delayed(
         base = _friction_and_terms(shifted, stream, sv, robot, replace(options, delay=None), plain, progress, Timing())
         base = _settled(base, robot)
         at = replace(options, friction=base.form.friction, delay=applied + step)
-        moved = observe_at(original, robot, at, steps.geometry, payload=steps.payload)
+        moved = observe_at(original, robot, at, steps.geometry)
         return _checked(with_timing_term(base, moved, record, warnings, step, robot), shifted, robot, steps)
     stream, sv = surveyed(shifted)
     timing = Timing(delay_record=record, delay_warnings=tuple(warnings))
@@ -177,7 +175,7 @@ def _friction_and_terms(
     """The friction model chosen (its passes), the timing's records and warnings, the unresolved-delay term, the
     closed-loop check and the hold term."""
     result, friction_record = choose_friction(
-        stream, sv, robot, options, geometry=steps.geometry, payload=steps.payload, load_terms=steps.load_terms,
+        stream, sv, robot, options, geometry=steps.geometry, load_terms=steps.load_terms,
         progress=progress,
     )  # fmt: skip
     diagnostics = {**result.diagnostics, "friction": friction_record}

@@ -9,7 +9,6 @@ it when it is significant (:mod:`wmrid.pipeline.identify`).
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -86,18 +85,17 @@ def observe_at(
     robot: Robot | None,
     options: ObserverOptions,
     geometry: tuple[float, ...],
-    payload: bool = False,
-    progress: Callable[[int, int], None] | None = None,
 ) -> IdentificationResult:
     """One pass of the observer over ``log`` with its efforts read ``options.delay`` s earlier (None: as stamped) and
-    the friction model ``options.friction``: the other admissible reading a widening compares with."""
+    the friction model ``options.friction``: the other admissible reading a widening compares with (its estimate
+    only: no payload)."""
     if options.delay is not None:
         if options.delay == "auto":
             raise ValueError("observe_at reads the log at a given delay, not 'auto'")
         original = log.read() if isinstance(log, LogStream) else log
         log, _, _ = apply_delay(original, options.delay, options.torque_hold, options.control_rate, None)
     stream, sv = surveyed(log)
-    return observe(stream, sv, robot, options, geometry, payload, progress)
+    return observe(stream, sv, robot, replace(options, payload=False), geometry)
 
 
 def carry_unresolved_delay(

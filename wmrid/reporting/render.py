@@ -10,8 +10,7 @@ from wmrid.estimators.diagnostics import impossible_parameters
 from wmrid.estimators.model_error import std_mark
 from wmrid.estimators.result import IdentificationResult
 from wmrid.estimators.verdict import LEGEND
-from wmrid.reporting.terminal import STYLES, print_table, styled
-from wmrid.reporting.terminal import warning as warning_line
+from wmrid.reporting.terminal import STYLES, print_table, styled, warning as warning_line
 
 
 def to_json(obj: Any) -> str:

@@ -378,8 +378,7 @@ def _speed_fit(log: Any, theta0: np.ndarray, form: Any, torque_hold: str) -> tup
 
 def _add_figures(report: Report, rl: Any, log: Any, truth: dict[str, float] | None, validation_log: Any) -> None:
     """The report's figures, each under a short title with a sentence saying what it shows (``figure_notes``)."""
-    from wmrid.reporting import figures as fg
-    from wmrid.reporting import fit_figures as ff
+    from wmrid.reporting import figures as fg, fit_figures as ff
 
     def both(name: str, fig: Any, note: str) -> None:
         if fig is None:
