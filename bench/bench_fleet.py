@@ -93,9 +93,14 @@ def generate(folder: Path, robots: int, days: int, duration: float, rate: float)
             payload = None
             if robot_id in PAYLOAD and day >= PAYLOAD[robot_id][3]:
                 mass, x, y, _ = PAYLOAD[robot_id]
-                payload = f"{mass}@{x},{y}"
-            run = wmrid.simulate(robot, duration=duration, rate=rate, seed=int(rng.integers(2**31)), payload=payload,
-                                 eta_noise=0.01, tau_noise=0.02)  # fmt: skip
+                payload = wmrid.Payload(mass, x, y)
+            run = wmrid.simulate(
+                robot,
+                duration=duration,
+                rate=rate,
+                payload=payload,
+                noise=wmrid.NoiseSettings(seed=int(rng.integers(2**31)), eta_std=0.01, tau_std=0.02),
+            )
             frame = run.to_frame()[["t", "eta_r", "eta_l", "tau_r", "tau_l"]]
             write_log(frame, str(path))
             size += path.stat().st_size

@@ -67,9 +67,10 @@ def simulated(case: str, seed: int):
     path = CACHE / f"{case}_s{seed}_{hashlib.sha1(key.encode()).hexdigest()[:12]}.npz"
     if not path.exists():
         run = wmrid.simulate(
-            spec["robot"], engine="mujoco", trajectory="reversing", duration=DURATION, rate=spec["rate"], seed=seed,
-            payload=spec["payload"], floor_friction=spec["floor_friction"], caster_resistance=RESISTANCE,
-            eta_noise=spec["eta_noise"], tau_noise=spec["tau_noise"],
+            spec["robot"], trajectory="reversing", duration=DURATION, rate=spec["rate"],
+            engine=wmrid.MultibodySettings(floor_friction=spec["floor_friction"], caster_resistance=RESISTANCE),
+            payload=None if spec["payload"] is None else wmrid.Payload.parse(spec["payload"]),
+            noise=wmrid.NoiseSettings(eta_std=spec["eta_noise"], tau_std=spec["tau_noise"], seed=seed),
         )  # fmt: skip
         log = run.log.to_wheel_log()
         CACHE.mkdir(parents=True, exist_ok=True)

@@ -34,8 +34,9 @@ def one(job: tuple[int, int, str, float]) -> dict:
     from tests.encoder_log import encoder_mcap
 
     cpr, seed, engine, duration = job
-    extra = {"caster_resistance": 0.0} if engine == "mujoco" else {}  # frictionless casters: no disturbance at all
-    run = wmrid.simulate("paper", duration=duration, seed=seed, engine=engine, **extra)
+    # frictionless casters: no disturbance at all
+    settings = wmrid.MultibodySettings(caster_resistance=0.0) if engine == "mujoco" else engine
+    run = wmrid.simulate("paper", duration=duration, engine=settings, noise=wmrid.NoiseSettings(seed=seed))
     truth = run.truth["parameters"]
     with tempfile.TemporaryDirectory() as tmp:
         path = encoder_mcap(Path(tmp) / "encoder.mcap", run.log, cpr, seed)

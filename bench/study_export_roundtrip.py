@@ -47,15 +47,27 @@ def run(seed: int, payload: str) -> dict:
     if not robot.exists() or not plan.exists():
         study_plan.make("amr")
     OUT.mkdir(parents=True, exist_ok=True)
-    noise = {"eta_noise": spec["eta_noise"], "tau_noise": spec["tau_noise"], "rate": 1000.0}
-    first_sim = wmrid.simulate(str(robot), reference=str(plan), engine="mujoco", seed=seed, payload=payload, **noise)
+    noise = {"eta_std": spec["eta_noise"], "tau_std": spec["tau_noise"]}
+    first_sim = wmrid.simulate(
+        str(robot),
+        engine="mujoco",
+        trajectory=str(plan),
+        rate=1000.0,
+        payload=Payload.parse(payload),
+        noise=wmrid.NoiseSettings(seed=seed, **noise),
+    )
     first = wmrid.identify(first_sim.log.to_wheel_log(), str(robot))
     saved = OUT / f"first_{seed}.json"
     saved.write_text(json.dumps(first.to_dict(history=False), default=float))
     exported = wmrid.export(str(saved), str(robot), OUT / f"identified_{seed}.toml", force=True)
     wmrid.export(str(saved), str(robot), OUT / f"identified_{seed}.xml", force=True)
-    second_sim = wmrid.simulate(str(OUT / f"identified_{seed}.toml"), reference=str(plan), engine="mujoco",
-                                seed=seed + 100, **noise)  # fmt: skip
+    second_sim = wmrid.simulate(
+        str(OUT / f"identified_{seed}.toml"),
+        engine="mujoco",
+        trajectory=str(plan),
+        rate=1000.0,
+        noise=wmrid.NoiseSettings(seed=seed + 100, **noise),
+    )
     second = wmrid.identify(second_sim.log.to_wheel_log(), str(robot))
     base = {}
     for p in BASE:

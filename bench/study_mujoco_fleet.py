@@ -53,9 +53,10 @@ def generate(folder: Path, units: int, days: int, seed: int) -> None:
             payload = None
             if robot_id in PAYLOAD and day >= PAYLOAD[robot_id][3]:
                 mass, x, y, _ = PAYLOAD[robot_id]
-                payload = f"{mass}@{x},{y}"
-            run = wmrid.simulate(robot, duration=30.0, rate=200.0, seed=int(rng.integers(2**31)), payload=payload,
-                                 eta_noise=0.01, tau_noise=0.02, engine="mujoco", caster_resistance=0.015)  # fmt: skip
+                payload = wmrid.Payload(mass, x, y)
+            noise = wmrid.NoiseSettings(eta_std=0.01, tau_std=0.02, seed=int(rng.integers(2**31)))
+            run = wmrid.simulate(robot, duration=30.0, rate=200.0, noise=noise, payload=payload,
+                                 engine=wmrid.MultibodySettings(caster_resistance=0.015))  # fmt: skip
             write_log(run.to_frame()[["t", "eta_r", "eta_l", "tau_r", "tau_l"]], str(path))
             made += 1
     print(f"generated {made} logs in {time.perf_counter() - t0:.0f} s into {folder}", flush=True)

@@ -9,7 +9,7 @@ with every inertial and friction parameter 20 % off, alternately up and down, r,
 1. ``wmrid.plan(robot_file, duration=60, area 4 m x 4 m, noise as simulated, log_rate=1000)``: the plan, its predicted
    std per base parameter, its criterion against the paper's sinusoid and the back-and-forth (reversing) drive of the
    same duration within the same limits; its CSV reference at 50 Hz.
-2. Per engine and seed: ``wmrid.simulate(robot_file, reference=plan.csv, engine=E, seed=s, eta_noise, tau_noise)``
+2. Per engine and seed: ``wmrid.simulate(robot_file, trajectory=plan.csv, engine=E, noise=NoiseSettings(...))``
    at 1 kHz (the log the prediction assumed), identified with defaults (``wmrid.identify(log, robot_file)``).
    Recorded: each base parameter's estimate, std and z = (estimate - truth) / std; the poorly determined and the
    flagged parameters; achieved std / predicted std; the peaks of |eta|, |eta'| (a 5-sample central difference of the
@@ -103,8 +103,13 @@ def run(job: tuple[str, str, int, str, str]) -> dict:
 
     name, engine, seed, robot_path, csv = job
     spec = ROBOTS[name]
-    sim = wmrid.simulate(robot_path, reference=csv, engine=engine, seed=seed, eta_noise=spec["eta_noise"],
-                         tau_noise=spec["tau_noise"], rate=1000.0)  # fmt: skip
+    sim = wmrid.simulate(
+        robot_path,
+        engine=engine,
+        rate=1000.0,
+        trajectory=csv,
+        noise=wmrid.NoiseSettings(seed=seed, eta_std=spec["eta_noise"], tau_std=spec["tau_noise"]),
+    )
     truth = sim.truth["parameters"]
     result = wmrid.identify(sim.log.to_wheel_log(), robot_path)
     log = sim.log
@@ -204,14 +209,18 @@ def _sequential_seed(job: tuple[int, str, str, str, float, float]) -> dict:
     import wmrid
 
     seed, robot, csv, alone_csv, eta_noise, tau_noise = job
-    noise = {"eta_noise": eta_noise, "tau_noise": tau_noise, "rate": 1000.0}
-    sim1 = wmrid.simulate(robot, trajectory="sinusoid", duration=20, seed=2000 + seed, **noise)
+    noise = {"eta_std": eta_noise, "tau_std": tau_noise}
+    sim1 = wmrid.simulate(
+        robot, trajectory="sinusoid", duration=20, rate=1000.0, noise=wmrid.NoiseSettings(seed=2000 + seed, **noise)
+    )
     first = wmrid.identify(sim1.log.to_wheel_log(), robot)
-    sim2 = wmrid.simulate(robot, reference=csv, seed=3000 + seed, **noise)
+    sim2 = wmrid.simulate(robot, trajectory=csv, rate=1000.0, noise=wmrid.NoiseSettings(seed=3000 + seed, **noise))
     second = wmrid.identify(sim2.log.to_wheel_log(), robot)
     both = wmrid.identify(sim2.log.to_wheel_log(), robot, given=first)
-    alone = wmrid.identify(wmrid.simulate(robot, reference=alone_csv, seed=4000 + seed, **noise).log.to_wheel_log(),
-                           robot)  # fmt: skip
+    alone_sim = wmrid.simulate(
+        robot, trajectory=alone_csv, rate=1000.0, noise=wmrid.NoiseSettings(seed=4000 + seed, **noise)
+    )
+    alone = wmrid.identify(alone_sim.log.to_wheel_log(), robot)
     out = {"seed": seed, "truth": [sim2.truth["parameters"][n] for n in BASE], "fused_dof": both.estimate.dof,
            "first_poorly": first.diagnostics.get("poorly_determined", []),
            "widened": [bool(r.diagnostics.get("inflated")) for r in (first, second)]}  # fmt: skip
@@ -235,8 +244,13 @@ def sequential(eta_noise: float, tau_noise: float, seeds: int = 20, workers: int
     from wmrid.model.dynamics import RegressorForm
 
     robot = str(robot_file("paper"))
-    sim = wmrid.simulate(robot, trajectory="sinusoid", duration=20, rate=1000, eta_noise=eta_noise,
-                         tau_noise=tau_noise, seed=100)  # fmt: skip
+    sim = wmrid.simulate(
+        robot,
+        trajectory="sinusoid",
+        duration=20,
+        rate=1000,
+        noise=wmrid.NoiseSettings(eta_std=eta_noise, tau_std=tau_noise, seed=100),
+    )
     first = wmrid.identify(sim.log.to_wheel_log(), robot)
     saved = OUT / f"sequential_first_{eta_noise}_{tau_noise}.json"
     saved.write_text(json.dumps(first.to_dict(history=False), default=float))

@@ -26,7 +26,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 INERTIA = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc")
-NOISE = {"eta_noise": 0.02, "tau_noise": 0.01}
+NOISE = {"eta_std": 0.02, "tau_std": 0.01}
 
 
 def case_a(job: tuple[str, int, float, float, bool]) -> dict:
@@ -37,9 +37,13 @@ def case_a(job: tuple[str, int, float, float, bool]) -> dict:
 
     amr = load_robot("examples/small_amr.toml")
     run = wmrid.simulate(
-        "examples/small_amr.toml", trajectory="reversing", duration=duration, rate=200.0, seed=seed, caster=caster,
-        engine=engine, **NOISE,
-    )  # fmt: skip
+        "examples/small_amr.toml",
+        trajectory="reversing",
+        duration=duration,
+        rate=200.0,
+        engine=engine,
+        noise=wmrid.NoiseSettings(seed=seed, caster_std=caster, **NOISE),
+    )
     log = run.log.to_wheel_log()
     if not reference:  # a field log without the controller's set-points: least squares times the efforts
         from dataclasses import replace
@@ -67,7 +71,9 @@ def case_b(job: tuple[int, str, float]) -> dict:
     from wmrid.pipeline.identify import identify
 
     robot = load_robot("paper")
-    run = wmrid.simulate("paper", trajectory=trajectory, duration=duration, seed=seed, **NOISE)
+    run = wmrid.simulate(
+        "paper", trajectory=trajectory, duration=duration, noise=wmrid.NoiseSettings(seed=seed, **NOISE)
+    )
     log = run.log.to_wheel_log()
     truth = run.truth["parameters"]
     out: dict = {"seed": seed, "trajectory": trajectory}

@@ -43,9 +43,13 @@ def write_fleet(
                                                F_d2=cad.F_d2 * k[3]))  # fmt: skip
             load = None
             if payload and u in payload and day >= payload[u][3]:
-                load = f"{payload[u][0]}@{payload[u][1]},{payload[u][2]}"
-            run = wmrid.simulate(robot, duration=duration, seed=int(day_rng.integers(2**31)), payload=load,
-                                 eta_noise=0.01, tau_noise=0.02)  # fmt: skip
+                load = wmrid.Payload(payload[u][0], payload[u][1], payload[u][2])
+            run = wmrid.simulate(
+                robot,
+                duration=duration,
+                payload=load,
+                noise=wmrid.NoiseSettings(seed=int(day_rng.integers(2**31)), eta_std=0.01, tau_std=0.02),
+            )
             path = folder / f"R{u + 1:02d}" / f"{(START + dt.timedelta(days=day)).date()}.parquet"
             path.parent.mkdir(parents=True, exist_ok=True)
             write_log(run.to_frame()[["t", "eta_r", "eta_l", "tau_r", "tau_l"]], str(path))

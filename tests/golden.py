@@ -54,22 +54,25 @@ def _real(*parts: str) -> Callable[[Path], Path]:
 
 
 def _simulated(name: str, *args: str, shift_s: float = 0.0) -> Callable[[Path], Path]:
-    """A log ``wmrid simulate ARGS`` writes (CSV); ``shift_s``: its efforts then stamped that much late."""
+    """A log ``wmrid simulate ARGS`` writes (CSV; ARGS as pairs of a flag's Python name and its value);
+    ``shift_s``: its efforts then stamped that much late."""
 
     def make(folder: Path) -> Path:
         import pandas as pd
 
-        import wmrid
-        from wmrid.api.simulation import write_simulation
+        from tests.cliutil import text, wmrid
 
         path = folder / f"{name}.csv"
         if path.exists():
             return path
-        run = wmrid.simulate(**dict(_pairs(args)))
+        raw = folder / f"{name}.raw.csv" if shift_s else path
+        flags = [f"--{args[i].replace('_', '-')}={args[i + 1]}" for i in range(0, len(args), 2)]
+        proc = wmrid("simulate", "-o", str(raw), *flags)
+        if proc.returncode != 0:
+            raise AssertionError(f"{name}: simulate failed: {text(proc).stderr}")
         if not shift_s:
-            write_simulation(run, path)
             return path
-        frame = run.to_frame()
+        frame = pd.read_csv(raw)
         t = frame["t"].to_numpy()
         late = {}
         for col in ("tau_r", "tau_l"):  # the effort at t is the one applied at t - shift_s
@@ -79,21 +82,6 @@ def _simulated(name: str, *args: str, shift_s: float = 0.0) -> Callable[[Path], 
         return path
 
     return make
-
-
-def _pairs(args: tuple[str, ...]) -> list[tuple[str, object]]:
-    out: list[tuple[str, object]] = []
-    for i in range(0, len(args), 2):
-        key, value = args[i], args[i + 1]
-        try:
-            number: object = int(value)
-        except ValueError:
-            try:
-                number = float(value)
-            except ValueError:
-                number = value
-        out.append((key, number))
-    return out
 
 
 ME169_A = _real("me169", "wheel_pwm_2022-04-13-14-27-37.mcap")

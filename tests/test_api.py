@@ -144,7 +144,7 @@ def test_log_options_come_from_one_object_and_the_robot_fills_the_rest():
 
 
 def test_simulate_and_write_simulation_give_the_cli_files(tmp_path):
-    run = wmrid.simulate("paper", duration=2.0, seed=3, eta_noise=0.01)
+    run = wmrid.simulate("paper", duration=2.0, noise=wmrid.NoiseSettings(seed=3, eta_std=0.01))
     truth_path = wmrid.write_simulation(run, tmp_path / "api.csv")
     proc = cli("simulate", "-o", str(tmp_path / "cli.csv"), "--duration", "2", "--seed", "3", "--eta-noise", "0.01")
     assert proc.returncode == 0, proc.stderr
@@ -203,7 +203,7 @@ def test_report_of_a_saved_result_ignores_the_robot_flags(tmp_path, sample_resul
 
 def test_a_simulated_log_identifies_as_its_wheel_log():
     # wmrid.simulate(...).log is taken by identify as it is (it failed: its reference pose is (n, 3))
-    run = wmrid.simulate("paper", duration=4.0, seed=2, eta_noise=0.01)
+    run = wmrid.simulate("paper", duration=4.0, noise=wmrid.NoiseSettings(seed=2, eta_std=0.01))
     direct = wmrid.identify(run.log, "paper")
     log = run.log.to_wheel_log()
     assert log.reference is run.log.eta_ref  # the wheel-speed reference, not the pose

@@ -11,6 +11,7 @@ import pytest
 import wmrid
 from wmrid.core.wheel_log import WheelLog
 from wmrid.model import dynamics as model
+from wmrid.sim.multibody import MultibodySettings
 
 BASE = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
 INERTIA_VC = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc")
@@ -48,8 +49,8 @@ def test_heavy_robot_with_dragging_casters_every_method():
     run accelerates as much as it brakes in each direction, so the part the constant-drag model leaves out does not
     bias the estimate."""
     run = wmrid.simulate(
-        "paper", engine="mujoco", trajectory="reversing", payload="60@0.2,0.1", floor_friction=0.6,
-        caster_resistance=0.015, eta_noise=0.02, tau_noise=0.05, seed=0,
+        "paper", engine=MultibodySettings(floor_friction=0.6, caster_resistance=0.015), trajectory="reversing",
+        payload=wmrid.Payload(60, 0.2, 0.1), noise=wmrid.NoiseSettings(eta_std=0.02, tau_std=0.05, seed=0),
     )  # fmt: skip
     truth = run.truth["parameters"]
     for method in ("auto", "idim", "rls", "oe", "iv"):
@@ -70,8 +71,8 @@ def test_heavy_robot_with_both_casters_touching_idim_and_iv():
     9.3 %); averaged over the grid's shifts (wmrid.estimators.idim.GRID_SHIFTS) it is 8.0 % (z = 2.9), and every
     parameter is within 3 std or flagged."""
     run = wmrid.simulate(
-        "paper", engine="mujoco", trajectory="reversing", payload="60@-0.2,0", floor_friction=0.6,
-        caster_resistance=0.015, eta_noise=0.02, tau_noise=0.05, seed=7,
+        "paper", engine=MultibodySettings(floor_friction=0.6, caster_resistance=0.015), trajectory="reversing",
+        payload=wmrid.Payload(60, -0.2, 0), noise=wmrid.NoiseSettings(eta_std=0.02, tau_std=0.05, seed=7),
     )  # fmt: skip
     truth = run.truth["parameters"]
     for method in ("idim", "iv"):

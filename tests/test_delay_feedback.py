@@ -26,14 +26,20 @@ from wmrid.estimators.idim_regression import shifted
 from wmrid.model.robot import BUILTIN_ROBOTS
 
 AMR = BUILTIN_ROBOTS["amr"]
-NOISE = {"eta_noise": 0.02, "tau_noise": 0.01}
+NOISE = {"eta_std": 0.02, "tau_std": 0.01}
 
 
 @pytest.fixture(scope="module")
 def disturbed():
     """The light AMR, 30 s reversing at 200 Hz on one clock (no delay), a 0.02 N m caster disturbance inside the
     loop, sensor noise; seed 2."""
-    run = wmrid.simulate("amr", trajectory="reversing", duration=30.0, rate=200.0, seed=2, caster=0.02, **NOISE)
+    run = wmrid.simulate(
+        "amr",
+        trajectory="reversing",
+        duration=30.0,
+        rate=200.0,
+        noise=wmrid.NoiseSettings(seed=2, caster_std=0.02, **NOISE),
+    )
     return run.log.to_wheel_log()
 
 
@@ -71,7 +77,7 @@ def test_the_instrumental_variables_find_a_real_delay(true_delay):
     from wmrid.core.wheel_log import WheelLog
     from wmrid.pipeline.identify import identify
 
-    log = wmrid.simulate("amr", duration=20.0, seed=1, **NOISE).log.to_wheel_log()
+    log = wmrid.simulate("amr", duration=20.0, noise=wmrid.NoiseSettings(seed=1, **NOISE)).log.to_wheel_log()
     late = WheelLog(t=log.t, eta=log.eta, tau=shifted(log.t, log.tau, true_delay), source="late",
                     reference=log.reference)  # fmt: skip
     est = estimate_delay(late.t, late.eta, late.tau, reference=late.reference)
@@ -133,7 +139,13 @@ def test_a_jackknife_clipped_at_the_edge_does_not_pin_the_delay():
     pin the delay, and nothing is applied or carried."""
     from wmrid.estimators.delay import _jackknife_std, _refine
 
-    run = wmrid.simulate("amr", trajectory="reversing", duration=40.0, rate=200.0, seed=7, caster=0.005, **NOISE)
+    run = wmrid.simulate(
+        "amr",
+        trajectory="reversing",
+        duration=40.0,
+        rate=200.0,
+        noise=wmrid.NoiseSettings(seed=7, caster_std=0.005, **NOISE),
+    )
     log = run.log.to_wheel_log()
     clipped = estimate_delay(log.t, log.eta, log.tau, span=search_span(log.t))
     assert clipped.method == "least squares"

@@ -21,7 +21,7 @@ JUDGED = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc")
 @pytest.fixture(scope="module")
 def encoder_log(tmp_path_factory):
     """Paper sinusoid, 40 s at 1 kHz, no sensor noise; positions quantised to 2048 counts/rev (seed 0)."""
-    run = wmrid.simulate("paper", seed=0)
+    run = wmrid.simulate("paper", noise=wmrid.NoiseSettings(seed=0))
     path = encoder_mcap(tmp_path_factory.mktemp("enc") / "encoder.mcap", run.log, 2048, seed=0)
     return path, run.truth["parameters"]
 

@@ -271,8 +271,13 @@ def test_check_applies_the_identified_caster_drag(tmp_path):
     same windows (before the drag was applied as a force, the fit fell 3-5 points: the drag was lost)."""
     pytest.importorskip("mujoco")
     log = tmp_path / "amr.parquet"
-    sim = wmrid.simulate("amr", engine="mujoco", trajectory="reversing", duration=8.0, seed=2, eta_noise=0.005,
-                         tau_noise=0.001)  # fmt: skip
+    sim = wmrid.simulate(
+        "amr",
+        engine="mujoco",
+        trajectory="reversing",
+        duration=8.0,
+        noise=wmrid.NoiseSettings(seed=2, eta_std=0.005, tau_std=0.001),
+    )
     from wmrid.api.simulation import write_simulation
 
     write_simulation(sim, log)
@@ -337,7 +342,13 @@ def two_term(tmp_path_factory):
     from wmrid.api.simulation import write_simulation
 
     folder = tmp_path_factory.mktemp("two_term")
-    sim = wmrid.simulate("paper", trajectory="reversing", duration=10.0, rate=500.0, eta_noise=0.01, tau_noise=0.05)
+    sim = wmrid.simulate(
+        "paper",
+        trajectory="reversing",
+        duration=10.0,
+        rate=500.0,
+        noise=wmrid.NoiseSettings(eta_std=0.01, tau_std=0.05),
+    )
     log = folder / "rev.csv"
     write_simulation(sim, log)
     robot = dataclasses.replace(wmrid.load_robot("paper"), casters=None)

@@ -141,7 +141,13 @@ def test_given_results_add_their_information(planned: Path, tmp_path: Path) -> N
     (16 s: an 8 s log, 10 segments of 0.8 s, lowers no std by 2 % once its covariance's 9 degrees of freedom are
     weighed, where its inverse claimed 13 %.)"""
     robot = planned / "tiny.toml"
-    sim = wmrid.simulate("amr", trajectory="sinusoid", duration=16, rate=200, eta_noise=0.02, tau_noise=0.005, seed=1)
+    sim = wmrid.simulate(
+        "amr",
+        trajectory="sinusoid",
+        duration=16,
+        rate=200,
+        noise=wmrid.NoiseSettings(eta_std=0.02, tau_std=0.005, seed=1),
+    )
     result = wmrid.identify(sim.log.to_wheel_log(), robot)
     saved = tmp_path / "run.json"
     saved.write_text(json.dumps(result.to_dict(history=False)))
@@ -203,7 +209,9 @@ def test_noise_measured_from_a_log(tmp_path: Path) -> None:
     from wmrid.api.planning import measured_noise
 
     log = tmp_path / "old.csv"
-    wmrid.write_simulation(wmrid.simulate("paper", duration=10, rate=200, eta_noise=0.03, tau_noise=0.2), log)
+    wmrid.write_simulation(
+        wmrid.simulate("paper", duration=10, rate=200, noise=wmrid.NoiseSettings(eta_std=0.03, tau_std=0.2)), log
+    )
     eta_std, tau_std, rate = measured_noise(log)
     assert eta_std == pytest.approx(0.03, rel=0.05)
     assert tau_std == pytest.approx(0.2, rel=0.05)

@@ -215,7 +215,7 @@ def test_a_reference_not_starting_at_zero_starts_the_run(tmp_path: Path) -> None
 def test_library_reference_arrays_are_checked(bad: tuple) -> None:
     reference, needle = bad
     with pytest.raises(UsageError, match=needle):
-        api_simulate("paper", reference=reference)
+        api_simulate("paper", trajectory=reference)
 
 
 # --------------------------------------------------------------------------------------------------- MuJoCo engine
@@ -227,7 +227,7 @@ def test_mujoco_engine_tracks_a_reference_file(tmp_path: Path) -> None:
     0.02 rad/s (observed 6e-3: tyre creep and the casters' drag, which the reduced model lacks)."""
     path = tmp_path / "plan.mcap"
     write_reference(path, _at_rest_columns())
-    run = api_simulate("paper", engine="mujoco", reference=path, duration=4.0)
+    run = api_simulate("paper", engine="mujoco", duration=4.0, trajectory=path)
     log = run.log
     assert log.settings["engine"] == "mujoco"
     assert log.settings["trajectory"] == "reference"
@@ -264,7 +264,7 @@ def test_cli_simulates_a_csv_reference(tmp_path: Path) -> None:
     assert settings["trajectory_parameters"]["file"] == str(plan)
     assert settings["trajectory_parameters"]["sha256"] == hashlib.sha256(plan.read_bytes()).hexdigest()
     # the same reference through the library, bit for bit
-    again = api_simulate("paper", reference=plan, rate=100.0)
+    again = api_simulate("paper", rate=100.0, trajectory=plan)
     np.testing.assert_array_equal(frame["x"].to_numpy(), again.log.pose[:, 0])
 
 

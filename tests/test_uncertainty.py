@@ -109,6 +109,8 @@ def test_slow_parts_fit_like_the_rest_where_the_model_holds():
     well-specified logs that gate lets through by chance; the residual test does not add to them.)"""
     import wmrid
 
-    sim = wmrid.simulate("amr", trajectory="reversing", duration=30.0, seed=3, eta_noise=0.02, tau_noise=0.01)
+    sim = wmrid.simulate(
+        "amr", trajectory="reversing", duration=30.0, noise=wmrid.NoiseSettings(seed=3, eta_std=0.02, tau_std=0.01)
+    )
     slow = wmrid.identify(sim.log.to_wheel_log(), "amr").diagnostics["uncertainty"]["model_error"]["slow_speed"]
     assert all(0.8 < r < 1.25 for r in slow["residual_ratio"]), slow["residual_ratio"]

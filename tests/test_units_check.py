@@ -211,8 +211,14 @@ def test_signals_alone():
 def test_the_multibody_prototype_in_rpm_and_ms():
     """On the MuJoCo prototype's log (a multibody simulation; reversing, sensor noise): rpm with the robot file and ms
     with or without it are named, the log as it is has no finding."""
-    run = wmrid.simulate(ROOT / "examples" / "small_amr.toml", duration=20, rate=200, engine="mujoco", seed=3,
-                         eta_noise=0.02, tau_noise=0.01, trajectory="reversing")  # fmt: skip
+    run = wmrid.simulate(
+        ROOT / "examples" / "small_amr.toml",
+        duration=20,
+        rate=200,
+        engine="mujoco",
+        trajectory="reversing",
+        noise=wmrid.NoiseSettings(seed=3, eta_std=0.02, tau_std=0.01),
+    )
     amr = ROOT / "examples" / "small_amr.toml"
     log = run.log
     assert wmrid.identify(log, amr).diagnostics["units"]["findings"] == []

@@ -149,6 +149,12 @@ _EXPORTS = {
     "report": "wmrid.api.reporting",
     "write_report": "wmrid.api.reporting",
     "write_simulation": "wmrid.api.simulation",
+    "load_reference": "wmrid.api.simulation",
+    "NoiseSettings": "wmrid.sim.scenario",
+    "Change": "wmrid.sim.scenario",
+    "PlantChange": "wmrid.sim.scenario",
+    "Payload": "wmrid.model.robot",
+    "MultibodySettings": "wmrid.sim.multibody",
     "IdentificationResult": "wmrid.estimators.result",
     "ObserverRun": "wmrid.estimators.result",
     "BaseEstimate": "wmrid.estimators.estimate",
@@ -226,6 +232,7 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
     )
     from wmrid.api.simulation import (
         SimulationRun as SimulationRun,
+        load_reference as load_reference,
         simulate as simulate,
         write_simulation as write_simulation,
     )
@@ -257,6 +264,7 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
         PhysicalEstimate as PhysicalEstimate,
     )
     from wmrid.model.robot import (
+        Payload as Payload,
         Robot as Robot,
     )
     from wmrid.monitoring.monitor import (
@@ -270,6 +278,14 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
     )
     from wmrid.reporting.report import (
         Report as Report,
+    )
+    from wmrid.sim.multibody import (
+        MultibodySettings as MultibodySettings,
+    )
+    from wmrid.sim.scenario import (
+        Change as Change,
+        NoiseSettings as NoiseSettings,
+        PlantChange as PlantChange,
     )
 
 __all__ = ["__version__", *sorted(_EXPORTS)]

@@ -8,13 +8,18 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from wmrid.api.inputs import load_robot
+from wmrid.core.choices import Trajectory, values
 from wmrid.core.errors import UsageError, option
 from wmrid.model.robot import Payload, Robot
+from wmrid.sim.scenario import Change, NoiseSettings, PlantChange
 
-__all__ = ["SimulationRun", "load_reference", "simulate", "write_simulation"]
+if TYPE_CHECKING:
+    from wmrid.sim.multibody import MultibodySettings
+
+__all__ = ["Change", "NoiseSettings", "Payload", "SimulationRun", "load_reference", "simulate", "write_simulation"]
 
 
 @dataclass(frozen=True)
@@ -30,42 +35,6 @@ class SimulationRun:
     def to_frame(self) -> Any:
         """The log as a pandas DataFrame of the canonical columns."""
         return self.log.to_frame()
-
-
-def _change(truth_params, load, duration, load_at, drop_at, friction_fault, fault_at):
-    """(the change during the run or None, the physical parameters at t = 0)."""
-    from wmrid.sim.scenario import PlantChange, parse_friction_fault, parse_time
-
-    times = {"load_at": load_at, "drop_at": drop_at, "fault_at": fault_at}
-    given = [name for name, text in times.items() if text is not None]
-    if len(given) > 1:
-        raise UsageError(f"{' and '.join(option(n) for n in given)}: one change per run; give only one of them")
-    if (load_at is not None or drop_at is not None) and load is None:
-        raise UsageError(f"{option(given[0])} needs {option('payload', 'MASS[@X,Y]')} (the payload loaded or dropped)")
-    if (friction_fault is None) != (fault_at is None):
-        raise UsageError(
-            f"{option('friction_fault', 'WHEEL:FACTOR')} and {option('fault_at', 'T')} go together; give both"
-        )
-    if not given:
-        return None, truth_params if load is None else truth_params.with_payload(load)
-    name = given[0]
-    when = parse_time(times[name], option(name))
-    if when >= duration:
-        raise UsageError(
-            f"{option(name, times[name])}: the change must come before the end of the run ({duration:g} s)"
-        )
-    if load_at is not None:
-        change = PlantChange.payload_load(when, truth_params, load)
-    elif drop_at is not None:
-        change = PlantChange.payload_drop(when, truth_params, load)
-    else:
-        wheel, factor, terms = parse_friction_fault(friction_fault)
-        base = truth_params if load is None else truth_params.with_payload(load)
-        try:
-            change = PlantChange.friction_fault(when, base, wheel, factor, terms)
-        except UsageError as err:
-            raise UsageError(f"{option('friction_fault', friction_fault)}: {err}") from None
-    return change, change.before
 
 
 def load_reference(reference: Any, *, topic: str | None = None) -> Any:
@@ -102,104 +71,97 @@ def load_reference(reference: Any, *, topic: str | None = None) -> Any:
 def simulate(
     robot: str | os.PathLike[str] | Robot = "paper",
     *,
-    trajectory: str | None = None,
+    trajectory: Any = None,
     duration: float | None = None,
     rate: float = 1000.0,
-    seed: int = 0,
-    payload: str | Payload | None = None,
-    payload_inertia: float = 0.0,
-    eta_noise: float = 0.0,
-    tau_noise: float = 0.0,
-    caster: float = 0.0,
-    caster_time: float = 0.3,
-    encoder_cpr: int = 0,
-    load_at: str | float | None = None,
-    drop_at: str | float | None = None,
-    friction_fault: str | None = None,
-    fault_at: str | float | None = None,
-    engine: str = "reduced",
-    floor_friction: float | None = None,
-    caster_resistance: float | None = None,
-    torque_limit: float | None = None,
-    gear_ratio: float | None = None,
-    rotor_inertia: float | None = None,
-    reference: Any = None,
-    reference_topic: str | None = None,
+    noise: NoiseSettings | None = None,
+    payload: Payload | None = None,
+    change: Change | PlantChange | None = None,
+    engine: str | MultibodySettings = "reduced",
 ) -> SimulationRun:
-    """Simulate ``robot`` (its CAD set is the truth; the controller uses its nominal set) tracking ``trajectory``
-    (None: "sinusoid") or a ``reference`` (a file or arrays, :func:`load_reference`; not both) for ``duration`` s (None:
-    40 s, or the whole reference), logged at ``rate`` Hz (control at 1 kHz), with white noise (``eta_noise`` rad/s,
-    ``tau_noise`` N m), a coloured caster disturbance (``caster`` N m, ``caster_time`` s), encoder quantisation
-    (``encoder_cpr``), a ``payload`` ("MASS[@X,Y]" or a :class:`Payload`), and at most one change during the run:
-    the payload loaded at ``load_at`` or dropped at ``drop_at`` s, or a friction fault ("right:3") at ``fault_at`` s.
-    ``engine``: "reduced" (the paper's model) or "mujoco" (multibody, with ``floor_friction``, ``caster_resistance``
-    and ``torque_limit``).  Seeded: the same arguments give the same log bit for bit."""
-    from wmrid.sim.scenario import NoiseSettings
-    from wmrid.sim.simulate import simulate as run_reduced
+    """Simulate ``robot`` (a name, a robot file or a :class:`Robot`; its CAD set is the truth, the controller uses its
+    nominal set) tracking ``trajectory`` for ``duration`` s, logged at ``rate`` Hz (control at 1 kHz).
 
-    robot_obj = load_robot(robot, gear_ratio=gear_ratio, rotor_inertia=rotor_inertia)
+    trajectory : a built-in trajectory's name (None: "sinusoid"; "reversing"), or a reference to track: a file, arrays
+        or a :class:`~wmrid.sim.reference.Reference` (:func:`load_reference`, which also takes an MCAP file's topic);
+        duration None: 40 s, or the whole reference.
+    noise : the sensors' noise, the caster disturbance, the encoder and the seed (:class:`NoiseSettings`; None:
+        none, seed 0).  Seeded: the same arguments give the same log bit for bit.
+    payload : a rigid :class:`Payload` carried throughout, or loaded or dropped by ``change``.
+    change : at most one change during the run: a :class:`Change` (the payload loaded or dropped, a wheel's friction
+        multiplied, at a time) or a :class:`PlantChange` (its own before and after).
+    engine : "reduced" (the paper's model), "mujoco" (multibody, default settings) or a
+        :class:`~wmrid.sim.multibody.MultibodySettings` (mujoco with its floor friction, caster resistance, torque
+        limit)."""
+    from wmrid.sim.simulate import plan_duration, simulate as run_reduced
+
+    robot_obj = load_robot(robot)
     if not robot_obj.physical:
         raise UsageError(
             f"{option('robot', robot_obj.name)}: gives base parameters only; a simulation needs the physical ones "
             "([nominal] and [cad] tables of Table 1's parameters; see examples/)"
         )
-    load = None
-    if isinstance(payload, Payload):
-        load = payload
-    elif payload is not None:
-        load = Payload.parse(payload, inertia=payload_inertia)
-    elif payload_inertia:
-        raise UsageError(f"{option('payload_inertia')} needs {option('payload', 'MASS[@X,Y]')}")
-    load_at, drop_at, fault_at = (None if v is None else str(v) for v in (load_at, drop_at, fault_at))
+    noise = noise if noise is not None else NoiseSettings()
+    for name, value, kind in (("noise", noise, NoiseSettings), ("payload", payload, Payload)):
+        if value is not None and not isinstance(value, kind):
+            raise UsageError(f"{option(name)} must be a {kind.__name__}, got {type(value).__name__}")
     ref = None
-    if reference is not None:
-        if trajectory is not None:
-            raise UsageError(
-                f"{option('reference')} and {option('trajectory', trajectory)}: the run tracks one reference; give "
-                "one of them"
-            )
-        ref = load_reference(reference, topic=reference_topic)
-    elif reference_topic is not None:
-        raise UsageError(f"{option('reference_topic')} needs {option('reference')} (an MCAP file)")
-    from wmrid.sim.simulate import plan_duration
-
+    if trajectory is not None and not (isinstance(trajectory, str) and trajectory in values(Trajectory)):
+        ref, trajectory = load_reference(trajectory), None
     duration = plan_duration(duration, ref)
-    change, truth_params = _change(robot_obj.reference, load, duration, load_at, drop_at, friction_fault, fault_at)
-    noise = NoiseSettings(
-        eta_std=eta_noise, tau_std=tau_noise, caster_std=caster, caster_time=caster_time, encoder_cpr=encoder_cpr
-    )
-    if engine == "mujoco":
-        from wmrid.sim.multibody import FLOOR_FRICTION, MultibodySettings, import_mujoco, simulate_multibody
+    plant, truth_params = _plant_change(robot_obj.reference, payload, change, duration)
+    settings = _engine(engine)
+    if settings is not None:
+        from wmrid.sim.multibody import import_mujoco, simulate_multibody
 
         import_mujoco()  # before anything else, so that a missing engine says how to install it
-        mb_settings = MultibodySettings(
-            floor_friction=FLOOR_FRICTION if floor_friction is None else floor_friction,
-            caster_resistance=caster_resistance, torque_limit=torque_limit,
-        )  # fmt: skip
         sim = simulate_multibody(
-            robot_obj.reference, robot_obj.nominal, casters=robot_obj.casters, settings=mb_settings,
-            trajectory=trajectory, duration=duration, rate=rate, noise=noise, seed=seed, change=change, payload=load,
+            robot_obj.reference, robot_obj.nominal, casters=robot_obj.casters, settings=settings,
+            trajectory=trajectory, duration=duration, rate=rate, noise=noise, change=plant, payload=payload,
             reference=ref,
         )  # fmt: skip
-    elif engine == "reduced":
-        given = {"floor_friction": floor_friction, "caster_resistance": caster_resistance, "torque_limit": torque_limit}
-        for name, value in given.items():
-            if value is not None:
-                raise UsageError(
-                    f"{option(name)} applies to {option('engine', 'mujoco')} only; the reduced model has no floor "
-                    "or casters"
-                )
+    else:
         sim = run_reduced(
             truth_params, robot_obj.nominal, trajectory=trajectory, duration=duration, rate=rate, noise=noise,
-            seed=seed, change=change, reference=ref,
+            change=plant, reference=ref,
         )  # fmt: skip
-    else:
-        raise UsageError(f"{option('engine')} must be reduced or mujoco, got {engine!r}")
     truth = sim.truth()
     truth["robot"] = robot_obj.name
-    if load is not None:
-        truth["payload"] = {"mass": load.mass, "x": load.x, "y": load.y, "inertia": load.inertia}
-    return SimulationRun(log=sim, truth=truth, change=change)
+    if payload is not None:
+        truth["payload"] = {"mass": payload.mass, "x": payload.x, "y": payload.y, "inertia": payload.inertia}
+    return SimulationRun(log=sim, truth=truth, change=plant)
+
+
+def _plant_change(
+    robot: Any, payload: Payload | None, change: Change | PlantChange | None, duration: float
+) -> tuple[PlantChange | None, Any]:
+    """(the change of the plant during the run or None, the plant's physical parameters at t = 0)."""
+    if change is None:
+        return None, robot if payload is None else robot.with_payload(payload)
+    if isinstance(change, Change):
+        if change.at >= duration:
+            raise UsageError(
+                f"change.at {change.at:g} s: the change must come before the end of the run ({duration:g} s)"
+            )
+        plant = change.plant(robot, payload)
+    elif isinstance(change, PlantChange):
+        plant = change
+    else:
+        raise UsageError(f"{option('change')} must be a Change or a PlantChange, got {type(change).__name__}")
+    return plant, plant.before
+
+
+def _engine(engine: Any) -> Any:
+    """The multibody settings of ``engine`` (None: the reduced model)."""
+    from wmrid.sim.multibody import MultibodySettings
+
+    if isinstance(engine, MultibodySettings):
+        return engine
+    if engine == "reduced":
+        return None
+    if engine == "mujoco":
+        return MultibodySettings()
+    raise UsageError(f"{option('engine')} must be reduced, mujoco or a MultibodySettings, got {engine!r}")
 
 
 def write_simulation(run: SimulationRun, output: str | os.PathLike[str], *, force: bool = False) -> str | None:

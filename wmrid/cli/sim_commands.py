@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from wmrid.cli.app import app
-from wmrid.cli.helpers import activity, log_opts, on_stdout, stderr_console, warning_summary
+from wmrid.cli.helpers import activity, check_rotor, log_opts, on_stdout, stderr_console, warning_summary
 from wmrid.cli.options import (
     AlignOpt,
     AlignRule,
@@ -146,18 +146,29 @@ def simulate_command(
     are those at t = 0; its settings.change holds both parameter sets ("before", "after", base and
     physical), the requested time t and the switch time t_switch (s).
     """
+    from wmrid.api.identification import robot_for
+    from wmrid.api.inputs import LogOptions
     from wmrid.api.simulation import simulate as run_simulate, write_simulation
+    from wmrid.cli.sim_flags import change_of, engine_of, payload_of, reference_of
+    from wmrid.sim.scenario import NoiseSettings
+    from wmrid.sim.simulate import plan_duration
 
+    load = payload_of(payload, payload_inertia)
+    drive = reference_of(None if trajectory is None else trajectory.value, reference, reference_topic)
+    end = plan_duration(duration, None if drive is None or isinstance(drive, str) else drive)
+    change = change_of(load, load_at, drop_at, friction_fault, fault_at, end)
+    noise = NoiseSettings(
+        eta_std=eta_noise, tau_std=tau_noise, caster_std=caster, caster_time=caster_time, encoder_cpr=encoder_cpr,
+        seed=seed,
+    )  # fmt: skip
+    settings = engine_of(engine.value, floor_friction, caster_resistance, torque_limit)
+    robot_obj = robot_for(robot, LogOptions(gear_ratio=gear_ratio), check_rotor(rotor_inertia))
     with activity("wmrid simulate") as stage:
         what = f"{duration:g} s" if duration is not None else "the reference" if reference is not None else "40 s"
         stage(f"{what} on the {engine.value} model")
         run = run_simulate(
-            robot, trajectory=None if trajectory is None else trajectory.value, duration=duration, rate=rate,
-            seed=seed, payload=payload, payload_inertia=payload_inertia, eta_noise=eta_noise, tau_noise=tau_noise,
-            caster=caster, caster_time=caster_time, encoder_cpr=encoder_cpr, load_at=load_at, drop_at=drop_at,
-            friction_fault=friction_fault, fault_at=fault_at, engine=engine.value, floor_friction=floor_friction,
-            caster_resistance=caster_resistance, torque_limit=torque_limit, gear_ratio=gear_ratio,
-            rotor_inertia=rotor_inertia, reference=reference, reference_topic=reference_topic,
+            robot_obj, trajectory=drive, duration=duration, rate=rate, noise=noise, payload=load, change=change,
+            engine=settings,
         )  # fmt: skip
         stage(f"writing {output}")
         truth_path = write_simulation(run, output, force=force)

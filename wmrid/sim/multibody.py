@@ -393,7 +393,7 @@ def simulate_multibody(
     duration: float | None = None,
     rate: float = 1000.0,
     noise: NoiseSettings = NoiseSettings(),  # noqa: B008 - frozen, so one shared default is safe
-    seed: int = 0,
+    seed: int | None = None,
     change: PlantChange | None = None,
     payload: Payload | None = None,
     reference: Reference | None = None,
@@ -456,7 +456,7 @@ def _simulate(
     duration: float | None,
     rate: float,
     noise: NoiseSettings,
-    seed: int,
+    seed: int | None,
     change: PlantChange | None,
     payload: Payload | None,
     reference: Reference | None,

@@ -46,6 +46,8 @@ class NoiseSettings:
     caster_time : s, correlation time of that process.
     encoder_cpr : counts per wheel revolution; when > 0 the logged velocity is the finite difference of
         the quantised wheel angle over one log period (then eta_std, if any, is added on top); 0: off.
+    seed : the seed (a whole number >= 0) of ``numpy.random.PCG64``, which draws every random number of a run:
+        the same seed, the same log bit for bit.
     """
 
     eta_std: float = 0.0
@@ -53,6 +55,7 @@ class NoiseSettings:
     caster_std: float = 0.0
     caster_time: float = 0.3
     encoder_cpr: int = 0
+    seed: int = 0
 
     def __post_init__(self) -> None:
         for name in ("eta_std", "tau_std", "caster_std", "caster_time"):
@@ -68,9 +71,73 @@ class NoiseSettings:
         if isinstance(cpr, bool) or not isinstance(cpr, (int, np.integer)) or cpr < 0:
             raise UsageError(f"{option('encoder_cpr')} must be a whole number >= 0, got {cpr!r}")
         object.__setattr__(self, "encoder_cpr", int(cpr))
+        check_seed(self.seed)
+        object.__setattr__(self, "seed", int(self.seed))
 
     def to_dict(self) -> dict[str, float | int]:
-        return dataclasses.asdict(self)
+        """The noise as ``settings["noise"]`` records it (the seed is recorded on its own, ``settings["seed"]``)."""
+        out = dataclasses.asdict(self)
+        del out["seed"]
+        return out
+
+
+def check_seed(seed: object) -> None:
+    """Refuse a seed that is not a whole number >= 0."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise UsageError(f"{option('seed')} must be a whole number >= 0, got {seed!r}")
+
+
+#: What a :class:`Change` does: the payload loaded or dropped, or one wheel's friction multiplied.
+CHANGE_SPECS = ("load", "drop", "fault")
+
+
+@dataclass(frozen=True)
+class Change:
+    """One change of the plant during a run, said against the robot and its payload (what :func:`wmrid.simulate`
+    takes; :meth:`plant` makes the :class:`PlantChange`).
+
+    at : s, when (> 0; before the run's end).  kind : "load" (the run's payload is loaded at ``at``), "drop" (it is
+    carried until ``at``, then dropped) or "fault" (``wheel``'s friction multiplied by ``factor``, >= 0 and not 1;
+    ``terms``: "both", "viscous" or "coulomb").
+    """
+
+    at: float
+    kind: str = "load"
+    wheel: str | None = None
+    factor: float | None = None
+    terms: str = "both"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "at", _time("change.at", self.at))
+        if self.kind not in CHANGE_SPECS:
+            raise UsageError(f"change.kind must be one of {', '.join(CHANGE_SPECS)}, got {self.kind!r}")
+        fault = (self.wheel, self.factor) != (None, None)
+        if self.kind == "fault" and (self.wheel is None or self.factor is None):
+            raise UsageError("a friction fault (change.kind 'fault') needs change.wheel and change.factor")
+        if self.kind != "fault" and fault:
+            raise UsageError(f"change.wheel and change.factor describe a friction fault, not a {self.kind}")
+        if self.kind == "fault":
+            factor = self.factor
+            if isinstance(factor, bool) or not isinstance(factor, (int, float, np.integer, np.floating)):
+                raise UsageError(f"friction fault factor must be a number, got {factor!r}")
+            if not math.isfinite(factor) or factor < 0 or factor == 1:
+                raise UsageError(f"friction fault factor must be a finite number >= 0 other than 1, got {factor}")
+            if self.wheel not in WHEELS:
+                raise UsageError(f"friction fault: unknown wheel {self.wheel!r}; choose one of {', '.join(WHEELS)}")
+            if self.terms not in FRICTION_TERMS:
+                raise UsageError(
+                    f"friction fault: unknown terms {self.terms!r}; choose one of {', '.join(FRICTION_TERMS)}"
+                )
+
+    def plant(self, robot: PhysicalParameters, payload: Payload | None) -> PlantChange:
+        """The change of ``robot`` (its parameters without the payload) that carries ``payload`` as this says."""
+        if self.kind in ("load", "drop"):
+            if payload is None:
+                raise UsageError(f"a change of kind {self.kind!r} needs the payload (loaded or dropped)")
+            make = PlantChange.payload_load if self.kind == "load" else PlantChange.payload_drop
+            return make(self.at, robot, payload)
+        base = robot if payload is None else robot.with_payload(payload)
+        return PlantChange.friction_fault(self.at, base, str(self.wheel), float(self.factor or 0.0), self.terms)
 
 
 def _time(name: str, value: object) -> float:

@@ -99,7 +99,7 @@ if TYPE_CHECKING:
     import pandas
 from wmrid.sim.closed_loop import KIND, closed_loop_kernel, reference_wheel_speeds
 from wmrid.sim.reference import TABLE_BYTES_PER_CONTROL_STEP, Reference, pack_table, reference_table
-from wmrid.sim.scenario import NoiseSettings, PlantChange, positive_number
+from wmrid.sim.scenario import NoiseSettings, PlantChange, check_seed, positive_number
 
 #: Control period used whenever the log rate is at most 1 kHz (the paper's sampling time), s.
 CONTROL_PERIOD = 1e-3
@@ -262,7 +262,7 @@ def simulate(
     duration: float | None = None,
     rate: float = 1000.0,
     noise: NoiseSettings = NO_NOISE,
-    seed: int = 0,
+    seed: int | None = None,
     substeps: int = 4,
     change: PlantChange | None = None,
     reference: Reference | None = None,
@@ -275,7 +275,8 @@ def simulate(
     at the origin facing +x. duration : s (> 0; None: :data:`DEFAULT_DURATION`, or the reference's length, which a
     duration may not exceed); the log has n = floor(duration * rate) + 1 samples at t = 0, 1/rate, ... rate : log
     rate in Hz (see :func:`timing`). noise : see :class:`NoiseSettings`. seed : non-negative int for
-    ``numpy.random.PCG64``; same seed, same output bit for bit. substeps : RK4 steps per control period (>= 1).
+    ``numpy.random.PCG64`` (None: ``noise.seed``); same seed, same output bit for bit. substeps : RK4 steps per
+    control period (>= 1).
     change : a :class:`PlantChange` whose ``before`` is ``true``, switching the plant to ``change.after`` at the
     first control period starting at or after ``change.t``, which must come before the last sample; None (default):
     no change, and the output is exactly that of a simulator without this option.
@@ -452,7 +453,7 @@ def plan_duration(duration: float | None, reference: Reference | None = None) ->
 
 def plan_run(
     nominal: PhysicalParameters, *, trajectory: str | None, duration: float | None, rate: float,
-    noise: NoiseSettings, seed: int, reference: Reference | None = None,
+    noise: NoiseSettings, seed: int | None = None, reference: Reference | None = None,
 ) -> RunPlan:  # fmt: skip
     """Check a run's settings (UsageError naming the bad one) and draw its random streams; see :class:`RunPlan`.
 
@@ -466,8 +467,8 @@ def plan_run(
         raise UsageError(f"noise must be a NoiseSettings, got {type(noise).__name__}")
     period, every = timing(rate)
     rate = float(rate)
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise UsageError(f"{option('seed')} must be a whole number >= 0, got {seed!r}")
+    seed = noise.seed if seed is None else seed
+    check_seed(seed)
     n = math.floor(duration * rate + 1e-9) + 1
     if n < 2:
         raise UsageError(f"duration {duration:g} s at {rate:g} Hz gives fewer than 2 samples")
