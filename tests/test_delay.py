@@ -193,8 +193,8 @@ def test_the_delays_uncertainty_is_in_the_std():
 @pytest.mark.parametrize("rate", [100.0, 20.0])
 def test_a_slow_log_of_a_faster_controller_is_named_by_default(rate):
     """The issue's case: a 1 kHz controller logged at 100 Hz or 20 Hz, default options (no --delay).  The timing check
-    (wmrid.estimators.delay.timing_check) finds the efforts acting well before the half logged step the default hold
-    assumes (measured: 4.5 of 5 ms, 24.6 of 25 ms), applies that delay (--delay auto) and names --control-rate; no
+    (wmrid.estimators.timing_check.timing_check) finds the efforts acting well before the half logged step the default
+    hold assumes (measured: 4.5 of 5 ms, 24.6 of 25 ms), applies that delay (--delay auto) and names --control-rate; no
     parameter is beyond 3 std unflagged."""
     from types import SimpleNamespace
 
@@ -297,7 +297,7 @@ def test_the_timing_check_profiles_a_window_read_piece_by_piece():
     from types import SimpleNamespace
 
     from wmrid.core.wheel_log import stream_arrays
-    from wmrid.estimators.delay import _window
+    from wmrid.estimators.timing_check import _window
 
     sim = simulate(AMR.cad, AMR.nominal, duration=5.0, noise=NOISE, seed=1)
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="w", notes=())
@@ -382,9 +382,9 @@ def test_a_log_longer_than_the_window_carries_the_delay_by_the_profiles_slope(mo
     20 001 samples of a 40 s reversing log (late 5 ms, seed 12): two windows cover it (+2.71 +/- 0.91 ms combined,
     against +2.80 +/- 1.18 ms profiled whole), the term is found so and still leaves every parameter within 3 std
     or flagged."""
-    import wmrid.estimators.delay
+    import wmrid.estimators.timing_check
 
-    monkeypatch.setattr(wmrid.estimators.delay, "TIMING_WINDOW_SAMPLES", 20_001)
+    monkeypatch.setattr(wmrid.estimators.timing_check, "TIMING_WINDOW_SAMPLES", 20_001)
     result, truth = _reversing_result(12, 0.005)
     record = result.diagnostics["timing"]
     assert record["windows"] == 2
@@ -408,7 +408,7 @@ def test_the_casters_drag_profile_decides_when_the_wheels_alone_show_a_delay_or_
     stands (the drag's is not consulted); a significant one that the drag's profile does not confirm is not applied,
     and a note names both figures; one the drag's confirms takes the drag's figure; a failed drag profile changes
     nothing."""
-    from wmrid.estimators.delay import consults_drag, with_drag
+    from wmrid.estimators.timing_check import consults_drag, with_drag
     from wmrid.model.dynamics import RegressorForm
 
     form = RegressorForm("general", caster=True)
@@ -448,9 +448,10 @@ def test_a_casters_drag_is_not_read_as_a_delay_on_the_multibody_prototype(tmp_pa
     import wmrid
     from wmrid.api.simulation import load_reference
     from wmrid.core.wheel_log import stream_arrays
-    from wmrid.estimators.delay import DELAY_RESOLUTION_S, with_drag
+    from wmrid.estimators.delay import DELAY_RESOLUTION_S
     from wmrid.estimators.observer_pass import delay_profile_form
     from wmrid.estimators.survey import survey
+    from wmrid.estimators.timing_check import with_drag
 
     paper = BUILTIN_ROBOTS["paper"]
     # the plan as wmrid.plan made it once (seed 0, multithreaded BLAS): the search is deterministic for a given BLAS

@@ -14,15 +14,9 @@ import numpy as np
 import pytest
 
 import wmrid
-from wmrid.estimators.delay import (
-    DELAY_STEP_S,
-    DelayEstimate,
-    combine,
-    estimate_delay,
-    search_span,
-    unresolved_delay,
-)
+from wmrid.estimators.delay import DELAY_STEP_S, DelayEstimate, combine, estimate_delay
 from wmrid.estimators.idim_regression import shifted
+from wmrid.estimators.timing_check import search_span, unresolved_delay
 from wmrid.model.robot import BUILTIN_ROBOTS
 
 AMR = BUILTIN_ROBOTS["amr"]

@@ -193,7 +193,7 @@ def test_a_bad_reference_cell_drops_the_reference_unless_it_was_named(tmp_path, 
 
 
 def test_an_applied_delay_keeps_the_reference(clean_sim):
-    from wmrid.estimators.delay import apply_delay
+    from wmrid.estimators.timing_check import apply_delay
 
     shifted_log, record, _ = apply_delay(as_log(clean_sim), 0.002, "zoh", None)
     assert record["applied_s"] == 0.002

@@ -205,5 +205,5 @@ def whole_efforts(effort) -> str | None:
 
 def split_topics(notes: tuple[str, ...] | list[str]) -> bool:
     """Whether a log's reading notes say its efforts and speeds came from two topics (two clocks, two drivers), the
-    case where ``identify`` estimates their delay by default (:func:`wmrid.estimators.delay.apply_delay`)."""
+    case where ``identify`` estimates their delay by default (:func:`wmrid.estimators.timing_check.apply_delay`)."""
     return any(SPLIT_NOTE in note for note in notes)

@@ -116,8 +116,8 @@ def with_unresolved_timing(
     result: IdentificationResult, delta: np.ndarray, delay: float, how: str, warning: str, robot: Robot | None = None
 ) -> IdentificationResult:
     """``result`` (its efforts used as stamped) with delta delta^T added to its covariance, delta (n0,) the change of
-    theta0 when the efforts are read ``delay`` s earlier (:func:`wmrid.estimators.delay.unresolved_delay`; ``how`` it
-    was
+    theta0 when the efforts are read ``delay`` s earlier (:func:`wmrid.estimators.timing_check.unresolved_delay`;
+    ``how`` it was
     found: "identified again" or "the profile's slope"); recorded as ``diagnostics["timing"]["timing_term"]``;
     parameters grown beyond UNRESOLVED_MARK are marked and ``warning`` is said."""
     est = result.estimate

@@ -24,12 +24,13 @@ from typing import Any
 
 from wmrid.core.errors import UsageError, WmridError, option
 from wmrid.core.wheel_log import LogStream, stream_arrays
-from wmrid.estimators.delay import DELAY_RESOLUTION_S, apply_delay
+from wmrid.estimators.delay import DELAY_RESOLUTION_S
 from wmrid.estimators.feedback import check as feedback_check
 from wmrid.estimators.observer_pass import delay_profile_form
 from wmrid.estimators.options import ObserverOptions
 from wmrid.estimators.result import IdentificationResult, LogLike
 from wmrid.estimators.survey import survey
+from wmrid.estimators.timing_check import apply_delay
 from wmrid.estimators.verdict import settle
 from wmrid.estimators.widening import with_hold_term, with_timing_term
 from wmrid.model.robot import Robot
@@ -127,9 +128,9 @@ def _delayed(
     progress: Callable[[int, int], None] | None,
 ) -> IdentificationResult:
     """The log's efforts read ``options.delay`` s earlier (the whole log in memory), then identified.  "auto": the
-    delay estimated on the whole log (:func:`wmrid.estimators.delay.apply_delay`, profiled with the richest friction
-    model allowed); applied when significant, with the timing term: a pass at the delay moved by its resolution,
-    whose change the std carries (:func:`wmrid.estimators.widening.with_timing_term`)."""
+    delay estimated on the whole log (:func:`wmrid.estimators.timing_check.apply_delay`, profiled with the richest
+    friction model allowed); applied when significant, with the timing term: a pass at the delay moved by its
+    resolution, whose change the std carries (:func:`wmrid.estimators.widening.with_timing_term`)."""
     delay = options.delay
     original = log.read() if isinstance(log, LogStream) else log  # read once: shifting needs the whole log
     profile = None

@@ -16,11 +16,11 @@ import numpy as np
 
 from wmrid.core.errors import WmridError
 from wmrid.core.wheel_log import LogStream, split_topics, stream_arrays
-from wmrid.estimators.delay import apply_delay, timing_check, unresolved_delay, unresolved_text
 from wmrid.estimators.observer_pass import delay_profile_form, observe
 from wmrid.estimators.options import ObserverOptions
 from wmrid.estimators.result import IdentificationResult
 from wmrid.estimators.survey import Survey, survey
+from wmrid.estimators.timing_check import apply_delay, timing_check, unresolved_delay, unresolved_text
 from wmrid.estimators.widening import with_unresolved_timing
 from wmrid.model.robot import Robot
 
@@ -29,10 +29,10 @@ from wmrid.model.robot import Robot
 class Timing:
     """What the pipeline knows about the efforts' timing when the friction models run.
 
-    record : the timing check's (:func:`wmrid.estimators.delay.timing_check`, ``diagnostics["timing"]``), None when
-    it did not run.  warnings : said before the result's own.  split : the efforts came from another topic than the
+    record : the timing check's (:func:`wmrid.estimators.timing_check.timing_check`, ``diagnostics["timing"]``), None
+    when it did not run.  warnings : said before the result's own.  split : the efforts came from another topic than the
     speeds (:func:`wmrid.core.wheel_log.split_topics`).  delay_record, delay_warnings : the applied delay's
-    (:func:`wmrid.estimators.delay.apply_delay`, ``diagnostics["delay"]``), None when none was asked for.
+    (:func:`wmrid.estimators.timing_check.apply_delay`, ``diagnostics["delay"]``), None when none was asked for.
     """
 
     record: dict[str, Any] | None = None
