@@ -1,7 +1,7 @@
 """Batches of a followed log to wheel samples, with wmrid's own readers.
 
 :class:`TableDecoder`: CSV batches (:class:`wmrid.io.live.framing.CsvBatcher`) through the CSV reader
-(:func:`wmrid.io.csv_log.csv_chunks`) and one assembler for the whole stream (:class:`wmrid.io.logs._Assembler`:
+(:func:`wmrid.io.csv_log.csv_chunks`) and one assembler for the whole stream (:class:`wmrid.io.assembler.Assembler`:
 the time unit, offset and epoch decisions are made once, on the first rows, and every row is checked as it is in a
 file, time strictly increasing across batches included).
 
@@ -58,8 +58,8 @@ class TableDecoder:
 
     def decode(self, batch: bytes, rows_before: int) -> WheelLog | None:
         """The samples of one batch (``rows_before``: the data lines of the batches before it), or None."""
+        from wmrid.io.assembler import MERGED_TIME, Assembler
         from wmrid.io.csv_log import csv_chunks
-        from wmrid.io.logs import MERGED_TIME, _Assembler
         from wmrid.io.sources import Source
 
         source = Source(self.name, None, batch)
@@ -69,7 +69,7 @@ class TableDecoder:
             return where(i - rows_before)
 
         if self.assembler is None:
-            self.assembler = _Assembler(
+            self.assembler = Assembler(
                 self.name, self.mapping, self.time_unit, hint, where_all, bool(self.explicit & set(REFERENCE)),
                 merged=self.mapping["t"].lower() == MERGED_TIME,
             )  # fmt: skip
