@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from wmrid.model import dynamics as model
+from wmrid.model import dynamics as model, torques
 from wmrid.model.robot import PAPER_CAD
 
 
@@ -54,7 +54,7 @@ def open_loop_log(
         return torque(t, eta) if feedback else torque(t)
 
     def rhs(t, y):
-        return model.wheel_acceleration(y[None, :], applied(t, y)[None, :], theta0)[0]
+        return torques.wheel_acceleration(y[None, :], applied(t, y)[None, :], theta0)[0]
 
     if uneven:
         rng = np.random.default_rng(5)

@@ -42,7 +42,7 @@ from tests.test_caster_model import (
 from wmrid.estimators.observer import ObserverSettings, initial_state, observer_step
 from wmrid.estimators.observer_kernel import KIND_CASTER_GEOMETRY, _regressor_into
 from wmrid.estimators.replay import kernel_kind, load_codes, replay
-from wmrid.model import dynamics as model
+from wmrid.model import dynamics as model, torques
 from wmrid.model.base_params import direct_recovery, fit_base_parameters, jacobian_intermediate
 from wmrid.model.dynamics import RegressorForm
 from wmrid.model.robot import AMR_CAD, AMR_NOMINAL, PAPER_NOMINAL, Caster, Robot
@@ -130,10 +130,10 @@ def test_loaded_drag_matches_rigid_body_kinematics(name):
         theta0 = random_load_theta0(rng, form)
         eta_dot = rng.normal(0.0, 20.0, size=eta.shape)
         expected = caster_drag(eta, form.geometry, loaded_forces(theta0, form, eta, eta_dot))[0]
-        got = model.friction_torque(eta, theta0, form, eta_dot) - (theta0[4:6] * eta + theta0[6:8] * np.sign(eta))
+        got = torques.friction_torque(eta, theta0, form, eta_dot) - (theta0[4:6] * eta + theta0[6:8] * np.sign(eta))
         np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12 * np.max(np.abs(expected)))
     with pytest.raises(ValueError, match="eta_dot"):
-        model.friction_torque(eta, theta0, form)
+        torques.friction_torque(eta, theta0, form)
 
 
 @pytest.mark.parametrize("name", list(LOAD_FORMS))
@@ -161,17 +161,17 @@ def test_regression_form_and_the_implicit_direct_model(name):
         theta = model.intermediate_parameters(theta0, form)
         got = model.regressor(eta, tau, form, eta_dot) @ theta.T
         np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12 * np.max(np.abs(expected)))
-        acc = model.wheel_acceleration(eta, tau, theta0, form)
+        acc = torques.wheel_acceleration(eta, tau, theta0, form)
         fixed = model.regressor(eta, tau, form, acc) @ theta.T
         np.testing.assert_allclose(fixed, acc, rtol=0, atol=1e-10 * np.max(np.abs(acc)))
-        back = model.wheel_torque(eta, acc, theta0, form)
+        back = torques.wheel_torque(eta, acc, theta0, form)
         np.testing.assert_allclose(back, tau, rtol=0, atol=1e-10 * np.max(np.abs(tau)))
-        a = model.load_inertia(eta, theta0, form)
-        size = np.max(np.abs(model.friction_torque(eta, theta0, form, eta_dot)))
+        a = torques.load_inertia(eta, theta0, form)
+        size = np.max(np.abs(torques.friction_torque(eta, theta0, form, eta_dot)))
         for j in range(2):
             step = np.zeros(2)
             step[j] = 10.0
-            diff = model.friction_torque(eta, theta0, form, eta_dot + step) - model.friction_torque(
+            diff = torques.friction_torque(eta, theta0, form, eta_dot + step) - torques.friction_torque(
                 eta, theta0, form, eta_dot - step
             )
             np.testing.assert_allclose(diff / 20.0, a[:, :, j], rtol=0, atol=1e-13 * size)

@@ -31,7 +31,7 @@ from wmrid.estimators.observer_kernel import (
 )
 from wmrid.estimators.observer_pass import caster_geometry
 from wmrid.estimators.replay import kernel_kind
-from wmrid.model import dynamics as model
+from wmrid.model import dynamics as model, torques
 from wmrid.model.base_params import derived_with_std, direct_recovery, fit_base_parameters, jacobian_intermediate
 from wmrid.model.dynamics import RegressorForm
 from wmrid.model.robot import AMR_NOMINAL, Caster, Robot
@@ -159,7 +159,7 @@ def test_geometric_drag_matches_rigid_body_kinematics(form):
     for _ in range(5):
         theta0 = random_theta0(rng, n_extra(form))
         expected, power = caster_drag(eta, form.geometry, theta0[8:])
-        got = model.friction_torque(eta, theta0, form) - wheel_friction(eta, theta0)
+        got = torques.friction_torque(eta, theta0, form) - wheel_friction(eta, theta0)
         scale = np.max(np.abs(expected))
         assert scale > 0.01
         np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12 * scale)
@@ -180,7 +180,7 @@ def test_geometric_drag_special_motions():
     form = RegressorForm("general", caster=True, geometry=(R, B, -0.3, 0.0))
     theta0 = np.array([20.0, -2.0, 20.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
     eta = np.array([[10.0, 10.0], [-7.0, -7.0], [10.0, -10.0], [-4.0, 4.0], [0.0, 0.0]])
-    got = model.friction_torque(eta, theta0, form)
+    got = torques.friction_torque(eta, theta0, form)
     straight, turn = R / 2.0, R / (2.0 * B) * 0.3
     expected = np.array([[straight, straight], [-straight, -straight], [turn, -turn], [-turn, turn], [0.0, 0.0]])
     np.testing.assert_allclose(got, expected, rtol=1e-5, atol=0)
@@ -208,12 +208,12 @@ def test_two_term_model():
     eta = speed_samples(rng)
     theta0 = random_theta0(rng, 2)
     expected = two_term_drag(eta, theta0[8], theta0[9])
-    got = model.friction_torque(eta, theta0, TWO_TERM) - wheel_friction(eta, theta0)
-    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-15 * np.max(np.abs(model.friction_torque(eta, theta0))))
+    got = torques.friction_torque(eta, theta0, TWO_TERM) - wheel_friction(eta, theta0)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-15 * np.max(np.abs(torques.friction_torque(eta, theta0))))
     bare = theta0.copy()
     bare[4:8] = 0.0
-    assert np.array_equal(model.friction_torque(eta, bare, TWO_TERM), expected)
-    assert np.array_equal(model.friction_torque(eta, bare), expected)  # form None: the two-term model
+    assert np.array_equal(torques.friction_torque(eta, bare, TWO_TERM), expected)
+    assert np.array_equal(torques.friction_torque(eta, bare), expected)  # form None: the two-term model
     g = model.regressor(eta, np.zeros_like(eta), TWO_TERM)
     assert np.array_equal(g[:, 8], -np.sign(eta[:, 0] + eta[:, 1]))
     assert np.array_equal(g[:, 9], -np.sign(eta[:, 0] - eta[:, 1]))
@@ -241,9 +241,9 @@ def test_regressor_times_theta_is_the_direct_model(name):
         assert theta.shape == (2, form.n_columns)
         via_regressor = model.regressor(eta, tau, form) @ theta.T
         np.testing.assert_allclose(via_regressor, expected, rtol=0, atol=1e-12 * scale)
-        direct = model.wheel_acceleration(eta, tau, theta0, form)
+        direct = torques.wheel_acceleration(eta, tau, theta0, form)
         np.testing.assert_allclose(direct, expected, rtol=0, atol=1e-12 * scale)
-        back = model.wheel_torque(eta, direct, theta0, form)
+        back = torques.wheel_torque(eta, direct, theta0, form)
         np.testing.assert_allclose(back, tau, rtol=0, atol=1e-12 * np.max(np.abs(tau)))
 
 

@@ -17,7 +17,7 @@ import wmrid
 from wmrid.api.exporting import ExportResult
 from wmrid.cli import main
 from wmrid.exports.controller import ControllerModel, python_text, yaml_text
-from wmrid.model import dynamics as dm
+from wmrid.model import dynamics as dm, torques
 from wmrid.model.robot import BUILTIN_ROBOTS
 from wmrid.model.urdf import read_urdf
 
@@ -61,7 +61,7 @@ def _model(form, theta0):
 
 @pytest.mark.parametrize("which", [0, 1, 2, 3], ids=["wheel", "two-term", "geometric", "load"])
 def test_python_function_reproduces_the_inverse_dynamics(tmp_path, which):
-    """wheel_torques(eta, eta_dot) of the written .py against wmrid.model.dynamics.wheel_torque on 2,000 random
+    """wheel_torques(eta, eta_dot) of the written .py against wmrid.model.torques.wheel_torque on 2,000 random
     states (speeds through zero included): to 1e-12 relative to the torques' scale (the same sums in another order)."""
     form, theta0 = _forms()[which]
     path = tmp_path / "ff.py"
@@ -74,7 +74,7 @@ def test_python_function_reproduces_the_inverse_dynamics(tmp_path, which):
     eta[:50] = 0.0  # at rest
     eta[50:100, 1] = -eta[50:100, 0]  # turning on the spot
     eta_dot = rng.normal(scale=5.0, size=(2000, 2))
-    want = dm.wheel_torque(eta, eta_dot, theta0, form)
+    want = torques.wheel_torque(eta, eta_dot, theta0, form)
     got = np.array([module.wheel_torques(e, a) for e, a in zip(eta, eta_dot, strict=True)])
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.max(np.abs(want)))
 
@@ -117,7 +117,7 @@ def test_yaml_reproduces_the_inverse_dynamics(tmp_path, which):
                 if np.ndim(force)
                 else force * np.stack([a + cc, a - cc], axis=1)
             )
-    want = dm.wheel_torque(eta, eta_dot, theta0, form)
+    want = torques.wheel_torque(eta, eta_dot, theta0, form)
     np.testing.assert_allclose(tau, want, rtol=0, atol=1e-12 * np.max(np.abs(want)))
 
 

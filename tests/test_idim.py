@@ -12,7 +12,7 @@ import pytest
 from tests.open_loop import open_loop_log
 from wmrid.core.errors import LogFormatError, NotIdentifiableError, UsageError
 from wmrid.estimators import idim, idim_regression
-from wmrid.model import dynamics as model
+from wmrid.model import dynamics as model, torques
 from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
 from wmrid.sim.scenario import NoiseSettings
 from wmrid.sim.simulate import simulate
@@ -45,7 +45,7 @@ def test_regression_rows_reproduce_the_inverse_model(smooth_log, reversing_log):
     # With the exact accelerations of the true model (Eq. 20), X phi must give back the torques (Eq. 9).
     phi = true_phi()
     for log in (smooth_log, reversing_log):
-        eta_dot = model.wheel_acceleration(log.eta, log.tau, log.theta0)
+        eta_dot = torques.wheel_acceleration(log.eta, log.tau, log.theta0)
         x = idim_regression.regressor_rows(log.eta, eta_dot)
         assert x.shape == (len(log.t), 2, 8)
         np.testing.assert_allclose(x @ phi, log.tau, rtol=0, atol=1e-12 * np.abs(log.tau).max())

@@ -14,7 +14,7 @@ from tests.open_loop import open_loop_log
 from wmrid.core.errors import NotIdentifiableError
 from wmrid.estimators import idim, idim_regression
 from wmrid.estimators.methods import MethodOptions, run
-from wmrid.model import dynamics as model
+from wmrid.model import dynamics as model, torques
 from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
 from wmrid.pipeline.identify import identify
 
@@ -63,14 +63,14 @@ def test_a_form_without_caster_changes_nothing(reversing_log, weighted):
 
 @pytest.mark.parametrize("form", [GEOMETRIC, TWO_TERM], ids=["geometric", "two-term"])
 def test_regression_rows_reproduce_the_inverse_model_with_caster_drag(form):
-    """X phi = tau of :func:`wmrid.model.dynamics.wheel_torque` with the drag (columns sharing a parameter add up)."""
+    """X phi = tau of :func:`wmrid.model.torques.wheel_torque` with the drag (columns sharing a parameter add up)."""
     rng = np.random.default_rng(3)
     eta = rng.normal(0.0, 2.0, (500, 2))
     eta_dot = rng.normal(0.0, 5.0, (500, 2))
     theta0 = np.concatenate([model.base_parameters(PAPER_CAD), [0.8, 0.5]])
     x = idim_regression.regressor_rows(eta, eta_dot, form)
     assert x.shape == (500, 2, form.n_base)
-    expected = model.wheel_torque(eta, eta_dot, theta0, form)
+    expected = torques.wheel_torque(eta, eta_dot, theta0, form)
     np.testing.assert_allclose(x @ phi_of(theta0), expected, rtol=0, atol=1e-12 * np.abs(expected).max())
     assert idim_regression.phi_names(form) == ("M11", "M12", "M22", *form.base_names[3:])
 
@@ -94,7 +94,7 @@ def test_theta0_jacobian_is_the_identity_on_the_caster_parameters():
 @pytest.fixture(scope="module")
 def caster_log():
     """The paper's CAD robot with two casters' geometric drag, open loop, 30 s at 1 kHz, no noise: the direct
-    model with the drag (:func:`wmrid.model.dynamics.wheel_acceleration`) integrated by DOP853 at rtol 1e-10.
+    model with the drag (:func:`wmrid.model.torques.wheel_acceleration`) integrated by DOP853 at rtol 1e-10.
 
     The torques are sums of cosines (zero-mean speeds, both wheels reverse 9-13 times, and turn both ways)
     sampled at the log's instants.  Not held between samples: a zero-order hold puts the applied torque half a
@@ -114,7 +114,7 @@ def caster_log():
         )
 
     def rhs(s, y):
-        return model.wheel_acceleration(y[None, :], torque(s)[None, :], theta0, GEOMETRIC)[0]
+        return torques.wheel_acceleration(y[None, :], torque(s)[None, :], theta0, GEOMETRIC)[0]
 
     t = np.arange(30_001) * 1e-3
     sol = solve_ivp(rhs, (t[0], t[-1]), [0.0, 0.0], t_eval=t, rtol=1e-10, atol=1e-12, method="DOP853")

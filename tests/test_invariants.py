@@ -26,7 +26,7 @@ from hypothesis import example, given, settings, strategies as st
 
 from tests.open_loop import open_loop_log
 from wmrid.estimators.result import REPORTED
-from wmrid.model import dynamics as model
+from wmrid.model import dynamics as model, torques
 from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
 from wmrid.pipeline.identify import identify
 from wmrid.sim.simulate import simulate
@@ -115,13 +115,13 @@ def test_coriolis_term_under_wheel_swap_keeps_vc(eta, vc):
     # Exact products and differences of the same doubles: the swap identity holds to a few ulp of the
     # largest term, vc * 30^2; 1e-12 relative of it is ~1000 ulp of margin and still catches any real term.
     atol = 1e-12 * abs(vc) * max(1.0, float(np.max(eta**2)))
-    swapped = model.coriolis_torque(eta @ SWAP, vc)
-    np.testing.assert_allclose(swapped, model.coriolis_torque(eta, vc) @ SWAP, rtol=0, atol=atol)
+    swapped = torques.coriolis_torque(eta @ SWAP, vc)
+    np.testing.assert_allclose(swapped, torques.coriolis_torque(eta, vc) @ SWAP, rtol=0, atol=atol)
     # The sign-change rule gives exactly the opposite torque, so it is wrong wherever V is not ~0.
-    np.testing.assert_allclose(model.coriolis_torque(eta @ SWAP, -vc), -swapped, rtol=0, atol=atol)
+    np.testing.assert_allclose(torques.coriolis_torque(eta @ SWAP, -vc), -swapped, rtol=0, atol=atol)
     big = np.abs(swapped).max(axis=1) > 1e3 * atol
     if big.any():  # where V is not ~0 (all-zero speeds give V = 0 under either rule)
-        assert not np.allclose(model.coriolis_torque(eta @ SWAP, -vc)[big], swapped[big], rtol=0, atol=atol)
+        assert not np.allclose(torques.coriolis_torque(eta @ SWAP, -vc)[big], swapped[big], rtol=0, atol=atol)
 
 
 def test_mirrored_robot_has_mirrored_base_parameters_and_dynamics():
@@ -138,14 +138,14 @@ def test_mirrored_robot_has_mirrored_base_parameters_and_dynamics():
     rng = np.random.default_rng(0)
     eta = rng.uniform(-10.0, 10.0, (200, 2))
     tau = rng.uniform(-5.0, 5.0, (200, 2))
-    acc = model.wheel_acceleration(eta, tau, theta0)
-    acc_m = model.wheel_acceleration(eta @ SWAP, tau @ SWAP, theta0_m)
+    acc = torques.wheel_acceleration(eta, tau, theta0)
+    acc_m = torques.wheel_acceleration(eta @ SWAP, tau @ SWAP, theta0_m)
     # Linear algebra on values up to ~1e3 rad/s^2: 1e-10 relative of the largest is rounding.
     atol = 1e-10 * float(np.abs(acc).max())
     np.testing.assert_allclose(acc_m, acc @ SWAP, rtol=0, atol=atol)
     wrong = theta0_m.copy()
     wrong[3] = -wrong[3]  # the "Vc changes sign" rule
-    assert np.abs(model.wheel_acceleration(eta @ SWAP, tau @ SWAP, wrong) - acc @ SWAP).max() > 1e3 * atol
+    assert np.abs(torques.wheel_acceleration(eta @ SWAP, tau @ SWAP, wrong) - acc @ SWAP).max() > 1e3 * atol
 
 
 @pytest.mark.parametrize("traj", TRAJECTORIES)

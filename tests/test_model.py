@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wmrid.model import dynamics as model
+from wmrid.model import dynamics as model, torques
 from wmrid.model.dynamics import RegressorForm
 from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD, PAPER_NOMINAL, PhysicalParameters
 
@@ -116,7 +116,7 @@ def test_coriolis_torque_matches_newton_euler():
     force, moment = -sx * w**2, sx * v * w
     expected = np.stack([p.r / 2 * force + p.r / (2 * p.b) * moment, p.r / 2 * force - p.r / (2 * p.b) * moment], 1)
     np.testing.assert_allclose(
-        model.coriolis_torque(eta, model.coriolis_coefficient(p)), expected, rtol=1e-12, atol=1e-12
+        torques.coriolis_torque(eta, model.coriolis_coefficient(p)), expected, rtol=1e-12, atol=1e-12
     )
 
 
@@ -133,7 +133,7 @@ def test_regressor_times_theta_is_the_direct_model(form):
     theta = model.intermediate_parameters(theta0, form)
     g = model.regressor(eta, tau, form)
     assert g.shape == (100, form.n_columns)
-    np.testing.assert_allclose(g @ theta.T, model.wheel_acceleration(eta, tau, theta0), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(g @ theta.T, torques.wheel_acceleration(eta, tau, theta0), rtol=1e-12, atol=1e-12)
 
 
 def test_inverse_and_direct_models_agree():
@@ -141,7 +141,7 @@ def test_inverse_and_direct_models_agree():
     rng = np.random.default_rng(3)
     eta, acc = rng.normal(0, 3, (20, 2)), rng.normal(0, 1, (20, 2))
     np.testing.assert_allclose(
-        model.wheel_acceleration(eta, model.wheel_torque(eta, acc, theta0), theta0), acc, atol=1e-12
+        torques.wheel_acceleration(eta, torques.wheel_torque(eta, acc, theta0), theta0), acc, atol=1e-12
     )
 
 

@@ -12,7 +12,7 @@ import pytest
 
 import wmrid.monitoring.monitor as mon
 from wmrid.core.errors import UsageError
-from wmrid.model import dynamics as model
+from wmrid.model import dynamics as model, torques
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
 from wmrid.monitoring import glr, residuals, settings as mon_settings
 from wmrid.pipeline.identify import identify
@@ -116,7 +116,7 @@ def test_a_caster_model_is_read_with_its_drag(amr_caster_json) -> None:
 
 
 def test_the_caster_columns_are_the_drag_torque_smoothed(amr_caster_log, amr_caster_json) -> None:
-    """Phi p's drag part is the model's caster drag torque (:func:`wmrid.model.dynamics.friction_torque`) smoothed as
+    """Phi p's drag part is the model's caster drag torque (:func:`wmrid.model.torques.friction_torque`) smoothed as
     the other speed columns: the Savitzky-Golay smoothing is linear."""
     log = amr_caster_log
     m = mon_settings.model_from_dict(amr_caster_json, "amr.json")
@@ -126,7 +126,7 @@ def test_the_caster_columns_are_the_drag_torque_smoothed(amr_caster_log, amr_cas
     assert phi.shape[1:] == (2, len(m.theta0))
     assert np.array_equal(phi[:, :, :8], sig.phi)
     assert sig.phi_for(m.form, "test").shape == phi.shape
-    drag = model.friction_torque(log.eta, m.theta0, m.form) - model.friction_torque(log.eta, m.theta0[:8])
+    drag = torques.friction_torque(log.eta, m.theta0, m.form) - torques.friction_torque(log.eta, m.theta0[:8])
     step = float(np.median(np.diff(log.t)))
     window = residuals._odd_window(settings.accel_window_s, step)
     half = max(window, residuals._odd_window(settings.regressor_window_s, step)) // 2

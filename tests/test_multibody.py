@@ -20,7 +20,7 @@ import pytest
 
 from wmrid.cli.app import main
 from wmrid.core.errors import RobotFileError, UsageError
-from wmrid.model import dynamics as model
+from wmrid.model import dynamics as model, torques
 from wmrid.model.robot import (
     BUILTIN_ROBOTS,
     Caster,
@@ -62,7 +62,7 @@ def torque_residual(eta: np.ndarray, tau: np.ndarray, p: PhysicalParameters) -> 
     theta0 = model.base_parameters(p)
     acc = np.diff(eta, axis=0) / H
     mid = 0.5 * (eta[1:] + eta[:-1])
-    return tau[:-1] - model.wheel_torque(mid, acc, theta0)
+    return tau[:-1] - torques.wheel_torque(mid, acc, theta0)
 
 
 def cli(capsys, *args: str) -> tuple[int, str, str]:
@@ -183,7 +183,7 @@ def test_engine_motion_balances_eq9_with_the_true_inertia_matrix(frictionless, r
     theta0 = model.base_parameters(CAD)
     acc = np.diff(eta, axis=0)[50:] / H
     mid = (0.5 * (eta[1:] + eta[:-1]))[50:]
-    rhs = (tau[:-1][50:] - model.friction_torque(mid, theta0)).ravel()  # rows tau_1, tau_2, tau_1, ...
+    rhs = (tau[:-1][50:] - torques.friction_torque(mid, theta0)).ravel()  # rows tau_1, tau_2, tau_1, ...
     e1, e2 = mid[:, 0], mid[:, 1]
     zero = np.zeros_like(e1)
     rows_1 = np.stack([acc[:, 0], acc[:, 1], zero, e1 * e2 - e2 * e2], axis=1)

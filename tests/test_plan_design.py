@@ -19,7 +19,7 @@ from wmrid.design.information import (
     predicted_covariance,
 )
 from wmrid.design.limits import Limits, parse_area, resolve_limits
-from wmrid.model import dynamics as d
+from wmrid.model import dynamics as d, torques
 from wmrid.model.robot import PAPER_CAD
 
 THETA0 = d.base_parameters(PAPER_CAD)
@@ -35,7 +35,7 @@ def _motion(duration: float = 10.0, rate: float = 100.0):
     dw = np.gradient(w, t)
     eta = np.stack([(v + PAPER_CAD.b * w) / PAPER_CAD.r, (v - PAPER_CAD.b * w) / PAPER_CAD.r], axis=1)
     deta = np.stack([(dv + PAPER_CAD.b * dw) / PAPER_CAD.r, (dv - PAPER_CAD.b * dw) / PAPER_CAD.r], axis=1)
-    return eta, d.wheel_torque(eta, deta, THETA0), 1.0 / rate
+    return eta, torques.wheel_torque(eta, deta, THETA0), 1.0 / rate
 
 
 def test_jacobian_matches_finite_differences():
@@ -225,7 +225,7 @@ def test_sign_flips_near_standstill_cost_information():
     assert np.allclose(draws.std(axis=0), sd, atol=0.02)
     e, _, h = _motion()
     slow = e * 0.05  # the same motion, 20 times slower: much of it within a few sigma of standstill
-    tau = d.wheel_torque(slow, np.gradient(slow, h, axis=0), THETA0)
+    tau = torques.wheel_torque(slow, np.gradient(slow, h, axis=0), THETA0)
     fd = []
     for sigma in (0.001, 0.05):
         cov = predicted_covariance(slow, tau, h, THETA0, GENERAL, SensorNoise(sigma, 0.05, 100.0))
@@ -254,7 +254,7 @@ def test_flips_of_the_centred_mean_sign_match_a_monte_carlo() -> None:
 
     eta, _, h = _motion(duration=6.0, rate=1000.0)
     slow = 0.1 * eta
-    tau = d.wheel_torque(slow, np.gradient(slow, h, axis=0), THETA0)
+    tau = torques.wheel_torque(slow, np.gradient(slow, h, axis=0), THETA0)
     noise, k = SensorNoise(0.05, 0.002, 1000.0), 10.0
     cov, _ = intermediate_covariance(slow, tau, h, THETA0, GENERAL, noise, k)
     white, _ = intermediate_covariance(slow, tau, h, THETA0, GENERAL, WhiteFlips(0.05, 0.002, 1000.0), k)

@@ -10,7 +10,7 @@ from scipy.integrate import solve_ivp
 
 from tests.open_loop import open_loop_log
 from wmrid.core.errors import UsageError
-from wmrid.model import dynamics as model
+from wmrid.model import dynamics as model, torques
 from wmrid.model.predict import MAX_STEP, fit_percent, simulate_segments, simulate_speeds, validation_fit
 from wmrid.model.robot import PAPER_CAD, PAPER_NOMINAL
 
@@ -19,7 +19,7 @@ THETA_CAD = model.base_parameters(PAPER_CAD)
 
 def _rhs(theta0: np.ndarray, torque):
     def rhs(t, y):
-        return model.wheel_acceleration(y[None, :], torque(t)[None, :], theta0)[0]
+        return torques.wheel_acceleration(y[None, :], torque(t)[None, :], theta0)[0]
 
     return rhs
 
@@ -204,7 +204,7 @@ def test_coupled_wheel_sticks_while_the_other_turns() -> None:
     got = simulate_speeds(t, tau, theta0, [0.3, 1.0])
 
     def full(_s, y):
-        return model.wheel_acceleration(y[None, :], tau[:1], theta0)[0]
+        return torques.wheel_acceleration(y[None, :], tau[:1], theta0)[0]
 
     def hit(_s, y):
         return y[0]

@@ -12,7 +12,7 @@ from tests.open_loop import open_loop_log
 from tests.test_idim_caster import GEOMETRIC, TWO_TERM, caster_log  # noqa: F401  (caster_log: a fixture)
 from wmrid.core.errors import UsageError
 from wmrid.estimators.output_error import identify_oe
-from wmrid.model import dynamics as model
+from wmrid.model import dynamics as model, torques
 from wmrid.model.predict import simulate_segments, simulate_speeds, validation_fit
 from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
 from wmrid.pipeline.identify import identify
@@ -95,13 +95,13 @@ def test_a_wheel_held_by_coulomb_friction_against_the_drag():
     inner[first + 1 : -1] = True
     assert np.all(eta[inner, 1] > 0.2)  # wheel 2 turning: the casters move and drag
     eta_dot = np.gradient(eta, t, axis=0)
-    holding = tau[inner, 0] - model.wheel_torque(eta, eta_dot, theta0, GEOMETRIC)[inner, 0]
+    holding = tau[inner, 0] - torques.wheel_torque(eta, eta_dot, theta0, GEOMETRIC)[inner, 0]
     assert np.all(np.abs(holding) <= theta0[6])
-    without_drag = tau[inner, 0] - model.wheel_torque(eta, eta_dot, theta0[:8])[inner, 0]
+    without_drag = tau[inner, 0] - torques.wheel_torque(eta, eta_dot, theta0[:8])[inner, 0]
     assert np.min(without_drag) < -theta0[6]
     turning = np.zeros_like(rest)
     turning[1 : first - 1] = True
-    acc = model.wheel_acceleration(eta, tau, theta0, GEOMETRIC)
+    acc = torques.wheel_acceleration(eta, tau, theta0, GEOMETRIC)
     np.testing.assert_allclose(eta_dot[turning], acc[turning], atol=1e-5)
 
 

@@ -11,7 +11,7 @@ import pytest
 from tests.open_loop import open_loop_log
 from wmrid.core.errors import NotIdentifiableError, UsageError
 from wmrid.estimators import idim, idim_regression, rls
-from wmrid.model import dynamics as model
+from wmrid.model import dynamics as model, torques
 from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
 from wmrid.sim.scenario import NoiseSettings
 from wmrid.sim.simulate import simulate
@@ -73,10 +73,10 @@ def test_forgetting_tracks_a_step_in_viscous_friction(reversing_log):
     # wheel's friction (weakly excited in that stretch) still 11 % (F_v2) and 9 % (F_d2) off; at the end
     # of the log (9.6 windows) everything within 2.7e-4.  Plain RLS (lambda = 1) ends at 0.0167.
     log = reversing_log
-    acc = model.wheel_acceleration(log.eta, log.tau, log.theta0)
+    acc = torques.wheel_acceleration(log.eta, log.tau, log.theta0)
     after = log.theta0.copy()
     after[4] *= 2.0
-    tau = np.where((log.t >= 10.0)[:, None], model.wheel_torque(log.eta, acc, after), log.tau)
+    tau = np.where((log.t >= 10.0)[:, None], torques.wheel_torque(log.eta, acc, after), log.tau)
     hist = rls.rls_history(log.t, log.eta, tau, forgetting=0.999, torque_hold="foh")
     assert len(hist.t) <= rls.HISTORY_POINTS
     before = np.searchsorted(hist.t, 9.5)
@@ -126,7 +126,7 @@ def test_forgetting_does_not_wind_up_when_excitation_stops(reversing_log):
     log = reversing_log
     n = 30000
     eta_c = np.tile(log.eta[-1], (n, 1))
-    tau_c = model.wheel_torque(eta_c, np.zeros_like(eta_c), log.theta0)
+    tau_c = torques.wheel_torque(eta_c, np.zeros_like(eta_c), log.theta0)
     t = np.concatenate([log.t, log.t[-1] + 1e-3 * np.arange(1, n + 1)])
     est, hist = rls.rls_run(
         t, np.vstack([log.eta, eta_c]), np.vstack([log.tau, tau_c]), forgetting=0.999, torque_hold="foh"

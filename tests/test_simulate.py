@@ -10,7 +10,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from wmrid.core.errors import UsageError
-from wmrid.model import dynamics as model
+from wmrid.model import dynamics as model, torques
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
 from wmrid.sim.closed_loop import closed_loop_kernel
 from wmrid.sim.scenario import NoiseSettings
@@ -39,7 +39,7 @@ def reversing() -> SimulatedLog:
 def _plant_rhs(t: float, s: np.ndarray, tau: np.ndarray, theta0: np.ndarray, r: float, b: float) -> list:
     """Eq. (7) + Eq. (20), written here with model.wheel_acceleration; s = x, y, phi, th1, th2, eta1, eta2."""
     eta = s[5:7]
-    acc = model.wheel_acceleration(eta[None, :], tau[None, :], theta0)[0]
+    acc = torques.wheel_acceleration(eta[None, :], tau[None, :], theta0)[0]
     v = 0.5 * r * (eta[0] + eta[1])
     return [v * math.cos(s[2]), v * math.sin(s[2]), r / (2 * b) * (eta[0] - eta[1]), eta[0], eta[1], acc[0], acc[1]]
 
@@ -108,12 +108,12 @@ def test_logged_data_satisfy_the_model(caster_std: float) -> None:
     theta0 = model.base_parameters(TRUE)
     fd = np.diff(log.eta, axis=0) / h
     mid = 0.5 * (log.eta[1:] + log.eta[:-1])
-    acc = model.wheel_acceleration(mid, log.tau[:-1] - log.disturbance[:-1], theta0)
+    acc = torques.wheel_acceleration(mid, log.tau[:-1] - log.disturbance[:-1], theta0)
     assert np.abs(fd).max() > 1.0  # the run does accelerate
     np.testing.assert_allclose(fd, acc, rtol=0, atol=2e-5)
     if caster_std > 0:
         # ... and ignoring tau_d would not fit: the disturbance is really in the plant.
-        acc_wrong = model.wheel_acceleration(mid, log.tau[:-1], theta0)
+        acc_wrong = torques.wheel_acceleration(mid, log.tau[:-1], theta0)
         assert np.abs(fd - acc_wrong).max() > 0.05
 
 

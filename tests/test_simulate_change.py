@@ -11,7 +11,7 @@ import pytest
 from cliutil import assert_clean_error, wmrid
 
 from wmrid.core.errors import UsageError
-from wmrid.model import dynamics as model
+from wmrid.model import dynamics as model, torques
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
 from wmrid.sim.closed_loop import closed_loop_kernel
 from wmrid.sim.scenario import NoiseSettings, PlantChange, parse_friction_fault, parse_time
@@ -125,7 +125,7 @@ def _acceleration_check(log: SimulatedLog, theta0: np.ndarray, rows: np.ndarray)
     h = log.t[1] - log.t[0]
     fd = np.diff(log.eta, axis=0)[rows] / h
     mid = 0.5 * (log.eta[1:] + log.eta[:-1])[rows]
-    acc = model.wheel_acceleration(mid, log.tau[:-1][rows], theta0)
+    acc = torques.wheel_acceleration(mid, log.tau[:-1][rows], theta0)
     m_norm = np.linalg.norm(model.inverse_inertia(theta0), 2)
     vc, eta_max, d1 = theta0[3], np.abs(log.eta).max(), np.abs(fd).max()
     j_norm = m_norm * (3 * vc * eta_max + theta0[4:6].max())

@@ -29,7 +29,8 @@ from wmrid.design.information import (
     speed_sensitivity,
 )
 from wmrid.design.limits import Limits
-from wmrid.model.dynamics import RegressorForm, wheel_torque
+from wmrid.model.dynamics import RegressorForm
+from wmrid.model.torques import wheel_torque
 
 #: Criteria: the largest relative std of the base parameters (default), D-optimality (the geometric mean of the
 #: relative covariance's eigenvalues, as a std: det^(1/2n)) and A-optimality (the rms of the relative stds).

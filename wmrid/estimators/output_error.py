@@ -95,7 +95,8 @@ from wmrid.estimators.estimate import BaseEstimate
 from wmrid.estimators.uncertainty import segment_count
 from wmrid.model.dynamics import RegressorForm
 from wmrid.model.kernels import plain
-from wmrid.model.predict import MAX_STEP, caster_array, fit_percent, predictor_text, simulate_kernel
+from wmrid.model.predict import MAX_STEP, caster_array, fit_percent, predictor_text
+from wmrid.model.predict_kernel import simulate_kernel
 
 #: Default length (s) of the multiple-shooting segments (see the module docstring).
 SHOOTING_SECONDS = 0.5

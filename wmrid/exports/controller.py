@@ -6,10 +6,10 @@ Both hold the model the result identified, in the paper's form (Eq. 9 without th
     V(eta) = V_c [eta_1 eta_2 - eta_2^2, eta_1 eta_2 - eta_1^2],
 
 eta = [right, left] wheel speeds (rad/s), tau the wheel torques (N m, or the log's effort unit); the caster drag as
-:func:`wmrid.model.dynamics.friction_torque` computes it (the two-term model, or each caster's drag force D_k against
+:func:`wmrid.model.torques.friction_torque` computes it (the two-term model, or each caster's drag force D_k against
 its contact's velocity).  Every value carries its std (a field in YAML, a comment in Python) and both name the
 result, the log and the robot they came from.  :func:`wheel_torques` is what the Python file defines; the tests
-check both files against :func:`wmrid.model.dynamics.wheel_torque` to 1e-12.
+check both files against :func:`wmrid.model.torques.wheel_torque` to 1e-12.
 """
 
 from __future__ import annotations

@@ -60,7 +60,7 @@ change to the next change or the end of the log (time re-based to 0): those are 
 
 Caster drag.  A model identified with ``--friction wheel+caster`` (its JSON ``theta.form``, read by
 :meth:`wmrid.model.dynamics.RegressorForm.from_dict`) adds its caster columns to Phi: column j of ``form.caster_map``
-adds theta0[param_j] col_j [1, pattern_j] to the wheel torques (:func:`wmrid.model.dynamics.friction_torque`),
+adds theta0[param_j] col_j [1, pattern_j] to the wheel torques (:func:`wmrid.model.torques.friction_torque`),
 smoothed as the other speed columns; p's drag entries are theta0's (as in
 :func:`wmrid.estimators.idim_regression.rows_from_features`), with their reported standard errors.  The test then has
 len(p)

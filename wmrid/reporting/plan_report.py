@@ -17,7 +17,7 @@ def plan_figures(plan: Any) -> dict[str, Any]:
     """caption -> matplotlib Figure: the path, the reference (v, w), the wheel speeds, accelerations and torques with
     their limits (dashed: the limit; dotted: the plan's bound after the margin), the predicted relative std."""
     from wmrid.design.excitation import wheel_motion
-    from wmrid.model.dynamics import wheel_torque
+    from wmrid.model.torques import wheel_torque
     from wmrid.reporting.figures import FIGSIZE, FIGSIZE_STACKED, _new_figure
 
     s = plan.samples(max(plan.settings["rate"], 50.0))

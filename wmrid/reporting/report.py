@@ -32,7 +32,7 @@ from wmrid.core.errors import WmridError
 from wmrid.estimators.model_error import std_mark
 from wmrid.estimators.result import from_dict
 from wmrid.estimators.verdict import LEGEND, PLAN_HINT
-from wmrid.model import dynamics as model
+from wmrid.model import dynamics as model, torques
 from wmrid.model.dynamics import RegressorForm
 
 #: A difference from the CAD value beyond this many standard errors is flagged.
@@ -89,7 +89,7 @@ def torque_residual(log: Any, theta0: np.ndarray, form: RegressorForm | None = N
     from wmrid.io.signals import speed_from_position
 
     eta_dot, how = speed_from_position(np.asarray(log.t) - log.t[0], np.asarray(log.eta), window_s=ACCEL_WINDOW_S)
-    predicted = model.wheel_torque(np.asarray(log.eta), eta_dot, theta0, form)
+    predicted = torques.wheel_torque(np.asarray(log.eta), eta_dot, theta0, form)
     res = np.asarray(log.tau) - predicted
     spread = np.asarray(log.tau) - np.asarray(log.tau).mean(axis=0)
     rms = np.sqrt(np.mean(res**2, axis=0))
