@@ -109,7 +109,7 @@ def test_the_core_identifies_and_simulates_csv_without_pyarrow(tmp_path):
 
 
 def test_series_json_without_pyarrow_holds_the_same_numbers():
-    from wmrid.io.mcap.writer import _json_objects, _json_objects_python
+    from wmrid.io.mcap.series_writer import _json_objects, _json_objects_python
 
     rng = np.random.default_rng(7)
     values = rng.normal(size=500) * 10.0 ** rng.integers(-30, 30, 500)

@@ -13,7 +13,7 @@ from mcap.writer import Writer as RawMcapWriter
 from rosbags.highlevel import AnyReader
 
 from wmrid.core.errors import LogFormatError, OutputExistsError, UsageError
-from wmrid.io.mcap.writer import write_series_mcap
+from wmrid.io.mcap.series_writer import write_series_mcap
 from wmrid.io.reference_files import read_reference, write_reference
 
 DURATION = 6.0

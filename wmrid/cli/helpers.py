@@ -77,7 +77,7 @@ def write_estimates(result, path: Path, force: bool) -> None:
     import numpy as np
 
     from wmrid.core.atomic import to_json_text
-    from wmrid.io.mcap.writer import write_series_mcap
+    from wmrid.io.mcap.series_writer import write_series_mcap
     from wmrid.model.base_params import recover_history
 
     if path.suffix.lower() != ".mcap":
