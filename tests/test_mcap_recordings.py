@@ -308,7 +308,7 @@ def test_the_span_walk_hands_the_pages_back(long_split, monkeypatch):
     """:func:`mcap_span` asks for the mapped pages it walked past to be released (an unchunked file of 340 MB
     raised the peak memory by 380 MB without it, by 65 MB with it)."""
     asked: list[int] = []
-    real = mcap_files._map
+    real = mcap_files.map_file
 
     def recorded(path, data):
         buf, release = real(path, data)
@@ -320,7 +320,7 @@ def test_the_span_walk_hands_the_pages_back(long_split, monkeypatch):
 
         return buf, wrapped
 
-    monkeypatch.setattr(mcap_files, "_map", recorded)
+    monkeypatch.setattr(mcap_files, "map_file", recorded)
     last = sorted(long_split.glob("*.mcap"))[-1]
     assert mcap_files.mcap_span(str(last))[0] is not None
     assert asked

@@ -32,17 +32,9 @@ import numpy as np
 
 from wmrid.core.errors import LogFormatError
 from wmrid.io.bag.state import _BagState, _Topic, storage_files
+from wmrid.io.binary import cut_short_note, map_file, u64s_at
 from wmrid.io.mcap.joint_batches import DYNAMIC_JOINT_STATE_NAMES
-from wmrid.io.mcap.reader import (
-    _SCAN_WINDOW,
-    UNCLOSED_NOTE,
-    _check_start,
-    _map,
-    _ReadState,
-    closed,
-    cut_short_note,
-    u64s_at,
-)
+from wmrid.io.mcap.reader import _SCAN_WINDOW, UNCLOSED_NOTE, _check_start, _ReadState, closed
 from wmrid.io.mcap.records import JOINT_STATE_NAMES, MAGIC, OP_CHUNK, OP_HEADER, OP_MESSAGE, scan
 
 
@@ -100,7 +92,7 @@ def mcap_span(path: str) -> tuple[int | None, int | None] | None:
     an MCAP file.  Only top-level records are read: a chunk's times from its record header, a message's from its own;
     a file cut short is walked up to its last whole record."""
     try:
-        buf, release = _map(path, None)
+        buf, release = map_file(path, None)
     except LogFormatError:
         return None
     size = buf.shape[0]
@@ -159,7 +151,7 @@ class McapFilesState(_BagState):
                     "file began): skipped"
                 )
                 continue
-            buf, release = _map(path, None)
+            buf, release = map_file(path, None)
             _check_start(path, buf)
             size = buf.shape[0]
             walker = _FileWalker(self, path, release)

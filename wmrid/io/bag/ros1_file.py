@@ -29,7 +29,7 @@ from wmrid.core.errors import LogFormatError
 from wmrid.core.limits import describe
 from wmrid.io.bag.ros1_records import OP_CHUNK, OP_CHUNK_INFO, OP_CONNECTION, OP_MESSAGE, ros1_records
 from wmrid.io.bag.state import _BagState, _Topic
-from wmrid.io.mcap.reader import cut_short_note, page_releaser
+from wmrid.io.binary import cut_short_note, page_releaser
 from wmrid.io.mcap.records import BOMB_FLOOR, BOMB_RATIO
 
 MAGIC = b"#ROSBAG V2.0\n"

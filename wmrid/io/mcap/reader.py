@@ -46,7 +46,6 @@ Times stay integer nanoseconds here; conversion to seconds happens once, when a 
 from __future__ import annotations
 
 import io
-import mmap
 import os
 import zlib
 from collections.abc import Callable, Generator, Iterable, Mapping
@@ -56,6 +55,7 @@ import numpy as np
 
 from wmrid.core.errors import LogFormatError
 from wmrid.core.limits import describe
+from wmrid.io.binary import cut_short_note, map_file, u64s_at
 from wmrid.io.mcap.contents import (
     Accumulator,
     JsonSeries,
@@ -97,7 +97,7 @@ def read_mcap(
     json_fields : {topic: {key: dotted field path}} for JSON-encoded channels to read as numbers.
     decode_joint_states : False to take only the inventory (faster for ``inspect`` on huge files).
     """
-    buf, release = _map(path, data)
+    buf, release = map_file(path, data)
     state = _ReadState(path, json_fields or {}, decode_joint_states, release=release, fields=fields)
     return _read_buffer(state, buf)
 
@@ -111,7 +111,7 @@ def scan_mcap(
     spare : bytes; when ``complete`` is False and the parts decoded without their positions fit in this many
     bytes, ``replay`` holds them (see the module docstring), else None.
     """
-    buf, release = _map(path, data)
+    buf, release = map_file(path, data)
     return _read_buffer(_ReadState(path, {}, True, release=release, keep=keep, spare=spare, fields=fields), buf)
 
 
@@ -124,7 +124,7 @@ def iter_joint_parts(
     are not decoded; notes are those of the first pass (the walk is the same).  Memory: one batch.
     """
     wanted = set(channel_ids)
-    buf, release = _map(path, data)
+    buf, release = map_file(path, data)
     _check_start(path, buf)
     state = _ReadState(path, {}, True, release=release, wanted=wanted, fields=fields)
 
@@ -143,44 +143,6 @@ def iter_joint_parts(
     parts = drain()
     if parts:
         yield parts
-
-
-def _map(path: str, data: bytes | None) -> tuple[np.ndarray, Callable[[int], None] | None]:
-    """(the bytes as uint8, a function that hands the mapped pages below an offset back to the kernel)."""
-    if data is not None:
-        return np.frombuffer(data, dtype=np.uint8), None
-    try:
-        with open(path, "rb") as fh:
-            size = os.fstat(fh.fileno()).st_size
-            if size == 0:
-                raise LogFormatError(f"{path}: the file is empty (0 bytes)")
-            # Not closed explicitly: numpy views of it may live on in a traceback; the map is released
-            # when the last view goes (the file descriptor closes here, the map keeps its own).
-            mapped = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
-    except OSError as err:
-        raise LogFormatError(f"{path}: cannot be read ({err.strerror or err})") from err
-    return np.frombuffer(mapped, dtype=np.uint8), page_releaser(mapped)
-
-
-def page_releaser(mapped: mmap.mmap) -> Callable[[int], None] | None:
-    """A function that hands the pages of a read-only file mapping below an offset back to the kernel, in runs of
-    at least :data:`_RELEASE_BYTES` (None where the platform cannot).  Dropping them loses nothing (they come back
-    from the page cache if touched again); without this a long file's pages all count in the resident memory."""
-    if not hasattr(mapped, "madvise") or not hasattr(mmap, "MADV_DONTNEED"):
-        return None
-    done = [0]
-
-    def release(offset: int) -> None:
-        upto = offset // mmap.PAGESIZE * mmap.PAGESIZE
-        if upto - done[0] >= _RELEASE_BYTES:
-            mapped.madvise(mmap.MADV_DONTNEED, done[0], upto - done[0])
-            done[0] = upto
-
-    return release
-
-
-#: Mapped pages are handed back in runs of at least this many bytes.
-_RELEASE_BYTES = 1 << 22
 
 
 #: Bytes of top-level records scanned at a time.
@@ -230,19 +192,6 @@ def _read_buffer(state: _ReadState, buf: np.ndarray) -> McapContents:
         json=json_out, metadata=state.metadata, notes=tuple(notes), size_bytes=size, lost_bytes=lost_bytes,
         complete=state.complete, replay=None if state.complete else state.replay, definitions=_definitions(state),
     )  # fmt: skip
-
-
-def cut_short_note(reached: int, size: int) -> str:
-    """Said of a file (MCAP or ROS 1) whose last record stops at byte ``size``, after ``reached``."""
-    return (
-        f"the file ends inside a record (byte {reached} of {size}): it was cut short, e.g. by a crash; read "
-        f"everything up to there, {size - reached} bytes at the end are lost"
-    )
-
-
-def u64s_at(buf: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """The little-endian uint64 at each of ``offsets`` (n,) in ``buf`` (uint8), as int64 (n,)."""
-    return np.ascontiguousarray(buf[offsets[:, None] + np.arange(8)]).view("<i8").ravel()
 
 
 #: Said of a file that ends between two records without MCAP's footer and closing magic bytes.
