@@ -29,7 +29,7 @@ from wmrid.model.dynamics import (
 )
 from wmrid.model.robot import BUILTIN_ROBOTS
 from wmrid.pipeline.identify import identify
-from wmrid.reporting import decimate, figures, fit_figures
+from wmrid.reporting import convergence_figures, decimate, figures, fit_figures
 from wmrid.reporting.decimate import MAX_POINTS, decimate_for_display
 from wmrid.sim.simulate import simulate
 
@@ -60,11 +60,11 @@ def _all_figures(run):
     return {
         "log_overview": figures.build_log_overview(run.log),
         "path": figures.build_path_figure(run.sim.pose),
-        "estimates": figures.build_estimates_figure(run.result, run.truth),
-        "errors": figures.build_estimates_figure(run.result, run.truth, error_mode=True),
+        "estimates": convergence_figures.build_estimates_figure(run.result, run.truth),
+        "errors": convergence_figures.build_estimates_figure(run.result, run.truth, error_mode=True),
         "residuals": fit_figures.build_residuals_figure(run.result),
         "excitation": fit_figures.build_excitation_figure(run.result),
-        "convergence": figures.build_base_convergence_figure(run.result, run.truth),
+        "convergence": convergence_figures.build_base_convergence_figure(run.result, run.truth),
         "speed_fit": fit_figures.build_speed_fit_figure(run.log.t, run.log.eta, _model_speeds(run.log), [97.1, 95.0]),
         "correlation": fit_figures.build_correlation_figure(run.result.form.base_names, run.result.theta0_cov),
     }
@@ -175,18 +175,18 @@ BOTH = ("svg", "png")
         ("log_overview", BOTH, lambda run, fmt: figures.log_overview(run.log, fmt=fmt)),
         ("path", BOTH, lambda run, fmt: figures.path_figure(run.sim.pose, fmt=fmt)),
         # estimates_figure in both formats, split between its two modes (14 panels take ~1 s per format)
-        ("estimates", ("png",), lambda run, fmt: figures.estimates_figure(run.result, run.truth, fmt=fmt)),
+        ("estimates", ("png",), lambda run, fmt: convergence_figures.estimates_figure(run.result, run.truth, fmt=fmt)),
         (
             "errors",
             ("svg",),
-            lambda run, fmt: figures.estimates_figure(run.result, run.truth, error_mode=True, fmt=fmt),
+            lambda run, fmt: convergence_figures.estimates_figure(run.result, run.truth, error_mode=True, fmt=fmt),
         ),
         ("residuals", BOTH, lambda run, fmt: fit_figures.residuals_figure(run.result, fmt=fmt)),
         ("excitation", BOTH, lambda run, fmt: fit_figures.excitation_figure(run.result, fmt=fmt)),
         pytest.param(
             "convergence",
             BOTH,
-            lambda run, fmt: figures.base_convergence_figure(run.result, run.truth, fmt=fmt),
+            lambda run, fmt: convergence_figures.base_convergence_figure(run.result, run.truth, fmt=fmt),
             marks=pytest.mark.slow(reason="3 s; drawn as SVG by the determinism test, as PNG by test_terminal's .md"),
         ),
         (
@@ -267,7 +267,7 @@ def test_estimates_figure(built, run):
     for n, ax in enumerate(fig.axes):
         i, k = divmod(n, p)
         assert _units_ok(ax.get_ylabel()), ax.get_ylabel()
-        assert figures._subscript(f"{i + 1}{k + 1}") in ax.get_title()
+        assert convergence_figures._subscript(f"{i + 1}{k + 1}") in ax.get_title()
         lines = {line.get_label(): line for line in ax.get_lines()}
         assert set(lines) == {"estimate", "start value", "true value"}
         assert lines["start value"].get_linestyle() == "--"
@@ -280,10 +280,10 @@ def test_estimates_figure(built, run):
     assert all(ax.get_xlabel() == "time (s)" for ax in fig.axes[p:])
     # the whole truth file is accepted as well as its "parameters" table
     whole = json.loads((ROOT / "sample_logs" / "paper_sinusoid.csv.truth.json").read_text())
-    np.testing.assert_allclose(figures.true_theta(whole, run.result.form), truth_theta, rtol=1e-12)
+    np.testing.assert_allclose(convergence_figures.true_theta(whole, run.result.form), truth_theta, rtol=1e-12)
     with pytest.raises(UsageError, match="Fd2"):
-        figures.true_theta({"m11": 1.0}, run.result.form)
-    no_truth = figures.build_estimates_figure(run.result)
+        convergence_figures.true_theta({"m11": 1.0}, run.result.form)
+    no_truth = convergence_figures.build_estimates_figure(run.result)
     assert {line.get_label() for line in no_truth.axes[0].get_lines()} == {"estimate", "start value"}
 
 
@@ -297,13 +297,13 @@ def test_estimation_error_figure(built, run):
         start_err = lines["error of the start value"].get_ydata()[0]
         assert abs(err[-1]) < 1e-2 * max(abs(start_err), 1e-12) or abs(err[-1]) < 1e-6
     with pytest.raises(UsageError, match="truth"):
-        figures.build_estimates_figure(run.result, error_mode=True)
+        convergence_figures.build_estimates_figure(run.result, error_mode=True)
 
 
 def test_estimates_figure_general_form():
     _, _, result, truth = _run("reversing")
     assert result.form.kind == "general"
-    fig = figures.build_estimates_figure(result, truth)
+    fig = convergence_figures.build_estimates_figure(result, truth)
     assert len(fig.axes) == 16
     assert fig.axes[7].get_ylabel() == "rad/s²"
     assert fig.axes[15].get_title() == "θ̂₂₈"
@@ -355,9 +355,9 @@ def test_estimate_panels_zoom_past_early_excursions():
     t = np.linspace(0.0, 10.0, 1001)
     est = np.full_like(t, 0.79)
     est[:50] = np.linspace(8.0, 0.79, 50)  # the first half second far off, as at the box bound
-    lo, hi = figures._settled_limits(t, est, np.array([0.92, 0.787]))
+    lo, hi = convergence_figures._settled_limits(t, est, np.array([0.92, 0.787]))
     assert lo < 0.787 < 0.92 < hi < 1.0
-    assert figures._settled_limits(t, np.linspace(0.92, 0.79, 1001), np.array([0.92, 0.787])) is None
+    assert convergence_figures._settled_limits(t, np.linspace(0.92, 0.79, 1001), np.array([0.92, 0.787])) is None
 
 
 # --------------------------------------------------------------------------------------------------
@@ -412,8 +412,8 @@ def test_svg_keeps_text_as_text_and_is_deterministic(built, name):
 
 @pytest.mark.slow  # 2.7 s; the same figure rendered twice is checked in the default run
 def test_svg_is_byte_identical_across_builds(run):
-    one = figures.render(figures.build_base_convergence_figure(run.result, run.truth))
-    two = figures.render(figures.build_base_convergence_figure(run.result, run.truth))
+    one = figures.render(convergence_figures.build_base_convergence_figure(run.result, run.truth))
+    two = figures.render(convergence_figures.build_base_convergence_figure(run.result, run.truth))
     assert one == two
 
 
@@ -478,12 +478,12 @@ def test_base_convergence_figure(built, run):
 
 
 def test_base_convergence_figure_without_history_truth_or_std(run):
-    assert figures.build_base_convergence_figure(dataclasses.replace(run.result, observer=None)) is None
-    assert figures.base_convergence_figure(dataclasses.replace(run.result, observer=None)) is None
+    assert convergence_figures.build_base_convergence_figure(dataclasses.replace(run.result, observer=None)) is None
+    assert convergence_figures.base_convergence_figure(dataclasses.replace(run.result, observer=None)) is None
     params = dict(run.result.parameters)
     for name, std in (("m11", math.nan), ("m12", None), ("m22", math.inf)):
         params[name] = (params[name][0], std)
-    fig = figures.build_base_convergence_figure(dataclasses.replace(run.result, parameters=params))
+    fig = convergence_figures.build_base_convergence_figure(dataclasses.replace(run.result, parameters=params))
     for ax in fig.axes:
         labels = {line.get_label() for line in ax.get_lines()}
         assert labels == {"estimate (closed form)", "final estimate"}  # no truth given
@@ -519,7 +519,7 @@ def test_base_convergence_figure_with_caster_drag(form, n_names):
     result, theta0 = _synthetic_result(form)
     names = form.base_names
     assert len(names) == n_names
-    fig = figures.build_base_convergence_figure(result, dict(zip(names, theta0, strict=True)))
+    fig = convergence_figures.build_base_convergence_figure(result, dict(zip(names, theta0, strict=True)))
     assert len(fig.axes) == n_names  # 2 rows of 5, the unused panel removed
     assert {ax.get_subplotspec().get_geometry()[:2] for ax in fig.axes} == {(2, 5)}
     assert [ax.get_title().split()[0] for ax in fig.axes] == list(names)
@@ -534,7 +534,7 @@ def test_base_convergence_figure_with_caster_drag(form, n_names):
     # the synthetic estimate starts 50 % off: every panel is zoomed on the band and the settled estimate
     assert all("(zoomed)" in ax.get_title() for ax in fig.axes)
     quiet, _ = _synthetic_result(form, transient=False)
-    fig = figures.build_base_convergence_figure(quiet)
+    fig = convergence_figures.build_base_convergence_figure(quiet)
     assert not any("(zoomed)" in ax.get_title() for ax in fig.axes)
     for ax, value in zip(fig.axes, theta0, strict=True):
         lo, hi = ax.get_ylim()
@@ -547,15 +547,15 @@ def test_zoom_limits():
     t = np.linspace(0.0, 10.0, 1001)
     est = np.full_like(t, 1.0)
     est[:50] = np.linspace(10.0, 1.0, 50)
-    lo, hi, clipped = figures._zoom_limits(t, est, np.array([0.9, 1.1]))
+    lo, hi, clipped = convergence_figures._zoom_limits(t, est, np.array([0.9, 1.1]))
     assert clipped
     assert lo == pytest.approx(0.88)
     assert hi == pytest.approx(1.12)
-    lo, hi, clipped = figures._zoom_limits(t, np.linspace(1.2, 1.0, 1001), np.array([0.9, 1.1]))
+    lo, hi, clipped = convergence_figures._zoom_limits(t, np.linspace(1.2, 1.0, 1001), np.array([0.9, 1.1]))
     assert not clipped
     assert lo < 0.9
     assert hi > 1.2
-    assert figures._zoom_limits(t, np.full_like(t, np.nan), np.array([np.nan])) is None
+    assert convergence_figures._zoom_limits(t, np.full_like(t, np.nan), np.array([np.nan])) is None
 
 
 def test_zoom_limits_ignore_a_few_late_spikes():
@@ -564,7 +564,7 @@ def test_zoom_limits_ignore_a_few_late_spikes():
     t = np.linspace(0.0, 10.0, 1001)
     est = np.full_like(t, 1.0)
     est[[500, 520, 600, 700, 800]] = [3e4, -2e4, 5e3, -7e3, 1e4]
-    lo, hi, clipped = figures._zoom_limits(t, est, np.array([0.9, 1.1]))
+    lo, hi, clipped = convergence_figures._zoom_limits(t, est, np.array([0.9, 1.1]))
     assert clipped
     assert lo == pytest.approx(0.88)
     assert hi == pytest.approx(1.12)

@@ -14,19 +14,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from wmrid.core.errors import UsageError
+from wmrid.reporting.convergence_figures import _display_scale, _finite
 from wmrid.reporting.decimate import MAX_POINTS, envelope_indices
-from wmrid.reporting.figures import (
-    _OUTWEIGH,
-    _WHEELS,
-    FIGSIZE,
-    FIGSIZE_STACKED,
-    _display_scale,
-    _finite,
-    _new_figure,
-    _plot,
-    _styled,
-    render,
-)
+from wmrid.reporting.figures import _OUTWEIGH, _WHEELS, FIGSIZE, FIGSIZE_STACKED, _new_figure, _plot, _styled, render
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

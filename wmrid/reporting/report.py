@@ -378,7 +378,7 @@ def _speed_fit(log: Any, theta0: np.ndarray, form: Any, torque_hold: str) -> tup
 
 def _add_figures(report: Report, rl: Any, log: Any, truth: dict[str, float] | None, validation_log: Any) -> None:
     """The report's figures, each under a short title with a sentence saying what it shows (``figure_notes``)."""
-    from wmrid.reporting import figures as fg, fit_figures as ff
+    from wmrid.reporting import convergence_figures as cf, figures as fg, fit_figures as ff
 
     def both(name: str, fig: Any, note: str) -> None:
         if fig is None:
@@ -391,7 +391,7 @@ def _add_figures(report: Report, rl: Any, log: Any, truth: dict[str, float] | No
     theta0 = np.array([params[n]["value"] for n in rl.form.base_names])
     hold = data.get("settings", {}).get("torque_hold", "zoh")
     if rl.history is not None:
-        both("Base parameters over time", fg.build_base_convergence_figure(rl, truth),
+        both("Base parameters over time", cf.build_base_convergence_figure(rl, truth),
              "Each base parameter recovered (Eq. 21, in closed form) from the observer's intermediate estimates as "
              "the log is replayed; the band is the final estimate ± 2σ.")  # fmt: skip
     for which, wheel_log in (("identification", log), ("validation", validation_log)):
@@ -420,11 +420,11 @@ def _add_figures(report: Report, rl: Any, log: Any, truth: dict[str, float] | No
         if getattr(log, "pose", None) is not None:
             both("Path (paper Fig. 5)", fg.build_path_figure(log.pose), "The robot's path in the plane.")
     if rl.history is not None:
-        both("Intermediate parameters over time", fg.build_estimates_figure(rl, truth),
+        both("Intermediate parameters over time", cf.build_estimates_figure(rl, truth),
              f"The observer's estimates θ̂ of Eqs. 23-24 (row i: wheel i, 1 = right, 2 = left; {rl.form.kind} form, "
              f"k = {rl.settings.k:g} 1/s).")  # fmt: skip
         if truth is not None:
-            both("Estimation errors over time (paper Fig. 7)", fg.build_estimates_figure(rl, truth, error_mode=True),
+            both("Estimation errors over time (paper Fig. 7)", cf.build_estimates_figure(rl, truth, error_mode=True),
                  "θ̂ − θ of the intermediate parameters against the truth.")  # fmt: skip
         both("Prediction errors", ff.build_residuals_figure(rl),
              "The estimator's prediction errors of the wheel speeds, over time and their distribution.")  # fmt: skip
