@@ -16,8 +16,8 @@ from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2Writer
 
 from wmrid.core.errors import OutputExistsError, UsageError
-from wmrid.io.mcap.writer import EPOCH_NS, JOINT_STATE_MSGDEF, ODOMETRY_MSGDEF, write_joint_state_mcap
 from wmrid.io.mcap.series_writer import write_series_mcap
+from wmrid.io.mcap.writer import EPOCH_NS, JOINT_STATE_MSGDEF, ODOMETRY_MSGDEF, write_joint_state_mcap
 
 NASTY = [np.nan, -0.0, 0.0, 5e-324, -1.7976931348623157e308, np.inf, -np.inf, 1e-300, 0.1]
 

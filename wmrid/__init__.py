@@ -39,9 +39,9 @@ def _numba_cache_fallback() -> None:
             continue
         if _os.access(folder, _os.W_OK | _os.X_OK):  # also false on a read-only file system, root or not
             return  # numba can cache here
-    folder = _private_temp_folder("wmrid-numba-cache")
-    if folder is not None:
-        _os.environ["NUMBA_CACHE_DIR"] = folder
+    fallback = _private_temp_folder("wmrid-numba-cache")
+    if fallback is not None:
+        _os.environ["NUMBA_CACHE_DIR"] = fallback
 
 
 def _private_temp_folder(name: str) -> str | None:
@@ -291,7 +291,7 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
 __all__ = ["__version__", *sorted(_EXPORTS)]
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> object:
     module = _EXPORTS.get(name)
     if module is None:
         raise AttributeError(f"module 'wmrid' has no attribute {name!r}")

@@ -162,8 +162,9 @@ def export(
     unit = found.log_info.get("effort_unit", "N m")
     # the robot file's masses and geometry taken as known: its CAD set when it has one (the measured robot), else
     # its nominal set
-    use_cad = isinstance(robot_obj.cad, PhysicalParameters)
-    geometry = robot_obj.cad if use_cad else robot_obj.nominal
+    cad = robot_obj.cad
+    use_cad = isinstance(cad, PhysicalParameters)
+    geometry = cad if isinstance(cad, PhysicalParameters) else robot_obj.nominal
     provenance["robot"] = f"{robot_obj.name} ({'CAD' if use_cad else 'nominal'} set for what the log does not give)"
     cm = controller_model(found, provenance)
     simulator = suffix in (".xml", ".urdf", ".toml")
@@ -186,6 +187,7 @@ def export(
         )
     checked = None
     if check is not None:  # before anything is written: a check that cannot run leaves no file behind
+        assert physical is not None  # a check without the physical quantities is refused above
         checked = check_fit(found, physical, robot_obj, check, window=window, options=options, casters=cm.casters())
         if any(v is not None and v < 0 for m in ("multibody", "reduced") for v in checked[m].values()):
             said.append("a fit below 0 % predicts the check log worse than its mean: is it a log of this robot?")
@@ -198,12 +200,15 @@ def export(
         from wmrid.exports.mjcf import mjcf_text
         from wmrid.model.robot import default_casters
 
+        assert physical is not None  # a simulator's file without the physical quantities is refused above
         text = mjcf_text(physical.parameters, casters or default_casters(physical.parameters), notes, prov_line,
                          cm.casters(), extra)  # fmt: skip
         atomic_write_text(target, text, force=force)
     elif suffix == ".urdf":
         from wmrid.exports.urdf import minimal_urdf, updated_urdf
 
+        assert physical is not None  # a simulator's file without the physical quantities is refused above
+        assert isinstance(geometry, PhysicalParameters)  # so is a robot of base parameters only
         source = os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else ""
         if source.lower().endswith(".urdf"):
             from wmrid.core.limits import ROBOT_FILE_LIMIT, read_limited
@@ -229,6 +234,7 @@ def export(
     elif suffix == ".toml":
         from wmrid.exports.robot_file import robot_file_text
 
+        assert physical is not None  # a simulator's file without the physical quantities is refused above
         loads: list[float] = []
         if robot_obj.casters and cm.casters():
             from wmrid.sim.open_loop import settled_caster_loads

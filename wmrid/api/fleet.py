@@ -14,14 +14,15 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
+import itertools
 import math
 import os
 import socket
 import time
 import uuid
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -40,6 +41,9 @@ from wmrid.io.fleet_table import (
     to_arrow,
     write_table,
 )
+
+if TYPE_CHECKING:
+    from wmrid.core.wheel_log import LogStream, WheelLog
 
 __all__ = ["FleetRun", "fleet", "identify_entry", "option_columns"]
 
@@ -157,11 +161,11 @@ class _Seen:
         return right, left
 
 
-def _watched_stream(stream: Any, seen: _Seen) -> Any:
+def _watched_stream(stream: LogStream, seen: _Seen) -> LogStream:
     """``stream`` as a new LogStream whose pieces are noted in ``seen`` as they pass."""
     from wmrid.core.wheel_log import LogStream
 
-    def pieces():
+    def pieces() -> Generator[WheelLog, None, tuple[str, ...]]:
         for piece in stream:
             if len(piece):
                 if seen.first is None:
@@ -324,6 +328,7 @@ def _fit(result: Any, log: Any, robot: Any) -> dict[str, Any]:
         checked = validate(result, whole, robot=robot)
     except Exception:  # the fit is an extra: its failure never discards the identification
         return {}
+    assert checked.validation is not None  # validate always records one
     fit = checked.validation["fit_percent"]
     return {"fit_r": fit["eta_r"], "fit_l": fit["eta_l"]}
 
@@ -558,6 +563,7 @@ def warm_up() -> float:
     tau = np.column_stack([np.cos(3 * t), -np.sin(2 * t)]) + 0.1
     with contextlib.suppress(WmridError):
         result = identify(WheelLog(t=t, eta=eta, tau=tau, source="warm-up"), "paper")
+        assert result.estimate is not None  # identify's result always carries its estimate
         validation_fit(t, eta, tau, result.estimate.theta0)
     return time.perf_counter() - start
 
@@ -637,7 +643,7 @@ def _run_tasks(
         group_of[future] = group
         return future
 
-    queue = as_completed([submit(i, g) for i, g in (next(groups, (None, None)) for _ in range(window)) if g])
+    queue = as_completed([submit(i, g) for i, g in itertools.islice(groups, window)])
     for future in queue:
         group = group_of.pop(future)
         if future.status == "finished":

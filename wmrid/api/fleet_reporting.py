@@ -5,10 +5,14 @@ file's suffix.  ``wmrid fleet-report`` is these two functions with its flags tra
 from __future__ import annotations
 
 import os
-from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 from wmrid.core.errors import UsageError, WmridError, option
 from wmrid.reporting.fleet_report import FleetReport, build_fleet_report
+
+if TYPE_CHECKING:
+    from wmrid.model.robot import Robot
 
 __all__ = ["fleet_report", "write_fleet_report"]
 
@@ -26,14 +30,14 @@ def check_settings(baseline: int, window: int, alpha: float, outlier_alpha: floa
             raise UsageError(f"{option(name)} must be a probability in [1e-09, 0.2], got {value!r}")
 
 
-def _robot_loader(robot: str | None):
+def _robot_loader(robot: str | None) -> Callable[[str], Robot | None]:
     """name -> Robot or None (a robot column that no longer loads gives no payload estimate, not an error)."""
     from wmrid.api.inputs import load_robot
     from wmrid.monitoring.fleet_review import NO_MODEL
 
-    cache: dict[str, Any] = {}
+    cache: dict[str, Robot | None] = {}
 
-    def robot_of(name: str) -> Any:
+    def robot_of(name: str) -> Robot | None:
         key = robot if name == NO_MODEL else name
         if key is None:
             return None

@@ -12,7 +12,8 @@ import math
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields, replace
-from typing import Any
+from functools import partial
+from typing import Any, Literal, TypeGuard, cast, overload
 
 from wmrid.api.inputs import LogOptions, given_results, load_robot, open_log
 from wmrid.core.errors import UsageError, cannot_read, option
@@ -67,7 +68,7 @@ def load_truth(truth: dict[str, float] | str | os.PathLike[str] | None) -> dict[
         raise UsageError(f"{option('truth', path)}: not a truth file {{'parameters': {{'m11': ...}}}} ({err})") from err
 
 
-def _is_path(log: Any) -> bool:
+def _is_path(log: object) -> TypeGuard[str | os.PathLike[str] | Sequence[str | os.PathLike[str]]]:
     """A path, or several (the files of one recording)."""
     if isinstance(log, (list, tuple)):
         return bool(log) and all(isinstance(p, (str, os.PathLike)) for p in log)
@@ -77,11 +78,15 @@ def _is_path(log: Any) -> bool:
 def _given(log: Any) -> str:
     """A log as the caller named it: the path as given (the first of several, and how many more), else the source
     it was read from."""
-    if isinstance(log, (list, tuple)) and _is_path(log):
+    if _is_path(log) and isinstance(log, (list, tuple)):
         return os.fspath(log[0]) + (f" (+{len(log) - 1} more)" if len(log) > 1 else "")
-    return os.fspath(log) if _is_path(log) else str(getattr(log, "source", "log"))
+    return os.fspath(log) if isinstance(log, (str, os.PathLike)) else str(getattr(log, "source", "log"))
 
 
+@overload
+def _log(log: LogInput, options: LogOptions | None, robot: Robot | None, whole: Literal[True]) -> WheelLog: ...
+@overload
+def _log(log: LogInput, options: LogOptions | None, robot: Robot | None, whole: bool) -> WheelLog | LogStream: ...
 def _log(log: LogInput, options: LogOptions | None, robot: Robot | None, whole: bool) -> WheelLog | LogStream:
     """The log as a stream (``whole`` False) or in memory; a simulated log (``wmrid.simulate(...).log``) as the
     :class:`WheelLog` it stands for."""
@@ -92,10 +97,12 @@ def _log(log: LogInput, options: LogOptions | None, robot: Robot | None, whole: 
         return stream.read() if whole else stream
     if whole and isinstance(log, LogStream):
         return log.read()
-    return log
+    return cast("WheelLog | LogStream", log)  # not a path: a log already read (a stream only when not whole)
 
 
-def _refuse_unmodelled(name: str, value: Any, methods: tuple[str, ...], validating: bool, supported: tuple[str, ...]):
+def _refuse_unmodelled(
+    name: str, value: Any, methods: tuple[str, ...], validating: bool, supported: tuple[str, ...]
+) -> None:
     """UsageError when an option would be ignored: by a method outside ``supported``, or by the validation
     predictor."""
     others = [m for m in methods if m not in supported]
@@ -199,7 +206,8 @@ def settings_given(method: str, observer: ObserverOptions, fit: MethodOptions) -
 
 
 def no_two_stdin(log: Any, validate_log: Any, what: str) -> None:
-    if _is_path(log) and _is_path(validate_log) and os.fspath(log) == "-" and os.fspath(validate_log) == "-":
+    """UsageError when both logs are standard input ("-"; several files of one recording never are)."""
+    if all(isinstance(p, (str, os.PathLike)) and os.fspath(p) == "-" for p in (log, validate_log)):
         raise UsageError(f"{what} and {option('validate')} cannot both be standard input; give one of them as a file")
 
 
@@ -233,9 +241,10 @@ def validate(
             f"{option('validate', _given(log))}: its effort is in {other_log.effort_unit}, "
             f"the identified model's in {unit}; give both logs in the same units"
         )
+    assert result.estimate is not None  # identify's results carry one (a document from before schema 1 does not)
     theta0 = result.estimate.theta0
     form = result.form if len(theta0) == result.form.n_base else None
-    validation = {
+    validation: dict[str, Any] = {
         "log": other_log.source, "samples": len(other_log),
         "definition": "fit = 100 (1 - ||eta - eta_hat|| / ||eta - mean(eta)||) per wheel over the whole log",
     }  # fmt: skip
@@ -245,7 +254,8 @@ def validate(
         return replace(result, validation=validation, warnings=(*result.warnings, f"--validate: {why}"))
     torque_hold = result.settings.torque_hold
     fit = validation_fit(other_log.t, other_log.eta, other_log.tau, theta0, torque_hold, form=form)
-    validation["fit_percent"] = {w: fit[w] if math.isfinite(fit[w]) else None for w in ("eta_r", "eta_l")}
+    # the fits are floats (validation_fit's dict also holds the predictor's sentence)
+    validation["fit_percent"] = {w: fit[w] if math.isfinite(cast(float, fit[w])) else None for w in ("eta_r", "eta_l")}
     validation["predictor"] = fit["predictor"]
     return replace(result, validation=validation)
 
@@ -440,19 +450,20 @@ def compare(
         wheel_log, robot_obj, replace(observer, friction=friction_), Steps(load_terms=load_terms, switch=False)
     )
     wheel_only = "oe" in names and friction_model(friction, ("oe",), validating, robot_obj) != observed.form.friction
-    common = {"other": other, "truth": truth, "stage": stage, "robot": robot_obj}
+    run = partial(run_compare, other=other, truth=truth, stage=stage, robot=robot_obj)
     if not wheel_only:
-        return run_compare(wheel_log, observed, fit, names, **common)
+        return run(wheel_log, observed, fit, names)
     shared = tuple(m for m in names if m != "oe")
-    first = run_compare(wheel_log, observed, fit, shared, **common) if shared else None
+    first = run(wheel_log, observed, fit, shared) if shared else None
     say("the observer's run with wheel friction (for oe)")
     plain = identify_log(wheel_log, robot_obj, replace(observer, friction="wheel"), Steps(feedback=False))
-    oe = run_compare(wheel_log, plain, fit, ("oe",), **common)
+    oe = run(wheel_log, plain, fit, ("oe",))
     row = dict(oe.methods["oe"])
     row["warnings"] = [
         f"friction: wheel, not the observer's {observed.form.friction}: output error simulates the drag, which needs "
         "the casters' positions (a robot file with [[caster]] tables)",
         *row["warnings"],
     ]
-    methods = {m: (row if m == "oe" else first.methods[m]) for m in names}
-    return replace(first or oe, methods=methods)
+    shared_rows = first.methods if first is not None else {}  # no first run: oe is the only method
+    rows = {m: (row if m == "oe" else shared_rows[m]) for m in names}
+    return replace(first or oe, methods=rows)

@@ -128,9 +128,9 @@ def _check(name: str, value: float | None, low: float = 0.0) -> None:
 class LiveRun:
     """A live identification (see :func:`live`): iterate it for the updates and the final :class:`LiveResult`."""
 
-    def __init__(self, source: str, robot: Any, observer: ObserverOptions, rotor_inertia: float | None,
-                 options: LogOptions | None, every: float, idle: float | None, until: float | None,
-                 until_std: float | None, params: Sequence[str] | None, reconnect: bool = False,
+    def __init__(self, source: str | os.PathLike[str], robot: Any, observer: ObserverOptions,
+                 rotor_inertia: float | None, options: LogOptions | None, every: float, idle: float | None,
+                 until: float | None, until_std: float | None, params: Sequence[str] | None, reconnect: bool = False,
                  monitor: Any = None) -> None:  # fmt: skip
         from wmrid.io.live.follow import ReaderSettings
         from wmrid.io.live.sources import open_live
@@ -263,7 +263,7 @@ class LiveRun:
 
     @property
     def log_time_s(self) -> float:
-        return 0.0 if self.t_first is None else float(self.t_last - self.t_first)
+        return 0.0 if self.t_first is None or self.t_last is None else float(self.t_last - self.t_first)
 
     # -- the run --------------------------------------------------------------------------------------------------
     def update(self) -> LiveUpdate:

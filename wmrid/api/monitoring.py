@@ -14,7 +14,9 @@ from wmrid.monitoring.settings import MonitoredModel, MonitorSettings, load_mode
 __all__ = ["monitor"]
 
 
-def monitored_model(model: str | os.PathLike[str] | IdentificationResult | dict[str, Any] | MonitoredModel):
+def monitored_model(
+    model: str | os.PathLike[str] | IdentificationResult | dict[str, Any] | MonitoredModel,
+) -> MonitoredModel:
     """The model to monitor against: a saved ``identify`` result (path or its JSON as a dict), a result, or a
     :class:`MonitoredModel`."""
     if isinstance(model, MonitoredModel):

@@ -14,7 +14,7 @@ import math
 import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 
@@ -36,6 +36,10 @@ DEFAULT_TAU_SHARE = 0.01
 DEFAULT_LOG_RATE = 100.0
 
 
+@overload
+def _number(name: str, value: float, low: float = 0.0, strict: bool = True) -> float: ...
+@overload
+def _number(name: str, value: float | None, low: float = 0.0, strict: bool = True) -> float | None: ...
 def _number(name: str, value: Any, low: float = 0.0, strict: bool = True) -> float | None:
     if value is None:
         return None
@@ -164,8 +168,8 @@ def plan(
     from wmrid.model.dynamics import base_parameters
 
     # every number is checked before anything is read or searched
-    seed = int(_number("seed", seed, 0.0, strict=False))  # type: ignore[arg-type]
-    rate = _number("rate", rate)  # type: ignore[assignment]
+    seed = int(_number("seed", seed, 0.0, strict=False))
+    rate = _number("rate", rate)
     given_limits = {"max_wheel_speed": max_wheel_speed, "max_wheel_accel": max_wheel_accel, "max_torque": max_torque,
                     "max_speed": max_speed, "max_turn_rate": max_turn_rate}  # fmt: skip
     for name, value in given_limits.items():
@@ -179,8 +183,8 @@ def plan(
     _number("target_std", target_std)
     robot_obj = load_robot(robot)
     nominal = robot_obj.nominal
-    r, b = getattr(nominal, "r", None), getattr(nominal, "b", None)
-    if isinstance(nominal, BaseSet) and (r is None or b is None):
+    r, b = nominal.r, nominal.b
+    if r is None or b is None:  # a base set without them (physical parameters always have both)
         raise UsageError(
             f"{option('robot', robot_obj.name)}: a plan needs the wheel radius r and half track b (the [nominal_base] "
             "table gives neither)"
@@ -188,6 +192,7 @@ def plan(
     limits = resolve_limits(
         r, dict(robot_obj.limits), margin=margin, footprint=footprint(robot_obj), area=area, **given_limits
     )
+    # a base set gives its theta0 (what base_parameters returns for one)
     theta0 = np.asarray(base_parameters(nominal), dtype=np.float64)
     big_m = np.linalg.inv(np.array([[theta0[0], theta0[1]], [theta0[1], theta0[2]]]))
     tau_scale = limits.max_torque or float(np.max(np.sum(np.abs(big_m), axis=1))) * limits.max_wheel_accel
@@ -203,11 +208,11 @@ def plan(
         noise_source = "given" if eta_noise is not None and tau_noise is not None else "default" if (
             eta_noise is None and tau_noise is None) else "given in part, default in part"  # fmt: skip
     log_rate = DEFAULT_LOG_RATE if log_rate is None else _number("log_rate", log_rate)
-    if eta_std == 0 and tau_std == 0:  # type: ignore[operator]
+    if eta_std == 0 and tau_std == 0:
         raise UsageError(
             f"{option('eta_noise')} and {option('tau_noise')} are both 0: a noise-free log has no std to plan"
         )
-    noise = SensorNoise(float(eta_std), float(tau_std), float(log_rate))  # type: ignore[arg-type]
+    noise = SensorNoise(float(eta_std), float(tau_std), float(log_rate))
     length: float | None
     if isinstance(duration, str) and duration.strip().lower() == "auto":
         if target_std is None:
@@ -224,7 +229,7 @@ def plan(
             raise UsageError(f"{option('duration', duration)}: a plan lasts at least {MIN_DURATION:g} s")
     share = None
     if target_std is not None:
-        share = _number("target_std", target_std) / 100.0  # type: ignore[operator]
+        share = _number("target_std", target_std) / 100.0
     friction, geometry, drag = _friction(friction, robot_obj)
     form = plan_form(friction, geometry)
     names = form.base_names

@@ -110,7 +110,16 @@ class Identification:
     given: Any = None
 
 
-def _report(result, log, truth, figures, options, robot, rotor_inertia, how: Identification):
+def _report(
+    result: IdentificationResult | dict[str, Any] | str | os.PathLike[str] | WheelLog | LogStream,
+    log: WheelLog | None,
+    truth: dict[str, float] | None,
+    figures: bool,
+    options: LogOptions | None,
+    robot: str | os.PathLike[str] | Robot | None,
+    rotor_inertia: float | None,
+    how: Identification,
+) -> tuple[Report, list[str], bytes | None]:
     """(report, the input paths to record, the standard input's bytes or None)."""
     if isinstance(result, IdentificationResult):
         rep = build_report(result.to_dict(), result=result, log=log, truth=truth, figures=figures)
@@ -119,7 +128,7 @@ def _report(result, log, truth, figures, options, robot, rotor_inertia, how: Ide
         return _from_saved(dict(result), str(result.get("source") or "result"), truth, figures), [], None
     validate, method = how.validate, how.method
     check_rotor_inertia(rotor_inertia)  # before INPUT is opened, as identify does
-    inputs: list[Any] = []
+    inputs: list[str] = []
     data = None
     if isinstance(result, (str, os.PathLike)):
         from wmrid.io.sources import open_source
@@ -137,15 +146,14 @@ def _report(result, log, truth, figures, options, robot, rotor_inertia, how: Ide
             return _from_saved(_parse_saved(source), source.name, truth, figures), inputs, data
     else:
         check_validation(result, validate, how.observer, (method,), option("input_"))
-        source = None
     # a log: the checks identify() makes, before the log is read
     prep = prepare(
         method, how.observer, how.fit, options=options, robot=robot, rotor_inertia=rotor_inertia,
         validating=validate is not None,
     )  # fmt: skip
     earlier = given_results(how.given)  # read (and refused) before the log
-    if source is not None:
-        wheel_log = read_log(os.fspath(result), options, robot=prep.robot, data=source.data)
+    if isinstance(result, (str, os.PathLike)):  # opened above: its bytes when they were read (standard input)
+        wheel_log = read_log(os.fspath(result), options, robot=prep.robot, data=data)
     else:
         wheel_log = result.read() if isinstance(result, LogStream) else result
     identified = run_prepared(wheel_log, prep, given=earlier)
@@ -162,7 +170,15 @@ def _report(result, log, truth, figures, options, robot, rotor_inertia, how: Ide
     return replace(rep, identification=identified, log=wheel_log), inputs, data
 
 
-def _provenance(command, inputs, data, options, robot, rotor_inertia, how: Identification) -> dict[str, Any]:
+def _provenance(
+    command: str | None,
+    inputs: list[str],
+    data: bytes | None,
+    options: LogOptions | None,
+    robot: str | os.PathLike[str] | Robot | None,
+    rotor_inertia: float | None,
+    how: Identification,
+) -> dict[str, Any]:
     """What a colleague needs to make the report again: version, time, command, options, inputs and their hashes."""
     import dataclasses
 
@@ -196,7 +212,7 @@ def provenance_block(command: str, options: dict[str, Any], inputs: list[dict[st
 
     return {
         "wmrid": __version__,
-        "made_utc": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+        "made_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "command": command,
         "options": {k: (os.fspath(v) if isinstance(v, os.PathLike) else v) for k, v in options.items()},
         "inputs": inputs,

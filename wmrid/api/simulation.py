@@ -8,12 +8,12 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 from wmrid.api.inputs import load_robot
 from wmrid.core.choices import Trajectory, values
 from wmrid.core.errors import UsageError, option
-from wmrid.model.robot import Payload, Robot
+from wmrid.model.robot import Payload, PhysicalParameters, Robot
 from wmrid.sim.scenario import Change, NoiseSettings, PlantChange
 
 if TYPE_CHECKING:
@@ -101,6 +101,7 @@ def simulate(
             f"{option('robot', robot_obj.name)}: gives base parameters only; a simulation needs the physical ones "
             "([nominal] and [cad] tables of Table 1's parameters; see examples/)"
         )
+    nominal = cast(PhysicalParameters, robot_obj.nominal)  # physical, not a BaseSet: checked just above
     noise = noise if noise is not None else NoiseSettings()
     for name, value, kind in (("noise", noise, NoiseSettings), ("payload", payload, Payload)):
         if value is not None and not isinstance(value, kind):
@@ -116,13 +117,13 @@ def simulate(
 
         import_mujoco()  # before anything else, so that a missing engine says how to install it
         sim = simulate_multibody(
-            robot_obj.reference, robot_obj.nominal, casters=robot_obj.casters, settings=settings,
+            robot_obj.reference, nominal, casters=robot_obj.casters, settings=settings,
             trajectory=trajectory, duration=duration, rate=rate, noise=noise, change=plant, payload=payload,
             reference=ref,
         )  # fmt: skip
     else:
         sim = run_reduced(
-            truth_params, robot_obj.nominal, trajectory=trajectory, duration=duration, rate=rate, noise=noise,
+            truth_params, nominal, trajectory=trajectory, duration=duration, rate=rate, noise=noise,
             change=plant, reference=ref,
         )  # fmt: skip
     truth = sim.truth()

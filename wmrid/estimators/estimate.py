@@ -76,7 +76,8 @@ class BaseEstimate:
     @property
     def std(self) -> np.ndarray:
         """(n0,) standard errors (inf where the log does not determine the parameter)."""
-        return np.sqrt(np.clip(np.diag(self.cov), 0.0, None))
+        std: np.ndarray = np.sqrt(np.clip(np.diag(self.cov), 0.0, None))
+        return std
 
     def named(self, names: tuple[str, ...] | None = None) -> dict[str, tuple[float, float]]:
         """name -> (value, std) for the base parameters; ``names`` default: the eight, then Cv, Cw (give a form's

@@ -10,6 +10,7 @@ read back carries those, and the base parameters' full covariance under ``estima
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -39,11 +40,19 @@ JSON_HISTORY_POINTS = 300
 
 
 class LogLike(Protocol):
-    t: np.ndarray
-    eta: np.ndarray
-    tau: np.ndarray
-    source: str
-    notes: tuple[str, ...]
+    """A wheel log in memory (:class:`wmrid.core.wheel_log.WheelLog`, whose fields are read-only, or the like): read,
+    never set."""
+
+    @property
+    def t(self) -> np.ndarray: ...
+    @property
+    def eta(self) -> np.ndarray: ...
+    @property
+    def tau(self) -> np.ndarray: ...
+    @property
+    def source(self) -> str: ...
+    @property
+    def notes(self) -> tuple[str, ...]: ...
 
 
 @dataclass(frozen=True)
@@ -233,7 +242,7 @@ def _floats(values: Any) -> np.ndarray:
     return np.array([math.nan if v is None else float(v) for v in values], dtype=float)
 
 
-def _box(values: dict[str, Any], names: tuple[str, ...], p: int, missing: float) -> np.ndarray:
+def _box(values: dict[str, Any], names: Sequence[str], p: int, missing: float) -> np.ndarray:
     return np.array([missing if values[n] is None else float(values[n]) for n in names], dtype=float).reshape(2, p)
 
 

@@ -65,7 +65,6 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-import numba
 import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError, UsageError
@@ -81,10 +80,10 @@ from wmrid.estimators.idim import (
     sub_segments,
     theta0_covariance,
 )
-from wmrid.estimators.idim_regression import ROW_LAYOUT, IdimRegression, effort_delay, idim_regression
+from wmrid.estimators.idim_regression import IdimRegression, effort_delay, idim_regression
+from wmrid.estimators.rls_kernel import INIT_PIVOT, rls_kernel
 from wmrid.estimators.uncertainty import SEGMENT_SECONDS
 from wmrid.model.dynamics import RegressorForm
-from wmrid.estimators.rls_kernel import INIT_PIVOT, rls_kernel
 
 #: Default number of history points.
 HISTORY_POINTS = 2000

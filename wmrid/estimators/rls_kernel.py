@@ -4,30 +4,12 @@ the per-batch scores the jackknife needs."""
 
 from __future__ import annotations
 
-import dataclasses
 import math
-import time
-from dataclasses import dataclass
-from typing import Any
+
 import numba
 import numpy as np
-from wmrid.core.errors import NotIdentifiableError, UsageError
-from wmrid.estimators.estimate import BaseEstimate
-from wmrid.estimators.idim import (
-    GRID_SHIFTS,
-    JACKKNIFE_TEXT,
-    averaged_covariance,
-    inertia_warnings,
-    not_identifiable_message,
-    phi_to_theta0,
-    segment_index,
-    sub_segments,
-    theta0_covariance,
-)
-from wmrid.estimators.idim_regression import ROW_LAYOUT, IdimRegression, effort_delay, idim_regression
-from wmrid.estimators.uncertainty import SEGMENT_SECONDS
-from wmrid.model.dynamics import RegressorForm
 
+from wmrid.estimators.idim_regression import ROW_LAYOUT
 
 #: The recursion starts when every Cholesky pivot^2 of the equilibrated information exceeds this.
 INIT_PIVOT = 1e-4

@@ -25,7 +25,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from wmrid.model.robot import PhysicalParameters
+from wmrid.model.robot import BaseSet, PhysicalParameters
 
 THETA0_NAMES = ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
 #: The caster-drag base parameters of the ``wheel+caster`` friction model, appended to theta0.
@@ -259,7 +259,7 @@ def coriolis_coefficient(p: PhysicalParameters) -> float:
     return (p.m_p * p.d_x + 2.0 * p.m_r * p.c_x) * p.r**3 / (4.0 * p.b**2)
 
 
-def base_parameters(p: PhysicalParameters) -> np.ndarray:
+def base_parameters(p: PhysicalParameters | BaseSet) -> np.ndarray:
     """theta0 (8,) = [m11, m12, m22, Vc, Fv1, Fv2, Fd1, Fd2] of Eq. (21), with m = M^-1 (a robot file's base set,
     :class:`wmrid.model.robot.BaseSet`, gives them directly)."""
     given = getattr(p, "theta0", None)

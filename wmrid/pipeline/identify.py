@@ -105,7 +105,8 @@ def identify_log(
 
 def _settled(result: IdentificationResult, robot: Robot | None) -> IdentificationResult:
     radius = None if robot is None else getattr(robot.nominal, "r", None)
-    return settle(result, radius=None if radius is None else float(radius))
+    settled: IdentificationResult = settle(result, radius=None if radius is None else float(radius))
+    return settled
 
 
 def _check_payload(robot: Robot | None, payload: bool) -> None:
@@ -132,6 +133,7 @@ def _delayed(
     friction model allowed); applied when significant, with the timing term: a pass at the delay moved by its
     resolution, whose change the std carries (:func:`wmrid.estimators.widening.with_timing_term`)."""
     delay = options.delay
+    assert delay is not None, "_delayed is called with a delay (seconds or auto)"
     original = log.read() if isinstance(log, LogStream) else log  # read once: shifting needs the whole log
     profile = None
     if delay == "auto":
