@@ -55,7 +55,8 @@ def stage_times() -> dict[str, float]:
     sys.path.insert(0, str(ROOT))
     import wmrid
     from wmrid.api.reporting import report
-    from wmrid.reporting.report import rendered, to_html
+    from wmrid.reporting.report import rendered
+    from wmrid.reporting.report_html import to_html
 
     def once() -> dict[str, float]:
         t0 = time.perf_counter()

@@ -232,7 +232,8 @@ def test_the_multibody_prototype_in_rpm_and_ms():
 def test_the_report_opens_with_the_verdict(in_rpm, clean):
     """Markdown and HTML reports put the verdict first: bold, the groups as a list; in red when it says not to use
     the numbers (issue 28)."""
-    from wmrid.reporting.report import to_html, to_markdown
+    from wmrid.reporting.report_html import to_html
+    from wmrid.reporting.report_markdown import to_markdown
 
     doubt = wmrid.report(wmrid.identify(in_rpm, "paper"), figures=False)
     text_md = to_markdown(doubt)

@@ -276,9 +276,7 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
     from wmrid.reporting.fleet_report import (
         FleetReport as FleetReport,
     )
-    from wmrid.reporting.report import (
-        Report as Report,
-    )
+    from wmrid.reporting.report import Report as Report
     from wmrid.sim.multibody import (
         MultibodySettings as MultibodySettings,
     )

@@ -242,7 +242,9 @@ def residual_frame(rep: Report) -> Any:
 
 def write_report(rep: Report, output: str | os.PathLike[str], *, force: bool = False) -> None:
     """Write ``rep`` as a self-contained HTML page (.html, .htm), Markdown (.md) or JSON (.json), atomically."""
-    from wmrid.reporting.report import to_html, to_json_dict, to_markdown
+    from wmrid.reporting.report import to_json_dict
+    from wmrid.reporting.report_html import to_html
+    from wmrid.reporting.report_markdown import to_markdown
 
     write_by_suffix(output, rep, to_html, to_markdown, to_json_dict, force=force)
 

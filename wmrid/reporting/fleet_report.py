@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from wmrid.monitoring.fleet_review import FleetReview, RobotReview
-from wmrid.reporting.report import _CSS, _html_provenance, _html_table, _md_table, md_provenance
+from wmrid.reporting.report_html import _CSS, _html_provenance, _html_table
+from wmrid.reporting.report_markdown import _md_table, md_provenance
 
 #: Robots drawn at most (flagged robots always; the others in rank order up to this count).
 MAX_ROBOT_FIGURES = 60
