@@ -120,7 +120,7 @@ class Job:
 
 
 def normal_floor() -> float:
-    from wmrid.sim.multibody import FLOOR_FRICTION
+    from wmrid.sim.multibody_model import FLOOR_FRICTION
 
     return float(FLOOR_FRICTION)
 
@@ -191,7 +191,8 @@ def simulate_cached(job: Job) -> tuple[dict[str, Any], float | None]:
         except (OSError, ValueError, KeyError):
             pass  # unreadable (e.g. a killed run's half file): simulate again
     from wmrid.model.robot import BUILTIN_ROBOTS, Payload
-    from wmrid.sim.multibody import MultibodySettings, simulate_multibody
+    from wmrid.sim.multibody import simulate_multibody
+    from wmrid.sim.multibody_model import MultibodySettings
     from wmrid.sim.scenario import NoiseSettings
 
     c = job.case
@@ -492,7 +493,7 @@ def main() -> int:
     if seeds < 1 or args.workers < 1 or not args.duration > 0:
         ap.error("--seeds and --workers must be >= 1 and --duration > 0")
 
-    from wmrid.sim.multibody import import_mujoco
+    from wmrid.sim.multibody_model import import_mujoco
 
     import_mujoco()  # a clear message when MuJoCo is missing
     wall0 = time.perf_counter()

@@ -59,7 +59,8 @@ def one(job: tuple[str, str, str, int, float]) -> dict:
             amr.cad, amr.nominal, trajectory=trajectory, duration=duration, rate=rate, noise=noise, seed=seed
         )  # fmt: skip
     else:
-        from wmrid.sim.multibody import MultibodySettings, simulate_multibody
+        from wmrid.sim.multibody import simulate_multibody
+        from wmrid.sim.multibody_model import MultibodySettings
 
         sim = simulate_multibody(
             amr.cad, amr.nominal, settings=MultibodySettings(caster_resistance=0.0), trajectory=trajectory,

@@ -94,7 +94,8 @@ def run(name: str, variant: str, seed: int, frictions: tuple[str, ...] = ("auto"
     import wmrid
     from wmrid.api.inputs import load_robot
     from wmrid.api.simulation import load_reference
-    from wmrid.sim.multibody import MultibodySettings, simulate_multibody
+    from wmrid.sim.multibody import simulate_multibody
+    from wmrid.sim.multibody_model import MultibodySettings
     from wmrid.sim.scenario import NoiseSettings
 
     spec = study_plan.ROBOTS[name]

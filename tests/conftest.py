@@ -63,7 +63,8 @@ def amr_caster_log(tmp_path_factory):
     200 Hz, sensor noise 0.02 rad/s and 0.002 N m, seed 0 (issue 11's AMR configuration; 3-11 s to simulate,
     so made once per run and shared by every test that needs it)."""
     from wmrid.model.robot import BUILTIN_ROBOTS
-    from wmrid.sim.multibody import MultibodySettings, simulate_multibody
+    from wmrid.sim.multibody import simulate_multibody
+    from wmrid.sim.multibody_model import MultibodySettings
     from wmrid.sim.scenario import NoiseSettings
 
     amr = BUILTIN_ROBOTS["amr"]

@@ -11,7 +11,7 @@ import pytest
 import wmrid
 from wmrid.core.wheel_log import WheelLog
 from wmrid.model import dynamics as model
-from wmrid.sim.multibody import MultibodySettings
+from wmrid.sim.multibody_model import MultibodySettings
 
 BASE = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
 INERTIA_VC = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc")

@@ -13,7 +13,8 @@ from wmrid.core.errors import UsageError
 from wmrid.estimators.delay import DELAY_STEP_S, _refine, estimate_delay
 from wmrid.estimators.idim_regression import shifted
 from wmrid.model.robot import BUILTIN_ROBOTS
-from wmrid.sim.multibody import MultibodySettings, simulate_multibody
+from wmrid.sim.multibody import simulate_multibody
+from wmrid.sim.multibody_model import MultibodySettings
 from wmrid.sim.scenario import NoiseSettings
 from wmrid.sim.simulate import simulate
 

@@ -19,7 +19,8 @@ from wmrid.io.logs import read_log
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS
 from wmrid.pipeline.identify import identify
-from wmrid.sim.multibody import MultibodySettings, simulate_multibody
+from wmrid.sim.multibody import simulate_multibody
+from wmrid.sim.multibody_model import MultibodySettings
 from wmrid.sim.scenario import NoiseSettings
 from wmrid.sim.simulate import simulate
 

@@ -153,7 +153,8 @@ def test_a_payload_loaded_mid_run_is_found(amr_caster_json) -> None:
     """5 kg loaded at 20 s on the multibody AMR, against the caster model of the unloaded robot (measured: the
     change placed at 20.05 s, alarm at 20.40 s, statistic 495 against a threshold of 86; M11 +26 %).  The span
     after the change is identified with the model's caster positions."""
-    from wmrid.sim.multibody import MultibodySettings, simulate_multibody
+    from wmrid.sim.multibody import simulate_multibody
+    from wmrid.sim.multibody_model import MultibodySettings
 
     load = Payload(5.0, 0.0, 0.0, 0.05)
     sim = simulate_multibody(

@@ -32,7 +32,8 @@ from wmrid.model.robot import (
     robot_to_toml,
 )
 from wmrid.sim import multibody as multibody_module
-from wmrid.sim.multibody import GRAVITY, INSTALL_HINT, MultibodySettings, simulate_multibody
+from wmrid.sim.multibody import simulate_multibody
+from wmrid.sim.multibody_model import GRAVITY, INSTALL_HINT, MultibodySettings
 from wmrid.sim.scenario import NoiseSettings
 from wmrid.sim.simulate import _encoder_velocity, simulate
 

@@ -243,7 +243,7 @@ def test_a_robot_with_casters_is_planned_for_their_drag(planned: Path, tmp_path:
     least-norm statics: 0.015 x the weight less the wheels' share) and its two load terms, which the criterion does not
     count (nuisance parameters); the JSON round-trips.  A robot file without casters keeps the eight (auto: wheel), and
     --friction wheel+caster+load on it is one line."""
-    from wmrid.sim.multibody import static_loads
+    from wmrid.sim.multibody_model import static_loads
 
     robot = tmp_path / "casters.toml"
     robot.write_text(ROBOT.replace('name = "tiny"', 'name = "casters"') + CASTERS)

@@ -21,7 +21,8 @@ from wmrid.estimators.model_error import MISFIT_FLOOR, MISFIT_RATIO, prediction_
 from wmrid.estimators.noise_floor import WINDOW, NoiseFloor
 from wmrid.model.robot import BUILTIN_ROBOTS
 from wmrid.pipeline.identify import identify
-from wmrid.sim.multibody import MultibodySettings, simulate_multibody
+from wmrid.sim.multibody import simulate_multibody
+from wmrid.sim.multibody_model import MultibodySettings
 from wmrid.sim.scenario import NoiseSettings
 from wmrid.sim.simulate import simulate
 

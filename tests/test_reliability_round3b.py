@@ -289,7 +289,8 @@ def test_mujocos_warnings_become_part_of_one_error(tmp_path, monkeypatch, capfd)
     pytest.importorskip("mujoco")
     from wmrid.core.errors import UsageError
     from wmrid.model.robot import BUILTIN_ROBOTS
-    from wmrid.sim.multibody import MultibodySettings, simulate_multibody
+    from wmrid.sim.multibody import simulate_multibody
+    from wmrid.sim.multibody_model import MultibodySettings
 
     monkeypatch.chdir(tmp_path)
     settings = MultibodySettings()

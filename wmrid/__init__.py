@@ -154,7 +154,7 @@ _EXPORTS = {
     "Change": "wmrid.sim.scenario",
     "PlantChange": "wmrid.sim.scenario",
     "Payload": "wmrid.model.robot",
-    "MultibodySettings": "wmrid.sim.multibody",
+    "MultibodySettings": "wmrid.sim.multibody_model",
     "IdentificationResult": "wmrid.estimators.result",
     "ObserverRun": "wmrid.estimators.result",
     "BaseEstimate": "wmrid.estimators.estimate",
@@ -277,9 +277,7 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
         FleetReport as FleetReport,
     )
     from wmrid.reporting.report import Report as Report
-    from wmrid.sim.multibody import (
-        MultibodySettings as MultibodySettings,
-    )
+    from wmrid.sim.multibody_model import MultibodySettings as MultibodySettings
     from wmrid.sim.scenario import (
         Change as Change,
         NoiseSettings as NoiseSettings,

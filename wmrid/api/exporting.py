@@ -329,7 +329,7 @@ def check_fit(
     from wmrid.api.identification import _log
     from wmrid.model.predict import fit_percent, simulate_segments, unsimulated
     from wmrid.model.robot import default_casters
-    from wmrid.sim.multibody import MultibodySettings
+    from wmrid.sim.multibody_model import MultibodySettings
     from wmrid.sim.open_loop import drive_windows
 
     wheel_log = _log(log, options, robot_obj, whole=True)

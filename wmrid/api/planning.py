@@ -272,7 +272,7 @@ def _friction(friction: str, robot: Robot) -> tuple[str, tuple[float, ...], tupl
             f"{option('friction', friction)}: the casters' drag needs the robot's masses (a [nominal] table of "
             "physical parameters), not a [nominal_base] table; or plan with --friction wheel"
         )
-    from wmrid.sim.multibody import static_loads
+    from wmrid.sim.multibody_model import static_loads
 
     geometry = caster_geometry(robot)
     loads = static_loads(robot.nominal, casters)[2:]

@@ -17,7 +17,7 @@ from wmrid.model.robot import Payload, PhysicalParameters, Robot
 from wmrid.sim.scenario import Change, NoiseSettings, PlantChange
 
 if TYPE_CHECKING:
-    from wmrid.sim.multibody import MultibodySettings
+    from wmrid.sim.multibody_model import MultibodySettings
 
 __all__ = ["Change", "NoiseSettings", "Payload", "SimulationRun", "load_reference", "simulate", "write_simulation"]
 
@@ -91,7 +91,7 @@ def simulate(
     change : at most one change during the run: a :class:`Change` (the payload loaded or dropped, a wheel's friction
         multiplied, at a time) or a :class:`PlantChange` (its own before and after).
     engine : "reduced" (the paper's model), "mujoco" (multibody, default settings) or a
-        :class:`~wmrid.sim.multibody.MultibodySettings` (mujoco with its floor friction, caster resistance, torque
+        :class:`~wmrid.sim.multibody_model.MultibodySettings` (mujoco with its floor friction, caster resistance, torque
         limit)."""
     from wmrid.sim.simulate import plan_duration, simulate as run_reduced
 
@@ -113,7 +113,8 @@ def simulate(
     plant, truth_params = _plant_change(robot_obj.reference, payload, change, duration)
     settings = _engine(engine)
     if settings is not None:
-        from wmrid.sim.multibody import import_mujoco, simulate_multibody
+        from wmrid.sim.multibody import simulate_multibody
+        from wmrid.sim.multibody_model import import_mujoco
 
         import_mujoco()  # before anything else, so that a missing engine says how to install it
         sim = simulate_multibody(
@@ -154,7 +155,7 @@ def _plant_change(
 
 def _engine(engine: Any) -> Any:
     """The multibody settings of ``engine`` (None: the reduced model)."""
-    from wmrid.sim.multibody import MultibodySettings
+    from wmrid.sim.multibody_model import MultibodySettings
 
     if isinstance(engine, MultibodySettings):
         return engine

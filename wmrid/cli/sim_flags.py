@@ -1,7 +1,7 @@
 """``wmrid simulate``'s text forms turned into the library's objects: ``--payload MASS[@X,Y]`` into a
 :class:`~wmrid.model.robot.Payload`, ``--load-at``/``--drop-at``/``--friction-fault WHEEL:FACTOR[:TERMS]``/
 ``--fault-at`` into a :class:`~wmrid.sim.scenario.Change`, the noise flags into a
-:class:`~wmrid.sim.scenario.NoiseSettings`, the engine's into a :class:`~wmrid.sim.multibody.MultibodySettings`.
+:class:`~wmrid.sim.scenario.NoiseSettings`, the engine's into a :class:`~wmrid.sim.multibody_model.MultibodySettings`.
 The library never parses these texts; each error here names the flag as the user wrote it."""
 
 from __future__ import annotations
@@ -90,7 +90,7 @@ def engine_of(
                     "or casters"
                 )
         return "reduced"
-    from wmrid.sim.multibody import MultibodySettings, import_mujoco
+    from wmrid.sim.multibody_model import MultibodySettings, import_mujoco
 
     import_mujoco()  # before anything else, so that a missing engine says how to install it
     return MultibodySettings(**{name: value for name, value in given.items() if value is not None})

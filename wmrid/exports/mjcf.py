@@ -1,5 +1,5 @@
 """The identified robot as MJCF: the multibody model wmrid's MuJoCo prototype builds
-(:func:`wmrid.sim.multibody.build_mjcf`), with the identified platform (m_p, d_x, d_y, I_p) and the wheel joints'
+(:func:`wmrid.sim.multibody_model.build_mjcf`), with the identified platform (m_p, d_x, d_y, I_p) and the wheel joints'
 damping (F_v) and friction loss (F_d) in it, and an XML comment with every value's std and the provenance.
 
 What MJCF cannot hold is said in the comment: a ball caster's rolling drag is a force wmrid's prototype applies at
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from wmrid.exports.xml_text import xml_comment
 from wmrid.model.robot import Caster, PhysicalParameters
-from wmrid.sim.multibody import MultibodySettings, build_mjcf
+from wmrid.sim.multibody_model import MultibodySettings, build_mjcf
 
 
 def mjcf_text(

@@ -14,15 +14,8 @@ import numpy as np
 
 from wmrid.core.errors import UsageError
 from wmrid.model.robot import Caster, PhysicalParameters, default_casters
-from wmrid.sim.multibody import (
-    SETTLE_SECONDS,
-    MultibodySettings,
-    _Plant,
-    _quat_mul,
-    caster_resistance,
-    import_mujoco,
-    static_loads,
-)
+from wmrid.sim.multibody import SETTLE_SECONDS, _Plant, _quat_mul
+from wmrid.sim.multibody_model import MultibodySettings, caster_resistance, import_mujoco, static_loads
 
 #: The prototype's settings unless given (frozen, so one shared instance is safe).
 DEFAULT_SETTINGS = MultibodySettings()
