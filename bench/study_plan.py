@@ -56,7 +56,8 @@ EXACT = ("r", "b", "k_r", "a", "c_y")
 
 def robot_file(name: str) -> Path:
     """A robot TOML: [cad] = the built-in robot's CAD set, [nominal] = it 20 % off (alternately up and down)."""
-    from wmrid.model.robot import BUILTIN_ROBOTS, Robot, robot_to_toml
+    from wmrid.model.robot import BUILTIN_ROBOTS, Robot
+    from wmrid.model.robot_file import robot_to_toml
 
     builtin = BUILTIN_ROBOTS[name]
     cad = builtin.cad.to_dict()

@@ -75,7 +75,7 @@ def test_a_partial_robot_file_states_what_was_assumed(tmp_path):
     """A robot file with only what M and V_c depend on most: the rest is assumed (no rotors, a thin-disc wheel,
     a = b, no friction), the parameters are those of the full file with the assumed values written out, and
     identify says what it assumed; the CAD friction, not given, is compared with nothing ("—")."""
-    from wmrid.model.robot import robot_from_toml_text
+    from wmrid.model.robot_file import robot_from_toml_text
 
     path = tmp_path / "minimal.toml"
     path.write_text(MINIMAL)
@@ -98,7 +98,7 @@ def test_a_partial_robot_file_states_what_was_assumed(tmp_path):
 
 def test_a_robot_file_missing_what_matters_is_refused_with_the_list():
     from wmrid.core.errors import RobotFileError
-    from wmrid.model.robot import robot_from_toml_text
+    from wmrid.model.robot_file import robot_from_toml_text
 
     with pytest.raises(RobotFileError, match=r"missing parameter\(s\) m_w.*needs at least I_p, m_p, d_x, I_w, m_w"):
         robot_from_toml_text(MINIMAL.replace("m_w = 4.0\n", "", 1), "x.toml")
@@ -152,7 +152,7 @@ def test_a_robot_file_of_base_parameters(tmp_path):
     sim = text(wmrid("simulate", "-o", tmp_path / "s.csv", "--robot", path, "--duration", "1"))
     assert sim.returncode == 2
     assert "gives base parameters only; a simulation needs the physical ones" in sim.stderr
-    from wmrid.model.robot import robot_from_toml_text, robot_to_toml
+    from wmrid.model.robot_file import robot_from_toml_text, robot_to_toml
 
     again = robot_from_toml_text(robot_to_toml(robot), "again")
     assert again.nominal == robot.nominal
@@ -161,7 +161,7 @@ def test_a_robot_file_of_base_parameters(tmp_path):
 
 def test_base_parameter_tables_are_checked():
     from wmrid.core.errors import RobotFileError
-    from wmrid.model.robot import robot_from_toml_text
+    from wmrid.model.robot_file import robot_from_toml_text
 
     cases = {
         BASE_ONLY.replace("M22 = 1.15485\n", ""): "all three of one of them",

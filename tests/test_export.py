@@ -248,7 +248,7 @@ def test_cli_refuses_an_unphysical_result(saved, tmp_path, capsys):
 def test_robot_file_export_rebuilds_the_same_robot(saved, tmp_path):
     """The exported TOML reads back as a robot whose base parameters are the result's (1e-9 relative) and whose
     multibody model is the exported MJCF's, element for element (the comment aside)."""
-    from wmrid.model.robot import load_robot
+    from wmrid.model.robot_file import load_robot
     from wmrid.sim.multibody_model import MultibodySettings, build_mjcf
 
     path, result = saved

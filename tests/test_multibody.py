@@ -21,16 +21,8 @@ import pytest
 from wmrid.cli.app import main
 from wmrid.core.errors import RobotFileError, UsageError
 from wmrid.model import dynamics as model, torques
-from wmrid.model.robot import (
-    BUILTIN_ROBOTS,
-    Caster,
-    Payload,
-    PhysicalParameters,
-    default_casters,
-    load_robot,
-    robot_from_toml_text,
-    robot_to_toml,
-)
+from wmrid.model.robot import BUILTIN_ROBOTS, Caster, Payload, PhysicalParameters, default_casters
+from wmrid.model.robot_file import load_robot, robot_from_toml_text, robot_to_toml
 from wmrid.sim import multibody as multibody_module
 from wmrid.sim.multibody import simulate_multibody
 from wmrid.sim.multibody_model import GRAVITY, INSTALL_HINT, MultibodySettings

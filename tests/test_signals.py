@@ -9,7 +9,8 @@ import pytest
 
 from wmrid.core.errors import RobotFileError, UsageError
 from wmrid.io.signals import SignalOptions, effort_to_torque, mirror_left, speed_from_position, speed_to_rad_s
-from wmrid.model.robot import BUILTIN_ROBOTS, load_robot, robot_from_toml_text, robot_to_toml
+from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.model.robot_file import load_robot, robot_from_toml_text, robot_to_toml
 
 
 @pytest.mark.parametrize(

@@ -263,10 +263,7 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
     from wmrid.model.physical import (
         PhysicalEstimate as PhysicalEstimate,
     )
-    from wmrid.model.robot import (
-        Payload as Payload,
-        Robot as Robot,
-    )
+    from wmrid.model.robot import Payload as Payload, Robot as Robot
     from wmrid.monitoring.monitor import (
         MonitorResult as MonitorResult,
     )

@@ -114,7 +114,7 @@ def load_robot(
         return load_robot_urdf(text, gear_ratio=gear_ratio, rotor_inertia=rotor_inertia, wheel_radius=wheel_radius)
     if rotor_inertia is not None:
         raise UsageError(f"{option('rotor_inertia')} applies to a URDF robot only; a robot TOML file gives I_r itself")
-    from wmrid.model.robot import load_robot as load_toml
+    from wmrid.model.robot_file import load_robot as load_toml
 
     return load_toml(text)
 

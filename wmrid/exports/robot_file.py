@@ -18,7 +18,8 @@ import json
 
 import numpy as np
 
-from wmrid.model.robot import Caster, PhysicalParameters, Robot, robot_to_toml
+from wmrid.model.robot import Caster, PhysicalParameters, Robot
+from wmrid.model.robot_file import robot_to_toml
 
 
 def _same_columns(caster: Caster, drag: dict[str, float]) -> bool:
