@@ -11,15 +11,11 @@ from __future__ import annotations
 
 from collections.abc import Callable, Generator, Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from wmrid.core.errors import LogFormatError
-
-if TYPE_CHECKING:
-    pass
-
 
 REQUIRED = ("t", "eta_r", "eta_l", "tau_r", "tau_l")
 

@@ -4,12 +4,8 @@ from __future__ import annotations
 
 import difflib
 import re
-from typing import TYPE_CHECKING
 
 from wmrid.core.errors import LogFormatError, UsageError, option
-
-if TYPE_CHECKING:
-    pass
 from wmrid.core.wheel_log import CANONICAL, POSE, POSITION, REFERENCE
 
 #: The speed columns, which the position columns (:data:`POSITION`) may replace.

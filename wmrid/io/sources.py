@@ -17,13 +17,10 @@ import io
 import os
 import sys
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, BinaryIO
+from typing import Any, BinaryIO
 
 from wmrid.core.errors import LogFormatError, UsageError
 from wmrid.core.limits import memory_budget, read_limited
-
-if TYPE_CHECKING:
-    pass
 from wmrid.io.columns import suggest
 
 CSV_SUFFIXES = (".csv", ".txt", ".tsv")

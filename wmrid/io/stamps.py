@@ -11,15 +11,9 @@ already in seconds is kept exactly as in the file whatever its size: converting 
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from wmrid.core.choices import TimeUnit, values
-
-if TYPE_CHECKING:
-    pass
-
 
 TIME_UNITS = values(TimeUnit)
 

@@ -4,13 +4,9 @@ computed-torque control on the nominal parameters, and the RK4 loop that logs it
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
-
-if TYPE_CHECKING:
-    pass
 
 from wmrid.model.kernels import sign
 

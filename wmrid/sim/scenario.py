@@ -7,17 +7,12 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from wmrid.core.errors import UsageError, option
 from wmrid.model import dynamics as model
 from wmrid.model.robot import Payload, PhysicalParameters
-
-if TYPE_CHECKING:
-    pass
-
 
 #: Kinds of :class:`PlantChange` (``settings["change"]["kind"]``).
 CHANGE_KINDS = ("payload-load", "payload-drop", "friction-fault", "custom")

@@ -7,18 +7,15 @@ from __future__ import annotations
 
 from collections.abc import Callable, Generator, Iterator, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from wmrid.core.errors import LogFormatError, UsageError, option
+from wmrid.core.wheel_log import CACHE_ROWS, CHUNK_ROWS, MIN_SAMPLES, REQUIRED, LogStream, WheelLog, stream_arrays
 from wmrid.io.field_paths import FieldSignals, check_values, field_signals
 from wmrid.io.mcap.joints import TopicSelection
 from wmrid.io.signals import SignalOptions
-
-if TYPE_CHECKING:
-    pass
-from wmrid.core.wheel_log import CACHE_ROWS, CHUNK_ROWS, MIN_SAMPLES, REQUIRED, LogStream, WheelLog, stream_arrays
 from wmrid.io.sources import Source
 from wmrid.io.stamps import ABSOLUTE_LIMIT_S, NS_PER_UNIT, seconds_from_stamps
 
