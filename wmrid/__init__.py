@@ -161,7 +161,7 @@ _EXPORTS = {
     "WheelLog": "wmrid.core.wheel_log",
     "LogStream": "wmrid.core.wheel_log",
     "Robot": "wmrid.model.robot",
-    "MonitorResult": "wmrid.monitoring.monitor",
+    "MonitorResult": "wmrid.monitoring.monitor_result",
     "MonitorSettings": "wmrid.monitoring.settings",
     "Report": "wmrid.reporting.report",
     "SimulationRun": "wmrid.api.simulation",
@@ -264,9 +264,7 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
         PhysicalEstimate as PhysicalEstimate,
     )
     from wmrid.model.robot import Payload as Payload, Robot as Robot
-    from wmrid.monitoring.monitor import (
-        MonitorResult as MonitorResult,
-    )
+    from wmrid.monitoring.monitor_result import MonitorResult as MonitorResult
     from wmrid.monitoring.settings import (
         MonitorSettings as MonitorSettings,
     )

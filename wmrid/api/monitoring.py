@@ -8,7 +8,8 @@ from typing import Any
 from wmrid.api.inputs import LogOptions, read_log
 from wmrid.core.wheel_log import LogStream, WheelLog
 from wmrid.estimators.result import IdentificationResult
-from wmrid.monitoring.monitor import MonitorResult, monitor as run_monitor
+from wmrid.monitoring.monitor import monitor as run_monitor
+from wmrid.monitoring.monitor_result import MonitorResult
 from wmrid.monitoring.settings import MonitoredModel, MonitorSettings, load_model, model_from_dict
 
 __all__ = ["monitor"]

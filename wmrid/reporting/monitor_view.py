@@ -7,7 +7,7 @@ from typing import Any
 
 from wmrid.model import dynamics as model
 from wmrid.model.dynamics import THETA0_NAMES
-from wmrid.monitoring.monitor import MonitorResult
+from wmrid.monitoring.monitor_result import MonitorResult
 from wmrid.reporting.terminal import print_table, warning
 
 
