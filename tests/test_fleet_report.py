@@ -194,7 +194,8 @@ def test_a_simulated_fleet_end_to_end(tmp_path):
     # wmrid's simulator, then each log identified as a fleet task does (identify_entry, in this process), then the
     # review: the right-wheel drift of robot 2 (+4 %/day from day 14) and the 10 kg payload of robot 4 (from day 22)
     # are flagged and dated, nothing else is
-    from wmrid.api.fleet import identify_entry, plan
+    from wmrid.api.fleet import plan
+    from wmrid.api.fleet_worker import identify_entry
     from wmrid.io.fleet_table import entries_from_paths
 
     # 20 s logs: friction to about 1.5 % per log (8 s logs scatter by 6 %, and a 4 %/day drift then takes 9 days)
@@ -285,7 +286,8 @@ def test_a_fleet_row_carries_the_mean_wheel_speeds_and_the_friction_correlations
     """identify_entry's speed_r / speed_l are the log's mean |wheel speed| (the log read again here, by read_log),
     and the correlations those of the identification's own covariance (wmrid.identify, its JSON)."""
     import wmrid
-    from wmrid.api.fleet import identify_entry, plan
+    from wmrid.api.fleet import plan
+    from wmrid.api.fleet_worker import identify_entry
     from wmrid.io.fleet_table import entries_from_paths
 
     (path,) = write_fleet(tmp_path, robots=1, days=1, duration=6.0)

@@ -309,7 +309,7 @@ def _in_thread(function, *args, timeout: float = 10):
 
 
 def test_a_worker_hashes_a_log_boundedly_and_never_a_device_or_fifo(tmp_path):
-    from wmrid.api.fleet import identify_entry
+    from wmrid.api.fleet_worker import identify_entry
     from wmrid.io.fleet_table import content_digest
 
     os.mkfifo(tmp_path / "pipe.csv")

@@ -190,10 +190,7 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
         ExportResult as ExportResult,
         export as export,
     )
-    from wmrid.api.fleet import (
-        FleetRun as FleetRun,
-        fleet as fleet,
-    )
+    from wmrid.api.fleet import FleetRun as FleetRun, fleet as fleet
     from wmrid.api.fleet_reporting import (
         fleet_report as fleet_report,
         write_fleet_report as write_fleet_report,
