@@ -12,7 +12,7 @@ import pytest
 
 from wmrid.api.fleet import option_columns
 from wmrid.core.errors import LogFormatError, UsageError
-from wmrid.io import fleet_table as ft
+from wmrid.io import fleet_manifest as fm, fleet_table as ft
 
 UTC = dt.timezone.utc
 OPTIONS = option_columns()
@@ -98,7 +98,7 @@ def test_manifest_rows_with_options(tmp_path):
         "logs/R9/2026-03-02.mcap,,paper,,,,\n"
         "/abs/c.bag,R3,,1772352000,,,no\n"
     )
-    a, b, c = ft.read_manifest(tmp_path / "m.csv", option_names=OPTIONS, root="/")  # /abs/c.bag: outside
+    a, b, c = fm.read_manifest(tmp_path / "m.csv", option_names=OPTIONS, root="/")  # /abs/c.bag: outside
     assert a.log == str(tmp_path / "logs" / "a.mcap")
     assert a.robot_id == "R1"
     assert a.robot == str(tmp_path / "robots" / "r.toml")  # relative to the manifest, as the logs
@@ -131,7 +131,7 @@ def test_manifest_rows_with_options(tmp_path):
 def test_manifest_errors_name_the_row(tmp_path, text, message):
     (tmp_path / "m.csv").write_text(text)
     with pytest.raises(UsageError, match=message):
-        ft.read_manifest(tmp_path / "m.csv", option_names=OPTIONS)
+        fm.read_manifest(tmp_path / "m.csv", option_names=OPTIONS)
 
 
 def test_parquet_manifest(tmp_path):
@@ -139,7 +139,7 @@ def test_parquet_manifest(tmp_path):
     table = pa.table({"log": ["x/R5/2026-01-09.csv", "y.csv"], "robot_id": ["R5", "R6"], "k": [20.0, None],
                       "time": times})  # fmt: skip
     pq.write_table(table, tmp_path / "m.parquet")
-    entry, other = ft.read_manifest(tmp_path / "m.parquet", option_names=OPTIONS)
+    entry, other = fm.read_manifest(tmp_path / "m.parquet", option_names=OPTIONS)
     # a null time (NaT in pandas) is an empty cell: the path's date stands
     assert entry.time == dt.datetime(2026, 1, 9, tzinfo=UTC)
     assert entry.time_source == "path"

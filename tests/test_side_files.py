@@ -260,7 +260,7 @@ def test_a_manifest_reaches_only_logs_under_its_root(tmp_path, row, needles):
 
 
 def test_manifest_root_widens_the_rule_but_never_to_devices(tmp_path):
-    from wmrid.io import fleet_table as ft
+    from wmrid.io import fleet_manifest as fm
 
     inside = tmp_path / "fleet"
     inside.mkdir()
@@ -269,14 +269,14 @@ def test_manifest_root_widens_the_rule_but_never_to_devices(tmp_path):
     (inside / "via_link").symlink_to(tmp_path / "logs")
     manifest = _manifest(inside, "../logs/R1_2026-01-01.csv", "via_link/R1_2026-01-01.csv")
     with pytest.raises(UsageError, match="outside the manifest's folder"):
-        ft.read_manifest(manifest)
-    a, b = ft.read_manifest(manifest, root=tmp_path)
+        fm.read_manifest(manifest)
+    a, b = fm.read_manifest(manifest, root=tmp_path)
     assert a.log == b.log == str((tmp_path / "logs" / "R1_2026-01-01.csv").resolve())  # the real path, in the table
     with pytest.raises(UsageError, match="is a character device, not a log"):
-        ft.read_manifest(_manifest(inside, "/dev/zero"), root="/")
+        fm.read_manifest(_manifest(inside, "/dev/zero"), root="/")
     (inside / "loop.csv").symlink_to("loop.csv")  # was a row failing as "No such file or directory"
     with pytest.raises(UsageError, match=r"row 2: loop.csv: .*/loop.csv is a loop of symbolic links, not a log"):
-        ft.read_manifest(_manifest(inside, "loop.csv"))
+        fm.read_manifest(_manifest(inside, "loop.csv"))
     # the robot cells too: a FIFO there hung the worker that loaded it, /etc/shadow was read as TOML
     os.mkfifo(inside / "robot.toml")
     (inside / "R1_2026-01-01.csv").write_text("t\n")
@@ -288,9 +288,9 @@ def test_manifest_root_widens_the_rule_but_never_to_devices(tmp_path):
     ]:
         robots.write_text(f"log,robot\nR1_2026-01-01.csv,{cell}\n")
         with pytest.raises(UsageError, match=needle):
-            ft.read_manifest(robots, root=tmp_path)
+            fm.read_manifest(robots, root=tmp_path)
     robots.write_text("log,robot\nR1_2026-01-01.csv,paper\nR1_2026-01-01.csv,via_link/../fleet/m.csv\n")
-    paper, linked = ft.read_manifest(robots, root=tmp_path)
+    paper, linked = fm.read_manifest(robots, root=tmp_path)
     assert (paper.robot, linked.robot) == ("paper", str((inside / "m.csv").resolve()))  # a name; a real path
     done = run("fleet", "--manifest", str(_manifest(inside, "/dev/zero")), "--manifest-root", "/", "-o", "t.parquet")
     done.one_error(2, "row 2: /dev/zero: /dev/zero is a character device, not a log")

@@ -23,6 +23,7 @@ from typing import Any
 
 from wmrid.api.fleet_worker import _one_line, _split_options, identify_batch, warm_up
 from wmrid.core.errors import UsageError, option
+from wmrid.io.fleet_manifest import read_manifest
 from wmrid.io.fleet_table import (
     LogEntry,
     canonical_options,
@@ -31,7 +32,6 @@ from wmrid.io.fleet_table import (
     entries_from_paths,
     options_key,
     read_arrow,
-    read_manifest,
     sort_table,
     to_arrow,
     write_table,
@@ -239,7 +239,7 @@ def fleet(
     """Identify every log of a fleet on Dask and write the table (Parquet) to ``output``.
 
     logs : paths, globs or folders (:func:`~wmrid.io.fleet_table.find_logs`); or ``manifest``: a CSV/Parquet file,
-        one row per log (:func:`~wmrid.io.fleet_table.read_manifest`).  Robot id and time of a log without them
+        one row per log (:func:`~wmrid.io.fleet_manifest.read_manifest`).  Robot id and time of a log without them
         come from ``id_pattern`` or the path's folder and date (:func:`~wmrid.io.fleet_table.id_and_time_from_path`),
         else the log's own first stamp when it is an epoch time.
     manifest_root : the folder every log of the manifest must resolve into (default: the manifest's own folder); a

@@ -17,12 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from wmrid.core.errors import WmridError
-from wmrid.io.fleet_table import (
-    PARAMETERS,
-    canonical_options,
-    content_digest,
-    empty_row,
-)
+from wmrid.io.fleet_table import PARAMETERS, canonical_options, content_digest, empty_row
 
 if TYPE_CHECKING:
     from wmrid.core.wheel_log import LogStream, WheelLog
