@@ -191,3 +191,16 @@ def test_the_loop_finder_sees_a_loop() -> None:
     assert _loops(graph) == [("wmrid.x.a", "wmrid.x.b", "wmrid.x.c")]
     graph["wmrid.x.c"] = {"wmrid.y.d"}
     assert _loops(graph) == []
+
+
+#: The longest a module may be (issue 31): past it, a module holds more than one concern; split it by what it holds.
+MAX_MODULE_LINES = 500
+
+
+def test_no_module_is_longer_than_the_limit() -> None:
+    long = {
+        str(path.relative_to(PACKAGE.parent)): n
+        for _, path in _modules()
+        if (n := len(path.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES
+    }
+    assert long == {}, f"modules over {MAX_MODULE_LINES} lines: {long}"
