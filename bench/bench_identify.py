@@ -21,12 +21,14 @@ The log is simulated (seed ``--seed``) into bench/out/ the first time; later run
 from __future__ import annotations
 
 import argparse
-import inspect
+import datetime
 import json
+import platform
+import sys
 import time
 from types import SimpleNamespace
 
-from _common import fmt_rss, median, run_timed, sim_log, wmrid_cmd
+from _common import OUT, fmt_rss, median, run_timed, sim_log, wmrid_cmd
 
 TARGET = 1_000_000  # samples/s end-to-end
 
@@ -51,8 +53,11 @@ def end_to_end(path, n: int, repeat: int) -> dict:
 
 
 def in_process(path, repeat: int) -> dict:
+    import pyarrow.parquet as pq
+
     from wmrid.estimators.observer import ObserverSettings
     from wmrid.estimators.observer_pass import default_box, resolve_form
+    from wmrid.estimators.options import ObserverOptions
     from wmrid.estimators.replay import replay
     from wmrid.io.logs import read_log
     from wmrid.model import dynamics as model
@@ -70,9 +75,10 @@ def in_process(path, repeat: int) -> dict:
     robot = BUILTIN_ROBOTS["paper"]
     log = read_log(str(path))
     read = best(lambda: read_log(str(path)))
+    bare = best(lambda: pq.read_table(str(path)))  # the file's columns into memory, nothing else
     t, eta, tau = log.t, log.eta, log.tau
-    # settings as identify() builds them for --robot paper, with identify()'s own defaults
-    d = {name: p.default for name, p in inspect.signature(identify).parameters.items()}
+    # settings as the observer's pass builds them for --robot paper, with the options' defaults
+    d = vars(ObserverOptions())
     form = resolve_form(model.choose_form(eta), d["form"])
     theta_init = model.intermediate_parameters(model.base_parameters(robot.nominal), form)
     lo, hi = default_box(theta_init, form, d["box_width"], True)
@@ -91,7 +97,10 @@ def in_process(path, repeat: int) -> dict:
     identify(short, robot)
     rep = best(lambda: replay(t, eta, tau, settings, max_history=d["max_history"]))
     whole = best(lambda: identify(log, robot))
-    return {"form": form.kind, "k": d["k"], "read": read, "replay": rep, "replay_rate": len(t) / rep, "identify": whole}
+    return {
+        "form": form.kind, "k": d["k"], "read": read, "pyarrow_read": bare, "replay": rep,
+        "replay_rate": len(t) / rep, "identify": whole,
+    }  # fmt: skip
 
 
 def main() -> None:
@@ -130,9 +139,22 @@ def main() -> None:
             f"(in-process medians of {args.repeat}, JIT excluded: read = read_log, replay = replay() alone, "
             f"identify() = replay + covariance, fit, diagnostics; form '{ip0['form']}', k = {ip0['k']:g})"
         )
+        print(
+            f"end to end / bare pyarrow read of the file: {e2e0['median'] / ip0['pyarrow_read']:.2f}x "
+            f"(pyarrow.parquet.read_table {ip0['pyarrow_read']:.3f} s)"
+        )
     print(f"\ntarget: end-to-end >= {TARGET:,} samples/s")
     for duration, _, e2e, _ in rows:
         print(f"  {duration:g} s log: {e2e['rate']:,.0f} samples/s -> {'MET' if e2e['rate'] >= TARGET else 'NOT met'}")
+    OUT.mkdir(parents=True, exist_ok=True)
+    record = {
+        "command": " ".join(["python", *sys.argv]), "machine": platform.node(), "cpus": platform.processor() or None,
+        "date_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "rows": [{"duration_s": d, "samples": n, "end_to_end": {k: v for k, v in e.items() if k != "cmd"},
+                  "in_process": ip} for d, n, e, ip in rows],
+    }  # fmt: skip
+    (OUT / "bench_identify.json").write_text(json.dumps(record, indent=1) + "\n")
+    print(f"figures written to {(OUT / 'bench_identify.json').relative_to(OUT.parent.parent)}")
 
 
 if __name__ == "__main__":

@@ -36,3 +36,25 @@ def test_half_window_follows_the_rate():
     assert sign_half_window(6_001, 60.0) == 1
     assert sign_half_window(3_001, 60.0) == 0
     assert sign_half_window(1, 0.0) == 0
+
+
+def test_the_compiled_window_means_equal_numpys_offset_sums_bit_for_bit() -> None:
+    """The kernel sums each window as numpy's loop over the offsets did (0.0 + x[i - h] + ... + x[i + h], cut at the
+    ends), so its means are the same bits, whatever context the window has on either side."""
+    import numpy as np
+
+    from wmrid.estimators.sign_speed import _window_means
+
+    def offsets(x, h, left, right):
+        n = x.shape[0]
+        idx = np.arange(left, n - right)
+        total = np.zeros((len(idx), 2))
+        for k in range(-h, h + 1):
+            rows = idx + k
+            inside = (rows >= 0) & (rows < n)
+            total[inside] += x[rows[inside]]
+        return total / (np.minimum(idx + h + 1, n) - np.maximum(idx - h, 0))[:, None]
+
+    x = np.random.default_rng(5).standard_normal((2000, 2)) * 10.0 ** np.arange(-3, 3)[np.arange(2000) % 6, None]
+    for h, left, right in [(10, 0, 0), (10, 7, 10), (3, 3, 0), (500, 20, 5), (1, 0, 1), (0, 0, 0)]:
+        assert np.array_equal(_window_means(x, h, left, right), offsets(x, h, left, right)), (h, left, right)
