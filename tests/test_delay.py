@@ -477,3 +477,26 @@ def test_a_casters_drag_is_not_read_as_a_delay_on_the_multibody_prototype(tmp_pa
     assert est.significant, (est.delay, est.std)
     assert note is None
     assert abs(est.delay - 0.005) <= 3 * est.std + DELAY_RESOLUTION_S, (est.delay, est.std)
+
+
+def test_the_compiled_interpolation_is_numpys_bit_for_bit() -> None:
+    """interp_columns (the profile's reading of the efforts at each candidate delay) gives numpy.interp's values
+    exactly: knots hit exactly, reads before and after the knots, a repeated knot, an infinite value, 200 cases."""
+    from wmrid.estimators.delay import interp_columns
+
+    rng = np.random.default_rng(1)
+    for case in range(200):
+        m = int(rng.integers(2, 400))
+        xp = np.arange(m) * 1e-3 + rng.uniform(-1, 1) if case % 3 == 0 else np.sort(rng.uniform(0, 10, m))
+        if case % 7 == 0 and m > 3:
+            xp[2] = xp[1]
+        fp = rng.standard_normal((m, 2)) * 10 ** rng.uniform(-6, 6)
+        if case % 11 == 0:
+            fp[m // 2] = np.inf
+        at = rng.uniform(xp[0] - 1, xp[-1] + 1, int(rng.integers(1, 500)))
+        if case % 5 == 0:
+            at[: min(len(at), m)] = xp[: min(len(at), m)]
+        at = np.sort(at)
+        d = float(rng.choice([0.0, 1e-3, -2.5e-4, rng.uniform(-0.02, 0.02)]))
+        expected = np.column_stack([np.interp(at + d, xp, fp[:, c]) for c in range(2)])
+        assert np.array_equal(interp_columns(at, d, xp, fp), expected, equal_nan=True), case

@@ -25,6 +25,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import numba
 import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError, UsageError, WmridError
@@ -56,6 +57,8 @@ class DelayEstimate:
     at_edge: bool
     theta0_slope: np.ndarray | None = None
     method: str = "least squares"
+    #: Hz, the zero-phase filter's cutoff the profile used (IDIM's, chosen from the log unless given)
+    cutoff_hz: float | None = None
 
     @property
     def determined(self) -> bool:
@@ -178,9 +181,12 @@ def estimate_delay(
         raise NotIdentifiableError("the log is too short to profile the delay over the searched span")
     per_segment = np.zeros((len(grid), g))
 
+    t_grid = np.ascontiguousarray(reg.t_grid, dtype=np.float64)
+    effort_grid = np.ascontiguousarray(reg.effort_grid, dtype=np.float64)
+
     def effort(d: float, at: np.ndarray) -> np.ndarray:
         # a candidate delay d: the effort acted d before its stamp, i.e. it is read d later than its hold
-        return np.column_stack([np.interp(at + d, reg.t_grid, reg.effort_grid[:, j]) for j in range(2)]).reshape(-1)
+        return interp_columns(np.ascontiguousarray(at, dtype=np.float64), float(d), t_grid, effort_grid).reshape(-1)
 
     for k, d in enumerate(grid):
         y = effort(d, times)
@@ -210,7 +216,8 @@ def estimate_delay(
     if fast_slope is not None and all_slope is not None:
         slope = np.where(np.abs(fast_slope) >= np.abs(all_slope), fast_slope, all_slope)
     return DelayEstimate(
-        delay=delay, std=std, grid=grid, rss=rss, segments=g, at_edge=at_edge, theta0_slope=slope, method=method
+        delay=delay, std=std, grid=grid, rss=rss, segments=g, at_edge=at_edge, theta0_slope=slope, method=method,
+        cutoff_hz=cutoff_hz,
     )  # fmt: skip
 
 
@@ -337,3 +344,45 @@ def combine(estimates: list[DelayEstimate]) -> DelayEstimate:
         delay=delay, std=std, grid=first.grid, rss=first.rss, segments=segments, at_edge=at_edge,
         theta0_slope=first.theta0_slope, method=first.method,
     )  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True)
+def interp_columns(at: np.ndarray, d: float, xp: np.ndarray, fp: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """The columns of fp (m, 2), sampled at xp (m,) increasing, read at at + d (at (n,) increasing): numpy.interp's
+    value bit for bit (its slope times the step from the knot below, the end values outside, the knot's own value on
+    a knot; tested against it), in one pass that walks the knots along ``at`` instead of searching for each.  The
+    delay's profile reads the efforts so at each of its candidates (half its time on an hour's log with numpy)."""
+    n = at.shape[0]
+    m = xp.shape[0]
+    out = np.empty((n, 2))
+    j = 0
+    for i in range(n):
+        x = at[i] + d
+        if np.isnan(x):
+            out[i, 0] = x
+            out[i, 1] = x
+            continue
+        if x < xp[0]:
+            out[i, 0] = fp[0, 0]
+            out[i, 1] = fp[0, 1]
+            continue
+        if x > xp[m - 1]:
+            out[i, 0] = fp[m - 1, 0]
+            out[i, 1] = fp[m - 1, 1]
+            continue
+        while j + 1 < m and xp[j + 1] <= x:  # the last knot at or below x (x increases with i)
+            j += 1
+        while j > 0 and xp[j] > x:  # (at need not increase: then walk back)
+            j -= 1
+        for c in range(2):
+            if j == m - 1 or xp[j] == x:
+                out[i, c] = fp[j, c]
+                continue
+            slope = (fp[j + 1, c] - fp[j, c]) / (xp[j + 1] - xp[j])
+            value = slope * (x - xp[j]) + fp[j, c]
+            if np.isnan(value):
+                value = slope * (x - xp[j + 1]) + fp[j + 1, c]
+                if np.isnan(value) and fp[j, c] == fp[j + 1, c]:
+                    value = fp[j, c]
+            out[i, c] = value
+    return out

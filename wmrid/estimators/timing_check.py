@@ -90,10 +90,13 @@ def timing_check(
         for t, eta, tau, reference in _windows(log if isinstance(log, LogStream) else None, log, size):
             if estimates and len(t) < size // 2:  # a short tail adds little and may not fit the filter
                 break
+            # the filter's cutoff follows the log's bandwidth and noise, the same all along a log as its delay: chosen
+            # once, on the first window (IDIM's choice fits the log several times: half the check's time on an hour)
+            cutoff = estimates[0].cutoff_hz if estimates else None
             try:
                 est = estimate_delay(
                     t, eta, tau, span=search_span(t), torque_hold=torque_hold, control_rate=control_rate,
-                    reference=reference, form=with_form,
+                    reference=reference, form=with_form, cutoff_hz=cutoff,
                 )  # fmt: skip
             except WmridError:
                 if not estimates:
