@@ -20,6 +20,7 @@ decode once samples have come, ends the run with one line; the file then keeps w
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import time
 from typing import Any
@@ -33,8 +34,25 @@ from wmrid.io.live.follow import FinalInput, LiveSource, ReaderSettings, _Mcap
 
 #: s: how long opening a connection (TCP, handshake) may take.
 OPEN_TIMEOUT_S = 5.0
-#: s: ping interval, and how long a pong may take before the server counts as not answering.
+#: s: ping interval, and how long a pong may take before the server counts as not answering (WMRID_WS_PING_S sets
+#: another: longer on a lossy radio link, shorter to notice a stopped server sooner).
 PING_S = 5.0
+
+
+def ping_seconds() -> float:
+    """The ping interval and pong timeout, s: WMRID_WS_PING_S when set (a number > 0), else PING_S."""
+    text = os.environ.get("WMRID_WS_PING_S")
+    if text is None:
+        return PING_S
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise UsageError(f"WMRID_WS_PING_S must be a number of seconds > 0, got {text!r}")
+    return value
+
+
 #: s: after the first frame of a poll, how long more frames are gathered before they are decoded.
 GATHER_S = 0.02
 #: s: the first wait before reconnecting; doubled after each failed attempt, up to BACKOFF_MAX_S.
@@ -69,7 +87,7 @@ def _why(err: BaseException) -> str:
     if isinstance(err, ConnectionClosed):
         rcvd = err.rcvd
         if rcvd is None and err.sent is not None and err.sent.code == 1011:  # websockets' keepalive timeout
-            return f"the server stopped answering (no reply to a ping within {PING_S:g} s)"
+            return f"the server stopped answering (no reply to a ping within {ping_seconds():g} s)"
         if rcvd is None:
             return "the connection dropped without a closing handshake (the server was killed or the network failed)"
         if rcvd.code == 1005:  # a close frame without a status code
@@ -145,10 +163,11 @@ class WsSource(LiveSource):
         from websockets.exceptions import InvalidHandshake, WebSocketException
         from websockets.sync.client import connect
 
+        ping = ping_seconds()
         try:
             conn = connect(
-                self.url, subprotocols=list(fx.SUBPROTOCOLS), open_timeout=OPEN_TIMEOUT_S, ping_interval=PING_S,
-                ping_timeout=PING_S, close_timeout=1.0, max_size=MAX_FRAME, max_queue=QUEUE_FRAMES, proxy=None,
+                self.url, subprotocols=list(fx.SUBPROTOCOLS), open_timeout=OPEN_TIMEOUT_S, ping_interval=ping,
+                ping_timeout=ping, close_timeout=1.0, max_size=MAX_FRAME, max_queue=QUEUE_FRAMES, proxy=None,
                 logger=_quiet_logger(),
             )  # type: ignore[arg-type]  # fmt: skip
         except (OSError, TimeoutError, InvalidHandshake, WebSocketException) as err:
