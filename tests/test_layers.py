@@ -204,3 +204,80 @@ def test_no_module_is_longer_than_the_limit() -> None:
         if (n := len(path.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES
     }
     assert long == {}, f"modules over {MAX_MODULE_LINES} lines: {long}"
+
+
+def _resolved(node: ast.Import | ast.ImportFrom, package: str, names: set[str]) -> list[str]:
+    """The wmrid modules an import statement loads (``from a import b``: the submodule ``a.b`` when there is one)."""
+    if isinstance(node, ast.Import):
+        return [a.name for a in node.names if a.name in names]
+    base = node.module or ""
+    if node.level:
+        parts = package.split(".")[: len(package.split(".")) - node.level + 1]
+        base = ".".join([*parts, *([base] if base else [])])
+    subs = [f"{base}.{a.name}" for a in node.names if f"{base}.{a.name}" in names]
+    return [m for m in (subs or [base]) if m in names]
+
+
+def _import_time_and_local_imports() -> tuple[dict[str, set[str]], dict[str, list[tuple[int, str]]]]:
+    """(module -> the wmrid modules its body imports when it is imported, ``TYPE_CHECKING`` blocks left out;
+    module -> (line, module) of each import inside one of its functions)."""
+    names = {n for n, _ in _modules()}
+    at_import: dict[str, set[str]] = {}
+    local: dict[str, list[tuple[int, str]]] = {}
+
+    def body_imports(body: list[ast.stmt], package: str, found: set[str]) -> None:
+        for node in body:
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                found.update(_resolved(node, package, names))
+            elif isinstance(node, ast.If) and "TYPE_CHECKING" not in ast.unparse(node.test):
+                body_imports(node.body, package, found)
+                body_imports(node.orelse, package, found)
+            elif isinstance(node, ast.Try):
+                for block in (node.body, *(h.body for h in node.handlers), node.orelse, node.finalbody):
+                    body_imports(block, package, found)
+
+    for name, path in _modules():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        found: set[str] = set()
+        body_imports(tree.body, package, found)
+        at_import[name] = found
+        local[name] = [
+            (node.lineno, target)
+            for function in ast.walk(tree)
+            if isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef))
+            for node in ast.walk(function)
+            if isinstance(node, (ast.Import, ast.ImportFrom))
+            for target in _resolved(node, package, names)
+        ]
+    return at_import, local
+
+
+def test_a_function_imports_a_module_only_to_put_off_loading_it() -> None:
+    """Imports inside functions are for start-up time only (issue 31), each for one of three reasons:
+
+    * in ``wmrid.cli``: ``wmrid --help`` and each command load only what that command runs;
+    * in ``wmrid.api`` and the package's front: ``import wmrid`` and each function load only what they use;
+    * elsewhere: the module imported is one its importer does not load otherwise (numba's kernels, scipy,
+      matplotlib, an optional package behind it), checked here: a function-local import of a module the importer
+      loads anyway at import time puts nothing off and belongs at the top.
+    """
+    at_import, local = _import_time_and_local_imports()
+
+    def loaded(module: str, seen: set[str]) -> set[str]:
+        for target in at_import.get(module, ()):
+            parts = target.split(".")
+            for i in range(2, len(parts) + 1):  # a package's __init__ runs before its module
+                step = ".".join(parts[:i])
+                if step in at_import and step not in seen:
+                    seen.add(step)
+                    loaded(step, seen)
+        return seen
+
+    needless = []
+    for module, imports in local.items():
+        if module == "wmrid" or module.startswith(("wmrid.cli", "wmrid.api")):
+            continue
+        already = loaded(module, set())
+        needless += [f"{module}:{line} imports {target}" for line, target in imports if target in already | {module}]
+    assert needless == [], "function-local imports of modules loaded anyway:\n" + "\n".join(needless)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import os
 from typing import Any
 
-from wmrid.core.errors import UsageError
+from wmrid.core.errors import LogFormatError, UsageError
 
 #: bytes: the default budget (at most half the machine's memory, :func:`memory_budget`).
 DEFAULT_BUDGET = 4 << 30
@@ -74,7 +74,6 @@ def read_limited(source: Any, limit: int, message: str, error: type[Exception] |
     refused with :class:`wmrid.core.errors.LogFormatError` (``message``, formatted with ``size``, the limit described)
     once they pass ``limit`` (or ``error``, another WmridError class): an endless source (``/dev/zero``, ``yes |``)
     stops there instead of filling memory.  OSError passes through."""
-    from wmrid.core.errors import LogFormatError
 
     error = error or LogFormatError
 

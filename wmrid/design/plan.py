@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import UsageError, option
-from wmrid.design.excitation import RAMP_SECONDS, Excitation
+from wmrid.design.excitation import RAMP_SECONDS, Excitation, pose_along
 from wmrid.design.information import DEFAULT_K, GivenLogs, SensorNoise
 from wmrid.design.limits import LIMIT_NAMES, Limits
 from wmrid.design.problem import CORRELATION, CRITERIA, DIRECTION_SHARE, FLOOR_SHARE, Motion, Problem
@@ -92,7 +92,6 @@ class Plan:
         every = max(1, math.ceil(200.0 / rate))
         fine = np.linspace(0.0, self.excitation.duration, (n - 1) * every + 1)
         vf, wf, _, _ = self.excitation.evaluate(fine)
-        from wmrid.design.excitation import pose_along
 
         pose = pose_along(fine, vf, wf)[::every]
         return {
@@ -415,7 +414,6 @@ def _baseline(fine: Problem, name: str, theta0: np.ndarray, form: RegressorForm,
 
 
 def _inseparable(duration: float) -> str:
-    from wmrid.design.problem import CORRELATION, DIRECTION_SHARE
 
     return (
         f"no {duration:g} s drive found that keeps the limits and still separates the parameters (each wheel forward "

@@ -92,6 +92,7 @@ from wmrid.estimators.idim_regression import (
     LOW_CUTOFF_HZ,
     PHI_NAMES,
     IdimRegression,
+    cutoff_bounds,
     effort_delay,
     idim_regression,
     phi_to_theta0,
@@ -340,7 +341,6 @@ def _lower_cutoff(
     most MAX_LOWERINGS times and never below the default's lower bound
     (:func:`wmrid.estimators.idim_regression.cutoff_bounds`).  Only the default cutoff is lowered (``default``).
     """
-    from wmrid.estimators.idim_regression import cutoff_bounds
 
     if not default or len(lowered) >= MAX_LOWERINGS or cut.get("delta") is None:
         return None

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError, UsageError
-from wmrid.estimators.idim_regression import phi_to_theta0, segment_factors, solve_r
+from wmrid.estimators.idim_regression import idim_regression, phi_to_theta0, segment_factors, solve_r
 
 #: The second fit's cutoff is the first's divided by this.
 CUTOFF_RATIO = math.sqrt(2.0)
@@ -92,7 +92,6 @@ def cutoff_check(
     effort delay, s.  Skipped (not
     applied, with "why") when the log is too short for the lower cutoff's transient.
     """
-    from wmrid.estimators.idim_regression import idim_regression
 
     low = reg.cutoff_hz / CUTOFF_RATIO
     try:

@@ -18,6 +18,7 @@ import numpy as np
 from wmrid.core.choices import Method, values
 from wmrid.core.errors import UsageError, WmridError, option
 from wmrid.estimators.estimate import BaseEstimate
+from wmrid.estimators.model_error import std_mark
 from wmrid.estimators.result import IdentificationResult, payload_dict
 from wmrid.estimators.substitution import with_estimate
 from wmrid.model.robot import Robot
@@ -205,7 +206,6 @@ def compare(
     ``stage`` : called with each method's name as it starts (a progress display).  ``robot``: the robot the
     observer's run estimated a payload against (its row's ``"payload"``, when the observer's result has one).
     """
-    from wmrid.estimators.model_error import std_mark
     from wmrid.model.predict import unsimulated, validation_fit
 
     methods: dict[str, dict[str, Any]] = {}

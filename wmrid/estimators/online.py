@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wmrid.estimators.observer import ObserverSettings
+from wmrid.estimators.observer_kernel import observer_chunk, project_history_box
 from wmrid.estimators.replay import KernelState
 from wmrid.estimators.sign_speed import SignSpeeds
 from wmrid.model.kernels import plain
@@ -89,7 +90,6 @@ class OnlineObserver:
         self._advance(*self._signs.finish())
 
     def _advance(self, t: np.ndarray, eta: np.ndarray, tau: np.ndarray, eta_sign: np.ndarray) -> None:
-        from wmrid.estimators.observer_kernel import observer_chunk
 
         if len(t) == 0:
             return
@@ -173,7 +173,6 @@ class OnlineEstimate:
 def online_estimate(obs: OnlineObserver) -> OnlineEstimate | None:
     """The estimate of ``obs`` with its jackknife std (module docstring), or None while the samples do not determine
     one (too few, or a singular system)."""
-    from wmrid.estimators.observer_kernel import project_history_box
     from wmrid.estimators.result import reported_names
     from wmrid.estimators.uncertainty import estimate_covariances
     from wmrid.model.base_params import derived_with_std, fit_base_parameters

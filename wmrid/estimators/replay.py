@@ -14,8 +14,9 @@ import numpy as np
 
 from wmrid.estimators.noise_floor import NoiseFloor
 from wmrid.estimators.observer import ObserverSettings
+from wmrid.estimators.observer_kernel import KIND_CASTER, KIND_CASTER_GEOMETRY, KIND_GENERAL, KIND_PAPER, observer_chunk
 from wmrid.estimators.sign_speed import SignSpeeds
-from wmrid.model.dynamics import filter_regressor
+from wmrid.model.dynamics import LOAD_SIGNALS, filter_regressor
 from wmrid.model.kernels import plain
 
 CHUNK = 262_144
@@ -102,7 +103,6 @@ def replay(
 
 def kernel_kind(form) -> int:
     """The compiled kernel's regressor kind for ``form`` (:mod:`wmrid.estimators.observer_kernel`)."""
-    from wmrid.estimators.observer_kernel import KIND_CASTER, KIND_CASTER_GEOMETRY, KIND_GENERAL, KIND_PAPER
 
     if form.kind == "paper":
         return KIND_PAPER
@@ -113,7 +113,6 @@ def kernel_kind(form) -> int:
 
 def load_codes(form) -> np.ndarray:
     """The kernel's load codes (L,) int64 of ``form`` (indices into :data:`wmrid.model.dynamics.LOAD_SIGNALS`)."""
-    from wmrid.model.dynamics import LOAD_SIGNALS
 
     return np.array([LOAD_SIGNALS.index(x) for x in form.load], dtype=np.int64)
 
@@ -188,7 +187,6 @@ class _HalfRate:
     def feed(self, t: np.ndarray, eta: np.ndarray, tau: np.ndarray, eta_sign: np.ndarray, start: int) -> None:
         """Samples with global indices start .. start + len(t) - 1; only the even ones are used (their sign speeds
         are the full-rate run's: the same centred mean of the measured speeds)."""
-        from wmrid.estimators.observer_kernel import observer_chunk
 
         first = start % 2  # offset of the first even global index within this piece
         t, eta, tau, eta_sign = t[first::2], eta[first::2], tau[first::2], eta_sign[first::2]
@@ -234,7 +232,6 @@ def replay_pieces(
     plus one (:mod:`wmrid.estimators.sign_speed`; 0: of the measured speeds); the pieces then reach the kernel that
     many samples late, the last ones when the pieces end.
     """
-    from wmrid.estimators.observer_kernel import observer_chunk
 
     p = settings.form.n_columns
     hist_idx, block_end = layout(n, duration, settings.k, max_history)

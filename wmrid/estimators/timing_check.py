@@ -73,7 +73,6 @@ def timing_check(
     windows' estimates combined by their inverse variances (:func:`combine`), so the delay's std keeps shrinking
     as 1/sqrt(T) with the log's length.  A log that cannot be profiled (a hole, too short for the filter) is not
     checked, and the record says why.  ``form``: the friction model profiled (:func:`estimate_delay`)."""
-    from wmrid.core.errors import WmridError
     from wmrid.core.wheel_log import LogStream
 
     slow = bool(median_step > 0 and 1.0 / median_step < SLOW_LOG_HZ)

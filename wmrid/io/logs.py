@@ -37,7 +37,7 @@ from wmrid.core.wheel_log import (
     WheelLog,
 )
 from wmrid.io.assembler import MERGED_TIME, Assembler
-from wmrid.io.bag.log import recording_paths
+from wmrid.io.bag.log import read_bag_log, recording_paths
 from wmrid.io.columns import check_key
 from wmrid.io.csv_log import csv_chunks
 from wmrid.io.field_paths import field_signals
@@ -211,7 +211,6 @@ def _bag_log(
     rows: int,
 ) -> LogStream:
     from wmrid.core.atomic import register_input
-    from wmrid.io.bag.log import read_bag_log
 
     fs = field_signals(columns) if columns else None
     if columns and fs is None:

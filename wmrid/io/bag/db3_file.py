@@ -28,7 +28,7 @@ import numpy as np
 
 from wmrid.core.errors import LogFormatError
 from wmrid.core.limits import describe
-from wmrid.io.bag.db3_wal import wal_state
+from wmrid.io.bag.db3_wal import connect, wal_state
 from wmrid.io.bag.state import BATCH, _BagState, _one_line, _Topic, storage_files
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -82,8 +82,6 @@ def _connect(path: str) -> Any:
     """A read-only, immutable connection to a .db3 file: through its write-ahead log when it has one with committed
     pages (a recording that was not closed: :mod:`wmrid.io.bag.db3_wal`)."""
     import apsw
-
-    from wmrid.io.bag.db3_wal import connect, wal_state
 
     view, _ = wal_state(path)  # an unreadable log is said in a note (Db3State)
     if view is not None:

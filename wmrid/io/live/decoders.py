@@ -21,8 +21,10 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from wmrid.core.errors import UsageError, option
 from wmrid.core.wheel_log import CANONICAL, REFERENCE, WheelLog
-from wmrid.io.mcap.joints import TopicSelection
+from wmrid.io.mcap.joints import TopicSelection, signals_from_json, signals_from_mcap
+from wmrid.io.mcap.records import JOINT_STATE_NAMES
 from wmrid.io.signals import SignalOptions, convert
 from wmrid.io.stamps import ABSOLUTE_LIMIT_S
 
@@ -109,8 +111,6 @@ class McapDecoder:
         self.fields = field_signals(self.columns) if self.columns else None
         self.json_topic = selection.topic if self.columns and self.fields is None else None
         if self.json_topic is None and self.columns and self.fields is None:
-            from wmrid.core.errors import UsageError, option
-
             raise UsageError(f"{name}: {option('columns')} with an MCAP needs {option('topic')} (a JSON topic) or "
                              "field paths KEY=TOPIC:PATH")  # fmt: skip
         self.selection = field_selection(selection, self.fields) if self.fields is not None else selection
@@ -125,7 +125,6 @@ class McapDecoder:
     def keep(self, topic: str, schema: str) -> bool:
         """Whether a channel's messages can hold the wheel signals (the others are not kept)."""
         from wmrid.io.mcap.joint_batches import DYNAMIC_JOINT_STATE_NAMES
-        from wmrid.io.mcap.records import JOINT_STATE_NAMES
 
         if self.fields is not None:
             return topic in self.fields.topics()
@@ -138,7 +137,6 @@ class McapDecoder:
 
     def decode(self, batch: bytes) -> WheelLog | None:
         """The samples of one batch (a small MCAP file of its own), or None when it holds none past the last."""
-        from wmrid.io.mcap.joints import signals_from_json, signals_from_mcap
         from wmrid.io.mcap.reader import read_mcap
 
         if self.fields is not None:

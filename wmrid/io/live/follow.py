@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from typing import BinaryIO
 
 from wmrid.core.errors import LogFormatError, UsageError
+from wmrid.core.limits import memory_budget
 from wmrid.core.wheel_log import WheelLog
 from wmrid.io.live.decoders import McapDecoder, TableDecoder
 from wmrid.io.live.feeds import READ_BYTES, FileFeed, PipeFeed
@@ -155,7 +156,6 @@ class _Mcap:
     """MCAP bytes to samples: the framer and the decoder (one decoder for the split files of a recording)."""
 
     def __init__(self, name: str, decoder: McapDecoder) -> None:
-        from wmrid.core.limits import memory_budget
 
         self.decoder = decoder
         self.framer = McapFramer(name, decoder.keep, memory_budget())

@@ -14,7 +14,7 @@ import numpy as np
 from wmrid.core.errors import LogFormatError, UsageError, option
 from wmrid.core.wheel_log import CACHE_ROWS, CHUNK_ROWS, MIN_SAMPLES, REQUIRED, LogStream, WheelLog, stream_arrays
 from wmrid.io.field_paths import FieldSignals, check_values, field_signals
-from wmrid.io.mcap.joints import TopicSelection
+from wmrid.io.mcap.joints import TopicSelection, signals_from_json, signals_from_mcap
 from wmrid.io.signals import SignalOptions
 from wmrid.io.sources import Source
 from wmrid.io.stamps import ABSOLUTE_LIMIT_S, NS_PER_UNIT, seconds_from_stamps
@@ -157,7 +157,6 @@ def _mcap_whole_log(
     source: Any, contents: Any, selection: TopicSelection, signals: SignalOptions, gear_ratio: float | None
 ) -> WheelLog:
     """The WheelLog of a recording read whole (:class:`wmrid.io.mcap.contents.McapContents` with its arrays)."""
-    from wmrid.io.mcap.joints import signals_from_json, signals_from_mcap
 
     if selection.topic in contents.json:
         sig = signals_from_json(contents, selection.topic, signals, gear_ratio)
