@@ -9,6 +9,7 @@ read back carries those, and the base parameters' full covariance under ``estima
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -85,6 +86,46 @@ class ObserverRun:
 
 
 @dataclass(frozen=True)
+class MethodSettings:
+    """What a classical method's estimate was made with (a result of IDIM, IV, RLS or OE; the observer's run that
+    every method starts from keeps its own, :attr:`IdentificationResult.observer_settings`).
+
+    method : "idim", "iv", "rls" or "oe".  torque_hold, control_rate : how the efforts were held (the observer's).
+    cutoff_hz : Hz, the zero-phase filter's cutoff used (IDIM, IV, RLS).  weighted : IDIM's/IV's two-step weighting.
+    forgetting : RLS's forgetting factor.  None: the method has no such setting.
+    """
+
+    method: str
+    torque_hold: str
+    control_rate: float | None = None
+    cutoff_hz: float | None = None
+    weighted: bool | None = None
+    forgetting: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The settings as JSON: the method and the hold always, the others where the method has them."""
+        always = ("method", "torque_hold", "control_rate")
+        return {k: v for k, v in dataclasses.asdict(self).items() if k in always or v is not None}
+
+    def said(self) -> str:
+        """The settings in words, e.g. "idim: cutoff 10 Hz, unweighted" (a report's and the table's line)."""
+        said = [f"cutoff {self.cutoff_hz:.3g} Hz"] if self.cutoff_hz is not None else []
+        if self.weighted is not None:
+            said.append("weighted" if self.weighted else "unweighted")
+        if self.forgetting is not None:
+            said.append(f"forgetting factor {self.forgetting:g}")
+        return f"{self.method}: {', '.join(said) or 'its defaults'}"
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> MethodSettings:
+        return cls(
+            method=str(data["method"]), torque_hold=str(data.get("torque_hold", "zoh")),
+            control_rate=data.get("control_rate"), cutoff_hz=data.get("cutoff_hz"), weighted=data.get("weighted"),
+            forgetting=data.get("forgetting"),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
 class IdentificationResult:
     """Everything an identification found, whichever the method, immutable.  ``to_dict`` gives the JSON form.
 
@@ -95,6 +136,7 @@ class IdentificationResult:
     method showed.  nominal, reference : the robot's nominal and CAD base parameters.  payload : (value, std) of
     mass kg, x m, y m, inertia kg m^2.  validation : the fit on another log.  observer : the observer's run on the
     log (every method runs it first: its excitation figures and history describe the log), or None.
+    method_settings : what another method's estimate was made with (None for the observer's): :attr:`settings`.
     """
 
     source: str
@@ -113,10 +155,16 @@ class IdentificationResult:
     estimate: BaseEstimate | None = None  # the reported theta0 and its covariance (undetermined: NaN/inf)
     validation: dict[str, Any] | None = None  # fit on another log (wmrid.model.predict.validation_fit)
     verdict: dict[str, Any] | None = None  # what the log determines, per group (wmrid.estimators.verdict)
+    method_settings: MethodSettings | None = None
+
+    @property
+    def settings(self) -> ObserverSettings | MethodSettings:
+        """The settings of the method reported: the observer's (:attr:`observer_settings`), or another method's."""
+        return self.method_settings if self.method_settings is not None else self._run().settings
 
     # The observer run's figures, read through the result (the reports and figures use them).
     @property
-    def settings(self) -> ObserverSettings:
+    def observer_settings(self) -> ObserverSettings:
         return self._run().settings
 
     @property
@@ -157,9 +205,13 @@ class IdentificationResult:
             "values": {n: float(v) for n, v in zip(names, self.theta.ravel(), strict=True)},
             "std": {n: finite_or_none(s) for n, s in zip(names, std, strict=True)},
             "unconstrained": {n: float(v) for n, v in zip(names, self.theta_unconstrained.ravel(), strict=True)},
-            "start": {n: float(v) for n, v in zip(names, self.settings.theta_init.ravel(), strict=True)},
-            "box_min": {n: finite_or_none(v) for n, v in zip(names, self.settings.theta_min.ravel(), strict=True)},
-            "box_max": {n: finite_or_none(v) for n, v in zip(names, self.settings.theta_max.ravel(), strict=True)},
+            "start": {n: float(v) for n, v in zip(names, self.observer_settings.theta_init.ravel(), strict=True)},
+            "box_min": {
+                n: finite_or_none(v) for n, v in zip(names, self.observer_settings.theta_min.ravel(), strict=True)
+            },
+            "box_max": {
+                n: finite_or_none(v) for n, v in zip(names, self.observer_settings.theta_max.ravel(), strict=True)
+            },
         }
 
     def to_dict(self, history: bool = True) -> dict[str, Any]:
@@ -179,13 +231,18 @@ class IdentificationResult:
         out["parameters"] = params
         if self.observer is not None:
             out["theta"] = self.theta_dict()
-            out["settings"] = {
-                "k": self.settings.k,
-                "alpha": self.settings.alpha,
-                "torque_hold": self.settings.torque_hold,
-                "control_rate": self.settings.control_rate,
+            observer = {
+                "k": self.observer_settings.k,
+                "alpha": self.observer_settings.alpha,
+                "torque_hold": self.observer_settings.torque_hold,
+                "control_rate": self.observer_settings.control_rate,
                 "start": self.start_source,
             }
+            if self.method_settings is None:
+                out["settings"] = observer
+            else:  # another method's: its own settings, the observer's run under its own name
+                out["settings"] = self.method_settings.to_dict()
+                out["observer_settings"] = observer
         out.update(diagnostics=self.diagnostics, warnings=list(self.warnings), log=self.log_info)
         if self.estimate is not None:
             out["estimate"] = estimate_dict(self.estimate, self.form.base_names)
@@ -288,7 +345,8 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
     form = RegressorForm.from_dict(theta_d["form"])
     names = form.theta_names()
     p = form.n_columns
-    settings_d = data["settings"]
+    settings_d = data.get("observer_settings", data["settings"])
+    method_settings = MethodSettings.from_dict(data["settings"]) if "observer_settings" in data else None
     settings = ObserverSettings(
         form=form,
         theta_init=_box(theta_d["start"], names, p, math.nan),
@@ -372,6 +430,7 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
         estimate=estimate,
         validation=data.get("validation"),
         verdict=data.get("verdict"),
+        method_settings=method_settings,
     )
     if result.verdict is None:  # saved before the verdict: said from its numbers (wmrid.estimators.verdict)
         from wmrid.estimators.verdict import settle

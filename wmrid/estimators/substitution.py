@@ -11,7 +11,7 @@ import numpy as np
 from wmrid.estimators.estimate import BaseEstimate
 from wmrid.estimators.model_error import record_widening
 from wmrid.estimators.observer_pass import CLOSED_LOOP_CAVEAT
-from wmrid.estimators.result import IdentificationResult, finite_or_none, reported_names
+from wmrid.estimators.result import IdentificationResult, MethodSettings, finite_or_none, reported_names
 from wmrid.estimators.uncertainty import interval_factor
 from wmrid.model.base_params import derived_with_std
 from wmrid.model.dynamics import RegressorForm
@@ -93,7 +93,13 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
         payload_est = payload_with_std(np.asarray(est.theta0, dtype=float), cov, robot.reference)
     from wmrid.estimators.verdict import settle
 
+    used = est.diagnostics  # the method's own figures: the cutoff it used, its weighting, its forgetting factor
+    hold = result.observer_settings  # every method reads the efforts under the observer's hold
+    method_settings = MethodSettings(
+        method=est.method, torque_hold=hold.torque_hold, control_rate=hold.control_rate,
+        cutoff_hz=used.get("cutoff_hz"), weighted=used.get("weighted"), forgetting=used.get("forgetting"),
+    )  # fmt: skip
     return settle(replace(
         result, parameters=parameters, theta0_cov=cov, diagnostics=diagnostics, warnings=tuple(warnings),
-        payload=payload_est, method=est.method, estimate=replace(est, cov=cov),
+        payload=payload_est, method=est.method, estimate=replace(est, cov=cov), method_settings=method_settings,
     ))  # fmt: skip

@@ -91,7 +91,7 @@ def build_estimates_figure(
 ) -> Figure:
     """Every intermediate parameter estimate theta_ij over time, one panel each (rows: wheel i = 1, 2).
 
-    The start value (``result.settings.theta_init``) is dashed; with ``truth`` (see :func:`true_theta`)
+    The start value (``result.observer_settings.theta_init``) is dashed; with ``truth`` (see :func:`true_theta`)
     the true theta is dotted.  A panel whose early excursions would flatten the rest is zoomed on the
     start, the truth and the last 80 % of the estimate (its title says "zoomed"; :func:`_settled_limits`).
     ``error_mode``: the estimation error theta_hat - theta_true instead
@@ -105,7 +105,7 @@ def build_estimates_figure(
     h = result.history
     form = result.form
     p = form.n_columns
-    start = np.asarray(result.settings.theta_init, dtype=np.float64)
+    start = np.asarray(result.observer_settings.theta_init, dtype=np.float64)
     theta_true = true_theta(truth, form) if truth is not None else None
     units = theta_units(form, result.log_info.get("effort_unit", "N m"))
     t = np.asarray(h.t, dtype=np.float64)

@@ -116,7 +116,7 @@ def build_excitation_figure(result: IdentificationResult) -> Figure:
     t = np.asarray(h.t, dtype=np.float64)
     lam = np.asarray(h.lambda_min, dtype=np.float64)
     lam = np.where(np.isfinite(lam) & (lam > 0), lam, np.nan)
-    alpha = float(result.settings.alpha)
+    alpha = float(result.observer_settings.alpha)
     fig = _new_figure(left=0.9, top=0.35)
     ax = fig.subplots()
     _plot(ax, t, lam, color="C0", lw=1.3, label="λ_min(Γ)")

@@ -92,7 +92,8 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
     console.print(
         f"{info['samples']} samples, {info['duration_s']:.3f} s at {info['rate_hz']:.6g} Hz; "
         f"regressor: {result.form.kind} form ({result.form.n_columns} columns), {result.form.friction} friction; "
-        f"k = {result.settings.k:g} 1/s, alpha = {result.settings.alpha:g}; start: {result.start_source}"
+        f"{_method_settings(result.method_settings)}k = {result.observer_settings.k:g} 1/s, "
+        f"alpha = {result.observer_settings.alpha:g}; start: {result.start_source}"
     )
     diag = result.diagnostics
     if diag.get("robot_assumed"):
@@ -281,3 +282,8 @@ def print_comparison(data: dict, console: Any) -> None:
     for name, m in methods.items():
         for warning in m["warnings"]:
             console.print(warning_line(warning, f"warning ({name})"))
+
+
+def _method_settings(settings: Any) -> str:
+    """Another method's settings, said before the observer's run it started from ("" for the observer's result)."""
+    return "" if settings is None else f"{settings.said()}; the observer's run it started from: "

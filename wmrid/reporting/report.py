@@ -27,7 +27,7 @@ import numpy as np
 
 from wmrid.core.errors import WmridError
 from wmrid.estimators.model_error import std_mark
-from wmrid.estimators.result import from_dict
+from wmrid.estimators.result import MethodSettings, from_dict
 from wmrid.estimators.verdict import LEGEND, PLAN_HINT
 from wmrid.model import dynamics as model, torques
 from wmrid.model.dynamics import RegressorForm
@@ -136,6 +136,8 @@ def build_report(
     """A report from an identify JSON document ``data`` (and the live ``result``/``log`` when available;
     ``validation_log``: the ``--validate`` log in memory, for its measured and predicted speeds).  ``figures``:
     build the figures (rendered only when an output needs them: :func:`rendered`)."""
+    # the observer's run every method starts from: its settings (another method's result has its own as "settings")
+    observer = data.get("observer_settings", data["settings"])
     rl = result if result is not None else from_dict(data, data.get("source") or "?")
     form = rl.form
     names = form.theta_names()
@@ -254,7 +256,7 @@ def build_report(
             if diag["structural_mismatch"]["p_value"] < 1e-3
             else " — consistent with the model."
         ),
-        f"Excitation: λ_min(Γ) = {diag['lambda_min_gamma']:.3g} (α = {data['settings']['alpha']:g}); "
+        f"Excitation: λ_min(Γ) = {diag['lambda_min_gamma']:.3g} (α = {observer['alpha']:g}); "
         + (
             f"not determined by this log: {', '.join(diag['undetermined'])}."
             if diag.get("undetermined")
@@ -314,7 +316,7 @@ def build_report(
         summary=[
             f"{data['log'].get('samples', '?')} samples, {data['log'].get('duration_s', float('nan')):.3f} s at "
             f"{data['log'].get('rate_hz', float('nan')):.5g} Hz; regressor: {form.kind} form; "
-            f"k = {data['settings']['k']:g} 1/s; start: {data['settings']['start']}",
+            f"{method_said(data)}k = {observer['k']:g} 1/s; start: {observer['start']}",
         ],
         intermediate=intermediate, base=base, payload=payload, diagnostics=statements,
         notes=list(data["log"].get("notes", [])), residuals=residuals, result=data,
@@ -419,7 +421,7 @@ def _add_figures(report: Report, rl: Any, log: Any, truth: dict[str, float] | No
     if rl.history is not None:
         both("Intermediate parameters over time", cf.build_estimates_figure(rl, truth),
              f"The observer's estimates θ̂ of Eqs. 23-24 (row i: wheel i, 1 = right, 2 = left; {rl.form.kind} form, "
-             f"k = {rl.settings.k:g} 1/s).")  # fmt: skip
+             f"k = {rl.observer_settings.k:g} 1/s).")  # fmt: skip
         if truth is not None:
             both("Estimation errors over time (paper Fig. 7)", cf.build_estimates_figure(rl, truth, error_mode=True),
                  "θ̂ − θ of the intermediate parameters against the truth.")  # fmt: skip
@@ -463,3 +465,10 @@ def to_json_dict(report: Report) -> dict[str, Any]:
         "diagnostics": report.diagnostics, "residuals": residuals, "notes": report.notes,
         "result": report.result, "provenance": report.provenance,
     }  # fmt: skip
+
+
+def method_said(data: dict[str, Any]) -> str:
+    """Another method's settings, said before the observer's run it started from ("" for the observer's result)."""
+    if "observer_settings" not in data:
+        return ""
+    return f"{MethodSettings.from_dict(data['settings']).said()}; the observer's run it started from: "
