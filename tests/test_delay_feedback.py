@@ -23,18 +23,18 @@ AMR = BUILTIN_ROBOTS["amr"]
 NOISE = {"eta_std": 0.02, "tau_std": 0.01}
 
 
+def amr_reversing(duration: float, seed: int, caster: float):
+    """The light AMR reversing at 200 Hz on one clock (no delay), a caster disturbance of ``caster`` N m inside the
+    loop, sensor noise, as a log in memory."""
+    noise = wmrid.NoiseSettings(seed=seed, caster_std=caster, **NOISE)
+    return wmrid.simulate("amr", trajectory="reversing", duration=duration, rate=200.0, noise=noise).log.to_wheel_log()
+
+
 @pytest.fixture(scope="module")
 def disturbed():
     """The light AMR, 30 s reversing at 200 Hz on one clock (no delay), a 0.02 N m caster disturbance inside the
     loop, sensor noise; seed 2."""
-    run = wmrid.simulate(
-        "amr",
-        trajectory="reversing",
-        duration=30.0,
-        rate=200.0,
-        noise=wmrid.NoiseSettings(seed=2, caster_std=0.02, **NOISE),
-    )
-    return run.log.to_wheel_log()
+    return amr_reversing(30.0, 2, 0.02)
 
 
 def test_a_disturbance_inside_the_loop_is_not_taken_for_a_delay(disturbed):
@@ -133,14 +133,7 @@ def test_a_jackknife_clipped_at_the_edge_does_not_pin_the_delay():
     pin the delay, and nothing is applied or carried."""
     from wmrid.estimators.delay import _jackknife_std, _refine
 
-    run = wmrid.simulate(
-        "amr",
-        trajectory="reversing",
-        duration=40.0,
-        rate=200.0,
-        noise=wmrid.NoiseSettings(seed=7, caster_std=0.005, **NOISE),
-    )
-    log = run.log.to_wheel_log()
+    log = amr_reversing(40.0, 7, 0.005)
     clipped = estimate_delay(log.t, log.eta, log.tau, span=search_span(log.t))
     assert clipped.method == "least squares"
     assert not clipped.at_edge
