@@ -104,8 +104,8 @@ def main() -> None:
     )
     print()
     print(
-        f"wmrid default: k = {default.settings.k:g} 1/s, alpha = {default.settings.alpha:g}, torque hold "
-        f"{default.settings.torque_hold}.  Paper settings: k = {PAPER_K:g} 1/s, alpha = {PAPER_ALPHA:g}."
+        f"wmrid default: k = {default.observer_settings.k:g} 1/s, alpha = {default.observer_settings.alpha:g}, "
+        f"torque hold {default.settings.torque_hold}.  Paper settings: k = {PAPER_K:g} 1/s, alpha = {PAPER_ALPHA:g}."
     )
     print()
     print("**Table 2** (intermediate parameters, Eqs. 23-24)")
@@ -180,7 +180,7 @@ def main() -> None:
         for j, n in enumerate(model.THETA0_NAMES)
     ]
     print(
-        f"wmrid default (alpha = {default.settings.alpha:g}): largest base-parameter error "
+        f"wmrid default (alpha = {default.observer_settings.alpha:g}): largest base-parameter error "
         f"{g6(100 * worst_def)} %; lambda_min(Gamma) at the end = {g6(d_def['lambda_min_gamma'])}; "
         f"{len(default.warnings)} warning(s)."
     )

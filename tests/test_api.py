@@ -93,8 +93,11 @@ def test_a_result_round_trips_through_its_json(sample_log, method):
 
 def test_a_result_of_a_newer_schema_or_an_incomplete_one_is_refused(sample_result):
     doc = sample_result.to_dict()
-    with pytest.raises(LogFormatError, match="schema version 2, newer than this wmrid reads"):
-        from_dict({**doc, "schema_version": 2}, "future.json")
+    from wmrid.estimators.result import SCHEMA_VERSION
+
+    newer = SCHEMA_VERSION + 1
+    with pytest.raises(LogFormatError, match=f"schema version {newer}, newer than this wmrid reads"):
+        from_dict({**doc, "schema_version": newer}, "future.json")
     broken = {k: v for k, v in doc.items() if k != "settings"}
     with pytest.raises(LogFormatError, match=r"broken.json: not a complete identify result \(no 'settings'\)"):
         from_dict(broken, "broken.json")
@@ -208,3 +211,40 @@ def test_a_simulated_log_identifies_as_its_wheel_log():
     log = run.log.to_wheel_log()
     assert log.reference is run.log.eta_ref  # the wheel-speed reference, not the pose
     assert direct.estimate.theta0.tolist() == wmrid.identify(log, "paper").estimate.theta0.tolist()
+
+
+def test_a_version_1_result_of_another_method_reads_its_settings_as_the_observers(sample_log):
+    """Schema version 1 put the observer's settings under ``settings`` whatever the method; version 2 gives another
+    method its own (``MethodSettings``) and the observer's under ``observer_settings``.  Both read back."""
+    idim = wmrid.identify(sample_log, "paper", method="idim")
+    doc = json.loads(to_json(idim.to_dict(history=False)))
+    assert doc["schema_version"] == 2
+    assert doc["settings"]["method"] == "idim"
+    assert doc["settings"]["cutoff_hz"] > 0
+    assert doc["observer_settings"]["k"] == 10.0
+    back = from_dict(doc)
+    assert back.settings == idim.settings
+    assert back.observer_settings.k == 10.0
+    old = {**doc, "schema_version": 1, "settings": doc["observer_settings"]}
+    del old["observer_settings"]
+    was = from_dict(old)
+    assert was.method_settings is None  # what version 1 said, read as it said it
+    assert was.settings.k == 10.0
+    assert was.parameters == back.parameters
+
+
+def test_option_objects_parse_and_refuse_as_the_flags_do():
+    assert wmrid.ObserverOptions(delay="0.012").delay == 0.012
+    assert wmrid.ObserverOptions(delay=" AUTO ").delay == "auto"
+    for bad in ("soon", float("nan"), float("inf")):
+        with pytest.raises(UsageError, match="delay must be auto or a number of seconds"):
+            wmrid.ObserverOptions(delay=bad)
+    with pytest.raises(UsageError, match="no built-in trajectory of that name"):
+        wmrid.simulate("paper", trajectory="sinusiod")
+    robot = wmrid.load_robot("paper")
+    fault = wmrid.PlantChange.friction_fault(1.0, robot.reference, "right", 3.0)
+    with pytest.raises(UsageError, match="with a friction-fault PlantChange: the change holds the plant"):
+        wmrid.simulate("paper", duration=2.0, payload=wmrid.Payload(20.0), change=fault)
+    loaded = wmrid.simulate("paper", duration=2.0, payload=wmrid.Payload(20.0), change=wmrid.Change(1.0, "drop"))
+    unloaded = model.named_base(model.base_parameters(robot.reference))
+    assert loaded.truth["parameters"]["m11"] < unloaded["m11"]  # carried until the drop: the plant at t = 0 is loaded

@@ -334,7 +334,7 @@ def test_excitation_figure(built, run):
     labels = [line.get_label() for line in ax.get_lines()]
     assert any("from t =" in label for label in labels)
     alpha_line = next(line for line in ax.get_lines() if line.get_label().startswith("α ="))
-    assert alpha_line.get_ydata()[0] == run.result.settings.alpha
+    assert alpha_line.get_ydata()[0] == run.result.observer_settings.alpha
 
 
 def test_matplotlib_is_imported_lazily_and_pyplot_never():

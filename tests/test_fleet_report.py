@@ -339,3 +339,19 @@ def test_figure_units_are_the_models():
     assert UNITS["Vc"] == "kg m²"
     assert UNITS["Fv1"] == THETA0_UNITS["Fv1"] == "N m s/rad"
     assert UNITS["M11"] == "kg m²"
+
+
+def test_a_row_identified_with_a_controller_rate_keeps_its_fit(tmp_path):
+    """The fit column is the model's simulated speeds on its own log, also for a row with a controller rate (the
+    predictor holds each logged effort over its step; only the command line refuses --validate with the rate)."""
+    import wmrid
+    from wmrid.api.fleet import plan
+    from wmrid.api.fleet_worker import identify_entry
+    from wmrid.io.fleet_table import entries_from_paths
+
+    log = tmp_path / "R1_2026-01-01.csv"
+    wmrid.write_simulation(wmrid.simulate("paper", duration=8.0, rate=200.0), log)
+    (spec,) = plan(entries_from_paths([str(log)]), {"control_rate": 1000.0}, "paper", fit=True)
+    row = identify_entry(spec)
+    assert row["error"] is None
+    assert row["fit_r"] > 95

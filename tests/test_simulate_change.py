@@ -384,3 +384,18 @@ def test_cli_help_documents_the_change_options() -> None:
     text = " ".join(proc.stdout.decode().split())
     for needle in ("--load-at", "--drop-at", "--friction-fault", "--fault-at", "WHEEL:FACTOR[:TERMS]"):
         assert needle in text, needle
+
+
+def test_a_fault_on_a_friction_the_plant_lacks_is_refused_naming_the_flag(tmp_path: Path) -> None:
+    """The plant is checked before the run: a Coulomb fault on a robot whose Coulomb friction is 0 changes nothing,
+    and the line names the flag as given."""
+    robot = tmp_path / "frictionless.toml"
+    text = (Path(__file__).resolve().parents[1] / "examples" / "paper_robot.toml").read_text()
+    robot.write_text(text.replace("F_d1 = 0.045", "F_d1 = 0.0"))  # the plant (the CAD set) without it
+    log = tmp_path / "fault.csv"
+    done = wmrid(
+        "simulate", "-o", str(log), "--duration", "4", "--robot", str(robot), "--friction-fault", "right:3:coulomb",
+        "--fault-at", "1",
+    )  # fmt: skip
+    assert_clean_error(done, 2, "--friction-fault right:3:coulomb: friction fault: F_d1", "are 0 in the plant")
+    assert not log.exists()

@@ -144,7 +144,7 @@ def test_identify_without_robot_streams_the_same_start(tmp_path: Path) -> None:
     path = str(SAMPLES / "paper_sinusoid.csv")
     whole = identify(read_log(path))
     streamed = identify(open_log(path, rows=999))
-    assert np.array_equal(whole.settings.theta_init, streamed.settings.theta_init)
+    assert np.array_equal(whole.observer_settings.theta_init, streamed.observer_settings.theta_init)
     assert whole.parameters == streamed.parameters
 
 
@@ -204,5 +204,5 @@ def test_the_survey_does_not_depend_on_the_pieces(tmp_path: Path) -> None:
     for rows in (5000, 777):
         cut = identify(open_log(str(path), rows=rows))
         assert cut.log_info == whole.log_info
-        assert np.array_equal(cut.settings.theta_init, whole.settings.theta_init)
+        assert np.array_equal(cut.observer_settings.theta_init, whole.observer_settings.theta_init)
         assert cut.parameters == whole.parameters

@@ -124,7 +124,7 @@ def friction_model(friction: str, methods: tuple[str, ...], validating: bool, ro
     without the casters' positions (it simulates the drag, which needs its direction).  An explicit
     ``wheel+caster`` there is refused.  ``validating`` changes nothing here: an option that only adds output never
     changes the estimate (a model whose drag the validation predictor cannot simulate is validated without a fit,
-    and the validation says why: :func:`with_validation`).
+    and the validation says why: :func:`validate`).
     """
     if friction not in FRICTION_CHOICES:
         raise UsageError(f"{option('friction')} must be one of {', '.join(FRICTION_CHOICES)}, got {friction!r}")
@@ -159,19 +159,6 @@ def check_control_rate(control_rate: float | None, methods: tuple[str, ...], val
         _refuse_unmodelled("control_rate", control_rate, methods, validating, CONTROL_RATE_METHODS)
 
 
-def delay_value(delay: float | str | None) -> float | str | None:
-    """``delay``: None (as stamped, or estimated for split topics), "auto" or seconds (a number or its text)."""
-    if delay is None or (isinstance(delay, (int, float)) and not isinstance(delay, bool)):
-        return delay
-    text = str(delay)
-    if text.strip().lower() == "auto":
-        return "auto"
-    try:
-        return float(text)
-    except ValueError:
-        raise UsageError(f"{option('delay')} must be auto or a number of seconds, got {text!r}") from None
-
-
 #: The classical methods' settings by their command-line names: MethodOptions' fields.
 FIT_NAMES = {"cutoff": "cutoff_hz", "weighted": "weighted", "forgetting": "forgetting"}
 #: The observer's settings by name: ObserverOptions' fields a user sets.
@@ -188,8 +175,6 @@ def settings_from(flat: dict[str, Any]) -> tuple[str, ObserverOptions, MethodOpt
     if unknown:
         raise UsageError(f"unknown setting {unknown[0]!r}; the settings are {', '.join(SETTING_NAMES)}")
     given = {k: v for k, v in flat.items() if v is not None}
-    if "delay" in given:
-        given["delay"] = delay_value(given["delay"])
     observer = ObserverOptions(**{k: v for k, v in given.items() if k in OBSERVER_NAMES})
     fit = MethodOptions(**{FIT_NAMES[k]: v for k, v in given.items() if k in FIT_NAMES})
     return str(given.get("method", "auto")), observer, fit
@@ -229,11 +214,11 @@ def validate(
 ) -> IdentificationResult:
     """``result`` with ``validation``: the fit % per wheel of its model's simulated wheel speeds on ``log`` (another
     log of the same robot, read with ``options``; ``robot`` fills in its units as for identify), the effort held as
-    the result's observer held it.  The estimate is unchanged: validation only adds output."""
+    the result's observer held it (the predictor holds each logged effort over its whole step: a controller rate is
+    not modelled, and the command line refuses ``--validate`` with ``--control-rate``, :func:`check_validation`).
+    The estimate is unchanged: validation only adds output."""
     from wmrid.model.predict import unsimulated, validation_fit
 
-    if result.settings.control_rate is not None:  # the predictor holds each logged effort over its whole step
-        check_control_rate(result.settings.control_rate, (), True)
     other_log = _log(log, options, robot, whole=True)
     unit = result.log_info.get("effort_unit", "N m")
     if other_log.effort_unit != unit:

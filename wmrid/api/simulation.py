@@ -108,6 +108,11 @@ def simulate(
             raise UsageError(f"{option(name)} must be a {kind.__name__}, got {type(value).__name__}")
     ref = None
     if trajectory is not None and not (isinstance(trajectory, str) and trajectory in values(Trajectory)):
+        if isinstance(trajectory, str) and not os.path.exists(trajectory) and "." not in os.path.basename(trajectory):
+            raise UsageError(
+                f"{option('trajectory', trajectory)}: no built-in trajectory of that name (choose one of "
+                f"{', '.join(values(Trajectory))}) and no such reference file"
+            )
         ref, trajectory = load_reference(trajectory), None
     duration = plan_duration(duration, ref)
     plant, truth_params = _plant_change(robot_obj.reference, payload, change, duration)
@@ -148,6 +153,14 @@ def _plant_change(
         plant = change.plant(robot, payload)
     elif isinstance(change, PlantChange):
         plant = change
+        loads = change.kind in ("payload-load", "payload-drop")
+        if payload is not None and not loads:
+            raise UsageError(
+                f"{option('payload')} with a {change.kind} PlantChange: the change holds the plant before and after; "
+                "build it on the loaded robot, or give a Change, which carries the payload throughout"
+            )
+        if loads and payload is None:
+            raise UsageError(f"a {change.kind} PlantChange needs {option('payload')} (the payload loaded or dropped)")
     else:
         raise UsageError(f"{option('change')} must be a Change or a PlantChange, got {type(change).__name__}")
     return plant, plant.before

@@ -24,11 +24,11 @@ def log_opts(params: dict):
 def observer_opts(params: dict):
     """The :class:`wmrid.estimators.options.ObserverOptions` of a command's observer flags (``locals()``; a command
     without ``--payload`` estimates none), checked once as it is made; ``--delay``'s text parsed."""
-    from wmrid.api.identification import OBSERVER_NAMES, delay_value
+    from wmrid.api.identification import OBSERVER_NAMES
     from wmrid.estimators.options import ObserverOptions
 
     given = {n: params[n].value if isinstance(params[n], Enum) else params[n] for n in OBSERVER_NAMES if n in params}
-    return ObserverOptions(**{**given, "delay": delay_value(given.get("delay"))})
+    return ObserverOptions(**given)
 
 
 def fit_opts(params: dict):

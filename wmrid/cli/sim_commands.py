@@ -156,13 +156,13 @@ def simulate_command(
     load = payload_of(payload, payload_inertia)
     drive = reference_of(None if trajectory is None else trajectory.value, reference, reference_topic)
     end = plan_duration(duration, None if drive is None or isinstance(drive, str) else drive)
-    change = change_of(load, load_at, drop_at, friction_fault, fault_at, end)
+    robot_obj = robot_for(robot, LogOptions(gear_ratio=gear_ratio), check_rotor(rotor_inertia))
+    change = change_of(load, load_at, drop_at, friction_fault, fault_at, end, robot_obj)
     noise = NoiseSettings(
         eta_std=eta_noise, tau_std=tau_noise, caster_std=caster, caster_time=caster_time, encoder_cpr=encoder_cpr,
         seed=seed,
     )  # fmt: skip
     settings = engine_of(engine.value, floor_friction, caster_resistance, torque_limit)
-    robot_obj = robot_for(robot, LogOptions(gear_ratio=gear_ratio), check_rotor(rotor_inertia))
     with activity("wmrid simulate") as stage:
         what = f"{duration:g} s" if duration is not None else "the reference" if reference is not None else "40 s"
         stage(f"{what} on the {engine.value} model")

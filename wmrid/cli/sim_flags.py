@@ -41,10 +41,11 @@ def reference_of(trajectory: str | None, reference: str | None, topic: str | Non
 
 def change_of(
     payload: Any, load_at: str | None, drop_at: str | None, friction_fault: str | None, fault_at: str | None,
-    duration: float,
+    duration: float, robot: Any,
 ) -> Any:  # fmt: skip
     """The change ``--load-at``, ``--drop-at`` or ``--friction-fault`` with ``--fault-at`` asks for (None: none),
-    before the end of a run of ``duration`` s."""
+    before the end of a run of ``duration`` s, checked against the ``robot``'s plant (a fault on a friction the
+    plant does not have is refused here, naming the flag)."""
     from wmrid.sim.scenario import Change, parse_friction_fault, parse_time
 
     times = {"load_at": load_at, "drop_at": drop_at, "fault_at": fault_at}
@@ -71,9 +72,11 @@ def change_of(
         return Change(when, "drop")
     wheel, factor, terms = parse_friction_fault(str(friction_fault))
     try:
-        return Change(when, "fault", wheel=wheel, factor=factor, terms=terms)
+        change = Change(when, "fault", wheel=wheel, factor=factor, terms=terms)
+        change.plant(robot.reference, payload)
     except UsageError as err:
         raise UsageError(f"{option('friction_fault', friction_fault)}: {err}") from None
+    return change
 
 
 def engine_of(

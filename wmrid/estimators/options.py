@@ -24,12 +24,23 @@ def check_box_width(box_width: float) -> None:
         raise UsageError(f"{option('box_width')} must be a number > 0 (inf: no box), got {box_width!r}")
 
 
-def check_delay(delay: float | str | None) -> None:
-    """Refuse a delay that is neither None, "auto" nor a finite number of seconds."""
-    if delay is None or delay == "auto":
-        return
-    if isinstance(delay, bool) or not isinstance(delay, (int, float)) or not math.isfinite(delay):
+def delay_value(delay: float | str | None) -> float | str | None:
+    """``delay``: None (as stamped, or estimated for split topics), "auto" or seconds (a number or its text), checked;
+    a UsageError otherwise."""
+    if delay is None:
+        return None
+    if isinstance(delay, (int, float)) and not isinstance(delay, bool):
+        value = float(delay)
+    elif isinstance(delay, str) and delay.strip().lower() == "auto":
+        return "auto"
+    else:
+        try:
+            value = float(delay) if isinstance(delay, str) else math.nan
+        except ValueError:
+            value = math.nan
+    if not math.isfinite(value):
         raise UsageError(f"{option('delay')} must be auto or a number of seconds, got {delay!r}")
+    return value
 
 
 @dataclass(frozen=True)
@@ -73,6 +84,6 @@ class ObserverOptions:
             raise UsageError(
                 f"{option('friction')} must be one of {', '.join(FRICTION_CHOICES)}, got {self.friction!r}"
             )
-        check_delay(self.delay)
+        object.__setattr__(self, "delay", delay_value(self.delay))
         if not (isinstance(self.max_history, int) and self.max_history >= 2):
             raise UsageError(f"max_history must be an integer >= 2, got {self.max_history!r}")

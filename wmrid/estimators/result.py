@@ -33,8 +33,10 @@ def reported_names(form: RegressorForm) -> tuple[str, ...]:
 
 #: Version of the JSON document :meth:`IdentificationResult.to_dict` writes.  1: the first with a version (the
 #: documents before it are read as version 1 too: it only added ``schema_version`` and ``estimate``).  A document
-#: of a newer version is refused by :func:`from_dict` with a message, not misread.
-SCHEMA_VERSION = 1
+#: of a newer version is refused by :func:`from_dict` with a message, not misread.  2: a result of another method
+#: than the observer has that method's ``settings`` (:class:`MethodSettings`) and the observer's run's under
+#: ``observer_settings`` (version 1 put the observer's in ``settings`` whatever the method; both are read).
+SCHEMA_VERSION = 2
 
 #: Points of the history kept in a JSON result (enough for the report's figures).
 JSON_HISTORY_POINTS = 300
