@@ -120,7 +120,7 @@ def run(name: str, variant: str, seed: int, frictions: tuple[str, ...] = ("auto"
     caster_truth = load_truth(robot, sim, normals, [c["resistance_used"] for c in casters])
     rows = []
     for friction in frictions:
-        result = wmrid.identify(sim.to_wheel_log(), str(robot_path), friction=friction)
+        result = wmrid.identify(sim.to_wheel_log(), str(robot_path), observer=wmrid.ObserverOptions(friction=friction))
         diag = result.diagnostics
         error = diag["uncertainty"]["model_error"]
         params = {}
