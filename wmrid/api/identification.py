@@ -153,7 +153,7 @@ def check_control_rate(control_rate: float | None, methods: tuple[str, ...], val
     """A controller rate is modelled by the observer, IDIM and RLS (output error and the validation predictor hold
     each logged effort over the whole step): refuse it where it would be ignored."""
     if control_rate is not None:
-        from wmrid.estimators.observer import check_control_rate_value
+        from wmrid.estimators.options import check_control_rate_value
 
         check_control_rate_value(control_rate)  # a frequency > 0 first, then where it is modelled
         _refuse_unmodelled("control_rate", control_rate, methods, validating, CONTROL_RATE_METHODS)

@@ -24,6 +24,10 @@ from wmrid.cli.helpers import (
     write_estimates,
 )
 from wmrid.cli.options import (
+    DEFAULT_FORM,
+    DEFAULT_FRICTION,
+    DEFAULT_TORQUE_HOLD,
+    OBSERVER_DEFAULTS,
     AlignOpt,
     AlignRule,
     AlphaOpt,
@@ -39,9 +43,7 @@ from wmrid.cli.options import (
     EffortUnitOpt,
     FlipEffortOpt,
     ForgettingOpt,
-    FormChoice,
     FormOpt,
-    FrictionChoice,
     FrictionOpt,
     GearRatioOpt,
     GivenOpt,
@@ -62,7 +64,6 @@ from wmrid.cli.options import (
     TimeUnitOpt,
     TopicOpt,
     TorqueConstantOpt,
-    TorqueHold,
     TorqueHoldOpt,
     ValidateOpt,
     VelocityFrom,
@@ -102,11 +103,11 @@ def identify_command(
     ] = None,
     columns: ColumnsOpt = None,
     time_unit: TimeUnitOpt = TimeUnit.auto,
-    form: FormOpt = FormChoice.auto,
-    k: KOpt = 10.0,
-    alpha: AlphaOpt = 1e-10,
-    box_width: BoxWidthOpt = 10.0,
-    torque_hold: TorqueHoldOpt = TorqueHold.zoh,
+    form: FormOpt = DEFAULT_FORM,
+    k: KOpt = OBSERVER_DEFAULTS.k,
+    alpha: AlphaOpt = OBSERVER_DEFAULTS.alpha,
+    box_width: BoxWidthOpt = OBSERVER_DEFAULTS.box_width,
+    torque_hold: TorqueHoldOpt = DEFAULT_TORQUE_HOLD,
     output_format: Annotated[
         OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
     ] = OutputFormat.auto,
@@ -156,7 +157,7 @@ def identify_command(
     validate: ValidateOpt = None,
     control_rate: ControlRateOpt = None,
     delay: DelayOpt = None,
-    friction: FrictionOpt = FrictionChoice.auto,
+    friction: FrictionOpt = DEFAULT_FRICTION,
     given: GivenOpt = None,
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
@@ -246,11 +247,11 @@ def report_command(
     robot: Annotated[str | None, typer.Option(help="Robot (name, TOML or URDF), as for identify.")] = None,
     columns: ColumnsOpt = None,
     time_unit: TimeUnitOpt = TimeUnit.auto,
-    form: FormOpt = FormChoice.auto,
-    k: KOpt = 10.0,
-    alpha: AlphaOpt = 1e-10,
-    box_width: BoxWidthOpt = 10.0,
-    torque_hold: TorqueHoldOpt = TorqueHold.zoh,
+    form: FormOpt = DEFAULT_FORM,
+    k: KOpt = OBSERVER_DEFAULTS.k,
+    alpha: AlphaOpt = OBSERVER_DEFAULTS.alpha,
+    box_width: BoxWidthOpt = OBSERVER_DEFAULTS.box_width,
+    torque_hold: TorqueHoldOpt = DEFAULT_TORQUE_HOLD,
     payload: PayloadOpt = False,
     given: GivenOpt = None,
     force: Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")] = False,
@@ -279,7 +280,7 @@ def report_command(
     validate: ValidateOpt = None,
     control_rate: ControlRateOpt = None,
     delay: DelayOpt = None,
-    friction: FrictionOpt = FrictionChoice.auto,
+    friction: FrictionOpt = DEFAULT_FRICTION,
 ) -> None:
     """Tables (paper Tables 2 and 3), comparison with nominal/CAD/truth, diagnostics and figures for INPUT; for a
     plan (wmrid plan -o plan.json): its path, signals against their limits and predicted precision."""
@@ -353,11 +354,11 @@ def compare_command(
     ] = "observer,idim,rls,oe",
     columns: ColumnsOpt = None,
     time_unit: TimeUnitOpt = TimeUnit.auto,
-    form: FormOpt = FormChoice.auto,
-    k: KOpt = 10.0,
-    alpha: AlphaOpt = 1e-10,
-    box_width: BoxWidthOpt = 10.0,
-    torque_hold: TorqueHoldOpt = TorqueHold.zoh,
+    form: FormOpt = DEFAULT_FORM,
+    k: KOpt = OBSERVER_DEFAULTS.k,
+    alpha: AlphaOpt = OBSERVER_DEFAULTS.alpha,
+    box_width: BoxWidthOpt = OBSERVER_DEFAULTS.box_width,
+    torque_hold: TorqueHoldOpt = DEFAULT_TORQUE_HOLD,
     payload: PayloadOpt = False,
     cutoff: CutoffOpt = None,
     weighted: WeightedOpt = False,
@@ -387,7 +388,7 @@ def compare_command(
     mirror_left: MirrorLeftOpt = False,
     flip_effort: FlipEffortOpt = False,
     rotor_inertia: RotorInertiaOpt = None,
-    friction: FrictionOpt = FrictionChoice.auto,
+    friction: FrictionOpt = DEFAULT_FRICTION,
 ) -> None:
     """Run every identification method on LOG: estimates, standard errors, errors against --truth, fit on
     --validate OTHER, run time.  Every method identifies the same friction model (--friction)."""

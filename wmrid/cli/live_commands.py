@@ -12,6 +12,10 @@ import typer
 from wmrid.cli.app import app
 from wmrid.cli.helpers import log_opts, observer_opts, on_stdout, warning_summary
 from wmrid.cli.options import (
+    DEFAULT_FORM,
+    DEFAULT_FRICTION,
+    DEFAULT_TORQUE_HOLD,
+    OBSERVER_DEFAULTS,
     AlignOpt,
     AlignRule,
     AlphaOpt,
@@ -25,9 +29,7 @@ from wmrid.cli.options import (
     EffortTopicOpt,
     EffortUnitOpt,
     FlipEffortOpt,
-    FormChoice,
     FormOpt,
-    FrictionChoice,
     FrictionOpt,
     GearRatioOpt,
     KOpt,
@@ -45,7 +47,6 @@ from wmrid.cli.options import (
     TimeUnitOpt,
     TopicOpt,
     TorqueConstantOpt,
-    TorqueHold,
     TorqueHoldOpt,
     VelocityFrom,
     VelocityFromOpt,
@@ -144,11 +145,11 @@ def live_command(
     ] = OutputFormat.auto,
     columns: ColumnsOpt = None,
     time_unit: TimeUnitOpt = TimeUnit.auto,
-    form: FormOpt = FormChoice.auto,
-    k: KOpt = 10.0,
-    alpha: AlphaOpt = 1e-10,
-    box_width: BoxWidthOpt = 10.0,
-    torque_hold: TorqueHoldOpt = TorqueHold.zoh,
+    form: FormOpt = DEFAULT_FORM,
+    k: KOpt = OBSERVER_DEFAULTS.k,
+    alpha: AlphaOpt = OBSERVER_DEFAULTS.alpha,
+    box_width: BoxWidthOpt = OBSERVER_DEFAULTS.box_width,
+    torque_hold: TorqueHoldOpt = DEFAULT_TORQUE_HOLD,
     payload: PayloadOpt = False,
     topic: TopicOpt = None,
     velocity_topic: VelocityTopicOpt = None,
@@ -170,7 +171,7 @@ def live_command(
     rotor_inertia: RotorInertiaOpt = None,
     control_rate: ControlRateOpt = None,
     delay: DelayOpt = None,
-    friction: FrictionOpt = FrictionChoice.auto,
+    friction: FrictionOpt = DEFAULT_FRICTION,
 ) -> None:
     """Identify the robot while it drives: follow SOURCE as it is written, refresh the estimate ± std every --every
     seconds, and when it ends (--idle, --until, --until-std, the recording's end, Ctrl-C) give identify's result on

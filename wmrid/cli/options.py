@@ -25,6 +25,10 @@ from wmrid.core.choices import (
     Trajectory,
     VelocityFrom,
 )
+from wmrid.estimators.options import ObserverOptions
+
+#: The observer's defaults: the library's own (``ObserverOptions()``), so a flag's default is never written twice.
+OBSERVER_DEFAULTS = ObserverOptions()
 
 __all__ = [
     "AlignRule",
@@ -399,3 +403,8 @@ GivenOpt = Annotated[
         "log's, as wmrid plan --given predicted. Repeatable.",
     ),
 ]
+
+#: The observer's default choices as the flags offer them (read from :data:`OBSERVER_DEFAULTS`).
+DEFAULT_FORM = FormChoice(OBSERVER_DEFAULTS.form)
+DEFAULT_TORQUE_HOLD = TorqueHold(OBSERVER_DEFAULTS.torque_hold)
+DEFAULT_FRICTION = FrictionChoice(OBSERVER_DEFAULTS.friction)

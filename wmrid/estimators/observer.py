@@ -53,7 +53,6 @@ boundary as soon as the data say so (:func:`project_to_box`).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -61,11 +60,8 @@ import numpy as np
 from wmrid.core.choices import TorqueHold, values
 from wmrid.core.errors import UsageError, option
 from wmrid.estimators.observer_kernel import foh
+from wmrid.estimators.options import check_gains
 from wmrid.model.dynamics import RegressorForm, filter_regressor, platform_speeds
-
-#: 1/s: the largest predictor gain: a time constant of 10 us, a hundredth of a 1 kHz step (--k 1e308 used to be
-#: accepted and reported as "the log does not excite the dynamics").
-MAX_K = 1e5
 
 
 def substep_weights(k: float, h: float, m: int) -> tuple[float, float]:
@@ -90,25 +86,6 @@ def foh_weights(x: float) -> tuple[float, float, float]:
     """
     a, phi0, phi1 = foh(float(x))
     return float(a), float(phi0), float(phi1)
-
-
-def check_control_rate_value(control_rate: float | None) -> None:
-    """Refuse a control rate that is not a frequency > 0 Hz (None: none)."""
-    if control_rate is not None and not (math.isfinite(control_rate) and control_rate > 0):
-        raise UsageError(f"{option('control_rate')} must be a frequency > 0 in Hz, got {control_rate!r}")
-
-
-def check_gains(k: float, alpha: float, control_rate: float | None = None) -> None:
-    """Refuse a gain k outside (0, MAX_K] 1/s, an alpha that is not a finite number > 0, a control rate that is not
-    a frequency > 0 Hz (None: none)."""
-    check_control_rate_value(control_rate)
-    if not (math.isfinite(k) and 0 < k <= MAX_K):
-        raise UsageError(
-            f"{option('k')} must be a number in (0, {MAX_K:g}] (1/s, the state predictor's gain; default 10), got "
-            f"{k}: beyond that the predictor forgets within microseconds and its filter carries no signal"
-        )
-    if not (math.isfinite(alpha) and alpha > 0):
-        raise UsageError(f"{option('alpha')} must be a finite number > 0, got {alpha}")
 
 
 @dataclass(frozen=True)

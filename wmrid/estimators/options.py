@@ -72,8 +72,6 @@ class ObserverOptions:
     max_history: int = MAX_HISTORY
 
     def __post_init__(self) -> None:
-        from wmrid.estimators.observer import check_gains
-
         check_gains(self.k, self.alpha, self.control_rate)
         check_box_width(self.box_width)
         if self.torque_hold not in values(TorqueHold):
@@ -87,3 +85,27 @@ class ObserverOptions:
         object.__setattr__(self, "delay", delay_value(self.delay))
         if not (isinstance(self.max_history, int) and self.max_history >= 2):
             raise UsageError(f"max_history must be an integer >= 2, got {self.max_history!r}")
+
+
+#: 1/s: the largest predictor gain: a time constant of 10 us, a hundredth of a 1 kHz step (--k 1e308 used to be
+#: accepted and reported as "the log does not excite the dynamics").
+MAX_K = 1e5
+
+
+def check_control_rate_value(control_rate: float | None) -> None:
+    """Refuse a control rate that is not a frequency > 0 Hz (None: none)."""
+    if control_rate is not None and not (math.isfinite(control_rate) and control_rate > 0):
+        raise UsageError(f"{option('control_rate')} must be a frequency > 0 in Hz, got {control_rate!r}")
+
+
+def check_gains(k: float, alpha: float, control_rate: float | None = None) -> None:
+    """Refuse a gain k outside (0, MAX_K] 1/s, an alpha that is not a finite number > 0, a control rate that is not
+    a frequency > 0 Hz (None: none)."""
+    check_control_rate_value(control_rate)
+    if not (math.isfinite(k) and 0 < k <= MAX_K):
+        raise UsageError(
+            f"{option('k')} must be a number in (0, {MAX_K:g}] (1/s, the state predictor's gain; default 10), got "
+            f"{k}: beyond that the predictor forgets within microseconds and its filter carries no signal"
+        )
+    if not (math.isfinite(alpha) and alpha > 0):
+        raise UsageError(f"{option('alpha')} must be a finite number > 0, got {alpha}")
