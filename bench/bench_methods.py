@@ -33,7 +33,8 @@ def main() -> None:
     ap.add_argument("--levels", nargs="+", default=list(LEVELS), help=f"noise levels of {list(LEVELS)}")
     args = ap.parse_args()
 
-    from wmrid.estimators.methods import METHODS, MethodOptions, compare
+    from wmrid.estimators.methods import METHODS, compare
+    from wmrid.estimators.options import MethodOptions
     from wmrid.model import dynamics as model
     from wmrid.model.robot import BUILTIN_ROBOTS
     from wmrid.pipeline.identify import identify

@@ -242,9 +242,11 @@ def test_fleet_records_no_options_when_none_are_given():
     import inspect
 
     from wmrid.cli.fleet_commands import _given_options, fleet_command
+    from wmrid.cli.groups import FIT_FLAGS, LOG_FLAGS, OBSERVER_FLAGS
 
     defaults = {
         name: param.default.default if hasattr(param.default, "default") else param.default
         for name, param in inspect.signature(fleet_command).parameters.items()
     }
-    assert _given_options(defaults) == {}
+    made = [group.make(defaults) for group in (LOG_FLAGS, OBSERVER_FLAGS, FIT_FLAGS)]
+    assert _given_options(*made, defaults["method"].value, defaults["rotor_inertia"]) == {}

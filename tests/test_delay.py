@@ -90,7 +90,8 @@ def test_identify_applies_an_estimated_delay(late_log):
     delay is applied as given; a log on time is left as stamped, with no warning."""
     from types import SimpleNamespace
 
-    from wmrid.estimators.methods import MethodOptions, run
+    from wmrid.estimators.methods import run
+    from wmrid.estimators.options import MethodOptions
     from wmrid.model import dynamics as model
     from wmrid.pipeline.identify import identify
 

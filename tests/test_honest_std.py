@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 from wmrid.cli.app import main
-from wmrid.estimators.methods import MethodOptions, run
+from wmrid.estimators.methods import run
 from wmrid.estimators.model_error import model_error_scale
+from wmrid.estimators.options import MethodOptions
 from wmrid.io.logs import read_log
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS

@@ -13,7 +13,8 @@ from scipy.integrate import solve_ivp
 from tests.open_loop import open_loop_log
 from wmrid.core.errors import NotIdentifiableError
 from wmrid.estimators import idim, idim_regression
-from wmrid.estimators.methods import MethodOptions, run
+from wmrid.estimators.methods import run
+from wmrid.estimators.options import MethodOptions
 from wmrid.model import dynamics as model, torques
 from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
 from wmrid.pipeline.identify import identify

@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from wmrid.core.errors import UsageError
-from wmrid.estimators.methods import METHODS, MethodOptions, compare
+from wmrid.estimators.methods import METHODS, compare
+from wmrid.estimators.options import MethodOptions
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
 from wmrid.pipeline.identify import identify

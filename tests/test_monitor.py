@@ -336,6 +336,38 @@ def test_cli_monitor_errors_exit_with_one_line(cli_files, kind: str, code: int, 
     assert_clean_error(wmrid("monitor", str(log), "--model", str(bad)), code, *needles)
 
 
+def test_cli_monitor_takes_identify_s_observer_flags(cli_files) -> None:
+    """The observer's flags reach the identification after a change (``--k 5`` moves its estimate a little, within
+    the 2 % of the truth); ``--delay`` shifts the efforts of the whole log first, recorded in the JSON's log."""
+    args = ("monitor", str(cli_files["load"]), "--model", str(cli_files["model"]), "--format", "json")
+    runs = {}
+    for name, extra in (("default", ()), ("k5", ("--k", "5")), ("delay", ("--delay", "0.002"))):
+        proc = wmrid(*args, *extra)
+        assert proc.returncode == 0, proc.stderr.decode()
+        runs[name] = json.loads(proc.stdout)
+    truth = base(TRUE.with_payload(LOAD))
+    for name, data in runs.items():
+        [found] = data["changes"]
+        assert found["t"] == pytest.approx(20.0, abs=0.2), name
+        assert found["parameters"]["m11"]["value"] == pytest.approx(truth["m11"], rel=0.02), name
+    assert runs["k5"]["changes"][0]["parameters"] != runs["default"]["changes"][0]["parameters"]
+    assert "delay" not in runs["default"]["log"]
+    assert runs["delay"]["log"]["delay"] == {"chosen_by": "--delay", "applied_s": 0.002}
+
+
+@pytest.mark.parametrize(
+    ("flags", "needles"),
+    [
+        (["--payload"], ["--payload", "not available in wmrid monitor", "identify --payload --robot"]),
+        (["--friction", "wheel+caster"], ["--friction wheel+caster", "model's friction model (wheel)"]),
+        (["--k", "0"], ["--k"]),
+    ],
+)
+def test_cli_monitor_refuses_an_observer_flag_it_cannot_honour(cli_files, flags: list[str], needles) -> None:
+    proc = wmrid("monitor", str(cli_files["load"]), "--model", str(cli_files["model"]), *flags)
+    assert_clean_error(proc, 2, *needles)
+
+
 def test_load_model_reads_what_identify_writes(cli_files) -> None:
     got = load_model(cli_files["model"])
     assert got.effort_unit == "N m"

@@ -16,9 +16,10 @@ import numpy as np
 import pytest
 
 from wmrid.cli.app import main
-from wmrid.estimators.methods import MethodOptions, run
+from wmrid.estimators.methods import run
 from wmrid.estimators.model_error import MISFIT_FLOOR, MISFIT_RATIO, prediction_misfit
 from wmrid.estimators.noise_floor import WINDOW, NoiseFloor
+from wmrid.estimators.options import MethodOptions
 from wmrid.model.robot import BUILTIN_ROBOTS
 from wmrid.pipeline.identify import identify
 from wmrid.sim.multibody import simulate_multibody

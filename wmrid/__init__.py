@@ -246,11 +246,9 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
     from wmrid.estimators.estimate import (
         BaseEstimate as BaseEstimate,
     )
-    from wmrid.estimators.methods import (
-        Comparison as Comparison,
-        MethodOptions as MethodOptions,
-    )
+    from wmrid.estimators.methods import Comparison as Comparison
     from wmrid.estimators.options import (
+        MethodOptions as MethodOptions,
         ObserverOptions as ObserverOptions,
     )
     from wmrid.estimators.result import (

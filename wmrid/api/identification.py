@@ -18,8 +18,8 @@ from typing import Any, Literal, TypeGuard, cast, overload
 from wmrid.api.inputs import LogOptions, given_results, load_robot, open_log
 from wmrid.core.errors import UsageError, cannot_read, option
 from wmrid.core.wheel_log import LogStream, WheelLog
-from wmrid.estimators.methods import Comparison, MethodOptions
-from wmrid.estimators.options import FRICTION_CHOICES, ObserverOptions
+from wmrid.estimators.methods import Comparison
+from wmrid.estimators.options import FRICTION_CHOICES, MethodOptions, ObserverOptions
 from wmrid.estimators.result import IdentificationResult
 from wmrid.model.robot import Robot
 
@@ -268,7 +268,7 @@ def identify(
         "rls" or "oe" (:data:`wmrid.estimators.methods.METHODS`): a method named is the method reported.
     observer : the observer's options (:class:`~wmrid.estimators.options.ObserverOptions`: form, gains, box, hold,
         control rate, delay, friction model, payload); every method starts from the observer's run.
-    fit : the classical methods' options (:class:`~wmrid.estimators.methods.MethodOptions`: cutoff, weighting,
+    fit : the classical methods' options (:class:`~wmrid.estimators.options.MethodOptions`: cutoff, weighting,
         forgetting factor).
     given : results of earlier logs of the same robot (paths of saved results, ``wmrid identify --format json``, or
         :class:`IdentificationResult` objects; one or several): the result is this log's estimate combined with

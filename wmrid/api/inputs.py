@@ -12,11 +12,13 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, fields, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from wmrid.core.errors import UsageError, option
-from wmrid.core.wheel_log import LogStream, WheelLog
 from wmrid.model.robot import Robot
+
+if TYPE_CHECKING:
+    from wmrid.core.wheel_log import LogStream, WheelLog
 
 __all__ = ["LogOptions", "inspect", "load_robot", "open_log", "read_log"]
 

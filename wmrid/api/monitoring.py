@@ -3,10 +3,15 @@
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 from typing import Any
 
+import numpy as np
+
 from wmrid.api.inputs import LogOptions, read_log
+from wmrid.core.errors import UsageError, option
 from wmrid.core.wheel_log import LogStream, WheelLog
+from wmrid.estimators.options import ObserverOptions
 from wmrid.estimators.result import IdentificationResult
 from wmrid.monitoring.monitor import monitor as run_monitor
 from wmrid.monitoring.monitor_result import MonitorResult
@@ -37,16 +42,66 @@ def monitor(
     calibration: float = 10.0,
     false_alarm_rate: float = 0.1,
     settings: MonitorSettings | None = None,
+    observer: ObserverOptions | None = None,
 ) -> MonitorResult:
     """Replay ``log`` against ``model`` and report when the dynamics change, and the parameters after each change.
 
     calibration : s at the start of the log (and after each change) assumed unchanged, to calibrate the test.
     false_alarm_rate : false alarms per hour the test's threshold allows.  ``settings`` (all of them) overrides both.
+    observer : the observer's settings for the identifications after a change (as ``identify``'s).  Its friction
+    model is the model's (``auto`` or that one); a ``delay`` shifts the efforts of the whole log before the test
+    ("auto": estimated on the calibration span, which is assumed unchanged; recorded in the JSON's ``log.delay``);
+    ``payload`` is refused: a change is identified without a robot file.
     """
     settings = settings or MonitorSettings(calibration_s=calibration, false_alarm_rate=false_alarm_rate)
     model_obj = monitored_model(model)
+    if observer is not None:
+        _check_observer(observer, model_obj)
     if isinstance(log, (str, os.PathLike)):
         log = read_log(log, options)
     elif isinstance(log, LogStream):
         log = log.read()
-    return run_monitor(log, model_obj, settings)
+    delay = None
+    if observer is not None and observer.delay is not None:
+        log, delay = _delayed(log, observer, settings.calibration_s)
+    result = run_monitor(log, model_obj, settings, observer)
+    if delay is not None:
+        result = replace(result, log_info={**result.log_info, "delay": delay})
+    return result
+
+
+def _check_observer(observer: ObserverOptions, model: MonitoredModel) -> None:
+    """Refuse what the monitor cannot honour: a payload (no robot file) and a friction model not the model's."""
+    if observer.payload:
+        raise UsageError(
+            f"{option('payload')} is not available in wmrid monitor: the segments after a change are identified "
+            "without a robot file; identify one segment with wmrid identify --payload --robot ROBOT"
+        )
+    friction = "wheel" if model.form is None else model.form.friction
+    if observer.friction not in ("auto", friction):
+        raise UsageError(
+            f"{option('friction')} {observer.friction}: the monitor identifies with the model's friction model "
+            f"({friction}); identify the model with {option('friction')} {observer.friction} to monitor with it"
+        )
+
+
+def _delayed(log: WheelLog, observer: ObserverOptions, calibration_s: float) -> tuple[WheelLog, dict[str, Any]]:
+    """``log`` with its efforts read ``observer.delay`` s earlier ("auto": the delay estimated on the first
+    ``calibration_s`` s), and the record of what was applied."""
+    from wmrid.estimators.timing_check import apply_delay
+
+    delay = observer.delay
+    record: dict[str, Any] = {}
+    if delay == "auto":
+        t = np.asarray(log.t, dtype=np.float64)
+        n = int(np.searchsorted(t, t[0] + calibration_s, side="right"))
+        reference = None if log.reference is None else log.reference[:n]
+        span = WheelLog(t=t[:n], eta=np.asarray(log.eta)[:n], tau=np.asarray(log.tau)[:n], source=log.source,
+                        effort_unit=log.effort_unit, reference=reference)  # fmt: skip
+        _, record, warnings = apply_delay(span, "auto", observer.torque_hold, observer.control_rate)
+        record = {**record, "estimated_on_s": calibration_s, "warnings": warnings}
+        delay = record["applied_s"]
+    if not isinstance(delay, (int, float)):  # given seconds, or the estimate's applied_s
+        raise TypeError(f"delay {delay!r}")
+    shifted, applied, _ = apply_delay(log, float(delay), observer.torque_hold, observer.control_rate)
+    return shifted, {**applied, **record}

@@ -20,8 +20,7 @@ from wmrid.api.identification import (
 from wmrid.api.inputs import LogOptions, given_results, read_log
 from wmrid.core.errors import LogFormatError, UsageError, WmridError, option
 from wmrid.core.wheel_log import LogStream, WheelLog
-from wmrid.estimators.methods import MethodOptions
-from wmrid.estimators.options import ObserverOptions
+from wmrid.estimators.options import MethodOptions, ObserverOptions
 from wmrid.estimators.result import IdentificationResult, from_dict
 from wmrid.model.robot import Robot
 from wmrid.reporting.report import Report, build_report

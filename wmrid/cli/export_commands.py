@@ -3,40 +3,21 @@
 from __future__ import annotations
 
 import sys
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from wmrid.cli.app import app
-from wmrid.cli.helpers import activity, log_opts
+from wmrid.cli.groups import LOG_FLAGS, takes
+from wmrid.cli.helpers import activity
 from wmrid.cli.options import (
-    AlignOpt,
-    AlignRule,
-    EfficiencyOpt,
-    EffortKind,
-    EffortOpt,
-    EffortTopicOpt,
-    EffortUnitOpt,
-    FlipEffortOpt,
-    GearRatioOpt,
-    LeftJointOpt,
-    MirrorLeftOpt,
     OutputFormat,
-    RightJointOpt,
     RotorInertiaOpt,
-    SpeedUnit,
-    SpeedUnitOpt,
-    TimeSource,
-    TimeSourceOpt,
-    TimeUnit,
-    TopicOpt,
-    TorqueConstantOpt,
-    VelocityFrom,
-    VelocityFromOpt,
-    VelocityTopicOpt,
-    WheelRadiusOpt,
 )
 from wmrid.reporting.terminal import console
+
+if TYPE_CHECKING:
+    from wmrid.api.inputs import LogOptions
 
 
 @app.command(
@@ -47,6 +28,7 @@ from wmrid.reporting.terminal import console
     "wmrid export run.json --robot amr -o model.yaml\n\n"
     "wmrid export run.json --robot amr -o feedforward.py",
 )
+@takes(LOG_FLAGS)
 def export_command(
     result: Annotated[str, typer.Argument(help="A saved result (wmrid identify --format json -o run.json).")],
     output: Annotated[
@@ -67,9 +49,7 @@ def export_command(
             "its geometry and wheel and rotor masses give what the log does not."
         ),
     ],
-    gear_ratio: GearRatioOpt = None,
     rotor_inertia: RotorInertiaOpt = None,
-    wheel_radius: WheelRadiusOpt = None,
     check: Annotated[
         str | None,
         typer.Option(
@@ -84,23 +64,8 @@ def export_command(
         OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
     ] = OutputFormat.auto,
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing output file.")] = False,
-    columns: Annotated[str | None, typer.Option(help="--check log: column mapping, as for identify.")] = None,
-    time_unit: Annotated[TimeUnit, typer.Option(help="--check log: unit of the time column.")] = TimeUnit.auto,
-    topic: TopicOpt = None,
-    velocity_topic: VelocityTopicOpt = None,
-    effort_topic: EffortTopicOpt = None,
-    right_joint: RightJointOpt = None,
-    left_joint: LeftJointOpt = None,
-    time_source: TimeSourceOpt = TimeSource.auto,
-    align: AlignOpt = AlignRule.linear,
-    velocity_from: VelocityFromOpt = VelocityFrom.auto,
-    speed_unit: SpeedUnitOpt = SpeedUnit.rad_s,
-    effort: EffortOpt = EffortKind.torque,
-    effort_unit: EffortUnitOpt = None,
-    torque_constant: TorqueConstantOpt = None,
-    efficiency: EfficiencyOpt = None,
-    mirror_left: MirrorLeftOpt = False,
-    flip_effort: FlipEffortOpt = False,
+    *,
+    log_options: LogOptions,
 ) -> None:
     """Write an identified robot as a model a simulator or a controller loads, with every value's std."""
     from wmrid.api.exporting import check_export_output, export
@@ -109,8 +74,8 @@ def export_command(
 
     check_export_output(output)
     with activity("export"):
-        done = export(result, robot, output, check=check, window=window, gear_ratio=gear_ratio,
-                      rotor_inertia=rotor_inertia, wheel_radius=wheel_radius, options=log_opts(locals()),
+        done = export(result, robot, output, check=check, window=window, gear_ratio=log_options.gear_ratio,
+                      rotor_inertia=rotor_inertia, wheel_radius=log_options.wheel_radius, options=log_options,
                       force=force)  # fmt: skip
     data = done.to_dict()
     fmt = output_format.value

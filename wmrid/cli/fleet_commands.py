@@ -7,86 +7,50 @@ import json
 import sys
 from dataclasses import fields
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
 from wmrid.cli.app import app, invocation
-from wmrid.cli.helpers import activity, log_opts, stderr_console
+from wmrid.cli.groups import FIT_FLAGS, LOG_FLAGS, OBSERVER_FLAGS, takes
+from wmrid.cli.helpers import activity, stderr_console
 from wmrid.cli.options import (
-    DEFAULT_FORM,
-    DEFAULT_FRICTION,
-    DEFAULT_TORQUE_HOLD,
-    OBSERVER_DEFAULTS,
-    AlignOpt,
-    AlignRule,
-    AlphaOpt,
-    BoxWidthOpt,
-    ColumnsOpt,
-    ControlRateOpt,
-    CutoffOpt,
-    DelayOpt,
-    EfficiencyOpt,
-    EffortKind,
-    EffortOpt,
-    EffortTopicOpt,
-    EffortUnitOpt,
-    FlipEffortOpt,
-    ForgettingOpt,
-    FormOpt,
-    FrictionOpt,
-    GearRatioOpt,
-    KOpt,
-    LeftJointOpt,
     MethodChoice,
     MethodOpt,
-    MirrorLeftOpt,
     OutputFormat,
-    RightJointOpt,
     RotorInertiaOpt,
-    SpeedUnit,
-    SpeedUnitOpt,
-    TimeSource,
-    TimeSourceOpt,
-    TimeUnit,
-    TimeUnitOpt,
-    TopicOpt,
-    TorqueConstantOpt,
-    TorqueHoldOpt,
-    VelocityFrom,
-    VelocityFromOpt,
-    VelocityTopicOpt,
-    WeightedOpt,
-    WheelRadiusOpt,
 )
 from wmrid.core.errors import ExitStatus, UsageError
 from wmrid.reporting.terminal import console
 
+if TYPE_CHECKING:
+    from wmrid.api.inputs import LogOptions
+    from wmrid.estimators.options import MethodOptions, ObserverOptions
+
+
 _RUN_PANEL = "The fleet run"
 
-#: identify's settings as ``wmrid fleet`` passes them: only those given a value other than identify's default, so
-#: that the table's "options" column says what was asked and nothing else.
-_IDENTIFY_DEFAULTS = {
-    "method": "auto", "form": "auto", "k": 10.0, "alpha": 1e-10, "box_width": 10.0, "torque_hold": "zoh",
-    "control_rate": None, "delay": None, "friction": "auto", "cutoff": None, "weighted": False, "forgetting": 1.0,
-    "rotor_inertia": None,
-}  # fmt: skip
 
-
-def _given_options(params: dict[str, Any]) -> dict[str, Any]:
-    """The log-input and identify flags that differ from their defaults, by their Python names."""
+def _given_options(
+    log_options: LogOptions, observer: ObserverOptions, fit: MethodOptions, method: str, rotor_inertia: float | None
+) -> dict[str, Any]:
+    """identify's settings as ``wmrid fleet`` passes them, by their Python names: only those given a value other
+    than the default, so that the table's "options" column says what was asked and nothing else."""
+    from wmrid.api.identification import FIT_NAMES
     from wmrid.api.inputs import LogOptions
+    from wmrid.estimators.options import MethodOptions, ObserverOptions
 
-    opts = log_opts(params)
-    plain = LogOptions()
-    given = {
-        f.name: getattr(opts, f.name) for f in fields(LogOptions) if getattr(opts, f.name) != getattr(plain, f.name)
-    }
-    for name, default in _IDENTIFY_DEFAULTS.items():
-        value = params[name]
-        value = getattr(value, "value", value)
-        if value != default:
-            given[name] = value
+    given: dict[str, Any] = {}
+    for options, plain in ((log_options, LogOptions()), (observer, ObserverOptions())):
+        given.update({f.name: getattr(options, f.name) for f in fields(options)
+                      if getattr(options, f.name) != getattr(plain, f.name)})  # fmt: skip
+    plain_fit = MethodOptions()
+    given.update({name: getattr(fit, field) for name, field in FIT_NAMES.items()
+                  if getattr(fit, field) != getattr(plain_fit, field)})  # fmt: skip
+    if method != "auto":
+        given["method"] = method
+    if rotor_inertia is not None:
+        given["rotor_inertia"] = rotor_inertia
     return given
 
 
@@ -97,6 +61,7 @@ def _given_options(params: dict[str, Any]) -> dict[str, Any]:
     "wmrid fleet --manifest fleet.csv -o fleet.parquet --resume\n\n"
     "wmrid fleet 'logs/*/*.mcap' --scheduler tcp://10.0.0.5:8786 -o fleet.parquet",
 )
+@takes(LOG_FLAGS, OBSERVER_FLAGS, FIT_FLAGS)
 def fleet_command(
     logs: Annotated[
         list[str] | None,
@@ -200,38 +165,12 @@ def fleet_command(
         str | None,
         typer.Option(help="Robot of every log whose manifest row names none: built-in name, TOML or URDF file."),
     ] = None,
-    columns: ColumnsOpt = None,
-    time_unit: TimeUnitOpt = TimeUnit.auto,
-    form: FormOpt = DEFAULT_FORM,
-    k: KOpt = OBSERVER_DEFAULTS.k,
-    alpha: AlphaOpt = OBSERVER_DEFAULTS.alpha,
-    box_width: BoxWidthOpt = OBSERVER_DEFAULTS.box_width,
-    torque_hold: TorqueHoldOpt = DEFAULT_TORQUE_HOLD,
-    topic: TopicOpt = None,
-    velocity_topic: VelocityTopicOpt = None,
-    effort_topic: EffortTopicOpt = None,
-    right_joint: RightJointOpt = None,
-    left_joint: LeftJointOpt = None,
-    time_source: TimeSourceOpt = TimeSource.auto,
-    align: AlignOpt = AlignRule.linear,
-    velocity_from: VelocityFromOpt = VelocityFrom.auto,
-    speed_unit: SpeedUnitOpt = SpeedUnit.rad_s,
-    wheel_radius: WheelRadiusOpt = None,
-    effort: EffortOpt = EffortKind.torque,
-    effort_unit: EffortUnitOpt = None,
-    torque_constant: TorqueConstantOpt = None,
-    gear_ratio: GearRatioOpt = None,
-    efficiency: EfficiencyOpt = None,
-    mirror_left: MirrorLeftOpt = False,
-    flip_effort: FlipEffortOpt = False,
     rotor_inertia: RotorInertiaOpt = None,
     method: MethodOpt = MethodChoice.auto,
-    cutoff: CutoffOpt = None,
-    weighted: WeightedOpt = False,
-    forgetting: ForgettingOpt = 1.0,
-    control_rate: ControlRateOpt = None,
-    delay: DelayOpt = None,
-    friction: FrictionOpt = DEFAULT_FRICTION,
+    *,
+    log_options: LogOptions,
+    observer: ObserverOptions,
+    fit: MethodOptions,
 ) -> int:
     """Identify every log of a fleet on Dask and write one Parquet table, one row per log: robot id, log, content
     hash, start time, duration, samples, method, every base parameter with its std, flags, warnings, fit, run time,
@@ -242,7 +181,7 @@ def fleet_command(
     require("pyarrow", "fleet")
     from wmrid.api.fleet import fleet as run_fleet
 
-    given = _given_options(locals())
+    given = _given_options(log_options, observer, fit, method.value, rotor_inertia)
     if output is None:
         raise UsageError("-o/--output is required: the Parquet table to write (e.g. -o fleet.parquet)")
     update, finish = _progress()

@@ -32,9 +32,9 @@ def observer_opts(params: dict):
 
 
 def fit_opts(params: dict):
-    """The :class:`wmrid.estimators.methods.MethodOptions` of a command's classical-method flags (``locals()``)."""
+    """The :class:`wmrid.estimators.options.MethodOptions` of a command's classical-method flags (``locals()``)."""
     from wmrid.api.identification import FIT_NAMES
-    from wmrid.estimators.methods import MethodOptions
+    from wmrid.estimators.options import MethodOptions
 
     return MethodOptions(**{field: params[name] for name, field in FIT_NAMES.items()})
 

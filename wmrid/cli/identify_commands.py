@@ -5,18 +5,16 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from wmrid.cli.app import app, invocation
+from wmrid.cli.groups import FIT_FLAGS, LOG_FLAGS, OBSERVER_FLAGS, takes
 from wmrid.cli.helpers import (
     activity,
     check_rotor,
     deprecated_option,
-    fit_opts,
-    log_opts,
-    observer_opts,
     on_stdout,
     progress,
     stderr_console,
@@ -24,56 +22,20 @@ from wmrid.cli.helpers import (
     write_estimates,
 )
 from wmrid.cli.options import (
-    DEFAULT_FORM,
-    DEFAULT_FRICTION,
-    DEFAULT_TORQUE_HOLD,
-    OBSERVER_DEFAULTS,
-    AlignOpt,
-    AlignRule,
-    AlphaOpt,
-    BoxWidthOpt,
-    ColumnsOpt,
-    ControlRateOpt,
-    CutoffOpt,
-    DelayOpt,
-    EfficiencyOpt,
-    EffortKind,
-    EffortOpt,
-    EffortTopicOpt,
-    EffortUnitOpt,
-    FlipEffortOpt,
-    ForgettingOpt,
-    FormOpt,
-    FrictionOpt,
-    GearRatioOpt,
     GivenOpt,
-    KOpt,
-    LeftJointOpt,
     MethodChoice,
     MethodOpt,
-    MirrorLeftOpt,
     OutputFormat,
-    PayloadOpt,
-    RightJointOpt,
     RotorInertiaOpt,
-    SpeedUnit,
-    SpeedUnitOpt,
-    TimeSource,
-    TimeSourceOpt,
-    TimeUnit,
-    TimeUnitOpt,
-    TopicOpt,
-    TorqueConstantOpt,
-    TorqueHoldOpt,
     ValidateOpt,
-    VelocityFrom,
-    VelocityFromOpt,
-    VelocityTopicOpt,
-    WeightedOpt,
-    WheelRadiusOpt,
 )
 from wmrid.core.errors import UsageError
 from wmrid.reporting.terminal import console
+
+if TYPE_CHECKING:
+    from wmrid.api.inputs import LogOptions
+    from wmrid.estimators.options import MethodOptions, ObserverOptions
+
 
 LOG_HELP = (
     "Log: .csv (also gzip/bz2/xz/zstd), .parquet, .mcap, ROS 1 .bag, ROS 2 .db3, a rosbag2 folder, several bag "
@@ -93,6 +55,7 @@ def one_or_many(paths: list[str]) -> str | list[str]:
     "wmrid identify run.bag --velocity-topic /wheel_state --effort-topic /wheel_cmd --format json | jq .parameters\n\n"
     "wmrid identify log.csv.gz --columns t=time,eta_r=vr,eta_l=vl,tau_r=ur,tau_l=ul -o result.json",
 )
+@takes(LOG_FLAGS, OBSERVER_FLAGS, FIT_FLAGS)
 def identify_command(
     log: Annotated[list[str], typer.Argument(metavar="LOG...", help=LOG_HELP)],
     robot: Annotated[
@@ -101,13 +64,6 @@ def identify_command(
             help="Robot: built-in name ('paper'), TOML file, or URDF (with --gear-ratio); starts the estimate."
         ),
     ] = None,
-    columns: ColumnsOpt = None,
-    time_unit: TimeUnitOpt = TimeUnit.auto,
-    form: FormOpt = DEFAULT_FORM,
-    k: KOpt = OBSERVER_DEFAULTS.k,
-    alpha: AlphaOpt = OBSERVER_DEFAULTS.alpha,
-    box_width: BoxWidthOpt = OBSERVER_DEFAULTS.box_width,
-    torque_hold: TorqueHoldOpt = DEFAULT_TORQUE_HOLD,
     output_format: Annotated[
         OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
     ] = OutputFormat.auto,
@@ -131,34 +87,14 @@ def identify_command(
     ] = False,
     history: Annotated[bool, typer.Option("--history", hidden=True, help="Keep the history (the default).")] = False,
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing output file.")] = False,
-    payload: PayloadOpt = False,
-    topic: TopicOpt = None,
-    velocity_topic: VelocityTopicOpt = None,
-    effort_topic: EffortTopicOpt = None,
-    right_joint: RightJointOpt = None,
-    left_joint: LeftJointOpt = None,
-    time_source: TimeSourceOpt = TimeSource.auto,
-    align: AlignOpt = AlignRule.linear,
-    velocity_from: VelocityFromOpt = VelocityFrom.auto,
-    speed_unit: SpeedUnitOpt = SpeedUnit.rad_s,
-    wheel_radius: WheelRadiusOpt = None,
-    effort: EffortOpt = EffortKind.torque,
-    effort_unit: EffortUnitOpt = None,
-    torque_constant: TorqueConstantOpt = None,
-    gear_ratio: GearRatioOpt = None,
-    efficiency: EfficiencyOpt = None,
-    mirror_left: MirrorLeftOpt = False,
-    flip_effort: FlipEffortOpt = False,
     rotor_inertia: RotorInertiaOpt = None,
     method: MethodOpt = MethodChoice.auto,
-    cutoff: CutoffOpt = None,
-    weighted: WeightedOpt = False,
-    forgetting: ForgettingOpt = 1.0,
     validate: ValidateOpt = None,
-    control_rate: ControlRateOpt = None,
-    delay: DelayOpt = None,
-    friction: FrictionOpt = DEFAULT_FRICTION,
     given: GivenOpt = None,
+    *,
+    log_options: LogOptions,
+    observer: ObserverOptions,
+    fit: MethodOptions,
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
     from wmrid.api.identification import check_validation, identify as run_identify, robot_for, validate as run_validate
@@ -168,18 +104,17 @@ def identify_command(
     if out is not None:
         deprecated_option("--out", "--mcap-out")
         mcap_out = mcap_out or out
-    options, observer, fit = log_opts(locals()), observer_opts(locals()), fit_opts(locals())
     logs = one_or_many(log)
     check_validation(logs, validate, observer, (method.value,), "LOG")
-    robot_obj = robot_for(robot, options, check_rotor(rotor_inertia))
+    robot_obj = robot_for(robot, log_options, check_rotor(rotor_inertia))
     progress_cb, finish = progress("identify")
     try:
         result = run_identify(
-            logs, robot_obj, method=method.value, options=options, observer=observer, fit=fit, given=given,
+            logs, robot_obj, method=method.value, options=log_options, observer=observer, fit=fit, given=given,
             progress=progress_cb,
         )  # fmt: skip
         if validate is not None:
-            result = run_validate(result, validate, options, robot=robot_obj)
+            result = run_validate(result, validate, log_options, robot=robot_obj)
     finally:
         finish()
     payload = result.to_dict(history=history or not no_history)
@@ -228,6 +163,7 @@ def inspect_command(
     "wmrid report run.mcap --robot paper -o report.html\n\n"
     "wmrid identify run.mcap -o result.json; wmrid report result.json -o report.md",
 )
+@takes(LOG_FLAGS, OBSERVER_FLAGS, FIT_FLAGS)
 def report_command(
     input_: Annotated[
         str,
@@ -245,42 +181,15 @@ def report_command(
         Path | None, typer.Option(help="Export the prediction errors over time (t, e_r, e_l) as .csv or .parquet.")
     ] = None,
     robot: Annotated[str | None, typer.Option(help="Robot (name, TOML or URDF), as for identify.")] = None,
-    columns: ColumnsOpt = None,
-    time_unit: TimeUnitOpt = TimeUnit.auto,
-    form: FormOpt = DEFAULT_FORM,
-    k: KOpt = OBSERVER_DEFAULTS.k,
-    alpha: AlphaOpt = OBSERVER_DEFAULTS.alpha,
-    box_width: BoxWidthOpt = OBSERVER_DEFAULTS.box_width,
-    torque_hold: TorqueHoldOpt = DEFAULT_TORQUE_HOLD,
-    payload: PayloadOpt = False,
     given: GivenOpt = None,
     force: Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")] = False,
-    topic: TopicOpt = None,
-    velocity_topic: VelocityTopicOpt = None,
-    effort_topic: EffortTopicOpt = None,
-    right_joint: RightJointOpt = None,
-    left_joint: LeftJointOpt = None,
-    time_source: TimeSourceOpt = TimeSource.auto,
-    align: AlignOpt = AlignRule.linear,
-    velocity_from: VelocityFromOpt = VelocityFrom.auto,
-    speed_unit: SpeedUnitOpt = SpeedUnit.rad_s,
-    wheel_radius: WheelRadiusOpt = None,
-    effort: EffortOpt = EffortKind.torque,
-    effort_unit: EffortUnitOpt = None,
-    torque_constant: TorqueConstantOpt = None,
-    gear_ratio: GearRatioOpt = None,
-    efficiency: EfficiencyOpt = None,
-    mirror_left: MirrorLeftOpt = False,
-    flip_effort: FlipEffortOpt = False,
     rotor_inertia: RotorInertiaOpt = None,
     method: MethodOpt = MethodChoice.auto,
-    cutoff: CutoffOpt = None,
-    weighted: WeightedOpt = False,
-    forgetting: ForgettingOpt = 1.0,
     validate: ValidateOpt = None,
-    control_rate: ControlRateOpt = None,
-    delay: DelayOpt = None,
-    friction: FrictionOpt = DEFAULT_FRICTION,
+    *,
+    log_options: LogOptions,
+    observer: ObserverOptions,
+    fit: MethodOptions,
 ) -> None:
     """Tables (paper Tables 2 and 3), comparison with nominal/CAD/truth, diagnostics and figures for INPUT; for a
     plan (wmrid plan -o plan.json): its path, signals against their limits and predicted precision."""
@@ -305,13 +214,12 @@ def report_command(
     truth_params = load_truth(truth)
     if input_ == "-" and validate == "-":
         raise UsageError("INPUT and --validate cannot both be standard input; give one of them as a file")
-    how = Identification(method.value, observer_opts(locals()), fit_opts(locals()), validate, given)
-    opts = log_opts(locals())
+    how = Identification(method.value, observer, fit, validate, given)
     with activity("wmrid report") as stage:
         drawn = suffix in (".html", ".htm", ".md")  # the outputs that show figures
         stage("identifying" + (" and drawing the figures" if drawn else ""))
         rep = build(
-            input_, truth=truth_params, figures=drawn, rotor_inertia=rotor_inertia, options=opts, robot=robot,
+            input_, truth=truth_params, figures=drawn, rotor_inertia=rotor_inertia, options=log_options, robot=robot,
             identification=how, command=invocation(),
         )  # fmt: skip
         from wmrid.core.atomic import output_group
@@ -338,6 +246,7 @@ def report_command(
     "wmrid compare run.mcap --robot paper\n\n"
     "wmrid compare sim.csv --truth sim.csv.truth.json --methods observer,idim,oe --validate other.csv",
 )
+@takes(LOG_FLAGS, OBSERVER_FLAGS, FIT_FLAGS)
 def compare_command(
     log: Annotated[list[str], typer.Argument(metavar="LOG...", help=LOG_HELP)],
     robot: Annotated[
@@ -347,22 +256,9 @@ def compare_command(
         Path | None, typer.Option(help='Ground truth JSON {"parameters": {"m11": ...}} (the simulator\'s sidecar).')
     ] = None,
     validate: ValidateOpt = None,
-    control_rate: ControlRateOpt = None,
-    delay: DelayOpt = None,
     methods: Annotated[
         str, typer.Option(help="Comma-separated methods to run, of observer, idim, iv, rls, oe.")
     ] = "observer,idim,rls,oe",
-    columns: ColumnsOpt = None,
-    time_unit: TimeUnitOpt = TimeUnit.auto,
-    form: FormOpt = DEFAULT_FORM,
-    k: KOpt = OBSERVER_DEFAULTS.k,
-    alpha: AlphaOpt = OBSERVER_DEFAULTS.alpha,
-    box_width: BoxWidthOpt = OBSERVER_DEFAULTS.box_width,
-    torque_hold: TorqueHoldOpt = DEFAULT_TORQUE_HOLD,
-    payload: PayloadOpt = False,
-    cutoff: CutoffOpt = None,
-    weighted: WeightedOpt = False,
-    forgetting: ForgettingOpt = 1.0,
     output_format: Annotated[
         OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
     ] = OutputFormat.auto,
@@ -370,25 +266,11 @@ def compare_command(
         Path | None, typer.Option("--output", "-o", help="Write the JSON comparison to this file.")
     ] = None,
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing output file.")] = False,
-    topic: TopicOpt = None,
-    velocity_topic: VelocityTopicOpt = None,
-    effort_topic: EffortTopicOpt = None,
-    right_joint: RightJointOpt = None,
-    left_joint: LeftJointOpt = None,
-    time_source: TimeSourceOpt = TimeSource.auto,
-    align: AlignOpt = AlignRule.linear,
-    velocity_from: VelocityFromOpt = VelocityFrom.auto,
-    speed_unit: SpeedUnitOpt = SpeedUnit.rad_s,
-    wheel_radius: WheelRadiusOpt = None,
-    effort: EffortOpt = EffortKind.torque,
-    effort_unit: EffortUnitOpt = None,
-    torque_constant: TorqueConstantOpt = None,
-    gear_ratio: GearRatioOpt = None,
-    efficiency: EfficiencyOpt = None,
-    mirror_left: MirrorLeftOpt = False,
-    flip_effort: FlipEffortOpt = False,
     rotor_inertia: RotorInertiaOpt = None,
-    friction: FrictionOpt = DEFAULT_FRICTION,
+    *,
+    log_options: LogOptions,
+    observer: ObserverOptions,
+    fit: MethodOptions,
 ) -> None:
     """Run every identification method on LOG: estimates, standard errors, errors against --truth, fit on
     --validate OTHER, run time.  Every method identifies the same friction model (--friction)."""
@@ -396,11 +278,10 @@ def compare_command(
     from wmrid.core.atomic import write_json
     from wmrid.reporting.render import print_comparison, to_json
 
-    opts, observer, fit = log_opts(locals()), observer_opts(locals()), fit_opts(locals())
-    robot_obj = robot_for(robot, opts, check_rotor(rotor_inertia))
+    robot_obj = robot_for(robot, log_options, check_rotor(rotor_inertia))
     with activity("wmrid compare") as stage:
         data = run_compare(
-            one_or_many(log), robot_obj, methods=methods.split(","), options=opts, observer=observer, fit=fit,
+            one_or_many(log), robot_obj, methods=methods.split(","), options=log_options, observer=observer, fit=fit,
             validate=validate, truth=truth, stage=stage,
         ).to_dict()  # fmt: skip
     if output is not None:

@@ -5,55 +5,23 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from wmrid.cli.app import app
-from wmrid.cli.helpers import log_opts, observer_opts, on_stdout, warning_summary
+from wmrid.cli.groups import LOG_FLAGS, OBSERVER_FLAGS, takes
+from wmrid.cli.helpers import on_stdout, warning_summary
 from wmrid.cli.options import (
-    DEFAULT_FORM,
-    DEFAULT_FRICTION,
-    DEFAULT_TORQUE_HOLD,
-    OBSERVER_DEFAULTS,
-    AlignOpt,
-    AlignRule,
-    AlphaOpt,
-    BoxWidthOpt,
-    ColumnsOpt,
-    ControlRateOpt,
-    DelayOpt,
-    EfficiencyOpt,
-    EffortKind,
-    EffortOpt,
-    EffortTopicOpt,
-    EffortUnitOpt,
-    FlipEffortOpt,
-    FormOpt,
-    FrictionOpt,
-    GearRatioOpt,
-    KOpt,
-    LeftJointOpt,
-    MirrorLeftOpt,
     OutputFormat,
-    PayloadOpt,
-    RightJointOpt,
     RotorInertiaOpt,
-    SpeedUnit,
-    SpeedUnitOpt,
-    TimeSource,
-    TimeSourceOpt,
-    TimeUnit,
-    TimeUnitOpt,
-    TopicOpt,
-    TorqueConstantOpt,
-    TorqueHoldOpt,
-    VelocityFrom,
-    VelocityFromOpt,
-    VelocityTopicOpt,
-    WheelRadiusOpt,
 )
 from wmrid.reporting.terminal import console
+
+if TYPE_CHECKING:
+    from wmrid.api.inputs import LogOptions
+    from wmrid.estimators.options import ObserverOptions
+
 
 _LIVE_PANEL = "Live (refresh and when to stop)"
 
@@ -66,6 +34,7 @@ _LIVE_PANEL = "Live (refresh and when to stop)"
     "wmrid live run.mcap --idle 5 --until-std 1 --params m11,m22,Vc\n\n"
     "some_logger | wmrid live - --columns t=time,eta_r=vr,eta_l=vl,tau_r=ur,tau_l=ul | jq .parameters",
 )
+@takes(LOG_FLAGS, OBSERVER_FLAGS)
 def live_command(
     source: Annotated[
         str,
@@ -143,35 +112,10 @@ def live_command(
             "--format", help="table (a live table), json (a JSON line per refresh), or auto (table on a terminal)."
         ),
     ] = OutputFormat.auto,
-    columns: ColumnsOpt = None,
-    time_unit: TimeUnitOpt = TimeUnit.auto,
-    form: FormOpt = DEFAULT_FORM,
-    k: KOpt = OBSERVER_DEFAULTS.k,
-    alpha: AlphaOpt = OBSERVER_DEFAULTS.alpha,
-    box_width: BoxWidthOpt = OBSERVER_DEFAULTS.box_width,
-    torque_hold: TorqueHoldOpt = DEFAULT_TORQUE_HOLD,
-    payload: PayloadOpt = False,
-    topic: TopicOpt = None,
-    velocity_topic: VelocityTopicOpt = None,
-    effort_topic: EffortTopicOpt = None,
-    right_joint: RightJointOpt = None,
-    left_joint: LeftJointOpt = None,
-    time_source: TimeSourceOpt = TimeSource.auto,
-    align: AlignOpt = AlignRule.linear,
-    velocity_from: VelocityFromOpt = VelocityFrom.auto,
-    speed_unit: SpeedUnitOpt = SpeedUnit.rad_s,
-    wheel_radius: WheelRadiusOpt = None,
-    effort: EffortOpt = EffortKind.torque,
-    effort_unit: EffortUnitOpt = None,
-    torque_constant: TorqueConstantOpt = None,
-    gear_ratio: GearRatioOpt = None,
-    efficiency: EfficiencyOpt = None,
-    mirror_left: MirrorLeftOpt = False,
-    flip_effort: FlipEffortOpt = False,
     rotor_inertia: RotorInertiaOpt = None,
-    control_rate: ControlRateOpt = None,
-    delay: DelayOpt = None,
-    friction: FrictionOpt = DEFAULT_FRICTION,
+    *,
+    log_options: LogOptions,
+    observer: ObserverOptions,
 ) -> None:
     """Identify the robot while it drives: follow SOURCE as it is written, refresh the estimate ± std every --every
     seconds, and when it ends (--idle, --until, --until-std, the recording's end, Ctrl-C) give identify's result on
@@ -185,9 +129,9 @@ def live_command(
     if output is not None:
         check_output(output, force)
     run = run_live(
-        source, robot, options=log_opts(locals()), every=every, idle=idle, until=until, until_std=until_std,
+        source, robot, options=log_options, every=every, idle=idle, until=until, until_std=until_std,
         params=[p.strip() for p in params.split(",") if p.strip()] if params else None,
-        observer=observer_opts(locals()), rotor_inertia=rotor_inertia, reconnect=reconnect, monitor=monitor,
+        observer=observer, rotor_inertia=rotor_inertia, reconnect=reconnect, monitor=monitor,
     )  # fmt: skip
     fmt = "json" if on_stdout(output) else output_format.value
     if fmt == "auto":

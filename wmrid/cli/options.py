@@ -55,6 +55,7 @@ class OutputFormat(str, Enum):
 
 
 _LOG_PANEL = "Log input (bag topics, units, effort)"
+_OBSERVER_PANEL = "Observer (the paper's estimator, Eqs. 26-37), friction model and the efforts' timing"
 
 
 TopicOpt = Annotated[
@@ -235,6 +236,7 @@ DelayOpt = Annotated[
         "output states it).  Reads the log into memory.  Default: the timing check estimates the delay on every log of "
         "up to 2 M samples and applies it when significant, as auto does (always auto when the efforts come from "
         "another topic than the speeds); 0: as stamped.",
+        rich_help_panel=_OBSERVER_PANEL,
     ),
 ]
 
@@ -246,6 +248,7 @@ ControlRateOpt = Annotated[
         metavar="HZ",
         help="The controller updated the (held) effort at HZ (> 0), faster than the log: each step is held over its "
         "sub-steps, the unlogged values interpolated (e.g. a 1 kHz controller logged at 100 Hz).",
+        rich_help_panel=_OBSERVER_PANEL,
     ),
 ]
 
@@ -261,6 +264,7 @@ FrictionOpt = Annotated[
         "(needs the positions; the observer only); "
         "auto: both, and the caster model when the log shows the drag (a Wald test, p < 0.001; the output says "
         "which and why), then its load terms when the log shows them too.",
+        rich_help_panel=_OBSERVER_PANEL,
     ),
 ]
 
@@ -362,37 +366,59 @@ FalseAlarmRateOpt = Annotated[
 
 #: The observer's settings and the table options, declared once for every command that identifies a log (issue 31).
 ColumnsOpt = Annotated[
-    str | None, typer.Option(help="Column mapping NAME=COLUMN, comma-separated, e.g. t=time,eta_r=vr,tau_l=ul.")
+    str | None,
+    typer.Option(
+        help="Column mapping NAME=COLUMN, comma-separated, e.g. t=time,eta_r=vr,tau_l=ul.", rich_help_panel=_LOG_PANEL
+    ),
 ]
 TimeUnitOpt = Annotated[
-    TimeUnit, typer.Option(help="Time column unit (auto: float s, floats past 1e13 us, 1e16 ns; integer ns).")
+    TimeUnit,
+    typer.Option(
+        help="Time column unit (auto: float s, floats past 1e13 us, 1e16 ns; integer ns).", rich_help_panel=_LOG_PANEL
+    ),
 ]
 FormOpt = Annotated[
-    FormChoice, typer.Option(help="Regressor: paper (7 columns, wheels keep one sign), general (8), auto.")
+    FormChoice,
+    typer.Option(
+        help="Regressor: paper (7 columns, wheels keep one sign), general (8), auto.", rich_help_panel=_OBSERVER_PANEL
+    ),
 ]
 KOpt = Annotated[
     float,
-    typer.Option("--k", help="Observer/filter gain k of Eqs. 26-30, 1/s, in (0, 100000] (paper: 1; see the docs)."),
+    typer.Option(
+        "--k",
+        help="Observer/filter gain k of Eqs. 26-30, 1/s, in (0, 100000] (paper: 1; see the docs).",
+        rich_help_panel=_OBSERVER_PANEL,
+    ),
 ]
 AlphaOpt = Annotated[
-    float, typer.Option(help="Initial Gamma = alpha I (Eq. 33), > 0: weight of the start value (paper: 5000).")
+    float,
+    typer.Option(
+        help="Initial Gamma = alpha I (Eq. 33), > 0: weight of the start value (paper: 5000).",
+        rich_help_panel=_OBSERVER_PANEL,
+    ),
 ]
 BoxWidthOpt = Annotated[
     float,
     typer.Option(
         help="Half-width of the parameter box around the nominal values, in units of max(|theta|, m_ii), "
-        "in (0, inf] (inf: no box)."
+        "in (0, inf] (inf: no box).",
+        rich_help_panel=_OBSERVER_PANEL,
     ),
 ]
 TorqueHoldOpt = Annotated[
     TorqueHold,
-    typer.Option(help="Torque between samples: zoh (held, as a digital controller applies it) or foh (linear)."),
+    typer.Option(
+        help="Torque between samples: zoh (held, as a digital controller applies it) or foh (linear).",
+        rich_help_panel=_OBSERVER_PANEL,
+    ),
 ]
 PayloadOpt = Annotated[
     bool,
     typer.Option(
         "--payload",
         help="Also estimate the payload carried (mass, x, y, inertia) against --robot's unloaded parameters.",
+        rich_help_panel=_OBSERVER_PANEL,
     ),
 ]
 GivenOpt = Annotated[

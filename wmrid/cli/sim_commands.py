@@ -4,51 +4,31 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from wmrid.cli.app import app
-from wmrid.cli.helpers import activity, check_rotor, log_opts, on_stdout, stderr_console, warning_summary
+from wmrid.cli.groups import LOG_FLAGS, OBSERVER_FLAGS, takes
+from wmrid.cli.helpers import activity, check_rotor, on_stdout, stderr_console, warning_summary
 from wmrid.cli.options import (
-    AlignOpt,
-    AlignRule,
     CalibrationOpt,
-    ColumnsOpt,
     DropAtOpt,
-    EfficiencyOpt,
-    EffortKind,
-    EffortOpt,
-    EffortTopicOpt,
-    EffortUnitOpt,
     Engine,
     FalseAlarmRateOpt,
     FaultAtOpt,
-    FlipEffortOpt,
     FrictionFaultOpt,
-    GearRatioOpt,
-    LeftJointOpt,
     LoadAtOpt,
-    MirrorLeftOpt,
     MonitorModelOpt,
     OutputFormat,
-    RightJointOpt,
     RotorInertiaOpt,
-    SpeedUnit,
-    SpeedUnitOpt,
-    TimeSource,
-    TimeSourceOpt,
-    TimeUnit,
-    TimeUnitOpt,
-    TopicOpt,
-    TorqueConstantOpt,
     Trajectory,
-    VelocityFrom,
-    VelocityFromOpt,
-    VelocityTopicOpt,
-    WheelRadiusOpt,
 )
 from wmrid.reporting.terminal import console
+
+if TYPE_CHECKING:
+    from wmrid.api.inputs import LogOptions
+    from wmrid.estimators.options import ObserverOptions
 
 
 @app.command(
@@ -182,6 +162,7 @@ def simulate_command(
     name="monitor",
     epilog="Examples:\n\nwmrid identify monday.mcap -o model.json; wmrid monitor friday.mcap --model model.json",
 )
+@takes(LOG_FLAGS, OBSERVER_FLAGS)
 def monitor_command(
     log: Annotated[
         str, typer.Argument(metavar="LOG", help="Log file (.csv, .parquet, .mcap) or - for standard input.")
@@ -189,30 +170,14 @@ def monitor_command(
     model: MonitorModelOpt,
     calibration: CalibrationOpt = 10.0,
     false_alarm_rate: FalseAlarmRateOpt = 0.1,
-    columns: ColumnsOpt = None,
-    time_unit: TimeUnitOpt = TimeUnit.auto,
     output_format: Annotated[
         OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
     ] = OutputFormat.auto,
     output: Annotated[Path | None, typer.Option("--output", "-o", help="Write the JSON result to this file.")] = None,
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing output file.")] = False,
-    topic: TopicOpt = None,
-    velocity_topic: VelocityTopicOpt = None,
-    effort_topic: EffortTopicOpt = None,
-    right_joint: RightJointOpt = None,
-    left_joint: LeftJointOpt = None,
-    time_source: TimeSourceOpt = TimeSource.auto,
-    align: AlignOpt = AlignRule.linear,
-    velocity_from: VelocityFromOpt = VelocityFrom.auto,
-    speed_unit: SpeedUnitOpt = SpeedUnit.rad_s,
-    wheel_radius: WheelRadiusOpt = None,
-    effort: EffortOpt = EffortKind.torque,
-    effort_unit: EffortUnitOpt = None,
-    torque_constant: TorqueConstantOpt = None,
-    gear_ratio: GearRatioOpt = None,
-    efficiency: EfficiencyOpt = None,
-    mirror_left: MirrorLeftOpt = False,
-    flip_effort: FlipEffortOpt = False,
+    *,
+    log_options: LogOptions,
+    observer: ObserverOptions,
 ) -> None:
     """Replay LOG against an identified model; report when the dynamics change, and the parameters after.
 
@@ -226,9 +191,15 @@ def monitor_command(
     from wmrid.reporting.monitor_view import print_monitor
     from wmrid.reporting.render import to_json
 
-    opts = log_opts(locals())
     with activity("wmrid monitor"):
-        result = run_monitor(log, model, options=opts, calibration=calibration, false_alarm_rate=false_alarm_rate)
+        result = run_monitor(
+            log,
+            model,
+            options=log_options,
+            observer=observer,
+            calibration=calibration,
+            false_alarm_rate=false_alarm_rate,
+        )
     payload = result.to_dict()
     if output is not None:
         write_json(str(output), payload, force=force)

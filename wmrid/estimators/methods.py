@@ -19,13 +19,12 @@ from wmrid.core.choices import Method, values
 from wmrid.core.errors import UsageError, WmridError, option
 from wmrid.estimators.estimate import BaseEstimate
 from wmrid.estimators.model_error import std_mark
+from wmrid.estimators.options import MethodOptions
 from wmrid.estimators.result import IdentificationResult, payload_dict
 from wmrid.estimators.substitution import with_estimate
 from wmrid.model.robot import Robot
 
 METHODS = values(Method, without=("auto",))
-#: The smallest RLS forgetting factor: a memory of 1/(1 - lambda) = 50 samples, about six per parameter.
-MIN_FORGETTING = 0.98
 DESCRIPTIONS = {
     "observer": "the paper's observer-based adaptive estimator (Eqs. 26-37), no accelerations",
     "idim": "inverse dynamic model, least squares on zero-phase low-pass filtered and differentiated speeds",
@@ -34,37 +33,6 @@ DESCRIPTIONS = {
     "rls": "recursive least squares with forgetting on the IDIM regression",
     "oe": "output error: simulate the model on the log's torques and minimise the speed error, from the observer",
 }
-
-
-@dataclass(frozen=True)
-class MethodOptions:
-    """Options of the classical methods.
-
-    cutoff_hz : IDIM/RLS low-pass cutoff, Hz (None: from the log, see
-    :func:`wmrid.estimators.idim_regression.default_cutoff`).
-    weighted : IDIM two-step weighted least squares.  forgetting : RLS forgetting factor in (0, 1].
-    How the effort was held between samples is the observer's (its ``torque_hold`` and ``control_rate``,
-    :class:`wmrid.estimators.options.ObserverOptions`): OE simulates it, IDIM and RLS read the efforts half a hold
-    period earlier under "zoh" (:func:`wmrid.estimators.idim_regression.effort_delay`).
-    """
-
-    cutoff_hz: float | None = None
-    weighted: bool = False
-    forgetting: float = 1.0
-
-    def __post_init__(self) -> None:
-        if self.cutoff_hz is not None and not (np.isfinite(self.cutoff_hz) and self.cutoff_hz > 0):
-            raise UsageError(f"{option('cutoff')} must be a positive frequency in Hz, got {self.cutoff_hz!r}")
-        if not (MIN_FORGETTING <= self.forgetting <= 1.0):
-            why = (
-                "above 1 the recursion weights old samples more than new ones and diverges"
-                if self.forgetting > 1.0
-                else f"below {MIN_FORGETTING} the recursion remembers fewer than "
-                f"{round(1 / (1 - MIN_FORGETTING))} samples for 8 parameters"
-                if self.forgetting < MIN_FORGETTING
-                else "it is not a number"
-            )
-            raise UsageError(f"{option('forgetting')} must be in [{MIN_FORGETTING}, 1], got {self.forgetting!r}: {why}")
 
 
 def check_method(name: str) -> str:

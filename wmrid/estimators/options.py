@@ -1,4 +1,5 @@
-"""The observer's options, declared and checked once (:class:`ObserverOptions`).
+"""The observer's options and the classical methods', declared and checked once (:class:`ObserverOptions`,
+:class:`MethodOptions`).
 
 Every command that runs the observer (identify, compare, report, fleet, monitor, live) takes these; the command line
 turns its flags into one, the library's functions take one, and nothing checks them again downstream.
@@ -109,3 +110,38 @@ def check_gains(k: float, alpha: float, control_rate: float | None = None) -> No
         )
     if not (math.isfinite(alpha) and alpha > 0):
         raise UsageError(f"{option('alpha')} must be a finite number > 0, got {alpha}")
+
+
+#: The smallest RLS forgetting factor: a memory of 1/(1 - lambda) = 50 samples, about six per parameter.
+MIN_FORGETTING = 0.98
+
+
+@dataclass(frozen=True)
+class MethodOptions:
+    """Options of the classical methods.
+
+    cutoff_hz : IDIM/RLS low-pass cutoff, Hz (None: from the log, see
+    :func:`wmrid.estimators.idim_regression.default_cutoff`).
+    weighted : IDIM two-step weighted least squares.  forgetting : RLS forgetting factor in (0, 1].
+    How the effort was held between samples is the observer's (its ``torque_hold`` and ``control_rate``,
+    :class:`wmrid.estimators.options.ObserverOptions`): OE simulates it, IDIM and RLS read the efforts half a hold
+    period earlier under "zoh" (:func:`wmrid.estimators.idim_regression.effort_delay`).
+    """
+
+    cutoff_hz: float | None = None
+    weighted: bool = False
+    forgetting: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.cutoff_hz is not None and not (math.isfinite(self.cutoff_hz) and self.cutoff_hz > 0):
+            raise UsageError(f"{option('cutoff')} must be a positive frequency in Hz, got {self.cutoff_hz!r}")
+        if not (MIN_FORGETTING <= self.forgetting <= 1.0):
+            why = (
+                "above 1 the recursion weights old samples more than new ones and diverges"
+                if self.forgetting > 1.0
+                else f"below {MIN_FORGETTING} the recursion remembers fewer than "
+                f"{round(1 / (1 - MIN_FORGETTING))} samples for 8 parameters"
+                if self.forgetting < MIN_FORGETTING
+                else "it is not a number"
+            )
+            raise UsageError(f"{option('forgetting')} must be in [{MIN_FORGETTING}, 1], got {self.forgetting!r}: {why}")

@@ -83,12 +83,13 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError, UsageError, option
+from wmrid.estimators.options import ObserverOptions
 from wmrid.model import dynamics as model
 from wmrid.model.dynamics import THETA0_NAMES, RegressorForm
 from wmrid.monitoring.glr import ModelError, NoiseModel, locate, window_grid, window_statistics
@@ -127,14 +128,23 @@ def _segment_log(log: Any, t_start: float, t_end: float, unit: str) -> _Log:
 
 
 def _identify_span(log: Any, t_start: float, t_end: float, unit: str, friction: str = "wheel",
-                   notes: list[str] | None = None, geometry: tuple[float, ...] = ()):  # fmt: skip
+                   notes: list[str] | None = None, geometry: tuple[float, ...] = (),
+                   observer: ObserverOptions | None = None):  # fmt: skip
     """(identification of log[t_start, t_end] (s from the log's start), None) or (None, why not).
 
     ``friction``: the given model's friction model.  ``wheel+caster`` is identified with the given model's caster
     positions ``geometry`` ((r, b, x_1, y_1, ...), its ``form.geometry``), else with the two-term caster model
     (Cv, Cw); where that is not identifiable (the wheels never stop or reverse: the drag then adds to the
-    Coulomb friction) the wheel friction model is used instead, and why is appended to ``notes``."""
-    from wmrid.pipeline.identify import identify
+    Coulomb friction) the wheel friction model is used instead, and why is appended to ``notes``.  ``observer``: the
+    observer's settings (its friction, delay and payload aside: the model's friction, the log already shifted by any
+    delay, no robot for a payload; default :class:`ObserverOptions`)."""
+    from wmrid.pipeline.identify import Steps, identify_log
+
+    base = observer if observer is not None else ObserverOptions()
+
+    def identify(seg: Any, friction: str, geometry: tuple[float, ...] = ()) -> Any:
+        options = replace(base, friction=friction, delay=None, payload=False)
+        return identify_log(seg, None, options, Steps(geometry=geometry, feedback=False, timing=False))
 
     seg = _segment_log(log, t_start, t_end, unit)
     span = float(seg.t[-1]) if len(seg.t) else 0.0
@@ -144,11 +154,11 @@ def _identify_span(log: Any, t_start: float, t_end: float, unit: str, friction: 
         )
     try:
         try:
-            result = identify(seg, None, friction=friction, geometry=geometry, feedback=False, timing=False)
+            result = identify(seg, friction, geometry)
         except NotIdentifiableError as err:
             if friction == "wheel":
                 raise
-            result = identify(seg, None, friction="wheel", feedback=False, timing=False)
+            result = identify(seg, "wheel")
             if notes is not None:
                 notes.append(
                     f"the log from {t_start:.3f} s to {t_end:.3f} s was identified with wheel friction only: the "
@@ -215,7 +225,7 @@ class _Segment:
                 [m.sig.residual(self.fixed.theta0, a, a + upto, self.fixed.form)], m.order
             )
         t0, t1 = self._t(0), self._t(upto - 1)
-        result, problem = _identify_span(m.log, t0, t1, m.unit, m.friction, m.notes, m.geometry)
+        result, problem = _identify_span(m.log, t0, t1, m.unit, m.friction, m.notes, m.geometry, m.observer)
         if result is None:
             raise _Stop(problem)
         fitted = _model_of_result(result)
@@ -223,8 +233,8 @@ class _Segment:
         # model sees the model's estimation error as the test will, not an in-sample fit.
         half = upto // 2
         tm = self._t(half)
-        first, _ = _identify_span(m.log, t0, tm, m.unit, m.friction, m.notes, m.geometry)
-        second, _ = _identify_span(m.log, tm, t1, m.unit, m.friction, m.notes, m.geometry)
+        first, _ = _identify_span(m.log, t0, tm, m.unit, m.friction, m.notes, m.geometry, m.observer)
+        second, _ = _identify_span(m.log, tm, t1, m.unit, m.friction, m.notes, m.geometry, m.observer)
         if first is not None and second is not None:
             spans = [m.sig.residual(second.estimate.theta0, a, a + half, caster_form(second.form)),
                      m.sig.residual(first.estimate.theta0, a + half, a + upto, caster_form(first.form))]  # fmt: skip
@@ -298,7 +308,7 @@ class _Stop(Exception):
 class _Monitor:
     def __init__(
         self, log: Any, sig: Signals, settings: MonitorSettings, unit: str, friction: str = "wheel",
-        geometry: tuple[float, ...] = (),
+        geometry: tuple[float, ...] = (), observer: ObserverOptions | None = None,
     ) -> None:  # fmt: skip
         self.log, self.sig, self.settings, self.unit = log, sig, settings, unit
         self.grid = window_grid(settings, sig.rate)
@@ -309,6 +319,7 @@ class _Monitor:
         self.friction = friction
         self.geometry = geometry  # the model's caster positions (r, b, x_1, y_1, ...), () for none
         self.notes: list[str] = []  # fallbacks of re-identification (see _identify_span)
+        self.observer = observer  # the re-identifications' observer settings
 
     def whitened(self, fitted: _Model, noise: NoiseModel, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
         """Whitened residual z (m, 2) and regressor x (m, 2, n) of signal samples [a, b) (from a - q for the
@@ -318,9 +329,12 @@ class _Monitor:
         return noise.whiten(residual), noise.whiten(self.sig.phi_for(fitted.form, "test")[a - q : b])
 
 
-def monitor(log: Any, model_: MonitoredModel, settings: MonitorSettings | None = None) -> MonitorResult:
+def monitor(
+    log: Any, model_: MonitoredModel, settings: MonitorSettings | None = None, observer: ObserverOptions | None = None
+) -> MonitorResult:
     """Replay ``log`` (t (n,) s, eta (n, 2) rad/s, tau (n, 2); source, notes, effort_unit) against ``model_``
-    and report the changes of its dynamics (see the module docstring)."""
+    and report the changes of its dynamics (see the module docstring); ``observer``: the settings of the
+    re-identifications after a change (see :func:`_identify_span`)."""
     started = time.perf_counter()
     settings = settings or MonitorSettings()
     source = getattr(log, "source", "log")
@@ -334,7 +348,7 @@ def monitor(log: Any, model_: MonitoredModel, settings: MonitorSettings | None =
     sig = residual_signals(log.t, log.eta, log.tau, settings, source)
     friction = "wheel" if model_.form is None else model_.form.friction
     geometry = () if model_.form is None else tuple(model_.form.geometry)
-    mon = _Monitor(log, sig, settings, unit, friction, geometry)
+    mon = _Monitor(log, sig, settings, unit, friction, geometry, observer)
     duration = float(log.t[-1] - log.t[0])
     need = (MIN_ROWS_PER_COEFFICIENT * 2 + 2) * mon.order  # after a change the halves lose q samples each
     if mon.n_cal < need:
@@ -372,7 +386,7 @@ def monitor(log: Any, model_: MonitoredModel, settings: MonitorSettings | None =
     for i, change in enumerate(changes):
         t_end = changes[i + 1].t if i + 1 < len(changes) else duration
         notes: list[str] = []
-        result, problem = _identify_span(log, change.t, t_end, unit, friction, notes, geometry)
+        result, problem = _identify_span(log, change.t, t_end, unit, friction, notes, geometry, observer)
         change.warnings.extend(notes)
         if result is None:
             change.warnings.append(problem)

@@ -1,0 +1,207 @@
+"""Groups of flags declared once: an options dataclass of the library turned into Typer parameters, shared by every
+command that takes it (:func:`takes`).
+
+A command names the object it wants as a parameter (``log_options: LogOptions``); :func:`takes` replaces that
+parameter in the signature Typer reads by one flag per field of the dataclass (its type, help and panel from the
+field's ``Annotated`` alias in :mod:`wmrid.cli.options`, its default the dataclass's own), and calls the command with
+the object made from the flags' values, checked once as it is made.  So ``identify``, ``report``, ``compare``,
+``fleet``, ``monitor`` and ``live`` offer the same log and observer flags, and a new field reaches them all.
+"""
+
+from __future__ import annotations
+
+import functools
+import inspect
+from collections.abc import Callable
+from dataclasses import MISSING, dataclass, fields
+from enum import Enum
+from typing import Any, TypeVar, get_args
+
+from wmrid.api.inputs import LogOptions
+from wmrid.cli.options import (
+    AlignOpt,
+    AlphaOpt,
+    BoxWidthOpt,
+    ColumnsOpt,
+    ControlRateOpt,
+    CutoffOpt,
+    DelayOpt,
+    EfficiencyOpt,
+    EffortOpt,
+    EffortTopicOpt,
+    EffortUnitOpt,
+    FlipEffortOpt,
+    ForgettingOpt,
+    FormOpt,
+    FrictionOpt,
+    GearRatioOpt,
+    KOpt,
+    LeftJointOpt,
+    MirrorLeftOpt,
+    PayloadOpt,
+    RightJointOpt,
+    SpeedUnitOpt,
+    TimeSourceOpt,
+    TimeUnitOpt,
+    TopicOpt,
+    TorqueConstantOpt,
+    TorqueHoldOpt,
+    VelocityFromOpt,
+    VelocityTopicOpt,
+    WeightedOpt,
+    WheelRadiusOpt,
+)
+from wmrid.estimators.options import MethodOptions, ObserverOptions
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+@dataclass(frozen=True)
+class OptionGroup:
+    """The flags of one options dataclass.
+
+    keyword : the command's parameter that receives the object.  options : the dataclass.  flags : field name ->
+    (flag's parameter name, its ``Annotated`` alias); every field is a flag or in ``internal`` (set by the library,
+    never by a flag).
+    """
+
+    keyword: str
+    options: type
+    flags: dict[str, tuple[str, Any]]
+    internal: frozenset[str] = frozenset()
+
+    def __post_init__(self) -> None:
+        names = {f.name for f in fields(self.options)}
+        loose = names - set(self.flags) - self.internal
+        if loose or set(self.flags) - names:
+            raise TypeError(f"{self.options.__name__}: fields without a flag {sorted(loose)}, or flags without a field")
+
+    def parameters(self) -> list[inspect.Parameter]:
+        """The flags as keyword parameters, defaults from the dataclass (an Enum flag's default as its member)."""
+        out = []
+        for f in fields(self.options):
+            if f.name in self.internal:
+                continue
+            name, alias = self.flags[f.name]
+            default = f.default if f.default is not MISSING else f.default_factory()  # type: ignore[misc]
+            kind = get_args(alias)[0]
+            if isinstance(kind, type) and issubclass(kind, Enum) and default is not None:
+                default = kind(default)
+            out.append(inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default, annotation=alias))
+        return out
+
+    def make(self, values: dict[str, Any]) -> Any:
+        """The options object of the flags' values (``values`` by parameter name; Enum members as their values)."""
+        given = {}
+        for field_name, (name, _) in self.flags.items():
+            value = values[name]
+            given[field_name] = value.value if isinstance(value, Enum) else value
+        return self.options(**given)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The flags' parameter names."""
+        return tuple(name for name, _ in self.flags.values())
+
+
+LOG_FLAGS = OptionGroup(
+    "log_options",
+    LogOptions,
+    {
+        "columns": ("columns", ColumnsOpt),
+        "time_unit": ("time_unit", TimeUnitOpt),
+        "topic": ("topic", TopicOpt),
+        "velocity_topic": ("velocity_topic", VelocityTopicOpt),
+        "effort_topic": ("effort_topic", EffortTopicOpt),
+        "right_joint": ("right_joint", RightJointOpt),
+        "left_joint": ("left_joint", LeftJointOpt),
+        "time_source": ("time_source", TimeSourceOpt),
+        "align": ("align", AlignOpt),
+        "velocity_from": ("velocity_from", VelocityFromOpt),
+        "speed_unit": ("speed_unit", SpeedUnitOpt),
+        "wheel_radius": ("wheel_radius", WheelRadiusOpt),
+        "effort": ("effort", EffortOpt),
+        "effort_unit": ("effort_unit", EffortUnitOpt),
+        "torque_constant": ("torque_constant", TorqueConstantOpt),
+        "gear_ratio": ("gear_ratio", GearRatioOpt),
+        "efficiency": ("efficiency", EfficiencyOpt),
+        "mirror_left": ("mirror_left", MirrorLeftOpt),
+        "flip_effort": ("flip_effort", FlipEffortOpt),
+    },
+)
+
+OBSERVER_FLAGS = OptionGroup(
+    "observer",
+    ObserverOptions,
+    {
+        "form": ("form", FormOpt),
+        "k": ("k", KOpt),
+        "alpha": ("alpha", AlphaOpt),
+        "box_width": ("box_width", BoxWidthOpt),
+        "torque_hold": ("torque_hold", TorqueHoldOpt),
+        "control_rate": ("control_rate", ControlRateOpt),
+        "delay": ("delay", DelayOpt),
+        "friction": ("friction", FrictionOpt),
+        "payload": ("payload", PayloadOpt),
+    },
+    internal=frozenset({"max_history"}),
+)
+
+FIT_FLAGS = OptionGroup(
+    "fit",
+    MethodOptions,
+    {
+        "cutoff_hz": ("cutoff", CutoffOpt),
+        "weighted": ("weighted", WeightedOpt),
+        "forgetting": ("forgetting", ForgettingOpt),
+    },
+)
+
+
+def takes(*groups: OptionGroup) -> Callable[[F], F]:
+    """Decorate a command (beneath ``@app.command``): each group's ``keyword`` parameter becomes the group's flags
+    in the signature Typer reads, and the command receives the object made from them."""
+
+    def decorate(command: F) -> F:
+        signature = inspect.signature(command)
+        hints = _evaluated(command, {g.keyword for g in groups})
+        own: list[inspect.Parameter] = []
+        for p in signature.parameters.values():
+            group = next((g for g in groups if g.keyword == p.name), None)
+            if group is None:
+                own.append(p.replace(annotation=hints[p.name]))
+            else:
+                own.extend(group.parameters())
+        taken = {name for g in groups for name in g.names}
+        clash = taken & {p.name for p in signature.parameters.values()}
+        if clash:
+            raise TypeError(f"{command.__name__}: parameters {sorted(clash)} are flags of a group it takes")
+        # keyword-only parameters after positional-or-keyword ones with defaults: Typer reads the names, not the kinds
+        own = [p.replace(kind=inspect.Parameter.KEYWORD_ONLY) for p in own]
+
+        @functools.wraps(command)
+        def run(**values: Any) -> Any:
+            for group in groups:
+                values[group.keyword] = group.make({name: values.pop(name) for name in group.names})
+            return command(**values)
+
+        run.__signature__ = signature.replace(parameters=own)  # type: ignore[attr-defined]
+        run.__annotations__ = {p.name: p.annotation for p in own}
+        if signature.return_annotation is not inspect.Signature.empty:
+            run.__annotations__["return"] = hints.get("return", Any)
+        del run.__wrapped__  # type: ignore[attr-defined]  (Typer must read the new signature, not the command's)
+        return run  # type: ignore[return-value]
+
+    return decorate
+
+
+def _evaluated(command: Callable[..., Any], skip: set[str]) -> dict[str, Any]:
+    """The command's annotations evaluated in its module (``from __future__ import annotations`` leaves text), the
+    groups' keywords left out (their types may be imported for type checking only)."""
+    namespace = getattr(command, "__globals__", {})
+    out = {}
+    for name, text in command.__annotations__.items():
+        if name in skip:
+            continue
+        out[name] = eval(text, namespace) if isinstance(text, str) else text
+    return out
