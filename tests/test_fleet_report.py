@@ -355,3 +355,26 @@ def test_a_row_identified_with_a_controller_rate_keeps_its_fit(tmp_path):
     row = identify_entry(spec)
     assert row["error"] is None
     assert row["fit_r"] > 95
+
+
+def test_a_row_identified_with_payload_carries_the_payload_as_identify_gives_it(tmp_path):
+    """``wmrid fleet --payload`` (the run-wide option ``payload``): the row's payload columns are identify's payload
+    estimate on the same log, bit for bit; a row without it has them null."""
+    import wmrid
+    from wmrid.api.fleet import plan
+    from wmrid.api.fleet_worker import identify_entry
+    from wmrid.io.fleet_table import ADDED_IN_3, entries_from_paths
+
+    log = tmp_path / "R1_2026-01-01.csv"
+    carried = wmrid.Payload(mass=20.0, x=0.1, y=-0.05, inertia=0.4)
+    wmrid.write_simulation(wmrid.simulate("paper", duration=20.0, rate=200.0, payload=carried), log)
+    (spec,) = plan(entries_from_paths([str(log)]), {"payload": True}, "paper", fit=False)
+    row = identify_entry(spec)
+    assert row["error"] is None
+    expected = wmrid.identify(str(log), robot="paper", observer=wmrid.ObserverOptions(payload=True)).payload
+    assert expected is not None
+    for name, (value, std) in expected.items():
+        assert (row[f"payload_{name}"], row[f"payload_{name}_std"]) == (value, std)
+    assert row["payload_mass"] == pytest.approx(carried.mass, rel=0.1)
+    (plain,) = plan(entries_from_paths([str(log)]), {}, "paper", fit=False)
+    assert all(identify_entry(plain)[column] is None for column in ADDED_IN_3)

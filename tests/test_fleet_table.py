@@ -25,6 +25,7 @@ DOCUMENTED = [
     ("options", "string"), ("options_key", "string"),
     *[(c, "double") for n in ft.PARAMETERS for c in (n, f"{n}_std")],
     ("speed_r", "double"), ("speed_l", "double"), ("Fv1_Fd1_corr", "double"), ("Fv2_Fd2_corr", "double"),
+    *[(f"payload_{n}{s}", "double") for n in ("mass", "x", "y", "inertia") for s in ("", "_std")],
     ("flags", "list<element: string>"), ("warnings", "list<element: string>"), ("fit_r", "double"), ("fit_l", "double"),
     ("run_time_s", "double"), ("worker", "string"), ("wmrid_version", "string"), ("error", "string"),
 ]  # fmt: skip
@@ -33,7 +34,7 @@ DOCUMENTED = [
 def test_schema_is_stable():
     schema = ft.schema()
     assert [(f.name, str(f.type)) for f in schema] == DOCUMENTED
-    assert schema.metadata[b"wmrid_fleet_schema"] == b"2"
+    assert schema.metadata[b"wmrid_fleet_schema"] == b"3"
     assert ft.PARAMETERS == ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2", "Cv", "Cw")
 
 
@@ -49,26 +50,27 @@ def test_table_round_trip(tmp_path):
     assert back == rows
     on_disk = pq.read_schema(path)
     assert [(f.name, str(f.type)) for f in on_disk] == DOCUMENTED
-    assert on_disk.metadata[b"wmrid_fleet_schema"] == b"2"
+    assert on_disk.metadata[b"wmrid_fleet_schema"] == b"3"
     with pytest.raises(Exception, match="exists"):
         ft.write_table(rows, path)  # never over a table without force
     ft.write_table(rows[:1], path, force=True)
     assert len(ft.read_table(path)) == 1
 
 
-def test_a_schema_1_table_reads_with_nulls_in_the_columns_schema_2_added(tmp_path):
-    """A table written before schema 2 (no speeds, no friction correlations) still reads, resumes and reviews:
-    those columns come back null, everything else as written."""
+@pytest.mark.parametrize(("version", "dropped"), [("1", (*ft.ADDED_IN_2, *ft.ADDED_IN_3)), ("2", ft.ADDED_IN_3)])
+def test_an_older_table_reads_with_nulls_in_the_columns_added_since(tmp_path, version: str, dropped) -> None:
+    """A table written before schema 2 (no speeds, no friction correlations) or 3 (no payload) still reads, resumes
+    and reviews: those columns come back null, everything else as written; a newer schema is refused."""
     rows = [ft.empty_row(robot_id="R1", log="a.mcap", M11=1.5, M11_std=0.01, flags=["M11"], samples=10)]
-    table = ft.to_arrow(rows).drop_columns(list(ft.ADDED_IN_2))
-    old = table.replace_schema_metadata({b"wmrid_fleet_schema": b"1"})
-    path = tmp_path / "v1.parquet"
+    table = ft.to_arrow(rows).drop_columns(list(dropped))
+    old = table.replace_schema_metadata({b"wmrid_fleet_schema": version.encode()})
+    path = tmp_path / f"v{version}.parquet"
     pq.write_table(old, path)
     assert ft.read_table(path) == rows
-    newer = table.replace_schema_metadata({b"wmrid_fleet_schema": b"3"})
-    pq.write_table(newer, tmp_path / "v3.parquet")
-    with pytest.raises(LogFormatError, match=r"schema 1 or 2 \(schema 3\)"):
-        ft.read_table(tmp_path / "v3.parquet")
+    newer = table.replace_schema_metadata({b"wmrid_fleet_schema": b"4"})
+    pq.write_table(newer, tmp_path / "v4.parquet")
+    with pytest.raises(LogFormatError, match=r"schema 1, 2 or 3 \(schema 4\)"):
+        ft.read_table(tmp_path / "v4.parquet")
 
 
 def test_an_unknown_row_column_is_refused():

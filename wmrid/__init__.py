@@ -195,11 +195,7 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
         fleet_report as fleet_report,
         write_fleet_report as write_fleet_report,
     )
-    from wmrid.api.identification import (
-        compare as compare,
-        identify as identify,
-        validate as validate,
-    )
+    from wmrid.api.identification import compare as compare, identify as identify, validate as validate
     from wmrid.api.inputs import (
         LogOptions as LogOptions,
         inspect as inspect,

@@ -23,6 +23,7 @@ from typing import Any
 
 from wmrid.api.fleet_worker import _one_line, _split_options, identify_batch, warm_up
 from wmrid.core.errors import UsageError, option
+from wmrid.estimators.options import SETTING_NAMES
 from wmrid.io.fleet_manifest import read_manifest
 from wmrid.io.fleet_table import (
     LogEntry,
@@ -39,11 +40,9 @@ from wmrid.io.fleet_table import (
 
 __all__ = ["FleetRun", "fleet", "option_columns"]
 
-#: identify's keywords a manifest row may set, besides the :class:`~wmrid.api.inputs.LogOptions` fields.
-IDENTIFY_OPTIONS = (
-    "method", "form", "k", "alpha", "box_width", "torque_hold", "control_rate", "delay", "friction", "cutoff",
-    "weighted", "forgetting", "rotor_inertia",
-)  # fmt: skip
+#: identify's keywords a manifest row may set, besides the :class:`~wmrid.api.inputs.LogOptions` fields: its
+#: settings (the method, the observer's options, the classical methods') and the rotor inertia.
+IDENTIFY_OPTIONS = (*SETTING_NAMES, "rotor_inertia")
 
 
 def option_columns() -> tuple[str, ...]:

@@ -99,6 +99,8 @@ def _result_columns(result: Any) -> dict[str, Any]:
         flags=flagged, warnings=[" ".join(w.split()) for w in result.warnings],
     )  # fmt: skip
     out["Fv1_Fd1_corr"], out["Fv2_Fd2_corr"] = friction_correlations(result)
+    for name, (value, std) in (result.payload or {}).items():  # --payload: mass, x, y, inertia
+        out[f"payload_{name}"], out[f"payload_{name}_std"] = value, std
     return out
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any, Literal, TypeGuard, cast, overload
 
@@ -19,7 +19,14 @@ from wmrid.api.inputs import LogOptions, given_results, load_robot, open_log
 from wmrid.core.errors import UsageError, cannot_read, option
 from wmrid.core.wheel_log import LogStream, WheelLog
 from wmrid.estimators.methods import Comparison
-from wmrid.estimators.options import FRICTION_CHOICES, MethodOptions, ObserverOptions
+from wmrid.estimators.options import (
+    FIT_NAMES,
+    FRICTION_CHOICES,
+    OBSERVER_NAMES,
+    SETTING_NAMES,
+    MethodOptions,
+    ObserverOptions,
+)
 from wmrid.estimators.result import IdentificationResult
 from wmrid.model.robot import Robot
 
@@ -157,15 +164,6 @@ def check_control_rate(control_rate: float | None, methods: tuple[str, ...], val
 
         check_control_rate_value(control_rate)  # a frequency > 0 first, then where it is modelled
         _refuse_unmodelled("control_rate", control_rate, methods, validating, CONTROL_RATE_METHODS)
-
-
-#: The classical methods' settings by their command-line names: MethodOptions' fields.
-FIT_NAMES = {"cutoff": "cutoff_hz", "weighted": "weighted", "forgetting": "forgetting"}
-#: The observer's settings by name: ObserverOptions' fields a user sets.
-OBSERVER_NAMES = tuple(f.name for f in fields(ObserverOptions) if f.name != "max_history")
-#: identify's settings by name (a fleet manifest's columns, the command line's flags): the method, the observer's
-#: options, the classical methods'.
-SETTING_NAMES = ("method", *OBSERVER_NAMES, *FIT_NAMES)
 
 
 def settings_from(flat: dict[str, Any]) -> tuple[str, ObserverOptions, MethodOptions]:

@@ -36,9 +36,8 @@ def _given_options(
 ) -> dict[str, Any]:
     """identify's settings as ``wmrid fleet`` passes them, by their Python names: only those given a value other
     than the default, so that the table's "options" column says what was asked and nothing else."""
-    from wmrid.api.identification import FIT_NAMES
     from wmrid.api.inputs import LogOptions
-    from wmrid.estimators.options import MethodOptions, ObserverOptions
+    from wmrid.estimators.options import FIT_NAMES, MethodOptions, ObserverOptions
 
     given: dict[str, Any] = {}
     for options, plain in ((log_options, LogOptions()), (observer, ObserverOptions())):

@@ -24,8 +24,7 @@ def log_opts(params: dict):
 def observer_opts(params: dict):
     """The :class:`wmrid.estimators.options.ObserverOptions` of a command's observer flags (``locals()``; a command
     without ``--payload`` estimates none), checked once as it is made; ``--delay``'s text parsed."""
-    from wmrid.api.identification import OBSERVER_NAMES
-    from wmrid.estimators.options import ObserverOptions
+    from wmrid.estimators.options import OBSERVER_NAMES, ObserverOptions
 
     given = {n: params[n].value if isinstance(params[n], Enum) else params[n] for n in OBSERVER_NAMES if n in params}
     return ObserverOptions(**given)
@@ -33,8 +32,7 @@ def observer_opts(params: dict):
 
 def fit_opts(params: dict):
     """The :class:`wmrid.estimators.options.MethodOptions` of a command's classical-method flags (``locals()``)."""
-    from wmrid.api.identification import FIT_NAMES
-    from wmrid.estimators.options import MethodOptions
+    from wmrid.estimators.options import FIT_NAMES, MethodOptions
 
     return MethodOptions(**{field: params[name] for name, field in FIT_NAMES.items()})
 

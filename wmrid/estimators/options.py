@@ -8,7 +8,7 @@ turns its flags into one, the library's functions take one, and nothing checks t
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 from wmrid.core.choices import Form, Friction, TorqueHold, values
 from wmrid.core.errors import UsageError, option
@@ -145,3 +145,16 @@ class MethodOptions:
                 else "it is not a number"
             )
             raise UsageError(f"{option('forgetting')} must be in [{MIN_FORGETTING}, 1], got {self.forgetting!r}: {why}")
+
+
+#: The classical methods' settings by their command-line names: MethodOptions' fields.
+FIT_NAMES = {"cutoff": "cutoff_hz", "weighted": "weighted", "forgetting": "forgetting"}
+
+
+#: The observer's settings by name: ObserverOptions' fields a user sets.
+OBSERVER_NAMES = tuple(f.name for f in fields(ObserverOptions) if f.name != "max_history")
+
+
+#: identify's settings by name (a fleet manifest's columns, the command line's flags): the method, the observer's
+#: options, the classical methods'.
+SETTING_NAMES = ("method", *OBSERVER_NAMES, *FIT_NAMES)

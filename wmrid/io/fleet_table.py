@@ -23,13 +23,17 @@ from typing import Any
 
 from wmrid.core.errors import LogFormatError, UsageError, option
 
-SCHEMA_VERSION = "2"
-#: Schema versions read (a version-1 table lacks :data:`ADDED_IN_2`: read as nulls, so that it can be resumed).
-READABLE_VERSIONS = ("1", "2")
+SCHEMA_VERSION = "3"
+#: Schema versions read (an older table lacks the columns added since, :data:`ADDED_IN_2` and :data:`ADDED_IN_3`:
+#: read as nulls, so that it can be resumed).
+READABLE_VERSIONS = ("1", "2", "3")
 #: Columns added by schema 2: each wheel's mean absolute speed over the log (rad/s, at the wheel) and the
 #: correlation of that wheel's viscous and Coulomb friction estimates (what the fleet review needs for the
 #: friction torque at a robot's typical speed, :mod:`wmrid.monitoring.fleet_review`).
 ADDED_IN_2 = ("speed_r", "speed_l", "Fv1_Fd1_corr", "Fv2_Fd2_corr")
+#: Columns added by schema 3: the payload estimated against the robot file (``--payload``; null without it), mass kg,
+#: position x, y m and inertia kg m^2 about its centre, each with its std.
+ADDED_IN_3 = tuple(f"payload_{name}{suffix}" for name in ("mass", "x", "y", "inertia") for suffix in ("", "_std"))
 
 #: The base parameters of every row (value and ``NAME_std``), SI units as ``identify`` reports them: the entries of
 #: m = M^-1 and of M, the Coriolis coefficient, the wheels' viscous and Coulomb friction, the casters' drag (null
@@ -63,7 +67,7 @@ def _schema():
     ]  # fmt: skip
     for name in PARAMETERS:
         fields += [(name, pa.float64()), (f"{name}_std", pa.float64())]
-    fields += [(name, pa.float64()) for name in ADDED_IN_2]
+    fields += [(name, pa.float64()) for name in (*ADDED_IN_2, *ADDED_IN_3)]
     fields += [
         ("flags", pa.list_(pa.field("element", pa.string()))),
         ("warnings", pa.list_(pa.field("element", pa.string()))), ("fit_r", pa.float64()),
@@ -150,11 +154,12 @@ def read_arrow(path: str | os.PathLike[str], *, as_input: bool = True):
     if version not in READABLE_VERSIONS:
         found = f"schema {version}" if version else "no wmrid_fleet_schema in its metadata"
         raise LogFormatError(
-            f"{name}: not a wmrid fleet table of schema {' or '.join(READABLE_VERSIONS)} ({found}); make it with "
+            f"{name}: not a wmrid fleet table of schema {', '.join(READABLE_VERSIONS[:-1])} or {READABLE_VERSIONS[-1]} "
+            f"({found}); make it with "
             "`wmrid fleet`"
         )
-    if version == "1":
-        for column in ADDED_IN_2:
+    if version != SCHEMA_VERSION:
+        for column in (*ADDED_IN_2, *ADDED_IN_3):
             if column not in table.column_names:
                 table = table.append_column(column, pa.nulls(len(table), pa.float64()))
     missing = [n for n in column_names() if n not in table.column_names]
