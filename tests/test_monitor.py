@@ -285,7 +285,7 @@ def test_cli_monitor_writes_the_changes_as_json(cli_files) -> None:
     assert found["t"] == pytest.approx(20.0, abs=0.2)
     assert set(found["parameters"]) >= set(model.THETA0_NAMES)
     for entry in found["parameters"].values():
-        assert set(entry) == {"value", "std", "unit"}
+        assert set(entry) == {"value", "std", "unit", "flags"}
     assert found["parameters"]["m11"]["value"] == pytest.approx(base(TRUE.with_payload(LOAD))["m11"], rel=0.02)
     detector = data["detector"]
     assert detector["false_alarm_rate_per_hour"] == 0.1

@@ -36,6 +36,11 @@ class SimulationRun:
         """The log as a pandas DataFrame of the canonical columns."""
         return self.log.to_frame()
 
+    def to_wheel_log(self) -> Any:
+        """The log as the :class:`wmrid.core.wheel_log.WheelLog` it stands for, so that a run is identified as it is:
+        ``wmrid.identify(wmrid.simulate("paper"), robot="paper")``."""
+        return self.log.to_wheel_log()
+
 
 def load_reference(reference: Any, *, topic: str | None = None) -> Any:
     """The :class:`wmrid.sim.reference.Reference` of ``reference``: a file (.csv, .parquet or .mcap, read by

@@ -18,7 +18,6 @@ import numpy as np
 from wmrid.core.choices import Method, values
 from wmrid.core.errors import UsageError, WmridError, option
 from wmrid.estimators.estimate import BaseEstimate
-from wmrid.estimators.model_error import std_mark
 from wmrid.estimators.options import MethodOptions
 from wmrid.estimators.result import IdentificationResult, payload_dict
 from wmrid.estimators.substitution import with_estimate
@@ -165,8 +164,8 @@ def compare(
 ) -> Comparison:
     """Every method in ``names`` on ``log`` (in memory; ``observer`` is the observer's result on it), JSON-ready.
 
-    {"methods": {name: {"description", "parameters": {n: {"value", "std", "unit"[, "error_percent"]}}, "flagged",
-    "marks" ({n: "", "†", "!" or "†!"}, :func:`wmrid.estimators.model_error.std_mark`),
+    {"methods": {name: {"description", "parameters": {n: {"value", "std", "unit", "flags"[, "error_percent"]}},
+    "flagged", "marks" ({n: "", "†", "!" or "†!"}: :attr:`wmrid.estimators.parameter.Parameter.mark`),
     "seconds", "warnings"[, "validation": {"fit_percent": {"eta_r", "eta_l"}}]}}, ...}.  The std, flags and
     warnings are those ``identify --method NAME`` reports (model-error widenings included); the parameters are
     the form's (caster drag too under ``--friction wheel+caster``).  ``other`` : a second
@@ -186,16 +185,17 @@ def compare(
         # (wmrid.estimators.substitution.with_estimate)
         result = observer if name == "observer" else with_estimate(observer, est, robot)
         params = {}
-        for key, (value, std) in result.parameters.items():
-            entry = {"value": value, "std": std if np.isfinite(std) else None, "unit": observer.units[key]}
+        table = result.table
+        for key, parameter in table.items():
+            entry = parameter.to_dict()
             if truth is not None and key in truth and truth[key]:
-                entry["error_percent"] = 100.0 * (value - truth[key]) / abs(truth[key])
+                entry["error_percent"] = 100.0 * (parameter.value - truth[key]) / abs(truth[key])
             params[key] = entry
         row: dict[str, Any] = {
             "description": DESCRIPTIONS[name],
             "parameters": params,
             "flagged": list(result.diagnostics.get("flagged", [])),
-            "marks": {key: std_mark(key, result.diagnostics) for key in params},
+            "marks": {key: parameter.mark for key, parameter in table.items()},
             "seconds": est.seconds,
             "warnings": list(result.warnings),
             "verdict": result.verdict,

@@ -20,6 +20,7 @@ import numpy as np
 from wmrid.core.errors import LogFormatError
 from wmrid.estimators.estimate import BaseEstimate
 from wmrid.estimators.observer import ObserverSettings
+from wmrid.estimators.parameter import Parameter, parameter_table
 from wmrid.model.dynamics import THETA0_UNITS, RegressorForm
 
 #: Reported parameter names, in report order.
@@ -160,6 +161,12 @@ class IdentificationResult:
     method_settings: MethodSettings | None = None
 
     @property
+    def table(self) -> dict[str, Parameter]:
+        """The reported parameters as :class:`Parameter` (value, std, unit and the flags the estimator recorded),
+        what every view of the result prints."""
+        return parameter_table(self.parameters, self.units, self.diagnostics)
+
+    @property
     def settings(self) -> ObserverSettings | MethodSettings:
         """The settings of the method reported: the observer's (:attr:`observer_settings`), or another method's."""
         return self.method_settings if self.method_settings is not None else self._run().settings
@@ -218,10 +225,7 @@ class IdentificationResult:
 
     def to_dict(self, history: bool = True) -> dict[str, Any]:
         """The result as JSON-ready data; ``history``: include the estimates over time (most of its size)."""
-        params = {
-            name: {"value": value, "std": finite_or_none(std), "unit": self.units[name]}
-            for name, (value, std) in self.parameters.items()
-        }
+        params = {name: parameter.to_dict() for name, parameter in self.table.items()}
         out: dict[str, Any] = {
             "schema_version": SCHEMA_VERSION,
             "source": self.source,

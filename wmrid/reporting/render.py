@@ -6,8 +6,6 @@ import math
 from typing import Any
 
 from wmrid.core.atomic import to_json_text
-from wmrid.estimators.diagnostics import impossible_parameters
-from wmrid.estimators.model_error import std_mark
 from wmrid.estimators.result import IdentificationResult
 from wmrid.estimators.verdict import LEGEND
 from wmrid.reporting.terminal import STYLES, print_table, styled, warning as warning_line
@@ -47,8 +45,8 @@ def print_verdict(verdict: dict[str, Any] | None, console: Any, prefix: str = ""
 
 def print_identification(result: IdentificationResult, console: Any) -> None:
     """A table of the base parameters with their standard errors, nominal and CAD values; a flagged value in the
-    flagged style, a physically impossible one (:func:`impossible_parameters`) in the impossible style and marked
-    ✗."""
+    flagged style, a physically impossible one in the impossible style and marked ✗ (the flags the estimator
+    recorded: :attr:`IdentificationResult.table`)."""
     method = getattr(result, "method", "observer")
     print_verdict(result.verdict, console)
     title = f"wmrid identify: {result.source}" + (f" (method {method})" if method != "observer" else "")
@@ -57,13 +55,15 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         header.append("nominal")
     if result.reference is not None:
         header += ["CAD", "Δ/std"]
-    marks = {name: std_mark(name, result.diagnostics) for name in result.parameters}
-    impossible = impossible_parameters(result.parameters)
+    table = result.table
+    marks = {name: parameter.mark for name, parameter in table.items()}
+    impossible = [name for name, parameter in table.items() if parameter.impossible]
     rows = []
-    for name, (value, std) in result.parameters.items():
-        meaning = "impossible" if name in impossible else ("flagged" if "!" in marks[name] else None)
-        row = [_cell(name, meaning), _cell(_fmt(value) + ("✗" if name in impossible else ""), meaning),
-               _cell(_fmt(std, 2) + marks[name], meaning), result.units[name]]  # fmt: skip
+    for name, parameter in table.items():
+        value, std = parameter.value, parameter.std
+        meaning = "impossible" if parameter.impossible else ("flagged" if not parameter.trusted else None)
+        row = [_cell(name, meaning), _cell(_fmt(value) + ("✗" if parameter.impossible else ""), meaning),
+               _cell(_fmt(std, 2) + parameter.mark, meaning), parameter.unit]  # fmt: skip
         if result.nominal is not None:
             row.append(_fmt(result.nominal.get(name)))
         if result.reference is not None:
@@ -258,11 +258,12 @@ def print_comparison(data: dict, console: Any) -> None:
             if e is None:  # a parameter this method does not report
                 row.append("—")
                 continue
+            flags = e.get("flags") or ()
             mark = m.get("marks", {}).get(key, "")
-            cell = f"{_fmt(e['value'])}\n± {_fmt(e['std'], 2)}{mark}"
+            cell = f"{_fmt(e['value'])}{'✗' if 'impossible' in flags else ''}\n± {_fmt(e['std'], 2)}{mark}"
             if "error_percent" in e:
                 cell += f"\n{e['error_percent']:+.2g} %"
-            row.append(_cell(cell, "flagged" if "!" in mark else None))
+            row.append(_cell(cell, "impossible" if "impossible" in flags else "flagged" if "!" in mark else None))
         rows.append(row)
     rows.append(["run time (s)", *([""] if truth else []), *(f"{m['seconds']:.3g}" for m in methods.values())])
     if "validation" in data:
@@ -279,6 +280,8 @@ def print_comparison(data: dict, console: Any) -> None:
         console.print(LEGEND["†"])
     if "!" in marks:
         console.print(LEGEND["!"])
+    if any("impossible" in (e.get("flags") or ()) for m in methods.values() for e in m["parameters"].values()):
+        console.print(LEGEND["✗"], style=STYLES["impossible"])
     for name, m in methods.items():
         for warning in m["warnings"]:
             console.print(warning_line(warning, f"warning ({name})"))

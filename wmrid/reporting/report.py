@@ -26,7 +26,6 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import WmridError
-from wmrid.estimators.model_error import std_mark
 from wmrid.estimators.result import MethodSettings, from_dict
 from wmrid.estimators.verdict import LEGEND, PLAN_HINT
 from wmrid.model import dynamics as model, torques
@@ -182,14 +181,15 @@ def build_report(
     header += ["true", "error %", "(est − true)/std"] if truth else []
     rows = []
     flagged = []
-    inflated = set(data["diagnostics"].get("inflated", []))
-    marks = {name: std_mark(name, data["diagnostics"]) for name in params}
-    warned = any("!" in mark for mark in marks.values())
-    for name, entry in params.items():
-        value, std = entry["value"], entry["std"]
-        known_std = std is not None and math.isfinite(std)
-        interval = _interval(value, factor * std) if known_std else "—"
-        row = [name, entry["unit"], _fmt(value), _fmt(std, 2) + (f" {marks[name]}" if marks[name] else ""), interval]
+    table = rl.table  # value, std, unit and the flags the estimator recorded
+    inflated = any("inflated" in parameter.flags for parameter in table.values())
+    warned = any(not parameter.trusted for parameter in table.values())
+    for name, parameter in table.items():
+        value, known_std = parameter.value, math.isfinite(parameter.std)
+        std = parameter.std if known_std else None
+        interval = _interval(value, factor * parameter.std) if known_std else "—"
+        mark = f" {parameter.mark}" if parameter.mark else ""
+        row = [name, parameter.unit, _fmt(value), _fmt(std, 2) + mark, interval]
         if nominal:
             row.append(_fmt(nominal.get(name)))
         if reference:

@@ -1,0 +1,88 @@
+"""One reported parameter and what the estimator said of its std (:class:`Parameter`): the same value, std and flags
+in the terminal's table, the reports, ``compare``, the monitor and the JSON, decided once (by
+:func:`wmrid.estimators.verdict.settle` and the widenings) and read everywhere else.
+
+The flags, each with one meaning wherever it is printed:
+
+* ``inflated`` (mark "†"): the std was widened to cover an error the log shows beyond its noise (model, timing,
+  feedback); it includes that error and is to be trusted.
+* ``flagged`` (mark "!"): do not trust this std (not defined, an impossible value, or a log whose misfit or units put
+  every std in doubt).
+* ``impossible`` (mark "✗" after the value): a value no physical robot has (M not positive definite, a friction or a
+  caster's drag negative beyond 3 std); always flagged too.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from wmrid.estimators.diagnostics import impossible_parameters
+
+#: The flags, in the order they are listed.
+FLAGS = ("inflated", "flagged", "impossible")
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A reported parameter.  value : in ``unit`` (SI; the effort's unit for a PWM log).  std : its standard error
+    (inf: not determined).  flags : a subset of :data:`FLAGS`, in that order."""
+
+    name: str
+    value: float
+    std: float
+    unit: str
+    flags: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        unknown = set(self.flags) - set(FLAGS)
+        if unknown:
+            raise ValueError(f"{self.name}: unknown flags {sorted(unknown)}; the flags are {', '.join(FLAGS)}")
+        object.__setattr__(self, "flags", tuple(f for f in FLAGS if f in self.flags))
+
+    @property
+    def mark(self) -> str:
+        """The mark after the std in tables: "†" (inflated), "!" (flagged), both, or ""."""
+        return ("†" if "inflated" in self.flags else "") + ("!" if "flagged" in self.flags else "")
+
+    @property
+    def trusted(self) -> bool:
+        """Whether its std may be trusted (not flagged)."""
+        return "flagged" not in self.flags
+
+    @property
+    def impossible(self) -> bool:
+        return "impossible" in self.flags
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form: {"value", "std" (null when not finite), "unit", "flags"}."""
+        std = self.std if math.isfinite(self.std) else None
+        return {"value": self.value, "std": std, "unit": self.unit, "flags": list(self.flags)}
+
+    @classmethod
+    def from_dict(cls, name: str, data: dict[str, Any]) -> Parameter:
+        """The parameter a :meth:`to_dict` entry describes (value null read as NaN, std null as inf; no "flags", as
+        documents before they were written: none)."""
+        value = math.nan if data["value"] is None else float(data["value"])
+        std = math.inf if data["std"] is None else float(data["std"])
+        return cls(name, value, std, str(data["unit"]), tuple(data.get("flags") or ()))
+
+
+def parameter_table(
+    parameters: dict[str, tuple[float, float]], units: dict[str, str], diagnostics: dict[str, Any]
+) -> dict[str, Parameter]:
+    """The parameters (name -> (value, std)) with their units and the flags the estimator recorded in
+    ``diagnostics`` ("inflated", "flagged", "impossible" lists); a result saved before "impossible" was recorded
+    has it made from its values (:func:`wmrid.estimators.diagnostics.impossible_parameters`)."""
+    inflated = set(diagnostics.get("inflated") or ())
+    flagged = set(diagnostics.get("flagged") or ())
+    if "impossible" in diagnostics:
+        impossible = set(diagnostics["impossible"] or ())
+    else:
+        impossible = impossible_parameters(parameters)
+    table = {}
+    for name, (value, std) in parameters.items():
+        flags = tuple(f for f, names in zip(FLAGS, (inflated, flagged, impossible), strict=True) if name in names)
+        table[name] = Parameter(name, float(value), float(std), units[name], flags)
+    return table
