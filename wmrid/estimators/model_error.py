@@ -400,12 +400,3 @@ def misfit_text(misfit: dict[str, Any]) -> str:
         sigma=f"{misfit['noise_rms'][wheel]:.2g}",
         share=f"{100 * misfit['share']:.2g}",
     )
-
-
-def std_mark(name: str, diagnostics: dict[str, Any]) -> str:
-    """The mark after a parameter's std in tables and reports: "†" when it was widened to cover an error the log
-    shows (``diagnostics["inflated"]``), "!" when it is flagged: its std is not to be trusted
-    (``diagnostics["flagged"]``); "" otherwise.  ``diagnostics``: a result's (or its JSON's)."""
-    inflated = name in diagnostics.get("inflated", ())
-    flagged = name in diagnostics.get("flagged", ())
-    return ("†" if inflated else "") + ("!" if flagged else "")
