@@ -125,7 +125,7 @@ def bare_identify(log: Path) -> dict:
 
 
 def run_fleet(folder: Path, table: Path, workers: int, fit: bool = True, logs: list[str] | None = None) -> dict:
-    from wmrid.api.fleet import fleet
+    from wmrid.fleets.run import fleet
 
     run = fleet(logs or [str(folder)], str(table), robot="paper", workers=workers, force=True, fit=fit)
     rows = [r for r in run.rows if r["error"] is None]
@@ -144,7 +144,7 @@ def run_external(logs: list[str], table: Path, workers: int) -> dict:
     the scheduler's own CPU time is measured apart from the client's (psutil on its process)."""
     import psutil
 
-    from wmrid.api.fleet import fleet
+    from wmrid.fleets.run import fleet
 
     folder = Path(tempfile.mkdtemp(prefix="wmrid-sched-"))
     sched_file = folder / "scheduler.json"

@@ -7,7 +7,8 @@ Measures, for each ``--duration`` (default one hour = 3.6 M samples):
     under ``/usr/bin/time -v``; wall time (min, median), samples/s end-to-end (process start, imports,
     reading, replay and reporting included) and peak RSS.  The JSON output is checked to parse and to
     hold ``parameters``.
-(b) in-process, the parts alone: ``wmrid.io.logs.read_log``; the sample-by-sample ``wmrid.estimators.replay.replay``
+(b) in-process, the parts alone: ``wmrid.io.logs.read_log``; the sample-by-sample
+``wmrid.estimators.observer.replay.replay``
     with settings built as ``wmrid.pipeline.identify.identify`` builds them (JIT compile excluded by a warm-up
     call on a short slice), in samples/s; and the whole ``wmrid.pipeline.identify.identify`` call (replay plus
     covariance, base-parameter fit and diagnostics).
@@ -55,10 +56,10 @@ def end_to_end(path, n: int, repeat: int) -> dict:
 def in_process(path, repeat: int) -> dict:
     import pyarrow.parquet as pq
 
-    from wmrid.estimators.observer import ObserverSettings
-    from wmrid.estimators.observer_pass import default_box, resolve_form
+    from wmrid.estimators.observer.observe import default_box, resolve_form
+    from wmrid.estimators.observer.replay import replay
+    from wmrid.estimators.observer.step import ObserverSettings
     from wmrid.estimators.options import ObserverOptions
-    from wmrid.estimators.replay import replay
     from wmrid.io.logs import read_log
     from wmrid.model import dynamics as model
     from wmrid.model.robot import BUILTIN_ROBOTS

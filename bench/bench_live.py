@@ -175,7 +175,7 @@ def main() -> None:
         "machine": {"cpus": os.cpu_count(), "python": sys.version.split()[0]},
         "command": "python3 bench/bench_live.py " + " ".join(sys.argv[1:]),
     }  # fmt: skip
-    from wmrid.core.atomic import write_json
+    from wmrid.runtime.atomic import write_json
 
     dest = ROOT / "bench" / "out" / f"bench_live_{args.source}.json"
     dest.parent.mkdir(parents=True, exist_ok=True)

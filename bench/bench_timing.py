@@ -8,7 +8,7 @@ differences; before and after wmrid's checks and ``--delay auto``.
 For each engine (wmrid's reduced simulator; the MuJoCo multibody prototype, frictionless casters), trajectory
 (sinusoid, reversing) and fault, the light AMR is simulated with sensor noise (0.02 rad/s, 0.01 N m; seeds
 0..N-1), its controller at 1 kHz.  Faults (``--faults``): ``+5ms``, ``0ms``, ``-5ms``: logged at 1 kHz, the efforts
-shifted by that delay (:func:`wmrid.estimators.idim_regression.shifted`; + = stamped late); ``100hz``, ``20hz``:
+shifted by that delay (:func:`wmrid.estimators.regression.idim_rows.shifted`; + = stamped late); ``100hz``, ``20hz``:
 logged at that
 rate
 (a decimated record of the 1 kHz loop); ``backdiff``: speeds as backward differences of a 2^20-count encoder (half
@@ -45,7 +45,7 @@ def one(job: tuple[str, str, str, int, float]) -> dict:
     engine, trajectory, fault, seed, duration = job
     delay = FAULTS[fault]
     rate = RATES.get(fault, 1000.0)
-    from wmrid.estimators.idim_regression import shifted
+    from wmrid.estimators.regression.idim_rows import shifted
     from wmrid.model import dynamics as model
     from wmrid.model.robot import BUILTIN_ROBOTS
     from wmrid.pipeline.identify import identify

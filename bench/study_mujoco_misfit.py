@@ -21,8 +21,8 @@ z = error / std; the caster parameters (D_k, and the load terms D{k}dv, D{k}w2, 
 their truth from the engine: each ball caster's contact normal force at every logged sample (the engine's own,
 :meth:`wmrid.sim.multibody._Plant.caster_normals`) fitted by least squares on 1, v', w^2, v w, w' (from the true
 wheel speeds, a 41-sample Savitzky-Golay derivative), times its rolling resistance, summed over the casters that
-share a parameter (:func:`wmrid.estimators.observer_pass.caster_geometry`); ``load_fit_rms_N`` is that fit's residual.
-JSON: ``bench/out/study_mujoco_misfit.json``.  Seeded throughout.
+share a parameter (:func:`wmrid.estimators.observer.observe.caster_geometry`); ``load_fit_rms_N`` is that fit's
+residual. JSON: ``bench/out/study_mujoco_misfit.json``.  Seeded throughout.
 
     python bench/study_mujoco_misfit.py --friction wheel+caster,auto      # before / after the load terms
 """
@@ -68,7 +68,7 @@ def load_truth(robot, sim, normals: np.ndarray, resistance: list[float]) -> dict
     """The truth of D_k and its load terms (module docstring), named as the ``wheel+caster+load`` model names them."""
     from scipy.signal import savgol_filter
 
-    from wmrid.estimators.observer_pass import caster_geometry
+    from wmrid.estimators.observer.observe import caster_geometry
     from wmrid.model.dynamics import LOAD_SIGNALS, platform_speeds
 
     p = robot.reference

@@ -26,10 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from wmrid.core.atomic import to_json_text, write_json
 from wmrid.io.logs import write_log
 from wmrid.io.mcap.writer import write_joint_state_mcap
 from wmrid.model.robot import BUILTIN_ROBOTS
+from wmrid.runtime.atomic import to_json_text, write_json
 from wmrid.sim.simulate import simulate
 
 NAME = "paper_sinusoid"

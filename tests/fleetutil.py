@@ -79,7 +79,7 @@ def synthetic_rows(
     trade : friction as on the multibody prototype (:data:`TRADE`): per wheel, Fw = Fd + 4 Fv scatters by 1 % and Fv
     by 15 %, Fd taking up the difference; the rows carry the wheels' mean speeds and the Fv-Fd correlations (a
     change edits Fv and Fd, applied after the trade)."""
-    from wmrid.io.fleet_table import empty_row
+    from wmrid.fleets.table import empty_row
 
     rng = np.random.Generator(np.random.PCG64(seed))
     rows = []

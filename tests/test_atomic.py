@@ -9,8 +9,8 @@ import stat
 import numpy as np
 import pytest
 
-from wmrid.core.atomic import atomic_output, atomic_write_bytes, atomic_write_text, write_json
 from wmrid.core.errors import OutputExistsError, UsageError
+from wmrid.runtime.atomic import atomic_output, atomic_write_bytes, atomic_write_text, write_json
 
 
 def names(folder) -> list[str]:
@@ -154,7 +154,7 @@ def test_a_stop_just_after_the_temporary_file_is_registered_leaves_nothing(tmp_p
     itself from inside the one call between the two, the temporary name made a path."""
     import signal
 
-    from wmrid.core import atomic
+    from wmrid.runtime import atomic
 
     real = atomic.Path
 
@@ -171,7 +171,7 @@ def test_a_stop_just_after_the_temporary_file_is_registered_leaves_nothing(tmp_p
 def _stopped_writing_leaves_nothing(folder):
     """With wmrid's signal handlers installed, an atomic output into ``folder`` is stopped (the SIGTERM the patched
     call sends) and the folder is left empty."""
-    from wmrid.core import interrupts
+    from wmrid.runtime import interrupts
 
     previous = interrupts.install()
     try:

@@ -20,9 +20,9 @@ import pytest
 from tests import bagutil
 from tests.cliutil import text, wmrid
 from wmrid.io.bag.reader import read_bag
-from wmrid.io.columns import parse_column_mapping
 from wmrid.io.logs import open_log, read_log
 from wmrid.io.mcap import log as mcap_log
+from wmrid.io.table.columns import parse_column_mapping
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "sample_logs" / "paper_sinusoid.mcap"
@@ -485,7 +485,7 @@ def test_inspect_lists_the_numeric_field_paths(vendor_bags, dynamic_bags):
     table = text(wmrid("inspect", str(vendor_bags["mcap"]), "--format", "table", columns="160")).stdout
     assert "right.current" in table
     assert "[i] by position" in table  # not eaten as markup
-    from wmrid.io.field_paths import numeric_paths
+    from wmrid.io.ros.field_paths import numeric_paths
 
     store = bagutil.dynamic_store()
     assert numeric_paths(store.fielddefs, bagutil.DYNAMIC_JOINT_STATE) == ["interface_values@NAME.values@NAME"]
@@ -495,7 +495,7 @@ def test_inspect_lists_the_numeric_field_paths(vendor_bags, dynamic_bags):
 def test_a_field_path_evaluates_as_documented():
     from types import SimpleNamespace as M
 
-    from wmrid.io.field_paths import parse
+    from wmrid.io.ros.field_paths import parse
 
     msg = M(name=["a", "b"], velocity=[1.5, 2.5], arr=[7.0], nested=M(x=M(y=3)))
     dynamic = M(joint_names=["j"], interface_values=[M(interface_names=["velocity", "current"], values=[4.0, 5.0])])
@@ -505,7 +505,7 @@ def test_a_field_path_evaluates_as_documented():
     assert parse("/t:interface_values@j.values@current").value(dynamic) == 5.0
     for missing in ("velocity@c", "arr[3]"):  # absent from this message: NaN
         assert np.isnan(parse(f"/t:{missing}").value(msg)), missing
-    from wmrid.io.field_paths import FieldPathError
+    from wmrid.io.ros.field_paths import FieldPathError
 
     for bad in ("nested.z", "name", "nested", "velocity.size", "__class__.__name__", "nested.x.y[0]"):
         with pytest.raises(FieldPathError, match="does not name a number"):  # no field there, or not a number
@@ -517,7 +517,7 @@ def test_a_name_with_a_dot_or_a_comma_is_given_in_double_quotes():
     from types import SimpleNamespace as M
 
     from wmrid.core.errors import UsageError
-    from wmrid.io.field_paths import parse
+    from wmrid.io.ros.field_paths import parse
 
     msg = M(name=["base.wheel_r", "wheel,l", "plain"], velocity=[1.0, 2.0, 3.0])
     assert parse('/t:velocity@"base.wheel_r"').value(msg) == 1.0

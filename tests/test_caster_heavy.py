@@ -68,8 +68,8 @@ def test_heavy_robot_with_both_casters_touching_idim_and_iv():
     """The same robot with the payload at 60@-0.2,0 (both casters touch and trade +-26 N per m/s^2), seed 7 of
     bench/study_caster_heavy.py --payload 60@-0.2,0: IDIM's and IV's Fv1 is 23 % off (as every method's, the
     observer's 22 %).  One jackknife grid put its std at 5.7 % (z = 4.1, unflagged; RLS's grid, one segment more,
-    9.3 %); averaged over the grid's shifts (wmrid.estimators.idim.GRID_SHIFTS) it is 8.0 % (z = 2.9), and every
-    parameter is within 3 std or flagged."""
+    9.3 %); averaged over the grid's shifts (wmrid.estimators.regression.idim.GRID_SHIFTS) it is 8.0 % (z = 2.9), and
+    every parameter is within 3 std or flagged."""
     run = wmrid.simulate(
         "paper", engine=MultibodySettings(floor_friction=0.6, caster_resistance=0.015), trajectory="reversing",
         payload=wmrid.Payload(60, -0.2, 0), noise=wmrid.NoiseSettings(eta_std=0.02, tau_std=0.05, seed=7),

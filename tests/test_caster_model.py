@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from wmrid.estimators.observer_kernel import (
+from wmrid.estimators.observer.kernel import (
     DRAG_SPEED as KERNEL_DRAG_SPEED,
     KIND_CASTER,
     KIND_CASTER_GEOMETRY,
@@ -29,8 +29,8 @@ from wmrid.estimators.observer_kernel import (
     KIND_PAPER,
     _regressor_into,
 )
-from wmrid.estimators.observer_pass import caster_geometry
-from wmrid.estimators.replay import kernel_kind
+from wmrid.estimators.observer.observe import caster_geometry
+from wmrid.estimators.observer.replay import kernel_kind
 from wmrid.model import dynamics as model, torques
 from wmrid.model.base_params import derived_with_std, direct_recovery, fit_base_parameters, jacobian_intermediate
 from wmrid.model.dynamics import RegressorForm

@@ -13,8 +13,8 @@ import pandas as pd
 import pytest
 
 from tests.cliutil import wmrid
-from wmrid.io.columns import guess_candidates, words
 from wmrid.io.logs import read_log
+from wmrid.io.table.columns import guess_candidates, words
 from wmrid.model.robot import BUILTIN_ROBOTS
 from wmrid.sim.simulate import simulate
 

@@ -11,7 +11,7 @@ import pytest
 
 from wmrid.core.errors import UsageError
 from wmrid.estimators.delay import DELAY_STEP_S, _refine, estimate_delay
-from wmrid.estimators.idim_regression import shifted
+from wmrid.estimators.regression.idim_rows import shifted
 from wmrid.model.robot import BUILTIN_ROBOTS
 from wmrid.sim.multibody import simulate_multibody
 from wmrid.sim.multibody_model import MultibodySettings
@@ -312,11 +312,11 @@ def test_the_timing_check_profiles_a_window_read_piece_by_piece():
 
 def test_the_profiles_slope_is_idims_sensitivity_to_the_delay():
     """``theta0_slope`` (d theta0 / d delay of the profile's least-squares fit) against an independent computation:
-    IDIM's whole pipeline (:func:`wmrid.estimators.idim.identify_idim`) on the efforts read 1 ms earlier and later, a
-    central difference.  On a noise-free sinusoid every row is fast, so the two fits are the same least squares:
-    agreement to 1e-3 (measured 1e-4; the difference step is 1 ms against the slope's 0.5 ms, on a parameter curve whose
-    second derivative is small over that range)."""
-    from wmrid.estimators.idim import identify_idim
+    IDIM's whole pipeline (:func:`wmrid.estimators.regression.idim.identify_idim`) on the efforts read 1 ms earlier and
+    later, a central difference.  On a noise-free sinusoid every row is fast, so the two fits are the same least
+    squares: agreement to 1e-3 (measured 1e-4; the difference step is 1 ms against the slope's 0.5 ms, on a parameter
+    curve whose second derivative is small over that range)."""
+    from wmrid.estimators.regression.idim import identify_idim
 
     sim = simulate(AMR.cad, AMR.nominal, duration=20.0, noise=NoiseSettings(eta_std=0.0, tau_std=0.0), seed=1)
     est = estimate_delay(sim.t, sim.eta, sim.tau)
@@ -451,8 +451,8 @@ def test_a_casters_drag_is_not_read_as_a_delay_on_the_multibody_prototype(tmp_pa
     from wmrid.api.simulation import load_reference
     from wmrid.core.wheel_log import stream_arrays
     from wmrid.estimators.delay import DELAY_RESOLUTION_S
-    from wmrid.estimators.observer_pass import delay_profile_form
-    from wmrid.estimators.survey import survey
+    from wmrid.estimators.observer.observe import delay_profile_form
+    from wmrid.estimators.observer.survey import survey
     from wmrid.estimators.timing_check import with_drag
 
     paper = BUILTIN_ROBOTS["paper"]

@@ -15,7 +15,7 @@ import pytest
 
 import wmrid
 from wmrid.estimators.delay import DELAY_STEP_S, DelayEstimate, combine, estimate_delay
-from wmrid.estimators.idim_regression import shifted
+from wmrid.estimators.regression.idim_rows import shifted
 from wmrid.estimators.timing_check import search_span, unresolved_delay
 from wmrid.model.robot import BUILTIN_ROBOTS
 

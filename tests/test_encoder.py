@@ -10,7 +10,8 @@ import pytest
 
 import wmrid
 from tests.encoder_log import encoder_mcap
-from wmrid.estimators import feedback, idim
+from wmrid.estimators import feedback
+from wmrid.estimators.regression import idim
 from wmrid.model.dynamics import THETA0_NAMES
 from wmrid.model.robot import BUILTIN_ROBOTS
 from wmrid.pipeline.identify import identify

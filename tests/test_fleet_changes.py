@@ -9,10 +9,10 @@ import math
 import numpy as np
 import pytest
 
+from wmrid.fleets import changes as fc
 from wmrid.model import dynamics as model
 from wmrid.model.payload import payload_from_base, payload_from_change
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
-from wmrid.monitoring import fleet_changes as fc
 
 CAD = BUILTIN_ROBOTS["paper"].cad
 

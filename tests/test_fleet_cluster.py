@@ -19,8 +19,8 @@ import pytest
 
 from tests.cliutil import assert_clean_error, wmrid
 from tests.fleetutil import write_fleet
-from wmrid.api.fleet import fleet
-from wmrid.io.fleet_table import read_table
+from wmrid.fleets.run import fleet
+from wmrid.fleets.table import read_table
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -13,8 +13,8 @@ import pytest
 
 from tests.cliutil import assert_clean_error, wmrid
 from tests.fleetutil import START, synthetic_rows, write_fleet
-from wmrid.api.fleet_reporting import fleet_report, write_fleet_report
-from wmrid.io.fleet_table import write_table
+from wmrid.fleets.report import fleet_report, write_fleet_report
+from wmrid.fleets.table import write_table
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS, Payload
 
@@ -194,9 +194,9 @@ def test_a_simulated_fleet_end_to_end(tmp_path):
     # wmrid's simulator, then each log identified as a fleet task does (identify_entry, in this process), then the
     # review: the right-wheel drift of robot 2 (+4 %/day from day 14) and the 10 kg payload of robot 4 (from day 22)
     # are flagged and dated, nothing else is
-    from wmrid.api.fleet import plan
-    from wmrid.api.fleet_worker import identify_entry
-    from wmrid.io.fleet_table import entries_from_paths
+    from wmrid.fleets.run import plan
+    from wmrid.fleets.table import entries_from_paths
+    from wmrid.fleets.worker import identify_entry
 
     # 20 s logs: friction to about 1.5 % per log (8 s logs scatter by 6 %, and a 4 %/day drift then takes 9 days)
     write_fleet(tmp_path, robots=6, days=32, duration=20.0, drift={1: ("right", 0.04, 14)},
@@ -225,7 +225,7 @@ def test_wear_hidden_by_the_fv_fd_trade_is_found_through_the_friction_at_typical
     """Fv and Fd scatter by 15 % from log to log against each other while their sum at 4 rad/s scatters by 1 %:
     a +1.5 %/day wear of R02's right wheel is flagged through Fw1 within 8 days, and only it; the same rows without
     the speeds (a schema-1 table) hide it: no flag at all."""
-    from wmrid.io.fleet_table import ADDED_IN_2
+    from wmrid.fleets.table import ADDED_IN_2
 
     rows = synthetic_rows(8, 40, changes={1: _wear(15, 0.015)}, trade=True, seed=11)
     rep = fleet_report(rows, robot="paper", figures=False)
@@ -270,7 +270,7 @@ def test_no_false_flags_with_the_friction_at_typical_speed_watched():
 
 
 def test_the_robot_figure_shows_the_friction_at_typical_speed():
-    from wmrid.reporting.fleet_figures import build_robot_figure
+    from wmrid.fleets.figures import build_robot_figure
 
     rows = synthetic_rows(2, 20, changes={1: _wear(8, 0.02)}, trade=True, seed=4)
     robots = _by_id(fleet_report(rows, figures=False))
@@ -286,9 +286,9 @@ def test_a_fleet_row_carries_the_mean_wheel_speeds_and_the_friction_correlations
     """identify_entry's speed_r / speed_l are the log's mean |wheel speed| (the log read again here, by read_log),
     and the correlations those of the identification's own covariance (wmrid.identify, its JSON)."""
     import wmrid
-    from wmrid.api.fleet import plan
-    from wmrid.api.fleet_worker import identify_entry
-    from wmrid.io.fleet_table import entries_from_paths
+    from wmrid.fleets.run import plan
+    from wmrid.fleets.table import entries_from_paths
+    from wmrid.fleets.worker import identify_entry
 
     (path,) = write_fleet(tmp_path, robots=1, days=1, duration=6.0)
     (spec,) = plan(entries_from_paths([str(tmp_path)]), {}, "paper", fit=False)
@@ -307,7 +307,7 @@ def test_each_robot_states_the_smallest_changes_it_would_flag(rows, tmp_path):
     """Under every tested robot: the step of each inertial parameter and the friction rise over 10 logs flagged at
     least half the time, from its first 10 logs' scatter (detectable(h) sd, and no less than twice the median std),
     relative to their mean; in the page, the Markdown and the JSON."""
-    from wmrid.monitoring.fleet_changes import detectable
+    from wmrid.fleets.changes import detectable
 
     rep = fleet_report(rows, robot="paper", figures=False)
     rv = _by_id(rep)["R01"]
@@ -333,8 +333,8 @@ def test_each_robot_states_the_smallest_changes_it_would_flag(rows, tmp_path):
 
 def test_figure_units_are_the_models():
     """The fleet figures' panel units come from the model's units table (they said Vc "kg m" and Fv "N m s")."""
+    from wmrid.fleets.figures import UNITS
     from wmrid.model.dynamics import THETA0_UNITS
-    from wmrid.reporting.fleet_figures import UNITS
 
     assert UNITS["Vc"] == "kg m²"
     assert UNITS["Fv1"] == THETA0_UNITS["Fv1"] == "N m s/rad"
@@ -345,9 +345,9 @@ def test_a_row_identified_with_a_controller_rate_keeps_its_fit(tmp_path):
     """The fit column is the model's simulated speeds on its own log, also for a row with a controller rate (the
     predictor holds each logged effort over its step; only the command line refuses --validate with the rate)."""
     import wmrid
-    from wmrid.api.fleet import plan
-    from wmrid.api.fleet_worker import identify_entry
-    from wmrid.io.fleet_table import entries_from_paths
+    from wmrid.fleets.run import plan
+    from wmrid.fleets.table import entries_from_paths
+    from wmrid.fleets.worker import identify_entry
 
     log = tmp_path / "R1_2026-01-01.csv"
     wmrid.write_simulation(wmrid.simulate("paper", duration=8.0, rate=200.0), log)
@@ -361,9 +361,9 @@ def test_a_row_identified_with_payload_carries_the_payload_as_identify_gives_it(
     """``wmrid fleet --payload`` (the run-wide option ``payload``): the row's payload columns are identify's payload
     estimate on the same log, bit for bit; a row without it has them null."""
     import wmrid
-    from wmrid.api.fleet import plan
-    from wmrid.api.fleet_worker import identify_entry
-    from wmrid.io.fleet_table import ADDED_IN_3, entries_from_paths
+    from wmrid.fleets.run import plan
+    from wmrid.fleets.table import ADDED_IN_3, entries_from_paths
+    from wmrid.fleets.worker import identify_entry
 
     log = tmp_path / "R1_2026-01-01.csv"
     carried = wmrid.Payload(mass=20.0, x=0.1, y=-0.05, inertia=0.4)

@@ -10,9 +10,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from wmrid.api.fleet import option_columns
 from wmrid.core.errors import LogFormatError, UsageError
-from wmrid.io import fleet_manifest as fm, fleet_table as ft
+from wmrid.fleets import manifest as fm, table as ft
+from wmrid.fleets.run import option_columns
 
 UTC = dt.timezone.utc
 OPTIONS = option_columns()

@@ -94,7 +94,7 @@ def test_paper_alpha_keeps_the_start_and_says_so(long_smooth_log, k):
 def test_the_half_rate_run_inline_equals_it_on_its_thread():
     # wmrid fleet's workers run it on the caller's thread (estimators.replay.one_thread); same numbers, bit for bit
     from wmrid.api.identification import identify as api_identify
-    from wmrid.estimators import replay
+    from wmrid.estimators.observer import replay
 
     sample = str(Path(__file__).resolve().parents[1] / "sample_logs" / "paper_sinusoid.csv")
     threaded = api_identify(sample, "paper").to_dict()

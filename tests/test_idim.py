@@ -1,4 +1,4 @@
-"""IDIM least squares (wmrid.estimators.idim): the regression, recovery of the truth, the default cutoff, the
+"""IDIM least squares (wmrid.estimators.regression.idim): the regression, recovery of the truth, the default cutoff, the
 jackknife."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 
 from tests.open_loop import open_loop_log
 from wmrid.core.errors import LogFormatError, NotIdentifiableError, UsageError
-from wmrid.estimators import idim, idim_regression
+from wmrid.estimators.regression import idim, idim_rows
 from wmrid.model import dynamics as model, torques
 from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
 from wmrid.sim.scenario import NoiseSettings
@@ -46,7 +46,7 @@ def test_regression_rows_reproduce_the_inverse_model(smooth_log, reversing_log):
     phi = true_phi()
     for log in (smooth_log, reversing_log):
         eta_dot = torques.wheel_acceleration(log.eta, log.tau, log.theta0)
-        x = idim_regression.regressor_rows(log.eta, eta_dot)
+        x = idim_rows.regressor_rows(log.eta, eta_dot)
         assert x.shape == (len(log.t), 2, 8)
         np.testing.assert_allclose(x @ phi, log.tau, rtol=0, atol=1e-12 * np.abs(log.tau).max())
 
@@ -66,7 +66,7 @@ def test_phi_to_theta0_and_its_jacobian():
 def test_filtered_regression_is_exact_on_a_noise_free_log(smooth_log):
     # Parallel filtering: the filtered torques obey the same linear equation as the raw ones, so the
     # residual of the true phi is only the derivative's and the edges' error (measured max 1e-6 N m).
-    reg = idim_regression.idim_regression(smooth_log.t, smooth_log.eta, smooth_log.tau, decimate=False)
+    reg = idim_rows.idim_regression(smooth_log.t, smooth_log.eta, smooth_log.tau, decimate=False)
     resid = reg.rows() @ true_phi() - reg.tau
     assert np.abs(resid).max() < 1e-5
     assert reg.cutoff_hz == 10.0  # noise-free: the floor is rounding noise, the rule gives f_hi
@@ -136,11 +136,7 @@ def test_diagnostics_are_json_ready_and_complete(noisy_closed_loop):
     d = json.loads(json.dumps(est.diagnostics))
     for key in ("cutoff_hz", "cutoff_rule", "decimation", "samples_used", "residual_rms", "weights", "phi"):
         assert key in d
-    assert (
-        d["decimation"]
-        == idim_regression.decimation_factor(1000.0, d["cutoff_hz"])
-        == math.floor(250.0 / d["cutoff_hz"])
-    )
+    assert d["decimation"] == idim_rows.decimation_factor(1000.0, d["cutoff_hz"]) == math.floor(250.0 / d["cutoff_hz"])
     assert len(d["residual_rms"]) == 2
     assert all(0.01 < r < 0.2 for r in d["residual_rms"])  # N m
     assert est.cov.shape == (8, 8)
@@ -155,28 +151,24 @@ def test_diagnostics_are_json_ready_and_complete(noisy_closed_loop):
 
 
 def test_default_cutoff_rule(smooth_log, noisy_closed_loop):
-    assert idim_regression.cutoff_bounds(1000.0, 40.0) == pytest.approx(
-        (idim_regression.edge_seconds(1.0, 4) / 4.0, 10.0)
-    )
-    assert idim_regression.cutoff_bounds(100.0, 40.0)[1] == 5.0  # rate / 20
-    assert idim_regression.cutoff_bounds(1000.0, 2.0) == (10.0, 10.0)  # short log: edges win over the bandwidth
+    assert idim_rows.cutoff_bounds(1000.0, 40.0) == pytest.approx((idim_rows.edge_seconds(1.0, 4) / 4.0, 10.0))
+    assert idim_rows.cutoff_bounds(100.0, 40.0)[1] == 5.0  # rate / 20
+    assert idim_rows.cutoff_bounds(1000.0, 2.0) == (10.0, 10.0)  # short log: edges win over the bandwidth
     # noise-free: no floor, f_hi; noisy closed loop: the speed loop reaches ~2.4 Hz
-    assert idim_regression.default_cutoff(smooth_log.eta, 1000.0) == 10.0
-    assert 2.0 < idim_regression.velocity_bandwidth(noisy_closed_loop.eta, 1000.0) < 3.5
+    assert idim_rows.default_cutoff(smooth_log.eta, 1000.0) == 10.0
+    assert 2.0 < idim_rows.velocity_bandwidth(noisy_closed_loop.eta, 1000.0) < 3.5
     # noisy open loop driven below 0.5 Hz: the cutoff drops to ~2 Hz, which is what keeps the inertia
     # unbiased there (a 10 Hz cutoff biased m12 by -12.6 %, see test_jackknife_std_is_honest)
     log = open_loop_log(duration=20.0)
     eta = log.eta + 0.01 * np.random.default_rng(0).standard_normal(log.eta.shape)
-    assert 1.5 < idim_regression.default_cutoff(eta, 1000.0) < 3.0
+    assert 1.5 < idim_rows.default_cutoff(eta, 1000.0) < 3.0
 
 
 def test_edge_and_decimation_rules():
-    assert idim_regression.edge_seconds(10.0, 4) == pytest.approx(
-        math.log(1e4) / (2 * math.pi * 10 * math.sin(math.pi / 8))
-    )
-    assert idim_regression.decimation_factor(1000.0, 10.0) == 25
-    assert idim_regression.decimation_factor(100.0, 5.0) == 5
-    assert idim_regression.decimation_factor(100.0, 40.0) == 1
+    assert idim_rows.edge_seconds(10.0, 4) == pytest.approx(math.log(1e4) / (2 * math.pi * 10 * math.sin(math.pi / 8)))
+    assert idim_rows.decimation_factor(1000.0, 10.0) == 25
+    assert idim_rows.decimation_factor(100.0, 5.0) == 5
+    assert idim_rows.decimation_factor(100.0, 40.0) == 1
 
 
 # ----------------------------------------------------------------------------------------------- failures
@@ -224,7 +216,7 @@ def test_the_jackknife_is_averaged_over_shifted_grids(noisy_closed_loop):
     j / K of a segment along the log, the last wrapping round to its start: each checked against refits without the
     segment's rows.  The leave-one-out solutions kept (for the difference tests) are those of the plain grid."""
     sim = noisy_closed_loop
-    reg = idim_regression.idim_regression(sim.t, sim.eta, sim.tau)
+    reg = idim_rows.idim_regression(sim.t, sim.eta, sim.tau)
     fit = idim.fit_regression(reg)
     k = idim.GRID_SHIFTS
     seg, g = idim.segment_index(reg.t)
@@ -296,11 +288,11 @@ def test_jackknife_std_is_honest():
 def test_effort_delay_is_half_a_hold_period():
     """zoh: half the median step; --control-rate: half the controller's period; foh: none."""
     t = np.arange(101) * 0.01
-    assert idim_regression.effort_delay(t, "zoh") == pytest.approx(0.005)
-    assert idim_regression.effort_delay(t, "zoh", control_rate=1000.0) == pytest.approx(0.0005)
-    assert idim_regression.effort_delay(t, "foh") == 0.0
+    assert idim_rows.effort_delay(t, "zoh") == pytest.approx(0.005)
+    assert idim_rows.effort_delay(t, "zoh", control_rate=1000.0) == pytest.approx(0.0005)
+    assert idim_rows.effort_delay(t, "foh") == 0.0
     with pytest.raises(UsageError):
-        idim_regression.effort_delay(t, "hold")
+        idim_rows.effort_delay(t, "hold")
 
 
 def test_a_held_effort_is_read_half_a_step_earlier():
@@ -309,7 +301,7 @@ def test_a_held_effort_is_read_half_a_step_earlier():
     on noise-free logs; read half a step earlier (zoh, the default), IDIM and RLS recover every base parameter
     to 2e-4 relative (measured 7.8e-5, the Coulomb terms; inertia 1.3e-6: asserted 2e-5).  foh (no delay) on the
     same log is still off by more than 5 % on friction (measured 11 %)."""
-    from wmrid.estimators import rls
+    from wmrid.estimators.regression import rls
 
     sim = simulate(PAPER_CAD, BUILTIN_ROBOTS["paper"].nominal, duration=20.0)
     truth = model.base_parameters(PAPER_CAD)
@@ -328,14 +320,14 @@ def test_alternative_fits_agree_where_the_model_holds(reversing_log):
     """On a noise-free log of the model itself (continuous torques, so foh), the fit at a lower cutoff and the fit
     without the slow rows differ from the full one by less than 1e-5 of each parameter (measured 1.8e-6 and 6.5e-7):
     neither widens anything.  The same factors on both sides give a zero difference."""
-    from wmrid.estimators import idim_checks
+    from wmrid.estimators.regression import idim_checks
 
     log = reversing_log
     est = idim.identify_idim(log.t, log.eta, log.tau, torque_hold="foh")
     for name, check in est.diagnostics["checks"].items():
         assert check["delta"] is not None, name
         assert np.abs(np.asarray(check["delta"]) / est.theta0).max() < 1e-5, name
-    reg = idim_regression.idim_regression(log.t, log.eta, log.tau)
+    reg = idim_rows.idim_regression(log.t, log.eta, log.tau)
     seg, g = idim.segment_index(reg.t)
     fac = idim.segment_factors(reg.rows(), reg.tau, np.ones(2), seg, g)
     same = idim_checks.difference(fac, fac, 3.0)
@@ -346,10 +338,10 @@ def test_alternative_fits_agree_where_the_model_holds(reversing_log):
 def test_slow_rows_cover_the_slow_speeds_and_their_margin(reversing_log):
     """Every row whose filtered speed is below SLOW_FRACTION of the 90th-percentile |speed| is slow, and so is every
     row within SLOW_MARGIN_PERIODS cutoff periods of one; no row farther from all of them is."""
-    from wmrid.estimators import idim_checks
+    from wmrid.estimators.regression import idim_checks
 
     log = reversing_log
-    reg = idim_regression.idim_regression(log.t, log.eta, log.tau)
+    reg = idim_rows.idim_regression(log.t, log.eta, log.tau)
     slow = idim_checks.slow_rows(reg, log.eta)
     low = idim_checks.SLOW_FRACTION * np.percentile(np.abs(log.eta), 90, axis=0)
     core = np.any(np.abs(reg.features[:, 4:6]) < low, axis=1)

@@ -12,9 +12,9 @@ from scipy.integrate import solve_ivp
 
 from tests.open_loop import open_loop_log
 from wmrid.core.errors import NotIdentifiableError
-from wmrid.estimators import idim, idim_regression
 from wmrid.estimators.methods import run
 from wmrid.estimators.options import MethodOptions
+from wmrid.estimators.regression import idim, idim_rows
 from wmrid.model import dynamics as model, torques
 from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
 from wmrid.pipeline.identify import identify
@@ -55,11 +55,11 @@ def test_a_form_without_caster_changes_nothing(reversing_log, weighted):
     assert len(plain.theta0) == 8
     for form in (model.RegressorForm("general"), model.RegressorForm("paper"), None):
         assert_same_estimate(idim.identify_idim(log.t, log.eta, log.tau, weighted=weighted, form=form), plain)
-    reg = idim_regression.idim_regression(log.t, log.eta, log.tau, form=model.RegressorForm("general"))
+    reg = idim_rows.idim_regression(log.t, log.eta, log.tau, form=model.RegressorForm("general"))
     assert reg.form is None
-    assert reg.phi_names == idim_regression.PHI_NAMES
-    assert reg.feature_names == idim_regression.FEATURE_NAMES
-    assert np.array_equal(reg.rows(), idim_regression.idim_regression(log.t, log.eta, log.tau).rows())
+    assert reg.phi_names == idim_rows.PHI_NAMES
+    assert reg.feature_names == idim_rows.FEATURE_NAMES
+    assert np.array_equal(reg.rows(), idim_rows.idim_regression(log.t, log.eta, log.tau).rows())
 
 
 @pytest.mark.parametrize("form", [GEOMETRIC, TWO_TERM], ids=["geometric", "two-term"])
@@ -69,11 +69,11 @@ def test_regression_rows_reproduce_the_inverse_model_with_caster_drag(form):
     eta = rng.normal(0.0, 2.0, (500, 2))
     eta_dot = rng.normal(0.0, 5.0, (500, 2))
     theta0 = np.concatenate([model.base_parameters(PAPER_CAD), [0.8, 0.5]])
-    x = idim_regression.regressor_rows(eta, eta_dot, form)
+    x = idim_rows.regressor_rows(eta, eta_dot, form)
     assert x.shape == (500, 2, form.n_base)
     expected = torques.wheel_torque(eta, eta_dot, theta0, form)
     np.testing.assert_allclose(x @ phi_of(theta0), expected, rtol=0, atol=1e-12 * np.abs(expected).max())
-    assert idim_regression.phi_names(form) == ("M11", "M12", "M22", *form.base_names[3:])
+    assert idim_rows.phi_names(form) == ("M11", "M12", "M22", *form.base_names[3:])
 
 
 def test_theta0_jacobian_is_the_identity_on_the_caster_parameters():
@@ -130,8 +130,8 @@ def assert_recovers_geometric(est, log, rtol=5e-4):
     np.testing.assert_allclose(est.theta0, log.theta0, rtol=rtol)
     named = model.named_base(est.theta0[:8])
     np.testing.assert_allclose([named[n] for n in ("M11", "M12", "M22")], phi_of(log.theta0)[:3], rtol=rtol)
-    assert tuple(est.diagnostics["phi"]) == (*idim_regression.PHI_NAMES, "D1", "D2")
-    assert tuple(est.diagnostics["phi_std"]) == (*idim_regression.PHI_NAMES, "D1", "D2")
+    assert tuple(est.diagnostics["phi"]) == (*idim_rows.PHI_NAMES, "D1", "D2")
+    assert tuple(est.diagnostics["phi_std"]) == (*idim_rows.PHI_NAMES, "D1", "D2")
     assert est.diagnostics["phi"]["D1"] == est.theta0[8]
     assert np.all(np.isfinite(est.cov))
     assert np.all(np.diag(est.cov) > 0)
@@ -148,7 +148,7 @@ def test_recovers_the_geometric_caster_drag_on_a_noise_free_log(caster_log):
     log = caster_log
     est = idim.identify_idim(log.t, log.eta, log.tau, form=GEOMETRIC, torque_hold="foh")
     assert_recovers_geometric(est, log)
-    reg = idim_regression.idim_regression(log.t, log.eta, log.tau, form=GEOMETRIC)
+    reg = idim_rows.idim_regression(log.t, log.eta, log.tau, form=GEOMETRIC)
     assert reg.features.shape[1] == 8 + 4
     assert reg.feature_names[8:] == ("drag1_v", "drag1_w", "drag2_v", "drag2_w")
     assert np.all(reg.scales()[8:] > 0)
@@ -196,7 +196,7 @@ def test_idim_with_caster_drag_on_the_multibody_amr(amr_caster_log):
     for name in ("M11", "M12", "M22", "Vc"):
         assert abs(errors[name][0]) < 3.0, (name, errors[name])
     assert abs(errors["D1"][0]) < 10.0, errors["D1"]
-    assert set(result.diagnostics["method"]["phi"]) == {*idim_regression.PHI_NAMES, "D1"}
+    assert set(result.diagnostics["method"]["phi"]) == {*idim_rows.PHI_NAMES, "D1"}
 
 
 def test_compare_identifies_the_caster_model_with_every_method(amr_caster_log, tmp_path, capsys):

@@ -1,4 +1,4 @@
-"""Instrumental variables (IDIM-IV, :mod:`wmrid.estimators.iv`) and the closed-loop check
+"""Instrumental variables (IDIM-IV, :mod:`wmrid.estimators.regression.iv`) and the closed-loop check
 (:mod:`wmrid.estimators.feedback`), issue 12.
 
 Independent references: the IV estimate with the regressor itself as instruments IS least squares (an algebraic
@@ -20,9 +20,9 @@ from wmrid.cli.app import main
 from wmrid.core.errors import NotIdentifiableError, UsageError
 from wmrid.estimators.estimate import BaseEstimate, SegmentEstimates
 from wmrid.estimators.feedback import difference_test
-from wmrid.estimators.idim import identify_idim, segment_index
-from wmrid.estimators.idim_regression import idim_regression
-from wmrid.estimators.iv import identify_iv, segment_moments, solve_moments
+from wmrid.estimators.regression.idim import identify_idim, segment_index
+from wmrid.estimators.regression.idim_rows import idim_regression
+from wmrid.estimators.regression.iv import identify_iv, segment_moments, solve_moments
 from wmrid.io.logs import read_log, write_log
 from wmrid.model.dynamics import THETA0_NAMES
 from wmrid.model.robot import BUILTIN_ROBOTS

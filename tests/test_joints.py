@@ -1,4 +1,4 @@
-"""From an MCAP's joints to a wheel log (wmrid.io.mcap.joints), function by function, against hand values; and
+"""From an MCAP's joints to a wheel log (wmrid.io.ros.joints), function by function, against hand values; and
 inspect (wmrid.io.inspect) on CSV and Parquet."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 import wmrid
 from wmrid.core.errors import LogFormatError
 from wmrid.core.wheel_log import SPLIT_NOTE, split_topics
-from wmrid.io.mcap.joints import TopicSelection, align, choose_joints
+from wmrid.io.ros.joints import TopicSelection, align, choose_joints
 
 
 @pytest.mark.parametrize(

@@ -1,11 +1,13 @@
 """The package's layers: a module never imports one from a higher layer, nor from a sibling layer of the same rank.
 
-Layers, lowest first (docs/development.md): ``core`` (errors, limits, atomic outputs, the log types) -> ``model``
+Layers, lowest first (docs/development.md): ``core`` (errors, choices, extras, the log types) -> ``runtime`` (signals,
+atomic outputs, the memory budget, careful reading of side files) -> ``model``
 (dynamics, robot, payload, predictor) -> ``io`` (readers, writers) | ``estimators`` | ``sim`` (siblings: the
 estimators never import a reader, the readers never an estimator) -> ``pipeline`` (the identification's route over
 the estimators) -> ``monitoring`` | ``design`` (``wmrid plan``:
 experiment design on the model, the simulator's built-in trajectories as its baselines) -> ``reporting`` |
-``exports`` (siblings: ``wmrid export``'s writers) -> ``api`` (the front door) -> ``cli``. Every import counts,
+``exports`` (siblings: ``wmrid export``'s writers) -> ``api`` (the front door) -> ``fleets`` (a fleet's table, its
+run on Dask over the api, its review) -> ``cli``. Every import counts,
 including those inside functions and under ``TYPE_CHECKING``.
 """
 
@@ -21,17 +23,19 @@ import wmrid
 PACKAGE = Path(wmrid.__file__).parent
 RANK = {
     "core": 0,
-    "model": 1,
-    "io": 2,
-    "estimators": 2,
-    "sim": 2,
-    "pipeline": 3,
-    "monitoring": 4,
-    "design": 4,
-    "reporting": 5,
-    "exports": 5,
-    "api": 6,
-    "cli": 7,
+    "runtime": 1,
+    "model": 2,
+    "io": 3,
+    "estimators": 3,
+    "sim": 3,
+    "pipeline": 4,
+    "monitoring": 5,
+    "design": 5,
+    "reporting": 6,
+    "exports": 6,
+    "api": 7,
+    "fleets": 8,
+    "cli": 9,
 }
 
 
@@ -253,11 +257,16 @@ def _import_time_and_local_imports() -> tuple[dict[str, set[str]], dict[str, lis
     return at_import, local
 
 
+#: The fleet's front doors: wmrid.fleet and wmrid.fleet_report, as lazy about what they load as ``wmrid.api``.
+FRONT_DOORS = ("wmrid.fleets.run", "wmrid.fleets.report")
+
+
 def test_a_function_imports_a_module_only_to_put_off_loading_it() -> None:
     """Imports inside functions are for start-up time only (issue 31), each for one of three reasons:
 
     * in ``wmrid.cli``: ``wmrid --help`` and each command load only what that command runs;
-    * in ``wmrid.api`` and the package's front: ``import wmrid`` and each function load only what they use;
+    * in ``wmrid.api``, the fleet's front doors (``wmrid.fleets.run``, ``wmrid.fleets.report``) and the package's
+      front: ``import wmrid`` and each function load only what they use;
     * elsewhere: the module imported is one its importer does not load otherwise (numba's kernels, scipy,
       matplotlib, an optional package behind it), checked here: a function-local import of a module the importer
       loads anyway at import time puts nothing off and belongs at the top.
@@ -276,7 +285,7 @@ def test_a_function_imports_a_module_only_to_put_off_loading_it() -> None:
 
     needless = []
     for module, imports in local.items():
-        if module == "wmrid" or module.startswith(("wmrid.cli", "wmrid.api")):
+        if module in ("wmrid", *FRONT_DOORS) or module.startswith(("wmrid.cli", "wmrid.api")):
             continue
         already = loaded(module, set())
         needless += [f"{module}:{line} imports {target}" for line, target in imports if target in already | {module}]

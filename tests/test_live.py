@@ -84,9 +84,9 @@ def grow(path: Path, data: bytes, pieces: int = 40, pause: float = 0.01) -> thre
 def test_online_observer_is_the_offline_replay_in_pieces(log):
     """Fed in random pieces, the online observer holds the offline replay's theta and Gamma bit for bit, and its block
     sums add up to the replay's."""
-    from wmrid.estimators.observer import ObserverSettings
-    from wmrid.estimators.online import OnlineObserver, online_estimate
-    from wmrid.estimators.replay import replay
+    from wmrid.estimators.observer.online import OnlineObserver, online_estimate
+    from wmrid.estimators.observer.replay import replay
+    from wmrid.estimators.observer.step import ObserverSettings
     from wmrid.model import dynamics as model
     from wmrid.model.dynamics import RegressorForm
 

@@ -17,11 +17,11 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 from wmrid.core.errors import LogFormatError, OutputExistsError, UsageError
 from wmrid.core.wheel_log import WheelLog
-from wmrid.io.columns import parse_column_mapping
-from wmrid.io.csv_log import sniff_delimiter
 from wmrid.io.logs import read_log, read_metadata, write_log
 from wmrid.io.sources import detect_format
 from wmrid.io.stamps import seconds_from_stamps
+from wmrid.io.table.columns import parse_column_mapping
+from wmrid.io.table.csv_log import sniff_delimiter
 
 HEADER = "t,eta_r,eta_l,tau_r,tau_l\n"
 

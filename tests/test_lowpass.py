@@ -1,4 +1,4 @@
-"""wmrid.estimators.lowpass against scipy.signal, the implementation it follows (see its module docstring).
+"""wmrid.estimators.regression.lowpass against scipy.signal, the implementation it follows (see its module docstring).
 
 Sections and zero-phase filtering are compared for exact equality: the design runs the same floating-point
 operations as scipy's butter/zpk2sos and the recursion those of scipy's sosfilt, so any difference is a
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import scipy.signal as ss
 
-from wmrid.estimators import lowpass
+from wmrid.estimators.regression import lowpass
 
 CUTOFFS = [(2.0, 1000.0), (10.0, 1000.0), (0.05, 1000.0), (0.3, 100.0), (49.0, 100.0), (5.0, 200.0), (123.4, 1000.0)]
 

@@ -1,4 +1,4 @@
-"""glibc malloc tuned for one identification at a time (:func:`wmrid.core.limits.tune_malloc`): applied in the
+"""glibc malloc tuned for one identification at a time (:func:`wmrid.runtime.limits.tune_malloc`): applied in the
 command-line process and on fleet workers, left alone under an address-space cap and where the user's environment
 sets malloc's thresholds (unless a fleet worker overrides Dask's).  Each case runs in its own small process, so
 this test process keeps glibc's defaults."""
@@ -24,7 +24,7 @@ def _tuned(env_extra: dict[str, str] | None = None, cap: int | None = None, over
         if cap is not None:
             resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
 
-    code = f"from wmrid.core.limits import tune_malloc; print(tune_malloc({override}))"
+    code = f"from wmrid.runtime.limits import tune_malloc; print(tune_malloc({override}))"
     out = subprocess.run(
         [sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, preexec_fn=limit, check=True
     )

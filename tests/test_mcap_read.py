@@ -20,9 +20,9 @@ from mcap_ros2.writer import Writer as Ros2Writer
 
 from wmrid.core.errors import LogFormatError
 from wmrid.io.logs import read_log, write_log
-from wmrid.io.mcap.joints import TopicSelection
 from wmrid.io.mcap.reader import read_mcap
 from wmrid.io.mcap.writer import JOINT_STATE_MSGDEF, write_joint_state_mcap
+from wmrid.io.ros.joints import TopicSelection
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS
 from wmrid.pipeline.identify import identify

@@ -27,10 +27,10 @@ from wmrid.core.errors import LogFormatError
 from wmrid.core.wheel_log import stream_arrays
 from wmrid.io.logs import open_log, read_log
 from wmrid.io.mcap import log as mcap_log
-from wmrid.io.mcap.joints import TopicSelection
 from wmrid.io.mcap.reader import read_mcap, scan_mcap
 from wmrid.io.mcap.records import scan as _scan
 from wmrid.io.mcap.writer import JOINT_STATE_MSGDEF, write_joint_state_mcap
+from wmrid.io.ros.joints import TopicSelection
 from wmrid.io.signals import SignalOptions
 from wmrid.model.robot import BUILTIN_ROBOTS
 from wmrid.pipeline.identify import identify
@@ -407,8 +407,8 @@ def test_a_file_that_changes_between_passes_is_refused(tmp_path, monkeypatch):
 @ONE_PASS
 @pytest.mark.parametrize("seed", range(6))
 def test_the_median_step_is_exact_from_the_histogram_and_a_second_look(seed):
-    from wmrid.io.mcap.joint_stream import _StepMedian
     from wmrid.io.mcap.records import STEP_BUCKETS, step_buckets
+    from wmrid.io.ros.joint_stream import _StepMedian
 
     rng = np.random.default_rng(seed)
     n = int(rng.integers(1, 5000))

@@ -17,7 +17,6 @@ import pytest
 from cliutil import assert_clean_error, wmrid
 from scipy.stats import chi2
 
-from wmrid.core.atomic import write_json
 from wmrid.core.errors import NotIdentifiableError, UsageError
 from wmrid.io.logs import write_log
 from wmrid.model import dynamics as model
@@ -26,6 +25,7 @@ from wmrid.monitoring.glr import ModelError, NoiseModel, window_grid, window_sta
 from wmrid.monitoring.monitor import monitor
 from wmrid.monitoring.settings import MonitorSettings, load_model, model_from_dict
 from wmrid.pipeline.identify import identify
+from wmrid.runtime.atomic import write_json
 from wmrid.sim.scenario import NoiseSettings, PlantChange
 from wmrid.sim.simulate import simulate
 

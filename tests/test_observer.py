@@ -7,7 +7,8 @@ import pytest
 from scipy import optimize, signal
 
 from tests.open_loop import open_loop_log
-from wmrid.estimators.observer import (
+from wmrid.estimators.observer.replay import replay
+from wmrid.estimators.observer.step import (
     ObserverSettings,
     foh_weights,
     initial_state,
@@ -15,7 +16,6 @@ from wmrid.estimators.observer import (
     project_to_box,
     substep_weights,
 )
-from wmrid.estimators.replay import replay
 from wmrid.model import dynamics as model
 from wmrid.model.dynamics import RegressorForm
 from wmrid.model.robot import PAPER_NOMINAL
@@ -216,7 +216,7 @@ def test_settings_are_validated():
 
 def test_compiled_projection_matches_the_bounded_least_squares_reference():
     # Independent computation: scipy's BVLS on the Cholesky form of the same quadratic.
-    from wmrid.estimators.observer_kernel import project_row_box
+    from wmrid.estimators.observer.kernel import project_row_box
 
     rng = np.random.default_rng(7)
     for _ in range(500):
@@ -242,7 +242,7 @@ def test_compiled_projection_matches_the_bounded_least_squares_reference():
 
 
 def test_compiled_projection_leaves_interior_points_alone():
-    from wmrid.estimators.observer_kernel import project_history_box
+    from wmrid.estimators.observer.kernel import project_history_box
 
     theta = np.random.default_rng(1).uniform(-1, 1, (5, 2, 7))
     gamma = np.broadcast_to(np.eye(7), (5, 7, 7)).copy()

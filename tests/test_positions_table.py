@@ -14,10 +14,10 @@ import wmrid
 from tests.cliutil import wmrid as run_cli
 from tests.encoder_log import write_encoder_mcap
 from wmrid.core.wheel_log import DERIVED_NOTE
-from wmrid.io.columns import guess_candidates
 from wmrid.io.logs import open_log, read_log
-from wmrid.io.mcap.joints import TopicSelection
+from wmrid.io.ros.joints import TopicSelection
 from wmrid.io.signals import SignalOptions
+from wmrid.io.table.columns import guess_candidates
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_logs" / "paper_sinusoid.csv"
 BASE = ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")

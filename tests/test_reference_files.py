@@ -158,7 +158,7 @@ def test_an_existing_file_is_kept_without_force(tmp_path: Path) -> None:
 
 
 def test_an_input_of_the_command_is_never_overwritten(tmp_path: Path) -> None:
-    from wmrid.core.atomic import clear_inputs, track_inputs
+    from wmrid.runtime.atomic import clear_inputs, track_inputs
 
     path = tmp_path / "plan.mcap"
     write_reference(path, _plan())

@@ -268,7 +268,7 @@ def test_a_large_parquet_row_group_is_read_in_slices(tmp_path, monkeypatch):
     path = tmp_path / "one_group.parquet"
     write_log(frame, str(path))
     whole = read_log(str(path))
-    monkeypatch.setattr(wmrid.io.parquet_log, "ROW_GROUP_SLICE_BYTES", 1024)
+    monkeypatch.setattr(wmrid.io.table.parquet_log, "ROW_GROUP_SLICE_BYTES", 1024)
     sliced = read_log(str(path))
     np.testing.assert_array_equal(sliced.t, whole.t)
     np.testing.assert_array_equal(sliced.eta, whole.eta)
@@ -379,8 +379,8 @@ def test_an_mcap_cut_mid_chunk_says_so(tmp_path, capsys):
 STUCK = """
 import sys
 import numba
-from wmrid.core import interrupts
-from wmrid.core.atomic import atomic_output
+from wmrid.runtime import interrupts
+from wmrid.runtime.atomic import atomic_output
 
 interrupts.install()
 interrupts.GRACE_S = 1.0
@@ -444,7 +444,7 @@ def test_a_file_too_large_for_the_disk_is_one_line_and_leaves_nothing(tmp_path):
 def test_a_signal_inside_held_waits_for_its_end():
     """A result group's renames run inside ``interrupts.held()``: a stopping signal handled there (as when it reaches
     another thread, which pthread_sigmask does not hold back) is raised only when the block ends."""
-    from wmrid.core import interrupts
+    from wmrid.runtime import interrupts
 
     done = []
 

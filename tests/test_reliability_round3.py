@@ -153,8 +153,8 @@ def test_a_compressed_csv_of_blank_lines_is_refused_early_in_bounded_memory(tmp_
 
 
 def test_blank_lines_and_long_lines_within_the_bounds_are_read(tmp_path):
-    from wmrid.io.csv_log import MAX_LINE_BYTES
     from wmrid.io.logs import read_log
+    from wmrid.io.table.csv_log import MAX_LINE_BYTES
 
     rows = CSV.read_bytes().splitlines(keepends=True)
     spaced = tmp_path / "spaced.csv"  # a million blank lines, and CRLF ones, between the rows: read as the rows
@@ -273,7 +273,7 @@ def test_a_recorded_bag_in_one_large_chunk_reads_as_in_small_ones(tmp_path, monk
 
 def _fleet_table(folder: Path) -> Path:
     from tests.fleetutil import synthetic_rows
-    from wmrid.io.fleet_table import write_table
+    from wmrid.fleets.table import write_table
 
     path = folder / "fleet.parquet"
     write_table(synthetic_rows(robots=2, days=3), path)

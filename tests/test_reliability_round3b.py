@@ -241,7 +241,7 @@ def test_a_plans_robot_name_and_warnings_are_escaped_in_markdown(tmp_path):
 
 def test_a_fleet_tables_robot_ids_are_escaped_in_markdown(tmp_path):
     from tests.fleetutil import synthetic_rows
-    from wmrid.api.fleet_reporting import fleet_report, write_fleet_report
+    from wmrid.fleets.report import fleet_report, write_fleet_report
 
     rows = synthetic_rows(3, 12)
     for r in rows:
@@ -320,7 +320,7 @@ def test_forged_dates_draw_without_matplotlibs_warnings(tmp_path, first, step):
     import datetime as dt
 
     from tests.fleetutil import synthetic_rows
-    from wmrid.io.fleet_table import write_table
+    from wmrid.fleets.table import write_table
 
     start = dt.datetime.fromisoformat(first).replace(tzinfo=dt.timezone.utc)
     rows = [dict(r, start_time=start + dt.timedelta(days=step * i)) for i, r in enumerate(synthetic_rows(2, 3))]

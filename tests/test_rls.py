@@ -1,4 +1,5 @@
-"""Recursive least squares (wmrid.estimators.rls): equal to batch LS without forgetting, tracking with it, the
+"""Recursive least squares (wmrid.estimators.regression.rls): equal to batch LS without forgetting, tracking with it,
+the
 history."""
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ import pytest
 
 from tests.open_loop import open_loop_log
 from wmrid.core.errors import NotIdentifiableError, UsageError
-from wmrid.estimators import idim, idim_regression, rls
+from wmrid.estimators.regression import idim, idim_rows, rls
 from wmrid.model import dynamics as model, torques
 from wmrid.model.robot import BUILTIN_ROBOTS, PAPER_CAD
 from wmrid.sim.scenario import NoiseSettings
@@ -30,7 +31,7 @@ def reversing_log():
     return open_loop_log(duration=20.0, reversing=True)
 
 
-def batch_ls(reg: idim_regression.IdimRegression) -> np.ndarray:
+def batch_ls(reg: idim_rows.IdimRegression) -> np.ndarray:
     """Ordinary least squares (numpy lstsq, SVD) of phi on the stacked rows of a regression."""
     return np.linalg.lstsq(reg.rows().reshape(-1, 8), reg.tau.reshape(-1), rcond=None)[0]
 
@@ -40,7 +41,7 @@ def test_no_forgetting_equals_batch_least_squares(smooth_log, reversing_log, noi
     # covariance recursion.  Measured max relative differences: 1e-9 (5 s smooth log, whose weak Coulomb
     # directions start ill-conditioned), 3e-10 (reversing), 1e-11 (noisy closed loop).
     for log, decimate in ((smooth_log, False), (reversing_log, False), (noisy_closed_loop, False), (smooth_log, True)):
-        reg = idim_regression.idim_regression(log.t, log.eta, log.tau, decimate=decimate)
+        reg = idim_rows.idim_regression(log.t, log.eta, log.tau, decimate=decimate)
         est, hist = rls.rls_on_regression(reg, forgetting=1.0)
         phi = np.array(list(est.diagnostics["phi"].values()))
         np.testing.assert_allclose(phi, batch_ls(reg), rtol=1e-8)
@@ -109,7 +110,7 @@ def test_history_before_and_after_the_start(smooth_log):
     est, hist = rls.rls_run(
         smooth_log.t, smooth_log.eta, smooth_log.tau, forgetting=1.0, history_points=100, torque_hold="foh"
     )
-    reg = idim_regression.idim_regression(smooth_log.t, smooth_log.eta, smooth_log.tau, decimate=False)
+    reg = idim_rows.idim_regression(smooth_log.t, smooth_log.eta, smooth_log.tau, decimate=False)
     assert len(hist.t) <= 100
     assert hist.t[-1] == reg.t[-1]
     assert np.all(np.diff(hist.t) > 0)

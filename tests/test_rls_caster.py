@@ -16,7 +16,7 @@ from tests.test_idim_caster import (  # noqa: F401 (caster_log: a fixture)
     caster_log,
     phi_of,
 )
-from wmrid.estimators import idim, idim_regression, rls
+from wmrid.estimators.regression import idim, idim_rows, rls
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS
 from wmrid.pipeline.identify import identify
@@ -42,7 +42,7 @@ def test_a_form_without_caster_changes_nothing(forgetting):
 
     plain = run()
     assert len(plain[0]) == 8
-    assert tuple(plain[4]["phi"]) == idim_regression.PHI_NAMES
+    assert tuple(plain[4]["phi"]) == idim_rows.PHI_NAMES
     for form in (model.RegressorForm("general"), model.RegressorForm("paper"), None):
         got = run(form=form)
         assert all(same(a, b) for a, b in zip(got, plain, strict=True)), form
@@ -69,7 +69,7 @@ def test_recovers_the_geometric_caster_drag_on_a_noise_free_log(caster_log):  # 
     np.testing.assert_allclose(hist.theta0[defined], idim.phi_to_theta0(hist.phi[defined]), rtol=1e-13)
     assert np.all(np.isfinite(hist.std[-1]))
     # batch least squares on the same rows (the caster columns mapped by idim)
-    reg = idim_regression.idim_regression(log.t, log.eta, log.tau, decimate=False, form=GEOMETRIC)
+    reg = idim_rows.idim_regression(log.t, log.eta, log.tau, decimate=False, form=GEOMETRIC)
     x = reg.rows()
     lstsq = np.linalg.lstsq(x.reshape(-1, x.shape[-1]), reg.tau.reshape(-1), rcond=None)[0]
     np.testing.assert_allclose(list(est.diagnostics["phi"].values()), lstsq, rtol=1e-9)
@@ -115,4 +115,4 @@ def test_rls_with_caster_drag_on_the_multibody_amr(amr_caster_log):
     for name in ("M11", "M12", "M22", "Vc"):
         assert abs(errors[name][0]) < 3.0, (name, errors[name])
     assert abs(errors["D1"][0]) < 10.0, errors["D1"]
-    assert set(est.diagnostics["phi"]) == {*idim_regression.PHI_NAMES, "D1"}
+    assert set(est.diagnostics["phi"]) == {*idim_rows.PHI_NAMES, "D1"}

@@ -260,7 +260,7 @@ def test_a_manifest_reaches_only_logs_under_its_root(tmp_path, row, needles):
 
 
 def test_manifest_root_widens_the_rule_but_never_to_devices(tmp_path):
-    from wmrid.io import fleet_manifest as fm
+    from wmrid.fleets import manifest as fm
 
     inside = tmp_path / "fleet"
     inside.mkdir()
@@ -309,8 +309,8 @@ def _in_thread(function, *args, timeout: float = 10):
 
 
 def test_a_worker_hashes_a_log_boundedly_and_never_a_device_or_fifo(tmp_path):
-    from wmrid.api.fleet_worker import identify_entry
-    from wmrid.io.fleet_table import content_digest
+    from wmrid.fleets.table import content_digest
+    from wmrid.fleets.worker import identify_entry
 
     os.mkfifo(tmp_path / "pipe.csv")
     spec = {"robot_id": "R1", "options": {}, "options_key": "k", "fit": False, "known_sha256": None}
@@ -348,7 +348,7 @@ def _looped_tree(root: Path) -> Path:
 def test_a_recursive_glob_follows_no_symlink_loop(tmp_path):
     import glob
 
-    from wmrid.io.fleet_table import find_logs, safe_glob
+    from wmrid.fleets.table import find_logs, safe_glob
 
     top = _looped_tree(tmp_path)
     found = _in_thread(find_logs, [f"{top}/**/2026*.csv"], timeout=5)

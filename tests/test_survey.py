@@ -1,4 +1,5 @@
-"""The survey (wmrid.estimators.survey): one pass over a log in pieces gives the figures numpy computes on the whole
+"""The survey (wmrid.estimators.observer.survey): one pass over a log in pieces gives the figures numpy computes on the
+whole
 arrays, whatever the pieces."""
 
 from __future__ import annotations
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 
 from wmrid.core.errors import NotIdentifiableError
-from wmrid.estimators.survey import EXACT_STEPS, START_SPACING_S, survey
+from wmrid.estimators.observer.survey import EXACT_STEPS, START_SPACING_S, survey
 
 
 def _log(n: int = 5000, seed: int = 0, uneven: bool = False, reversing: bool = True):

@@ -166,11 +166,11 @@ _EXPORTS = {
     "Report": "wmrid.reporting.report",
     "SimulationRun": "wmrid.api.simulation",
     "WmridError": "wmrid.core.errors",
-    "fleet": "wmrid.api.fleet",
-    "FleetRun": "wmrid.api.fleet",
-    "fleet_report": "wmrid.api.fleet_reporting",
-    "write_fleet_report": "wmrid.api.fleet_reporting",
-    "FleetReport": "wmrid.reporting.fleet_report",
+    "fleet": "wmrid.fleets.run",
+    "FleetRun": "wmrid.fleets.run",
+    "fleet_report": "wmrid.fleets.report",
+    "write_fleet_report": "wmrid.fleets.report",
+    "FleetReport": "wmrid.fleets.rendering",
     "plan": "wmrid.api.planning",
     "write_plan": "wmrid.api.planning",
     "read_plan": "wmrid.api.planning",
@@ -189,11 +189,6 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
     from wmrid.api.exporting import (
         ExportResult as ExportResult,
         export as export,
-    )
-    from wmrid.api.fleet import FleetRun as FleetRun, fleet as fleet
-    from wmrid.api.fleet_reporting import (
-        fleet_report as fleet_report,
-        write_fleet_report as write_fleet_report,
     )
     from wmrid.api.identification import compare as compare, identify as identify, validate as validate
     from wmrid.api.inputs import (
@@ -251,6 +246,14 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
         IdentificationResult as IdentificationResult,
         ObserverRun as ObserverRun,
     )
+    from wmrid.fleets.rendering import (
+        FleetReport as FleetReport,
+    )
+    from wmrid.fleets.report import (
+        fleet_report as fleet_report,
+        write_fleet_report as write_fleet_report,
+    )
+    from wmrid.fleets.run import FleetRun as FleetRun, fleet as fleet
     from wmrid.model.physical import (
         PhysicalEstimate as PhysicalEstimate,
     )
@@ -258,9 +261,6 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
     from wmrid.monitoring.monitor_result import MonitorResult as MonitorResult
     from wmrid.monitoring.settings import (
         MonitorSettings as MonitorSettings,
-    )
-    from wmrid.reporting.fleet_report import (
-        FleetReport as FleetReport,
     )
     from wmrid.reporting.report import Report as Report
     from wmrid.sim.multibody_model import MultibodySettings as MultibodySettings

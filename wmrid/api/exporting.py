@@ -142,9 +142,9 @@ def export(
     kept unless ``force``.  Raises UsageError (one line) for an unknown suffix, a robot file without physical
     parameters, an unphysical result, a result whose effort is not a torque."""
     from wmrid.api.inputs import load_robot
-    from wmrid.core.atomic import _check_target, atomic_write_bytes, atomic_write_text
     from wmrid.exports.controller import controller_model
     from wmrid.model.robot import PhysicalParameters
+    from wmrid.runtime.atomic import _check_target, atomic_write_bytes, atomic_write_text
 
     suffix = check_export_output(output)
     _check_target(Path(os.fspath(output)), force)  # before any work: an existing output, a missing folder
@@ -211,7 +211,7 @@ def export(
         assert isinstance(geometry, PhysicalParameters)  # so is a robot of base parameters only
         source = os.fspath(robot) if isinstance(robot, (str, os.PathLike)) else ""
         if source.lower().endswith(".urdf"):
-            from wmrid.core.limits import ROBOT_FILE_LIMIT, read_limited
+            from wmrid.runtime.limits import ROBOT_FILE_LIMIT, read_limited
 
             data = read_limited(source, max(ROBOT_FILE_LIMIT, 64 << 20), f"{source}: holds more than {{size}}",
                                 UsageError)  # fmt: skip
@@ -389,6 +389,6 @@ def check_fit(
 
 
 def write_export_summary(result: ExportResult, path: str | os.PathLike[str], *, force: bool = False) -> None:
-    from wmrid.core.atomic import write_json
+    from wmrid.runtime.atomic import write_json
 
     write_json(os.fspath(path), result.to_dict(), force=force)

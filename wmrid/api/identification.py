@@ -62,7 +62,7 @@ def load_truth(truth: dict[str, float] | str | os.PathLike[str] | None) -> dict[
         return truth
     import json
 
-    from wmrid.core.atomic import register_input
+    from wmrid.runtime.atomic import register_input
 
     path = os.fspath(truth)
     register_input(path)

@@ -147,9 +147,9 @@ def reader_arguments(options: LogOptions | None, robot: Robot | None = None) -> 
     """The readers' arguments for ``options`` (with ``robot``'s values where they are not given): columns, time_unit,
     selection, signals and gear_ratio, as :func:`wmrid.io.logs.open_log` and the live readers
     (:mod:`wmrid.io.live`) take them."""
-    from wmrid.io.columns import parse_column_mapping
-    from wmrid.io.mcap.joints import TopicSelection
+    from wmrid.io.ros.joints import TopicSelection
     from wmrid.io.signals import SignalOptions
+    from wmrid.io.table.columns import parse_column_mapping
 
     opts = (options or LogOptions()).with_robot(robot)
     selection = TopicSelection(**_subset(opts, TopicSelection))
@@ -195,9 +195,9 @@ def read_json_input(path: str, name: str, what: str) -> Any:
     UsageError naming ``name`` when it cannot be read or is not JSON."""
     import json
 
-    from wmrid.core.atomic import register_input
     from wmrid.core.errors import cannot_read
-    from wmrid.core.limits import memory_budget, read_limited
+    from wmrid.runtime.atomic import register_input
+    from wmrid.runtime.limits import memory_budget, read_limited
 
     register_input(path)
     try:

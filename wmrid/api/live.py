@@ -2,8 +2,8 @@
 server (``foxglove_bridge``), and optionally watch it for a change against an identified model.
 
 :func:`live` returns a :class:`LiveRun`: iterating it follows the source (:mod:`wmrid.io.live`), feeds the samples to
-the observer as they arrive (the offline kernel, in pieces: :class:`wmrid.estimators.online.OnlineObserver`) and
-yields a :class:`LiveUpdate` every ``every`` seconds, then, when the source ends (its end, ``idle`` seconds without
+the observer as they arrive (the offline kernel, in pieces: :class:`wmrid.estimators.observer.online.OnlineObserver`)
+and yields a :class:`LiveUpdate` every ``every`` seconds, then, when the source ends (its end, ``idle`` seconds without
 data, ``until`` seconds of log time, ``until_std``), one :class:`LiveResult`.  :meth:`LiveRun.finish` gives that
 result at any moment, e.g. after Ctrl-C.
 
@@ -185,8 +185,8 @@ class LiveRun:
     # -- the observer ---------------------------------------------------------------------------------------------
     def _start_observers(self) -> None:
         from wmrid.core.wheel_log import WheelLog
-        from wmrid.estimators.observer_pass import caster_geometry
-        from wmrid.estimators.survey import survey
+        from wmrid.estimators.observer.observe import caster_geometry
+        from wmrid.estimators.observer.survey import survey
         from wmrid.model.dynamics import RegressorForm
 
         t = np.concatenate([p.t for p in self.buffer])
@@ -213,9 +213,9 @@ class LiveRun:
         self._feed_observers(t, eta, tau)
 
     def _observer(self, form: Any, sv: Any) -> Any:
-        from wmrid.estimators.observer import ObserverSettings
-        from wmrid.estimators.observer_pass import default_box
-        from wmrid.estimators.online import OnlineObserver
+        from wmrid.estimators.observer.observe import default_box
+        from wmrid.estimators.observer.online import OnlineObserver
+        from wmrid.estimators.observer.step import ObserverSettings
         from wmrid.estimators.sign_speed import sign_half_window
         from wmrid.model import dynamics as model
 
@@ -268,7 +268,7 @@ class LiveRun:
     # -- the run --------------------------------------------------------------------------------------------------
     def update(self) -> LiveUpdate:
         """The live state now."""
-        from wmrid.estimators.online import online_estimate
+        from wmrid.estimators.observer.online import online_estimate
 
         now = time.monotonic()
         form_name, parameters, segments = None, {}, 0
@@ -298,8 +298,8 @@ class LiveRun:
     def _poll(self, flush: bool = False) -> None:
         """Feed what the source brings in one poll (``flush``: the samples it holds for a larger batch).  A source
         that breaks off (StreamError) after samples came ends the run, keeping them; before, its error is raised."""
-        from wmrid.core import interrupts
         from wmrid.core.errors import StreamError
+        from wmrid.runtime import interrupts
 
         try:
             with interrupts.held():  # a stop lands between two polls: what was read is whole, spilled and counted
@@ -367,7 +367,7 @@ class LiveRun:
         if self._final is not None:
             return self._final
         if stopped_by is not None:
-            from wmrid.core import interrupts
+            from wmrid.runtime import interrupts
 
             interrupts.extend_grace(FINISH_GRACE_S)
             self.stop(stopped_by)
@@ -402,13 +402,13 @@ def _warm_up() -> None:
 
     from wmrid.core.extras import available
     from wmrid.core.wheel_log import WheelLog
-    from wmrid.estimators.observer import ObserverSettings
-    from wmrid.estimators.observer_pass import default_box
-    from wmrid.estimators.online import OnlineObserver, online_estimate
-    from wmrid.estimators.survey import survey
+    from wmrid.estimators.observer.observe import default_box
+    from wmrid.estimators.observer.online import OnlineObserver, online_estimate
+    from wmrid.estimators.observer.step import ObserverSettings
+    from wmrid.estimators.observer.survey import survey
     from wmrid.model.dynamics import RegressorForm
 
-    for name in ("pandas", "pyarrow.csv", "wmrid.io.csv_log", "wmrid.io.mcap.reader", "wmrid.io.mcap.joints"):
+    for name in ("pandas", "pyarrow.csv", "wmrid.io.table.csv_log", "wmrid.io.mcap.reader", "wmrid.io.ros.joints"):
         if name != "pyarrow.csv" or available(name):  # pyarrow: the parquet extra
             importlib.import_module(name)
     t = np.arange(200) * 1e-3
@@ -429,7 +429,7 @@ def check_output(path: str | os.PathLike[str], force: bool = False) -> None:
     without ``force``, a missing folder); standard output and other streams pass."""
     from pathlib import Path
 
-    from wmrid.core.atomic import _check_target, stream_fd
+    from wmrid.runtime.atomic import _check_target, stream_fd
 
     if stream_fd(str(path)) is None:
         _check_target(Path(path), force)

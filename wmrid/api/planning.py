@@ -256,7 +256,7 @@ def _friction(friction: str, robot: Robot) -> tuple[str, tuple[float, ...], tupl
     at rest (least-norm statics; mirrored casters, which the log cannot tell apart, summed)."""
     if friction not in FRICTIONS:
         raise UsageError(f"{option('friction', friction)}: choose one of {', '.join(FRICTIONS)}")
-    from wmrid.estimators.observer_pass import caster_geometry
+    from wmrid.estimators.observer.observe import caster_geometry
 
     casters = tuple(robot.casters or ())
     if friction == "auto":
@@ -309,7 +309,7 @@ def write_plan(
     the reference at the plan's rate (t, v, omega, eta_r, eta_l, x, y, phi); ``.mcap`` a ROS 2 recording of
     geometry_msgs/msg/Twist (TwistStamped with ``stamped``) on ``topic``.  Atomic; an existing file is kept unless
     ``force``."""
-    from wmrid.core.atomic import write_json
+    from wmrid.runtime.atomic import write_json
 
     target = os.fspath(path)
     check_plan_output(target)
@@ -342,8 +342,8 @@ def plan_document(path: str | os.PathLike[str]) -> Plan | None:
 
 def write_plan_report(result: Plan, path: str | os.PathLike[str], *, force: bool = False) -> None:
     """The plan's report by suffix: ``.html`` (self-contained, with figures), ``.md`` or ``.json`` (the plan)."""
-    from wmrid.core.atomic import atomic_write_text, write_json
     from wmrid.reporting.plan_report import to_html, to_markdown
+    from wmrid.runtime.atomic import atomic_write_text, write_json
 
     target = os.fspath(path)
     suffix = Path(target).suffix.lower()

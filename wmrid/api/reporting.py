@@ -33,8 +33,8 @@ REPORT_SUFFIXES = (".html", ".htm", ".md", ".json")
 
 def _parse_saved(source: Any) -> Any:
     """The JSON document of a saved result (a file, or standard input already read), in bounded memory."""
-    from wmrid.core.atomic import register_input
-    from wmrid.core.limits import memory_budget, read_limited
+    from wmrid.runtime.atomic import register_input
+    from wmrid.runtime.limits import memory_budget, read_limited
 
     if source.data is None:
         register_input(source.path)
@@ -253,7 +253,7 @@ def write_by_suffix(
 ) -> None:
     """Write a report atomically in the format its file's suffix names: ``html(rep)`` for .html/.htm,
     ``markdown(rep)`` for .md, ``data(rep)`` as JSON for .json."""
-    from wmrid.core.atomic import atomic_write_text, write_json
+    from wmrid.runtime.atomic import atomic_write_text, write_json
 
     path = os.fspath(output)
     suffix = os.path.splitext(path)[1].lower()

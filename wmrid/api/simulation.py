@@ -188,8 +188,8 @@ def write_simulation(run: SimulationRun, output: str | os.PathLike[str], *, forc
     """Write the log (CSV, Parquet or MCAP by suffix; ``"-"``: CSV on standard output) and its truth
     (``OUTPUT.truth.json``, also inside the log's metadata) together: both appear or neither.  Returns the truth
     file's path (None for standard output)."""
-    from wmrid.core.atomic import output_group, to_json_text, write_json
     from wmrid.io.logs import write_log
+    from wmrid.runtime.atomic import output_group, to_json_text, write_json
 
     output = os.fspath(output)
     truth_path = None if output == "-" else output + ".truth.json"

@@ -64,13 +64,13 @@ def main(argv: list[str] | None = None) -> None:
     128 + the signal for Ctrl-C, SIGTERM and SIGHUP (130, 143, 129; temporary files removed either way)."""
     from wmrid.cli import export_commands, fleet_commands, identify_commands, live_commands, plan_commands, sim_commands  # noqa: F401  (their commands join ``app`` on import)
     from wmrid.cli.streams import finish_output, guard
-    from wmrid.core import interrupts
-    from wmrid.core.atomic import clear_inputs, track_inputs
+    from wmrid.runtime import interrupts
+    from wmrid.runtime.atomic import clear_inputs, track_inputs
 
     previous = interrupts.install()  # Ctrl-C is deferred while numba compiles (an interrupt there crashes LLVM)
     if argv is None:  # the command-line process: a signal that finds it stuck in compiled code still ends it
         interrupts.start_watchdog()
-        from wmrid.core.limits import tune_malloc
+        from wmrid.runtime.limits import tune_malloc
 
         tune_malloc()  # large arrays from the heap, not mapped afresh each time (a process of one command)
     saved = guard()  # a failing stdout is an error naming it; a failing stderr never changes the outcome
@@ -82,7 +82,7 @@ def main(argv: list[str] | None = None) -> None:
     try:
         track_inputs()  # an output that is one of the command's inputs is refused
         try:
-            from wmrid.core.limits import memory_budget
+            from wmrid.runtime.limits import memory_budget
 
             if not {"--help", "-h", "--version"} & set(args):
                 memory_budget()  # a malformed WMRID_MEMORY_BUDGET is a usage error whatever the command reads
@@ -193,7 +193,7 @@ def _leave(argv: list[str] | None, saved: Any, previous: Any) -> None:
     if argv is None:
         return
     from wmrid.cli.streams import unguard
-    from wmrid.core import interrupts
+    from wmrid.runtime import interrupts
 
     unguard(saved)
     interrupts.restore(previous)
@@ -202,7 +202,7 @@ def _leave(argv: list[str] | None, saved: Any, previous: Any) -> None:
 def _out_of_memory() -> str:
     """The line for a MemoryError: the inputs the command named (its arguments that are existing paths, or "-"), the
     budget, and the address-space cap when there is one."""
-    from wmrid.core.limits import ENV, address_space_cap, describe, memory_budget
+    from wmrid.runtime.limits import ENV, address_space_cap, describe, memory_budget
 
     named = [a for a in _invocation.get() if a == "-" or (not a.startswith("-") and os.path.exists(a))]
     inputs = ", ".join("standard input" if a == "-" else a for a in named) or "the input"
@@ -220,14 +220,14 @@ def _out_of_memory() -> str:
 
 def _kept() -> str:
     """What a stopped command leaves: the files it wrote completely before the stop (a fleet's table), or none."""
-    from wmrid.core.atomic import written
+    from wmrid.runtime.atomic import written
 
     done = written()
     return f"wrote {', '.join(done)} before the stop" if done else "no output was written"
 
 
 def _stopped_by() -> str:
-    from wmrid.core import interrupts
+    from wmrid.runtime import interrupts
 
     received = interrupts.received
     if received is None or received == signal.SIGINT:

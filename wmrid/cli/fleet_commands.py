@@ -1,5 +1,5 @@
 """``wmrid fleet`` and ``wmrid fleet-report``: each a translation of its flags into one library call
-(:mod:`wmrid.api.fleet`, :mod:`wmrid.api.fleet_reporting`) and a rendering of the outcome."""
+(:mod:`wmrid.fleets.run`, :mod:`wmrid.fleets.report`) and a rendering of the outcome."""
 
 from __future__ import annotations
 
@@ -178,7 +178,7 @@ def fleet_command(
 
     require("distributed", "fleet")  # before the fleet's modules, which import pyarrow
     require("pyarrow", "fleet")
-    from wmrid.api.fleet import fleet as run_fleet
+    from wmrid.fleets.run import fleet as run_fleet
 
     given = _given_options(log_options, observer, fit, method.value, rotor_inertia)
     if output is None:
@@ -323,9 +323,9 @@ def fleet_report_command(
 
     require("pyarrow", "fleet", "wmrid fleet-report")
     require("matplotlib", "fleet", "wmrid fleet-report")
-    from wmrid.api.fleet_reporting import check_settings, fleet_report as build, write_fleet_report
     from wmrid.api.reporting import REPORT_SUFFIXES
-    from wmrid.reporting.fleet_report import ranked_table, to_json_dict
+    from wmrid.fleets.rendering import ranked_table, to_json_dict
+    from wmrid.fleets.report import check_settings, fleet_report as build, write_fleet_report
 
     suffix = output.suffix.lower() if output is not None else None
     if suffix not in (None, *REPORT_SUFFIXES):

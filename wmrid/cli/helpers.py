@@ -74,9 +74,9 @@ def write_estimates(result, path: Path, force: bool) -> None:
     the final estimate's std (``NAME_std``, the same in every message), the prediction errors and lambda_min."""
     import numpy as np
 
-    from wmrid.core.atomic import to_json_text
     from wmrid.io.mcap.series_writer import write_series_mcap
     from wmrid.model.base_params import recover_history
+    from wmrid.runtime.atomic import to_json_text
 
     if path.suffix.lower() != ".mcap":
         raise UsageError(f"--mcap-out {path}: the estimates are written as MCAP; name the file .mcap")
@@ -137,7 +137,7 @@ def activity(label: str) -> Iterator[Callable[[str], None]]:
 
 
 def on_stdout(output: Any) -> bool:
-    """Whether ``-o`` named standard output (``-``, /dev/stdout, /dev/fd/1: :func:`wmrid.core.atomic.stream_fd`)."""
-    from wmrid.core.atomic import stream_fd
+    """Whether ``-o`` named standard output (``-``, /dev/stdout, /dev/fd/1: :func:`wmrid.runtime.atomic.stream_fd`)."""
+    from wmrid.runtime.atomic import stream_fd
 
     return output is not None and stream_fd(str(output)) == 1

@@ -98,8 +98,8 @@ def identify_command(
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
     from wmrid.api.identification import check_validation, identify as run_identify, robot_for, validate as run_validate
-    from wmrid.core.atomic import output_group, write_json
     from wmrid.reporting.render import print_identification, to_json
+    from wmrid.runtime.atomic import output_group, write_json
 
     if out is not None:
         deprecated_option("--out", "--mcap-out")
@@ -222,7 +222,7 @@ def report_command(
             input_, truth=truth_params, figures=drawn, rotor_inertia=rotor_inertia, options=log_options, robot=robot,
             identification=how, command=invocation(),
         )  # fmt: skip
-        from wmrid.core.atomic import output_group
+        from wmrid.runtime.atomic import output_group
 
         with output_group():  # the residuals and the report appear together or not at all
             if residuals is not None:
@@ -275,8 +275,8 @@ def compare_command(
     """Run every identification method on LOG: estimates, standard errors, errors against --truth, fit on
     --validate OTHER, run time.  Every method identifies the same friction model (--friction)."""
     from wmrid.api.identification import compare as run_compare, robot_for
-    from wmrid.core.atomic import write_json
     from wmrid.reporting.render import print_comparison, to_json
+    from wmrid.runtime.atomic import write_json
 
     robot_obj = robot_for(robot, log_options, check_rotor(rotor_inertia))
     with activity("wmrid compare") as stage:

@@ -121,10 +121,10 @@ def live_command(
     seconds, and when it ends (--idle, --until, --until-std, the recording's end, Ctrl-C) give identify's result on
     the same messages."""
     from wmrid.api.live import check_output, live as run_live
-    from wmrid.core import interrupts
-    from wmrid.core.atomic import write_json
     from wmrid.reporting.live_view import json_line
     from wmrid.reporting.render import print_identification
+    from wmrid.runtime import interrupts
+    from wmrid.runtime.atomic import write_json
 
     if output is not None:
         check_output(output, force)

@@ -85,9 +85,9 @@ def plan_command(
 ) -> None:
     """Design the drive that identifies ROBOT best within its limits, and predict how precise the result will be."""
     from wmrid.api.planning import check_plan_output, plan as make, write_plan
-    from wmrid.core.atomic import output_group
     from wmrid.reporting.plan_view import print_plan
     from wmrid.reporting.render import to_json
+    from wmrid.runtime.atomic import output_group
 
     outputs = list(output or [])
     for path in outputs:

@@ -187,9 +187,9 @@ def monitor_command(
     "parameters": {...}, ...}], "detector": {..., "threshold", "false_alarm_rate_per_hour"}, ...}.
     """
     from wmrid.api.monitoring import monitor as run_monitor
-    from wmrid.core.atomic import write_json
     from wmrid.reporting.monitor_view import print_monitor
     from wmrid.reporting.render import to_json
+    from wmrid.runtime.atomic import write_json
 
     with activity("wmrid monitor"):
         result = run_monitor(

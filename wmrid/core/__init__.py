@@ -1,1 +1,2 @@
-"""Lowest layer: errors and exit codes, the memory budget, interrupts, atomic outputs, the wheel-log types."""
+"""Lowest layer, the domain's own types: errors and exit codes, the settings' choices, the optional extras, the
+wheel-log types."""

@@ -23,7 +23,8 @@ REQUIRED = ("t", "eta_r", "eta_l", "tau_r", "tau_l")
 POSE = ("x", "y", "phi")
 
 
-#: Optional wheel-speed reference (set-points, rad/s): the instruments of ``--method iv`` (:mod:`wmrid.estimators.iv`).
+#: Optional wheel-speed reference (set-points, rad/s): the instruments of ``--method iv``
+# (:mod:`wmrid.estimators.regression.iv`).
 REFERENCE = ("eta_ref_r", "eta_ref_l")
 
 

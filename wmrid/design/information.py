@@ -1,7 +1,7 @@
 """The precision a drive will give, before anyone drives it: the covariance of the base parameters theta0 that
 wmrid's observer-based estimator would report on a log of that motion with white sensor noise.
 
-The estimator (:mod:`wmrid.estimators.observer`) is a least-squares fit of u = w theta per wheel, where
+The estimator (:mod:`wmrid.estimators.observer.step`) is a least-squares fit of u = w theta per wheel, where
 w' = g(eta, tau) - k w is the low-passed regressor (Eq. 27) and u = eta - eta_f, eta_f = k/(s + k) eta.  On a noisy
 log (speed noise e_eta, effort noise e_tau, white, per sample) the residual of wheel i at the true theta is, to first
 order in the noise (the regressor's columns hold the noisy eta and tau)::

@@ -6,11 +6,11 @@ equation, which a sinusoidal motion turns into viscous friction) and biases F_v 
 
 The estimate profiles the fit over the shift.  For each candidate delay d on a grid of DELAY_STEP_S over
 [-span, span], the efforts are read d later than stamped, tau_log(t + d)
-(:func:`wmrid.estimators.idim_regression.shifted`), and
+(:func:`wmrid.estimators.regression.idim_rows.shifted`), and
 the
-inverse-dynamics regression of :mod:`wmrid.estimators.idim` (the same zero-phase filter, cutoff fixed once from the log)
-is solved by least squares; its residual sum of squares RSS(d) is smallest at the delay that makes the model
-fit best.  A parabola through the three grid points around the minimum refines it below the grid step.
+inverse-dynamics regression of :mod:`wmrid.estimators.regression.idim` (the same zero-phase filter, cutoff fixed once
+from the log) is solved by least squares; its residual sum of squares RSS(d) is smallest at the delay that makes the
+model fit best.  A parabola through the three grid points around the minimum refines it below the grid step.
 Its standard error is the delete-a-segment jackknife of that minimiser: RSS(d) minus one segment's share,
 minimised again, for each of G contiguous segments (:func:`wmrid.estimators.uncertainty.segment_count`); infinite
 (the log does not pin the delay) when a replicate's minimum is at the edge of the search (:func:`_jackknife_std`).
@@ -135,17 +135,18 @@ def estimate_delay(
     """The delay of the efforts behind the speeds, with its standard error (see the module docstring).
 
     t (n,) s, eta (n, 2) rad/s, tau (n, 2); span s: search [-span, span]; torque_hold, control_rate: how the
-    effort was held (:func:`wmrid.estimators.idim_regression.effort_delay`, applied on top of each candidate);
-    cutoff_hz: the filter's (default: IDIM's, from the log, once: :func:`wmrid.estimators.idim.fit_with_cutoff`).
-    reference (n, 2) rad/s: the logged wheel-speed set-points; given, the delay is the root of an instrumental-variable
-    moment (:func:`_iv_profile`), which a disturbance inside the feedback loop does not bias, instead of the
-    least-squares minimiser.  form : the friction model profiled (a :class:`wmrid.model.dynamics.RegressorForm` with
-    caster drag, :func:`wmrid.estimators.observer_pass.delay_profile_form`; None: the wheels' friction only).  Raises
+    effort was held (:func:`wmrid.estimators.regression.idim_rows.effort_delay`, applied on top of each candidate);
+    cutoff_hz: the filter's (default: IDIM's, from the log, once:
+    :func:`wmrid.estimators.regression.idim.fit_with_cutoff`). reference (n, 2) rad/s: the logged wheel-speed
+    set-points; given, the delay is the root of an instrumental-variable moment (:func:`_iv_profile`), which a
+    disturbance inside the feedback loop does not bias, instead of the least-squares minimiser.  form : the friction
+    model profiled (a :class:`wmrid.model.dynamics.RegressorForm` with caster drag,
+    :func:`wmrid.estimators.observer.observe.delay_profile_form`; None: the wheels' friction only).  Raises
     NotIdentifiableError when the log is too short.
     """
-    from wmrid.estimators.idim import fit_with_cutoff, segment_index
-    from wmrid.estimators.idim_checks import slow_rows
-    from wmrid.estimators.idim_regression import MAX_EFFORT_SHIFT_S, default_cutoff, effort_delay, idim_regression
+    from wmrid.estimators.regression.idim import fit_with_cutoff, segment_index
+    from wmrid.estimators.regression.idim_checks import slow_rows
+    from wmrid.estimators.regression.idim_rows import MAX_EFFORT_SHIFT_S, default_cutoff, effort_delay, idim_regression
 
     if not (math.isfinite(span) and 0 < span <= MAX_EFFORT_SHIFT_S / 2):
         raise UsageError(f"the delay search span must be in (0, {MAX_EFFORT_SHIFT_S / 2:g}] s, got {span!r}")
@@ -226,24 +227,25 @@ def _iv_profile(
     tau: np.ndarray, seg: np.ndarray, g: int,
 ) -> tuple[float, float] | None:  # fmt: skip
     """(delay s, its jackknife std s) by instrumental variables, or None when the reference cannot serve (another
-    shape, non-finite, or a first-stage R^2 below :data:`wmrid.estimators.iv.MIN_R2`: it does not describe the motion).
+    shape, non-finite, or a first-stage R^2 below :data:`wmrid.estimators.regression.iv.MIN_R2`: it does not describe
+    the motion).
 
     Why not least squares: inside a feedback loop the controller answers a disturbance d with an effort that lags it
     by about the loop's time constant (20 ms on the light AMR), so a shifted effort fits part of d, and the RSS
     profile's minimum moves towards that lag (to the edge of the +/-20 ms search, or -19.6 +/- 2.85 ms applied, on
     a 200 Hz AMR log on one clock).  The reference was set before the disturbance acted, so a moment built from it
     is not moved by d.  Model: the effort read d0 later, y(d0) = X phi + e, e uncorrelated with the instruments Z
-    (the IDIM regressor rebuilt from the reference, :func:`wmrid.estimators.iv.instrument_regression`).  For each
-    candidate d, phi(d) = (Z^T X)^-1 Z^T y(d) (IDIM-IV) leaves one more instrument free to test the delay: w = dZ/dt
-    phi(0), the derivative of the effort the reference predicts (a central difference over one logged step, at
+    (the IDIM regressor rebuilt from the reference, :func:`wmrid.estimators.regression.iv.instrument_regression`).  For
+    each candidate d, phi(d) = (Z^T X)^-1 Z^T y(d) (IDIM-IV) leaves one more instrument free to test the delay: w =
+    dZ/dt phi(0), the derivative of the effort the reference predicts (a central difference over one logged step, at
     least 1 ms).  The moment m(d) = w^T (y(d) - X phi(d)) is zero at d0 up to noise and grows through it with slope
     w^T (I - X (Z^T X)^-1 Z^T) dy/dt, about |w|^2 less its part in the instruments' span, > 0: the delay is the grid
     interval where m rises through zero (linear interpolation), the one nearest 0 if several.  Its std: the
     delete-a-segment jackknife of that root (per-segment moments, no refit); infinite when the full log or a
     jackknife replicate has no root in the span, i.e. the log does not pin the delay.  On logs without a
     disturbance it agrees with least squares (5 ms late at 1 kHz: +4.96 +/- 0.07 ms against +4.96 +/- 0.07 ms)."""
-    from wmrid.estimators.idim_regression import shifted
-    from wmrid.estimators.iv import MIN_R2, first_stage_r2, instrument_regression
+    from wmrid.estimators.regression.idim_rows import shifted
+    from wmrid.estimators.regression.iv import MIN_R2, first_stage_r2, instrument_regression
 
     reference = np.asarray(reference, dtype=np.float64)
     if reference.shape != (len(t), 2) or not np.all(np.isfinite(reference)):
@@ -308,7 +310,7 @@ def _iv_profile(
 def _theta0_slope(q: np.ndarray, r: np.ndarray, effort: Any, delay: float) -> np.ndarray | None:
     """d theta0 / d delay (8,) per s of the least-squares fit (rows = q r, efforts ``effort(d)``) at ``delay``, by a
     central difference over DELAY_STEP_S; None when R is singular or the slope is not finite."""
-    from wmrid.estimators.idim import phi_to_theta0, theta0_jacobian
+    from wmrid.estimators.regression.idim import phi_to_theta0, theta0_jacobian
 
     try:
         phi = np.linalg.solve(r, q.T @ effort(delay))

@@ -193,7 +193,7 @@ def start_sensitivity(
 ) -> np.ndarray:
     """How much the start value sets each base parameter, (8,) in its units.
 
-    The final estimate is exactly Gamma^-1 (alpha theta_init + data) (see wmrid.estimators.observer), so its
+    The final estimate is exactly Gamma^-1 (alpha theta_init + data) (see wmrid.estimators.observer.step), so its
     sensitivity to the start is alpha Gamma^-1: about 0 along directions the log excites, the identity
     along directions it does not (where Gamma's data part is 0 and the estimate IS the start).  A start
     wrong by 100 % of max(|theta_init|, |theta_hat|) in each entry, independently, then moves theta0 by

@@ -1,8 +1,8 @@
 """The result every identification method returns: base parameters with their covariance.
 
-The observer (:mod:`wmrid.estimators.observer_pass`), IDIM least squares (:mod:`wmrid.estimators.idim`), recursive least
-squares
-(:mod:`wmrid.estimators.rls`) and output error (:mod:`wmrid.estimators.output_error`) all end in a
+The observer (:mod:`wmrid.estimators.observer.observe`), IDIM least squares (:mod:`wmrid.estimators.regression.idim`),
+recursive least squares
+(:mod:`wmrid.estimators.regression.rls`) and output error (:mod:`wmrid.estimators.output_error`) all end in a
 :class:`BaseEstimate`, so
 that reports, ``wmrid compare`` and ``wmrid monitor`` are blind to the method.
 """

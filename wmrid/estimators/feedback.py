@@ -1,16 +1,16 @@
 """The closed-loop check: is the observer's estimate biased by the feedback of the loop that recorded the log?
 
 In closed loop the controller answers a disturbance (a caster's drag, the floor), so the efforts in the observer's
-regressor carry it and least squares is no longer consistent (:mod:`wmrid.estimators.iv` explains why).  The bias is the
-same all along the log, so the jackknife cannot see it.  What can is a second estimate that the feedback does not
-bias, or biases far less, computed on the same log: the Durbin-Wu-Hausman idea (Janot, Vandanjon & Gautier, IEEE
-TCST 2014, propose it for robots).  The two agree up to noise when there is no feedback bias and differ beyond it
+regressor carry it and least squares is no longer consistent (:mod:`wmrid.estimators.regression.iv` explains why).  The
+bias is the same all along the log, so the jackknife cannot see it.  What can is a second estimate that the feedback
+does not bias, or biases far less, computed on the same log: the Durbin-Wu-Hausman idea (Janot, Vandanjon & Gautier,
+IEEE TCST 2014, propose it for robots).  The two agree up to noise when there is no feedback bias and differ beyond it
 when there is.  A feedback bias needs a disturbance to feed back, and a disturbance shows in the observer's
 prediction error (:func:`disturbance`); the check runs only then.
 
-The second estimate: IDIM-IV (:func:`wmrid.estimators.iv.identify_iv`) when the log carries the wheel-speed reference
-(eta_ref_r, eta_ref_l), else IDIM (:func:`wmrid.estimators.idim.identify_idim`), whose regressor (the speeds) the
-feedback
+The second estimate: IDIM-IV (:func:`wmrid.estimators.regression.iv.identify_iv`) when the log carries the wheel-speed
+reference (eta_ref_r, eta_ref_l), else IDIM (:func:`wmrid.estimators.regression.idim.identify_idim`), whose regressor
+(the speeds) the feedback
 reaches only through the tracking error the controller lets through.  Both are fitted on the observer's jackknife
 segments, so the difference delta = theta0_observer - theta0_other has a delete-a-segment jackknife of its own
 (the classical Hausman variance V_IV - V_LS needs the least-squares estimate to be efficient, which the observer
@@ -96,7 +96,7 @@ def difference_test(
 def systematic_variance(other: BaseEstimate) -> tuple[np.ndarray, list[str]]:
     """(n0,) variance, per parameter, of the errors of ``other`` that its jackknife cannot see and its own checks
     measured (``diagnostics["checks"]``: IDIM's estimate at a lower filter cutoff and without the slow rows,
-    :mod:`wmrid.estimators.idim_checks`), delta_j^2 summed over the applied checks; and their names.
+    :mod:`wmrid.estimators.regression.idim_checks`), delta_j^2 summed over the applied checks; and their names.
 
     Noise in the speeds biases IDIM's inertia towards zero (errors in variables) by the same amount all along the
     log, so it shows in the difference from the observer exactly as a feedback bias would.  Its mark is that the
@@ -118,7 +118,8 @@ def systematic_variance(other: BaseEstimate) -> tuple[np.ndarray, list[str]]:
 
 def other_estimate(log: Any, result: Any, grid: tuple[float, float, int] | None = None) -> BaseEstimate:
     """IDIM-IV on ``log``'s reference when it has one, else IDIM, with the observer's settings (form, hold) and the
-    jackknife segments ``grid`` (:func:`wmrid.estimators.idim.jackknife_segments`; None: the method's own)."""
+    jackknife segments ``grid`` (:func:`wmrid.estimators.regression.idim.jackknife_segments`; None: the method's
+    own)."""
     t = np.asarray(log.t, dtype=np.float64)
     eta = np.asarray(log.eta, dtype=np.float64)
     tau = np.asarray(log.tau, dtype=np.float64)
@@ -128,13 +129,13 @@ def other_estimate(log: Any, result: Any, grid: tuple[float, float, int] | None 
     }  # fmt: skip
     reference = getattr(log, "reference", None)
     if reference is not None:
-        from wmrid.estimators.iv import identify_iv
+        from wmrid.estimators.regression.iv import identify_iv
 
         try:
             return identify_iv(t, eta, tau, reference, **common)
         except NotIdentifiableError:  # a reference that does not describe the motion: IDIM, as without one
             pass
-    from wmrid.estimators.idim import identify_idim
+    from wmrid.estimators.regression.idim import identify_idim
 
     return identify_idim(t, eta, tau, **common)
 

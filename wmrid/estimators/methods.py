@@ -58,13 +58,13 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
     tau = np.asarray(log.tau, dtype=np.float64)
     applied = (observer.diagnostics.get("delay") or {}).get("applied_s") or 0.0
     if applied:  # the efforts' delay the observer's run applied (identify(..., delay=)): the same log for every method
-        from wmrid.estimators.idim_regression import shifted
+        from wmrid.estimators.regression.idim_rows import shifted
 
         tau = shifted(t, tau, -applied)
     source = getattr(log, "source", observer.source)
     try:
         if name == "idim":
-            from wmrid.estimators.idim import identify_idim
+            from wmrid.estimators.regression.idim import identify_idim
 
             # the observer's form: IDIM models the casters' drag too when the observer does (wheel+caster)
             # and the effort held as the observer assumed (--torque-hold, --control-rate)
@@ -73,7 +73,7 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
                 t, eta, tau, cutoff_hz=options.cutoff_hz, weighted=options.weighted, form=observer.form, **hold
             )
         if name == "iv":
-            from wmrid.estimators.iv import identify_iv
+            from wmrid.estimators.regression.iv import identify_iv
 
             reference = getattr(log, "reference", None)
             if reference is None:
@@ -88,7 +88,7 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
                 **hold,
             )  # fmt: skip
         if name == "rls":
-            from wmrid.estimators.rls import identify_rls
+            from wmrid.estimators.regression.rls import identify_rls
 
             hold = {"torque_hold": observer.settings.torque_hold, "control_rate": observer.settings.control_rate}
             return identify_rls(

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.estimators.diagnostics import MISMATCH_RELEVANT, flagged_names
-from wmrid.estimators.observer_kernel import project_history_box
+from wmrid.estimators.observer.kernel import project_history_box
 from wmrid.estimators.uncertainty import FILTER_MEMORY, segments_of, slow_speed_difference
 from wmrid.model import dynamics as model
 from wmrid.model.base_params import BaseFit, fit_base_parameters
@@ -80,8 +80,8 @@ def widen(
     """The covariance (n0, n0) of theta0 with the three widenings, and their record (JSON-ready).
 
     fit : the minimum-distance fit of theta (2, p, projected on the box); out : the replay's output
-    (:class:`wmrid.estimators.replay.ReplayOutput`); gamma, theta_u : its final Gamma and unconstrained estimate; lo,
-    hi :
+    (:class:`wmrid.estimators.observer.replay.ReplayOutput`); gamma, theta_u : its final Gamma and unconstrained
+    estimate; lo, hi :
     the box; weight_cov : the fit's weights; block_mid (J,) s : the blocks' mid-times from the log's start;
     duration : s; k : the observer's gain, 1/s.  The record holds the scale's test figures, "relative_misfit",
     "discretisation" and "slow_speed" (:func:`discretisation_error`, :func:`slow_speed_term`; fragile parameters

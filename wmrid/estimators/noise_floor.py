@@ -1,6 +1,6 @@
 """The wheel-speed sensors' white-noise level, measured from the log itself in bounded memory.
 
-The observer's prediction error e = eta - eta_hat (:mod:`wmrid.estimators.observer_kernel`) is, where the model holds,
+The observer's prediction error e = eta - eta_hat (:mod:`wmrid.estimators.observer.kernel`) is, where the model holds,
 the speed sensors' noise and little else: the predictor follows the speeds with a slow gain, so
 rms(e) ~ sigma.  Where the model fails -- wheels that slip, backlash, a current loop the model leaves out --
 e grows far beyond sigma (docs/explanation/checks.md, "Slip and other gross misfit").  sigma itself comes

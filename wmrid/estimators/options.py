@@ -51,7 +51,7 @@ class ObserverOptions:
     form : "auto" (the paper's 7 columns when each wheel keeps one sign, else the general 8), "paper" or "general".
     k : 1/s, the state predictor's and filter's gain, in (0, MAX_K].  alpha : the start value's weight, Gamma(0) =
     alpha I, > 0.  box_width : the parameter box's half-width in units of the start value (inf: no box;
-    :func:`wmrid.estimators.observer_pass.default_box`).  torque_hold : "zoh" (each effort held over its step) or
+    :func:`wmrid.estimators.observer.observe.default_box`).  torque_hold : "zoh" (each effort held over its step) or
     "foh" (linear between samples).  control_rate : Hz, the rate of a controller faster than the log that held the
     effort (None: the log's own).  delay : s, how late the efforts are stamped against the speeds: read that much
     earlier; "auto": estimated and applied when significant; None: as stamped unless the timing check finds
@@ -121,11 +121,11 @@ class MethodOptions:
     """Options of the classical methods.
 
     cutoff_hz : IDIM/RLS low-pass cutoff, Hz (None: from the log, see
-    :func:`wmrid.estimators.idim_regression.default_cutoff`).
+    :func:`wmrid.estimators.regression.idim_rows.default_cutoff`).
     weighted : IDIM two-step weighted least squares.  forgetting : RLS forgetting factor in (0, 1].
     How the effort was held between samples is the observer's (its ``torque_hold`` and ``control_rate``,
     :class:`wmrid.estimators.options.ObserverOptions`): OE simulates it, IDIM and RLS read the efforts half a hold
-    period earlier under "zoh" (:func:`wmrid.estimators.idim_regression.effort_delay`).
+    period earlier under "zoh" (:func:`wmrid.estimators.regression.idim_rows.effort_delay`).
     """
 
     cutoff_hz: float | None = None

@@ -94,7 +94,7 @@ TIME_UNITS = (
 def signal_findings(
     scales: dict[str, Any], r: float | None = None, notes: tuple[str, ...] = ()
 ) -> list[dict[str, Any]]:
-    """Unit doubts the signals show by themselves (``scales``: :meth:`wmrid.estimators.survey.Survey.scales`;
+    """Unit doubts the signals show by themselves (``scales``: :meth:`wmrid.estimators.observer.survey.Survey.scales`;
     ``r`` m: the robot's wheel radius, or None; ``notes``: the log's reading notes, which say when an effort topic held
     whole numbers before it was put on the speed stamps).  Each: {"quantity": "time"|"speed"|"effort", "unit", "fix",
     "text", "doubt"}; "columns" when a wheel's speed and effort fit far better exchanged (``scales["swapped"]``)."""

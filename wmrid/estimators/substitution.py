@@ -10,7 +10,7 @@ import numpy as np
 
 from wmrid.estimators.estimate import BaseEstimate
 from wmrid.estimators.model_error import record_widening
-from wmrid.estimators.observer_pass import CLOSED_LOOP_CAVEAT
+from wmrid.estimators.observer.observe import CLOSED_LOOP_CAVEAT
 from wmrid.estimators.result import IdentificationResult, MethodSettings, finite_or_none, reported_names
 from wmrid.estimators.uncertainty import interval_factor
 from wmrid.model.base_params import derived_with_std
@@ -37,7 +37,8 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
     # The model-error scale and the low-speed difference are evidence about the log and the model, so they carry
     # over to another method: the log departs from the same model (and in the same slow parts) whichever method
     # reads it.  The discretisation term is the observer's own replay and does not.
-    # A method that refits itself without the slow parts (IDIM, wmrid.estimators.idim_checks) uses its own difference
+    # A method that refits itself without the slow parts (IDIM, wmrid.estimators.regression.idim_checks) uses its own
+    # difference
     # instead of the observer's, and its other alternative fit (another filter cutoff) the same way.
     slow = inflation.get("slow_speed") or {}
     own = est.diagnostics.get("checks") or {}

@@ -302,7 +302,7 @@ def apply_delay(
     of the search; ``form`` the friction model profiled).  The warnings name the likely cause: two clocks, or a
     controller faster than the log."""
     from wmrid.core.wheel_log import LogStream, WheelLog
-    from wmrid.estimators.idim_regression import MAX_EFFORT_SHIFT_S, shifted
+    from wmrid.estimators.regression.idim_rows import MAX_EFFORT_SHIFT_S, shifted
 
     whole = log.read() if isinstance(log, LogStream) else log
     t = np.asarray(whole.t, dtype=np.float64)

@@ -1,6 +1,6 @@
 """Standard errors of the estimate that stay honest when residuals are coloured.
 
-The estimator is a least-squares fit of u = w theta (see :mod:`wmrid.estimators.observer`), so at the end
+The estimator is a least-squares fit of u = w theta (see :mod:`wmrid.estimators.observer.step`), so at the end
 theta_hat = P (alpha theta_0 + sum h w^T u), P = Gamma^-1, and theta_hat - theta = P sum h w^T r
 with r the residual.  The residual carries coloured disturbances (a caster, slip) and, in closed
 loop, the regressor responds to them, so successive terms are correlated over seconds and the

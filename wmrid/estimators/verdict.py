@@ -208,7 +208,8 @@ def _negligible(name: str, value: float, std: float, result: Any) -> float | Non
     return bound if bound < NEGLIGIBLE * scale else None
 
 
-#: Words of the signal warnings that put the efforts' signs in doubt (wmrid.estimators.survey.Survey.signal_warnings).
+#: Words of the signal warnings that put the efforts' signs in doubt
+# (wmrid.estimators.observer.survey.Survey.signal_warnings).
 SIGN_WARNINGS = ("mostly opposes its speed", "never changes sign while its speed does")
 
 

@@ -103,7 +103,7 @@ class Assembler:
     def add(self, values: dict[str, Any], base: int) -> WheelLog | None:
         """The piece whose first row is data row ``base`` (0-based) of the file, or None if it has no rows left.
 
-        ``values`` holds the columns :func:`wmrid.io.columns.select` chose: with wheel positions (pos_r, pos_l) in
+        ``values`` holds the columns :func:`wmrid.io.table.columns.select` chose: with wheel positions (pos_r, pos_l) in
         place of the speeds, the piece's ``eta`` holds those positions, as read, for the caller to differentiate.
         """
         name, mapping = self.name, self.mapping

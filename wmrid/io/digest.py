@@ -15,9 +15,9 @@ _BLOCK = 1 << 20
 def regular_digest(path: str | os.PathLike[str]) -> tuple[str, int]:
     """(SHA-256 hex, bytes) of the regular file ``path``: its bytes up to the size it had when opened (a file that
     grows meanwhile is not chased), in blocks.  A device, a FIFO or a folder is refused unread
-    (:class:`wmrid.core.side_files.NotRegularFile`, an OSError: ``/dev/zero`` would never end, a FIFO never start);
+    (:class:`wmrid.runtime.side_files.NotRegularFile`, an OSError: ``/dev/zero`` would never end, a FIFO never start);
     other OSErrors pass through."""
-    from wmrid.core.side_files import open_regular
+    from wmrid.runtime.side_files import open_regular
 
     h = hashlib.sha256()
     with open_regular(path) as fh:

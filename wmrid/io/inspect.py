@@ -93,7 +93,7 @@ def _field_paths(contents: Any, kind: str) -> dict[str, list[str]]:
     in the recording (the distribution's own for a bag without them); a type that cannot be parsed has none."""
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-    from wmrid.io.field_paths import numeric_paths
+    from wmrid.io.ros.field_paths import numeric_paths
 
     store = get_typestore(Stores.ROS1_NOETIC if kind == "ros1 bag" else Stores.ROS2_HUMBLE)
     for msgtype, text in contents.definitions.values():
@@ -171,7 +171,7 @@ def _inspect_table(source, kind: str) -> TableInventory:
     else:
         import pandas as pd
 
-        from wmrid.io.csv_log import csv_layout, csv_stream
+        from wmrid.io.table.csv_log import csv_layout, csv_stream
 
         layout = csv_layout(source)
         try:

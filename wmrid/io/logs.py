@@ -1,11 +1,12 @@
 """Reading and writing wheel logs, whatever their format, as one log type (:class:`wmrid.core.wheel_log.WheelLog`).
 
 :func:`read_log` reads a log whole; :func:`open_log` returns a :class:`wmrid.core.wheel_log.LogStream` that reads it
-piece by piece.  The format is recognised in :mod:`wmrid.io.sources`; the pieces come from :mod:`wmrid.io.csv_log`,
-:mod:`wmrid.io.parquet_log` or :mod:`wmrid.io.mcap.log`; this module turns the columns into checked SI arrays
-(:class:`Assembler`: time stamps through :mod:`wmrid.io.stamps`, signals through :mod:`wmrid.io.signals`).
-``--columns t=time,eta_r=vel_right`` maps canonical names to the names in a file (:mod:`wmrid.io.columns`); other
-columns are ignored.  Rows stamped 0 among epoch times (a clock not yet set) are dropped, with a note.
+piece by piece.  The format is recognised in :mod:`wmrid.io.sources`; the pieces come from
+:mod:`wmrid.io.table.csv_log`, :mod:`wmrid.io.table.parquet_log` or :mod:`wmrid.io.mcap.log`; this module turns the
+columns into checked SI arrays (:class:`Assembler`: time stamps through :mod:`wmrid.io.stamps`, signals through
+:mod:`wmrid.io.signals`). ``--columns t=time,eta_r=vel_right`` maps canonical names to the names in a file
+(:mod:`wmrid.io.table.columns`); other columns are ignored.  Rows stamped 0 among epoch times (a clock not yet set) are
+dropped, with a note.
 
 Pieces: CSV and Parquet logs are read CHUNK_ROWS rows at a time (Parquet one row group at a time), so ``wmrid
 identify`` needs the same memory for a 4 h log as for a 1 h one.  Every row is checked as when the log is read whole;
@@ -23,7 +24,7 @@ import numpy as np
 
 from wmrid.core.errors import LogFormatError, UsageError, option
 from wmrid.core.extras import available, require
-from wmrid.io.mcap.joints import TopicSelection
+from wmrid.io.ros.joints import TopicSelection
 from wmrid.io.signals import SignalOptions, convert, position_to_rad, speed_from_position
 
 if TYPE_CHECKING:
@@ -38,15 +39,15 @@ from wmrid.core.wheel_log import (
 )
 from wmrid.io.assembler import MERGED_TIME, Assembler
 from wmrid.io.bag.log import read_bag_log, recording_paths
-from wmrid.io.columns import check_key
-from wmrid.io.csv_log import csv_chunks
-from wmrid.io.field_paths import field_signals
 from wmrid.io.mcap.log import read_mcap_log
-from wmrid.io.parquet_log import parquet_chunks
+from wmrid.io.ros.field_paths import field_signals
 from wmrid.io.sources import CSV_SUFFIXES, PARQUET_SUFFIXES, STDIN_NAME, Source, detect_format, one_line, open_source
 from wmrid.io.stamps import (
     TIME_UNITS,
 )
+from wmrid.io.table.columns import check_key
+from wmrid.io.table.csv_log import csv_chunks
+from wmrid.io.table.parquet_log import parquet_chunks
 
 
 def read_log(
@@ -66,7 +67,7 @@ def read_log(
     time_unit : ``"auto"`` (float -> s, integer -> ns), ``"s"``, ``"ms"``, ``"us"`` or ``"ns"``.
     data : the log's bytes when the caller has already read them (e.g. standard input it had to peek
         at); ``path`` then only names the log.
-    selection : MCAP topics, joints, time source and alignment (:mod:`wmrid.io.mcap.joints`).
+    selection : MCAP topics, joints, time source and alignment (:mod:`wmrid.io.ros.joints`).
     signals : what the speed and effort columns hold (:mod:`wmrid.io.signals`); gear_ratio : the robot's
         k_r, used to turn a motor current into a wheel torque when --gear-ratio is not given.
 
@@ -115,7 +116,7 @@ def open_log(
     explicit = set(columns or ())
 
     if data is None and path != "-":
-        from wmrid.core.atomic import register_input
+        from wmrid.runtime.atomic import register_input
 
         register_input(path)  # an output of this command may not be this file
     source = open_source(path) if data is None else Source(STDIN_NAME if path == "-" else path, None, data)
@@ -210,7 +211,7 @@ def _bag_log(
     gear_ratio: float | None,
     rows: int,
 ) -> LogStream:
-    from wmrid.core.atomic import register_input
+    from wmrid.runtime.atomic import register_input
 
     fs = field_signals(columns) if columns else None
     if columns and fs is None:
@@ -250,9 +251,9 @@ def write_log(
 
     CSV floats are written with repr precision (read back exactly); CSV has no place for ``metadata``,
     so it is dropped there.  Parquet keeps ``metadata`` in the schema's key/value metadata.  Files are
-    written atomically (:mod:`wmrid.core.atomic`); an existing file is replaced only with ``force``.
+    written atomically (:mod:`wmrid.runtime.atomic`); an existing file is replaced only with ``force``.
     """
-    from wmrid.core.atomic import atomic_output
+    from wmrid.runtime.atomic import atomic_output
 
     if path == "-":
         out = getattr(sys.stdout, "buffer", None)

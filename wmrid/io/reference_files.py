@@ -165,7 +165,7 @@ def write_reference(
         ``header.frame_id = frame_id`` and ``header.stamp`` the message's time (``zero_stamps``: 0 s, 0 ns instead).
     start_ns : integer nanoseconds of t = 0 on the MCAP clock; message i is logged and published at
         ``start_ns + round(t[i] * 1e9)`` ns (which must lie in [0, 2**31) s), its sequence number i.
-    force : replace an existing file.  The file is written atomically (:mod:`wmrid.core.atomic`): it appears complete
+    force : replace an existing file.  The file is written atomically (:mod:`wmrid.runtime.atomic`): it appears complete
         or not at all; an input of the running command is never overwritten.
 
     Raises :class:`UsageError` for malformed columns or options, :class:`LogFormatError` for times that are not
@@ -219,7 +219,7 @@ def _write_mcap(
 ) -> None:  # fmt: skip
     from mcap_ros2.writer import Writer
 
-    from wmrid.core.atomic import atomic_output
+    from wmrid.runtime.atomic import atomic_output
 
     if not isinstance(topic, str) or not topic:
         raise UsageError(f"topic must be a non-empty string, got {topic!r}")
@@ -263,7 +263,7 @@ def read_reference(
     missing) for an unreadable file, a missing column or topic, a value that is not a finite number, times that
     do not strictly increase, fewer than 2 samples; :class:`UsageError` for a path that cannot be read.
     """
-    from wmrid.core.atomic import register_input
+    from wmrid.runtime.atomic import register_input
 
     name = os.fspath(path)
     p = Path(name)

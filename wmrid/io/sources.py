@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 from typing import Any, BinaryIO
 
 from wmrid.core.errors import LogFormatError, UsageError
-from wmrid.core.limits import memory_budget, read_limited
-from wmrid.io.columns import suggest
+from wmrid.io.table.columns import suggest
+from wmrid.runtime.limits import memory_budget, read_limited
 
 CSV_SUFFIXES = (".csv", ".txt", ".tsv")
 

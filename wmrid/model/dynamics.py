@@ -355,7 +355,8 @@ def regressor(eta: np.ndarray, tau: np.ndarray, form: RegressorForm, eta_dot: np
 
 #: Samples by which the observer's derivative columns (c(eta) v', c(eta) w') take phi' late: the change of the speeds
 #: over the previous step, not the current one, whose noise the prediction error carries too (see
-#: :mod:`wmrid.estimators.observer`).  A lag of one step errs by about h phi'' / phi' of the column (1 ms at 1 kHz).
+#: :mod:`wmrid.estimators.observer.step`).  A lag of one step errs by about h phi'' / phi' of the column (1 ms at 1
+# kHz).
 DERIVATIVE_LAG = 1
 
 
@@ -367,7 +368,7 @@ def filter_regressor(
 
     The filters then take that column's input over a step from t_a to t_b as phi's rate of change over the step
     before it times the first-order-hold weights of c (:data:`DERIVATIVE_LAG`;
-    :func:`wmrid.estimators.observer.observer_step`).  No derivative is formed: summed over
+    :func:`wmrid.estimators.observer.step.observer_step`).  No derivative is formed: summed over
     steps the phi differences telescope, so a noisy phi enters the filtered column once, not divided by the step
     (with c constant, filtered phi' = phi - k filtered phi, exactly).
 

@@ -285,10 +285,10 @@ def load_robot(spec: str) -> Robot:
         )
     if path.is_dir():
         raise RobotFileError(f"robot {spec!r} is a directory; give a robot TOML file")
-    from wmrid.core.atomic import register_input
+    from wmrid.runtime.atomic import register_input
 
     register_input(path)
-    from wmrid.core.limits import ROBOT_FILE_LIMIT, read_limited
+    from wmrid.runtime.limits import ROBOT_FILE_LIMIT, read_limited
 
     try:
         text = read_limited(

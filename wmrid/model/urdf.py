@@ -436,7 +436,7 @@ def load_robot_urdf(
     name : default the URDF's <robot name>, else the file name without extension.
     torque_constant : k_t (N m/A) of each motor; efficiency : of the gearbox, in (0, 1].
     """
-    from wmrid.core.atomic import register_input
+    from wmrid.runtime.atomic import register_input
 
     register_input(path)
     model = read_urdf(

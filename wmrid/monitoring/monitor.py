@@ -62,8 +62,8 @@ Caster drag.  A model identified with ``--friction wheel+caster`` (its JSON ``th
 :meth:`wmrid.model.dynamics.RegressorForm.from_dict`) adds its caster columns to Phi: column j of ``form.caster_map``
 adds theta0[param_j] col_j [1, pattern_j] to the wheel torques (:func:`wmrid.model.torques.friction_torque`),
 smoothed as the other speed columns; p's drag entries are theta0's (as in
-:func:`wmrid.estimators.idim_regression.rows_from_features`), with their reported standard errors.  The test then has
-len(p)
+:func:`wmrid.estimators.regression.idim_rows.rows_from_features`), with their reported standard errors.  The test then
+has len(p)
 degrees of freedom, S / len(p) ~ F(len(p), dof).  After a change the segment is identified with
 ``friction="wheel+caster"`` and the model's caster positions (its ``form.geometry``) when it has them, else with the
 two-term drag (Cv, Cw) (where the wheels never reverse, with wheel friction only; a warning says so).

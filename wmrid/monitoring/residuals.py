@@ -42,7 +42,8 @@ class Signals:
         """The regressor (m, 2, len(p)) of ``form``: phi (``which`` "res") or phi_test ("test"), with a
         ``wheel+caster`` form's drag columns appended: column j of ``form.caster_map`` adds
         col_j x [1, pattern_j] to the wheel torques, so it goes to p's entry of its parameter (as
-        :func:`wmrid.estimators.idim_regression.rows_from_features` maps them), smoothed as the other speed columns."""
+        :func:`wmrid.estimators.regression.idim_rows.rows_from_features` maps them), smoothed as the other speed
+        columns."""
         base = self.phi if which == "res" else self.phi_test
         form = caster_form(form)
         if form is None:

@@ -249,10 +249,10 @@ def _form_of(form_d: Any, source: str, hint: str) -> RegressorForm | None:
 
 def load_model(path: str | Path) -> MonitoredModel:
     """The model in an ``identify`` JSON result file; UsageError (one line, naming the file) otherwise."""
-    from wmrid.core.atomic import register_input
+    from wmrid.runtime.atomic import register_input
 
     register_input(path)
-    from wmrid.core.limits import memory_budget, read_limited
+    from wmrid.runtime.limits import memory_budget, read_limited
 
     try:
         text = read_limited(

@@ -10,10 +10,10 @@ from typing import Any
 from wmrid.core.errors import NotIdentifiableError
 from wmrid.core.wheel_log import LogStream
 from wmrid.estimators.diagnostics import AUTO_NO_REVERSAL, AUTO_P, caster_drag_test
-from wmrid.estimators.observer_pass import observe
+from wmrid.estimators.observer.observe import observe
+from wmrid.estimators.observer.survey import Survey
 from wmrid.estimators.options import ObserverOptions
 from wmrid.estimators.result import IdentificationResult
-from wmrid.estimators.survey import Survey
 from wmrid.model.robot import Robot
 
 
@@ -31,7 +31,7 @@ def choose_friction(
     ``diagnostics["friction"]``).  ``auto``: the wheel model and the caster model (one more pass over the log), the
     caster model taken when a Wald test puts its drag off zero at p < AUTO_P (never on a log whose wheels keep one
     sign, and not when the drag would push the robot); with the casters' positions and ``load_terms``, then also
-    ``wheel+caster+load`` (:func:`_with_load`).  Each pass: :func:`wmrid.estimators.observer_pass.observe`."""
+    ``wheel+caster+load`` (:func:`_with_load`).  Each pass: :func:`wmrid.estimators.observer.observe.observe`."""
 
     def run(model: str) -> IdentificationResult:
         return observe(stream, sv, robot, replace(options, friction=model), geometry, progress)
@@ -74,7 +74,7 @@ def _with_load(
     The second condition guards against load terms that fit something else and move the fit away from the model
     instead of towards it.  (The case that motivated it -- the paper robot's MuJoCo plan log at 0.02 rad/s: D1dv
     -0.91 N s^2/m for the engine's -0.43, S 189 where the caster model had 133 -- was a delay the timing check had
-    invented from the casters' drag, :func:`wmrid.estimators.observer_pass.delay_profile_form`; profiled with the
+    invented from the casters' drag, :func:`wmrid.estimators.observer.observe.delay_profile_form`; profiled with the
     drag, the same log takes the load model with S 1.0 and D1dv -0.48.)"""
     try:
         loaded = run_load()

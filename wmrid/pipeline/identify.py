@@ -26,10 +26,10 @@ from wmrid.core.errors import UsageError, WmridError, option
 from wmrid.core.wheel_log import LogStream, stream_arrays
 from wmrid.estimators.delay import DELAY_RESOLUTION_S
 from wmrid.estimators.feedback import check as feedback_check
-from wmrid.estimators.observer_pass import delay_profile_form
+from wmrid.estimators.observer.observe import delay_profile_form
+from wmrid.estimators.observer.survey import survey
 from wmrid.estimators.options import ObserverOptions
 from wmrid.estimators.result import IdentificationResult, LogLike
-from wmrid.estimators.survey import survey
 from wmrid.estimators.timing_check import apply_delay
 from wmrid.estimators.verdict import settle
 from wmrid.estimators.widening import with_hold_term, with_timing_term

@@ -16,10 +16,10 @@ import numpy as np
 
 from wmrid.core.errors import WmridError
 from wmrid.core.wheel_log import LogStream, split_topics, stream_arrays
-from wmrid.estimators.observer_pass import delay_profile_form, observe
+from wmrid.estimators.observer.observe import delay_profile_form, observe
+from wmrid.estimators.observer.survey import Survey, survey
 from wmrid.estimators.options import ObserverOptions
 from wmrid.estimators.result import IdentificationResult
-from wmrid.estimators.survey import Survey, survey
 from wmrid.estimators.timing_check import apply_delay, timing_check, unresolved_delay, unresolved_text
 from wmrid.estimators.widening import with_unresolved_timing
 from wmrid.model.robot import Robot
@@ -53,7 +53,7 @@ class Timing:
 
 
 def surveyed(log: Any) -> tuple[LogStream, Survey]:
-    """(``log`` as a stream, its survey: one pass, :func:`wmrid.estimators.survey.survey`)."""
+    """(``log`` as a stream, its survey: one pass, :func:`wmrid.estimators.observer.survey.survey`)."""
     stream = log if isinstance(log, LogStream) else stream_arrays(log)
     return stream, survey(stream, stream.source, stream.effort_unit)
 
@@ -70,7 +70,7 @@ def decide_timing(
 ) -> Timing:
     """The timing of ``log`` (``stream``, surveyed as ``sv``): split topics, else the timing check on a window of
     the log, profiled with the richest friction model ``options.friction`` allows
-    (:func:`wmrid.estimators.observer_pass.delay_profile_form`); its note (a delay the casters' drag explains) is a
+    (:func:`wmrid.estimators.observer.observe.delay_profile_form`); its note (a delay the casters' drag explains) is a
     warning.  ``delay``: a :class:`Timing`'s delay_record and delay_warnings, kept."""
     if split_topics(stream.notes):
         return Timing(split=True, **delay)

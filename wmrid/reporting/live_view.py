@@ -78,6 +78,6 @@ def json_line(obj: Any) -> str:
     """``obj`` as one line of strict JSON (NaN/inf as null), without the newline: a JSON-lines record."""
     import json
 
-    from wmrid.core.atomic import _jsonable
+    from wmrid.runtime.atomic import _jsonable
 
     return json.dumps(_jsonable(obj), allow_nan=False, separators=(",", ":"))

@@ -5,10 +5,10 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from wmrid.core.atomic import to_json_text
 from wmrid.estimators.result import IdentificationResult
 from wmrid.estimators.verdict import LEGEND
 from wmrid.reporting.terminal import STYLES, print_table, styled, warning as warning_line
+from wmrid.runtime.atomic import to_json_text
 
 
 def to_json(obj: Any) -> str:

@@ -142,7 +142,8 @@ class SimulatedLog:
     reference : (n, 3) reference pose x_r (m), y_r (m), phi_r (rad) at t.
     eta_ref : (n, 2) rad/s, the reference's wheel speeds [right, left] at t: (v_r +/- b w_r) / r with the
         NOMINAL r, b -- the wheel-speed set-points a planner would send (uncorrelated with the disturbance),
-        logged as eta_ref_r, eta_ref_l (the instruments of ``identify --method iv``, :mod:`wmrid.estimators.iv`).
+        logged as eta_ref_r, eta_ref_l (the instruments of ``identify --method iv``,
+        :mod:`wmrid.estimators.regression.iv`).
     disturbance : (n, 2) N m, caster torque tau_d applied over the control period starting at t (unlogged
         in a real log; kept for tests and diagnostics).
     eta_true : (n, 2) rad/s, true wheel velocities at t (the clean counterpart of ``eta``).
@@ -398,9 +399,9 @@ def check_run_memory(
     n: int, n_ctrl: int, duration: float, rate: float, per_control_step: int = BYTES_PER_CONTROL_STEP
 ) -> None:
     """UsageError before anything is allocated when a run of n samples (n_ctrl control steps, ``per_control_step``
-    bytes each) would need more than the memory budget (:mod:`wmrid.core.limits`): ``simulate --duration 1e9`` used
+    bytes each) would need more than the memory budget (:mod:`wmrid.runtime.limits`): ``simulate --duration 1e9`` used
     to die of "Unable to allocate 14.6 TiB"."""
-    from wmrid.core.limits import ENV, describe, memory_budget
+    from wmrid.runtime.limits import ENV, describe, memory_budget
 
     need = n * BYTES_PER_SAMPLE + n_ctrl * per_control_step
     budget = memory_budget()

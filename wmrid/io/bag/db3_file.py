@@ -27,9 +27,9 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import LogFormatError
-from wmrid.core.limits import describe
 from wmrid.io.bag.db3_wal import connect, wal_state
 from wmrid.io.bag.state import BATCH, _BagState, _one_line, _Topic, storage_files
+from wmrid.runtime.limits import describe
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
 #: sqlite rows fetched at a time (below the garbage collector's threshold of 700 live allocations: holding a whole

@@ -26,7 +26,7 @@ from typing import Any
 import numba
 import numpy as np
 
-from wmrid.core.side_files import NotRegularFile, open_regular
+from wmrid.runtime.side_files import NotRegularFile, open_regular
 
 WAL_MAGIC = (0x377F0682, 0x377F0683)
 WAL_VERSION = 3007000

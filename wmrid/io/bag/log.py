@@ -11,8 +11,8 @@ from collections.abc import Sequence
 
 from wmrid.core.errors import LogFormatError, cannot_read
 from wmrid.core.wheel_log import CHUNK_ROWS, LogStream
-from wmrid.io.field_paths import FieldSignals
-from wmrid.io.mcap.joints import TopicSelection
+from wmrid.io.ros.field_paths import FieldSignals
+from wmrid.io.ros.joints import TopicSelection
 from wmrid.io.signals import SignalOptions
 
 ROS1_MAGIC = b"#ROSBAG V2.0"

@@ -33,9 +33,9 @@ import numpy as np
 from wmrid.core.errors import LogFormatError
 from wmrid.io.bag.state import _BagState, _Topic, storage_files
 from wmrid.io.binary import cut_short_note, map_file, u64s_at
-from wmrid.io.mcap.joint_batches import DYNAMIC_JOINT_STATE_NAMES
 from wmrid.io.mcap.reader import _SCAN_WINDOW, UNCLOSED_NOTE, _check_start, _ReadState, closed
 from wmrid.io.mcap.records import JOINT_STATE_NAMES, MAGIC, OP_CHUNK, OP_HEADER, OP_MESSAGE, scan
+from wmrid.io.ros.joint_batches import DYNAMIC_JOINT_STATE_NAMES
 
 
 def mcap_files(paths: Sequence[str]) -> list[str] | None:

@@ -1,5 +1,5 @@
 """ROS 1 bags, ROS 2 sqlite3 bags, rosbag2 folders and split recordings, read through rosbags into the contents an MCAP
-read gives (:class:`wmrid.io.mcap.contents.McapContents`), so that topic, joint and time choices are the same for
+read gives (:class:`wmrid.io.ros.contents.McapContents`), so that topic, joint and time choices are the same for
 every format.
 
 rosbags opens the files (``rosbags.rosbag1.Reader`` for a ROS 1 bag, ``rosbags.rosbag2.Reader`` for a ``.db3`` or
@@ -10,7 +10,7 @@ its receive time; several files are merged in time order (``heapq.merge``, as ro
 file cut short by a crash; this module keeps what rosbags reads (compressed recordings, files that overlap in
 time).  The JointState messages are gathered per topic in batches of
 :data:`wmrid.io.bag.state.BATCH` and decoded by the compiled kernels of
-:class:`wmrid.io.mcap.joint_batches.JointChannels`: :func:`wmrid.io.bag.ros1_records.ros1_joint_states` for ROS 1,
+:class:`wmrid.io.ros.joint_batches.JointChannels`: :func:`wmrid.io.bag.ros1_records.ros1_joint_states` for ROS 1,
 :func:`wmrid.io.mcap.records.joint_states` for CDR.  A message the kernel refuses, or a topic whose message
 definition is not the standard JointState, is decoded by rosbags' deserialiser with the definitions stored in the
 bag (a bag without them: the ROS 1 Noetic or ROS 2 Humble definitions).
@@ -37,7 +37,7 @@ from wmrid.io.bag.state import (
     _Topic,
     metadata_text,
 )
-from wmrid.io.mcap.contents import McapContents
+from wmrid.io.ros.contents import McapContents
 
 
 class BagFiles:

@@ -26,11 +26,11 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import LogFormatError
-from wmrid.core.limits import describe
 from wmrid.io.bag.ros1_records import OP_CHUNK, OP_CHUNK_INFO, OP_CONNECTION, OP_MESSAGE, ros1_records
 from wmrid.io.bag.state import _BagState, _Topic
 from wmrid.io.binary import cut_short_note, page_releaser
 from wmrid.io.mcap.records import BOMB_FLOOR, BOMB_RATIO
+from wmrid.runtime.limits import describe
 
 MAGIC = b"#ROSBAG V2.0\n"
 OP_BAG_HEADER = 0x03

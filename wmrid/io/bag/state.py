@@ -1,6 +1,6 @@
 """What every bag reader shares (issue 31: the bag readers' shared state in a module of its own): the JointState
 decoding of a bag's topics (:class:`_BagState`, on the compiled kernels of
-:class:`wmrid.io.mcap.joint_batches.JointChannels`), a topic's record (:class:`_Topic`), and the rosbag2 folder's
+:class:`wmrid.io.ros.joint_batches.JointChannels`), a topic's record (:class:`_Topic`), and the rosbag2 folder's
 metadata (:func:`metadata_text`, :func:`storage_files`).  :mod:`wmrid.io.bag.reader` (rosbags' reads) and wmrid's
 own readers of ROS 1 bags, sqlite3 and MCAP storage (:mod:`wmrid.io.bag.ros1_file`, :mod:`wmrid.io.bag.db3_file`,
 :mod:`wmrid.io.bag.mcap_files`) build on it."""
@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import LogFormatError
-from wmrid.io.mcap.contents import Accumulator
-from wmrid.io.mcap.joint_batches import DYNAMIC_JOINT_STATE_NAMES, JointChannels
 from wmrid.io.mcap.records import JOINT_STATE_NAMES, joint_states, ros1_joint_names, standard_joint_state
+from wmrid.io.ros.contents import Accumulator
+from wmrid.io.ros.joint_batches import DYNAMIC_JOINT_STATE_NAMES, JointChannels
 
 #: Messages per topic decoded at a time (the batch's bytes are joined into one buffer for the kernel).
 BATCH = 16384
@@ -152,7 +152,7 @@ def metadata_text(folder: str) -> bytes:
     LogFormatError when it is not a regular file (a device such as /dev/zero, a FIFO, a link to either, a loop of
     links) or holds more than :data:`METADATA_LIMIT`, or when a storage file it lists is not a regular file
     (:func:`_check_listed_files`); ``b""`` when there is none or it cannot be read (rosbags then says why)."""
-    from wmrid.core.side_files import NotRegularFile, broken_link, read_regular
+    from wmrid.runtime.side_files import NotRegularFile, broken_link, read_regular
 
     path = os.path.join(folder, "metadata.yaml")
     broken = broken_link(path)
@@ -184,7 +184,7 @@ def _check_listed_files(folder: str, text: bytes) -> None:
     ends), a socket or folder, a loop of links (a missing file, or a link to nothing, the readers name).  The user
     named the folder, not these files.  Each is looked up by its name in the folder, as rosbags and wmrid's readers
     find it (a listed ``../x`` is ``x`` in the folder).  Metadata that cannot be parsed is left to the readers."""
-    from wmrid.core.side_files import LOOP, broken_link, not_regular
+    from wmrid.runtime.side_files import LOOP, broken_link, not_regular
 
     try:
         from ruamel.yaml import YAML

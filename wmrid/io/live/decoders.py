@@ -1,12 +1,12 @@
 """Batches of a followed log to wheel samples, with wmrid's own readers.
 
 :class:`TableDecoder`: CSV batches (:class:`wmrid.io.live.framing.CsvBatcher`) through the CSV reader
-(:func:`wmrid.io.csv_log.csv_chunks`) and one assembler for the whole stream (:class:`wmrid.io.assembler.Assembler`:
-the time unit, offset and epoch decisions are made once, on the first rows, and every row is checked as it is in a
-file, time strictly increasing across batches included).
+(:func:`wmrid.io.table.csv_log.csv_chunks`) and one assembler for the whole stream
+(:class:`wmrid.io.assembler.Assembler`: the time unit, offset and epoch decisions are made once, on the first rows, and
+every row is checked as it is in a file, time strictly increasing across batches included).
 
 :class:`McapDecoder`: MCAP batches (:class:`wmrid.io.live.framing.McapFramer`) through the MCAP reader
-(:func:`wmrid.io.mcap.reader.read_mcap`) and its signal rules (:func:`wmrid.io.mcap.joints.signals_from_mcap`:
+(:func:`wmrid.io.mcap.reader.read_mcap`) and its signal rules (:func:`wmrid.io.ros.joints.signals_from_mcap`:
 topics, joints, time source, split-topic alignment, speeds from positions, units; JSON topics and field paths), each
 batch on its own; stamps stay integer nanoseconds until one offset for the whole stream turns them into seconds.
 A batch's samples stamped at or before the last sample handed out are dropped (counted in ``dropped``).
@@ -23,8 +23,8 @@ import numpy as np
 
 from wmrid.core.errors import UsageError, option
 from wmrid.core.wheel_log import CANONICAL, REFERENCE, WheelLog
-from wmrid.io.mcap.joints import TopicSelection, signals_from_json, signals_from_mcap
 from wmrid.io.mcap.records import JOINT_STATE_NAMES
+from wmrid.io.ros.joints import TopicSelection, signals_from_json, signals_from_mcap
 from wmrid.io.signals import SignalOptions, convert
 from wmrid.io.stamps import ABSOLUTE_LIMIT_S
 
@@ -43,7 +43,7 @@ class TableDecoder:
         self, name: str, columns: Mapping[str, str] | None, time_unit: str, signals: SignalOptions,
         gear_ratio: float | None,
     ) -> None:  # fmt: skip
-        from wmrid.io.columns import check_key
+        from wmrid.io.table.columns import check_key
 
         self.name = name
         self.mapping = {key: key for key in CANONICAL}
@@ -61,8 +61,8 @@ class TableDecoder:
     def decode(self, batch: bytes, rows_before: int) -> WheelLog | None:
         """The samples of one batch (``rows_before``: the data lines of the batches before it), or None."""
         from wmrid.io.assembler import MERGED_TIME, Assembler
-        from wmrid.io.csv_log import csv_chunks
         from wmrid.io.sources import Source
+        from wmrid.io.table.csv_log import csv_chunks
 
         source = Source(self.name, None, batch)
         chunks, where, _, hint = csv_chunks(source, self.mapping, self.explicit, _ROWS)
@@ -103,8 +103,8 @@ class McapDecoder:
         self, name: str, columns: Mapping[str, str] | None, selection: TopicSelection, signals: SignalOptions,
         gear_ratio: float | None,
     ) -> None:  # fmt: skip
-        from wmrid.io.field_paths import field_signals
         from wmrid.io.mcap.log import field_selection
+        from wmrid.io.ros.field_paths import field_signals
 
         self.name = name
         self.columns = dict(columns or {})
@@ -124,7 +124,7 @@ class McapDecoder:
 
     def keep(self, topic: str, schema: str) -> bool:
         """Whether a channel's messages can hold the wheel signals (the others are not kept)."""
-        from wmrid.io.mcap.joint_batches import DYNAMIC_JOINT_STATE_NAMES
+        from wmrid.io.ros.joint_batches import DYNAMIC_JOINT_STATE_NAMES
 
         if self.fields is not None:
             return topic in self.fields.topics()
@@ -140,7 +140,7 @@ class McapDecoder:
         from wmrid.io.mcap.reader import read_mcap
 
         if self.fields is not None:
-            from wmrid.io.field_paths import check_values
+            from wmrid.io.ros.field_paths import check_values
 
             contents = read_mcap(self.name, data=batch, fields=self.fields.topics())
             check_values(contents.joints, self.fields, self.name)

@@ -24,15 +24,15 @@ from dataclasses import dataclass, field
 from typing import BinaryIO
 
 from wmrid.core.errors import LogFormatError, UsageError
-from wmrid.core.limits import memory_budget
 from wmrid.core.wheel_log import WheelLog
 from wmrid.io.live.decoders import McapDecoder, TableDecoder
 from wmrid.io.live.feeds import READ_BYTES, FileFeed, PipeFeed
 from wmrid.io.live.framing import CsvBatcher, JsonLines, LineFramer, McapFramer
-from wmrid.io.mcap.joints import TopicSelection
 from wmrid.io.mcap.records import MAGIC
+from wmrid.io.ros.joints import TopicSelection
 from wmrid.io.signals import SignalOptions
 from wmrid.io.sources import STDIN_NAME, compression_of
+from wmrid.runtime.limits import memory_budget
 
 #: An MCAP batch is decoded once it holds this many messages (or the source pauses or ends): enough for split
 #: topics to overlap, few enough for a refresh.
@@ -384,7 +384,7 @@ class Rosbag2Source(LiveSource):
         """LogFormatError, before it is opened, when the folder's ``path`` (named NAME.mcap, a file the user did not
         name) is not a regular file: a FIFO (opening it waited forever), a device, a loop of links or a link to
         nothing (an "internal error" on opening)."""
-        from wmrid.core.side_files import broken_link, not_regular
+        from wmrid.runtime.side_files import broken_link, not_regular
 
         kind = not_regular(path) or broken_link(path)
         if kind is not None:

@@ -30,7 +30,7 @@ from wmrid.io.mcap.records import (
 #: bytes: the longest line a followed CSV may have (a wheel log's row is well under 1 KiB)
 MAX_LINE = 1 << 20
 
-#: The comment marks of CSV logs (wmrid.io.csv_log skips such leading lines).
+#: The comment marks of CSV logs (wmrid.io.table.csv_log skips such leading lines).
 COMMENT_MARKS = ("#", "%")
 
 
@@ -103,7 +103,7 @@ def _prelude(text: bytes) -> tuple[bytes | None, bytes]:
     """(comment lines and the header line, the lines after them) once a line that is neither blank nor a comment
     has arrived, else (None, text).  A first such line that holds only numbers is data: the prelude is then the
     comments alone."""
-    from wmrid.io.csv_log import _all_numbers, sniff_delimiter
+    from wmrid.io.table.csv_log import _all_numbers, sniff_delimiter
 
     pos = 0
     while True:

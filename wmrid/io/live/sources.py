@@ -37,7 +37,7 @@ def open_live(spec: str, settings: ReaderSettings | None = None, reconnect: bool
         return Rosbag2Source(spec, settings)
     if not os.path.isfile(spec):
         raise LogFormatError(f"{spec}: not a regular file; give the log being written, or - for a pipe")
-    from wmrid.core.atomic import register_input
+    from wmrid.runtime.atomic import register_input
 
     register_input(spec)  # an output of this command may not be this file
     with open(spec, "rb") as fh:

@@ -8,7 +8,7 @@ import io
 import json
 from typing import Any
 
-from wmrid.io.mcap.contents import Accumulator
+from wmrid.io.ros.contents import Accumulator
 
 
 def decode_generic(state: Any, acc: Accumulator, payload: bytes) -> Any:

@@ -13,8 +13,8 @@ import numpy as np
 
 from wmrid.core.errors import LogFormatError, UsageError, option
 from wmrid.core.wheel_log import CACHE_ROWS, CHUNK_ROWS, MIN_SAMPLES, REQUIRED, LogStream, WheelLog, stream_arrays
-from wmrid.io.field_paths import FieldSignals, check_values, field_signals
-from wmrid.io.mcap.joints import TopicSelection, signals_from_json, signals_from_mcap
+from wmrid.io.ros.field_paths import FieldSignals, check_values, field_signals
+from wmrid.io.ros.joints import TopicSelection, signals_from_json, signals_from_mcap
 from wmrid.io.signals import SignalOptions
 from wmrid.io.sources import Source
 from wmrid.io.stamps import ABSOLUTE_LIMIT_S, NS_PER_UNIT, seconds_from_stamps
@@ -51,7 +51,7 @@ def read_mcap_log(
     kept instead when they fitted in ``_MCAP_REPLAY_BYTES``: up to about 70 minutes at 1 kHz the file is
     decoded once.  Read whole all the same, with a note saying why: speeds derived from
     positions, messages out of time order in the file, and the other cases
-    :func:`wmrid.io.mcap.joint_stream.stream_plan`
+    :func:`wmrid.io.ros.joint_stream.stream_plan`
     lists; a JSON topic is always read whole.
     """
     from wmrid.io.mcap.reader import iter_joint_parts, read_mcap, scan_mcap
@@ -125,7 +125,7 @@ def recording_log(
 ) -> LogStream:
     """The LogStream of a recording's JointState topics (or of the wheel signals by field path ``fields``,
     checked to give numbers): decoded whole, or streamed (see :func:`read_mcap_log`)."""
-    from wmrid.io.mcap.joint_stream import stream_plan
+    from wmrid.io.ros.joint_stream import stream_plan
 
     source = recording
     contents = recording.scan(_MCAP_WHOLE_PIECES * rows, _MCAP_REPLAY_BYTES)
@@ -156,7 +156,7 @@ def recording_log(
 def _mcap_whole_log(
     source: Any, contents: Any, selection: TopicSelection, signals: SignalOptions, gear_ratio: float | None
 ) -> WheelLog:
-    """The WheelLog of a recording read whole (:class:`wmrid.io.mcap.contents.McapContents` with its arrays)."""
+    """The WheelLog of a recording read whole (:class:`wmrid.io.ros.contents.McapContents` with its arrays)."""
 
     if selection.topic in contents.json:
         sig = signals_from_json(contents, selection.topic, signals, gear_ratio)
@@ -203,7 +203,7 @@ def _mcap_pieces(
     """The streamed LogStream of a long recording (see :func:`read_mcap_log`): pieces of exactly ``rows``
     samples, as :func:`stream_arrays` cuts the whole log.  Its ``_mcap_peak`` is the most JointState samples
     the last pass held at once (decoded, waiting and cut into pieces)."""
-    from wmrid.io.mcap.joint_stream import SignalStream
+    from wmrid.io.ros.joint_stream import SignalStream
 
     source = recording
     unit = signals.effort_label

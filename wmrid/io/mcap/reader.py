@@ -23,7 +23,7 @@ How (bounded memory, no per-message Python objects on the fast path):
 * The mapped file's pages are handed back to the kernel (``madvise(MADV_DONTNEED)``) as the walk passes
   them, so they do not pile up in the process's resident memory on a large file.
 * Damage is checked, never trusted (issue 13): a record length is compared with the bytes left without
-  overflowing; a chunk whose declared size is beyond the memory budget (:mod:`wmrid.core.limits`) is skipped
+  overflowing; a chunk whose declared size is beyond the memory budget (:mod:`wmrid.runtime.limits`) is skipped
   unread, and one that decompresses to another size, or fails its CRC (``uncompressed_crc``; set
   ``WMRID_MCAP_CRC=0`` to skip the check), is skipped; each with a note giving its size and time range.
   A JointState channel whose schema lists other fields, or its fields in another order, than the standard
@@ -54,15 +54,8 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import LogFormatError
-from wmrid.core.limits import describe
 from wmrid.io.binary import cut_short_note, map_file, u64s_at
-from wmrid.io.mcap.contents import (
-    Accumulator,
-    JsonSeries,
-    McapContents,
-)
 from wmrid.io.mcap.generic import decode_generic, json_batch
-from wmrid.io.mcap.joint_batches import DYNAMIC_JOINT_STATE_NAMES, JointChannels
 from wmrid.io.mcap.records import (
     BOMB_FLOOR,
     BOMB_RATIO,
@@ -82,6 +75,13 @@ from wmrid.io.mcap.records import (
     standard_joint_state,
     time_span,
 )
+from wmrid.io.ros.contents import (
+    Accumulator,
+    JsonSeries,
+    McapContents,
+)
+from wmrid.io.ros.joint_batches import DYNAMIC_JOINT_STATE_NAMES, JointChannels
+from wmrid.runtime.limits import describe
 
 
 def read_mcap(

@@ -127,7 +127,7 @@ def write_series_mcap(
     """
     from mcap.well_known import MessageEncoding, SchemaEncoding
 
-    from wmrid.core.atomic import atomic_output
+    from wmrid.runtime.atomic import atomic_output
 
     topic = _check_topic(topic, "topic")
     chunk_size = _check_chunk_size(chunk_size)

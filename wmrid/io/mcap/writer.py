@@ -17,7 +17,7 @@ alignment rules of a CDR writer (XCDR1, little endian, encapsulation header ``00
 primitive aligned to its size relative to the payload after that header, an empty sequence not
 aligned at all), and numpy fills the per-row fields of a block of rows at once.
 
-Every file is written atomically (:mod:`wmrid.core.atomic`); an existing file is replaced only with ``force``.
+Every file is written atomically (:mod:`wmrid.runtime.atomic`); an existing file is replaced only with ``force``.
 """
 
 from __future__ import annotations
@@ -338,7 +338,7 @@ def write_joint_state_mcap(
     """
     from mcap.well_known import MessageEncoding, Profile, SchemaEncoding
 
-    from wmrid.core.atomic import atomic_output
+    from wmrid.runtime.atomic import atomic_output
 
     missing = [c for c in ("t", "eta_r", "eta_l", "tau_r", "tau_l") if c not in frame.columns]
     if missing:

@@ -1,0 +1,1 @@
+"""Table logs: CSV (and other delimited text) and Parquet read piece by piece, and the column mapping they share."""
