@@ -1,9 +1,10 @@
-"""Ten minutes of the MCAP framing fuzzer (tests/test_fuzz_mcap.py), in fresh processes so a segfault is counted.
+"""Ten minutes of the MCAP framing fuzzer (tests/contract/test_fuzz_mcap.py), in fresh processes so a segfault is
+counted.
 
     python bench/fuzz_mcap.py                 # 600 s, 1000 examples per compression per run
     python bench/fuzz_mcap.py --seconds 60
 
-Each run is ``pytest tests/test_fuzz_mcap.py`` with WMRID_FUZZ_EXAMPLES examples per compression (none, zstd,
+Each run is ``pytest tests/contract/test_fuzz_mcap.py`` with WMRID_FUZZ_EXAMPLES examples per compression (none, zstd,
 lz4) and its own --hypothesis-seed (0, 1, 2, ...).  Printed: runs, cases tried, wall time, and every run that
 failed or died (its seed, exit code and the tail of its output), which reproduces with the same seed.
 """
@@ -33,7 +34,7 @@ def main() -> None:
     while time.monotonic() - start < args.seconds:
         proc = subprocess.run(
             [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", f"--hypothesis-seed={seed}",
-             "tests/test_fuzz_mcap.py", "-k", "mutated"],
+             "tests/contract/test_fuzz_mcap.py", "-k", "mutated"],
             cwd=ROOT, env=env, capture_output=True, text=True,
         )  # fmt: skip
         runs += 1

@@ -7,8 +7,8 @@ identify again -- does the export carry the robot?
 Per seed: the light AMR of ``bench/study_plan.py`` (nominal set 20 % off, CAD set the truth, its casters) carrying
 ``--payload`` (kg @ x, y m in the platform frame), driven on the MuJoCo prototype along the study's 60 s plan at 1 kHz
 with sensor noise (0.02 rad/s, 0.005 N m), identified with defaults; exported (``wmrid.export``) as MJCF and as a robot
-file (the file builds the same MJCF: tests/test_export.py); the robot file simulated again on MuJoCo along the same plan
-(another noise seed) and identified with the original robot file.  Recorded:
+file (the file builds the same MJCF: tests/unit/exports/test_export.py); the robot file simulated again on MuJoCo along
+the same plan (another noise seed) and identified with the original robot file.  Recorded:
 
 * the second result's base parameters against the first's: z = (second - first) / sqrt(std1^2 + std2^2);
 * the exported physical quantities against the truth (the AMR with its payload): total mass m, yaw inertia about the

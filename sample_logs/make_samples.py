@@ -16,7 +16,7 @@ sinusoid for 40 s under backstepping + computed torque built on the NOMINAL para
 * ``<log>.truth.json`` for each: the ground truth, of the form
   ``{"parameters": {"m11": ..., ...}, "physical": {...}, ...}``.
 
-``tests/test_sample_logs.py`` regenerates them and checks they are unchanged.
+``tests/contract/test_sample_logs.py`` regenerates them and checks they are unchanged.
 """
 
 from __future__ import annotations

@@ -5,7 +5,8 @@
 * ``<!-- wmrid:api-reference -->`` becomes a mkdocstrings block for every public name in ``wmrid.__all__``;
 * ``<!-- wmrid:result-schema -->`` becomes the published JSON Schema of the identify result, verbatim.
 
-``tests/test_docs.py`` checks the generated reference against the app and the API page against ``wmrid.__all__``.
+``tests/contract/test_docs.py`` checks the generated reference against the app and the API page against
+``wmrid.__all__``.
 """
 
 from __future__ import annotations

@@ -175,7 +175,7 @@ def detectable(h: float, baseline: int, length: int, kind: str) -> float:
     noncentral F(1, n - 1) with noncentrality (effect / rise)^2 (S_gg - S_g^2 / (n + 1)) in the units of the scatter,
     S_g and S_gg the sums of the alternative's regressor and of its square (:func:`scan`); the effect whose F has
     median h is returned.  The scan also tries the other onsets, ends and the other alternative, so the chance of a
-    flag is at least one half (``tests/test_fleet_changes.py`` measures it by Monte Carlo)."""
+    flag is at least one half (``tests/unit/fleets/test_fleet_changes.py`` measures it by Monte Carlo)."""
     from scipy.optimize import brentq
     from scipy.stats import ncf
 

@@ -18,7 +18,7 @@ unloaded robot give, one after the other,
     m_L x    = dV_c 4 b^2 / r^3
 
 four equations in the four unknowns (m_L, x, y, I_L), solvable whenever m_L != 0: all four are
-identifiable (tests/test_payload.py checks the round trip and the Jacobian's rank).  Standard errors
+identifiable (tests/unit/model/test_payload.py checks the round trip and the Jacobian's rank).  Standard errors
 follow by the delta method from the covariance of (m11, m12, m22, V_c) (M = m^-1 inside).
 """
 

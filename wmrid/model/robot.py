@@ -18,7 +18,7 @@ All values are SI: kg, m, kg m^2, N m s/rad (viscous), N m (Coulomb). Every key 
 Table 1 of the paper prints ``d_x`` in "cm", but its values (0.15, 0.1781) only make sense in metres:
 with d_x = 0.15 m, Eq. (13)'s V_c and the paper's Table 2 nominal column agree to every printed
 digit (theta_13 = m11 V_c = 0.147); with 0.15 cm they would be 100 times smaller. wmrid therefore
-reads d_x in metres, like every other length (``tests/test_model.py`` checks this).
+reads d_x in metres, like every other length (``tests/unit/model/test_model.py`` checks this).
 """
 
 from __future__ import annotations

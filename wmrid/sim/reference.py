@@ -10,8 +10,8 @@ omega.  :func:`reference_table` precomputes that state on the control grid t_k =
   the spline errs by O(h^4 |v''''|) in value and O(h^3 |v''''|) in slope, most in the last samples at either end
   (not-a-knot guesses the end slopes): on the 50 Hz samples of the built-in ``reversing`` over 20 s, v_r within
   2e-9 m/s, w_r 1.3e-8 rad/s, v_r' 6e-7 m/s^2, w_r' 4.2e-6 rad/s^2 (away from the ends 2e-10, 1.5e-9, 3e-8 and
-  2.3e-7; tests/test_simulate_reference.py).  Between the samples the spline is the reference: it is C2, so v_r' is
-  continuous, as the controller's feed-forward needs.
+  2.3e-7; tests/unit/sim/test_simulate_reference.py).  Between the samples the spline is the reference: it is C2, so
+  v_r' is continuous, as the controller's feed-forward needs.
 * phi_r = the integral of the omega spline from the first sample (its exact antiderivative), so phi_r(0) = 0.
 * x_r, y_r: the integrals of v_r cos phi_r, v_r sin phi_r, by Simpson's rule on each control period (the integrand
   at both ends and the middle).  The composite rule errs by at most T^4 / 2880 max|f''''| per unit time: at

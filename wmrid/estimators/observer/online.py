@@ -3,11 +3,11 @@
 :class:`OnlineObserver` is a thin object around the same compiled kernel the offline replay runs
 (:func:`wmrid.estimators.observer.kernel.observer_chunk`, started from the first sample exactly as
 :func:`wmrid.estimators.observer.replay.replay_pieces` starts it), so after the same samples its estimate theta and
-Gamma are those of the offline replay, bit for bit, however the samples were cut into pieces (``tests/test_live.py``).
-What differs is the bookkeeping around it, because the log's length is not known in advance: no history, and the
-per-block sums of the normal equations kept over blocks of a fixed duration (min(0.1 s, 0.1/k), as offline), two
-neighbours merged into one (and the duration doubled) whenever MAX_BLOCKS are full, so memory stays bounded however
-long the stream runs.
+Gamma are those of the offline replay, bit for bit, however the samples were cut into pieces
+(``tests/unit/api/test_live.py``). What differs is the bookkeeping around it, because the log's length is not known in
+advance: no history, and the per-block sums of the normal equations kept over blocks of a fixed duration (min(0.1 s,
+0.1/k), as offline), two neighbours merged into one (and the duration doubled) whenever MAX_BLOCKS are full, so memory
+stays bounded however long the stream runs.
 
 :func:`online_estimate` turns that state into base parameters with a standard error: the box projection, the
 minimum-distance recovery of theta0 and the delete-a-segment jackknife over the blocks, as offline

@@ -4,7 +4,8 @@ identify`` runs (IDIM's regression and the timing check, :mod:`wmrid.estimators.
 Why here and not :mod:`scipy.signal`: importing ``scipy.signal`` takes 0.55 s on the 2-core machine wmrid is
 benchmarked on (scipy 1.17 rewrites some 800 docstrings at import, and loads scipy.stats, interpolate and
 optimize with it), a quarter of ``wmrid identify`` on a 10-minute bag, for three functions.  They are written
-here to scipy's definitions, step for step, and ``tests/test_lowpass.py`` checks them against scipy.signal:
+here to scipy's definitions, step for step, and ``tests/unit/estimators/test_lowpass.py`` checks them against
+scipy.signal:
 
 * :func:`butter_sos` = ``scipy.signal.butter(order, cutoff, fs=rate, output="sos")``: the analog Butterworth
   prototype (poles -exp(i pi m / 2N), m = -N+1, -N+3, ..., N-1), the cutoff pre-warped (2 fs' tan(pi Wn / fs'),
@@ -181,7 +182,9 @@ def steady_state(sos: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
-def _sosfilt(sos, x, zi):  # pragma: no cover - compiled; tests/test_lowpass.py compares it with scipy.signal
+def _sosfilt(
+    sos, x, zi
+):  # pragma: no cover - compiled; tests/unit/estimators/test_lowpass.py compares it with scipy.signal
     """Run x (n,) through the sections in place (direct form II transposed), zi (n_sections, 2) updated."""
     n_sections = sos.shape[0]
     for i in range(x.shape[0]):

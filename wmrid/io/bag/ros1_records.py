@@ -6,7 +6,7 @@ terminating NUL); an array is its uint32 count then its elements.  A JointState 
 stamp.sec, uint32 stamp.nsec, string frame_id), string[] name, float64[] position, velocity and effort.
 
 Stamps come out in ns; values as the message has them (rad, rad/s, N m).  What it cannot decode it reports by a
-status code, never by reading outside the message's bytes.  tests/test_ros1_records.py checks it field for field
+status code, never by reading outside the message's bytes.  tests/unit/io/test_ros1_records.py checks it field for field
 against rosbags' ROS 1 deserialiser, on messages written by rosbags and on truncated and corrupted ones.
 """
 

@@ -17,7 +17,7 @@ Choices, each stated in the log's notes:
   stamp, the latest effort at or before it (what a drive does with a command until the next arrives).
   Speed samples before the first effort, or after the last (zoh: more than 1.5 effort periods after),
   are dropped.  Measured on the paper scenario (40 s, 1 kHz speeds, efforts at 500 Hz stamped 0.3 ms
-  late; tests/test_mcap_read.py): linear leaves m11 0.014 %, Vc 0.12 %, Fv1 4.9 % off; zoh 0.065 %,
+  late; tests/unit/io/test_mcap_read.py): linear leaves m11 0.014 %, Vc 0.12 %, Fv1 4.9 % off; zoh 0.065 %,
   0.60 %, 25 %.  Interpolation recovers much of the torque between effort messages that a hold loses.
 * **Speed from positions** when the speed field is empty or all zero (or ``velocity_from="position"``):
   :func:`wmrid.io.signals.speed_from_position`.

@@ -1,0 +1,194 @@
+"""The documentation site (docs/, mkdocs.yml) says what the code does: the generated command-line reference matches
+the Typer app, the API reference covers every public name, the published result schema holds for every bundled
+sample's identify JSON, and the README stays a front page (its example runs, its test command is CI's, its links
+lead into the site).  The examples of the site run in ``tests/contract/test_docs_examples.py``."""
+
+from __future__ import annotations
+
+import html
+import importlib.util
+import json
+import re
+
+import pytest
+from locations import ROOT_DIR
+
+ROOT = ROOT_DIR
+DOCS = ROOT / "docs"
+REAL_LOGS = ROOT.parent / "shared" / "real_logs"
+SCHEMA = DOCS / "reference" / "result.schema.json"
+
+
+def _hook():
+    spec = importlib.util.spec_from_file_location("wmrid_docs_hook", DOCS / "hooks" / "reference.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+HOOK = _hook()
+
+
+# ---- the command-line reference
+
+
+def _normal(text: str) -> str:
+    return " ".join(text.split())
+
+
+def _sections(markdown: str) -> dict[str, str]:
+    """``wmrid CMD`` -> its section of the generated reference."""
+    parts = re.split(r"^## `(wmrid[^`]*)`$", markdown, flags=re.M)
+    return dict(zip(parts[1::2], parts[2::2], strict=True))
+
+
+def test_the_cli_reference_lists_every_command_and_option_of_the_app():
+    """The reference is generated from the app at build time; this walks the app itself and finds each command,
+    each option (with its value, default and help) in the generated page, and nothing the app does not have."""
+    from typer import _click as click
+
+    from wmrid.cli.app import command
+
+    root = HOOK.cli_app()
+    running = command()  # the command line as `wmrid` runs it
+    assert list(root.commands) == list(running.commands)
+    for name, cmd in running.commands.items():
+        assert [p.name for p in root.commands[name].params] == [p.name for p in cmd.params]
+    markdown = HOOK.cli_markdown(root)
+    sections = _sections(markdown)
+    commands = ["wmrid", *(f"wmrid {n}" for n, c in root.commands.items() if not getattr(c, "hidden", False))]
+    assert list(sections) == commands
+    assert {"wmrid identify", "wmrid report", "wmrid live", "wmrid export", "wmrid fleet"} <= set(sections)
+    root_ctx = click.Context(root, info_name="wmrid")
+    for name in commands:
+        cmd = root if name == "wmrid" else root.commands[name.split()[1]]
+        ctx = root_ctx if cmd is root else click.Context(cmd, info_name=cmd.name, parent=root_ctx)
+        section = sections[name]
+        rows = {m.group(1): m.group(0) for m in re.finditer(r"^\| `([^`]+)` \|.*$", section, flags=re.M)}
+        documented = 0
+        for param in cmd.get_params(ctx):
+            if getattr(param, "hidden", False) or "--help" in param.opts:
+                continue
+            record = HOOK.option_record(param, ctx)
+            row = rows.get(record["flags"])
+            assert row is not None, f"{name}: {record['flags']} is not in the reference"
+            if param.param_type_name == "option":
+                assert all(opt in record["flags"].split(", ") for opt in param.opts)
+            plain = _normal(html.unescape(re.sub(r"\\(.)", r"\1", row)))
+            assert _normal(record["help"]) in plain, f"{name} {record['flags']}: help differs"
+            if record["default"]:
+                assert f"| {_normal(record['default'])} |" in plain, f"{name} {record['flags']}: default differs"
+            documented += 1
+        assert documented == len(rows), f"{name}: the reference has options the app does not"
+        if cmd.help:
+            assert _normal(cmd.help) in _normal(html.unescape(re.sub(r"\\(.)", r"\1", section)))
+
+
+def test_the_cli_reference_page_is_the_generated_one():
+    page = (DOCS / "reference" / "cli.md").read_text(encoding="utf-8")
+    assert HOOK.CLI_MARKER in page
+
+
+# ---- the Python API reference
+
+
+def test_the_api_reference_documents_every_public_name_from_its_docstring():
+    import wmrid
+
+    names = HOOK.public_names()
+    assert set(names) == set(wmrid.__all__) - {"__version__"}
+    markdown = HOOK.api_markdown()
+    directives = re.findall(r"^::: (\S+)$", markdown, flags=re.M)
+    assert sorted(directives) == sorted(f"{module}.{name}" for name, module in names.items())
+    assert "Other" not in re.findall(r"^## (.*)$", markdown, flags=re.M), "a public name has no group on the page"
+    for name in names:
+        assert (getattr(wmrid, name).__doc__ or "").strip(), f"wmrid.{name} has no docstring for the reference"
+    assert HOOK.API_MARKER in (DOCS / "reference" / "api.md").read_text(encoding="utf-8")
+
+
+# ---- the result schema
+
+
+@pytest.fixture(scope="module")
+def validator():
+    jsonschema = pytest.importorskip("jsonschema")
+    schema = json.loads(SCHEMA.read_text(encoding="utf-8"))
+    jsonschema.Draft202012Validator.check_schema(schema)
+    return jsonschema.Draft202012Validator(schema)
+
+
+def _problems(validator, document: dict) -> list[str]:
+    return [f"{'/'.join(map(str, e.path))}: {e.message[:200]}" for e in validator.iter_errors(document)]
+
+
+def test_the_schema_is_of_the_version_wmrid_writes():
+    from wmrid.estimators.result import SCHEMA_VERSION
+
+    schema = json.loads(SCHEMA.read_text(encoding="utf-8"))
+    assert schema["properties"]["schema_version"]["const"] == SCHEMA_VERSION
+
+
+SAMPLES = sorted(p.name for p in (ROOT / "sample_logs").glob("*.*") if p.suffix in (".csv", ".mcap", ".parquet"))
+
+
+@pytest.mark.parametrize("sample", SAMPLES)
+def test_every_bundled_samples_identify_json_follows_the_published_schema(validator, sample):
+    """``wmrid identify SAMPLE --format json`` for each bundled sample (without a robot: the other test has one)."""
+    from tests.cliutil import wmrid
+
+    proc = wmrid("identify", str(ROOT / "sample_logs" / sample), "--format", "json")
+    assert proc.returncode == 0, proc.stderr
+    assert _problems(validator, json.loads(proc.stdout)) == []
+
+
+def test_the_schema_holds_for_other_methods_a_payload_a_validation_and_no_history(validator):
+    import wmrid
+    from wmrid.reporting.render import to_json
+
+    log = wmrid.read_log(ROOT / "sample_logs" / "paper_sinusoid.csv")
+    results = [
+        wmrid.validate(
+            wmrid.identify(log, "paper", method="idim"), str(ROOT / "sample_logs" / "paper_sinusoid.parquet")
+        ),
+        wmrid.identify(log, "paper", observer=wmrid.ObserverOptions(payload=True)),
+    ]
+    for result in results:
+        for history in (True, False):
+            document = json.loads(to_json(result.to_dict(history=history)))
+            assert _problems(validator, document) == []
+    broken = json.loads(to_json(results[1].to_dict()))
+    del broken["parameters"]["m11"]["std"]
+    assert _problems(validator, broken), "the schema must refuse a parameter without its std"
+
+
+# ---- the README: a front page that points into the site
+
+
+def test_the_readme_is_a_front_page():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert len(readme.splitlines()) <= 250
+    ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8")
+    test_command = next(line for line in ci.splitlines() if line.startswith("python3 -m venv"))
+    assert test_command in readme.splitlines(), "the README's test command must be the one CI runs"
+    for target in re.findall(r"\]\((docs/[^)#]+)", readme):
+        assert (ROOT / target).exists(), f"the README links to {target}, which does not exist"
+
+
+def test_the_docs_link_only_to_pages_that_exist():
+    """mkdocs --strict checks links between pages; this checks the links from files outside docs/ into it."""
+    for path in [ROOT / "README.md", ROOT / "examples" / "README.md", ROOT / "CHANGELOG.md"]:
+        if path.exists():
+            for target in re.findall(r"\]\(((?:\.\./)?docs/[^)#]+)", path.read_text(encoding="utf-8")):
+                assert (path.parent / target).resolve().exists(), f"{path.name} links to {target}"
+
+
+def test_the_readme_python_example_runs(tmp_path, monkeypatch):
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    code = re.search(r"```python\n(.*?)```", readme.split("## Python", 1)[1], re.S).group(1)
+    from tests.contract.test_docs_examples import workdir
+
+    monkeypatch.chdir(workdir(tmp_path))
+    scope: dict = {}
+    exec(compile(code, "README.md", "exec"), scope)
+    assert scope["value"] == pytest.approx(0.7872544, rel=1e-6)
+    assert (tmp_path / "report.html").read_text(encoding="utf-8").startswith("<!DOCTYPE html>")
