@@ -459,6 +459,43 @@ def test_a_signal_inside_held_waits_for_its_end():
     assert done == ["renamed"]
 
 
+def test_a_stop_dropped_in_a_weakref_callback_is_raised_again():
+    """A SIGTERM whose handler runs inside a weakref callback (where Python drops the exception: "Exception ignored";
+    seen in CI as the import system's module-lock callback, and ``wmrid simulate`` then wrote its log and exited 0) is
+    raised again a moment later, in the code that runs next, and nothing is printed for the dropped one."""
+    import gc
+    import weakref
+
+    from wmrid.runtime import interrupts
+
+    class Thing:
+        pass
+
+    def callback(_):
+        signal.raise_signal(signal.SIGTERM)  # the handler runs here, inside the callback
+
+    previous = interrupts.install()
+    try:
+        hook = sys.unraisablehook
+        thing = Thing()
+        ref = weakref.ref(thing, callback)
+
+        def drop_and_wait() -> None:
+            nonlocal thing
+            thing = None  # the callback runs; its Terminated is dropped, then raised again by the hook's timer
+            gc.collect()
+            time.sleep(2.0)
+
+        with pytest.raises(interrupts.Terminated):
+            drop_and_wait()
+        assert ref() is None
+        assert interrupts.received == signal.SIGTERM
+    finally:
+        interrupts.restore(previous)
+    assert sys.unraisablehook is not hook  # restored to the caller's
+    assert signal.getsignal(signal.SIGTERM) is previous[signal.SIGTERM]
+
+
 def test_in_process_calls_keep_the_callers_streams(tmp_path, capsys):
     """``main([...])`` under a text-only stdout (StringIO) writes CSV there (it exited 1, "standard output is
     closed"), and with --debug an error leaves the caller's streams and SIGINT handler as they were."""

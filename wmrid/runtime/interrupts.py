@@ -11,6 +11,11 @@ handled when they return), so this only defers Ctrl-C by the length of a compila
 SIGTERM (``timeout``, ``docker stop``, systemd) and SIGHUP (a closed terminal) are handled the same way: they
 raise :class:`Terminated`, a KeyboardInterrupt, so every temporary file is removed and a result group is complete
 or absent, exactly as for Ctrl-C; the CLI then exits 128 + the signal's number (143, 129).
+
+An exception raised where Python cannot pass it on (a weakref callback, ``__del__``: measured, a SIGTERM that arrived
+while the import system's module-lock callback ran) is printed as "Exception ignored" and dropped, and the run went on
+to exit 0 with its outputs written.  :func:`install` therefore also hooks ``sys.unraisablehook``: the dropped stop is
+raised again 1 ms later, from wherever the program then is.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import sys
 import time
 from collections.abc import Callable, Iterator
 from types import FrameType
@@ -92,6 +98,24 @@ def held() -> Iterator[None]:
         _raise()
 
 
+#: s: how soon a stop that was dropped (raised inside a weakref callback or ``__del__``) is raised again.
+REPEAT_S = 0.001
+_previous_hook: Callable[[object], object] | None = None
+
+
+def _unraisable(info: object) -> None:
+    """``sys.unraisablehook``: a stopping signal's exception dropped where it was raised is raised again (by SIGALRM,
+    :data:`REPEAT_S` later) instead of printed; anything else goes to the previous hook."""
+    if isinstance(getattr(info, "exc_value", None), KeyboardInterrupt) and received is not None:
+        global _deferred
+        if _holding:
+            _deferred = True
+        elif hasattr(signal, "setitimer"):
+            signal.setitimer(signal.ITIMER_REAL, REPEAT_S)
+        return
+    (_previous_hook or sys.__unraisablehook__)(info)  # type: ignore[arg-type]
+
+
 def exit_code() -> int:
     """128 + the stopping signal received (130 for Ctrl-C, 143 for SIGTERM, 129 for SIGHUP)."""
     return 128 + int(received if received is not None else signal.SIGINT)
@@ -101,8 +125,11 @@ def install() -> dict[int, object]:
     """Use the deferring handler for SIGINT, SIGTERM and SIGHUP (and SIGALRM, its retry); call from the main
     thread.  Returns the handlers it replaced, for :func:`restore`.
     """
-    global received, _pending
+    global received, _pending, _previous_hook
     received, _pending = None, signal.SIGINT
+    if sys.unraisablehook is not _unraisable:
+        _previous_hook = sys.unraisablehook
+        sys.unraisablehook = _unraisable
     previous = {
         signum: signal.signal(signum, _interrupt)
         for signum in STOPPING
@@ -122,8 +149,12 @@ _CALLER_TIMER = -1
 def restore(previous: dict[int, object]) -> None:
     """Put back the handlers :func:`install` replaced, cancel a pending retry, and re-arm the caller's alarm for
     the time it had left (at once if that has passed)."""
+    global _previous_hook
     if hasattr(signal, "setitimer"):
         signal.setitimer(signal.ITIMER_REAL, 0)
+    if sys.unraisablehook is _unraisable:
+        sys.unraisablehook = _previous_hook or sys.__unraisablehook__
+        _previous_hook = None
     for signum, handler in previous.items():
         if signum != _CALLER_TIMER:
             signal.signal(signum, handler)  # type: ignore[arg-type]
