@@ -1,5 +1,5 @@
-"""The flags declared once (:mod:`wmrid.cli.groups`): every command that reads a log offers identify's log flags, and
-every command that identifies offers its observer flags, made from the library's option objects."""
+"""The flags declared once (:mod:`wmrid.cli.groups`): made from the library's option objects, defaults included (which
+command offers which is tests/cli/test_cli_options.py's)."""
 
 from __future__ import annotations
 
@@ -31,18 +31,6 @@ def _commands() -> dict[str, set[str]]:
 def _flags(command_name: str) -> dict[str, object]:
     group = typer.main.get_command(app)
     return {p.name: p for p in group.commands[command_name].params}  # type: ignore[attr-defined]
-
-
-#: The commands that identify a log (the observer runs), and those that only read one (export's --check log).
-IDENTIFYING = ("identify", "report", "compare", "fleet", "monitor", "live")
-
-
-@pytest.mark.parametrize("command", IDENTIFYING)
-def test_every_command_that_identifies_offers_identify_s_log_and_observer_flags(command: str) -> None:
-    params = _commands()
-    shared = set(LOG_FLAGS.names) | set(OBSERVER_FLAGS.names)
-    assert shared <= params["identify"]
-    assert not shared - params[command], f"wmrid {command} lacks {sorted(shared - params[command])}"
 
 
 @pytest.mark.parametrize("command", ["identify", "report", "compare", "fleet"])

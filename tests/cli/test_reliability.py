@@ -496,6 +496,57 @@ def test_a_stop_dropped_in_a_weakref_callback_is_raised_again():
     assert signal.getsignal(signal.SIGTERM) is previous[signal.SIGTERM]
 
 
+def test_a_stop_dropped_at_the_end_still_ends_the_run_as_stopped(tmp_path, monkeypatch):
+    """A stop dropped so late that the command returns before it is raised again: the command line still exits
+    128 + the signal and says what it wrote (complete) before the stop, instead of exit 0."""
+    from types import SimpleNamespace
+
+    from wmrid.runtime import interrupts
+
+    real_disarm = interrupts.disarm
+
+    def dropped_just_now() -> bool:  # the command has returned: a SIGTERM arrives and is dropped in a callback
+        interrupts.received = signal.SIGTERM
+        interrupts._unraisable(SimpleNamespace(exc_value=interrupts.Terminated(signal.SIGTERM)))
+        return real_disarm()
+
+    monkeypatch.setattr(interrupts, "disarm", dropped_just_now)
+    out = tmp_path / "run.csv"
+    code = run("simulate", "--duration", "0.5", "-o", str(out))
+    assert code == 128 + signal.SIGTERM
+    assert out.exists()  # written in full before the stop, and said so
+
+
+def test_the_hook_never_calls_itself_through_a_wrapper_left_installed():
+    """A hook that wrapped wmrid's and stayed installed after :func:`restore` is the previous hook of the next
+    :func:`install`: an ordinary unraisable exception then went wrapper -> wmrid's -> wrapper ... (RecursionError)."""
+    from wmrid.runtime import interrupts
+
+    seen = []
+    caller = sys.unraisablehook
+    first = interrupts.install()
+    ours = sys.unraisablehook
+
+    def wrapper(info) -> None:
+        seen.append(info)
+        ours(info)
+
+    sys.unraisablehook = wrapper
+    interrupts.restore(first)
+    second = interrupts.install()
+
+    class Boom:
+        def __del__(self) -> None:
+            raise ValueError("dropped in __del__")  # an ordinary unraisable exception, not a stop
+
+    try:
+        Boom()  # collected at once: the hook chain runs (the default hook prints it to stderr)
+    finally:
+        interrupts.restore(second)
+        sys.unraisablehook = caller
+    assert len(seen) == 1  # wmrid's hook -> the wrapper (its previous) -> wmrid's again -> the default: no loop
+
+
 def test_in_process_calls_keep_the_callers_streams(tmp_path, capsys):
     """``main([...])`` under a text-only stdout (StringIO) writes CSV there (it exited 1, "standard output is
     closed"), and with --debug an error leaves the caller's streams and SIGINT handler as they were."""

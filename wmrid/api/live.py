@@ -180,7 +180,7 @@ class LiveRun:
         robot = self.prep.robot
         r, b = (getattr(robot.nominal, "r", None), getattr(robot.nominal, "b", None)) if robot else (None, None)
         geometry = (r, b) if r and b else None  # a base set may not know them
-        return LiveMonitor(monitored_model(model), geometry=geometry, effort_unit=unit)
+        return LiveMonitor(monitored_model(model), geometry=geometry, effort_unit=unit, observer=self.settings)
 
     # -- the observer ---------------------------------------------------------------------------------------------
     def _start_observers(self) -> None:

@@ -65,8 +65,9 @@ def monitor(
     if observer is not None and observer.delay is not None:
         log, delay = _delayed(log, observer, settings.calibration_s)
     result = run_monitor(log, model_obj, settings, observer)
-    if delay is not None:
-        result = replace(result, log_info={**result.log_info, "delay": delay})
+    if delay is not None:  # recorded with the log; what the estimate said is a warning of the run too
+        warnings = [*delay.get("warnings", ()), *result.warnings]
+        result = replace(result, log_info={**result.log_info, "delay": delay}, warnings=warnings)
     return result
 
 

@@ -89,10 +89,11 @@ def main(argv: list[str] | None = None) -> None:
             with option_style("flag"):  # library messages name options as the flags the user typed
                 rv = command().main(args=args, prog_name="wmrid", standalone_mode=False)
             finish_output()
+            stopped = interrupts.disarm()  # a stop dropped in a callback, not raised again before the command ended
         finally:
             clear_inputs()
         code = rv if isinstance(rv, int) else ExitStatus.OK
-        if code == ExitStatus.INTERRUPTED:  # Typer turns Ctrl-C into an exit code of 130
+        if code == ExitStatus.INTERRUPTED or (stopped and code < 128):  # Typer turns Ctrl-C into an exit code of 130
             code = interrupts.exit_code()
             sys.stderr.write(f"wmrid: {_stopped_by()}; {_kept()}\n")
     except KeyboardInterrupt:
@@ -134,8 +135,9 @@ def main(argv: list[str] | None = None) -> None:
     if argv is not None:  # called in-process: leave the caller's signal handlers and streams as they were
         _leave(argv, saved, previous)
         sys.exit(int(code))
-    for signum in interrupts.STOPPING:  # the outcome is decided: a late signal must not change it
-        signal.signal(signum, signal.SIG_IGN)
+    interrupts.disarm()
+    for signum in (*interrupts.STOPPING, *interrupts.RETRIES):  # the outcome is decided: a late signal must not
+        signal.signal(signum, signal.SIG_IGN)  # change it (nor the retry timer's, raising a stop past the handlers)
     if code >= 128:
         # Python remembers a KeyboardInterrupt that went through an embedded interpreter call (even one caught
         # later) and, at exit, kills itself with SIGINT instead of returning 130; leave at once instead.

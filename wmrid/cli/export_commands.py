@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     "wmrid export run.json --robot amr -o model.yaml\n\n"
     "wmrid export run.json --robot amr -o feedforward.py",
 )
-@takes(LOG_FLAGS)
+@takes(LOG_FLAGS.adapted(panel="Log input of --check (bag topics, units, effort)"))
 def export_command(
     result: Annotated[str, typer.Argument(help="A saved result (wmrid identify --format json -o run.json).")],
     output: Annotated[

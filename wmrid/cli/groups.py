@@ -10,12 +10,13 @@ the object made from the flags' values, checked once as it is made.  So ``identi
 
 from __future__ import annotations
 
+import copy
 import functools
 import inspect
 from collections.abc import Callable
-from dataclasses import MISSING, dataclass, fields
+from dataclasses import MISSING, dataclass, fields, replace
 from enum import Enum
-from typing import Any, TypeVar, get_args
+from typing import Annotated, Any, TypeVar, get_args
 
 from wmrid.api.inputs import LogOptions
 from wmrid.cli.options import (
@@ -102,6 +103,27 @@ class OptionGroup:
     def names(self) -> tuple[str, ...]:
         """The flags' parameter names."""
         return tuple(name for name, _ in self.flags.values())
+
+    def adapted(
+        self, *, without: tuple[str, ...] = (), texts: dict[str, str] | None = None, panel: str | None = None
+    ) -> OptionGroup:
+        """This group for one command: ``without`` fields left out (the object gets their defaults), ``texts``: help
+        by field for what the flag means there, every flag in ``panel``."""
+        flags = {}
+        for field_name, (name, alias) in self.flags.items():
+            if field_name in without:
+                continue
+            text = (texts or {}).get(field_name)
+            if text is not None or panel is not None:
+                kind, info = get_args(alias)[:2]
+                info = copy.copy(info)
+                if text is not None:
+                    info.help = text
+                if panel is not None:
+                    info.rich_help_panel = panel
+                alias = Annotated[kind, info]
+            flags[field_name] = (name, alias)
+        return replace(self, flags=flags, internal=self.internal | frozenset(without))
 
 
 LOG_FLAGS = OptionGroup(

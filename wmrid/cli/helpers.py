@@ -6,35 +6,10 @@ from __future__ import annotations
 import contextlib
 import sys
 from collections.abc import Callable, Iterator
-from enum import Enum
 from pathlib import Path
 from typing import Any
 
 from wmrid.core.errors import UsageError
-
-
-def log_opts(params: dict):
-    """The :class:`wmrid.api.inputs.LogOptions` of a command's log-input flags: its parameters by name (``locals()``),
-    Enum choices as their plain values."""
-    from wmrid.api.inputs import LOG_OPTION_NAMES, LogOptions
-
-    return LogOptions(**{n: params[n].value if isinstance(params[n], Enum) else params[n] for n in LOG_OPTION_NAMES})
-
-
-def observer_opts(params: dict):
-    """The :class:`wmrid.estimators.options.ObserverOptions` of a command's observer flags (``locals()``; a command
-    without ``--payload`` estimates none), checked once as it is made; ``--delay``'s text parsed."""
-    from wmrid.estimators.options import OBSERVER_NAMES, ObserverOptions
-
-    given = {n: params[n].value if isinstance(params[n], Enum) else params[n] for n in OBSERVER_NAMES if n in params}
-    return ObserverOptions(**given)
-
-
-def fit_opts(params: dict):
-    """The :class:`wmrid.estimators.options.MethodOptions` of a command's classical-method flags (``locals()``)."""
-    from wmrid.estimators.options import FIT_NAMES, MethodOptions
-
-    return MethodOptions(**{field: params[name] for name, field in FIT_NAMES.items()})
 
 
 def check_rotor(rotor_inertia: float | None) -> float | None:

@@ -158,11 +158,26 @@ def simulate_command(
         stderr_console().print(f"wrote {output} ({len(run.log.t)} samples{what}) and {truth_path}")
 
 
+#: The observer's flags as monitor reads them: the identifications after a change use them; the friction model is the
+#: model's, a delay shifts the whole log before the test, and a payload is not estimated (no robot file).
+MONITOR_OBSERVER_FLAGS = OBSERVER_FLAGS.adapted(
+    without=("payload",),
+    texts={
+        "delay": "The efforts are stamped SECONDS later than the speeds (two topics, two clocks; negative: earlier): "
+        "the whole log's efforts are read that much earlier before the test.  auto: the delay estimated on the "
+        "calibration span (assumed unchanged) and applied when significant.  Default: as stamped (monitor runs no "
+        "timing check).",
+        "friction": "The friction model the identifications after a change use: the model's (auto, the default, or "
+        "its name); another is refused (identify the model with it).",
+    },
+)
+
+
 @app.command(
     name="monitor",
     epilog="Examples:\n\nwmrid identify monday.mcap -o model.json; wmrid monitor friday.mcap --model model.json",
 )
-@takes(LOG_FLAGS, OBSERVER_FLAGS)
+@takes(LOG_FLAGS, MONITOR_OBSERVER_FLAGS)
 def monitor_command(
     log: Annotated[
         str, typer.Argument(metavar="LOG", help="Log file (.csv, .parquet, .mcap) or - for standard input.")

@@ -84,6 +84,8 @@ class ObserverOptions:
                 f"{option('friction')} must be one of {', '.join(FRICTION_CHOICES)}, got {self.friction!r}"
             )
         object.__setattr__(self, "delay", delay_value(self.delay))
+        if not isinstance(self.payload, bool):  # a text "false" would count as true
+            raise UsageError(f"{option('payload')} must be true or false, got {self.payload!r}")
         if not (isinstance(self.max_history, int) and self.max_history >= 2):
             raise UsageError(f"max_history must be an integer >= 2, got {self.max_history!r}")
 
@@ -133,6 +135,8 @@ class MethodOptions:
     forgetting: float = 1.0
 
     def __post_init__(self) -> None:
+        if not isinstance(self.weighted, bool):  # a text "false" would count as true
+            raise UsageError(f"{option('weighted')} must be true or false, got {self.weighted!r}")
         if self.cutoff_hz is not None and not (math.isfinite(self.cutoff_hz) and self.cutoff_hz > 0):
             raise UsageError(f"{option('cutoff')} must be a positive frequency in Hz, got {self.cutoff_hz!r}")
         if not (MIN_FORGETTING <= self.forgetting <= 1.0):

@@ -4,8 +4,10 @@ path confined under the manifest's root, each value checked with its row named."
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Sequence
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
@@ -15,11 +17,25 @@ from wmrid.fleets.table import MANIFEST_COLUMNS, LogEntry, _one_line, id_and_tim
 _BOOL = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}
 
 
+@functools.lru_cache(maxsize=1)
+def _kinds() -> tuple[frozenset[str], frozenset[str]]:
+    """(the options that are true/false, those that are numbers), by their names as manifest columns: read from the
+    option objects' field types (LogOptions, ObserverOptions, MethodOptions under the command line's names), plus the
+    rotor inertia."""
+    from wmrid.api.inputs import LogOptions
+    from wmrid.estimators.options import FIT_NAMES, MethodOptions, ObserverOptions
+
+    types = {f.name: f.type for cls in (LogOptions, ObserverOptions) for f in fields(cls)}
+    fit = {f.name: f.type for f in fields(MethodOptions)}
+    types.update({name: fit[field] for name, field in FIT_NAMES.items()})
+    flags = frozenset(n for n, t in types.items() if t == "bool")
+    numeric = frozenset(n for n, t in types.items() if t in ("float", "float | None")) | {"rotor_inertia"}
+    return flags, numeric
+
+
 def _option_value(name: str, value: Any, where: str) -> Any:
     """A manifest cell as the option's Python value (text kept for text options, numbers for numeric ones)."""
-    numeric = {"k", "alpha", "box_width", "control_rate", "cutoff", "forgetting", "rotor_inertia", "wheel_radius",
-               "torque_constant", "gear_ratio", "efficiency"}  # fmt: skip
-    flags = {"weighted", "mirror_left", "flip_effort"}
+    flags, numeric = _kinds()
     if name in flags:
         if isinstance(value, bool):
             return value

@@ -432,8 +432,23 @@ def options_key(options: dict[str, Any]) -> str:
 
 def canonical_options(options: dict[str, Any]) -> str:
     """Options as JSON with sorted keys and no spaces: the table's "options" cell and what :func:`options_key`
-    hashes."""
+    hashes.  ``delay`` as text (:func:`_delay_text`), whether it came as a number or as text."""
+    if "delay" in options:
+        options = {**options, "delay": _delay_text(options["delay"])}
     return json.dumps(options, sort_keys=True, separators=(",", ":"), default=str)
+
+
+def _delay_text(value: Any) -> Any:
+    """``delay`` as the table records it: "auto", or its seconds as the shortest text of the number ("0.02"), as
+    the command line passed the flag's text before it parsed it: a table it wrote resumes without running its logs
+    again, and a number from the command line and its text in a manifest give one key."""
+    if isinstance(value, str) and value.strip().lower() == "auto":
+        return "auto"
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        return value
+    return repr(number) if math.isfinite(number) else value
 
 
 def sort_table(table):

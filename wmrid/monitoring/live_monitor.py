@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError, UsageError, option
+from wmrid.estimators.options import ObserverOptions
 from wmrid.monitoring.glr import ModelError, NoiseModel, locate, window_grid, window_statistics
 from wmrid.monitoring.monitor import _identify_span, _Model, _model_of_result
 from wmrid.monitoring.residuals import residual_signals
@@ -118,12 +119,15 @@ class LiveMonitor:
     """The change test along a stream against ``model`` (see the module docstring).
 
     geometry : (r, b) m, the robot's wheel radius and half-track, for a payload's mass (None: not estimated).
+    observer : the observer's settings for the identifications after a change (as :func:`wmrid.monitoring.monitor.
+    _identify_span` uses them: the model's friction, no delay, no payload).
     :meth:`feed` takes t (k,) s, eta (k, 2) rad/s, tau (k, 2) in the model's effort unit, in order, and returns the
     changes found.
     """
 
     def __init__(self, model: MonitoredModel, settings: MonitorSettings | None = None,
-                 geometry: tuple[float, float] | None = None, effort_unit: str = "N m") -> None:  # fmt: skip
+                 geometry: tuple[float, float] | None = None, effort_unit: str = "N m",
+                 observer: ObserverOptions | None = None) -> None:  # fmt: skip
         if effort_unit != model.effort_unit:
             raise UsageError(
                 f"{option('monitor')} {model.source}: its parameters are for efforts in {model.effort_unit}, but the "
@@ -136,6 +140,7 @@ class LiveMonitor:
         self.friction = "wheel" if model.form is None else model.form.friction
         self.caster_geometry = () if model.form is None else tuple(model.form.geometry)
         self.notes: list[str] = []  # why the monitor stopped, fallbacks of re-identification
+        self.observer = observer  # the re-identifications' observer settings (friction, delay, payload aside)
         self.stopped = False
         # the raw stream (kept from raw index ``raw0``) and its grid, fixed on the first second
         self.raw_t: list[np.ndarray] = []
@@ -278,14 +283,16 @@ class LiveMonitor:
         a = seg.start
         t0, t1 = self._t(a) - offset, self._t(a + upto - 1) - offset
         unit = self.model.effort_unit
-        result, problem = _identify_span(log, t0, t1, unit, self.friction, self.notes, self.caster_geometry)
+        result, problem = _identify_span(
+            log, t0, t1, unit, self.friction, self.notes, self.caster_geometry, self.observer
+        )
         if result is None:
             raise NotIdentifiableError(problem)
         fitted = _model_of_result(result)
         half = upto // 2
         tm = self._t(a + half) - offset
-        first, _ = _identify_span(log, t0, tm, unit, self.friction, self.notes, self.caster_geometry)
-        second, _ = _identify_span(log, tm, t1, unit, self.friction, self.notes, self.caster_geometry)
+        first, _ = _identify_span(log, t0, tm, unit, self.friction, self.notes, self.caster_geometry, self.observer)
+        second, _ = _identify_span(log, tm, t1, unit, self.friction, self.notes, self.caster_geometry, self.observer)
         if first is not None and second is not None:
             spans = [self._residual(second.estimate.theta0, second.form, a, a + half),
                      self._residual(first.estimate.theta0, first.form, a + half, a + upto)]  # fmt: skip

@@ -51,6 +51,8 @@ class Terminated(KeyboardInterrupt):
 
 #: The signals that stop a run: Ctrl-C, and where the platform has them, kill and a closed terminal.
 STOPPING = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
+#: The timer's signal that retries a deferred or dropped stop (where the platform has it).
+RETRIES = tuple(getattr(signal, n) for n in ("SIGALRM",) if hasattr(signal, n))
 #: The first stopping signal received (the exit code is 128 + it), or None.
 received: int | None = None
 _pending = signal.SIGINT
@@ -100,20 +102,39 @@ def held() -> Iterator[None]:
 
 #: s: how soon a stop that was dropped (raised inside a weakref callback or ``__del__``) is raised again.
 REPEAT_S = 0.001
+#: Whether a stopping signal's exception was dropped since :func:`install` (raised again later, or, when the command
+#: ended first, turned into its exit code by the CLI: :func:`disarm`).
+dropped = False
 _previous_hook: Callable[[object], object] | None = None
+_in_hook = False
 
 
 def _unraisable(info: object) -> None:
     """``sys.unraisablehook``: a stopping signal's exception dropped where it was raised is raised again (by SIGALRM,
-    :data:`REPEAT_S` later) instead of printed; anything else goes to the previous hook."""
+    :data:`REPEAT_S` later) instead of printed; anything else goes to the previous hook (never back to this one: a
+    hook that wrapped this one and stayed installed would otherwise call it in a loop)."""
+    global _deferred, dropped, _in_hook
     if isinstance(getattr(info, "exc_value", None), KeyboardInterrupt) and received is not None:
-        global _deferred
+        dropped = True
         if _holding:
             _deferred = True
         elif hasattr(signal, "setitimer"):
             signal.setitimer(signal.ITIMER_REAL, REPEAT_S)
         return
-    (_previous_hook or sys.__unraisablehook__)(info)  # type: ignore[arg-type]
+    previous = _previous_hook if not _in_hook else None
+    _in_hook = True
+    try:
+        (previous or sys.__unraisablehook__)(info)  # type: ignore[arg-type]
+    finally:
+        _in_hook = False
+
+
+def disarm() -> bool:
+    """Cancel a pending re-raise (the outcome is being decided); returns whether a stop was dropped since
+    :func:`install`, for the caller to end as stopped."""
+    if hasattr(signal, "setitimer"):
+        signal.setitimer(signal.ITIMER_REAL, 0)
+    return dropped
 
 
 def exit_code() -> int:
@@ -125,8 +146,8 @@ def install() -> dict[int, object]:
     """Use the deferring handler for SIGINT, SIGTERM and SIGHUP (and SIGALRM, its retry); call from the main
     thread.  Returns the handlers it replaced, for :func:`restore`.
     """
-    global received, _pending, _previous_hook
-    received, _pending = None, signal.SIGINT
+    global received, _pending, _previous_hook, dropped
+    received, _pending, dropped = None, signal.SIGINT, False
     if sys.unraisablehook is not _unraisable:
         _previous_hook = sys.unraisablehook
         sys.unraisablehook = _unraisable

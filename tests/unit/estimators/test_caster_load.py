@@ -237,7 +237,8 @@ def _settings(form: RegressorForm, k: float = 3.0, hold: str = "zoh") -> Observe
 
 @pytest.mark.parametrize("name", list(LOAD_FORMS))
 def test_kernel_regressor_is_the_filter_regressor(name):
-    """observer_kernel._regressor_into with the load codes equals filter_regressor on ~450 samples with the special
+    """wmrid.estimators.observer.kernel._regressor_into with the load codes equals filter_regressor on ~450 samples with
+    the special
     speeds: to 1e-14 of each column's largest entry (the same arithmetic in the same order; measured exact).  Both
     with the drag's direction taken from the measured speeds and from other ones (the sign speeds,
     :mod:`wmrid.estimators.sign_speed`: here the measured speeds shuffled, so that direction and load signals

@@ -117,6 +117,23 @@ def test_manifest_rows_with_options(tmp_path):
     assert c.options == {"mirror_left": False}
 
 
+def test_a_manifest_s_true_false_columns_are_read_as_booleans(tmp_path):
+    """Every true/false option (read from the option objects' field types: payload, weighted, mirror_left,
+    flip_effort) is read as a boolean, so a "false" cell is False (a payload column's "false" was text, which
+    ObserverOptions took as true); ObserverOptions and MethodOptions refuse a non-boolean."""
+    from wmrid.core.errors import UsageError as Refused
+    from wmrid.estimators.options import MethodOptions, ObserverOptions
+
+    (tmp_path / "m.csv").write_text("log,payload,weighted\na.mcap,false,no\nb.mcap,True,1\n")
+    a, b = fm.read_manifest(tmp_path / "m.csv", option_names=OPTIONS, root="/")
+    assert a.options == {"payload": False, "weighted": False}
+    assert b.options == {"payload": True, "weighted": True}
+    with pytest.raises(Refused, match="payload must be true or false, got 'false'"):
+        ObserverOptions(payload="false")  # type: ignore[arg-type]
+    with pytest.raises(Refused, match="weighted must be true or false"):
+        MethodOptions(weighted="false")  # type: ignore[arg-type]
+
+
 @pytest.mark.parametrize(
     ("text", "message"),
     [
@@ -125,6 +142,7 @@ def test_manifest_rows_with_options(tmp_path):
         ("log,time\na.mcap,yesterday\n", r"m\.csv row 2: time: not a time"),
         ("log,k\na.mcap,fast\n", r"m\.csv row 2: k: k must be a number"),
         ("log,weighted\na.mcap,maybe\n", "weighted must be true or false"),
+        ("log,payload\na.mcap,sometimes\n", "payload must be true or false"),
         ("log,time\na.mcap,1772352000000\n", "not seconds since 1970"),
         ("log\n\n", "lists no log"),
         ("log,robot_id\n,R1\n", "row 2: the log cell is empty"),
@@ -206,3 +224,13 @@ def test_content_digest_of_a_file_and_a_folder(tmp_path):
     assert len(digest) == 64
     (rec / "rec_0.db3").write_bytes(b"de")
     assert ft.content_digest(str(rec))[0] != digest  # any byte of any file changes it
+
+
+def test_a_delay_gives_one_key_whether_a_number_or_its_text():
+    """``wmrid fleet --delay 0.02`` passes the parsed number (the flags are made into ObserverOptions), a CSV manifest
+    the text "0.02", a table written before the flags were parsed the text: one "options" cell and one resume key
+    for all three ("0.02"), and "auto" however it is spelled."""
+    cells = {ft.canonical_options({"delay": v, "k": 5.0}) for v in (0.02, "0.02", " 0.020 ", 2e-2)}
+    assert cells == {'{"delay":"0.02","k":5.0}'}
+    assert ft.options_key({"delay": 0.02}) == ft.options_key({"delay": "0.02"})
+    assert ft.canonical_options({"delay": "Auto"}) == ft.canonical_options({"delay": "auto"}) == '{"delay":"auto"}'

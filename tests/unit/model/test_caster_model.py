@@ -309,7 +309,8 @@ def test_kernel_kinds():
 
 @pytest.mark.parametrize("name", list(FORMS))
 def test_kernel_regressor_is_the_model_regressor(name):
-    """observer_kernel._regressor_into (compiled) equals model.regressor on ~450 samples, including standing
+    """wmrid.estimators.observer.kernel._regressor_into (compiled) equals model.regressor on ~450 samples, including
+    standing
     still, one wheel still, eta_1 = -eta_2, eta_1 = eta_2 and contact speeds below DRAG_SPEED: to 1e-14 of
     each column's largest entry (the same arithmetic in the same order; measured: bit-identical)."""
     form = FORMS[name]

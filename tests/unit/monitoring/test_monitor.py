@@ -358,7 +358,6 @@ def test_cli_monitor_takes_identify_s_observer_flags(cli_files) -> None:
 @pytest.mark.parametrize(
     ("flags", "needles"),
     [
-        (["--payload"], ["--payload", "not available in wmrid monitor", "identify --payload --robot"]),
         (["--friction", "wheel+caster"], ["--friction wheel+caster", "model's friction model (wheel)"]),
         (["--k", "0"], ["--k"]),
     ],
@@ -366,6 +365,13 @@ def test_cli_monitor_takes_identify_s_observer_flags(cli_files) -> None:
 def test_cli_monitor_refuses_an_observer_flag_it_cannot_honour(cli_files, flags: list[str], needles) -> None:
     proc = wmrid("monitor", str(cli_files["load"]), "--model", str(cli_files["model"]), *flags)
     assert_clean_error(proc, 2, *needles)
+
+
+def test_the_library_s_monitor_refuses_a_payload_estimate(cli_files) -> None:
+    import wmrid
+
+    with pytest.raises(UsageError, match=r"not available in wmrid monitor: .* identify --payload --robot"):
+        wmrid.monitor(cli_files["load"], cli_files["model"], observer=wmrid.ObserverOptions(payload=True))
 
 
 def test_load_model_reads_what_identify_writes(cli_files) -> None:
