@@ -14,7 +14,7 @@ import copy
 import functools
 import inspect
 from collections.abc import Callable
-from dataclasses import MISSING, dataclass, fields, replace
+from dataclasses import MISSING, dataclass, field, fields, replace
 from enum import Enum
 from typing import Annotated, Any, TypeVar, get_args
 
@@ -61,15 +61,16 @@ F = TypeVar("F", bound=Callable[..., Any])
 class OptionGroup:
     """The flags of one options dataclass.
 
-    keyword : the command's parameter that receives the object.  options : the dataclass.  flags : field name ->
-    (flag's parameter name, its ``Annotated`` alias); every field is a flag or in ``internal`` (set by the library,
-    never by a flag).
+    keyword : the command's parameter that receives the object.  options : the dataclass.  flags : field name -> the
+    flag's ``Annotated`` alias; every field is a flag or in ``internal`` (set by the library, never by a flag).
+    renamed : field name -> the flag's parameter name where they differ (``cutoff_hz`` is ``--cutoff``).
     """
 
     keyword: str
     options: type
-    flags: dict[str, tuple[str, Any]]
+    flags: dict[str, Any]
     internal: frozenset[str] = frozenset()
+    renamed: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         names = {f.name for f in fields(self.options)}
@@ -83,7 +84,7 @@ class OptionGroup:
         for f in fields(self.options):
             if f.name in self.internal:
                 continue
-            name, alias = self.flags[f.name]
+            name, alias = self.renamed.get(f.name, f.name), self.flags[f.name]
             default = f.default if f.default is not MISSING else f.default_factory()  # type: ignore[misc]
             kind = get_args(alias)[0]
             if isinstance(kind, type) and issubclass(kind, Enum) and default is not None:
@@ -94,15 +95,15 @@ class OptionGroup:
     def make(self, values: dict[str, Any]) -> Any:
         """The options object of the flags' values (``values`` by parameter name; Enum members as their values)."""
         given = {}
-        for field_name, (name, _) in self.flags.items():
-            value = values[name]
+        for field_name in self.flags:
+            value = values[self.renamed.get(field_name, field_name)]
             given[field_name] = value.value if isinstance(value, Enum) else value
         return self.options(**given)
 
     @property
     def names(self) -> tuple[str, ...]:
         """The flags' parameter names."""
-        return tuple(name for name, _ in self.flags.values())
+        return tuple(self.renamed.get(name, name) for name in self.flags)
 
     def adapted(
         self, *, without: tuple[str, ...] = (), texts: dict[str, str] | None = None, panel: str | None = None
@@ -110,7 +111,7 @@ class OptionGroup:
         """This group for one command: ``without`` fields left out (the object gets their defaults), ``texts``: help
         by field for what the flag means there, every flag in ``panel``."""
         flags = {}
-        for field_name, (name, alias) in self.flags.items():
+        for field_name, alias in self.flags.items():
             if field_name in without:
                 continue
             text = (texts or {}).get(field_name)
@@ -122,7 +123,7 @@ class OptionGroup:
                 if panel is not None:
                     info.rich_help_panel = panel
                 alias = Annotated[kind, info]
-            flags[field_name] = (name, alias)
+            flags[field_name] = alias
         return replace(self, flags=flags, internal=self.internal | frozenset(without))
 
 
@@ -130,25 +131,25 @@ LOG_FLAGS = OptionGroup(
     "log_options",
     LogOptions,
     {
-        "columns": ("columns", ColumnsOpt),
-        "time_unit": ("time_unit", TimeUnitOpt),
-        "topic": ("topic", TopicOpt),
-        "velocity_topic": ("velocity_topic", VelocityTopicOpt),
-        "effort_topic": ("effort_topic", EffortTopicOpt),
-        "right_joint": ("right_joint", RightJointOpt),
-        "left_joint": ("left_joint", LeftJointOpt),
-        "time_source": ("time_source", TimeSourceOpt),
-        "align": ("align", AlignOpt),
-        "velocity_from": ("velocity_from", VelocityFromOpt),
-        "speed_unit": ("speed_unit", SpeedUnitOpt),
-        "wheel_radius": ("wheel_radius", WheelRadiusOpt),
-        "effort": ("effort", EffortOpt),
-        "effort_unit": ("effort_unit", EffortUnitOpt),
-        "torque_constant": ("torque_constant", TorqueConstantOpt),
-        "gear_ratio": ("gear_ratio", GearRatioOpt),
-        "efficiency": ("efficiency", EfficiencyOpt),
-        "mirror_left": ("mirror_left", MirrorLeftOpt),
-        "flip_effort": ("flip_effort", FlipEffortOpt),
+        "columns": ColumnsOpt,
+        "time_unit": TimeUnitOpt,
+        "topic": TopicOpt,
+        "velocity_topic": VelocityTopicOpt,
+        "effort_topic": EffortTopicOpt,
+        "right_joint": RightJointOpt,
+        "left_joint": LeftJointOpt,
+        "time_source": TimeSourceOpt,
+        "align": AlignOpt,
+        "velocity_from": VelocityFromOpt,
+        "speed_unit": SpeedUnitOpt,
+        "wheel_radius": WheelRadiusOpt,
+        "effort": EffortOpt,
+        "effort_unit": EffortUnitOpt,
+        "torque_constant": TorqueConstantOpt,
+        "gear_ratio": GearRatioOpt,
+        "efficiency": EfficiencyOpt,
+        "mirror_left": MirrorLeftOpt,
+        "flip_effort": FlipEffortOpt,
     },
 )
 
@@ -156,15 +157,15 @@ OBSERVER_FLAGS = OptionGroup(
     "observer",
     ObserverOptions,
     {
-        "form": ("form", FormOpt),
-        "k": ("k", KOpt),
-        "alpha": ("alpha", AlphaOpt),
-        "box_width": ("box_width", BoxWidthOpt),
-        "torque_hold": ("torque_hold", TorqueHoldOpt),
-        "control_rate": ("control_rate", ControlRateOpt),
-        "delay": ("delay", DelayOpt),
-        "friction": ("friction", FrictionOpt),
-        "payload": ("payload", PayloadOpt),
+        "form": FormOpt,
+        "k": KOpt,
+        "alpha": AlphaOpt,
+        "box_width": BoxWidthOpt,
+        "torque_hold": TorqueHoldOpt,
+        "control_rate": ControlRateOpt,
+        "delay": DelayOpt,
+        "friction": FrictionOpt,
+        "payload": PayloadOpt,
     },
     internal=frozenset({"max_history"}),
 )
@@ -173,10 +174,11 @@ FIT_FLAGS = OptionGroup(
     "fit",
     MethodOptions,
     {
-        "cutoff_hz": ("cutoff", CutoffOpt),
-        "weighted": ("weighted", WeightedOpt),
-        "forgetting": ("forgetting", ForgettingOpt),
+        "cutoff_hz": CutoffOpt,
+        "weighted": WeightedOpt,
+        "forgetting": ForgettingOpt,
     },
+    renamed={"cutoff_hz": "cutoff"},
 )
 
 
