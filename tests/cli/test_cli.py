@@ -252,3 +252,18 @@ def test_fleet_records_no_options_when_none_are_given():
     }
     made = [group.make(defaults) for group in (LOG_FLAGS, OBSERVER_FLAGS, FIT_FLAGS)]
     assert _given_options(*made, defaults["method"].value, defaults["rotor_inertia"]) == {}
+
+
+@pytest.mark.parametrize(
+    ("args", "needles"),
+    [
+        (["identify", "--nope"], ["No such option: --nope", "see wmrid identify --help"]),
+        (["identify", "run.csv", "--k", "abc"], ["Invalid value for '--k'", "see wmrid identify --help"]),
+        (["identify"], ["Missing argument 'LOG...'; see wmrid identify --help"]),
+        (["idnetify", "x"], ["No such command 'idnetify'. Did you mean 'identify'?", "see wmrid --help"]),
+    ],
+)
+def test_a_command_line_mistake_is_one_line_naming_where_to_look(args, needles):
+    """A flag, value or argument click refuses: one line, exit 2, naming the command's --help (click printed a
+    four-line usage block)."""
+    assert_clean_error(wmrid(*args), 2, *needles)

@@ -117,8 +117,8 @@ def main(argv: list[str] | None = None) -> None:
         sys.stderr.write(f"wmrid: error: {_out_of_memory()}\n")
         code = ExitStatus.USAGE
     except Exception as exc:
-        if hasattr(exc, "show") and hasattr(exc, "exit_code"):  # a Click/Typer usage error: its own message
-            exc.show()
+        if hasattr(exc, "format_message") and hasattr(exc, "exit_code"):  # a Click/Typer usage error
+            sys.stderr.write(f"wmrid: error: {_usage_line(exc)}\n")
             code = ExitStatus.USAGE
         elif type(exc).__name__ == "Abort":
             code = interrupts.exit_code()
@@ -218,6 +218,14 @@ def _out_of_memory() -> str:
         f"out of memory reading {inputs}; {budget}{limit}: an endless source (/dev/zero, yes |)? save the log to a "
         f"file, or set {ENV} lower than the memory there is"
     )
+
+
+def _usage_line(exc: Any) -> str:
+    """A command-line usage error (an unknown option, a value that does not parse, a missing argument) as one line
+    that names the fix, instead of click's usage block: "No such option: --nope ...; see wmrid identify --help"."""
+    context = getattr(exc, "ctx", None)
+    where = getattr(context, "command_path", None) or "wmrid"
+    return f"{_one_line(exc.format_message()).rstrip('.')}; see {where} --help"
 
 
 def _kept() -> str:
