@@ -378,3 +378,17 @@ def test_a_row_identified_with_payload_carries_the_payload_as_identify_gives_it(
     assert row["payload_mass"] == pytest.approx(carried.mass, rel=0.1)
     (plain,) = plan(entries_from_paths([str(log)]), {}, "paper", fit=False)
     assert all(identify_entry(plain)[column] is None for column in ADDED_IN_3)
+
+
+def test_a_payload_without_a_robot_is_one_error_before_any_worker(tmp_path):
+    """``wmrid fleet --payload`` with no --robot and no robot column: one line, exit 2, no table (every row failed
+    with the same error before)."""
+    from cliutil import assert_clean_error, wmrid as run
+
+    import wmrid
+
+    log = tmp_path / "R1_2026-01-01.csv"
+    wmrid.write_simulation(wmrid.simulate("paper", duration=2.0, rate=200.0), log)
+    out = tmp_path / "t.parquet"
+    assert_clean_error(run("fleet", str(log), "--payload", "-o", str(out)), 2, "--payload", "--robot")
+    assert not out.exists()
