@@ -58,7 +58,7 @@ def in_process(path, repeat: int) -> dict:
 
     from wmrid.estimators.observer.observe import default_box, resolve_form
     from wmrid.estimators.observer.replay import replay
-    from wmrid.estimators.observer.step import ObserverSettings
+    from wmrid.estimators.observer.settings import ObserverSettings
     from wmrid.estimators.options import ObserverOptions
     from wmrid.io.logs import read_log
     from wmrid.model import dynamics as model

@@ -215,7 +215,7 @@ class LiveRun:
     def _observer(self, form: Any, sv: Any) -> Any:
         from wmrid.estimators.observer.observe import default_box
         from wmrid.estimators.observer.online import OnlineObserver
-        from wmrid.estimators.observer.step import ObserverSettings
+        from wmrid.estimators.observer.settings import ObserverSettings
         from wmrid.estimators.sign_speed import sign_half_window
         from wmrid.model import dynamics as model
 
@@ -404,7 +404,7 @@ def _warm_up() -> None:
     from wmrid.core.wheel_log import WheelLog
     from wmrid.estimators.observer.observe import default_box
     from wmrid.estimators.observer.online import OnlineObserver, online_estimate
-    from wmrid.estimators.observer.step import ObserverSettings
+    from wmrid.estimators.observer.settings import ObserverSettings
     from wmrid.estimators.observer.survey import survey
     from wmrid.model.dynamics import RegressorForm
 

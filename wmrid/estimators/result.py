@@ -19,7 +19,7 @@ import numpy as np
 
 from wmrid.core.errors import LogFormatError
 from wmrid.estimators.estimate import BaseEstimate
-from wmrid.estimators.observer.step import ObserverSettings
+from wmrid.estimators.observer.settings import ObserverSettings
 from wmrid.estimators.parameter import Parameter, parameter_table
 from wmrid.model.dynamics import THETA0_UNITS, RegressorForm
 

@@ -249,3 +249,11 @@ def test_option_objects_parse_and_refuse_as_the_flags_do():
     loaded = wmrid.simulate("paper", duration=2.0, payload=wmrid.Payload(20.0), change=wmrid.Change(1.0, "drop"))
     unloaded = model.named_base(model.base_parameters(robot.reference))
     assert loaded.truth["parameters"]["m11"] < unloaded["m11"]  # carried until the drop: the plant at t = 0 is loaded
+
+
+def test_a_saved_result_is_read_without_numba(tmp_path):
+    """The result's types load no compiled code (ObserverSettings lives apart from the kernel): reading a saved result
+    back (``IdentificationResult.from_dict``) starts without numba."""
+    code = "import sys, json; from wmrid.estimators.result import IdentificationResult; print('numba' in sys.modules)"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=tmp_path)
+    assert done.stdout.strip() == "False", done.stderr

@@ -87,7 +87,7 @@ def test_online_observer_is_the_offline_replay_in_pieces(log):
     sums add up to the replay's."""
     from wmrid.estimators.observer.online import OnlineObserver, online_estimate
     from wmrid.estimators.observer.replay import replay
-    from wmrid.estimators.observer.step import ObserverSettings
+    from wmrid.estimators.observer.settings import ObserverSettings
     from wmrid.model import dynamics as model
     from wmrid.model.dynamics import RegressorForm
 

@@ -41,7 +41,8 @@ from tests.unit.model.test_caster_model import (
 )
 from wmrid.estimators.observer.kernel import KIND_CASTER_GEOMETRY, _regressor_into
 from wmrid.estimators.observer.replay import kernel_kind, load_codes, replay
-from wmrid.estimators.observer.step import ObserverSettings, initial_state, observer_step
+from wmrid.estimators.observer.settings import ObserverSettings
+from wmrid.estimators.observer.step import initial_state, observer_step
 from wmrid.model import dynamics as model, torques
 from wmrid.model.base_params import direct_recovery, fit_base_parameters, jacobian_intermediate
 from wmrid.model.dynamics import RegressorForm

@@ -8,14 +8,8 @@ from scipy import optimize, signal
 
 from tests.open_loop import open_loop_log
 from wmrid.estimators.observer.replay import replay
-from wmrid.estimators.observer.step import (
-    ObserverSettings,
-    foh_weights,
-    initial_state,
-    observer_step,
-    project_to_box,
-    substep_weights,
-)
+from wmrid.estimators.observer.settings import ObserverSettings
+from wmrid.estimators.observer.step import foh_weights, initial_state, observer_step, project_to_box, substep_weights
 from wmrid.model import dynamics as model
 from wmrid.model.dynamics import RegressorForm
 from wmrid.model.robot import PAPER_NOMINAL

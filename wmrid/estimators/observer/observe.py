@@ -34,7 +34,7 @@ from wmrid.estimators.model_error import (
 from wmrid.estimators.noise_floor import derived_lag
 from wmrid.estimators.observer.kernel import project_history_box
 from wmrid.estimators.observer.replay import replay_pieces
-from wmrid.estimators.observer.step import ObserverSettings
+from wmrid.estimators.observer.settings import ObserverSettings
 from wmrid.estimators.observer.survey import Survey
 from wmrid.estimators.options import ObserverOptions
 from wmrid.estimators.result import History, IdentificationResult, ObserverRun, reported_names

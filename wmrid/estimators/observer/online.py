@@ -25,7 +25,7 @@ import numpy as np
 
 from wmrid.estimators.observer.kernel import observer_chunk, project_history_box
 from wmrid.estimators.observer.replay import KernelState
-from wmrid.estimators.observer.step import ObserverSettings
+from wmrid.estimators.observer.settings import ObserverSettings
 from wmrid.estimators.sign_speed import SignSpeeds
 from wmrid.model.kernels import plain
 

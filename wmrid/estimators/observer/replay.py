@@ -14,7 +14,7 @@ import numpy as np
 
 from wmrid.estimators.noise_floor import NoiseFloor
 from wmrid.estimators.observer.kernel import KIND_CASTER, KIND_CASTER_GEOMETRY, KIND_GENERAL, KIND_PAPER, observer_chunk
-from wmrid.estimators.observer.step import ObserverSettings
+from wmrid.estimators.observer.settings import ObserverSettings
 from wmrid.estimators.sign_speed import SignSpeeds
 from wmrid.model.dynamics import LOAD_SIGNALS, filter_regressor
 from wmrid.model.kernels import plain

@@ -417,8 +417,8 @@ def effort_delay(t: np.ndarray, torque_hold: str = "zoh", control_rate: float | 
     the filter's band, the effort delayed by half a hold period, and IDIM pairs the effort with the speeds'
     derivative at the sample time.  Left out, that half step biased the friction identified on multibody logs by
     -0.5 to -9 % (reversing at 1 kHz, noise-free; the inertia by 0.01 %); read half a step earlier, +0.2 to +1.6 %,
-    as the observer, which models the hold (:class:`wmrid.estimators.observer.step.ObserverSettings`).  ``torque_hold``:
-    "zoh"
+    as the observer, which models the hold (:class:`wmrid.estimators.observer.settings.ObserverSettings`).
+    ``torque_hold``: "zoh"
     (held over each logged step: half the median step t (n,) s), "foh" (linear between samples: 0);
     ``control_rate`` Hz: held by a controller at that rate (half its period), whatever the log's rate.
     """
