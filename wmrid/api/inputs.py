@@ -147,7 +147,7 @@ def reader_arguments(options: LogOptions | None, robot: Robot | None = None) -> 
     """The readers' arguments for ``options`` (with ``robot``'s values where they are not given): columns, time_unit,
     selection, signals and gear_ratio, as :func:`wmrid.io.logs.open_log` and the live readers
     (:mod:`wmrid.io.live`) take them."""
-    from wmrid.io.ros.joints import TopicSelection
+    from wmrid.io.ros.selection import TopicSelection
     from wmrid.io.signals import SignalOptions
     from wmrid.io.table.columns import parse_column_mapping
 

@@ -67,7 +67,7 @@ class TableInventory:
 
 def inspect_log(path: str | list[str]) -> McapInventory | TableInventory:
     """A description of the log at ``path`` (or ``-``; or the files of one recording); see the module docstring."""
-    from wmrid.io.bag.log import recording_paths
+    from wmrid.io.bag.paths import recording_paths
     from wmrid.io.sources import detect_format, open_source
 
     paths = [path] if isinstance(path, str) else list(path)

@@ -24,7 +24,7 @@ import numpy as np
 
 from wmrid.core.errors import LogFormatError, UsageError, option
 from wmrid.core.extras import available, require
-from wmrid.io.ros.joints import TopicSelection
+from wmrid.io.ros.selection import TopicSelection
 from wmrid.io.signals import SignalOptions, convert, position_to_rad, speed_from_position
 
 if TYPE_CHECKING:
@@ -38,8 +38,7 @@ from wmrid.core.wheel_log import (
     WheelLog,
 )
 from wmrid.io.assembler import MERGED_TIME, Assembler
-from wmrid.io.bag.log import read_bag_log, recording_paths
-from wmrid.io.mcap.log import read_mcap_log
+from wmrid.io.bag.paths import recording_paths
 from wmrid.io.ros.field_paths import field_signals
 from wmrid.io.sources import CSV_SUFFIXES, PARQUET_SUFFIXES, STDIN_NAME, Source, detect_format, one_line, open_source
 from wmrid.io.stamps import (
@@ -98,7 +97,7 @@ def open_log(
     layouts listed in the module docstring, which are decoded whole and then handed out in pieces.
     The file's layout (format, columns, delimiter) is checked here; the rows are checked as the pieces
     are read.  ``path`` may also be a ROS 1 bag, a ROS 2 ``.db3`` bag, a rosbag2 folder, or several bag files
-    of one recording (read in time order: :func:`wmrid.io.bag.log.recording_paths`).
+    of one recording (read in time order: :func:`wmrid.io.bag.paths.recording_paths`).
     """
     if time_unit not in TIME_UNITS:
         raise UsageError(f"{option('time_unit')} {time_unit!r} is not one of {', '.join(TIME_UNITS)}")
@@ -130,6 +129,8 @@ def open_log(
                 "logs only "
                 "so far; export the set-points as columns of one"
             )
+        from wmrid.io.mcap.log import read_mcap_log  # the MCAP reader and its compiled decoders: MCAP logs only
+
         return read_mcap_log(source, columns or {}, selection or TopicSelection(), signals, gear_ratio, rows)
     velocity_from = (selection or TopicSelection()).velocity_from
     if kind == "parquet":
@@ -224,6 +225,8 @@ def _bag_log(
         for root, _, files in os.walk(p) if os.path.isdir(p) else [("", None, [p])]:
             for f in files:
                 register_input(os.path.join(root, f))  # an output of this command may not be one of them
+    from wmrid.io.bag.log import read_bag_log  # rosbags and the compiled decoders: bag logs only
+
     return read_bag_log(paths, selection or TopicSelection(), signals, gear_ratio, rows, fields=fs)
 
 

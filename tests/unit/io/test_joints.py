@@ -10,7 +10,8 @@ import pytest
 import wmrid
 from wmrid.core.errors import LogFormatError
 from wmrid.core.wheel_log import SPLIT_NOTE, split_topics
-from wmrid.io.ros.joints import TopicSelection, align, choose_joints
+from wmrid.io.ros.joints import align, choose_joints
+from wmrid.io.ros.selection import TopicSelection
 
 
 @pytest.mark.parametrize(

@@ -23,7 +23,7 @@ from wmrid.core.errors import LogFormatError
 from wmrid.io.logs import read_log, write_log
 from wmrid.io.mcap.reader import read_mcap
 from wmrid.io.mcap.writer import JOINT_STATE_MSGDEF, write_joint_state_mcap
-from wmrid.io.ros.joints import TopicSelection
+from wmrid.io.ros.selection import TopicSelection
 from wmrid.model import dynamics as model
 from wmrid.model.robot import BUILTIN_ROBOTS
 from wmrid.pipeline.identify import identify

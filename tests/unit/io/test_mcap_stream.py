@@ -30,7 +30,7 @@ from wmrid.io.mcap import log as mcap_log
 from wmrid.io.mcap.reader import read_mcap, scan_mcap
 from wmrid.io.mcap.records import scan as _scan
 from wmrid.io.mcap.writer import JOINT_STATE_MSGDEF, write_joint_state_mcap
-from wmrid.io.ros.joints import TopicSelection
+from wmrid.io.ros.selection import TopicSelection
 from wmrid.io.signals import SignalOptions
 from wmrid.model.robot import BUILTIN_ROBOTS
 from wmrid.pipeline.identify import identify

@@ -14,7 +14,7 @@ from tests.cliutil import wmrid as run_cli
 from tests.encoder_log import write_encoder_mcap
 from wmrid.core.wheel_log import DERIVED_NOTE
 from wmrid.io.logs import open_log, read_log
-from wmrid.io.ros.joints import TopicSelection
+from wmrid.io.ros.selection import TopicSelection
 from wmrid.io.signals import SignalOptions
 from wmrid.io.table.columns import guess_candidates
 

@@ -24,7 +24,8 @@ import numpy as np
 from wmrid.core.errors import UsageError, option
 from wmrid.core.wheel_log import CANONICAL, REFERENCE, WheelLog
 from wmrid.io.mcap.records import JOINT_STATE_NAMES
-from wmrid.io.ros.joints import TopicSelection, signals_from_json, signals_from_mcap
+from wmrid.io.ros.joints import signals_from_json, signals_from_mcap
+from wmrid.io.ros.selection import TopicSelection
 from wmrid.io.signals import SignalOptions, convert
 from wmrid.io.stamps import ABSOLUTE_LIMIT_S
 

@@ -29,7 +29,7 @@ from wmrid.io.live.decoders import McapDecoder, TableDecoder
 from wmrid.io.live.feeds import READ_BYTES, FileFeed, PipeFeed
 from wmrid.io.live.framing import CsvBatcher, JsonLines, LineFramer, McapFramer
 from wmrid.io.mcap.records import MAGIC
-from wmrid.io.ros.joints import TopicSelection
+from wmrid.io.ros.selection import TopicSelection
 from wmrid.io.signals import SignalOptions
 from wmrid.io.sources import STDIN_NAME, compression_of
 from wmrid.runtime.limits import memory_budget

@@ -14,7 +14,8 @@ import numpy as np
 from wmrid.core.errors import LogFormatError, UsageError, option
 from wmrid.core.wheel_log import CACHE_ROWS, CHUNK_ROWS, MIN_SAMPLES, REQUIRED, LogStream, WheelLog, stream_arrays
 from wmrid.io.ros.field_paths import FieldSignals, check_values, field_signals
-from wmrid.io.ros.joints import TopicSelection, signals_from_json, signals_from_mcap
+from wmrid.io.ros.joints import signals_from_json, signals_from_mcap
+from wmrid.io.ros.selection import TopicSelection
 from wmrid.io.signals import SignalOptions
 from wmrid.io.sources import Source
 from wmrid.io.stamps import ABSOLUTE_LIMIT_S, NS_PER_UNIT, seconds_from_stamps

@@ -11,7 +11,6 @@ from wmrid.io.mcap.records import bucket_range
 from wmrid.io.ros.contents import McapContents
 from wmrid.io.ros.joints import (
     SignalPlan,
-    TopicSelection,
     align_note,
     check_effort,
     clean_counts,
@@ -19,6 +18,7 @@ from wmrid.io.ros.joints import (
     no_overlap,
     plan_signals,
 )
+from wmrid.io.ros.selection import TopicSelection
 from wmrid.io.signals import SignalOptions, convert
 
 
