@@ -267,3 +267,12 @@ def test_a_command_line_mistake_is_one_line_naming_where_to_look(args, needles):
     """A flag, value or argument click refuses: one line, exit 2, naming the command's --help (click printed a
     four-line usage block)."""
     assert_clean_error(wmrid(*args), 2, *needles)
+
+
+def test_wmrid_alone_shows_its_help_and_no_error_line():
+    """``wmrid`` without a command: the help on stdout, exit 2 as click's, and no "error" on stderr (the one-line
+    usage errors had turned it into "wmrid: error: ; see wmrid --help")."""
+    proc = wmrid()
+    assert proc.returncode == 2
+    assert b"Usage" in proc.stdout
+    assert b"error" not in proc.stderr

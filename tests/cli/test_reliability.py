@@ -517,6 +517,37 @@ def test_a_stop_dropped_at_the_end_still_ends_the_run_as_stopped(tmp_path, monke
     assert out.exists()  # written in full before the stop, and said so
 
 
+def test_a_stop_still_waiting_when_the_command_ends_is_owed():
+    """Whatever kept a stop waiting when the command returned (a retry of a Ctrl-C deferred while numba compiled, a
+    stop held back by a block that then raised) makes :func:`disarm` say a stop is owed; nothing else does."""
+    from wmrid.runtime import interrupts
+
+    previous = interrupts.install()
+    try:
+        assert interrupts.disarm() is False  # nothing received
+        interrupts.received = signal.SIGINT
+        signal.setitimer(signal.ITIMER_REAL, 5.0)  # the compile retry, still pending
+        assert interrupts.disarm() is True
+        assert signal.getitimer(signal.ITIMER_REAL)[0] == 0  # and cancelled
+        interrupts.received = None
+
+        def failing_block() -> None:
+            with interrupts.held():
+                interrupts._interrupt(signal.SIGTERM, None)  # held back...
+                raise RuntimeError("the block fails")  # ...and never raised at the block's end
+
+        with pytest.raises(RuntimeError):
+            failing_block()
+        assert interrupts.disarm() is True
+    finally:
+        interrupts.restore(previous)
+    assert interrupts.install() is not None  # a fresh install forgets it
+    try:
+        assert interrupts.disarm() is False
+    finally:
+        interrupts.restore({})
+
+
 def test_the_hook_never_calls_itself_through_a_wrapper_left_installed():
     """A hook that wrapped wmrid's and stayed installed after :func:`restore` is the previous hook of the next
     :func:`install`: an ordinary unraisable exception then went wrapper -> wmrid's -> wrapper ... (RecursionError)."""

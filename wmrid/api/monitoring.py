@@ -65,9 +65,9 @@ def monitor(
     if observer is not None and observer.delay is not None:
         log, delay = _delayed(log, observer, settings.calibration_s)
     result = run_monitor(log, model_obj, settings, observer)
-    if delay is not None:  # recorded with the log; what the estimate said is a warning of the run too
-        warnings = [*delay.get("warnings", ()), *result.warnings]
-        result = replace(result, log_info={**result.log_info, "delay": delay}, warnings=warnings)
+    if delay is not None:  # recorded with the log; what the estimate said is a warning of the run
+        record, said = delay
+        result = replace(result, log_info={**result.log_info, "delay": record}, warnings=[*said, *result.warnings])
     return result
 
 
@@ -86,13 +86,16 @@ def _check_observer(observer: ObserverOptions, model: MonitoredModel) -> None:
         )
 
 
-def _delayed(log: WheelLog, observer: ObserverOptions, calibration_s: float) -> tuple[WheelLog, dict[str, Any]]:
+def _delayed(
+    log: WheelLog, observer: ObserverOptions, calibration_s: float
+) -> tuple[WheelLog, tuple[dict[str, Any], list[str]]]:
     """``log`` with its efforts read ``observer.delay`` s earlier ("auto": the delay estimated on the first
-    ``calibration_s`` s), and the record of what was applied."""
+    ``calibration_s`` s), and (the record of what was applied, the estimate's warnings)."""
     from wmrid.estimators.timing_check import apply_delay
 
     delay = observer.delay
     record: dict[str, Any] = {}
+    warnings: list[str] = []
     if delay == "auto":
         t = np.asarray(log.t, dtype=np.float64)
         n = int(np.searchsorted(t, t[0] + calibration_s, side="right"))
@@ -100,9 +103,9 @@ def _delayed(log: WheelLog, observer: ObserverOptions, calibration_s: float) -> 
         span = WheelLog(t=t[:n], eta=np.asarray(log.eta)[:n], tau=np.asarray(log.tau)[:n], source=log.source,
                         effort_unit=log.effort_unit, reference=reference)  # fmt: skip
         _, record, warnings = apply_delay(span, "auto", observer.torque_hold, observer.control_rate)
-        record = {**record, "estimated_on_s": calibration_s, "warnings": warnings}
+        record = {**record, "estimated_on_s": calibration_s}
         delay = record["applied_s"]
     if not isinstance(delay, (int, float)):  # given seconds, or the estimate's applied_s
         raise TypeError(f"delay {delay!r}")
     shifted, applied, _ = apply_delay(log, float(delay), observer.torque_hold, observer.control_rate)
-    return shifted, {**applied, **record}
+    return shifted, ({**applied, **record}, warnings)

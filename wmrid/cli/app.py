@@ -89,8 +89,8 @@ def main(argv: list[str] | None = None) -> None:
             with option_style("flag"):  # library messages name options as the flags the user typed
                 rv = command().main(args=args, prog_name="wmrid", standalone_mode=False)
             finish_output()
-            stopped = interrupts.disarm()  # a stop dropped in a callback, not raised again before the command ended
         finally:
+            stopped = interrupts.disarm()  # a stop dropped in a callback, or still waiting, when the command ended
             clear_inputs()
         code = rv if isinstance(rv, int) else ExitStatus.OK
         if code == ExitStatus.INTERRUPTED or (stopped and code < 128):  # Typer turns Ctrl-C into an exit code of 130
@@ -117,7 +117,9 @@ def main(argv: list[str] | None = None) -> None:
         sys.stderr.write(f"wmrid: error: {_out_of_memory()}\n")
         code = ExitStatus.USAGE
     except Exception as exc:
-        if hasattr(exc, "format_message") and hasattr(exc, "exit_code"):  # a Click/Typer usage error
+        if type(exc).__name__ == "NoArgsIsHelpError":  # `wmrid COMMAND` without arguments: its help was shown
+            code = ExitStatus.USAGE
+        elif hasattr(exc, "format_message") and hasattr(exc, "exit_code"):  # a Click/Typer usage error
             sys.stderr.write(f"wmrid: error: {_usage_line(exc)}\n")
             code = ExitStatus.USAGE
         elif type(exc).__name__ == "Abort":

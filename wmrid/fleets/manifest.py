@@ -7,9 +7,8 @@ from __future__ import annotations
 import functools
 import os
 from collections.abc import Sequence
-from dataclasses import fields
 from pathlib import Path
-from typing import Any
+from typing import Any, get_args, get_type_hints
 
 from wmrid.core.errors import LogFormatError, UsageError, option
 from wmrid.fleets.table import MANIFEST_COLUMNS, LogEntry, _one_line, id_and_time_from_path, parse_time
@@ -25,12 +24,12 @@ def _kinds() -> tuple[frozenset[str], frozenset[str]]:
     from wmrid.api.inputs import LogOptions
     from wmrid.estimators.options import FIT_NAMES, MethodOptions, ObserverOptions
 
-    types = {f.name: f.type for cls in (LogOptions, ObserverOptions) for f in fields(cls)}
-    fit = {f.name: f.type for f in fields(MethodOptions)}
+    types = {**get_type_hints(LogOptions), **get_type_hints(ObserverOptions)}
+    fit = get_type_hints(MethodOptions)
     types.update({name: fit[field] for name, field in FIT_NAMES.items()})
-    flags = frozenset(n for n, t in types.items() if t == "bool")
-    numeric = frozenset(n for n, t in types.items() if t in ("float", "float | None")) | {"rotor_inertia"}
-    return flags, numeric
+    flags = frozenset(n for n, t in types.items() if t is bool)
+    numeric = frozenset(n for n, t in types.items() if t is float or set(get_args(t)) == {float, type(None)})
+    return flags, numeric | {"rotor_inertia"}
 
 
 def _option_value(name: str, value: Any, where: str) -> Any:

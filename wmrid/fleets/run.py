@@ -141,12 +141,13 @@ def _robot_digest(robot: str | None, cache: dict[str, str | None]) -> str | None
     return cache[robot]
 
 
-def _check_payload_robots(entries: Sequence[LogEntry], given: dict[str, Any], robot: str | None) -> None:
-    """A payload asked for (run-wide or in a manifest row) needs the unloaded robot it is weighed against: a log
-    without a robot is one error before any worker starts, not a failed row per log."""
-    for e in entries:
-        if (e.options.get("payload", given.get("payload")) is True) and not (e.robot or robot):
-            where = f"{e.log}: " if len(entries) > 1 else ""
+def _check_payload_robots(specs: Sequence[dict[str, Any]]) -> None:
+    """A payload asked for (run-wide or in a manifest row) needs the unloaded robot it is weighed against: a log to
+    run without a robot is one error before any worker starts, not a failed row per log (the logs a resumed table
+    keeps are not asked again)."""
+    for spec in specs:
+        if spec["options"].get("payload") is True and not spec["robot"]:
+            where = f"{spec['log']}: " if len(specs) > 1 else ""
             raise UsageError(
                 f"{where}{option('payload')} estimates the payload against the unloaded robot: give {option('robot')} "
                 "(or a robot column in the manifest)"
@@ -305,9 +306,9 @@ def fleet(
         from wmrid.api.inputs import load_robot
 
         load_robot(robot, gear_ratio=given.get("gear_ratio"))  # a bad robot file is one error, not a row per log
-    _check_payload_robots(entries, given, robot)
     specs = plan(entries, given, robot, fit)
     old, specs, notes = _resume(out, specs, resume, retry_failed, force)
+    _check_payload_robots(specs)
     run = FleetRun(notes=notes, scheduler=scheduler)
     started = time.perf_counter()
     new_rows = _NewRows()

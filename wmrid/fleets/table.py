@@ -439,16 +439,19 @@ def canonical_options(options: dict[str, Any]) -> str:
 
 
 def _delay_text(value: Any) -> Any:
-    """``delay`` as the table records it: "auto", or its seconds as the shortest text of the number ("0.02"), as
-    the command line passed the flag's text before it parsed it: a table it wrote resumes without running its logs
-    again, and a number from the command line and its text in a manifest give one key."""
+    """``delay`` as the table records it: "auto", or its seconds as the shortest text of the number ("0.02", "0"),
+    as the command line passed the flag's text before it parsed it: a table it wrote resumes without running its logs
+    again when the flag was written that way (another spelling, "1e-3" or "0.020", runs them once more), and a number
+    from the command line and its text in a manifest give one key."""
     if isinstance(value, str) and value.strip().lower() == "auto":
         return "auto"
     try:
         number = float(value)
     except (TypeError, ValueError):
         return value
-    return repr(number) if math.isfinite(number) else value
+    if not math.isfinite(number):
+        return value
+    return str(int(number)) if number.is_integer() else repr(number)  # "0", as --delay 0 was written
 
 
 def sort_table(table):

@@ -24,6 +24,7 @@ import contextlib
 import os
 import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator
 from types import FrameType
@@ -106,14 +107,14 @@ REPEAT_S = 0.001
 #: ended first, turned into its exit code by the CLI: :func:`disarm`).
 dropped = False
 _previous_hook: Callable[[object], object] | None = None
-_in_hook = False
+_in_hook = threading.local()  # .active: this thread is inside the previous hook (it must not call this one again)
 
 
 def _unraisable(info: object) -> None:
     """``sys.unraisablehook``: a stopping signal's exception dropped where it was raised is raised again (by SIGALRM,
     :data:`REPEAT_S` later) instead of printed; anything else goes to the previous hook (never back to this one: a
     hook that wrapped this one and stayed installed would otherwise call it in a loop)."""
-    global _deferred, dropped, _in_hook
+    global _deferred, dropped
     if isinstance(getattr(info, "exc_value", None), KeyboardInterrupt) and received is not None:
         dropped = True
         if _holding:
@@ -121,20 +122,24 @@ def _unraisable(info: object) -> None:
         elif hasattr(signal, "setitimer"):
             signal.setitimer(signal.ITIMER_REAL, REPEAT_S)
         return
-    previous = _previous_hook if not _in_hook else None
-    _in_hook = True
+    inside = getattr(_in_hook, "active", False)
+    previous = _previous_hook if not inside else None
+    _in_hook.active = True
     try:
         (previous or sys.__unraisablehook__)(info)  # type: ignore[arg-type]
     finally:
-        _in_hook = False
+        _in_hook.active = inside
 
 
 def disarm() -> bool:
-    """Cancel a pending re-raise (the outcome is being decided); returns whether a stop was dropped since
-    :func:`install`, for the caller to end as stopped."""
+    """Cancel a pending retry (the outcome is being decided); returns whether a stop is owed since :func:`install`:
+    one dropped, one held back by :func:`held` whose block raised, or one deferred while numba compiled whose retry
+    was still pending; the caller ends the run as stopped.  (Any timer still pending is wmrid's: :func:`install`
+    saved and cleared the caller's.)"""
+    pending = False
     if hasattr(signal, "setitimer"):
-        signal.setitimer(signal.ITIMER_REAL, 0)
-    return dropped
+        pending = signal.setitimer(signal.ITIMER_REAL, 0)[0] > 0
+    return dropped or _deferred or (pending and received is not None)
 
 
 def exit_code() -> int:
@@ -146,8 +151,8 @@ def install() -> dict[int, object]:
     """Use the deferring handler for SIGINT, SIGTERM and SIGHUP (and SIGALRM, its retry); call from the main
     thread.  Returns the handlers it replaced, for :func:`restore`.
     """
-    global received, _pending, _previous_hook, dropped
-    received, _pending, dropped = None, signal.SIGINT, False
+    global received, _pending, _previous_hook, dropped, _deferred
+    received, _pending, dropped, _deferred = None, signal.SIGINT, False, False
     if sys.unraisablehook is not _unraisable:
         _previous_hook = sys.unraisablehook
         sys.unraisablehook = _unraisable
@@ -212,7 +217,6 @@ def start_watchdog() -> None:
     if not hasattr(signal, "set_wakeup_fd") or not hasattr(signal, "pthread_sigmask"):
         return
     import socket
-    import threading
 
     reader, writer = socket.socketpair()
     writer.setblocking(False)

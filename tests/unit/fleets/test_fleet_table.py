@@ -234,3 +234,4 @@ def test_a_delay_gives_one_key_whether_a_number_or_its_text():
     assert cells == {'{"delay":"0.02","k":5.0}'}
     assert ft.options_key({"delay": 0.02}) == ft.options_key({"delay": "0.02"})
     assert ft.canonical_options({"delay": "Auto"}) == ft.canonical_options({"delay": "auto"}) == '{"delay":"auto"}'
+    assert ft.canonical_options({"delay": 0.0}) == ft.canonical_options({"delay": "0"}) == '{"delay":"0"}'
