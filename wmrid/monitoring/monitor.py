@@ -329,6 +329,16 @@ class _Monitor:
         return noise.whiten(residual), noise.whiten(self.sig.phi_for(fitted.form, "test")[a - q : b])
 
 
+def identification_settings(observer: ObserverOptions | None) -> dict[str, Any]:
+    """The observer's settings the identifications after a change use (the defaults when none are given), for the
+    JSON's "identification": its friction model is the model's, no delay (the log is shifted first), no payload."""
+    options = observer if observer is not None else ObserverOptions()
+    return {
+        "form": options.form, "k": options.k, "alpha": options.alpha, "box_width": options.box_width,
+        "torque_hold": options.torque_hold, "control_rate": options.control_rate,
+    }  # fmt: skip
+
+
 def monitor(
     log: Any, model_: MonitoredModel, settings: MonitorSettings | None = None, observer: ObserverOptions | None = None
 ) -> MonitorResult:
@@ -427,4 +437,5 @@ def monitor(
         source=source, model=model_, settings=settings, grid=mon.grid, noise_lags=mon.order,
         calibration_samples=mon.n_cal, changes=changes, segments=segments,
         log_info=log_info, warnings=warnings, seconds=time.perf_counter() - started,
+        identification=identification_settings(observer),
     )  # fmt: skip

@@ -66,6 +66,9 @@ class MonitorResult:
     log_info: dict[str, Any]
     warnings: list[str]
     seconds: float
+    #: the observer's settings of the identifications after a change (form, k, alpha, box_width, torque_hold,
+    #: control_rate), as the JSON's "identification"
+    identification: dict[str, Any] | None = None
 
     def detector_dict(self) -> dict[str, Any]:
         g, st, order = self.grid, self.settings, self.noise_lags
@@ -119,6 +122,7 @@ class MonitorResult:
             "changes": [c.to_dict() for c in self.changes],
             "detector": self.detector_dict(),
             "segments": self.segments,
+            **({} if self.identification is None else {"identification": self.identification}),
             "log": self.log_info,
             "warnings": list(self.warnings),
             "seconds": self.seconds,

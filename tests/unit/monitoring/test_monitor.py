@@ -351,6 +351,8 @@ def test_cli_monitor_takes_identify_s_observer_flags(cli_files) -> None:
         assert found["t"] == pytest.approx(20.0, abs=0.2), name
         assert found["parameters"]["m11"]["value"] == pytest.approx(truth["m11"], rel=0.02), name
     assert runs["k5"]["changes"][0]["parameters"] != runs["default"]["changes"][0]["parameters"]
+    assert runs["default"]["identification"]["k"] == 10.0  # the settings used are in the JSON
+    assert runs["k5"]["identification"] == {**runs["default"]["identification"], "k": 5.0}
     assert "delay" not in runs["default"]["log"]
     assert runs["delay"]["log"]["delay"] == {"chosen_by": "--delay", "applied_s": 0.002}
 
