@@ -78,7 +78,7 @@ def _check_observer(observer: ObserverOptions, model: MonitoredModel) -> None:
             f"{option('payload')} is not available in wmrid monitor: the segments after a change are identified "
             "without a robot file; identify one segment with wmrid identify --payload --robot ROBOT"
         )
-    friction = "wheel" if model.form is None else model.form.friction
+    friction = model.friction
     if observer.friction not in ("auto", friction):
         raise UsageError(
             f"{option('friction')} {observer.friction}: the monitor identifies with the model's friction model "

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any, get_args, get_type_hints
 
 from wmrid.core.errors import LogFormatError, UsageError, option
+from wmrid.estimators.options import FIT_NAMES, MethodOptions, ObserverOptions
 from wmrid.fleets.table import MANIFEST_COLUMNS, LogEntry, _one_line, id_and_time_from_path, parse_time
 
 _BOOL = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}
@@ -22,7 +23,6 @@ def _kinds() -> tuple[frozenset[str], frozenset[str]]:
     option objects' field types (LogOptions, ObserverOptions, MethodOptions under the command line's names), plus the
     rotor inertia."""
     from wmrid.api.inputs import LogOptions
-    from wmrid.estimators.options import FIT_NAMES, MethodOptions, ObserverOptions
 
     types = {**get_type_hints(LogOptions), **get_type_hints(ObserverOptions)}
     fit = get_type_hints(MethodOptions)

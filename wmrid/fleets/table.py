@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from wmrid.core.errors import LogFormatError, UsageError, option
+from wmrid.estimators.options import delay_value
 
 SCHEMA_VERSION = "3"
 #: Schema versions read (an older table lacks the columns added since, :data:`ADDED_IN_2` and :data:`ADDED_IN_3`:
@@ -442,16 +443,15 @@ def _delay_text(value: Any) -> Any:
     """``delay`` as the table records it: "auto", or its seconds as the shortest text of the number ("0.02", "0"),
     as the command line passed the flag's text before it parsed it: a table it wrote resumes without running its logs
     again when the flag was written that way (another spelling, "1e-3" or "0.020", runs them once more), and a number
-    from the command line and its text in a manifest give one key."""
-    if isinstance(value, str) and value.strip().lower() == "auto":
-        return "auto"
+    from the command line and its text in a manifest give one key.  Parsed as the observer parses it
+    (:func:`wmrid.estimators.options.delay_value`); a value it refuses is kept as it is (its row fails on its own)."""
     try:
-        number = float(value)
-    except (TypeError, ValueError):
+        parsed = delay_value(value)
+    except UsageError:
         return value
-    if not math.isfinite(number):
-        return value
-    return str(int(number)) if number.is_integer() else repr(number)  # "0", as --delay 0 was written
+    if not isinstance(parsed, float):
+        return parsed
+    return str(int(parsed)) if parsed.is_integer() else repr(parsed)  # "0", as --delay 0 was written
 
 
 def sort_table(table):

@@ -137,7 +137,7 @@ class LiveMonitor:
         self.settings = settings or MonitorSettings()
         self.geometry = geometry
         self.form = caster_form(model.form)
-        self.friction = "wheel" if model.form is None else model.form.friction
+        self.friction = model.friction
         self.caster_geometry = () if model.form is None else tuple(model.form.geometry)
         self.notes: list[str] = []  # why the monitor stopped, fallbacks of re-identification
         self.observer = observer  # the re-identifications' observer settings (friction, delay, payload aside)

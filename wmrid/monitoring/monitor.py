@@ -356,7 +356,7 @@ def monitor(
             f"is in {unit}; identify and monitor with the same effort options"
         )
     sig = residual_signals(log.t, log.eta, log.tau, settings, source)
-    friction = "wheel" if model_.form is None else model_.form.friction
+    friction = model_.friction
     geometry = () if model_.form is None else tuple(model_.form.geometry)
     mon = _Monitor(log, sig, settings, unit, friction, geometry, observer)
     duration = float(log.t[-1] - log.t[0])

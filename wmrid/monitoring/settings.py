@@ -133,6 +133,11 @@ class MonitoredModel:
     #: what the saved result says against its own use (its verdict or flags), a warning of every monitor run
     doubt: str | None = None
 
+    @property
+    def friction(self) -> str:
+        """The model's friction model ("wheel" without a caster form): the one its re-identifications use."""
+        return "wheel" if self.form is None else self.form.friction
+
 
 def caster_form(form: RegressorForm | None) -> RegressorForm | None:
     """``form`` when it models caster drag, else None (the eight wheel columns)."""
