@@ -157,6 +157,12 @@ _EXPORTS = {
     "MultibodySettings": "wmrid.sim.multibody_model",
     "IdentificationResult": "wmrid.estimators.result",
     "ObserverRun": "wmrid.estimators.result",
+    "Parameter": "wmrid.estimators.parameter",
+    "Verdict": "wmrid.estimators.records",
+    "GroupVerdict": "wmrid.estimators.records",
+    "LogInfo": "wmrid.estimators.records",
+    "Validation": "wmrid.estimators.records",
+    "PayloadEstimate": "wmrid.model.payload",
     "BaseEstimate": "wmrid.estimators.estimate",
     "WheelLog": "wmrid.core.wheel_log",
     "LogStream": "wmrid.core.wheel_log",
@@ -242,6 +248,13 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
         MethodOptions as MethodOptions,
         ObserverOptions as ObserverOptions,
     )
+    from wmrid.estimators.parameter import Parameter as Parameter
+    from wmrid.estimators.records import (
+        GroupVerdict as GroupVerdict,
+        LogInfo as LogInfo,
+        Validation as Validation,
+        Verdict as Verdict,
+    )
     from wmrid.estimators.result import (
         IdentificationResult as IdentificationResult,
         ObserverRun as ObserverRun,
@@ -254,6 +267,7 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
         write_fleet_report as write_fleet_report,
     )
     from wmrid.fleets.run import FleetRun as FleetRun, fleet as fleet
+    from wmrid.model.payload import PayloadEstimate as PayloadEstimate
     from wmrid.model.physical import (
         PhysicalEstimate as PhysicalEstimate,
     )

@@ -105,7 +105,7 @@ def _result(result: Any) -> tuple[Any, dict[str, str]]:
     if found.estimate is None:
         raise UsageError(f"{provenance['result']}: holds no estimate to export")
     provenance.update({
-        "log": str(found.log_info.get("source", found.source)), "method": str(found.estimate.method),
+        "log": str(found.source), "method": str(found.estimate.method),
         "friction_model": found.form.friction,
     })  # fmt: skip
     return found, provenance
@@ -156,10 +156,10 @@ def export(
     _same_robot(found, robot_obj, robot_name)
     _determined(found)
     said: list[str] = []
-    notes_log = [str(n) for n in found.log_info.get("notes", [])]
+    notes_log = list(found.log_info.notes)
     if notes_log:
         provenance["log_notes"] = " ".join(notes_log)
-    unit = found.log_info.get("effort_unit", "N m")
+    unit = found.log_info.effort_unit
     # the robot file's masses and geometry taken as known: its CAD set when it has one (the measured robot), else
     # its nominal set
     cad = robot_obj.cad

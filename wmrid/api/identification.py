@@ -27,6 +27,7 @@ from wmrid.estimators.options import (
     MethodOptions,
     ObserverOptions,
 )
+from wmrid.estimators.records import Validation
 from wmrid.estimators.result import IdentificationResult
 from wmrid.model.robot import Robot
 
@@ -218,7 +219,7 @@ def validate(
     from wmrid.model.predict import unsimulated, validation_fit
 
     other_log = _log(log, options, robot, whole=True)
-    unit = result.log_info.get("effort_unit", "N m")
+    unit = result.log_info.effort_unit
     if other_log.effort_unit != unit:
         raise UsageError(
             f"{option('validate', _given(log))}: its effort is in {other_log.effort_unit}, "
@@ -227,19 +228,18 @@ def validate(
     assert result.estimate is not None  # identify's results carry one (a document from before schema 1 does not)
     theta0 = result.estimate.theta0
     form = result.form if len(theta0) == result.form.n_base else None
-    validation: dict[str, Any] = {
-        "log": other_log.source, "samples": len(other_log),
-        "definition": "fit = 100 (1 - ||eta - eta_hat|| / ||eta - mean(eta)||) per wheel over the whole log",
-    }  # fmt: skip
+    definition = "fit = 100 (1 - ||eta - eta_hat|| / ||eta - mean(eta)||) per wheel over the whole log"
     why = unsimulated(form)
     if why:
-        validation.update({"fit_percent": {"eta_r": None, "eta_l": None}, "predictor": None, "not_simulated": why})
+        validation = Validation(other_log.source, len(other_log), definition, {"eta_r": None, "eta_l": None}, None, why)
         return replace(result, validation=validation, warnings=(*result.warnings, f"--validate: {why}"))
     torque_hold = result.settings.torque_hold
     fit = validation_fit(other_log.t, other_log.eta, other_log.tau, theta0, torque_hold, form=form)
     # the fits are floats (validation_fit's dict also holds the predictor's sentence)
-    validation["fit_percent"] = {w: fit[w] if math.isfinite(cast(float, fit[w])) else None for w in ("eta_r", "eta_l")}
-    validation["predictor"] = fit["predictor"]
+    percent: dict[str, float | None] = {
+        w: cast(float, fit[w]) if math.isfinite(cast(float, fit[w])) else None for w in ("eta_r", "eta_l")
+    }
+    validation = Validation(other_log.source, len(other_log), definition, percent, str(fit["predictor"]))
     return replace(result, validation=validation)
 
 

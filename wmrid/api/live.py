@@ -441,9 +441,7 @@ def _renamed(result: IdentificationResult, path: str, name: str) -> Identificati
     def fix(text: Any) -> Any:
         return text.replace(path, name) if isinstance(text, str) else text
 
-    log_info = dict(result.log_info)
-    if "notes" in log_info:
-        log_info["notes"] = [fix(n) for n in log_info["notes"]]
+    log_info = replace(result.log_info, notes=tuple(fix(n) for n in result.log_info.notes))
     return replace(result, source=name, warnings=tuple(fix(w) for w in result.warnings), log_info=log_info)
 
 

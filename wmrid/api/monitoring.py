@@ -67,7 +67,7 @@ def monitor(
     result = run_monitor(log, model_obj, settings, observer)
     if delay is not None:  # recorded with the log; what the estimate said is a warning of the run
         record, said = delay
-        result = replace(result, log_info={**result.log_info, "delay": record}, warnings=[*said, *result.warnings])
+        result = replace(result, log_info=replace(result.log_info, delay=record), warnings=[*said, *result.warnings])
     return result
 
 

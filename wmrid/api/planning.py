@@ -107,7 +107,7 @@ def _given(
             value, std = float(est.theta0[i]), math.sqrt(cov[i, i])
             if value != 0 and std < 0.1 * abs(value):
                 theta0[names.index(their[i])] = value
-        sources.append({"source": source, "log": result.log_info.get("source"), "method": est.method,
+        sources.append({"source": source, "log": result.source, "method": est.method,
                         "parameters": [their[i] for i in idx]})  # fmt: skip
     return (GivenLogs(weight, 0.5 * (spread + spread.T)), {"results": sources}), theta0
 

@@ -55,7 +55,7 @@ def _from_saved(data: Any, name: str, truth: dict[str, float] | None, figures: b
         data["source"] = name
     saved = from_dict(data, name)  # names the file in its message, not the log it came from
     try:
-        return build_report(data, result=saved, truth=truth, figures=figures)
+        return build_report(saved, document=data, truth=truth, figures=figures)
     except WmridError:
         raise
     except (KeyError, TypeError, ValueError, IndexError, AttributeError) as err:
@@ -121,8 +121,7 @@ def _report(
 ) -> tuple[Report, list[str], bytes | None]:
     """(report, the input paths to record, the standard input's bytes or None)."""
     if isinstance(result, IdentificationResult):
-        rep = build_report(result.to_dict(), result=result, log=log, truth=truth, figures=figures)
-        return replace(rep, identification=result, log=log), [], None
+        return build_report(result, log=log, truth=truth, figures=figures), [], None
     if isinstance(result, dict):
         return _from_saved(dict(result), str(result.get("source") or "result"), truth, figures), [], None
     validate, method = how.validate, how.method
@@ -164,9 +163,8 @@ def _report(
         inputs.append(os.fspath(validate))
         if figures:  # its measured and predicted speeds (the identification read it, and kept only its fit)
             validation_log = read_log(os.fspath(validate), options, robot=robot_obj)
-    rep = build_report(identified.to_dict(), result=identified, log=wheel_log, truth=truth, figures=figures,
-                       validation_log=validation_log)  # fmt: skip
-    return replace(rep, identification=identified, log=wheel_log), inputs, data
+    rep = build_report(identified, log=wheel_log, truth=truth, figures=figures, validation_log=validation_log)
+    return rep, inputs, data
 
 
 def _provenance(
@@ -223,16 +221,12 @@ def residual_frame(rep: Report) -> Any:
     recorded prediction error (rad/s) and lambda_min; from a saved result, its history only."""
     import pandas as pd
 
-    result, log, data = rep.identification, rep.log, rep.result
-    if result is not None:
-        h = result.history
-        frame = pd.DataFrame({"t": h.t, "e_r": h.e[:, 0], "e_l": h.e[:, 1], "lambda_min": h.lambda_min})
-    elif "history" in data:
-        h = data["history"]
-        frame = pd.DataFrame({"t": h["t"], "e_r": h["e_r"], "e_l": h["e_l"], "lambda_min": h["lambda_min"]})
-    else:
+    result, log = rep.identification, rep.log
+    h = None if result is None else result.history
+    if h is None:
         raise UsageError(f"{option('residuals')}: this result holds no history; give the log itself")
-    if result is not None and log is not None and "torque" in rep.residuals:
+    frame = pd.DataFrame({"t": h.t, "e_r": h.e[:, 0], "e_l": h.e[:, 1], "lambda_min": h.lambda_min})
+    if log is not None and "torque" in rep.residuals:
         res = rep.residuals["torque"]["residual"]
         full = pd.DataFrame({"t": log.t - log.t[0], "tau_res_r": res[:, 0], "tau_res_l": res[:, 1]})
         frame = pd.merge_asof(full, frame, on="t", direction="nearest")

@@ -268,13 +268,13 @@ def combined_result(
     own_cov = np.asarray(est.cov, dtype=np.float64)
     parts = [Part(np.asarray(est.theta0, dtype=np.float64), own_cov, est.dof,
                   tuple(i for i in range(n0) if _determined(own_cov, i)), est.weight_cov)]  # fmt: skip
-    unit = result.log_info.get("effort_unit", "N m")
+    unit = result.log_info.effort_unit
     records, partial = [], []
     for other, source in given:
         theirs_est = other.estimate
         if theirs_est is None:
             raise UsageError(f"{option('given', source)}: holds no estimate")
-        their_unit = other.log_info.get("effort_unit", "N m")
+        their_unit = other.log_info.effort_unit
         if their_unit != unit:
             raise UsageError(
                 f"{option('given', source)}: its efforts are in {their_unit}, this log's in {unit}; give results "

@@ -167,7 +167,7 @@ def check(result: Any, log: Any, robot: Any = None, switch: bool = True) -> Any:
             "why": "no disturbance shows in the prediction error, so none feeds back",
         }
         return replace(result, diagnostics={**result.diagnostics, "feedback": record})
-    samples = int(result.log_info.get("samples", 0))
+    samples = result.log_info.samples or 0
     if samples > MAX_SAMPLES:
         record = {"checked": False, "why": f"the log has {samples} samples, more than the check holds in memory"}
         return replace(result, diagnostics={**result.diagnostics, "feedback": record})

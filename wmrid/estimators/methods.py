@@ -19,7 +19,7 @@ from wmrid.core.choices import Method, values
 from wmrid.core.errors import UsageError, WmridError, option
 from wmrid.estimators.estimate import BaseEstimate
 from wmrid.estimators.options import MethodOptions
-from wmrid.estimators.result import IdentificationResult, payload_dict
+from wmrid.estimators.result import IdentificationResult
 from wmrid.estimators.substitution import with_estimate
 from wmrid.model.robot import Robot
 
@@ -198,10 +198,10 @@ def compare(
             "marks": {key: parameter.mark for key, parameter in table.items()},
             "seconds": est.seconds,
             "warnings": list(result.warnings),
-            "verdict": result.verdict,
+            "verdict": None if result.verdict is None else result.verdict.to_dict(),
         }
         if result.payload is not None:
-            row["payload"] = payload_dict(result.payload)
+            row["payload"] = result.payload.to_dict()
         if other is not None:
             form = observer.form if len(est.theta0) == observer.form.n_base else None
             why = unsimulated(form)

@@ -21,7 +21,9 @@ from wmrid.core.errors import LogFormatError
 from wmrid.estimators.estimate import BaseEstimate
 from wmrid.estimators.observer.settings import ObserverSettings
 from wmrid.estimators.parameter import Parameter, parameter_table
+from wmrid.estimators.records import LogInfo, Validation, Verdict
 from wmrid.model.dynamics import THETA0_UNITS, RegressorForm
+from wmrid.model.payload import PayloadEstimate
 
 #: Reported parameter names, in report order.
 REPORTED = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
@@ -135,10 +137,13 @@ class IdentificationResult:
     source : the log.  form : the regressor (friction model included).  method : the method whose estimate is
     reported.  parameters : name -> (value, std), REPORTED names, SI units (the effort's units for a PWM log).
     theta0_cov : (n0, n0) covariance of the base parameters.  estimate : the method's
-    :class:`~wmrid.estimators.estimate.BaseEstimate`.  diagnostics, warnings, log_info : what the log and the
-    method showed.  nominal, reference : the robot's nominal and CAD base parameters.  payload : (value, std) of
-    mass kg, x m, y m, inertia kg m^2.  validation : the fit on another log.  observer : the observer's run on the
-    log (every method runs it first: its excitation figures and history describe the log), or None.
+    :class:`~wmrid.estimators.estimate.BaseEstimate`.  diagnostics, warnings : what the log and the method showed.
+    log_info : what the log was (:class:`~wmrid.estimators.records.LogInfo`).  nominal, reference : the robot's
+    nominal and CAD base parameters.  payload : the payload's mass, position and inertia
+    (:class:`~wmrid.model.payload.PayloadEstimate`, ``--payload``).  verdict : what the log determines, per
+    parameter group (:class:`~wmrid.estimators.records.Verdict`).  validation : the fit on another log
+    (:class:`~wmrid.estimators.records.Validation`).  observer : the observer's run on the log (every method runs it
+    first: its excitation figures and history describe the log), or None.
     method_settings : what another method's estimate was made with (None for the observer's): :attr:`settings`.
     """
 
@@ -148,16 +153,16 @@ class IdentificationResult:
     theta0_cov: np.ndarray  # (n0, n0)
     diagnostics: dict[str, Any]
     warnings: tuple[str, ...]
-    log_info: dict[str, Any]
+    log_info: LogInfo
     observer: ObserverRun | None = None
     nominal: dict[str, float] | None = None
     reference: dict[str, float] | None = None
     units: dict[str, str] = field(default_factory=lambda: dict(THETA0_UNITS))
-    payload: dict[str, tuple[float, float]] | None = None  # mass kg, x m, y m, inertia kg m^2: (value, std)
+    payload: PayloadEstimate | None = None
     method: str = "observer"
     estimate: BaseEstimate | None = None  # the reported theta0 and its covariance (undetermined: NaN/inf)
-    validation: dict[str, Any] | None = None  # fit on another log (wmrid.model.predict.validation_fit)
-    verdict: dict[str, Any] | None = None  # what the log determines, per group (wmrid.estimators.verdict)
+    validation: Validation | None = None
+    verdict: Verdict | None = None
     method_settings: MethodSettings | None = None
 
     @property
@@ -230,10 +235,10 @@ class IdentificationResult:
             "schema_version": SCHEMA_VERSION,
             "source": self.source,
             "method": self.method,
-            "effort_unit": self.log_info.get("effort_unit", "N m"),
+            "effort_unit": self.log_info.effort_unit,
         }
         if self.verdict is not None:
-            out["verdict"] = self.verdict
+            out["verdict"] = self.verdict.to_dict()
         out["parameters"] = params
         if self.observer is not None:
             out["theta"] = self.theta_dict()
@@ -249,15 +254,15 @@ class IdentificationResult:
             else:  # another method's: its own settings, the observer's run under its own name
                 out["settings"] = self.method_settings.to_dict()
                 out["observer_settings"] = observer
-        out.update(diagnostics=self.diagnostics, warnings=list(self.warnings), log=self.log_info)
+        out.update(diagnostics=self.diagnostics, warnings=list(self.warnings), log=self.log_info.to_dict())
         if self.estimate is not None:
             out["estimate"] = estimate_dict(self.estimate, self.form.base_names)
         if history and self.history is not None:
             out["history"] = history_dict(self)
         if self.validation is not None:
-            out["validation"] = self.validation
+            out["validation"] = self.validation.to_dict()
         if self.payload is not None:
-            out["payload"] = payload_dict(self.payload)
+            out["payload"] = self.payload.to_dict()
         if self.nominal is not None:
             out["nominal"] = self.nominal
         if self.reference is not None:
@@ -403,15 +408,8 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
             lambda_min=_floats(hist_d["lambda_min"]),
         )
     payload_d = data.get("payload")
-    payload = None
-    if payload_d is not None:
-        payload = {
-            n: (
-                math.nan if e["value"] is None else float(e["value"]),
-                math.inf if e["std"] is None else float(e["std"]),
-            )
-            for n, e in payload_d.items()
-        }
+    validation_d = data.get("validation")
+    verdict_d = data.get("verdict")
     result = IdentificationResult(
         source=data.get("source") or source,
         form=form,
@@ -419,7 +417,7 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
         theta0_cov=theta0_cov,
         diagnostics=data.get("diagnostics", {}),
         warnings=tuple(data.get("warnings", ())),
-        log_info=data.get("log", {}),
+        log_info=LogInfo.from_dict(data.get("log") or {}),
         observer=ObserverRun(
             settings=settings,
             start_source=settings_d.get("start", ""),
@@ -431,11 +429,11 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
         nominal=data.get("nominal"),
         reference=data.get("reference"),
         units=units,
-        payload=payload,
+        payload=None if payload_d is None else PayloadEstimate.from_dict(payload_d),
         method=data.get("method", "observer"),
         estimate=estimate,
-        validation=data.get("validation"),
-        verdict=data.get("verdict"),
+        validation=None if validation_d is None else Validation.from_dict(validation_d),
+        verdict=None if verdict_d is None else Verdict.from_dict(verdict_d),
         method_settings=method_settings,
     )
     if result.verdict is None:  # saved before the verdict: said from its numbers (wmrid.estimators.verdict)
@@ -443,13 +441,3 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
 
         result = settle(result)
     return result
-
-
-def payload_dict(payload: dict[str, tuple[float, float]]) -> dict[str, dict[str, Any]]:
-    """A payload estimate {name: (value, std)} as JSON: {name: {"value", "std", "unit"}} (mass kg, x m, y m, inertia
-    kg m^2; std None when not finite)."""
-    from wmrid.model.payload import PAYLOAD_UNITS
-
-    return {
-        name: {"value": v, "std": finite_or_none(e), "unit": PAYLOAD_UNITS[name]} for name, (v, e) in payload.items()
-    }

@@ -37,6 +37,7 @@ from wmrid.estimators.diagnostics import (
     poorly_text,
 )
 from wmrid.estimators.plausibility import units_check
+from wmrid.estimators.records import GroupVerdict, Verdict
 
 #: The start of the warning that names ``wmrid plan`` when a parameter is poorly determined (issue 29).
 PLAN_HINT = "to determine "
@@ -134,9 +135,9 @@ def settle(result: Any, radius: float | None = None) -> Any:
     diagnostics = dict(result.diagnostics)
     previous = diagnostics.get("units") or {}
     r = radius if radius is not None else previous.get("wheel_radius")
-    effort_free = result.log_info.get("effort_unit", "N m") != "N m"
-    notes = tuple(result.log_info.get("notes") or ())
-    units = units_check(result.parameters, result.log_info.get("scales"), _references(result), r, notes, effort_free)
+    effort_free = result.log_info.effort_unit != "N m"
+    notes = result.log_info.notes
+    units = units_check(result.parameters, result.log_info.scales, _references(result), r, notes, effort_free)
     units["wheel_radius"] = r
     diagnostics["units"] = units
     method = result.method if result.method != "observer" else None
@@ -192,7 +193,7 @@ def _negligible(name: str, value: float, std: float, result: Any) -> float | Non
     """The 3-std bound on |``name``| when it is negligible (module constant NEGLIGIBLE), else None.  The term's
     scale: the largest effort for a Coulomb friction or a caster's drag, over the largest speed for a viscous
     friction, over its square for Vc (the log's ``scales``); inertia entries are never negligible."""
-    scales = result.log_info.get("scales") or {}
+    scales = result.log_info.scales or {}
     effort, speed = max(scales.get("effort_max") or [0.0]), max(scales.get("speed_max") or [0.0])
     if not (math.isfinite(value) and math.isfinite(std)) or effort <= 0 or speed <= 0:
         return None
@@ -220,7 +221,7 @@ def _signs(result: Any) -> str:
     return ""
 
 
-def _group_sentence(group: str, names: tuple[str, ...], extra: tuple[str, ...], result: Any) -> dict[str, Any] | None:
+def _group_sentence(group: str, names: tuple[str, ...], extra: tuple[str, ...], result: Any) -> GroupVerdict | None:
     params = result.parameters
     present = tuple(n for n in names if n in params)
     if not present:
@@ -240,17 +241,15 @@ def _group_sentence(group: str, names: tuple[str, ...], extra: tuple[str, ...], 
         rel.update({n: 0.0 for n in present})
     worst = max(judged, key=lambda n: rel[n])
     label = f"{group} ({', '.join(present + tuple(n for n in extra if n in params))})"
-    record: dict[str, Any] = {"group": group, "parameters": list(present), "worst": worst,
-                              "relative_std": rel[worst] if math.isfinite(rel[worst]) else None}  # fmt: skip
     impossible = impossible_parameters(params) & set(present)
+    status: str
+    reason: str | None = None
     if units.get("doubt"):
-        record.update(status="in doubt", reason="the log's units or columns are in doubt (see the unit check)")
+        status, reason = "in doubt", "the log's units or columns are in doubt (see the unit check)"
     elif not math.isfinite(rel[worst]):
-        record.update(status="not determined", reason="the log does not excite it: the start value sets it")
+        status, reason = "not determined", "the log does not excite it: the start value sets it"
     elif impossible:
-        record.update(
-            status="in doubt", reason=f"{', '.join(sorted(impossible))}: a value no robot has{_signs(result)}"
-        )
+        status, reason = "in doubt", f"{', '.join(sorted(impossible))}: a value no robot has{_signs(result)}"
     elif misfit.get("applied") and set(present) <= flagged:
         quality = (
             "determined"
@@ -259,62 +258,62 @@ def _group_sentence(group: str, names: tuple[str, ...], extra: tuple[str, ...], 
             if rel[worst] <= NOT_DETERMINED
             else "not determined"
         )
-        record.update(
-            status="in doubt",
-            reason=f"{quality} by its std, but the model does not fit this log (slip, backlash or an effect it leaves "
-            f"out), so no std covers the error{_signs(result)}",
+        status = "in doubt"
+        reason = (
+            f"{quality} by its std, but the model does not fit this log (slip, backlash or an effect it leaves "
+            f"out), so no std covers the error{_signs(result)}"
         )
-    elif rel[worst] <= POORLY_DETERMINED and len(negligible) == len(present):
-        record.update(status="determined", reason=None)
-        record["negligible"] = negligible
     elif rel[worst] <= POORLY_DETERMINED:
-        record.update(status="determined", reason=None)
+        status = "determined"
     elif rel[worst] <= NOT_DETERMINED:
-        record.update(status="poorly determined", reason=_reason(present, result))
+        status, reason = "poorly determined", _reason(present, result)
     else:
-        record.update(status="not determined", reason=_reason(present, result) + " (its std exceeds its value)")
+        status, reason = "not determined", _reason(present, result) + " (its std exceeds its value)"
     pct = f"{100 * rel[worst]:.2g} %" if math.isfinite(rel[worst]) else "unbounded"
-    text = f"{label}: {record['status']}"
+    text = f"{label}: {status}"
     small = ", ".join(f"|{n}| < {b:.2g} {result.units[n]}" for n, b in negligible.items())
-    if record["status"] in ("determined", "poorly determined") and len(negligible) == len(present):
+    said_negligible = None
+    if status in ("determined", "poorly determined") and len(negligible) == len(present):
         text += f" as negligible ({small}, at 3 std: under {100 * NEGLIGIBLE:g} % of the largest effort)"
-    elif record["status"] in ("determined", "poorly determined"):
+        said_negligible = negligible
+    elif status in ("determined", "poorly determined"):
         text += f" (std up to {pct} of the value" + (f", {worst})" if len(judged) > 1 else ")")
         if negligible:
             text += f"; negligible: {small}"
-            record["negligible"] = negligible
-    coupling = [n for n in extra if n in rel and rel[n] > POORLY_DETERMINED and record["status"] == "determined"]
+            said_negligible = negligible
+    coupling = [n for n in extra if n in rel and rel[n] > POORLY_DETERMINED and status == "determined"]
     if coupling:
         text += (
             f"; {coupling[0]} only to {100 * rel[coupling[0]]:.2g} %"
             if math.isfinite(rel[coupling[0]])
             else (f"; {coupling[0]} not determined")
         )
-    if record["reason"]:
-        text += f": {record['reason']}"
-    record["text"] = text
-    return record
+    if reason:
+        text += f": {reason}"
+    return GroupVerdict(
+        group=group, parameters=present, worst=worst, relative_std=rel[worst] if math.isfinite(rel[worst]) else None,
+        status=status, reason=reason, text=text, negligible=said_negligible,
+    )  # fmt: skip
 
 
-def verdict(result: Any) -> dict[str, Any]:
-    """One sentence per parameter group (see the module docstring): {"summary", "groups": [{"group",
-    "parameters", "status" ("determined", "poorly determined", "not determined", "in doubt"), "worst",
-    "relative_std", "reason", "text"}], "lines" (the groups' sentences to print), and when there is something to
-    add: "first" (a method switched), "check" (unit findings that are warnings, not doubts), "units" (what units were
-    assumed, when no robot file could check them)}."""
-    groups = [_group_sentence(g, names, extra, result) for g, names, extra in GROUPS]
+def verdict(result: Any) -> Verdict:
+    """One sentence per parameter group (see the module docstring and :class:`Verdict`): the summary, a
+    :class:`GroupVerdict` per group, the lines to print, and when there is something to add: ``first`` (a method
+    switched), ``check`` (unit findings that are warnings, not doubts), ``units`` (what units were assumed, when no
+    robot file could check them)."""
+    said = [_group_sentence(g, names, extra, result) for g, names, extra in GROUPS]
     casters = tuple(result.form.base_names[8:])
     if casters:
-        groups.append(_group_sentence("casters", casters, (), result))
-    groups = [g for g in groups if g is not None]
+        said.append(_group_sentence("casters", casters, (), result))
+    groups = [g for g in said if g is not None]
     units = result.diagnostics.get("units") or {}
     if units.get("doubt"):
         first = units["findings"][0]["text"]
         summary = f"Do not use these numbers: {first}."
     else:
-        good = [g["group"] for g in groups if g["status"] == "determined"]
-        weak = [g["group"] for g in groups if g["status"] == "poorly determined"]
-        bad = [g["group"] for g in groups if g["status"] in ("not determined", "in doubt")]
+        good = [g.group for g in groups if g.status == "determined"]
+        weak = [g.group for g in groups if g.status == "poorly determined"]
+        bad = [g.group for g in groups if g.status in ("not determined", "in doubt")]
         parts = []
         subject = "these logs determine" if result.diagnostics.get("combined") else "this log determines"
         if good:
@@ -327,41 +326,41 @@ def verdict(result: Any) -> dict[str, Any]:
         summary = text[0].upper() + text[1:] + "."
         if not good and not weak:
             summary = f"{subject[0].upper() + subject[1:]} none of the parameters ({_join(bad)})."
-    out: dict[str, Any] = {"summary": summary, "groups": groups, "lines": lines(groups)}
+    first: tuple[str, ...] = ()
     feedback = result.diagnostics.get("feedback") or {}
     if feedback.get("reported") and feedback["reported"] != "observer" and result.method == feedback["reported"]:
         other = "IDIM-IV" if feedback["reported"] == "iv" else "IDIM"
-        out["first"] = [
+        first = (
             f"method: {other}, not the observer: the closed-loop check found the observer's estimate biased by "
-            "feedback (see the first warning); --method observer keeps the observer's"
-        ]
-    said = [f["text"] for f in units.get("findings", []) if not f["doubt"]]
-    if said and not units.get("doubt"):
-        out["check"] = said
-    scales = result.log_info.get("scales") or {}
+            "feedback (see the first warning); --method observer keeps the observer's",
+        )
+    findings = [f["text"] for f in units.get("findings", []) if not f["doubt"]]
+    check = tuple(findings) if findings and not units.get("doubt") else ()
+    assumed_units = None
+    scales = result.log_info.scales or {}
     speed, effort = max(scales.get("speed_max") or [0.0]), max(scales.get("effort_max") or [0.0])
-    unit = result.log_info.get("effort_unit", "N m")
+    unit = result.log_info.effort_unit
     assumed = f"speeds read as rad/s (up to {speed:.3g}), efforts as {unit} (up to {effort:.3g})"
     if scales and not _references(result):
-        out["units"] = f"units not checked against a robot file (give --robot): {assumed}"
+        assumed_units = f"units not checked against a robot file (give --robot): {assumed}"
     elif scales and unit != "N m":
-        out["units"] = (
+        assumed_units = (
             f"units checked against the robot file only through ratios of its parameters (the efforts are in {unit}, "
             f"its values in N m): {assumed}"
         )
-    return out
+    return Verdict(summary, tuple(groups), lines(groups), first, check, assumed_units)
 
 
-def lines(groups: list[dict[str, Any]]) -> list[str]:
+def lines(groups: list[GroupVerdict]) -> tuple[str, ...]:
     """The groups' sentences to print: one per group, or one for all when every group has the same status and
     reason (a unit in doubt, a model that does not fit the log)."""
     if (
         len(groups) > 1
-        and groups[0]["reason"]
-        and all((g["status"], g["reason"]) == (groups[0]["status"], groups[0]["reason"]) for g in groups)
+        and groups[0].reason
+        and all((g.status, g.reason) == (groups[0].status, groups[0].reason) for g in groups)
     ):
-        return [f"{_join([g['group'] for g in groups])}: {groups[0]['status']}: {groups[0]['reason']}"]
-    return [g["text"] for g in groups]
+        return (f"{_join([g.group for g in groups])}: {groups[0].status}: {groups[0].reason}",)
+    return tuple(g.text for g in groups)
 
 
 def _join(words: list[str]) -> str:

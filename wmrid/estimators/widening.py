@@ -24,6 +24,7 @@ import numpy as np
 
 from wmrid.estimators.estimate import BaseEstimate
 from wmrid.model.base_params import derived_with_std
+from wmrid.model.payload import payload_with_std
 from wmrid.model.robot import Robot
 
 if TYPE_CHECKING:
@@ -66,8 +67,6 @@ def with_covariance(
     diagnostics["flagged"] = flagged_names(parameters, diagnostics)
     payload = result.payload
     if payload is not None and robot is not None:
-        from wmrid.model.payload import payload_with_std
-
         payload = payload_with_std(np.asarray(est.theta0, dtype=float), cov, robot.reference)
     out = replace(
         result, parameters=parameters, diagnostics=diagnostics, estimate=replace(est, cov=cov), theta0_cov=cov,
@@ -99,7 +98,7 @@ def with_hold_term(
     warnings = list(result.warnings)
     if grown:
         warnings.append(
-            f"the log ({1.0 / result.log_info['rate_hz'] * 1e3:.3g} ms steps) does not say how fast the controller "
+            f"the log ({1.0 / result.log_info.rate_hz * 1e3:.3g} ms steps) does not say how fast the controller "
             f"that held its efforts was; the estimates under a hold over each step and a much faster controller "
             f"differ, and the std of {', '.join(grown)} carries that difference: give --control-rate HZ if known"
         )

@@ -94,12 +94,14 @@ def _result_columns(result: Any) -> dict[str, Any]:
     info = result.log_info
     flagged = list(result.diagnostics.get("flagged", []))
     out.update(
-        duration_s=info.get("duration_s"), samples=info.get("samples"), rate_hz=info.get("rate_hz"),
-        method=result.method, form=getattr(result.form, "kind", None), effort_unit=info.get("effort_unit"),
+        duration_s=info.duration_s, samples=info.samples, rate_hz=info.rate_hz,
+        method=result.method, form=getattr(result.form, "kind", None), effort_unit=info.effort_unit,
         flags=flagged, warnings=[" ".join(w.split()) for w in result.warnings],
     )  # fmt: skip
     out["Fv1_Fd1_corr"], out["Fv2_Fd2_corr"] = friction_correlations(result)
-    for name, (value, std) in (result.payload or {}).items():  # --payload: mass, x, y, inertia
+    for name, (value, std) in (
+        result.payload.items() if result.payload is not None else ()
+    ):  # --payload: mass, x, y, inertia
         out[f"payload_{name}"], out[f"payload_{name}_std"] = value, std
     return out
 
@@ -212,7 +214,7 @@ def _fit(result: Any, log: Any, robot: Any) -> dict[str, Any]:
     kept its pieces from the identification: the file is not read again."""
     from wmrid.api.identification import validate
 
-    samples = result.log_info.get("samples") or 0
+    samples = result.log_info.samples or 0
     if samples > FIT_MAX_SAMPLES:
         return {}
     try:
@@ -221,7 +223,7 @@ def _fit(result: Any, log: Any, robot: Any) -> dict[str, Any]:
     except Exception:  # the fit is an extra: its failure never discards the identification
         return {}
     assert checked.validation is not None  # validate always records one
-    fit = checked.validation["fit_percent"]
+    fit = checked.validation.fit_percent
     return {"fit_r": fit["eta_r"], "fit_l": fit["eta_l"]}
 
 

@@ -25,6 +25,7 @@ follow by the delta method from the covariance of (m11, m12, m22, V_c) (M = m^-1
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -34,6 +35,39 @@ from wmrid.model.robot import PhysicalParameters
 
 PAYLOAD_NAMES = ("mass", "x", "y", "inertia")
 PAYLOAD_UNITS = {"mass": "kg", "x": "m", "y": "m", "inertia": "kg m^2"}
+
+
+@dataclass(frozen=True)
+class PayloadEstimate:
+    """A payload estimated from a log: each of mass kg, x m, y m (its centre of mass in the platform frame) and
+    inertia kg m^2 (yaw, about its own centre of mass) as (value, std), std +inf when the log does not bound it."""
+
+    mass: tuple[float, float]
+    x: tuple[float, float]
+    y: tuple[float, float]
+    inertia: tuple[float, float]
+
+    def items(self) -> tuple[tuple[str, tuple[float, float]], ...]:
+        """(name, (value, std)) in :data:`PAYLOAD_NAMES` order."""
+        return tuple((name, getattr(self, name)) for name in PAYLOAD_NAMES)
+
+    def to_dict(self) -> dict[str, dict[str, Any]]:
+        """{name: {"value", "std", "unit"}} (std None when not finite), the result JSON's ``payload``."""
+        return {
+            name: {"value": v, "std": e if math.isfinite(e) else None, "unit": PAYLOAD_UNITS[name]}
+            for name, (v, e) in self.items()
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> PayloadEstimate:
+        """The estimate :meth:`to_dict` wrote (value null read as NaN, std null as +inf)."""
+
+        def pair(name: str) -> tuple[float, float]:
+            entry = data[name]
+            value, std = entry["value"], entry["std"]
+            return (math.nan if value is None else float(value), math.inf if std is None else float(std))
+
+        return cls(*(pair(name) for name in PAYLOAD_NAMES))
 
 
 def payload_from_base(theta0: np.ndarray, unloaded: PhysicalParameters) -> np.ndarray:
@@ -63,10 +97,9 @@ def payload_from_change(before: Any, after: Any, r: float, b: float) -> np.ndarr
     return np.array([mass, x, y, inertia_about_o - mass * (x**2 + y**2)])
 
 
-def payload_with_std(
-    theta0: np.ndarray, cov0: np.ndarray, unloaded: PhysicalParameters
-) -> dict[str, tuple[float, float]]:
-    """{name: (value, std)} for mass, x, y, inertia; std by the delta method (central differences)."""
+def payload_with_std(theta0: np.ndarray, cov0: np.ndarray, unloaded: PhysicalParameters) -> PayloadEstimate:
+    """The payload's mass, x, y and inertia with their std, by the delta method (central differences) from theta0
+    (8,) and its covariance cov0 (n0, n0) (only m11, m12, m22, Vc enter)."""
     value = payload_from_base(theta0, unloaded)
     jac = np.zeros((4, 4))
     for j in range(4):  # only m11, m12, m22, Vc enter
@@ -78,19 +111,19 @@ def payload_with_std(
     sub = cov0[:4, :4]
     finite = np.all(np.isfinite(sub))
     std = np.sqrt(np.clip(np.diag(jac @ sub @ jac.T), 0.0, None)) if finite else np.full(4, np.inf)
-    return {name: (float(v), float(e)) for name, v, e in zip(PAYLOAD_NAMES, value, std, strict=True)}
+    return PayloadEstimate(*((float(v), float(e)) for v, e in zip(value, std, strict=True)))
 
 
 #: The smallest payload mass reported as a payload, kg (below it a wheeled robot's load is noise or model error).
 MIN_PAYLOAD_KG = 0.05
 
 
-def payload_statement(payload: dict[str, tuple[float, float]]) -> str:
-    """One sentence on a payload estimate ({name: (value, std)}): detected when its mass exceeds both 3 std and
+def payload_statement(payload: PayloadEstimate) -> str:
+    """One sentence on a payload estimate: detected when its mass exceeds both 3 std and
     :data:`MIN_PAYLOAD_KG`, else "no payload detected" (and then its position and inertia mean nothing)."""
-    mass, std = payload["mass"]
+    mass, std = payload.mass
     if math.isfinite(std) and mass > 3 * std and mass > MIN_PAYLOAD_KG:
-        x, y = payload["x"][0], payload["y"][0]
+        x, y = payload.x[0], payload.y[0]
         return f"payload detected: {mass:.4g} ± {std:.2g} kg at x = {x:.3g} m, y = {y:.3g} m (platform frame)"
     if mass <= 0:
         why = "not positive"

@@ -90,6 +90,7 @@ import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError, UsageError, option
 from wmrid.estimators.options import ObserverOptions
+from wmrid.estimators.records import LogInfo
 from wmrid.model import dynamics as model
 from wmrid.model.dynamics import THETA0_NAMES, RegressorForm
 from wmrid.monitoring.glr import ModelError, NoiseModel, locate, window_grid, window_statistics
@@ -426,13 +427,10 @@ def monitor(
         if note not in seen:
             seen.add(note)
             warnings.append(note)
-    log_info = {
-        "samples": len(log.t),
-        "duration_s": duration,
-        "rate_hz": tidy(sig.log_rate),
-        "notes": [*getattr(log, "notes", ()), *sig.notes],
-        "effort_unit": unit,
-    }
+    log_info = LogInfo(
+        samples=len(log.t), duration_s=duration, rate_hz=tidy(sig.log_rate),
+        notes=(*getattr(log, "notes", ()), *sig.notes), effort_unit=unit,
+    )  # fmt: skip
     return MonitorResult(
         source=source, model=model_, settings=settings, grid=mon.grid, noise_lags=mon.order,
         calibration_samples=mon.n_cal, changes=changes, segments=segments,

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from wmrid.estimators.records import LogInfo
 from wmrid.monitoring.glr import WindowGrid
 from wmrid.monitoring.residuals import tidy
 from wmrid.monitoring.settings import (
@@ -63,7 +64,7 @@ class MonitorResult:
     calibration_samples: int
     changes: list[Change]
     segments: list[dict[str, Any]]
-    log_info: dict[str, Any]
+    log_info: LogInfo
     warnings: list[str]
     seconds: float
     #: the observer's settings of the identifications after a change (form, k, alpha, box_width, torque_hold,
@@ -123,7 +124,7 @@ class MonitorResult:
             "detector": self.detector_dict(),
             "segments": self.segments,
             **({} if self.identification is None else {"identification": self.identification}),
-            "log": self.log_info,
+            "log": self.log_info.to_dict(),
             "warnings": list(self.warnings),
             "seconds": self.seconds,
         }

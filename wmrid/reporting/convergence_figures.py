@@ -107,7 +107,7 @@ def build_estimates_figure(
     p = form.n_columns
     start = np.asarray(result.observer_settings.theta_init, dtype=np.float64)
     theta_true = true_theta(truth, form) if truth is not None else None
-    units = theta_units(form, result.log_info.get("effort_unit", "N m"))
+    units = theta_units(form, result.log_info.effort_unit)
     t = np.asarray(h.t, dtype=np.float64)
     fig = _new_figure(
         (max(FIGSIZE[0], 1.75 * p), 5.6), left=0.75, right=0.1, top=0.3, bottom=0.85, gaps=(0.8, 0.45), grid=(2, p)

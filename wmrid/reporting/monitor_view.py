@@ -24,7 +24,7 @@ def print_monitor(result: MonitorResult, console: Any) -> None:
     console.print(f"wmrid monitor: {result.source} against {result.model.source}")
     info = result.log_info
     console.print(
-        f"{info['samples']} samples, {info['duration_s']:.3f} s at {info['rate_hz']:.6g} Hz; windowed GLR test of "
+        f"{info.samples} samples, {info.duration_s:.3f} s at {info.rate_hz:.6g} Hz; windowed GLR test of "
         f"the torque residual, at most {st.false_alarm_rate:g} false alarms per hour (threshold "
         f"{det['threshold']['first_calibration']:.4g} after the first {st.calibration_s:g} s, assumed unchanged, "
         f"falling to {det['threshold']['limit']:.4g} as the calibration grows)"
@@ -53,7 +53,7 @@ def print_monitor(result: MonitorResult, console: Any) -> None:
             rows.append([*row, units.get(name, "")])
         print_table(console, header, rows, title="parameters before and after each change",
                     numeric=tuple(range(1, len(header) - 1)))  # fmt: skip
-    for note in info["notes"]:
+    for note in info.notes:
         console.print(f"note: {note}")
     for c in result.changes:
         for w in c.warnings:

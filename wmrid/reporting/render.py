@@ -5,8 +5,10 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from wmrid.estimators.records import Verdict
 from wmrid.estimators.result import IdentificationResult
 from wmrid.estimators.verdict import LEGEND
+from wmrid.model.payload import PAYLOAD_UNITS, payload_statement
 from wmrid.reporting.terminal import STYLES, print_table, styled, warning as warning_line
 from wmrid.runtime.atomic import to_json_text
 
@@ -26,21 +28,19 @@ def _cell(text: str, meaning: str | None) -> Any:
     return text if meaning is None else styled(text, meaning)
 
 
-def print_verdict(verdict: dict[str, Any] | None, console: Any, prefix: str = "") -> None:
+def print_verdict(verdict: Verdict | None, console: Any, prefix: str = "") -> None:
     """The verdict (:func:`wmrid.estimators.verdict.verdict`) before any number: its summary, then one line per
     parameter group; a summary that says not to use the numbers in the impossible style."""
-    if not verdict:
+    if verdict is None:
         return
-    doubt = verdict["summary"].startswith("Do not use")
-    lines = [*(verdict.get("first") or []), verdict["summary"]]
-    for line in lines:
-        console.print(f"{prefix}verdict: {line}", style=STYLES["impossible"] if doubt else "bold")
-    for line in verdict.get("lines") or [g["text"] for g in verdict["groups"]]:
+    for line in (*verdict.first, verdict.summary):
+        console.print(f"{prefix}verdict: {line}", style=STYLES["impossible"] if verdict.doubt else "bold")
+    for line in verdict.lines or [g.text for g in verdict.groups]:
         console.print(f"{prefix}  {line}")
-    for line in verdict.get("check") or []:
+    for line in verdict.check:
         console.print(f"{prefix}  check: {line}")
-    if verdict.get("units"):
-        console.print(f"{prefix}  {verdict['units']}")
+    if verdict.units:
+        console.print(f"{prefix}  {verdict.units}")
 
 
 def print_identification(result: IdentificationResult, console: Any) -> None:
@@ -75,13 +75,9 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         rows.append(row)
     print_table(console, header, rows, title=title, numeric=tuple(i for i in range(1, len(header)) if i != 3))
     if result.payload is not None:
-        from wmrid.model.payload import PAYLOAD_UNITS
-
         rows = [[name, _fmt(value), _fmt(std, 2), PAYLOAD_UNITS[name]] for name, (value, std) in result.payload.items()]
         print_table(console, ["quantity", "estimate", "std", "unit"], rows,
                     title="payload (against the unloaded robot)", numeric=(1, 2))  # fmt: skip
-        from wmrid.model.payload import payload_statement
-
         console.print(payload_statement(result.payload))
     if impossible:
         console.print(
@@ -90,7 +86,7 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         )
     info = result.log_info
     console.print(
-        f"{info['samples']} samples, {info['duration_s']:.3f} s at {info['rate_hz']:.6g} Hz; "
+        f"{info.samples} samples, {info.duration_s:.3f} s at {info.rate_hz:.6g} Hz; "
         f"regressor: {result.form.kind} form ({result.form.n_columns} columns), {result.form.friction} friction; "
         f"{_method_settings(result.method_settings)}k = {result.observer_settings.k:g} 1/s, "
         f"alpha = {result.observer_settings.alpha:g}; start: {result.start_source}"
@@ -119,27 +115,27 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         console.print(LEGEND["†"] + (f"; here{scale}: {model_error['meaning']}" if model_error else ""))
     if any("!" in mark for mark in marks.values()):
         console.print(LEGEND["!"])
-    if info.get("effort_unit", "N m") != "N m":
+    if info.effort_unit != "N m":
         console.print(
-            f"units: the effort is in {info['effort_unit']}, not N m, so every parameter is in "
-            f"{info['effort_unit']}-based units (see the unit column)", style="bold",
+            f"units: the effort is in {info.effort_unit}, not N m, so every parameter is in "
+            f"{info.effort_unit}-based units (see the unit column)", style="bold",
         )  # fmt: skip
     if method != "observer":
         console.print(
             f"method {method}: {result.diagnostics['method']['seconds']:.3g} s; the excitation figures above and the "
             "history are the observer's, run on the same log"
         )
-    validation = getattr(result, "validation", None)
-    if validation is not None and validation.get("not_simulated"):
-        console.print(f"validation on {validation['log']}: {validation['not_simulated']}")
+    validation = result.validation
+    if validation is not None and validation.not_simulated:
+        console.print(f"validation on {validation.log}: {validation.not_simulated}")
     elif validation is not None:
-        fit = validation["fit_percent"]
+        fit = validation.fit_percent
         console.print(
-            f"validation on {validation['log']}: fit {_fmt(fit['eta_r'], 3)} % (right), "
+            f"validation on {validation.log}: fit {_fmt(fit['eta_r'], 3)} % (right), "
             f"{_fmt(fit['eta_l'], 3)} % (left) "
-            f"({validation['predictor']})",
+            f"({validation.predictor})",
         )
-    for note in info["notes"]:
+    for note in info.notes:
         console.print(f"note: {note}")
     for warning in result.warnings:
         console.print(warning_line(warning))

@@ -26,10 +26,12 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import WmridError
-from wmrid.estimators.result import MethodSettings, from_dict
+from wmrid.estimators.records import GroupVerdict
+from wmrid.estimators.result import IdentificationResult
 from wmrid.estimators.verdict import LEGEND, PLAN_HINT
 from wmrid.model import dynamics as model, torques
 from wmrid.model.dynamics import RegressorForm
+from wmrid.model.payload import PAYLOAD_UNITS, payload_statement
 
 #: A difference from the CAD value beyond this many standard errors is flagged.
 SIGNIFICANT = 3.0
@@ -55,6 +57,8 @@ class Report:
     figures_png: dict[str, bytes] = field(default_factory=dict)
     figure_notes: dict[str, str] = field(default_factory=dict)  # name -> one sentence under its title
     result: dict[str, Any] = field(default_factory=dict)
+    #: The verdict's parameter groups (their status colours the summary box).
+    groups: tuple[GroupVerdict, ...] = ()
     #: How the report was made: wmrid's version, time, command, options, inputs with their SHA-256
     #: (:func:`wmrid.api.reporting.report`).
     provenance: dict[str, Any] = field(default_factory=dict)
@@ -63,7 +67,7 @@ class Report:
     #: The summary box at the top: the key numbers (label, value text) and what to do next (:func:`summary_box`).
     key_numbers: list[tuple[str, str]] = field(default_factory=list)
     next_steps: list[str] = field(default_factory=list)
-    #: The live identification and its log when the report was made from a log (None from a saved result).
+    #: The identification (a saved result read back) and its log when the report was made from a log.
     identification: Any = field(default=None, repr=False, compare=False)
     log: Any = field(default=None, repr=False, compare=False)
 
@@ -124,31 +128,30 @@ def _fmt(x: Any, digits: int = 6) -> str:
 
 
 def build_report(
-    data: dict[str, Any],
+    result: IdentificationResult,
     *,
-    result: Any = None,
+    document: dict[str, Any] | None = None,
     log: Any = None,
     truth: dict[str, float] | None = None,
     figures: bool = True,
     validation_log: Any = None,
 ) -> Report:
-    """A report from an identify JSON document ``data`` (and the live ``result``/``log`` when available;
-    ``validation_log``: the ``--validate`` log in memory, for its measured and predicted speeds).  ``figures``:
-    build the figures (rendered only when an output needs them: :func:`rendered`)."""
-    # the observer's run every method starts from: its settings (another method's result has its own as "settings")
-    observer = data.get("observer_settings", data["settings"])
-    rl = result if result is not None else from_dict(data, data.get("source") or "?")
+    """A report of ``result`` (run on ``log`` when it is given; ``document``: the saved identify JSON it was read from,
+    kept in the report as it was; None: ``result.to_dict()``).  ``validation_log``: the ``--validate`` log in memory,
+    for its measured and predicted speeds.  ``figures``: build the figures (rendered only when an output needs them:
+    :func:`rendered`).  Everything is read from the typed result; nothing is decided again."""
+    rl = result
     form = rl.form
     names = form.theta_names()
-    nominal = data.get("nominal")
-    reference = data.get("reference")
-    params = data["parameters"]
-    effort_unit = data.get("effort_unit", "N m")
+    observer = rl.observer_settings  # the observer's run every method starts from
+    nominal, reference = rl.nominal, rl.reference
+    effort_unit = rl.log_info.effort_unit
+    diag = rl.diagnostics
 
     # Table 2: intermediate parameters
-    theta_vals = data["theta"]["values"]
-    theta_std = data["theta"]["std"]
-    start = data["theta"]["start"]
+    theta_vals = dict(zip(names, rl.theta.ravel(), strict=True))
+    theta_std = dict(zip(names, np.sqrt(np.clip(np.diag(rl.theta_cov), 0, None)), strict=True))
+    start = dict(zip(names, observer.theta_init.ravel(), strict=True))
     ref_theta = true_theta_row = None
     # A caster-drag parameter the reference or truth does not give is NaN: its intermediate parameters show "—".
     if reference is not None:
@@ -175,7 +178,7 @@ def build_report(
     intermediate = {"header": header, "rows": rows}
 
     # Table 3: base parameters, with the comparison against nominal and CAD
-    factor = data["diagnostics"]["uncertainty"]["interval_factor"]["95%"]
+    factor = diag["uncertainty"]["interval_factor"]["95%"]
     header = ["parameter", "unit", "estimate", "std", "95 % interval"]
     header += (["nominal"] if nominal else []) + (["CAD", "(est − CAD)/std"] if reference else [])
     header += ["true", "error %", "(est − true)/std"] if truth else []
@@ -211,17 +214,66 @@ def build_report(
     base = {"header": header, "rows": rows}
 
     payload = None
-    if "payload" in data:
-        from wmrid.model.payload import payload_statement
-
-        verdict = payload_statement({k: (v["value"], _num(v["std"])) for k, v in data["payload"].items()})
+    if rl.payload is not None:
+        said = payload_statement(rl.payload)
         payload = {
             "header": ["quantity", "estimate", "std", "unit"],
-            "rows": [[k, _fmt(v["value"]), _fmt(v["std"], 2), v["unit"]] for k, v in data["payload"].items()],
-            "statement": verdict[0].upper() + verdict[1:] + ".",
+            "rows": [[k, _fmt(v), _fmt(e, 2), PAYLOAD_UNITS[k]] for k, (v, e) in rl.payload.items()],
+            "statement": said[0].upper() + said[1:] + ".",
         }
 
-    diag = data["diagnostics"]
+    statements = _statements(rl, inflated=inflated, warned=warned, flagged=flagged)
+
+    residuals = {}
+    if rl.history is not None:
+        e = np.asarray(rl.history.e)
+        residuals = {
+            "rms_e_rad_s": {
+                "eta_r": float(np.sqrt(np.mean(e[:, 0] ** 2))),
+                "eta_l": float(np.sqrt(np.mean(e[:, 1] ** 2))),
+            },
+            "samples": len(e),
+        }
+    if "prediction_error_rms" in diag:
+        residuals["prediction_error_rms"] = diag["prediction_error_rms"]
+    if log is not None and effort_unit == "N m":
+        theta0 = np.array([rl.parameters[n][0] for n in form.base_names])
+        residuals["torque"] = torque_residual(log, theta0, form)
+
+    verdict = rl.verdict
+    said_verdict = [] if verdict is None else [*verdict.first, verdict.summary]
+    groups = [] if verdict is None else list(verdict.lines or [g.text for g in verdict.groups])
+    said_verdict += [line[0].upper() + line[1:] + "." for line in groups]
+    said_verdict += [f"Check: {line}." for line in verdict.check] if verdict is not None else []
+    said_verdict += [verdict.units[0].upper() + verdict.units[1:] + "."] if verdict and verdict.units else []
+    info = rl.log_info
+    samples = "?" if info.samples is None else info.samples
+    duration = math.nan if info.duration_s is None else info.duration_s
+    rate = math.nan if info.rate_hz is None else info.rate_hz
+    method_text = (
+        "" if rl.method_settings is None else f"{rl.method_settings.said()}; the observer's run it started from: "
+    )
+    report = Report(
+        title=f"wmrid report: {rl.source}",
+        verdict=said_verdict,
+        summary=[
+            f"{samples} samples, {duration:.3f} s at {rate:.5g} Hz; regressor: {form.kind} form; "
+            f"{method_text}k = {observer.k:g} 1/s; start: {rl.start_source}",
+        ],
+        intermediate=intermediate, base=base, payload=payload, diagnostics=statements,
+        notes=list(info.notes), residuals=residuals, result=rl.to_dict() if document is None else document,
+        groups=() if verdict is None else verdict.groups, identification=rl, log=log,
+    )  # fmt: skip
+    report.key_numbers, report.next_steps = summary_box(rl)
+    if figures:
+        _add_figures(report, rl, log, truth, validation_log)
+    return report
+
+
+def _statements(rl: IdentificationResult, *, inflated: bool, warned: bool, flagged: list[str]) -> list[str]:
+    """The diagnostics in plain words: the std's meaning, the friction model, the structural check, the excitation,
+    the CAD differences (``flagged``), then the warnings; the validation, the method and a non-N m effort first."""
+    diag = rl.diagnostics
     unc = diag["uncertainty"]
     statements = [
         f"Standard errors: {unc.get('method', 'jackknife')}"
@@ -256,7 +308,7 @@ def build_report(
             if diag["structural_mismatch"]["p_value"] < 1e-3
             else " — consistent with the model."
         ),
-        f"Excitation: λ_min(Γ) = {diag['lambda_min_gamma']:.3g} (α = {observer['alpha']:g}); "
+        f"Excitation: λ_min(Γ) = {diag['lambda_min_gamma']:.3g} (α = {rl.observer_settings.alpha:g}); "
         + (
             f"not determined by this log: {', '.join(diag['undetermined'])}."
             if diag.get("undetermined")
@@ -264,67 +316,30 @@ def build_report(
         ),
         *flagged,
         *(["Robot file: assumed " + "; ".join(diag["robot_assumed"]) + "."] if diag.get("robot_assumed") else []),
-        *data.get("warnings", []),
+        *rl.warnings,
     ]
+    effort_unit = rl.log_info.effort_unit
     if effort_unit != "N m":
         statements.insert(
             0, f"Units: the effort is in {effort_unit}, not N m, so every parameter is in {effort_unit}-based units."
         )
-    method = data.get("method", "observer")
-    if method != "observer":
+    if rl.method != "observer":
         statements.insert(
             0,
-            f"Method: {method} ({diag.get('method', {}).get('seconds', float('nan')):.3g} s). Table 3 holds its "
+            f"Method: {rl.method} ({diag.get('method', {}).get('seconds', float('nan')):.3g} s). Table 3 holds its "
             "estimate; Table 2, the excitation figures and the history are the observer's, run on the same log.",
         )
-    if "validation" in data and data["validation"].get("not_simulated"):
-        statements.insert(0, f"Validation on {data['validation']['log']}: {data['validation']['not_simulated']}.")
-    elif "validation" in data:
-        v = data["validation"]
+    v = rl.validation
+    if v is not None and v.not_simulated:
+        statements.insert(0, f"Validation on {v.log}: {v.not_simulated}.")
+    elif v is not None:
         statements.insert(
             0,
-            f"Validation on {v['log']}: fit {_fmt(v['fit_percent']['eta_r'], 3)} % (right wheel), "
-            f"{_fmt(v['fit_percent']['eta_l'], 3)} % (left wheel): {v['definition']}; "
-            f"the prediction: {v['predictor']}.",
+            f"Validation on {v.log}: fit {_fmt(v.fit_percent['eta_r'], 3)} % (right wheel), "
+            f"{_fmt(v.fit_percent['eta_l'], 3)} % (left wheel): {v.definition}; "
+            f"the prediction: {v.predictor}.",
         )
-
-    residuals = {}
-    if rl.history is not None:
-        e = np.asarray(rl.history.e)
-        residuals = {
-            "rms_e_rad_s": {
-                "eta_r": float(np.sqrt(np.mean(e[:, 0] ** 2))),
-                "eta_l": float(np.sqrt(np.mean(e[:, 1] ** 2))),
-            },
-            "samples": len(e),
-        }
-    if "prediction_error_rms" in diag:
-        residuals["prediction_error_rms"] = diag["prediction_error_rms"]
-    if log is not None and effort_unit == "N m":
-        theta0 = np.array([params[n]["value"] for n in form.base_names])
-        residuals["torque"] = torque_residual(log, theta0, form)
-
-    verdict = data.get("verdict") or {}
-    said = [line for line in [*(verdict.get("first") or []), verdict.get("summary")] if line]
-    groups = verdict.get("lines") or [g["text"] for g in verdict.get("groups", [])]
-    said += [line[0].upper() + line[1:] + "." for line in groups]
-    said += [f"Check: {line}." for line in verdict.get("check") or []]
-    said += [verdict["units"][0].upper() + verdict["units"][1:] + "."] if verdict.get("units") else []
-    report = Report(
-        title=f"wmrid report: {data.get('source', '?')}",
-        verdict=said,
-        summary=[
-            f"{data['log'].get('samples', '?')} samples, {data['log'].get('duration_s', float('nan')):.3f} s at "
-            f"{data['log'].get('rate_hz', float('nan')):.5g} Hz; regressor: {form.kind} form; "
-            f"{method_said(data)}k = {observer['k']:g} 1/s; start: {observer['start']}",
-        ],
-        intermediate=intermediate, base=base, payload=payload, diagnostics=statements,
-        notes=list(data["log"].get("notes", [])), residuals=residuals, result=data,
-    )  # fmt: skip
-    report.key_numbers, report.next_steps = summary_box(data)
-    if figures:
-        _add_figures(report, rl, log, truth, validation_log)
-    return report
+    return statements
 
 
 #: The parameters the summary box shows: the inertia matrix, the Coriolis coefficient and the wheels' friction (the
@@ -332,33 +347,33 @@ def build_report(
 KEY_PARAMETERS = ("M11", "M22", "M12", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
 
 
-def summary_box(data: dict[str, Any]) -> tuple[list[tuple[str, str]], list[str]]:
-    """The key numbers (name, "value ± std unit") and the next steps, in words, of an identify JSON document."""
-    params = data["parameters"]
-    flagged = set(data["diagnostics"].get("flagged", []))
+def summary_box(result: IdentificationResult) -> tuple[list[tuple[str, str]], list[str]]:
+    """The key numbers (name, "value ± std unit") and the next steps, in words, of an identification."""
+    table = result.table
+    flagged = {name for name, parameter in table.items() if not parameter.trusted}
     numbers = []
-    for name in [n for n in KEY_PARAMETERS if n in params] + [n for n in params if n not in (*KEY_PARAMETERS, "m11",
-                                                                                            "m12", "m22")]:  # fmt: skip
-        entry = params[name]
-        std = entry["std"]
-        spread = f" ± {_fmt(std, 2)}" if std is not None and math.isfinite(std) else " (std unknown)"
-        numbers.append((name + (" ⚑" if name in flagged else ""), f"{_fmt(entry['value'])}{spread} {entry['unit']}"))
-    verdict = data.get("verdict") or {}
-    groups = verdict.get("groups", [])
+    for name in [n for n in KEY_PARAMETERS if n in table] + [n for n in table if n not in (*KEY_PARAMETERS, "m11",
+                                                                                          "m12", "m22")]:  # fmt: skip
+        parameter = table[name]
+        std = parameter.std
+        spread = f" ± {_fmt(std, 2)}" if math.isfinite(std) else " (std unknown)"
+        numbers.append((name + (" ⚑" if name in flagged else ""), f"{_fmt(parameter.value)}{spread} {parameter.unit}"))
+    verdict = result.verdict
+    groups = () if verdict is None else verdict.groups
     steps = []
-    if str(verdict.get("summary", "")).startswith("Do not use"):
+    if verdict is not None and verdict.doubt:
         steps.append("Check the log's units and columns first (see the verdict and the diagnostics): these numbers "
                      "are not usable as they are.")  # fmt: skip
-    plan = [w for w in data.get("warnings", []) if w.startswith(PLAN_HINT)]
+    plan = [w for w in result.warnings if w.startswith(PLAN_HINT)]
     if plan:
         steps.append(plan[0][0].upper() + plan[0][1:] + ".")
-    elif any(g.get("status") in ("poorly determined", "not determined") for g in groups):
+    elif any(g.status in ("poorly determined", "not determined") for g in groups):
         steps.append("Record a longer log that drives the robot harder (faster turns, both directions): the "
                      "parameters marked poorly or not determined need more excitation.")  # fmt: skip
     if flagged:
         steps.append(f"Do not trust the std of {', '.join(sorted(flagged))} (⚑): the warnings under Diagnostics say "
                      "why.")  # fmt: skip
-    if not steps or all(g.get("status") == "determined" for g in groups):
+    if not steps or all(g.status == "determined" for g in groups):
         steps.append("Use the numbers: save the result (wmrid identify LOG --robot ROBOT -o run.json) and turn it into "
                      "a robot model or a feedforward with wmrid export run.json --robot ROBOT -o robot.urdf (or .xml, "
                      ".yaml, .py); check later logs against it with wmrid monitor LOG --model run.json.")  # fmt: skip
@@ -385,10 +400,8 @@ def _add_figures(report: Report, rl: Any, log: Any, truth: dict[str, float] | No
         report.figure_objects[name] = fig  # rendered when an output needs it (:func:`rendered`)
         report.figure_notes[name] = note
 
-    data = report.result
-    params = data["parameters"]
-    theta0 = np.array([params[n]["value"] for n in rl.form.base_names])
-    hold = data.get("settings", {}).get("torque_hold", "zoh")
+    theta0 = np.array([rl.parameters[n][0] for n in rl.form.base_names])
+    hold = rl.settings.torque_hold
     if rl.history is not None:
         both("Base parameters over time", cf.build_base_convergence_figure(rl, truth),
              "Each base parameter recovered (Eq. 21, in closed form) from the observer's intermediate estimates as "
@@ -408,10 +421,11 @@ def _add_figures(report: Report, rl: Any, log: Any, truth: dict[str, float] | No
             f"{_fmt(fit['fit'][1], 3)} % left (100 (1 − ‖η − η̂‖ / ‖η − mean η‖)); {fit['predictor']}."
         )
         both(title, figure, note)
-    estimate = data.get("estimate")
-    if estimate and estimate.get("covariance"):
-        cov = np.array([[math.nan if v is None else v for v in row] for row in estimate["covariance"]], dtype=float)
-        both("Parameter correlations", ff.build_correlation_figure(list(estimate["names"]), cov),
+    estimate = rl.estimate
+    if estimate is not None and estimate.cov.size:
+        cov = np.where(np.isfinite(estimate.cov), estimate.cov, math.nan)  # unknown: NaN, as in the JSON (null)
+        names = list(rl.form.base_names[: len(estimate.theta0)])
+        both("Parameter correlations", ff.build_correlation_figure(names, cov),
              "Correlations of the base parameters' estimates (from their covariance): near ±1, the log moves the "
              "two together and tells them apart poorly.")  # fmt: skip
     if log is not None:
@@ -465,10 +479,3 @@ def to_json_dict(report: Report) -> dict[str, Any]:
         "diagnostics": report.diagnostics, "residuals": residuals, "notes": report.notes,
         "result": report.result, "provenance": report.provenance,
     }  # fmt: skip
-
-
-def method_said(data: dict[str, Any]) -> str:
-    """Another method's settings, said before the observer's run it started from ("" for the observer's result)."""
-    if "observer_settings" not in data:
-        return ""
-    return f"{MethodSettings.from_dict(data['settings']).said()}; the observer's run it started from: "

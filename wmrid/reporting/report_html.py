@@ -55,10 +55,9 @@ def _html_summary(report: Report) -> list[str]:
     lines = report.verdict
     if not lines and not report.key_numbers:
         return []
-    groups = (report.result.get("verdict") or {}).get("groups", [])
     tone = (
         "bad" if lines and lines[0].startswith("Do not use")
-        else "fair" if any(g.get("status") != "determined" for g in groups) else "good"
+        else "fair" if any(g.status != "determined" for g in report.groups) else "good"
     )  # fmt: skip
     out = [f"<section class='summary {tone}'>"]
     if lines:

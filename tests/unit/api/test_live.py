@@ -255,7 +255,7 @@ def test_until_stops_and_identifies_what_was_read(tmp_path, log):
     _, final = follow(path, until=3.0)
     assert 3.0 <= final.log_time_s < 5.0
     assert "until" in final.reason
-    assert final.result.log_info["samples"] == final.samples
+    assert final.result.log_info.samples == final.samples
     assert final.result.source == str(path)
     prefix = tmp_path / "prefix.csv"
     prefix.write_bytes(csv_bytes(*(a[: final.samples] for a in log)))

@@ -310,7 +310,7 @@ def test_reconnect_to_a_restarted_server(recording):
     assert final.samples == N  # the 500 sent again are older than what came: dropped live
     assert any(e.startswith(f"lost the connection to ws://127.0.0.1:{port}") for e in events), events
     assert f"reconnected to ws://127.0.0.1:{port}" in events
-    assert final.result.log_info["samples"] == N
+    assert final.result.log_info.samples == N
     for name, (value, _) in offline.parameters.items():
         assert final.result.parameters[name][0] == pytest.approx(value, rel=1e-9), name
 

@@ -34,7 +34,7 @@ def test_the_reported_estimate_is_within_one_percent_and_honest(encoder_log):
     closed-loop check does not replace the observer."""
     path, truth = encoder_log
     result = wmrid.identify(str(path), "paper")
-    assert any("derived from wheel positions" in note for note in result.log_info["notes"])
+    assert any("derived from wheel positions" in note for note in result.log_info.notes)
     assert result.method == "observer"
     assert not result.diagnostics["feedback"].get("applied")
     assert (result.diagnostics.get("delay") or {}).get("applied_s") in (None, 0.0)
@@ -47,7 +47,7 @@ def test_the_reported_estimate_is_within_one_percent_and_honest(encoder_log):
     # is flagged and the verdict is not "in doubt" (every parameter was, before; wmrid.estimators.noise_floor)
     assert flagged == set()
     assert not result.diagnostics["uncertainty"]["model_error"]["prediction_misfit"]["applied"]
-    assert all(g["status"] != "in doubt" for g in result.verdict["groups"]), result.verdict
+    assert all(g.status != "in doubt" for g in result.verdict.groups), result.verdict
 
 
 def test_idim_lowers_its_default_cutoff_while_the_estimate_moves_with_it(encoder_log):

@@ -218,5 +218,5 @@ def test_the_closed_loop_term_widens_the_payload_too():
     assert record["checked"]
     assert not record["applied"]
     assert record["widened"]
-    assert checked.payload["mass"][1] > plain.payload["mass"][1]
+    assert checked.payload.mass[1] > plain.payload.mass[1]
     assert set(checked.diagnostics["inflated"]) <= set(checked.diagnostics["flagged"])

@@ -70,7 +70,7 @@ def test_a_clean_log_has_no_finding_and_no_flag(clean):
     assert units["doubt"] is False
     assert units["robot"]["rms_factor"] == pytest.approx(1.0, abs=1e-3)  # the sample's truth is the CAD set
     assert clean.diagnostics["flagged"] == []
-    assert clean.verdict["summary"] == "This log determines the inertia, Coriolis coefficient and friction."
+    assert clean.verdict.summary == "This log determines the inertia, Coriolis coefficient and friction."
 
 
 def test_rpm_with_a_robot_file_is_named_and_flags_everything(in_rpm):
@@ -81,15 +81,15 @@ def test_rpm_with_a_robot_file_is_named_and_flags_everything(in_rpm):
     assert result.warnings[0].startswith("unit check: ")
     assert "--speed-unit rpm" in result.warnings[0]
     assert result.diagnostics["flagged"] == list(result.parameters)
-    assert result.verdict["summary"].startswith("Do not use these numbers:")
-    assert all(g["status"] == "in doubt" for g in result.verdict["groups"])
+    assert result.verdict.summary.startswith("Do not use these numbers:")
+    assert all(g.status == "in doubt" for g in result.verdict.groups)
 
 
 def test_rpm_without_a_robot_file_is_not_silent(in_rpm):
     """Without a robot nothing says what a wheel's speed should be; 72 'rad/s' is fast for a wheel, and said so."""
     result = wmrid.identify(in_rpm)
     assert [w for w in result.warnings if w.startswith("unit check: ") and "--speed-unit rpm" in w]
-    assert re.search(r"speeds read as rad/s \(up to 7\d", result.verdict["units"])
+    assert re.search(r"speeds read as rad/s \(up to 7\d", result.verdict.units)
 
 
 @pytest.mark.parametrize("robot", ["paper", None])
@@ -99,14 +99,14 @@ def test_milliseconds_are_named_with_and_without_a_robot_file(in_ms, robot):
     assert units["doubt"] is True
     assert units["findings"][0]["fix"] == "--time-unit ms"
     assert "would make it 1000 Hz over 12 s" in units["findings"][0]["text"]
-    assert result.verdict["summary"].startswith("Do not use these numbers:")
+    assert result.verdict.summary.startswith("Do not use these numbers:")
 
 
 def test_whole_number_efforts_are_taken_for_pwm(sample):
     pwm = replace(sample, tau=np.round(sample.tau * 15.0))
     result = wmrid.identify(pwm)
     assert result.diagnostics["units"]["findings"][0]["fix"] == "--effort pwm"
-    assert "PWM counts" in result.verdict["summary"]
+    assert "PWM counts" in result.verdict.summary
 
 
 def test_the_command_line_says_it_first(tmp_path, in_rpm):

@@ -195,7 +195,7 @@ def test_mjcf_loads_and_check_agrees_with_validate(saved, tmp_path):
     platform = model.body("platform").id
     assert model.body_mass[platform] == pytest.approx(done.physical.parameters.m_p, rel=1e-12)
     assert model.body_inertia[platform][2] == pytest.approx(done.physical.parameters.I_p, rel=1e-12)
-    fit = result.validation["fit_percent"]
+    fit = result.validation.fit_percent
     for wheel in ("eta_r", "eta_l"):
         assert abs(done.check["multibody"][wheel] - fit[wheel]) < 1.0
     back = ExportResult.from_dict(json.loads(json.dumps(done.to_dict())))

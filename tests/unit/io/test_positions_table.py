@@ -56,11 +56,11 @@ def test_a_positions_only_csv_identifies_as_the_positions_only_mcap(identified):
     csv, mcap = identified["csv"], identified["mcap"]
     for name in BASE:
         assert csv.parameters[name][0] == pytest.approx(mcap.parameters[name][0], rel=1e-3), name
-    derived = [n for n in csv.log_info["notes"] if DERIVED_NOTE in n]
+    derived = [n for n in csv.log_info.notes if DERIVED_NOTE in n]
     assert derived == [
         "columns 'pos_r' and 'pos_l': " + DERIVED_NOTE + "21 samples (21 ms) (the log has no speed columns)"
     ]
-    assert any(DERIVED_NOTE + "21 samples" in n for n in mcap.log_info["notes"])
+    assert any(DERIVED_NOTE + "21 samples" in n for n in mcap.log_info.notes)
 
 
 def test_a_positions_only_parquet_gives_the_csvs_speeds(positions):

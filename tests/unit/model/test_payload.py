@@ -50,7 +50,7 @@ def test_delta_method_std_matches_monte_carlo():
     spread = np.std([payload_from_base(d, CAD) for d in draws], axis=0)
     # Linear to first order at these small errors; 4000 draws give the std to about 2 % (1 sigma).
     for i, name in enumerate(("mass", "x", "y", "inertia")):
-        assert est[name][1] == pytest.approx(spread[i], rel=0.08), name
+        assert getattr(est, name)[1] == pytest.approx(spread[i], rel=0.08), name
 
 
 def test_identify_finds_a_25_kg_payload_in_a_noisy_simulated_log(tmp_path):
@@ -68,11 +68,11 @@ def test_identify_finds_a_25_kg_payload_in_a_noisy_simulated_log(tmp_path):
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="sim", notes=())
     result = identify(log, robot, payload=True)
     est = result.payload
-    assert abs(est["mass"][0] / 25.0 - 1) < 0.01
-    assert abs(est["x"][0] - 0.1) < 0.005
-    assert abs(est["y"][0] + 0.05) < 0.005
-    assert abs(est["inertia"][0] / 0.4 - 1) < 0.10
+    assert abs(est.mass[0] / 25.0 - 1) < 0.01
+    assert abs(est.x[0] - 0.1) < 0.005
+    assert abs(est.y[0] + 0.05) < 0.005
+    assert abs(est.inertia[0] / 0.4 - 1) < 0.10
     factor = result.diagnostics["uncertainty"]["interval_factor"]["99.7%"]
     for name, truth in zip(("mass", "x", "y", "inertia"), (25.0, 0.1, -0.05, 0.4), strict=True):
-        assert abs(est[name][0] - truth) <= factor * est[name][1], name
+        assert abs(getattr(est, name)[0] - truth) <= factor * getattr(est, name)[1], name
     assert result.to_dict()["payload"]["mass"]["unit"] == "kg"

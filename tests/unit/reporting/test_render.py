@@ -52,7 +52,7 @@ def test_the_identification_table_shows_every_parameter_with_its_std_nominal_and
         assert f"{result.nominal[name]:.6g}" in cells, name
         z = (value - result.reference[name]) / std
         assert f"{z:+.1f}" in cells, name
-    assert f"{result.log_info['samples']} samples" in text
+    assert f"{result.log_info.samples} samples" in text
     assert "regressor: paper form (7 columns), wheel friction" in text
 
 

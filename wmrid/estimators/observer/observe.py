@@ -37,12 +37,14 @@ from wmrid.estimators.observer.replay import replay_pieces
 from wmrid.estimators.observer.settings import ObserverSettings
 from wmrid.estimators.observer.survey import Survey
 from wmrid.estimators.options import ObserverOptions
+from wmrid.estimators.records import LogInfo
 from wmrid.estimators.result import History, IdentificationResult, ObserverRun, reported_names
 from wmrid.estimators.sign_speed import sign_half_window
 from wmrid.estimators.uncertainty import estimate_covariances, interval_factor, jackknife_deltas, segments_of
 from wmrid.model import dynamics as model
 from wmrid.model.base_params import derived_with_std, fit_base_parameters, weighting_covariance
 from wmrid.model.dynamics import RegressorForm
+from wmrid.model.payload import payload_with_std
 from wmrid.model.robot import Robot
 
 #: A time step longer than GAP_FACTOR median steps (and GAP_MIN_S) is a hole the estimator cannot bridge.
@@ -328,19 +330,13 @@ def _observe(
     record_widening(diagnostics, inflation, parameters, [chosen.base_names[j] for j in undetermined])
     rms_e = np.sqrt(out.blk_ee.sum(axis=0) / duration) if duration > 0 else np.zeros(2)
     diagnostics["prediction_error_rms"] = {"eta_r": float(rms_e[0]), "eta_l": float(rms_e[1]), "unit": "rad/s"}
-    log_info = {
-        "samples": n,
-        "duration_s": duration,
-        "rate_hz": float(1.0 / sv.median_step),
-        "uneven_steps": bool(sv.max_step - sv.min_step > 1e-6 * sv.median_step),
-        "notes": list(stream.notes),
-        "effort_unit": effort_unit,
-        "scales": sv.scales(),
-    }
+    log_info = LogInfo(
+        samples=n, duration_s=duration, rate_hz=float(1.0 / sv.median_step),
+        uneven_steps=bool(sv.max_step - sv.min_step > 1e-6 * sv.median_step), notes=tuple(stream.notes),
+        effort_unit=effort_unit, scales=sv.scales(),
+    )  # fmt: skip
     payload_est = None
     if payload and robot is not None:
-        from wmrid.model.payload import payload_with_std
-
         payload_est = payload_with_std(fit.theta0, cov0, robot.reference)
     nominal = reference = None
     if robot is not None:
