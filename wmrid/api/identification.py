@@ -441,12 +441,11 @@ def compare(
     say("the observer's run with wheel friction (for oe)")
     plain = identify_log(wheel_log, robot_obj, replace(observer, friction="wheel"), Steps(feedback=False))
     oe = run(wheel_log, plain, fit, ("oe",))
-    row = dict(oe.methods["oe"])
-    row["warnings"] = [
+    said = (
         f"friction: wheel, not the observer's {observed.form.friction}: output error simulates the drag, which needs "
-        "the casters' positions (a robot file with [[caster]] tables)",
-        *row["warnings"],
-    ]
+        "the casters' positions (a robot file with [[caster]] tables)"
+    )
+    row = replace(oe.methods["oe"], warnings=(said, *oe.methods["oe"].warnings))
     shared_rows = first.methods if first is not None else {}  # no first run: oe is the only method
     rows = {m: (row if m == "oe" else shared_rows[m]) for m in names}
     return replace(first or oe, methods=rows)

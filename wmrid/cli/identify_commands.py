@@ -280,10 +280,11 @@ def compare_command(
 
     robot_obj = robot_for(robot, log_options, check_rotor(rotor_inertia))
     with activity("wmrid compare") as stage:
-        data = run_compare(
+        comparison = run_compare(
             one_or_many(log), robot_obj, methods=methods.split(","), options=log_options, observer=observer, fit=fit,
             validate=validate, truth=truth, stage=stage,
-        ).to_dict()  # fmt: skip
+        )  # fmt: skip
+    data = comparison.to_dict()
     if output is not None:
         write_json(str(output), data, force=force)
     fmt = "json" if on_stdout(output) else output_format.value
@@ -292,7 +293,7 @@ def compare_command(
     if fmt == "json":
         if not on_stdout(output):  # else the result went to standard output already
             sys.stdout.write(to_json(data) + "\n")
-        warning_summary([f"{name}: {w}" for name, m in data["methods"].items() for w in m["warnings"]],
+        warning_summary([f"{name}: {w}" for name, m in comparison.methods.items() for w in m.warnings],
                         "each method's \"warnings\" in the JSON")  # fmt: skip
     else:
-        print_comparison(data, console())
+        print_comparison(comparison, console())

@@ -10,7 +10,7 @@ problem); :func:`run` then reports the chosen method's estimate through
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -19,8 +19,11 @@ from wmrid.core.choices import Method, values
 from wmrid.core.errors import UsageError, WmridError, option
 from wmrid.estimators.estimate import BaseEstimate
 from wmrid.estimators.options import MethodOptions
+from wmrid.estimators.parameter import Parameter
+from wmrid.estimators.records import Verdict
 from wmrid.estimators.result import IdentificationResult
 from wmrid.estimators.substitution import with_estimate
+from wmrid.model.payload import PayloadEstimate
 from wmrid.model.robot import Robot
 
 METHODS = values(Method, without=("auto",))
@@ -127,23 +130,69 @@ def run(
 
 
 @dataclass(frozen=True)
+class MethodRow:
+    """One method's estimate in a comparison: what ``identify --method NAME`` reports, in short.
+
+    description : the method in one line.  parameters : name -> :class:`~wmrid.estimators.parameter.Parameter`
+    (value, std, unit, flags).  flagged : the parameters whose std is not to be trusted.  error_percent : name ->
+    100 (value - truth) / |truth| where a truth was given.  seconds : the method's run time, s.  warnings, verdict,
+    payload : its result's (payload: with ``--payload``, else None).  fit_percent : {"eta_r", "eta_l"} % of its
+    model on the validation log (None: no validation log; a value None: not simulated or not finite).
+    not_simulated : why its model could not be simulated there (None: it was).
+    """
+
+    description: str
+    parameters: dict[str, Parameter]
+    flagged: tuple[str, ...]
+    seconds: float | None
+    warnings: tuple[str, ...]
+    verdict: Verdict | None
+    error_percent: dict[str, float] = field(default_factory=dict)
+    payload: PayloadEstimate | None = None
+    fit_percent: dict[str, float | None] | None = None
+    not_simulated: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The row of ``wmrid compare``'s JSON: {"description", "parameters": {n: {"value", "std", "unit", "flags"[,
+        "error_percent"]}}, "flagged", "marks", "seconds", "warnings", "verdict"[, "payload"][, "validation":
+        {"fit_percent"[, "not_simulated"]}]}."""
+        params = {}
+        for name, parameter in self.parameters.items():
+            entry = parameter.to_dict()
+            if name in self.error_percent:
+                entry["error_percent"] = self.error_percent[name]
+            params[name] = entry
+        row: dict[str, Any] = {
+            "description": self.description, "parameters": params, "flagged": list(self.flagged),
+            "marks": {name: parameter.mark for name, parameter in self.parameters.items()}, "seconds": self.seconds,
+            "warnings": list(self.warnings), "verdict": None if self.verdict is None else self.verdict.to_dict(),
+        }  # fmt: skip
+        if self.payload is not None:
+            row["payload"] = self.payload.to_dict()
+        if self.fit_percent is not None:
+            row["validation"] = {"fit_percent": dict(self.fit_percent)}
+            if self.not_simulated is not None:
+                row["validation"]["not_simulated"] = self.not_simulated
+        return row
+
+
+@dataclass(frozen=True)
 class Comparison:
     """Every method's estimate on one log (:func:`compare`); ``to_dict`` is the ``wmrid compare`` JSON.
 
-    methods : name -> {"description", "parameters": {n: {"value", "std", "unit"[, "error_percent"]}}, "flagged",
-        "marks", "seconds", "warnings", "verdict"[, "validation": {"fit_percent": {"eta_r", "eta_l"}}]}, in the order
-        run.
+    methods : name -> :class:`MethodRow`, in the order run.
     validation : {"log", "samples", "predictor"} of the second log each model was validated on, or None.
     truth : the true base parameters the errors are against, or None.
     """
 
     source: str
-    methods: dict[str, dict[str, Any]]
+    methods: dict[str, MethodRow]
     validation: dict[str, Any] | None = None
     truth: dict[str, float] | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"source": self.source, "methods": self.methods}
+        methods = {name: row.to_dict() for name, row in self.methods.items()}
+        out: dict[str, Any] = {"source": self.source, "methods": methods}
         if self.validation is not None:
             out["validation"] = self.validation
         if self.truth is not None:
@@ -175,7 +224,7 @@ def compare(
     """
     from wmrid.model.predict import unsimulated, validation_fit
 
-    methods: dict[str, dict[str, Any]] = {}
+    methods: dict[str, MethodRow] = {}
     predictor = None
     for i, name in enumerate(names, 1):
         if stage is not None:
@@ -184,37 +233,31 @@ def compare(
         # the same honest std, flags and warnings as ``identify --method NAME``
         # (wmrid.estimators.substitution.with_estimate)
         result = observer if name == "observer" else with_estimate(observer, est, robot)
-        params = {}
         table = result.table
-        for key, parameter in table.items():
-            entry = parameter.to_dict()
-            if truth is not None and key in truth and truth[key]:
-                entry["error_percent"] = 100.0 * (parameter.value - truth[key]) / abs(truth[key])
-            params[key] = entry
-        row: dict[str, Any] = {
-            "description": DESCRIPTIONS[name],
-            "parameters": params,
-            "flagged": list(result.diagnostics.get("flagged", [])),
-            "marks": {key: parameter.mark for key, parameter in table.items()},
-            "seconds": est.seconds,
-            "warnings": list(result.warnings),
-            "verdict": None if result.verdict is None else result.verdict.to_dict(),
+        errors = {
+            key: 100.0 * (parameter.value - truth[key]) / abs(truth[key])
+            for key, parameter in table.items()
+            if truth is not None and key in truth and truth[key]
         }
-        if result.payload is not None:
-            row["payload"] = result.payload.to_dict()
+        fit_percent: dict[str, float | None] | None = None
+        why = None
         if other is not None:
             form = observer.form if len(est.theta0) == observer.form.n_base else None
             why = unsimulated(form)
             if why:
-                row["validation"] = {"fit_percent": {"eta_r": None, "eta_l": None}, "not_simulated": why}
+                fit_percent = {"eta_r": None, "eta_l": None}
             else:
                 fit = validation_fit(
                     other.t, other.eta, other.tau, np.asarray(est.theta0), observer.settings.torque_hold, form=form
                 )
-                fit_percent = {w: fit[w] if np.isfinite(fit[w]) else None for w in ("eta_r", "eta_l")}
-                row["validation"] = {"fit_percent": fit_percent}
+                fit_percent = {w: float(fit[w]) if np.isfinite(fit[w]) else None for w in ("eta_r", "eta_l")}
                 predictor = fit["predictor"]
-        methods[name] = row
+        methods[name] = MethodRow(
+            description=DESCRIPTIONS[name], parameters=dict(table),
+            flagged=tuple(result.diagnostics.get("flagged", [])), seconds=est.seconds, warnings=tuple(result.warnings),
+            verdict=result.verdict, error_percent=errors, payload=result.payload, fit_percent=fit_percent,
+            not_simulated=why or None,
+        )  # fmt: skip
     return Comparison(
         source=observer.source,
         methods=methods,

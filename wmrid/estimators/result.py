@@ -417,7 +417,7 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
         theta0_cov=theta0_cov,
         diagnostics=data.get("diagnostics", {}),
         warnings=tuple(data.get("warnings", ())),
-        log_info=LogInfo.from_dict(data.get("log") or {}),
+        log_info=LogInfo.from_dict(data["log"]),
         observer=ObserverRun(
             settings=settings,
             start_source=settings_d.get("start", ""),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from wmrid.estimators.methods import Comparison
 from wmrid.estimators.records import Verdict
 from wmrid.estimators.result import IdentificationResult
 from wmrid.estimators.verdict import LEGEND
@@ -232,54 +233,51 @@ def print_report(report: Any, console: Any) -> None:
         console.print(f"- {statement}")
 
 
-def print_comparison(data: dict, console: Any) -> None:
+def print_comparison(comparison: Comparison, console: Any) -> None:
     """A table of ``wmrid compare``'s result: one column per method (estimate ± std, error % with truth), in
     slices of methods where the terminal is narrow."""
-    methods = data["methods"]
-    truth = data.get("truth")
+    methods = comparison.methods
+    truth = comparison.truth
     for name, m in methods.items():
-        verdict = m.get("verdict")
-        if verdict:
-            doubt = verdict["summary"].startswith("Do not use")
-            console.print(f"verdict ({name}): {verdict['summary']}", style=STYLES["impossible"] if doubt else "bold")
+        if m.verdict is not None:
+            style = STYLES["impossible"] if m.verdict.doubt else "bold"
+            console.print(f"verdict ({name}): {m.verdict.summary}", style=style)
     header = ["param", *(["true"] if truth else []), *methods]
     rows = []
     first = next(iter(methods.values()))
-    for key, entry in first["parameters"].items():
-        row: list[Any] = [f"{key}\n{entry['unit']}"]
+    for key, parameter in first.parameters.items():
+        row: list[Any] = [f"{key}\n{parameter.unit}"]
         if truth:
             row.append(_fmt(truth.get(key)))
         for m in methods.values():
-            e = m["parameters"].get(key)
+            e = m.parameters.get(key)
             if e is None:  # a parameter this method does not report
                 row.append("—")
                 continue
-            flags = e.get("flags") or ()
-            mark = m.get("marks", {}).get(key, "")
-            cell = f"{_fmt(e['value'])}{'✗' if 'impossible' in flags else ''}\n± {_fmt(e['std'], 2)}{mark}"
-            if "error_percent" in e:
-                cell += f"\n{e['error_percent']:+.2g} %"
-            row.append(_cell(cell, "impossible" if "impossible" in flags else "flagged" if "!" in mark else None))
+            cell = f"{_fmt(e.value)}{'✗' if e.impossible else ''}\n± {_fmt(e.std, 2)}{e.mark}"
+            if key in m.error_percent:
+                cell += f"\n{m.error_percent[key]:+.2g} %"
+            row.append(_cell(cell, "impossible" if e.impossible else "flagged" if "!" in e.mark else None))
         rows.append(row)
-    rows.append(["run time (s)", *([""] if truth else []), *(f"{m['seconds']:.3g}" for m in methods.values())])
-    if "validation" in data:
+    rows.append(["run time (s)", *([""] if truth else []), *(_fmt(m.seconds, 3) for m in methods.values())])
+    if comparison.validation is not None:
         for wheel in ("eta_r", "eta_l"):
             rows.append([f"fit {wheel} (%)", *([""] if truth else []),
-                         *(_fmt(m["validation"]["fit_percent"][wheel], 3) for m in methods.values())])  # fmt: skip
-    print_table(console, header, rows, title=f"wmrid compare: {data['source']}",
+                         *(_fmt((m.fit_percent or {}).get(wheel), 3) for m in methods.values())])  # fmt: skip
+    print_table(console, header, rows, title=f"wmrid compare: {comparison.source}",
                 numeric=tuple(range(1, len(header))))  # fmt: skip
-    if "validation" in data:
-        v = data["validation"]
+    if comparison.validation is not None:
+        v = comparison.validation
         console.print(f"fit on {v['log']}: {v['predictor'] or 'not simulated (see the warnings)'}")
-    marks = "".join(mark for m in methods.values() for mark in m.get("marks", {}).values())
+    marks = "".join(p.mark for m in methods.values() for p in m.parameters.values())
     if "†" in marks:
         console.print(LEGEND["†"])
     if "!" in marks:
         console.print(LEGEND["!"])
-    if any("impossible" in (e.get("flags") or ()) for m in methods.values() for e in m["parameters"].values()):
+    if any(p.impossible for m in methods.values() for p in m.parameters.values()):
         console.print(LEGEND["✗"], style=STYLES["impossible"])
     for name, m in methods.items():
-        for warning in m["warnings"]:
+        for warning in m.warnings:
             console.print(warning_line(warning, f"warning ({name})"))
 
 

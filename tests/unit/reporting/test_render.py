@@ -63,10 +63,10 @@ def test_the_inspection_and_comparison_tables_name_what_they_hold(result):
     assert "/joint_states" in text
     assert "sensor_msgs/msg/JointState" in text
     console, out = _console()
-    data = wmrid.compare(wmrid.read_log(SAMPLE), "paper", methods=["observer", "idim"]).to_dict()
-    print_comparison(data, console)
+    comparison = wmrid.compare(wmrid.read_log(SAMPLE), "paper", methods=["observer", "idim"])
+    print_comparison(comparison, console)
     text = out.getvalue()
     assert "observer" in text
     assert "idim" in text
-    m11 = data["methods"]["idim"]["parameters"]["m11"]["value"]
+    m11 = comparison.methods["idim"].parameters["m11"].value
     assert f"{m11:.6g}" in text
