@@ -58,8 +58,13 @@ class LogOptions:
     flip_effort: bool = False
 
     def __post_init__(self) -> None:
-        from wmrid.io.signals import check_signal_numbers
+        """Checked once, when made: the topic selection (:class:`~wmrid.io.ros.selection.TopicSelection`) and the
+        signals' units and numbers (the wheel radius an m/s speed needs may still come from the robot)."""
+        from wmrid.io.ros.selection import TopicSelection
+        from wmrid.io.signals import check_signal_choices, check_signal_numbers
 
+        TopicSelection(**_subset(self, TopicSelection))
+        check_signal_choices(self.speed_unit, self.effort)
         check_signal_numbers(self.wheel_radius, self.torque_constant, self.gear_ratio, self.efficiency)
 
     def with_robot(self, robot: Robot | None) -> LogOptions:

@@ -47,6 +47,15 @@ def check_signal_numbers(
         raise UsageError(f"{option('efficiency')} must be in (0, 1], got {efficiency!r}")
 
 
+def check_signal_choices(speed_unit: str, effort: str) -> None:
+    """Raise a UsageError naming the flag unless ``speed_unit`` is one of SPEED_UNITS and ``effort`` of
+    EFFORT_KINDS."""
+    if speed_unit not in SPEED_UNITS:
+        raise UsageError(f"{option('speed_unit')} {speed_unit!r} is not one of {', '.join(SPEED_UNITS)}")
+    if effort not in EFFORT_KINDS:
+        raise UsageError(f"{option('effort')} {effort!r} is not one of {', '.join(EFFORT_KINDS)}")
+
+
 @dataclass(frozen=True)
 class SignalOptions:
     """What the speed and effort columns hold.
@@ -70,10 +79,7 @@ class SignalOptions:
     flip_effort: bool = False
 
     def __post_init__(self) -> None:
-        if self.speed_unit not in SPEED_UNITS:
-            raise UsageError(f"{option('speed_unit')} {self.speed_unit!r} is not one of {', '.join(SPEED_UNITS)}")
-        if self.effort not in EFFORT_KINDS:
-            raise UsageError(f"{option('effort')} {self.effort!r} is not one of {', '.join(EFFORT_KINDS)}")
+        check_signal_choices(self.speed_unit, self.effort)
         check_signal_numbers(self.wheel_radius, self.torque_constant, self.gear_ratio, self.efficiency)
         if self.speed_unit == "m/s" and self.wheel_radius is None:
             raise UsageError(

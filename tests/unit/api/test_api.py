@@ -257,3 +257,13 @@ def test_a_saved_result_is_read_without_numba(tmp_path):
     code = "import sys, json; from wmrid.estimators.result import IdentificationResult; print('numba' in sys.modules)"
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=tmp_path)
     assert done.stdout.strip() == "False", done.stderr
+
+
+@pytest.mark.parametrize(
+    ("fields", "named"),
+    [({"time_source": "x"}, "time_source"), ({"speed_unit": "furlong"}, "speed_unit"), ({"effort": "x"}, "effort"),
+     ({"topic": "/a", "velocity_topic": "/b"}, "velocity_topic")],
+)  # fmt: skip
+def test_log_options_are_checked_when_made_not_when_a_log_is_read(fields, named) -> None:
+    with pytest.raises(wmrid.WmridError, match=named):
+        wmrid.LogOptions(**fields)
