@@ -22,6 +22,7 @@ from wmrid.estimators.estimate import BaseEstimate
 from wmrid.estimators.observer.settings import ObserverSettings
 from wmrid.estimators.parameter import Parameter, parameter_table
 from wmrid.model.dynamics import THETA0_UNITS, RegressorForm
+from wmrid.model.payload import PAYLOAD_UNITS
 
 #: Reported parameter names, in report order.
 REPORTED = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
@@ -439,6 +440,7 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
         method_settings=method_settings,
     )
     if result.verdict is None:  # saved before the verdict: said from its numbers (wmrid.estimators.verdict)
+        # the verdict's checks (~15 ms): only a result saved before verdicts
         from wmrid.estimators.verdict import settle
 
         result = settle(result)
@@ -448,8 +450,6 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
 def payload_dict(payload: dict[str, tuple[float, float]]) -> dict[str, dict[str, Any]]:
     """A payload estimate {name: (value, std)} as JSON: {name: {"value", "std", "unit"}} (mass kg, x m, y m, inertia
     kg m^2; std None when not finite)."""
-    from wmrid.model.payload import PAYLOAD_UNITS
-
     return {
         name: {"value": v, "std": finite_or_none(e), "unit": PAYLOAD_UNITS[name]} for name, (v, e) in payload.items()
     }

@@ -15,6 +15,7 @@ from wmrid.estimators.result import IdentificationResult, MethodSettings, finite
 from wmrid.estimators.uncertainty import interval_factor
 from wmrid.model.base_params import derived_with_std
 from wmrid.model.dynamics import RegressorForm
+from wmrid.model.payload import payload_with_std
 from wmrid.model.robot import Robot
 
 #: Diagnostics that describe the observer's run on the log (kept, and listed as such, under another method).
@@ -89,10 +90,8 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
     warnings = [*result.warnings, *est.warnings]
     payload_est = None
     if result.payload is not None and robot is not None:
-        from wmrid.model.payload import payload_with_std
-
         payload_est = payload_with_std(np.asarray(est.theta0, dtype=float), cov, robot.reference)
-    from wmrid.estimators.verdict import settle
+    from wmrid.estimators.verdict import settle  # the verdict's checks (~15 ms): only when another estimate is reported
 
     used = est.diagnostics  # the method's own figures: the cutoff it used, its weighting, its forgetting factor
     hold = result.observer_settings  # every method reads the efforts under the observer's hold

@@ -43,6 +43,7 @@ from wmrid.estimators.uncertainty import estimate_covariances, interval_factor, 
 from wmrid.model import dynamics as model
 from wmrid.model.base_params import derived_with_std, fit_base_parameters, weighting_covariance
 from wmrid.model.dynamics import RegressorForm
+from wmrid.model.payload import payload_with_std
 from wmrid.model.robot import Robot
 
 #: A time step longer than GAP_FACTOR median steps (and GAP_MIN_S) is a hole the estimator cannot bridge.
@@ -339,8 +340,6 @@ def _observe(
     }
     payload_est = None
     if payload and robot is not None:
-        from wmrid.model.payload import payload_with_std
-
         payload_est = payload_with_std(fit.theta0, cov0, robot.reference)
     nominal = reference = None
     if robot is not None:
