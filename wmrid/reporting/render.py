@@ -7,6 +7,7 @@ from typing import Any
 
 from wmrid.estimators.result import IdentificationResult
 from wmrid.estimators.verdict import LEGEND
+from wmrid.model.payload import PAYLOAD_UNITS, payload_statement
 from wmrid.reporting.terminal import STYLES, print_table, styled, warning as warning_line
 from wmrid.runtime.atomic import to_json_text
 
@@ -75,13 +76,9 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         rows.append(row)
     print_table(console, header, rows, title=title, numeric=tuple(i for i in range(1, len(header)) if i != 3))
     if result.payload is not None:
-        from wmrid.model.payload import PAYLOAD_UNITS
-
         rows = [[name, _fmt(value), _fmt(std, 2), PAYLOAD_UNITS[name]] for name, (value, std) in result.payload.items()]
         print_table(console, ["quantity", "estimate", "std", "unit"], rows,
                     title="payload (against the unloaded robot)", numeric=(1, 2))  # fmt: skip
-        from wmrid.model.payload import payload_statement
-
         console.print(payload_statement(result.payload))
     if impossible:
         console.print(
