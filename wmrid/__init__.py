@@ -10,6 +10,9 @@ The public API, loaded on first use so that ``import wmrid`` stays fast::
 Layers, lowest first: :mod:`wmrid.core`, :mod:`wmrid.model`, then :mod:`wmrid.io`, :mod:`wmrid.estimators` and
 :mod:`wmrid.sim` side by side, :mod:`wmrid.pipeline`, :mod:`wmrid.monitoring` and :mod:`wmrid.design`,
 :mod:`wmrid.reporting`, :mod:`wmrid.api` and the command line :mod:`wmrid.cli` on top.
+
+Imports inside functions: start-up time (a front door: ``import wmrid`` and each function load only what that
+function uses).
 """
 
 import os as _os

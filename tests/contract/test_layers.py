@@ -14,6 +14,9 @@ including those inside functions and under ``TYPE_CHECKING``.
 from __future__ import annotations
 
 import ast
+import io
+import re
+import tokenize
 from pathlib import Path
 
 import pytest
@@ -261,6 +264,11 @@ def _import_time_and_local_imports() -> tuple[dict[str, set[str]], dict[str, lis
 FRONT_DOORS = ("wmrid.fleets.run", "wmrid.fleets.report")
 
 
+def _front(module: str) -> bool:
+    """Whether ``module`` is a front one: the command line, the api, the package's front or a fleet's front door."""
+    return module in ("wmrid", *FRONT_DOORS) or module.startswith(("wmrid.cli", "wmrid.api"))
+
+
 def test_a_function_imports_a_module_only_to_put_off_loading_it() -> None:
     """Imports inside functions are for start-up time only (issue 31), each for one of three reasons:
 
@@ -285,8 +293,117 @@ def test_a_function_imports_a_module_only_to_put_off_loading_it() -> None:
 
     needless = []
     for module, imports in local.items():
-        if module in ("wmrid", *FRONT_DOORS) or module.startswith(("wmrid.cli", "wmrid.api")):
+        if _front(module):
             continue
         already = loaded(module, set())
         needless += [f"{module}:{line} imports {target}" for line, target in imports if target in already | {module}]
     assert needless == [], "function-local imports of modules loaded anyway:\n" + "\n".join(needless)
+
+
+#: How a front module says, once, why it imports inside functions: in its docstring, or in a comment under its imports.
+REASON_MARK = "Imports inside functions:"
+#: A comment that is only a tool's pragma says nothing about why.
+_PRAGMA = re.compile(r"#\s*(noqa|type:|fmt:|pragma|pyright:)")
+
+
+def _function_imports(tree: ast.Module) -> list[ast.Import | ast.ImportFrom]:
+    """The import statements inside functions (nested ones once), in line order."""
+    found = {
+        node.lineno: node
+        for function in ast.walk(tree)
+        if isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef))
+        for node in ast.walk(function)
+        if isinstance(node, (ast.Import, ast.ImportFrom))
+    }
+    return [found[line] for line in sorted(found)]
+
+
+def _comments(text: str) -> dict[int, str]:
+    """line -> its comment's text (without ``#``), pragmas left out."""
+    out = {}
+    for tok in tokenize.generate_tokens(io.StringIO(text).readline):
+        if tok.type == tokenize.COMMENT and not _PRAGMA.match(tok.string) and tok.string.lstrip("#").strip():
+            out[tok.start[0]] = tok.string.lstrip("#").strip()
+    return out
+
+
+def _unexplained_imports(name: str, path: Path) -> list[str]:
+    """``module:line  statement`` of each function-local import without a comment on its lines or on a line of its
+    own just before (another import's trailing comment there does not count)."""
+    text = path.read_text(encoding="utf-8")
+    lines, comments = text.splitlines(), _comments(text)
+
+    def explained(node: ast.Import | ast.ImportFrom) -> bool:
+        before = node.lineno - 1
+        if before in comments and lines[before - 1].lstrip().startswith("#"):
+            return True
+        return any(line in comments for line in range(node.lineno, (node.end_lineno or node.lineno) + 1))
+
+    return [
+        f"{name}:{node.lineno}  {ast.unparse(node)}"
+        for node in _function_imports(ast.parse(text))
+        if not explained(node)
+    ]
+
+
+def _states_its_reason(path: Path) -> bool:
+    """Whether the module says once why it imports inside functions (:data:`REASON_MARK` and a reason after it, in
+    its docstring or a comment of its own line at the top level)."""
+    text = path.read_text(encoding="utf-8")
+    said = re.compile(re.escape(REASON_MARK) + r"\s*\S")
+    docstring = ast.get_docstring(ast.parse(text)) or ""
+    top_comments = [c for line, c in _comments(text).items() if text.splitlines()[line - 1].startswith("#")]
+    return bool(said.search(docstring)) or any(said.match(c) for c in top_comments)
+
+
+def test_every_function_local_import_says_why() -> None:
+    """Issue 31: outside the front modules (:func:`_front`), an import inside a function puts a load off for
+    start-up time, and says so where it stands: a comment on its line (or the line before) naming what it puts off
+    and why (``# scipy.stats (~0.6 s): only a fleet review``, ``# optional extra [physics]``).  An import with no
+    such reason belongs at the top of its module."""
+    missing = [entry for name, path in _modules() if not _front(name) for entry in _unexplained_imports(name, path)]
+    assert missing == [], (
+        "function-local imports without a comment saying what they put off and why (on the line or the one "
+        "before; or move them to the top):\n" + "\n".join(missing)
+    )
+
+
+def test_each_front_module_says_once_why_it_imports_inside_functions() -> None:
+    """Issue 31: a front module's imports inside functions are all for start-up time; the module says so once
+    ("Imports inside functions: <reason>" in its docstring or a comment under its imports), not on every line."""
+    missing = [
+        name
+        for name, path in _modules()
+        if _front(name)
+        and _function_imports(ast.parse(path.read_text(encoding="utf-8")))
+        and not _states_its_reason(path)
+    ]
+    assert missing == [], (
+        f"front modules that import inside functions without saying why once ({REASON_MARK!r}): {missing}"
+    )
+
+
+def test_the_reason_checks_see_what_is_missing(tmp_path) -> None:
+    """The checks themselves: an import without a comment is named by module and line; a comment on its line (a
+    multi-line import's lines too) or on a line of its own before it counts, a pragma alone or the previous import's
+    comment does not; a front module's reason is found in its docstring or a top-level comment."""
+    f = tmp_path / "m.py"
+    f.write_text(
+        "import os\n\n\ndef f():\n    import json\n    import csv  # csv: only f\n    # ssl: only f\n    import ssl\n"
+        "    from typing import (\n        Any,  # typing: only f\n    )\n    import zlib  # noqa: F401\n\n"
+        "    def g():\n        import uuid  # uuid: only g\n        import hmac\n"
+    )
+    assert _unexplained_imports("wmrid.x.m", f) == [
+        "wmrid.x.m:5  import json",
+        "wmrid.x.m:12  import zlib",
+        "wmrid.x.m:16  import hmac",
+    ]
+    assert not _states_its_reason(f)
+    f.write_text('"""Doc.\n\nImports inside functions: start-up time."""\n\n\ndef f():\n    import json\n')
+    assert _states_its_reason(f)
+    f.write_text("import os\n\n# Imports inside functions: start-up time\n\n\ndef f():\n    import json\n")
+    assert _states_its_reason(f)
+    f.write_text(
+        '"""Doc.  Imports inside functions:"""\n\n\ndef f():\n    # Imports inside functions: here\n    import json\n'
+    )
+    assert not _states_its_reason(f)

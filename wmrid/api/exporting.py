@@ -15,6 +15,9 @@ what the file gives, what stays undetermined; an unphysical result is refused) a
 ``check``: a log whose torques drive the exported multibody model over windows restarted from the logged speeds
 (:func:`wmrid.sim.open_loop.drive_windows`); the fit % per wheel is reported next to the reduced model's on the same
 windows (:func:`wmrid.model.predict.simulate_segments`).  The returned :class:`ExportResult` round-trips through JSON.
+
+Imports inside functions: start-up time (a front door: ``import wmrid`` and each function load only what that
+function uses).
 """
 
 from __future__ import annotations

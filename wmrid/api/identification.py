@@ -4,6 +4,9 @@
 Both take a log as a path (read with :class:`~wmrid.api.inputs.LogOptions`), a :class:`WheelLog` or a
 :class:`LogStream`, and a robot as a built-in name, a file or a :class:`Robot`.  ``wmrid identify`` and ``wmrid
 compare`` are these functions with their flags translated, so the two commands cannot drift apart.
+
+Imports inside functions: start-up time (a front door: ``import wmrid`` and each function load only what that
+function uses).
 """
 
 from __future__ import annotations

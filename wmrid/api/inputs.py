@@ -5,6 +5,9 @@ The options are the command line's log-input flags, one field each (``--speed-un
 ``LogOptions(speed_unit="rpm")``).  A robot, when given, fills in what the log does not say: the wheel radius for
 speeds in m/s, the torque constant and gearbox efficiency for motor currents, the gear ratio for a PWM effort's
 conversion.
+
+Imports inside functions: start-up time (a front door: ``import wmrid`` and each function load only what that
+function uses).
 """
 
 from __future__ import annotations

@@ -16,6 +16,9 @@ samples also go through ``wmrid monitor``'s change test as they arrive
 (:class:`wmrid.monitoring.live_monitor.LiveMonitor`), and each change it finds is yielded as a :class:`LiveChange`.
 A source that breaks off (a lost connection, a malformed frame: :class:`wmrid.core.errors.StreamError`) ends the run
 with the result on what came before it (:attr:`LiveResult.failure`).
+
+Imports inside functions: start-up time (a front door: ``import wmrid`` and each function load only what that
+function uses).
 """
 
 from __future__ import annotations

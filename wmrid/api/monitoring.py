@@ -1,4 +1,8 @@
-"""Change detection as one call: :func:`monitor` replays a log against an identified model (``wmrid monitor``)."""
+"""Change detection as one call: :func:`monitor` replays a log against an identified model (``wmrid monitor``).
+
+Imports inside functions: start-up time (a front door: ``import wmrid`` and each function load only what that
+function uses).
+"""
 
 from __future__ import annotations
 

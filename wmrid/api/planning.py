@@ -6,6 +6,9 @@ See :mod:`wmrid.design` for the method.  The robot's nominal set gives the model
 efforts), or defaults (:data:`DEFAULT_ETA_NOISE`, :data:`DEFAULT_TAU_SHARE` of the torque scale, at
 :data:`DEFAULT_LOG_RATE`).  ``given``: results of logs already identified (``wmrid identify --format json``), whose
 information is added, so that the plan targets what they leave poorly determined.
+
+Imports inside functions: start-up time (a front door: ``import wmrid`` and each function load only what that
+function uses).
 """
 
 from __future__ import annotations

@@ -1,6 +1,10 @@
 """Reports as one call: :func:`report` builds what ``wmrid report`` writes (tables after the paper's Tables 2 and 3,
 the comparison with nominal/CAD values and a truth, diagnostics, figures), and :func:`write_report` writes it as
-HTML, Markdown or JSON by the file's suffix."""
+HTML, Markdown or JSON by the file's suffix.
+
+Imports inside functions: start-up time (a front door: ``import wmrid`` and each function load only what that
+function uses).
+"""
 
 from __future__ import annotations
 

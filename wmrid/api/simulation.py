@@ -1,6 +1,9 @@
 """Simulated logs as one call: :func:`simulate` runs the paper's virtual prototype (or the MuJoCo multibody one)
 with an optional payload and one change of the dynamics during the run; :func:`write_simulation` writes the log and
 its ground truth together.  ``wmrid simulate`` is these two functions with its flags translated.
+
+Imports inside functions: start-up time (a front door: ``import wmrid`` and each function load only what that
+function uses).
 """
 
 from __future__ import annotations

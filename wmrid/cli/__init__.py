@@ -1,7 +1,10 @@
 """The command line: a thin translation of flags into library calls (:mod:`wmrid.api`).
 
 ``main`` is the console script's entry point; the Typer application is imported only when it runs, so that
-importing :mod:`wmrid.cli` costs nothing."""
+importing :mod:`wmrid.cli` costs nothing.
+
+Imports inside functions: start-up time (``wmrid --help`` and each command load only what that command runs).
+"""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """The ``wmrid`` application and its entry point: the Typer app the commands join, and :func:`main`.
 
-Heavy modules (numpy, pandas, numba, rich) are imported inside the commands so that ``wmrid --help``
-answers at once.  :func:`main` is the one place that maps errors to exit codes and messages.
+Imports inside functions: start-up time (numpy, pandas, numba, rich are imported inside the commands so that
+``wmrid --help`` answers at once).  :func:`main` is the one place that maps errors to exit codes and messages.
 """
 
 from __future__ import annotations

@@ -1,4 +1,7 @@
-"""``wmrid export``: a translation of its flags into one library call (:func:`wmrid.api.exporting.export`)."""
+"""``wmrid export``: a translation of its flags into one library call (:func:`wmrid.api.exporting.export`).
+
+Imports inside functions: start-up time (``wmrid --help`` and each command load only what that command runs).
+"""
 
 from __future__ import annotations
 

@@ -1,5 +1,8 @@
 """``wmrid fleet`` and ``wmrid fleet-report``: each a translation of its flags into one library call
-(:mod:`wmrid.fleets.run`, :mod:`wmrid.fleets.report`) and a rendering of the outcome."""
+(:mod:`wmrid.fleets.run`, :mod:`wmrid.fleets.report`) and a rendering of the outcome.
+
+Imports inside functions: start-up time (``wmrid --help`` and each command load only what that command runs).
+"""
 
 from __future__ import annotations
 

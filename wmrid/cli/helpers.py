@@ -1,5 +1,8 @@
 """What the commands share beyond their options: reading a log and a robot with the flags' values, progress, where
-the output goes."""
+the output goes.
+
+Imports inside functions: start-up time (``wmrid --help`` and each command load only what that command runs).
+"""
 
 from __future__ import annotations
 

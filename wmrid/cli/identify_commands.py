@@ -1,5 +1,8 @@
 """``wmrid identify``, ``inspect``, ``report`` and ``compare``: each a translation of its flags into one library call
-(:mod:`wmrid.api`) and a rendering of the result."""
+(:mod:`wmrid.api`) and a rendering of the result.
+
+Imports inside functions: start-up time (``wmrid --help`` and each command load only what that command runs).
+"""
 
 from __future__ import annotations
 

@@ -1,5 +1,8 @@
 """``wmrid live``: a translation of its flags into one library call (:func:`wmrid.api.live.live`), the updates shown
-as they come (a live table on a terminal, JSON lines in a pipe), the result written at the end and on a stop."""
+as they come (a live table on a terminal, JSON lines in a pipe), the result written at the end and on a stop.
+
+Imports inside functions: start-up time (``wmrid --help`` and each command load only what that command runs).
+"""
 
 from __future__ import annotations
 

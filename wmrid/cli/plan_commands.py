@@ -1,4 +1,7 @@
-"""``wmrid plan``: a translation of its flags into one library call (:func:`wmrid.api.planning.plan`)."""
+"""``wmrid plan``: a translation of its flags into one library call (:func:`wmrid.api.planning.plan`).
+
+Imports inside functions: start-up time (``wmrid --help`` and each command load only what that command runs).
+"""
 
 from __future__ import annotations
 

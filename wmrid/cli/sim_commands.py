@@ -1,4 +1,7 @@
-"""``wmrid simulate`` and ``monitor``: each a translation of its flags into one library call (:mod:`wmrid.api`)."""
+"""``wmrid simulate`` and ``monitor``: each a translation of its flags into one library call (:mod:`wmrid.api`).
+
+Imports inside functions: start-up time (``wmrid --help`` and each command load only what that command runs).
+"""
 
 from __future__ import annotations
 

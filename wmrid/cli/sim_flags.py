@@ -2,7 +2,10 @@
 :class:`~wmrid.model.robot.Payload`, ``--load-at``/``--drop-at``/``--friction-fault WHEEL:FACTOR[:TERMS]``/
 ``--fault-at`` into a :class:`~wmrid.sim.scenario.Change`, the noise flags into a
 :class:`~wmrid.sim.scenario.NoiseSettings`, the engine's into a :class:`~wmrid.sim.multibody_model.MultibodySettings`.
-The library never parses these texts; each error here names the flag as the user wrote it."""
+The library never parses these texts; each error here names the flag as the user wrote it.
+
+Imports inside functions: start-up time (``wmrid --help`` and each command load only what that command runs).
+"""
 
 from __future__ import annotations
 

@@ -190,8 +190,6 @@ WHOLE_EFFORTS_NOTE = "every effort message holds whole numbers"
 
 def whole_efforts(effort) -> str | None:
     """The :data:`WHOLE_EFFORTS_NOTE` clause for efforts (k, 2) that are all whole numbers, not all zero; else None."""
-    import numpy as np
-
     effort = np.asarray(effort, dtype=float)
     if effort.size == 0 or not np.all(np.isfinite(effort)) or not np.any(effort):
         return None

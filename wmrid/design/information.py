@@ -42,6 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.signal import lfilter
+from scipy.special import erf
 
 from wmrid.estimators.sign_speed import sign_half_window
 from wmrid.model.dynamics import RegressorForm, caster_columns, intermediate_parameters, inverse_inertia, regressor
@@ -125,8 +126,6 @@ def sign_statistics(eta: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarr
     itself, std 0."""
     if sigma <= 0:
         return np.sign(eta), np.zeros_like(eta), np.zeros_like(eta)
-    from scipy.special import erf
-
     x = eta / (math.sqrt(2.0) * sigma)
     mean = erf(x)
     sd = np.sqrt(np.clip(1.0 - mean * mean, 0.0, None))

@@ -15,6 +15,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+import numba
 import numpy as np
 
 from wmrid.core.errors import UsageError, option
@@ -192,8 +193,8 @@ def separability(motion: Motion, wheel_speed_limit: float, interior: np.ndarray)
 def baseline_motion(problem: Problem, name: str, area: bool = True) -> tuple[Motion, float]:
     """(motion, factor): the ``wmrid simulate`` trajectory ``name`` over the plan's duration on ``problem``'s grid,
     slowed down uniformly (speeds times factor <= 1) until it keeps every limit (``area``: the area too)."""
-    from wmrid.sim.closed_loop import KIND
-    from wmrid.sim.simulate import TRAJECTORY_PARAMETERS
+    from wmrid.sim.closed_loop import KIND  # the simulator's built-in trajectories: only a plan's baselines
+    from wmrid.sim.simulate import TRAJECTORY_PARAMETERS  # the simulator (~30 ms): only a plan's baselines
 
     traj = np.array(list(TRAJECTORY_PARAMETERS[name].values()), dtype=np.float64)
     v, w, dv, dw = _reference_signals(KIND[name], traj, problem.t).T
@@ -210,11 +211,11 @@ def baseline_motion(problem: Problem, name: str, area: bool = True) -> tuple[Mot
 
 def _reference_signals(kind: int, traj: np.ndarray, t: np.ndarray) -> np.ndarray:
     """(n, 4): v, w, v', w' of a built-in trajectory at times t (compiled: a 1 kHz minute is 60,000 calls)."""
+    # the simulator's reference (its numba kernels): only a plan's baselines
     from wmrid.sim.closed_loop import reference_state
 
     global _REFERENCE_KERNEL
     if _REFERENCE_KERNEL is None:
-        import numba
 
         @numba.njit(cache=False)
         def kernel(kind, traj, t):

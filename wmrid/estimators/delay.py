@@ -29,6 +29,7 @@ import numba
 import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError, UsageError, WmridError
+from wmrid.estimators.uncertainty import interval_factor
 
 #: Grid step of the profile, s (a fifth of a 1 kHz step would be finer than the refinement needs).
 DELAY_STEP_S = 0.0005
@@ -84,8 +85,6 @@ class DelayEstimate:
 def significance_factor(segments: int, coverage: float = 0.9973) -> float:
     """Standard errors a delay must exceed: Student's t quantile at ``coverage`` with ``segments`` - 1 dof (the
     jackknife's), at least SIGNIFICANT_Z (the normal's 3)."""
-    from wmrid.estimators.uncertainty import interval_factor
-
     return max(SIGNIFICANT_Z, interval_factor(coverage, max(int(segments) - 1, 1)))
 
 
@@ -144,8 +143,11 @@ def estimate_delay(
     :func:`wmrid.estimators.observer.observe.delay_profile_form`; None: the wheels' friction only).  Raises
     NotIdentifiableError when the log is too short.
     """
+    # IDIM (~20 ms with its rows and checks): only a delay estimate
     from wmrid.estimators.regression.idim import fit_with_cutoff, segment_index
-    from wmrid.estimators.regression.idim_checks import slow_rows
+    from wmrid.estimators.regression.idim_checks import slow_rows  # IDIM's checks: only a delay estimate
+
+    # IDIM's rows: only a delay estimate
     from wmrid.estimators.regression.idim_rows import MAX_EFFORT_SHIFT_S, default_cutoff, effort_delay, idim_regression
 
     if not (math.isfinite(span) and 0 < span <= MAX_EFFORT_SHIFT_S / 2):
@@ -244,7 +246,9 @@ def _iv_profile(
     delete-a-segment jackknife of that root (per-segment moments, no refit); infinite when the full log or a
     jackknife replicate has no root in the span, i.e. the log does not pin the delay.  On logs without a
     disturbance it agrees with least squares (5 ms late at 1 kHz: +4.96 +/- 0.07 ms against +4.96 +/- 0.07 ms)."""
-    from wmrid.estimators.regression.idim_rows import shifted
+    from wmrid.estimators.regression.idim_rows import shifted  # IDIM's rows: only a delay estimate
+
+    # IDIM-IV: only a log with the wheel-speed reference
     from wmrid.estimators.regression.iv import MIN_R2, first_stage_r2, instrument_regression
 
     reference = np.asarray(reference, dtype=np.float64)
@@ -310,7 +314,7 @@ def _iv_profile(
 def _theta0_slope(q: np.ndarray, r: np.ndarray, effort: Any, delay: float) -> np.ndarray | None:
     """d theta0 / d delay (8,) per s of the least-squares fit (rows = q r, efforts ``effort(d)``) at ``delay``, by a
     central difference over DELAY_STEP_S; None when R is singular or the slope is not finite."""
-    from wmrid.estimators.regression.idim import phi_to_theta0, theta0_jacobian
+    from wmrid.estimators.regression.idim import phi_to_theta0, theta0_jacobian  # IDIM: only a delay estimate
 
     try:
         phi = np.linalg.solve(r, q.T @ effort(delay))

@@ -34,7 +34,11 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError, UsageError, WmridError
+from wmrid.core.wheel_log import LogStream
+from wmrid.estimators.diagnostics import impossible_parameters
 from wmrid.estimators.estimate import BaseEstimate
+from wmrid.estimators.substitution import with_estimate
+from wmrid.estimators.widening import with_covariance
 
 #: The check reports the other estimate when some |delta_j| exceeds the gate, in jackknife std of delta_j: the
 #: Student-t quantile (G - 1 dof) that keeps the chance of any of the m judged parameters passing it by noise alone
@@ -64,7 +68,7 @@ def difference_test(
     Returns {"applied": some ratio > gate, "delta", "sd" (the jackknife's, with ``systematic``), "ratio" (per
     name), "largest_ratio", "largest", "gate", "dof"}.
     """
-    from scipy.special import stdtrit
+    from scipy.special import stdtrit  # scipy.special (~0.15 s): only when the check runs
 
     sa, sb = a.segments, b.segments
     if sa is None or sb is None or sa.grid != sb.grid:
@@ -129,13 +133,14 @@ def other_estimate(log: Any, result: Any, grid: tuple[float, float, int] | None 
     }  # fmt: skip
     reference = getattr(log, "reference", None)
     if reference is not None:
+        # IDIM-IV (~20 ms): only when the check runs, on a log with the reference
         from wmrid.estimators.regression.iv import identify_iv
 
         try:
             return identify_iv(t, eta, tau, reference, **common)
         except NotIdentifiableError:  # a reference that does not describe the motion: IDIM, as without one
             pass
-    from wmrid.estimators.regression.idim import identify_idim
+    from wmrid.estimators.regression.idim import identify_idim  # IDIM (~20 ms): only when the check runs
 
     return identify_idim(t, eta, tau, **common)
 
@@ -153,9 +158,6 @@ def check(result: Any, log: Any, robot: Any = None, switch: bool = True) -> Any:
     reference).  Logs over MAX_SAMPLES samples, and logs where the other method cannot fit, are not checked (the
     record says why).
     """
-    from wmrid.core.wheel_log import LogStream
-    from wmrid.estimators.substitution import with_estimate
-
     est = result.estimate
     if est is None or est.segments is None or result.method != "observer":
         return result
@@ -187,8 +189,6 @@ def check(result: Any, log: Any, robot: Any = None, switch: bool = True) -> Any:
     record["other_systematic"] = terms  # its own checks whose difference joined the difference's variance
     impossible: set[str] = set()
     if test["applied"] and switch:  # never report an estimate no robot has (the evidence says it is the worse one)
-        from wmrid.estimators.diagnostics import impossible_parameters
-
         candidate = with_estimate(result, other, robot)
         impossible = impossible_parameters(candidate.parameters)
     if not test["applied"] or not switch or impossible:
@@ -244,8 +244,6 @@ def widened(result: Any, delta: np.ndarray, other_std: np.ndarray, record: dict[
     logs (docs/explanation/checks.md): m11 beyond 3 std in 18 % of seeds without the term, 3 % with it.
     The parameters it widens by more than INFLATION_MARK are marked inflated.
     """
-    from wmrid.estimators.widening import with_covariance
-
     est = result.estimate
     delta = np.where(np.isfinite(delta), delta, 0.0)
     cov = np.asarray(est.cov, dtype=float)

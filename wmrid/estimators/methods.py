@@ -61,12 +61,14 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
     tau = np.asarray(log.tau, dtype=np.float64)
     applied = (observer.diagnostics.get("delay") or {}).get("applied_s") or 0.0
     if applied:  # the efforts' delay the observer's run applied (identify(..., delay=)): the same log for every method
+        # IDIM's rows (~10 ms): only a log the observer's run shifted
         from wmrid.estimators.regression.idim_rows import shifted
 
         tau = shifted(t, tau, -applied)
     source = getattr(log, "source", observer.source)
     try:
         if name == "idim":
+            # each method's estimator is loaded only when asked for
             from wmrid.estimators.regression.idim import identify_idim
 
             # the observer's form: IDIM models the casters' drag too when the observer does (wheel+caster)
@@ -76,6 +78,7 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
                 t, eta, tau, cutoff_hz=options.cutoff_hz, weighted=options.weighted, form=observer.form, **hold
             )
         if name == "iv":
+            # each method's estimator is loaded only when asked for
             from wmrid.estimators.regression.iv import identify_iv
 
             reference = getattr(log, "reference", None)
@@ -91,12 +94,14 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
                 **hold,
             )  # fmt: skip
         if name == "rls":
+            # each method's estimator is loaded only when asked for (RLS: numba kernels)
             from wmrid.estimators.regression.rls import identify_rls
 
             hold = {"torque_hold": observer.settings.torque_hold, "control_rate": observer.settings.control_rate}
             return identify_rls(
                 t, eta, tau, forgetting=options.forgetting, cutoff_hz=options.cutoff_hz, form=observer.form, **hold
             )
+        # output error: scipy.optimize (~0.3 s), only for --method oe
         from wmrid.estimators.output_error import identify_oe
 
         assert observer.estimate is not None
@@ -222,7 +227,7 @@ def compare(
     ``stage`` : called with each method's name as it starts (a progress display).  ``robot``: the robot the
     observer's run estimated a payload against (its row's ``"payload"``, when the observer's result has one).
     """
-    from wmrid.model.predict import unsimulated, validation_fit
+    from wmrid.model.predict import unsimulated, validation_fit  # the predictor's numba kernel: only compare's fits
 
     methods: dict[str, MethodRow] = {}
     predictor = None

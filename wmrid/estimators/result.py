@@ -437,6 +437,7 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
         method_settings=method_settings,
     )
     if result.verdict is None:  # saved before the verdict: said from its numbers (wmrid.estimators.verdict)
+        # the verdict's checks (~15 ms): only a result saved before verdicts
         from wmrid.estimators.verdict import settle
 
         result = settle(result)

@@ -12,7 +12,9 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import UsageError, WmridError, option
+from wmrid.core.wheel_log import LogStream, WheelLog
 from wmrid.estimators.delay import DEFAULT_SPAN_S, SIGNIFICANT_S, SIGNIFICANT_Z, DelayEstimate, combine, estimate_delay
+from wmrid.estimators.uncertainty import interval_factor
 
 
 def faster_controller(est: Any, t: np.ndarray, torque_hold: str, control_rate: float | None) -> bool:
@@ -73,8 +75,6 @@ def timing_check(
     windows' estimates combined by their inverse variances (:func:`combine`), so the delay's std keeps shrinking
     as 1/sqrt(T) with the log's length.  A log that cannot be profiled (a hole, too short for the filter) is not
     checked, and the record says why.  ``form``: the friction model profiled (:func:`estimate_delay`)."""
-    from wmrid.core.wheel_log import LogStream
-
     slow = bool(median_step > 0 and 1.0 / median_step < SLOW_LOG_HZ)
     none = {"checked": False, "apply": False, "slow": slow, "faster_controller": False}
     if samples < 2:
@@ -191,8 +191,6 @@ def unresolved_delay(record: dict[str, Any], theta0_std: np.ndarray) -> float | 
     carried a delay of the size of its std on every log, so the std of a log that pins its delay poorly (a 200 Hz
     reversing log with a disturbance inside the loop: s of 5-45 ms) grew 4-5 times against --delay 0; on a log
     with no delay the term now comes in 5 % of logs, and where it does its size, like s, shrinks as 1/sqrt(T)."""
-    from wmrid.estimators.uncertainty import interval_factor
-
     if not record.get("checked") or record.get("apply") or record.get("at_edge_of_search"):
         return None
     slope = record.get("theta0_slope_per_s")
@@ -301,7 +299,7 @@ def apply_delay(
     ``delay``: seconds, or "auto" (:func:`estimate_delay`; applied only when significant and not at the edge
     of the search; ``form`` the friction model profiled).  The warnings name the likely cause: two clocks, or a
     controller faster than the log."""
-    from wmrid.core.wheel_log import LogStream, WheelLog
+    # IDIM's rows (~10 ms): only when a delay is applied
     from wmrid.estimators.regression.idim_rows import MAX_EFFORT_SHIFT_S, shifted
 
     whole = log.read() if isinstance(log, LogStream) else log

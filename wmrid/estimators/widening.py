@@ -22,7 +22,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from wmrid.estimators.diagnostics import flagged_names
 from wmrid.estimators.estimate import BaseEstimate
+from wmrid.estimators.model_error import INFLATION_MARK
+from wmrid.estimators.result import reported_names
 from wmrid.model.base_params import derived_with_std
 from wmrid.model.payload import payload_with_std
 from wmrid.model.robot import Robot
@@ -41,9 +44,6 @@ def with_covariance(
     (what widened them) to the meaning of the widening mark (``diagnostics["uncertainty"]["model_error"]["meaning"]``)
     when any grew.  The one place a term (timing, hold,
     closed loop) widens a result.  ``mark``: the growth that marks a parameter (default INFLATION_MARK)."""
-    from wmrid.estimators.model_error import INFLATION_MARK
-    from wmrid.estimators.result import reported_names
-
     mark = INFLATION_MARK if mark is None else mark
     est = result.estimate
     assert est is not None
@@ -62,8 +62,6 @@ def with_covariance(
         unc["model_error"] = model_error
         diagnostics["uncertainty"] = unc
     diagnostics["inflated"] = [n for n in parameters if n in set(diagnostics.get("inflated", [])) | set(grown)]
-    from wmrid.estimators.diagnostics import flagged_names
-
     diagnostics["flagged"] = flagged_names(parameters, diagnostics)
     payload = result.payload
     if payload is not None and robot is not None:

@@ -132,7 +132,7 @@ def _null_maxima(total: int, first: int, window: int, params: int) -> np.ndarray
 
 def _tail(h: np.ndarray | float, dof: float) -> np.ndarray:
     """P(F(1, dof) > h): the tail of one F statistic."""
-    from scipy.stats import f
+    from scipy.stats import f  # scipy.stats (~0.6 s): only a fleet review
 
     return f.sf(h, 1, dof)
 
@@ -146,7 +146,7 @@ def threshold(alpha: float, total: int, first: int, window: int, params: int = l
     :data:`CALIBRATION_ALPHA`, which gives the effective number of independent chances K = alpha_ref / P(F(1, d) >
     h_ref), d = total - 2; a smaller alpha solves K P(F(1, d) > h) = alpha (the tail of a maximum of K F
     statistics).  A history longer than :data:`CALIBRATION_MAX_LOGS` logs has proportionally more chances."""
-    from scipy.optimize import brentq
+    from scipy.optimize import brentq  # scipy.optimize (~0.3 s): only a fleet review
 
     if not 0 < alpha < 1:
         raise ValueError(f"alpha must be in (0, 1), got {alpha}")
@@ -176,8 +176,8 @@ def detectable(h: float, baseline: int, length: int, kind: str) -> float:
     S_g and S_gg the sums of the alternative's regressor and of its square (:func:`scan`); the effect whose F has
     median h is returned.  The scan also tries the other onsets, ends and the other alternative, so the chance of a
     flag is at least one half (``tests/unit/fleets/test_fleet_changes.py`` measures it by Monte Carlo)."""
-    from scipy.optimize import brentq
-    from scipy.stats import ncf
+    from scipy.optimize import brentq  # scipy.optimize (~0.3 s): only a fleet review
+    from scipy.stats import ncf  # scipy.stats (~0.6 s): only a fleet review
 
     if length < 1 or baseline < 2:
         raise ValueError("detectable: length >= 1 and baseline >= 2 logs")
@@ -374,6 +374,6 @@ def outlier_threshold(alpha: float, robots: int, params: int = len(MONITORED)) -
     """The |t| over which a robot stands out: Bonferroni over the ``robots`` x ``params`` two-sided tests of
     :func:`leave_one_out_t`, so that a fleet with Gaussian unit-to-unit spread has any robot flagged with
     probability at most ``alpha`` (Monte Carlo with 10 robots, 8 parameters, alpha 0.001: 9.45 exact, 9.49 here)."""
-    from scipy.stats import t
+    from scipy.stats import t  # scipy.stats (~0.6 s): only a fleet review
 
     return float(t.isf(alpha / (2 * robots * params), robots - 2))

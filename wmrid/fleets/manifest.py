@@ -13,6 +13,7 @@ from typing import Any, get_args, get_type_hints
 from wmrid.core.errors import LogFormatError, UsageError, option
 from wmrid.estimators.options import FIT_NAMES, MethodOptions, ObserverOptions
 from wmrid.fleets.table import MANIFEST_COLUMNS, LogEntry, _one_line, id_and_time_from_path, parse_time
+from wmrid.runtime.side_files import LOOP, broken_link, not_regular
 
 _BOOL = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}
 
@@ -22,6 +23,7 @@ def _kinds() -> tuple[frozenset[str], frozenset[str]]:
     """(the options that are true/false, those that are numbers), by their names as manifest columns: read from the
     option objects' field types (LogOptions, ObserverOptions, MethodOptions under the command line's names), plus the
     rotor inertia."""
+    # api.inputs: only a manifest read (wmrid.fleets.run, which imports this, stays lazy)
     from wmrid.api.inputs import LogOptions
 
     types = {**get_type_hints(LogOptions), **get_type_hints(ObserverOptions)}
@@ -57,7 +59,7 @@ def _blank(value: Any) -> bool:
     if isinstance(value, str):
         return not value.strip()
     try:
-        import pandas as pd
+        import pandas as pd  # pandas (~0.2 s): only a manifest read
 
         return bool(pd.isna(value))
     except (TypeError, ValueError):
@@ -84,8 +86,9 @@ def read_manifest(
     with its row, and so is one naming a device, a FIFO or a socket (only log files and rosbag2 folders are logs).
     A log that does not exist is left to its row's error, as before.
     """
-    import pandas as pd
+    import pandas as pd  # pandas (~0.2 s): only a manifest read
 
+    # runtime.atomic (tempfile): only a manifest read (wmrid.fleets.run stays lazy)
     from wmrid.runtime.atomic import register_input
 
     name = os.fspath(path)
@@ -148,8 +151,6 @@ def _confined(
     """The real path of a manifest's log, refused (UsageError naming ``where``) outside the folder ``fence`` or when
     it names something that is neither a file nor a folder (see :func:`read_manifest`).  ``folders``: the real
     paths of folders resolved so far (filled here).  ``robot``: a robot file, which a folder is not either."""
-    from wmrid.runtime.side_files import LOOP, broken_link, not_regular
-
     thing = "robot file" if robot else "log"
     real = _realpath(log_path, folders if folders is not None else {})
     if real != fence and not real.startswith(fence.rstrip(os.sep) + os.sep):  # os.path.commonpath, 5x faster
@@ -171,6 +172,7 @@ def _manifest_robot(robot: str, base: Path, fence: str, default_root: bool, wher
     logs are, resolved and kept inside the root, refused unless a regular file (:func:`_confined`: a FIFO named
     there hung the worker that loaded it; /etc/shadow was read as TOML).  A file that is not there is left to the
     worker to name."""
+    # model.robot (~5 ms): only a manifest read (wmrid.fleets.run stays lazy)
     from wmrid.model.robot import BUILTIN_ROBOTS
 
     if robot in BUILTIN_ROBOTS:

@@ -12,7 +12,10 @@ import re
 from dataclasses import dataclass, field
 from typing import Any
 
+from wmrid.fleets.figures import build_evidence_figure, build_robot_figure
 from wmrid.fleets.review import FleetReview, RobotReview
+from wmrid.reporting.figures import render
+from wmrid.reporting.markdown import text
 from wmrid.reporting.report_html import _CSS, _html_provenance, _html_table
 from wmrid.reporting.report_markdown import _md_table, md_provenance
 
@@ -34,8 +37,6 @@ class FleetReport:
     _rendered: dict[tuple[str, str], bytes] = field(default_factory=dict, repr=False)
 
     def rendered(self, name: str, fmt: str) -> bytes:
-        from wmrid.reporting.figures import render
-
         key = (name, fmt)
         if key not in self._rendered:
             self._rendered[key] = render(self.figure_objects[name], fmt)
@@ -79,8 +80,6 @@ def build_fleet_report(
     ]
     rep = FleetReport(review, table, summary)
     if figures:
-        from wmrid.fleets.figures import build_evidence_figure, build_robot_figure
-
         fig = build_evidence_figure(review)
         if fig is not None:
             rep.figure_objects["evidence"] = fig
@@ -160,8 +159,6 @@ def to_html(rep: FleetReport) -> str:
 def to_markdown(rep: FleetReport) -> str:
     """Markdown: the ranked table, findings, PNG figures as data URIs (one file); the table's path, robot ids and
     every other string from the table escaped (:mod:`wmrid.reporting.markdown`)."""
-    from wmrid.reporting.markdown import text
-
     review = rep.review
     parts = [f"# wmrid fleet report: {text(rep.table, False)}", "", *[text(s) for s in rep.summary], "",
              "## Robots ranked by the evidence against them", "", _md_table(ranked_table(review))]  # fmt: skip

@@ -1,6 +1,10 @@
 """The fleet report as one call: :func:`fleet_report` reviews a ``wmrid fleet`` table (changes across each robot's
 logs, robots that stand out, a ranking) and :func:`write_fleet_report` writes it as HTML, Markdown or JSON by the
-file's suffix.  ``wmrid fleet-report`` is these two functions with its flags translated."""
+file's suffix.  ``wmrid fleet-report`` is these two functions with its flags translated.
+
+Imports inside functions: start-up time (a front door: ``import wmrid`` and each function load only what that
+function uses).
+"""
 
 from __future__ import annotations
 

@@ -28,6 +28,7 @@ from wmrid.fleets.changes import (
     leave_one_out_t,
     outlier_threshold,
 )
+from wmrid.model.payload import PAYLOAD_NAMES, payload_from_change
 
 #: The table columns of each wheel's friction at its typical speed: (Fw name, Fv, Fd, speed, correlation).
 _WHEEL_COLUMNS = (("Fw1", "Fv1", "Fd1", "speed_r", "Fv1_Fd1_corr"), ("Fw2", "Fv2", "Fd2", "speed_l", "Fv2_Fd2_corr"))
@@ -334,8 +335,6 @@ def _payload(review: RobotReview, change: Any, robot_of: Callable[[str], Any] | 
     """{mass, x, y, inertia: (value, standard error or None)} from the mean of the logs from the onset on against the
     mean of the robot's own logs before it (odd logs left out), when its r and b are known; the standard error
     from both means' log-to-log scatter by the delta method."""
-    from wmrid.model.payload import PAYLOAD_NAMES, payload_from_change
-
     if robot_of is None:
         return None
     robot = robot_of(review.model)  # NO_MODEL: the report's --robot, if given

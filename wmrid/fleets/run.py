@@ -8,6 +8,9 @@ a log that kills three workers is a row with that error.  At most ``window`` tas
 the scheduler hold a bounded number of tasks whatever the fleet's size; the table is written atomically every
 ``checkpoint`` seconds and at the end (also on Ctrl-C), so ``resume=True`` continues an interrupted run: a log
 whose content hash and options equal a row's is not identified again.
+
+Imports inside functions: start-up time (a front door: ``import wmrid`` and each function load only what that
+function uses).
 """
 
 from __future__ import annotations

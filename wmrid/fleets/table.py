@@ -58,7 +58,7 @@ MANIFEST_COLUMNS = ("log", "robot_id", "robot", "time")
 @functools.lru_cache(maxsize=1)
 def _schema():
     """The schema, made once (a pyarrow schema is immutable; making it took 0.1 ms, paid per row of 10^5)."""
-    import pyarrow as pa
+    import pyarrow as pa  # pyarrow (~30 ms, extra [fleet]): only the table's schema
 
     fields = [
         ("robot_id", pa.string()), ("log", pa.string()), ("robot", pa.string()), ("sha256", pa.string()),
@@ -101,7 +101,7 @@ def empty_row(**given: Any) -> dict[str, Any]:
 
 def to_arrow(rows: Sequence[dict[str, Any]]):
     """The rows as a pyarrow Table of :func:`schema` (a missing column is null)."""
-    import pyarrow as pa
+    import pyarrow as pa  # pyarrow (~30 ms, extra [fleet]): only a table made
 
     sch = _schema()
     columns = {name: [row.get(name) for row in rows] for name in sch.names}
@@ -113,9 +113,10 @@ def to_arrow(rows: Sequence[dict[str, Any]]):
 def write_table(rows: Any, path: str | os.PathLike[str], *, force: bool = False) -> None:
     """Write the rows (dicts, or a pyarrow Table of :func:`schema`) as the fleet table at ``path`` (Parquet),
     atomically: a reader sees the old table or the new one, never half of one."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    import pyarrow as pa  # pyarrow (~40 ms, extra [fleet]): only a table written
+    import pyarrow.parquet as pq  # pyarrow: only a table written
 
+    # runtime.atomic (tempfile): only a table written (wmrid.fleets.run stays lazy)
     from wmrid.runtime.atomic import atomic_output
 
     table = rows if isinstance(rows, pa.Table) else to_arrow(rows)
@@ -131,9 +132,10 @@ def read_table(path: str | os.PathLike[str]) -> list[dict[str, Any]]:
 def read_arrow(path: str | os.PathLike[str], *, as_input: bool = True):
     """The fleet table at ``path`` as a pyarrow Table of :func:`schema` (its columns in order), checked.
     ``as_input`` False: not noted as an input of the command (``fleet --resume`` reads the table it then rewrites)."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    import pyarrow as pa  # pyarrow (~40 ms, extra [fleet]): only a table read
+    import pyarrow.parquet as pq  # pyarrow: only a table read
 
+    # runtime.atomic (tempfile): only a table read (wmrid.fleets.run stays lazy)
     from wmrid.runtime.atomic import register_input
 
     name = os.fspath(path)
@@ -413,7 +415,7 @@ def content_digest(path: str) -> tuple[str, int]:
     """(SHA-256 hex, bytes) of a log's content: of the file, or of a folder's files (names relative to it, sizes and
     hashes, in name order), read in blocks up to each file's size; a device or a FIFO is refused unread
     (:class:`wmrid.runtime.side_files.NotRegularFile`, an OSError)."""
-    from wmrid.io.digest import file_digests
+    from wmrid.io.digest import file_digests  # io.digest: only on a worker (wmrid.fleets.run stays lazy)
 
     items = file_digests(path, regular_only=True)  # a device or a FIFO is refused unread (an OSError)
     if len(items) == 1 and not os.path.isdir(path):

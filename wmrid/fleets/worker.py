@@ -12,15 +12,15 @@ import socket
 import time
 from collections.abc import Generator
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
+import wmrid
 from wmrid.core.errors import WmridError
+from wmrid.core.wheel_log import LogStream, WheelLog
 from wmrid.fleets.table import PARAMETERS, canonical_options, content_digest, empty_row
-
-if TYPE_CHECKING:
-    from wmrid.core.wheel_log import LogStream, WheelLog
+from wmrid.runtime.limits import tune_malloc
 
 __all__ = ["identify_batch", "identify_entry", "prepare_worker", "warm_up"]
 
@@ -51,7 +51,6 @@ class _Seen:
 
 def _watched_stream(stream: LogStream, seen: _Seen) -> LogStream:
     """``stream`` as a new LogStream whose pieces are noted in ``seen`` as they pass."""
-    from wmrid.core.wheel_log import LogStream
 
     def pieces() -> Generator[WheelLog, None, tuple[str, ...]]:
         for piece in stream:
@@ -115,8 +114,6 @@ def identify_entry(spec: dict[str, Any]) -> dict[str, Any]:
         None)}.  When the log's content hash equals ``known_sha256`` the log is not identified and
         {"skipped": True, "sha256": ...} is returned.
     """
-    import wmrid
-
     start = time.perf_counter()
     row = empty_row(
         robot_id=spec["robot_id"], log=spec["log"], robot=spec.get("robot"), start_time=spec.get("time"),
@@ -166,8 +163,8 @@ def prepare_worker() -> bool:
     tuned."""
     global _worker_prepared, _malloc_tuned
     if not _worker_prepared:
+        # the observer's kernels (numba): only a worker's set-up, not wmrid.fleets.run
         from wmrid.estimators.observer.replay import one_thread
-        from wmrid.runtime.limits import tune_malloc
 
         one_thread()
         _worker_prepared = True
@@ -183,6 +180,7 @@ def identify_batch(specs: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def _split_options(options: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    # api.inputs: only on a worker (wmrid.fleets.run, which imports this, stays lazy)
     from wmrid.api.inputs import LOG_OPTION_NAMES
 
     log_opts = {k: v for k, v in options.items() if k in LOG_OPTION_NAMES}
@@ -193,8 +191,9 @@ def _split_options(options: dict[str, Any]) -> tuple[dict[str, Any], dict[str, A
 def _identify(spec: dict[str, Any]) -> tuple[Any, _Seen, Any, Any]:
     """(result, what its pieces showed (first stamp, wheel speeds), the prepared robot, the log as read: a stream or
     a whole log)."""
+    # the identification (numba, ~0.3 s): only on a worker, not in wmrid.fleets.run
     from wmrid.api.identification import prepare, run_prepared, settings_from
-    from wmrid.api.inputs import LogOptions, open_log
+    from wmrid.api.inputs import LogOptions, open_log  # api.inputs: only on a worker (wmrid.fleets.run stays lazy)
 
     log_opts, run_opts = _split_options(spec["options"])
     options = LogOptions(**log_opts)
@@ -212,6 +211,7 @@ def _fit(result: Any, log: Any, robot: Any) -> dict[str, Any]:
     """fit_r, fit_l: % fit of the identified model's simulated wheel speeds on the log it was identified from (None
     above :data:`FIT_MAX_SAMPLES` samples, or where the predictor cannot run the model).  A stream of that size
     kept its pieces from the identification: the file is not read again."""
+    # the identification (numba, ~0.3 s): only on a worker, not in wmrid.fleets.run
     from wmrid.api.identification import validate
 
     samples = result.log_info.samples or 0
@@ -230,9 +230,8 @@ def _fit(result: Any, log: Any, robot: Any) -> dict[str, Any]:
 def warm_up() -> float:
     """Load wmrid's compiled kernels in this process (numba's cache: about a second once per process), so that a
     worker's first log does not pay for it; returns the seconds it took.  Run on every worker at the start."""
-    from wmrid.api.identification import identify
-    from wmrid.core.wheel_log import WheelLog
-    from wmrid.model.predict import validation_fit
+    from wmrid.api.identification import identify  # the identification (numba, ~0.3 s): warm_up loads it on a worker
+    from wmrid.model.predict import validation_fit  # the predictor's numba kernel: warm_up loads it on a worker
 
     start = time.perf_counter()
     prepare_worker()

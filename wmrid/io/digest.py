@@ -8,6 +8,8 @@ import os
 from pathlib import Path
 from typing import Any
 
+from wmrid.runtime.side_files import open_regular
+
 #: bytes read at a time when hashing.
 _BLOCK = 1 << 20
 
@@ -17,8 +19,6 @@ def regular_digest(path: str | os.PathLike[str]) -> tuple[str, int]:
     grows meanwhile is not chased), in blocks.  A device, a FIFO or a folder is refused unread
     (:class:`wmrid.runtime.side_files.NotRegularFile`, an OSError: ``/dev/zero`` would never end, a FIFO never start);
     other OSErrors pass through."""
-    from wmrid.runtime.side_files import open_regular
-
     h = hashlib.sha256()
     with open_regular(path) as fh:
         left = size = os.fstat(fh.fileno()).st_size

@@ -15,6 +15,10 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import LogFormatError
+from wmrid.core.extras import require
+from wmrid.core.wheel_log import CANONICAL, CHUNK_ROWS
+from wmrid.io.bag.paths import recording_paths
+from wmrid.io.sources import detect_format, open_source
 
 
 @dataclass(frozen=True)
@@ -67,14 +71,10 @@ class TableInventory:
 
 def inspect_log(path: str | list[str]) -> McapInventory | TableInventory:
     """A description of the log at ``path`` (or ``-``; or the files of one recording); see the module docstring."""
-    from wmrid.io.bag.paths import recording_paths
-    from wmrid.io.sources import detect_format, open_source
-
     paths = [path] if isinstance(path, str) else list(path)
     bag = recording_paths(paths)
     if bag is not None:
-        from wmrid.core.wheel_log import CHUNK_ROWS
-        from wmrid.io.bag.reader import read_bag
+        from wmrid.io.bag.reader import read_bag  # the bag reader (numba, ~0.3 s): only a bag
 
         contents = read_bag(bag, keep=4 * CHUNK_ROWS)  # summaries past ~1 M messages: memory stays bounded
         return _inventory(contents, contents.format)
@@ -82,7 +82,7 @@ def inspect_log(path: str | list[str]) -> McapInventory | TableInventory:
     source = open_source(path)
     kind = detect_format(path, source.head(8), source.compression)
     if kind == "mcap":
-        from wmrid.io.mcap.reader import read_mcap
+        from wmrid.io.mcap.reader import read_mcap  # the MCAP reader (numba, ~0.3 s): only an MCAP file
 
         return _inventory(read_mcap(source.path or source.name, data=source.data), "mcap")
     return _inspect_table(source, kind)
@@ -91,9 +91,10 @@ def inspect_log(path: str | list[str]) -> McapInventory | TableInventory:
 def _field_paths(contents: Any, kind: str) -> dict[str, list[str]]:
     """topic -> its numeric field paths as ``--columns`` takes them (``TOPIC:PATH``), from the message definitions
     in the recording (the distribution's own for a bag without them); a type that cannot be parsed has none."""
+    # rosbags' type system (~15 ms): only a bag or MCAP's field paths
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-    from wmrid.io.ros.field_paths import numeric_paths
+    from wmrid.io.ros.field_paths import numeric_paths  # ROS field paths (~8 ms): only a bag or MCAP's topics
 
     store = get_typestore(Stores.ROS1_NOETIC if kind == "ros1 bag" else Stores.ROS2_HUMBLE)
     for msgtype, text in contents.definitions.values():
@@ -151,14 +152,10 @@ def _inventory(contents: Any, kind: str) -> McapInventory:
 
 
 def _inspect_table(source, kind: str) -> TableInventory:
-    from wmrid.core.wheel_log import CANONICAL
-
     if kind == "parquet":
-        from wmrid.core.extras import require
-
         require("pyarrow.parquet", "parquet", f"{source.name}: reading a Parquet log")
-        import pyarrow as pa
-        import pyarrow.parquet as pq
+        import pyarrow as pa  # pyarrow (~40 ms, extra [parquet]): only a Parquet log
+        import pyarrow.parquet as pq  # pyarrow: only a Parquet log
 
         try:
             with pa.OSFile(source.path, "r") if source.path is not None else pa.BufferReader(source.data) as stream:
@@ -169,9 +166,9 @@ def _inspect_table(source, kind: str) -> TableInventory:
         except (pa.ArrowException, OSError) as err:
             raise LogFormatError(f"{source.name}: not a readable Parquet file ({err})") from err
     else:
-        import pandas as pd
+        import pandas as pd  # pandas (~0.2 s): only a CSV log
 
-        from wmrid.io.table.csv_log import csv_layout, csv_stream
+        from wmrid.io.table.csv_log import csv_layout, csv_stream  # the CSV reader (~10 ms): only a CSV log
 
         layout = csv_layout(source)
         try:

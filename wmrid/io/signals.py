@@ -172,7 +172,7 @@ def speed_from_position(t: np.ndarray, position: np.ndarray, window_s: float = S
     of samples, at least 5) gives the derivative at each sample, zero-phase; otherwise second-order
     finite differences on the uneven grid (numpy.gradient).
     """
-    from scipy.signal import savgol_filter
+    from scipy.signal import savgol_filter  # scipy.signal (~0.6 s): only speeds from wheel positions
 
     angle = np.unwrap(position, axis=0) if np.nanmax(np.abs(np.diff(position, axis=0))) > math.pi else position
     dt = np.diff(t)

@@ -154,9 +154,9 @@ class Source:
         raw: BinaryIO = open(self.path, "rb") if self.data is None else io.BytesIO(self.data)  # type: ignore[arg-type]  # noqa: SIM115
         if self.compression is None:
             return raw
-        import bz2
-        import gzip
-        import lzma
+        import bz2  # stdlib codecs: only a compressed log (bz2, lzma: optional in a Python build)
+        import gzip  # stdlib codecs: only a compressed log
+        import lzma  # stdlib codecs: only a compressed log (bz2, lzma: optional in a Python build)
 
         if self.compression == "gzip":
             reader: Any = gzip.GzipFile(fileobj=raw, mode="rb")
@@ -285,7 +285,7 @@ class _ZstdReader:
     _IN = 1024
 
     def __init__(self, raw: BinaryIO):
-        import zstandard
+        import zstandard  # zstandard: only a .zst log
 
         self._zstd, self._raw = zstandard, raw
         self._dobj = zstandard.ZstdDecompressor().decompressobj()

@@ -99,7 +99,7 @@ def fit_base_parameters(
     ``report_cov`` (default ``cov``) is the covariance of theta.ravel() to propagate; ``report_dof``
     its degrees of freedom when it is a jackknife estimate (None: a chi-square test in the weights' metric).
     """
-    from scipy.special import chdtrc, fdtrc
+    from scipy.special import chdtrc, fdtrc  # scipy.special (~0.15 s): only when base parameters are fitted
 
     theta = np.asarray(theta, dtype=float)
     start = direct_recovery(theta, form)

@@ -24,6 +24,7 @@ from wmrid.model.robot import (
     PhysicalParameters,
     Robot,
 )
+from wmrid.runtime.limits import ROBOT_FILE_LIMIT, read_limited
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -285,11 +286,10 @@ def load_robot(spec: str) -> Robot:
         )
     if path.is_dir():
         raise RobotFileError(f"robot {spec!r} is a directory; give a robot TOML file")
+    # runtime.atomic (tempfile, ~10 ms): only a robot file, not a built-in robot
     from wmrid.runtime.atomic import register_input
 
     register_input(path)
-    from wmrid.runtime.limits import ROBOT_FILE_LIMIT, read_limited
-
     try:
         text = read_limited(
             path, ROBOT_FILE_LIMIT, f"robot {spec!r}: holds more than {{size}}; a robot TOML file is a few kilobytes",

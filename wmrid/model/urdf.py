@@ -56,6 +56,7 @@ import numpy as np
 from wmrid.core.errors import RobotFileError, UsageError, option
 from wmrid.model.robot import PhysicalParameters, Robot
 from wmrid.model.urdf_tree import Body, Joint, Reader, load
+from wmrid.runtime.atomic import register_input
 
 _AXIS_TOLERANCE = 0.01  # rad: how far a wheel axis may lean from y (exporters round pi/2 to 1.5708)
 
@@ -436,8 +437,6 @@ def load_robot_urdf(
     name : default the URDF's <robot name>, else the file name without extension.
     torque_constant : k_t (N m/A) of each motor; efficiency : of the gearbox, in (0, 1].
     """
-    from wmrid.runtime.atomic import register_input
-
     register_input(path)
     model = read_urdf(
         path, gear_ratio=gear_ratio, rotor_inertia=rotor_inertia,

@@ -33,12 +33,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError, UsageError, option
 from wmrid.estimators.options import ObserverOptions
+from wmrid.model.payload import payload_from_change
 from wmrid.monitoring.glr import ModelError, NoiseModel, locate, window_grid, window_statistics
 from wmrid.monitoring.monitor import _identify_span, _Model, _model_of_result
 from wmrid.monitoring.residuals import residual_signals
@@ -274,8 +276,6 @@ class LiveMonitor:
 
     def _identified(self, seg: _Segment, upto: int) -> tuple[_Model, NoiseModel]:
         """A segment after a change: its model identified on [0, upto) and a cross-fitted noise model, as offline."""
-        from types import SimpleNamespace
-
         t, eta, tau = self._raw()
         t_rel = t - t[0]
         log = SimpleNamespace(t=t_rel, eta=eta, tau=tau, source="stream")
@@ -393,8 +393,6 @@ class LiveMonitor:
         }
         payload = None
         if kind == "payload" and self.geometry is not None:
-            from wmrid.model.payload import payload_from_change
-
             r, b = self.geometry
             mass = float(payload_from_change(before[:4], before[:4] + delta, r, b)[0])
             s = r**2 / (4.0 * b**2)

@@ -139,6 +139,7 @@ def _identify_span(log: Any, t_start: float, t_end: float, unit: str, friction: 
     Coulomb friction) the wheel friction model is used instead, and why is appended to ``notes``.  ``observer``: the
     observer's settings (its friction, delay and payload aside: the model's friction, the log already shifted by any
     delay, no robot for a payload; default :class:`ObserverOptions`)."""
+    # the identification pipeline (~0.25 s): only a span identified after a change
     from wmrid.pipeline.identify import Steps, identify_log
 
     base = observer if observer is not None else ObserverOptions()

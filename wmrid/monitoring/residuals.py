@@ -82,7 +82,7 @@ def _odd_window(seconds: float, step: float) -> int:
 
 def _savgol_at(x: np.ndarray, window: int, deriv: int, delta: float, centres: np.ndarray) -> np.ndarray:
     """The Savitzky-Golay cubic (``window`` samples, derivative ``deriv``) of x (n,) at the given centres."""
-    from scipy.signal import savgol_coeffs
+    from scipy.signal import savgol_coeffs  # scipy.signal (~0.6 s): only the residuals' derivatives
 
     coeffs = savgol_coeffs(window, 3, deriv=deriv, delta=delta, use="dot")
     half = window // 2

@@ -12,8 +12,11 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import LogFormatError, UsageError, cannot_read, option
+from wmrid.estimators.result import from_dict
 from wmrid.model import dynamics as model
 from wmrid.model.dynamics import THETA0_NAMES, RegressorForm
+from wmrid.runtime.atomic import register_input
+from wmrid.runtime.limits import memory_budget, read_limited
 
 #: Names of the columns of the inverse-dynamics regressor Phi (the parameters p it multiplies).
 REGRESSOR_NAMES = ("M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
@@ -209,8 +212,6 @@ def model_from_dict(data: Any, source: str) -> MonitoredModel:
     stds = {name: (reported.get(name) or {}).get("std") for name in columns}
     theta_d = data.get("theta")
     if isinstance(theta_d, dict) and "form" in theta_d and "settings" in data:  # a saved result: as report checks
-        from wmrid.estimators.result import from_dict
-
         try:
             from_dict(data, source)
         except LogFormatError as err:
@@ -254,11 +255,7 @@ def _form_of(form_d: Any, source: str, hint: str) -> RegressorForm | None:
 
 def load_model(path: str | Path) -> MonitoredModel:
     """The model in an ``identify`` JSON result file; UsageError (one line, naming the file) otherwise."""
-    from wmrid.runtime.atomic import register_input
-
     register_input(path)
-    from wmrid.runtime.limits import memory_budget, read_limited
-
     try:
         text = read_limited(
             path, memory_budget(), f"--model {path}: holds more than {{size}} (WMRID_MEMORY_BUDGET); is it a result?",

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from wmrid.core.errors import UsageError
+from wmrid.model.base_params import recover_history
 from wmrid.model.dynamics import THETA0_NAMES, RegressorForm, intermediate_parameters
 from wmrid.reporting.decimate import MAX_POINTS
 from wmrid.reporting.figures import FIGSIZE, _legend_below, _new_figure, _plot, _styled, render
@@ -99,8 +100,8 @@ def build_estimates_figure(
     """
     if error_mode and truth is None:
         raise UsageError("the estimation-error figure needs the true parameters (truth)")
-    from matplotlib.lines import Line2D
-    from matplotlib.ticker import MaxNLocator
+    from matplotlib.lines import Line2D  # matplotlib (~0.1 s): only figures
+    from matplotlib.ticker import MaxNLocator  # matplotlib: only figures
 
     h = result.history
     form = result.form
@@ -224,9 +225,7 @@ def build_base_convergence_figure(
     rest is zoomed on the band, the truth and the last 70 % of the estimate (its title says "zoomed";
     :func:`_zoom_limits`).  None when the result has no history.
     """
-    from matplotlib.ticker import MaxNLocator
-
-    from wmrid.model.base_params import recover_history
+    from matplotlib.ticker import MaxNLocator  # matplotlib (~0.1 s): only figures
 
     h = result.history
     if h is None:

@@ -18,7 +18,9 @@ as ``<text>`` elements (selectable, searchable), not as glyph outlines.
 
 from __future__ import annotations
 
+import functools
 import io
+import warnings
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -65,8 +67,8 @@ def _new_figure(
     Fixed margins, not matplotlib's constrained layout: laying the report's figures out took 8 of its 18 s
     (bench/bench_report.py), measuring every tick label again and again; the margins here fit the labels drawn.
     """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # matplotlib (~0.3 s, no pyplot): only figures
+    from matplotlib.figure import Figure  # matplotlib: only figures
 
     fig = Figure(figsize=figsize)
     FigureCanvasAgg(fig)
@@ -88,11 +90,10 @@ _STYLE = {"axes.titley": 1.0, "axes.titlepad": 4.0}
 
 def _styled(build: Any) -> Any:
     """``build`` (a ``build_*`` function) run with :data:`_STYLE`."""
-    import functools
 
     @functools.wraps(build)
     def styled(*args: Any, **kwargs: Any) -> Any:
-        import matplotlib
+        import matplotlib  # matplotlib (~0.1 s): only figures
 
         with matplotlib.rc_context(_STYLE):
             return build(*args, **kwargs)
@@ -113,7 +114,7 @@ def _freeze_layout(fig: Figure) -> None:
     who changes the figure after rendering it can lay it out again with
     ``fig.set_layout_engine("constrained")``.
     """
-    from matplotlib.layout_engine import PlaceHolderLayoutEngine
+    from matplotlib.layout_engine import PlaceHolderLayoutEngine  # matplotlib: only figures
 
     engine = fig.get_layout_engine()
     if engine is not None and not isinstance(engine, PlaceHolderLayoutEngine):
@@ -130,9 +131,7 @@ def render(fig: Figure, fmt: str = "svg") -> bytes:
     """
     if fmt not in FORMATS:
         raise UsageError(f"figure format must be one of {', '.join(FORMATS)}, got {fmt!r}")
-    import warnings
-
-    import matplotlib
+    import matplotlib  # matplotlib (~0.1 s): only figures
 
     buf = io.BytesIO()
     # matplotlib's own advice on drawing (a date range its tick locator has no interval for, ...) is for its

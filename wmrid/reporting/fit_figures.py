@@ -231,8 +231,8 @@ def build_correlation_figure(names: Any, cov: Any) -> Figure | None:
     names : (k,) parameter names; cov : (k, k) their covariance, None/NaN where undefined (those cells
     are grey and marked "—").  Colours from -1 (blue) to +1 (red); each cell shows its value.
     """
-    import matplotlib
-    from matplotlib.colors import Normalize
+    import matplotlib  # matplotlib (~0.1 s): only figures
+    from matplotlib.colors import Normalize  # matplotlib: only figures
 
     names = [str(n) for n in names]
     k = len(names)

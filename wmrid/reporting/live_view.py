@@ -5,8 +5,11 @@ Built from the plain dicts :meth:`wmrid.api.live.LiveUpdate.to_dict` gives (this
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Any
+
+from wmrid.runtime.atomic import _jsonable
 
 #: Parameters shown, in order (those the update has).
 SHOWN = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
@@ -24,9 +27,9 @@ def _trend(now: float, before: float | None, std: float | None) -> str:
 def live_table(update: dict[str, Any], previous: dict[str, Any] | None = None) -> Any:
     """A rich renderable: a header line (source, samples, rates, log time, time since the last data, form) and a table
     of each parameter's estimate, std, relative std and trend since ``previous``."""
-    from rich.console import Group
-    from rich.table import Table
-    from rich.text import Text
+    from rich.console import Group  # rich (~20 ms): only the live table on a terminal
+    from rich.table import Table  # rich: only the live table on a terminal
+    from rich.text import Text  # rich: only the live table on a terminal
 
     rate = update["rate_hz"]
     log_rate = update.get("log_rate_hz")
@@ -59,7 +62,7 @@ def live_table(update: dict[str, Any], previous: dict[str, Any] | None = None) -
 
 def change_line(change: dict[str, Any]) -> Any:
     """A highlighted line for a change found along the stream (:meth:`wmrid.api.live.LiveChange.to_dict`)."""
-    from rich.text import Text
+    from rich.text import Text  # rich (~15 ms): only a change line on a terminal
 
     moved = (
         ", ".join(f"{n} {m['before']:.4g} → {m['after']:.4g}" for n, m in change["moved"].items()) or "no term alone"
@@ -76,8 +79,4 @@ def change_line(change: dict[str, Any]) -> Any:
 
 def json_line(obj: Any) -> str:
     """``obj`` as one line of strict JSON (NaN/inf as null), without the newline: a JSON-lines record."""
-    import json
-
-    from wmrid.runtime.atomic import _jsonable
-
     return json.dumps(_jsonable(obj), allow_nan=False, separators=(",", ":"))

@@ -10,16 +10,16 @@ from typing import Any
 
 import numpy as np
 
+from wmrid.design.excitation import wheel_motion
+from wmrid.model.torques import wheel_torque
+from wmrid.reporting import markdown as md
+from wmrid.reporting.figures import FIGSIZE, FIGSIZE_STACKED, _new_figure, render
 from wmrid.reporting.plan_view import BASELINE_TEXT, summary
 
 
 def plan_figures(plan: Any) -> dict[str, Any]:
     """caption -> matplotlib Figure: the path, the reference (v, w), the wheel speeds, accelerations and torques with
     their limits (dashed: the limit; dotted: the plan's bound after the margin), the predicted relative std."""
-    from wmrid.design.excitation import wheel_motion
-    from wmrid.model.torques import wheel_torque
-    from wmrid.reporting.figures import FIGSIZE, FIGSIZE_STACKED, _new_figure
-
     s = plan.samples(max(plan.settings["rate"], 50.0))
     t = s["t"]
     v, w, dv, dw = plan.excitation.evaluate(t)
@@ -133,8 +133,6 @@ def _pct(x: Any) -> str:
 
 def to_html(plan: Any) -> str:
     """One self-contained page (inline SVG, inline style, nothing fetched)."""
-    from wmrid.reporting.figures import render
-
     data = plan.to_dict()
     parts = [
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>",
@@ -173,8 +171,6 @@ def to_html(plan: Any) -> str:
 def to_markdown(plan: Any) -> str:
     """The plan as Markdown; the robot's name, the tables' cells and the warnings escaped
     (:mod:`wmrid.reporting.markdown`)."""
-    from wmrid.reporting import markdown as md
-
     data = plan.to_dict()
     lines = [f"# wmrid plan: {md.text(data['robot'], False)}", "", *[md.text(s) for s in summary(data)], ""]
     for title, table in tables(data).items():

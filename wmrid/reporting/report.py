@@ -29,9 +29,12 @@ from wmrid.core.errors import WmridError
 from wmrid.estimators.records import GroupVerdict
 from wmrid.estimators.result import IdentificationResult
 from wmrid.estimators.verdict import LEGEND, PLAN_HINT
+from wmrid.io.signals import speed_from_position
 from wmrid.model import dynamics as model, torques
 from wmrid.model.dynamics import RegressorForm
 from wmrid.model.payload import PAYLOAD_UNITS, payload_statement
+from wmrid.reporting import figures as fg
+from wmrid.reporting.figures import render
 
 #: A difference from the CAD value beyond this many standard errors is flagged.
 SIGNIFICANT = 3.0
@@ -75,8 +78,6 @@ class Report:
 def rendered(report: Report, fmt: str) -> dict[str, bytes]:
     """The report's figures as ``fmt`` ("svg" or "png") bytes by name, in order, each rendered once (matplotlib's
     rendering is most of a report's time: an HTML file needs only SVG, Markdown only PNG)."""
-    from wmrid.reporting.figures import render
-
     cache = report.figures if fmt == "svg" else report.figures_png
     for name, fig in report.figure_objects.items():
         if name not in cache:
@@ -86,8 +87,6 @@ def rendered(report: Report, fmt: str) -> dict[str, bytes]:
 
 def torque_residual(log: Any, theta0: np.ndarray, form: RegressorForm | None = None) -> dict[str, Any]:
     """RMS (N m) and fit % per wheel of tau - tau_model(eta, eta_dot) on the whole log (see the module docstring)."""
-    from wmrid.io.signals import speed_from_position
-
     eta_dot, how = speed_from_position(np.asarray(log.t) - log.t[0], np.asarray(log.eta), window_s=ACCEL_WINDOW_S)
     predicted = torques.wheel_torque(np.asarray(log.eta), eta_dot, theta0, form)
     res = np.asarray(log.tau) - predicted
@@ -383,6 +382,7 @@ def summary_box(result: IdentificationResult) -> tuple[list[tuple[str, str]], li
 def _speed_fit(log: Any, theta0: np.ndarray, form: Any, torque_hold: str) -> tuple[np.ndarray, dict[str, Any]]:
     """The model's simulated wheel speeds on ``log`` (from its first speed, driven by its efforts) and their fit
     (:func:`wmrid.model.predict.validation_fit`'s)."""
+    # the predictor's numba kernel: only a report with the log
     from wmrid.model.predict import fit_percent, predictor_text, simulate_speeds
 
     t, eta = np.asarray(log.t, dtype=float), np.asarray(log.eta, dtype=float)
@@ -392,7 +392,8 @@ def _speed_fit(log: Any, theta0: np.ndarray, form: Any, torque_hold: str) -> tup
 
 def _add_figures(report: Report, rl: Any, log: Any, truth: dict[str, float] | None, validation_log: Any) -> None:
     """The report's figures, each under a short title with a sentence saying what it shows (``figure_notes``)."""
-    from wmrid.reporting import convergence_figures as cf, figures as fg, fit_figures as ff
+    # the figure builders (~10 ms): only a report with figures
+    from wmrid.reporting import convergence_figures as cf, fit_figures as ff
 
     def both(name: str, fig: Any, note: str) -> None:
         if fig is None:

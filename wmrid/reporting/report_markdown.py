@@ -5,21 +5,19 @@ from __future__ import annotations
 import base64
 from typing import Any
 
+from wmrid.reporting import markdown as md
+from wmrid.reporting.markdown import code, text
 from wmrid.reporting.report import Report, rendered, residual_lines
 
 
 def _md_table(table: dict[str, Any]) -> str:
     """A table as Markdown, every cell escaped (:mod:`wmrid.reporting.markdown`)."""
-    from wmrid.reporting import markdown as md
-
     return md.table(table["header"], table["rows"])
 
 
 def to_markdown(report: Report) -> str:
     """Markdown with the tables, statements and PNG figures as data URIs (one file); every string that came from an
     input (names, a saved result's source, notes, warnings) escaped (:mod:`wmrid.reporting.markdown`)."""
-    from wmrid.reporting.markdown import text
-
     verdict = []
     if report.verdict:
         verdict = [f"**Verdict:** {text(report.verdict[0], False)}", "", *(f"- {text(v)}" for v in report.verdict[1:])]
@@ -57,8 +55,6 @@ def to_markdown(report: Report) -> str:
 def md_provenance(prov: dict[str, Any]) -> list[str]:
     """The reproducibility block in Markdown: version, time, command, options, inputs with their SHA-256 (each
     escaped: the command line and the paths are the user's)."""
-    from wmrid.reporting.markdown import code, text
-
     if not prov:
         return []
     parts = ["", "## Reproducibility", "",

@@ -21,21 +21,21 @@ STYLES = {
 
 def console(*, stderr: bool = False) -> Any:
     """A rich Console that prints text as it is: no markup, no highlighting, no emoji codes."""
-    from rich.console import Console
+    from rich.console import Console  # rich (~20 ms): only when something is printed (a JSON run never loads it)
 
     return Console(stderr=stderr, markup=False, highlight=False, emoji=False)
 
 
 def styled(text: str, meaning: str) -> Any:
     """``text`` in the style of ``meaning`` (a key of :data:`STYLES`), as a rich Text (never parsed as markup)."""
-    from rich.text import Text
+    from rich.text import Text  # rich: only when something is printed
 
     return Text(text, style=STYLES[meaning])
 
 
 def warning(text: str, prefix: str = "warning") -> Any:
     """'warning: TEXT' with the word in the warning style and the text verbatim."""
-    from rich.text import Text
+    from rich.text import Text  # rich: only when something is printed
 
     return Text.assemble((f"{prefix}:", STYLES["warning"]), " ", text)
 
@@ -69,8 +69,8 @@ def print_table(
 
 
 def _table(console: Any, header, rows, cols, numeric, fold) -> Any:
-    from rich import box
-    from rich.table import Table
+    from rich import box  # rich: only when a table is printed
+    from rich.table import Table  # rich (~15 ms): only when a table is printed
 
     table = Table(box=box.SIMPLE_HEAD, pad_edge=False)
     for c in cols:
@@ -84,7 +84,7 @@ def _table(console: Any, header, rows, cols, numeric, fold) -> Any:
 
 
 def _width(console: Any, header, rows, cols, numeric, fold) -> int:
-    from rich.measure import Measurement
+    from rich.measure import Measurement  # rich: only when a table is printed
 
     unbounded = console.options.update_width(1 << 20)  # a table's measure is otherwise capped at the console's width
     return Measurement.get(console, unbounded, _table(console, header, rows, cols, numeric, fold)).maximum

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import select
 import signal
 import sys
 import threading
@@ -216,7 +217,7 @@ def start_watchdog() -> None:
     so SIGTERM used not to end a process stuck inside a compiled loop at all (``timeout`` then waited forever)."""
     if not hasattr(signal, "set_wakeup_fd") or not hasattr(signal, "pthread_sigmask"):
         return
-    import socket
+    import socket  # socket (~5 ms): only the command line's watchdog (wmrid --help never starts it)
 
     reader, writer = socket.socketpair()
     writer.setblocking(False)
@@ -247,8 +248,6 @@ def start_watchdog() -> None:
             name = "interrupted" if signum == signal.SIGINT else f"terminated by {signal.Signals(signum).name}"
             note = f"wmrid: {name} (the program did not return to Python within {GRACE_S:g} s)\n"
             with contextlib.suppress(Exception):
-                import select
-
                 if select.select([], [2], [], 0.2)[1]:  # never block on a full stderr pipe
                     os.write(2, note.encode())
             os._exit(128 + stopping[0])

@@ -26,7 +26,7 @@ _SUFFIX = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
 def address_space_cap() -> int | None:
     """The soft RLIMIT_AS in bytes (``ulimit -v``), None when there is none."""
     try:
-        import resource
+        import resource  # Unix only: the ImportError is caught (no cap)
 
         soft = resource.getrlimit(resource.RLIMIT_AS)[0]
     except (ImportError, OSError, ValueError, AttributeError):
@@ -107,8 +107,8 @@ def tune_malloc(override_environment: bool = False) -> bool:
     address-space cap (``ulimit -v``: the heap's larger footprint would count against it) and, unless
     ``override_environment``, when MALLOC_MMAP_THRESHOLD_ or MALLOC_TRIM_THRESHOLD_ says what the user wants."""
     try:
-        import ctypes
-        import resource
+        import ctypes  # only to call glibc's mallopt; a platform without it: the ImportError is caught below
+        import resource  # Unix only: the ImportError is caught below
 
         if resource.getrlimit(resource.RLIMIT_AS)[0] != resource.RLIM_INFINITY:
             return False

@@ -63,7 +63,7 @@ GRAVITY = 9.81
 def import_mujoco() -> Any:
     """The ``mujoco`` module, or a UsageError that says how to install it."""
     try:
-        import mujoco
+        import mujoco  # optional extra [physics]: only --engine mujoco
     except ImportError:
         raise UsageError(INSTALL_HINT) from None
     return mujoco

@@ -113,7 +113,7 @@ def reference_table(ref: Reference, period: float, n_rows: int) -> np.ndarray:
     """(n_rows, 7) float64: the reference state at t_k = k ``period`` s, k = 0 .. n_rows - 1, in the columns of
     :data:`TABLE_COLUMNS` (see the module docstring).  Times past the last sample (at most rounding) extrapolate
     the last spline piece."""
-    from scipy.interpolate import CubicSpline
+    from scipy.interpolate import CubicSpline  # scipy.interpolate (~0.3 s): only a reference drive
 
     t0 = ref.t - ref.t[0]
     v_spline = CubicSpline(t0, ref.v)

@@ -26,7 +26,10 @@ import numpy as np
 from wmrid.estimators.observer.kernel import observer_chunk, project_history_box
 from wmrid.estimators.observer.replay import KernelState
 from wmrid.estimators.observer.settings import ObserverSettings
+from wmrid.estimators.result import reported_names
 from wmrid.estimators.sign_speed import SignSpeeds
+from wmrid.estimators.uncertainty import estimate_covariances
+from wmrid.model.base_params import derived_with_std, fit_base_parameters
 from wmrid.model.kernels import plain
 
 #: The most blocks kept; past it neighbours are merged (the jackknife uses at most 40 segments).
@@ -173,10 +176,6 @@ class OnlineEstimate:
 def online_estimate(obs: OnlineObserver) -> OnlineEstimate | None:
     """The estimate of ``obs`` with its jackknife std (module docstring), or None while the samples do not determine
     one (too few, or a singular system)."""
-    from wmrid.estimators.result import reported_names
-    from wmrid.estimators.uncertainty import estimate_covariances
-    from wmrid.model.base_params import derived_with_std, fit_base_parameters
-
     duration = obs.t_last - obs.t_first
     if obs.n < 20 or duration <= 0:
         return None

@@ -7,6 +7,7 @@ the chunk size (tests check this).
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -257,8 +258,6 @@ def replay_pieces(
     pool = None
     pending = None
     if half is not None and _SECOND_THREAD:
-        from concurrent.futures import ThreadPoolExecutor
-
         pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wmrid-half-rate")
     signs = SignSpeeds(sign_half_window)
     done = 0

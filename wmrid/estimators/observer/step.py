@@ -193,7 +193,7 @@ def project_to_box(theta: np.ndarray, gamma: np.ndarray, lo: np.ndarray, hi: np.
 def _project_row(x0: np.ndarray, gamma: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     if np.all(x0 >= lo) and np.all(x0 <= hi):
         return x0.copy()
-    from scipy.optimize import lsq_linear
+    from scipy.optimize import lsq_linear  # scipy.optimize (~0.3 s): only an estimate outside its bounds
 
     # (x - x0)^T Gamma (x - x0) = |L^T (x - x0)|^2 with Gamma = L L^T; scale columns for conditioning.
     scale = np.sqrt(np.maximum(np.diag(gamma), 1e-300))

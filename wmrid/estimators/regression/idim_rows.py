@@ -13,6 +13,7 @@ import numpy as np
 
 from wmrid.core.choices import TorqueHold, values
 from wmrid.core.errors import LogFormatError, NotIdentifiableError, UsageError, option
+from wmrid.estimators.regression.lowpass import butter_sos, filtfilt, welch
 from wmrid.model.dynamics import RegressorForm, caster_columns, invert_inertia_entries, platform_speeds
 
 #: Names of the IDIM parameters phi, in order (SI: kg m^2 for M and Vc, N m s/rad, N m).
@@ -238,8 +239,6 @@ def velocity_bandwidth(eta: np.ndarray, rate_hz: float) -> float:
     with 8 dof its chance is below 1e-12); the floor is the median spectrum above rate / 4.  The Nyquist
     frequency when the floor is 0 (a noise-free log).
     """
-    from wmrid.estimators.regression.lowpass import welch
-
     n = len(eta)
     nper = 2 ** max(3, math.floor(math.log2(max(8, min(n / 4.0, 8.0 * rate_hz)))))
     nper = min(nper, n)
@@ -324,8 +323,6 @@ def idim_regression(
     Raises UsageError for bad arguments, LogFormatError for unusable time stamps, NotIdentifiableError
     when the log is too short for the filter.
     """
-    from wmrid.estimators.regression.lowpass import butter_sos, filtfilt
-
     t, eta, tau = _check_arrays(t, eta, tau)
     if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or not 1 <= order <= 12:
         raise UsageError(f"filter order must be a whole number in 1..12, got {order!r}")

@@ -81,7 +81,7 @@ def _span(files: list[_File]) -> tuple[int, int]:
 def _connect(path: str) -> Any:
     """A read-only, immutable connection to a .db3 file: through its write-ahead log when it has one with committed
     pages (a recording that was not closed: :mod:`wmrid.io.bag.db3_wal`)."""
-    import apsw
+    import apsw  # apsw: only a .db3 file's own reader
 
     view, _ = wal_state(path)  # an unreadable log is said in a note (Db3State)
     if view is not None:

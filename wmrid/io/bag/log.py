@@ -9,6 +9,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from wmrid.core.wheel_log import CHUNK_ROWS, LogStream
+from wmrid.io.bag.reader import iter_bag_joint_parts, read_bag
+from wmrid.io.mcap.log import Recording, field_selection, recording_log
 from wmrid.io.ros.field_paths import FieldSignals
 from wmrid.io.ros.selection import TopicSelection
 from wmrid.io.signals import SignalOptions
@@ -24,9 +26,6 @@ def read_bag_log(
 ) -> LogStream:
     """The LogStream of the recording in ``paths`` (see :func:`recording_paths`), JointState topics chosen, aligned
     and converted as for an MCAP file; ``fields``: the wheel signals by field path instead."""
-    from wmrid.io.bag.reader import iter_bag_joint_parts, read_bag
-    from wmrid.io.mcap.log import Recording, field_selection, recording_log
-
     files = list(paths)
     topics = fields.topics() if fields is not None else None
     if fields is not None:

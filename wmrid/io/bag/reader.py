@@ -45,7 +45,10 @@ class BagFiles:
     ("ros1" or "ros2"), and :meth:`messages`.  Use as a context manager."""
 
     def __init__(self, paths: Sequence[str], kind: str):
+        # rosbags' readers (~50 ms): only a recording wmrid's own readers do not take
         from rosbags.rosbag1 import Reader as Reader1
+
+        # rosbags' readers (~50 ms): only a recording wmrid's own readers do not take
         from rosbags.rosbag2 import Reader as Reader2
 
         self.paths, self.kind = list(paths), kind
@@ -173,7 +176,7 @@ class _RosbagsState(_BagState):
 def _unread_logs(paths: Sequence[str]) -> list[str]:
     """Notes for the .db3 files among ``paths`` (files or folders) whose write-ahead log holds committed messages
     that rosbags, which opens the database immutable, does not read."""
-    from wmrid.io.bag.db3_wal import wal_state
+    from wmrid.io.bag.db3_wal import wal_state  # the write-ahead log's reader: only .db3 files
 
     found = []
     for path in map(Path, paths):
@@ -248,18 +251,19 @@ def _open_state(paths: Sequence[str], kind: str, **kwargs: Any) -> Iterator[_Bag
     """The state that reads ``paths``: wmrid's own readers for ROS 1 bags, uncompressed sqlite3 recordings and MCAP
     files, rosbags for the other ROS 2 recordings (compressed, or files that overlap in time)."""
     if kind == "ros1":
-        from wmrid.io.bag.ros1_file import Ros1State
+        from wmrid.io.bag.ros1_file import Ros1State  # each storage's reader is loaded only for its recordings
 
         with Ros1State(paths, **kwargs) as state:
             yield state
         return
-    from wmrid.io.bag.db3_file import Db3State, db3_files
+    from wmrid.io.bag.db3_file import Db3State, db3_files  # each storage's reader is loaded only for its recordings
 
     recordings = db3_files(paths)
     if recordings is not None:
         with Db3State(paths, recordings, **kwargs) as state:
             yield state
         return
+    # each storage's reader is loaded only for its recordings
     from wmrid.io.bag.mcap_files import McapFilesState, mcap_files
 
     files = mcap_files(paths)

@@ -18,6 +18,7 @@ that cannot be decompressed, or declares more than the memory budget, is skipped
 
 from __future__ import annotations
 
+import bz2
 import contextlib
 import mmap
 from collections.abc import Generator, Iterator, Sequence
@@ -276,11 +277,9 @@ def _decompress(compression: str, data: bytes, size: int) -> bytes:
     if compression == "none":
         return data
     if compression == "bz2":
-        import bz2
-
         return bz2.BZ2Decompressor().decompress(data, max_length=size + 1)
     if compression == "lz4":
-        import lz4.frame
+        import lz4.frame  # lz4: only an lz4 chunk
 
         with lz4.frame.LZ4FrameDecompressor() as decompressor:
             return decompressor.decompress(data, max_length=size + 1)
@@ -302,11 +301,9 @@ def _pieces(compression: str, data: np.ndarray, size: int, window: int) -> Itera
     """A bz2 or lz4 chunk's records ``window`` bytes at a time, never more than ``size`` + 1 in all (a chunk that
     lies about its size cannot make wmrid decompress more)."""
     if compression == "bz2":
-        import bz2
-
         decompressor: Any = bz2.BZ2Decompressor()
     elif compression == "lz4":
-        import lz4.frame
+        import lz4.frame  # lz4: only an lz4 chunk
 
         decompressor = lz4.frame.LZ4FrameDecompressor()
     else:

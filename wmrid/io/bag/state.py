@@ -19,6 +19,7 @@ from wmrid.core.errors import LogFormatError
 from wmrid.io.mcap.records import JOINT_STATE_NAMES, joint_states, ros1_joint_names, standard_joint_state
 from wmrid.io.ros.contents import Accumulator
 from wmrid.io.ros.joint_batches import DYNAMIC_JOINT_STATE_NAMES, JointChannels
+from wmrid.runtime.side_files import LOOP, NotRegularFile, broken_link, not_regular, read_regular
 
 #: Messages per topic decoded at a time (the batch's bytes are joined into one buffer for the kernel).
 BATCH = 16384
@@ -96,7 +97,7 @@ class _BagState(JointChannels):
 
     def kernel(self, acc: Accumulator) -> Callable[..., None]:
         if self.topics[acc.info["id"]].encoding == "ros1":
-            from wmrid.io.bag.ros1_records import ros1_joint_states
+            from wmrid.io.bag.ros1_records import ros1_joint_states  # the ROS 1 decoder: only a ROS 1 topic
 
             return ros1_joint_states
         return joint_states
@@ -104,6 +105,7 @@ class _BagState(JointChannels):
     def _types(self) -> Any:
         """rosbags' typestore with the bag's definitions (the distribution's own where the bag has none)."""
         if self.typestore is None:
+            # rosbags' type system (~15 ms): only a message the compiled decoders do not take
             from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
             store = get_typestore(Stores.ROS1_NOETIC if self.kind == "ros1" else Stores.ROS2_HUMBLE)
@@ -152,8 +154,6 @@ def metadata_text(folder: str) -> bytes:
     LogFormatError when it is not a regular file (a device such as /dev/zero, a FIFO, a link to either, a loop of
     links) or holds more than :data:`METADATA_LIMIT`, or when a storage file it lists is not a regular file
     (:func:`_check_listed_files`); ``b""`` when there is none or it cannot be read (rosbags then says why)."""
-    from wmrid.runtime.side_files import NotRegularFile, broken_link, read_regular
-
     path = os.path.join(folder, "metadata.yaml")
     broken = broken_link(path)
     if broken is not None:
@@ -184,10 +184,8 @@ def _check_listed_files(folder: str, text: bytes) -> None:
     ends), a socket or folder, a loop of links (a missing file, or a link to nothing, the readers name).  The user
     named the folder, not these files.  Each is looked up by its name in the folder, as rosbags and wmrid's readers
     find it (a listed ``../x`` is ``x`` in the folder).  Metadata that cannot be parsed is left to the readers."""
-    from wmrid.runtime.side_files import LOOP, broken_link, not_regular
-
     try:
-        from ruamel.yaml import YAML
+        from ruamel.yaml import YAML  # ruamel.yaml (~10 ms): only a rosbag2 folder's metadata.yaml
 
         listed = YAML(typ="safe").load(text.decode("utf-8"))["rosbag2_bagfile_information"]["relative_file_paths"]
         names = [PurePath(str(p)).name for p in listed]
@@ -221,7 +219,7 @@ def storage_files(path: str, storage: str, magic: bytes) -> list[str] | None:
             return None
     text = metadata_text(path)  # refuses a device, a FIFO or an oversized file before rosbags reads it whole
     try:
-        from ruamel.yaml import YAML
+        from ruamel.yaml import YAML  # ruamel.yaml (~10 ms): only a rosbag2 folder's metadata.yaml
 
         info = YAML(typ="safe").load(text.decode("utf-8"))["rosbag2_bagfile_information"]
         if int(info["version"]) > MAX_METADATA_VERSION or info["storage_identifier"] != storage:

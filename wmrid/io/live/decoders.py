@@ -24,10 +24,14 @@ import numpy as np
 from wmrid.core.errors import UsageError, option
 from wmrid.core.wheel_log import CANONICAL, REFERENCE, WheelLog
 from wmrid.io.mcap.records import JOINT_STATE_NAMES
+from wmrid.io.ros.field_paths import check_values, field_signals
+from wmrid.io.ros.joint_batches import DYNAMIC_JOINT_STATE_NAMES
 from wmrid.io.ros.joints import signals_from_json, signals_from_mcap
 from wmrid.io.ros.selection import TopicSelection
 from wmrid.io.signals import SignalOptions, convert
+from wmrid.io.sources import Source
 from wmrid.io.stamps import ABSOLUTE_LIMIT_S
+from wmrid.io.table.columns import check_key
 
 #: Rows asked of the CSV reader at once: a batch is read in one piece.
 _ROWS = 1 << 30
@@ -44,8 +48,6 @@ class TableDecoder:
         self, name: str, columns: Mapping[str, str] | None, time_unit: str, signals: SignalOptions,
         gear_ratio: float | None,
     ) -> None:  # fmt: skip
-        from wmrid.io.table.columns import check_key
-
         self.name = name
         self.mapping = {key: key for key in CANONICAL}
         for key, value in (columns or {}).items():
@@ -61,9 +63,8 @@ class TableDecoder:
 
     def decode(self, batch: bytes, rows_before: int) -> WheelLog | None:
         """The samples of one batch (``rows_before``: the data lines of the batches before it), or None."""
-        from wmrid.io.assembler import MERGED_TIME, Assembler
-        from wmrid.io.sources import Source
-        from wmrid.io.table.csv_log import csv_chunks
+        from wmrid.io.assembler import MERGED_TIME, Assembler  # the assembler (~5 ms): only a CSV stream
+        from wmrid.io.table.csv_log import csv_chunks  # the CSV reader (~10 ms): only a CSV stream
 
         source = Source(self.name, None, batch)
         chunks, where, _, hint = csv_chunks(source, self.mapping, self.explicit, _ROWS)
@@ -104,8 +105,7 @@ class McapDecoder:
         self, name: str, columns: Mapping[str, str] | None, selection: TopicSelection, signals: SignalOptions,
         gear_ratio: float | None,
     ) -> None:  # fmt: skip
-        from wmrid.io.mcap.log import field_selection
-        from wmrid.io.ros.field_paths import field_signals
+        from wmrid.io.mcap.log import field_selection  # the MCAP log's topic rules (~10 ms): only an MCAP stream
 
         self.name = name
         self.columns = dict(columns or {})
@@ -125,8 +125,6 @@ class McapDecoder:
 
     def keep(self, topic: str, schema: str) -> bool:
         """Whether a channel's messages can hold the wheel signals (the others are not kept)."""
-        from wmrid.io.ros.joint_batches import DYNAMIC_JOINT_STATE_NAMES
-
         if self.fields is not None:
             return topic in self.fields.topics()
         if self.json_topic is not None:
@@ -138,11 +136,9 @@ class McapDecoder:
 
     def decode(self, batch: bytes) -> WheelLog | None:
         """The samples of one batch (a small MCAP file of its own), or None when it holds none past the last."""
-        from wmrid.io.mcap.reader import read_mcap
+        from wmrid.io.mcap.reader import read_mcap  # the MCAP reader (~15 ms): only an MCAP stream
 
         if self.fields is not None:
-            from wmrid.io.ros.field_paths import check_values
-
             contents = read_mcap(self.name, data=batch, fields=self.fields.topics())
             check_values(contents.joints, self.fields, self.name)
             sig = signals_from_mcap(contents, self.selection, self.signals, self.gear_ratio)

@@ -33,6 +33,7 @@ from wmrid.io.ros.selection import TopicSelection
 from wmrid.io.signals import SignalOptions
 from wmrid.io.sources import STDIN_NAME, compression_of
 from wmrid.runtime.limits import memory_budget
+from wmrid.runtime.side_files import broken_link, not_regular
 
 #: An MCAP batch is decoded once it holds this many messages (or the source pauses or ends): enough for split
 #: topics to overlap, few enough for a refresh.
@@ -384,8 +385,6 @@ class Rosbag2Source(LiveSource):
         """LogFormatError, before it is opened, when the folder's ``path`` (named NAME.mcap, a file the user did not
         name) is not a regular file: a FIFO (opening it waited forever), a device, a loop of links or a link to
         nothing (an "internal error" on opening)."""
-        from wmrid.runtime.side_files import broken_link, not_regular
-
         kind = not_regular(path) or broken_link(path)
         if kind is not None:
             raise LogFormatError(

@@ -17,6 +17,7 @@ from wmrid.io.live.follow import (
 )
 from wmrid.io.mcap.records import MAGIC
 from wmrid.io.sources import compression_of
+from wmrid.runtime.atomic import register_input
 
 
 def open_live(spec: str, settings: ReaderSettings | None = None, reconnect: bool = False) -> LiveSource:
@@ -37,8 +38,6 @@ def open_live(spec: str, settings: ReaderSettings | None = None, reconnect: bool
         return Rosbag2Source(spec, settings)
     if not os.path.isfile(spec):
         raise LogFormatError(f"{spec}: not a regular file; give the log being written, or - for a pipe")
-    from wmrid.runtime.atomic import register_input
-
     register_input(spec)  # an output of this command may not be this file
     with open(spec, "rb") as fh:
         head = fh.read(8)

@@ -6,7 +6,7 @@ few layouts that cannot stream exactly are decoded whole, with a note saying why
 from __future__ import annotations
 
 from collections.abc import Callable, Generator, Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -14,6 +14,7 @@ import numpy as np
 from wmrid.core.errors import LogFormatError, UsageError, option
 from wmrid.core.wheel_log import CACHE_ROWS, CHUNK_ROWS, MIN_SAMPLES, REQUIRED, LogStream, WheelLog, stream_arrays
 from wmrid.io.ros.field_paths import FieldSignals, check_values, field_signals
+from wmrid.io.ros.joint_stream import SignalStream, stream_plan
 from wmrid.io.ros.joints import signals_from_json, signals_from_mcap
 from wmrid.io.ros.selection import TopicSelection
 from wmrid.io.signals import SignalOptions
@@ -55,6 +56,7 @@ def read_mcap_log(
     :func:`wmrid.io.ros.joint_stream.stream_plan`
     lists; a JSON topic is always read whole.
     """
+    # the MCAP reader (~15 ms): only an MCAP file (a bag shares this module)
     from wmrid.io.mcap.reader import iter_joint_parts, read_mcap, scan_mcap
 
     path = source.path or source.name
@@ -86,8 +88,6 @@ def read_mcap_log(
 def field_selection(selection: TopicSelection, fs: FieldSignals) -> TopicSelection:
     """The topic selection that reads the field-path signals ``fs``: their topics, and the two joints "right" and
     "left" the readers make of them; UsageError when topics or joints were also chosen by option."""
-    from dataclasses import replace
-
     chosen = [
         n for n in ("topic", "velocity_topic", "effort_topic", "right_joint", "left_joint") if getattr(selection, n)
     ]
@@ -126,8 +126,6 @@ def recording_log(
 ) -> LogStream:
     """The LogStream of a recording's JointState topics (or of the wheel signals by field path ``fields``,
     checked to give numbers): decoded whole, or streamed (see :func:`read_mcap_log`)."""
-    from wmrid.io.ros.joint_stream import stream_plan
-
     source = recording
     contents = recording.scan(_MCAP_WHOLE_PIECES * rows, _MCAP_REPLAY_BYTES)
     if fields is not None:
@@ -143,8 +141,6 @@ def recording_log(
         if not relative and not (times.high < limit and times.low > -limit):
             why = "its stamps cross the limit of absolute float64 times"
     if why is not None:
-        from dataclasses import replace
-
         if contents.replay:
             contents.replay.clear()  # not needed by the whole decode, which would otherwise hold both
 
@@ -204,8 +200,6 @@ def _mcap_pieces(
     """The streamed LogStream of a long recording (see :func:`read_mcap_log`): pieces of exactly ``rows``
     samples, as :func:`stream_arrays` cuts the whole log.  Its ``_mcap_peak`` is the most JointState samples
     the last pass held at once (decoded, waiting and cut into pieces)."""
-    from wmrid.io.ros.joint_stream import SignalStream
-
     source = recording
     unit = signals.effort_label
     per_s = float(NS_PER_UNIT["s"])

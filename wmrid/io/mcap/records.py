@@ -334,12 +334,12 @@ def decompress(name: str, compression: str, data: bytes, size: int) -> bytes:
     if compression == "":
         return bytes(data)
     if compression == "zstd":
-        import zstandard
+        import zstandard  # zstandard: only a zstd chunk
 
         with zstandard.ZstdDecompressor().stream_reader(io.BytesIO(data)) as reader:
             return reader.read(size + 1)
     if compression == "lz4":
-        import lz4.frame
+        import lz4.frame  # lz4: only an lz4 chunk
 
         return lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
     raise LogFormatError(

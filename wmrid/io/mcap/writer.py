@@ -28,9 +28,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from mcap.well_known import MessageEncoding, Profile, SchemaEncoding
+from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
 from wmrid import __version__
 from wmrid.core.errors import UsageError
+from wmrid.runtime.atomic import atomic_output
 
 if TYPE_CHECKING:
     import pandas
@@ -212,8 +215,6 @@ def _odometry_layout() -> _CdrLayout:
 
 
 def _compression(name: str) -> Any:
-    from mcap.writer import CompressionType
-
     kinds = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "": CompressionType.NONE}
     if name not in kinds:
         raise UsageError(f"MCAP compression {name!r} is not one of 'zstd', 'lz4' or '' (none)")
@@ -285,8 +286,6 @@ def _float_column(frame: pandas.DataFrame, name: str) -> np.ndarray:
 
 
 def _open_writer(fh: Any, compression: str, chunk_size: int, profile: str) -> Any:
-    from mcap.writer import LIBRARY_IDENTIFIER, Writer
-
     writer = Writer(fh, chunk_size=chunk_size, compression=_compression(compression))
     writer.start(profile=profile, library=f"wmrid/{__version__}; {LIBRARY_IDENTIFIER}")
     return writer
@@ -336,10 +335,6 @@ def write_joint_state_mcap(
     Raises :class:`UsageError` for a missing or malformed column or option, and
     :class:`~wmrid.core.errors.OutputExistsError` if ``path`` exists and ``force`` is false.
     """
-    from mcap.well_known import MessageEncoding, Profile, SchemaEncoding
-
-    from wmrid.runtime.atomic import atomic_output
-
     missing = [c for c in ("t", "eta_r", "eta_l", "tau_r", "tau_l") if c not in frame.columns]
     if missing:
         raise UsageError(f"cannot write JointState messages: no column {', '.join(map(repr, missing))}")

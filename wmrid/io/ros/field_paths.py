@@ -23,10 +23,12 @@ a message).  ``wmrid inspect`` lists the numeric field paths of every topic.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -106,9 +108,6 @@ class FieldPathError(LogFormatError):
 def message_fields(obj: Any) -> tuple[str, ...] | None:
     """The fields a decoded message declares in its definition (rosbags' dataclasses, mcap_ros2's namespaces with
     ``__slots__``), in order; None when ``obj`` is not a message (a number, a string, an array)."""
-    import dataclasses
-    from types import SimpleNamespace
-
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         names = [f.name for f in dataclasses.fields(obj)]
     elif isinstance(obj, SimpleNamespace):

@@ -23,8 +23,8 @@ def parquet_chunks(
     """(chunks, where, notes, time unit hint) of a Parquet log; ``chunks()`` yields (first row, columns)."""
     name = source.name
     require("pyarrow.parquet", "parquet", f"{name}: reading a Parquet log")
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    import pyarrow as pa  # pyarrow (~40 ms, extra [parquet]): only a Parquet log
+    import pyarrow.parquet as pq  # pyarrow: only a Parquet log
 
     def opened() -> Any:
         try:
@@ -93,7 +93,7 @@ def parquet_chunks(
 
 def arrow_values(arr: Any, is_time: bool = False) -> Any:
     """A column of an Arrow batch as numpy (numbers; nulls -> NaN) or, for anything else, a pandas Series."""
-    import pyarrow as pa
+    import pyarrow as pa  # pyarrow (~30 ms, extra [parquet]): only a Parquet or pyarrow-read log
 
     if is_time and (pa.types.is_timestamp(arr.type) or pa.types.is_duration(arr.type)):
         arr = arr.cast(pa.int64())
@@ -110,7 +110,7 @@ def _primitive_to_numpy(arr: Any) -> np.ndarray:
     ``pyarrow.Array.to_numpy`` imports pandas (a third of a second); the data buffer of a primitive
     array is already the numpy layout.
     """
-    import pyarrow as pa
+    import pyarrow as pa  # pyarrow (~30 ms, extra [parquet]): only a Parquet or pyarrow-read log
 
     kind = "f" if pa.types.is_floating(arr.type) else "i" if pa.types.is_signed_integer(arr.type) else "u"
     dtype = np.dtype(f"{kind}{arr.type.bit_width // 8}")
