@@ -14,6 +14,7 @@ including those inside functions and under ``TYPE_CHECKING``.
 from __future__ import annotations
 
 import ast
+import functools
 import io
 import re
 import tokenize
@@ -48,6 +49,17 @@ def _layer(module: str) -> str | None:
     return parts[1] if len(parts) > 1 and parts[1] in RANK else None
 
 
+@functools.cache
+def _source(path: Path) -> str:
+    return path.read_text(encoding="utf-8")
+
+
+@functools.cache
+def _tree(path: Path) -> ast.Module:
+    """The module's syntax tree, parsed once for all the tests (read-only: no test changes it)."""
+    return ast.parse(_source(path))
+
+
 def _modules() -> list[tuple[str, Path]]:
     out = []
     for path in sorted(PACKAGE.rglob("*.py")):
@@ -61,7 +73,7 @@ def _imports(name: str, path: Path) -> list[tuple[int, str]]:
     """(line, imported wmrid module) for every import in the file: import statements, names taken from the package
     (its lazy exports resolved to the modules that define them), ``wmrid.NAME`` attribute uses, and
     ``importlib.import_module("wmrid....")`` calls."""
-    tree = ast.parse(path.read_text(encoding="utf-8"))
+    tree = _tree(path)
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     exports = wmrid._EXPORTS
     found = []
@@ -128,7 +140,7 @@ def _graph() -> dict[str, set[str]]:
     graph: dict[str, set[str]] = {}
     for name, path in _modules():
         targets = set()
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+        tree = _tree(path)
         for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom) and node.module and not node.level:
                 subs = {f"{node.module}.{a.name}" for a in node.names} & names
@@ -208,7 +220,7 @@ def test_no_module_is_longer_than_the_limit() -> None:
     long = {
         str(path.relative_to(PACKAGE.parent)): n
         for _, path in _modules()
-        if (n := len(path.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES
+        if (n := len(_source(path).splitlines())) > MAX_MODULE_LINES
     }
     assert long == {}, f"modules over {MAX_MODULE_LINES} lines: {long}"
 
@@ -244,7 +256,7 @@ def _import_time_and_local_imports() -> tuple[dict[str, set[str]], dict[str, lis
                     body_imports(block, package, found)
 
     for name, path in _modules():
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+        tree = _tree(path)
         package = name if path.name == "__init__.py" else name.rpartition(".")[0]
         found: set[str] = set()
         body_imports(tree.body, package, found)
@@ -330,7 +342,7 @@ def _comments(text: str) -> dict[int, str]:
 def _unexplained_imports(name: str, path: Path) -> list[str]:
     """``module:line  statement`` of each function-local import without a comment on its lines or on a line of its
     own just before (another import's trailing comment there does not count)."""
-    text = path.read_text(encoding="utf-8")
+    text = _source(path)
     lines, comments = text.splitlines(), _comments(text)
 
     def explained(node: ast.Import | ast.ImportFrom) -> bool:
@@ -340,18 +352,16 @@ def _unexplained_imports(name: str, path: Path) -> list[str]:
         return any(line in comments for line in range(node.lineno, (node.end_lineno or node.lineno) + 1))
 
     return [
-        f"{name}:{node.lineno}  {ast.unparse(node)}"
-        for node in _function_imports(ast.parse(text))
-        if not explained(node)
+        f"{name}:{node.lineno}  {ast.unparse(node)}" for node in _function_imports(_tree(path)) if not explained(node)
     ]
 
 
 def _states_its_reason(path: Path) -> bool:
     """Whether the module says once why it imports inside functions (:data:`REASON_MARK` and a reason after it, in
     its docstring or a comment of its own line at the top level)."""
-    text = path.read_text(encoding="utf-8")
+    text = _source(path)
     said = re.compile(re.escape(REASON_MARK) + r"\s*\S")
-    docstring = ast.get_docstring(ast.parse(text)) or ""
+    docstring = ast.get_docstring(_tree(path)) or ""
     top_comments = [c for line, c in _comments(text).items() if text.splitlines()[line - 1].startswith("#")]
     return bool(said.search(docstring)) or any(said.match(c) for c in top_comments)
 
@@ -374,9 +384,7 @@ def test_each_front_module_says_once_why_it_imports_inside_functions() -> None:
     missing = [
         name
         for name, path in _modules()
-        if _front(name)
-        and _function_imports(ast.parse(path.read_text(encoding="utf-8")))
-        and not _states_its_reason(path)
+        if _front(name) and _function_imports(_tree(path)) and not _states_its_reason(path)
     ]
     assert missing == [], (
         f"front modules that import inside functions without saying why once ({REASON_MARK!r}): {missing}"
@@ -399,10 +407,13 @@ def test_the_reason_checks_see_what_is_missing(tmp_path) -> None:
         "wmrid.x.m:16  import hmac",
     ]
     assert not _states_its_reason(f)
+    f = tmp_path / "m2.py"  # a new file: the checks read each path once
     f.write_text('"""Doc.\n\nImports inside functions: start-up time."""\n\n\ndef f():\n    import json\n')
     assert _states_its_reason(f)
+    f = tmp_path / "m3.py"  # a new file: the checks read each path once
     f.write_text("import os\n\n# Imports inside functions: start-up time\n\n\ndef f():\n    import json\n")
     assert _states_its_reason(f)
+    f = tmp_path / "m4.py"  # a new file: the checks read each path once
     f.write_text(
         '"""Doc.  Imports inside functions:"""\n\n\ndef f():\n    # Imports inside functions: here\n    import json\n'
     )
