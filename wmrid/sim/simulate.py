@@ -148,6 +148,9 @@ class SimulatedLog:
         in a real log; kept for tests and diagnostics).
     eta_true : (n, 2) rad/s, true wheel velocities at t (the clean counterpart of ``eta``).
     change : the plant change of the run, or None.
+    caster_load : (n, K) N, the multibody prototype's normal contact force on each of its K casters at t (0 when a
+        caster is off the ground; the engine's own, whose mean is the truth's ``mean_normal_load``); None from the
+        reduced model, which has no casters.
     """
 
     t: np.ndarray
@@ -163,6 +166,7 @@ class SimulatedLog:
     eta_true: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
     change: PlantChange | None = field(repr=False, default=None)
     eta_ref: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
+    caster_load: np.ndarray | None = field(repr=False, default=None)
 
     def plant_at(self, t: float) -> PhysicalParameters:
         """The plant's parameters over the control period starting at t (s): ``true`` before the switch time,
