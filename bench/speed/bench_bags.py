@@ -1,10 +1,11 @@
 """Bag benchmark: ``wmrid identify`` on a 10-minute 1 kHz JointState recording as a ROS 1 bag and as a ROS 2 .db3,
 against a plain rosbags deserialise loop over the same file.
 
-The recording is bench_mcap.py's (a noisy ``paper`` simulation, ``--duration`` s, default 600 = 600,001
-``sensor_msgs/msg/JointState`` messages), converted with rosbags: to a ROS 1 bag (each message deserialised from
-CDR and serialised for ROS 1, header ``seq`` added; ``--compression`` none, lz4 or bz2 chunks, default none) and
-to a rosbag2 folder with sqlite3 storage (the CDR bytes as they are).  Both are made once into bench/out/.
+The recording is bench_mcap.py's (``_common.mcap_log``: a noisy ``paper`` simulation, ``--duration`` s, default
+600 = 600,001 ``sensor_msgs/msg/JointState`` messages), converted with rosbags: to a ROS 1 bag (each message
+deserialised from CDR and serialised for ROS 1, header ``seq`` added; ``--compression`` none, lz4 or bz2 chunks,
+default none) and to a rosbag2 folder with sqlite3 storage (the CDR bytes as they are).  Both are made once into
+bench/out/.
 
 Measured, per format, as subprocesses (wall time including process start and imports, as a user sees it):
 (a) the deserialise loop: ``rosbags.highlevel.AnyReader`` over the file, ``reader.deserialize(raw, type)`` for
@@ -21,8 +22,10 @@ are printed too, with ``wmrid identify`` on the 5-s recording as a command (its 
 import and initialisation are 0.6 s of it): on a 10-minute recording that start-up is most of the db3's time; on
 an hour (``--duration 3600``) the commands meet the target as well.
 
-    /work/venv/bin/python bench/bench_bags.py
-    /work/venv/bin/python bench/bench_bags.py --duration 60 --repeat 1
+    python3 bench/speed/bench_bags.py
+    python3 bench/speed/bench_bags.py --duration 60 --repeat 1   # a quick check that it runs
+
+Figures: printed, and written to bench/results/bench_bags.json.
 """
 
 from __future__ import annotations
@@ -32,9 +35,8 @@ import json
 import sys
 from pathlib import Path
 
-from _common import BENCH, OUT, ROOT, fmt_rss, median, run_timed, wmrid_cmd
-
-sys.path[:] = [p for p in sys.path if p and Path(p).resolve() != BENCH]
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # bench/: the shared module _common
+from _common import OUT, ROOT, fmt_rss, mcap_log, median, run_timed, wmrid_cmd, write_results
 
 RATIO_TARGET = 0.25
 
@@ -50,13 +52,6 @@ with AnyReader([Path(sys.argv[1])]) as reader:
         n += 1
 print(n)
 """
-
-
-def mcap_source(duration: float, seed: int) -> Path:
-    sys.path.insert(0, str(BENCH))
-    from bench_mcap import mcap_log
-
-    return mcap_log(duration, seed)
 
 
 def ros1_bag(mcap: Path, compression: str) -> Path:
@@ -154,17 +149,19 @@ def main() -> None:
     ap.add_argument("--loop-repeat", type=int, default=1, help="deserialise-loop runs (default 1)")
     args = ap.parse_args()
 
-    mcap = mcap_source(args.duration, args.seed)
+    mcap = mcap_log(args.duration, args.seed)
     bags = {"ROS 1 bag": ros1_bag(mcap, args.compression), "ROS 2 db3": db3_folder(mcap)}
-    small = mcap_source(5.0, args.seed)
+    small = mcap_log(5.0, args.seed)
     warm = {"ROS 1 bag": ros1_bag(small, args.compression), "ROS 2 db3": db3_folder(small)}
     print(f"\nrecording: {args.duration:g} s at 1 kHz ({mcap.relative_to(ROOT)} converted)")
     print(f"as commands (start-up included):\n{'format':<11} {'loop s':>8} {'msg/s':>10} {'identify s':>11} "
           f"{'(min)':>7} {'peak MB':>8} {'ratio':>7} {'start-up s':>11}")  # fmt: skip
+    commands, throughput = {}, {}
     for name, path in bags.items():
         lp = loop(path, args.loop_repeat)
         ident = identify(path, args.repeat)
         start = identify(warm[name], args.repeat)["median"]
+        commands[name] = {"loop": lp, "identify": ident, "startup_s": start, "ratio": ident["median"] / lp["median"]}
         print(f"{name:<11} {lp['median']:8.2f} {lp['n'] / lp['median']:10,.0f} {ident['median']:11.2f} "
               f"{ident['min']:7.2f} {fmt_rss(ident['rss']):>8} {ident['median'] / lp['median']:7.3f} "
               f"{start:11.2f}")  # fmt: skip
@@ -173,8 +170,14 @@ def main() -> None:
     for name, path in bags.items():
         lp, ident = in_process("loop", path, warm[name]), in_process("identify", path, warm[name])
         verdict = "MET" if ident / lp <= RATIO_TARGET else "NOT MET"
+        throughput[name] = {"loop_s": lp, "identify_s": ident, "ratio": ident / lp, "met": ident / lp <= RATIO_TARGET}
         print(f"{name:<11} {lp:8.2f} {ident:11.2f} {ident / lp:7.3f} {verdict}")
     print(f"\ntarget: identify <= {RATIO_TARGET} x the rosbags deserialise loop (throughput)")
+    write_results({
+        "recording": {"duration_s": args.duration, "source": str(mcap.relative_to(ROOT)),
+                      "compression": args.compression},
+        "as_commands": commands, "in_one_process": throughput, "ratio_target": RATIO_TARGET,
+    })  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -7,29 +7,34 @@ Measures, for each ``--duration`` (default one hour = 3.6 M samples):
     under ``/usr/bin/time -v``; wall time (min, median), samples/s end-to-end (process start, imports,
     reading, replay and reporting included) and peak RSS.  The JSON output is checked to parse and to
     hold ``parameters``.
-(b) in-process, the parts alone: ``wmrid.io.logs.read_log``; the sample-by-sample
-``wmrid.estimators.observer.replay.replay``
-    with settings built as ``wmrid.pipeline.identify.identify`` builds them (JIT compile excluded by a warm-up
-    call on a short slice), in samples/s; and the whole ``wmrid.pipeline.identify.identify`` call (replay plus
-    covariance, base-parameter fit and diagnostics).
+(b) in-process, through the public API: ``wmrid.read_log`` of the file (and pyarrow's bare read of it, for
+    scale); ``wmrid.identify(log, "paper")`` on the log in memory (the whole call: the observer's passes, covariance,
+    fit, checks and diagnostics; numba's compile or cache load excluded by a warm-up call on a short slice); and,
+    from the progress the call reports after each piece of 262,144 samples, the observer's replay rate in its first
+    pass (samples/s between its first and its last piece) and the number of passes.  (Before the bench used only the
+    public API it timed the replay kernel alone, called with settings built by hand; the rate from the progress
+    measures the same kernel inside the call.  A pass of one piece, a log of at most 262,144 samples (4.4 min at
+    1 kHz), gives no rate.)
 
 The log is simulated (seed ``--seed``) into bench/out/ the first time; later runs reuse it.
 
-    /work/venv/bin/python bench/bench_identify.py                         # 1 h log, 3 runs
-    /work/venv/bin/python bench/bench_identify.py --duration 3600 14400   # also 4 h (memory comparison)
+    python3 bench/speed/bench_identify.py                         # 1 h log, 3 runs
+    python3 bench/speed/bench_identify.py --duration 3600 14400   # also 4 h (memory comparison)
+    python3 bench/speed/bench_identify.py --duration 60 --repeat 1   # a quick check that it runs
+
+Figures: printed, and written to bench/results/bench_identify.json.
 """
 
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
-import platform
 import sys
 import time
-from types import SimpleNamespace
+from pathlib import Path
 
-from _common import OUT, fmt_rss, median, run_timed, sim_log, wmrid_cmd
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # bench/: the shared module _common
+from _common import fmt_rss, median, run_timed, sim_log, wmrid_cmd, write_results
 
 TARGET = 1_000_000  # samples/s end-to-end
 
@@ -53,17 +58,21 @@ def end_to_end(path, n: int, repeat: int) -> dict:
     }
 
 
+def observer_passes(ticks: list[tuple[float, int, int]]) -> list[list[tuple[float, int, int]]]:
+    """The progress ticks (time, samples done, samples) of one call split into the observer's passes (each pass
+    counts its samples from the start again)."""
+    passes: list[list[tuple[float, int, int]]] = []
+    for tick in ticks:
+        if not passes or tick[1] <= passes[-1][-1][1]:
+            passes.append([])
+        passes[-1].append(tick)
+    return passes
+
+
 def in_process(path, repeat: int) -> dict:
     import pyarrow.parquet as pq
 
-    from wmrid.estimators.observer.observe import default_box, resolve_form
-    from wmrid.estimators.observer.replay import replay
-    from wmrid.estimators.observer.settings import ObserverSettings
-    from wmrid.estimators.options import ObserverOptions
-    from wmrid.io.logs import read_log
-    from wmrid.model import dynamics as model
-    from wmrid.model.robot import BUILTIN_ROBOTS
-    from wmrid.pipeline.identify import identify
+    import wmrid
 
     def best(fn) -> float:  # median wall time of fn() over `repeat` calls
         times = []
@@ -73,34 +82,32 @@ def in_process(path, repeat: int) -> dict:
             times.append(time.perf_counter() - t0)
         return median(times)
 
-    robot = BUILTIN_ROBOTS["paper"]
-    log = read_log(str(path))
-    read = best(lambda: read_log(str(path)))
+    log = wmrid.read_log(str(path))
+    read = best(lambda: wmrid.read_log(str(path)))
     bare = best(lambda: pq.read_table(str(path)))  # the file's columns into memory, nothing else
-    t, eta, tau = log.t, log.eta, log.tau
-    # settings as the observer's pass builds them for --robot paper, with the options' defaults
-    d = vars(ObserverOptions())
-    form = resolve_form(model.choose_form(eta), d["form"])
-    theta_init = model.intermediate_parameters(model.base_parameters(robot.nominal), form)
-    lo, hi = default_box(theta_init, form, d["box_width"], True)
-    settings = ObserverSettings(
-        form=form,
-        theta_init=theta_init,
-        theta_min=lo,
-        theta_max=hi,
-        k=d["k"],
-        alpha=d["alpha"],
-        torque_hold=d["torque_hold"],
-    )
-    # warm-ups on a short slice: JIT compile / numba cache load, not timed
-    short = SimpleNamespace(t=t[:20000], eta=eta[:20000], tau=tau[:20000], source="warm-up", notes=())
-    replay(short.t, short.eta, short.tau, settings)
-    identify(short, robot)
-    rep = best(lambda: replay(t, eta, tau, settings, max_history=d["max_history"]))
-    whole = best(lambda: identify(log, robot))
+    # warm-up on a short slice: JIT compile / numba cache load, not timed
+    short = wmrid.WheelLog(t=log.t[:20000], eta=log.eta[:20000], tau=log.tau[:20000], source="warm-up")
+    wmrid.identify(short, "paper")
+    times, rates, passes, result = [], [], [], None
+    for _ in range(repeat):
+        ticks: list[tuple[float, int, int]] = []
+
+        def tick(done: int, n: int, ticks: list = ticks) -> None:
+            ticks.append((time.perf_counter(), done, n))
+
+        t0 = time.perf_counter()
+        result = wmrid.identify(log, "paper", progress=tick)
+        times.append(time.perf_counter() - t0)
+        runs = observer_passes(ticks)
+        passes.append(len(runs))
+        first = runs[0] if runs else []
+        if len(first) >= 2 and first[-1][0] > first[0][0]:
+            rates.append((first[-1][1] - first[0][1]) / (first[-1][0] - first[0][0]))
+    rate = median(rates) if rates else None
     return {
-        "form": form.kind, "k": d["k"], "read": read, "pyarrow_read": bare, "replay": rep,
-        "replay_rate": len(t) / rep, "identify": whole,
+        "form": result.form.kind, "k": result.observer_settings.k, "friction": result.form.friction,
+        "read": read, "pyarrow_read": bare, "identify": median(times), "observer_passes": max(passes),
+        "replay_rate": rate, "replay": None if rate is None else len(log.t) / rate,
     }  # fmt: skip
 
 
@@ -130,15 +137,21 @@ def main() -> None:
         f" {'read s':>6} {'replay s':>8} {'replay samp/s':>13} {'identify() s':>12}"
     )
     for duration, n, e2e, ip in rows:
-        tail = f" {ip['read']:6.2f} {ip['replay']:8.2f} {ip['replay_rate']:13,.0f} {ip['identify']:12.2f}" if ip else ""
+        tail = ""
+        if ip:
+            replay = "n/a" if ip["replay"] is None else f"{ip['replay']:.2f}"
+            rate = "n/a" if ip["replay_rate"] is None else f"{ip['replay_rate']:,.0f}"
+            tail = f" {ip['read']:6.2f} {replay:>8} {rate:>13} {ip['identify']:12.2f}"
         print(
             f"{duration / 3600:>6.2f}h {n:>11,} | {e2e['min']:9.2f} {e2e['median']:9.2f} {e2e['rate']:11,.0f}"
             f" {fmt_rss(e2e['rss']):>8} |{tail}"
         )
     if ip0:
         print(
-            f"(in-process medians of {args.repeat}, JIT excluded: read = read_log, replay = replay() alone, "
-            f"identify() = replay + covariance, fit, diagnostics; form '{ip0['form']}', k = {ip0['k']:g})"
+            f"(in-process medians of {args.repeat}, JIT excluded: read = wmrid.read_log; identify() = "
+            f"wmrid.identify(log, 'paper'), {ip0['observer_passes']} observer pass(es); replay = one pass at the "
+            f"first pass's rate, from the call's progress; form '{ip0['form']}', k = {ip0['k']:g}, friction "
+            f"{ip0['friction']})"
         )
         print(
             f"end to end / bare pyarrow read of the file: {e2e0['median'] / ip0['pyarrow_read']:.2f}x "
@@ -147,15 +160,11 @@ def main() -> None:
     print(f"\ntarget: end-to-end >= {TARGET:,} samples/s")
     for duration, _, e2e, _ in rows:
         print(f"  {duration:g} s log: {e2e['rate']:,.0f} samples/s -> {'MET' if e2e['rate'] >= TARGET else 'NOT met'}")
-    OUT.mkdir(parents=True, exist_ok=True)
-    record = {
-        "command": " ".join(["python", *sys.argv]), "machine": platform.node(), "cpus": platform.processor() or None,
-        "date_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+    write_results({
+        "target_samples_per_s": TARGET,
         "rows": [{"duration_s": d, "samples": n, "end_to_end": {k: v for k, v in e.items() if k != "cmd"},
                   "in_process": ip} for d, n, e, ip in rows],
-    }  # fmt: skip
-    (OUT / "bench_identify.json").write_text(json.dumps(record, indent=1) + "\n")
-    print(f"figures written to {(OUT / 'bench_identify.json').relative_to(OUT.parent.parent)}")
+    })  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -1,7 +1,8 @@
 """``wmrid live`` at 1 kHz in real time: the time from the first message to the first estimate, the latency from a
 message's arrival to the first update that includes it (median, 99th percentile), the CPU the process uses while it
 follows (from /proc, between the first update and the end of the stream), its peak RSS, and the final result against
-``wmrid identify`` on the same messages.  Written as JSON to bench/out/bench_live_SOURCE.json.
+``wmrid identify`` on the same messages.  Written as JSON to bench/results/bench_live.json (``--source csv``:
+bench_live-csv.json).
 
 Sources: ``ws`` (default) -- the foxglove-sdk WebSocket server (tests/fxserver.py) in this process publishing the
 bundled paper-scenario log as JointState CDR messages, ``wmrid live ws://127.0.0.1:PORT`` in a process of its own;
@@ -10,7 +11,8 @@ is on the same machine; the client's receipt follows within a millisecond); the 
 read its JSON line.  ``--speed 0`` sends as fast as the server can (memory over a long stream: ``--seconds 28800``
 is 8 hours of log).
 
-    python3 bench/bench_live.py [--source ws|csv] [--seconds 20] [--every 1] [--speed 1]
+    python3 bench/speed/bench_live.py [--source ws|csv] [--seconds 20] [--every 1] [--speed 1]
+    python3 bench/speed/bench_live.py --seconds 5   # a quick check that it runs
 """
 
 from __future__ import annotations
@@ -27,9 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # bench/: the shared module _common
+from _common import ROOT, write_log, write_results
+
 SAMPLE = ROOT / "sample_logs" / "paper_sinusoid.csv"
-sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT))  # tests/fxserver.py: the Foxglove server of the tests
 
 
 def cpu_seconds(pid: int) -> float:
@@ -86,7 +90,6 @@ def main() -> None:
     parser.add_argument("--speed", type=float, default=1.0, help="times real time (0: as fast as possible)")
     args = parser.parse_args()
     import wmrid
-    from wmrid.io.mcap.writer import write_joint_state_mcap
 
     data = frame(args.seconds)
     n = len(data)
@@ -98,7 +101,8 @@ def main() -> None:
             from tests.fxserver import Publisher, read_recording
 
             ref = Path(tmp) / "run.mcap"
-            write_joint_state_mcap(ref, data, odom_topic=None)
+            truth = json.loads(SAMPLE.with_name(SAMPLE.name + ".truth.json").read_text())  # the sample's, repeated
+            write_log(data, ref, truth)
             pub = Publisher(read_recording(str(ref)))
             msgs = pub.rec.messages
 
@@ -172,15 +176,9 @@ def main() -> None:
         "cpu_fraction_of_one_core": cpu, "peak_rss_mb_while_streaming": rss_stream,
         "peak_rss_mb_with_final_identify": rss, "seconds_wall": time.monotonic() - started,
         "final_vs_identify_largest_relative_difference": worst, "samples": final["samples"],
-        "machine": {"cpus": os.cpu_count(), "python": sys.version.split()[0]},
-        "command": "python3 bench/bench_live.py " + " ".join(sys.argv[1:]),
     }  # fmt: skip
-    from wmrid.runtime.atomic import write_json
-
-    dest = ROOT / "bench" / "out" / f"bench_live_{args.source}.json"
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    write_json(str(dest), out, force=True)
     print(json.dumps(out, indent=2))
+    write_results(out, variant=None if args.source == "ws" else args.source)
 
 
 if __name__ == "__main__":

@@ -1,9 +1,8 @@
 """MCAP benchmark: ``wmrid`` on a 10-minute 1 kHz ROS 2 JointState MCAP against the generic decoder.
 
-The log (``--duration`` s, default 600 = 600,001 messages) is a noisy ``paper`` simulation (default
-trajectory and rate of :func:`wmrid.sim.simulate.simulate`, seed ``--seed``) written by
-:func:`wmrid.io.mcap.writer.write_joint_state_mcap` as ``sensor_msgs/msg/JointState`` only (no odometry),
-zstd chunks.  It is made once into bench/out/ and reused.  Measured:
+The log (``--duration`` s, default 600 = 600,001 messages) is a noisy ``paper`` simulation (``wmrid.simulate``'s
+default trajectory at 1 kHz, seed ``--seed``) written by ``wmrid.write_simulation`` as ``sensor_msgs/msg/JointState``
+only (no odometry), zstd chunks (``_common.mcap_log``).  It is made once into bench/out/ and reused.  Measured:
 
 (a) generic decode: a ``python -c`` subprocess that opens the file with ``mcap.reader.make_reader`` and
     ``mcap_ros2.decoder.DecoderFactory`` and iterates ``iter_decoded_messages()``, touching each
@@ -12,15 +11,20 @@ zstd chunks.  It is made once into bench/out/ and reused.  Measured:
 (b) ``wmrid identify LOG --robot paper --format json`` as a subprocess: one untimed warm-up run
     (numba's on-disk cache, page cache), then ``--repeat`` timed runs under ``/usr/bin/time -v`` when
     available; wall min/median, samples/s, peak RSS.  The JSON must parse; the largest relative error of
-    m11, m12, m22, Vc against the simulation's truth is printed.
+    m11, m12, m22, Vc against the simulation's truth (the paper robot's CAD set, the result's "reference") is
+    printed.
 (c) ``wmrid inspect LOG --format json`` as a subprocess (same warm-up/repeat scheme), wall time.
-(d) in-process ``wmrid.io.mcap.reader.read_mcap(path)`` alone, median of ``--repeat`` calls, after one
-    warm-up call on a small MCAP (so JIT compile / numba cache load is excluded).
+(d) in-process ``wmrid.read_log(path)``, median of ``--repeat`` calls, after one warm-up call on a small MCAP (so
+    JIT compile / numba cache load is excluded).  (Before the bench used only the public API this timed the MCAP
+    reader alone, without the checks and the conversion to a WheelLog that read_log adds.)
 
 Target: end-to-end identify <= 0.15 x the generic decode time (medians).
 
-    /work/venv/bin/python bench/bench_mcap.py
-    /work/venv/bin/python bench/bench_mcap.py --repeat 5 --decode-repeat 2
+    python3 bench/speed/bench_mcap.py
+    python3 bench/speed/bench_mcap.py --repeat 5 --decode-repeat 2
+    python3 bench/speed/bench_mcap.py --duration 30 --repeat 1   # a quick check that it runs
+
+Figures: printed, and written to bench/results/bench_mcap.json.
 """
 
 from __future__ import annotations
@@ -31,11 +35,8 @@ import sys
 import time
 from pathlib import Path
 
-from _common import BENCH, OUT, ROOT, cached_log, fmt_rss, median, run_timed, wmrid_cmd
-
-# bench/ is sys.path[0] when run as a script, and bench/coverage.py would then shadow the ``coverage``
-# module that numba imports (numba.misc.coverage_support): drop it now that _common is imported.
-sys.path[:] = [p for p in sys.path if p and Path(p).resolve() != BENCH]
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # bench/: the shared module _common
+from _common import ROOT, fmt_rss, mcap_log, median, run_timed, wmrid_cmd, write_results
 
 RATIO_TARGET = 0.15  # identify end-to-end / generic decode
 
@@ -51,16 +52,6 @@ with open(sys.argv[1], "rb") as f:
         n += 1
 print(n)
 """
-
-
-def mcap_log(duration: float, seed: int) -> Path:
-    """The JointState-only zstd MCAP in bench/out/, made if missing."""
-    from wmrid.io.mcap.writer import write_joint_state_mcap
-
-    def write(frame, path):
-        write_joint_state_mcap(path, frame, odom_topic=None, force=True)
-
-    return cached_log(OUT / f"paper_jointstate_{duration:g}s_seed{seed}.mcap", duration, write, seed=seed)
 
 
 def generic_decode(path, repeat: int) -> dict:
@@ -87,13 +78,12 @@ def cli(args_: list[str], repeat: int) -> tuple[dict, list]:
 
 
 def max_rel_error(runs) -> tuple[float, str]:
-    from wmrid.model import dynamics as model
-    from wmrid.model.robot import BUILTIN_ROBOTS
-
-    truth = model.named_base(model.base_parameters(BUILTIN_ROBOTS["paper"].reference))
+    """The largest relative error of m11, m12, m22, Vc over the runs, against the CAD set (the simulation's truth)
+    that each result holds as its "reference"."""
     worst, worst_name = 0.0, ""
     for r in runs:
-        params = json.loads(r.stdout)["parameters"]
+        out = json.loads(r.stdout)
+        params, truth = out["parameters"], out["reference"]
         for name in ("m11", "m12", "m22", "Vc"):
             err = abs(params[name]["value"] - truth[name]) / abs(truth[name])
             if err >= worst:
@@ -102,14 +92,14 @@ def max_rel_error(runs) -> tuple[float, str]:
 
 
 def in_process_read(path, seed: int, repeat: int) -> float:
-    from wmrid.io.mcap.reader import read_mcap
+    import wmrid
 
     small = mcap_log(5.0, seed)
-    read_mcap(str(small))  # warm-up: JIT compile / numba cache load, not timed
+    wmrid.read_log(str(small))  # warm-up: JIT compile / numba cache load, not timed
     times = []
     for _ in range(repeat):
         t0 = time.perf_counter()
-        read_mcap(str(path))
+        wmrid.read_log(str(path))
         times.append(time.perf_counter() - t0)
     return median(times)
 
@@ -139,7 +129,7 @@ def main() -> None:
         (f"generic decode (mcap_ros2) x{args.decode_repeat}", dec),
         ("wmrid identify (e2e)", ident),
         ("wmrid inspect (e2e)", insp),
-        (f"read_mcap in-process x{args.repeat}", {"min": None, "median": read, "rss": None}),
+        (f"wmrid.read_log in-process x{args.repeat}", {"min": None, "median": read, "rss": None}),
     ]
     for label, d in rows:
         mn = "" if d["min"] is None else f"{d['min']:7.2f}"
@@ -148,6 +138,13 @@ def main() -> None:
     ratio = ident["median"] / dec["median"]
     verdict = "MET" if ratio <= RATIO_TARGET else "NOT MET"
     print(f"\ntarget: identify end-to-end <= {RATIO_TARGET} x generic decode time -> ratio = {ratio:.3f} ({verdict})")
+    write_results({
+        "log": {"path": str(path.relative_to(ROOT)), "megabytes": size_mb, "messages": n},
+        "generic_decode": dec, "identify": {k: v for k, v in ident.items() if k != "cmd"},
+        "inspect": {k: v for k, v in insp.items() if k != "cmd"}, "read_log_in_process_s": read,
+        "max_relative_error": {"value": err, "parameter": err_name},
+        "ratio_identify_to_decode": ratio, "ratio_target": RATIO_TARGET, "met": ratio <= RATIO_TARGET,
+    })  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -2,8 +2,8 @@
 
 The bags (``--short`` and ``--long`` s, default 3600 and 14400 s: 3.6 M and 14.4 M
 ``sensor_msgs/msg/JointState`` messages, zstd chunks, no odometry) are noisy ``paper`` sinusoid
-simulations (:func:`_common.noisy_paper_sim`, seed ``--seed``) written by
-:func:`wmrid.io.mcap.writer.write_joint_state_mcap`, made once into bench/out/ and reused.
+simulations (``_common.mcap_log``: ``wmrid.simulate``, seed ``--seed``, written by ``wmrid.write_simulation``), made
+once into bench/out/ and reused.
 
 For each bag, ``wmrid identify BAG --robot paper --format json`` runs as a subprocess under
 ``/usr/bin/time -v`` (one untimed warm-up for numba's cache and the page cache, then ``--repeat`` runs):
@@ -11,8 +11,11 @@ wall time and peak RSS (the largest of the runs).  The JSON must parse.  Printed
 ratio long/short of the peak RSS.  Target: ratio <= 1.5 (the MCAP is decoded piece by piece, so memory
 should not grow with the length of the recording).
 
-    /work/venv/bin/python bench/bench_mcap_memory.py
-    /work/venv/bin/python bench/bench_mcap_memory.py --short 600 --long 2400 --repeat 1
+    python3 bench/speed/bench_mcap_memory.py
+    python3 bench/speed/bench_mcap_memory.py --short 600 --long 2400 --repeat 1
+    python3 bench/speed/bench_mcap_memory.py --short 30 --long 120 --repeat 1   # a quick check that it runs
+
+Figures: printed, and written to bench/results/bench_mcap_memory.json.
 """
 
 from __future__ import annotations
@@ -22,22 +25,10 @@ import json
 import sys
 from pathlib import Path
 
-from _common import BENCH, GNU_TIME, OUT, ROOT, cached_log, fmt_rss, median, run_timed, wmrid_cmd
-
-# bench/ is sys.path[0] when run as a script; drop it (bench/ modules must not shadow installed ones).
-sys.path[:] = [p for p in sys.path if p and Path(p).resolve() != BENCH]
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # bench/: the shared module _common
+from _common import GNU_TIME, ROOT, fmt_rss, mcap_log, median, run_timed, wmrid_cmd, write_results
 
 RATIO_TARGET = 1.5  # peak RSS long / short
-
-
-def bag(duration: float, seed: int) -> Path:
-    """The JointState-only zstd MCAP of ``duration`` s in bench/out/, made if missing."""
-    from wmrid.io.mcap.writer import write_joint_state_mcap
-
-    def write(frame, path):
-        write_joint_state_mcap(path, frame, odom_topic=None, force=True)
-
-    return cached_log(OUT / f"paper_jointstate_{duration:g}s_seed{seed}.mcap", duration, write, seed=seed)
 
 
 def measure(path: Path, repeat: int) -> dict:
@@ -63,7 +54,7 @@ def main() -> None:
 
     rows = []
     for duration in (args.short, args.long):
-        path = bag(duration, args.seed)
+        path = mcap_log(duration, args.seed)
         result = measure(path, args.repeat)
         rows.append((duration, path, result))
 
@@ -77,10 +68,18 @@ def main() -> None:
     for name in ("m11", "m22", "Vc"):
         a, b = short["json"]["parameters"][name]["value"], long_["json"]["parameters"][name]["value"]
         print(f"  {name}: {a:.6g} (short)  {b:.6g} (long)")
+    ratio = None
     if short["rss"] and long_["rss"]:
         ratio = long_["rss"] / short["rss"]
         verdict = "MET" if ratio <= RATIO_TARGET else "NOT MET"
         print(f"\ntarget: peak RSS long/short <= {RATIO_TARGET} -> ratio = {ratio:.3f} ({verdict})")
+    write_results({
+        "bags": [{"duration_s": d, "path": str(p.relative_to(ROOT)), "megabytes": p.stat().st_size / 1e6,
+                  "messages": round(d * 1000) + 1, "wall_s": r["wall"], "peak_rss_mb": r["rss"],
+                  "parameters": {n: r["json"]["parameters"][n]["value"] for n in ("m11", "m22", "Vc")}}
+                 for d, p, r in rows],
+        "ratio_peak_rss_long_to_short": ratio, "ratio_target": RATIO_TARGET,
+    })  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -1,22 +1,25 @@
 """``wmrid plan`` speed and quality: the wall time of a plan, its predicted worst relative std and its advantage over
 the paper's sinusoid and the back-and-forth drive of the same duration within the same limits, per seed.
 
-    python bench/bench_plan.py                           # 60 s plans, paper robot and light AMR, seeds 0-2
-    python bench/bench_plan.py --duration 30 --seeds 5 --robots amr
+    python3 bench/speed/bench_plan.py                           # 60 s plans, paper robot and light AMR, seeds 0-2
+    python3 bench/speed/bench_plan.py --duration 30 --seeds 5 --robots amr
+    python3 bench/speed/bench_plan.py --duration 12 --seeds 1 --robots amr   # a quick check that it runs
 
 Limits: the robot's defaults (1 m/s and 1 m/s^2 at the rim, a 4 m x 4 m area) and a torque limit (paper 20 N m, AMR
 1 N m); noise 0.02 rad/s and 0.05 N m (paper) / 0.005 N m (AMR) per sample at 1 kHz.  The issue's budget: a 60 s plan
-in under 60 s on the 2-core machine.  Figures print and go to ``bench/out/bench_plan.json``.
+in under 60 s on the 2-core machine.  Figures print and go to ``bench/results/bench_plan.json``.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
+import sys
 import time
+from pathlib import Path
 
-from _common import OUT
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # bench/: the shared module _common
+from _common import write_results
 
 CASES = {"paper": {"max_torque": 20.0, "tau_noise": 0.05}, "amr": {"max_torque": 1.0, "tau_noise": 0.005}}
 
@@ -53,8 +56,7 @@ def main() -> None:
         print(f"{robot}: median {statistics.median(r['wall_s'] for r in sel):.1f} s (max "
               f"{max(r['wall_s'] for r in sel):.1f} s), x{min(r['x_reversing'] for r in sel):.2f}-"
               f"{max(r['x_reversing'] for r in sel):.2f} vs reversing")  # fmt: skip
-    OUT.mkdir(parents=True, exist_ok=True)
-    (OUT / "bench_plan.json").write_text(json.dumps({"args": vars(args), "rows": rows}, indent=1))
+    write_results({"args": vars(args), "rows": rows})
 
 
 if __name__ == "__main__":

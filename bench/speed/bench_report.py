@@ -3,30 +3,32 @@
 1. The command as a user runs it, ``wmrid report sample_logs/paper_sinusoid.csv --robot paper -o report.html``
    (the log identified on the fly, the HTML page written), in a fresh process: wall time and the process's CPU time,
    median of ``--repeat`` runs after one warm-up (numba's kernels compiled and cached).
-2. The same in this process, stage by stage: reading and identifying the log, building the report (its tables,
-   statements and figures), rendering the page.
+2. The same in this process, stage by stage, through the public API: reading and identifying the log
+   (``wmrid.read_log``, ``wmrid.identify``), building the report (``wmrid.report``: its tables, statements and
+   figures), writing the page (``wmrid.write_report`` to an .html file: the figures rendered as SVG and the page
+   written; before the bench used only the public API it timed the figures' rendering and the page apart).
 
 The checkout this script lives in is measured (``python -m wmrid`` with it first on PYTHONPATH).  The figures are
-printed and written to ``bench/out/bench_report.json`` with the machine, the date and the command.
+printed and written to ``bench/results/bench_report.json`` with the machine, the date and the command.
 
-    python bench/bench_report.py
-    python bench/bench_report.py --repeat 5
+    python3 bench/speed/bench_report.py
+    python3 bench/speed/bench_report.py --repeat 5
+    python3 bench/speed/bench_report.py --repeat 1   # a quick check that it runs
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
 import resource
 import statistics
 import subprocess
 import sys
 import time
-from datetime import datetime, timezone
+from pathlib import Path
 
-from _common import OUT, ROOT
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # bench/: the shared module _common
+from _common import OUT, ROOT, write_results
 
 SAMPLE = ROOT / "sample_logs" / "paper_sinusoid.csv"
 
@@ -54,25 +56,23 @@ def stage_times() -> dict[str, float]:
     """Seconds of each stage in this process (wall), after a warm-up run of the whole."""
     sys.path.insert(0, str(ROOT))
     import wmrid
-    from wmrid.api.reporting import report
-    from wmrid.reporting.report import rendered
-    from wmrid.reporting.report_html import to_html
+
+    page = OUT / "bench_report_in_process.html"
 
     def once() -> dict[str, float]:
         t0 = time.perf_counter()
         log = wmrid.read_log(str(SAMPLE))
         result = wmrid.identify(log, "paper")
         t1 = time.perf_counter()
-        made = report(result, log=log)
+        made = wmrid.report(result, log=log)
         t2 = time.perf_counter()
-        figures = rendered(made, "svg")
+        wmrid.write_report(made, page, force=True)
         t3 = time.perf_counter()
-        to_html(made)
-        t4 = time.perf_counter()
-        assert figures
-        return {"read_and_identify_s": t1 - t0, "build_report_s": t2 - t1, "render_figures_s": t3 - t2,
-                "page_s": t4 - t3, "total_s": t4 - t0}  # fmt: skip
+        assert made.figure_objects
+        return {"read_and_identify_s": t1 - t0, "build_report_s": t2 - t1, "write_html_s": t3 - t2,
+                "total_s": t3 - t0}  # fmt: skip
 
+    OUT.mkdir(parents=True, exist_ok=True)
     once()
     return once()
 
@@ -95,17 +95,7 @@ def main() -> None:
     print(f"  wall {figures['wall_s_median']:.2f} s, CPU {figures['cpu_s_median']:.2f} s (median of {args.repeat})")
     for name, seconds in stages.items():
         print(f"  in process: {name.removesuffix('_s').replace('_', ' ')} {seconds:.2f} s")
-    OUT.mkdir(parents=True, exist_ok=True)
-    record = {
-        "benchmark": "bench/bench_report.py",
-        "made_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "machine": {"platform": platform.platform(), "python": platform.python_version(), "cpus": os.cpu_count()},
-        "run": " ".join([os.path.basename(sys.executable), *sys.argv]),
-        "figures": figures,
-    }
-    path = OUT / "bench_report.json"
-    path.write_text(json.dumps(record, indent=2) + "\n")
-    print(f"wrote {path.relative_to(ROOT)}")
+    write_results(figures)
 
 
 if __name__ == "__main__":
