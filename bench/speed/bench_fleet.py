@@ -1,10 +1,12 @@
 """Benchmark of ``wmrid fleet`` on Dask, and the fleet report's detection, on a simulated fleet (issue 17).
 
-    python3 bench/bench_fleet.py                      # 20 robots x 50 days of 60 s logs at 1 kHz (2.4 GB, ~10 min)
-    python3 bench/bench_fleet.py --robots 6 --days 30 --duration 20   # a quick look
+    python3 bench/speed/bench_fleet.py                    # 20 robots x 50 days of 60 s logs at 1 kHz (2.4 GB, ~10 min)
+    python3 bench/speed/bench_fleet.py --robots 6 --days 30 --duration 20   # a quick look
+    python3 bench/speed/bench_fleet.py --robots 4 --days 8 --duration 10 --overhead-logs 8   # a check that it runs
 
 1. Generates the fleet with wmrid's simulator (``wmrid.simulate``, the library call behind ``wmrid simulate``), one
-   log a day per robot, as ``DIR/R07/2026-01-05.parquet`` (robot id and date from the path):
+   log a day per robot, as ``DIR/R07/2026-01-05.parquet`` (robot id and date from the path; the units and days of
+   ``_common.unit_robot`` and ``_common.day_robot``):
    * unit-to-unit spread: platform mass 3 %, yaw inertia 5 %, centre-of-mass offset 1 cm, each friction coefficient
      15 % (log-normal), all drawn once per robot; the controller keeps the model's nominal parameters;
    * day-to-day: each friction coefficient 1 % (temperature, floor), noise on speeds (0.01 rad/s) and torques
@@ -18,7 +20,8 @@
 4. Runs the fleet report and prints which robots it flags and when, against what was injected.
 5. Projects a 100-node cluster and a million logs from these figures and Dask's published limits.
 
-Seeded throughout (numpy PCG64); the figures vary by +-10 % between runs on a shared machine.
+Seeded throughout (numpy PCG64); the figures vary by +-10 % between runs on a shared machine.  Figures: printed, and
+written to bench/results/bench_fleet.json.
 """
 
 from __future__ import annotations
@@ -31,50 +34,20 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-START = dt.date(2026, 1, 1)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # bench/: the shared module _common
+from _common import FLEET_START as START, WHEEL_COLUMNS, day_robot, unit_robot, write_log, write_results
+
 DRIFTS = {"R03": ("right", 0.03, 20), "R11": ("left", 0.05, 28)}  # robot: (wheel, relative rise per day, onset day)
 PAYLOAD = {"R07": (10.0, 0.05, -0.03, 35)}  # robot: (kg, x m, y m, from day)
-
-
-def unit_robot(rng: np.random.Generator, name: str):
-    """The paper's robot with this unit's own CAD ("true") parameters."""
-    from wmrid.model.robot import BUILTIN_ROBOTS, default_casters
-
-    paper = BUILTIN_ROBOTS["paper"]
-    cad = paper.cad
-    spread = np.exp(0.15 * rng.standard_normal(4))
-    cad = replace(
-        cad, m_p=cad.m_p * (1 + 0.03 * rng.standard_normal()), I_p=cad.I_p * (1 + 0.05 * rng.standard_normal()),
-        d_x=cad.d_x + 0.01 * rng.standard_normal(), F_v1=cad.F_v1 * spread[0], F_v2=cad.F_v2 * spread[1],
-        F_d1=cad.F_d1 * spread[2], F_d2=cad.F_d2 * spread[3],
-    )  # fmt: skip
-    return replace(paper, name=name, cad=cad, casters=default_casters(cad))
-
-
-def day_robot(unit, rng: np.random.Generator, robot_id: str, day: int, drifts: dict | None = None):
-    """The unit on one day: friction with the day's jitter and any injected drift (``drifts``: as :data:`DRIFTS`,
-    the default)."""
-    drifts = DRIFTS if drifts is None else drifts
-    cad = unit.cad
-    factor = 1 + 0.01 * rng.standard_normal(4)
-    if robot_id in drifts:
-        wheel, rate, onset = drifts[robot_id]
-        rise = 1 + rate * max(0, day - onset)
-        factor[[0, 2] if wheel == "right" else [1, 3]] *= rise
-    cad = replace(cad, F_v1=cad.F_v1 * factor[0], F_v2=cad.F_v2 * factor[1], F_d1=cad.F_d1 * factor[2],
-                  F_d2=cad.F_d2 * factor[3])  # fmt: skip
-    return replace(unit, cad=cad)
 
 
 def generate(folder: Path, robots: int, days: int, duration: float, rate: float) -> dict:
     """Write the fleet's logs; returns what was injected."""
     import wmrid
-    from wmrid.io.logs import write_log
 
     folder.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -89,7 +62,7 @@ def generate(folder: Path, robots: int, days: int, duration: float, rate: float)
                 size += path.stat().st_size
                 continue
             rng = np.random.Generator(np.random.PCG64([17, u, day]))
-            robot = day_robot(unit, rng, robot_id, day)
+            robot = day_robot(unit, rng, robot_id, day, DRIFTS)
             payload = None
             if robot_id in PAYLOAD and day >= PAYLOAD[robot_id][3]:
                 mass, x, y, _ = PAYLOAD[robot_id]
@@ -101,8 +74,7 @@ def generate(folder: Path, robots: int, days: int, duration: float, rate: float)
                 payload=payload,
                 noise=wmrid.NoiseSettings(seed=int(rng.integers(2**31)), eta_std=0.01, tau_std=0.02),
             )
-            frame = run.to_frame()[["t", "eta_r", "eta_l", "tau_r", "tau_l"]]
-            write_log(frame, str(path))
+            write_log(run.to_frame()[WHEEL_COLUMNS], path, run.truth)
             size += path.stat().st_size
     return {"seconds": time.perf_counter() - t0, "bytes": size, "logs": robots * days}
 
@@ -125,9 +97,9 @@ def bare_identify(log: Path) -> dict:
 
 
 def run_fleet(folder: Path, table: Path, workers: int, fit: bool = True, logs: list[str] | None = None) -> dict:
-    from wmrid.fleets.run import fleet
+    import wmrid
 
-    run = fleet(logs or [str(folder)], str(table), robot="paper", workers=workers, force=True, fit=fit)
+    run = wmrid.fleet(logs or [str(folder)], str(table), robot="paper", workers=workers, force=True, fit=fit)
     rows = [r for r in run.rows if r["error"] is None]
     task_s = float(np.mean([r["run_time_s"] for r in run.rows]))
     per_log_worker = run.processing_s * workers / max(run.identified, 1)
@@ -144,7 +116,7 @@ def run_external(logs: list[str], table: Path, workers: int) -> dict:
     the scheduler's own CPU time is measured apart from the client's (psutil on its process)."""
     import psutil
 
-    from wmrid.fleets.run import fleet
+    import wmrid
 
     folder = Path(tempfile.mkdtemp(prefix="wmrid-sched-"))
     sched_file = folder / "scheduler.json"
@@ -160,7 +132,7 @@ def run_external(logs: list[str], table: Path, workers: int) -> dict:
                                       stderr=subprocess.DEVNULL))  # fmt: skip
         sched = psutil.Process(procs[0].pid)
         before = sched.cpu_times()
-        run = fleet(logs, str(table), robot="paper", scheduler=address, force=True)
+        run = wmrid.fleet(logs, str(table), robot="paper", scheduler=address, force=True)
         after = sched.cpu_times()
     finally:
         for p in procs[::-1]:
@@ -221,14 +193,25 @@ def main() -> None:
         print(f"separately started scheduler, 2 workers, {ext['logs']} logs: {ext['logs_per_s']:.2f} logs/s; CPU per "
               f"task: scheduler {1e3 * ext['scheduler_cpu_per_task_s']:.2f} ms, client "
               f"{1e3 * ext['client_cpu_per_task_s']:.2f} ms")  # fmt: skip
-        review(table)
-        project(results, bare, gen, ext)
+        flagged = review(table)
+        projection = project(results, bare, gen, ext)
+        write_results({
+            "fleet": {"robots": args.robots, "days": args.days, "duration_s": args.duration, "rate_hz": args.rate},
+            "generate": gen, "bare": bare, "workers": results, "speedup_2_over_1": speedup,
+            "overhead": {"logs": len(subset), "fleet_per_log_s": per_log, "loop_per_log_s": loop},
+            "external": ext, "flagged": flagged,
+            "injected": {"drifts": {k: {"wheel": w, "per_day": r, "onset_day": d} for k, (w, r, d) in DRIFTS.items()},
+                         "payload": {k: {"kg": m, "x": x, "y": y, "from_day": d}
+                                     for k, (m, x, y, d) in PAYLOAD.items()}},
+            "projection": projection,
+        })  # fmt: skip
     finally:
         if args.dir is None:
             shutil.rmtree(folder, ignore_errors=True)
 
 
-def review(table: Path) -> None:
+def review(table: Path) -> dict[str, list[str]]:
+    """The fleet report's flagged robots and their findings, printed beside what was injected."""
     import wmrid
 
     rep = wmrid.fleet_report(str(table), robot="paper")
@@ -244,9 +227,10 @@ def review(table: Path) -> None:
         )
     for robot_id, (mass, x, y, day) in PAYLOAD.items():
         print(f"  injected: {robot_id} payload {mass:g} kg at ({x:g}, {y:g}) m from {START + dt.timedelta(days=day)}")
+    return {rv.robot_id: list(rv.findings) for rv in flagged}
 
 
-def project(results: list[dict], bare: dict, gen: dict, ext: dict) -> None:
+def project(results: list[dict], bare: dict, gen: dict, ext: dict) -> dict:
     """A 100-node cluster (32 cores each) and a million logs, from the measured figures: compute, the scheduler (its
     measured CPU per task, at least Dask's published "about 1 ms of overhead per task", distributed.dask.org), the
     client, and the storage it reads from."""
@@ -258,6 +242,7 @@ def project(results: list[dict], bare: dict, gen: dict, ext: dict) -> None:
     client = ext["client_cpu_per_task_s"]
     print(f"projection, 100 nodes x 32 cores, 1,000,000 logs like these ({task:.3f} core-s and {mb:.1f} MB each):")
     print(f"  compute: {compute:,.0f} logs/s -> {1e6 / compute:,.0f} s")
+    out: dict = {"nodes": 100, "cores": cores, "logs": 1_000_000, "compute_logs_per_s": compute, "batches": {}}
     for batch in (1, 16, 64):
         limit = batch / max(sched, client)
         rate = min(compute, limit)
@@ -265,7 +250,9 @@ def project(results: list[dict], bare: dict, gen: dict, ext: dict) -> None:
             f"  --batch {batch}: the scheduler and client handle {limit:,.0f} logs/s -> {rate:,.0f} logs/s, "
             f"{1e6 / rate:,.0f} s; reads {rate * mb / 1e3:,.1f} GB/s from storage"
         )
-    print(json.dumps({"results": results, "bare": bare, "generate": gen, "external": ext}, default=float))
+        out["batches"][str(batch)] = {"limit_logs_per_s": limit, "logs_per_s": rate, "seconds": 1e6 / rate,
+                                      "storage_gb_per_s": rate * mb / 1e3}  # fmt: skip
+    return out
 
 
 if __name__ == "__main__":
