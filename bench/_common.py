@@ -35,8 +35,9 @@ BENCH = Path(__file__).resolve().parent
 ROOT = BENCH.parent
 #: Generated logs and other large outputs, reused between runs (git-ignored).
 OUT = BENCH / "out"
-#: Each script's figures, ``<script>.json`` (committed).
-RESULTS = BENCH / "results"
+#: Each script's figures, ``<script>.json`` (committed); WMRID_BENCH_RESULTS names another folder (the tests that run
+#: a script write there, not over the committed figures).
+RESULTS = Path(os.environ.get("WMRID_BENCH_RESULTS") or BENCH / "results")
 GNU_TIME = "/usr/bin/time" if os.access("/usr/bin/time", os.X_OK) else None
 
 
@@ -277,5 +278,5 @@ def write_results(figures: dict[str, Any], *, variant: str | None = None, script
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
-    print(f"figures written to {path.relative_to(ROOT)}")
+    print(f"figures written to {path.relative_to(ROOT) if path.is_relative_to(ROOT) else path}")
     return path

@@ -1,16 +1,17 @@
 """Physics benchmark (issue 11): accuracy and std coverage of the observer and IDIM on MuJoCo multibody logs.
 
-    python bench/bench_physics.py --quick                      # 7 cases x (3 seeds + clean), about 1 min on 2 cores
-    python bench/bench_physics.py --json /tmp/bench_physics.json   # 27 cases x (20 seeds + clean), ~15-20 min
-    python bench/bench_physics.py --robots amr --seeds 50 --workers 4
+    python3 bench/accuracy/bench_physics.py --quick                 # 7 cases x (3 seeds + clean), ~1 min on 2 cores
+    python3 bench/accuracy/bench_physics.py --json /tmp/bench_physics.json   # 27 cases x (20 seeds + clean), ~20 min
+    python3 bench/accuracy/bench_physics.py --robots amr --seeds 50 --workers 4
+    python3 bench/accuracy/bench_physics.py --quick --robots amr --seeds 1 --duration 10   # a check that it runs
 
-The logs come from :func:`wmrid.sim.multibody.simulate_multibody` (rigid bodies, contacts, joint friction and
-casters derived by the engine), not from wmrid's reduced simulator, so they contain physics that the
-identified model leaves out.  A case is robot x trajectory x log rate x caster x floor:
+The logs come from the MuJoCo multibody prototype (``wmrid.simulate(robot, engine=wmrid.MultibodySettings(...))``:
+rigid bodies, contacts, joint friction and casters derived by the engine), not from wmrid's reduced simulator, so
+they contain physics that the identified model leaves out.  A case is robot x trajectory x log rate x caster x floor:
 
-* robots ``paper``, ``amr``, ``heavy`` (``BUILTIN_ROBOTS``: CAD set = plant, nominal set = controller and
+* robots ``paper``, ``amr``, ``heavy`` (the built-in robots: CAD set = plant, nominal set = controller and
   estimator start); ``heavy`` carries a 50 kg payload ``Payload(50, 0.1, 0, 2)`` throughout (the truth is
-  then the loaded robot, ``sim.true``);
+  then the loaded robot's, the run's ``truth``);
 * trajectories ``sinusoid`` and ``reversing``; logs at 1000 and 100 Hz (the control loop runs at 1 kHz in
   both); casters frictionless (``caster_resistance=0``) and resisting (0.015, rolling resistance x load);
   floor friction 1 (rubber on concrete);
@@ -28,11 +29,15 @@ casters); seed 0 is also run noise-free as the case's "clean" row.  The noise is
 signals only (no caster disturbance is injected), so the simulated motion is the same in every seed of a
 case: the spread over seeds is the noise's, and the model's systematic error is in every seed alike.
 
-Each log is identified with the observer (``identify(log, robot)``, default settings, plus
-``control_rate=1000`` on the 100 Hz logs, as the prototype's controller runs at 1 kHz), the observer with
-``friction="wheel+caster"`` (the robots' caster positions; reversing logs only) and IDIM
-(``methods.run("idim", ...)``), reading ``result.parameters`` (name -> (value, std)) and
-``result.diagnostics["flagged"]`` generically.  Reported per case and method:
+Each log is identified with ``wmrid.identify``: the default method (``observer``: the observer with the closed-loop
+check, which may report IDIM or IDIM-IV instead), the wheels' friction model, plus ``control_rate=1000`` on the 100
+Hz logs, as the prototype's controller runs at 1 kHz; the observer with ``friction="wheel+caster"`` (the robots' caster
+positions; reversing logs only); and ``method="idim"``; reading ``result.parameters`` (name -> (value, std)) and
+``result.diagnostics["flagged"]`` generically.  (Before the bench used only the public API, the first ran the
+closed-loop check after the observer's passes rather than within them, and IDIM started from that observer run: the
+same estimates and std on the cases compared, but IDIM's seconds now include its observer run.)
+
+Reported per case and method:
 
 1. error in % of the truth, median over seeds: inertia = max over M11, M12, M22; Vc; viscous = max over
    Fv1, Fv2; Coulomb = max over Fd1, Fd2;
@@ -47,9 +52,10 @@ Each log is identified with the observer (``identify(log, robot)``, default sett
 
 A ``WmridError`` of the simulation or of a method makes a failure row; other exceptions are recorded as
 crashes (the run goes on and exits with status 1).  Simulated logs are cached as .npz under ``--cache``,
-keyed by the case settings, noise, seed, duration, MuJoCo version and ``wmrid.sim.multibody.PHYSICS_VERSION``, so
-a re-run after estimator changes only re-identifies.  Prints two Markdown tables (noisy seeds; clean
-runs), the offenders, the failures, wall time and samples/s; ``--json PATH`` dumps everything.
+keyed by the case settings, noise, seed, duration, MuJoCo version and ``wmrid.MultibodySettings.physics_version``,
+so a re-run after estimator changes only re-identifies.  Prints two Markdown tables (noisy seeds; clean
+runs), the offenders, the failures, wall time and samples/s; writes the summaries to
+bench/results/bench_physics.json; ``--json PATH`` dumps everything (every log's row too).
 """
 
 from __future__ import annotations
@@ -70,6 +76,11 @@ from typing import Any
 
 import numpy as np
 from scipy.special import stdtr, stdtrit
+
+import wmrid
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # bench/: the shared module _common
+from _common import jsonable, write_results
 
 ROBOTS = ("paper", "amr", "heavy")
 TRAJECTORIES = ("sinusoid", "reversing")
@@ -92,7 +103,7 @@ CONTROL_RATE = 1000.0
 PARAMS = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
 GROUPS = {"inertia": ("M11", "M12", "M22"), "Vc": ("Vc",), "viscous": ("Fv1", "Fv2"), "Coulomb": ("Fd1", "Fd2")}
 Z_LIMIT = 3.0
-CACHE_FORMAT = 1
+CACHE_FORMAT = 2  # 2: the truth as the run states it (base parameters), not the physical set
 
 
 @dataclasses.dataclass(frozen=True)
@@ -120,9 +131,7 @@ class Job:
 
 
 def normal_floor() -> float:
-    from wmrid.sim.multibody_model import FLOOR_FRICTION
-
-    return float(FLOOR_FRICTION)
+    return float(wmrid.MultibodySettings().floor_friction)
 
 
 def case_set(robots: tuple[str, ...], quick: bool, only: dict[str, Any] | None = None) -> list[Case]:
@@ -149,13 +158,11 @@ def reference_case(robot: str) -> Case:
 
 
 def sim_version() -> str:
-    """MuJoCo's version and the prototype's PHYSICS_VERSION (bumped with every change to the simulated motion):
+    """MuJoCo's version and the prototype's physics version (raised with every change to the simulated motion):
     a change of either invalidates the cache."""
     import mujoco
 
-    import wmrid.sim.multibody
-
-    return f"mujoco {mujoco.__version__} multibody physics {wmrid.sim.multibody.PHYSICS_VERSION}"
+    return f"mujoco {mujoco.__version__} multibody physics {wmrid.MultibodySettings.physics_version}"
 
 
 def cache_path(job: Job) -> Path:
@@ -176,7 +183,8 @@ def cache_path(job: Job) -> Path:
 
 
 def simulate_cached(job: Job) -> tuple[dict[str, Any], float | None]:
-    """The log's arrays, physical truth and settings; from the cache, else simulated (then also its seconds)."""
+    """The log's arrays, truth (base parameters) and settings; from the cache, else simulated (then also its
+    seconds)."""
     path = cache_path(job)
     if path.exists():
         try:
@@ -185,38 +193,31 @@ def simulate_cached(job: Job) -> tuple[dict[str, Any], float | None]:
                     "t": z["t"],
                     "eta": z["eta"],
                     "tau": z["tau"],
-                    "true": json.loads(str(z["true"])),
+                    "truth": json.loads(str(z["truth"])),
                     "settings": json.loads(str(z["settings"])),
                 }, None
         except (OSError, ValueError, KeyError):
             pass  # unreadable (e.g. a killed run's half file): simulate again
-    from wmrid.model.robot import BUILTIN_ROBOTS, Payload
-    from wmrid.sim.multibody import simulate_multibody
-    from wmrid.sim.multibody_model import MultibodySettings
-    from wmrid.sim.scenario import NoiseSettings
-
     c = job.case
-    robot = BUILTIN_ROBOTS[c.robot]
-    payload = Payload(*PAYLOADS[c.robot]) if c.robot in PAYLOADS else None
+    payload = wmrid.Payload(*PAYLOADS[c.robot]) if c.robot in PAYLOADS else None
     t0 = time.perf_counter()
-    sim = simulate_multibody(
-        robot.cad,
-        robot.nominal,
-        settings=MultibodySettings(caster_resistance=c.caster, floor_friction=c.floor),
+    run = wmrid.simulate(
+        c.robot,
+        engine=wmrid.MultibodySettings(caster_resistance=c.caster, floor_friction=c.floor),
         trajectory=c.trajectory,
         duration=job.duration,
         rate=c.rate,
-        noise=NoiseSettings(eta_std=job.eta_std, tau_std=job.tau_std),
-        seed=job.seed,
+        noise=wmrid.NoiseSettings(eta_std=job.eta_std, tau_std=job.tau_std, seed=job.seed),
         payload=payload,
     )
     seconds = time.perf_counter() - t0
+    sim = run.log
     data = {
         "t": np.array(sim.t),
         "eta": np.array(sim.eta),
         "tau": np.array(sim.tau),
-        "true": dataclasses.asdict(sim.true),
-        "settings": json.loads(json.dumps(sim.settings, default=float)),
+        "truth": {k: float(v) for k, v in run.truth["parameters"].items()},
+        "settings": json.loads(json.dumps(run.truth["settings"], default=float)),
     }
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
@@ -225,7 +226,7 @@ def simulate_cached(job: Job) -> tuple[dict[str, Any], float | None]:
         t=data["t"],
         eta=data["eta"],
         tau=data["tau"],
-        true=json.dumps(data["true"]),
+        truth=json.dumps(data["truth"]),
         settings=json.dumps(data["settings"]),
     )
     os.replace(tmp, path)
@@ -263,17 +264,10 @@ def _error_text(err: BaseException) -> str:
 
 def run_job(job: Job) -> dict[str, Any]:
     """Simulate (or load) one log and identify it with every method; one JSON-ready row."""
-    from wmrid.core.errors import WmridError
-    from wmrid.core.wheel_log import WheelLog
-    from wmrid.estimators import feedback, methods
-    from wmrid.model import dynamics as model
-    from wmrid.model.robot import BUILTIN_ROBOTS, PhysicalParameters
-    from wmrid.pipeline.identify import identify
-
     row: dict[str, Any] = {"case": dataclasses.asdict(job.case), "seed": job.seed, "clean": job.clean}
     try:
         data, sim_seconds = simulate_cached(job)
-    except WmridError as err:
+    except wmrid.WmridError as err:
         row.update(stage="simulate", status="fail", error=_error_text(err), n=0, methods={})
         return row
     except Exception as err:
@@ -289,14 +283,12 @@ def run_job(job: Job) -> dict[str, Any]:
         tau_rms=float(np.sqrt(np.mean(tau**2))),
         status="ok",
     )
-    robot = BUILTIN_ROBOTS[job.case.robot]
-    truth = model.named_base(model.base_parameters(PhysicalParameters(**data["true"])))
+    truth = data["truth"]
     row["truth"] = {p: truth.get(p, math.nan) for p in PARAMS}
     c = job.case
     source = f"mb {c.robot} {c.trajectory} {c.rate:g}Hz c{c.caster:g} f{c.floor:g} seed {job.seed}"
-    log = WheelLog(t=data["t"], eta=data["eta"], tau=tau, source=source + (" clean" if job.clean else ""))
+    log = wmrid.WheelLog(t=data["t"], eta=data["eta"], tau=tau, source=source + (" clean" if job.clean else ""))
     out: dict[str, Any] = {}
-    observer = None
     # The prototype's controller runs at 1 kHz: a slower log says so with --control-rate, as its user would
     # (what wmrid does without it is issue 12's subject).
     control_rate = CONTROL_RATE if c.rate < CONTROL_RATE else None
@@ -304,29 +296,25 @@ def run_job(job: Job) -> dict[str, Any]:
         entry: dict[str, Any] = {"status": "ok"}
         t0 = time.perf_counter()
         try:
-            if name == "observer":
-                # the observer's own run (the other methods start from it), then the default's closed-loop check
-                observer = identify(log, robot, control_rate=control_rate, feedback=False)
-                res = feedback.check(observer, log, robot)
+            if name == "observer":  # the default: the observer's run and its closed-loop check
+                options = wmrid.ObserverOptions(friction="wheel", control_rate=control_rate)
+                res = wmrid.identify(log, c.robot, observer=options)
             elif name == "observer+caster":
                 if c.trajectory == "sinusoid":
                     out[name] = {"status": "skip", "seconds": 0.0}
                     continue
-                res = identify(log, robot, friction="wheel+caster", control_rate=control_rate)
+                options = wmrid.ObserverOptions(friction="wheel+caster", control_rate=control_rate)
+                res = wmrid.identify(log, c.robot, observer=options)
             else:
-                if observer is None:
-                    raise RuntimeError("no observer result")
-                res = methods.run(name, log, observer, methods.MethodOptions(), robot)
+                options = wmrid.ObserverOptions(friction="wheel", control_rate=control_rate)
+                res = wmrid.identify(log, c.robot, method=name, observer=options)
             entry["parameters"] = {p: _pair(res.parameters.get(p)) for p in PARAMS}
             entry["flagged"] = _flagged(res.diagnostics)
             entry["dof"] = res.diagnostics.get("uncertainty", {}).get("dof")
-        except WmridError as err:
+        except wmrid.WmridError as err:
             entry.update(status="fail", error=_error_text(err))
         except Exception as err:
-            if name != "observer" and observer is None:
-                entry.update(status="fail", error="observer failed")
-            else:
-                entry.update(status="crash", error=traceback.format_exc(limit=4), error_short=_error_text(err))
+            entry.update(status="crash", error=traceback.format_exc(limit=4), error_short=_error_text(err))
         entry["seconds"] = time.perf_counter() - t0
         out[name] = entry
     row["methods"] = out
@@ -416,18 +404,6 @@ def fmt(x: float) -> str:
     return f"{x:.1g}"
 
 
-def jsonable(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {str(k): jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [jsonable(v) for v in x]
-    if isinstance(x, (float, np.floating)):
-        return float(x) if math.isfinite(x) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    return x
-
-
 def run_all(pool: ProcessPoolExecutor, jobs: list[Job], what: str) -> list[dict[str, Any]]:
     """Run ``jobs`` in the pool, in their order, with a progress line to stderr every ~5 %."""
     start = time.perf_counter()
@@ -493,9 +469,12 @@ def main() -> int:
     if seeds < 1 or args.workers < 1 or not args.duration > 0:
         ap.error("--seeds and --workers must be >= 1 and --duration > 0")
 
-    from wmrid.sim.multibody_model import import_mujoco
-
-    import_mujoco()  # a clear message when MuJoCo is missing
+    try:
+        import mujoco  # noqa: F401  (a clear message when MuJoCo is missing)
+    except ImportError:
+        raise SystemExit(
+            "the physics benchmark needs MuJoCo: pip install 'wmrid[physics]' (or pip install mujoco)"
+        ) from None
     wall0 = time.perf_counter()
     version = sim_version()
     robots = tuple(args.robots)
@@ -660,40 +639,45 @@ def main() -> int:
             print(f"- {m}: median {statistics.median(secs):.2f} s per log")
     print(f"- {len(fresh)} of {len(all_rows)} logs simulated, the rest read from the cache")
 
+    dump = {
+        "config": {
+            "seeds": seeds,
+            "duration": args.duration,
+            "quick": args.quick,
+            "robots": list(robots),
+            "eta_std": ETA_STD,
+            "tau_fraction": TAU_FRACTION,
+            "payloads": PAYLOADS,
+            "z_limit": Z_LIMIT,
+            "sim_version": version,
+            "workers": args.workers,
+        },
+        "tau_rms": tau_rms,
+        "tau_std": tau_std,
+        "slip_checks": slip_checks,
+        "summaries": [{"clean": clean, **s} for (_, clean, _), s in summaries.items()],
+        "acceptance": {
+            "unflagged_beyond_3_std": len(offenders),
+            "pairs": n_pairs,
+            "undetermined": undetermined,
+            "unflagged_pairs": unflagged,
+            "expected_by_chance": chance,
+            "beyond_99_7_interval": beyond_interval,
+        },
+        "offenders": offenders,
+        "failures": [
+            {"case": label, "seed": seed, "clean": clean, "method": m, "error": e.get("error")}
+            for label, seed, clean, m, e in failures
+        ],
+        "timing": {"wall": wall, "samples": samples, "samples_per_s": samples / wall, "estimate_seconds": est},
+        "logs": rows,
+    }
+    # the results file: the summaries with their offenders counted (every offender is listed once, below them), the
+    # methods' median seconds; every log's row only in --json
+    summary = [{**entry, "offenders": len(entry["offenders"])} for entry in dump["summaries"]]
+    timing = {**dump["timing"], "estimate_seconds": {m: statistics.median(v) for m, v in est.items() if v}}
+    write_results({**{k: v for k, v in dump.items() if k != "logs"}, "summaries": summary, "timing": timing})
     if args.json:
-        dump = {
-            "config": {
-                "seeds": seeds,
-                "duration": args.duration,
-                "quick": args.quick,
-                "robots": list(robots),
-                "eta_std": ETA_STD,
-                "tau_fraction": TAU_FRACTION,
-                "payloads": PAYLOADS,
-                "z_limit": Z_LIMIT,
-                "sim_version": version,
-                "workers": args.workers,
-            },
-            "tau_rms": tau_rms,
-            "tau_std": tau_std,
-            "slip_checks": slip_checks,
-            "summaries": [{"clean": clean, **s} for (_, clean, _), s in summaries.items()],
-            "acceptance": {
-                "unflagged_beyond_3_std": len(offenders),
-                "pairs": n_pairs,
-                "undetermined": undetermined,
-                "unflagged_pairs": unflagged,
-                "expected_by_chance": chance,
-                "beyond_99_7_interval": beyond_interval,
-            },
-            "offenders": offenders,
-            "failures": [
-                {"case": label, "seed": seed, "clean": clean, "method": m, "error": e.get("error")}
-                for label, seed, clean, m, e in failures
-            ],
-            "timing": {"wall": wall, "samples": samples, "samples_per_s": samples / wall, "estimate_seconds": est},
-            "logs": rows,
-        }
         Path(args.json).write_text(json.dumps(jsonable(dump), indent=1))
         print(f"JSON written to {args.json}")
     return 1 if crashes else 0

@@ -1,34 +1,38 @@
-"""The paper's Tables 2 and 3 side by side with wmrid, as Markdown: ``python3 bench/paper_tables.py``.
+"""The paper's Tables 2 and 3 side by side with wmrid, as Markdown: ``python3 bench/accuracy/paper_tables.py``.
 
 Paper columns are copied verbatim from Hoang & Kang (2015), Table 2 ("Estimated results of the
 intermediate parameters") and Table 3 ("Estimated results of the dynamic parameters"); Table 3 has no
 nominal column.  wmrid columns:
 
-* nominal: Table 1's nominal column through Eqs. (10)-(14), (23)-(24)
-  (``model.intermediate_parameters(model.base_parameters(robot.nominal), form)``);
+* nominal: Table 1's nominal column through Eqs. (10)-(14) (the result's ``nominal`` base parameters) and
+  Eqs. (23)-(24) (:func:`intermediate`, checked against the observer's start, which is that);
 * true: Table 1's CAD column plus the paper's friction F_v = diag(0.01, 0.015), F_d = diag(0.045, 0.04)
-  through the same equations;
-* estimate: ``wmrid.pipeline.identify.identify`` on ``sample_logs/paper_sinusoid.parquet`` with the built-in
-  ``paper`` robot, once with wmrid's defaults and once with the paper's own settings k = 1, alpha = 5000.
+  through the same equations (the result's ``reference``);
+* estimate: ``wmrid.identify`` on ``sample_logs/paper_sinusoid.parquet`` with the built-in ``paper`` robot, once
+  with wmrid's defaults and once with the paper's own settings k = 1, alpha = 5000 (``wmrid.ObserverOptions``).
 
 Error % is |estimate - true| / |true| * 100 (as in the paper), each against its own "true" column.
 "gap left %" is (estimate - true) / (nominal - true) * 100: the share of the nominal start's error still
 in the estimate at the end of the 40 s log (0 = converged, 100 = still at the start, above 100 = further
 from the truth than the start).
-Computed numbers are printed to 6 significant digits.
+Computed numbers are printed to 6 significant digits, and written to bench/results/paper_tables.json.
 """
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
-from wmrid.io.logs import read_log
-from wmrid.model import dynamics as model
-from wmrid.model.robot import BUILTIN_ROBOTS
-from wmrid.pipeline.identify import identify
+import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
+import wmrid
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # bench/: the shared module _common
+from _common import ROOT, write_results
+
 LOG = ROOT / "sample_logs" / "paper_sinusoid.parquet"
+#: The base parameters theta0 of Eq. (21), in order.
+BASE = ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
 
 # Hoang & Kang (2015), Table 2: parameter -> (nominal, true, estimated, error %), as printed.
 PAPER_TABLE2 = {
@@ -75,6 +79,18 @@ def gap_left_pct(est: float, true: float, nominal: float) -> str:
     return "—" if nominal == true else g6((est - true) / (nominal - true) * 100.0)
 
 
+def intermediate(base: dict[str, float], signs: tuple[int, int]) -> np.ndarray:
+    """theta (2, 7) of Eqs. (23)-(24): row i is [m_i1, m_i2, m_i1 Vc, m_i2 Vc, m_i1 Fv1, m_i2 Fv2,
+    m_i1 Fd1 s1 + m_i2 Fd2 s2] with m = [[m11, m12], [m12, m22]] and s the wheels' signs of the paper's form."""
+    m = np.array([[base["m11"], base["m12"]], [base["m12"], base["m22"]]])
+    s1, s2 = signs
+    rows = []
+    for mi1, mi2 in m:
+        rows.append([mi1, mi2, mi1 * base["Vc"], mi2 * base["Vc"], mi1 * base["Fv1"], mi2 * base["Fv2"],
+                     mi1 * base["Fd1"] * s1 + mi2 * base["Fd2"] * s2])  # fmt: skip
+    return np.array(rows)
+
+
 def markdown(header: list[str], rows: list[list[str]]) -> str:
     align = ["---"] + ["---:"] * (len(header) - 1)
     lines = ["| " + " | ".join(header) + " |", "| " + " | ".join(align) + " |"]
@@ -83,18 +99,21 @@ def markdown(header: list[str], rows: list[list[str]]) -> str:
 
 
 def main() -> None:
-    robot = BUILTIN_ROBOTS["paper"]
-    log = read_log(str(LOG))
-    default = identify(log, robot)
-    paper_run = identify(log, robot, k=PAPER_K, alpha=PAPER_ALPHA)
+    robot = wmrid.load_robot("paper")
+    log = wmrid.read_log(LOG)
+    default = wmrid.identify(log, robot)
+    paper_run = wmrid.identify(log, robot, observer=wmrid.ObserverOptions(k=PAPER_K, alpha=PAPER_ALPHA))
     form = default.form
     if paper_run.form != form or form.kind != "paper" or form.signs != (1, 1):
         raise SystemExit(f"expected the paper form with both wheels forward, got {form} / {paper_run.form}")
 
-    base_nom = model.base_parameters(robot.nominal)
-    base_true = model.base_parameters(robot.cad)
-    theta_nom = model.intermediate_parameters(base_nom, form).ravel()
-    theta_true = model.intermediate_parameters(base_true, form).ravel()
+    base_nom = np.array([default.nominal[n] for n in BASE])
+    base_true = np.array([default.reference[n] for n in BASE])
+    theta_nom = intermediate(default.nominal, form.signs).ravel()
+    theta_true = intermediate(default.reference, form.signs).ravel()
+    start = np.asarray(default.observer_settings.theta_init).ravel()  # the observer starts from the nominal theta
+    if not np.allclose(theta_nom, start, rtol=1e-12, atol=0):
+        raise SystemExit(f"Eqs. (23)-(24) of the nominal set {theta_nom} differ from the observer's start {start}")
     theta_def = default.theta.ravel()
     theta_pap = paper_run.theta.ravel()
 
@@ -149,7 +168,7 @@ def main() -> None:
     print()
     header[1] = "paper nominal (not printed)"
     rows = []
-    for j, name in enumerate(model.THETA0_NAMES):
+    for j, name in enumerate(BASE):
         p_true, p_est, p_err = PAPER_TABLE3[name]
         est_d = default.parameters[name][0]
         est_p = paper_run.parameters[name][0]
@@ -173,12 +192,9 @@ def main() -> None:
     print()
 
     d_def, d_pap = default.diagnostics, paper_run.diagnostics
-    worst_def = max(abs(default.parameters[n][0] / base_true[j] - 1) for j, n in enumerate(model.THETA0_NAMES))
-    worst_pap = max(abs(paper_run.parameters[n][0] / base_true[j] - 1) for j, n in enumerate(model.THETA0_NAMES))
-    gaps = [
-        abs((paper_run.parameters[n][0] - base_true[j]) / (base_nom[j] - base_true[j]))
-        for j, n in enumerate(model.THETA0_NAMES)
-    ]
+    worst_def = max(abs(default.parameters[n][0] / base_true[j] - 1) for j, n in enumerate(BASE))
+    worst_pap = max(abs(paper_run.parameters[n][0] / base_true[j] - 1) for j, n in enumerate(BASE))
+    gaps = [abs((paper_run.parameters[n][0] - base_true[j]) / (base_nom[j] - base_true[j])) for j, n in enumerate(BASE)]
     print(
         f"wmrid default (alpha = {default.observer_settings.alpha:g}): largest base-parameter error "
         f"{g6(100 * worst_def)} %; lambda_min(Gamma) at the end = {g6(d_def['lambda_min_gamma'])}; "
@@ -193,6 +209,19 @@ def main() -> None:
         f"(data part {g6(d_pap['lambda_min_gamma'] - PAPER_ALPHA)}) against alpha = {PAPER_ALPHA:g}; "
         f"{len(paper_run.warnings)} warning(s)."
     )
+    runs = {"default": default, "paper_settings": paper_run}
+    write_results({
+        "log": str(LOG.relative_to(ROOT)), "samples": int(log.t.size), "form": [form.kind, list(form.signs)],
+        "settings": {k: {"k": r.observer_settings.k, "alpha": r.observer_settings.alpha} for k, r in runs.items()},
+        "intermediate": {name: {"nominal": theta_nom[j], "true": theta_true[j], "default": theta_def[j],
+                                "paper_settings": theta_pap[j]} for j, name in enumerate(form.theta_names())},
+        "base": {name: {"nominal": base_nom[j], "true": base_true[j],
+                        **{k: r.parameters[name][0] for k, r in runs.items()}} for j, name in enumerate(BASE)},
+        "largest_error_percent": {"default": 100 * worst_def, "paper_settings": 100 * worst_pap},
+        "gap_left_percent": {"min": 100 * min(gaps), "max": 100 * max(gaps)},
+        "lambda_min_gamma": {k: r.diagnostics["lambda_min_gamma"] for k, r in runs.items()},
+        "warnings": {k: len(r.warnings) for k, r in runs.items()},
+    })  # fmt: skip
 
 
 if __name__ == "__main__":
