@@ -1,12 +1,14 @@
 """Ten minutes of the MCAP framing fuzzer (tests/contract/test_fuzz_mcap.py), in fresh processes so a segfault is
 counted.
 
-    python bench/fuzz_mcap.py                 # 600 s, 1000 examples per compression per run
-    python bench/fuzz_mcap.py --seconds 60
+    python3 bench/fuzz/fuzz_mcap.py                 # 600 s, 1000 examples per compression per run
+    python3 bench/fuzz/fuzz_mcap.py --seconds 60
+    python3 bench/fuzz/fuzz_mcap.py --seconds 1 --examples 20   # one short run: a check that it runs
 
 Each run is ``pytest tests/contract/test_fuzz_mcap.py`` with WMRID_FUZZ_EXAMPLES examples per compression (none, zstd,
 lz4) and its own --hypothesis-seed (0, 1, 2, ...).  Printed: runs, cases tried, wall time, and every run that
-failed or died (its seed, exit code and the tail of its output), which reproduces with the same seed.
+failed or died (its seed, exit code and the tail of its output), which reproduces with the same seed.  Figures:
+bench/results/fuzz_mcap.json.
 """
 
 from __future__ import annotations
@@ -18,7 +20,8 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # bench/: the shared module _common
+from _common import ROOT, write_results
 
 
 def main() -> None:
@@ -47,6 +50,10 @@ def main() -> None:
     print(f"{runs} runs, {cases} cases passed, {len(failures)} failed runs, {wall:.0f} s wall")
     for seed, code, tail in failures:
         print(f"\n--- seed {seed}: exit {code}\n{tail}")
+    write_results({
+        "runs": runs, "examples_per_compression": args.examples, "cases_passed": cases, "wall_s": wall,
+        "failed_runs": [{"seed": seed, "exit_code": code} for seed, code, _ in failures],
+    })  # fmt: skip
     sys.exit(1 if failures else 0)
 
 

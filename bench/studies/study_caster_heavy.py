@@ -1,7 +1,8 @@
 """Caster drag on a heavy robot and on the light AMR (issue 28, item 6).
 
-    python bench/study_caster_heavy.py                      # both cases, 20 seeds, every method
-    python bench/study_caster_heavy.py --seeds 5 --cases heavy --methods auto,idim
+    python3 bench/studies/study_caster_heavy.py                      # both cases, 20 seeds, every method
+    python3 bench/studies/study_caster_heavy.py --seeds 5 --cases heavy --methods auto,idim
+    python3 bench/studies/study_caster_heavy.py --seeds 1 --cases amr --methods auto   # a check that it runs
 
 Cases (MuJoCo multibody prototype, reversing, ball casters of rolling resistance 0.015):
 
@@ -18,8 +19,9 @@ std"); a seed is honest when every judged parameter is.  Judged: m11 m12 m22 M11
 caster drag's truth, resistance x a load that moves, has no single value; its error against the engine's mean
 load is printed beside).  Printed per case and method: the share of honest seeds, the share *accurate* (the
 AMR's criterion: inertia and Vc within 3 %, friction within 10 % or within 3 std), the median and worst errors per
-group, and the worst |z| of an unflagged parameter.  The per-seed rows go to ``bench/out/study_caster_heavy.json``.
-Logs are cached in ``bench/out/cache_caster/`` (keyed on the case, seed and the prototype's physics version).
+group, and the worst |z| of an unflagged parameter.  Figures: ``bench/results/study_caster_heavy.json`` (the
+summaries); the per-seed rows go to ``--json`` (default ``bench/out/study_caster_heavy.json``).  Logs are cached in
+``bench/out/cache_caster/`` (keyed on the case, seed and ``wmrid.MultibodySettings.physics_version``).
 Seeded: the same numbers every time; ``--workers`` processes (default 2).
 """
 
@@ -35,8 +37,9 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-OUT = ROOT / "bench" / "out"
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # bench/: the shared module _common
+from _common import OUT, ROOT, write_results
+
 CACHE = OUT / "cache_caster"
 INERTIA = ("m11", "m12", "m22", "M11", "M12", "M22")
 FRICTION = ("Fv1", "Fv2", "Fd1", "Fd2")
@@ -58,12 +61,10 @@ def simulated(case: str, seed: int):
     import numpy as np
 
     import wmrid
-    from wmrid.core.wheel_log import WheelLog
-    from wmrid.sim.multibody import PHYSICS_VERSION
 
     spec = CASES[case]
-    key = json.dumps({"case": case, "spec": spec, "seed": seed, "physics": PHYSICS_VERSION, "resistance": RESISTANCE,
-                      "duration": DURATION}, sort_keys=True)  # fmt: skip
+    key = json.dumps({"case": case, "spec": spec, "seed": seed, "physics": wmrid.MultibodySettings.physics_version,
+                      "resistance": RESISTANCE, "duration": DURATION}, sort_keys=True)  # fmt: skip
     path = CACHE / f"{case}_s{seed}_{hashlib.sha1(key.encode()).hexdigest()[:12]}.npz"
     if not path.exists():
         run = wmrid.simulate(
@@ -79,14 +80,13 @@ def simulated(case: str, seed: int):
                  truth=json.dumps(run.truth, default=float))  # fmt: skip
         tmp.replace(path)
     with np.load(path) as z:
-        log = WheelLog(t=z["t"], eta=z["eta"], tau=z["tau"], reference=z["ref"], pose=z["pose"],
-                       source=f"{case} seed {seed}")  # fmt: skip
+        log = wmrid.WheelLog(t=z["t"], eta=z["eta"], tau=z["tau"], reference=z["ref"], pose=z["pose"],
+                             source=f"{case} seed {seed}")  # fmt: skip
         truth = json.loads(str(z["truth"]))
     return log, truth
 
 
 def one(job: tuple[str, int, tuple[str, ...], str | None]) -> list[dict]:
-    sys.path.insert(0, str(ROOT))
     import wmrid
 
     case, seed, methods, payload = job
@@ -156,7 +156,7 @@ def main() -> None:
     ap.add_argument("--methods", default=",".join(METHODS))
     ap.add_argument("--payload", default=None, help="the heavy case's payload MASS@X,Y instead of 60@0.2,0.1")
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--json", default=str(OUT / "study_caster_heavy.json"))
+    ap.add_argument("--json", default=str(OUT / "study_caster_heavy.json"), help="every seed's row")
     args = ap.parse_args()
     cases = args.cases.split(",")
     if args.payload:
@@ -187,6 +187,7 @@ def main() -> None:
     print(f"{time.perf_counter() - t0:.0f} s", file=sys.stderr)
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).write_text(json.dumps(result, indent=1, default=lambda x: None if x != x else x))
+    write_results({"settings": vars(args), **{k: v for k, v in result.items() if k != "rows"}})
 
 
 if __name__ == "__main__":

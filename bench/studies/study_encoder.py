@@ -1,7 +1,8 @@
 """Encoder logs: the paper sinusoid with speeds derived from quantised wheel positions (issue 28, item 5).
 
-    python bench/study_encoder.py                           # 2048 and 512 counts/rev, 10 seeds, reduced simulator
-    python bench/study_encoder.py --engine mujoco --cpr 2048 --seeds 3   # the MuJoCo multibody prototype
+    python3 bench/studies/study_encoder.py                   # 2048 and 512 counts/rev, 10 seeds, reduced simulator
+    python3 bench/studies/study_encoder.py --engine mujoco --cpr 2048 --seeds 3   # the MuJoCo multibody prototype
+    python3 bench/studies/study_encoder.py --cpr 2048 --seeds 1 --duration 10     # a check that it runs
 
 For each counts-per-revolution and seed: the paper robot (CAD true, nominal in the controller) tracks the sinusoid
 for 40 s, logged at 1 kHz without sensor noise; its wheel angles are quantised as an encoder counts them (the count
@@ -9,8 +10,8 @@ boundaries offset by a seeded uniform draw per wheel: tests/encoder_log.py) and 
 positions and the efforts; ``wmrid.identify(path, "paper")`` reads it with defaults (speeds from the positions) and
 identifies it.  Printed per counts/rev: the worst |error| % over seeds of the inertia entries (m11 m12 m22 M11 M12
 M22) and of Vc, the share of seeds honest for them (truth within 3 std, or flagged), the method reported, and the
-closed-loop check's verdicts.  With ``--json PATH`` the per-seed figures too.  Seeded: the same numbers every time;
-``--workers`` processes (default 2).
+closed-loop check's verdicts.  Figures: bench/results/study_encoder.json (with ``--json PATH`` the per-seed figures
+too).  Seeded: the same numbers every time; ``--workers`` processes (default 2).
 """
 
 from __future__ import annotations
@@ -23,13 +24,15 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # bench/: the shared module _common
+from _common import ROOT, write_results
+
+sys.path.insert(0, str(ROOT))  # tests/encoder_log.py: the tests' positions-only MCAP writer
 INERTIA = ("m11", "m12", "m22", "M11", "M12", "M22")
 JUDGED = (*INERTIA, "Vc")
 
 
 def one(job: tuple[int, int, str, float]) -> dict:
-    sys.path.insert(0, str(ROOT))
     import wmrid
     from tests.encoder_log import encoder_mcap
 
@@ -102,6 +105,7 @@ def main() -> None:
             f"| {c} | {s['max_inertia_error_percent']:.3f} | {s['max_vc_error_percent']:.3f} | "
             f"{s['share_honest']:.0%} | {rep} | {s['check_applied']} | {s['all_flagged']} | {s['delay_applied']} |"
         )
+    write_results({k: v for k, v in out.items() if k != "rows"})
     if args.json is not None:
         args.json.write_text(json.dumps(out, indent=1, default=float))
 

@@ -1,20 +1,22 @@
 """Issue 34's round trip: identify a MuJoCo log of the light AMR with a payload, export it, simulate the export,
 identify again -- does the export carry the robot?
 
-    python bench/study_export_roundtrip.py               # seeds 0-2
-    python bench/study_export_roundtrip.py --seeds 1 --payload 3@0.05,-0.02
+    python3 bench/studies/study_export_roundtrip.py               # seeds 0-2
+    python3 bench/studies/study_export_roundtrip.py --seeds 1 --payload 3@0.05,-0.02   # one seed
 
-Per seed: the light AMR of ``bench/study_plan.py`` (nominal set 20 % off, CAD set the truth, its casters) carrying
-``--payload`` (kg @ x, y m in the platform frame), driven on the MuJoCo prototype along the study's 60 s plan at 1 kHz
-with sensor noise (0.02 rad/s, 0.005 N m), identified with defaults; exported (``wmrid.export``) as MJCF and as a robot
-file (the file builds the same MJCF: tests/unit/exports/test_export.py); the robot file simulated again on MuJoCo along
-the same plan (another noise seed) and identified with the original robot file.  Recorded:
+Per seed: the light AMR of ``bench/studies/study_plan.py`` (nominal set 20 % off, CAD set the truth, its casters)
+carrying ``--payload`` (kg @ x, y m in the platform frame), driven on the MuJoCo prototype along the study's 60 s plan
+at 1 kHz with sensor noise (0.02 rad/s, 0.005 N m), identified with defaults; exported (``wmrid.export``) as MJCF and
+as a robot file (the file builds the same MJCF: tests/unit/exports/test_export.py); the robot file simulated again on
+MuJoCo along the same plan (another noise seed) and identified with the original robot file.  Recorded:
 
 * the second result's base parameters against the first's: z = (second - first) / sqrt(std1^2 + std2^2);
-* the exported physical quantities against the truth (the AMR with its payload): total mass m, yaw inertia about the
-  axle midpoint I, the platform's centre of mass (d_x, d_y): z = (exported - truth) / std.
+* the exported physical quantities against the truth (the AMR with its payload, :func:`physical_truth`): total mass
+  m, yaw inertia about the axle midpoint I, the platform's centre of mass (d_x, d_y), mass m_p and yaw inertia I_p:
+  z = (exported - truth) / std.
 
-JSON: ``bench/out/study_export_roundtrip.json``.  Seeded throughout.
+Figures: ``bench/results/study_export_roundtrip.json``; the files made in ``bench/out/study_export_roundtrip/``.
+Seeded throughout.
 """
 
 from __future__ import annotations
@@ -24,22 +26,31 @@ import json
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "bench"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # bench/: the shared module _common
+import study_plan  # the AMR robot file and plan of the closed-loop study (this folder)
+from _common import OUT as BENCH_OUT, write_results
 
-import study_plan  # noqa: E402  (the AMR robot file and plan of the closed-loop study)
-
-OUT = ROOT / "bench" / "out" / "study_export_roundtrip"
+OUT = BENCH_OUT / "study_export_roundtrip"
 BASE = study_plan.BASE
+
+
+def physical_truth(p) -> dict[str, float]:
+    """The quantities an export states, of the physical parameters ``p`` (the robot with its payload): the total mass
+    m = m_p + 2 m_w + 2 m_r; the yaw inertia about the axle midpoint I = I_p + m_p (d_x^2 + d_y^2) + 2 (I_wm + m_w a^2)
+    + 2 (I_rm + m_r (c_x^2 + c_y^2)); the platform's own m_p, d_x, d_y and I_p (what wmrid.export's documentation
+    defines them as; before the bench used only the public API it took them through the inertia matrix M and V_c)."""
+    return {
+        "m": p.m_p + 2.0 * p.m_w + 2.0 * p.m_r,
+        "I": p.I_p + p.m_p * (p.d_x**2 + p.d_y**2) + 2.0 * (p.I_wm + p.m_w * p.a**2)
+        + 2.0 * (p.I_rm + p.m_r * (p.c_x**2 + p.c_y**2)),
+        "d_x": p.d_x, "d_y": p.d_y, "m_p": p.m_p, "I_p": p.I_p,
+    }  # fmt: skip
 
 
 def run(seed: int, payload: str) -> dict:
     import numpy as np
 
     import wmrid
-    from wmrid.model import dynamics as dm
-    from wmrid.model.physical import mass_distribution, platform_values
-    from wmrid.model.robot import Payload
 
     spec = study_plan.ROBOTS["amr"]
     robot = study_plan.OUT / "amr_20pc.toml"
@@ -53,7 +64,7 @@ def run(seed: int, payload: str) -> dict:
         engine="mujoco",
         trajectory=str(plan),
         rate=1000.0,
-        payload=Payload.parse(payload),
+        payload=wmrid.Payload.parse(payload),
         noise=wmrid.NoiseSettings(seed=seed, **noise),
     )
     first = wmrid.identify(first_sim.log.to_wheel_log(), str(robot))
@@ -74,11 +85,7 @@ def run(seed: int, payload: str) -> dict:
         (v1, s1), (v2, s2) = first.parameters[p], second.parameters[p]
         base[p] = {"first": v1, "first_std": s1, "second": v2, "second_std": s2,
                    "z": (v2 - v1) / float(np.hypot(s1, s2))}  # fmt: skip
-    truth_robot = wmrid.load_robot(str(robot)).cad.with_payload(Payload.parse(payload))
-    big_m = dm.inertia_matrix(truth_robot)
-    dist = mass_distribution(big_m, dm.coriolis_coefficient(truth_robot), truth_robot)
-    plat = platform_values(dist, truth_robot)
-    truth = {"m": dist[0], "I": dist[1], "d_x": plat[1], "d_y": plat[2], "m_p": plat[0], "I_p": plat[3]}
+    truth = physical_truth(wmrid.load_robot(str(robot)).cad.with_payload(wmrid.Payload.parse(payload)))
     physical = {}
     for name, value in truth.items():
         q = exported.physical.quantities[name]
@@ -95,7 +102,6 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--payload", default="3@0.05,-0.02")
-    ap.add_argument("--json", type=Path, default=ROOT / "bench" / "out" / "study_export_roundtrip.json")
     args = ap.parse_args()
     rows = []
     for seed in range(args.seeds):
@@ -107,8 +113,7 @@ def main() -> None:
               f"exported vs truth, worst |z| {abs(row['physical'][worst_phys]['z']):.2f} ({worst_phys}); "
               + ", ".join(f"{n} {v['exported']:.4g} (truth {v['truth']:.4g}, std {v['std']:.2g})"
                           for n, v in row["physical"].items()), flush=True)  # fmt: skip
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps({"args": vars(args) | {"json": str(args.json)}, "rows": rows}, indent=1))
+    write_results({"args": vars(args), "rows": rows})
 
 
 if __name__ == "__main__":

@@ -1,21 +1,21 @@
 """The fleet report on logs of the MuJoCo multibody prototype (docs/how-to/fleet-dask.md): physics wmrid's reduced
 model did not derive, casters' rolling drag included.
 
-    python3 bench/study_mujoco_fleet.py                   # seed 17: ~8 min of simulation, then ~15 s
-    python3 bench/study_mujoco_fleet.py --seed-base 18    # another draw of the same fleet
+    python3 bench/studies/study_mujoco_fleet.py                   # seed 17: ~8 min of simulation, then ~15 s
+    python3 bench/studies/study_mujoco_fleet.py --seed-base 18    # another draw of the same fleet
 
 1. Generates 6 paper-robot units x 24 days, one 30 s log a day at 200 Hz (``wmrid.simulate(..., engine="mujoco",
-   caster_resistance=0.015)``), with bench_fleet.py's unit-to-unit and day-to-day spreads and noise (its
-   ``unit_robot``, ``day_robot``), as ``DIR/R02/2026-01-13.parquet``.  Injected: the right wheel of R02, F_v1 and
-   F_d1 +4 %/day from day 12 (+44 % by the last log); R04 carries 10 kg at (0.05, -0.03) m from day 16
-   (2026-01-17).  Nothing else changes.  Logs already in DIR are kept (a second run only reviews).
+   caster_resistance=0.015)``), with speed/bench_fleet.py's unit-to-unit and day-to-day spreads and noise
+   (``_common.unit_robot``, ``_common.day_robot``), as ``DIR/R02/2026-01-13.parquet``.  Injected: the right wheel
+   of R02, F_v1 and F_d1 +4 %/day from day 12 (+44 % by the last log); R04 carries 10 kg at (0.05, -0.03) m from
+   day 16 (2026-01-17).  Nothing else changes.  Logs already in DIR are kept (a second run only reviews).
 2. Identifies them (``wmrid fleet --robot paper --control-rate 1000 --workers 1``) and reviews the table
    (``wmrid fleet-report``), as JSON next to the table; prints every robot's verdict and findings, the largest
    evidence among the unchanged robots, and each robot's log-to-log scatter of F_v, F_d and F_w = F_d + w F_v over
    its first 10 logs (relative std, %), and the median reported std / value of F_v and F_d.
 3. Reviews the same table without the four schema-2 columns (a schema-1 table: no wheel speeds, so no F_w).
 
-Seeded throughout (numpy PCG64 [seed, unit, day]).
+Seeded throughout (numpy PCG64 [seed, unit, day]).  Figures: bench/results/study_mujoco_fleet.json.
 """
 
 from __future__ import annotations
@@ -24,12 +24,23 @@ import argparse
 import datetime as dt
 import json
 import subprocess
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
-from _common import OUT, wmrid_cmd
-from bench_fleet import START, day_robot, unit_robot
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # bench/: the shared module _common
+from _common import (
+    FLEET_START as START,
+    OUT,
+    WHEEL_COLUMNS,
+    day_robot,
+    unit_robot,
+    wmrid_cmd,
+    write_log,
+    write_results,
+)
 
 DRIFTS = {"R02": ("right", 0.04, 12)}  # robot: (wheel, relative rise per day, onset day)
 PAYLOAD = {"R04": (10.0, 0.05, -0.03, 16)}  # robot: (kg, x m, y m, from day)
@@ -37,7 +48,6 @@ PAYLOAD = {"R04": (10.0, 0.05, -0.03, 16)}  # robot: (kg, x m, y m, from day)
 
 def generate(folder: Path, units: int, days: int, seed: int) -> None:
     import wmrid
-    from wmrid.io.logs import write_log
 
     t0, made = time.perf_counter(), 0
     for u in range(units):
@@ -57,7 +67,7 @@ def generate(folder: Path, units: int, days: int, seed: int) -> None:
             noise = wmrid.NoiseSettings(eta_std=0.01, tau_std=0.02, seed=int(rng.integers(2**31)))
             run = wmrid.simulate(robot, duration=30.0, rate=200.0, noise=noise, payload=payload,
                                  engine=wmrid.MultibodySettings(caster_resistance=0.015))  # fmt: skip
-            write_log(run.to_frame()[["t", "eta_r", "eta_l", "tau_r", "tau_l"]], str(path))
+            write_log(run.to_frame()[WHEEL_COLUMNS], path, run.truth)
             made += 1
     print(f"generated {made} logs in {time.perf_counter() - t0:.0f} s into {folder}", flush=True)
 
@@ -68,11 +78,12 @@ def review(table: Path, out: Path) -> dict:
     return json.loads(out.read_text())
 
 
-def scatter(table: Path) -> None:
+def scatter(table: Path) -> dict:
     import pyarrow.parquet as pq
 
     t = pq.read_table(table).to_pandas().sort_values(["robot_id", "start_time"])
     print("baseline scatter (first 10 logs), relative std %; median reported std / value:")
+    out = {}
     for robot_id, g in t.groupby("robot_id"):
         b = g.iloc[:10]
         parts = []
@@ -83,9 +94,14 @@ def scatter(table: Path) -> None:
                 return 100 * np.std(x, ddof=1) / abs(np.mean(x))
 
             ratio = [np.median(b[f"{n}_std"] / b[n].abs()) for n in (fv, fd)]
+            out[f"{robot_id} wheel {wheel}"] = {
+                "Fv": rel(b[fv]), "Fd": rel(b[fd]), "Fw": rel(fw), "std_over_value_Fv": ratio[0],
+                "std_over_value_Fd": ratio[1],
+            }  # fmt: skip
             parts.append(f"wheel {wheel}: Fv {rel(b[fv]):4.1f} Fd {rel(b[fd]):4.1f} Fw {rel(fw):4.2f} "
                          f"(std/value Fv {ratio[0]:.1f}, Fd {ratio[1]:.1f})")  # fmt: skip
         print(f"  {robot_id}  " + "   ".join(parts))
+    return out
 
 
 def main() -> None:
@@ -110,7 +126,7 @@ def main() -> None:
         for finding in robot["findings"]:
             print(f"    {finding}")
     print(f"largest evidence among the unchanged robots: {max(unchanged):.3f}")
-    scatter(table)
+    spread = scatter(table)
 
     import pyarrow.parquet as pq
 
@@ -120,6 +136,12 @@ def main() -> None:
     pq.write_table(old, schema1)
     flagged = [r["robot_id"] for r in review(schema1, schema1.with_suffix(".json"))["robots"] if r["flagged"]]
     print(f"the same logs as a schema-1 table (no wheel speeds): flagged {', '.join(flagged) or 'none'}")
+    write_results({
+        "settings": vars(args), "robots": {r["robot_id"]: {"flagged": r["flagged"], "evidence": r["evidence"],
+                                                            "findings": r["findings"]} for r in report["robots"]},
+        "largest_unchanged_evidence": max(unchanged), "baseline_scatter_percent": spread,
+        "schema1_flagged": flagged,
+    })  # fmt: skip
 
 
 if __name__ == "__main__":

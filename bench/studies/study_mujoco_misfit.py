@@ -1,10 +1,11 @@
 """Issue 29: why a plan's MuJoCo log does not determine the robot -- the caster's drag, its load transfer, or neither?
 
-    python bench/study_mujoco_misfit.py                  # paper + light AMR, 3 variants, seeds 0-2
-    python bench/study_mujoco_misfit.py --robots amr --seeds 1
+    python3 bench/studies/study_mujoco_misfit.py                  # paper + light AMR, 3 variants, seeds 0-2
+    python3 bench/studies/study_mujoco_misfit.py --robots amr --seeds 1
+    python3 bench/studies/study_mujoco_misfit.py --robots amr --variants default --seeds 1   # a check that it runs
 
-The plans and robot files of ``bench/study_plan.py`` (made by it when missing: the nominal set 20 % off, 60 s in a
-4 m x 4 m area), driven on the MuJoCo prototype at 1 kHz with the study's sensor noise, in three variants:
+The plans and robot files of ``bench/studies/study_plan.py`` (made by it when missing: the nominal set 20 % off, 60 s
+in a 4 m x 4 m area), driven on the MuJoCo prototype at 1 kHz with the study's sensor noise, in three variants:
 
 * ``default``: the prototype as ``wmrid simulate --engine mujoco`` builds it (ball casters with rolling resistance
   0.015, the platform's centre of mass 0.05 m above the axle);
@@ -18,67 +19,56 @@ log once per model).  Recorded per run: the friction model chosen, the model-err
 its T^2, the largest relative misfit of the intermediate parameters, whether the low-speed term and the
 "fragile" rule applied, the poorly determined parameters, and per base parameter its error (% of the truth) and
 z = error / std; the caster parameters (D_k, and the load terms D{k}dv, D{k}w2, ... of ``wheel+caster+load``) with
-their truth from the engine: each ball caster's contact normal force at every logged sample (the engine's own,
-:meth:`wmrid.sim.multibody._Plant.caster_normals`) fitted by least squares on 1, v', w^2, v w, w' (from the true
-wheel speeds, a 41-sample Savitzky-Golay derivative), times its rolling resistance, summed over the casters that
-share a parameter (:func:`wmrid.estimators.observer.observe.caster_geometry`); ``load_fit_rms_N`` is that fit's
-residual. JSON: ``bench/out/study_mujoco_misfit.json``.  Seeded throughout.
+their truth from the engine: each ball caster's contact normal force at every logged sample (the engine's own, the
+run's ``log.caster_load``) fitted by least squares on 1, v', w^2, v w, w' (from the true wheel speeds, a 41-sample
+Savitzky-Golay derivative), times its rolling resistance, summed over the casters that share a parameter (mirrored
+about the platform's x axis: :func:`caster_keys`); ``load_fit_rms_N`` is that fit's residual.  Figures:
+``bench/results/study_mujoco_misfit.json``.  Seeded throughout.
 
-    python bench/study_mujoco_misfit.py --friction wheel+caster,auto      # before / after the load terms
+    python3 bench/studies/study_mujoco_misfit.py --friction wheel+caster,auto      # before / after the load terms
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "bench"))
+import numpy as np
 
-import numpy as np  # noqa: E402
-import study_plan  # noqa: E402  (the plans and robot files of the closed-loop study)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # bench/: the shared module _common
+import study_plan  # the plans and robot files of the closed-loop study (this folder)
+from _common import write_results
 
 VARIANTS = ("default", "no_load_transfer", "frictionless_casters")
+#: The platform motions a caster's normal load follows, as the ``wheel+caster+load`` model names its load terms.
+LOAD_SIGNALS = ("dv", "w2", "vw", "dw")
 
 
-def engine_normals(run_sim):
-    """run_sim() with every ball caster's normal force (N) recorded at each logged sample: (its result, (n, K))."""
-    from wmrid.sim import multibody
-
-    rec = []
-    original = multibody._Plant.caster_normals
-
-    def recording(plant):
-        out = original(plant)
-        rec.append(out.copy())
-        return out
-
-    multibody._Plant.caster_normals = recording
-    try:
-        sim = run_sim()
-    finally:
-        multibody._Plant.caster_normals = original
-    return sim, np.array(rec)
+def caster_keys(robot) -> list[tuple[float, float]]:
+    """(|x|, y) of each caster parameter D_k, k = 1, 2, ...: casters at (x, y) and (-x, y) have the same drag columns
+    (their contacts' velocities mirror each other about the platform's x axis), so one parameter stands for their
+    total drag (casters within 1 mm count as one position)."""
+    keys: list[tuple[float, float]] = []
+    for c in robot.casters or ():
+        key = (abs(c.x), c.y)
+        if not any(abs(key[0] - k[0]) < 1e-3 and abs(key[1] - k[1]) < 1e-3 for k in keys):
+            keys.append(key)
+    return keys
 
 
 def load_truth(robot, sim, normals: np.ndarray, resistance: list[float]) -> dict:
     """The truth of D_k and its load terms (module docstring), named as the ``wheel+caster+load`` model names them."""
     from scipy.signal import savgol_filter
 
-    from wmrid.estimators.observer.observe import caster_geometry
-    from wmrid.model.dynamics import LOAD_SIGNALS, platform_speeds
-
     p = robot.reference
     t = np.asarray(sim.t)
     eta = np.asarray(sim.eta_true)
-    v, w = platform_speeds(eta, p.r, p.b)
+    v, w = 0.5 * p.r * (eta[:, 0] + eta[:, 1]), p.r / (2.0 * p.b) * (eta[:, 0] - eta[:, 1])
     dv, dw = (savgol_filter(x, 41, 3, deriv=1, delta=t[1] - t[0]) for x in (v, w))
     x = np.column_stack([np.ones_like(v), dv, w * w, v * w, dw])
-    geo = caster_geometry(robot)
-    keys = [(geo[2 + 2 * k], geo[3 + 2 * k]) for k in range((len(geo) - 2) // 2)]
+    keys = caster_keys(robot)
     out: dict[str, float] = {}
     rms = 0.0
     for i, c in enumerate(robot.casters):
@@ -92,29 +82,22 @@ def load_truth(robot, sim, normals: np.ndarray, resistance: list[float]) -> dict
 
 def run(name: str, variant: str, seed: int, frictions: tuple[str, ...] = ("auto",)) -> list[dict]:
     import wmrid
-    from wmrid.api.inputs import load_robot
-    from wmrid.api.simulation import load_reference
-    from wmrid.sim.multibody import simulate_multibody
-    from wmrid.sim.multibody_model import MultibodySettings
-    from wmrid.sim.scenario import NoiseSettings
 
     spec = study_plan.ROBOTS[name]
     robot_path = study_plan.OUT / f"{name}_20pc.toml"
     csv = study_plan.OUT / f"{name}_plan.csv"
     if not robot_path.exists() or not csv.exists():
         study_plan.make(name)
-    robot = load_robot(str(robot_path))
-    settings = MultibodySettings()
+    robot = wmrid.load_robot(str(robot_path))
+    settings = wmrid.MultibodySettings()
     if variant == "no_load_transfer":
         settings = dataclasses.replace(settings, cg_height=-robot.reference.r)
     elif variant == "frictionless_casters":
         settings = dataclasses.replace(settings, caster_resistance=0.0)
-    noise = NoiseSettings(eta_std=spec["eta_noise"], tau_std=spec["tau_noise"])
-    ref = load_reference(str(csv))
-    sim, normals = engine_normals(lambda: simulate_multibody(
-        robot.reference, robot.nominal, casters=robot.casters, settings=settings, rate=1000.0, noise=noise,
-        seed=seed, reference=ref))  # fmt: skip
-    truth = sim.truth()
+    noise = wmrid.NoiseSettings(eta_std=spec["eta_noise"], tau_std=spec["tau_noise"], seed=seed)
+    run_ = wmrid.simulate(robot, engine=settings, rate=1000.0, noise=noise, trajectory=wmrid.load_reference(str(csv)))
+    sim, normals = run_.log, run_.log.caster_load
+    truth = run_.truth
     casters = truth["settings"]["multibody"]["casters"]
     drag = [c.get("mean_drag_force") for c in casters]
     caster_truth = load_truth(robot, sim, normals, [c["resistance_used"] for c in casters])
@@ -152,7 +135,6 @@ def main() -> None:
     ap.add_argument("--variants", default=",".join(VARIANTS))
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--friction", default="auto", help="comma list: identify each log once per friction model")
-    ap.add_argument("--json", type=Path, default=ROOT / "bench" / "out" / "study_mujoco_misfit.json")
     args = ap.parse_args()
     rows = []
     for name in args.robots.split(","):
@@ -169,8 +151,7 @@ def main() -> None:
                           f"{len(base_poorly)}/8, largest error {worst} {row['parameters'][worst]['error_pc']:+.2g} %,"
                           f" max |z| {max(abs(v['z']) for v in row['parameters'].values()):.2f}; {load}",
                           flush=True)  # fmt: skip
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps({"args": vars(args) | {"json": str(args.json)}, "rows": rows}, indent=1))
+    write_results({"args": vars(args), "rows": rows})
 
 
 if __name__ == "__main__":

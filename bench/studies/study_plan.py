@@ -1,7 +1,8 @@
 """Issue 29: does a plan deliver what it predicts?  Closed loop, two robots, both simulator engines, 10 seeds.
 
-    python bench/study_plan.py                        # paper + light AMR, reduced + MuJoCo, 10 seeds each
-    python bench/study_plan.py --robots amr --engines reduced --seeds 3
+    python3 bench/studies/study_plan.py                        # paper + light AMR, reduced + MuJoCo, 10 seeds each
+    python3 bench/studies/study_plan.py --robots amr --engines reduced --seeds 3
+    python3 bench/studies/study_plan.py --robots amr --engines reduced --seeds 1   # a check that it runs
 
 For each robot (the paper's and the light AMR's CAD sets as the truth; a robot file whose nominal set is the truth
 with every inertial and friction parameter 20 % off, alternately up and down, r, b and k_r exact; a [limits] table):
@@ -21,27 +22,34 @@ effort noise (seed 100), identified and saved; a 30 s plan without and with ``gi
 of each, and of the plan without ``given`` combined with the first log).  Then, on ``--seeds`` seeds, the logs drawn
 again (the plans kept): the first identified; the plan without ``given`` identified alone; the plan with ``given``
 identified alone and with ``wmrid.identify(log, robot, given=first)`` (what ``wmrid identify B --given A.json``
-reports: :mod:`wmrid.estimators.combination`).  Per parameter: the predicted std, the spread of the estimate across
-seeds, the median reported std and the rms of z, for each.  Relative std is over the plan's scale of each parameter
-throughout (the floor for the paper robot's friction).  JSON: ``bench/out/study_plan_sequential_ETA_TAU.json``.
+reports).  Per parameter: the predicted std (``wmrid.predict_plan``: a plan's drive predicted again, without or
+with ``given``), the spread of the estimate across seeds, the median reported std and the rms of z, for each.
+Relative std is over the plan's scale of each parameter throughout (the floor for the paper robot's friction).
+Figures: ``bench/results/study_plan-sequential_ETA_TAU.json``.
 
 Printed per robot and engine: seeds with every parameter determined, with the truth within 3 std, with every limit
-within 10 %, with the path in the area; the median achieved/predicted std ratio per parameter (the issue's 0.5-2x).
-JSON: ``bench/out/study_plan.json``.  Seeded throughout; ``--workers`` processes (default 1).
+within 10 %, with the path in the area; the median achieved/predicted std ratio per parameter (the issue's 0.5-2x),
+the prediction being the plan's for the friction model identify chose on each log (``wmrid.predict_plan``).
+Figures: ``bench/results/study_plan.json`` (the summaries); every seed's row in ``--json`` (default
+``bench/out/study_plan.json``).  The robot files and plans are made in bench/out/study_plan/ (the export and misfit
+studies use them).  Seeded throughout; ``--workers`` processes (default 1).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import statistics
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-OUT = ROOT / "bench" / "out" / "study_plan"
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # bench/: the shared module _common
+from _common import OUT as BENCH_OUT, write_results
+
+OUT = BENCH_OUT / "study_plan"
 BASE = ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
 #: Per robot: the CAD set (truth), limits, sensor noise (rad/s, N m per sample at 1 kHz).
 ROBOTS = {
@@ -54,12 +62,16 @@ ROBOTS = {
 EXACT = ("r", "b", "k_r", "a", "c_y")
 
 
-def robot_file(name: str) -> Path:
-    """A robot TOML: [cad] = the built-in robot's CAD set, [nominal] = it 20 % off (alternately up and down)."""
-    from wmrid.model.robot import BUILTIN_ROBOTS, Robot
-    from wmrid.model.robot_file import robot_to_toml
+def _toml(value) -> str:
+    return json.dumps(value) if isinstance(value, str) else repr(list(value) if isinstance(value, tuple) else value)
 
-    builtin = BUILTIN_ROBOTS[name]
+
+def robot_file(name: str) -> Path:
+    """A robot TOML: [cad] = the built-in robot's CAD set, [nominal] = it 20 % off (alternately up and down), its
+    casters, and the study's [limits]."""
+    import wmrid
+
+    builtin = wmrid.load_robot(name)
     cad = builtin.cad.to_dict()
     nominal, sign = {}, 1.0
     for key, value in cad.items():
@@ -68,15 +80,25 @@ def robot_file(name: str) -> Path:
             continue
         nominal[key] = value * (1.0 + 0.2 * sign)
         sign = -sign
-    from wmrid.model.robot import PhysicalParameters
-
-    robot = Robot(name=f"{name}_20pc", nominal=PhysicalParameters(**nominal), cad=builtin.cad,
-                  casters=builtin.casters, limits=tuple((k, tuple(v) if isinstance(v, list) else v)
-                                                        for k, v in ROBOTS[name]["limits"].items()))  # fmt: skip
+    lines = [f"name = {_toml(f'{name}_20pc')}"]
+    for title, values in (("nominal", nominal), ("cad", cad)):
+        lines += ["", f"[{title}]", *(f"{key} = {value!r}" for key, value in values.items())]
+    for caster in builtin.casters:
+        lines += ["", "[[caster]]", *(f"{key} = {_toml(value)}" for key, value in caster.to_dict().items())]
+    lines += ["", "[limits]", *(f"{key} = {_toml(value)}" for key, value in ROBOTS[name]["limits"].items())]
     OUT.mkdir(parents=True, exist_ok=True)
     path = OUT / f"{name}_20pc.toml"
-    path.write_text(robot_to_toml(robot))
+    path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def footprint(robot) -> float:
+    """m: how far the robot reaches from its axle midpoint: its wheels' contacts and its casters' (as ``wmrid plan``
+    keeps the whole robot inside the area)."""
+    reach = float(robot.nominal.b)
+    for caster in robot.casters or ():
+        reach = max(reach, math.hypot(caster.x, caster.y) + caster.radius)
+    return reach
 
 
 def make(name: str) -> dict:
@@ -99,8 +121,6 @@ def run(job: tuple[str, str, int, str, str]) -> dict:
     import numpy as np
 
     import wmrid
-    from wmrid.api.inputs import load_robot
-    from wmrid.api.planning import footprint
 
     name, engine, seed, robot_path, csv = job
     spec = ROBOTS[name]
@@ -120,7 +140,7 @@ def run(job: tuple[str, str, int, str, str]) -> dict:
     smooth = np.stack([np.convolve(eta[:, j], kernel, mode="same") for j in range(2)], axis=1)
     deta = np.gradient(smooth, dt, axis=0)[20:-20]
     tau = np.asarray(log.tau)
-    reach = footprint(load_robot(robot_path))
+    reach = footprint(wmrid.load_robot(robot_path))
     limits = spec["limits"]
     pose = np.asarray(log.pose)
     peaks = {
@@ -150,23 +170,10 @@ def prediction_for(robot_path: str, csv: str, form, spec: dict) -> dict[str, flo
     """The plan's predicted std of each base parameter under the friction model identify chose (``form``): the plan
     predicts for the model its robot file implies (the casters' drag), but the reduced simulator has no casters, so
     identify fits the wheels' model to its logs."""
-    import numpy as np
-
     import wmrid
-    from wmrid.api.inputs import load_robot
-    from wmrid.api.planning import _friction
-    from wmrid.design.plan import FINE_GRID, _problem, plan_form
 
-    plan = wmrid.read_plan(Path(csv).with_suffix(".json"))
-    robot = load_robot(robot_path)
-    friction, geometry, drag = _friction(form.friction, robot)
-    pform = plan_form(friction, geometry)
-    theta0 = np.concatenate([[plan.predicted[n]["nominal"] for n in BASE], drag,
-                             np.zeros(pform.n_base - 8 - len(drag))])  # fmt: skip
-    pb = _problem(theta0, pform, plan.r, plan.b, plan.limits, plan.noise, plan.excitation.duration,
-                  min(plan.noise.rate, FINE_GRID), "worst", None, plan.settings["k"])  # fmt: skip
-    cov = pb.covariance(pb.motion_of(np.asarray(plan.excitation.coefficients)))
-    return {n: float(np.sqrt(cov[i, i])) for i, n in enumerate(BASE)}
+    again = wmrid.predict_plan(Path(csv).with_suffix(".json"), robot_path, friction=form.friction)
+    return {n: float(again.predicted[n]["std"]) for n in BASE}
 
 
 def summarise(made: dict, rows: list[dict]) -> dict:
@@ -240,9 +247,6 @@ def sequential(eta_noise: float, tau_noise: float, seeds: int = 20, workers: int
     import numpy as np
 
     import wmrid
-    from wmrid.api.planning import _given
-    from wmrid.design.plan import FINE_GRID, _problem
-    from wmrid.model.dynamics import RegressorForm
 
     robot = str(robot_file("paper"))
     sim = wmrid.simulate(
@@ -262,13 +266,8 @@ def sequential(eta_noise: float, tau_noise: float, seeds: int = 20, workers: int
     wmrid.write_plan(both, csv, force=True)
     scale = np.array([both.predicted[n]["scale"] for n in BASE])
     # the plans' own predictions: the targeted plan alone, and the untargeted plan combined with the first log
-    theta0 = np.array([both.predicted[n]["nominal"] for n in BASE])
-    given, _ = _given(saved, BASE, theta0)
-    args = (theta0, RegressorForm("general"), both.r, both.b, both.limits, both.noise, 30.0, FINE_GRID, "worst")
-    bare, with_given = _problem(*args, None, both.settings["k"]), _problem(*args, given[0], both.settings["k"])
-    second_cov = bare.covariance(bare.motion_of(both.excitation.coefficients))
-    second_pred = np.sqrt(np.diag(second_cov))
-    alone_with = with_given.criterion_value(with_given.covariance(with_given.motion_of(alone.excitation.coefficients)))
+    second_pred = np.array([wmrid.predict_plan(both, robot).predicted[n]["std"] for n in BASE])
+    alone_with = wmrid.predict_plan(alone, robot, given=saved).value
     fused_pred = np.array([both.predicted[n]["std"] for n in BASE])
     alone_csv = OUT / "sequential_alone.csv"
     wmrid.write_plan(alone, alone_csv, force=True)
@@ -312,7 +311,7 @@ def main() -> None:
     ap.add_argument("--engines", default="reduced,mujoco")
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--workers", type=int, default=1)
-    ap.add_argument("--json", type=Path, default=ROOT / "bench" / "out" / "study_plan.json")
+    ap.add_argument("--json", type=Path, default=BENCH_OUT / "study_plan.json", help="every seed's row")
     ap.add_argument("--sequential", default=None, help="ETA,TAU: the sequential-design check at that noise instead")
     args = ap.parse_args()
     if args.sequential:
@@ -336,9 +335,7 @@ def main() -> None:
         alone_median = 100 * statistics.median(out["alone_worst_reported"])
         print(f"plan without --given, worst reported std: median {alone_median:.3g} %; first log's friction all poorly "
               f"determined on {out['first_friction_poorly']}/{out['seeds']} seeds")  # fmt: skip
-        path = args.json.with_name(f"study_plan_sequential_{eta_noise:g}_{tau_noise:g}.json")
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(out, indent=1, default=float))
+        write_results(out, variant=f"sequential_{eta_noise:g}_{tau_noise:g}")
         return None
     report: dict = {"args": vars(args) | {"json": str(args.json)}, "robots": {}}
     for name in args.robots.split(","):
@@ -369,6 +366,13 @@ def main() -> None:
         report["robots"][name] = {"plan": made, "rows": rows, "summary": summary}
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(report, indent=1, default=float))
+    plans = {name: {k: v for k, v in r["plan"].items() if k != "plan"} for name, r in report["robots"].items()}
+    for name, r in report["robots"].items():
+        plan = r["plan"]["plan"]
+        plans[name]["criterion"] = plan["criterion"]
+        plans[name]["baselines"] = {b: v["improvement"] for b, v in plan["baselines"].items()}
+    write_results({"settings": report["args"], "plans": plans,
+                   "summary": {name: r["summary"] for name, r in report["robots"].items()}})  # fmt: skip
     return None
 
 

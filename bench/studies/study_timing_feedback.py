@@ -6,25 +6,35 @@
 (b) the paper's robot, white sensor noise only, 300 s: the std of m11, m12, m22, M11, M12, M22, Vc on the first
     75 s against the whole 300 s (1/sqrt(T) predicts 2), and the share of parameters within 3 std of the truth.
 
-    python bench/study_timing_feedback.py                         # (a) 20 seeds reduced + 4 multibody, (b) 6 seeds
-    python bench/study_timing_feedback.py --a-seeds 5 --b-seeds 2 --mb-seeds 0 --json /tmp/t.json
-    python bench/study_timing_feedback.py --no-reference --b-seeds 0 --json bench/out/timing_no_reference.json
+    python3 bench/studies/study_timing_feedback.py                 # (a) 20 seeds reduced + 4 multibody, (b) 6 seeds
+    python3 bench/studies/study_timing_feedback.py --a-seeds 5 --b-seeds 2 --mb-seeds 0
+    python3 bench/studies/study_timing_feedback.py --no-reference --b-seeds 0      # its own results file
+    python3 bench/studies/study_timing_feedback.py --a-seeds 1 --mb-seeds 0 --b-seeds 1 --b-duration 40 --caster 0.02
 
-Logs come from :func:`wmrid.simulate` (seeded) and are identified as :class:`wmrid.core.wheel_log.WheelLog` (their
-wheel-speed reference included, as ``wmrid simulate`` writes it).  At most ``--workers`` processes (default 2).
+Logs come from :func:`wmrid.simulate` (seeded) and are identified (``wmrid.identify``, the wheels' friction model) as
+:class:`wmrid.WheelLog` (their wheel-speed reference included, as ``wmrid simulate`` writes it).  At most
+``--workers`` processes (default 2).  Figures: bench/results/study_timing_feedback.json (``--no-reference``:
+study_timing_feedback-no_reference.json); every run's row with ``--json PATH``.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import statistics
+import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # bench/: the shared module _common
+from _common import ROOT, write_results
+
+AMR = str(ROOT / "examples" / "small_amr.toml")
 INERTIA = ("m11", "m12", "m22", "M11", "M12", "M22", "Vc")
 NOISE = {"eta_std": 0.02, "tau_std": 0.01}
 
@@ -32,12 +42,9 @@ NOISE = {"eta_std": 0.02, "tau_std": 0.01}
 def case_a(job: tuple[str, int, float, float, bool]) -> dict:
     engine, seed, caster, duration, reference = job
     import wmrid
-    from wmrid.api.inputs import load_robot
-    from wmrid.pipeline.identify import identify
 
-    amr = load_robot("examples/small_amr.toml")
     run = wmrid.simulate(
-        "examples/small_amr.toml",
+        AMR,
         trajectory="reversing",
         duration=duration,
         rate=200.0,
@@ -46,11 +53,9 @@ def case_a(job: tuple[str, int, float, float, bool]) -> dict:
     )
     log = run.log.to_wheel_log()
     if not reference:  # a field log without the controller's set-points: least squares times the efforts
-        from dataclasses import replace
-
-        log = replace(log, reference=None)
-    default = identify(log, amr)
-    zero = identify(log, amr, delay=0.0)
+        log = dataclasses.replace(log, reference=None)
+    default = wmrid.identify(log, AMR, observer=wmrid.ObserverOptions(friction="wheel"))
+    zero = wmrid.identify(log, AMR, observer=wmrid.ObserverOptions(friction="wheel", delay=0.0))
     timing = default.diagnostics.get("timing") or {}
     applied = (default.diagnostics.get("delay") or {}).get("applied_s") or 0.0
     ratio = {k: default.parameters[k][1] / zero.parameters[k][1] for k in default.parameters}
@@ -66,11 +71,7 @@ def case_a(job: tuple[str, int, float, float, bool]) -> dict:
 def case_b(job: tuple[int, str, float]) -> dict:
     seed, trajectory, duration = job
     import wmrid
-    from wmrid.api.inputs import load_robot
-    from wmrid.core.wheel_log import WheelLog
-    from wmrid.pipeline.identify import identify
 
-    robot = load_robot("paper")
     run = wmrid.simulate(
         "paper", trajectory=trajectory, duration=duration, noise=wmrid.NoiseSettings(seed=seed, **NOISE)
     )
@@ -79,8 +80,10 @@ def case_b(job: tuple[int, str, float]) -> dict:
     out: dict = {"seed": seed, "trajectory": trajectory}
     for length in (duration / 4, duration):
         keep = log.t <= log.t[0] + length
-        sub = WheelLog(t=log.t[keep], eta=log.eta[keep], tau=log.tau[keep], source="b", reference=log.reference[keep])
-        res = identify(sub, robot)
+        sub = wmrid.WheelLog(
+            t=log.t[keep], eta=log.eta[keep], tau=log.tau[keep], source="b", reference=log.reference[keep]
+        )
+        res = wmrid.identify(sub, "paper", observer=wmrid.ObserverOptions(friction="wheel"))
         timing = res.diagnostics.get("timing") or {}
         out[f"{length:g}"] = {
             "std": {k: res.parameters[k][1] for k in res.parameters},
@@ -103,7 +106,7 @@ def main() -> None:
     ap.add_argument("--b-duration", type=float, default=300.0)
     ap.add_argument("--b-trajectories", default="sinusoid,reversing")
     ap.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
-    ap.add_argument("--json", default="bench/out/study_timing_feedback.json")
+    ap.add_argument("--json", default=None, help="also every run's row, here")
     args = ap.parse_args()
     ref = not args.no_reference
     jobs_a = [("reduced", s, c, args.a_duration, ref) for c in args.caster for s in range(args.a_seeds)]
@@ -155,11 +158,14 @@ def main() -> None:
         cells = " | ".join(f"{ratios[k]:.2f}" for k in INERTIA)
         print(f"| {trajectory} | {len(sel)} | {cells} | {within:.2f} |")
     print(f"\n{len(rows_a) + len(rows_b)} runs, {wall:.0f} s wall")
-    os.makedirs(os.path.dirname(args.json) or ".", exist_ok=True)
-    with open(args.json, "w") as fh:
-        json.dump({"args": vars(args), "a": {"summary": summary_a, "rows": rows_a},
-                   "b": {"summary": summary_b, "rows": rows_b}, "wall_s": wall}, fh, indent=1)  # fmt: skip
-    print(f"written {args.json}")
+    write_results({"args": vars(args), "a": summary_a, "b": summary_b, "wall_s": wall},
+                  variant="no_reference" if args.no_reference else None)  # fmt: skip
+    if args.json:
+        os.makedirs(os.path.dirname(args.json) or ".", exist_ok=True)
+        with open(args.json, "w") as fh:
+            json.dump({"args": vars(args), "a": {"summary": summary_a, "rows": rows_a},
+                       "b": {"summary": summary_b, "rows": rows_b}, "wall_s": wall}, fh, indent=1)  # fmt: skip
+        print(f"written {args.json}")
 
 
 if __name__ == "__main__":
