@@ -47,8 +47,8 @@ area = "3x3"
 @pytest.fixture(scope="module", autouse=True)
 def _a_shorter_search():
     """These tests check what the command writes and holds, not the search's last 10 %: every plan here refines 4
-    starts and polishes 1 (the search before its REFINE 12 and POLISH 2, half the time; ``bench/bench_plan.py`` and
-    ``bench/study_plan.py`` measure the full one)."""
+    starts and polishes 1 (the search before its REFINE 12 and POLISH 2, half the time;
+    ``bench/speed/bench_plan.py`` and ``bench/studies/study_plan.py`` measure the full one)."""
     import functools
 
     from wmrid.design import plan as design

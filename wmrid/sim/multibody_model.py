@@ -41,7 +41,7 @@ MAX_FLOOR_FRICTION = 100.0
 #: noise-free 60 s plan, and the light AMR's structural-mismatch test rejected the model (T2 281 on 17 dof,
 #: std widened 15-fold).  Two steps is as stiff as MuJoCo allows (its ``refsafe`` floor), the same rule as the
 #: joint friction below; it left -0.004 % and +0.020 %, and T2 14 on 17 dof.  ``MultibodySettings.tyre_time_constant``
-#: brings a softer, creeping tyre back for a study (``bench/study_mujoco_misfit.py``).
+#: brings a softer, creeping tyre back for a study (``bench/studies/study_mujoco_misfit.py``).
 CONTACT_SOLREF_STEPS = 2
 
 
