@@ -67,9 +67,11 @@ def simulated(case: str, seed: int):
                       "resistance": RESISTANCE, "duration": DURATION}, sort_keys=True)  # fmt: skip
     path = CACHE / f"{case}_s{seed}_{hashlib.sha1(key.encode()).hexdigest()[:12]}.npz"
     if not path.exists():
+        # the engine's default floor (mu = 1) where the case gives none
+        floor = {} if spec["floor_friction"] is None else {"floor_friction": spec["floor_friction"]}
         run = wmrid.simulate(
             spec["robot"], trajectory="reversing", duration=DURATION, rate=spec["rate"],
-            engine=wmrid.MultibodySettings(floor_friction=spec["floor_friction"], caster_resistance=RESISTANCE),
+            engine=wmrid.MultibodySettings(caster_resistance=RESISTANCE, **floor),
             payload=None if spec["payload"] is None else wmrid.Payload.parse(spec["payload"]),
             noise=wmrid.NoiseSettings(eta_std=spec["eta_noise"], tau_std=spec["tau_noise"], seed=seed),
         )  # fmt: skip
