@@ -207,11 +207,13 @@ def machine() -> dict[str, Any]:
 
 
 def git_commit() -> dict[str, Any] | None:
-    """The checkout's commit and whether tracked files differ from it, or None outside a git checkout."""
+    """The checkout's commit and whether tracked files differ from it (bench/results/ aside: the figures files are
+    what runs write), or None outside a git checkout."""
     try:
         head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True, check=True)
-        status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT,
-                                capture_output=True, text=True, check=True)  # fmt: skip
+        status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", ".",
+                                 ":(exclude)bench/results"], cwd=ROOT, capture_output=True, text=True,
+                                check=True)  # fmt: skip
     except (OSError, subprocess.CalledProcessError):
         return None
     return {"commit": head.stdout.strip(), "modified": bool(status.stdout.strip())}
