@@ -1,4 +1,4 @@
-"""Encoder logs for the tests and bench/study_encoder.py (a helper module, not a test module): a simulated run's
+"""Encoder logs for the tests and bench/studies/study_encoder.py (a helper module, not a test module): a simulated run's
 wheel angles quantised as an incremental encoder counts them, written as a ROS 2 MCAP of sensor_msgs/JointState
 holding only the positions and the efforts (the velocity sequence empty), so wmrid derives the speeds from the
 positions (:func:`wmrid.io.signals.speed_from_position`), as it does for a driver that publishes counts only."""

@@ -1,5 +1,5 @@
-"""A real Foxglove WebSocket server for the tests of ``wmrid live ws://`` (and bench/bench_live.py): the foxglove-sdk's
-server on 127.0.0.1, publishing the messages of an MCAP (JointState as CDR with their ros2msg schema, as
+"""A real Foxglove WebSocket server for the tests of ``wmrid live ws://`` (and bench/speed/bench_live.py): the
+foxglove-sdk's server on 127.0.0.1, publishing the messages of an MCAP (JointState as CDR with their ros2msg schema, as
 foxglove_bridge publishes them), each with its MCAP log time as the frame's timestamp.
 
 In the test process (:class:`Publisher`) or as a process of its own, to be killed::

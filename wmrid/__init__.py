@@ -181,6 +181,7 @@ _EXPORTS = {
     "write_fleet_report": "wmrid.fleets.report",
     "FleetReport": "wmrid.fleets.rendering",
     "plan": "wmrid.api.planning",
+    "predict_plan": "wmrid.api.planning",
     "write_plan": "wmrid.api.planning",
     "read_plan": "wmrid.api.planning",
     "Plan": "wmrid.design.plan",
@@ -219,6 +220,7 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
     )
     from wmrid.api.planning import (
         plan as plan,
+        predict_plan as predict_plan,
         read_plan as read_plan,
         write_plan as write_plan,
     )

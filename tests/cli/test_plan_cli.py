@@ -47,8 +47,8 @@ area = "3x3"
 @pytest.fixture(scope="module", autouse=True)
 def _a_shorter_search():
     """These tests check what the command writes and holds, not the search's last 10 %: every plan here refines 4
-    starts and polishes 1 (the search before its REFINE 12 and POLISH 2, half the time; ``bench/bench_plan.py`` and
-    ``bench/study_plan.py`` measure the full one)."""
+    starts and polishes 1 (the search before its REFINE 12 and POLISH 2, half the time;
+    ``bench/speed/bench_plan.py`` and ``bench/studies/study_plan.py`` measure the full one)."""
     import functools
 
     from wmrid.design import plan as design
@@ -167,6 +167,35 @@ def test_given_results_add_their_information(planned: Path, tmp_path: Path) -> N
     smaller = np.diag(with_info.covariance(motion)) / np.diag(without.covariance(motion))
     assert np.all(smaller <= 1.0 + 1e-9)
     assert np.min(smaller) < 0.9
+    # the public call gives the same predictions of the same drive, without and with the saved result
+    names = list(both.predicted)
+    alone, added = wmrid.predict_plan(both, robot), wmrid.predict_plan(both, robot, given=saved)
+    std = np.sqrt(np.diag(without.covariance(motion))), np.sqrt(np.diag(with_info.covariance(motion)))
+    np.testing.assert_allclose([alone.predicted[n]["std"] for n in names], std[0], rtol=1e-9)
+    np.testing.assert_allclose([added.predicted[n]["std"] for n in names], std[1], rtol=1e-9)
+    assert added.given["results"][0]["source"] == str(saved)
+    assert alone.given is None
+
+
+def test_a_plan_predicted_again(planned: Path) -> None:
+    """predict_plan: under the plan's own model the plan's own prediction, criterion and drive; under another (the
+    two-term caster drag Cv, Cw added) the same drive predicted for two more parameters."""
+    plan = wmrid.read_plan(planned / "plan.json")
+    robot = planned / "tiny.toml"
+    same = wmrid.predict_plan(planned / "plan.json", robot)
+    assert list(same.predicted) == list(plan.predicted)
+    for name, entry in plan.predicted.items():
+        assert same.predicted[name]["std"] == pytest.approx(entry["std"], rel=1e-9)
+        assert same.predicted[name]["counted"] == entry["counted"]
+    assert same.value == pytest.approx(plan.value, rel=1e-9)
+    np.testing.assert_array_equal(same.excitation.coefficients, plan.excitation.coefficients)
+    drag = wmrid.predict_plan(plan, robot, friction="wheel+caster")
+    assert list(drag.predicted) == [*plan.predicted, "Cv", "Cw"]
+    assert drag.settings["friction"] == "wheel+caster"
+    assert plan.settings["friction"] == "wheel"
+    assert all(0 < drag.predicted[n]["std"] < np.inf for n in drag.predicted)
+    assert drag.value == max(v["relative"] for v in drag.predicted.values() if v["counted"])
+    assert drag.baselines == plan.baselines
 
 
 @pytest.mark.parametrize(

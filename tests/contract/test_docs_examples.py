@@ -97,6 +97,7 @@ def test_the_examples_of_a_docs_page_run(page, tmp_path, monkeypatch):
         "PYTHONPATH": str(ROOT),
         "COLUMNS": "100",
         "NO_COLOR": "1",
+        "WMRID_BENCH_RESULTS": str(tmp_path / "bench-results"),  # a bench script's figures, not the committed ones
     }
     scope: dict = {"__name__": "__docs__"}
     monkeypatch.chdir(work)

@@ -3,7 +3,7 @@ mutated to edge values (0, a few bytes, 2^31, 2^32 - 1, 2^63 - 1, 2^63, 2^64 - 1
 
 Every mutated file must read to a result or a WmridError (one clear line), never another exception, a hang or a
 segfault (a length near 2^63 used to overflow the compiled scanner's bounds check).  The default run tries
-WMRID_FUZZ_EXAMPLES examples (default 150, about 3 s); ``python bench/fuzz_mcap.py --seconds 600`` runs it for
+WMRID_FUZZ_EXAMPLES examples (default 150, about 3 s); ``python bench/fuzz/fuzz_mcap.py --seconds 600`` runs it for
 ten minutes in fresh processes, so that a segfault is counted rather than ending the run.
 """
 

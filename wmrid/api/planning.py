@@ -29,7 +29,7 @@ from wmrid.design.plan import Plan, make_plan, plan_form
 from wmrid.estimators.combination import Part, shared_names
 from wmrid.model.robot import BaseSet, Robot
 
-__all__ = ["Plan", "plan", "read_plan", "write_plan"]
+__all__ = ["Plan", "plan", "predict_plan", "read_plan", "write_plan"]
 
 #: Defaults of the noise the prediction assumes when neither given nor measured: rad/s on each wheel speed, and the
 #: effort noise as a share of the torque scale (the torque limit, or the nominal torque at the acceleration limit),
@@ -247,6 +247,61 @@ def plan(
     from dataclasses import replace
 
     return replace(result, settings=settings)
+
+
+def predict_plan(
+    plan: Plan | str | os.PathLike[str],
+    robot: str | os.PathLike[str] | Robot,
+    *,
+    friction: str | None = None,
+    given: Any = None,
+) -> Plan:
+    """``plan``'s drive (a :class:`Plan`, or a saved one's path) predicted again, for the model identify will fit to
+    its log and the logs identified since, without searching again: the precision a drive already planned gives.
+
+    robot : the robot the plan was made for (a built-in name, a robot file or a :class:`Robot`; its casters for a
+    friction model with caster drag).  friction : the model identify will fit, as for :func:`plan` ("auto", "wheel",
+    "wheel+caster", "wheel+caster+load"; None: the plan's own), e.g. "wheel" for a log without caster drag.  given :
+    saved results of logs already identified (paths, or results; one or several), whose information is added as
+    :func:`plan` adds it.
+
+    Returns the plan with ``predicted``, ``value``, ``given`` and ``settings["friction"]`` of the new prediction; the
+    drive, its limits, noise and ``baselines`` are the plan's own.
+    """
+    from dataclasses import replace
+
+    from wmrid.api.inputs import load_robot
+    from wmrid.design.plan import FINE_GRID, _problem
+
+    if not isinstance(plan, Plan):
+        plan = read_plan(plan)
+    robot_obj = load_robot(robot)
+    model, geometry, drag = _friction(friction or str(plan.settings.get("friction", "wheel")), robot_obj)
+    form = plan_form(model, geometry)
+    names = form.base_names
+    start = np.array([float(plan.predicted[n]["nominal"]) for n in names[:8]])
+    theta0 = np.concatenate([start, drag, np.zeros(len(names) - 8 - len(drag))])
+    given_info, theta0 = _given(given, names, theta0)
+    duration = plan.excitation.duration
+    fine = _problem(
+        theta0, form, plan.r, plan.b, plan.limits, plan.noise, duration, min(plan.noise.rate, FINE_GRID),
+        plan.settings.get("criterion", "worst"), None if given_info is None else given_info[0],
+        plan.settings.get("k", DEFAULT_K),
+    )  # fmt: skip
+    cov = fine.covariance(fine.motion_of(np.asarray(plan.excitation.coefficients, dtype=np.float64)))
+    rel = fine.relative_std(cov)
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    predicted = {
+        name: {"nominal": float(theta0[i]), "scale": float(fine.scales[i]), "scale_from": fine.scale_sources[i],
+               "std": float(std[i]), "relative": float(rel[i]), "counted": i < fine.judged}
+        for i, name in enumerate(names)
+    }  # fmt: skip
+    settings = {**plan.settings, "friction": model, "caster_geometry": list(form.geometry),
+                "parameter_names": list(names)}  # fmt: skip
+    return replace(
+        plan, predicted=predicted, value=fine.criterion_value(cov), settings=settings,
+        given=None if given_info is None else given_info[1],
+    )  # fmt: skip
 
 
 #: ``plan --friction`` choices.

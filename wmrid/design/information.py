@@ -27,7 +27,7 @@ Logs already identified (``plan --given``) enter as :class:`GivenLogs`: their es
 log's by fixed weights, and the combination's covariance is linear in their REPORTED covariance (a sandwich), never
 its inverse: wmrid reports a jackknife covariance with few degrees of freedom (a 20 s log: 9, for 8 parameters),
 whose inverse overstates the information in its weakest directions many times over (the seed-100 sinusoid of
-``bench/study_plan.py --sequential``: eigenvalues 0.07-23 of the true covariance's).
+``bench/studies/study_plan.py --sequential``: eigenvalues 0.07-23 of the true covariance's).
 
 What this leaves out, and the reported std includes: a coloured disturbance (caster, slip), the controller's
 response to noise (a simulator's controller sees the true state; a real one sees the noisy speeds), and

@@ -14,7 +14,7 @@ noisy (few degrees of freedom), the more so the more of its entries they use, so
 by what that adds, found by a parametric bootstrap of the weighting (:func:`weight_noise_factor`): the
 combination's std is as honest as the logs' own.  A jackknife covariance is never inverted into information: with 9
 degrees of freedom for 8 parameters (a 20 s log) its eigenvalues were 0.07-23 times the true covariance's
-(``bench/study_plan.py --sequential``, seed 100).  The combination's degrees of freedom: Welch-Satterthwaite per
+(``bench/studies/study_plan.py --sequential``, seed 100).  The combination's degrees of freedom: Welch-Satterthwaite per
 parameter, the smallest of them reported.
 
 Only what means the same in both logs is combined: the inertia (m11, m12, m22) and V_c always; the friction terms
@@ -198,8 +198,8 @@ def weight_noise_factor(parts: Sequence[Part], det: Sequence[int], seed: int = 0
     again on its degrees of freedom (Wishart), its estimate from that truth, the weights made from the draw as
     :func:`combine` makes them; the variance of the combined estimate over the mean of the fixed-weight formula,
     WEIGHT_DRAWS draws, seeded; never below 1.  A log known exactly (dof None) keeps its weight.  Measured (30 seeds
-    of ``bench/study_plan.py --sequential 0.075,0.375``'s logs): with the fixed-weight formula alone the combined
-    estimate's spread was 0.8-1.37 times its median reported std (rms z 0.89-1.40)."""
+    of ``bench/studies/study_plan.py --sequential 0.075,0.375``'s logs): with the fixed-weight formula alone the
+    combined estimate's spread was 0.8-1.37 times its median reported std (rms z 0.89-1.40)."""
     rng = np.random.Generator(np.random.PCG64(seed))
     d = list(det)
     n, draws = len(d), WEIGHT_DRAWS

@@ -22,8 +22,8 @@ movement with its filter, the errors in variables of noisy speeds) join that std
 a difference they explain is not feedback, and an estimate is never reported for a difference within its own
 stated uncertainty.
 
-Measured (``bench/bench_coverage.py --robot amr --caster 0.02 --eta-noise 0.02 --tau-noise 0.01``, 20 seeds): see
-docs/explanation/checks.md, "The closed-loop check".
+Measured (``bench/accuracy/bench_coverage.py --robot amr --caster 0.02 --eta-noise 0.02 --tau-noise 0.01``, 20
+seeds): see docs/explanation/checks.md, "The closed-loop check".
 """
 
 from __future__ import annotations

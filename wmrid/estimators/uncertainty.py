@@ -15,7 +15,7 @@ jackknife follows Student's t with G - 1 degrees of freedom, so intervals have a
 (:func:`interval_factor`).  Unlike a kernel (Newey-West) estimate of the score's long-run covariance,
 the jackknife also sees how much the fit itself absorbs of a persistent disturbance, which matters on
 short logs: on simulated noisy 40 s logs with a coloured caster disturbance in closed loop
-(``bench/bench_coverage.py``), Newey-West with Andrews' bandwidth understated the spread 2-4 times, an
+(``bench/accuracy/bench_coverage.py``), Newey-West with Andrews' bandwidth understated the spread 2-4 times, an
 equal-weighted-cosine estimate 1.2-1.6 times, the jackknife 1.0-1.4 times.
 
 The Newey-West estimate (Bartlett kernel, Andrews' AR(1) bandwidth) is still used, for the weights of

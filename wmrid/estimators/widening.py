@@ -79,10 +79,10 @@ def with_hold_term(
     """``result`` with delta delta^T added to its covariance, delta the observer's estimate under --torque-hold foh
     (``foh``) minus that under zoh (``zoh``, the observer's estimate behind ``result``): on a log slower than the hold
     check's 400 Hz whose controller rate is unknown, the hold is uncertain between those two.  Measured on the light
-    AMR (bench/bench_timing.py, 1 kHz controller): at 100 Hz zoh and foh bias friction by about the same amount in
-    opposite directions, so the bracket covers the truth.  Parameters widened beyond INFLATION_MARK are marked.
-    When the closed-loop check reported another method, the observer's zoh-to-foh change stands for that method's
-    (an approximation: every method reads the efforts under the same hold)."""
+    AMR (bench/accuracy/bench_timing.py, 1 kHz controller): at 100 Hz zoh and foh bias friction by about the same
+    amount in opposite directions, so the bracket covers the truth.  Parameters widened beyond INFLATION_MARK are
+    marked.  When the closed-loop check reported another method, the observer's zoh-to-foh change stands for that
+    method's (an approximation: every method reads the efforts under the same hold)."""
     est = result.estimate
     if est is None or foh.estimate is None or len(foh.estimate.theta0) != len(zoh.theta0):
         return result

@@ -363,7 +363,7 @@ def fleet(
 
 def auto_batch(logs: int, workers: int) -> int:
     """Logs per task when not given: enough that each worker gets about 32 tasks, at most 16 logs: the scheduler's
-    and client's work per task (a few ms of CPU, bench/bench_fleet.py) is then shared, and the last tasks still
+    and client's work per task (a few ms of CPU, bench/speed/bench_fleet.py) is then shared, and the last tasks still
     balance across the workers."""
     return max(1, min(16, logs // (32 * max(workers, 1))))
 

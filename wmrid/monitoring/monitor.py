@@ -46,7 +46,7 @@ the Bonferroni bound then keeps the expected number of false alarms per hour of 
 with the disturbance; the tail is a little heavier than F in the first doublings), so ``margin`` = 1.1,
 chosen by measurement: on 6.4 h of unchanged noisy closed-loop simulated logs, each monitored against a
 model identified on another log, margin 1 gave 4.2, 0.78 and 0.31 false alarms per hour at stated rates of
-10, 1 and 0.3 per hour, margin 1.1 gave 1.7, 0.16 and 0.  bench/bench_monitor.py measures the defaults
+10, 1 and 0.3 per hour, margin 1.1 gave 1.7, 0.16 and 0.  bench/accuracy/bench_monitor.py measures the defaults
 (300 logs, 9.2 h: no false alarm; 1.2 per hour at a stated 10 per hour).
 
 After an alarm.  The change time is the maximum-likelihood one, the start j maximising S(j, k) with k one

@@ -105,7 +105,7 @@ class MonitorResult:
                 "model from residuals of models identified on the other half, cross-fitted); threshold: Bonferroni "
                 "bound over all tests (p_per_test = false_alarm_rate_per_hour / tests_per_hour) on the F law of S, "
                 f"times margin {st.margin:g}; the false alarms per hour measured on many seeds of unchanged noisy "
-                "closed-loop simulated logs are printed by bench/bench_monitor.py"
+                "closed-loop simulated logs are printed by bench/accuracy/bench_monitor.py"
             ),
             "not_tested": "the first calibration_s of the log and of each segment after a change (assumed unchanged); "
             "two changes closer than calibration_s are not told apart",

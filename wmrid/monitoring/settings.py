@@ -45,14 +45,15 @@ MIN_ROWS_PER_COEFFICIENT = 5
 HOLE_FACTOR = 10.0
 
 
-#: The false-alarm rate measured at the default settings by bench/bench_monitor.py (reported with every result).
+#: The false-alarm rate measured at the default settings by bench/accuracy/bench_monitor.py (reported with every
+#: result).
 MEASURED = {
     "logs": "300 unchanged noisy closed-loop simulated logs of 120 s (paper robot on the sinusoid at 1 kHz; noise "
     "0.01 rad/s, 0.02 N m, caster 0.05 N m with 0.3 s correlation), each against a model identified on another log",
     "hours": 9.17,
     "false_alarms": 0,
     "per_hour_at_stated": {"10": 1.2, "1": 0.0, "0.3": 0.0, "0.1": 0.0},
-    "by": "bench/bench_monitor.py",
+    "by": "bench/accuracy/bench_monitor.py",
 }
 
 
@@ -76,7 +77,7 @@ class MonitorSettings:
     accel_window_s, regressor_window_s : s, Savitzky-Golay windows of the residual and of the regressor.
     noise_memory_s : s, span of the lags of the noise model's autoregression.
     locate_s : s, data past an alarm used to locate the change.
-    margin : factor on the threshold for what the F law leaves out (chosen in bench/bench_monitor.py).
+    margin : factor on the threshold for what the F law leaves out (chosen in bench/accuracy/bench_monitor.py).
     """
 
     calibration_s: float = 10.0

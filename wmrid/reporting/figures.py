@@ -65,7 +65,7 @@ def _new_figure(
     (between columns, between rows).
 
     Fixed margins, not matplotlib's constrained layout: laying the report's figures out took 8 of its 18 s
-    (bench/bench_report.py), measuring every tick label again and again; the margins here fit the labels drawn.
+    (bench/speed/bench_report.py), measuring every tick label again and again; the margins here fit the labels drawn.
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg  # matplotlib (~0.3 s, no pyplot): only figures
     from matplotlib.figure import Figure  # matplotlib: only figures

@@ -13,8 +13,8 @@ BASELINE_TEXT = {"sinusoid": "the paper's sinusoid", "reversing": "the back-and-
 
 #: How the prediction held, said with every plan (docs/explanation/plan.md, "Measured").
 PREDICTION_ACCURACY = (
-    "On simulated logs of plans (bench/study_plan.py) the std wmrid identify reported came out 0.9-1.6 times the "
-    "prediction (median per parameter)."
+    "On simulated logs of plans (bench/studies/study_plan.py) the std wmrid identify reported came out 0.9-1.6 times "
+    "the prediction (median per parameter)."
 )
 
 

@@ -97,7 +97,7 @@ def read_limited(source: Any, limit: int, message: str, error: type[Exception] |
 #: the heap (M_MMAP_THRESHOLD, -3) and up to 64 MiB of freed heap kept (M_TRIM_THRESHOLD, -1).  With glibc's
 #: defaults every array of a long log (600,000 samples: ~10 MB each) is mapped and unmapped afresh, its pages
 #: faulted in each time: the in-process identify of a 10-minute 1 kHz bag took 0.96 s instead of 0.90 s (db3) and
-#: 0.67 s instead of 0.63 s (ROS 1), for 20 MB more peak memory (bench/bench_bags.py).  Dask's nanny even sets
+#: 0.67 s instead of 0.63 s (ROS 1), for 20 MB more peak memory (bench/speed/bench_bags.py).  Dask's nanny even sets
 #: MALLOC_TRIM_THRESHOLD_=65536, which pins the mmap threshold at 128 KiB: +70 % on a fleet worker.
 MALLOC_SETTINGS = {-3: 32 << 20, -1: 64 << 20}
 

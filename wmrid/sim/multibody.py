@@ -40,6 +40,7 @@ force, resistance x load: the truth of the drag D_k of ``identify --friction whe
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -49,6 +50,7 @@ from wmrid.model.robot import Caster, Payload, PhysicalParameters, default_caste
 from wmrid.sim.closed_loop import KIND, control_torque, reference_state, reversing_advance
 from wmrid.sim.multibody_model import (
     DRAG_SPEED,
+    PHYSICS_VERSION as PHYSICS_VERSION,
     MultibodySettings,
     _flat_inertia,
     build_mjcf,
@@ -60,8 +62,6 @@ from wmrid.sim.reference import Reference
 from wmrid.sim.scenario import NoiseSettings, PlantChange
 from wmrid.sim.simulate import SimulatedLog, plan_run
 
-#: Bump when a change alters the simulated motion (not its docs or truth fields): benchmarks key their caches on it.
-PHYSICS_VERSION = 3
 #: Time the robot settles on its contacts, at rest, before t = 0, s.
 SETTLE_SECONDS = 0.5
 
@@ -347,6 +347,7 @@ def _simulate(
     dist = np.empty((n, 2))
     normals = np.zeros(len(casters))
     n_normals = 0
+    caster_load = np.zeros((n, len(casters)))  # each caster's normal force at each logged sample
     slip_max = 0.0
 
     a_ou = math.exp(-period / noise.caster_time)
@@ -384,7 +385,9 @@ def _simulate(
             refpose[i] = ref[0], ref[1], ref[2]
             dist[i] = d1, d2
             if plant.caster_geoms:
-                normals += plant.caster_normals()
+                now = plant.caster_normals()
+                caster_load[i] = now
+                normals += now
                 n_normals += 1
             v_body = qvel[bv] * math.cos(yaw) + qvel[bv + 1] * math.sin(yaw)
             slip_max = max(slip_max, abs(v_body - 0.5 * r * (s[5] + s[6])))
@@ -435,7 +438,9 @@ def _simulate(
     if warned.count:
         multibody["mujoco_warnings"] = {"count": warned.count, "first": warned.first}
     extra = {"engine": "mujoco", "substeps": settings.substeps, "multibody": multibody}
-    return run.log(plant0, pose, angle, eta, tau, refpose, dist, extra, change)
+    caster_load.setflags(write=False)
+    log = run.log(plant0, pose, angle, eta, tau, refpose, dist, extra, change)
+    return dataclasses.replace(log, caster_load=caster_load)
 
 
 #: Most control periods of one run (50,000 s at 1 kHz): a bound on the time and memory of a simulation.

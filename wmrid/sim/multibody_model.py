@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -20,6 +20,11 @@ INSTALL_HINT = "--engine mujoco needs MuJoCo: pip install 'wmrid[physics]' (or p
 
 #: MuJoCo steps per control period by default (a 0.25 ms step at the 1 ms control period).
 SUBSTEPS = 4
+
+
+#: Bump when a change alters the simulated motion (not its docs or truth fields): benchmarks key their caches on it
+#: (:attr:`MultibodySettings.physics_version`).
+PHYSICS_VERSION = 3
 
 
 #: Default Coulomb friction of the wheels on the floor (rubber on concrete).
@@ -36,7 +41,7 @@ MAX_FLOOR_FRICTION = 100.0
 #: noise-free 60 s plan, and the light AMR's structural-mismatch test rejected the model (T2 281 on 17 dof,
 #: std widened 15-fold).  Two steps is as stiff as MuJoCo allows (its ``refsafe`` floor), the same rule as the
 #: joint friction below; it left -0.004 % and +0.020 %, and T2 14 on 17 dof.  ``MultibodySettings.tyre_time_constant``
-#: brings a softer, creeping tyre back for a study (``bench/study_mujoco_misfit.py``).
+#: brings a softer, creeping tyre back for a study (``bench/studies/study_mujoco_misfit.py``).
 CONTACT_SOLREF_STEPS = 2
 
 
@@ -81,7 +86,13 @@ class MultibodySettings:
     cg_height : m, height of the platform's centre of mass above the axle (it sets the load transfer).
     tyre_time_constant : s, time constant of the tyres' contact with the floor (None: ``CONTACT_SOLREF_STEPS``
         MuJoCo steps, as stiff as the engine allows; a larger value lets the tyres creep, as real ones do).
+
+    ``MultibodySettings.physics_version`` (a class attribute, not a setting): the version of the prototype's
+    physics, raised with every change that alters the simulated motion; with MuJoCo's version it keys a cache of
+    simulated logs (the same settings, seed and version give the same log).
     """
+
+    physics_version: ClassVar[int] = PHYSICS_VERSION
 
     floor_friction: float = FLOOR_FRICTION
     caster_resistance: float | None = None

@@ -135,20 +135,20 @@ class SimulatedLog:
     pose : (n, 3) true x (m), y (m), phi (rad, unwrapped) of the axle midpoint.
     wheel_angle : (n, 2) rad, true wheel angles theta [right, left], 0 at t = 0.
     true, nominal : the plant's parameters (at t = 0, before any change) and the controller's.
-    settings : everything needed to reproduce the run (JSON-serialisable); with a plant change, its
-        ``"change"`` entry holds kind, requested time t, actual switch time t_switch (s) and control period
-        switch_period, the base parameters ``before`` and ``after`` (as ``truth()["parameters"]``), the
-        physical sets ``physical_before`` and ``physical_after``, and the change's detail (payload, or
-        wheel, factor, terms, parameters).
+    settings : everything needed to reproduce the run (JSON-serialisable); with a plant change, its ``"change"``
+        entry holds kind, requested time t, actual switch time t_switch (s) and control period switch_period, the
+        base parameters ``before`` and ``after`` (as ``truth()["parameters"]``), the physical sets
+        ``physical_before`` and ``physical_after``, and the change's detail (payload, or wheel, factor, terms,
+        parameters).
     reference : (n, 3) reference pose x_r (m), y_r (m), phi_r (rad) at t.
-    eta_ref : (n, 2) rad/s, the reference's wheel speeds [right, left] at t: (v_r +/- b w_r) / r with the
-        NOMINAL r, b -- the wheel-speed set-points a planner would send (uncorrelated with the disturbance),
-        logged as eta_ref_r, eta_ref_l (the instruments of ``identify --method iv``,
-        :mod:`wmrid.estimators.regression.iv`).
-    disturbance : (n, 2) N m, caster torque tau_d applied over the control period starting at t (unlogged
-        in a real log; kept for tests and diagnostics).
+    eta_ref : (n, 2) rad/s, the reference's wheel speeds [right, left] at t: (v_r +/- b w_r) / r with the NOMINAL
+        r, b -- the wheel-speed set-points a planner would send (uncorrelated with the disturbance), logged as
+        eta_ref_r, eta_ref_l (the instruments of ``identify --method iv``, :mod:`wmrid.estimators.regression.iv`).
+    disturbance : (n, 2) N m, caster torque tau_d applied over the control period starting at t (unlogged in a
+        real log; kept for tests and diagnostics).
     eta_true : (n, 2) rad/s, true wheel velocities at t (the clean counterpart of ``eta``).
     change : the plant change of the run, or None.
+    caster_load : (n, K) N, each caster's normal force at t (multibody only, else None; mean: ``mean_normal_load``).
     """
 
     t: np.ndarray
@@ -164,6 +164,7 @@ class SimulatedLog:
     eta_true: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
     change: PlantChange | None = field(repr=False, default=None)
     eta_ref: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
+    caster_load: np.ndarray | None = field(repr=False, default=None)
 
     def plant_at(self, t: float) -> PhysicalParameters:
         """The plant's parameters over the control period starting at t (s): ``true`` before the switch time,

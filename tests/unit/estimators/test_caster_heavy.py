@@ -1,6 +1,6 @@
 """Caster drag on a heavy robot and on the light AMR, every method (issue 28, item 6).
 
-The 20-seed figures are bench/study_caster_heavy.py's; these are one seed of each case.
+The 20-seed figures are bench/studies/study_caster_heavy.py's; these are one seed of each case.
 """
 
 from __future__ import annotations
@@ -43,8 +43,8 @@ def test_light_amr_with_dragging_casters_every_method(amr_caster_log, method):
 @pytest.mark.slow
 def test_heavy_robot_with_dragging_casters_every_method():
     """The paper robot carrying 60 kg off-centre on a mu = 0.6 floor, ball casters of rolling resistance 0.015,
-    reversing, sensor noise (seed 0 of bench/study_caster_heavy.py): every method's every parameter within 3 std or
-    flagged (measured |z| <= 1.3), inertia and Vc within 3.6 % (output error; the others <= 0.3 %).  The front
+    reversing, sensor noise (seed 0 of bench/studies/study_caster_heavy.py): every method's every parameter within 3
+    std or flagged (measured |z| <= 1.3), inertia and Vc within 3.6 % (output error; the others <= 0.3 %).  The front
     caster's load moves by 4 % with the acceleration (-52 N per m/s^2): its drag is not constant, but a reversing
     run accelerates as much as it brakes in each direction, so the part the constant-drag model leaves out does not
     bias the estimate."""
@@ -66,7 +66,7 @@ def test_heavy_robot_with_dragging_casters_every_method():
 @pytest.mark.slow
 def test_heavy_robot_with_both_casters_touching_idim_and_iv():
     """The same robot with the payload at 60@-0.2,0 (both casters touch and trade +-26 N per m/s^2), seed 7 of
-    bench/study_caster_heavy.py --payload 60@-0.2,0: IDIM's and IV's Fv1 is 23 % off (as every method's, the
+    bench/studies/study_caster_heavy.py --payload 60@-0.2,0: IDIM's and IV's Fv1 is 23 % off (as every method's, the
     observer's 22 %).  One jackknife grid put its std at 5.7 % (z = 4.1, unflagged; RLS's grid, one segment more,
     9.3 %); averaged over the grid's shifts (wmrid.estimators.regression.idim.GRID_SHIFTS) it is 8.0 % (z = 2.9), and
     every parameter is within 3 std or flagged."""

@@ -1,7 +1,7 @@
 """Speeds derived from encoder positions (issue 28, item 5): IDIM's filter chosen from the noise's effect, the
 closed-loop check's attribution, and the reported estimate, on the paper sinusoid logged as a positions-only MCAP
 of a 2048-count/rev encoder (tests/encoder_log.py).  The figures over seeds and at 512 counts/rev:
-``bench/study_encoder.py`` (docs/how-to/positions-only.md)."""
+``bench/studies/study_encoder.py`` (docs/how-to/positions-only.md)."""
 
 from __future__ import annotations
 

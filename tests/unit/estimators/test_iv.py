@@ -4,7 +4,7 @@
 Independent references: the IV estimate with the regressor itself as instruments IS least squares (an algebraic
 identity, checked against IDIM's QR solution); the moments' leave-one-segment-out solutions against a refit
 without the segment; the reference speeds of the simulator against its reference pose (test_simulate).  The
-statistical claims (coverage over seeds) are measured by ``bench/bench_coverage.py`` and quoted in
+statistical claims (coverage over seeds) are measured by ``bench/accuracy/bench_coverage.py`` and quoted in
 docs/explanation/checks.md.
 """
 

@@ -269,7 +269,7 @@ def test_a_ros1_bag_cut_short_is_read_up_to_its_last_whole_record(tmp_path, samp
 
 def test_a_ros1_bags_pages_are_handed_back_as_it_is_walked(sample_bags, monkeypatch):
     """The mapped file's pages leave the resident memory as the walk passes them (as the MCAP reader's do): an
-    hour's ROS 1 bag peaked at 1.03 GB before, 0.47 GB after (bench/bench_bags.py --duration 3600, /usr/bin/time).
+    hour's ROS 1 bag peaked at 1.03 GB before, 0.47 GB after (bench/speed/bench_bags.py --duration 3600, /usr/bin/time).
     Here: the release is asked for past every chunk, up to the file's end, and the log is unchanged."""
     from wmrid.io.bag import ros1_file
 

@@ -289,7 +289,7 @@ def test_cli_monitor_writes_the_changes_as_json(cli_files) -> None:
     assert found["parameters"]["m11"]["value"] == pytest.approx(base(TRUE.with_payload(LOAD))["m11"], rel=0.02)
     detector = data["detector"]
     assert detector["false_alarm_rate_per_hour"] == 0.1
-    assert detector["measured"]["by"] == "bench/bench_monitor.py"
+    assert detector["measured"]["by"] == "bench/accuracy/bench_monitor.py"
     assert detector["threshold"]["first_calibration"] > detector["threshold"]["limit"] > 0
     assert "Bonferroni" in detector["calibration"]
     assert "assumed unchanged" in detector["calibration"]

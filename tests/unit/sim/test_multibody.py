@@ -208,6 +208,17 @@ def test_mean_caster_load_is_the_static_moment_balance(frictionless):
     assert casters[1]["mean_normal_load"] >= 0.0
 
 
+def test_each_casters_load_is_logged(frictionless):
+    """``caster_load`` holds each caster's normal force at every logged sample: read-only, never negative, its mean
+    the truth's ``mean_normal_load``."""
+    load = frictionless.caster_load
+    casters = frictionless.settings["multibody"]["casters"]
+    assert load.shape == (len(frictionless.t), len(casters))
+    assert not load.flags.writeable
+    assert np.all(load >= 0.0)
+    np.testing.assert_allclose(load.mean(axis=0), [c["mean_normal_load"] for c in casters], rtol=1e-12, atol=1e-9)
+
+
 # --- 3. payload -------------------------------------------------------------------------------------------------
 
 

@@ -54,7 +54,7 @@ GAP_FACTOR = 1000.0
 GAP_MIN_S = 1.0
 
 
-#: What the standard errors do not cover, with the coverage measured in simulation (bench/bench_coverage.py).
+#: What the standard errors do not cover, with the coverage measured in simulation (bench/accuracy/bench_coverage.py).
 CLOSED_LOOP_CAVEAT = (
     "in closed loop a coloured disturbance (a caster, the floor) reaches the efforts through the controller and "
     "biases the observer's inertia entries and Vc; the closed-loop check (diagnostics.feedback, "

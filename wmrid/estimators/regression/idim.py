@@ -176,9 +176,10 @@ def inertia_warnings(phi: np.ndarray) -> list[str]:
 #: The reported jackknife covariance is the mean of GRID_SHIFTS jackknives over the same G equal segments, the grid
 #: moved along the log by 1 / GRID_SHIFTS of a segment each time (:func:`shifted_groups`).  Each is the delete-a-segment
 #: jackknife with the same expectation; what one grid's spread owes to where its boundaries happen to fall averages
-#: out.  On 20 heavy-robot MuJoCo logs (the study of bench/study_caster_heavy.py, payload 60@-0.2,0) one grid's Fv1 std
-#: varied by 23 % over seeds (median unchanged by averaging; 16 % with 8 grids), and the same estimate got 5.7 % from
-#: IDIM's grid and 9.3 % from RLS's, one segment more.  8 grids: 16 and 32 changed no |z| by more than 0.05.
+#: out.  On 20 heavy-robot MuJoCo logs (the study of bench/studies/study_caster_heavy.py, payload 60@-0.2,0) one
+#: grid's Fv1 std varied by 23 % over seeds (median unchanged by averaging; 16 % with 8 grids), and the same estimate
+#: got 5.7 % from IDIM's grid and 9.3 % from RLS's, one segment more.  8 grids: 16 and 32 changed no |z| by more than
+#: 0.05.
 GRID_SHIFTS = 8
 #: How the std were computed (``diagnostics["uncertainty"]``), for IDIM, IV and RLS without forgetting.
 JACKKNIFE_TEXT = (

@@ -3,7 +3,7 @@ read by wmrid itself, block by block (:class:`Db3State`): the sqlite3 counterpar
 :mod:`wmrid.io.bag.ros1_file`.
 
 rosbags' reader opens a ``.db3`` by counting every topic's messages with a join over the whole table (0.17-0.26 s
-of a 1.2 s identify on a 600,000-message file, ``bench/bench_bags.py``) and then hands out one message at a time
+of a 1.2 s identify on a 600,000-message file, ``bench/speed/bench_bags.py``) and then hands out one message at a time
 through generators.  Here the file is opened read-only with apsw (the SQLite binding rosbags itself uses), its
 ``topics`` and ``message_definitions`` tables give the topics, and one query in timestamp order (rosbags' order:
 the ``timestamp_idx`` index) returns every message, with the bytes of the JointState topics only; the counts and

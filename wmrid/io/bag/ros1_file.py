@@ -2,7 +2,7 @@
 decoded in one call (:class:`Ros1State`): the ROS 1 counterpart of :mod:`wmrid.io.mcap.reader`.
 
 rosbags reads a bag message by message in Python (7.3 s for a 10-minute 1 kHz JointState bag on the benchmark
-machine, ``bench/bench_bags.py``); this reader scans each decompressed chunk with
+machine, ``bench/speed/bench_bags.py``); this reader scans each decompressed chunk with
 :func:`wmrid.io.bag.ros1_records.ros1_records` and hands its JointState messages to
 :func:`wmrid.io.bag.ros1_records.ros1_joint_states`.  rosbags still deserialises what the kernel does not decode
 (:class:`wmrid.io.bag.state._BagState`), with the definitions from the bag's connection records.
