@@ -21,6 +21,8 @@ KIND_CASTER = 2  # general plus the caster-drag columns -sgn(eta_1 + eta_2), -sg
 #: general plus two columns per caster of known position (wmrid.model.dynamics.caster_columns), and two per caster and
 #: load signal of the wheel+caster+load model (the kernel's ``load`` codes; v' and w' filtered by _derivative_inputs)
 KIND_CASTER_GEOMETRY = 3
+#: The distinct steps h whose coefficients (:func:`foh`, :func:`_substep_weights`) :func:`observer_chunk` keeps.
+STEP_CACHE = 8
 
 
 @numba.njit(cache=True, nogil=True)
@@ -174,7 +176,7 @@ def observer_chunk(
     st (9,) = [t_prev, eta_prev (2), eta_hat (2), xi_hat (2), eta's rate of change over the previous step (2)]; w,
     g_prev (p,);
     theta (2, p) unconstrained
-    estimate; gamma, gamma_inv (p, p).
+    estimate; gamma, gamma_inv (p, p), gamma_inv symmetric (as the observer starts it, and keeps it).
     hist_idx (m,) increasing global sample indices to record into hist_theta (m, 2, p), hist_e (m, 2)
     (prior prediction error, rad/s), hist_gamma (m, p, p).  block_end (J,) increasing global indices, the
     last one n - 1: block j sums the steps ending at samples in (block_end[j-1], block_end[j]]:
@@ -187,6 +189,11 @@ def observer_chunk(
     c = t.shape[0]
     p = theta.shape[1]
     m = hist_idx.shape[0]
+    # the step's coefficients depend on h alone, and a log has a handful of distinct steps: those of the last
+    # STEP_CACHE steps seen are kept (the same values as computed afresh: foh's series costs 24 divisions a sample)
+    cached_h = np.full(STEP_CACHE, np.nan)
+    cached = np.empty((STEP_CACHE, 5))
+    slot = 0
     g = np.empty(p)
     gin = np.empty(p)
     pw = np.empty(p)
@@ -198,9 +205,19 @@ def observer_chunk(
     for i in range(c):
         n_i = offset + i
         h = t[i] - st[0]
-        a, phi0, phi1 = foh(k * h)
-        b0 = h * phi0
-        b1 = h * phi1
+        q = 0
+        while q < STEP_CACHE and cached_h[q] != h:
+            q += 1
+        if q == STEP_CACHE:  # not seen lately: computed, and kept in place of the oldest
+            q = slot
+            slot = (slot + 1) % STEP_CACHE
+            cached_h[q] = h
+            cached[q, 0], cached[q, 1], cached[q, 2] = foh(k * h)
+            if hold > 0.0:
+                cached[q, 3], cached[q, 4] = _substep_weights(k * h, h, max(1, round(h * hold)))
+        a = cached[q, 0]
+        b0 = h * cached[q, 1]
+        b1 = h * cached[q, 2]
         e1 = eta[i, 0]
         e2 = eta[i, 1]
         _regressor_into(g, e1, e2, eta_sign[i, 0], eta_sign[i, 1], tau[i, 0], tau[i, 1], kind, geom, load)
@@ -211,10 +228,8 @@ def observer_chunk(
             gin[0] = (b0 + b1) * g_prev[0]
             gin[1] = (b0 + b1) * g_prev[1]
         elif hold > 0.0:
-            sub = max(1, round(h * hold))
-            c0, c1 = _substep_weights(k * h, h, sub)
-            gin[0] = c0 * g_prev[0] + c1 * g[0]
-            gin[1] = c0 * g_prev[1] + c1 * g[1]
+            gin[0] = cached[q, 3] * g_prev[0] + cached[q, 4] * g[0]
+            gin[1] = cached[q, 3] * g_prev[1] + cached[q, 4] * g[1]
         _derivative_inputs(gin, g_prev, g, b0, b1, h, h * st[7], h * st[8], geom, load)
         # (27) w and (26) eta_hat with theta held over the step
         for j in range(p):
@@ -236,14 +251,21 @@ def observer_chunk(
         den = 1.0 / h
         for r in range(p):
             den += w[r] * pw[r]
+        while block_end[bj] < n_i:
+            bj += 1
         for r in range(p):
             wr = h * w[r]
             for j in range(p):
-                gamma[r, j] += wr * w[j]
-                gamma_inv[r, j] -= pw[r] * pw[j] / den
+                dw = wr * w[j]
+                gamma[r, j] += dw
+                blk_a[bj, r, j] += dw
+        # gamma_inv is symmetric, and so is its change (pw_r pw_j = pw_j pw_r): each entry above the diagonal is
+        # updated once and averaged with its mirror image, the same value (0.5 (v + v), as the readable step does)
         for r in range(p):
+            gamma_inv[r, r] -= pw[r] * pw[r] / den
             for j in range(r + 1, p):
-                avg = 0.5 * (gamma_inv[r, j] + gamma_inv[j, r])
+                v = gamma_inv[r, j] - pw[r] * pw[j] / den
+                avg = 0.5 * (v + v)
                 gamma_inv[r, j] = avg
                 gamma_inv[j, r] = avg
         # (35)-(36): gain h Gamma^-1 w
@@ -252,8 +274,6 @@ def observer_chunk(
             for j in range(p):
                 s += gamma_inv[r, j] * w[j]
             pw[r] = h * s
-        while block_end[bj] < n_i:
-            bj += 1
         for r in range(2):
             innov = e_prior[r] - xi_hat[r]
             wt = 0.0
@@ -269,10 +289,6 @@ def observer_chunk(
             eta_hat[r] += dwt  # the w theta_hat' term of (26)
             blk_uu[bj, r] += h * u * u
             blk_ee[bj, r] += h * e_prior[r] * e_prior[r]
-        for r in range(p):
-            wr = h * w[r]
-            for j in range(p):
-                blk_a[bj, r, j] += wr * w[j]
         for j in range(p):
             g_prev[j] = g[j]
         st[7] = (e1 - st[1]) / h
