@@ -21,16 +21,23 @@ from wmrid.model.kernels import plain
 
 CHUNK = 262_144
 
-#: Whether the half-rate run goes on a second thread (one identify then uses two cores).  A process that shares the
-#: machine's cores with others doing the same (``wmrid fleet``'s workers, one per core) turns it off
-#: (:func:`one_thread`): there the second thread only competes for a busy core (+6-10 % per log, measured).
+#: Whether identify may use a second thread: the half-rate run, and the timing check alongside the observer's passes
+#: (:mod:`wmrid.pipeline.alongside`); one identify then uses two cores.  A process that shares the machine's cores with
+#: others doing the same (``wmrid fleet``'s workers, one per core) turns it off (:func:`one_thread`): there the second
+#: thread only competes for a busy core (+6-10 % per log, measured).
 _SECOND_THREAD = True
 
 
 def one_thread(on: bool = True) -> None:
-    """Run the half-rate replay inline, on the caller's thread (``on``), or on a second thread (the default)."""
+    """Run identify on the caller's thread alone (``on``: the half-rate replay inline, the timing check before the
+    observer's passes), or on two (the default)."""
     global _SECOND_THREAD
     _SECOND_THREAD = not on
+
+
+def second_thread() -> bool:
+    """Whether identify may run a second pass on a second thread (:func:`one_thread`)."""
+    return _SECOND_THREAD
 
 
 @dataclass(frozen=True)
