@@ -236,8 +236,8 @@ def replay_pieces(
     ``noise_lag`` samples: the spacing of the noise floor's second differences (:class:`wmrid.estimators.noise_floor.
     NoiseFloor`; 1 for measured speeds, the derivative's window for speeds derived from positions).
     ``sign_half_window`` samples: the sign columns take the sign of a centred mean of the speeds over twice this
-    plus one (:mod:`wmrid.estimators.sign_speed`; 0: of the measured speeds); the pieces then reach the kernel that
-    many samples late, the last ones when the pieces end.
+    plus one (:mod:`wmrid.estimators.sign_speed`; 0: of the measured speeds; not taken for the paper form, which has
+    none); the pieces then reach the kernel that many samples late, the last ones when the pieces end.
     """
 
     p = settings.form.n_columns
@@ -267,7 +267,8 @@ def replay_pieces(
         from concurrent.futures import ThreadPoolExecutor
 
         pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wmrid-half-rate")
-    signs = SignSpeeds(sign_half_window)
+    # the paper form has no sign column (each wheel keeps one sign): no speeds to average for one
+    signs = SignSpeeds(0 if settings.form.kind == "paper" else sign_half_window)
     done = 0
 
     def advance(t: np.ndarray, eta: np.ndarray, tau: np.ndarray, es: np.ndarray) -> None:
