@@ -327,7 +327,9 @@ def idim_regression(
     Raises UsageError for bad arguments, LogFormatError for unusable time stamps, NotIdentifiableError
     when the log is too short for the filter.
     """
-    from wmrid.estimators.regression.lowpass import butter_sos, filtfilt
+    from wmrid.estimators.regression.idim_columns import raw_columns_into
+    from wmrid.estimators.regression.lowpass import butter_sos, filtfilt_extended
+    from wmrid.model.kernels import plain
 
     t, eta, tau = _check_arrays(t, eta, tau)
     if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or not 1 <= order <= 12:
@@ -377,16 +379,13 @@ def idim_regression(
 
     sos = butter_sos(order, cutoff, rate)
     pad = min(edge, n - 1)
-    e1, e2 = eta[:, 0], eta[:, 1]
     form = form if _caster_map(form) else None
     caster_raw = caster_columns(eta, form, multiplier=True) if form is not None else np.empty((n, 0))
-    raw = np.empty((n, 8 + caster_raw.shape[1]))
-    for j, col in enumerate((e1, e2, e1 * e2 - e2 * e2, e1 * e2 - e1 * e1, np.sign(e1), np.sign(e2), tau[:, 0])):
-        raw[:, j] = col
-    raw[:, 7] = tau[:, 1]
-    raw[:, 8:] = caster_raw  # computed from the unfiltered speeds like sgn(eta_i), filtered like every column
-    filt = filtfilt(sos, raw, pad)  # (n, 8 + q), the columns side by side
-    del raw, caster_raw
+    ext = np.empty((n + 2 * pad, 8 + caster_raw.shape[1]))  # the columns side by side, room for the odd extension
+    raw_columns_into(plain(eta), plain(tau), ext[pad : pad + n])
+    ext[pad : pad + n, 8:] = caster_raw  # from the unfiltered speeds like sgn(eta_i), filtered like every column
+    del caster_raw
+    filt = filtfilt_extended(sos, ext, pad)  # (n, 8 + q)
     acc = _five_point_derivative(filt[:, 0:2], dt, keep)
     kept = filt[keep]
     features = np.column_stack([acc, kept[:, [2, 3, 0, 1, 4, 5]]])

@@ -220,15 +220,24 @@ def filtfilt(sos: np.ndarray, x: np.ndarray, pad: int) -> np.ndarray:
     if not 0 <= pad < len(x):
         raise ValueError(f"pad {pad} must be at least 0 and below the signal's length {len(x)}")
     columns = x.reshape(len(x), -1)
-    # odd extension: 2 x[0] - x[pad..1] before, 2 x[-1] - x[-2..-pad-1] after
-    y = (
-        np.concatenate((2 * columns[:1] - columns[pad:0:-1], columns, 2 * columns[-1:] - columns[-2 : -(pad + 2) : -1]))
-        if pad
-        else columns.copy()
-    )
+    y = np.empty((len(x) + 2 * pad, columns.shape[1]))
+    y[pad : pad + len(x)] = columns
+    return filtfilt_extended(sos, y, pad).reshape(x.shape)
+
+
+def filtfilt_extended(sos: np.ndarray, y: np.ndarray, pad: int) -> np.ndarray:
+    """:func:`filtfilt` in place, for a caller that wrote the signal (n, c) into y[pad : pad + n] of y (n + 2 pad, c),
+    float64, C order: the first and last ``pad`` rows are overwritten by the odd extension (2 x[0] - x[pad..1] before,
+    2 x[-1] - x[-2..-pad-1] after); returns the filtered signal, the view y[pad : pad + n]."""
+    n = len(y) - 2 * pad
+    if not 0 <= pad < n:
+        raise ValueError(f"pad {pad} must be at least 0 and below the signal's length {n}")
+    if pad:
+        y[:pad] = 2 * y[pad : pad + 1] - y[2 * pad : pad : -1]
+        y[pad + n :] = 2 * y[pad + n - 1 : pad + n] - y[pad + n - 2 : n - 2 : -1]
     sos = np.ascontiguousarray(sos, dtype=np.float64)
     _filtfilt_columns(sos, steady_state(sos), y)
-    return y[pad : len(y) - pad].reshape(x.shape)
+    return y[pad : pad + n]
 
 
 def blackman_harris(n: int) -> np.ndarray:
