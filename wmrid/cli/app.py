@@ -70,9 +70,10 @@ def main(argv: list[str] | None = None) -> None:
     previous = interrupts.install()  # Ctrl-C is deferred while numba compiles (an interrupt there crashes LLVM)
     if argv is None:  # the command-line process: a signal that finds it stuck in compiled code still ends it
         interrupts.start_watchdog()
-        from wmrid.runtime.limits import tune_malloc
+        from wmrid.runtime.limits import one_blas_thread, tune_malloc
 
         tune_malloc()  # large arrays from the heap, not mapped afresh each time (a process of one command)
+        one_blas_thread()  # before numpy loads OpenBLAS: small calls, whose spinning workers took wmrid's cores
     saved = guard()  # a failing stdout is an error naming it; a failing stderr never changes the outcome
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args

@@ -356,12 +356,12 @@ def combine(estimates: list[DelayEstimate]) -> DelayEstimate:
 def interp_columns(at: np.ndarray, d: float, xp: np.ndarray, fp: np.ndarray) -> np.ndarray:  # pragma: no cover
     """The columns of fp (m, 2), sampled at xp (m,) increasing, read at at + d (at (n,) increasing): numpy.interp's
     value bit for bit (its slope times the step from the knot below, the end values outside, the knot's own value on
-    a knot; tested against it), in one pass that walks the knots along ``at`` instead of searching for each.  The
-    delay's profile reads the efforts so at each of its candidates (half its time on an hour's log with numpy)."""
+    a knot; tested against it), each point's knot found from where evenly spaced knots would put it, then walked to.
+    The delay's profile reads the efforts so at each of its candidates (half its time on an hour's log with numpy)."""
     n = at.shape[0]
     m = xp.shape[0]
     out = np.empty((n, 2))
-    j = 0
+    per_span = (m - 1) / (xp[m - 1] - xp[0]) if m > 1 and xp[m - 1] > xp[0] else 0.0
     for i in range(n):
         x = at[i] + d
         if np.isnan(x):
@@ -376,9 +376,12 @@ def interp_columns(at: np.ndarray, d: float, xp: np.ndarray, fp: np.ndarray) -> 
             out[i, 0] = fp[m - 1, 0]
             out[i, 1] = fp[m - 1, 1]
             continue
-        while j + 1 < m and xp[j + 1] <= x:  # the last knot at or below x (x increases with i)
+        # the last knot at or below x, walked to from where evenly spaced knots would put it (the profile's knots
+        # are: one step or none, however far apart the points of ``at``)
+        j = min(max(int((x - xp[0]) * per_span), 0), m - 1)
+        while j + 1 < m and xp[j + 1] <= x:
             j += 1
-        while j > 0 and xp[j] > x:  # (at need not increase: then walk back)
+        while j > 0 and xp[j] > x:
             j -= 1
         for c in range(2):
             if j == m - 1 or xp[j] == x:

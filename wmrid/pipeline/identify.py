@@ -6,7 +6,8 @@ The route, each step a function that returns a record and re-enters nothing:
 2. the efforts' timing decided (:func:`wmrid.pipeline.timing.decide_timing`): split topics, or the timing check;
    when it finds a significant delay, or the user asks for one (``delay``), the delay is estimated on the whole log
    and applied (:func:`_delayed`), with a pass at the delay moved by its resolution for the timing term;
-3. the observer's passes the friction model needs (:func:`wmrid.pipeline.friction.choose_friction`: one to three);
+3. the observer's passes the friction model needs (:func:`wmrid.pipeline.friction.choose_friction`: one to three),
+   run while step 2's timing check runs (:mod:`wmrid.pipeline.alongside`) and used unless it applies a delay;
 4. the widenings: the unresolved delay (:func:`wmrid.pipeline.timing.carry_unresolved_delay`), the closed-loop check
    (:func:`wmrid.estimators.feedback.check`), the hold term of a slow log (:func:`wmrid.estimators.widening.
    with_hold_term`, a pass under foh);
@@ -23,7 +24,7 @@ from dataclasses import dataclass, fields, replace
 from typing import Any
 
 from wmrid.core.errors import UsageError, WmridError, option
-from wmrid.core.wheel_log import LogStream, stream_arrays
+from wmrid.core.wheel_log import LogStream, split_topics, stream_arrays
 from wmrid.estimators.delay import DELAY_RESOLUTION_S
 from wmrid.estimators.feedback import check as feedback_check
 from wmrid.estimators.observer.observe import delay_profile_form
@@ -34,6 +35,7 @@ from wmrid.estimators.timing_check import apply_delay
 from wmrid.estimators.verdict import settle
 from wmrid.estimators.widening import with_hold_term, with_timing_term
 from wmrid.model.robot import Robot
+from wmrid.pipeline.alongside import Once, alongside
 from wmrid.pipeline.friction import choose_friction
 from wmrid.pipeline.timing import Timing, carry_unresolved_delay, decide_timing, observe_at, surveyed
 
@@ -87,9 +89,14 @@ def identify_log(
     if options.delay is not None:
         return _settled(_delayed(log, robot, options, steps, progress), robot)
     stream, sv = surveyed(log)
+    chosen = Once(lambda: _choose(stream, sv, robot, options, steps, progress))
     timing = Timing()
     if steps.timing:
-        timing = decide_timing(log, stream, sv, robot, options, steps.geometry, steps.load_terms)
+        # the friction models' passes run while the timing is checked (wmrid.pipeline.alongside), and serve unless it
+        # applies a delay; split topics are timed first, unchecked
+        meanwhile = None if split_topics(stream.notes) else chosen.run
+        check = (log, stream, sv, robot, options, steps.geometry, steps.load_terms)
+        timing = alongside(lambda: decide_timing(*check), meanwhile)
         if timing.split or timing.apply:  # time the efforts by default
             try:
                 timed = _settled(_delayed(log, robot, replace(options, delay="auto"), steps, progress), robot)
@@ -100,7 +107,7 @@ def identify_log(
                     merged = {**timing.record, **(timed.diagnostics.get("timing") or {})}
                     timed = replace(timed, diagnostics={**timed.diagnostics, "timing": merged})
                 return _settled(timed, robot)
-    return _settled(_friction_and_terms(log, stream, sv, robot, options, steps, progress, timing), robot)
+    return _settled(_friction_and_terms(log, chosen(), robot, options, steps, timing), robot)
 
 
 def _settled(result: IdentificationResult, robot: Robot | None) -> IdentificationResult:
@@ -146,41 +153,58 @@ def _delayed(
         step = max(DELAY_RESOLUTION_S, 2.0 * record["std_s"])
         plain = replace(steps, feedback=False, timing=False)
         stream, sv = surveyed(shifted)
-        base = _friction_and_terms(shifted, stream, sv, robot, replace(options, delay=None), plain, progress, Timing())
+        undelayed = replace(options, delay=None)
+        base = _friction_and_terms(
+            shifted, _choose(stream, sv, robot, undelayed, plain, progress), robot, undelayed, plain, Timing()
+        )
         base = _settled(base, robot)
         at = replace(options, friction=base.form.friction, delay=applied + step)
         moved = observe_at(original, robot, at, steps.geometry)
         return _checked(with_timing_term(base, moved, record, warnings, step, robot), shifted, robot, steps)
     stream, sv = surveyed(shifted)
+    chosen = Once(lambda: _choose(stream, sv, robot, options, steps, progress))
     timing = Timing(delay_record=record, delay_warnings=tuple(warnings))
     if steps.timing and delay == "auto":
-        timing = decide_timing(
-            shifted, stream, sv, robot, options, steps.geometry, steps.load_terms, delay_record=record,
-            delay_warnings=tuple(warnings),
-        )  # fmt: skip
-    return _friction_and_terms(shifted, stream, sv, robot, options, steps, progress, timing)
+        check = (shifted, stream, sv, robot, options, steps.geometry, steps.load_terms)
+        noted = tuple(warnings)
+
+        def decided() -> Timing:
+            return decide_timing(*check, delay_record=record, delay_warnings=noted)
+
+        timing = alongside(decided, chosen.run)  # the friction models' passes meanwhile
+    return _friction_and_terms(shifted, chosen(), robot, options, steps, timing)
 
 
 def _checked(result: IdentificationResult, log: Any, robot: Robot | None, steps: Steps) -> IdentificationResult:
     return feedback_check(result, log, robot, switch=steps.switch) if steps.feedback else result
 
 
-def _friction_and_terms(
-    log: Any,
+def _choose(
     stream: LogStream,
     sv: Any,
     robot: Robot | None,
     options: ObserverOptions,
     steps: Steps,
     progress: Callable[[int, int], None] | None,
+) -> tuple[IdentificationResult, dict[str, Any]]:
+    """The friction model's passes over ``stream`` (surveyed as ``sv``): :func:`wmrid.pipeline.friction.choose_friction`
+    (the result, the record of the choice)."""
+    return choose_friction(
+        stream, sv, robot, options, geometry=steps.geometry, load_terms=steps.load_terms, progress=progress
+    )
+
+
+def _friction_and_terms(
+    log: Any,
+    chosen: tuple[IdentificationResult, dict[str, Any]],
+    robot: Robot | None,
+    options: ObserverOptions,
+    steps: Steps,
     timing: Timing,
 ) -> IdentificationResult:
-    """The friction model chosen (its passes), the timing's records and warnings, the unresolved-delay term, the
-    closed-loop check and the hold term."""
-    result, friction_record = choose_friction(
-        stream, sv, robot, options, geometry=steps.geometry, load_terms=steps.load_terms,
-        progress=progress,
-    )  # fmt: skip
+    """The friction model chosen (``chosen``: :func:`_choose`'s), the timing's records and warnings, the
+    unresolved-delay term, the closed-loop check and the hold term."""
+    result, friction_record = chosen
     diagnostics = {**result.diagnostics, "friction": friction_record}
     if timing.record is not None:
         diagnostics["timing"] = timing.record

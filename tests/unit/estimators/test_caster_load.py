@@ -39,7 +39,7 @@ from tests.unit.model.test_caster_model import (
     speed_samples,
     synthetic_log,
 )
-from wmrid.estimators.observer.kernel import KIND_CASTER_GEOMETRY, _regressor_into
+from wmrid.estimators.observer.kernel import KIND_CASTER_GEOMETRY, _regressor_rows
 from wmrid.estimators.observer.replay import kernel_kind, load_codes, replay
 from wmrid.estimators.observer.settings import ObserverSettings
 from wmrid.estimators.observer.step import initial_state, observer_step
@@ -238,7 +238,7 @@ def _settings(form: RegressorForm, k: float = 3.0, hold: str = "zoh") -> Observe
 
 @pytest.mark.parametrize("name", list(LOAD_FORMS))
 def test_kernel_regressor_is_the_filter_regressor(name):
-    """wmrid.estimators.observer.kernel._regressor_into with the load codes equals filter_regressor on ~450 samples with
+    """wmrid.estimators.observer.kernel._regressor_rows with the load codes equals filter_regressor on ~450 samples with
     the special
     speeds: to 1e-14 of each column's largest entry (the same arithmetic in the same order; measured exact).  Both
     with the drag's direction taken from the measured speeds and from other ones (the sign speeds,
@@ -250,16 +250,12 @@ def test_kernel_regressor_is_the_filter_regressor(name):
     eta = speed_samples(rng)
     tau = rng.normal(0.0, 2.0, size=eta.shape)
     geom, load = np.array(form.geometry), load_codes(form)
-    out = np.empty(form.n_columns)
+    out = np.empty((len(eta), form.n_columns))
     for signs in (eta, eta[rng.permutation(len(eta))]):
         expected = model.filter_regressor(eta, tau, form, signs)
         scale = np.maximum(np.max(np.abs(expected), axis=0), 1e-300)
-        for i in range(len(eta)):
-            _regressor_into(
-                out, eta[i, 0], eta[i, 1], signs[i, 0], signs[i, 1], tau[i, 0], tau[i, 1], KIND_CASTER_GEOMETRY, geom,
-                load,
-            )  # fmt: skip
-            assert np.all(np.abs(out - expected[i]) <= 1e-14 * scale)
+        _regressor_rows(out, eta, signs, tau, 0, KIND_CASTER_GEOMETRY, geom, load)
+        assert np.all(np.abs(out - expected) <= 1e-14 * scale)
 
 
 def test_derivative_column_is_the_exact_filter():

@@ -51,6 +51,27 @@ def test_regression_rows_reproduce_the_inverse_model(smooth_log, reversing_log):
         np.testing.assert_allclose(x @ phi, log.tau, rtol=0, atol=1e-12 * np.abs(log.tau).max())
 
 
+def test_raw_columns_are_numpys_bit_for_bit():
+    """The compiled writer of the regression's unfiltered columns gives numpy's values, zero speeds (and -0.0)
+    included."""
+    from wmrid.estimators.regression.idim_columns import raw_columns_into
+
+    rng = np.random.default_rng(4)
+    eta = rng.normal(0.0, 3.0, size=(500, 2))
+    eta[::7] = 0.0
+    eta[3::11, 1] = -0.0
+    tau = rng.normal(0.0, 2.0, size=(500, 2))
+    e1, e2 = eta[:, 0], eta[:, 1]
+    expected = np.column_stack(
+        [e1, e2, e1 * e2 - e2 * e2, e1 * e2 - e1 * e1, np.sign(e1), np.sign(e2), tau[:, 0], tau[:, 1]]
+    )
+    out = np.full((500, 9), 7.0)
+    raw_columns_into(eta, tau, out)
+    assert np.array_equal(out[:, :8], expected)
+    assert np.array_equal(np.signbit(out[:, :8]), np.signbit(expected))  # the zeros' signs too
+    assert np.all(out[:, 8] == 7.0)
+
+
 def test_phi_to_theta0_and_its_jacobian():
     phi = true_phi()
     np.testing.assert_allclose(idim.phi_to_theta0(phi), model.base_parameters(PAPER_CAD), rtol=1e-13)

@@ -62,6 +62,18 @@ def test_filtfilt_is_scipys_sosfiltfilt(order):
     assert np.array_equal(lowpass.steady_state(sos), ss.sosfilt_zi(sos))
 
 
+def test_filtfilt_filters_each_column_as_alone():
+    """A 2-D signal's columns, filtered side by side, are each the 1-D result, bit for bit."""
+    rng = np.random.default_rng(3)
+    x = np.cumsum(rng.standard_normal((3000, 5)), axis=0)
+    sos = lowpass.butter_sos(4, 12.0, 1000.0)
+    for pad in (0, 1, 250):
+        both = lowpass.filtfilt(sos, x, pad)
+        assert both.shape == x.shape
+        for j in range(x.shape[1]):
+            assert np.array_equal(both[:, j], ss.sosfiltfilt(sos, x[:, j], padlen=pad)), (pad, j)
+
+
 def test_filtfilt_keeps_a_constant_and_its_input():
     """A constant passes unchanged (unit DC gain, started from the steady state); the input is not modified."""
     x = np.full(400, 2.5)

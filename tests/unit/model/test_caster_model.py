@@ -27,7 +27,7 @@ from wmrid.estimators.observer.kernel import (
     KIND_CASTER_GEOMETRY,
     KIND_GENERAL,
     KIND_PAPER,
-    _regressor_into,
+    _regressor_rows,
 )
 from wmrid.estimators.observer.observe import caster_geometry
 from wmrid.estimators.observer.replay import kernel_kind
@@ -309,7 +309,7 @@ def test_kernel_kinds():
 
 @pytest.mark.parametrize("name", list(FORMS))
 def test_kernel_regressor_is_the_model_regressor(name):
-    """wmrid.estimators.observer.kernel._regressor_into (compiled) equals model.regressor on ~450 samples, including
+    """wmrid.estimators.observer.kernel._regressor_rows (compiled) equals model.regressor on ~450 samples, including
     standing
     still, one wheel still, eta_1 = -eta_2, eta_1 = eta_2 and contact speeds below DRAG_SPEED: to 1e-14 of
     each column's largest entry (the same arithmetic in the same order; measured: bit-identical)."""
@@ -321,11 +321,9 @@ def test_kernel_regressor_is_the_model_regressor(name):
     kind = kernel_kind(form)
     geom = np.array(form.geometry, dtype=np.float64)
     got = np.empty_like(expected)
-    out = np.empty(form.n_columns)
-    for i in range(len(eta)):
-        e1, e2 = eta[i]  # the sign speeds are the speeds themselves here
-        _regressor_into(out, e1, e2, e1, e2, tau[i, 0], tau[i, 1], kind, geom, np.zeros(0, dtype=np.int64))
-        got[i] = out
+    # the sign speeds are the speeds themselves here; rows from the 3rd sample on, then the first 3
+    _regressor_rows(got[3:], eta, eta, tau, 3, kind, geom, np.zeros(0, dtype=np.int64))
+    _regressor_rows(got[:3], eta, eta, tau, 0, kind, geom, np.zeros(0, dtype=np.int64))
     scale = np.maximum(np.max(np.abs(expected), axis=0), 1e-300)
     assert np.all(np.abs(got - expected) <= 1e-14 * scale)
 

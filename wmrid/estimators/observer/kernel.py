@@ -21,38 +21,48 @@ KIND_CASTER = 2  # general plus the caster-drag columns -sgn(eta_1 + eta_2), -sg
 #: general plus two columns per caster of known position (wmrid.model.dynamics.caster_columns), and two per caster and
 #: load signal of the wheel+caster+load model (the kernel's ``load`` codes; v' and w' filtered by _derivative_inputs)
 KIND_CASTER_GEOMETRY = 3
+#: The distinct steps h whose coefficients (:func:`foh`, :func:`_substep_weights`) :func:`observer_chunk` keeps.
+STEP_CACHE = 8
+#: Samples whose regressor :func:`observer_chunk` makes at a time (:func:`_regressor_rows`).
+REGRESSOR_ROWS = 512
 
 
 @numba.njit(cache=True, nogil=True)
-def _regressor_into(out, e1, e2, s1, s2, t1, t2, kind, geom, load):
-    """The filters' per-sample input g (:func:`wmrid.model.dynamics.filter_regressor`) into ``out`` (p,).
+def _regressor_rows(out, eta, eta_sign, tau, start, kind, geom, load):
+    """The filters' per-sample inputs g (:func:`wmrid.model.dynamics.filter_regressor`) of the samples start ..
+    start + m - 1 into ``out`` (m, p), a row each.
 
-    e1, e2 rad/s: the measured speeds; s1, s2 rad/s: the speeds the sign columns and the casters' drag directions
-    are taken from (:mod:`wmrid.estimators.sign_speed`).  load (L,) int64: kind 3's load signals, codes into
-    :data:`wmrid.model.dynamics.LOAD_SIGNALS` (0 dv, 1 w2, 2 vw, 3 dw); the columns of dv and dw hold their
-    multiplier (see :func:`_derivative_inputs`)."""
-    out[0] = t1
-    out[1] = t2
-    out[2] = e2 * e2 - e1 * e2
-    out[3] = e1 * e1 - e1 * e2
-    out[4] = -e1
-    out[5] = -e2
-    if kind == KIND_PAPER:
-        out[6] = -1.0
-    else:
-        out[6] = -sign(s1)
-        out[7] = -sign(s2)
+    eta (c, 2) rad/s: the measured speeds; eta_sign (c, 2) rad/s: the speeds the sign columns and the casters' drag
+    directions are taken from (:mod:`wmrid.estimators.sign_speed`); tau (c, 2).  load (L,) int64: kind 3's load
+    signals, codes into :data:`wmrid.model.dynamics.LOAD_SIGNALS` (0 dv, 1 w2, 2 vw, 3 dw); the columns of dv and dw
+    hold their multiplier (see :func:`_derivative_inputs`).  Rows at a time: a compiled call takes and drops a
+    reference count per array it is passed (two atomic operations each), a third of the replay's time when this was
+    called per sample."""
+    r, b = (geom[0], geom[1]) if kind == KIND_CASTER_GEOMETRY else (0.0, 1.0)  # geom = [r, b, x_1, y_1, ...]
+    nk = (len(geom) - 2) // 2
+    nl = len(load)
+    for row in range(out.shape[0]):
+        i = start + row
+        e1, e2, s1, s2 = eta[i, 0], eta[i, 1], eta_sign[i, 0], eta_sign[i, 1]
+        out[row, 0] = tau[i, 0]
+        out[row, 1] = tau[i, 1]
+        out[row, 2] = e2 * e2 - e1 * e2
+        out[row, 3] = e1 * e1 - e1 * e2
+        out[row, 4] = -e1
+        out[row, 5] = -e2
+        if kind == KIND_PAPER:
+            out[row, 6] = -1.0
+            continue
+        out[row, 6] = -sign(s1)
+        out[row, 7] = -sign(s2)
         if kind == KIND_CASTER:
-            out[8] = -sign(s1 + s2)
-            out[9] = -sign(s1 - s2)
-        elif kind == KIND_CASTER_GEOMETRY:  # geom = [r, b, x_1, y_1, ...]
-            r, b = geom[0], geom[1]
+            out[row, 8] = -sign(s1 + s2)
+            out[row, 9] = -sign(s1 - s2)
+        elif kind == KIND_CASTER_GEOMETRY:
             v = 0.5 * r * (e1 + e2)
             w = r / (2.0 * b) * (e1 - e2)
             vs = 0.5 * r * (s1 + s2)  # the drag's direction from the sign speeds, its load signals from the measured
             ws = r / (2.0 * b) * (s1 - s2)
-            nk = (len(geom) - 2) // 2
-            nl = len(load)
             for k in range(nk):
                 x, y = geom[2 + 2 * k], geom[3 + 2 * k]
                 ux = vs - ws * y
@@ -60,8 +70,8 @@ def _regressor_into(out, e1, e2, s1, s2, t1, t2, kind, geom, load):
                 norm = math.sqrt(ux * ux + uy * uy + DRAG_SPEED * DRAG_SPEED)
                 cv = 0.5 * r * ux / norm
                 cw = r / (2.0 * b) * (x * uy - y * ux) / norm
-                out[8 + 2 * k] = -cv
-                out[9 + 2 * k] = -cw
+                out[row, 8 + 2 * k] = -cv
+                out[row, 9 + 2 * k] = -cw
                 for j in range(nl):
                     code = load[j]
                     s = 1.0  # dv, dw: the multiplier of the derivative
@@ -70,19 +80,18 @@ def _regressor_into(out, e1, e2, s1, s2, t1, t2, kind, geom, load):
                     elif code == 2:
                         s = v * w
                     col = 8 + 2 * nk + 2 * (k * nl + j)
-                    out[col] = -cv * s
-                    out[col + 1] = -cw * s
+                    out[row, col] = -cv * s
+                    out[row, col + 1] = -cw * s
 
 
 @numba.njit(cache=True, nogil=True)
-def _derivative_inputs(gin, g_prev, g, b0, b1, h, de1, de2, geom, load):
+def _derivative_inputs(gin, g_prev, g, row, b0, b1, h, de1, de2, geom, load):
     """Overwrite the filter input of the columns c(eta) phi' (load codes 0: phi = v, 3: phi = w) over a step of h s
-    with phi' (b0 c_a + b1 c_b) / h.  de1, de2: h times the wheel speeds' rate of change over the PREVIOUS step,
-    rad/s (the caller keeps that rate; :data:`wmrid.model.dynamics.DERIVATIVE_LAG`): the change over this step would
-    carry this sample's speed noise, which the prediction error carries too, and the two would correlate."""
+    with phi' (b0 c_a + b1 c_b) / h, c_a in g_prev (p,), c_b in g[row] (g (m, p): :func:`_regressor_rows`).  de1, de2:
+    h times the wheel speeds' rate of change over the PREVIOUS step, rad/s (the caller keeps that rate;
+    :data:`wmrid.model.dynamics.DERIVATIVE_LAG`): the change over this step would carry this sample's speed noise,
+    which the prediction error carries too, and the two would correlate.  For load signals only (L > 0)."""
     nl = len(load)
-    if nl == 0:
-        return
     r, b = geom[0], geom[1]
     dv = 0.5 * r * (de1 + de2) / h
     dw = r / (2.0 * b) * (de1 - de2) / h
@@ -93,8 +102,8 @@ def _derivative_inputs(gin, g_prev, g, b0, b1, h, de1, de2, geom, load):
             if code == 0 or code == 3:
                 d = dv if code == 0 else dw
                 col = 8 + 2 * nk + 2 * (k * nl + j)
-                gin[col] = d * (b0 * g_prev[col] + b1 * g[col])
-                gin[col + 1] = d * (b0 * g_prev[col + 1] + b1 * g[col + 1])
+                gin[col] = d * (b0 * g_prev[col] + b1 * g[row, col])
+                gin[col + 1] = d * (b0 * g_prev[col + 1] + b1 * g[row, col + 1])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -174,7 +183,7 @@ def observer_chunk(
     st (9,) = [t_prev, eta_prev (2), eta_hat (2), xi_hat (2), eta's rate of change over the previous step (2)]; w,
     g_prev (p,);
     theta (2, p) unconstrained
-    estimate; gamma, gamma_inv (p, p).
+    estimate; gamma, gamma_inv (p, p), gamma_inv symmetric (as the observer starts it, and keeps it).
     hist_idx (m,) increasing global sample indices to record into hist_theta (m, 2, p), hist_e (m, 2)
     (prior prediction error, rad/s), hist_gamma (m, p, p).  block_end (J,) increasing global indices, the
     last one n - 1: block j sums the steps ending at samples in (block_end[j-1], block_end[j]]:
@@ -182,12 +191,18 @@ def observer_chunk(
     with u = e - xi_hat + w theta the filtered velocity the estimator regresses on.
     cursor (2,) int64 = [next history slot, current block].
     geom (q,) float64: the caster geometry [r, b, x_1, y_1, ...] of kind 3 (empty otherwise); load (L,) int64: its
-    load signals (:func:`_regressor_into`; empty for none).
+    load signals (:func:`_regressor_rows`; empty for none).
     """
     c = t.shape[0]
     p = theta.shape[1]
     m = hist_idx.shape[0]
-    g = np.empty(p)
+    # the step's coefficients depend on h alone, and a log has a handful of distinct steps: those of the last
+    # STEP_CACHE steps seen are kept (the same values as computed afresh: foh's series costs 24 divisions a sample)
+    cached_h = np.full(STEP_CACHE, np.nan)
+    cached = np.empty((STEP_CACHE, 5))
+    slot = 0
+    nl = len(load)
+    g = np.empty((min(REGRESSOR_ROWS, c), p))  # the regressor of the next REGRESSOR_ROWS samples (_regressor_rows)
     gin = np.empty(p)
     pw = np.empty(p)
     e_prior = np.empty(2)
@@ -198,24 +213,35 @@ def observer_chunk(
     for i in range(c):
         n_i = offset + i
         h = t[i] - st[0]
-        a, phi0, phi1 = foh(k * h)
-        b0 = h * phi0
-        b1 = h * phi1
+        q = 0
+        while q < STEP_CACHE and cached_h[q] != h:
+            q += 1
+        if q == STEP_CACHE:  # not seen lately: computed, and kept in place of the oldest
+            q = slot
+            slot = (slot + 1) % STEP_CACHE
+            cached_h[q] = h
+            cached[q, 0], cached[q, 1], cached[q, 2] = foh(k * h)
+            if hold > 0.0:
+                cached[q, 3], cached[q, 4] = _substep_weights(k * h, h, max(1, round(h * hold)))
+        a = cached[q, 0]
+        b0 = h * cached[q, 1]
+        b1 = h * cached[q, 2]
         e1 = eta[i, 0]
         e2 = eta[i, 1]
-        _regressor_into(g, e1, e2, eta_sign[i, 0], eta_sign[i, 1], tau[i, 0], tau[i, 1], kind, geom, load)
+        row = i % REGRESSOR_ROWS
+        if row == 0:
+            _regressor_rows(g[: min(REGRESSOR_ROWS, c - i)], eta, eta_sign, tau, i, kind, geom, load)
         # the input of the filters over the step: first-order hold, the torques held when zoh
         for j in range(p):
-            gin[j] = b0 * g_prev[j] + b1 * g[j]
+            gin[j] = b0 * g_prev[j] + b1 * g[row, j]
         if hold == 0.0:
             gin[0] = (b0 + b1) * g_prev[0]
             gin[1] = (b0 + b1) * g_prev[1]
         elif hold > 0.0:
-            sub = max(1, round(h * hold))
-            c0, c1 = _substep_weights(k * h, h, sub)
-            gin[0] = c0 * g_prev[0] + c1 * g[0]
-            gin[1] = c0 * g_prev[1] + c1 * g[1]
-        _derivative_inputs(gin, g_prev, g, b0, b1, h, h * st[7], h * st[8], geom, load)
+            gin[0] = cached[q, 3] * g_prev[0] + cached[q, 4] * g[row, 0]
+            gin[1] = cached[q, 3] * g_prev[1] + cached[q, 4] * g[row, 1]
+        if nl > 0:
+            _derivative_inputs(gin, g_prev, g, row, b0, b1, h, h * st[7], h * st[8], geom, load)
         # (27) w and (26) eta_hat with theta held over the step
         for j in range(p):
             w[j] = a * w[j] + gin[j]
@@ -236,14 +262,21 @@ def observer_chunk(
         den = 1.0 / h
         for r in range(p):
             den += w[r] * pw[r]
+        while block_end[bj] < n_i:
+            bj += 1
         for r in range(p):
             wr = h * w[r]
             for j in range(p):
-                gamma[r, j] += wr * w[j]
-                gamma_inv[r, j] -= pw[r] * pw[j] / den
+                dw = wr * w[j]
+                gamma[r, j] += dw
+                blk_a[bj, r, j] += dw
+        # gamma_inv is symmetric, and so is its change (pw_r pw_j = pw_j pw_r): each entry above the diagonal is
+        # updated once and averaged with its mirror image, the same value (0.5 (v + v), as the readable step does)
         for r in range(p):
+            gamma_inv[r, r] -= pw[r] * pw[r] / den
             for j in range(r + 1, p):
-                avg = 0.5 * (gamma_inv[r, j] + gamma_inv[j, r])
+                v = gamma_inv[r, j] - pw[r] * pw[j] / den
+                avg = 0.5 * (v + v)
                 gamma_inv[r, j] = avg
                 gamma_inv[j, r] = avg
         # (35)-(36): gain h Gamma^-1 w
@@ -252,8 +285,6 @@ def observer_chunk(
             for j in range(p):
                 s += gamma_inv[r, j] * w[j]
             pw[r] = h * s
-        while block_end[bj] < n_i:
-            bj += 1
         for r in range(2):
             innov = e_prior[r] - xi_hat[r]
             wt = 0.0
@@ -269,12 +300,8 @@ def observer_chunk(
             eta_hat[r] += dwt  # the w theta_hat' term of (26)
             blk_uu[bj, r] += h * u * u
             blk_ee[bj, r] += h * e_prior[r] * e_prior[r]
-        for r in range(p):
-            wr = h * w[r]
-            for j in range(p):
-                blk_a[bj, r, j] += wr * w[j]
         for j in range(p):
-            g_prev[j] = g[j]
+            g_prev[j] = g[row, j]
         st[7] = (e1 - st[1]) / h
         st[8] = (e2 - st[2]) / h
         st[0] = t[i]

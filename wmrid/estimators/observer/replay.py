@@ -22,16 +22,23 @@ from wmrid.model.kernels import plain
 
 CHUNK = 262_144
 
-#: Whether the half-rate run goes on a second thread (one identify then uses two cores).  A process that shares the
-#: machine's cores with others doing the same (``wmrid fleet``'s workers, one per core) turns it off
-#: (:func:`one_thread`): there the second thread only competes for a busy core (+6-10 % per log, measured).
+#: Whether identify may use a second thread: the half-rate run, and the timing check alongside the observer's passes
+#: (:mod:`wmrid.pipeline.alongside`); one identify then uses two cores.  A process that shares the machine's cores with
+#: others doing the same (``wmrid fleet``'s workers, one per core) turns it off (:func:`one_thread`): there the second
+#: thread only competes for a busy core (+6-10 % per log, measured).
 _SECOND_THREAD = True
 
 
 def one_thread(on: bool = True) -> None:
-    """Run the half-rate replay inline, on the caller's thread (``on``), or on a second thread (the default)."""
+    """Run identify on the caller's thread alone (``on``: the half-rate replay inline, the timing check before the
+    observer's passes), or on two (the default)."""
     global _SECOND_THREAD
     _SECOND_THREAD = not on
+
+
+def second_thread() -> bool:
+    """Whether identify may run a second pass on a second thread (:func:`one_thread`)."""
+    return _SECOND_THREAD
 
 
 @dataclass(frozen=True)
@@ -230,8 +237,8 @@ def replay_pieces(
     ``noise_lag`` samples: the spacing of the noise floor's second differences (:class:`wmrid.estimators.noise_floor.
     NoiseFloor`; 1 for measured speeds, the derivative's window for speeds derived from positions).
     ``sign_half_window`` samples: the sign columns take the sign of a centred mean of the speeds over twice this
-    plus one (:mod:`wmrid.estimators.sign_speed`; 0: of the measured speeds); the pieces then reach the kernel that
-    many samples late, the last ones when the pieces end.
+    plus one (:mod:`wmrid.estimators.sign_speed`; 0: of the measured speeds; not taken for the paper form, which has
+    none); the pieces then reach the kernel that many samples late, the last ones when the pieces end.
     """
 
     p = settings.form.n_columns
@@ -259,7 +266,8 @@ def replay_pieces(
     pending = None
     if half is not None and _SECOND_THREAD:
         pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="wmrid-half-rate")
-    signs = SignSpeeds(sign_half_window)
+    # the paper form has no sign column (each wheel keeps one sign): no speeds to average for one
+    signs = SignSpeeds(0 if settings.form.kind == "paper" else sign_half_window)
     done = 0
 
     def advance(t: np.ndarray, eta: np.ndarray, tau: np.ndarray, es: np.ndarray) -> None:

@@ -13,8 +13,10 @@ import numpy as np
 
 from wmrid.core.choices import TorqueHold, values
 from wmrid.core.errors import LogFormatError, NotIdentifiableError, UsageError, option
-from wmrid.estimators.regression.lowpass import butter_sos, filtfilt, welch
+from wmrid.estimators.regression.idim_columns import raw_columns_into
+from wmrid.estimators.regression.lowpass import butter_sos, filtfilt_extended, welch
 from wmrid.model.dynamics import RegressorForm, caster_columns, invert_inertia_entries, platform_speeds
+from wmrid.model.kernels import plain
 
 #: Names of the IDIM parameters phi, in order (SI: kg m^2 for M and Vc, N m s/rad, N m).
 PHI_NAMES = ("M11", "M12", "M22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
@@ -291,12 +293,15 @@ def _check_arrays(t: np.ndarray, eta: np.ndarray, tau: np.ndarray) -> tuple[np.n
     return t, eta, tau
 
 
-def _five_point_derivative(x: np.ndarray, dt: float) -> np.ndarray:
-    """d x / d t (n, c) on a uniform grid: 5-point central differences, second-order ones at the ends."""
+def _five_point_derivative(x: np.ndarray, dt: float, rows: np.ndarray) -> np.ndarray:
+    """d x / d t (m, c) at ``rows`` (m,) of x (n, c) on a uniform grid: 5-point central differences, second-order ones
+    at the ends (computed at the rows asked for only: the values are those of the whole derivative)."""
+    if len(x) >= 5 and (len(rows) == 0 or (rows.min() >= 2 and rows.max() < len(x) - 2)):
+        return (x[rows - 2] - 8.0 * x[rows - 1] + 8.0 * x[rows + 1] - x[rows + 2]) / (12.0 * dt)
     d = np.gradient(x, dt, axis=0, edge_order=2) if len(x) >= 3 else np.zeros_like(x)
     if len(x) >= 5:
         d[2:-2] = (x[:-4] - 8.0 * x[1:-3] + 8.0 * x[3:-1] - x[4:]) / (12.0 * dt)
-    return d
+    return d[rows]
 
 
 def idim_regression(
@@ -371,26 +376,26 @@ def idim_regression(
 
     sos = butter_sos(order, cutoff, rate)
     pad = min(edge, n - 1)
-    e1, e2 = eta[:, 0], eta[:, 1]
-    raw = (e1, e2, e1 * e2 - e2 * e2, e1 * e2 - e1 * e1, np.sign(e1), np.sign(e2), tau[:, 0], tau[:, 1])
     form = form if _caster_map(form) else None
-    if form is not None:  # computed from the unfiltered speeds like sgn(eta_i), filtered like every column
-        raw = raw + tuple(caster_columns(eta, form, multiplier=True).T)
-    filt = np.empty((n, len(raw)))
-    for j, col in enumerate(raw):  # one column at a time bounds the filter's temporary memory
-        filt[:, j] = filtfilt(sos, col, pad)
-    acc = _five_point_derivative(filt[:, 0:2], dt)
-    features = np.column_stack([acc[keep], filt[keep][:, [2, 3, 0, 1, 4, 5]]])
+    caster_raw = caster_columns(eta, form, multiplier=True) if form is not None else np.empty((n, 0))
+    ext = np.empty((n + 2 * pad, 8 + caster_raw.shape[1]))  # the columns side by side, room for the odd extension
+    raw_columns_into(plain(eta), plain(tau), ext[pad : pad + n])
+    ext[pad : pad + n, 8:] = caster_raw  # from the unfiltered speeds like sgn(eta_i), filtered like every column
+    del caster_raw
+    filt = filtfilt_extended(sos, ext, pad)  # (n, 8 + q)
+    acc = _five_point_derivative(filt[:, 0:2], dt, keep)
+    kept = filt[keep]
+    features = np.column_stack([acc, kept[:, [2, 3, 0, 1, 4, 5]]])
     if form is not None:
-        caster = filt[keep][:, 8:]
+        caster = kept[:, 8:]
         if form.derivative_columns:  # c(eta) phi': the filtered multiplier c times phi' of the filtered speeds
-            rates = platform_speeds(acc[keep], form.geometry[0], form.geometry[1])
+            rates = platform_speeds(acc, form.geometry[0], form.geometry[1])
             for col, which in form.derivative_columns:
                 caster[:, col - 8] *= rates[which]
         features = np.column_stack([features, caster])
     kept_effort = {"effort_grid": filt[:, 6:8].copy(), "t_grid": t.copy()} if keep_effort else {}
     return IdimRegression(
-        t=t[keep], features=features, tau=filt[keep][:, 6:8], cutoff_hz=cutoff, order=int(order),
+        t=t[keep], features=features, tau=kept[:, 6:8], cutoff_hz=cutoff, order=int(order),
         cutoff_rule=rule, rate_hz=rate, resampled=resampled, decimation=k, edge_seconds=edge_s, form=form,
         **kept_effort,
     )  # fmt: skip

@@ -15,8 +15,8 @@ scipy.signal:
   sections (bit for bit on the orders and cutoffs the tests try).
 * :func:`filtfilt` = ``scipy.signal.sosfiltfilt(sos, x, padlen=pad)``: odd extension of ``pad`` samples at each
   end, the filter run forward and backward from the steady state of a step (``sosfilt_zi``), the direct form II
-  transposed recursion of ``scipy.signal.sosfilt`` in :func:`_sosfilt` (numba, the same operations in the same
-  order).
+  transposed recursion of ``scipy.signal.sosfilt`` in :func:`_filtfilt_columns` (numba, the same operations in the
+  same order, the columns of a 2-D signal side by side).
 * :func:`welch` = ``scipy.signal.welch(x, fs, window="blackmanharris", nperseg, detrend="linear", axis=0)``
   (half-overlapping segments, periodic 4-term Blackman-Harris window, a least-squares line removed from each
   segment, one-sided density); equal to rounding (the tests: 1e-9 relative).
@@ -166,7 +166,7 @@ def _poly(roots: list) -> np.ndarray:
 
 
 def steady_state(sos: np.ndarray) -> np.ndarray:
-    """(n_sections, 2) states of :func:`_sosfilt` after a unit step has settled (``scipy.signal.sosfilt_zi``)."""
+    """(n_sections, 2) states of the sections after a unit step has settled (``scipy.signal.sosfilt_zi``)."""
     zi = np.empty((sos.shape[0], 2))
     scale = 1.0
     for s in range(sos.shape[0]):
@@ -182,38 +182,62 @@ def steady_state(sos: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
-def _sosfilt(
-    sos, x, zi
+def _filtfilt_columns(
+    sos, zi, y
 ):  # pragma: no cover - compiled; tests/unit/estimators/test_lowpass.py compares it with scipy.signal
-    """Run x (n,) through the sections in place (direct form II transposed), zi (n_sections, 2) updated."""
+    """Each column of y (m, c) run forward, then backward, through the sections in place: the direct form II
+    transposed recursion of ``scipy.signal.sosfilt``, each pass started from the steady state zi (n_sections, 2)
+    times the pass's first value.  The columns go side by side, row by row: their recursions are independent, so
+    the processor overlaps them (one column's recursion waits on its previous sample)."""
     n_sections = sos.shape[0]
-    for i in range(x.shape[0]):
-        x_cur = x[i]
+    m, c = y.shape
+    z = np.empty((n_sections, 2, c))
+    for backward in range(2):
+        first = m - 1 if backward else 0
         for s in range(n_sections):
-            x_new = sos[s, 0] * x_cur + zi[s, 0]
-            zi[s, 0] = sos[s, 1] * x_cur - sos[s, 4] * x_new + zi[s, 1]
-            zi[s, 1] = sos[s, 2] * x_cur - sos[s, 5] * x_new
-            x_cur = x_new
-        x[i] = x_cur
+            for j in range(c):
+                z[s, 0, j] = zi[s, 0] * y[first, j]
+                z[s, 1, j] = zi[s, 1] * y[first, j]
+        for step in range(m):
+            i = m - 1 - step if backward else step
+            for j in range(c):
+                x_cur = y[i, j]
+                for s in range(n_sections):
+                    x_new = sos[s, 0] * x_cur + z[s, 0, j]
+                    z[s, 0, j] = sos[s, 1] * x_cur - sos[s, 4] * x_new + z[s, 1, j]
+                    z[s, 1, j] = sos[s, 2] * x_cur - sos[s, 5] * x_new
+                    x_cur = x_new
+                y[i, j] = x_cur
 
 
 def filtfilt(sos: np.ndarray, x: np.ndarray, pad: int) -> np.ndarray:
-    """x (n,) filtered forward and backward by ``sos`` (zero phase, the magnitude squared), a new array.
+    """x (n,) or each column of x (n, c) filtered forward and backward by ``sos`` (zero phase, the magnitude squared),
+    a new array of x's shape.
 
     pad : samples of odd extension at each end (0 <= pad < n), dropped again from the result.
     """
     x = np.asarray(x, dtype=np.float64)
     if not 0 <= pad < len(x):
         raise ValueError(f"pad {pad} must be at least 0 and below the signal's length {len(x)}")
-    # odd extension: 2 x[0] - x[pad..1] before, 2 x[-1] - x[-2..-pad-1] after
-    y = np.concatenate((2 * x[:1] - x[pad:0:-1], x, 2 * x[-1:] - x[-2 : -(pad + 2) : -1])) if pad else x.copy()
+    columns = x.reshape(len(x), -1)
+    y = np.empty((len(x) + 2 * pad, columns.shape[1]))
+    y[pad : pad + len(x)] = columns
+    return filtfilt_extended(sos, y, pad).reshape(x.shape)
+
+
+def filtfilt_extended(sos: np.ndarray, y: np.ndarray, pad: int) -> np.ndarray:
+    """:func:`filtfilt` in place, for a caller that wrote the signal (n, c) into y[pad : pad + n] of y (n + 2 pad, c),
+    float64, C order: the first and last ``pad`` rows are overwritten by the odd extension (2 x[0] - x[pad..1] before,
+    2 x[-1] - x[-2..-pad-1] after); returns the filtered signal, the view y[pad : pad + n]."""
+    n = len(y) - 2 * pad
+    if not 0 <= pad < n:
+        raise ValueError(f"pad {pad} must be at least 0 and below the signal's length {n}")
+    if pad:
+        y[:pad] = 2 * y[pad : pad + 1] - y[2 * pad : pad : -1]
+        y[pad + n :] = 2 * y[pad + n - 1 : pad + n] - y[pad + n - 2 : n - 2 : -1]
     sos = np.ascontiguousarray(sos, dtype=np.float64)
-    zi = steady_state(sos)
-    _sosfilt(sos, y, zi * y[0])
-    y = np.ascontiguousarray(y[::-1])
-    _sosfilt(sos, y, zi * y[0])
-    y = y[::-1]
-    return np.ascontiguousarray(y[pad : len(y) - pad] if pad > 0 else y)
+    _filtfilt_columns(sos, steady_state(sos), y)
+    return y[pad : pad + n]
 
 
 def blackman_harris(n: int) -> np.ndarray:

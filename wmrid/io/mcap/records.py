@@ -10,6 +10,8 @@ import io
 
 import numba
 import numpy as np
+from numba.core import types
+from numba.extending import intrinsic
 
 from wmrid.core.errors import LogFormatError
 
@@ -108,9 +110,21 @@ def scan(buf, start, end, ops, starts, lengths):
     return n, p
 
 
+@intrinsic
+def _as_float64(typingctx, bits):  # pragma: no cover - compiled
+    """The float64 whose IEEE 754 bits are the int64 ``bits``: a move between registers."""
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], context.get_value_type(types.float64))
+
+    return types.float64(types.int64), codegen
+
+
 @numba.njit(cache=True, nogil=True)
 def _f64(buf, p):
-    return buf[p : p + 8].view(np.float64)[0]
+    """The little-endian float64 at buf[p] (its bytes as an integer, read as a float: a view of the bytes made an array
+    per value, whose reference counting took a sixth of the decode's time)."""
+    return _as_float64(_u64(buf, p))
 
 
 @numba.njit(cache=True, nogil=True)
