@@ -60,7 +60,9 @@ def _window_variances(eta, prev, state, out):
         state[5] += e1 * e1
         if known == size:
             old = start  # eta_(i-2L)
-            mid = (start + lag) % size  # eta_(i-L)
+            mid = start + lag  # eta_(i-L), (start + lag) mod size without a division
+            if mid >= size:
+                mid -= size
             d0 = e0 - 2.0 * prev[mid, 0] + prev[old, 0]
             d1 = e1 - 2.0 * prev[mid, 1] + prev[old, 1]
             state[2] += d0 * d0
@@ -75,7 +77,9 @@ def _window_variances(eta, prev, state, out):
                 state[3] = 0.0
             prev[start, 0] = e0
             prev[start, 1] = e1
-            start = (start + 1) % size
+            start += 1
+            if start == size:
+                start = 0
         else:
             prev[known, 0] = e0
             prev[known, 1] = e1

@@ -254,13 +254,13 @@ def _windows(stream: Any, log: Any, size: int) -> Any:
     count = 0
 
     def window(parts: list[Any]) -> tuple[Any, ...]:
-        t = np.concatenate([p.t for p in parts]).astype(np.float64)
-        eta = np.concatenate([p.eta for p in parts]).astype(np.float64)
-        tau = np.concatenate([p.tau for p in parts]).astype(np.float64)
+        t = np.concatenate([p.t for p in parts]).astype(np.float64, copy=False)
+        eta = np.concatenate([p.eta for p in parts]).astype(np.float64, copy=False)
+        tau = np.concatenate([p.tau for p in parts]).astype(np.float64, copy=False)
         refs = [getattr(p, "reference", None) for p in parts]
         reference = None
         if all(r is not None for r in refs):
-            reference = np.concatenate(refs).astype(np.float64)
+            reference = np.concatenate(refs).astype(np.float64, copy=False)
             reference = reference if reference.shape == (len(t), 2) else None
         return t, eta, tau, reference
 

@@ -57,18 +57,17 @@ class JointSeries:
     def any_nonzero(self, name: str, cols: list[int]) -> bool:
         """Whether field ``name`` holds a non-NaN, non-zero value in one of the joint columns ``cols``."""
         values = self.field(name)[:, cols]
-        finite = values[~np.isnan(values)]
-        return finite.size > 0 and bool(np.any(finite != 0))
+        return bool(np.any((values != 0) & ~np.isnan(values)))  # (NaN != 0: masked)
 
     def populated(self, name: str) -> str:
         """'yes', 'zeros' (present but all zero), 'partly' (some NaN) or 'no' for field ``name``."""
         values = self.field(name)
-        if values.size == 0 or np.all(np.isnan(values)):
+        nan = np.isnan(values)
+        if values.size == 0 or nan.all():
             return "no"
-        finite = values[~np.isnan(values)]
-        if np.all(finite == 0):
+        if not np.any((values != 0) & ~nan):
             return "zeros"
-        return "partly" if np.any(np.isnan(values)) else "yes"
+        return "partly" if nan.any() else "yes"
 
 
 FIELDS = ("position", "velocity", "effort")
