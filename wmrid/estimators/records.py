@@ -123,10 +123,6 @@ class Verdict:
         """The numbers are not to be used (the summary says so)."""
         return self.summary.startswith("Do not use")
 
-    def said(self) -> list[str]:
-        """What is printed, in order: ``first``, the summary, the groups' lines."""
-        return [*self.first, self.summary, *(self.lines or [g.text for g in self.groups])]
-
     def to_dict(self) -> dict[str, Any]:
         """The result JSON's ``verdict``: summary, groups, lines, then first, check and units when there are."""
         out: dict[str, Any] = {"summary": self.summary, "groups": [g.to_dict() for g in self.groups],

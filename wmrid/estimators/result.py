@@ -121,6 +121,11 @@ class MethodSettings:
             said.append(f"forgetting factor {self.forgetting:g}")
         return f"{self.method}: {', '.join(said) or 'its defaults'}"
 
+    def before_observer(self) -> str:
+        """The settings said before the observer's run the method started from (the table's and the report's
+        summary line)."""
+        return f"{self.said()}; the observer's run it started from: "
+
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> MethodSettings:
         return cls(

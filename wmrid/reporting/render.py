@@ -86,10 +86,11 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
             style=STYLES["impossible"],
         )
     info = result.log_info
+    method_text = "" if result.method_settings is None else result.method_settings.before_observer()
     console.print(
         f"{info.samples} samples, {info.duration_s:.3f} s at {info.rate_hz:.6g} Hz; "
         f"regressor: {result.form.kind} form ({result.form.n_columns} columns), {result.form.friction} friction; "
-        f"{_method_settings(result.method_settings)}k = {result.observer_settings.k:g} 1/s, "
+        f"{method_text}k = {result.observer_settings.k:g} 1/s, "
         f"alpha = {result.observer_settings.alpha:g}; start: {result.start_source}"
     )
     diag = result.diagnostics
@@ -279,8 +280,3 @@ def print_comparison(comparison: Comparison, console: Any) -> None:
     for name, m in methods.items():
         for warning in m.warnings:
             console.print(warning_line(warning, f"warning ({name})"))
-
-
-def _method_settings(settings: Any) -> str:
-    """Another method's settings, said before the observer's run it started from ("" for the observer's result)."""
-    return "" if settings is None else f"{settings.said()}; the observer's run it started from: "

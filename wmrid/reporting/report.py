@@ -249,9 +249,7 @@ def build_report(
     samples = "?" if info.samples is None else info.samples
     duration = math.nan if info.duration_s is None else info.duration_s
     rate = math.nan if info.rate_hz is None else info.rate_hz
-    method_text = (
-        "" if rl.method_settings is None else f"{rl.method_settings.said()}; the observer's run it started from: "
-    )
+    method_text = "" if rl.method_settings is None else rl.method_settings.before_observer()
     report = Report(
         title=f"wmrid report: {rl.source}",
         verdict=said_verdict,
