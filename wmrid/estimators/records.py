@@ -3,9 +3,10 @@ the result says of its parameter groups (:class:`Verdict`, :class:`GroupVerdict`
 log (:class:`Validation`).
 
 Each is frozen and has ``to_dict``/``from_dict``: ``to_dict`` gives the result JSON's ``log``, ``verdict`` and
-``validation`` objects key for key as before these types existed, and ``from_dict(r.to_dict()) == r``.  A key a
-document holds that this version does not know is kept (``other``) and written back, so that reading and writing a
-document loses nothing.
+``validation`` objects key for key as before these types existed, and ``from_dict(r.to_dict()) == r``.  A document
+of an older version comes back with what it lacks filled in as those versions meant it (a log's ``effort_unit`` "N m"
+and ``notes`` [], a group's ``reason`` null, a verdict's ``lines`` []); a key of a log record this version does not
+know is kept (``other``) and written back after the known ones.
 """
 
 from __future__ import annotations
