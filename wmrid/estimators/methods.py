@@ -139,7 +139,7 @@ class MethodRow:
     """One method's estimate in a comparison: what ``identify --method NAME`` reports, in short.
 
     description : the method in one line.  parameters : name -> :class:`~wmrid.estimators.parameter.Parameter`
-    (value, std, unit, flags).  flagged : the parameters whose std is not to be trusted.  error_percent : name ->
+    (value, std, unit, flags).  error_percent : name ->
     100 (value - truth) / |truth| where a truth was given.  seconds : the method's run time, s.  warnings, verdict,
     payload : its result's (payload: with ``--payload``, else None).  fit_percent : {"eta_r", "eta_l"} % of its
     model on the validation log (None: no validation log; a value None: not simulated or not finite).
@@ -148,7 +148,6 @@ class MethodRow:
 
     description: str
     parameters: dict[str, Parameter]
-    flagged: tuple[str, ...]
     seconds: float | None
     warnings: tuple[str, ...]
     verdict: Verdict | None
@@ -179,6 +178,11 @@ class MethodRow:
             if self.not_simulated is not None:
                 row["validation"]["not_simulated"] = self.not_simulated
         return row
+
+    @property
+    def flagged(self) -> tuple[str, ...]:
+        """The parameters whose std is not to be trusted (their "flagged" flag), in the parameters' order."""
+        return tuple(name for name, parameter in self.parameters.items() if not parameter.trusted)
 
 
 @dataclass(frozen=True)
@@ -258,10 +262,9 @@ def compare(
                 fit_percent = {w: float(fit[w]) if np.isfinite(fit[w]) else None for w in ("eta_r", "eta_l")}
                 predictor = fit["predictor"]
         methods[name] = MethodRow(
-            description=DESCRIPTIONS[name], parameters=dict(table),
-            flagged=tuple(result.diagnostics.get("flagged", [])), seconds=est.seconds, warnings=tuple(result.warnings),
-            verdict=result.verdict, error_percent=errors, payload=result.payload, fit_percent=fit_percent,
-            not_simulated=why or None,
+            description=DESCRIPTIONS[name], parameters=dict(table), seconds=est.seconds,
+            warnings=tuple(result.warnings), verdict=result.verdict, error_percent=errors, payload=result.payload,
+            fit_percent=fit_percent, not_simulated=why or None,
         )  # fmt: skip
     return Comparison(
         source=observer.source,

@@ -148,9 +148,8 @@ def build_report(
     diag = rl.diagnostics
 
     # Table 2: intermediate parameters
-    theta_vals = dict(zip(names, rl.theta.ravel(), strict=True))
-    theta_std = dict(zip(names, np.sqrt(np.clip(np.diag(rl.theta_cov), 0, None)), strict=True))
-    start = dict(zip(names, observer.theta_init.ravel(), strict=True))
+    theta = rl.theta_dict()  # values, std (None: not finite) and start by name, as the JSON's "theta"
+    theta_vals, theta_std, start = theta["values"], theta["std"], theta["start"]
     ref_theta = true_theta_row = None
     # A caster-drag parameter the reference or truth does not give is NaN: its intermediate parameters show "—".
     if reference is not None:
