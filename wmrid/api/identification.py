@@ -367,8 +367,10 @@ def run_prepared(
     )  # fmt: skip
     result = identify_log(wheel_log, prep.robot, prep.observer, steps, progress)
     if prep.friction_reason:
-        friction_record = {"model": prep.friction, "chosen_by": "auto", "reason": prep.friction_reason}
-        result = replace(result, diagnostics={**result.diagnostics, "friction": friction_record})
+        from wmrid.estimators.findings import FrictionChoice
+
+        friction_record = FrictionChoice(model=prep.friction, chosen_by="auto", reason=prep.friction_reason)
+        result = replace(result, diagnostics=replace(result.diagnostics, friction=friction_record))
     if prep.method != "observer":
         from wmrid.estimators.methods import run
 

@@ -106,10 +106,10 @@ def _delayed(
         reference = None if log.reference is None else log.reference[:n]
         span = WheelLog(t=t[:n], eta=np.asarray(log.eta)[:n], tau=np.asarray(log.tau)[:n], source=log.source,
                         effort_unit=log.effort_unit, reference=reference)  # fmt: skip
-        _, record, warnings = apply_delay(span, "auto", observer.torque_hold, observer.control_rate)
-        record = {**record, "estimated_on_s": calibration_s}
+        _, estimated, warnings = apply_delay(span, "auto", observer.torque_hold, observer.control_rate)
+        record = {**estimated.to_dict(), "estimated_on_s": calibration_s}
         delay = record["applied_s"]
     if not isinstance(delay, (int, float)):  # given seconds, or the estimate's applied_s
         raise TypeError(f"delay {delay!r}")
     shifted, applied, _ = apply_delay(log, float(delay), observer.torque_hold, observer.control_rate)
-    return shifted, ({**applied, **record}, warnings)
+    return shifted, ({**applied.to_dict(), **record}, warnings)

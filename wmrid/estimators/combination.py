@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import UsageError, option
+from wmrid.estimators.findings import Combination, CombinedResult, Uncertainty
 from wmrid.estimators.result import IdentificationResult, finite_or_none, reported_names
 from wmrid.estimators.uncertainty import interval_factor
 from wmrid.estimators.verdict import settle
@@ -257,7 +258,7 @@ def combined_result(
 ) -> IdentificationResult:
     """``result`` (one log's) combined with the results ``given`` ((result, where it came from) each): the estimate,
     its covariance and degrees of freedom become the combination's (module docstring), and every statement about
-    them is made again from those numbers (:func:`wmrid.estimators.verdict.settle`).  ``diagnostics["combined"]``
+    them is made again from those numbers (:func:`wmrid.estimators.verdict.settle`).  ``diagnostics.combined``
     records the results combined, which parameters each gave, and this log's own estimate.  ``robot``: for a
     payload estimate, the unloaded robot."""
     est = result.estimate
@@ -299,8 +300,8 @@ def combined_result(
             weight_cov = np.full((n0, n0), np.nan)
             weight_cov[np.ix_(ours, ours)] = np.asarray(theirs_est.weight_cov, dtype=np.float64)[np.ix_(at, at)]
         parts.append(Part(x, cov, theirs_est.dof, tuple(ours), weight_cov))
-        records.append({"source": source, "log": other.source, "method": theirs_est.method, "dof": theirs_est.dof,
-                        "parameters": [names[i] for i in ours]})  # fmt: skip
+        records.append(CombinedResult(source=source, log=other.source, method=theirs_est.method, dof=theirs_est.dof,
+                                      parameters=tuple(names[i] for i in ours)))  # fmt: skip
     x, cov, dof, det = combine(parts, n0)
     for i in range(n0):  # what no log determines stays as this log reported it
         if i not in det:
@@ -309,30 +310,30 @@ def combined_result(
     combined_est = replace(est, theta0=x, cov=cov, dof=dof, segments=None, weight_cov=weighting)
     parameters = derived_with_std(x, cov, names)
     parameters = {name: parameters[name] for name in reported_names(result.form) if name in parameters}
-    diagnostics = dict(result.diagnostics)
-    diagnostics["combined"] = {
-        "results": records,
-        "this_log": {name: {"value": v, "std": finite_or_none(s)} for name, (v, s) in result.parameters.items()},
-        "this_log_dof": est.dof,
-        "meaning": "the estimate and std are this log's combined with the given results' by fixed weights (their "
+    combined = Combination(
+        results=tuple(records),
+        this_log={name: {"value": v, "std": finite_or_none(s)} for name, (v, s) in result.parameters.items()},
+        this_log_dof=est.dof,
+        meaning="the estimate and std are this log's combined with the given results' by fixed weights (their "
         "covariances with correlations shrunk by their degrees of freedom); the covariance is the combination's, "
         "linear in each log's reported covariance; degrees of freedom by Welch-Satterthwaite",
-    }  # fmt: skip
-    uncertainty = dict(diagnostics.get("uncertainty") or {})
-    uncertainty["dof"] = dof
-    uncertainty["interval_factor"] = {
-        "95%": interval_factor(0.95, dof) if dof else 1.959964,
-        "99.7%": interval_factor(0.9973, dof) if dof else 2.999977,
-    }
-    uncertainty["combined"] = f"the combination of {len(records) + 1} logs' estimates (diagnostics.combined)"
-    own_method = uncertainty.get("method") or "this log's std"
-    uncertainty["method"] = (
-        f"this log's ({own_method}) combined with {len(records)} earlier result{'s' if len(records) != 1 else ''}'s "
-        "by fixed weights, degrees of freedom by Welch-Satterthwaite"
+    )  # fmt: skip
+    uncertainty = result.diagnostics.uncertainty or Uncertainty()
+    own_method = uncertainty.method or "this log's std"
+    uncertainty = replace(
+        uncertainty,
+        dof=dof,
+        interval_factor={
+            "95%": interval_factor(0.95, dof) if dof else 1.959964,
+            "99.7%": interval_factor(0.9973, dof) if dof else 2.999977,
+        },
+        combined=f"the combination of {len(records) + 1} logs' estimates (diagnostics.combined)",
+        method=f"this log's ({own_method}) combined with {len(records)} earlier "
+        f"result{'s' if len(records) != 1 else ''}'s by fixed weights, degrees of freedom by Welch-Satterthwaite",
+        segments=None,  # the combination's are not one log's segments
     )
-    uncertainty["segments"] = None  # the combination's are not one log's segments
-    diagnostics["uncertainty"] = uncertainty
-    files = ", ".join(r["source"] for r in records)
+    diagnostics = replace(result.diagnostics, combined=combined, uncertainty=uncertainty)
+    files = ", ".join(str(r.source) for r in records)
     note = f"{COMBINED_NOTE} {len(records)} earlier result{'s' if len(records) != 1 else ''} ({files}): the estimates "
     note += "and std are the combination; this log's own are in diagnostics.combined.this_log"
     warnings = [note]

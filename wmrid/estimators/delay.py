@@ -29,6 +29,7 @@ import numba
 import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError, UsageError, WmridError
+from wmrid.estimators.findings import EstimatedDelay
 from wmrid.estimators.uncertainty import interval_factor
 
 #: Grid step of the profile, s (a fifth of a 1 kHz step would be finer than the refinement needs).
@@ -72,6 +73,10 @@ class DelayEstimate:
         """|delay| beyond SIGNIFICANT_S and beyond the 99.73 % quantile of Student's t with G - 1 dof times its
         std (3.0 for a long log; 4.1 for a 4 s log of 10 segments, whose jackknife std is itself uncertain)."""
         return self.determined and abs(self.delay) > max(significance_factor(self.segments) * self.std, SIGNIFICANT_S)
+
+    def record(self) -> EstimatedDelay:
+        """The estimate as a result records it (:meth:`to_dict`'s figures)."""
+        return EstimatedDelay.from_dict(self.to_dict())
 
     def to_dict(self) -> dict[str, Any]:
         return {

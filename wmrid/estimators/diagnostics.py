@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import UsageError, option
+from wmrid.estimators.findings import Diagnostics, StructuralMismatch, WeakDirection
 
 #: A direction of the column-scaled information whose eigenvalue is below this fraction of the largest is
 #: not excited at all (double precision resolves about 1e-16; real logs' weakest directions are ~1e-8).
@@ -73,16 +74,21 @@ def impossible_parameters(parameters: dict[str, tuple[float, float]]) -> set[str
     return out
 
 
-def flagged_names(parameters: dict[str, tuple[float, float]], diagnostics: dict[str, Any]) -> list[str]:
+def every_std_in_doubt(diagnostics: Diagnostics) -> bool:
+    """Whether the log's misfit (the prediction misfit applied) or its units (the units check's doubt) put every std
+    in doubt."""
+    units = diagnostics.units
+    return bool(diagnostics.prediction_misfit.get("applied")) or bool(units is not None and units.doubt)
+
+
+def flagged_names(parameters: dict[str, tuple[float, float]], diagnostics: Diagnostics) -> tuple[str, ...]:
     """The parameters whose std is not to be trusted (:mod:`wmrid.estimators.verdict`): a std not defined, an
     impossible value, or every one when the log's misfit or units put every std in doubt; in the parameters' order."""
-    misfit = ((diagnostics.get("uncertainty") or {}).get("model_error") or {}).get("prediction_misfit") or {}
-    units = diagnostics.get("units") or {}
     out = {n for n, (_, std) in parameters.items() if not math.isfinite(std)}
     out |= impossible_parameters(parameters)
-    if misfit.get("applied") or units.get("doubt"):
+    if every_std_in_doubt(diagnostics):
         out |= set(parameters)
-    return [n for n in parameters if n in out]
+    return tuple(n for n in parameters if n in out)
 
 
 #: The wheels' friction; every one resists motion, so none is negative.
@@ -214,7 +220,7 @@ def start_sensitivity(
 
 def diagnose(
     gamma, alpha, form, fit, parameters, theta_cov, sens, undetermined, lo, hi, units, theta, inflation
-) -> tuple[dict[str, Any], list[str]]:
+) -> tuple[Diagnostics, list[str]]:
     """Excitation and consistency diagnostics, and the warnings they call for.
 
     Warnings follow from what the log does to the *answer*: columns it never excites, parameters it does not
@@ -236,10 +242,9 @@ def diagnose(
     weakest = []
     for idx in range(min(2, p)):
         vec = evecs[:, idx]
-        involved = [columns[j] for j in np.argsort(-np.abs(vec)) if abs(vec[j]) > 0.3]
-        weakest.append(
-            {"relative_eigenvalue": float(evals[idx] / evals[-1]) if evals[-1] > 0 else 0.0, "columns": involved}
-        )
+        involved = tuple(columns[j] for j in np.argsort(-np.abs(vec)) if abs(vec[j]) > 0.3)
+        relative = float(evals[idx] / evals[-1]) if evals[-1] > 0 else 0.0
+        weakest.append(WeakDirection(relative_eigenvalue=relative, columns=involved))
     dead = [columns[j] for j in range(p) if scale[j] == 0]
     if dead:
         warnings.append(
@@ -271,20 +276,17 @@ def diagnose(
             f"friction, a wrong sign or unit, or the wrong --torque-hold); every std is scaled by {scale:.3g} to "
             "cover it, and the estimates are only as good as the model"
         )
-    diagnostics = {
-        "lambda_min_gamma": float(lam[0]),
-        "lambda_max_gamma": float(lam[-1]),
-        "condition_number_scaled": cond,
-        "weakest_directions": weakest,
-        "undetermined": [names0[j] for j in undetermined],
-        "at_box_boundary": at_bound,
-        "start_sensitivity": {name: float(v) for name, v in zip(names0, sens, strict=True)},
-        "structural_mismatch": {
-            "statistic": fit.chi2, "dof": fit.dof, "p_value": fit.p_value, "relative_misfit": rel_mismatch,
-            "meaning": "Hotelling T2 of the misfit of theta to the model's form (Eqs. 23-24) on dof directions; "
+    diagnostics = Diagnostics(
+        lambda_min_gamma=float(lam[0]), lambda_max_gamma=float(lam[-1]), condition_number_scaled=cond,
+        weakest_directions=tuple(weakest), undetermined=tuple(names0[j] for j in undetermined),
+        at_box_boundary=tuple(at_bound),
+        start_sensitivity={name: float(v) for name, v in zip(names0, sens, strict=True)},
+        structural_mismatch=StructuralMismatch(
+            statistic=fit.chi2, dof=fit.dof, p_value=fit.p_value, relative_misfit=rel_mismatch,
+            meaning="Hotelling T2 of the misfit of theta to the model's form (Eqs. 23-24) on dof directions; "
             "small p_value = theta not of the model's form",
-        },
-    }  # fmt: skip
+        ),
+    )  # fmt: skip
     return diagnostics, warnings
 
 
@@ -318,7 +320,8 @@ def caster_drag_test(result: Any, names: tuple[str, ...] | None = None) -> dict[
     # values only: their std is the table's, which later terms may widen (wmrid.estimators.verdict)
     text = ", ".join(f"{n} = {v:.4g} {units[n]}" for n, v in zip(names, values, strict=True))
     q = len(names)
-    big_b = result.diagnostics.get("uncertainty", {}).get("dof")
+    uncertainty = result.diagnostics.uncertainty
+    big_b = None if uncertainty is None else uncertainty.dof
     if big_b and big_b - q + 1 > 0:
         p_value = float(fdtrc(q, big_b - q + 1, (big_b - q + 1) * stat / (big_b * q)))
     else:

@@ -37,6 +37,7 @@ from wmrid.core.errors import NotIdentifiableError, UsageError, WmridError
 from wmrid.core.wheel_log import LogStream
 from wmrid.estimators.diagnostics import impossible_parameters
 from wmrid.estimators.estimate import BaseEstimate
+from wmrid.estimators.findings import FeedbackCheck
 from wmrid.estimators.substitution import with_estimate
 from wmrid.estimators.widening import with_covariance
 
@@ -146,7 +147,7 @@ def other_estimate(log: Any, result: Any, grid: tuple[float, float, int] | None 
 
 
 def check(result: Any, log: Any, robot: Any = None, switch: bool = True) -> Any:
-    """``result`` (the observer's) with ``diagnostics["feedback"]``: reporting the other estimate (on its own
+    """``result`` (the observer's) with ``diagnostics.feedback``: reporting the other estimate (on its own
     segments), with a warning, when the difference test (:func:`difference_test`) finds the observer's estimate
     biased; else the observer's with the closed-loop term delta delta^T added to its covariance (:func:`widened`).
     ``switch`` False (the user named the observer): the observer's estimate is kept even past the gate, widened by
@@ -163,16 +164,12 @@ def check(result: Any, log: Any, robot: Any = None, switch: bool = True) -> Any:
         return result
     evidence = disturbance(result)
     if not evidence["disturbance"]:
-        record = {
-            "checked": False,
-            **evidence,
-            "why": "no disturbance shows in the prediction error, so none feeds back",
-        }
-        return replace(result, diagnostics={**result.diagnostics, "feedback": record})
+        why = "no disturbance shows in the prediction error, so none feeds back"
+        return _with_record(result, FeedbackCheck.from_dict({"checked": False, **evidence, "why": why}))
     samples = result.log_info.samples or 0
     if samples > MAX_SAMPLES:
-        record = {"checked": False, "why": f"the log has {samples} samples, more than the check holds in memory"}
-        return replace(result, diagnostics={**result.diagnostics, "feedback": record})
+        why = f"the log has {samples} samples, more than the check holds in memory"
+        return _with_record(result, FeedbackCheck(checked=False, why=why))
     if isinstance(log, LogStream):
         log = log.read()
     try:
@@ -182,11 +179,13 @@ def check(result: Any, log: Any, robot: Any = None, switch: bool = True) -> Any:
             test = difference_test(est, matched, result.form.base_names, systematic=systematic)
             other = other_estimate(log, result) if test["applied"] else matched
     except (WmridError, np.linalg.LinAlgError) as err:
-        record = {"checked": False, "why": f"{type(err).__name__}: {err}"}
-        return replace(result, diagnostics={**result.diagnostics, "feedback": record})
+        return _with_record(result, FeedbackCheck(checked=False, why=f"{type(err).__name__}: {err}"))
     label = {"iv": "instrumental-variable (IDIM-IV, the logged reference as instruments)", "idim": "IDIM"}
-    record = {"checked": True, "against": other.method, **evidence, **test, "reported": result.method}
-    record["other_systematic"] = terms  # its own checks whose difference joined the difference's variance
+    # other_systematic: its own checks whose difference joined the difference's variance
+    record = FeedbackCheck.from_dict(
+        {"checked": True, "against": other.method, **evidence, **test, "reported": result.method,
+         "other_systematic": terms}
+    )  # fmt: skip
     impossible: set[str] = set()
     if test["applied"] and switch:  # never report an estimate no robot has (the evidence says it is the worse one)
         candidate = with_estimate(result, other, robot)
@@ -210,11 +209,11 @@ def check(result: Any, log: Any, robot: Any = None, switch: bool = True) -> Any:
             f"answering a disturbance through the efforts; {why}, its std widened by that difference"
         )
         if impossible:
-            record = {**out.diagnostics["feedback"], "not_reported": f"{other_name}: {', '.join(sorted(impossible))}"}
-            out = replace(out, diagnostics={**out.diagnostics, "feedback": record})
+            kept = out.diagnostics.feedback or record
+            out = _with_record(out, replace(kept, not_reported=f"{other_name}: {', '.join(sorted(impossible))}"))
         return replace(out, warnings=(text, *out.warnings))
     out = candidate
-    record["reported"] = other.method
+    record = replace(record, reported=other.method)
     big = [n for n, r in test["ratio"].items() if r > test["gate"]]
     text = (
         f"closed-loop bias: the observer's {', '.join(big)} differ from the {label[other.method]} estimate by up to "
@@ -228,13 +227,16 @@ def check(result: Any, log: Any, robot: Any = None, switch: bool = True) -> Any:
             ", whose regressor the feedback reaches only through the tracking error; for the consistent "
             "instrumental-variable estimate log the wheel-speed reference (columns eta_ref_r, eta_ref_l)"
         )
-    return replace(
-        out, diagnostics={**out.diagnostics, "feedback": record}, warnings=(text, *out.warnings)
-    )  # fmt: skip
+    return replace(_with_record(out, record), warnings=(text, *out.warnings))
 
 
-def widened(result: Any, delta: np.ndarray, other_std: np.ndarray, record: dict[str, Any], robot: Any = None) -> Any:
-    """The observer's ``result`` with the closed-loop term, ``record`` as ``diagnostics["feedback"]``.
+def _with_record(result: Any, record: FeedbackCheck) -> Any:
+    """``result`` with ``record`` as its ``diagnostics.feedback``."""
+    return replace(result, diagnostics=replace(result.diagnostics, feedback=record))
+
+
+def widened(result: Any, delta: np.ndarray, other_std: np.ndarray, record: FeedbackCheck, robot: Any = None) -> Any:
+    """The observer's ``result`` with the closed-loop term, ``record`` as ``diagnostics.feedback``.
 
     The observer's estimate is the other method's plus delta (n0,), so its error is the other's error plus delta,
     and its covariance becomes
@@ -250,13 +252,13 @@ def widened(result: Any, delta: np.ndarray, other_std: np.ndarray, record: dict[
     own = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(divide="ignore", invalid="ignore"):
         scale = np.where((own > 0) & np.isfinite(other_std), np.maximum(1.0, other_std / own), 1.0)
-    other = {"iv": "IDIM-IV", "idim": "IDIM"}.get(record.get("against", ""), "the other method")
+    other = {"iv": "IDIM-IV", "idim": "IDIM"}.get(record.against or "", "the other method")
     note = (
         f"the prediction error shows a disturbance the loop may feed back: the std was raised to at least {other}'s "
         "and the difference from it added (the closed-loop term)"
     )
     out, grown = with_covariance(result, cov * np.outer(scale, scale) + np.outer(delta, delta), note, robot)
-    return replace(out, diagnostics={**out.diagnostics, "feedback": {**record, "widened": grown}})
+    return _with_record(out, replace(record, widened=tuple(grown)))
 
 
 def disturbance(result: Any) -> dict[str, Any]:
@@ -265,8 +267,7 @@ def disturbance(result: Any) -> dict[str, Any]:
     "prediction_error_ratio", "prediction_error_share"} (:func:`wmrid.estimators.model_error.prediction_misfit`'s
     figures;
     without a measured noise floor, no evidence)."""
-    unc = result.diagnostics.get("uncertainty", {}) or {}
-    misfit = (unc.get("model_error", {}) or {}).get("prediction_misfit") or {}
+    misfit = result.diagnostics.prediction_misfit
     ratio, share = misfit.get("ratio"), misfit.get("share")
     found = ratio is not None and share is not None and ratio > DISTURBANCE_RATIO and share > DISTURBANCE_SHARE
     return {"disturbance": bool(found), "prediction_error_ratio": ratio, "prediction_error_share": share}

@@ -59,7 +59,7 @@ def estimate(name: str, log: Any, observer: IdentificationResult, options: Metho
     t = np.asarray(log.t, dtype=np.float64)
     eta = np.asarray(log.eta, dtype=np.float64)
     tau = np.asarray(log.tau, dtype=np.float64)
-    applied = (observer.diagnostics.get("delay") or {}).get("applied_s") or 0.0
+    applied = (None if observer.diagnostics.delay is None else observer.diagnostics.delay.applied_s) or 0.0
     if applied:  # the efforts' delay the observer's run applied (identify(..., delay=)): the same log for every method
         # IDIM's rows (~10 ms): only a log the observer's run shifted
         from wmrid.estimators.regression.idim_rows import shifted

@@ -21,11 +21,13 @@ functions on arrays; no I/O.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from wmrid.estimators.diagnostics import MISMATCH_RELEVANT, flagged_names
+from wmrid.estimators.findings import Diagnostics, ModelError
 from wmrid.estimators.observer.kernel import project_history_box
 from wmrid.estimators.uncertainty import FILTER_MEMORY, segments_of, slow_speed_difference
 from wmrid.model import dynamics as model
@@ -352,10 +354,10 @@ def model_error_scale(fit: Any, relative_misfit: float = math.inf) -> dict[str, 
 
 
 def record_widening(
-    diagnostics: dict[str, Any], inflation: dict[str, Any], parameters: dict[str, Any], undetermined: list[str]
-) -> None:
-    """Put the model-error scale in ``diagnostics["uncertainty"]["model_error"]`` and list the parameters whose
-    std it widened (``diagnostics["inflated"]``) and the parameters whose std is not to be trusted (``"flagged"``,
+    diagnostics: Diagnostics, inflation: dict[str, Any], parameters: dict[str, Any], undetermined: list[str]
+) -> Diagnostics:
+    """``diagnostics`` (with its uncertainty) with the model-error scale (``uncertainty.model_error``), the
+    parameters whose std it widened (``inflated``) and those whose std is not to be trusted (``flagged``,
     :func:`wmrid.estimators.diagnostics.flagged_names`)."""
     scale = inflation["scale"]
     skip = set(undetermined)
@@ -380,13 +382,15 @@ def record_widening(
         meaning.append(FILTER_NOTE)
     if fragile:
         meaning.append(FRAGILE_NOTE.format(", ".join(sorted(fragile))))
-    diagnostics["uncertainty"]["model_error"] = {
+    model_error = ModelError.from_dict({
         **inflation,
         "meaning": "; ".join(meaning)
         or "the model holds within the log's noise, and the step is fine enough: no widening",
-    }
-    diagnostics["inflated"] = inflated
-    diagnostics["flagged"] = flagged_names(parameters, diagnostics)
+    })  # fmt: skip
+    assert diagnostics.uncertainty is not None, "the uncertainty is recorded before its widening"
+    out = replace(diagnostics, uncertainty=replace(diagnostics.uncertainty, model_error=model_error))
+    out = replace(out, inflated=tuple(inflated))
+    return replace(out, flagged=flagged_names(parameters, out))
 
 
 def misfit_text(misfit: dict[str, Any]) -> str:

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from wmrid.estimators.diagnostics import impossible_parameters
+from wmrid.estimators.findings import Diagnostics
 
 #: The flags, in the order they are listed.
 FLAGS = ("inflated", "flagged", "impossible")
@@ -70,15 +71,15 @@ class Parameter:
 
 
 def parameter_table(
-    parameters: dict[str, tuple[float, float]], units: dict[str, str], diagnostics: dict[str, Any]
+    parameters: dict[str, tuple[float, float]], units: dict[str, str], diagnostics: Diagnostics
 ) -> dict[str, Parameter]:
     """The parameters (name -> (value, std)) with their units and the flags the estimator recorded in
     ``diagnostics`` ("inflated", "flagged", "impossible" lists); a result saved before "impossible" was recorded
     has it made from its values (:func:`wmrid.estimators.diagnostics.impossible_parameters`)."""
-    inflated = set(diagnostics.get("inflated") or ())
-    flagged = set(diagnostics.get("flagged") or ())
-    if "impossible" in diagnostics:
-        impossible = set(diagnostics["impossible"] or ())
+    inflated = set(diagnostics.inflated or ())
+    flagged = set(diagnostics.flagged or ())
+    if diagnostics.impossible is not None:
+        impossible = set(diagnostics.impossible)
     else:
         impossible = impossible_parameters(parameters)
     table = {}

@@ -19,6 +19,7 @@ import numpy as np
 
 from wmrid.core.errors import LogFormatError
 from wmrid.estimators.estimate import BaseEstimate
+from wmrid.estimators.findings import Diagnostics
 from wmrid.estimators.observer.settings import ObserverSettings
 from wmrid.estimators.parameter import Parameter, parameter_table
 from wmrid.estimators.records import LogInfo, Validation, Verdict
@@ -142,7 +143,8 @@ class IdentificationResult:
     source : the log.  form : the regressor (friction model included).  method : the method whose estimate is
     reported.  parameters : name -> (value, std), REPORTED names, SI units (the effort's units for a PWM log).
     theta0_cov : (n0, n0) covariance of the base parameters.  estimate : the method's
-    :class:`~wmrid.estimators.estimate.BaseEstimate`.  diagnostics, warnings : what the log and the method showed.
+    :class:`~wmrid.estimators.estimate.BaseEstimate`.  diagnostics : what the log and the method
+    showed (:class:`~wmrid.estimators.findings.Diagnostics`).  warnings : said to the user.
     log_info : what the log was (:class:`~wmrid.estimators.records.LogInfo`).  nominal, reference : the robot's
     nominal and CAD base parameters.  payload : the payload's mass, position and inertia
     (:class:`~wmrid.model.payload.PayloadEstimate`, ``--payload``).  verdict : what the log determines, per
@@ -156,7 +158,7 @@ class IdentificationResult:
     form: RegressorForm
     parameters: dict[str, tuple[float, float]]  # name -> (value, std), REPORTED names, SI units
     theta0_cov: np.ndarray  # (n0, n0)
-    diagnostics: dict[str, Any]
+    diagnostics: Diagnostics
     warnings: tuple[str, ...]
     log_info: LogInfo
     observer: ObserverRun | None = None
@@ -259,7 +261,7 @@ class IdentificationResult:
             else:  # another method's: its own settings, the observer's run under its own name
                 out["settings"] = self.method_settings.to_dict()
                 out["observer_settings"] = observer
-        out.update(diagnostics=self.diagnostics, warnings=list(self.warnings), log=self.log_info.to_dict())
+        out.update(diagnostics=self.diagnostics.to_dict(), warnings=list(self.warnings), log=self.log_info.to_dict())
         if self.estimate is not None:
             out["estimate"] = estimate_dict(self.estimate, self.form.base_names)
         if history and self.history is not None:
@@ -420,7 +422,7 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
         form=form,
         parameters=parameters,
         theta0_cov=theta0_cov,
-        diagnostics=data.get("diagnostics", {}),
+        diagnostics=Diagnostics.from_dict(data.get("diagnostics", {})),
         warnings=tuple(data.get("warnings", ())),
         log_info=LogInfo.from_dict(data["log"]),
         observer=ObserverRun(

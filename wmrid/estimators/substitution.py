@@ -9,6 +9,7 @@ from dataclasses import replace
 import numpy as np
 
 from wmrid.estimators.estimate import BaseEstimate
+from wmrid.estimators.findings import MethodFigures, Uncertainty
 from wmrid.estimators.model_error import record_widening
 from wmrid.estimators.observer.observe import CLOSED_LOOP_CAVEAT
 from wmrid.estimators.result import IdentificationResult, MethodSettings, finite_or_none, reported_names
@@ -30,10 +31,12 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
 
     The parameters, their standard errors, the payload and the warnings about the estimate become the
     method's; what describes the log (notes, excitation, the observer's history and intermediate
-    parameters, kept as the observer's) stays.  ``diagnostics["method"]`` holds the method's own
-    figures and ``diagnostics["observer_parameters"]`` the observer's estimate for comparison.
+    parameters, kept as the observer's) stays.  ``diagnostics.method`` holds the method's own
+    figures and ``diagnostics.observer_parameters`` the observer's estimate for comparison.
     """
-    inflation = dict(result.diagnostics.get("uncertainty", {}).get("model_error", {"scale": 1.0, "applied": False}))
+    diag = result.diagnostics
+    model_error = None if diag.uncertainty is None else diag.uncertainty.model_error
+    inflation = {"scale": 1.0, "applied": False} if model_error is None else model_error.to_dict()
     inflation.pop("meaning", None)
     # The model-error scale and the low-speed difference are evidence about the log and the model, so they carry
     # over to another method: the log departs from the same model (and in the same slow parts) whichever method
@@ -52,12 +55,12 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
     if own.get("cutoff"):
         inflation["filter"] = {**own["cutoff"], "method": est.method}
     cov = np.array(est.cov, dtype=float) * inflation["scale"] ** 2  # the same log departs from the same model
-    timing = (result.diagnostics.get("delay") or {}).get("timing_term") or (
-        (result.diagnostics.get("timing") or {}).get("timing_term") or {}
+    timing = (None if diag.delay is None else diag.delay.timing_term) or (
+        None if diag.timing is None else diag.timing.timing_term
     )
     terms = [slow, inflation.get("filter") or {}]
-    if timing.get("widened"):  # the efforts' timing is as uncertain whichever method reads them
-        terms.append({"applied": True, "delta": timing["delta"]})
+    if timing is not None and timing.widened:  # the efforts' timing is as uncertain whichever method reads them
+        terms.append({"applied": True, "delta": timing.delta})
     for term in terms:
         if term.get("applied") and term.get("delta") is not None and len(term["delta"]) == len(est.theta0):
             delta = np.asarray(term["delta"], dtype=float)
@@ -65,28 +68,29 @@ def with_estimate(result: IdentificationResult, est: BaseEstimate, robot: Robot 
     form = result.form if len(est.theta0) == result.form.n_base else RegressorForm("general")
     parameters = derived_with_std(np.asarray(est.theta0, dtype=float), cov, form.base_names)
     parameters = {name: parameters[name] for name in reported_names(form)}
-    diagnostics = dict(result.diagnostics)
-    diagnostics["observer_parameters"] = {name: {"value": v, "std": finite_or_none(e)} for name, (v, e) in
-                                          result.parameters.items()}  # fmt: skip
-    diagnostics["method"] = {"name": est.method, "seconds": est.seconds, "dof": est.dof, **est.diagnostics}
-    diagnostics["from_observer"] = [k for k in OBSERVER_DIAGNOSTICS if k in diagnostics]
+    observer_parameters = {name: {"value": v, "std": finite_or_none(e)} for name, (v, e) in
+                           result.parameters.items()}  # fmt: skip
+    method = MethodFigures.from_dict({"name": est.method, "seconds": est.seconds, "dof": est.dof, **est.diagnostics})
+    from_observer = tuple(k for k in OBSERVER_DIAGNOSTICS if getattr(diag, k) is not None)
     dof = est.dof
-    diagnostics["uncertainty"] = {
-        "method": est.diagnostics.get("uncertainty", f"standard errors of method {est.method}"),
-        "segments": est.diagnostics.get("segments"),
-        "dof": dof,
-        "interval_factor": {
+    uncertainty = Uncertainty(
+        method=est.diagnostics.get("uncertainty", f"standard errors of method {est.method}"),
+        segments=est.diagnostics.get("segments"),
+        dof=dof,
+        interval_factor={
             "95%": interval_factor(0.95, dof) if dof else 1.959964,
             "99.7%": interval_factor(0.9973, dof) if dof else 2.999977,
         },
-        "meaning": "value +/- interval_factor * std covers the truth with that probability when the disturbances "
+        meaning="value +/- interval_factor * std covers the truth with that probability when the disturbances "
         "do not feed back into the efforts",
-        "caveat": CLOSED_LOOP_CAVEAT,
-    }
+        caveat=CLOSED_LOOP_CAVEAT,
+    )
+    diagnostics = replace(diag, observer_parameters=observer_parameters, method=method, from_observer=from_observer,
+                          uncertainty=uncertainty)  # fmt: skip
     # the per-parameter warnings (poorly determined, impossible values) are made by settle, from these numbers
     base_names = form.base_names
     undetermined = [name for name in base_names if not math.isfinite(parameters[name][1])]
-    record_widening(diagnostics, inflation, parameters, undetermined)
+    diagnostics = record_widening(diagnostics, inflation, parameters, undetermined)
     warnings = [*result.warnings, *est.warnings]
     payload_est = None
     if result.payload is not None and robot is not None:

@@ -6,7 +6,7 @@ carries."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -14,6 +14,7 @@ import numpy as np
 from wmrid.core.errors import UsageError, WmridError, option
 from wmrid.core.wheel_log import LogStream, WheelLog
 from wmrid.estimators.delay import DEFAULT_SPAN_S, SIGNIFICANT_S, SIGNIFICANT_Z, DelayEstimate, combine, estimate_delay
+from wmrid.estimators.findings import DelayApplied, TimingCheck
 from wmrid.estimators.uncertainty import interval_factor
 
 
@@ -60,8 +61,8 @@ def faster_controller_text(est: Any, t: np.ndarray) -> str:
 
 def timing_check(
     log: Any, torque_hold: str, control_rate: float | None, samples: int, median_step: float, form: Any = None
-) -> dict[str, Any]:
-    """The record for ``diagnostics["timing"]``: the efforts' delay estimated from the log (:func:`estimate_delay`,
+) -> TimingCheck:
+    """The record for ``diagnostics.timing``: the efforts' delay estimated from the log (:func:`estimate_delay`,
     searched over +/- max(DEFAULT_SPAN_S, 1.2 logged steps), under the given hold), for identify's default timing.
 
     Keys: "checked"; the estimate (:meth:`DelayEstimate.to_dict`; by instrumental variables when the log carries the
@@ -76,9 +77,9 @@ def timing_check(
     as 1/sqrt(T) with the log's length.  A log that cannot be profiled (a hole, too short for the filter) is not
     checked, and the record says why.  ``form``: the friction model profiled (:func:`estimate_delay`)."""
     slow = bool(median_step > 0 and 1.0 / median_step < SLOW_LOG_HZ)
-    none = {"checked": False, "apply": False, "slow": slow, "faster_controller": False}
+    none = TimingCheck(checked=False, apply=False, slow=slow, faster_controller=False)
     if samples < 2:
-        return {**none, "why": f"{samples} samples"}
+        return replace(none, why=f"{samples} samples")
     count = math.ceil(samples / TIMING_WINDOW_SAMPLES)
     size = math.ceil(samples / count)
 
@@ -110,7 +111,7 @@ def timing_check(
     try:
         wheel, profiled, windows, first_t = profile(None)
     except WmridError as err:
-        return {**none, "why": str(err)}
+        return replace(none, why=str(err))
     drag = None
     if form is not None and consults_drag(wheel):
         try:
@@ -120,16 +121,14 @@ def timing_check(
     est, note = with_drag(wheel, drag, form)
     apply = bool(est.significant and not est.at_edge)
     faster = bool(apply and faster_controller(est, first_t, torque_hold, control_rate))
-    window = {"samples_profiled": profiled, "of": int(samples), "windows": windows}
     # the eight base parameters' slope (a caster model profiled has its drag after them, named by its own form)
-    slope = {"theta0_slope_per_s": est.theta0_slope[:8].tolist()} if est.theta0_slope is not None else {}
-    record = {"checked": True, **est.to_dict(), "apply": apply, "slow": slow, "faster_controller": faster, **window}
-    if drag is not None:
-        record["profiled_with"] = form.friction if est is drag else "wheel"
-        record["wheel_model"] = wheel.to_dict()
-    if note:
-        record["note"] = note
-    return {**record, **slope}
+    slope = est.theta0_slope[:8].tolist() if est.theta0_slope is not None else None
+    return TimingCheck(
+        checked=True, estimate=est.record(), apply=apply, slow=slow, faster_controller=faster,
+        samples_profiled=profiled, of=int(samples), windows=windows,
+        profiled_with=None if drag is None else (form.friction if est is drag else "wheel"),
+        wheel_model=None if drag is None else wheel.record(), note=note or None, theta0_slope_per_s=slope,
+    )  # fmt: skip
 
 
 def consults_drag(wheel: DelayEstimate) -> bool:
@@ -175,7 +174,7 @@ MATERIAL_SHIFT = 0.3
 CARRY_COVERAGE = 0.95
 
 
-def unresolved_delay(record: dict[str, Any], theta0_std: np.ndarray) -> float | None:
+def unresolved_delay(record: TimingCheck, theta0_std: np.ndarray) -> float | None:
     """The delay s whose effect the std must carry when the timing check (``record``, :func:`timing_check`) left the
     efforts as stamped: sign(d) sqrt(d^2 - s^2), the unbiased estimate of the delay's size when the log puts it at
     d +/- s (E[d^2] = delta^2 + s^2), when the log gives evidence of a delay: |d| beyond the t quantile at
@@ -191,16 +190,18 @@ def unresolved_delay(record: dict[str, Any], theta0_std: np.ndarray) -> float | 
     carried a delay of the size of its std on every log, so the std of a log that pins its delay poorly (a 200 Hz
     reversing log with a disturbance inside the loop: s of 5-45 ms) grew 4-5 times against --delay 0; on a log
     with no delay the term now comes in 5 % of logs, and where it does its size, like s, shrinks as 1/sqrt(T)."""
-    if not record.get("checked") or record.get("apply") or record.get("at_edge_of_search"):
+    est = record.estimate
+    if not record.checked or record.apply or est is None or est.at_edge_of_search:
         return None
-    slope = record.get("theta0_slope_per_s")
-    d, s = record.get("delay_s"), record.get("std_s")
+    slope = record.theta0_slope_per_s
+    d, s = est.delay_s, est.std_s
     if slope is None or d is None or s is None or not (math.isfinite(d) and math.isfinite(s)):
         return None
     d, s = float(d), float(s)
     if abs(d) + SIGNIFICANT_Z * s <= SIGNIFICANT_S:
         return None  # the log rules out any delay the check would call significant
-    if abs(d) <= interval_factor(CARRY_COVERAGE, max(int(record.get("segments", 2)) - 1, 1)) * s:
+    segments = 2 if est.segments is None else est.segments
+    if abs(d) <= interval_factor(CARRY_COVERAGE, max(int(segments) - 1, 1)) * s:
         return None  # no evidence of a delay
     size = math.sqrt(d * d - s * s)
     slope = np.asarray(slope, dtype=float)
@@ -212,11 +213,15 @@ def unresolved_delay(record: dict[str, Any], theta0_std: np.ndarray) -> float | 
     return math.copysign(size, d)
 
 
-def unresolved_text(record: dict[str, Any], moved: float) -> str:
+def unresolved_text(record: TimingCheck, moved: float) -> str:
     """The warning for an unresolved delay (:func:`unresolved_delay`) ``moved`` s, the timing check's ``record``."""
+    est = record.estimate
+    assert est is not None, "an unresolved delay was estimated"
+    assert est.delay_s is not None, "an unresolved delay is finite"
+    assert est.std_s is not None, "an unresolved delay's std is finite"
     return (
         f"the efforts' timing against the speeds is uncertain: the log puts their delay at "
-        f"{record['delay_s'] * 1e3:+.2f} +/- {record['std_s'] * 1e3:.2f} ms, not distinguishable from none, so they "
+        f"{est.delay_s * 1e3:+.2f} +/- {est.std_s * 1e3:.2f} ms, not distinguishable from none, so they "
         f"were used as stamped; what a delay of {moved * 1e3:+.2f} ms would change was added to the std. Give "
         "--delay 0 if the two clocks are known to agree (or --delay SECONDS if the offset is known)"
     )
@@ -292,8 +297,8 @@ class _Piece:
 
 def apply_delay(
     log: Any, delay: float | str, torque_hold: str, control_rate: float | None, form: Any = None
-) -> tuple[Any, dict[str, Any], list[str]]:
-    """(the log in memory with its efforts read ``delay`` s earlier, the record for ``diagnostics["delay"]``,
+) -> tuple[Any, DelayApplied, list[str]]:
+    """(the log in memory with its efforts read ``delay`` s earlier, the record for ``diagnostics.delay``,
     warnings) for :func:`wmrid.pipeline.identify.identify`.
 
     ``delay``: seconds, or "auto" (:func:`estimate_delay`; applied only when significant and not at the edge
@@ -321,10 +326,11 @@ def apply_delay(
             except WmridError:
                 drag = None
         est, note = with_drag(wheel, drag, form)
-        record = {"chosen_by": "auto", **est.to_dict()}
+        record = DelayApplied(chosen_by="auto", estimate=est.record())
         if drag is not None:
-            record["profiled_with"] = form.friction if est is drag else "wheel"
-            record["wheel_model"] = wheel.to_dict()
+            record = replace(
+                record, profiled_with=form.friction if est is drag else "wheel", wheel_model=wheel.record()
+            )
         if note:
             warnings.append(note)
         applied = est.delay if est.significant and not est.at_edge else 0.0
@@ -367,8 +373,8 @@ def apply_delay(
             raise UsageError(
                 f"{option('delay')} must be auto or seconds within +/-{MAX_EFFORT_SHIFT_S:g}, got {delay!r}"
             )
-        record = {"chosen_by": "--delay"}
-    record["applied_s"] = applied
+        record = DelayApplied(chosen_by="--delay")
+    record = replace(record, applied_s=applied)
     if applied == 0.0:
         return whole, record, warnings
     shifted_log = WheelLog(

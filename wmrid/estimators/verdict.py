@@ -6,13 +6,13 @@ timing and hold terms); each may change a std.  What the user reads must not dep
 
 * the per-parameter warnings (poorly determined, not positive definite, negative friction), so that every std a
   warning quotes is the table's;
-* ``diagnostics["flagged"]``, which has one meaning everywhere: *do not trust this value's std*.  A parameter is
+* ``diagnostics.flagged``, which has one meaning everywhere: *do not trust this value's std*.  A parameter is
   flagged when the log does not determine it (infinite std), when the model does not fit the log so that no std
   covers the error (the prediction-error check), when its value is one no robot has, and when its unit is in
   doubt (:mod:`wmrid.estimators.plausibility`).  A std widened to cover a model error is trusted (marked "†",
-  ``diagnostics["inflated"]``), and so is a large std (``diagnostics["poorly_determined"]``): both say how
+  ``diagnostics.inflated``), and so is a large std (``diagnostics.poorly_determined``): both say how
   uncertain the value is;
-* the units check (``diagnostics["units"]``);
+* the units check (``diagnostics.units``);
 * the verdict (``result.verdict``): one plain sentence per parameter group (inertia, Coriolis, friction,
   casters) saying whether this log determines it, and the main reason when it does not.
 
@@ -36,6 +36,7 @@ from wmrid.estimators.diagnostics import (
     physics_warnings,
     poorly_text,
 )
+from wmrid.estimators.findings import UnitsCheck
 from wmrid.estimators.plausibility import units_check
 from wmrid.estimators.records import GroupVerdict, Verdict
 
@@ -79,9 +80,9 @@ def _relative(value: float, std: float) -> float:
 
 def _references(result: Any) -> list[tuple[str, dict[str, float]]]:
     """(label, values) of the robot file for the units check: its nominal and CAD base parameters, also when the
-    result does not show them (efforts not in N m: ``diagnostics["robot_values"]``)."""
+    result does not show them (efforts not in N m: ``diagnostics.robot_values``)."""
     out = []
-    kept = result.diagnostics.get("robot_values") or {}
+    kept = result.diagnostics.robot_values or {}
     for label, ref in (
         ("nominal", result.nominal or kept.get("nominal")),
         ("CAD", result.reference or kept.get("CAD")),
@@ -111,7 +112,8 @@ def _poorly_warnings(result: Any, method: str | None) -> tuple[list[str], list[s
     their value, the std being the reported one: the base parameters with the partners they cannot be told from,
     then M11, M12, M22 (:func:`wmrid.estimators.diagnostics.derived_poorly_determined`)."""
     names, corr = _correlations(result)
-    logs = 1 + len((result.diagnostics.get("combined") or {}).get("results") or [])
+    combined = result.diagnostics.combined
+    logs = 1 + len((None if combined is None else combined.results) or ())
     texts, poorly, pairs = [], [], []
     for i, name in enumerate(names):
         value, std = result.parameters[name]
@@ -132,23 +134,20 @@ def _poorly_warnings(result: Any, method: str | None) -> tuple[list[str], list[s
 def settle(result: Any, radius: float | None = None) -> Any:
     """``result`` with its parameter statements made from its final numbers (module docstring).  ``radius`` m:
     the robot's wheel radius for the units check (default: the one a previous settle recorded)."""
-    diagnostics = dict(result.diagnostics)
-    previous = diagnostics.get("units") or {}
-    r = radius if radius is not None else previous.get("wheel_radius")
+    previous = result.diagnostics.units
+    r = radius if radius is not None else (None if previous is None else previous.wheel_radius)
     effort_free = result.log_info.effort_unit != "N m"
     notes = result.log_info.notes
-    units = units_check(result.parameters, result.log_info.scales, _references(result), r, notes, effort_free)
-    units["wheel_radius"] = r
-    diagnostics["units"] = units
+    checked = units_check(result.parameters, result.log_info.scales, _references(result), r, notes, effort_free)
+    units = UnitsCheck.from_dict({**checked, "wheel_radius": r})
     method = result.method if result.method != "observer" else None
     poorly_texts, poorly, pairs = _poorly_warnings(result, method)
-    diagnostics["poorly_determined"] = poorly
-    diagnostics["not_separable"] = pairs
-    diagnostics["flagged"] = flagged_names(result.parameters, diagnostics)
+    diagnostics = replace(result.diagnostics, units=units, poorly_determined=tuple(poorly), not_separable=tuple(pairs))
+    diagnostics = replace(diagnostics, flagged=flagged_names(result.parameters, diagnostics))
     impossible = impossible_parameters(result.parameters)
-    diagnostics["impossible"] = [n for n in result.parameters if n in impossible]
+    diagnostics = replace(diagnostics, impossible=tuple(n for n in result.parameters if n in impossible))
     kept = [w for w in result.warnings if not any(key in w for key in OWNED)]
-    unit_texts = [f"unit check: {f['text']}" for f in units["findings"]]
+    unit_texts = [f"unit check: {f['text']}" for f in checked["findings"]]
     hint = [plan_hint(poorly)] if poorly else []
     warnings = (*unit_texts, *kept, *poorly_texts, *hint, *physics_warnings(result.parameters))
     out = replace(result, diagnostics=diagnostics, warnings=warnings)
@@ -167,18 +166,16 @@ def plan_hint(poorly: list[str]) -> str:
 def _reason(names: tuple[str, ...], result: Any) -> str:
     """The main reason the parameters ``names`` are not (well) determined."""
     diag = result.diagnostics
-    pairs = [p for p in diag.get("not_separable", []) if p[0] in names]
+    pairs = [p for p in diag.not_separable or () if p[0] in names]
     if pairs:
         a, b, c = pairs[0]
         return f"{a} cannot be told from {b} on this log (correlation {c:+.3f}); drive so that they act differently"
-    timing = ((diag.get("timing") or {}).get("timing_term") or {}).get("widened") or []
-    timing += ((diag.get("delay") or {}).get("timing_term") or {}).get("widened") or []
-    if set(timing) & set(names):
+    if set(diag.timing_widened()) & set(names):
         return "the efforts' timing against the speeds is uncertain and moves them"
-    feedback = (diag.get("feedback") or {}).get("widened") or []
+    feedback = () if diag.feedback is None else diag.feedback.widened or ()
     if set(feedback) & set(names):
         return "a disturbance fed back by the controller moves them (the closed-loop term)"
-    scale = ((diag.get("uncertainty") or {}).get("model_error") or {}).get("scale") or 1.0
+    scale = (None if diag.model_error is None else diag.model_error.scale) or 1.0
     if scale > 2.0:
         return f"the log departs from the model (std scaled by {scale:.3g} to cover it)"
     return "too little excitation: accelerate, brake, turn and reverse more, for longer"
@@ -226,9 +223,9 @@ def _group_sentence(group: str, names: tuple[str, ...], extra: tuple[str, ...], 
     present = tuple(n for n in names if n in params)
     if not present:
         return None
-    flagged = set(result.diagnostics.get("flagged", []))
-    units = result.diagnostics.get("units") or {}
-    misfit = ((result.diagnostics.get("uncertainty") or {}).get("model_error") or {}).get("prediction_misfit") or {}
+    flagged = set(result.diagnostics.flagged or ())
+    units = result.diagnostics.units or UnitsCheck()
+    misfit = result.diagnostics.prediction_misfit
     rel = {n: _relative(*params[n]) for n in present + tuple(n for n in extra if n in params)}
     # a value the log bounds to a negligible share of the effort is determined: it is small, not unknown
     negligible = {
@@ -244,7 +241,7 @@ def _group_sentence(group: str, names: tuple[str, ...], extra: tuple[str, ...], 
     impossible = impossible_parameters(params) & set(present)
     status: str
     reason: str | None = None
-    if units.get("doubt"):
+    if units.doubt:
         status, reason = "in doubt", "the log's units or columns are in doubt (see the unit check)"
     elif not math.isfinite(rel[worst]):
         status, reason = "not determined", "the log does not excite it: the start value sets it"
@@ -306,16 +303,16 @@ def verdict(result: Any) -> Verdict:
     if casters:
         said.append(_group_sentence("casters", casters, (), result))
     groups = [g for g in said if g is not None]
-    units = result.diagnostics.get("units") or {}
-    if units.get("doubt"):
-        first = units["findings"][0]["text"]
+    units = result.diagnostics.units or UnitsCheck()
+    if units.doubt:
+        first = (units.findings or ())[0].text
         summary = f"Do not use these numbers: {first}."
     else:
         good = [g.group for g in groups if g.status == "determined"]
         weak = [g.group for g in groups if g.status == "poorly determined"]
         bad = [g.group for g in groups if g.status in ("not determined", "in doubt")]
         parts = []
-        subject = "these logs determine" if result.diagnostics.get("combined") else "this log determines"
+        subject = "these logs determine" if result.diagnostics.combined else "this log determines"
         if good:
             parts.append(f"{subject} the {_join(good)}")
         if weak:
@@ -327,15 +324,15 @@ def verdict(result: Any) -> Verdict:
         if not good and not weak:
             summary = f"{subject[0].upper() + subject[1:]} none of the parameters ({_join(bad)})."
     first: tuple[str, ...] = ()
-    feedback = result.diagnostics.get("feedback") or {}
-    if feedback.get("reported") and feedback["reported"] != "observer" and result.method == feedback["reported"]:
-        other = "IDIM-IV" if feedback["reported"] == "iv" else "IDIM"
+    reported = None if result.diagnostics.feedback is None else result.diagnostics.feedback.reported
+    if reported and reported != "observer" and result.method == reported:
+        other = "IDIM-IV" if reported == "iv" else "IDIM"
         first = (
             f"method: {other}, not the observer: the closed-loop check found the observer's estimate biased by "
             "feedback (see the first warning); --method observer keeps the observer's",
         )
-    findings = [f["text"] for f in units.get("findings", []) if not f["doubt"]]
-    check = tuple(findings) if findings and not units.get("doubt") else ()
+    findings = [f.text for f in units.findings or () if not f.doubt]
+    check = tuple(findings) if findings and not units.doubt else ()
     assumed_units = None
     scales = result.log_info.scales or {}
     speed, effort = max(scales.get("speed_max") or [0.0]), max(scales.get("effort_max") or [0.0])

@@ -18,12 +18,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from wmrid.estimators.diagnostics import flagged_names
 from wmrid.estimators.estimate import BaseEstimate
+from wmrid.estimators.findings import DelayApplied, HoldTerm, ModelError, TimingCheck, TimingTerm, Uncertainty
 from wmrid.estimators.model_error import INFLATION_MARK
 from wmrid.estimators.result import reported_names
 from wmrid.model.base_params import derived_with_std
@@ -39,9 +40,9 @@ def with_covariance(
 ) -> tuple[IdentificationResult, list[str]]:
     """(``result`` reporting its estimate with the covariance ``cov`` (n0, n0), the parameters it widened): their std
     recomputed (:func:`wmrid.model.base_params.derived_with_std`), ``theta0_cov`` and the payload's std (with ``robot``)
-    too, the parameters grown beyond INFLATION_MARK times the old std added to ``diagnostics["inflated"]`` (a widened
+    too, the parameters grown beyond INFLATION_MARK times the old std added to ``diagnostics.inflated`` (a widened
     std is trusted: ``["flagged"]`` is made again, :func:`wmrid.estimators.diagnostics.flagged_names`), and ``note``
-    (what widened them) to the meaning of the widening mark (``diagnostics["uncertainty"]["model_error"]["meaning"]``)
+    (what widened them) to the meaning of the widening mark (``diagnostics.uncertainty.model_error.meaning``)
     when any grew.  The one place a term (timing, hold,
     closed loop) widens a result.  ``mark``: the growth that marks a parameter (default INFLATION_MARK)."""
     mark = INFLATION_MARK if mark is None else mark
@@ -53,16 +54,16 @@ def with_covariance(
         name for name, (_, std) in parameters.items()
         if math.isfinite(std) and std > mark * result.parameters[name][1]
     ]  # fmt: skip
-    diagnostics = dict(result.diagnostics)
+    diagnostics = result.diagnostics
     if grown:
-        unc = dict(diagnostics.get("uncertainty", {}))
-        model_error = dict(unc.get("model_error", {}))
-        before = model_error.get("meaning") if diagnostics.get("inflated") else None
-        model_error["meaning"] = f"{before}; {note}" if before else note
-        unc["model_error"] = model_error
-        diagnostics["uncertainty"] = unc
-    diagnostics["inflated"] = [n for n in parameters if n in set(diagnostics.get("inflated", [])) | set(grown)]
-    diagnostics["flagged"] = flagged_names(parameters, diagnostics)
+        unc = diagnostics.uncertainty or Uncertainty()
+        model_error = unc.model_error or ModelError()
+        before = model_error.meaning if diagnostics.inflated else None
+        model_error = replace(model_error, meaning=f"{before}; {note}" if before else note)
+        diagnostics = replace(diagnostics, uncertainty=replace(unc, model_error=model_error))
+    inflated = set(diagnostics.inflated or ()) | set(grown)
+    diagnostics = replace(diagnostics, inflated=tuple(n for n in parameters if n in inflated))
+    diagnostics = replace(diagnostics, flagged=flagged_names(parameters, diagnostics))
     payload = result.payload
     if payload is not None and robot is not None:
         payload = payload_with_std(np.asarray(est.theta0, dtype=float), cov, robot.reference)
@@ -91,8 +92,10 @@ def with_hold_term(
         return result
     note = "the hold of the efforts is unknown on this slow log: the change from zoh to foh was added to the covariance"
     result, grown = with_covariance(result, np.asarray(est.cov, dtype=float) + np.outer(delta, delta), note, robot)
-    diagnostics = dict(result.diagnostics)
-    diagnostics["timing"] = {**diagnostics.get("timing", {}), "hold_term": {"delta": delta.tolist(), "widened": grown}}
+    timing = replace(
+        result.diagnostics.timing or TimingCheck(), hold_term=HoldTerm(delta=delta.tolist(), widened=tuple(grown))
+    )
+    diagnostics = replace(result.diagnostics, timing=timing)
     warnings = list(result.warnings)
     if grown:
         warnings.append(
@@ -115,7 +118,7 @@ def with_unresolved_timing(
     """``result`` (its efforts used as stamped) with delta delta^T added to its covariance, delta (n0,) the change of
     theta0 when the efforts are read ``delay`` s earlier (:func:`wmrid.estimators.timing_check.unresolved_delay`;
     ``how`` it was
-    found: "identified again" or "the profile's slope"); recorded as ``diagnostics["timing"]["timing_term"]``;
+    found: "identified again" or "the profile's slope"); recorded as ``diagnostics.timing.timing_term``;
     parameters grown beyond UNRESOLVED_MARK are marked and ``warning`` is said."""
     est = result.estimate
     assert est is not None
@@ -128,15 +131,16 @@ def with_unresolved_timing(
     )
     cov = np.asarray(est.cov, dtype=float) + np.outer(delta, delta)
     widened, grown = with_covariance(result, cov, note, robot, mark=UNRESOLVED_MARK)
-    diagnostics = dict(widened.diagnostics)
-    term = {"delay_s": delay, "delta": delta.tolist(), "found_by": how, "widened": grown}
-    diagnostics["timing"] = {**(diagnostics.get("timing") or {}), "timing_term": term}
+    term = TimingTerm(delay_s=delay, delta=delta.tolist(), found_by=how, widened=tuple(grown))
+    diagnostics = replace(
+        widened.diagnostics, timing=replace(widened.diagnostics.timing or TimingCheck(), timing_term=term)
+    )
     warnings = (warning, *widened.warnings) if grown else tuple(widened.warnings)
     return replace(widened, diagnostics=diagnostics, warnings=warnings)
 
 
 def with_timing_term(
-    base: IdentificationResult, moved: IdentificationResult, record: dict[str, Any], warnings: list[str], step: float,
+    base: IdentificationResult, moved: IdentificationResult, record: DelayApplied, warnings: list[str], step: float,
     robot: Robot | None = None,
 ) -> IdentificationResult:  # fmt: skip
     """``base`` (identified with the estimated delay applied) with delta delta^T added to its covariance, delta the
@@ -154,6 +158,6 @@ def with_timing_term(
         "the estimate, and that change was added to the covariance"
     )
     widened, grown = with_covariance(base, np.asarray(est.cov, dtype=float) + np.outer(delta, delta), note, robot)
-    diagnostics = dict(widened.diagnostics)
-    diagnostics["delay"] = {**record, "timing_term": {"step_s": step, "delta": delta.tolist(), "widened": grown}}
+    term = TimingTerm(step_s=step, delta=delta.tolist(), widened=tuple(grown))
+    diagnostics = replace(widened.diagnostics, delay=replace(record, timing_term=term))
     return replace(widened, diagnostics=diagnostics, warnings=tuple(warnings) + tuple(base.warnings))

@@ -91,7 +91,7 @@ def _result_columns(result: Any) -> dict[str, Any]:
         value, std = params.get(name, (None, None))
         out[name], out[f"{name}_std"] = value, std
     info = result.log_info
-    flagged = list(result.diagnostics.get("flagged", []))
+    flagged = list(result.diagnostics.flagged or ())
     out.update(
         duration_s=info.duration_s, samples=info.samples, rate_hz=info.rate_hz,
         method=result.method, form=getattr(result.form, "kind", None), effort_unit=info.effort_unit,

@@ -5,11 +5,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import replace
-from typing import Any
 
 from wmrid.core.errors import NotIdentifiableError
 from wmrid.core.wheel_log import LogStream
 from wmrid.estimators.diagnostics import AUTO_NO_REVERSAL, AUTO_P, caster_drag_test
+from wmrid.estimators.findings import FrictionChoice, LoadTermsChoice
 from wmrid.estimators.observer.observe import observe
 from wmrid.estimators.observer.survey import Survey
 from wmrid.estimators.options import ObserverOptions
@@ -26,9 +26,9 @@ def choose_friction(
     geometry: tuple[float, ...] = (),
     load_terms: bool = True,
     progress: Callable[[int, int], None] | None = None,
-) -> tuple[IdentificationResult, dict[str, Any]]:
+) -> tuple[IdentificationResult, FrictionChoice]:
     """(the observer's run with the friction model ``options.friction`` names, the record of how it was chosen for
-    ``diagnostics["friction"]``).  ``auto``: the wheel model and the caster model (one more pass over the log), the
+    ``diagnostics.friction``).  ``auto``: the wheel model and the caster model (one more pass over the log), the
     caster model taken when a Wald test puts its drag off zero at p < AUTO_P (never on a log whose wheels keep one
     sign, and not when the drag would push the robot); with the casters' positions and ``load_terms``, then also
     ``wheel+caster+load`` (:func:`_with_load`).  Each pass: :func:`wmrid.estimators.observer.observe.observe`."""
@@ -38,14 +38,14 @@ def choose_friction(
 
     friction = options.friction
     if friction != "auto":
-        return run(friction), {"model": friction, "chosen_by": "--friction"}
+        return run(friction), FrictionChoice(model=friction, chosen_by="--friction")
     wheel = run("wheel")
     if wheel.form.kind == "paper":
-        return wheel, {"model": "wheel", "chosen_by": "auto", "reason": AUTO_NO_REVERSAL}
+        return wheel, FrictionChoice(model="wheel", chosen_by="auto", reason=AUTO_NO_REVERSAL)
     try:
         caster = run("wheel+caster")
     except NotIdentifiableError as err:
-        return wheel, {"model": "wheel", "chosen_by": "auto", "reason": f"caster model failed: {err}"}
+        return wheel, FrictionChoice(model="wheel", chosen_by="auto", reason=f"caster model failed: {err}")
     choice = caster_drag_test(caster)
     significant = choice["p_value"] < AUTO_P
     chosen = caster if significant and not choice["negative"] else wheel
@@ -57,15 +57,16 @@ def choose_friction(
             f", but {', '.join(choice['negative'])} would push the robot, which no caster does: not a caster's drag "
             "(a sign, a unit, or an effect neither model has), so the wheel model is kept"
         )
-    record = {"model": chosen.form.friction, "chosen_by": "auto", "reason": reason, **choice}
+    # the test's figures as they are (a drag not determined has no "negative")
+    record = FrictionChoice.from_dict({"model": chosen.form.friction, "chosen_by": "auto", "reason": reason, **choice})
     if chosen is caster and caster.form.geometry and load_terms:
         return _with_load(chosen, record, lambda: run("wheel+caster+load"))
     return chosen, record
 
 
 def _with_load(
-    caster: IdentificationResult, record: dict[str, Any], run_load: Callable[[], IdentificationResult]
-) -> tuple[IdentificationResult, dict[str, Any]]:
+    caster: IdentificationResult, record: FrictionChoice, run_load: Callable[[], IdentificationResult]
+) -> tuple[IdentificationResult, FrictionChoice]:
     """``--friction auto`` after the caster model was chosen: the ``wheel+caster+load`` model too, taken when a Wald
     test puts its load terms off zero at p < AUTO_P (:func:`wmrid.estimators.diagnostics.caster_drag_test` on them)
     and the log departs from it no more than from the caster model (its model-error scale S,
@@ -79,9 +80,9 @@ def _with_load(
     try:
         loaded = run_load()
     except NotIdentifiableError as err:
-        return caster, {**record, "load": {"taken": False, "reason": f"load model failed: {err}"}}
+        return caster, replace(record, load=LoadTermsChoice(taken=False, reason=f"load model failed: {err}"))
     test = caster_drag_test(loaded, loaded.form.base_names[8 + loaded.form.n_casters :])
-    scale = [r.diagnostics["uncertainty"]["model_error"]["scale"] for r in (caster, loaded)]
+    scale = [_model_error_scale(r) for r in (caster, loaded)]
     shown = test["p_value"] < AUTO_P
     taken = shown and scale[1] <= scale[0]
     reason = f"the drag's load terms ({test['text']}) differ from zero at p = {test['p_value']:.2g}" + (
@@ -92,8 +93,19 @@ def _with_load(
             f", but the log departs further from that model (model-error scale {scale[1]:.3g} against the caster "
             f"model's {scale[0]:.3g}), so the caster model is kept"
         )
-    test = {key: test[key] for key in ("statistic", "dof", "p_value")}
-    load = {"taken": taken, "reason": reason, "scale": scale[1], "caster_scale": scale[0], **test}
+    load = LoadTermsChoice(
+        taken=taken, reason=reason, scale=scale[1], caster_scale=scale[0], statistic=test["statistic"],
+        dof=test["dof"], p_value=test["p_value"],
+    )  # fmt: skip
     if not taken:
-        return caster, {**record, "load": load}
-    return loaded, {**record, "model": loaded.form.friction, "load": load}
+        return caster, replace(record, load=load)
+    return loaded, replace(record, model=loaded.form.friction, load=load)
+
+
+def _model_error_scale(result: IdentificationResult) -> float:
+    """The model-error scale S of an observer's run (:func:`wmrid.estimators.model_error.widen`)."""
+    uncertainty = result.diagnostics.uncertainty
+    model_error = None if uncertainty is None else uncertainty.model_error
+    assert model_error is not None, "an observer's run records its widening"
+    assert model_error.scale is not None, "an observer's run records its model-error scale"
+    return float(model_error.scale)

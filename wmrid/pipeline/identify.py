@@ -27,6 +27,7 @@ from wmrid.core.errors import UsageError, WmridError, option
 from wmrid.core.wheel_log import LogStream, split_topics, stream_arrays
 from wmrid.estimators.delay import DELAY_RESOLUTION_S
 from wmrid.estimators.feedback import check as feedback_check
+from wmrid.estimators.findings import FrictionChoice, TimingCheck
 from wmrid.estimators.observer.observe import delay_profile_form
 from wmrid.estimators.observer.survey import survey
 from wmrid.estimators.options import ObserverOptions
@@ -104,8 +105,8 @@ def identify_log(
                 timing = timing.failed(err)
             else:
                 if timing.record is not None:  # the window's record, with what the timed run found (its hold term)
-                    merged = {**timing.record, **(timed.diagnostics.get("timing") or {})}
-                    timed = replace(timed, diagnostics={**timed.diagnostics, "timing": merged})
+                    merged = timing.record.merged(timed.diagnostics.timing)
+                    timed = replace(timed, diagnostics=replace(timed.diagnostics, timing=merged))
                 return _settled(timed, robot)
     return _settled(_friction_and_terms(log, chosen(), robot, options, steps, timing), robot)
 
@@ -148,9 +149,11 @@ def _delayed(
         auto_form = survey(whole, whole.source, whole.effort_unit).form()
         profile = delay_profile_form(auto_form, options.friction, robot, steps.geometry, steps.load_terms)
     shifted, record, warnings = apply_delay(original, delay, options.torque_hold, options.control_rate, profile)
-    applied = record["applied_s"]
+    applied = record.applied_s
     if delay == "auto" and applied:
-        step = max(DELAY_RESOLUTION_S, 2.0 * record["std_s"])
+        std = None if record.estimate is None else record.estimate.std_s
+        assert std is not None, "an applied delay was estimated, with a finite std"
+        step = max(DELAY_RESOLUTION_S, 2.0 * std)
         plain = replace(steps, feedback=False, timing=False)
         stream, sv = surveyed(shifted)
         undelayed = replace(options, delay=None)
@@ -186,7 +189,7 @@ def _choose(
     options: ObserverOptions,
     steps: Steps,
     progress: Callable[[int, int], None] | None,
-) -> tuple[IdentificationResult, dict[str, Any]]:
+) -> tuple[IdentificationResult, FrictionChoice]:
     """The friction model's passes over ``stream`` (surveyed as ``sv``): :func:`wmrid.pipeline.friction.choose_friction`
     (the result, the record of the choice)."""
     return choose_friction(
@@ -196,7 +199,7 @@ def _choose(
 
 def _friction_and_terms(
     log: Any,
-    chosen: tuple[IdentificationResult, dict[str, Any]],
+    chosen: tuple[IdentificationResult, FrictionChoice],
     robot: Robot | None,
     options: ObserverOptions,
     steps: Steps,
@@ -205,23 +208,23 @@ def _friction_and_terms(
     """The friction model chosen (``chosen``: :func:`_choose`'s), the timing's records and warnings, the
     unresolved-delay term, the closed-loop check and the hold term."""
     result, friction_record = chosen
-    diagnostics = {**result.diagnostics, "friction": friction_record}
+    diagnostics = replace(result.diagnostics, friction=friction_record)
     if timing.record is not None:
-        diagnostics["timing"] = timing.record
+        diagnostics = replace(diagnostics, timing=timing.record)
     warnings = (*timing.warnings, *result.warnings)
     if timing.delay_record is not None:
-        diagnostics["delay"] = timing.delay_record
+        diagnostics = replace(diagnostics, delay=timing.delay_record)
         warnings = (*timing.delay_warnings, *warnings)
     result = replace(result, diagnostics=diagnostics, warnings=warnings)
-    rec = timing.record or {}
+    rec = timing.record or TimingCheck()
     if result.estimate is not None:
         result = carry_unresolved_delay(result, rec, log, robot, options, steps.geometry)
     observer = result.estimate
     result = _checked(result, log, robot, steps)
     # a faster controller found and timed settles the hold; found but not timed (the re-run failed), it does not
-    timed_controller = bool(rec.get("faster_controller")) and not timing.warnings
+    timed_controller = bool(rec.faster_controller) and not timing.warnings
     unknown_hold = options.torque_hold == "zoh" and options.control_rate is None and not timed_controller
-    if rec.get("checked") and rec.get("slow") and unknown_hold and observer is not None:
+    if rec.checked and rec.slow and unknown_hold and observer is not None:
         # a slow log whose controller rate is unknown: the truth lies between a hold at the log's rate (zoh) and a
         # controller much faster than the log (foh); that bracket, the std carries (the hold term)
         foh = replace(options, torque_hold="foh", friction=result.form.friction, delay=None)

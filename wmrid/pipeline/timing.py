@@ -16,6 +16,7 @@ import numpy as np
 
 from wmrid.core.errors import WmridError
 from wmrid.core.wheel_log import LogStream, split_topics, stream_arrays
+from wmrid.estimators.findings import DelayApplied, TimingCheck
 from wmrid.estimators.observer.observe import delay_profile_form, observe
 from wmrid.estimators.observer.survey import Survey, survey
 from wmrid.estimators.options import ObserverOptions
@@ -29,22 +30,22 @@ from wmrid.model.robot import Robot
 class Timing:
     """What the pipeline knows about the efforts' timing when the friction models run.
 
-    record : the timing check's (:func:`wmrid.estimators.timing_check.timing_check`, ``diagnostics["timing"]``), None
+    record : the timing check's (:func:`wmrid.estimators.timing_check.timing_check`, ``diagnostics.timing``), None
     when it did not run.  warnings : said before the result's own.  split : the efforts came from another topic than the
     speeds (:func:`wmrid.core.wheel_log.split_topics`).  delay_record, delay_warnings : the applied delay's
-    (:func:`wmrid.estimators.timing_check.apply_delay`, ``diagnostics["delay"]``), None when none was asked for.
+    (:func:`wmrid.estimators.timing_check.apply_delay`, ``diagnostics.delay``), None when none was asked for.
     """
 
-    record: dict[str, Any] | None = None
+    record: TimingCheck | None = None
     warnings: tuple[str, ...] = ()
     split: bool = False
-    delay_record: dict[str, Any] | None = None
+    delay_record: DelayApplied | None = None
     delay_warnings: tuple[str, ...] = ()
 
     @property
     def apply(self) -> bool:
         """The check found a significant delay: time the efforts."""
-        return bool((self.record or {}).get("apply"))
+        return self.record is not None and bool(self.record.apply)
 
     def failed(self, err: WmridError) -> Timing:
         """This timing, the efforts left as stamped because timing them failed with ``err``."""
@@ -76,7 +77,7 @@ def decide_timing(
         return Timing(split=True, **delay)
     profile = delay_profile_form(sv.form(), options.friction, robot, tuple(geometry), load_terms)
     record = timing_check(log, options.torque_hold, options.control_rate, sv.n, sv.median_step, profile)
-    warnings = (record["note"],) if record.get("note") else ()
+    warnings = (record.note,) if record.note else ()
     return Timing(record=record, warnings=warnings, **delay)
 
 
@@ -100,7 +101,7 @@ def observe_at(
 
 def carry_unresolved_delay(
     result: IdentificationResult,
-    record: dict[str, Any],
+    record: TimingCheck,
     log: Any,
     robot: Robot | None,
     options: ObserverOptions,
@@ -123,9 +124,9 @@ def carry_unresolved_delay(
         return result
     theta0 = np.asarray(est.theta0, dtype=float)
     text = unresolved_text(record, moved_delay)
-    if record.get("samples_profiled", 0) < record.get("of", 0) or record.get("windows", 1) > 1:
+    if (record.samples_profiled or 0) < (record.of or 0) or (record.windows or 1) > 1:
         slope = np.zeros_like(theta0)
-        slope[:8] = record["theta0_slope_per_s"]
+        slope[:8] = record.theta0_slope_per_s
         return with_unresolved_timing(result, moved_delay * slope, moved_delay, "the profile's slope", text, robot)
     try:
         moved = observe_at(log, robot, replace(options, friction=result.form.friction, delay=moved_delay), geometry)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from wmrid.estimators.findings import StructuralMismatch, Uncertainty
 from wmrid.estimators.methods import Comparison
 from wmrid.estimators.records import Verdict
 from wmrid.estimators.result import IdentificationResult
@@ -94,27 +95,29 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         f"alpha = {result.observer_settings.alpha:g}; start: {result.start_source}"
     )
     diag = result.diagnostics
-    if diag.get("robot_assumed"):
-        console.print("robot file: assumed " + "; ".join(diag["robot_assumed"]))
-    friction = diag.get("friction")
-    if friction and friction.get("chosen_by") == "auto":
-        console.print(f"friction model: {friction['model']} (auto: {friction.get('reason', '')})")
+    if diag.robot_assumed:
+        console.print("robot file: assumed " + "; ".join(diag.robot_assumed))
+    friction = diag.friction
+    if friction is not None and friction.chosen_by == "auto":
+        console.print(f"friction model: {friction.model} (auto: {friction.reason or ''})")
+    mismatch = diag.structural_mismatch or StructuralMismatch()
     console.print(
-        f"lambda_min(Gamma) = {diag['lambda_min_gamma']:.3g}; structural mismatch p = "
-        f"{diag['structural_mismatch']['p_value']:.2g} ({diag['structural_mismatch']['dof']} directions)"
+        f"lambda_min(Gamma) = {diag.lambda_min_gamma:.3g}; structural mismatch p = "
+        f"{mismatch.p_value:.2g} ({mismatch.dof} directions)"
     )
-    unc = diag["uncertainty"]
+    unc = diag.uncertainty or Uncertainty()
+    factor = unc.interval_factor or {}
     console.print(
-        f"std: {unc['method']}" + (f", {unc['segments']} segments" if unc.get("segments") else "") + f" "
-        f"({unc['dof']} dof); "
-        f"estimate ± {unc['interval_factor']['95%']:.2f} std covers the truth with 95 % probability, "
-        f"± {unc['interval_factor']['99.7%']:.2f} std with 99.7 %, if disturbances do not feed back into the "
+        f"std: {unc.method}" + (f", {unc.segments} segments" if unc.segments else "") + f" "
+        f"({unc.dof} dof); "
+        f"estimate ± {factor['95%']:.2f} std covers the truth with 95 % probability, "
+        f"± {factor['99.7%']:.2f} std with 99.7 %, if disturbances do not feed back into the "
         "efforts (in closed loop see diagnostics.feedback: the closed-loop check)"
     )
-    model_error = unc.get("model_error")
+    model_error = unc.model_error
     if any("†" in mark for mark in marks.values()):
-        scale = f" (S = {model_error['scale']:.3g})" if model_error and model_error.get("applied") else ""
-        console.print(LEGEND["†"] + (f"; here{scale}: {model_error['meaning']}" if model_error else ""))
+        scale = f" (S = {model_error.scale:.3g})" if model_error is not None and model_error.applied else ""
+        console.print(LEGEND["†"] + (f"; here{scale}: {model_error.meaning}" if model_error is not None else ""))
     if any("!" in mark for mark in marks.values()):
         console.print(LEGEND["!"])
     if info.effort_unit != "N m":
@@ -124,7 +127,7 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         )  # fmt: skip
     if method != "observer":
         console.print(
-            f"method {method}: {result.diagnostics['method']['seconds']:.3g} s; the excitation figures above and the "
+            f"method {method}: {result.diagnostics.method_seconds:.3g} s; the excitation figures above and the "
             "history are the observer's, run on the same log"
         )
     validation = result.validation

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import WmridError
+from wmrid.estimators.findings import StructuralMismatch, Uncertainty
 from wmrid.estimators.records import GroupVerdict
 from wmrid.estimators.result import IdentificationResult
 from wmrid.estimators.verdict import LEGEND, PLAN_HINT
@@ -176,7 +177,7 @@ def build_report(
     intermediate = {"header": header, "rows": rows}
 
     # Table 3: base parameters, with the comparison against nominal and CAD
-    factor = diag["uncertainty"]["interval_factor"]["95%"]
+    factor = ((diag.uncertainty or Uncertainty()).interval_factor or {})["95%"]
     header = ["parameter", "unit", "estimate", "std", "95 % interval"]
     header += (["nominal"] if nominal else []) + (["CAD", "(est − CAD)/std"] if reference else [])
     header += ["true", "error %", "(est − true)/std"] if truth else []
@@ -232,8 +233,8 @@ def build_report(
             },
             "samples": len(e),
         }
-    if "prediction_error_rms" in diag:
-        residuals["prediction_error_rms"] = diag["prediction_error_rms"]
+    if diag.prediction_error_rms is not None:
+        residuals["prediction_error_rms"] = diag.prediction_error_rms.to_dict()
     if log is not None and effort_unit == "N m":
         theta0 = np.array([rl.parameters[n][0] for n in form.base_names])
         residuals["torque"] = torque_residual(log, theta0, form)
@@ -270,48 +271,51 @@ def _statements(rl: IdentificationResult, *, inflated: bool, warned: bool, flagg
     """The diagnostics in plain words: the std's meaning, the friction model, the structural check, the excitation,
     the CAD differences (``flagged``), then the warnings; the validation, the method and a non-N m effort first."""
     diag = rl.diagnostics
-    unc = diag["uncertainty"]
+    unc = diag.uncertainty or Uncertainty()
+    model_error = unc.model_error
+    friction = diag.friction
+    mismatch = diag.structural_mismatch or StructuralMismatch()
     statements = [
-        f"Standard errors: {unc.get('method', 'jackknife')}"
-        + (f", {unc['segments']} segments" if unc.get("segments") else "")
-        + f" ({unc['dof']} degrees of "
-        f"freedom); estimate ± {unc['interval_factor']['95%']:.2f} std covers the truth with 95 % probability when "
-        "disturbances do not feed back into the efforts. " + (f"Caveat: {unc['caveat']}." if unc.get("caveat") else ""),
+        f"Standard errors: {unc.method or 'jackknife'}"
+        + (f", {unc.segments} segments" if unc.segments else "")
+        + f" ({unc.dof} degrees of "
+        f"freedom); estimate ± {(unc.interval_factor or {})['95%']:.2f} std covers the truth with 95 % probability "
+        "when disturbances do not feed back into the efforts. " + (f"Caveat: {unc.caveat}." if unc.caveat else ""),
         *(
             [
                 LEGEND["†"]
                 + "; here"
-                + (f" (S = {unc['model_error']['scale']:.3g})" if unc["model_error"].get("applied") else "")
-                + f": {unc['model_error']['meaning']}."
+                + (f" (S = {model_error.scale:.3g})" if model_error.applied else "")
+                + f": {model_error.meaning}."
             ]
-            if inflated and unc.get("model_error")
+            if inflated and model_error is not None
             else []
         ),
         *([LEGEND["!"] + "."] if warned else []),
         *(
             [
-                f"Friction model: {diag['friction']['model']} ({diag['friction']['chosen_by']}"
-                + (f": {diag['friction']['reason']}" if diag["friction"].get("reason") else "")
+                f"Friction model: {friction.model} ({friction.chosen_by}"
+                + (f": {friction.reason}" if friction.reason else "")
                 + ")."
             ]
-            if diag.get("friction")
+            if friction is not None
             else []
         ),
-        f"Structural consistency (Eqs. 23-24): p = {diag['structural_mismatch']['p_value']:.2g} on "
-        f"{diag['structural_mismatch']['dof']} directions"
+        f"Structural consistency (Eqs. 23-24): p = {mismatch.p_value:.2g} on "
+        f"{mismatch.dof} directions"
         + (
             " — the intermediate parameters are not of the model's form."
-            if diag["structural_mismatch"]["p_value"] < 1e-3
+            if mismatch.p_value is not None and mismatch.p_value < 1e-3
             else " — consistent with the model."
         ),
-        f"Excitation: λ_min(Γ) = {diag['lambda_min_gamma']:.3g} (α = {rl.observer_settings.alpha:g}); "
+        f"Excitation: λ_min(Γ) = {diag.lambda_min_gamma:.3g} (α = {rl.observer_settings.alpha:g}); "
         + (
-            f"not determined by this log: {', '.join(diag['undetermined'])}."
-            if diag.get("undetermined")
+            f"not determined by this log: {', '.join(diag.undetermined)}."
+            if diag.undetermined
             else "the data, not the start value, set every parameter."
         ),
         *flagged,
-        *(["Robot file: assumed " + "; ".join(diag["robot_assumed"]) + "."] if diag.get("robot_assumed") else []),
+        *(["Robot file: assumed " + "; ".join(diag.robot_assumed) + "."] if diag.robot_assumed else []),
         *rl.warnings,
     ]
     effort_unit = rl.log_info.effort_unit
@@ -322,7 +326,7 @@ def _statements(rl: IdentificationResult, *, inflated: bool, warned: bool, flagg
     if rl.method != "observer":
         statements.insert(
             0,
-            f"Method: {rl.method} ({diag.get('method', {}).get('seconds', float('nan')):.3g} s). Table 3 holds its "
+            f"Method: {rl.method} ({diag.method_seconds:.3g} s). Table 3 holds its "
             "estimate; Table 2, the excitation figures and the history are the observer's, run on the same log.",
         )
     v = rl.validation

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any, Literal
 
 import numpy as np
@@ -26,6 +27,7 @@ from wmrid.estimators.diagnostics import (
     unexcited_parameters,
 )
 from wmrid.estimators.estimate import BaseEstimate, SegmentEstimates
+from wmrid.estimators.findings import PredictionErrorRms, Uncertainty
 from wmrid.estimators.model_error import (
     misfit_text,
     record_widening,
@@ -316,20 +318,22 @@ def _observe(
     if inflation["prediction_misfit"]["applied"]:
         warnings.insert(0, misfit_text(inflation["prediction_misfit"]))
     dof = unc["dof"]
-    diagnostics["uncertainty"] = {
-        "method": "delete-a-segment jackknife over contiguous segments of the log",
-        "segments": unc["segments"],
-        "dof": dof,
-        "interval_factor": {"95%": interval_factor(0.95, dof), "99.7%": interval_factor(0.9973, dof)},
-        "meaning": "value +/- interval_factor * std covers the truth with that probability (Student t, dof) when "
+    uncertainty = Uncertainty(
+        method="delete-a-segment jackknife over contiguous segments of the log",
+        segments=unc["segments"],
+        dof=dof,
+        interval_factor={"95%": interval_factor(0.95, dof), "99.7%": interval_factor(0.9973, dof)},
+        meaning="value +/- interval_factor * std covers the truth with that probability (Student t, dof) when "
         "the disturbances do not feed back into the efforts",
-        "caveat": CLOSED_LOOP_CAVEAT,
-        "blocks": len(out.block_end),
-        "block_seconds": float(duration / len(out.block_end)),
-    }
-    record_widening(diagnostics, inflation, parameters, [chosen.base_names[j] for j in undetermined])
+        caveat=CLOSED_LOOP_CAVEAT,
+        blocks=len(out.block_end),
+        block_seconds=float(duration / len(out.block_end)),
+    )
+    diagnostics = replace(diagnostics, uncertainty=uncertainty)
+    diagnostics = record_widening(diagnostics, inflation, parameters, [chosen.base_names[j] for j in undetermined])
     rms_e = np.sqrt(out.blk_ee.sum(axis=0) / duration) if duration > 0 else np.zeros(2)
-    diagnostics["prediction_error_rms"] = {"eta_r": float(rms_e[0]), "eta_l": float(rms_e[1]), "unit": "rad/s"}
+    rms = PredictionErrorRms(eta_r=float(rms_e[0]), eta_l=float(rms_e[1]), unit="rad/s")
+    diagnostics = replace(diagnostics, prediction_error_rms=rms)
     log_info = LogInfo(
         samples=n, duration_s=duration, rate_hz=float(1.0 / sv.median_step),
         uneven_steps=bool(sv.max_step - sv.min_step > 1e-6 * sv.median_step), notes=tuple(stream.notes),
@@ -346,9 +350,9 @@ def _observe(
             for name in getattr(robot, "unknown_cad", ()):  # not given by the robot's source: no value, not 0
                 reference[name] = None
         if getattr(robot, "assumed", ()):  # what the robot file left out (said with every result that uses it)
-            diagnostics = {**diagnostics, "robot_assumed": list(robot.assumed)}
+            diagnostics = replace(diagnostics, robot_assumed=tuple(robot.assumed))
     if unit_reference:  # in N m-based units: ratios only (wmrid.estimators.plausibility, effort_free)
-        diagnostics = {**diagnostics, "robot_values": unit_reference}
+        diagnostics = replace(diagnostics, robot_values=unit_reference)
     # the jackknife's leave-one-segment-out estimates, theta0 to first order (fit.gain): for comparing methods
     segment, n_seg = segments_of(block_mid / max(duration, 1e-300), duration)
     deltas = jackknife_deltas(gamma, theta_u, out.blk_a, out.blk_c, segment, n_seg)
