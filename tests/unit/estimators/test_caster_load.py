@@ -461,9 +461,9 @@ def test_identify_recovers_the_load_terms(load_log, robot):
     result = identify(load_log, robot, friction="auto", torque_hold="foh")
     assert result.form.friction == "wheel+caster+load"
     assert result.form.base_names[8:] == ("D1", "D1dv", "D1w2")
-    record = result.diagnostics["friction"]
-    assert record["load"]["taken"]
-    assert record["load"]["p_value"] < 1e-3
+    record = result.diagnostics.friction
+    assert record.load.taken
+    assert record.load.p_value < 1e-3
     for name, truth in {**TRUTH, **LOAD_TRUTH}.items():
         value, std = result.parameters[name]
         tol = 1e-2 if name in LOAD_TRUTH else 1e-3
@@ -478,7 +478,7 @@ def test_constant_drag_keeps_the_caster_model(robot):
     log = synthetic_log()
     result = identify(log, robot, friction="auto", torque_hold="foh")
     assert result.form.friction == "wheel+caster"
-    assert not result.diagnostics["friction"]["load"]["taken"]
+    assert not result.diagnostics.friction.load.taken
     plain = identify(log, robot, friction="wheel+caster", torque_hold="foh")
     assert result.parameters == plain.parameters
 

@@ -212,7 +212,7 @@ def test_a_methods_estimate_carries_the_std_it_reports(tmp_path) -> None:
                  "--eta-noise", "0.05", "--tau-noise", "0.2")  # fmt: skip
     assert proc.returncode == 0, proc.stderr.decode()
     result = lib.identify(str(log), "paper", method="idim")
-    assert result.diagnostics["uncertainty"]["model_error"]["scale"] > 2
+    assert result.diagnostics.uncertainty.model_error.scale > 2
     np.testing.assert_allclose(result.estimate.cov, result.theta0_cov, rtol=1e-12)
     std = np.sqrt(np.diag(result.estimate.cov))[:8]
     assert std == pytest.approx([result.parameters[n][1] for n in BASE], rel=1e-9)

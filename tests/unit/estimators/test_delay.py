@@ -97,19 +97,19 @@ def test_identify_applies_an_estimated_delay(late_log):
     sim, log = late_log
     truth = model.named_base(model.base_parameters(AMR.cad))
     result = identify(log, AMR, delay="auto", feedback=False)
-    record = result.diagnostics["delay"]
-    assert record["applied_s"] == pytest.approx(0.005, abs=5e-4)
-    assert record["significant"]
+    record = result.diagnostics.delay
+    assert record.applied_s == pytest.approx(0.005, abs=5e-4)
+    assert record.estimate.significant
     assert result.warnings[0].startswith("the efforts appear stamped +5.")
     for name in ("Fv1", "Fv2", "Fd1", "Fd2"):
         assert result.parameters[name][0] == pytest.approx(truth[name], rel=0.05), name
     idim = run("idim", log, result, MethodOptions(), AMR)
     assert idim.parameters["Fv1"][0] == pytest.approx(truth["Fv1"], rel=0.05)
     given = identify(log, AMR, delay=0.005)
-    assert given.diagnostics["delay"] == {"chosen_by": "--delay", "applied_s": 0.005}
+    assert given.diagnostics.delay.to_dict() == {"chosen_by": "--delay", "applied_s": 0.005}
     on_time = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="on time", notes=())
     plain = identify(on_time, AMR, delay="auto")
-    assert plain.diagnostics["delay"]["applied_s"] == 0.0
+    assert plain.diagnostics.delay.applied_s == 0.0
     assert not any("stamped" in w for w in plain.warnings)
 
 
@@ -155,11 +155,11 @@ def test_a_controller_faster_than_the_log_is_named():
     )  # fmt: skip
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="100 Hz", notes=())
     result = identify(log, AMR, delay="auto")
-    assert 0.002 < result.diagnostics["delay"]["applied_s"] <= 0.0055
+    assert 0.002 < result.diagnostics.delay.applied_s <= 0.0055
     assert "--control-rate" in result.warnings[0]
     assert "controller faster than the log" in result.warnings[0]
     with_rate = identify(log, AMR, delay="auto", control_rate=1000.0)
-    assert abs(with_rate.diagnostics["delay"]["delay_s"]) < 1e-3
+    assert abs(with_rate.diagnostics.delay.estimate.delay_s) < 1e-3
     assert not any("controller faster" in w for w in with_rate.warnings)
 
 
@@ -180,15 +180,15 @@ def test_the_delays_uncertainty_is_in_the_std():
     truth = model.named_base(model.base_parameters(sim.true))
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=shifted(sim.t, sim.tau, 0.005), source="late", notes=())
     result = identify(log, AMR, delay="auto")
-    record = result.diagnostics["delay"]
-    assert record["timing_term"]["step_s"] >= 5e-4
-    fixed = identify(log, AMR, delay=record["applied_s"])
-    flagged = set(result.diagnostics["flagged"])
+    record = result.diagnostics.delay
+    assert record.timing_term.step_s >= 5e-4
+    fixed = identify(log, AMR, delay=record.applied_s)
+    flagged = set(result.diagnostics.flagged)
     for name, (value, std) in result.parameters.items():
         assert abs(value - truth[name]) <= 3 * std or name in flagged, (name, value, truth[name], std)
     for name in ("Fv1", "Fv2", "Fd1", "Fd2"):
         assert result.parameters[name][1] > fixed.parameters[name][1], name
-        assert name in result.diagnostics["inflated"]
+        assert name in result.diagnostics.inflated
 
 
 @pytest.mark.parametrize("rate", [100.0, 20.0])
@@ -204,21 +204,21 @@ def test_a_slow_log_of_a_faster_controller_is_named_by_default(rate):
     sim = simulate(AMR.cad, AMR.nominal, duration=40.0, rate=rate, noise=NOISE, seed=1)
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="slow", notes=())
     result = identify(log, AMR)
-    assert result.diagnostics["timing"]["faster_controller"]
-    assert result.diagnostics["delay"]["chosen_by"] == "auto"
-    assert result.diagnostics["delay"]["applied_s"] > 0
+    assert result.diagnostics.timing.faster_controller
+    assert result.diagnostics.delay.chosen_by == "auto"
+    assert result.diagnostics.delay.applied_s > 0
     assert any("--control-rate" in w for w in result.warnings)
     truth = sim.truth()["parameters"]
-    flagged = set(result.diagnostics.get("flagged", [])) | set(result.diagnostics.get("inflated", []))
+    flagged = set(result.diagnostics.flagged or ()) | set(result.diagnostics.inflated or ())
     for name, (value, std) in result.parameters.items():
         assert abs(value - truth[name]) <= 3 * std or name in flagged, name
     fast = simulate(AMR.cad, AMR.nominal, duration=20.0, noise=NOISE, seed=1)
     on_time = identify(SimpleNamespace(t=fast.t, eta=fast.eta, tau=fast.tau, source="fast", notes=()), AMR)
-    record = on_time.diagnostics["timing"]
-    assert record["checked"]
-    assert not record["apply"]  # on time: nothing applied
-    assert not record["slow"]
-    assert "delay" not in on_time.diagnostics
+    record = on_time.diagnostics.timing
+    assert record.checked
+    assert not record.apply  # on time: nothing applied
+    assert not record.slow
+    assert on_time.diagnostics.delay is None
 
 
 @pytest.mark.parametrize("true_delay", [0.005, -0.005])
@@ -233,7 +233,7 @@ def test_a_late_or_early_effort_is_timed_by_default(true_delay):
     sim = simulate(AMR.cad, AMR.nominal, duration=30.0, noise=NOISE, seed=3)
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=shifted(sim.t, sim.tau, true_delay), source="late", notes=())
     result = identify(log, AMR)
-    assert result.diagnostics["delay"]["applied_s"] == pytest.approx(true_delay, abs=1e-3)
+    assert result.diagnostics.delay.applied_s == pytest.approx(true_delay, abs=1e-3)
     assert any("stamped" in w for w in result.warnings)
     truth = sim.truth()["parameters"]
     for name in ("Fv1", "Fv2", "Fd1", "Fd2"):
@@ -251,8 +251,8 @@ def test_a_slow_log_with_a_hole_is_not_refused_by_the_timing_check():
     keep = (sim.t < 10.0) | (sim.t > 10.5)
     log = SimpleNamespace(t=sim.t[keep], eta=sim.eta[keep], tau=sim.tau[keep], source="holed", notes=())
     result = identify(log, AMR)
-    assert not result.diagnostics["timing"]["checked"]
-    assert "hole" in result.diagnostics["timing"]["why"]
+    assert not result.diagnostics.timing.checked
+    assert "hole" in result.diagnostics.timing.why
 
 
 def test_a_slow_reversing_log_carries_the_hold_in_its_std():
@@ -267,12 +267,12 @@ def test_a_slow_reversing_log_carries_the_hold_in_its_std():
     sim = simulate(AMR.cad, AMR.nominal, trajectory="reversing", duration=40.0, rate=100.0, noise=NOISE, seed=0)
     log = SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="slow", notes=())
     result = identify(log, AMR)
-    hold = result.diagnostics["timing"]
-    assert hold["checked"]
-    assert hold["hold_term"]["widened"]
+    hold = result.diagnostics.timing
+    assert hold.checked
+    assert hold.hold_term.widened
     assert any("--control-rate" in w for w in result.warnings)
     truth = sim.truth()["parameters"]
-    flagged = set(result.diagnostics.get("flagged", []))
+    flagged = set(result.diagnostics.flagged or ())
     for name, (value, std) in result.parameters.items():
         assert abs(value - truth[name]) <= 3 * std or name in flagged, name
 
@@ -288,7 +288,7 @@ def test_speeds_from_backward_differences_are_named():
     noise = NoiseSettings(eta_std=0.02, tau_std=0.01, encoder_cpr=2**20)
     sim = simulate(AMR.cad, AMR.nominal, duration=40.0, noise=noise, seed=1)
     result = identify(SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="encoder", notes=()), AMR)
-    assert result.diagnostics["delay"]["applied_s"] == pytest.approx(-0.0005, abs=2e-4)
+    assert result.diagnostics.delay.applied_s == pytest.approx(-0.0005, abs=2e-4)
     assert any("backward differences" in w for w in result.warnings)
 
 
@@ -347,14 +347,14 @@ def test_a_delay_the_check_cannot_resolve_is_carried_by_the_std():
     size) would change (the log identified again so): every parameter within 3 std or flagged, and a
     warning that names the delay and --delay (20 seeds: all within 3 std or flagged 0.25 -> 1.00)."""
     result, truth = _reversing_result(12, 0.005)
-    record = result.diagnostics["timing"]
-    assert record["checked"]
-    assert not record["apply"]
-    term = record["timing_term"]
-    assert term["found_by"] == "identified again"
-    assert abs(term["delay_s"]) == pytest.approx(np.sqrt(record["delay_s"] ** 2 - record["std_s"] ** 2))
+    record = result.diagnostics.timing
+    assert record.checked
+    assert not record.apply
+    term = record.timing_term
+    assert term.found_by == "identified again"
+    assert abs(term.delay_s) == pytest.approx(np.sqrt(record.estimate.delay_s**2 - record.estimate.std_s**2))
     assert any("timing against the speeds is uncertain" in w and "--delay" in w for w in result.warnings)
-    flagged = set(result.diagnostics["flagged"])
+    flagged = set(result.diagnostics.flagged)
     for name, (value, std) in result.parameters.items():
         assert abs(value - truth[name]) <= 3 * std or name in flagged, (name, value, truth[name], std)
     as_stamped, _ = _reversing_result(12, 0.005, timing=False)
@@ -372,9 +372,9 @@ def test_an_on_time_sinusoid_is_not_flagged_for_its_timing():
     sim = simulate(AMR.cad, AMR.nominal, duration=30.0, noise=NOISE, seed=1)
     result = identify(SimpleNamespace(t=sim.t, eta=sim.eta, tau=sim.tau, source="s", notes=()), AMR)
     assert not any("timing" in w for w in result.warnings)
-    grown = (result.diagnostics["timing"].get("timing_term") or {}).get("widened", [])
-    assert grown == []
-    assert not set(result.diagnostics.get("flagged", [])) & {"Fv1", "Fv2", "Fd1", "Fd2"}
+    grown = result.diagnostics.timing_widened()
+    assert grown == ()
+    assert not set(result.diagnostics.flagged or ()) & {"Fv1", "Fv2", "Fd1", "Fd2"}
 
 
 def test_a_log_longer_than_the_window_carries_the_delay_by_the_profiles_slope(monkeypatch):
@@ -387,12 +387,12 @@ def test_a_log_longer_than_the_window_carries_the_delay_by_the_profiles_slope(mo
 
     monkeypatch.setattr(wmrid.estimators.timing_check, "TIMING_WINDOW_SAMPLES", 20_001)
     result, truth = _reversing_result(12, 0.005)
-    record = result.diagnostics["timing"]
-    assert record["windows"] == 2
-    assert record["samples_profiled"] == record["of"] == 40_001
-    assert not record["apply"]
-    assert record["timing_term"]["found_by"] == "the profile's slope"
-    flagged = set(result.diagnostics["flagged"])
+    record = result.diagnostics.timing
+    assert record.windows == 2
+    assert record.samples_profiled == record.of == 40_001
+    assert not record.apply
+    assert record.timing_term.found_by == "the profile's slope"
+    flagged = set(result.diagnostics.flagged)
     for name, (value, std) in result.parameters.items():
         assert abs(value - truth[name]) <= 3 * std or name in flagged, (name, value, truth[name], std)
 

@@ -15,6 +15,7 @@ import pytest
 
 import wmrid
 from wmrid.estimators.delay import DELAY_STEP_S, DelayEstimate, combine, estimate_delay
+from wmrid.estimators.findings import TimingCheck
 from wmrid.estimators.regression.idim_rows import shifted
 from wmrid.estimators.timing_check import search_span, unresolved_delay
 from wmrid.model.robot import BUILTIN_ROBOTS
@@ -54,11 +55,11 @@ def test_a_disturbance_inside_the_loop_is_not_taken_for_a_delay(disturbed):
     assert not iv.significant
     result = identify(log, AMR)
     zero = identify(log, AMR, delay=0.0)
-    timing = result.diagnostics["timing"]
-    assert timing["checked"]
-    assert not timing["apply"]
-    assert "delay" not in result.diagnostics
-    assert not timing.get("timing_term")
+    timing = result.diagnostics.timing
+    assert timing.checked
+    assert not timing.apply
+    assert result.diagnostics.delay is None
+    assert timing.timing_term is None
     for name, (_, std) in result.parameters.items():
         assert std <= 1.5 * zero.parameters[name][1], name
 
@@ -79,8 +80,8 @@ def test_the_instrumental_variables_find_a_real_delay(true_delay):
     assert est.delay == pytest.approx(true_delay, abs=5e-4)
     assert est.significant
     result = identify(late, AMR, feedback=False)
-    assert result.diagnostics["delay"]["applied_s"] == pytest.approx(true_delay, abs=5e-4)
-    assert result.diagnostics["delay"]["estimator"] == "instrumental variables"
+    assert result.diagnostics.delay.applied_s == pytest.approx(true_delay, abs=5e-4)
+    assert result.diagnostics.delay.estimate.estimator == "instrumental variables"
 
 
 def _estimate(delay: float, std: float, segments: int = 40) -> DelayEstimate:
@@ -114,12 +115,16 @@ def test_the_unresolved_term_needs_evidence_and_shrinks_with_it():
     slope = [1.0] * 8
     base = {"checked": True, "apply": False, "at_edge_of_search": False, "segments": 40, "theta0_slope_per_s": slope}
     theta0_std = np.full(8, 1e-6)
-    assert unresolved_delay({**base, "delay_s": 1e-4, "std_s": 2e-4}, theta0_std) is None
-    assert unresolved_delay({**base, "delay_s": 7e-3, "std_s": 15e-3}, theta0_std) is None
-    assert unresolved_delay({**base, "delay_s": None, "std_s": None}, theta0_std) is None
-    late = unresolved_delay({**base, "delay_s": 3e-3, "std_s": 1e-3}, theta0_std)
+
+    def check(delay_s: float | None, std_s: float | None) -> TimingCheck:
+        return TimingCheck.from_dict({**base, "delay_s": delay_s, "std_s": std_s})
+
+    assert unresolved_delay(check(1e-4, 2e-4), theta0_std) is None
+    assert unresolved_delay(check(7e-3, 15e-3), theta0_std) is None
+    assert unresolved_delay(check(None, None), theta0_std) is None
+    late = unresolved_delay(check(3e-3, 1e-3), theta0_std)
     assert late == pytest.approx(math.sqrt(8) * 1e-3)
-    early = unresolved_delay({**base, "delay_s": -1.5e-3, "std_s": 0.5e-3}, theta0_std)
+    early = unresolved_delay(check(-1.5e-3, 0.5e-3), theta0_std)
     assert early == pytest.approx(-math.sqrt(2) * 1e-3)
 
 
@@ -140,8 +145,7 @@ def test_a_jackknife_clipped_at_the_edge_does_not_pin_the_delay():
     assert 0.0 < clipped.delay < 0.02
     assert not clipped.determined
     assert not clipped.significant
-    record = {"checked": True, "apply": False, "segments": clipped.segments, **clipped.to_dict()}
-    record["theta0_slope_per_s"] = [1.0] * 8
+    record = TimingCheck(checked=True, apply=False, estimate=clipped.record(), theta0_slope_per_s=[1.0] * 8)
     assert unresolved_delay(record, np.full(8, 1e-9)) is None
     wide = estimate_delay(log.t, log.eta, log.tau, span=0.04)
     assert wide.determined

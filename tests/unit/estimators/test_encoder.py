@@ -36,9 +36,9 @@ def test_the_reported_estimate_is_within_one_percent_and_honest(encoder_log):
     result = wmrid.identify(str(path), "paper")
     assert any("derived from wheel positions" in note for note in result.log_info.notes)
     assert result.method == "observer"
-    assert not result.diagnostics["feedback"].get("applied")
-    assert (result.diagnostics.get("delay") or {}).get("applied_s") in (None, 0.0)
-    flagged = set(result.diagnostics.get("flagged", []))
+    assert not result.diagnostics.feedback.applied
+    assert result.diagnostics.delay is None or result.diagnostics.delay.applied_s == 0.0
+    flagged = set(result.diagnostics.flagged or ())
     for name in JUDGED:
         value, std = result.parameters[name]
         assert abs(value / truth[name] - 1) < 0.01, name
@@ -46,7 +46,7 @@ def test_the_reported_estimate_is_within_one_percent_and_honest(encoder_log):
     # the noise floor is taken at the derivative's window: the smoothed quantisation noise is no misfit, so nothing
     # is flagged and the verdict is not "in doubt" (every parameter was, before; wmrid.estimators.noise_floor)
     assert flagged == set()
-    assert not result.diagnostics["uncertainty"]["model_error"]["prediction_misfit"]["applied"]
+    assert not result.diagnostics.uncertainty.model_error.prediction_misfit["applied"]
     assert all(g.status != "in doubt" for g in result.verdict.groups), result.verdict
 
 
@@ -80,12 +80,12 @@ def test_a_difference_explained_by_idims_filter_is_not_called_feedback(encoder_l
     path, _ = encoder_log
     log = wmrid.read_log(str(path))
     checked = identify(log, BUILTIN_ROBOTS["paper"])
-    record = checked.diagnostics["feedback"]
+    record = checked.diagnostics.feedback
     assert checked.method == "observer"
-    assert record["checked"]
-    assert not record["applied"]
-    assert "cutoff" in record["other_systematic"]
+    assert record.checked
+    assert not record.applied
+    assert "cutoff" in record.other_systematic
     monkeypatch.setattr(feedback, "systematic_variance", lambda other: (np.zeros(len(other.theta0)), []))
     unaware = identify(log, BUILTIN_ROBOTS["paper"])
-    assert unaware.diagnostics["feedback"]["applied"]
+    assert unaware.diagnostics.feedback.applied
     assert unaware.method == "idim"

@@ -55,10 +55,10 @@ def test_bundled_noise_free_sample_is_within_its_std(request):
     truth = model.named_base(model.base_parameters(PAPER.cad))
     z = z_scores(result, truth)
     assert max(abs(v) for v in z.values()) < 3.0, z
-    unc = result.diagnostics["uncertainty"]["model_error"]
-    assert unc["discretisation"]["applied"]
-    assert not unc["applied"]  # the structural test does not reject: the error is discretisation only
-    assert set(result.diagnostics["inflated"]) == set(BASE)
+    unc = result.diagnostics.uncertainty.model_error
+    assert unc.discretisation["applied"]
+    assert not unc.applied  # the structural test does not reject: the error is discretisation only
+    assert set(result.diagnostics.inflated) == set(BASE)
     # still a tight std: the discretisation bound is below 1e-3 of each inertia entry
     for name in ("M11", "M12", "M22", "Vc"):
         value, std = result.parameters[name]
@@ -71,13 +71,13 @@ def test_a_well_specified_noisy_log_keeps_its_std():
     noise = NoiseSettings(eta_std=0.01, tau_std=0.02)
     sim = simulate(PAPER.cad, PAPER.nominal, duration=40, noise=noise, seed=0)
     result = identify(as_log(sim), PAPER)
-    unc = result.diagnostics["uncertainty"]["model_error"]
-    assert not unc["applied"]
-    assert unc["scale"] == 1.0
-    assert not unc["discretisation"]["applied"]
-    assert not unc["slow_speed"]["applied"]
-    assert unc["slow_speed"]["fragile"] == []
-    assert result.diagnostics["inflated"] == []
+    unc = result.diagnostics.uncertainty.model_error
+    assert not unc.applied
+    assert unc.scale == 1.0
+    assert not unc.discretisation["applied"]
+    assert not unc.slow_speed["applied"]
+    assert unc.slow_speed["fragile"] == []
+    assert result.diagnostics.inflated == ()
     value, std = result.parameters["m11"]
     assert 2e-5 * value < std < 1e-3 * value
 
@@ -95,10 +95,10 @@ def test_multibody_paper_robot_acceptance(paper_multibody):
         err = abs(result.parameters[name][0] / truth[name] - 1)
         assert err < 0.02 or abs(z[name]) < 3, (name, err, z[name])
     assert max(abs(v) for v in z.values()) < 3.0, z
-    unc = result.diagnostics["uncertainty"]["model_error"]
-    assert unc["applied"]
-    assert unc["scale"] == pytest.approx(math.sqrt(1 + unc["T2"] - unc["T2_expected"]))
-    assert set(result.diagnostics["inflated"]) == set(BASE)
+    unc = result.diagnostics.uncertainty.model_error
+    assert unc.applied
+    assert unc.scale == pytest.approx(math.sqrt(1 + unc.T2 - unc.T2_expected))
+    assert set(result.diagnostics.inflated) == set(BASE)
 
 
 def test_other_methods_inherit_the_model_error_scale(paper_multibody):
@@ -110,11 +110,11 @@ def test_other_methods_inherit_the_model_error_scale(paper_multibody):
     observer = identify(as_log(paper_multibody), PAPER, feedback=False)
     idim = run("idim", as_log(paper_multibody), observer, MethodOptions(), PAPER)
     own = estimate("idim", as_log(paper_multibody), observer, MethodOptions())
-    scale = observer.diagnostics["uncertainty"]["model_error"]["scale"]
+    scale = observer.diagnostics.uncertainty.model_error.scale
     assert scale > 5
     assert np.allclose(np.sqrt(np.diag(idim.theta0_cov)), np.asarray(own.std) * scale, rtol=1e-12)
     np.testing.assert_array_equal(idim.estimate.cov, idim.theta0_cov)
-    assert set(idim.diagnostics["inflated"]) == set(BASE)
+    assert set(idim.diagnostics.inflated) == set(BASE)
 
 
 def test_model_error_scale_only_when_the_test_rejects():
@@ -154,7 +154,7 @@ def test_amr_without_caster_drag_is_honest_not_accurate(amr_caster_log):
     widened std keeps every truth within 3 std (measured |z| <= 1)."""
     result = identify(as_log(amr_caster_log), AMR)
     truth = model.named_base(model.base_parameters(amr_caster_log.true))
-    assert result.diagnostics["uncertainty"]["model_error"]["applied"]
+    assert result.diagnostics.uncertainty.model_error.applied
     z = z_scores(result, truth)
     assert max(abs(v) for v in z.values()) < 3.0, z
 

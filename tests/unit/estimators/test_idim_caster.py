@@ -196,7 +196,7 @@ def test_idim_with_caster_drag_on_the_multibody_amr(amr_caster_log):
     for name in ("M11", "M12", "M22", "Vc"):
         assert abs(errors[name][0]) < 3.0, (name, errors[name])
     assert abs(errors["D1"][0]) < 10.0, errors["D1"]
-    assert set(result.diagnostics["method"]["phi"]) == {*idim_rows.PHI_NAMES, "D1"}
+    assert set(result.diagnostics.method.figures["phi"]) == {*idim_rows.PHI_NAMES, "D1"}
 
 
 def test_compare_identifies_the_caster_model_with_every_method(amr_caster_log, tmp_path, capsys):
@@ -232,4 +232,4 @@ def test_compare_identifies_the_caster_model_with_every_method(amr_caster_log, t
         entry = out["methods"]["idim"]["parameters"][key]
         assert entry["value"] == pytest.approx(value, rel=1e-9)
         assert entry["std"] == pytest.approx(std, rel=1e-9)
-    assert out["methods"]["idim"]["flagged"] == idim_result.diagnostics["flagged"]
+    assert out["methods"]["idim"]["flagged"] == list(idim_result.diagnostics.flagged)

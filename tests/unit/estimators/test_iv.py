@@ -120,10 +120,10 @@ def test_the_closed_loop_bias_is_caught_and_the_consistent_estimate_reported(amr
     (measured: 0.1-1.1 %)."""
     truth = amr_closed_loop.truth()["parameters"]
     result = identify(as_log(amr_closed_loop), AMR)
-    record = result.diagnostics["feedback"]
-    assert record["checked"]
-    assert record["applied"]
-    assert record["against"] == "iv"
+    record = result.diagnostics.feedback
+    assert record.checked
+    assert record.applied
+    assert record.against == "iv"
     assert result.method == "iv"
     assert "closed-loop bias" in result.warnings[0]
     for name in ("m11", "m22", "Vc"):
@@ -141,10 +141,10 @@ def test_a_clean_log_keeps_the_observer(clean_sim):
     noisy = simulate(PAPER.reference, PAPER.nominal, duration=20.0, noise=NoiseSettings(0.01, 0.02), seed=1)
     plain = identify(as_log(noisy), PAPER, feedback=False)
     checked = identify(as_log(noisy), PAPER)
-    record = checked.diagnostics["feedback"]
-    assert not record["checked"]
-    assert not record["disturbance"]
-    assert record["prediction_error_ratio"] < 1.2
+    record = checked.diagnostics.feedback
+    assert not record.checked
+    assert not record.disturbance
+    assert record.prediction_error_ratio < 1.2
     assert checked.method == "observer"
     for name in ("m11", "m22", "Vc", "Fv1"):
         assert checked.parameters[name][0] == plain.parameters[name][0]
@@ -196,7 +196,7 @@ def test_an_applied_delay_keeps_the_reference(clean_sim):
     from wmrid.estimators.timing_check import apply_delay
 
     shifted_log, record, _ = apply_delay(as_log(clean_sim), 0.002, "zoh", None)
-    assert record["applied_s"] == 0.002
+    assert record.applied_s == 0.002
     np.testing.assert_array_equal(shifted_log.reference, clean_sim.eta_ref)
 
 
@@ -214,9 +214,9 @@ def test_the_closed_loop_term_widens_the_payload_too():
     sim = simulate(AMR.reference, AMR.nominal, duration=40.0, noise=CLOSED_LOOP, seed=17)
     plain = identify(as_log(sim, reference=False), AMR, payload=True, feedback=False)
     checked = identify(as_log(sim, reference=False), AMR, payload=True)
-    record = checked.diagnostics["feedback"]
-    assert record["checked"]
-    assert not record["applied"]
-    assert record["widened"]
+    record = checked.diagnostics.feedback
+    assert record.checked
+    assert not record.applied
+    assert record.widened
     assert checked.payload.mass[1] > plain.payload.mass[1]
-    assert set(checked.diagnostics["inflated"]) <= set(checked.diagnostics["flagged"])
+    assert set(checked.diagnostics.inflated) <= set(checked.diagnostics.flagged)

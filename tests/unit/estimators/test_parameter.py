@@ -11,6 +11,7 @@ from dataclasses import replace
 import pytest
 
 import wmrid
+from wmrid.estimators.findings import Diagnostics
 from wmrid.estimators.parameter import FLAGS, Parameter, parameter_table
 from wmrid.estimators.result import IdentificationResult
 from wmrid.estimators.verdict import settle
@@ -48,9 +49,9 @@ def test_a_parameter_round_trips_through_json_with_its_flags_in_order() -> None:
 def test_the_table_holds_the_flags_the_estimator_recorded(broken) -> None:
     table = broken.table
     diagnostics = broken.diagnostics
-    assert diagnostics["impossible"] == ["Fv1"]
+    assert diagnostics.impossible == ("Fv1",)
     for flag in FLAGS:
-        assert [n for n, p in table.items() if flag in p.flags] == list(diagnostics[flag]), flag
+        assert [n for n, p in table.items() if flag in p.flags] == list(getattr(diagnostics, flag)), flag
     assert {"flagged", "impossible"} <= set(table["Fv1"].flags)
     assert (table["Fv1"].value, table["Fv1"].std, table["Fv1"].unit) == (-1.0, 0.01, "N m s/rad")
 
@@ -72,7 +73,8 @@ def test_a_document_written_before_the_flags_reads_with_the_same_flags(broken) -
         del entry["flags"]
     del data["diagnostics"]["impossible"]
     assert IdentificationResult.from_dict(data).table == broken.table
-    assert parameter_table(broken.parameters, broken.units, data["diagnostics"]) == broken.table
+    diagnostics = Diagnostics.from_dict(data["diagnostics"])
+    assert parameter_table(broken.parameters, broken.units, diagnostics) == broken.table
 
 
 def test_the_terminal_table_and_the_report_print_the_recorded_marks(broken) -> None:

@@ -201,7 +201,7 @@ def test_a_gap_in_the_log_is_not_slip():
     sim = simulate(PAPER.cad, PAPER.nominal, duration=20, noise=noise, seed=0)
     keep = (sim.t <= 10.0) | (sim.t >= 10.5)
     log = SimpleNamespace(t=sim.t[keep], eta=sim.eta[keep], tau=sim.tau[keep], source="gap", notes=())
-    misfit = identify(log, PAPER).diagnostics["uncertainty"]["model_error"]["prediction_misfit"]
+    misfit = identify(log, PAPER).diagnostics.prediction_misfit
     assert not misfit["applied"]
     assert misfit["ratio"] < 1.3
 
@@ -212,15 +212,15 @@ def test_slipping_wheels_flag_every_parameter(slipping):
     times the noise (11-35 on the benchmark's slipping logs; 12 s here), so every parameter is flagged, the
     first warning says why, and IDIM on the same log inherits the flags."""
     result = identify(as_log(slipping), AMR, feedback=False)
-    misfit = result.diagnostics["uncertainty"]["model_error"]["prediction_misfit"]
+    misfit = result.diagnostics.uncertainty.model_error.prediction_misfit
     assert misfit["applied"]
     assert misfit["ratio"] > 5
     assert misfit["noise_rms"] == pytest.approx([ETA_STD, ETA_STD], rel=0.1)
-    assert set(result.diagnostics["flagged"]) == set(BASE)
+    assert set(result.diagnostics.flagged) == set(BASE)
     assert result.warnings[0].startswith("the model predicts the ")
     assert "slip" in result.warnings[0]
     idim = run("idim", as_log(slipping), result, MethodOptions(), AMR)
-    assert set(idim.diagnostics["flagged"]) == set(BASE)
+    assert set(idim.diagnostics.flagged) == set(BASE)
     assert any(w.startswith("the model predicts the ") for w in idim.warnings)
 
 
@@ -228,7 +228,7 @@ def test_gripping_wheels_are_not_flagged_by_it(gripping):
     """The same robot and motion on a normal floor: the prediction error is the sensor noise (ratio 1.02-1.11 on
     the benchmark's logs), well under MISFIT_RATIO."""
     result = identify(as_log(gripping), AMR)
-    misfit = result.diagnostics["uncertainty"]["model_error"]["prediction_misfit"]
+    misfit = result.diagnostics.uncertainty.model_error.prediction_misfit
     assert not misfit["applied"]
     assert 0.9 < misfit["ratio"] < 1.3
     assert not any(w.startswith("the model predicts the ") for w in result.warnings)
@@ -239,7 +239,7 @@ def test_a_closed_loop_disturbance_is_not_flagged():
     the model holds apart from the disturbance, which the jackknife covers; the ratio was 1.08."""
     noise = NoiseSettings(eta_std=0.01, tau_std=0.02, caster_std=0.05, caster_time=0.3)
     sim = simulate(PAPER.cad, PAPER.nominal, duration=20, noise=noise, seed=0)
-    misfit = identify(as_log(sim), PAPER).diagnostics["uncertainty"]["model_error"]["prediction_misfit"]
+    misfit = identify(as_log(sim), PAPER).diagnostics.prediction_misfit
     assert not misfit["applied"]
     assert misfit["ratio"] < 1.3
 

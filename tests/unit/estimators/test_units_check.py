@@ -65,22 +65,22 @@ def test_the_scaling_law_holds_on_the_estimates(clean, in_rpm, sample):
 
 
 def test_a_clean_log_has_no_finding_and_no_flag(clean):
-    units = clean.diagnostics["units"]
-    assert units["findings"] == []
-    assert units["doubt"] is False
-    assert units["robot"]["rms_factor"] == pytest.approx(1.0, abs=1e-3)  # the sample's truth is the CAD set
-    assert clean.diagnostics["flagged"] == []
+    units = clean.diagnostics.units
+    assert units.findings == ()
+    assert units.doubt is False
+    assert units.robot.rms_factor == pytest.approx(1.0, abs=1e-3)  # the sample's truth is the CAD set
+    assert clean.diagnostics.flagged == ()
     assert clean.verdict.summary == "This log determines the inertia, Coriolis coefficient and friction."
 
 
 def test_rpm_with_a_robot_file_is_named_and_flags_everything(in_rpm):
     result = wmrid.identify(in_rpm, "paper")
-    units = result.diagnostics["units"]
-    assert units["doubt"] is True
-    assert units["findings"][0]["fix"] == "--speed-unit rpm"
+    units = result.diagnostics.units
+    assert units.doubt is True
+    assert units.findings[0].fix == "--speed-unit rpm"
     assert result.warnings[0].startswith("unit check: ")
     assert "--speed-unit rpm" in result.warnings[0]
-    assert result.diagnostics["flagged"] == list(result.parameters)
+    assert result.diagnostics.flagged == tuple(result.parameters)
     assert result.verdict.summary.startswith("Do not use these numbers:")
     assert all(g.status == "in doubt" for g in result.verdict.groups)
 
@@ -95,17 +95,17 @@ def test_rpm_without_a_robot_file_is_not_silent(in_rpm):
 @pytest.mark.parametrize("robot", ["paper", None])
 def test_milliseconds_are_named_with_and_without_a_robot_file(in_ms, robot):
     result = wmrid.identify(in_ms, robot)
-    units = result.diagnostics["units"]
-    assert units["doubt"] is True
-    assert units["findings"][0]["fix"] == "--time-unit ms"
-    assert "would make it 1000 Hz over 12 s" in units["findings"][0]["text"]
+    units = result.diagnostics.units
+    assert units.doubt is True
+    assert units.findings[0].fix == "--time-unit ms"
+    assert "would make it 1000 Hz over 12 s" in units.findings[0].text
     assert result.verdict.summary.startswith("Do not use these numbers:")
 
 
 def test_whole_number_efforts_are_taken_for_pwm(sample):
     pwm = replace(sample, tau=np.round(sample.tau * 15.0))
     result = wmrid.identify(pwm)
-    assert result.diagnostics["units"]["findings"][0]["fix"] == "--effort pwm"
+    assert result.diagnostics.units.findings[0].fix == "--effort pwm"
     assert "PWM counts" in result.verdict.summary
 
 
@@ -221,12 +221,12 @@ def test_the_multibody_prototype_in_rpm_and_ms():
     )
     amr = ROOT / "examples" / "small_amr.toml"
     log = run.log
-    assert wmrid.identify(log, amr).diagnostics["units"]["findings"] == []
+    assert wmrid.identify(log, amr).diagnostics.units.findings == ()
     rpm = wmrid.identify(replace(log, eta=np.asarray(log.eta) * RPM), amr)
-    assert rpm.diagnostics["units"]["findings"][0]["fix"] == "--speed-unit rpm"
+    assert rpm.diagnostics.units.findings[0].fix == "--speed-unit rpm"
     for robot in (amr, None):
         ms = wmrid.identify(replace(log, t=np.asarray(log.t) * 1000.0), robot)
-        assert ms.diagnostics["units"]["findings"][0]["fix"] == "--time-unit ms"
+        assert ms.diagnostics.units.findings[0].fix == "--time-unit ms"
 
 
 def test_the_report_opens_with_the_verdict(in_rpm, clean):

@@ -212,9 +212,9 @@ def test_split_topics_get_their_delay_estimated_by_default(tmp_path):
     split_topic_log(path, sim, effort_every=1, offset_ns=5_000_000)
     sel = TopicSelection(velocity_topic="/wheel_state", effort_topic="/wheel_effort")
     result = identify(read_log(str(path), selection=sel), BUILTIN_ROBOTS["amr"])
-    record = result.diagnostics["delay"]
-    assert record["chosen_by"] == "auto"
-    assert record["applied_s"] == pytest.approx(0.005, abs=1e-3)
+    record = result.diagnostics.delay
+    assert record.chosen_by == "auto"
+    assert record.applied_s == pytest.approx(0.005, abs=1e-3)
     assert any("stamped" in w and "late" in w for w in result.warnings)
 
 

@@ -555,8 +555,8 @@ def test_wheel_only_model_std_is_honest_or_flagged(caster_log, caster_robot):
     all)."""
     result = identify(caster_log, caster_robot, friction="wheel", torque_hold="foh")
     z = {n: (result.parameters[n][0] - truth) / result.parameters[n][1] for n, truth in TRUTH.items() if n != "D1"}
-    assert result.diagnostics["feedback"]["disturbance"]
-    assert result.diagnostics["inflated"] or max(abs(v) for v in z.values()) <= 3.0, (
-        result.diagnostics["uncertainty"]["model_error"]["p_value"],
+    assert result.diagnostics.feedback.disturbance
+    assert result.diagnostics.inflated or max(abs(v) for v in z.values()) <= 3.0, (
+        result.diagnostics.uncertainty.model_error.p_value,
         z,
     )

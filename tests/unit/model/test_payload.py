@@ -72,7 +72,7 @@ def test_identify_finds_a_25_kg_payload_in_a_noisy_simulated_log(tmp_path):
     assert abs(est.x[0] - 0.1) < 0.005
     assert abs(est.y[0] + 0.05) < 0.005
     assert abs(est.inertia[0] / 0.4 - 1) < 0.10
-    factor = result.diagnostics["uncertainty"]["interval_factor"]["99.7%"]
+    factor = result.diagnostics.uncertainty.interval_factor["99.7%"]
     for name, truth in zip(("mass", "x", "y", "inertia"), (25.0, 0.1, -0.05, 0.4), strict=True):
         assert abs(getattr(est, name)[0] - truth) <= factor * getattr(est, name)[1], name
     assert result.to_dict()["payload"]["mass"]["unit"] == "kg"

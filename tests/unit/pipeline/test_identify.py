@@ -72,7 +72,7 @@ def test_history_is_decimated_projected_and_ends_at_the_result(smooth_log):
     lo, _hi = result.diagnostics_box if hasattr(result, "diagnostics_box") else (None, None)
     assert np.all(np.diff(hist.t) > 0)
     # Gamma only grows; eigvalsh is accurate to about eps * lambda_max
-    assert np.all(np.diff(hist.lambda_min) >= -1e-13 * result.diagnostics["lambda_max_gamma"])
+    assert np.all(np.diff(hist.lambda_min) >= -1e-13 * result.diagnostics.lambda_max_gamma)
     np.testing.assert_allclose(hist.theta[-1], result.theta, rtol=1e-12, atol=1e-15)
     assert lo is None or np.all(hist.theta >= lo)
 
