@@ -166,6 +166,7 @@ _EXPORTS = {
     "LogInfo": "wmrid.estimators.records",
     "Validation": "wmrid.estimators.records",
     "PayloadEstimate": "wmrid.model.payload",
+    "Diagnostics": "wmrid.estimators.findings",
     "BaseEstimate": "wmrid.estimators.estimate",
     "WheelLog": "wmrid.core.wheel_log",
     "LogStream": "wmrid.core.wheel_log",
@@ -248,6 +249,7 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
     from wmrid.estimators.estimate import (
         BaseEstimate as BaseEstimate,
     )
+    from wmrid.estimators.findings import Diagnostics as Diagnostics
     from wmrid.estimators.methods import Comparison as Comparison
     from wmrid.estimators.options import (
         MethodOptions as MethodOptions,

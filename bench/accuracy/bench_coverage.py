@@ -56,14 +56,14 @@ def one_seed(seed: int, args: argparse.Namespace) -> tuple[np.ndarray, np.ndarra
     truth = run.truth["parameters"]
     value = np.array([result.parameters[n][0] for n in BASE])
     std = np.array([result.parameters[n][1] for n in BASE])
-    unc = result.diagnostics["uncertainty"]["model_error"]
+    unc = result.diagnostics.to_dict()["uncertainty"]["model_error"]
     widened = {
         "scale": unc["applied"], "discretisation": bool((unc.get("discretisation") or {}).get("applied")),
         "low-speed": bool(unc["slow_speed"].get("applied") or unc["slow_speed"].get("fragile")),
     }  # fmt: skip
-    flagged = np.array([n in set(result.diagnostics.get("flagged", [])) for n in BASE])
+    flagged = np.array([n in set(result.diagnostics.flagged or ()) for n in BASE])
     extra = {"method": result.method, "flagged": flagged}
-    dof = result.diagnostics["uncertainty"]["dof"]
+    dof = result.diagnostics.uncertainty.dof
     return value, std, np.array([truth[n] for n in BASE]), dof, widened, extra
 
 

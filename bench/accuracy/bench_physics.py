@@ -309,8 +309,8 @@ def run_job(job: Job) -> dict[str, Any]:
                 options = wmrid.ObserverOptions(friction="wheel", control_rate=control_rate)
                 res = wmrid.identify(log, c.robot, method=name, observer=options)
             entry["parameters"] = {p: _pair(res.parameters.get(p)) for p in PARAMS}
-            entry["flagged"] = _flagged(res.diagnostics)
-            entry["dof"] = res.diagnostics.get("uncertainty", {}).get("dof")
+            entry["flagged"] = _flagged(res.diagnostics.to_dict())
+            entry["dof"] = None if res.diagnostics.uncertainty is None else res.diagnostics.uncertainty.dof
         except wmrid.WmridError as err:
             entry.update(status="fail", error=_error_text(err))
         except Exception as err:

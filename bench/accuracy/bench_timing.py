@@ -74,10 +74,11 @@ def one(job: tuple[str, str, str, int, float]) -> dict:
     )  # fmt: skip
     for name, method, options in runs:
         res = wmrid.identify(log, "amr", method=method, observer=wmrid.ObserverOptions(friction="wheel", **options))
-        flagged = set(res.diagnostics.get("flagged", []))
+        flagged = set(res.diagnostics.flagged or ())
         err = {p: abs(res.parameters[p][0] / truth[p] - 1) * 100 for p in PARAMS}
         z = {p: abs(res.parameters[p][0] - truth[p]) / res.parameters[p][1] for p in PARAMS}
-        found = (res.diagnostics.get("delay") or res.diagnostics.get("timing") or {}).get("delay_s")
+        diag = res.diagnostics.to_dict()
+        found = (diag.get("delay") or diag.get("timing") or {}).get("delay_s")
         out[name] = {
             "friction": max(err[p] for p in FRICTION),
             "inertia": max(err[p] for p in INERTIA),

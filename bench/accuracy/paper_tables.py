@@ -191,7 +191,7 @@ def main() -> None:
     print(markdown(header, rows))
     print()
 
-    d_def, d_pap = default.diagnostics, paper_run.diagnostics
+    d_def, d_pap = default.diagnostics.to_dict(), paper_run.diagnostics.to_dict()
     worst_def = max(abs(default.parameters[n][0] / base_true[j] - 1) for j, n in enumerate(BASE))
     worst_pap = max(abs(paper_run.parameters[n][0] / base_true[j] - 1) for j, n in enumerate(BASE))
     gaps = [abs((paper_run.parameters[n][0] - base_true[j]) / (base_nom[j] - base_true[j])) for j, n in enumerate(BASE)]
@@ -219,7 +219,7 @@ def main() -> None:
                         **{k: r.parameters[name][0] for k, r in runs.items()}} for j, name in enumerate(BASE)},
         "largest_error_percent": {"default": 100 * worst_def, "paper_settings": 100 * worst_pap},
         "gap_left_percent": {"min": 100 * min(gaps), "max": 100 * max(gaps)},
-        "lambda_min_gamma": {k: r.diagnostics["lambda_min_gamma"] for k, r in runs.items()},
+        "lambda_min_gamma": {k: r.diagnostics.lambda_min_gamma for k, r in runs.items()},
         "warnings": {k: len(r.warnings) for k, r in runs.items()},
     })  # fmt: skip
 

@@ -108,8 +108,8 @@ def one(job: tuple[str, int, tuple[str, ...], str | None]) -> list[dict]:
             row.update(status="fail", error=f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}")
             rows.append(row)
             continue
-        flagged = set(res.diagnostics.get("flagged", []))
-        inflated = set(res.diagnostics.get("inflated", []))
+        flagged = set(res.diagnostics.to_dict().get("flagged", []))
+        inflated = set(res.diagnostics.to_dict().get("inflated", []))
         err, z = {}, {}
         for n in JUDGED:
             v, s = res.parameters[n]

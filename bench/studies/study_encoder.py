@@ -44,12 +44,12 @@ def one(job: tuple[int, int, str, float]) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         path = encoder_mcap(Path(tmp) / "encoder.mcap", run.log, cpr, seed)
         res = wmrid.identify(str(path), "paper")
-    flagged = set(res.diagnostics.get("flagged", []))
+    flagged = set(res.diagnostics.to_dict().get("flagged", []))
     err = {n: 100.0 * (res.parameters[n][0] / truth[n] - 1.0) for n in JUDGED}
     z = {n: (res.parameters[n][0] - truth[n]) / res.parameters[n][1] for n in JUDGED}
-    fb = res.diagnostics.get("feedback") or {}
-    idim = (res.diagnostics.get("method") or {}) if res.method != "observer" else {}
-    delay = res.diagnostics.get("delay") or {}
+    fb = res.diagnostics.to_dict().get("feedback") or {}
+    idim = (res.diagnostics.to_dict().get("method") or {}) if res.method != "observer" else {}
+    delay = res.diagnostics.to_dict().get("delay") or {}
     return {
         "cpr": cpr, "seed": seed, "engine": engine, "reported": res.method, "error_percent": err, "z": z,
         "flagged": sorted(flagged & set(JUDGED)),

@@ -93,8 +93,8 @@ def run(seed: int, payload: str) -> dict:
                           "z": (q.value - float(value)) / q.std if q.std > 0 else None}  # fmt: skip
     return {
         "seed": seed, "payload": payload, "first_friction_model": first.form.friction,
-        "second_friction_model": second.form.friction, "first_poorly": list(first.diagnostics["poorly_determined"]),
-        "second_poorly": list(second.diagnostics["poorly_determined"]), "base": base, "physical": physical,
+        "second_friction_model": second.form.friction, "first_poorly": list(first.diagnostics.poorly_determined or ()),
+        "second_poorly": list(second.diagnostics.poorly_determined or ()), "base": base, "physical": physical,
     }  # fmt: skip
 
 

@@ -104,7 +104,7 @@ def run(name: str, variant: str, seed: int, frictions: tuple[str, ...] = ("auto"
     rows = []
     for friction in frictions:
         result = wmrid.identify(sim.to_wheel_log(), str(robot_path), observer=wmrid.ObserverOptions(friction=friction))
-        diag = result.diagnostics
+        diag = result.diagnostics.to_dict()
         error = diag["uncertainty"]["model_error"]
         params = {}
         for p in study_plan.BASE:

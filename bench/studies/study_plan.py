@@ -154,14 +154,14 @@ def run(job: tuple[str, str, int, str, str]) -> dict:
     for p in BASE:
         value, std = result.parameters[p]
         params[p] = {"value": value, "std": std, "truth": truth[p], "z": (value - truth[p]) / std if std else None}
-    diag = result.diagnostics
+    diag = result.diagnostics.to_dict()
     predicted = prediction_for(robot_path, csv, result.form, spec)
     for p in BASE:
         params[p]["predicted"] = predicted[p]
     return {
         "robot": name, "engine": engine, "seed": seed, "method": result.method, "parameters": params,
         "poorly": list(diag.get("poorly_determined", [])), "flagged": list(diag.get("flagged", [])),
-        "limit_ratio": peaks, "edge_m": edge, "verdict": (result.verdict or {}).get("summary"),
+        "limit_ratio": peaks, "edge_m": edge, "verdict": None if result.verdict is None else result.verdict.summary,
         "friction_model": result.form.friction,
     }  # fmt: skip
 
@@ -230,8 +230,8 @@ def _sequential_seed(job: tuple[int, str, str, str, float, float]) -> dict:
     )
     alone = wmrid.identify(alone_sim.log.to_wheel_log(), robot)
     out = {"seed": seed, "truth": [sim2.truth["parameters"][n] for n in BASE], "fused_dof": both.estimate.dof,
-           "first_poorly": first.diagnostics.get("poorly_determined", []),
-           "widened": [bool(r.diagnostics.get("inflated")) for r in (first, second)]}  # fmt: skip
+           "first_poorly": list(first.diagnostics.poorly_determined or ()),
+           "widened": [bool(r.diagnostics.inflated) for r in (first, second)]}  # fmt: skip
     for key, result in (("second", second), ("fused", both), ("alone", alone)):
         x, cov, _ = _base(result)
         out[key], out[key + "_std"] = x.tolist(), np.sqrt(np.diag(cov)).tolist()
@@ -301,7 +301,7 @@ def sequential(eta_noise: float, tau_noise: float, seeds: int = 20, workers: int
         "fused_worst_reported": sorted(worst.tolist()), "fused_below_2pc": int(np.sum(worst < 0.02)),
         "widened": [sum(r["widened"][j] for r in rows) for j in range(2)],
         "first_friction_poorly": sum(all(n in r["first_poorly"] for n in ("Fv1", "Fv2", "Fd1", "Fd2")) for r in rows),
-        "first_poorly_seed100": first.diagnostics.get("poorly_determined", []),
+        "first_poorly_seed100": list(first.diagnostics.poorly_determined or ()),
     }  # fmt: skip
 
 

@@ -56,8 +56,8 @@ def case_a(job: tuple[str, int, float, float, bool]) -> dict:
         log = dataclasses.replace(log, reference=None)
     default = wmrid.identify(log, AMR, observer=wmrid.ObserverOptions(friction="wheel"))
     zero = wmrid.identify(log, AMR, observer=wmrid.ObserverOptions(friction="wheel", delay=0.0))
-    timing = default.diagnostics.get("timing") or {}
-    applied = (default.diagnostics.get("delay") or {}).get("applied_s") or 0.0
+    timing = default.diagnostics.to_dict().get("timing") or {}
+    applied = (default.diagnostics.to_dict().get("delay") or {}).get("applied_s") or 0.0
     ratio = {k: default.parameters[k][1] / zero.parameters[k][1] for k in default.parameters}
     return {
         "engine": engine, "seed": seed, "caster": caster, "delay_s": timing.get("delay_s"),
@@ -84,13 +84,13 @@ def case_b(job: tuple[int, str, float]) -> dict:
             t=log.t[keep], eta=log.eta[keep], tau=log.tau[keep], source="b", reference=log.reference[keep]
         )
         res = wmrid.identify(sub, "paper", observer=wmrid.ObserverOptions(friction="wheel"))
-        timing = res.diagnostics.get("timing") or {}
+        timing = res.diagnostics.to_dict().get("timing") or {}
         out[f"{length:g}"] = {
             "std": {k: res.parameters[k][1] for k in res.parameters},
             "z": {k: abs(res.parameters[k][0] - truth[k]) / res.parameters[k][1] for k in res.parameters},
             "delay_s": timing.get("delay_s"), "std_s": timing.get("std_s"), "applied": bool(timing.get("apply")),
             "timing_term": bool((timing.get("timing_term") or {}).get("widened")),
-            "model_error_scale": res.diagnostics["uncertainty"]["model_error"].get("scale"),
+            "model_error_scale": res.diagnostics.model_error.scale,
         }  # fmt: skip
     return out
 

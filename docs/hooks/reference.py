@@ -158,6 +158,7 @@ API_GROUPS = (
             "LogInfo",
             "Validation",
             "PayloadEstimate",
+            "Diagnostics",
             "Comparison",
         ),
     ),

@@ -10,7 +10,8 @@ The rules, per field (its JSON key is its name):
 * a :func:`spliced` field holds a record whose keys are written at its place in this object, not under a key of
   its own (the timing check's delay estimate, whose figures are the check's own keys);
 * keys the record does not know (a newer wmrid's, or a method's own figures) are kept in ``other``, in their order,
-  and written after the known ones.
+  and written after the known ones; so is a ``null`` the object holds for a field that is written only with a value
+  (its attribute reads None, and the null is written in the field's place; a value set later replaces it).
 
 Each record's fields are declared in the order its keys are written.  A field's value is whatever the JSON holds
 (numbers, strings, booleans, lists, objects), read as it is: a record does not check or convert it.
@@ -74,7 +75,7 @@ class JsonRecord:
                     out.update(value.to_dict())
                 continue
             if value is None:
-                if meta.get("keep"):
+                if meta.get("keep") or f.name in self.other:  # always written, or read as null: null in its place
                     out[f.name] = None
                 continue
             if "record" in meta and isinstance(value, JsonRecord):
@@ -84,7 +85,8 @@ class JsonRecord:
             elif meta.get("seq") and isinstance(value, tuple):
                 value = list(value)
             out[f.name] = value
-        out.update(self.other)
+        for key, value in self.other.items():
+            out.setdefault(key, value)  # a field set since it was read as null is written with its value
         return out
 
     @classmethod
@@ -115,6 +117,9 @@ class JsonRecord:
             if f.name not in rest:
                 continue
             value = rest.pop(f.name)
+            if value is None and not meta.get("keep"):
+                rest[f.name] = None  # a null the object holds, for a field written only with a value: kept as such
+                continue
             if "record" in meta and isinstance(value, Mapping):
                 value = meta["record"].from_dict(value)
             elif "each" in meta and isinstance(value, list):

@@ -78,7 +78,7 @@ def every_std_in_doubt(diagnostics: Diagnostics) -> bool:
     """Whether the log's misfit (the prediction misfit applied) or its units (the units check's doubt) put every std
     in doubt."""
     units = diagnostics.units
-    return bool(diagnostics.prediction_misfit.get("applied")) or bool(units is not None and units.doubt)
+    return bool(diagnostics.prediction_misfit.applied) or bool(units is not None and units.doubt)
 
 
 def flagged_names(parameters: dict[str, tuple[float, float]], diagnostics: Diagnostics) -> tuple[str, ...]:

@@ -268,6 +268,6 @@ def disturbance(result: Any) -> dict[str, Any]:
     figures;
     without a measured noise floor, no evidence)."""
     misfit = result.diagnostics.prediction_misfit
-    ratio, share = misfit.get("ratio"), misfit.get("share")
+    ratio, share = misfit.ratio, misfit.share
     found = ratio is not None and share is not None and ratio > DISTURBANCE_RATIO and share > DISTURBANCE_SHARE
     return {"disturbance": bool(found), "prediction_error_ratio": ratio, "prediction_error_share": share}

@@ -5,7 +5,8 @@ holds under ``diagnostics`` (the keys in the order given here; None: the key is 
 always written), ``from_dict`` reads one back, keys it does not know kept in ``other``.  Units are SI (seconds,
 rad/s, the base parameters' units); the meaning of each figure is said by the check that makes it:
 
-* :class:`Uncertainty` (+ :class:`ModelError`): what the std is and the model-error widening
+* :class:`Uncertainty` (+ :class:`ModelError`, :class:`WideningTerm`, :class:`PredictionMisfit`): what the std is
+  and the model-error widening
   (:mod:`wmrid.estimators.uncertainty`, :mod:`wmrid.estimators.model_error`);
 * :class:`StructuralMismatch`: the misfit of the intermediate parameters to the model's form (Eqs. 23-24);
 * :class:`FrictionChoice` (+ :class:`LoadTermsChoice`): the friction model and why (:mod:`wmrid.pipeline.friction`);
@@ -51,10 +52,51 @@ class StructuralMismatch(JsonRecord):
 
 
 @dataclass(frozen=True, kw_only=True)
+class WideningTerm(JsonRecord):
+    """A term the std may carry (:mod:`wmrid.estimators.model_error`, :mod:`wmrid.estimators.regression.idim_checks`):
+    ``applied`` when its change of theta0 (``delta`` (n0,)) passes its gate in ``sd`` (n0,) (``largest_ratio``), or
+    ``why`` it could not be measured.  The discretisation's (``observer_only``: not another method's), the slow parts'
+    (``left_out_fraction`` of the log; ``fragile``: the parameters only the slow parts determine, their variance
+    ``var_without`` without them; the residuals' ``residual_ratio`` and ``residual_z`` per wheel), the filter
+    cutoff's (``cutoff_hz``: [used, lowered] Hz); ``method``: whose it is when not the observer's."""
+
+    applied: bool | None = None
+    delta: list[float] | None = None
+    sd: list[float] | None = None
+    largest_ratio: float | None = None
+    why: str | None = None
+    left_out_fraction: float | None = None
+    cutoff_hz: list[float] | None = None
+    method: str | None = None
+    observer_only: bool | None = None
+    fragile: tuple[str, ...] | None = names()
+    var_without: list[float] | None = None
+    residual_ratio: list[float] | None = None
+    residual_z: list[float] | None = None
+    other: dict[str, Any] = other_keys()
+
+
+@dataclass(frozen=True, kw_only=True)
+class PredictionMisfit(JsonRecord):
+    """The prediction-misfit test (:func:`wmrid.estimators.model_error.prediction_misfit`): ``applied`` when the
+    worst ``wheel``'s (0 right, 1 left) prediction error is ``ratio`` times the speeds' noise and ``share`` of their
+    rms; per wheel, rad/s: ``prediction_error_rms``, ``noise_rms``, ``speed_rms`` (None: not measured)."""
+
+    applied: bool | None = None
+    wheel: int | None = kept()
+    ratio: float | None = kept()
+    share: float | None = kept()
+    prediction_error_rms: list[float] | None = kept()
+    noise_rms: list[float] | None = kept()
+    speed_rms: list[float] | None = kept()
+    other: dict[str, Any] = other_keys()
+
+
+@dataclass(frozen=True, kw_only=True)
 class ModelError(JsonRecord):
     """The model-error widening: every std scaled by ``scale`` (``applied``) from the misfit's T2 (F, p_value);
-    the other terms' records (each {"applied", "delta" (n0,), ...}): the discretisation, the slow parts, the
-    prediction misfit, the filter cutoff; ``meaning``: what widened the std."""
+    the other terms (:class:`WideningTerm`): the discretisation, the slow parts, the filter cutoff; the prediction
+    misfit (:class:`PredictionMisfit`); ``meaning``: what widened the std."""
 
     scale: float | None = None
     applied: bool | None = None
@@ -63,10 +105,10 @@ class ModelError(JsonRecord):
     F: float | None = None
     p_value: float | None = None
     relative_misfit: float | None = None
-    discretisation: dict[str, Any] | None = None
-    slow_speed: dict[str, Any] | None = None
-    prediction_misfit: dict[str, Any] | None = None
-    filter: dict[str, Any] | None = None
+    discretisation: WideningTerm | None = nested(WideningTerm)
+    slow_speed: WideningTerm | None = nested(WideningTerm)
+    prediction_misfit: PredictionMisfit | None = nested(PredictionMisfit)
+    filter: WideningTerm | None = nested(WideningTerm)
     meaning: str | None = None
     other: dict[str, Any] = other_keys()
 
@@ -371,10 +413,11 @@ class Diagnostics(JsonRecord):
         return None if self.uncertainty is None else self.uncertainty.model_error
 
     @property
-    def prediction_misfit(self) -> dict[str, Any]:
-        """The prediction-misfit test's record ({"applied", "ratio", "share", ...}), {} when not recorded."""
+    def prediction_misfit(self) -> PredictionMisfit:
+        """The prediction-misfit test (``uncertainty.model_error.prediction_misfit``; not recorded: one with no
+        figures, not applied)."""
         model_error = self.model_error
-        return (None if model_error is None else model_error.prediction_misfit) or {}
+        return (None if model_error is None else model_error.prediction_misfit) or PredictionMisfit()
 
     @property
     def method_seconds(self) -> float:

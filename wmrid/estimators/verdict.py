@@ -247,7 +247,7 @@ def _group_sentence(group: str, names: tuple[str, ...], extra: tuple[str, ...], 
         status, reason = "not determined", "the log does not excite it: the start value sets it"
     elif impossible:
         status, reason = "in doubt", f"{', '.join(sorted(impossible))}: a value no robot has{_signs(result)}"
-    elif misfit.get("applied") and set(present) <= flagged:
+    elif misfit.applied and set(present) <= flagged:
         quality = (
             "determined"
             if rel[worst] <= POORLY_DETERMINED

@@ -55,7 +55,7 @@ def test_heavy_robot_with_dragging_casters_every_method():
     truth = run.truth["parameters"]
     for method in ("auto", "idim", "rls", "oe", "iv"):
         result = wmrid.identify(run.log, "paper", method=method)
-        flagged = set(result.diagnostics["flagged"])
+        flagged = set(result.diagnostics.flagged)
         for name in BASE:
             value, std = result.parameters[name]
             assert name in flagged or abs(value - truth[name]) <= 3 * std, (method, name, value, std, truth[name])
@@ -77,8 +77,8 @@ def test_heavy_robot_with_both_casters_touching_idim_and_iv():
     truth = run.truth["parameters"]
     for method in ("idim", "iv"):
         result = wmrid.identify(run.log, "paper", method=method)
-        assert result.diagnostics["method"]["grid_shifts"] > 1
-        flagged = set(result.diagnostics["flagged"])
+        assert result.diagnostics.method.figures["grid_shifts"] > 1
+        flagged = set(result.diagnostics.flagged)
         for name in BASE:
             value, std = result.parameters[name]
             assert name in flagged or abs(value - truth[name]) <= 3 * std, (method, name, value, std, truth[name])

@@ -46,7 +46,7 @@ def test_the_reported_estimate_is_within_one_percent_and_honest(encoder_log):
     # the noise floor is taken at the derivative's window: the smoothed quantisation noise is no misfit, so nothing
     # is flagged and the verdict is not "in doubt" (every parameter was, before; wmrid.estimators.noise_floor)
     assert flagged == set()
-    assert not result.diagnostics.uncertainty.model_error.prediction_misfit["applied"]
+    assert not result.diagnostics.uncertainty.model_error.prediction_misfit.applied
     assert all(g.status != "in doubt" for g in result.verdict.groups), result.verdict
 
 

@@ -56,7 +56,7 @@ def test_bundled_noise_free_sample_is_within_its_std(request):
     z = z_scores(result, truth)
     assert max(abs(v) for v in z.values()) < 3.0, z
     unc = result.diagnostics.uncertainty.model_error
-    assert unc.discretisation["applied"]
+    assert unc.discretisation.applied
     assert not unc.applied  # the structural test does not reject: the error is discretisation only
     assert set(result.diagnostics.inflated) == set(BASE)
     # still a tight std: the discretisation bound is below 1e-3 of each inertia entry
@@ -74,9 +74,9 @@ def test_a_well_specified_noisy_log_keeps_its_std():
     unc = result.diagnostics.uncertainty.model_error
     assert not unc.applied
     assert unc.scale == 1.0
-    assert not unc.discretisation["applied"]
-    assert not unc.slow_speed["applied"]
-    assert unc.slow_speed["fragile"] == []
+    assert not unc.discretisation.applied
+    assert not unc.slow_speed.applied
+    assert unc.slow_speed.fragile == ()
     assert result.diagnostics.inflated == ()
     value, std = result.parameters["m11"]
     assert 2e-5 * value < std < 1e-3 * value

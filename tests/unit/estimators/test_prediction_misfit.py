@@ -202,8 +202,8 @@ def test_a_gap_in_the_log_is_not_slip():
     keep = (sim.t <= 10.0) | (sim.t >= 10.5)
     log = SimpleNamespace(t=sim.t[keep], eta=sim.eta[keep], tau=sim.tau[keep], source="gap", notes=())
     misfit = identify(log, PAPER).diagnostics.prediction_misfit
-    assert not misfit["applied"]
-    assert misfit["ratio"] < 1.3
+    assert not misfit.applied
+    assert misfit.ratio < 1.3
 
 
 def test_slipping_wheels_flag_every_parameter(slipping):
@@ -213,9 +213,9 @@ def test_slipping_wheels_flag_every_parameter(slipping):
     first warning says why, and IDIM on the same log inherits the flags."""
     result = identify(as_log(slipping), AMR, feedback=False)
     misfit = result.diagnostics.uncertainty.model_error.prediction_misfit
-    assert misfit["applied"]
-    assert misfit["ratio"] > 5
-    assert misfit["noise_rms"] == pytest.approx([ETA_STD, ETA_STD], rel=0.1)
+    assert misfit.applied
+    assert misfit.ratio > 5
+    assert misfit.noise_rms == pytest.approx([ETA_STD, ETA_STD], rel=0.1)
     assert set(result.diagnostics.flagged) == set(BASE)
     assert result.warnings[0].startswith("the model predicts the ")
     assert "slip" in result.warnings[0]
@@ -229,8 +229,8 @@ def test_gripping_wheels_are_not_flagged_by_it(gripping):
     the benchmark's logs), well under MISFIT_RATIO."""
     result = identify(as_log(gripping), AMR)
     misfit = result.diagnostics.uncertainty.model_error.prediction_misfit
-    assert not misfit["applied"]
-    assert 0.9 < misfit["ratio"] < 1.3
+    assert not misfit.applied
+    assert 0.9 < misfit.ratio < 1.3
     assert not any(w.startswith("the model predicts the ") for w in result.warnings)
 
 
@@ -240,8 +240,8 @@ def test_a_closed_loop_disturbance_is_not_flagged():
     noise = NoiseSettings(eta_std=0.01, tau_std=0.02, caster_std=0.05, caster_time=0.3)
     sim = simulate(PAPER.cad, PAPER.nominal, duration=20, noise=noise, seed=0)
     misfit = identify(as_log(sim), PAPER).diagnostics.prediction_misfit
-    assert not misfit["applied"]
-    assert misfit["ratio"] < 1.3
+    assert not misfit.applied
+    assert misfit.ratio < 1.3
 
 
 @pytest.mark.slow  # the CLI's view of a flag the library tests check (4 s)

@@ -113,4 +113,4 @@ def test_slow_parts_fit_like_the_rest_where_the_model_holds():
         "amr", trajectory="reversing", duration=30.0, noise=wmrid.NoiseSettings(seed=3, eta_std=0.02, tau_std=0.01)
     )
     slow = wmrid.identify(sim.log.to_wheel_log(), "amr").diagnostics.model_error.slow_speed
-    assert all(0.8 < r < 1.25 for r in slow["residual_ratio"]), slow["residual_ratio"]
+    assert all(0.8 < r < 1.25 for r in slow.residual_ratio), slow.residual_ratio
