@@ -190,8 +190,9 @@ _EXPORTS = {
     "PhysicalEstimate": "wmrid.model.physical",
     "live": "wmrid.api.live",
     "LiveRun": "wmrid.api.live",
-    "LiveChange": "wmrid.api.live",
-    "LiveUpdate": "wmrid.api.live",
+    "LiveChange": "wmrid.monitoring.live_change",
+    "PayloadMass": "wmrid.monitoring.live_change",
+    "LiveUpdate": "wmrid.estimators.observer.live_update",
     "LiveResult": "wmrid.api.live",
 }
 
@@ -209,10 +210,8 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
         read_log as read_log,
     )
     from wmrid.api.live import (
-        LiveChange as LiveChange,
         LiveResult as LiveResult,
         LiveRun as LiveRun,
-        LiveUpdate as LiveUpdate,
         live as live,
     )
     from wmrid.api.monitoring import (
@@ -249,6 +248,7 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
         BaseEstimate as BaseEstimate,
     )
     from wmrid.estimators.methods import Comparison as Comparison
+    from wmrid.estimators.observer.live_update import LiveUpdate as LiveUpdate
     from wmrid.estimators.options import (
         MethodOptions as MethodOptions,
         ObserverOptions as ObserverOptions,
@@ -277,6 +277,7 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
         PhysicalEstimate as PhysicalEstimate,
     )
     from wmrid.model.robot import Payload as Payload, Robot as Robot
+    from wmrid.monitoring.live_change import LiveChange as LiveChange, PayloadMass as PayloadMass
     from wmrid.monitoring.monitor_result import MonitorResult as MonitorResult
     from wmrid.monitoring.settings import (
         MonitorSettings as MonitorSettings,

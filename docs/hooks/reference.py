@@ -180,7 +180,7 @@ API_GROUPS = (
     ("Fleets", ("fleet", "FleetRun", "fleet_report", "write_fleet_report", "FleetReport")),
     ("Planning a drive", ("plan", "predict_plan", "write_plan", "read_plan", "Plan")),
     ("Exporting", ("export", "ExportResult", "PhysicalEstimate")),
-    ("Live identification", ("live", "LiveRun", "LiveUpdate", "LiveChange", "LiveResult")),
+    ("Live identification", ("live", "LiveRun", "LiveUpdate", "LiveChange", "PayloadMass", "LiveResult")),
     ("Errors", ("WmridError",)),
 )
 
