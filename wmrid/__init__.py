@@ -186,7 +186,8 @@ _EXPORTS = {
     "read_plan": "wmrid.api.planning",
     "Plan": "wmrid.design.plan",
     "export": "wmrid.api.exporting",
-    "ExportResult": "wmrid.api.exporting",
+    "ExportResult": "wmrid.model.export_result",
+    "ExportCheck": "wmrid.model.export_result",
     "PhysicalEstimate": "wmrid.model.physical",
     "live": "wmrid.api.live",
     "LiveRun": "wmrid.api.live",
@@ -198,7 +199,6 @@ _EXPORTS = {
 
 if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (the same names as _EXPORTS)
     from wmrid.api.exporting import (
-        ExportResult as ExportResult,
         export as export,
     )
     from wmrid.api.identification import compare as compare, identify as identify, validate as validate
@@ -272,6 +272,7 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
         write_fleet_report as write_fleet_report,
     )
     from wmrid.fleets.run import FleetRun as FleetRun, fleet as fleet
+    from wmrid.model.export_result import ExportCheck as ExportCheck, ExportResult as ExportResult
     from wmrid.model.payload import PayloadEstimate as PayloadEstimate
     from wmrid.model.physical import (
         PhysicalEstimate as PhysicalEstimate,

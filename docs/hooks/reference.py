@@ -179,7 +179,7 @@ API_GROUPS = (
     ("Watching for changes", ("monitor", "MonitorResult", "MonitorSettings")),
     ("Fleets", ("fleet", "FleetRun", "fleet_report", "write_fleet_report", "FleetReport")),
     ("Planning a drive", ("plan", "predict_plan", "write_plan", "read_plan", "Plan")),
-    ("Exporting", ("export", "ExportResult", "PhysicalEstimate")),
+    ("Exporting", ("export", "ExportResult", "ExportCheck", "PhysicalEstimate")),
     ("Live identification", ("live", "LiveRun", "LiveUpdate", "LiveChange", "PayloadMass", "LiveResult")),
     ("Errors", ("WmridError",)),
 )
