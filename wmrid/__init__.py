@@ -147,6 +147,7 @@ _EXPORTS = {
     "Identification": "wmrid.api.reporting",
     "inspect": "wmrid.api.inputs",
     "Comparison": "wmrid.estimators.methods",
+    "ValidationLog": "wmrid.estimators.methods",
     "simulate": "wmrid.api.simulation",
     "monitor": "wmrid.api.monitoring",
     "report": "wmrid.api.reporting",
@@ -247,7 +248,7 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
     from wmrid.estimators.estimate import (
         BaseEstimate as BaseEstimate,
     )
-    from wmrid.estimators.methods import Comparison as Comparison
+    from wmrid.estimators.methods import Comparison as Comparison, ValidationLog as ValidationLog
     from wmrid.estimators.observer.live_update import LiveUpdate as LiveUpdate
     from wmrid.estimators.options import (
         MethodOptions as MethodOptions,

@@ -159,6 +159,7 @@ API_GROUPS = (
             "Validation",
             "PayloadEstimate",
             "Comparison",
+            "ValidationLog",
         ),
     ),
     ("Reports", ("report", "Identification", "write_report", "Report")),
