@@ -147,6 +147,7 @@ _EXPORTS = {
     "Identification": "wmrid.api.reporting",
     "inspect": "wmrid.api.inputs",
     "Comparison": "wmrid.estimators.methods",
+    "ValidationLog": "wmrid.estimators.methods",
     "simulate": "wmrid.api.simulation",
     "monitor": "wmrid.api.monitoring",
     "report": "wmrid.api.reporting",
@@ -187,18 +188,19 @@ _EXPORTS = {
     "read_plan": "wmrid.api.planning",
     "Plan": "wmrid.design.plan",
     "export": "wmrid.api.exporting",
-    "ExportResult": "wmrid.api.exporting",
+    "ExportResult": "wmrid.model.export_result",
+    "ExportCheck": "wmrid.model.export_result",
     "PhysicalEstimate": "wmrid.model.physical",
     "live": "wmrid.api.live",
     "LiveRun": "wmrid.api.live",
-    "LiveChange": "wmrid.api.live",
-    "LiveUpdate": "wmrid.api.live",
+    "LiveChange": "wmrid.monitoring.live_change",
+    "PayloadMass": "wmrid.monitoring.live_change",
+    "LiveUpdate": "wmrid.estimators.observer.live_update",
     "LiveResult": "wmrid.api.live",
 }
 
 if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (the same names as _EXPORTS)
     from wmrid.api.exporting import (
-        ExportResult as ExportResult,
         export as export,
     )
     from wmrid.api.identification import compare as compare, identify as identify, validate as validate
@@ -210,10 +212,8 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
         read_log as read_log,
     )
     from wmrid.api.live import (
-        LiveChange as LiveChange,
         LiveResult as LiveResult,
         LiveRun as LiveRun,
-        LiveUpdate as LiveUpdate,
         live as live,
     )
     from wmrid.api.monitoring import (
@@ -250,7 +250,8 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
         BaseEstimate as BaseEstimate,
     )
     from wmrid.estimators.findings import Diagnostics as Diagnostics
-    from wmrid.estimators.methods import Comparison as Comparison
+    from wmrid.estimators.methods import Comparison as Comparison, ValidationLog as ValidationLog
+    from wmrid.estimators.observer.live_update import LiveUpdate as LiveUpdate
     from wmrid.estimators.options import (
         MethodOptions as MethodOptions,
         ObserverOptions as ObserverOptions,
@@ -274,11 +275,13 @@ if _TYPE_CHECKING:  # what the lazy exports are, for editors and type checkers (
         write_fleet_report as write_fleet_report,
     )
     from wmrid.fleets.run import FleetRun as FleetRun, fleet as fleet
+    from wmrid.model.export_result import ExportCheck as ExportCheck, ExportResult as ExportResult
     from wmrid.model.payload import PayloadEstimate as PayloadEstimate
     from wmrid.model.physical import (
         PhysicalEstimate as PhysicalEstimate,
     )
     from wmrid.model.robot import Payload as Payload, Robot as Robot
+    from wmrid.monitoring.live_change import LiveChange as LiveChange, PayloadMass as PayloadMass
     from wmrid.monitoring.monitor_result import MonitorResult as MonitorResult
     from wmrid.monitoring.settings import (
         MonitorSettings as MonitorSettings,

@@ -160,6 +160,7 @@ API_GROUPS = (
             "PayloadEstimate",
             "Diagnostics",
             "Comparison",
+            "ValidationLog",
         ),
     ),
     ("Reports", ("report", "Identification", "write_report", "Report")),
@@ -180,8 +181,8 @@ API_GROUPS = (
     ("Watching for changes", ("monitor", "MonitorResult", "MonitorSettings")),
     ("Fleets", ("fleet", "FleetRun", "fleet_report", "write_fleet_report", "FleetReport")),
     ("Planning a drive", ("plan", "predict_plan", "write_plan", "read_plan", "Plan")),
-    ("Exporting", ("export", "ExportResult", "PhysicalEstimate")),
-    ("Live identification", ("live", "LiveRun", "LiveUpdate", "LiveChange", "LiveResult")),
+    ("Exporting", ("export", "ExportResult", "ExportCheck", "PhysicalEstimate")),
+    ("Live identification", ("live", "LiveRun", "LiveUpdate", "LiveChange", "PayloadMass", "LiveResult")),
     ("Errors", ("WmridError",)),
 )
 

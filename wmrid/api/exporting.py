@@ -25,13 +25,13 @@ from __future__ import annotations
 import hashlib
 import math
 import os
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from wmrid.core.errors import UsageError, option
+from wmrid.model.export_result import ExportCheck, ExportResult
 from wmrid.model.physical import PhysicalEstimate
 
 #: Suffixes :func:`export` writes, and what each is.
@@ -43,34 +43,6 @@ EXPORT_FORMATS = {
 CHECK_WINDOW = 2.0
 #: The shortest window, in samples of the check log: over fewer, restarting from the logged speeds makes any model fit.
 MIN_WINDOW_SAMPLES = 10
-
-
-@dataclass(frozen=True)
-class ExportResult:
-    """What :func:`export` wrote: the output path and format, the physical quantities, the provenance, and (with a
-    check log) the fit % per wheel of the exported multibody model and of the reduced model over the same windows."""
-
-    path: str
-    format: str
-    physical: PhysicalEstimate | None  # None: a result in PWM/voltage units, or a robot given as base parameters
-    provenance: dict[str, str]
-    check: dict[str, Any] | None = None
-    notes: tuple[str, ...] = ()
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "schema": 1, "kind": "export", "path": self.path, "format": self.format,
-            "physical": None if self.physical is None else self.physical.to_dict(),
-            "provenance": dict(self.provenance), "check": self.check,
-            "notes": list(self.notes),
-        }  # fmt: skip
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> ExportResult:
-        return cls(path=str(data["path"]), format=str(data["format"]),
-                   physical=None if data["physical"] is None else PhysicalEstimate.from_dict(data["physical"]),
-                   provenance=dict(data["provenance"]),
-                   check=data.get("check"), notes=tuple(data.get("notes", ())))  # fmt: skip
 
 
 def check_export_output(path: str | os.PathLike[str]) -> str:
@@ -192,7 +164,7 @@ def export(
     if check is not None:  # before anything is written: a check that cannot run leaves no file behind
         assert physical is not None  # a check without the physical quantities is refused above
         checked = check_fit(found, physical, robot_obj, check, window=window, options=options, casters=cm.casters())
-        if any(v is not None and v < 0 for m in ("multibody", "reduced") for v in checked[m].values()):
+        if any(v is not None and v < 0 for _, fit in checked.fits() for v in fit.values()):
             said.append("a fit below 0 % predicts the check log worse than its mean: is it a log of this robot?")
     notes = _notes(physical) if physical is not None else {}
     prov_line = "; ".join(f"{k}: {v}" for k, v in provenance.items())
@@ -326,7 +298,7 @@ def _physical(found: Any, geometry: Any, simulator: bool, said: list[str]) -> Ph
 def check_fit(
     found: Any, physical: PhysicalEstimate, robot_obj: Any, log: Any, *, window: float, options: Any = None,
     casters: list[dict[str, float]] | None = None,
-) -> dict[str, Any]:  # fmt: skip
+) -> ExportCheck:  # fmt: skip
     """Fit % per wheel of the exported multibody model and of the reduced model, both driven by ``log``'s torques over
     windows of ``window`` s restarted from its logged speeds (module docstring)."""
     from wmrid.api.identification import _log
@@ -381,14 +353,14 @@ def check_fit(
     def clean(v: float) -> float | None:
         return float(v) if math.isfinite(v) else None
 
-    return {
-        "log": wheel_log.source, "samples": len(t), "window_s": window, "windows": len(starts),
-        "definition": "fit = 100 (1 - ||eta - eta_hat|| / ||eta - mean(eta)||) per wheel, the models restarted from "
-                      "the logged speeds at the start of each window and driven by the logged torques",
-        "multibody": {"eta_r": clean(fit_mj[0]), "eta_l": clean(fit_mj[1])},
-        "reduced": {"eta_r": clean(fit_red[0]), "eta_l": clean(fit_red[1])},
-        "reduced_not_simulated": why,
-    }  # fmt: skip
+    return ExportCheck(
+        log=wheel_log.source, samples=len(t), window_s=window, windows=len(starts),
+        definition="fit = 100 (1 - ||eta - eta_hat|| / ||eta - mean(eta)||) per wheel, the models restarted from the "
+                   "logged speeds at the start of each window and driven by the logged torques",
+        multibody={"eta_r": clean(fit_mj[0]), "eta_l": clean(fit_mj[1])},
+        reduced={"eta_r": clean(fit_red[0]), "eta_l": clean(fit_red[1])},
+        reduced_not_simulated=why,
+    )  # fmt: skip
 
 
 def write_export_summary(result: ExportResult, path: str | os.PathLike[str], *, force: bool = False) -> None:

@@ -35,19 +35,14 @@ import numpy as np
 from wmrid.api.identification import prepare
 from wmrid.api.inputs import LogOptions, reader_arguments
 from wmrid.core.errors import UsageError, option
+from wmrid.estimators.observer.live_update import LiveUpdate
 from wmrid.estimators.options import ObserverOptions
 from wmrid.estimators.result import IdentificationResult
 from wmrid.model.robot import Robot
-from wmrid.monitoring.live_monitor import LiveChange
+from wmrid.monitoring.live_change import LiveChange
 
 __all__ = ["LiveChange", "LiveResult", "LiveRun", "LiveUpdate", "check_output", "live"]
 
-#: What the std of a :class:`LiveUpdate` is.
-ONLINE_STD = (
-    "delete-a-segment jackknife of the observer's estimate over contiguous segments of the samples received so far "
-    "(the offline std before its widening terms: model error, discretisation, slow speeds, closed-loop check, timing); "
-    "the final result's std is the offline one"
-)
 #: The parameters ``until_std`` watches by default: the eight base parameters.
 BASE = ("m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2")
 #: s: how long one poll of the source waits for new data.
@@ -56,48 +51,6 @@ POLL_S = 0.05
 START_SAMPLES = 50
 #: s: how long the process may take, after Ctrl-C or SIGTERM, to identify what it received and write it.
 FINISH_GRACE_S = 600.0
-
-
-@dataclass(frozen=True)
-class LiveUpdate:
-    """One refresh of a live run.
-
-    parameters : {name: (value, std)} in SI units (empty until the samples determine an estimate); std: ONLINE_STD.
-    samples : received so far; log_time_s : s of log time they span; rate_hz : samples received per second of wall
-    time since the last update; log_rate_hz : samples per second of log time; since_last_data_s : s of wall time since
-    the last bytes arrived; elapsed_s : s since the run started; form : the regressor ("paper", "general",
-    "general+caster"); segments : the jackknife's; notes : what the estimate assumes (e.g. the friction model);
-    events : what happened to the source since the last update (a connection lost or regained, a server's warning).
-    """
-
-    source: str
-    elapsed_s: float
-    samples: int
-    log_time_s: float
-    rate_hz: float
-    log_rate_hz: float | None
-    since_last_data_s: float
-    form: str | None
-    parameters: dict[str, tuple[float, float]]
-    segments: int
-    notes: tuple[str, ...] = ()
-    events: tuple[str, ...] = ()
-
-    def relative_std(self, name: str) -> float:
-        """std / |value| of parameter ``name`` (inf when unknown or zero)."""
-        value, std = self.parameters.get(name, (0.0, math.inf))
-        return std / abs(value) if value != 0 and math.isfinite(std) else math.inf
-
-    def to_dict(self) -> dict[str, Any]:
-        """The JSON line ``wmrid live`` prints in a pipe."""
-        return {
-            "event": "update", "source": self.source, "elapsed_s": self.elapsed_s, "samples": self.samples,
-            "log_time_s": self.log_time_s, "rate_hz": self.rate_hz, "log_rate_hz": self.log_rate_hz,
-            "since_last_data_s": self.since_last_data_s, "form": self.form,
-            "parameters": {n: {"value": v, "std": s if math.isfinite(s) else None} for n, (v, s) in
-                           self.parameters.items()},
-            "std": ONLINE_STD, "segments": self.segments, "notes": list(self.notes), "events": list(self.events),
-        }  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -80,11 +80,10 @@ def export_command(
         done = export(result, robot, output, check=check, window=window, gear_ratio=log_options.gear_ratio,
                       rotor_inertia=rotor_inertia, wheel_radius=log_options.wheel_radius, options=log_options,
                       force=force)  # fmt: skip
-    data = done.to_dict()
     fmt = output_format.value
     if fmt == "auto":
         fmt = "table" if sys.stdout.isatty() else "json"
     if fmt == "json":
-        sys.stdout.write(to_json(data) + "\n")
+        sys.stdout.write(to_json(done.to_dict()) + "\n")
     else:
-        print_export(data, console())
+        print_export(done, console())

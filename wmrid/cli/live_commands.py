@@ -201,12 +201,11 @@ def _follow(run, fmt: str):
             if isinstance(item, LiveResult):
                 return item
             if isinstance(item, LiveChange):
-                view.console.print(change_line(item.to_dict()))
+                view.console.print(change_line(item))
                 continue
             _events(item.events)
-            current = item.to_dict()
-            view.update(live_table(current, previous), refresh=True)
-            previous = current
+            view.update(live_table(item, previous), refresh=True)
+            previous = item
     return run.finish()
 
 

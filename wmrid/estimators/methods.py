@@ -9,7 +9,7 @@ problem); :func:`run` then reports the chosen method's estimate through
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -186,24 +186,45 @@ class MethodRow:
 
 
 @dataclass(frozen=True)
+class ValidationLog:
+    """The second log every method's model was validated on in a comparison (``wmrid compare --validate``; each
+    row's fit % is its :attr:`MethodRow.fit_percent`).  log : that log.  samples : its samples.  predictor : how the
+    wheel speeds were simulated open loop from its efforts (None: no method's model could be simulated)."""
+
+    log: str
+    samples: int
+    predictor: str | None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The comparison JSON's ``validation``: {"log", "samples", "predictor"}."""
+        return {"log": self.log, "samples": self.samples, "predictor": self.predictor}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> ValidationLog:
+        predictor = data.get("predictor")
+        return cls(log=str(data["log"]), samples=int(data["samples"]),
+                   predictor=None if predictor is None else str(predictor))  # fmt: skip
+
+
+@dataclass(frozen=True)
 class Comparison:
     """Every method's estimate on one log (:func:`compare`); ``to_dict`` is the ``wmrid compare`` JSON.
 
     methods : name -> :class:`MethodRow`, in the order run.
-    validation : {"log", "samples", "predictor"} of the second log each model was validated on, or None.
+    validation : the second log each model was validated on (:class:`ValidationLog`), or None.
     truth : the true base parameters the errors are against, or None.
     """
 
     source: str
     methods: dict[str, MethodRow]
-    validation: dict[str, Any] | None = None
+    validation: ValidationLog | None = None
     truth: dict[str, float] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         methods = {name: row.to_dict() for name, row in self.methods.items()}
         out: dict[str, Any] = {"source": self.source, "methods": methods}
         if self.validation is not None:
-            out["validation"] = self.validation
+            out["validation"] = self.validation.to_dict()
         if self.truth is not None:
             out["truth"] = self.truth
         return out
@@ -269,6 +290,6 @@ def compare(
     return Comparison(
         source=observer.source,
         methods=methods,
-        validation=None if other is None else {"log": other.source, "samples": len(other.t), "predictor": predictor},
+        validation=None if other is None else ValidationLog(other.source, len(other.t), predictor),
         truth=None if truth is None else {key: value for key, value in truth.items() if key in observer.parameters},
     )

@@ -42,6 +42,7 @@ from wmrid.core.errors import NotIdentifiableError, UsageError, option
 from wmrid.estimators.options import ObserverOptions
 from wmrid.model.payload import payload_from_change
 from wmrid.monitoring.glr import ModelError, NoiseModel, locate, window_grid, window_statistics
+from wmrid.monitoring.live_change import LiveChange, PayloadMass
 from wmrid.monitoring.monitor import _identify_span, _Model, _model_of_result
 from wmrid.monitoring.residuals import residual_signals
 from wmrid.monitoring.settings import (
@@ -63,40 +64,6 @@ MOVED_STD = 3.0
 #: s of data after the located change that what changed is estimated from before the alarm is raised (measured on a
 #: 25 kg payload loaded at 20 s of the paper scenario: from 0.3 s, 49 kg; from 2 s, within 10 %).
 FIT_S = 2.0
-
-
-@dataclass(frozen=True)
-class LiveChange:
-    """A change found along the stream.  Times in s of log time from the stream's first sample: ``t`` the located
-    change, ``t_alarm`` the time of the last sample the alarming test used (as offline), ``t_raised`` the time of the
-    last sample received when the alarm was raised (``fit_s`` after the change, for the estimates).  ``kind``:
-    "payload" when the inertia terms alone explain the change, "friction" when the friction terms alone do, else
-    "other" (all terms fitted).  ``moved``: {parameter: (before, after,
-    std of the change)} for the parameters of p = [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2 ...] that moved by more than 3 std
-    (SI units: kg m^2, kg m, N m s/rad, N m); ``payload``: {"mass": kg, "std": kg} of a payload change (the inertia
-    terms alone fitted), or None when the robot's geometry is unknown; ``fit_s`` the span the estimates used."""
-
-    t: float
-    t_alarm: float
-    t_raised: float
-    statistic: float
-    threshold: float
-    window_s: float
-    kind: str
-    moved: dict[str, tuple[float, float, float]]
-    payload: dict[str, float] | None
-    fit_s: float
-    notes: tuple[str, ...] = ()
-
-    def to_dict(self) -> dict[str, Any]:
-        """The JSON line ``wmrid live --monitor`` prints in a pipe."""
-        return {
-            "event": "change", "t": self.t, "t_alarm": self.t_alarm, "t_raised": self.t_raised,
-            "delay_s": self.t_raised - self.t,
-            "statistic": self.statistic, "threshold": self.threshold, "window_s": self.window_s, "kind": self.kind,
-            "moved": {n: {"before": b, "after": a, "std": s} for n, (b, a, s) in self.moved.items()},
-            "payload": self.payload, "fit_s": self.fit_s, "notes": list(self.notes),
-        }  # fmt: skip
 
 
 @dataclass
@@ -397,7 +364,7 @@ class LiveMonitor:
             mass = float(payload_from_change(before[:4], before[:4] + delta, r, b)[0])
             s = r**2 / (4.0 * b**2)
             coef = np.array([0.5, 1.0, 0.5, 0.0]) / (2.0 * s * b**2)  # mass = coef . dM (the payload module)
-            payload = {"mass": mass, "std": float(math.sqrt(max(coef @ cov @ coef, 0.0)))}
+            payload = PayloadMass(mass, float(math.sqrt(max(coef @ cov @ coef, 0.0))))
         return kind, moved, payload, len(z) / self.grid.rate
 
     # -- feeding ----------------------------------------------------------------------------------------------------

@@ -403,7 +403,7 @@ def monitor(
         if result is None:
             change.warnings.append(problem)
             continue
-        change.parameters = result.to_dict()["parameters"]
+        change.parameters = dict(result.table)
         change.segment = (change.t, t_end)
         change.warnings.extend(result.warnings)
         change.theta0 = result.estimate.theta0

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from wmrid.estimators.parameter import Parameter
 from wmrid.estimators.records import LogInfo
 from wmrid.monitoring.glr import WindowGrid
 from wmrid.monitoring.residuals import tidy
@@ -24,14 +25,19 @@ from wmrid.monitoring.settings import (
 
 @dataclass
 class Change:
-    """One detected change: times in s from the log's start."""
+    """One detected change: times in s from the log's start (``t`` the located change, ``t_alarm`` the end of the
+    alarming window, ``window_s`` its length); ``statistic`` the window's test statistic over ``threshold``.
+    ``parameters``: name -> :class:`Parameter` identified on ``segment`` (t_start, t_end) s after the change, as
+    ``identify`` reports them (None: not identified; ``warnings`` says why); ``relative_change``: name ->
+    (after - before) / |before| against the model or the previous segment; ``theta0``: (n,) the base parameters
+    identified after it."""
 
     t: float
     t_alarm: float
     statistic: float
     threshold: float
     window_s: float
-    parameters: dict[str, dict[str, Any]] | None = None
+    parameters: dict[str, Parameter] | None = None
     segment: tuple[float, float] | None = None
     warnings: list[str] = field(default_factory=list)
     relative_change: dict[str, float | None] | None = None
@@ -45,7 +51,7 @@ class Change:
             "statistic": self.statistic,
             "threshold": self.threshold,
             "window_s": tidy(self.window_s),
-            "parameters": self.parameters,
+            "parameters": None if self.parameters is None else {n: p.to_dict() for n, p in self.parameters.items()},
             "relative_change": self.relative_change,
             "identified_on": None if self.segment is None else {"t_start": self.segment[0], "t_end": self.segment[1]},
             "warnings": list(self.warnings),
@@ -117,7 +123,7 @@ class MonitorResult:
             "model": {
                 "source": self.model.source,
                 "effort_unit": self.model.effort_unit,
-                "parameters": self.model.parameters,
+                "parameters": {name: p.to_dict() for name, p in self.model.parameters.items()},
                 **({} if self.model.form is None else {"form": self.model.form.to_dict()}),
             },
             "changes": [c.to_dict() for c in self.changes],

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import LogFormatError, UsageError, cannot_read, option
+from wmrid.estimators.parameter import Parameter
 from wmrid.estimators.result import from_dict
 from wmrid.model import dynamics as model
 from wmrid.model.dynamics import THETA0_NAMES, RegressorForm
@@ -126,10 +127,11 @@ class MonitorSettings:
 class MonitoredModel:
     """Base parameters theta0 (n,) [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2, then the caster drag's] with their reported
     form, effort unit; ``form``: the regressor form of a ``wheel+caster`` model (its caster columns), None for
-    wheel friction (n = 8)."""
+    wheel friction (n = 8).  ``parameters``: the result's reported parameters, name -> :class:`Parameter` (value and
+    std in ``unit``, std inf when not determined; flags), in the result's order."""
 
     theta0: np.ndarray
-    parameters: dict[str, dict[str, Any]]
+    parameters: dict[str, Parameter]
     effort_unit: str
     source: str
     std: np.ndarray  # standard errors of p = [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2, drag] (undetermined: 10 x the value)
@@ -207,10 +209,10 @@ def model_from_dict(data: Any, source: str) -> MonitoredModel:
             f"{option('model')} {source}: its inverse inertia [m11 m12; m12 m22] is not positive definite, so it is no "
             "robot's model; identify the robot again"
         )
-    reported = {name: dict(entry) for name, entry in params.items() if isinstance(entry, dict)}
+    reported = _reported(params, unit, source)
     columns = p_names(form)
     by_name = model.named_base(theta0, names)
-    stds = {name: (reported.get(name) or {}).get("std") for name in columns}
+    stds = {name: reported[name].std if name in reported else None for name in columns}
     theta_d = data.get("theta")
     if isinstance(theta_d, dict) and "form" in theta_d and "settings" in data:  # a saved result: as report checks
         try:
@@ -219,6 +221,31 @@ def model_from_dict(data: Any, source: str) -> MonitoredModel:
             raise UsageError(f"{option('model')} {err}") from None
     return MonitoredModel(theta0=theta0, parameters=reported, effort_unit=unit, source=source,
                           std=_std_vector(by_name, stds, columns), form=form, doubt=_doubt(data, source))  # fmt: skip
+
+
+def _number(value: Any, missing: float) -> float:
+    """``value`` as a float; ``missing`` when it is null or not a number (a model written by hand)."""
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+    return float(value) if ok else missing
+
+
+def _reported(params: dict[str, Any], effort_unit: str, source: str) -> dict[str, Parameter]:
+    """The result's "parameters" entries as :class:`Parameter` (as :meth:`Parameter.from_dict` reads them); what a
+    model written by hand leaves out is filled in: the std as not determined, the unit its name has, no flags."""
+    units = model.base_units(effort_unit)
+    out = {}
+    for name, entry in params.items():
+        if not isinstance(entry, dict):
+            continue
+        try:
+            out[name] = Parameter(
+                name, _number(entry.get("value"), math.nan), _number(entry.get("std"), math.inf),
+                entry["unit"] if isinstance(entry.get("unit"), str) else units.get(name, ""),
+                tuple(entry.get("flags") or ()),
+            )  # fmt: skip
+        except ValueError as err:  # an unknown flag
+            raise UsageError(f"{option('model')} {source}: {err}") from None
+    return out
 
 
 def _doubt(data: dict[str, Any], source: str) -> str | None:

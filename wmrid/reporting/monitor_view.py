@@ -1,4 +1,6 @@
-"""``wmrid monitor`` for people: the changes found, and the parameters before and after each, as rich tables."""
+"""``wmrid monitor`` for people: the changes found, and the parameters before and after each, as rich tables (read
+from the typed :class:`~wmrid.monitoring.monitor_result.MonitorResult`: its model's and each change's parameters are
+:class:`~wmrid.estimators.parameter.Parameter`)."""
 
 from __future__ import annotations
 
@@ -46,10 +48,11 @@ def print_monitor(result: MonitorResult, console: Any) -> None:
                                   (*THETA0_NAMES, "M11", "M12", "M22")))  # fmt: skip
         rows = []
         for name in (*THETA0_NAMES[:3], "M11", "M12", "M22", *THETA0_NAMES[3:], *drag):
-            row = [name, _fmt((result.model.parameters.get(name) or {}).get("value"))]
+            given = result.model.parameters.get(name)
+            row = [name, _fmt(None if given is None else given.value)]
             for c in result.changes:
-                entry = (c.parameters or {}).get(name) or {}
-                row += [_fmt(entry.get("value")), _fmt(entry.get("std"), 2)]
+                after = (c.parameters or {}).get(name)
+                row += ["-", "-"] if after is None else [_fmt(after.value), _fmt(after.std, 2)]
             rows.append([*row, units.get(name, "")])
         print_table(console, header, rows, title="parameters before and after each change",
                     numeric=tuple(range(1, len(header) - 1)))  # fmt: skip

@@ -272,7 +272,7 @@ def print_comparison(comparison: Comparison, console: Any) -> None:
                 numeric=tuple(range(1, len(header))))  # fmt: skip
     if comparison.validation is not None:
         v = comparison.validation
-        console.print(f"fit on {v['log']}: {v['predictor'] or 'not simulated (see the warnings)'}")
+        console.print(f"fit on {v.log}: {v.predictor or 'not simulated (see the warnings)'}")
     marks = "".join(p.mark for m in methods.values() for p in m.parameters.values())
     if "†" in marks:
         console.print(LEGEND["†"])

@@ -312,6 +312,30 @@ def test_json_lines_on_stdin():
     assert last["result"]["parameters"] == json.loads(offline.stdout)["parameters"]
 
 
+def test_each_update_line_reads_back_typed_and_writes_the_same_line():
+    """The JSON lines `wmrid live` prints (in process, CSV rows on standard input): each update line read as a
+    :class:`wmrid.LiveUpdate` writes back exactly the line it was read from (same keys, same order, same values), and
+    the terminal's table is made from the typed update."""
+    from tests.cliutil import wmrid as run
+    from wmrid.reporting.live_view import json_line, live_table
+
+    data = b"\n".join(SAMPLE.read_bytes().splitlines()[:3001]) + b"\n"
+    proc = run("live", "-", "--robot", "paper", "--every", "0.01", "--format", "json", stdin=data)
+    assert proc.returncode == 0, proc.stderr.decode()
+    lines = [line for line in proc.stdout.decode().splitlines() if json.loads(line)["event"] == "update"]
+    assert lines
+    previous = None
+    for line in lines:
+        update = wmrid.LiveUpdate.from_dict(json.loads(line))
+        assert json_line(update.to_dict()) == line
+        assert wmrid.LiveUpdate.from_dict(update.to_dict()) == update
+        live_table(update, previous)
+        previous = update
+    assert previous is not None
+    assert previous.parameters  # the last update has an estimate
+    assert previous.parameters["m11"][0] == json.loads(lines[-1])["parameters"]["m11"]["value"]
+
+
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
 def test_stop_writes_the_result_so_far(tmp_path, log, signum):
     """Ctrl-C or SIGTERM while a CSV is still being written: -o holds identify's result on the lines read, exit

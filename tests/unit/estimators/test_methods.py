@@ -149,6 +149,27 @@ def test_compare_on_the_cli(tmp_path: Path) -> None:
         assert "error_percent" in row["parameters"]["m11"]
 
 
+def test_the_compare_validation_reads_back_typed_and_writes_the_same_json() -> None:
+    """`wmrid compare --validate` (in process): the JSON's ``validation`` read as a :class:`ValidationLog` writes back
+    exactly the object it was read from (same keys, same order, same values); the table names the log and predictor
+    from the typed record."""
+    from wmrid.estimators.methods import ValidationLog
+
+    args = (str(SAMPLES / "paper_sinusoid.csv"), "--robot", "paper", "--methods", "observer,idim", "--validate",
+            str(SAMPLES / "paper_sinusoid.parquet"))  # fmt: skip
+    proc = wmrid("compare", *args, "--format", "json")
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads(proc.stdout)
+    back = ValidationLog.from_dict(data["validation"])
+    assert json.dumps(back.to_dict()) == json.dumps(data["validation"])
+    assert ValidationLog.from_dict(back.to_dict()) == back
+    assert back.log == str(SAMPLES / "paper_sinusoid.parquet")
+    assert back.predictor
+    table = wmrid("compare", *args, "--format", "table")
+    assert table.returncode == 0, table.stderr
+    assert f"fit on {back.log}: {back.predictor[:30]}" in " ".join(table.stdout.split())
+
+
 @pytest.mark.parametrize(
     ("args", "needle"),
     [

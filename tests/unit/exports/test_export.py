@@ -197,9 +197,42 @@ def test_mjcf_loads_and_check_agrees_with_validate(saved, tmp_path):
     assert model.body_inertia[platform][2] == pytest.approx(done.physical.parameters.I_p, rel=1e-12)
     fit = result.validation.fit_percent
     for wheel in ("eta_r", "eta_l"):
-        assert abs(done.check["multibody"][wheel] - fit[wheel]) < 1.0
+        assert abs(done.check.multibody[wheel] - fit[wheel]) < 1.0
     back = ExportResult.from_dict(json.loads(json.dumps(done.to_dict())))
     assert back.to_dict() == done.to_dict()
+
+
+@pytest.mark.parametrize("name", ["robot.yaml", "robot.xml"])
+def test_the_export_json_reads_back_typed_and_writes_the_same_text(saved, tmp_path, capsys, name):
+    """What `wmrid export --format json` prints, read as an :class:`ExportResult` (its check an ``ExportCheck``),
+    writes back exactly the text it was read from (same keys, same order, same values); the table is made from the
+    typed result.  The .xml export is checked on the bundled sample (MuJoCo), the .yaml one has no check."""
+    from wmrid.model.export_result import ExportCheck
+    from wmrid.reporting.render import to_json
+
+    path, _ = saved
+    check = []
+    if name.endswith(".xml"):
+        pytest.importorskip("mujoco")
+        check = ["--check", str(SAMPLE)]
+    with pytest.raises(SystemExit) as exit_:
+        main(["export", str(path), "--robot", "paper", "-o", str(tmp_path / name), *check, "--format", "json"])
+    assert exit_.value.code == 0
+    text = capsys.readouterr().out
+    data = json.loads(text)
+    back = ExportResult.from_dict(data)
+    assert to_json(back.to_dict()) + "\n" == text
+    assert json.dumps(back.to_dict(), default=str) == json.dumps(data)
+    assert (back.check is None) == (not check)
+    if back.check is not None:
+        assert isinstance(back.check, ExportCheck)
+        assert json.dumps(ExportCheck.from_dict(data["check"]).to_dict()) == json.dumps(data["check"])
+    with pytest.raises(SystemExit) as exit_:
+        main(["export", str(path), "--robot", "paper", "-o", str(tmp_path / f"t{name}"), *check, "--format", "table"])
+    assert exit_.value.code == 0
+    table = capsys.readouterr().out
+    assert "Physical quantities" in table
+    assert ("Check on" in table) == bool(check)
 
 
 def test_cli_export_and_its_refusals(saved, tmp_path, capsys):
@@ -287,7 +320,7 @@ def test_check_applies_the_identified_caster_drag(tmp_path):
     saved.write_text(json.dumps(result.to_dict(history=False), default=float))
     done = wmrid.export(str(saved), "amr", tmp_path / "amr.xml", check=str(log))
     for wheel in ("eta_r", "eta_l"):
-        assert abs(done.check["multibody"][wheel] - done.check["reduced"][wheel]) < 1.0, done.check
+        assert abs(done.check.multibody[wheel] - done.check.reduced[wheel]) < 1.0, done.check
     # auto takes the drag that follows the load here: the predictor cannot simulate it (said), the multibody model
     # drives it as the prototype's resistance x load, and fits no worse than the constant drag's reduced model
     auto = wmrid.identify(str(log), "amr")
@@ -295,9 +328,9 @@ def test_check_applies_the_identified_caster_drag(tmp_path):
     saved = tmp_path / "auto.json"
     saved.write_text(json.dumps(auto.to_dict(history=False), default=float))
     loaded = wmrid.export(str(saved), "amr", tmp_path / "auto.xml", check=str(log))
-    assert "follows the load" in loaded.check["reduced_not_simulated"]
+    assert "follows the load" in loaded.check.reduced_not_simulated
     for wheel in ("eta_r", "eta_l"):
-        assert loaded.check["multibody"][wheel] > done.check["reduced"][wheel] - 1.0, loaded.check
+        assert loaded.check.multibody[wheel] > done.check.reduced[wheel] - 1.0, loaded.check
 
 
 # --- the review's cases --------------------------------------------------------------------------------------------
@@ -365,8 +398,8 @@ def test_the_two_term_caster_drag_is_said_to_be_left_out(two_term, tmp_path):
     text = (tmp_path / "r.xml").read_text()
     assert "two-term caster drag (Cv, Cw) has no place in a multibody model" in text
     assert any("two-term" in n for n in done.notes)
-    assert done.check["reduced"]["eta_r"] is None
-    assert "Cv, Cw" in done.check["reduced_not_simulated"]
+    assert done.check.reduced["eta_r"] is None
+    assert "Cv, Cw" in done.check.reduced_not_simulated
     assert done.physical.quantities["Cv"].unit == "N m"
     wmrid.export(str(path), robot, tmp_path / "r.py")  # the controller model keeps it
     assert "TWO_TERM = (" in (tmp_path / "r.py").read_text()

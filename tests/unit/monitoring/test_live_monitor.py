@@ -166,3 +166,25 @@ def test_alarm_line_on_a_terminal(files):
     assert "CHANGE at 20.01 s (payload; alarm at 20." in out, out
     assert "M11 1.41" in out, out
     assert "payload 2" in " ".join(out.split()), out  # its mass: 2x kg
+
+
+def test_each_change_line_reads_back_typed_and_writes_the_same_line(files):
+    """The change lines `wmrid live --monitor` prints (in process, the loaded run's MCAP): each read as a
+    :class:`wmrid.LiveChange` writes back exactly the line it was read from (same keys, same order, same values), its
+    payload a :class:`wmrid.PayloadMass`; the terminal's alarm line is made from the typed change."""
+    from tests.cliutil import wmrid as run
+    from wmrid.reporting.live_view import change_line, json_line
+
+    model, path, _ = files
+    proc = run("live", str(path), "--robot", "paper", "--monitor", str(model), "--format", "json")
+    assert proc.returncode == 0, proc.stderr.decode()
+    lines = [line for line in proc.stdout.decode().splitlines() if json.loads(line)["event"] == "change"]
+    assert lines
+    for line in lines:
+        change = wmrid.LiveChange.from_dict(json.loads(line))
+        assert json_line(change.to_dict()) == line
+        assert wmrid.LiveChange.from_dict(change.to_dict()) == change
+        assert change.delay_s == json.loads(line)["delay_s"]
+        assert f"CHANGE at {change.t:.2f} s ({change.kind};" in change_line(change).plain
+    payloads = [wmrid.LiveChange.from_dict(json.loads(line)).payload for line in lines]
+    assert any(isinstance(p, wmrid.PayloadMass) for p in payloads)

@@ -9,6 +9,7 @@ user would: ``wmrid identify LOG0 --robot paper -o RESULT.json``.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -69,7 +70,7 @@ def base(plant) -> dict[str, float]:
 
 def assert_near(parameters: dict, truth: dict[str, float], names=INERTIA, rel: float = 0.02) -> None:
     for name in names:
-        assert parameters[name]["value"] == pytest.approx(truth[name], rel=rel), name
+        assert parameters[name].value == pytest.approx(truth[name], rel=rel), name
 
 
 # ------------------------------------------------------------------------------------------ detection
@@ -117,7 +118,7 @@ def test_friction_fault_is_found(unloaded) -> None:
     assert found.t == pytest.approx(30.0, abs=2.0)
     after = sim.t >= found.t
     speed = sim.eta[after].mean(axis=0)
-    p = {name: found.parameters[name]["value"] for name in ("Fv1", "Fv2", "Fd1", "Fd2")}
+    p = {name: found.parameters[name].value for name in ("Fv1", "Fv2", "Fd1", "Fd2")}
     faulty = change.after
     assert p["Fv1"] * speed[0] + p["Fd1"] == pytest.approx(faulty.F_v1 * speed[0] + faulty.F_d1, rel=0.15)
     assert p["Fv2"] * speed[1] + p["Fd2"] == pytest.approx(TRUE.F_v2 * speed[1] + TRUE.F_d2, rel=0.15)
@@ -302,6 +303,35 @@ def test_cli_monitor_writes_the_changes_as_json(cli_files) -> None:
     assert json.loads(out.read_text()) == data
 
 
+def test_the_parameters_read_back_typed_and_write_the_same_json(cli_files) -> None:
+    """The model's parameters (what the real ``wmrid identify`` wrote) are read as :class:`Parameter` and written back
+    exactly (same keys, same order, same values) in ``wmrid monitor``'s JSON; each change's parameters, read back as
+    :class:`Parameter`, write the same JSON object they were read from."""
+    from wmrid.estimators.parameter import Parameter
+
+    saved = json.loads(cli_files["model"].read_text())
+    got = load_model(cli_files["model"])
+    assert all(isinstance(p, Parameter) for p in got.parameters.values())
+    assert json.dumps({n: p.to_dict() for n, p in got.parameters.items()}) == json.dumps(saved["parameters"])
+    proc = wmrid("monitor", str(cli_files["load"]), "--model", str(cli_files["model"]), "--format", "json")
+    assert proc.returncode == 0, proc.stderr.decode()
+    data = json.loads(proc.stdout)
+    assert json.dumps(data["model"]["parameters"]) == json.dumps(saved["parameters"])
+    assert data["changes"]
+    for change in data["changes"]:
+        back = {n: Parameter.from_dict(n, e) for n, e in change["parameters"].items()}
+        assert json.dumps({n: p.to_dict() for n, p in back.items()}) == json.dumps(change["parameters"])
+
+
+def test_a_model_written_by_hand_gets_the_units_of_its_names() -> None:
+    """Entries with a value only (a model written by hand) read as parameters whose std is not determined, in the
+    unit their name has, without flags."""
+    values = dict(zip(model.THETA0_NAMES, model.base_parameters(TRUE), strict=True))
+    got = model_from_dict({"parameters": {n: {"value": float(v)} for n, v in values.items()}}, "hand.json")
+    m11 = got.parameters["m11"]
+    assert (m11.value, m11.std, m11.unit, m11.flags) == (values["m11"], math.inf, "1/(kg m^2)", ())
+
+
 def test_cli_monitor_table_on_request(cli_files) -> None:
     proc = wmrid("monitor", str(cli_files["load"]), "--model", str(cli_files["model"]), "--format", "table",
                  "--false-alarm-rate", "0.01")  # fmt: skip
@@ -382,7 +412,7 @@ def test_load_model_reads_what_identify_writes(cli_files) -> None:
     assert np.all(got.std > 0)
     assert np.all(np.isfinite(got.std))
     assert got.theta0[:4] == pytest.approx(model.base_parameters(TRUE)[:4], rel=0.01)
-    assert got.parameters["M11"]["unit"] == "kg m^2"
+    assert got.parameters["M11"].unit == "kg m^2"
 
 
 def test_a_saved_result_is_also_read_through_from_dict(unloaded_json) -> None:
