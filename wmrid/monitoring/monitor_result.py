@@ -77,9 +77,16 @@ class MonitorResult:
     #: control_rate), as the JSON's "identification"
     identification: dict[str, Any] | None = None
 
+    @property
+    def thresholds(self) -> tuple[float, float]:
+        """The GLR statistic's threshold after the first calibration span, and its limit as the calibration grows."""
+        dim = len(p_names(caster_form(self.model.form)))
+        first_dof = (self.calibration_samples - self.noise_lags) / self.noise_lags
+        return self.grid.threshold(first_dof, dim), self.grid.threshold(math.inf, dim)
+
     def detector_dict(self) -> dict[str, Any]:
         g, st, order = self.grid, self.settings, self.noise_lags
-        first_dof = (self.calibration_samples - order) / order
+        first, limit = self.thresholds
         form = caster_form(self.model.form)
         names, dim = p_names(form), len(p_names(form))
         drag = "" if form is None else f" + the caster drag of {form.friction} ({', '.join(names[DOF:])})"
@@ -95,8 +102,8 @@ class MonitorResult:
             f"least-squares fit of z on X: chi-square with {dim} degrees of freedom when nothing changed",
             "settings": {**st.to_dict(), **g.to_dict(), "noise_lags": order},
             "threshold": {
-                "first_calibration": g.threshold(first_dof, dim),
-                "limit": g.threshold(math.inf, dim),
+                "first_calibration": first,
+                "limit": limit,
                 "rule": f"margin x {dim} x the F({dim}, dof) quantile at p_per_test, dof = the noise model's degrees "
                 "of freedom (samples / lags); it falls from 'first_calibration' towards 'limit' as the calibration "
                 "grows (each segment's thresholds are in segments[].calibrations)",

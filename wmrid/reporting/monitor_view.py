@@ -21,15 +21,15 @@ def _fmt(x: Any, digits: int = 6) -> str:
 
 def print_monitor(result: MonitorResult, console: Any) -> None:
     """The changes found, and the parameters before and after each, as rich tables."""
-    det = result.detector_dict()
+    first, limit = result.thresholds
     st = result.settings
     console.print(f"wmrid monitor: {result.source} against {result.model.source}")
     info = result.log_info
     console.print(
         f"{info.samples} samples, {info.duration_s:.3f} s at {info.rate_hz:.6g} Hz; windowed GLR test of "
         f"the torque residual, at most {st.false_alarm_rate:g} false alarms per hour (threshold "
-        f"{det['threshold']['first_calibration']:.4g} after the first {st.calibration_s:g} s, assumed unchanged, "
-        f"falling to {det['threshold']['limit']:.4g} as the calibration grows)"
+        f"{first:.4g} after the first {st.calibration_s:g} s, assumed unchanged, "
+        f"falling to {limit:.4g} as the calibration grows)"
     )
     if not result.changes:
         console.print("no change of the dynamics detected")
