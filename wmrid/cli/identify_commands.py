@@ -150,12 +150,12 @@ def inspect_command(
     from wmrid.io.inspect import inspect_log
     from wmrid.reporting.render import print_inspection, to_json
 
-    info = inspect_log(one_or_many(log)).to_dict()
+    info = inspect_log(one_or_many(log))
     fmt = output_format.value
     if fmt == "auto":
         fmt = "table" if sys.stdout.isatty() else "json"
     if fmt == "json":
-        sys.stdout.write(to_json(info) + "\n")
+        sys.stdout.write(to_json(info.to_dict()) + "\n")
     else:
         print_inspection(info, console())
 

@@ -16,16 +16,46 @@ import numpy as np
 
 from wmrid.core.errors import LogFormatError
 from wmrid.core.extras import require
+from wmrid.core.json_record import JsonRecord, kept, names, other_keys
 from wmrid.core.wheel_log import CANONICAL, CHUNK_ROWS
 from wmrid.io.bag.paths import recording_paths
 from wmrid.io.sources import detect_format, open_source
 
 
+@dataclass(frozen=True, kw_only=True)
+class TopicSummary(JsonRecord):
+    """A topic of a recording: its message ``type`` and ``encoding``, ``messages`` (None: not counted), ``rate_hz``,
+    ``start_s`` and ``end_s`` (None: not read); a JointState topic's ``joints``, which of position, velocity and
+    effort are populated (``fields``) and its ``header_stamps``; another topic's numeric ``field_paths``
+    (``TOPIC:PATH``, as ``--columns`` takes them)."""
+
+    topic: str | None = None
+    type: str | None = None
+    encoding: str | None = None
+    messages: int | None = kept()
+    rate_hz: float | None = kept()
+    start_s: float | None = kept()
+    end_s: float | None = kept()
+    joints: tuple[str, ...] | None = names()
+    fields: dict[str, Any] | None = None
+    header_stamps: str | None = None
+    field_paths: tuple[str, ...] | None = names()
+    other: dict[str, Any] = other_keys()
+
+
+@dataclass(frozen=True, kw_only=True)
+class ColumnSummary(JsonRecord):
+    """A column of a CSV or Parquet log: its ``name`` and its ``type`` as the reader sees it."""
+
+    name: str | None = None
+    type: str | None = None
+    other: dict[str, Any] = other_keys()
+
+
 @dataclass(frozen=True)
 class McapInventory:
-    """What an MCAP or a bag (``format``) holds: its topics (each {"topic", "type", "encoding", "messages",
-    "rate_hz", "start_s", "end_s"}, JointState topics also "joints", "fields" and "header_stamps"), time range (s),
-    metadata names and notes."""
+    """What an MCAP or a bag (``format``) holds: its topics (:class:`TopicSummary`), time range (s), metadata names
+    and notes."""
 
     source: str
     profile: str
@@ -34,7 +64,7 @@ class McapInventory:
     start_s: float | None
     end_s: float | None
     duration_s: float
-    topics: list[dict[str, Any]]
+    topics: tuple[TopicSummary, ...]
     metadata: list[str]
     notes: list[str]
     format: str = "mcap"  # or "ros1 bag", "ros2 bag"
@@ -43,19 +73,19 @@ class McapInventory:
         return {
             "source": self.source, "format": self.format, "profile": self.profile, "library": self.library,
             "size_bytes": self.size_bytes, "start_s": self.start_s, "end_s": self.end_s, "duration_s": self.duration_s,
-            "topics": self.topics, "metadata": self.metadata, "notes": self.notes,
+            "topics": [t.to_dict() for t in self.topics], "metadata": self.metadata, "notes": self.notes,
         }  # fmt: skip
 
 
 @dataclass(frozen=True)
 class TableInventory:
-    """What a CSV or Parquet log holds: its columns ({"name", "type"}), rows (None for CSV: not counted), which
+    """What a CSV or Parquet log holds: its columns (:class:`ColumnSummary`), rows (None for CSV: not counted), which
     canonical columns it has and which required ones it lacks, reading notes and comment lines."""
 
     source: str
     format: str
     rows: int | None
-    columns: list[dict[str, str]]
+    columns: tuple[ColumnSummary, ...]
     canonical_found: list[str]
     canonical_missing: list[str]
     notes: list[str]
@@ -63,7 +93,8 @@ class TableInventory:
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "source": self.source, "format": self.format, "rows": self.rows, "columns": self.columns,
+            "source": self.source, "format": self.format, "rows": self.rows,
+            "columns": [c.to_dict() for c in self.columns],
             "canonical_found": self.canonical_found, "canonical_missing": self.canonical_missing, "notes": self.notes,
             "comments": self.comments,
         }  # fmt: skip
@@ -142,12 +173,12 @@ def _inventory(contents: Any, kind: str) -> McapInventory:
             )
         elif c.topic in paths:
             entry["field_paths"] = paths[c.topic]
-        topics.append(entry)
+        topics.append(TopicSummary.from_dict(entry))
     return McapInventory(
         source=contents.source, profile=contents.profile, library=contents.library, size_bytes=contents.size_bytes,
         start_s=min(firsts) * 1e-9 if firsts else None, end_s=max(lasts) * 1e-9 if lasts else None,
         duration_s=(max(lasts) - min(firsts)) * 1e-9 if firsts else 0.0,
-        topics=topics, metadata=sorted(contents.metadata), notes=list(contents.notes), format=kind,
+        topics=tuple(topics), metadata=sorted(contents.metadata), notes=list(contents.notes), format=kind,
     )  # fmt: skip
 
 
@@ -160,7 +191,7 @@ def _inspect_table(source, kind: str) -> TableInventory:
         try:
             with pa.OSFile(source.path, "r") if source.path is not None else pa.BufferReader(source.data) as stream:
                 pf = pq.ParquetFile(stream)
-                columns = [{"name": f.name, "type": str(f.type)} for f in pf.schema_arrow]
+                columns = [ColumnSummary(name=f.name, type=str(f.type)) for f in pf.schema_arrow]
                 rows = pf.metadata.num_rows
                 notes, comments = [], []
         except (pa.ArrowException, OSError) as err:
@@ -178,14 +209,14 @@ def _inspect_table(source, kind: str) -> TableInventory:
             raise
         except (ValueError, UnicodeDecodeError) as err:
             raise layout.fail(err) from err
-        columns = [{"name": str(c).strip(), "type": str(t)} for c, t in frame.dtypes.items()]
+        columns = [ColumnSummary(name=str(c).strip(), type=str(t)) for c, t in frame.dtypes.items()]
         rows = None
         notes = layout.notes
         comments = layout.comments[:40]
-    names = [c["name"] for c in columns]
+    found = [c.name for c in columns]
     return TableInventory(
-        source=source.name, format=kind, rows=rows, columns=columns,
-        canonical_found=[c for c in CANONICAL if c in names],
-        canonical_missing=[c for c in CANONICAL[:5] if c not in names],
+        source=source.name, format=kind, rows=rows, columns=tuple(columns),
+        canonical_found=[c for c in CANONICAL if c in found],
+        canonical_missing=[c for c in CANONICAL[:5] if c not in found],
         notes=notes, comments=comments,
     )  # fmt: skip

@@ -9,6 +9,7 @@ from wmrid.estimators.findings import StructuralMismatch, Uncertainty
 from wmrid.estimators.methods import Comparison
 from wmrid.estimators.records import Verdict
 from wmrid.estimators.result import IdentificationResult
+from wmrid.io.inspect import McapInventory, TableInventory
 from wmrid.estimators.verdict import LEGEND
 from wmrid.model.payload import PAYLOAD_UNITS, payload_statement
 from wmrid.reporting.terminal import STYLES, print_table, styled, warning as warning_line
@@ -146,55 +147,55 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
         console.print(warning_line(warning))
 
 
-def _format_name(info: dict) -> str:
+def _format_name(info: McapInventory) -> str:
     """'MCAP, profile ros2', 'ROS 1 bag', 'ROS 2 bag'."""
-    if info["format"] == "mcap":
-        return f"MCAP, profile {info['profile'] or '-'}"
-    return {"ros1 bag": "ROS 1 bag", "ros2 bag": "ROS 2 bag"}.get(info["format"], info["format"])
+    if info.format == "mcap":
+        return f"MCAP, profile {info.profile or '-'}"
+    return {"ros1 bag": "ROS 1 bag", "ros2 bag": "ROS 2 bag"}.get(info.format, info.format)
 
 
-def print_inspection(info: dict, console: Any) -> None:
+def print_inspection(info: McapInventory | TableInventory, console: Any) -> None:
     """Tables of what a log holds (:func:`wmrid.io.inspect.inspect_log`); topic, joint and column names fold onto
     more lines at the terminal's edge, never cut."""
-    if "topics" not in info:  # a CSV or Parquet log (an MCAP or a bag lists topics)
-        rows = [[col["name"], col["type"]] for col in info["columns"]]
-        print_table(console, ["column", "type"], rows, title=f"wmrid inspect: {info['source']} ({info['format']})")
-        if info.get("rows") is not None:
-            console.print(f"{info['rows']} rows")
-        missing = info["canonical_missing"]
+    if isinstance(info, TableInventory):
+        rows = [[str(col.name), str(col.type)] for col in info.columns]
+        print_table(console, ["column", "type"], rows, title=f"wmrid inspect: {info.source} ({info.format})")
+        if info.rows is not None:
+            console.print(f"{info.rows} rows")
+        missing = info.canonical_missing
         console.print(
             "canonical columns: all of t, eta_r, eta_l, tau_r, tau_l found"
             if not missing
             else f"canonical columns missing: {', '.join(missing)} (map them with --columns)"
         )
-        if info.get("comments"):
+        if info.comments:
             console.print("comment lines (they often say what the columns are):")
-            for line in info["comments"]:
+            for line in info.comments:
                 console.print(f"  {line}")
-        for note in info.get("notes", []):
+        for note in info.notes:
             console.print(f"note: {note}")
         return
-    if info.get("start_s") is not None:
-        span = f"{info['duration_s']:.3f} s"
+    if info.start_s is not None:
+        span = f"{info.duration_s:.3f} s"
     else:  # a recording read through rosbags gives other topics' counts without their times
-        counted = sum(entry["messages"] or 0 for entry in info["topics"])
+        counted = sum(entry.messages or 0 for entry in info.topics)
         span = f"{counted} messages, times not read" if counted else "no messages"
-    t0 = info.get("start_s") or 0.0
+    t0 = info.start_s or 0.0
     rows = []
-    for entry in info["topics"]:
-        rate = f"{entry['rate_hz']:.4g}" if entry["rate_hz"] else "-"
-        start = "-" if entry["start_s"] is None else f"{entry['start_s'] - t0:.3f}"
-        end = "-" if entry["end_s"] is None else f"{entry['end_s'] - t0:.3f}"
-        rows.append([entry["topic"], entry["type"], entry["encoding"], str(entry["messages"]), rate, start, end])
+    for entry in info.topics:
+        rate = f"{entry.rate_hz:.4g}" if entry.rate_hz else "-"
+        start = "-" if entry.start_s is None else f"{entry.start_s - t0:.3f}"
+        end = "-" if entry.end_s is None else f"{entry.end_s - t0:.3f}"
+        rows.append([entry.topic, entry.type, entry.encoding, str(entry.messages), rate, start, end])
     print_table(
         console, ["topic", "type", "encoding", "messages", "rate Hz", "start s", "end s"], rows,
-        title=f"wmrid inspect: {info['source']} ({_format_name(info)}, {info['size_bytes']} bytes, {span})",
+        title=f"wmrid inspect: {info.source} ({_format_name(info)}, {info.size_bytes} bytes, {span})",
         numeric=(3, 4, 5, 6), fold=(1,),
     )  # fmt: skip
-    joints = [e for e in info["topics"] if "joints" in e]
+    joints = [e for e in info.topics if e.joints is not None]
     if joints:
-        rows = [[e["topic"], ", ".join(e["joints"]), e["fields"]["position"], e["fields"]["velocity"],
-                 e["fields"]["effort"], e["header_stamps"]] for e in joints]  # fmt: skip
+        rows = [[e.topic, ", ".join(e.joints or ()), (e.fields or {})["position"], (e.fields or {})["velocity"],
+                 (e.fields or {})["effort"], e.header_stamps] for e in joints]  # fmt: skip
         print_table(console, ["topic", "joints", "position", "velocity", "effort", "header stamps"], rows,
                     title="JointState topics", fold=(1, 5))  # fmt: skip
     else:
@@ -202,9 +203,9 @@ def print_inspection(info: dict, console: Any) -> None:
             "no sensor_msgs/msg/JointState topic: give the wheel signals by field path (below) with --columns "
             "eta_r=TOPIC:PATH,eta_l=...,tau_r=...,tau_l=... (or a JSON topic with --topic and --columns)"
         )
-    by_path = [e for e in info["topics"] if e.get("field_paths")]
+    by_path = [e for e in info.topics if e.field_paths]
     if by_path:
-        rows = [[e["topic"], ", ".join(p.split(":", 1)[1] for p in e["field_paths"])] for e in by_path]
+        rows = [[e.topic, ", ".join(p.split(":", 1)[1] for p in e.field_paths or ())] for e in by_path]
         print_table(
             console,
             ["topic", "field paths"],
@@ -212,7 +213,7 @@ def print_inspection(info: dict, console: Any) -> None:
             fold=(1,),
             title="Numeric fields (for --columns eta_r=TOPIC:PATH,...; @NAME picks by name, [i] by position)",
         )
-    for note in info["notes"]:
+    for note in info.notes:
         console.print(f"note: {note}")
 
 

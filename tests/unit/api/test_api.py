@@ -52,7 +52,7 @@ def test_the_python_tour_runs(tmp_path, monkeypatch):
     assert scope["saved"].to_dict() == scope["result"].to_dict()
     assert scope["sim"].truth["payload"]["mass"] == 25.0
     assert isinstance(scope["changes"], wmrid.MonitorResult)
-    assert scope["what"].topics[0]["topic"] == "/joint_states"
+    assert scope["what"].topics[0].topic == "/joint_states"
     assert (tmp_path / "r.html").read_text(encoding="utf-8").startswith("<!DOCTYPE html>")
     assert scope["run"].identified == 3  # the sample's three files, one robot "sample_logs"
     assert (tmp_path / "fleet.html").read_text(encoding="utf-8").startswith("<!DOCTYPE html>")

@@ -67,7 +67,7 @@ def test_inspect_a_csv_and_a_parquet_log(tmp_path):
     csv = wmrid.inspect(tmp_path / "a.csv")
     parquet = wmrid.inspect(tmp_path / "a.parquet")
     for info in (csv, parquet):
-        assert [c["name"] for c in info.columns] == ["t", "eta_r", "tau_r", "x"]
+        assert [c.name for c in info.columns] == ["t", "eta_r", "tau_r", "x"]
         assert info.canonical_found == ["t", "eta_r", "tau_r", "x"]
         assert info.canonical_missing == ["eta_l", "tau_l"]
     assert (csv.format, csv.rows) == ("csv", None)

@@ -58,7 +58,7 @@ def test_the_identification_table_shows_every_parameter_with_its_std_nominal_and
 
 def test_the_inspection_and_comparison_tables_name_what_they_hold(result):
     console, out = _console()
-    print_inspection(wmrid.inspect(ROOT / "sample_logs" / "paper_sinusoid.mcap").to_dict(), console)
+    print_inspection(wmrid.inspect(ROOT / "sample_logs" / "paper_sinusoid.mcap"), console)
     text = out.getvalue()
     assert "/joint_states" in text
     assert "sensor_msgs/msg/JointState" in text
