@@ -9,8 +9,8 @@ from wmrid.estimators.findings import StructuralMismatch, Uncertainty
 from wmrid.estimators.methods import Comparison
 from wmrid.estimators.records import Verdict
 from wmrid.estimators.result import IdentificationResult
-from wmrid.io.inspect import McapInventory, TableInventory
 from wmrid.estimators.verdict import LEGEND
+from wmrid.io.inspect import McapInventory, TableInventory
 from wmrid.model.payload import PAYLOAD_UNITS, payload_statement
 from wmrid.reporting.terminal import STYLES, print_table, styled, warning as warning_line
 from wmrid.runtime.atomic import to_json_text
