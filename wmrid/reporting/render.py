@@ -229,11 +229,10 @@ def print_report(report: Any, console: Any) -> None:
         if not table:
             continue
         console.print()
-        if table.get("statement"):
-            console.print(table["statement"])
-        rows = [[str(c) for c in row] for row in table["rows"]]
-        print_table(console, [str(h) for h in table["header"]], rows, title=title,
-                    numeric=tuple(i for i, h in enumerate(table["header"]) if i and h != "unit"))  # fmt: skip
+        if table.statement:
+            console.print(table.statement)
+        rows = [[str(c) for c in row] for row in table.rows]
+        print_table(console, [str(h) for h in table.header], rows, title=title, numeric=table.numeric)
     for statement in report.diagnostics:
         console.print(f"- {statement}")
 

@@ -36,6 +36,7 @@ from wmrid.model.dynamics import RegressorForm
 from wmrid.model.payload import PAYLOAD_UNITS, payload_statement
 from wmrid.reporting import figures as fg
 from wmrid.reporting.figures import render
+from wmrid.reporting.report_table import ReportTable
 
 #: A difference from the CAD value beyond this many standard errors is flagged.
 SIGNIFICANT = 3.0
@@ -49,9 +50,9 @@ class Report:
 
     title: str
     summary: list[str]
-    intermediate: dict[str, Any]
-    base: dict[str, Any]
-    payload: dict[str, Any] | None
+    intermediate: ReportTable
+    base: ReportTable
+    payload: ReportTable | None
     diagnostics: list[str]
     notes: list[str]
     residuals: dict[str, Any]
@@ -174,7 +175,7 @@ def build_report(
         else:
             row += [_fmt(theta_vals[name]), _fmt(theta_std[name], 2)]
         rows.append(row)
-    intermediate = {"header": header, "rows": rows}
+    intermediate = ReportTable(header, rows)
 
     # Table 3: base parameters, with the comparison against nominal and CAD
     factor = ((diag.uncertainty or Uncertainty()).interval_factor or {})["95%"]
@@ -210,16 +211,16 @@ def build_report(
                 f"{zt:+.1f}" if math.isfinite(zt) else "—",
             ]
         rows.append(row)
-    base = {"header": header, "rows": rows}
+    base = ReportTable(header, rows)
 
     payload = None
     if rl.payload is not None:
         said = payload_statement(rl.payload)
-        payload = {
-            "header": ["quantity", "estimate", "std", "unit"],
-            "rows": [[k, _fmt(v), _fmt(e, 2), PAYLOAD_UNITS[k]] for k, (v, e) in rl.payload.items()],
-            "statement": said[0].upper() + said[1:] + ".",
-        }
+        payload = ReportTable(
+            header=["quantity", "estimate", "std", "unit"],
+            rows=[[k, _fmt(v), _fmt(e, 2), PAYLOAD_UNITS[k]] for k, (v, e) in rl.payload.items()],
+            statement=said[0].upper() + said[1:] + ".",
+        )
 
     statements = _statements(rl, inflated=inflated, warned=warned, flagged=flagged)
 
@@ -476,7 +477,8 @@ def to_json_dict(report: Report) -> dict[str, Any]:
     if "torque" in report.residuals:
         residuals["torque"] = {k: v for k, v in report.residuals["torque"].items() if k != "residual"}
     return {
-        "title": report.title, "base": report.base, "intermediate": report.intermediate, "payload": report.payload,
+        "title": report.title, "base": report.base.to_dict(), "intermediate": report.intermediate.to_dict(),
+        "payload": None if report.payload is None else report.payload.to_dict(),
         "key_numbers": [list(pair) for pair in report.key_numbers], "next_steps": report.next_steps,
         "diagnostics": report.diagnostics, "residuals": residuals, "notes": report.notes,
         "result": report.result, "provenance": report.provenance,

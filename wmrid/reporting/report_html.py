@@ -8,6 +8,7 @@ import re
 from typing import Any
 
 from wmrid.reporting.report import Report, rendered, residual_lines
+from wmrid.reporting.report_table import ReportTable
 
 _CSS = """
 *{box-sizing:border-box}
@@ -35,10 +36,10 @@ background:#f8faf8}
 """
 
 
-def _html_table(table: dict[str, Any]) -> str:
+def _html_table(table: ReportTable) -> str:
     """A table in a box that scrolls sideways when the page is narrower (cells never break a number)."""
-    head = "".join(f"<th>{html.escape(str(h))}</th>" for h in table["header"])
-    body = "".join("<tr>" + "".join(_html_cell(c) for c in row) + "</tr>" for row in table["rows"])
+    head = "".join(f"<th>{html.escape(str(h))}</th>" for h in table.header)
+    body = "".join("<tr>" + "".join(_html_cell(c) for c in row) + "</tr>" for row in table.rows)
     return f"<div class='scroll'><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div>"
 
 
@@ -89,7 +90,11 @@ def to_html(report: Report) -> str:
         _html_table(report.base),
     ]
     if report.payload:
-        parts += ["<h2>Payload</h2>", f"<p>{html.escape(report.payload['statement'])}</p>", _html_table(report.payload)]
+        parts += [
+            "<h2>Payload</h2>",
+            f"<p>{html.escape(report.payload.statement or '')}</p>",
+            _html_table(report.payload),
+        ]
     parts += ["<h2>Diagnostics</h2><ul>", *[f"<li>{html.escape(s)}</li>" for s in report.diagnostics], "</ul>"]
     if report.residuals:
         parts.append(

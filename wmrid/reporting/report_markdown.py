@@ -8,11 +8,12 @@ from typing import Any
 from wmrid.reporting import markdown as md
 from wmrid.reporting.markdown import code, text
 from wmrid.reporting.report import Report, rendered, residual_lines
+from wmrid.reporting.report_table import ReportTable
 
 
-def _md_table(table: dict[str, Any]) -> str:
+def _md_table(table: ReportTable) -> str:
     """A table as Markdown, every cell escaped (:mod:`wmrid.reporting.markdown`)."""
-    return md.table(table["header"], table["rows"])
+    return md.table(table.header, table.rows)
 
 
 def to_markdown(report: Report) -> str:
@@ -38,7 +39,7 @@ def to_markdown(report: Report) -> str:
     ]
     parts += ["", "## Intermediate parameters (paper Table 2)", "", _md_table(report.intermediate)]
     if report.payload:
-        parts += ["", "## Payload", "", text(report.payload["statement"]), "", _md_table(report.payload)]
+        parts += ["", "## Payload", "", text(report.payload.statement or ""), "", _md_table(report.payload)]
     parts += ["", "## Diagnostics", "", *[f"- {text(s)}" for s in report.diagnostics]]
     if report.residuals:
         parts += ["", "## Residuals", "", *[f"- {text(s)}" for s in residual_lines(report)]]

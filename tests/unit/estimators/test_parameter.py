@@ -93,7 +93,7 @@ def test_the_terminal_table_and_the_report_print_the_recorded_marks(broken) -> N
     assert "-1✗" in line.replace(" ", "")
     assert f"0.01{mark}" in line.replace(" ", "")
     report = build_report(broken, figures=False)
-    row = next(r for r in report.base["rows"] if r[0] == "Fv1")
+    row = next(r for r in report.base.rows if r[0] == "Fv1")
     assert row[3] == f"0.01 {mark}"
 
 
