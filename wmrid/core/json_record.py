@@ -10,8 +10,9 @@ The rules, per field (its JSON key is its name):
 * a :func:`spliced` field holds a record whose keys are written at its place in this object, not under a key of
   its own (the timing check's delay estimate, whose figures are the check's own keys);
 * keys the record does not know (a newer wmrid's, or a method's own figures) are kept in ``other``, in their order,
-  and written after the known ones; so is a ``null`` the object holds for a field that is written only with a value
-  (its attribute reads None, and the null is written in the field's place; a value set later replaces it).
+  and written after the known ones;
+* a ``null`` read for a field that is written only with a value is remembered in ``other`` too: the attribute reads
+  None and the null is written back in the field's place (a value set later is written instead).
 
 Each record's fields are declared in the order its keys are written.  A field's value is whatever the JSON holds
 (numbers, strings, booleans, lists, objects), read as it is: a record does not check or convert it.
