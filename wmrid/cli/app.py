@@ -62,19 +62,35 @@ def main(argv: list[str] | None = None) -> None:
 
     Exit codes: 0 success, 1 no result (or an output that could not be written), 2 usage or unreadable input,
     128 + the signal for Ctrl-C, SIGTERM and SIGHUP (130, 143, 129; temporary files removed either way)."""
-    from wmrid.cli import export_commands, fleet_commands, identify_commands, live_commands, plan_commands, sim_commands  # noqa: F401  (their commands join ``app`` on import)
-    from wmrid.cli.streams import finish_output, guard
     from wmrid.runtime import interrupts
-    from wmrid.runtime.atomic import clear_inputs, track_inputs
 
-    previous = interrupts.install()  # Ctrl-C is deferred while numba compiles (an interrupt there crashes LLVM)
-    if argv is None:  # the command-line process: a signal that finds it stuck in compiled code still ends it
-        interrupts.start_watchdog()
-        from wmrid.runtime.limits import one_blas_thread, tune_malloc
+    previous: dict[int, object] = {}
+    try:  # a stop before the command runs (its modules still importing): one line, nothing written
+        from wmrid.cli import (  # noqa: F401  (their commands join ``app`` on import)
+            export_commands,
+            fleet_commands,
+            identify_commands,
+            live_commands,
+            plan_commands,
+            sim_commands,
+        )
+        from wmrid.cli.streams import finish_output, guard
+        from wmrid.runtime.atomic import clear_inputs, track_inputs
 
-        tune_malloc()  # large arrays from the heap, not mapped afresh each time (a process of one command)
-        one_blas_thread()  # before numpy loads OpenBLAS: small calls, whose spinning workers took wmrid's cores
-    saved = guard()  # a failing stdout is an error naming it; a failing stderr never changes the outcome
+        previous = interrupts.install()  # Ctrl-C is deferred while numba compiles (an interrupt there crashes LLVM)
+        if argv is None:  # the command-line process: a signal that finds it stuck in compiled code still ends it
+            interrupts.start_watchdog()
+            from wmrid.runtime.limits import one_blas_thread, tune_malloc
+
+            tune_malloc()  # large arrays from the heap, not mapped afresh each time (a process of one command)
+            one_blas_thread()  # before numpy loads OpenBLAS: small calls, whose spinning workers took wmrid's cores
+        saved = guard()  # a failing stdout is an error naming it; a failing stderr never changes the outcome
+    except KeyboardInterrupt:
+        code = interrupts.exit_code() if previous else 130  # SIGTERM once the handlers are in: 143
+        if previous:
+            interrupts.restore(previous)
+        sys.stderr.write(f"wmrid: {_stopped_by() if previous else 'interrupted'}; no output was written\n")
+        raise SystemExit(code) from None
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
     if debug:  # accepted anywhere on the line, not only before the command
