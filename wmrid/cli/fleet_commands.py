@@ -358,9 +358,9 @@ def fleet_report_command(
     for line in rep.summary:
         out.print(line)
     ranked = ranked_table(rep.review)
-    rows = [[str(c) for c in row[1:]] for row in ranked["rows"]]  # the rank is the order
+    rows = [[str(c) for c in row[1:]] for row in ranked.rows]  # the rank is the order
     print_table(
-        out, ranked["header"][1:], rows, title="Robots ranked by the evidence against them", numeric=(3,), fold=(1, 4)
+        out, ranked.header[1:], rows, title="Robots ranked by the evidence against them", numeric=(3,), fold=(1, 4)
     )
     for rv in rep.review.robots:
         for finding in rv.findings:

@@ -18,6 +18,7 @@ from wmrid.reporting.figures import render
 from wmrid.reporting.markdown import text
 from wmrid.reporting.report_html import _CSS, _html_provenance, _html_table
 from wmrid.reporting.report_markdown import _md_table, md_provenance
+from wmrid.reporting.report_table import ReportTable
 
 #: Robots drawn at most (flagged robots always; the others in rank order up to this count).
 MAX_ROBOT_FIGURES = 60
@@ -47,7 +48,7 @@ def _date(review: RobotReview, index: int | None) -> str:
     return "" if index is None else review.label_of(index)
 
 
-def ranked_table(review: FleetReview) -> dict[str, Any]:
+def ranked_table(review: FleetReview) -> ReportTable:
     """Robots ranked by the evidence against them: rank, robot, model, logs (failed), evidence, flags, change onset,
     first flagged."""
     rows = []
@@ -60,7 +61,7 @@ def ranked_table(review: FleetReview) -> dict[str, Any]:
             _date(rv, change.alarm if change else None) or "—",
         ])  # fmt: skip
     header = ["rank", "robot", "robot file", "logs", "evidence", "flags", "change from", "first flagged"]
-    return {"header": header, "rows": rows}
+    return ReportTable(header, rows)
 
 
 def build_fleet_report(
@@ -115,7 +116,7 @@ def _robot_html(rep: FleetReport, rv: RobotReview) -> list[str]:
         parts.append(f"<p class='small'>{html.escape(rv.sensitivity_text)}</p>")
     if rv.payload:
         rows = [[n, f"{v:.4g}", "—" if e is None else f"{e:.2g}"] for n, (v, e) in rv.payload.items()]
-        parts.append(_html_table({"header": ["payload", "estimate", "std"], "rows": rows}))
+        parts.append(_html_table(ReportTable(["payload", "estimate", "std"], rows)))
     name = f"robot {rv.robot_id}"
     if name in rep.figure_objects:
         note = html.escape(rep.figure_notes.get(name, ""))
@@ -222,6 +223,6 @@ def to_json_dict(rep: FleetReport) -> dict[str, Any]:
     return {
         "table": rep.table, "summary": rep.summary, "settings": review.settings, "statements": review.statements,
         "outlier_thresholds": {m: {"robots": n, "threshold": h} for m, (n, h) in review.outlier_thresholds.items()},
-        "ranked": ranked_table(review), "robots": [robot_dict(rv) for rv in review.robots],
+        "ranked": ranked_table(review).to_dict(), "robots": [robot_dict(rv) for rv in review.robots],
         "provenance": rep.provenance,
     }  # fmt: skip
