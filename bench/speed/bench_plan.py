@@ -43,9 +43,9 @@ def main() -> None:
             wall = time.perf_counter() - start
             row = {
                 "robot": robot, "seed": seed, "duration": args.duration, "wall_s": wall, "worst": plan.worst,
-                "worst_relative_std": plan.value, "evaluations": plan.settings["evaluations"],
-                **{f"x_{b}": v["improvement"] for b, v in plan.baselines.items()},
-                **{f"x_{b}_open_floor": v["area_ignored"]["improvement"] for b, v in plan.baselines.items()},
+                "worst_relative_std": plan.value, "evaluations": plan.settings.evaluations,
+                **{f"x_{b}": v.improvement for b, v in plan.baselines.items()},
+                **{f"x_{b}_open_floor": v.area_ignored.improvement for b, v in plan.baselines.items()},
             }  # fmt: skip
             rows.append(row)
             print(f"{robot} seed {seed}: {wall:5.1f} s, worst {100 * plan.value:.3g} % ({plan.worst}), "

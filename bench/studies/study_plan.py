@@ -173,7 +173,7 @@ def prediction_for(robot_path: str, csv: str, form, spec: dict) -> dict[str, flo
     import wmrid
 
     again = wmrid.predict_plan(Path(csv).with_suffix(".json"), robot_path, friction=form.friction)
-    return {n: float(again.predicted[n]["std"]) for n in BASE}
+    return {n: float(again.predicted[n].std) for n in BASE}
 
 
 def summarise(made: dict, rows: list[dict]) -> dict:
@@ -264,14 +264,14 @@ def sequential(eta_noise: float, tau_noise: float, seeds: int = 20, workers: int
     alone, both = wmrid.plan(robot, **kw), wmrid.plan(robot, given=saved, **kw)
     csv = OUT / "sequential_next.csv"
     wmrid.write_plan(both, csv, force=True)
-    scale = np.array([both.predicted[n]["scale"] for n in BASE])
+    scale = np.array([both.predicted[n].scale for n in BASE])
     # the plans' own predictions: the targeted plan alone, and the untargeted plan combined with the first log
-    second_pred = np.array([wmrid.predict_plan(both, robot).predicted[n]["std"] for n in BASE])
+    second_pred = np.array([wmrid.predict_plan(both, robot).predicted[n].std for n in BASE])
     alone_with = wmrid.predict_plan(alone, robot, given=saved).value
-    fused_pred = np.array([both.predicted[n]["std"] for n in BASE])
+    fused_pred = np.array([both.predicted[n].std for n in BASE])
     alone_csv = OUT / "sequential_alone.csv"
     wmrid.write_plan(alone, alone_csv, force=True)
-    alone_pred = np.array([alone.predicted[n]["std"] for n in BASE])
+    alone_pred = np.array([alone.predicted[n].std for n in BASE])
     jobs = [(s, robot, str(csv), str(alone_csv), eta_noise, tau_noise) for s in range(seeds)]
     with ProcessPoolExecutor(max_workers=workers) as pool:
         rows = list(pool.map(_sequential_seed, jobs))
@@ -293,8 +293,8 @@ def sequential(eta_noise: float, tau_noise: float, seeds: int = 20, workers: int
         "noise": [eta_noise, tau_noise], "seeds": seeds, "scale": dict(zip(BASE, scale.tolist(), strict=True)),
         "first_relative_std": {n: first.parameters[n][1] / scale[i] for i, n in enumerate(BASE)},
         "plan_alone": {"worst": alone.value, "with_first_log": alone_with,
-                       "relative": {n: v["relative"] for n, v in alone.predicted.items()}},
-        "plan_given": {"worst": both.value, "relative": {n: v["relative"] for n, v in both.predicted.items()}},
+                       "relative": {n: v.relative for n, v in alone.predicted.items()}},
+        "plan_given": {"worst": both.value, "relative": {n: v.relative for n, v in both.predicted.items()}},
         "second": figures("second", second_pred), "fused": figures("fused", fused_pred),
         "alone": figures("alone", alone_pred),
         "alone_worst_reported": sorted(np.max(np.array([r["alone_std"] for r in rows]) / scale, axis=1).tolist()),

@@ -114,12 +114,18 @@ def test_written_plans_keep_their_limits_and_agree(planned: Path) -> None:
 
 
 def test_plan_round_trips_and_reports(planned: Path, tmp_path: Path) -> None:
-    """The JSON reads back into the same plan, whose samples are the CSV's; report turns it into a page."""
+    """The JSON reads back into the same plan, typed, which writes the same text (key order included) and whose
+    samples are the CSV's; report turns it into a page."""
+    from wmrid.design.plan_records import BaselineForecast, LimitUse, PredictedStd
+
     plan = wmrid.read_plan(planned / "plan.json")
-    again = json.loads(json.dumps(plan.to_dict()))
-    assert again == json.loads((planned / "plan.json").read_text())
+    assert isinstance(plan.predicted["m11"], PredictedStd)
+    assert isinstance(plan.limits_used["max_torque"], LimitUse)
+    assert isinstance(plan.baselines["reversing"], BaselineForecast)
+    assert plan.settings.noise_source == "given"
+    assert json.dumps(plan.to_dict()) == json.dumps(json.loads((planned / "plan.json").read_text()))
     frame = pd.read_csv(planned / "plan.csv")
-    np.testing.assert_allclose(plan.samples()["v"], frame["v"], atol=1e-12)
+    np.testing.assert_allclose(plan.samples().v, frame["v"], atol=1e-12)
     proc = run("report", planned / "plan.json", "-o", tmp_path / "plan.html")
     assert proc.returncode == 0, proc.stderr.decode()
     page = (tmp_path / "plan.html").read_text()
@@ -152,13 +158,13 @@ def test_given_results_add_their_information(planned: Path, tmp_path: Path) -> N
     saved = tmp_path / "run.json"
     saved.write_text(json.dumps(result.to_dict(history=False)))
     both = wmrid.plan(robot, duration=12, eta_noise=0.02, tau_noise=0.005, log_rate=200, given=saved)
-    assert both.given["results"][0]["source"] == str(saved)
-    assert set(both.given["results"][0]["parameters"]) >= {"m11", "m12", "m22", "Vc"}
+    assert both.given.results[0].source == str(saved)
+    assert set(both.given.results[0].parameters or ()) >= {"m11", "m12", "m22", "Vc"}
     from wmrid.api.planning import _given
     from wmrid.design.plan import FINE_GRID, _problem
     from wmrid.model.dynamics import RegressorForm
 
-    theta0 = np.array([both.predicted[n]["nominal"] for n in both.predicted])
+    theta0 = np.array([both.predicted[n].nominal for n in both.predicted])
     (info, _), _ = _given(saved, tuple(both.predicted), theta0)
     args = (theta0, RegressorForm("general"), both.r, both.b, both.limits, both.noise, 12.0, min(200.0, FINE_GRID))
     with_info = _problem(*args, "worst", info, 10.0)
@@ -171,9 +177,9 @@ def test_given_results_add_their_information(planned: Path, tmp_path: Path) -> N
     names = list(both.predicted)
     alone, added = wmrid.predict_plan(both, robot), wmrid.predict_plan(both, robot, given=saved)
     std = np.sqrt(np.diag(without.covariance(motion))), np.sqrt(np.diag(with_info.covariance(motion)))
-    np.testing.assert_allclose([alone.predicted[n]["std"] for n in names], std[0], rtol=1e-9)
-    np.testing.assert_allclose([added.predicted[n]["std"] for n in names], std[1], rtol=1e-9)
-    assert added.given["results"][0]["source"] == str(saved)
+    np.testing.assert_allclose([alone.predicted[n].std for n in names], std[0], rtol=1e-9)
+    np.testing.assert_allclose([added.predicted[n].std for n in names], std[1], rtol=1e-9)
+    assert added.given.results[0].source == str(saved)
     assert alone.given is None
 
 
@@ -185,16 +191,16 @@ def test_a_plan_predicted_again(planned: Path) -> None:
     same = wmrid.predict_plan(planned / "plan.json", robot)
     assert list(same.predicted) == list(plan.predicted)
     for name, entry in plan.predicted.items():
-        assert same.predicted[name]["std"] == pytest.approx(entry["std"], rel=1e-9)
-        assert same.predicted[name]["counted"] == entry["counted"]
+        assert same.predicted[name].std == pytest.approx(entry.std, rel=1e-9)
+        assert same.predicted[name].counted == entry.counted
     assert same.value == pytest.approx(plan.value, rel=1e-9)
     np.testing.assert_array_equal(same.excitation.coefficients, plan.excitation.coefficients)
     drag = wmrid.predict_plan(plan, robot, friction="wheel+caster")
     assert list(drag.predicted) == [*plan.predicted, "Cv", "Cw"]
-    assert drag.settings["friction"] == "wheel+caster"
-    assert plan.settings["friction"] == "wheel"
-    assert all(0 < drag.predicted[n]["std"] < np.inf for n in drag.predicted)
-    assert drag.value == max(v["relative"] for v in drag.predicted.values() if v["counted"])
+    assert drag.settings.friction == "wheel+caster"
+    assert plan.settings.friction == "wheel"
+    assert all(0 < drag.predicted[n].std < np.inf for n in drag.predicted)
+    assert drag.value == max(v.relative for v in drag.predicted.values() if v.counted)
     assert drag.baselines == plan.baselines
 
 
@@ -278,21 +284,21 @@ def test_a_robot_with_casters_is_planned_for_their_drag(planned: Path, tmp_path:
     robot.write_text(ROBOT.replace('name = "tiny"', 'name = "casters"') + CASTERS)
     kw = {"duration": 12, "eta_noise": 0.02, "tau_noise": 0.005, "log_rate": 200}
     plan = wmrid.plan(robot, **kw)
-    assert plan.settings["friction"] == "wheel+caster+load"
+    assert plan.settings.friction == "wheel+caster+load"
     assert list(plan.predicted) == ["m11", "m12", "m22", "Vc", "Fv1", "Fv2", "Fd1", "Fd2", "D1", "D1dv", "D1w2"]
-    counted = {n for n, v in plan.predicted.items() if v["counted"]}
+    counted = {n for n, v in plan.predicted.items() if v.counted}
     assert counted == set(plan.predicted) - {"D1dv", "D1w2"}
     assert plan.worst in counted
-    assert plan.value == pytest.approx(max(plan.predicted[n]["relative"] for n in counted), rel=1e-12)
+    assert plan.value == pytest.approx(max(plan.predicted[n].relative for n in counted), rel=1e-12)
     from wmrid.api.inputs import load_robot
 
     parsed = load_robot(robot)
     drag = 0.015 * float(sum(static_loads(parsed.nominal, parsed.casters)[2:]))
-    assert plan.predicted["D1"]["nominal"] == pytest.approx(drag, rel=1e-12)
+    assert plan.predicted["D1"].nominal == pytest.approx(drag, rel=1e-12)
     assert wmrid.read_plan(_saved(plan, tmp_path)).predicted == plan.predicted
     from wmrid.reporting.plan_view import summary
 
-    said = " ".join(summary(plan.to_dict()))
+    said = " ".join(summary(plan))
     assert "(D1dv " in said
     assert "not counted" in said
     assert plan.form.friction == "wheel+caster+load"

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, overload
 
@@ -25,7 +26,8 @@ from wmrid.api.inputs import given_results, read_json_input
 from wmrid.core.errors import UsageError, option
 from wmrid.design.information import DEFAULT_K, GivenLogs, SensorNoise
 from wmrid.design.limits import DEFAULT_MARGIN, resolve_limits
-from wmrid.design.plan import Plan, make_plan, plan_form
+from wmrid.design.plan import Plan, criterion_of, make_plan, plan_form, predicted_std
+from wmrid.design.plan_records import GivenResult, GivenResults
 from wmrid.estimators.combination import Part, shared_names
 from wmrid.model.robot import BaseSet, Robot
 
@@ -79,8 +81,9 @@ def measured_noise(log: Any, robot: Robot | None = None) -> tuple[float, float, 
 
 def _given(
     given: Any, names: tuple[str, ...], theta0: np.ndarray
-) -> tuple[tuple[GivenLogs, dict[str, Any]], np.ndarray] | tuple[None, np.ndarray]:
-    """((the given logs (:class:`wmrid.design.information.GivenLogs`), description), theta0 updated) from saved
+) -> tuple[tuple[GivenLogs, GivenResults], np.ndarray] | tuple[None, np.ndarray]:
+    """((the given logs (:class:`wmrid.design.information.GivenLogs`), what they are (:class:`GivenResults`)),
+    theta0 updated) from saved
     results: each result's base covariance over the parameters it determines and means as the plan does
     (:func:`wmrid.estimators.combination.shared_names`), and its weight (:meth:`wmrid.estimators.combination.Part.
     weight`), summed: what ``wmrid identify --given`` will combine; the nominal values replaced by a result's estimate
@@ -110,9 +113,9 @@ def _given(
             value, std = float(est.theta0[i]), math.sqrt(cov[i, i])
             if value != 0 and std < 0.1 * abs(value):
                 theta0[names.index(their[i])] = value
-        sources.append({"source": source, "log": result.source, "method": est.method,
-                        "parameters": [their[i] for i in idx]})  # fmt: skip
-    return (GivenLogs(weight, 0.5 * (spread + spread.T)), {"results": sources}), theta0
+        sources.append(GivenResult(source=source, log=result.source, method=est.method,
+                                   parameters=tuple(their[i] for i in idx)))  # fmt: skip
+    return (GivenLogs(weight, 0.5 * (spread + spread.T)), GivenResults(results=tuple(sources))), theta0
 
 
 def footprint(robot: Robot) -> float:
@@ -243,10 +246,7 @@ def plan(
         criterion=criterion, friction=friction, k=k, given=given_info, progress=progress, geometry=geometry,
         drag=tuple(theta0[8 : 8 + len(drag)]),
     )  # fmt: skip
-    settings = {**result.settings, "noise_source": noise_source}
-    from dataclasses import replace
-
-    return replace(result, settings=settings)
+    return replace(result, settings=replace(result.settings, noise_source=noise_source))
 
 
 def predict_plan(
@@ -265,42 +265,34 @@ def predict_plan(
     saved results of logs already identified (paths, or results; one or several), whose information is added as
     :func:`plan` adds it.
 
-    Returns the plan with ``predicted``, ``value``, ``given`` and ``settings["friction"]`` of the new prediction; the
+    Returns the plan with ``predicted``, ``criterion``, ``given`` and ``settings.friction`` of the new prediction; the
     drive, its limits, noise and ``baselines`` are the plan's own.
     """
-    from dataclasses import replace
-
     from wmrid.api.inputs import load_robot
     from wmrid.design.plan import FINE_GRID, _problem
 
     if not isinstance(plan, Plan):
         plan = read_plan(plan)
     robot_obj = load_robot(robot)
-    model, geometry, drag = _friction(friction or str(plan.settings.get("friction", "wheel")), robot_obj)
+    model, geometry, drag = _friction(friction or plan.settings.friction or "wheel", robot_obj)
     form = plan_form(model, geometry)
     names = form.base_names
-    start = np.array([float(plan.predicted[n]["nominal"]) for n in names[:8]])
+    start = np.array([float(plan.predicted[n].nominal) for n in names[:8]])  # type: ignore[arg-type]
     theta0 = np.concatenate([start, drag, np.zeros(len(names) - 8 - len(drag))])
     given_info, theta0 = _given(given, names, theta0)
     duration = plan.excitation.duration
+    criterion = plan.settings.criterion or "worst"
     fine = _problem(
         theta0, form, plan.r, plan.b, plan.limits, plan.noise, duration, min(plan.noise.rate, FINE_GRID),
-        plan.settings.get("criterion", "worst"), None if given_info is None else given_info[0],
-        plan.settings.get("k", DEFAULT_K),
+        criterion, None if given_info is None else given_info[0],
+        DEFAULT_K if plan.settings.k is None else plan.settings.k,
     )  # fmt: skip
     cov = fine.covariance(fine.motion_of(np.asarray(plan.excitation.coefficients, dtype=np.float64)))
-    rel = fine.relative_std(cov)
-    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    predicted = {
-        name: {"nominal": float(theta0[i]), "scale": float(fine.scales[i]), "scale_from": fine.scale_sources[i],
-               "std": float(std[i]), "relative": float(rel[i]), "counted": i < fine.judged}
-        for i, name in enumerate(names)
-    }  # fmt: skip
-    settings = {**plan.settings, "friction": model, "caster_geometry": list(form.geometry),
-                "parameter_names": list(names)}  # fmt: skip
+    predicted = predicted_std(fine, theta0, cov, names)
+    settings = replace(plan.settings, friction=model, caster_geometry=tuple(form.geometry), parameter_names=names)
     return replace(
-        plan, predicted=predicted, value=fine.criterion_value(cov), settings=settings,
-        given=None if given_info is None else given_info[1],
+        plan, predicted=predicted, criterion=criterion_of(criterion, fine.criterion_value(cov), predicted),
+        settings=settings, given=None if given_info is None else given_info[1],
     )  # fmt: skip
 
 
@@ -379,7 +371,7 @@ def write_plan(
 
     # a stamped plan carries zero stamps: ros2_control's diff_drive_controller drops a TwistStamped older than its
     # cmd_vel_timeout (0.5 s) and re-stamps only a zero one, and ros2 bag play keeps the stamps as written
-    write_reference(target, result.samples(), topic=topic, stamped=stamped, zero_stamps=stamped, force=force)
+    write_reference(target, result.samples().columns(), topic=topic, stamped=stamped, zero_stamps=stamped, force=force)
 
 
 def plan_document(path: str | os.PathLike[str]) -> Plan | None:

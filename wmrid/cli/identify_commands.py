@@ -205,7 +205,7 @@ def report_command(
         if output is None:
             from wmrid.reporting.plan_view import print_plan
 
-            print_plan(planned.to_dict(), console())
+            print_plan(planned, console())
         else:
             write_plan_report(planned, output, force=force)
             stderr_console().print(f"wrote {output}")

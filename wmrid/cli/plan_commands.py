@@ -107,12 +107,11 @@ def plan_command(
         for path in outputs:
             if not on_stdout(path):
                 write_plan(result, path, topic=topic, stamped=stamped, force=force)
-    data = result.to_dict()
     fmt = output_format.value
     if fmt == "auto":
         fmt = "table" if sys.stdout.isatty() else "json"
     if fmt == "json":
-        sys.stdout.write(to_json(data) + "\n")
-        warning_summary(data["warnings"])
+        sys.stdout.write(to_json(result.to_dict()) + "\n")
+        warning_summary(list(result.warnings))
     else:
-        print_plan(data, console(), [p for p in outputs if not on_stdout(p)])
+        print_plan(result, console(), [p for p in outputs if not on_stdout(p)])

@@ -22,8 +22,20 @@ from wmrid.core.errors import UsageError, option
 from wmrid.design.excitation import RAMP_SECONDS, Excitation, pose_along
 from wmrid.design.information import DEFAULT_K, GivenLogs, SensorNoise
 from wmrid.design.limits import LIMIT_NAMES, Limits
+from wmrid.design.plan_records import (
+    BaselineForecast,
+    Criterion,
+    GivenResults,
+    LimitUse,
+    OpenFloorForecast,
+    PlanSettings,
+    PredictedStd,
+    ReferenceSamples,
+    Separability,
+    WheelSpread,
+)
 from wmrid.design.problem import CORRELATION, CRITERIA, DIRECTION_SHARE, FLOOR_SHARE, Motion, Problem
-from wmrid.design.search import search
+from wmrid.design.search import SearchResult, search
 from wmrid.model.dynamics import RegressorForm, choose_form, load_signals
 
 SCHEMA = 1
@@ -44,15 +56,15 @@ BASELINES = ("sinusoid", "reversing")
 
 @dataclass(frozen=True)
 class Plan:
-    """A planned drive and what it predicts (all SI).
+    """A planned drive and what it predicts (all SI; the parts are the records of :mod:`wmrid.design.plan_records`).
 
     robot : its name; r, b : m (nominal).  limits : :class:`Limits`.  noise : :class:`SensorNoise`.  excitation : the
-    reference (:class:`Excitation`).  settings : duration, period, harmonics, rate (Hz of the written reference),
-    seed, criterion, friction, k, the search's statistics.  predicted : name -> {nominal, scale, scale_from, std,
-    relative} for each base parameter (std in the parameter's unit; relative = std / scale).  value : the criterion.
-    limits_used : limit name -> {limit, bound, peak, share} (share = peak / limit).  baselines : name -> {value,
-    relative, worst, slowed_by, leaves_area, peaks}.  margins : what makes the parameters separable (time each
-    wheel spends in each direction, its speed spread, the correlation of v and w).  given : the logs already
+    reference (:class:`Excitation`).  settings : :class:`PlanSettings` (duration, period, harmonics, rate of the
+    written reference, seed, criterion, friction, k, the search's statistics).  predicted : base parameter name ->
+    :class:`PredictedStd` (std in the parameter's unit; relative = std / scale).  criterion : :class:`Criterion`
+    (its value and the worst parameter).  limits_used : limit name -> :class:`LimitUse` (share = peak / limit).
+    baselines : name -> :class:`BaselineForecast`.  margins : :class:`Separability` (time each wheel spends in each
+    direction, its speed spread, the correlation of v and w).  given : :class:`GivenResults`, the logs already
     identified whose information was added (None).  warnings : sentences.
     """
 
@@ -62,30 +74,34 @@ class Plan:
     limits: Limits
     noise: SensorNoise
     excitation: Excitation
-    settings: dict[str, Any]
-    predicted: dict[str, dict[str, Any]]
-    value: float
-    limits_used: dict[str, dict[str, float | None]]
-    baselines: dict[str, dict[str, Any]]
-    margins: dict[str, Any]
-    given: dict[str, Any] | None = None
+    settings: PlanSettings
+    predicted: dict[str, PredictedStd]
+    criterion: Criterion
+    limits_used: dict[str, LimitUse]
+    baselines: dict[str, BaselineForecast]
+    margins: Separability
+    given: GivenResults | None = None
     warnings: tuple[str, ...] = field(default=())
 
     @property
     def form(self) -> RegressorForm:
-        """The regressor form the prediction is for (``settings["friction"]``, the casters' geometry when given)."""
-        return plan_form(self.settings.get("friction", "wheel"), tuple(self.settings.get("caster_geometry") or ()))
+        """The regressor form the prediction is for (``settings.friction``, the casters' geometry when given)."""
+        return plan_form(self.settings.friction or "wheel", tuple(self.settings.caster_geometry or ()))
+
+    @property
+    def value(self) -> float:
+        """The criterion's value (a share: ``criterion.value``)."""
+        return float(self.criterion.value)  # type: ignore[arg-type]  # checked a number when read
 
     @property
     def worst(self) -> str:
-        """The base parameter with the largest predicted relative std (of those the criterion counts)."""
-        counted = [n for n, v in self.predicted.items() if v.get("counted", True)]
-        return max(counted, key=lambda n: self.predicted[n]["relative"])
+        """The base parameter with the largest predicted relative std, of those the criterion counts
+        (``criterion.worst``)."""
+        return str(self.criterion.worst)
 
-    def samples(self, rate: float | None = None) -> dict[str, np.ndarray]:
-        """The reference at ``rate`` Hz (default: the plan's): t (s), v (m/s), omega (rad/s), eta_r, eta_l (rad/s,
-        the wheel-speed set-points, nominal r and b), x, y (m), phi (rad) of the predicted pose."""
-        rate = float(rate or self.settings["rate"])
+    def samples(self, rate: float | None = None) -> ReferenceSamples:
+        """The reference at ``rate`` Hz (default: the plan's ``settings.rate``) and its predicted pose."""
+        rate = float(rate or self.settings.rate)  # type: ignore[arg-type]
         n = round(self.excitation.duration * rate) + 1
         t = np.linspace(0.0, self.excitation.duration, n)
         v, w, _, _ = self.excitation.evaluate(t)
@@ -95,20 +111,20 @@ class Plan:
         vf, wf, _, _ = self.excitation.evaluate(fine)
 
         pose = pose_along(fine, vf, wf)[::every]
-        return {
-            "t": t, "v": v, "omega": w, "eta_r": (v + self.b * w) / self.r, "eta_l": (v - self.b * w) / self.r,
-            "x": pose[:, 0], "y": pose[:, 1], "phi": pose[:, 2],
-        }  # fmt: skip
+        return ReferenceSamples(
+            t=t, v=v, omega=w, eta_r=(v + self.b * w) / self.r, eta_l=(v - self.b * w) / self.r,
+            x=pose[:, 0], y=pose[:, 1], phi=pose[:, 2],
+        )  # fmt: skip
 
     def to_dict(self) -> dict[str, Any]:
+        """The plan's JSON (what ``wmrid plan -o plan.json`` writes and :meth:`from_dict` reads)."""
         return {
             "schema": SCHEMA, "kind": "plan", "robot": self.robot, "r": self.r, "b": self.b,
-            "criterion": {"name": self.settings["criterion"], "text": CRITERION_TEXT[self.settings["criterion"]],
-                          "value": self.value, "worst": self.worst},
-            "predicted": self.predicted, "limits": self.limits.to_dict(), "limits_used": self.limits_used,
-            "baselines": self.baselines, "margins": self.margins, "noise": self.noise.to_dict(),
-            "settings": self.settings, "excitation": self.excitation.to_dict(), "given": self.given,
-            "warnings": list(self.warnings),
+            "criterion": self.criterion.to_dict(), "predicted": {n: p.to_dict() for n, p in self.predicted.items()},
+            "limits": self.limits.to_dict(), "limits_used": {n: u.to_dict() for n, u in self.limits_used.items()},
+            "baselines": {n: b.to_dict() for n, b in self.baselines.items()}, "margins": self.margins.to_dict(),
+            "noise": self.noise.to_dict(), "settings": self.settings.to_dict(), "excitation": self.excitation.to_dict(),
+            "given": None if self.given is None else self.given.to_dict(), "warnings": list(self.warnings),
         }  # fmt: skip
 
     @classmethod
@@ -119,15 +135,21 @@ class Plan:
             raise UsageError(f"{source}: a plan of schema {data['schema']}, newer than this wmrid reads ({SCHEMA})")
         try:
             noise = data["noise"]
+            criterion = Criterion.from_dict(data["criterion"])
+            float(criterion.value)  # type: ignore[arg-type]  # a number (TypeError, ValueError otherwise)
+            given = data.get("given")
             return cls(
                 robot=data["robot"], r=float(data["r"]), b=float(data["b"]), limits=Limits.from_dict(data["limits"]),
                 noise=SensorNoise(float(noise["eta_std"]), float(noise["tau_std"]), float(noise["rate"])),
-                excitation=Excitation.from_dict(data["excitation"]), settings=dict(data["settings"]),
-                predicted=data["predicted"], value=float(data["criterion"]["value"]),
-                limits_used=data["limits_used"], baselines=data["baselines"], margins=data["margins"],
-                given=data.get("given"), warnings=tuple(data.get("warnings", ())),
+                excitation=Excitation.from_dict(data["excitation"]), settings=PlanSettings.from_dict(data["settings"]),
+                predicted={n: PredictedStd.from_dict(p) for n, p in data["predicted"].items()}, criterion=criterion,
+                limits_used={n: LimitUse.from_dict(u) for n, u in data["limits_used"].items()},
+                baselines={n: BaselineForecast.from_dict(b) for n, b in data["baselines"].items()},
+                margins=Separability.from_dict(data["margins"]),
+                given=None if given is None else GivenResults.from_dict(given),
+                warnings=tuple(data.get("warnings", ())),
             )  # fmt: skip
-        except (KeyError, TypeError, ValueError) as err:
+        except (AttributeError, KeyError, TypeError, ValueError) as err:
             raise UsageError(f"{source}: not a valid plan ({type(err).__name__}: {err})") from None
 
 
@@ -148,15 +170,38 @@ def period_for(duration: float) -> float:
     return duration / max(1, round(duration / PERIOD_SECONDS))
 
 
-def _limits_used(problem: Problem, motion: Motion) -> dict[str, dict[str, float | None]]:
+def predicted_std(
+    problem: Problem, theta0: np.ndarray, cov: np.ndarray, names: tuple[str, ...]
+) -> dict[str, PredictedStd]:
+    """Base parameter name -> its :class:`PredictedStd` from the predicted covariance ``cov`` (n, n) of ``problem``
+    (nominal ``theta0`` (n,)): the parameters past ``problem.judged`` are not counted."""
+    rel = problem.relative_std(cov)
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    return {
+        name: PredictedStd(nominal=float(theta0[i]), scale=float(problem.scales[i]),
+                           scale_from=problem.scale_sources[i], std=float(std[i]), relative=float(rel[i]),
+                           counted=i < problem.judged)
+        for i, name in enumerate(names)
+    }  # fmt: skip
+
+
+def criterion_of(name: str, value: float, predicted: dict[str, PredictedStd]) -> Criterion:
+    """The :class:`Criterion` ``name`` at ``value``, its worst parameter the counted one of ``predicted`` with the
+    largest relative std."""
+    counted = [n for n, p in predicted.items() if p.in_criterion]
+    worst = max(counted, key=lambda n: predicted[n].relative)  # type: ignore[arg-type,return-value]
+    return Criterion(name=name, text=CRITERION_TEXT[name], value=value, worst=worst)
+
+
+def _limits_used(problem: Problem, motion: Motion) -> dict[str, LimitUse]:
     peaks = motion.peaks()
     out = {}
     for name in LIMIT_NAMES:
         limit = problem.limits.limit(name)
-        out[name] = {
-            "limit": limit, "bound": problem.bounds.get(name), "peak": peaks[name],
-            "share": None if limit is None else peaks[name] / limit, "unit": LIMIT_NAMES[name][0],
-        }  # fmt: skip
+        out[name] = LimitUse(
+            limit=limit, bound=problem.bounds.get(name), peak=peaks[name],
+            share=None if limit is None else peaks[name] / limit, unit=LIMIT_NAMES[name][0],
+        )  # fmt: skip
     return out
 
 
@@ -166,28 +211,29 @@ NEAR_ZERO = 0.03
 NEAR_ZERO_WARN = 0.05
 
 
-def separability(motion: Motion, wheel_speed_limit: float, interior: np.ndarray) -> dict[str, Any]:
+def separability(motion: Motion, wheel_speed_limit: float, interior: np.ndarray) -> Separability:
     """What lets the log tell the parameters apart: per wheel, the share of time it turns forward faster than a tenth
     of the wheel speed limit and backward likewise (the search keeps each >= DIRECTION_SHARE), and its speed
     magnitude's 10th/50th/90th percentiles while doing so (rad/s) -- F_v and F_d separate when each wheel runs at
     several speeds in both directions; the correlation of v and w and of |v| and |w| (m12 and Vc need them to vary
     independently; the search keeps |corr(v, w)| <= CORRELATION); and the share of the time between the ramps each wheel
     spends within NEAR_ZERO of the limit from standstill."""
-    out: dict[str, Any] = {"threshold": 0.1 * wheel_speed_limit, "direction_share_min": DIRECTION_SHARE,
-                           "corr_max": CORRELATION}  # fmt: skip
-    for j, wheel in enumerate(("right", "left")):
+    wheels = []
+    for j in range(2):  # right, left
         eta = motion.eta[:, j]
         moving = np.abs(eta) > 0.1 * wheel_speed_limit
         speed = np.abs(eta[moving]) if np.any(moving) else np.zeros(1)
-        out[wheel] = {
-            "forward_share": float(np.mean(eta > 0.1 * wheel_speed_limit)),
-            "backward_share": float(np.mean(eta < -0.1 * wheel_speed_limit)),
-            "speed_percentiles": [float(v) for v in np.percentile(speed, [10, 50, 90])],
-            "near_zero_share": float(np.mean(np.abs(eta[interior]) < NEAR_ZERO * wheel_speed_limit)),
-        }
-    out["corr_v_w"] = float(np.corrcoef(motion.v, motion.w)[0, 1])
-    out["corr_abs_v_abs_w"] = float(np.corrcoef(np.abs(motion.v), np.abs(motion.w))[0, 1])
-    return out
+        wheels.append(WheelSpread(
+            forward_share=float(np.mean(eta > 0.1 * wheel_speed_limit)),
+            backward_share=float(np.mean(eta < -0.1 * wheel_speed_limit)),
+            speed_percentiles=tuple(float(v) for v in np.percentile(speed, [10, 50, 90])),
+            near_zero_share=float(np.mean(np.abs(eta[interior]) < NEAR_ZERO * wheel_speed_limit)),
+        ))  # fmt: skip
+    return Separability(
+        threshold=0.1 * wheel_speed_limit, direction_share_min=DIRECTION_SHARE, corr_max=CORRELATION,
+        right=wheels[0], left=wheels[1], corr_v_w=float(np.corrcoef(motion.v, motion.w)[0, 1]),
+        corr_abs_v_abs_w=float(np.corrcoef(np.abs(motion.v), np.abs(motion.w))[0, 1]),
+    )  # fmt: skip
 
 
 def baseline_motion(problem: Problem, name: str, area: bool = True) -> tuple[Motion, float]:
@@ -218,7 +264,7 @@ def _reference_signals(kind: int, traj: np.ndarray, t: np.ndarray) -> np.ndarray
     if _REFERENCE_KERNEL is None:
 
         @numba.njit(cache=False)
-        def kernel(kind, traj, t):
+        def kernel(kind: int, traj: np.ndarray, t: np.ndarray) -> np.ndarray:
             out = np.empty((t.shape[0], 4))
             for i in range(t.shape[0]):
                 ref = reference_state(kind, traj, t[i], 0.0, 0.0)
@@ -226,13 +272,17 @@ def _reference_signals(kind: int, traj: np.ndarray, t: np.ndarray) -> np.ndarray
             return out
 
         _REFERENCE_KERNEL = kernel
-    return _REFERENCE_KERNEL(kind, traj, np.ascontiguousarray(t, dtype=np.float64))
+    out: np.ndarray = _REFERENCE_KERNEL(kind, traj, np.ascontiguousarray(t, dtype=np.float64))
+    return out
 
 
-_REFERENCE_KERNEL = None
+_REFERENCE_KERNEL: Any = None
 
 
-def _problem(theta0, form, r, b, limits, noise, duration, grid, criterion, given_info, k) -> Problem:
+def _problem(
+    theta0: np.ndarray, form: RegressorForm, r: float, b: float, limits: Limits, noise: SensorNoise, duration: float,
+    grid: float, criterion: str, given_info: GivenLogs | None, k: float,
+) -> Problem:  # fmt: skip
     return Problem(
         theta0, form, r, b, limits, noise, duration=duration, period=period_for(duration), harmonics=HARMONICS,
         ramp=min(RAMP_SECONDS, duration / 4.0), grid=grid, k=k, criterion=criterion, given_info=given_info,
@@ -243,7 +293,7 @@ def make_plan(
     robot_name: str, theta0: np.ndarray, r: float, b: float, limits: Limits, noise: SensorNoise, *,
     duration: float | None = 60.0, target_std: float | None = None, rate: float = 50.0, seed: int = 0,
     criterion: str = "worst", friction: str = "wheel", k: float = DEFAULT_K,
-    given: tuple[GivenLogs, dict[str, Any]] | None = None, progress: Any = None,
+    given: tuple[GivenLogs, GivenResults] | None = None, progress: Any = None,
     geometry: tuple[float, ...] = (), drag: tuple[float, ...] = (),
 ) -> Plan:  # fmt: skip
     """Design and predict a plan (module docstring).
@@ -276,7 +326,7 @@ def make_plan(
     say = progress or (lambda _text: None)
     started = time.perf_counter()
 
-    def design(length: float):
+    def design(length: float) -> tuple[Problem, Problem, SearchResult, float, Motion, np.ndarray]:
         problem = _problem(theta0, form, r, b, limits, noise, length, SEARCH_GRID, criterion, given_info, k)
         try:
             warm: tuple[np.ndarray, ...] = ()
@@ -321,13 +371,7 @@ def make_plan(
     if not found.feasible:
         raise UsageError(_inseparable(problem.duration))
 
-    rel = fine.relative_std(cov)
-    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    predicted = {
-        name: {"nominal": float(theta0[i]), "scale": float(fine.scales[i]), "scale_from": fine.scale_sources[i],
-               "std": float(std[i]), "relative": float(rel[i]), "counted": i < fine.judged}
-        for i, name in enumerate(form.base_names)
-    }  # fmt: skip
+    predicted = predicted_std(fine, theta0, cov, form.base_names)
     say("baselines")
     baselines = {name: _baseline(fine, name, theta0, form, value) for name in BASELINES}
     warnings = []
@@ -355,63 +399,68 @@ def make_plan(
             )
     if target_std is not None and value > target_std:
         warnings.append(f"the plan predicts {100 * value:.3g} %, above the target {100 * target_std:g} %")
-    settings = {
-        "duration": problem.duration, "period": problem.period, "harmonics": HARMONICS, "ramp": problem.ramp,
-        "rate": float(rate), "seed": int(seed), "criterion": criterion, "friction": friction,
-        "caster_geometry": list(form.geometry), "k": k,
-        "target_std": target_std, "search_grid": SEARCH_GRID, "prediction_grid": fine.t.size / fine.duration,
-        "starts": found.starts, "evaluations": found.evaluations,
-        "seconds": time.perf_counter() - started, "parameter_names": list(form.base_names),
-    }  # fmt: skip
+    settings = PlanSettings(
+        duration=problem.duration, period=problem.period, harmonics=HARMONICS, ramp=problem.ramp,
+        rate=float(rate), seed=int(seed), criterion=criterion, friction=friction,
+        caster_geometry=tuple(form.geometry), k=k,
+        target_std=target_std, search_grid=SEARCH_GRID, prediction_grid=fine.t.size / fine.duration,
+        starts=found.starts, evaluations=found.evaluations,
+        seconds=time.perf_counter() - started, parameter_names=tuple(form.base_names),
+    )  # fmt: skip
     return Plan(
         robot=robot_name, r=float(r), b=float(b), limits=limits, noise=noise,
         excitation=Excitation(problem.duration, problem.period, found.coefficients, problem.ramp), settings=settings,
-        predicted=predicted, value=value, limits_used=_limits_used(fine, motion), baselines=baselines,
+        predicted=predicted, criterion=criterion_of(criterion, value, predicted),
+        limits_used=_limits_used(fine, motion), baselines=baselines,
         margins=separability(motion, limits.max_wheel_speed, interior), given=None if given is None else given[1],
         warnings=tuple(warnings),
     )  # fmt: skip
 
 
-def _baseline(fine: Problem, name: str, theta0: np.ndarray, form: RegressorForm, value: float) -> dict[str, Any]:
+def _baseline(fine: Problem, name: str, theta0: np.ndarray, form: RegressorForm, value: float) -> BaselineForecast:
     """The prediction for baseline ``name`` within every limit (the area included: that is the comparison), and
     with the area ignored (how it would do on an open floor), on the plan's fine grid.  Each is predicted under the
     model identify fits to that log: the plan's, except that wheels that never reverse get the paper's form and no
     caster drag (it cannot be told from F_d there), so the drag's parameters are then undetermined (inf) and not
     counted."""
-    out: dict[str, Any] = {}
-    for area in (True, False):
-        motion, factor = baseline_motion(fine, name, area=area)
-        base_form = choose_form(motion.eta)
-        if base_form.kind == "general":
-            base_form = form
-        n = base_form.n_base
-        given = fine.given_info
-        if given is not None and n < len(theta0):
-            given = GivenLogs(given.weight[:n, :n], given.spread[:n, :n])
-        problem = Problem(
-            theta0[:n], base_form, fine.r, fine.b, fine.limits, fine.noise, duration=fine.duration,
-            period=fine.period, harmonics=fine.harmonics, ramp=fine.ramp, grid=fine.t.size / fine.duration, k=fine.k,
-            criterion=fine.criterion, given_info=given,
-        )  # fmt: skip
-        rel = np.full(len(theta0), math.inf)
-        try:
-            cov = problem.covariance(motion)
-            rel[:n], crit = problem.relative_std(cov), problem.criterion_value(cov)
-        except np.linalg.LinAlgError:
-            crit = math.inf
-        counted = rel[: min(n, fine.judged)]
-        entry = {
-            "value": crit, "relative": dict(zip(form.base_names, map(float, rel), strict=True)),
-            "worst": form.base_names[int(np.argmax(counted))], "slowed_by": factor, "peaks": motion.peaks(),
-            "improvement": crit / value if value > 0 else math.inf, "friction": base_form.friction,
-        }  # fmt: skip
-        if area:
-            out.update(entry)
-        else:
-            ratios = fine.ratios(motion)
-            entry["leaves_area"] = bool(max(ratios["area_x"], ratios["area_y"]) > 1.0 / (1.0 - fine.limits.margin))
-            out["area_ignored"] = entry
-    return out
+    within, _ = _forecast(fine, name, theta0, form, value, area=True)
+    open_floor, motion = _forecast(fine, name, theta0, form, value, area=False)
+    ratios = fine.ratios(motion)
+    leaves = bool(max(ratios["area_x"], ratios["area_y"]) > 1.0 / (1.0 - fine.limits.margin))
+    return BaselineForecast(**within, area_ignored=OpenFloorForecast(**open_floor, leaves_area=leaves))
+
+
+def _forecast(
+    fine: Problem, name: str, theta0: np.ndarray, form: RegressorForm, value: float, area: bool
+) -> tuple[dict[str, Any], Motion]:
+    """(the figures of a :class:`~wmrid.design.plan_records.DriveForecast`, the motion) of baseline ``name`` slowed
+    down for the limits (``area``: the area too) (:func:`_baseline`)."""
+    motion, factor = baseline_motion(fine, name, area=area)
+    base_form = choose_form(motion.eta)
+    if base_form.kind == "general":
+        base_form = form
+    n = base_form.n_base
+    given = fine.given_info
+    if given is not None and n < len(theta0):
+        given = GivenLogs(given.weight[:n, :n], given.spread[:n, :n])
+    problem = Problem(
+        theta0[:n], base_form, fine.r, fine.b, fine.limits, fine.noise, duration=fine.duration,
+        period=fine.period, harmonics=fine.harmonics, ramp=fine.ramp, grid=fine.t.size / fine.duration, k=fine.k,
+        criterion=fine.criterion, given_info=given,
+    )  # fmt: skip
+    rel = np.full(len(theta0), math.inf)
+    try:
+        cov = problem.covariance(motion)
+        rel[:n], crit = problem.relative_std(cov), problem.criterion_value(cov)
+    except np.linalg.LinAlgError:
+        crit = math.inf
+    counted = rel[: min(n, fine.judged)]
+    figures = {
+        "value": crit, "relative": dict(zip(form.base_names, map(float, rel), strict=True)),
+        "worst": form.base_names[int(np.argmax(counted))], "slowed_by": factor, "peaks": motion.peaks(),
+        "improvement": crit / value if value > 0 else math.inf, "friction": base_form.friction,
+    }  # fmt: skip
+    return figures, motion
 
 
 def _inseparable(duration: float) -> str:

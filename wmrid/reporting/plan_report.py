@@ -11,20 +11,22 @@ from typing import Any
 import numpy as np
 
 from wmrid.design.excitation import wheel_motion
+from wmrid.design.plan import Plan
 from wmrid.model.torques import wheel_torque
 from wmrid.reporting import markdown as md
 from wmrid.reporting.figures import FIGSIZE, FIGSIZE_STACKED, _new_figure, render
 from wmrid.reporting.plan_view import BASELINE_TEXT, summary
+from wmrid.reporting.report_table import ReportTable
 
 
-def plan_figures(plan: Any) -> dict[str, Any]:
+def plan_figures(plan: Plan) -> dict[str, Any]:
     """caption -> matplotlib Figure: the path, the reference (v, w), the wheel speeds, accelerations and torques with
     their limits (dashed: the limit; dotted: the plan's bound after the margin), the predicted relative std."""
-    s = plan.samples(max(plan.settings["rate"], 50.0))
-    t = s["t"]
+    s = plan.samples(max(plan.settings.rate, 50.0))
+    t = s.t
     v, w, dv, dw = plan.excitation.evaluate(t)
     eta, deta = wheel_motion(v, w, dv, dw, plan.r, plan.b)
-    theta0 = np.array([p["nominal"] for p in plan.predicted.values()])
+    theta0 = np.array([p.nominal for p in plan.predicted.values()])
     tau = wheel_torque(eta, deta, theta0, plan.form) if plan.form.geometry else wheel_torque(eta, deta, theta0[:8])
     lim = plan.limits
     keep = 1.0 - lim.margin
@@ -36,9 +38,9 @@ def plan_figures(plan: Any) -> dict[str, Any]:
     ax.plot([-wx, wx, wx, -wx, -wx], [-wy, -wy, wy, wy, -wy], "k--", lw=1, label="area")
     bx, by = wx - lim.footprint, wy - lim.footprint
     ax.plot([-bx, bx, bx, -bx, -bx], [-by, -by, by, by, -by], "k:", lw=1, label="axle midpoint's room (robot's reach)")
-    ax.plot(s["x"], s["y"], color="C0", lw=1.2, label="planned path")
+    ax.plot(s.x, s.y, color="C0", lw=1.2, label="planned path")
     ax.plot(0.0, 0.0, "o", color="C2", ms=8, label="start (facing +x)")
-    ax.plot(s["x"][-1], s["y"][-1], "s", color="C3", ms=7, label="end")
+    ax.plot(s.x[-1], s.y[-1], "s", color="C3", ms=7, label="end")
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
@@ -84,10 +86,11 @@ def plan_figures(plan: Any) -> dict[str, Any]:
     names = list(plan.predicted)
     x = np.arange(len(names))
     width = 0.8 / (1 + len(plan.baselines))
-    ax.bar(x, [100 * plan.predicted[n]["relative"] for n in names], width, label="this plan", color="C2")
+    ax.bar(x, [100 * plan.predicted[n].relative for n in names], width, label="this plan", color="C2")
     for i, (name, base) in enumerate(plan.baselines.items()):
         # a parameter the baseline's log cannot determine (None, or inf in memory) has no bar
-        values = [100 * v if v is not None and np.isfinite(v) else np.nan for v in map(base["relative"].get, names)]
+        relative = base.relative or {}
+        values = [100 * v if v is not None and np.isfinite(v) else np.nan for v in map(relative.get, names)]
         ax.bar(x + (i + 1) * width, values, width, label=BASELINE_TEXT.get(name, name), color=f"C{i}")
     ax.set_yscale("log")
     ax.set_xticks(x + 0.4 - width / 2, names)
@@ -107,23 +110,23 @@ _CSS = (
 )
 
 
-def tables(data: dict[str, Any]) -> dict[str, dict[str, Any]]:
-    """The plan's tables (header, rows) from its JSON."""
-    base_names = list(data["baselines"])
-    predicted = {
-        "header": ["parameter", "nominal", "predicted std", "relative", "scale",
-                   *[f"{b} (relative)" for b in base_names]],
-        "rows": [[name, f"{p['nominal']:.4g}", f"{p['std']:.3g}", f"{100 * p['relative']:.3g} %",
-                  f"{p['scale']:.3g} ({p['scale_from']})",
-                  *[_pct(data["baselines"][b]["relative"].get(name)) for b in base_names]]
-                 for name, p in data["predicted"].items()],
-    }  # fmt: skip
-    limits = {
-        "header": ["limit", "value", "unit", "plan's peak", "share of the limit", "from"],
-        "rows": [[name, f"{u['limit']:.3g}", u["unit"], f"{u['peak']:.3g}", f"{100 * u['share']:.0f} %",
-                  data["limits"]["sources"].get("area" if name.startswith("area") else name, "-")]
-                 for name, u in data["limits_used"].items() if u["limit"] is not None],
-    }  # fmt: skip
+def tables(plan: Plan) -> dict[str, ReportTable]:
+    """The plan's tables: title -> :class:`ReportTable` (the predicted precision beside the baselines', the limits
+    and the plan's use of each)."""
+    baselines = plan.baselines
+    predicted = ReportTable(
+        header=["parameter", "nominal", "predicted std", "relative", "scale",
+                *[f"{b} (relative)" for b in baselines]],
+        rows=[[name, f"{p.nominal:.4g}", f"{p.std:.3g}", f"{100 * p.relative:.3g} %", f"{p.scale:.3g} ({p.scale_from})",
+               *[_pct((base.relative or {}).get(name)) for base in baselines.values()]]
+              for name, p in plan.predicted.items()],
+    )  # fmt: skip
+    limits = ReportTable(
+        header=["limit", "value", "unit", "plan's peak", "share of the limit", "from"],
+        rows=[[name, f"{u.limit:.3g}", u.unit, f"{u.peak:.3g}", f"{100 * u.share:.0f} %",
+               plan.limits.sources.get("area" if name.startswith("area") else name, "-")]
+              for name, u in plan.limits_used.items() if u.limit is not None],
+    )  # fmt: skip
     return {"Predicted precision": predicted, "Limits": limits}
 
 
@@ -131,22 +134,22 @@ def _pct(x: Any) -> str:
     return "-" if x is None else f"{100 * x:.3g} %"
 
 
-def to_html(plan: Any) -> str:
+def to_html(plan: Plan) -> str:
     """One self-contained page (inline SVG, inline style, nothing fetched)."""
-    data = plan.to_dict()
+    settings = plan.settings
     parts = [
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>",
         "<meta name='viewport' content='width=device-width, initial-scale=1'>",
-        f"<title>wmrid plan: {html.escape(data['robot'])}</title><style>{_CSS}</style></head><body>",
-        f"<header><h1>wmrid plan</h1><p class='small'>robot {html.escape(data['robot'])}, "
-        f"{data['settings']['duration']:g} s, seed {data['settings']['seed']}</p>",
-        "<section class='verdict'>" + "".join(f"<p><strong>{html.escape(s)}</strong></p>" for s in summary(data)),
+        f"<title>wmrid plan: {html.escape(plan.robot)}</title><style>{_CSS}</style></head><body>",
+        f"<header><h1>wmrid plan</h1><p class='small'>robot {html.escape(plan.robot)}, "
+        f"{settings.duration:g} s, seed {settings.seed}</p>",
+        "<section class='verdict'>" + "".join(f"<p><strong>{html.escape(s)}</strong></p>" for s in summary(plan)),
         "</section></header>",
     ]
-    for title, table in tables(data).items():
-        head = "".join(f"<th>{html.escape(str(h))}</th>" for h in table["header"])
+    for title, table in tables(plan).items():
+        head = "".join(f"<th>{html.escape(str(h))}</th>" for h in table.header)
         body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in row) + "</tr>"
-                       for row in table["rows"])  # fmt: skip
+                       for row in table.rows)  # fmt: skip
         parts.append(f"<h2>{html.escape(title)}</h2><div class='scroll'><table><thead><tr>{head}</tr></thead>"
                      f"<tbody>{body}</tbody></table></div>")  # fmt: skip
     parts.append("<h2>Figures</h2>")
@@ -155,12 +158,13 @@ def to_html(plan: Any) -> str:
         text = text[text.index("<svg") :]
         text = re.sub(r"<metadata>.*?</metadata>", "", text, flags=re.S)
         parts.append(f"<figure><figcaption>{html.escape(caption)}</figcaption>{text}</figure>")
-    notes = [*data.get("warnings", ())]
-    noise = data["noise"]
+    notes = [*plan.warnings]
+    noise = plan.noise
+    source = "given" if settings.noise_source is None else settings.noise_source
     notes.append(
-        f"The prediction assumes white noise of {noise['eta_std']:.3g} rad/s and {noise['tau_std']:.3g} N m per sample "
-        f"at {noise['rate']:g} Hz ({data['settings'].get('noise_source', 'given')}), a robot that tracks the reference "
-        f"on its nominal model, and identification with wmrid's observer fitting the {data['settings']['friction']} "
+        f"The prediction assumes white noise of {noise.eta_std:.3g} rad/s and {noise.tau_std:.3g} N m per sample "
+        f"at {noise.rate:g} Hz ({source}), a robot that tracks the reference "
+        f"on its nominal model, and identification with wmrid's observer fitting the {settings.friction} "
         "friction model; a coloured disturbance (a rough floor, slip) or a controller that reacts to the noise make "
         "the achieved std larger."
     )
@@ -168,12 +172,11 @@ def to_html(plan: Any) -> str:
     return "\n".join(parts)
 
 
-def to_markdown(plan: Any) -> str:
+def to_markdown(plan: Plan) -> str:
     """The plan as Markdown; the robot's name, the tables' cells and the warnings escaped
     (:mod:`wmrid.reporting.markdown`)."""
-    data = plan.to_dict()
-    lines = [f"# wmrid plan: {md.text(data['robot'], False)}", "", *[md.text(s) for s in summary(data)], ""]
-    for title, table in tables(data).items():
-        lines += [f"## {md.text(title)}", "", md.table(table["header"], table["rows"]), ""]
-    lines += [f"- {md.text(w)}" for w in data.get("warnings", ())]
+    lines = [f"# wmrid plan: {md.text(plan.robot, False)}", "", *[md.text(s) for s in summary(plan)], ""]
+    for title, table in tables(plan).items():
+        lines += [f"## {md.text(title)}", "", md.table(table.header, table.rows), ""]
+    lines += [f"- {md.text(w)}" for w in plan.warnings]
     return "\n".join(lines) + "\n"
