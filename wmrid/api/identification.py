@@ -16,12 +16,11 @@ import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from functools import partial
-from typing import Any, Literal, TypeGuard, cast, overload
+from typing import TYPE_CHECKING, Any, Literal, TypeGuard, cast, overload
 
 from wmrid.api.inputs import LogOptions, given_results, load_robot, open_log
 from wmrid.core.errors import UsageError, cannot_read, option
 from wmrid.core.wheel_log import LogStream, WheelLog
-from wmrid.estimators.methods import Comparison
 from wmrid.estimators.options import (
     FIT_NAMES,
     FRICTION_CHOICES,
@@ -33,6 +32,9 @@ from wmrid.estimators.options import (
 from wmrid.estimators.records import Validation
 from wmrid.estimators.result import IdentificationResult
 from wmrid.model.robot import Robot
+
+if TYPE_CHECKING:  # the methods (numba kernels, ~0.3 s to import) load when compare runs, not with this module
+    from wmrid.estimators.methods import Comparison
 
 __all__ = ["CASTER_METHODS", "compare", "identify", "validate"]
 

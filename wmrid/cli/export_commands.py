@@ -72,14 +72,15 @@ def export_command(
 ) -> None:
     """Write an identified robot as a model a simulator or a controller loads, with every value's std."""
     from wmrid.api.exporting import check_export_output, export
-    from wmrid.reporting.export_view import print_export
-    from wmrid.reporting.render import to_json
 
     check_export_output(output)
     with activity("export"):
         done = export(result, robot, output, check=check, window=window, gear_ratio=log_options.gear_ratio,
                       rotor_inertia=rotor_inertia, wheel_radius=log_options.wheel_radius, options=log_options,
                       force=force)  # fmt: skip
+    from wmrid.reporting.export_view import print_export  # after the work: a refusal imports no rendering
+    from wmrid.reporting.render import to_json
+
     fmt = output_format.value
     if fmt == "auto":
         fmt = "table" if sys.stdout.isatty() else "json"

@@ -177,15 +177,15 @@ def fleet_command(
     """Identify every log of a fleet on Dask and write one Parquet table, one row per log: robot id, log, content
     hash, start time, duration, samples, method, every base parameter with its std, flags, warnings, fit, run time,
     and the error of a log that failed (a failed log never ends the run)."""
-    from wmrid.core.extras import require
+    from wmrid.core.extras import require_installed
 
-    require("distributed", "fleet")  # before the fleet's modules, which import pyarrow
-    require("pyarrow", "fleet")
+    require_installed("distributed", "fleet")  # before the fleet's modules, which import pyarrow
+    require_installed("pyarrow", "fleet")
+    if output is None:
+        raise UsageError("-o/--output is required: the Parquet table to write (e.g. -o fleet.parquet)")
     from wmrid.fleets.run import fleet as run_fleet
 
     given = _given_options(log_options, observer, fit, method.value, rotor_inertia)
-    if output is None:
-        raise UsageError("-o/--output is required: the Parquet table to write (e.g. -o fleet.parquet)")
     update, finish = _progress()
     try:
         run = run_fleet(
@@ -322,10 +322,13 @@ def fleet_report_command(
     """Review a fleet table: per robot, every base parameter over time with ±2σ bands; changes across its logs
     (friction rising: wheel wear?; M or Vc shifting: payload or configuration change) at a stated false-alarm rate;
     robots that stand out from their fleet; the robots ranked by the evidence against them."""
-    from wmrid.core.extras import require
+    from wmrid.core.extras import require_installed
 
-    require("pyarrow", "fleet", "wmrid fleet-report")
-    require("matplotlib", "fleet", "wmrid fleet-report")
+    require_installed("pyarrow", "fleet", "wmrid fleet-report")  # imported by the review, after the checks below
+    require_installed("matplotlib", "fleet", "wmrid fleet-report")
+    from wmrid.cli.helpers import check_outputs
+
+    check_outputs((output,), force, (table,))  # before anything is imported or read
     from wmrid.api.reporting import REPORT_SUFFIXES
     from wmrid.fleets.rendering import ranked_table, to_json_dict
     from wmrid.fleets.report import check_settings, fleet_report as build, write_fleet_report

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +21,26 @@ def check_rotor(rotor_inertia: float | None) -> float | None:
 
     check_rotor_inertia(rotor_inertia)
     return rotor_inertia
+
+
+def check_outputs(outputs: Iterable[Path | str | None], force: bool, inputs: Iterable[Path | str | None] = ()) -> None:
+    """Refuse, before any import of the numerics and any reading, an output the command could not write at its end
+    (:func:`wmrid.runtime.atomic.check_output`: an existing file without ``--force``, a missing folder, one of the
+    ``inputs`` the command reads), with the message the write would give; None entries are skipped."""
+    from wmrid.runtime.atomic import check_output, register_input
+
+    for name in inputs:
+        if name is not None and name != "-":  # standard input is never an output's file
+            register_input(name)
+    for path in outputs:
+        if path is not None:
+            check_output(path, force=force)
+
+
+def check_estimates_output(path: Path | None) -> None:
+    """``--mcap-out``: the estimates are written as MCAP (:func:`write_estimates`)."""
+    if path is not None and path.suffix.lower() != ".mcap":
+        raise UsageError(f"--mcap-out {path}: the estimates are written as MCAP; name the file .mcap")
 
 
 def stderr_console():
@@ -56,8 +76,7 @@ def write_estimates(result, path: Path, force: bool) -> None:
     from wmrid.model.base_params import recover_history
     from wmrid.runtime.atomic import to_json_text
 
-    if path.suffix.lower() != ".mcap":
-        raise UsageError(f"--mcap-out {path}: the estimates are written as MCAP; name the file .mcap")
+    check_estimates_output(path)
     hist = result.history
     series = {name: hist.theta[:, i // hist.theta.shape[2], i % hist.theta.shape[2]] for i, name in
               enumerate(result.form.theta_names())}  # fmt: skip

@@ -16,6 +16,8 @@ from wmrid.cli.app import app, invocation
 from wmrid.cli.groups import FIT_FLAGS, LOG_FLAGS, OBSERVER_FLAGS, takes
 from wmrid.cli.helpers import (
     activity,
+    check_estimates_output,
+    check_outputs,
     check_rotor,
     deprecated_option,
     on_stdout,
@@ -100,13 +102,15 @@ def identify_command(
     fit: MethodOptions,
 ) -> None:
     """Identify the base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded LOG."""
+    if out is not None:
+        deprecated_option("--out", "--mcap-out")
+        mcap_out = mcap_out or out
+    check_estimates_output(mcap_out)  # before anything is imported or read: a refusal is instant
+    check_outputs((output, mcap_out), force, (*log, validate))
     from wmrid.api.identification import check_validation, identify as run_identify, robot_for, validate as run_validate
     from wmrid.reporting.render import print_identification, to_json
     from wmrid.runtime.atomic import output_group, write_json
 
-    if out is not None:
-        deprecated_option("--out", "--mcap-out")
-        mcap_out = mcap_out or out
     logs = one_or_many(log)
     check_validation(logs, validate, observer, (method.value,), "LOG")
     robot_obj = robot_for(robot, log_options, check_rotor(rotor_inertia))
@@ -196,6 +200,7 @@ def report_command(
 ) -> None:
     """Tables (paper Tables 2 and 3), comparison with nominal/CAD/truth, diagnostics and figures for INPUT; for a
     plan (wmrid plan -o plan.json): its path, signals against their limits and predicted precision."""
+    check_outputs((output,), force, (input_, truth, validate))  # before anything is imported or read
     from wmrid.api.identification import load_truth
     from wmrid.api.planning import plan_document, write_plan_report
     from wmrid.api.reporting import REPORT_SUFFIXES, Identification, report as build, residual_frame, write_report
@@ -214,6 +219,7 @@ def report_command(
     suffix = output.suffix.lower() if output is not None else None
     if suffix not in (None, *REPORT_SUFFIXES):
         raise UsageError(f"-o {output}: the report format comes from the suffix: .html, .md or .json")
+    check_outputs((residuals,), force)  # (not a plan's: it has none)
     truth_params = load_truth(truth)
     if input_ == "-" and validate == "-":
         raise UsageError("INPUT and --validate cannot both be standard input; give one of them as a file")
@@ -277,6 +283,7 @@ def compare_command(
 ) -> None:
     """Run every identification method on LOG: estimates, standard errors, errors against --truth, fit on
     --validate OTHER, run time.  Every method identifies the same friction model (--friction)."""
+    check_outputs((output,), force, (*log, validate, truth))  # before anything is imported or read
     from wmrid.api.identification import compare as run_compare, robot_for
     from wmrid.reporting.render import print_comparison, to_json
     from wmrid.runtime.atomic import write_json

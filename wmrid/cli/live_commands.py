@@ -14,7 +14,7 @@ import typer
 
 from wmrid.cli.app import app
 from wmrid.cli.groups import LOG_FLAGS, OBSERVER_FLAGS, takes
-from wmrid.cli.helpers import on_stdout, warning_summary
+from wmrid.cli.helpers import check_outputs, on_stdout, warning_summary
 from wmrid.cli.options import (
     OutputFormat,
     RotorInertiaOpt,
@@ -123,14 +123,13 @@ def live_command(
     """Identify the robot while it drives: follow SOURCE as it is written, refresh the estimate ± std every --every
     seconds, and when it ends (--idle, --until, --until-std, the recording's end, Ctrl-C) give identify's result on
     the same messages."""
-    from wmrid.api.live import check_output, live as run_live
+    check_outputs((output,), force, (source,))  # before anything is imported or read; the run may take hours
+    from wmrid.api.live import live as run_live
     from wmrid.reporting.live_view import json_line
     from wmrid.reporting.render import print_identification
     from wmrid.runtime import interrupts
     from wmrid.runtime.atomic import write_json
 
-    if output is not None:
-        check_output(output, force)
     run = run_live(
         source, robot, options=log_options, every=every, idle=idle, until=until, until_std=until_std,
         params=[p.strip() for p in params.split(",") if p.strip()] if params else None,

@@ -11,7 +11,7 @@ from typing import Annotated
 import typer
 
 from wmrid.cli.app import app
-from wmrid.cli.helpers import activity, on_stdout, warning_summary
+from wmrid.cli.helpers import activity, check_outputs, on_stdout, warning_summary
 from wmrid.cli.options import Criterion, OutputFormat, PlanFriction
 from wmrid.reporting.terminal import console
 
@@ -87,15 +87,17 @@ def plan_command(
     force: Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")] = False,
 ) -> None:
     """Design the drive that identifies ROBOT best within its limits, and predict how precise the result will be."""
+    outputs = list(output or [])
+    files = [p for p in outputs if not on_stdout(p)]
+    check_outputs(files, force, (noise_from, *(given or ())))  # before anything is imported or read
     from wmrid.api.planning import check_plan_output, plan as make, write_plan
+
+    for path in files:
+        check_plan_output(path)
     from wmrid.reporting.plan_view import print_plan
     from wmrid.reporting.render import to_json
     from wmrid.runtime.atomic import output_group
 
-    outputs = list(output or [])
-    for path in outputs:
-        if not on_stdout(path):
-            check_plan_output(path)
     with activity("plan") as stage:
         result = make(
             robot, duration=duration, target_std=target_std, rate=rate, seed=seed, max_wheel_speed=max_wheel_speed,

@@ -13,7 +13,7 @@ import typer
 
 from wmrid.cli.app import app
 from wmrid.cli.groups import LOG_FLAGS, OBSERVER_FLAGS, takes
-from wmrid.cli.helpers import activity, check_rotor, on_stdout, stderr_console, warning_summary
+from wmrid.cli.helpers import activity, check_outputs, check_rotor, on_stdout, stderr_console, warning_summary
 from wmrid.cli.options import (
     CalibrationOpt,
     DropAtOpt,
@@ -204,6 +204,7 @@ def monitor_command(
     identified again and the test restarts.  JSON: {"changes": [{"t": s from the log's start,
     "parameters": {...}, ...}], "detector": {..., "threshold", "false_alarm_rate_per_hour"}, ...}.
     """
+    check_outputs((output,), force, (log, model))  # before anything is imported or read
     from wmrid.api.monitoring import monitor as run_monitor
     from wmrid.reporting.monitor_view import print_monitor
     from wmrid.reporting.render import to_json

@@ -41,7 +41,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import lfilter
 from scipy.special import erf
 
 from wmrid.estimators.sign_speed import sign_half_window
@@ -151,6 +150,10 @@ def expected_regressor(
 
 def lowpass(x: np.ndarray, a: float) -> np.ndarray:
     """y_n = a y_{n-1} + (1 - a) x_{n-1}, y_0 = 0 along axis 0: the unit-gain zero-order-hold low-pass."""
+    # scipy.signal (~0.8 s to import): only a prediction, not every import of the planner (``wmrid report`` asks it
+    # whether its input is a plan)
+    from scipy.signal import lfilter
+
     return lfilter([0.0, 1.0 - a], [1.0, -a], x, axis=0)
 
 

@@ -15,7 +15,6 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-import numba
 import numpy as np
 
 from wmrid.core.errors import UsageError, option
@@ -257,26 +256,11 @@ def baseline_motion(problem: Problem, name: str, area: bool = True) -> tuple[Mot
 
 def _reference_signals(kind: int, traj: np.ndarray, t: np.ndarray) -> np.ndarray:
     """(n, 4): v, w, v', w' of a built-in trajectory at times t (compiled: a 1 kHz minute is 60,000 calls)."""
-    # the simulator's reference (its numba kernels): only a plan's baselines
-    from wmrid.sim.closed_loop import reference_state
+    # the simulator's reference (its numba kernels, cached on disk with them): only a plan's baselines
+    from wmrid.sim.closed_loop import reference_signals
 
-    global _REFERENCE_KERNEL
-    if _REFERENCE_KERNEL is None:
-
-        @numba.njit(cache=False)
-        def kernel(kind: int, traj: np.ndarray, t: np.ndarray) -> np.ndarray:
-            out = np.empty((t.shape[0], 4))
-            for i in range(t.shape[0]):
-                ref = reference_state(kind, traj, t[i], 0.0, 0.0)
-                out[i, 0], out[i, 1], out[i, 2], out[i, 3] = ref[3], ref[4], ref[5], ref[6]
-            return out
-
-        _REFERENCE_KERNEL = kernel
-    out: np.ndarray = _REFERENCE_KERNEL(kind, traj, np.ascontiguousarray(t, dtype=np.float64))
+    out: np.ndarray = reference_signals(kind, traj, np.ascontiguousarray(t, dtype=np.float64))
     return out
-
-
-_REFERENCE_KERNEL: Any = None
 
 
 def _problem(

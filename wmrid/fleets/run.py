@@ -162,7 +162,6 @@ def check_defaults(defaults: dict[str, Any]) -> dict[str, Any]:
     checks them before any log is read."""
     from wmrid.api.identification import check_rotor_inertia, settings_from
     from wmrid.api.inputs import LogOptions
-    from wmrid.estimators.methods import check_method
 
     allowed = set(option_columns())
     unknown = sorted(set(defaults) - allowed)
@@ -174,6 +173,9 @@ def check_defaults(defaults: dict[str, Any]) -> dict[str, Any]:
     check_rotor_inertia(run_opts.pop("rotor_inertia", None))
     settings_from(run_opts)
     if run_opts.get("method", "auto") != "auto":
+        # the methods (their numba kernels, ~0.3 s to import): only when one is named, not before every manifest read
+        from wmrid.estimators.methods import check_method
+
         check_method(run_opts["method"])
     return given
 
@@ -270,11 +272,11 @@ def fleet(
     progress : called as progress(done, total, failed).
     defaults : identify's keywords and LogOptions fields for every log (a manifest row's own options win).
     """
-    from wmrid.core.extras import require
+    from wmrid.core.extras import require_installed
     from wmrid.runtime.atomic import register_input
 
-    require("distributed", "fleet")
-    require("pyarrow", "fleet")
+    require_installed("distributed", "fleet")  # imported only when the cluster starts: a bad manifest is said first
+    require_installed("pyarrow", "fleet")
     if output is None:
         raise UsageError(f"{option('output')} is required: the Parquet table to write (e.g. fleet.parquet)")
     out = os.fspath(output)

@@ -30,6 +30,17 @@ def map_file(path: str, data: bytes | None) -> tuple[np.ndarray, Callable[[int],
     return np.frombuffer(mapped, dtype=np.uint8), page_releaser(mapped)
 
 
+def read_only(buf: np.ndarray) -> np.ndarray:
+    """``buf`` as a read-only view (no copy).  The record kernels are compiled per array type, and numba types a
+    read-only array apart from a writable one: a file's map and a decompressed chunk are read-only, bytes given as a
+    bytearray are not; one type for all is one compilation instead of two."""
+    if not buf.flags.writeable:
+        return buf
+    view = buf.view()
+    view.flags.writeable = False
+    return view
+
+
 def page_releaser(mapped: mmap.mmap) -> Callable[[int], None] | None:
     """A function that hands the pages of a read-only file mapping below an offset back to the kernel, in runs of
     at least :data:`_RELEASE_BYTES` (None where the platform cannot).  Dropping them loses nothing (they come back

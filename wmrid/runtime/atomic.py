@@ -39,8 +39,8 @@ from wmrid.core.errors import OutputExistsError, OutputWriteError, ReaderGone, U
 from wmrid.runtime import interrupts
 
 __all__ = [
-    "atomic_output", "atomic_write_bytes", "atomic_write_text", "clear_inputs", "output_group", "register_input",
-    "to_json_text", "track_inputs", "write_json",
+    "atomic_output", "atomic_write_bytes", "atomic_write_text", "check_output", "clear_inputs", "output_group",
+    "register_input", "to_json_text", "track_inputs", "write_json",
 ]  # fmt: skip
 
 #: (st_dev, st_ino) of the files this run reads: an output that is one of them is refused.  None: not tracked
@@ -200,6 +200,24 @@ def _fsync_folder(folder: Path) -> None:
         os.close(fd)
 
 
+def _target(path: Path, force: bool) -> tuple[Path, Path] | None:
+    """(the file :func:`atomic_output` replaces, its folder) after every check made before writing, or None for a
+    stream (written in place)."""
+    if stream_fd(path) is not None or _special(path) == "stream":
+        return None
+    if path.is_symlink():
+        path = Path(os.path.realpath(path))
+    _refuse_input(path)
+    return path, _check_target(path, force)
+
+
+def check_output(path: str | Path, *, force: bool = False) -> None:
+    """Refuse now what :func:`atomic_output` would refuse when it comes to write ``path``, with the same error: an
+    existing file without ``force``, a missing folder, a folder, a block device or socket, an input of this run
+    (registered so far).  A command calls it before its work, so that a refusal costs nothing; a stream passes."""
+    _target(Path(path), force)
+
+
 @contextmanager
 def atomic_output(path: str | Path, *, force: bool = False, mode: str = "wb") -> Iterator[IO]:
     """Open ``path`` for writing so that it appears complete or not at all.
@@ -215,15 +233,12 @@ def atomic_output(path: str | Path, *, force: bool = False, mode: str = "wb") ->
     if mode not in ("wb", "w"):
         raise ValueError(f"atomic_output mode must be 'wb' or 'w', not {mode!r}")
     path = Path(path)
-    fd = stream_fd(path)
-    if fd is not None or _special(path) == "stream":
-        with _in_place(path, fd, mode) as handle:
+    target = _target(path, force)
+    if target is None:
+        with _in_place(path, stream_fd(path), mode) as handle:
             yield handle
         return
-    if path.is_symlink():
-        path = Path(os.path.realpath(path))
-    _refuse_input(path)
-    folder = _check_target(path, force)
+    path, folder = target
     file_mode = _new_file_mode(path)
     kwargs: dict[str, Any] = {"encoding": "utf-8"} if mode == "w" else {}
     handle: IO | None = None

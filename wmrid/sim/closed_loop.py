@@ -97,6 +97,17 @@ def reference_wheel_speeds(kind, traj, t, r, b):
 
 
 @numba.njit(cache=True, nogil=True)
+def reference_signals(kind, traj, t):
+    """(n, 4): the reference's v m/s, w rad/s, v' m/s^2, w' rad/s^2 at times t (n,) s (a plan's baselines: a 1 kHz
+    minute is 60,000 calls of :func:`reference_state`)."""
+    out = np.empty((t.shape[0], 4))
+    for i in range(t.shape[0]):
+        ref = reference_state(kind, traj, t[i], 0.0, 0.0)
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = ref[3], ref[4], ref[5], ref[6]
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
 def _reversing_velocity(traj, t):
     """(x_r', y_r') m/s of the reversing reference at time t."""
     vamp, vper, wamp, wper = traj[0], traj[1], traj[2], traj[3]

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import LogFormatError
+from wmrid.io.binary import read_only
 from wmrid.io.mcap.records import JOINT_STATE_NAMES, joint_states, ros1_joint_names, standard_joint_state
 from wmrid.io.ros.contents import Accumulator
 from wmrid.io.ros.joint_batches import DYNAMIC_JOINT_STATE_NAMES, JointChannels
@@ -130,6 +131,7 @@ class _BagState(JointChannels):
 
     def decode(self, channel: int, buf: np.ndarray, starts: np.ndarray, lengths: np.ndarray, stamps: np.ndarray):
         """A batch of one channel's messages: buf[starts[i] : starts[i] + lengths[i]] received at stamps[i] ns."""
+        buf = read_only(buf)  # one array type for the kernels, whatever held the bytes (a map, a chunk, a join)
         acc = self.channels[channel]
         lo, hi = int(stamps.min()), int(stamps.max())
         acc.first_ns = lo if acc.first_ns is None else min(acc.first_ns, lo)

@@ -54,7 +54,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import LogFormatError
-from wmrid.io.binary import cut_short_note, map_file, u64s_at
+from wmrid.io.binary import cut_short_note, map_file, read_only, u64s_at
 from wmrid.io.mcap.generic import decode_generic, json_batch
 from wmrid.io.mcap.records import (
     BOMB_FLOOR,
@@ -268,6 +268,7 @@ class _ReadState(JointChannels):
 
     def steps(self, buf: np.ndarray, start: int, end: int, top_level: bool) -> Generator[None, None, tuple[int, bool]]:
         """:meth:`walk` as a generator that pauses after each batch of messages it has decoded."""
+        buf = read_only(buf)  # one array type for the kernels, whatever held the bytes
         cap = 65536
         ops = np.empty(cap, dtype=np.uint8)
         starts = np.empty(cap, dtype=np.int64)
