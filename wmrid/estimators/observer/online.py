@@ -191,7 +191,9 @@ def online_estimate(obs: OnlineObserver) -> OnlineEstimate | None:
                 obs.gamma, obs.gamma_inv, obs.theta, blk_a, blk_c, mid, duration
             )
             theta = np.empty_like(obs.theta)
-            project_history_box(obs.theta[None], obs.gamma[None], s.theta_min, s.theta_max, theta[None])
+            # writable copies of the settings' read-only box, as observe passes its own: one compiled kernel
+            lo, hi = np.array(s.theta_min), np.array(s.theta_max)
+            project_history_box(obs.theta[None], obs.gamma[None], lo, hi, theta[None])
             fit = fit_base_parameters(theta, weight_cov, s.form, report_cov=theta_cov, report_dof=unc["dof"])
             named = derived_with_std(fit.theta0, fit.cov, s.form.base_names)
     except (np.linalg.LinAlgError, ValueError, FloatingPointError, ZeroDivisionError):
