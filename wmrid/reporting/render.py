@@ -194,8 +194,8 @@ def print_inspection(info: McapInventory | TableInventory, console: Any) -> None
     )  # fmt: skip
     joints = [e for e in info.topics if e.joints is not None]
     if joints:
-        rows = [[e.topic, ", ".join(e.joints or ()), (e.fields or {})["position"], (e.fields or {})["velocity"],
-                 (e.fields or {})["effort"], e.header_stamps] for e in joints]  # fmt: skip
+        rows = [[e.topic, ", ".join(e.joints or ()), *((e.fields or {})[f] for f in ("position", "velocity", "effort")),
+                 e.header_stamps] for e in joints]  # fmt: skip
         print_table(console, ["topic", "joints", "position", "velocity", "effort", "header stamps"], rows,
                     title="JointState topics", fold=(1, 5))  # fmt: skip
     else:
