@@ -286,9 +286,23 @@ def _arrow_csv(
 
     fh = csv_stream(source)
     fh.defer_errors()  # type: ignore[attr-defined]  # (a _LineGuard) pyarrow reads on its own threads
+    # pyarrow reads through a buffered native stream, which copies each block out of the bytes object read() returns
+    # while it holds the GIL: handed the Python file itself, its reader kept those bytes objects, and one released on
+    # one of its I/O threads after the interpreter began to exit made that thread take the GIL and die inside C++
+    # ("terminate called without an active exception", exit 134, after the right message: 2-3 runs in 96 under
+    # load, a 300 MB line in an xz file; gdb: arrow::py::PyBuffer::~PyBuffer -> PyGILState_Ensure ->
+    # pthread_exit).  ``raw.close()`` then drops the Python file on this thread, so nothing pyarrow keeps holds a
+    # Python object.
+    raw = pa.PythonFile(fh, mode="r")
+    stream = pa.BufferedInputStream(raw, buffer_size=1 << 24)
+
+    def release() -> None:
+        stream.close()
+        raw.close()
+
     try:
         reader = pcsv.open_csv(
-            fh,
+            stream,
             # One thread: with pyarrow's threads reading ahead through this Python stream, a log refused part-way
             # (a 300 MB line in an xz file, under WMRID_MEMORY_BUDGET) made the process abort at exit after the
             # right message, "terminate called without an active exception", exit 134: 2 full test runs of 4 under
@@ -298,10 +312,10 @@ def _arrow_csv(
             convert_options=pcsv.ConvertOptions(include_columns=usecols),
         )
     except LogFormatError:
-        fh.close()
+        release()
         raise
     except (pa.ArrowException, OSError, ValueError) as err:
-        fh.close()
+        release()
         fh.raise_deferred()  # type: ignore[attr-defined]
         raise _ArrowCsvRefused from err
     pending: list[Any] = []
@@ -326,6 +340,8 @@ def _arrow_csv(
     except (pa.ArrowException, OSError, ValueError) as err:
         fh.raise_deferred()  # type: ignore[attr-defined]
         raise _ArrowCsvRefused from err
+    finally:
+        release()
     fh.raise_deferred()  # type: ignore[attr-defined]
     if count:
         yield values(pa.Table.from_batches(pending))
