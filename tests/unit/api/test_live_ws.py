@@ -281,7 +281,9 @@ def test_server_that_stops_answering(recording, tmp_path):
 def test_reconnect_to_a_restarted_server(recording):
     """--reconnect: the server killed after 2500 messages, a new one on the same port sends messages 2000 to the end
     (500 again): the run goes on, says what happened, and its result is identify's on the MCAP of all the messages
-    (the repeated ones read as the offline reader reads them: sorted, a repeated stamp keeping the first)."""
+    (the repeated ones read as the offline reader reads them: sorted, a repeated stamp keeping the first).  The run
+    is stopped once the last message came (a restarted server never ends a --reconnect run; --idle would, 4 s
+    later)."""
     path, _, offline = recording
     first, port = start_server(path, "--speed", "0", "--stop", "2500")
     second, restarted = None, False
@@ -302,11 +304,14 @@ def test_reconnect_to_a_restarted_server(recording):
                 stop(first)
                 restarted = True
                 assert go(second) == port
+            elif restarted and item.samples >= N:
+                run.stop("the last message came")
     finally:
         stop(first)
         stop(second)
     assert final is not None
     assert final.failure is None
+    assert final.reason == "the last message came"
     assert final.samples == N  # the 500 sent again are older than what came: dropped live
     assert any(e.startswith(f"lost the connection to ws://127.0.0.1:{port}") for e in events), events
     assert f"reconnected to ws://127.0.0.1:{port}" in events
@@ -325,13 +330,18 @@ def test_reconnect_waits_for_a_server_not_started_yet(recording):
         port = sock.getsockname()[1]
     server = ready_server(path, "--speed", "0", "--stop", "2000", "--port", str(port))  # loaded, not listening
     # --idle: 3 s covers the reconnection attempts 0.25, 0.75 and 1.75 s after the first; the server listens as the
-    # run starts
+    # run starts.  The run is stopped once the 2000 messages came (as --idle would, 3 s later).
     run = wmrid.live(f"ws://127.0.0.1:{port}", "paper", every=0.2, idle=3.0, reconnect=True)
+    items = []
     try:
         assert go(server) == port
-        items = list(run)
+        for item in run:
+            items.append(item)
+            if isinstance(item, wmrid.LiveUpdate) and item.samples >= 2000:
+                run.stop("the last message came")
     finally:
         stop(server)
+    assert items[-1].reason == "the last message came"
     events = [e for u in items[:-1] for e in u.events]
     assert events[0] == f"ws://127.0.0.1:{port}: not answering yet; retrying (reconnect=True)"
     assert f"reconnected to ws://127.0.0.1:{port}" in events
