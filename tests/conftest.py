@@ -6,6 +6,7 @@ import contextlib
 import fcntl
 import os
 import pickle
+import signal
 
 import pytest
 
@@ -22,6 +23,20 @@ if "PYTEST_XDIST_WORKER" in os.environ and not {"OPENBLAS_NUM_THREADS", "OMP_NUM
         del os.environ["OPENBLAS_NUM_THREADS"]
 
 from tests.open_loop import open_loop_log
+
+
+def _ignored(signum: int, frame: object) -> None:
+    """A signal this test process was started ignoring: still ignored here (see below)."""
+
+
+# The tests send SIGINT, SIGTERM and SIGHUP to the wmrid processes they start and check what a user at a terminal
+# sees.  A run started with those signals ignored (under nohup, as a background job of a script) would hand the
+# ignoring on to every child, and wmrid rightly keeps an ignored signal ignored: the tests would fail for the way
+# the suite was launched.  An ignored signal is ignored here by a handler instead, which a child's exec resets to the
+# default, as at a terminal; this process itself still ignores it.
+for _sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT):
+    if signal.getsignal(_sig) == signal.SIG_IGN:
+        signal.signal(_sig, _ignored)
 
 
 def made_once_per_run(tmp_path_factory, name: str, make):
