@@ -514,6 +514,37 @@ def test_a_field_path_evaluates_as_documented():
     assert np.isnan(parse("/t:interface_values@j.values@effort").value(dynamic))
 
 
+def test_a_message_class_s_fields_are_found_once_and_released_with_the_class():
+    """The declared fields of a dataclass message are kept per class (every message of a topic shares its class), a
+    namespace's without ``__slots__`` are read per message (each may differ), and a class made for one recording is
+    not kept alive by wmrid."""
+    import dataclasses
+    import gc
+    import weakref
+    from types import SimpleNamespace as M
+
+    from wmrid.io.ros import field_paths
+
+    def made() -> type:
+        @dataclasses.dataclass
+        class Wheel:
+            velocity: float
+            __msgtype__: str = "vendor/msg/Wheel"
+
+        return Wheel
+
+    cls = made()
+    assert field_paths.message_fields(cls(1.0)) == ("velocity",)
+    assert field_paths._CLASS_FIELDS[cls] == ("velocity",)
+    assert field_paths.parse("/t:velocity").value(cls(2.5)) == 2.5
+    assert field_paths.message_fields(M(a=1)) == ("a",)
+    assert field_paths.message_fields(M(b=1)) == ("b",)
+    gone = weakref.ref(cls)
+    del cls
+    gc.collect()
+    assert gone() is None
+
+
 def test_a_name_with_a_dot_or_a_comma_is_given_in_double_quotes():
     from types import SimpleNamespace as M
 

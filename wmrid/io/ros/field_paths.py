@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+import weakref
 from collections.abc import Mapping
 from dataclasses import dataclass
 from types import SimpleNamespace
@@ -105,18 +106,34 @@ class FieldPathError(LogFormatError):
         )
 
 
+#: The declared fields of each message class whose fields are the class's (a dataclass, a namespace with
+#: ``__slots__``), found once per class: every message of a topic is of one class, and a field path looks its fields up
+#: at each step of each message (about a third of the time a message took).
+#: Weakly: the readers make message classes per recording, which must not outlive it.
+_CLASS_FIELDS: weakref.WeakKeyDictionary[type, tuple[str, ...]] = weakref.WeakKeyDictionary()
+
+
 def message_fields(obj: Any) -> tuple[str, ...] | None:
     """The fields a decoded message declares in its definition (rosbags' dataclasses, mcap_ros2's namespaces with
     ``__slots__``), in order; None when ``obj`` is not a message (a number, a string, an array)."""
+    cls = type(obj)
+    known = _CLASS_FIELDS.get(cls)
+    if known is not None:
+        return known
+    per_class = True
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         names = [f.name for f in dataclasses.fields(obj)]
     elif isinstance(obj, SimpleNamespace):
-        slots = type(obj).__dict__.get("__slots__")
-        names = [str(s) for s in slots] if isinstance(slots, (list, tuple)) else list(vars(obj))
+        slots = cls.__dict__.get("__slots__")
+        per_class = isinstance(slots, (list, tuple))
+        names = [str(s) for s in slots] if per_class else list(vars(obj))  # type: ignore[union-attr]
     else:
         return None
     # a ROS field name starts with a letter: rosbags' ``__msgtype__`` and the like are the library's, not the message's
-    return tuple(n for n in names if n[:1].isalpha())
+    fields = tuple(n for n in names if n[:1].isalpha())
+    if per_class:
+        _CLASS_FIELDS[cls] = fields
+    return fields
 
 
 def _is_array(obj: Any) -> bool:
