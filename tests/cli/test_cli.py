@@ -78,6 +78,47 @@ def test_identify_writes_json_file_atomically_and_refuses_to_overwrite(tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["result.json"]  # no temporary left behind
 
 
+def test_an_output_that_cannot_be_written_is_refused_before_any_work(tmp_path):
+    """identify, compare and simulate refuse an existing output (the log's, or a simulated log's truth file) or a
+    missing folder before they import the numerics or read or simulate anything (simulate ran the whole simulation
+    first): one process runs every refusal and then finds numba, scipy and pandas never imported."""
+    import subprocess
+    import sys
+
+    taken = tmp_path / "taken.json"
+    taken.write_text("{}")
+    (tmp_path / "sim.csv.truth.json").write_text("{}")
+    runs = [
+        ["identify", str(SAMPLE_CSV), "-o", str(taken)],
+        ["compare", str(SAMPLE_CSV), "-o", str(taken)],
+        ["simulate", "-o", str(taken)],
+        ["simulate", "-o", str(tmp_path / "sim.csv")],
+        ["simulate", "-o", str(tmp_path / "no" / "sim.csv")],
+    ]
+    code = (
+        "import json, sys\n"
+        "from wmrid.cli import main\n"
+        "out = []\n"
+        "for args in json.loads(sys.argv[1]):\n"
+        "    try:\n"
+        "        main(args)\n"
+        "    except SystemExit as stop:\n"
+        "        out.append(stop.code)\n"
+        "print(json.dumps([out, sorted(m for m in ('numba', 'scipy', 'pandas') if m in sys.modules)]))\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code, json.dumps(runs)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    codes, imported = json.loads(proc.stdout)
+    assert codes == [2] * len(runs), proc.stderr
+    assert imported == [], imported
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == len(runs), proc.stderr
+    assert [line.startswith("wmrid: error: ") for line in lines] == [True] * len(runs), proc.stderr
+    assert "sim.csv.truth.json exists; use --force" in lines[3]
+    assert "folder" in lines[4]
+    assert not (tmp_path / "sim.csv").exists()
+
+
 def test_paper_settings_are_reproducible_by_flags_and_warn_when_they_do_not_converge():
     out = identify_json(str(SAMPLE_CSV), "--robot", "paper", "--k", "1", "--alpha", "5000")
     assert out["settings"]["alpha"] == 5000

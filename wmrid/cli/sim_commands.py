@@ -129,6 +129,8 @@ def simulate_command(
     are those at t = 0; its settings.change holds both parameter sets ("before", "after", base and
     physical), the requested time t and the switch time t_switch (s).
     """
+    if output != "-":  # the log and its truth, refused before anything is imported or simulated
+        check_outputs((output, output + ".truth.json"), force, (reference,))
     from wmrid.api.identification import robot_for
     from wmrid.api.inputs import LogOptions
     from wmrid.api.simulation import simulate as run_simulate, write_simulation
