@@ -208,13 +208,16 @@ def test_a_read_only_install_without_a_home_folder(tmp_path, small_log):
     assert any(p.name.startswith("wmrid-numba-cache") for p in tmp.iterdir())
 
 
-def test_a_simulation_beyond_the_memory_budget_is_a_usage_error(capsys):
+def test_a_simulation_beyond_the_memory_budget_is_a_usage_error(capsys, tmp_path):
     """``simulate --duration 1e9`` died of "MemoryError: Unable to allocate 14.6 TiB"; now exit 2 before anything is
-    allocated, one line naming the budget and the longest run it allows."""
-    assert run("simulate", "--duration", "1e9", "-o", "/nonexistent/never.csv") == 2
+    allocated, one line naming the budget and the longest run it allows (the output could be written: an output that
+    cannot is refused first, before any import)."""
+    out = tmp_path / "never.csv"
+    assert run("simulate", "--duration", "1e9", "-o", str(out)) == 2
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert "WMRID_MEMORY_BUDGET" in line
     assert "simulate at most" in line
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_a_malformed_memory_budget_is_a_usage_error(monkeypatch, small_log, capsys):
