@@ -258,8 +258,8 @@ def test_server_that_stops_answering(recording, tmp_path):
     path, _, _ = recording
     server, port = start_server(path, "--speed", "1")
     out = tmp_path / "r.json"
-    # pings every 1.5 s (WMRID_WS_PING_S) instead of 5: the same path, found in 3 s instead of 10
-    live = start_live(f"ws://127.0.0.1:{port}", "--robot", "paper", "--every", "0.2", "-o", str(out), ping_s=1.5)
+    # pings every 1 s (WMRID_WS_PING_S) instead of 5: the same path, found within 2 s instead of 10
+    live = start_live(f"ws://127.0.0.1:{port}", "--robot", "paper", "--every", "0.2", "-o", str(out), ping_s=1.0)
     try:
         updates_until(live, 1000)
         server.send_signal(signal.SIGSTOP)
@@ -274,7 +274,7 @@ def test_server_that_stops_answering(recording, tmp_path):
     assert "Traceback" not in err
     lost = [line for line in err.splitlines() if "lost the connection" in line]
     assert len(lost) == 1, err
-    assert "the server stopped answering (no reply to a ping within 1.5 s)" in lost[0], err
+    assert "the server stopped answering (no reply to a ping within 1 s)" in lost[0], err
     assert json.loads(out.read_text())["log"]["samples"] >= 1000
 
 
