@@ -303,10 +303,7 @@ def _arrow_csv(
     try:
         reader = pcsv.open_csv(
             stream,
-            # One thread: with pyarrow's threads reading ahead through this Python stream, a log refused part-way
-            # (a 300 MB line in an xz file, under WMRID_MEMORY_BUDGET) made the process abort at exit after the
-            # right message, "terminate called without an active exception", exit 134: 2 full test runs of 4 under
-            # load, 1 in 12 concurrent runs by hand.
+            # One parsing thread (the stream is read on pyarrow's I/O thread all the same: see above).
             read_options=pcsv.ReadOptions(block_size=1 << 24, use_threads=False),
             parse_options=pcsv.ParseOptions(delimiter=sep),
             convert_options=pcsv.ConvertOptions(include_columns=usecols),
