@@ -224,7 +224,8 @@ def simulate_kernel(t, tau, theta0, starts, eta_start, foh, max_step, cas):
     n = t.shape[0]
     out = np.empty((n, 2))
     th = np.empty(9)
-    th[:8] = theta0
+    for j in range(8):  # element by element: a slice assignment compiled numba's shape-mismatch message, 1.3 s
+        th[j] = theta0[j]
     g = 0
     e1, e2 = 0.0, 0.0
     for k in range(n):

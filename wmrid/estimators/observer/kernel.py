@@ -308,10 +308,15 @@ def observer_chunk(
         st[1] = e1
         st[2] = e2
         if hi < m and hist_idx[hi] == n_i:
-            hist_theta[hi] = theta
+            # element by element: an array assigned to a slice compiles numba's shape-mismatch message (its string
+            # formatting), 2.2 of this kernel's 4.4 s of compiling in each fresh process
+            for j in range(p):
+                hist_theta[hi, 0, j] = theta[0, j]
+                hist_theta[hi, 1, j] = theta[1, j]
+                for q in range(p):
+                    hist_gamma[hi, j, q] = gamma[j, q]
             hist_e[hi, 0] = e_prior[0]
             hist_e[hi, 1] = e_prior[1]
-            hist_gamma[hi] = gamma
             hi += 1
     cursor[0] = hi
     cursor[1] = bj
