@@ -301,7 +301,7 @@ def identify_oe(
         return [float(v) if math.isfinite(v) else None for v in values]
 
     one = np.zeros(1, dtype=np.int64)
-    e_first = np.ascontiguousarray(eta[:1])
+    e_first = eta[:1].copy()  # writable, as eta_start: a read-only view (of a read-only log) compiled the kernel again
     cost_start = 0.5 * float(r_start @ r_start)
     cost_end = 0.5 * float(r_end @ r_end)
     warnings: list[str] = []
