@@ -319,6 +319,7 @@ class LiveRun:
         """The final result: ``identify`` on the messages received (see the module docstring); ``stopped_by`` names a
         stop (Ctrl-C, SIGTERM), after which the process is given FINISH_GRACE_S to identify and write."""
         from wmrid.api.identification import identify
+        from wmrid.core.errors import WmridError
 
         if self._final is not None:
             return self._final
@@ -332,6 +333,14 @@ class LiveRun:
         final = self.source.final_input(natural)
         try:
             result = identify(final.path, self.prep.robot, options=self.options, observer=self.settings)
+        except WmridError as err:
+            # what was received is not lost with the result (a stream with a gap, messages dropped on the way, is
+            # refused as identify refuses the log): the copy is kept, and the one line says where
+            kept = self.source.keep(final)
+            if kept is not None and err.args:
+                text = str(err.args[0]).replace(final.path, kept)  # the message names the copy where it now is
+                err.args = (f"{text}; {kept} keeps the {self.samples:,} samples received", *err.args[1:])
+            raise
         finally:
             self.source.close()
         if final.copied:

@@ -312,6 +312,42 @@ def test_json_lines_on_stdin():
     assert last["result"]["parameters"] == json.loads(offline.stdout)["parameters"]
 
 
+def test_a_stream_with_a_gap_keeps_what_was_received(tmp_path, log):
+    """Rows lost on the way (the stream's time jumps by 100 s, as when a bridge drops messages): the final identify
+    refuses the hole as identify does, in one line that also says where the rows received are kept; that copy holds
+    every row, and identify on it refuses the same way.  (It had been removed with the run's temporary folder.)"""
+    import glob
+
+    from tests.cliutil import wmrid as run
+
+    t, eta, tau = log
+    t = t.copy()
+    t[3000:] += 100.0
+    before = set(glob.glob(os.path.join(tempfile_dir(), "wmrid-live-received-*")))
+    proc = run("live", "-", "--robot", "paper", "--format", "json", "-o", str(tmp_path / "r.json"),
+               stdin=csv_bytes(t, eta, tau))  # fmt: skip
+    err = proc.stderr.decode().strip().splitlines()
+    (kept,) = set(glob.glob(os.path.join(tempfile_dir(), "wmrid-live-received-*"))) - before
+    try:
+        assert proc.returncode == 1, err  # the log supports no result, as identify says
+        assert len(err) == 1, err
+        assert err[0].startswith(f"wmrid: error: {kept}: the log has a hole: time jumps by 100"), err[0]
+        assert err[0].endswith(f"; {kept} keeps the {N:,} samples received"), err[0]
+        assert Path(kept).read_bytes() == csv_bytes(t, eta, tau)
+        assert not (tmp_path / "r.json").exists()
+        again = run("identify", kept, "--robot", "paper")
+        assert again.returncode == 1
+        assert f"{kept}: the log has a hole" in again.stderr.decode()
+    finally:
+        os.remove(kept)
+
+
+def tempfile_dir() -> str:
+    import tempfile
+
+    return tempfile.gettempdir()
+
+
 def test_each_update_line_reads_back_typed_and_writes_the_same_line():
     """The JSON lines `wmrid live` prints (in process, CSV rows on standard input): each update line read as a
     :class:`wmrid.LiveUpdate` writes back exactly the line it was read from (same keys, same order, same values), and

@@ -21,6 +21,7 @@ import time
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import BinaryIO
 
 from wmrid.core.errors import LogFormatError, UsageError
@@ -104,6 +105,18 @@ class LiveSource(ABC):
         if self._tmp is None:
             self._tmp = tempfile.mkdtemp(prefix="wmrid-live-")
         return self._tmp
+
+    def keep(self, final: FinalInput) -> str | None:
+        """Move a copy of what was received (``final.copied``) out of the temporary folder that :meth:`close` removes,
+        into the system's temporary folder under a name of its own; its new path (None when ``final`` is the source
+        itself, which stays where it is).  For a final identify that failed: the messages are not lost with it."""
+        if not final.copied or not os.path.exists(final.path):
+            return None
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        suffix = "".join(Path(final.path).suffixes)
+        kept = os.path.join(tempfile.gettempdir(), f"wmrid-live-received-{stamp}-{os.getpid()}{suffix}")
+        shutil.move(final.path, kept)
+        return kept
 
     def close(self) -> None:
         """Release the source and remove its temporary files."""
