@@ -317,17 +317,18 @@ def test_a_stream_with_a_gap_keeps_what_was_received(tmp_path, log):
     refuses the hole as identify does, in one line that also says where the rows received are kept; that copy holds
     every row, and identify on it refuses the same way.  (It had been removed with the run's temporary folder.)"""
     import glob
+    import tempfile
 
     from tests.cliutil import wmrid as run
 
     t, eta, tau = log
     t = t.copy()
     t[3000:] += 100.0
-    before = set(glob.glob(os.path.join(tempfile_dir(), "wmrid-live-received-*")))
+    before = set(glob.glob(os.path.join(tempfile.gettempdir(), "wmrid-live-received-*")))
     proc = run("live", "-", "--robot", "paper", "--format", "json", "-o", str(tmp_path / "r.json"),
                stdin=csv_bytes(t, eta, tau))  # fmt: skip
     err = proc.stderr.decode().strip().splitlines()
-    (kept,) = set(glob.glob(os.path.join(tempfile_dir(), "wmrid-live-received-*"))) - before
+    (kept,) = set(glob.glob(os.path.join(tempfile.gettempdir(), "wmrid-live-received-*"))) - before
     try:
         assert proc.returncode == 1, err  # the log supports no result, as identify says
         assert len(err) == 1, err
@@ -340,12 +341,6 @@ def test_a_stream_with_a_gap_keeps_what_was_received(tmp_path, log):
         assert f"{kept}: the log has a hole" in again.stderr.decode()
     finally:
         os.remove(kept)
-
-
-def tempfile_dir() -> str:
-    import tempfile
-
-    return tempfile.gettempdir()
 
 
 def test_each_update_line_reads_back_typed_and_writes_the_same_line():

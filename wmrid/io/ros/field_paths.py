@@ -126,7 +126,7 @@ def message_fields(obj: Any) -> tuple[str, ...] | None:
     elif isinstance(obj, SimpleNamespace):
         slots = cls.__dict__.get("__slots__")
         per_class = isinstance(slots, (list, tuple))
-        names = [str(s) for s in slots] if per_class else list(vars(obj))  # type: ignore[union-attr]
+        names = [str(s) for s in slots] if isinstance(slots, (list, tuple)) else list(vars(obj))
     else:
         return None
     # a ROS field name starts with a letter: rosbags' ``__msgtype__`` and the like are the library's, not the message's

@@ -291,14 +291,10 @@ def _arrow_csv(
     # one of its I/O threads after the interpreter began to exit made that thread take the GIL and die inside C++
     # ("terminate called without an active exception", exit 134, after the right message: 2-3 runs in 96 under
     # load, a 300 MB line in an xz file; gdb: arrow::py::PyBuffer::~PyBuffer -> PyGILState_Ensure ->
-    # pthread_exit).  ``raw.close()`` then drops the Python file on this thread, so nothing pyarrow keeps holds a
-    # Python object.
-    raw = pa.PythonFile(fh, mode="r")
-    stream = pa.BufferedInputStream(raw, buffer_size=1 << 24)
-
-    def release() -> None:
-        stream.close()
-        raw.close()
+    # pthread_exit).  Closing the stream (``release``) closes the Python file on this thread and drops it, so nothing
+    # pyarrow keeps holds a Python object.
+    stream = pa.BufferedInputStream(pa.PythonFile(fh, mode="r"), buffer_size=1 << 24)
+    release = stream.close
 
     try:
         reader = pcsv.open_csv(
