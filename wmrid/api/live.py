@@ -35,6 +35,7 @@ import numpy as np
 from wmrid.api.identification import prepare
 from wmrid.api.inputs import LogOptions, reader_arguments
 from wmrid.core.errors import UsageError, option
+from wmrid.core.wheel_log import caches_limited
 from wmrid.estimators.observer.live_update import LiveUpdate
 from wmrid.estimators.options import ObserverOptions
 from wmrid.estimators.result import IdentificationResult
@@ -51,6 +52,10 @@ POLL_S = 0.05
 START_SAMPLES = 50
 #: s: how long the process may take, after Ctrl-C or SIGTERM, to identify what it received and write it.
 FINISH_GRACE_S = 600.0
+#: Samples the final identify keeps between its passes (:func:`wmrid.core.wheel_log.caches_limited`): a stream of at
+#: most this many (about 17 min at 1 kHz, 40 MB) is kept, a longer one is read again on each pass (an 8 h stream
+#: would keep 160 MB, plus the MCAP reader's 200 MB, before finding it too long to keep).
+FINAL_CACHE_ROWS = 1_048_576
 
 
 @dataclass(frozen=True)
@@ -331,8 +336,11 @@ class LiveRun:
         self.reason = self.reason or "stopped"
         natural = not self.stopped and (self.source.ended is not None or self.reason.startswith("no data"))
         final = self.source.final_input(natural)
+        # memory stays that of the stream's: a long stream's passes read the file again instead of keeping it
+        limit = FINAL_CACHE_ROWS if self.samples <= FINAL_CACHE_ROWS else 0
         try:
-            result = identify(final.path, self.prep.robot, options=self.options, observer=self.settings)
+            with caches_limited(limit):
+                result = identify(final.path, self.prep.robot, options=self.options, observer=self.settings)
         except WmridError as err:
             # what was received is not lost with the result (a stream with a gap, messages dropped on the way, is
             # refused as identify refuses the log): the copy is kept, and the one line says where

@@ -10,6 +10,7 @@ speeds from them (:func:`wmrid.io.signals.speed_from_position`).
 from __future__ import annotations
 
 from collections.abc import Callable, Generator, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -93,6 +94,28 @@ CHUNK_ROWS = 262_144
 #: logs are re-read, so memory never exceeds this cache plus one piece.
 CACHE_ROWS = 4_194_304
 
+#: When set (:func:`caches_limited`), streams keep at most this many samples, whatever CACHE_ROWS says.
+_cache_limit: int | None = None
+
+
+def cache_rows() -> int:
+    """Samples a stream may keep after its first pass now: CACHE_ROWS, or less within :func:`caches_limited`."""
+    return CACHE_ROWS if _cache_limit is None else min(CACHE_ROWS, _cache_limit)
+
+
+@contextmanager
+def caches_limited(rows: int) -> Iterator[None]:
+    """Within: every stream keeps at most ``rows`` samples after its first pass (0: none; each pass reads the file
+    again), and the readers' caches of decoded records shrink with it (:func:`cache_rows`): the passes read the same
+    samples, so the result is the same, only its memory and time change.  For a process that must stay within a
+    memory budget (``wmrid live``'s final identify after a long stream).  Process-wide, for every thread."""
+    global _cache_limit
+    saved, _cache_limit = _cache_limit, int(rows)
+    try:
+        yield
+    finally:
+        _cache_limit = saved
+
 
 class LogStream:
     """A wheel log that yields :class:`WheelLog` pieces in time order and can be iterated again.
@@ -119,6 +142,7 @@ class LogStream:
             return
         kept: list[WheelLog] | None = []
         count = 0
+        limit = cache_rows()
         gen = self._pieces()
         while True:
             try:
@@ -129,7 +153,7 @@ class LogStream:
             count += len(piece)
             if kept is not None:
                 kept.append(piece)
-                if count > CACHE_ROWS:
+                if count > limit:
                     kept = None
             yield piece
         if self.samples is not None and count != self.samples:
@@ -173,6 +197,82 @@ def stream_arrays(log: Any, rows: int = CHUNK_ROWS) -> LogStream:
         return notes
 
     return LogStream(source, unit, pieces)
+
+
+def shifted_stream(stream: LogStream, delay: float) -> LogStream:
+    """``stream`` with its efforts read ``delay`` s earlier, tau(t - delay), by linear interpolation between their
+    samples, piece by piece: the same values as :func:`wmrid.estimators.regression.idim_rows.shifted` gives on the
+    whole log (held at the first and last sample beyond the log's ends; ``np.interp`` between the same two samples).
+
+    A piece's samples leave once the samples their time ``t - delay`` falls between have come (for a negative delay,
+    samples of the next piece), so the pieces may be cut elsewhere than the stream's.  Memory: a piece and the
+    samples within ``|delay|`` of its ends.
+    """
+    delay = float(delay)
+
+    def pieces() -> Generator[WheelLog, None, tuple[str, ...]]:
+        held: list[WheelLog] = []  # samples not yet out, and before them those their interpolation may still need
+        first = 0  # in held's concatenation: the first sample not yet out
+        for piece in stream:
+            held.append(piece)
+            out, held, first = _shift_out(held, first, delay, last=False)
+            if out is not None:
+                yield out
+        if held:
+            out, held, first = _shift_out(held, first, delay, last=True)
+            if out is not None:
+                yield out
+        return stream.notes
+
+    return LogStream(stream.source, stream.effort_unit, pieces)
+
+
+def _shift_out(
+    held: list[WheelLog], first: int, delay: float, last: bool
+) -> tuple[WheelLog | None, list[WheelLog], int]:
+    """(the samples of ``held`` from ``first`` on whose shifted effort is known, as one piece, or None; what to hold
+    on; the index there of the first sample not yet out) for :func:`shifted_stream`; ``last``: no sample follows."""
+    t = np.concatenate([p.t for p in held]) if len(held) > 1 else np.asarray(held[0].t)
+    x = t[first:] - delay
+    end = len(t) if last else first + int(np.searchsorted(x, t[-1], side="right"))
+    if end == first:
+        return None, held, first
+    tau = np.concatenate([p.tau for p in held]) if len(held) > 1 else np.asarray(held[0].tau)
+    tau = np.asarray(tau, dtype=np.float64)
+    xs = x[: end - first]
+    shifted = np.column_stack([np.interp(xs, t, tau[:, j]) for j in range(tau.shape[1])])
+
+    def part(name: str) -> np.ndarray | None:
+        values = [getattr(p, name) for p in held]
+        if any(v is None for v in values):
+            return None
+        return (np.concatenate(values) if len(values) > 1 else values[0])[first:end]
+
+    eta = part("eta")
+    assert eta is not None, "a piece has speeds"
+    h = held[0]
+    out = WheelLog(
+        t=t[first:end], eta=eta, tau=shifted, source=h.source, effort_unit=h.effort_unit, pose=part("pose"),
+        reference=part("reference"),
+    )  # fmt: skip
+    if last:
+        return out, [], 0
+    # keep from the sample at or before the next one's shifted time, the left end of its interpolation (of a sample
+    # still to come when all went out: its time is past the last one's)
+    after = (t[end] if end < len(t) else t[-1]) - delay
+    keep = min(max(int(np.searchsorted(t, after, side="right")) - 1, 0), end)
+    rest = WheelLog(
+        t=t[keep:], eta=_tail(held, "eta", keep), tau=tau[keep:], source=h.source, effort_unit=h.effort_unit,
+        pose=_tail(held, "pose", keep), reference=_tail(held, "reference", keep),
+    )  # fmt: skip
+    return out, [rest], end - keep
+
+
+def _tail(held: list[WheelLog], name: str, start: int) -> Any:
+    values = [getattr(p, name) for p in held]
+    if any(v is None for v in values):
+        return None
+    return (np.concatenate(values) if len(values) > 1 else values[0])[start:]
 
 
 #: The words of the note that says the effort came from another topic than the speeds (:func:`split_topics`).

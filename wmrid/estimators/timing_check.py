@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import UsageError, WmridError, option
-from wmrid.core.wheel_log import LogStream, WheelLog
+from wmrid.core.wheel_log import LogStream, WheelLog, shifted_stream
 from wmrid.estimators.delay import DEFAULT_SPAN_S, SIGNIFICANT_S, SIGNIFICANT_Z, DelayEstimate, combine, estimate_delay
 from wmrid.estimators.findings import DelayApplied, TimingCheck
 from wmrid.estimators.uncertainty import interval_factor
@@ -80,42 +80,14 @@ def timing_check(
     none = TimingCheck(checked=False, apply=False, slow=slow, faster_controller=False)
     if samples < 2:
         return replace(none, why=f"{samples} samples")
-    count = math.ceil(samples / TIMING_WINDOW_SAMPLES)
-    size = math.ceil(samples / count)
-
-    def profile(with_form: Any) -> tuple[DelayEstimate, int, int, np.ndarray]:
-        estimates: list[DelayEstimate] = []
-        profiled = 0
-        first_t = None
-        for t, eta, tau, reference in _windows(log if isinstance(log, LogStream) else None, log, size):
-            if estimates and len(t) < size // 2:  # a short tail adds little and may not fit the filter
-                break
-            # the filter's cutoff follows the log's bandwidth and noise, the same all along a log as its delay: chosen
-            # once, on the first window (IDIM's choice fits the log several times: half the check's time on an hour)
-            cutoff = estimates[0].cutoff_hz if estimates else None
-            try:
-                est = estimate_delay(
-                    t, eta, tau, span=search_span(t), torque_hold=torque_hold, control_rate=control_rate,
-                    reference=reference, form=with_form, cutoff_hz=cutoff,
-                )  # fmt: skip
-            except WmridError:
-                if not estimates:
-                    raise
-                break
-            estimates.append(est)
-            profiled += len(t)
-            first_t = t if first_t is None else first_t
-        assert first_t is not None
-        return combine(estimates), profiled, len(estimates), first_t
-
     try:
-        wheel, profiled, windows, first_t = profile(None)
+        wheel, profiled, windows, first_t = profile_windows(log, samples, torque_hold, control_rate, None)
     except WmridError as err:
         return replace(none, why=str(err))
     drag = None
     if form is not None and consults_drag(wheel):
         try:
-            drag = profile(form)[0]
+            drag = profile_windows(log, samples, torque_hold, control_rate, form)[0]
         except WmridError:
             drag = None
     est, note = with_drag(wheel, drag, form)
@@ -129,6 +101,42 @@ def timing_check(
         profiled_with=None if drag is None else (form.friction if est is drag else "wheel"),
         wheel_model=None if drag is None else wheel.record(), note=note or None, theta0_slope_per_s=slope,
     )  # fmt: skip
+
+
+def profile_windows(
+    log: Any, samples: int, torque_hold: str, control_rate: float | None, form: Any
+) -> tuple[DelayEstimate, int, int, np.ndarray]:
+    """The delay profiled window by window over a log of ``samples`` samples (windows of at most
+    TIMING_WINDOW_SAMPLES, of equal size; a short tail is left out), the windows' estimates combined by their inverse
+    variances (:func:`combine`): (estimate, samples profiled, windows, t (m,) s of the first window).  A
+    :class:`wmrid.core.wheel_log.LogStream` is read piece by piece (one window in memory).  ``form``: the friction
+    model profiled (:func:`estimate_delay`; None: the wheels' friction alone).  Raises :class:`WmridError` when the
+    first window cannot be profiled."""
+    count = math.ceil(samples / TIMING_WINDOW_SAMPLES)
+    size = math.ceil(samples / count)
+    estimates: list[DelayEstimate] = []
+    profiled = 0
+    first_t = None
+    for t, eta, tau, reference in _windows(log if isinstance(log, LogStream) else None, log, size):
+        if estimates and len(t) < size // 2:  # a short tail adds little and may not fit the filter
+            break
+        # the filter's cutoff follows the log's bandwidth and noise, the same all along a log as its delay: chosen
+        # once, on the first window (IDIM's choice fits the log several times: half the check's time on an hour)
+        cutoff = estimates[0].cutoff_hz if estimates else None
+        try:
+            est = estimate_delay(
+                t, eta, tau, span=search_span(t), torque_hold=torque_hold, control_rate=control_rate,
+                reference=reference, form=form, cutoff_hz=cutoff,
+            )  # fmt: skip
+        except WmridError:
+            if not estimates:
+                raise
+            break
+        estimates.append(est)
+        profiled += len(t)
+        first_t = t if first_t is None else first_t
+    assert first_t is not None
+    return combine(estimates), profiled, len(estimates), first_t
 
 
 def consults_drag(wheel: DelayEstimate) -> bool:
@@ -298,20 +306,23 @@ class _Piece:
 def apply_delay(
     log: Any, delay: float | str, torque_hold: str, control_rate: float | None, form: Any = None
 ) -> tuple[Any, DelayApplied, list[str]]:
-    """(the log in memory with its efforts read ``delay`` s earlier, the record for ``diagnostics.delay``,
-    warnings) for :func:`wmrid.pipeline.identify.identify`.
+    """(the log with its efforts read ``delay`` s earlier, the record for ``diagnostics.delay``, warnings) for
+    :func:`wmrid.pipeline.identify.identify`: in memory, or, for a :class:`wmrid.core.wheel_log.LogStream` longer
+    than the timing check's window (TIMING_WINDOW_SAMPLES; its ``samples`` known from a pass), a stream that is
+    never read whole (:func:`_apply_delay_stream`).
 
     ``delay``: seconds, or "auto" (:func:`estimate_delay`; applied only when significant and not at the edge
     of the search; ``form`` the friction model profiled).  The warnings name the likely cause: two clocks, or a
     controller faster than the log."""
     # IDIM's rows (~10 ms): only when a delay is applied
-    from wmrid.estimators.regression.idim_rows import MAX_EFFORT_SHIFT_S, shifted
+    from wmrid.estimators.regression.idim_rows import shifted
 
+    if in_pieces(log):
+        return _apply_delay_stream(log, log.samples, delay, torque_hold, control_rate, form)
     whole = log.read() if isinstance(log, LogStream) else log
     t = np.asarray(whole.t, dtype=np.float64)
     eta = np.asarray(whole.eta, dtype=np.float64)
     tau = np.asarray(whole.tau, dtype=np.float64)
-    source = getattr(whole, "source", "log")
     warnings: list[str] = []
     if delay == "auto":
         common = {
@@ -325,61 +336,109 @@ def apply_delay(
                 drag = estimate_delay(t, eta, tau, form=form, **common)
             except WmridError:
                 drag = None
-        est, note = with_drag(wheel, drag, form)
-        record = DelayApplied(chosen_by="auto", estimate=est.record())
-        if drag is not None:
-            record = replace(
-                record, profiled_with=form.friction if est is drag else "wheel", wheel_model=wheel.record()
-            )
-        if note:
-            warnings.append(note)
-        applied = est.delay if est.significant and not est.at_edge else 0.0
-        if est.at_edge:
-            warnings.append(
-                f"the delay between efforts and speeds could not be estimated (the fit keeps improving to the edge of "
-                f"the searched +/-{abs(est.grid[0]) * 1e3:g} ms): the model does not fit this log well enough to time "
-                "it; the efforts are used as stamped"
-            )
-        elif not est.determined:
-            why = (
-                "the instrumental-variable moment of the logged reference does not cross zero within the searched "
-                f"+/-{abs(est.grid[0]) * 1e3:g} ms"
-                if est.method == "instrumental variables"
-                else "the fit on part of the log keeps improving to the edge of the searched "
-                f"+/-{abs(est.grid[0]) * 1e3:g} ms"
-            )
-            warnings.append(
-                f"the delay between efforts and speeds could not be estimated ({why}): this log does not pin it; the "
-                "efforts are used as stamped"
-            )
-        elif est.significant and faster_controller(est, t, torque_hold, control_rate):
-            warnings.append(
-                f"{faster_controller_text(est, t)}.  This run read them {est.delay * 1e3:.2f} ms later than the hold "
-                f"assumes (--delay {est.delay:.5f})"
-            )
-        elif est.significant:
-            half = 0.5 * float(np.median(np.diff(t)))
-            cause = "two topics or clocks?"
-            if abs(est.delay + half) <= max(2 * est.std, 0.2 * half):
-                cause = "half a logged step: speeds computed as backward differences of encoder counts lag by that much"
-            warnings.append(
-                f"the efforts appear stamped {est.delay * 1e3:+.2f} +/- {est.std * 1e3:.2f} ms late against the "
-                f"speeds ({cause}): they were read that much earlier (--delay "
-                f"{est.delay:.5f}); a delay left in biases the friction by tens of per cent"
-            )
+        applied, record = _decided(wheel, drag, form, t, torque_hold, control_rate, warnings)
     else:
-        applied = float(delay)
-        if not (math.isfinite(applied) and abs(applied) <= MAX_EFFORT_SHIFT_S):
-            raise UsageError(
-                f"{option('delay')} must be auto or seconds within +/-{MAX_EFFORT_SHIFT_S:g}, got {delay!r}"
-            )
-        record = DelayApplied(chosen_by="--delay")
-    record = replace(record, applied_s=applied)
+        applied, record = _given(delay)
     if applied == 0.0:
         return whole, record, warnings
     shifted_log = WheelLog(
-        t=t, eta=eta, tau=shifted(t, tau, -applied), source=source, notes=tuple(getattr(whole, "notes", ())),
-        effort_unit=getattr(whole, "effort_unit", "N m"), pose=getattr(whole, "pose", None),
-        reference=getattr(whole, "reference", None),
+        t=t, eta=eta, tau=shifted(t, tau, -applied), source=getattr(whole, "source", "log"),
+        notes=tuple(getattr(whole, "notes", ())), effort_unit=getattr(whole, "effort_unit", "N m"),
+        pose=getattr(whole, "pose", None), reference=getattr(whole, "reference", None),
     )  # fmt: skip
     return shifted_log, record, warnings
+
+
+def in_pieces(log: Any) -> bool:
+    """Whether a delay is applied to ``log`` piece by piece (:func:`_apply_delay_stream`) rather than in memory: a
+    :class:`wmrid.core.wheel_log.LogStream` longer than the timing check's window (its length known from a pass)."""
+    return isinstance(log, LogStream) and log.samples is not None and log.samples > TIMING_WINDOW_SAMPLES
+
+
+def _apply_delay_stream(
+    log: Any, samples: int, delay: float | str, torque_hold: str, control_rate: float | None, form: Any
+) -> tuple[Any, DelayApplied, list[str]]:
+    """:func:`apply_delay` for a log longer than the timing check's window, read piece by piece, never whole: the
+    delay "auto" is the windows' combined estimate (:func:`profile_windows`, the one ``diagnostics.timing`` shows), the
+    efforts are shifted as the pieces pass (:func:`wmrid.core.wheel_log.shifted_stream`, the same values as in
+    memory).  Memory: a window and a piece, whatever the log's length."""
+    warnings: list[str] = []
+    if delay == "auto":
+        wheel, _, _, first_t = profile_windows(log, samples, torque_hold, control_rate, None)
+        drag = None
+        if form is not None and consults_drag(wheel):
+            try:
+                drag = profile_windows(log, samples, torque_hold, control_rate, form)[0]
+            except WmridError:
+                drag = None
+        applied, record = _decided(wheel, drag, form, first_t, torque_hold, control_rate, warnings)
+    else:
+        applied, record = _given(delay)
+    if applied == 0.0:
+        return log, record, warnings
+    return shifted_stream(log, -applied), record, warnings
+
+
+def _given(delay: float | str) -> tuple[float, DelayApplied]:
+    """(the delay s, its record) for a delay given in seconds (``--delay``)."""
+    # IDIM's rows (~10 ms): only when a delay is applied
+    from wmrid.estimators.regression.idim_rows import MAX_EFFORT_SHIFT_S
+
+    applied = float(delay)
+    if not (math.isfinite(applied) and abs(applied) <= MAX_EFFORT_SHIFT_S):
+        raise UsageError(f"{option('delay')} must be auto or seconds within +/-{MAX_EFFORT_SHIFT_S:g}, got {delay!r}")
+    return applied, DelayApplied(chosen_by="--delay", applied_s=applied)
+
+
+def _decided(
+    wheel: DelayEstimate,
+    drag: DelayEstimate | None,
+    form: Any,
+    t: np.ndarray,
+    torque_hold: str,
+    control_rate: float | None,
+    warnings: list[str],
+) -> tuple[float, DelayApplied]:
+    """(the delay s applied, its record) for the delay estimated as ``wheel`` (and ``drag``, :func:`with_drag`) on a
+    log with times ``t`` (n,) s (its first window for a long log); what it says is appended to ``warnings``."""
+    est, note = with_drag(wheel, drag, form)
+    record = DelayApplied(chosen_by="auto", estimate=est.record())
+    if drag is not None:
+        record = replace(record, profiled_with=form.friction if est is drag else "wheel", wheel_model=wheel.record())
+    if note:
+        warnings.append(note)
+    applied = est.delay if est.significant and not est.at_edge else 0.0
+    if est.at_edge:
+        warnings.append(
+            f"the delay between efforts and speeds could not be estimated (the fit keeps improving to the edge of "
+            f"the searched +/-{abs(est.grid[0]) * 1e3:g} ms): the model does not fit this log well enough to time "
+            "it; the efforts are used as stamped"
+        )
+    elif not est.determined:
+        why = (
+            "the instrumental-variable moment of the logged reference does not cross zero within the searched "
+            f"+/-{abs(est.grid[0]) * 1e3:g} ms"
+            if est.method == "instrumental variables"
+            else "the fit on part of the log keeps improving to the edge of the searched "
+            f"+/-{abs(est.grid[0]) * 1e3:g} ms"
+        )
+        warnings.append(
+            f"the delay between efforts and speeds could not be estimated ({why}): this log does not pin it; the "
+            "efforts are used as stamped"
+        )
+    elif est.significant and faster_controller(est, t, torque_hold, control_rate):
+        warnings.append(
+            f"{faster_controller_text(est, t)}.  This run read them {est.delay * 1e3:.2f} ms later than the hold "
+            f"assumes (--delay {est.delay:.5f})"
+        )
+    elif est.significant:
+        half = 0.5 * float(np.median(np.diff(t)))
+        cause = "two topics or clocks?"
+        if abs(est.delay + half) <= max(2 * est.std, 0.2 * half):
+            cause = "half a logged step: speeds computed as backward differences of encoder counts lag by that much"
+        warnings.append(
+            f"the efforts appear stamped {est.delay * 1e3:+.2f} +/- {est.std * 1e3:.2f} ms late against the "
+            f"speeds ({cause}): they were read that much earlier (--delay "
+            f"{est.delay:.5f}); a delay left in biases the friction by tens of per cent"
+        )
+    return applied, replace(record, applied_s=applied)

@@ -24,15 +24,14 @@ from dataclasses import dataclass, fields, replace
 from typing import Any
 
 from wmrid.core.errors import UsageError, WmridError, option
-from wmrid.core.wheel_log import LogStream, split_topics, stream_arrays
+from wmrid.core.wheel_log import LogStream, split_topics
 from wmrid.estimators.delay import DELAY_RESOLUTION_S
 from wmrid.estimators.feedback import check as feedback_check
 from wmrid.estimators.findings import FrictionChoice, TimingCheck
 from wmrid.estimators.observer.observe import delay_profile_form
-from wmrid.estimators.observer.survey import survey
 from wmrid.estimators.options import ObserverOptions
 from wmrid.estimators.result import IdentificationResult, LogLike
-from wmrid.estimators.timing_check import apply_delay
+from wmrid.estimators.timing_check import apply_delay, in_pieces
 from wmrid.estimators.verdict import settle
 from wmrid.estimators.widening import with_hold_term, with_timing_term
 from wmrid.model.robot import Robot
@@ -136,17 +135,20 @@ def _delayed(
     steps: Steps,
     progress: Callable[[int, int], None] | None,
 ) -> IdentificationResult:
-    """The log's efforts read ``options.delay`` s earlier (the whole log in memory), then identified.  "auto": the
+    """The log's efforts read ``options.delay`` s earlier (the whole log in memory; piece by piece when it is longer
+    than the timing check's window, :func:`wmrid.estimators.timing_check.in_pieces`), then identified.  "auto": the
     delay estimated on the whole log (:func:`wmrid.estimators.timing_check.apply_delay`, profiled with the richest
     friction model allowed); applied when significant, with the timing term: a pass at the delay moved by its
     resolution, whose change the std carries (:func:`wmrid.estimators.widening.with_timing_term`)."""
     delay = options.delay
     assert delay is not None, "_delayed is called with a delay (seconds or auto)"
-    original = log.read() if isinstance(log, LogStream) else log  # read once: shifting needs the whole log
+    if isinstance(log, LogStream) and log.samples is None:
+        surveyed(log)  # its length: a log longer than the timing check's window is shifted piece by piece
+    # read once when it is shifted in memory
+    original = log if in_pieces(log) or not isinstance(log, LogStream) else log.read()
     profile = None
     if delay == "auto":
-        whole = stream_arrays(original)
-        auto_form = survey(whole, whole.source, whole.effort_unit).form()
+        auto_form = surveyed(original)[1].form()
         profile = delay_profile_form(auto_form, options.friction, robot, steps.geometry, steps.load_terms)
     shifted, record, warnings = apply_delay(original, delay, options.torque_hold, options.control_rate, profile)
     applied = record.applied_s

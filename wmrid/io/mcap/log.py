@@ -12,7 +12,16 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import LogFormatError, UsageError, option
-from wmrid.core.wheel_log import CACHE_ROWS, CHUNK_ROWS, MIN_SAMPLES, REQUIRED, LogStream, WheelLog, stream_arrays
+from wmrid.core.wheel_log import (
+    CACHE_ROWS,
+    CHUNK_ROWS,
+    MIN_SAMPLES,
+    REQUIRED,
+    LogStream,
+    WheelLog,
+    cache_rows,
+    stream_arrays,
+)
 from wmrid.io.ros.field_paths import FieldSignals, check_values, field_signals
 from wmrid.io.ros.joint_stream import SignalStream, stream_plan
 from wmrid.io.ros.joints import signals_from_json, signals_from_mcap
@@ -127,7 +136,7 @@ def recording_log(
     """The LogStream of a recording's JointState topics (or of the wheel signals by field path ``fields``,
     checked to give numbers): decoded whole, or streamed (see :func:`read_mcap_log`)."""
     source = recording
-    contents = recording.scan(_MCAP_WHOLE_PIECES * rows, _MCAP_REPLAY_BYTES)
+    contents = recording.scan(_MCAP_WHOLE_PIECES * rows, min(_MCAP_REPLAY_BYTES, 48 * cache_rows()))
     if fields is not None:
         check_values(contents.joints, fields, recording.name)
     if contents.complete:
