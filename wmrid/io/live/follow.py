@@ -74,7 +74,10 @@ class FinalInput:
 
 class LiveSource(ABC):
     """A log followed as it is written.  ``name`` as the user gave it; ``bytes_read``; ``last_data`` the monotonic time
-    new bytes last arrived; ``ended`` None while it may still grow, else why it ended by itself."""
+    new bytes last arrived; ``ended`` None while it may still grow, else why it ended by itself.  ``tables``: it may
+    bring CSV rows (the table readers, pandas and pyarrow's CSV, are then loaded before the first message)."""
+
+    tables = True
 
     def __init__(self, name: str) -> None:
         self.name = name
@@ -325,6 +328,8 @@ class CsvFileSource(LiveSource):
 class McapFileSource(LiveSource):
     """An MCAP file being written (chunked or not): its whole records; it ends at its footer."""
 
+    tables = False
+
     def __init__(self, path: str, settings: ReaderSettings) -> None:
         super().__init__(path)
         s = settings
@@ -367,6 +372,8 @@ class Rosbag2Source(LiveSource):
     """A rosbag2 folder that ``ros2 bag record -s mcap`` is writing: its MCAP files in split order (NAME_0.mcap,
     NAME_1.mcap, ...), each followed to its footer before the next is opened; it ends once the recorder writes
     metadata.yaml and every file is read."""
+
+    tables = False
 
     def __init__(self, folder: str, settings: ReaderSettings) -> None:
         super().__init__(folder)

@@ -120,6 +120,8 @@ class WsSource(LiveSource):
     taken by the live run for its display; ``messages``: messages received.
     """
 
+    tables = False
+
     def __init__(self, url: str, settings: ReaderSettings, reconnect: bool = False) -> None:
         super().__init__(url)
         check_url(url)
