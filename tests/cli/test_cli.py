@@ -179,6 +179,68 @@ def test_help_and_version():
     assert wmrid("--version").stdout.startswith(b"wmrid ")
 
 
+def test_every_commands_help_fits_an_80_column_terminal():
+    """Issue 33: ``wmrid COMMAND --help`` at 80 columns fits in 120 lines (identify's was 243), no line wider than the
+    terminal; the panels of detail (the log's input, the observer) fold into one line naming ``--help-all``, which
+    shows every option.  Measured: identify 92 lines, fleet 114, report 75, live 76."""
+    from wmrid.cli.app import command
+
+    for name, cmd in command().commands.items():
+        if getattr(cmd, "hidden", False):
+            continue
+        shown = text(wmrid(name, "--help", columns="80"))
+        assert shown.returncode == 0, name
+        lines = shown.stdout.splitlines()
+        assert len(lines) <= 120, (name, len(lines))
+        assert max(len(line) for line in lines) <= 80, name
+    short = text(wmrid("identify", "--help", columns="80")).stdout
+    every = text(wmrid("identify", "--help-all", columns="80")).stdout
+    assert "--help-all" in short
+    assert "--robot" in short
+    for flag in ("--topic", "--speed-unit", "--torque-hold", "--box-width"):
+        assert flag not in short, flag
+        assert flag in every, flag
+    assert "Log input (bag topics, units, effort): 19 options" in " ".join(short.split())
+    assert len(every.splitlines()) > len(short.splitlines())
+
+
+def test_an_error_on_a_terminal_is_wrapped_at_word_boundaries(tmp_path):
+    """Issue 33: an error line is one line in a pipe (scripts, logs) and, on an 80-column terminal, wrapped at its
+    width between words (the terminal broke it mid-word), the lines after the first indented: the same words."""
+    import os
+    import pty
+    import subprocess
+    import sys
+
+    args = ["identify", str(ROOT_DIR / "sample_logs" / "paper_sinusoid.csv"), "--k=-1"]  # a path within 80 columns
+    piped = text(process(*args))
+    assert piped.returncode == 2
+    assert len(piped.stderr.splitlines()) == 1
+    assert len(piped.stderr) > 100
+    leader, follower = pty.openpty()
+    env = dict(os.environ, COLUMNS="80")
+    proc = subprocess.run(
+        [sys.executable, "-m", "wmrid", *args], stderr=follower, stdout=subprocess.PIPE, env=env, timeout=300
+    )  # fmt: skip
+    os.close(follower)
+    shown = b""
+    while True:
+        try:
+            chunk = os.read(leader, 65536)
+        except OSError:  # the terminal's other end closed
+            break
+        if not chunk:
+            break
+        shown += chunk
+    os.close(leader)
+    lines = shown.decode().replace("\r\n", "\n").rstrip("\n").split("\n")
+    assert proc.returncode == 2
+    assert len(lines) > 1
+    assert all(len(line) <= 80 for line in lines), lines
+    assert all(line.startswith("  ") for line in lines[1:])
+    assert " ".join(line.strip() for line in lines) == piped.stderr.strip()
+
+
 def test_the_command_is_built_once_and_answers_alike_every_time():
     """``command()`` (Typer's build of the app, 50 ms) is made once per process: the same object each call, its help
     texts escaped once (the brackets still shown as written after reuse), and a run after a refused one answers as

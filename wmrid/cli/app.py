@@ -120,7 +120,7 @@ def main(argv: list[str] | None = None) -> None:
         if debug:
             _leave(argv, saved, previous)
             raise
-        sys.stderr.write(f"wmrid: error: {_one_line(str(exc))}\n")
+        sys.stderr.write(_said(f"wmrid: error: {_one_line(str(exc))}"))
         code = exc.exit_status
     except (BrokenPipeError, ReaderGone):  # the reader (| head) has seen enough
         if argv is None:  # and nothing more is flushed into the closed pipe at exit
@@ -131,13 +131,13 @@ def main(argv: list[str] | None = None) -> None:
         if debug:
             _leave(argv, saved, previous)
             raise
-        sys.stderr.write(f"wmrid: error: {_out_of_memory()}\n")
+        sys.stderr.write(_said(f"wmrid: error: {_out_of_memory()}"))
         code = ExitStatus.USAGE
     except Exception as exc:
         if type(exc).__name__ == "NoArgsIsHelpError":  # `wmrid COMMAND` without arguments: its help was shown
             code = ExitStatus.USAGE
         elif hasattr(exc, "format_message") and hasattr(exc, "exit_code"):  # a Click/Typer usage error
-            sys.stderr.write(f"wmrid: error: {_usage_line(exc)}\n")
+            sys.stderr.write(_said(f"wmrid: error: {_usage_line(exc)}"))
             code = ExitStatus.USAGE
         elif type(exc).__name__ == "Abort":
             code = interrupts.exit_code()
@@ -262,6 +262,23 @@ def _stopped_by() -> str:
     if received is None or received == signal.SIGINT:
         return "interrupted"
     return f"terminated by {signal.Signals(received).name}"
+
+
+def _said(line: str) -> str:
+    """An error line as written to stderr: one line in a pipe or a file (for scripts and logs); on a terminal wrapped at
+    its width, at word boundaries, the lines after the first indented (a terminal broke it mid-word)."""
+    import shutil
+    import textwrap
+
+    try:
+        terminal = sys.stderr.isatty()
+    except (AttributeError, ValueError, OSError):
+        terminal = False
+    if not terminal:
+        return line + "\n"
+    width = max(shutil.get_terminal_size((80, 24)).columns, 40)
+    lines = textwrap.wrap(line, width=width, subsequent_indent="  ", break_long_words=False, break_on_hyphens=False)
+    return "\n".join(lines) + "\n"
 
 
 def _one_line(text: str) -> str:

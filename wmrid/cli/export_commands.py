@@ -12,8 +12,10 @@ import typer
 
 from wmrid.cli.app import app
 from wmrid.cli.groups import LOG_FLAGS, takes
+from wmrid.cli.help import Command
 from wmrid.cli.helpers import activity
 from wmrid.cli.options import (
+    CHECK_LOG_PANEL,
     OutputFormat,
     RotorInertiaOpt,
 )
@@ -24,6 +26,7 @@ if TYPE_CHECKING:
 
 
 @app.command(
+    cls=Command,
     name="export",
     epilog="Examples:\n\n"
     "wmrid export run.json --robot robot.toml -o robot.xml --check run.mcap\n\n"
@@ -31,7 +34,7 @@ if TYPE_CHECKING:
     "wmrid export run.json --robot amr -o model.yaml\n\n"
     "wmrid export run.json --robot amr -o feedforward.py",
 )
-@takes(LOG_FLAGS.adapted(panel="Log input of --check (bag topics, units, effort)"))
+@takes(LOG_FLAGS.adapted(panel=CHECK_LOG_PANEL))
 def export_command(
     result: Annotated[str, typer.Argument(help="A saved result (wmrid identify --format json -o run.json).")],
     output: Annotated[

@@ -16,6 +16,7 @@ import typer
 
 from wmrid.cli.app import app, invocation
 from wmrid.cli.groups import FIT_FLAGS, LOG_FLAGS, OBSERVER_FLAGS, takes
+from wmrid.cli.help import Command
 from wmrid.cli.helpers import activity, stderr_console
 from wmrid.cli.options import (
     MethodChoice,
@@ -57,6 +58,7 @@ def _given_options(
 
 
 @app.command(
+    cls=Command,
     name="fleet",
     epilog="Examples:\n\n"
     "wmrid fleet logs/ --robot paper -o fleet.parquet\n\n"
@@ -281,6 +283,7 @@ def _print_summary(summary: dict[str, Any]) -> None:
 
 
 @app.command(
+    cls=Command,
     name="fleet-report",
     epilog="Examples:\n\n"
     "wmrid fleet-report fleet.parquet -o fleet.html\n\n"

@@ -14,6 +14,7 @@ import typer
 
 from wmrid.cli.app import app, invocation
 from wmrid.cli.groups import FIT_FLAGS, LOG_FLAGS, OBSERVER_FLAGS, takes
+from wmrid.cli.help import Command
 from wmrid.cli.helpers import (
     activity,
     check_estimates_output,
@@ -54,6 +55,7 @@ def one_or_many(paths: list[str]) -> str | list[str]:
 
 
 @app.command(
+    cls=Command,
     name="identify",
     epilog="Examples:\n\n"
     "wmrid identify run.mcap --robot paper\n\n"
@@ -142,7 +144,9 @@ def identify_command(
 
 
 @app.command(
-    name="inspect", epilog="Examples:\n\nwmrid inspect run.mcap\n\nwmrid inspect rosbag2_folder/ --format json"
+    cls=Command,
+    name="inspect",
+    epilog="Examples:\n\nwmrid inspect run.mcap\n\nwmrid inspect rosbag2_folder/ --format json",
 )
 def inspect_command(
     log: Annotated[list[str], typer.Argument(metavar="LOG...", help=LOG_HELP)],
@@ -165,6 +169,7 @@ def inspect_command(
 
 
 @app.command(
+    cls=Command,
     name="report",
     epilog="Examples:\n\n"
     "wmrid report run.mcap --robot paper -o report.html\n\n"
@@ -250,6 +255,7 @@ def report_command(
 
 
 @app.command(
+    cls=Command,
     name="compare",
     epilog="Examples:\n\n"
     "wmrid compare run.mcap --robot paper\n\n"

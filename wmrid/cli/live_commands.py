@@ -14,6 +14,7 @@ import typer
 
 from wmrid.cli.app import app
 from wmrid.cli.groups import LOG_FLAGS, OBSERVER_FLAGS, takes
+from wmrid.cli.help import Command
 from wmrid.cli.helpers import check_outputs, on_stdout, warning_summary
 from wmrid.cli.options import (
     OutputFormat,
@@ -30,6 +31,7 @@ _LIVE_PANEL = "Live (refresh and when to stop)"
 
 
 @app.command(
+    cls=Command,
     name="live",
     epilog="Examples:\n\n"
     "wmrid live ws://robot.local:8765 --robot paper -o result.json  (foxglove_bridge on the robot)\n\n"

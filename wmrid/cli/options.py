@@ -54,8 +54,15 @@ class OutputFormat(str, Enum):
     json = "json"
 
 
-_LOG_PANEL = "Log input (bag topics, units, effort)"
-_OBSERVER_PANEL = "Observer (the paper's estimator, Eqs. 26-37), friction model and the efforts' timing"
+#: The panels of detail: ``--help`` folds each into one line, ``--help-all`` shows them (:mod:`wmrid.cli.help`).  Titles
+#: fit an 80-column terminal's panel border.
+LOG_PANEL = "Log input (bag topics, units, effort)"
+CHECK_LOG_PANEL = "Log input of --check (bag topics, units, effort)"
+OBSERVER_PANEL = "Observer (Eqs. 26-37), friction and the efforts' timing"
+MULTIBODY_PANEL = "Multibody prototype"
+CHANGE_PANEL = "Change of the dynamics during the run (one per run)"
+FOLDED_PANELS = (LOG_PANEL, CHECK_LOG_PANEL, OBSERVER_PANEL, MULTIBODY_PANEL, CHANGE_PANEL)
+_LOG_PANEL, _OBSERVER_PANEL = LOG_PANEL, OBSERVER_PANEL
 
 
 TopicOpt = Annotated[
@@ -280,7 +287,7 @@ ValidateOpt = Annotated[
 ]
 
 
-_CHANGE_PANEL = "Change of the dynamics during the run (one per run)"
+_CHANGE_PANEL = CHANGE_PANEL
 
 
 LoadAtOpt = Annotated[

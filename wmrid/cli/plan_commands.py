@@ -11,12 +11,14 @@ from typing import Annotated
 import typer
 
 from wmrid.cli.app import app
+from wmrid.cli.help import Command
 from wmrid.cli.helpers import activity, check_outputs, on_stdout, warning_summary
 from wmrid.cli.options import Criterion, OutputFormat, PlanFriction
 from wmrid.reporting.terminal import console
 
 
 @app.command(
+    cls=Command,
     name="plan",
     epilog="Examples:\n\n"
     "wmrid plan --robot robot.toml --max-torque 20 -o plan.csv -o plan.json\n\n"

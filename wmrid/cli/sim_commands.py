@@ -13,8 +13,10 @@ import typer
 
 from wmrid.cli.app import app
 from wmrid.cli.groups import LOG_FLAGS, OBSERVER_FLAGS, takes
+from wmrid.cli.help import Command
 from wmrid.cli.helpers import activity, check_outputs, check_rotor, on_stdout, stderr_console, warning_summary
 from wmrid.cli.options import (
+    MULTIBODY_PANEL,
     CalibrationOpt,
     DropAtOpt,
     Engine,
@@ -35,6 +37,7 @@ if TYPE_CHECKING:
 
 
 @app.command(
+    cls=Command,
     name="simulate",
     epilog="Examples:\n\n"
     "wmrid simulate -o sim.csv --duration 20 --eta-noise 0.01\n\n"
@@ -86,7 +89,7 @@ def simulate_command(
         typer.Option(
             help="reduced: the paper's reduced model (Eqs. 9-14); mujoco: a multibody prototype (rigid bodies, "
             "wheel-ground contact, casters) that knows nothing of those equations (pip install 'wmrid[physics]').",
-            rich_help_panel="Multibody prototype",
+            rich_help_panel=MULTIBODY_PANEL,
         ),
     ] = Engine.reduced,
     floor_friction: Annotated[
@@ -94,7 +97,7 @@ def simulate_command(
         typer.Option(
             help="mujoco: Coulomb friction of the wheels on the floor, in (0, 100] (low values let them slip); "
             "default 1.0.",
-            rich_help_panel="Multibody prototype",
+            rich_help_panel=MULTIBODY_PANEL,
         ),
     ] = None,
     caster_resistance: Annotated[
@@ -102,12 +105,12 @@ def simulate_command(
         typer.Option(
             help="mujoco: rolling-resistance coefficient of every caster, >= 0 (drag / normal load; 0: frictionless); "
             "default: the robot file's [[caster]] values, else 0.015 (polyurethane).",
-            rich_help_panel="Multibody prototype",
+            rich_help_panel=MULTIBODY_PANEL,
         ),
     ] = None,
     torque_limit: Annotated[
         float | None,
-        typer.Option(help="mujoco: clip each wheel torque to +-this, N m, > 0.", rich_help_panel="Multibody prototype"),
+        typer.Option(help="mujoco: clip each wheel torque to +-this, N m, > 0.", rich_help_panel=MULTIBODY_PANEL),
     ] = None,
     reference: Annotated[
         str | None,
@@ -179,6 +182,7 @@ MONITOR_OBSERVER_FLAGS = OBSERVER_FLAGS.adapted(
 
 
 @app.command(
+    cls=Command,
     name="monitor",
     epilog="Examples:\n\nwmrid identify monday.mcap -o model.json; wmrid monitor friday.mcap --model model.json",
 )

@@ -1,0 +1,73 @@
+"""Help that fits a terminal: ``wmrid COMMAND --help`` shows the options most runs need, and each panel of detail (the
+log's input, the observer: :data:`wmrid.cli.options.FOLDED_PANELS`) folds into one line that says how many options it
+holds; ``--help-all`` shows every option.  The options are the same either way (the reference lists them all).
+
+Imports inside functions: start-up time (Typer's flag type only when a command's parameters are listed)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from typer import _click as click
+from typer.core import TyperCommand, TyperOption
+
+from wmrid.cli.options import FOLDED_PANELS
+
+#: The context's key that says ``--help-all`` was given.
+_ALL = "wmrid.help_all"
+
+
+def _show_all(ctx: Any, param: Any, value: bool) -> None:
+    if value and not ctx.resilient_parsing:
+        ctx.meta[_ALL] = True
+        click.echo(ctx.get_help(), color=ctx.color)
+        ctx.exit()
+
+
+def _help_all_option() -> Any:
+    """The ``--help-all`` flag, made as Typer makes its own ``--help``."""
+    from typer._coercion import bool_flag_type_descriptor  # Typer's flag type, as its own --help uses
+
+    return TyperOption(
+        param_decls=["--help-all"], is_flag=True, expose_value=False, is_eager=True, required=False,
+        callback=_show_all, help="Show every option, those of the folded panels too, and exit.",
+        type_descriptor=bool_flag_type_descriptor(),
+    )  # fmt: skip
+
+
+class Command(TyperCommand):
+    """A command whose ``--help`` folds the panels of detail (:mod:`wmrid.cli.help`)."""
+
+    def _folded(self) -> list[Any]:
+        return [p for p in self.params if getattr(p, "rich_help_panel", None) in FOLDED_PANELS and not p.hidden]
+
+    _help_all: Any = None
+
+    def get_params(self, ctx: Any) -> list[Any]:
+        params = super().get_params(ctx)
+        if not self._folded():
+            return params
+        if self._help_all is None:  # one object: click orders the eager callbacks by identity
+            self._help_all = _help_all_option()
+        return [*params[:-1], self._help_all, params[-1]]  # before --help, which click puts last
+
+    def format_help(self, ctx: Any, formatter: Any) -> None:
+        folded = [] if ctx.meta.get(_ALL) else self._folded()
+        if not folded:
+            super().format_help(ctx, formatter)
+            return
+        counts: dict[str, int] = {}
+        for p in folded:
+            counts[p.rich_help_panel] = counts.get(p.rich_help_panel, 0) + 1
+        panels = "; ".join(f"{panel}: {n} options" for panel, n in counts.items())
+        saved = self.epilog
+        line = f"Folded: {panels}. See them: {ctx.command_path} --help-all"
+        self.epilog = f"{saved}\n\n{line}" if saved else line
+        for p in folded:
+            p.hidden = True
+        try:
+            super().format_help(ctx, formatter)
+        finally:
+            for p in folded:
+                p.hidden = False
+            self.epilog = saved
