@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
 from wmrid.estimators.findings import StructuralMismatch, Uncertainty
@@ -242,10 +243,12 @@ def print_comparison(comparison: Comparison, console: Any) -> None:
     slices of methods where the terminal is narrow."""
     methods = comparison.methods
     truth = comparison.truth
-    for name, m in methods.items():
-        if m.verdict is not None:
-            style = STYLES["impossible"] if m.verdict.doubt else "bold"
-            console.print(f"verdict ({name}): {m.verdict.summary}", style=style)
+    verdicts = [(name, m.verdict.summary) for name, m in methods.items() if m.verdict is not None]
+    doubt = {m.verdict.summary for m in methods.values() if m.verdict is not None and m.verdict.doubt}
+    for names, summary in said_once(verdicts):
+        console.print(
+            f"verdict ({', '.join(names)}): {summary}", style=STYLES["impossible"] if summary in doubt else "bold"
+        )
     header = ["param", *(["true"] if truth else []), *methods]
     rows = []
     first = next(iter(methods.values()))
@@ -280,6 +283,32 @@ def print_comparison(comparison: Comparison, console: Any) -> None:
         console.print(LEGEND["!"])
     if any(p.impossible for m in methods.values() for p in m.parameters.values()):
         console.print(LEGEND["✗"], style=STYLES["impossible"])
-    for name, m in methods.items():
-        for warning in m.warnings:
-            console.print(warning_line(warning, f"warning ({name})"))
+    for names, warning in said_once([(name, w) for name, m in methods.items() for w in _grouped(m.warnings)]):
+        console.print(warning_line(warning, f"warning ({', '.join(names)})"))
+
+
+#: The words of a warning that a parameter is poorly determined: compare's table shows each std, so the names suffice.
+_POORLY = " is poorly determined by this log"
+
+
+def _grouped(warnings: Sequence[str]) -> list[str]:
+    """One method's warnings for compare's terminal output: those that a parameter is poorly determined by the log (one
+    each, the value and std that the table shows) said in one line naming the parameters, where the first was."""
+    poorly = [w.split(_POORLY, 1)[0] for w in warnings if _POORLY in w]
+    out: list[str] = []
+    for w in warnings:
+        if _POORLY not in w:
+            out.append(w)
+        elif w.startswith(poorly[0] + _POORLY):
+            out.append(f"poorly determined by this log (std in the table): {', '.join(poorly)}")
+    return out
+
+
+def said_once(items: Sequence[tuple[str, str]]) -> list[tuple[list[str], str]]:
+    """``(who, text)`` pairs said once per text, in the order first said: (every who that said it, text)."""
+    said: dict[str, list[str]] = {}
+    for who, text in items:
+        names = said.setdefault(text, [])
+        if who not in names:
+            names.append(who)
+    return [(names, text) for text, names in said.items()]

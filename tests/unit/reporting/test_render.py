@@ -70,3 +70,28 @@ def test_the_inspection_and_comparison_tables_name_what_they_hold(result):
     assert "idim" in text
     m11 = comparison.methods["idim"].parameters["m11"].value
     assert f"{m11:.6g}" in text
+
+
+def test_compare_says_each_verdict_and_warning_once():
+    """Issue 33: ``wmrid compare`` said each warning once per method (141 lines of warnings on ME169, 179 lines in
+    all; now 52): a text several methods give is said once, naming them, and one method's "X is poorly determined"
+    warnings (each with the value and std the table shows) are one line naming the parameters."""
+    from dataclasses import replace
+
+    from wmrid.reporting.render import said_once
+
+    assert said_once([("a", "x"), ("b", "y"), ("b", "x"), ("a", "x")]) == [(["a", "b"], "x"), (["b"], "y")]
+    comparison = wmrid.compare(wmrid.read_log(SAMPLE), "paper", methods=["observer", "idim"])
+    shared = [
+        "the log is short",
+        "m11 is poorly determined by this log: 1 +/- 2",
+        "Vc is poorly determined by this log",
+    ]
+    methods = {name: replace(m, warnings=tuple(shared)) for name, m in comparison.methods.items()}
+    console, out = _console()
+    print_comparison(replace(comparison, methods=methods), console)
+    lines = [" ".join(line.split()) for line in out.getvalue().splitlines()]
+    assert lines.count("warning (observer, idim): the log is short") == 1
+    poorly = [line for line in lines if "poorly determined" in line]
+    assert poorly == ["warning (observer, idim): poorly determined by this log (std in the table): m11, Vc"]
+    assert sum(line.startswith("verdict (") for line in lines) == 1

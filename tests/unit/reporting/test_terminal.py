@@ -156,8 +156,11 @@ def test_help_has_panels_an_example_and_verbatim_text(name):
     assert "╭─ Options" in out.stdout
     if name in ("identify", "report", "compare"):
         assert "╭─ Method" in out.stdout
-        assert "╭─ Log input" in out.stdout
         assert "[0.98, 1]" in out.stdout.replace("│", " ").replace("\n", " ").replace("  ", " ")
+        # the log's input folded into one line that --help-all unfolds (issue 33)
+        assert "Folded: Log input" in " ".join(out.stdout.split())
+        assert "╭─ Log input" not in out.stdout
+        assert "╭─ Log input" in text(wmrid(name, "--help-all", columns="80")).stdout
     if name == "identify":
         assert "[m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2]" in out.stdout
     assert "…" not in out.stdout, [line for line in out.stdout.splitlines() if "…" in line]
