@@ -9,7 +9,7 @@ from locations import ROOT_DIR
 from wmrid.cli.app import command
 
 #: identify's own outputs: what it writes, not how it reads or identifies a log.
-OUTPUTS = {"output", "output_format", "force", "mcap_out", "out", "history", "no_history"}
+OUTPUTS = {"output", "output_format", "force", "mcap_out", "out", "history", "no_history", "verbose"}
 #: The flags of identify a command leaves out, and why.
 NOT_OFFERED = {
     "compare": {

@@ -34,6 +34,7 @@ from wmrid.cli.options import (
     OutputFormat,
     RotorInertiaOpt,
     ValidateOpt,
+    VerboseOpt,
 )
 from wmrid.core.errors import UsageError
 from wmrid.reporting.terminal import console
@@ -94,6 +95,7 @@ def identify_command(
     ] = False,
     history: Annotated[bool, typer.Option("--history", hidden=True, help="Keep the history (the default).")] = False,
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing output file.")] = False,
+    verbose: VerboseOpt = False,
     rotor_inertia: RotorInertiaOpt = None,
     method: MethodOpt = MethodChoice.auto,
     validate: ValidateOpt = None,
@@ -140,7 +142,7 @@ def identify_command(
             sys.stdout.write(to_json(payload) + "\n")
         warning_summary(payload["warnings"])
     else:
-        print_identification(result, console())
+        print_identification(result, console(), verbose=verbose)
 
 
 @app.command(

@@ -65,6 +65,16 @@ FOLDED_PANELS = (LOG_PANEL, CHECK_LOG_PANEL, OBSERVER_PANEL, MULTIBODY_PANEL, CH
 _LOG_PANEL, _OBSERVER_PANEL = LOG_PANEL, OBSERVER_PANEL
 
 
+VerboseOpt = Annotated[
+    bool,
+    typer.Option(
+        "--verbose", "-v",
+        help="The table also gives the estimator's own figures (regressor, gains, lambda_min(Gamma), the structural "
+        "mismatch test, how the std was computed); the JSON always holds them.",
+    ),
+]  # fmt: skip
+
+
 TopicOpt = Annotated[
     str | None,
     typer.Option(

@@ -47,10 +47,19 @@ def print_verdict(verdict: Verdict | None, console: Any, prefix: str = "") -> No
         console.print(f"{prefix}  {verdict.units}")
 
 
-def print_identification(result: IdentificationResult, console: Any) -> None:
+#: What the rows of the base parameters are, in the glossary's words (docs/reference/glossary.md).
+ROWS_MEAN = (
+    "rows: the inverse of the inertia matrix M (m11 m12 m22), M itself at the wheels (M11 M12 M22), the Coriolis "
+    "coefficient (Vc), the viscous (Fv1 Fv2) and Coulomb (Fd1 Fd2) friction of the right (1) and left (2) wheel"
+)
+
+
+def print_identification(result: IdentificationResult, console: Any, verbose: bool = False) -> None:
     """A table of the base parameters with their standard errors, nominal and CAD values; a flagged value in the
     flagged style, a physically impossible one in the impossible style and marked ✗ (the flags the estimator
-    recorded: :attr:`IdentificationResult.table`)."""
+    recorded: :attr:`IdentificationResult.table`).  Then what the numbers rest on in plain words; ``verbose``: the
+    estimator's own figures too (its regressor and gains, lambda_min(Gamma), the structural mismatch test, how the
+    std was computed), which the JSON always holds."""
     method = getattr(result, "method", "observer")
     print_verdict(result.verdict, console)
     title = f"wmrid identify: {result.source}" + (f" (method {method})" if method != "observer" else "")
@@ -89,32 +98,40 @@ def print_identification(result: IdentificationResult, console: Any) -> None:
             style=STYLES["impossible"],
         )
     info = result.log_info
-    method_text = "" if result.method_settings is None else result.method_settings.before_observer()
+    console.print(ROWS_MEAN)
     console.print(
-        f"{info.samples} samples, {info.duration_s:.3f} s at {info.rate_hz:.6g} Hz; "
-        f"regressor: {result.form.kind} form ({result.form.n_columns} columns), {result.form.friction} friction; "
-        f"{method_text}k = {result.observer_settings.k:g} 1/s, "
-        f"alpha = {result.observer_settings.alpha:g}; start: {result.start_source}"
+        f"{info.samples} samples, {info.duration_s:.3f} s at {info.rate_hz:.6g} Hz; {result.form.friction} friction; "
+        f"start: {result.start_source}"
     )
     diag = result.diagnostics
+    if verbose:
+        method_text = "" if result.method_settings is None else result.method_settings.before_observer()
+        console.print(
+            f"regressor: {result.form.kind} form ({result.form.n_columns} columns), {result.form.friction} friction; "
+            f"{method_text}k = {result.observer_settings.k:g} 1/s, alpha = {result.observer_settings.alpha:g}"
+        )
     if diag.robot_assumed:
         console.print("robot file: assumed " + "; ".join(diag.robot_assumed))
     friction = diag.friction
     if friction is not None and friction.chosen_by == "auto":
         console.print(f"friction model: {friction.model} (auto: {friction.reason or ''})")
-    mismatch = diag.structural_mismatch or StructuralMismatch()
-    console.print(
-        f"lambda_min(Gamma) = {diag.lambda_min_gamma:.3g}; structural mismatch p = "
-        f"{mismatch.p_value:.2g} ({mismatch.dof} directions)"
-    )
+    if verbose:
+        mismatch = diag.structural_mismatch or StructuralMismatch()
+        console.print(
+            f"lambda_min(Gamma) = {diag.lambda_min_gamma:.3g}; structural mismatch p = "
+            f"{mismatch.p_value:.2g} ({mismatch.dof} directions)"
+        )
     unc = diag.uncertainty or Uncertainty()
     factor = unc.interval_factor or {}
+    how = (
+        f"{unc.method}" + (f", {unc.segments} segments" if unc.segments else "") + f" ({unc.dof} dof)"
+        if verbose
+        else "how the estimate varies along the log" + (f" ({unc.segments} parts)" if unc.segments else "")
+    )
     console.print(
-        f"std: {unc.method}" + (f", {unc.segments} segments" if unc.segments else "") + f" "
-        f"({unc.dof} dof); "
-        f"estimate ± {factor['95%']:.2f} std covers the truth with 95 % probability, "
-        f"± {factor['99.7%']:.2f} std with 99.7 %, if disturbances do not feed back into the "
-        "efforts (in closed loop see diagnostics.feedback: the closed-loop check)"
+        f"std: {how}; estimate ± {factor['95%']:.2f} std covers the truth with 95 % probability, "
+        f"± {factor['99.7%']:.2f} std with 99.7 %, if disturbances do not feed back into the efforts (in closed loop "
+        "see the closed-loop check, diagnostics.feedback in the JSON)"
     )
     model_error = unc.model_error
     if any("†" in mark for mark in marks.values()):

@@ -53,7 +53,16 @@ def test_the_identification_table_shows_every_parameter_with_its_std_nominal_and
         z = (value - result.reference[name]) / std
         assert f"{z:+.1f}" in cells, name
     assert f"{result.log_info.samples} samples" in text
-    assert "regressor: paper form (7 columns), wheel friction" in text
+    # plain words by default (issue 33): what the rows are; the estimator's figures only with --verbose
+    assert "rows: the inverse of the inertia matrix M (m11 m12 m22)" in " ".join(text.split())
+    for jargon in ("regressor:", "lambda_min", "structural mismatch", "jackknife"):
+        assert jargon not in text, jargon
+    console, out = _console()
+    print_identification(result, console, verbose=True)
+    verbose = out.getvalue()
+    assert "regressor: paper form (7 columns), wheel friction" in verbose
+    assert "lambda_min(Gamma)" in verbose
+    assert "jackknife" in verbose
 
 
 def test_the_inspection_and_comparison_tables_name_what_they_hold(result):
