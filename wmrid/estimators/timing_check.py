@@ -329,13 +329,7 @@ def apply_delay(
             "span": search_span(t), "torque_hold": torque_hold, "control_rate": control_rate,
             "reference": _reference_of(whole, len(t)),
         }  # fmt: skip
-        wheel = estimate_delay(t, eta, tau, **common)
-        drag = None
-        if form is not None and consults_drag(wheel):
-            try:
-                drag = estimate_delay(t, eta, tau, form=form, **common)
-            except WmridError:
-                drag = None
+        wheel, drag = _wheel_and_drag(lambda with_form: estimate_delay(t, eta, tau, form=with_form, **common), form)
         applied, record = _decided(wheel, drag, form, t, torque_hold, control_rate, warnings)
     else:
         applied, record = _given(delay)
@@ -364,19 +358,32 @@ def _apply_delay_stream(
     memory).  Memory: a window and a piece, whatever the log's length."""
     warnings: list[str] = []
     if delay == "auto":
-        wheel, _, _, first_t = profile_windows(log, samples, torque_hold, control_rate, None)
-        drag = None
-        if form is not None and consults_drag(wheel):
-            try:
-                drag = profile_windows(log, samples, torque_hold, control_rate, form)[0]
-            except WmridError:
-                drag = None
-        applied, record = _decided(wheel, drag, form, first_t, torque_hold, control_rate, warnings)
+        windows: dict[str, Any] = {}
+
+        def profile(with_form: Any) -> DelayEstimate:
+            est, _, _, t = profile_windows(log, samples, torque_hold, control_rate, with_form)
+            windows.setdefault("first_t", t)
+            return est
+
+        wheel, drag = _wheel_and_drag(profile, form)
+        applied, record = _decided(wheel, drag, form, windows["first_t"], torque_hold, control_rate, warnings)
     else:
         applied, record = _given(delay)
     if applied == 0.0:
         return log, record, warnings
     return shifted_stream(log, -applied), record, warnings
+
+
+def _wheel_and_drag(profile: Any, form: Any) -> tuple[DelayEstimate, DelayEstimate | None]:
+    """(the wheels' friction profiled: ``profile(None)``, the casters' drag profiled too: ``profile(form)`` when the
+    first consults it, :func:`consults_drag`; None when not, or when it fails) for :func:`with_drag`."""
+    wheel = profile(None)
+    if form is None or not consults_drag(wheel):
+        return wheel, None
+    try:
+        return wheel, profile(form)
+    except WmridError:
+        return wheel, None
 
 
 def _given(delay: float | str) -> tuple[float, DelayApplied]:
