@@ -82,6 +82,7 @@ class Looped:
             return stamp, payload
         shift = k * self.period_ns
         data = bytearray(payload)
+        assert data[:4] == b"\x00\x01\x00\x00", "little-endian CDR (its header stamp read at bytes 4..12)"
         sec, nanosec = struct.unpack_from("<iI", data, 4)  # after CDR's 4-byte encapsulation: header.stamp
         total = sec * 1_000_000_000 + nanosec + shift
         struct.pack_into("<iI", data, 4, total // 1_000_000_000, total % 1_000_000_000)

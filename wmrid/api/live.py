@@ -53,8 +53,10 @@ POLL_S = 0.05
 START_SAMPLES = 50
 #: s: how long the process may take, after Ctrl-C or SIGTERM, to identify what it received and write it.
 FINISH_GRACE_S = 600.0
-#: Samples (about 17 min at 1 kHz) beyond which the final identify runs lean (:func:`_lean`): memory that of a short
-#: stream's, whatever the stream's length, for about 2.4 times the time (an hour at 1 kHz: 9.0 s instead of 3.7 s).
+#: Samples (about 17 min at 1 kHz) beyond which the final identify runs lean (:func:`_lean`): its memory then does not
+#: grow with the stream's length, for about 2.4 times the time (an hour at 1 kHz: 9.0 s instead of 3.7 s).  Except
+#: where identify itself holds a log: the closed-loop check reads a log of up to 2 M samples whole when its prediction
+#: error shows a disturbance (wmrid.estimators.feedback.MAX_SAMPLES; 30 min at 1 kHz: 461 MB), as offline.
 FINAL_CACHE_ROWS = 1_048_576
 #: Samples in a piece of the final identify's log when it runs lean (CHUNK_ROWS otherwise): 65 s at 1 kHz, 2.6 MB.
 FINAL_PIECE_ROWS = 65_536
@@ -372,26 +374,21 @@ class LiveRun:
 def _lean(on: bool) -> Iterator[None]:
     """Within, when ``on``: identify reads its log again on each pass instead of keeping it, in pieces of
     FINAL_PIECE_ROWS (:func:`wmrid.core.wheel_log.stream_limits`), runs its passes one after the other on this thread
-    (:func:`wmrid.estimators.observer.replay.one_thread`: two passes at once hold two pieces and a timing window), and
-    malloc gives freed memory back at once (:func:`wmrid.runtime.limits.lean_malloc`).  The result is the same to
-    rounding; the final identify of an hour's stream at 1 kHz peaks 265 MB lower (in a fresh process: 512 -> 247 MB;
-    caches 415, one thread 309, malloc 272, pieces 247), in 9.1 s instead of 3.7 s.  The malloc setting stays: the
-    live run ends with this identify."""
+    (:func:`wmrid.estimators.observer.replay.one_thread_within`: two passes at once hold two pieces and a timing
+    window), and, in the command-line process, malloc gives freed memory back at once
+    (:func:`wmrid.runtime.limits.lean_malloc`; left so: the command ends with this identify).  The result is the same
+    to rounding; the final identify of an hour's stream at 1 kHz peaks 265 MB lower (in a fresh process: 512 ->
+    247 MB; caches 415, one thread 309, malloc 272, pieces 247), in 9.1 s instead of 3.7 s."""
     if not on:
         yield
         return
     # the observer's replay (numba kernels): loaded by the identify that follows anyway, not before it
-    from wmrid.estimators.observer.replay import one_thread, second_thread
+    from wmrid.estimators.observer.replay import one_thread_within
     from wmrid.runtime.limits import lean_malloc  # glibc's mallopt through ctypes: only here
 
-    threads = second_thread()
     lean_malloc()
-    one_thread(True)
-    try:
-        with stream_limits(cache=0, piece=FINAL_PIECE_ROWS):
-            yield
-    finally:
-        one_thread(not threads)
+    with one_thread_within(), stream_limits(cache=0, piece=FINAL_PIECE_ROWS):
+        yield
 
 
 def _warm_up(tables: bool) -> None:

@@ -202,6 +202,8 @@ def _verbatim_help(cmd: Any) -> None:
     for attr in ("help", "epilog", "short_help"):
         if getattr(cmd, attr, None):
             setattr(cmd, attr, escape(getattr(cmd, attr)))
+    if getattr(cmd, "help", None):  # a docstring's paragraphs flow: Rich kept its line breaks mid-sentence
+        cmd.help = "\n\n".join(" ".join(paragraph.split()) for paragraph in cmd.help.split("\n\n"))
     for param in getattr(cmd, "params", []):
         if getattr(param, "help", None):
             param.help = escape(param.help)
@@ -267,7 +269,6 @@ def _stopped_by() -> str:
 def _said(line: str) -> str:
     """An error line as written to stderr: one line in a pipe or a file (for scripts and logs); on a terminal wrapped at
     its width, at word boundaries, the lines after the first indented (a terminal broke it mid-word)."""
-    import shutil
     import textwrap
 
     try:
@@ -276,7 +277,15 @@ def _said(line: str) -> str:
         terminal = False
     if not terminal:
         return line + "\n"
-    width = max(shutil.get_terminal_size((80, 24)).columns, 40)
+    columns = os.environ.get("COLUMNS", "")
+    if columns.isdigit() and int(columns) > 0:  # as the terminal or the user says, as Rich reads it
+        width = int(columns)
+    else:
+        try:
+            width = os.get_terminal_size(sys.stderr.fileno()).columns  # the terminal stderr is on
+        except OSError:
+            width = 80
+    width = max(width, 40)
     lines = textwrap.wrap(line, width=width, subsequent_indent="  ", break_long_words=False, break_on_hyphens=False)
     return "\n".join(lines) + "\n"
 

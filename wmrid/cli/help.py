@@ -8,8 +8,12 @@ from __future__ import annotations
 
 from typing import Any
 
-from typer import _click as click
 from typer.core import TyperCommand, TyperOption
+
+try:
+    from typer import _click as click  # Typer 0.29 and later: its own copy of click
+except ImportError:  # a Typer on click
+    import click  # type: ignore[no-redef]
 
 from wmrid.cli.options import FOLDED_PANELS
 
@@ -25,21 +29,29 @@ def _show_all(ctx: Any, param: Any, value: bool) -> None:
 
 
 def _help_all_option() -> Any:
-    """The ``--help-all`` flag, made as Typer makes its own ``--help``."""
-    from typer._coercion import bool_flag_type_descriptor  # Typer's flag type, as its own --help uses
-
+    """The ``--help-all`` flag, made as Typer makes its own ``--help`` (Typer 0.29 and later: its own parser and flag
+    type; before: click's option)."""
+    text = "Show every option, those of the folded panels too, and exit."
+    try:
+        from typer._coercion import bool_flag_type_descriptor  # Typer's flag type, as its own --help uses
+    except ImportError:  # a Typer on click
+        return click.Option(
+            ["--help-all"], is_flag=True, expose_value=False, is_eager=True, callback=_show_all, help=text
+        )
     return TyperOption(
         param_decls=["--help-all"], is_flag=True, expose_value=False, is_eager=True, required=False,
-        callback=_show_all, help="Show every option, those of the folded panels too, and exit.",
-        type_descriptor=bool_flag_type_descriptor(),
+        callback=_show_all, help=text, type_descriptor=bool_flag_type_descriptor(),
     )  # fmt: skip
 
 
 class Command(TyperCommand):
     """A command whose ``--help`` folds the panels of detail (:mod:`wmrid.cli.help`)."""
 
+    _folding: tuple[Any, ...] = ()  # the options hidden while --help is written
+
     def _folded(self) -> list[Any]:
-        return [p for p in self.params if getattr(p, "rich_help_panel", None) in FOLDED_PANELS and not p.hidden]
+        panels = [p for p in self.params if getattr(p, "rich_help_panel", None) in FOLDED_PANELS]
+        return [p for p in panels if not p.hidden or p in self._folding]
 
     _help_all: Any = None
 
@@ -63,6 +75,7 @@ class Command(TyperCommand):
         saved = self.epilog
         line = f"Folded: {panels}. See them: {ctx.command_path} --help-all"
         self.epilog = f"{saved}\n\n{line}" if saved else line
+        self._folding = tuple(folded)
         for p in folded:
             p.hidden = True
         try:
@@ -70,4 +83,5 @@ class Command(TyperCommand):
         finally:
             for p in folded:
                 p.hidden = False
+            self._folding = ()
             self.epilog = saved

@@ -61,7 +61,8 @@ CHECK_LOG_PANEL = "Log input of --check (bag topics, units, effort)"
 OBSERVER_PANEL = "Observer (Eqs. 26-37), friction and the efforts' timing"
 MULTIBODY_PANEL = "Multibody prototype"
 CHANGE_PANEL = "Change of the dynamics during the run (one per run)"
-FOLDED_PANELS = (LOG_PANEL, CHECK_LOG_PANEL, OBSERVER_PANEL, MULTIBODY_PANEL, CHANGE_PANEL)
+NOISE_PANEL = "Noise and disturbances of the simulated log"
+FOLDED_PANELS = (LOG_PANEL, CHECK_LOG_PANEL, OBSERVER_PANEL, MULTIBODY_PANEL, NOISE_PANEL)
 _LOG_PANEL, _OBSERVER_PANEL = LOG_PANEL, OBSERVER_PANEL
 
 

@@ -17,6 +17,7 @@ from wmrid.cli.help import Command
 from wmrid.cli.helpers import activity, check_outputs, check_rotor, on_stdout, stderr_console, warning_summary
 from wmrid.cli.options import (
     MULTIBODY_PANEL,
+    NOISE_PANEL,
     CalibrationOpt,
     DropAtOpt,
     Engine,
@@ -70,12 +71,25 @@ def simulate_command(
     payload_inertia: Annotated[
         float, typer.Option(help="Payload yaw inertia about its own centre of mass, kg m^2, >= 0.")
     ] = 0.0,
-    eta_noise: Annotated[float, typer.Option(help="Std of white noise on logged wheel speeds, rad/s, >= 0.")] = 0.0,
-    tau_noise: Annotated[float, typer.Option(help="Std of white noise on logged torques, N m, >= 0.")] = 0.0,
-    caster: Annotated[float, typer.Option(help="Std of the coloured caster disturbance torque, N m, >= 0.")] = 0.0,
-    caster_time: Annotated[float, typer.Option(help="Correlation time of the caster disturbance, s, > 0.")] = 0.3,
+    eta_noise: Annotated[
+        float, typer.Option(help="Std of white noise on logged wheel speeds, rad/s, >= 0.", rich_help_panel=NOISE_PANEL)
+    ] = 0.0,
+    tau_noise: Annotated[
+        float, typer.Option(help="Std of white noise on logged torques, N m, >= 0.", rich_help_panel=NOISE_PANEL)
+    ] = 0.0,
+    caster: Annotated[
+        float,
+        typer.Option(help="Std of the coloured caster disturbance torque, N m, >= 0.", rich_help_panel=NOISE_PANEL),
+    ] = 0.0,
+    caster_time: Annotated[
+        float,
+        typer.Option(help="Correlation time of the caster disturbance, s, > 0.", rich_help_panel=NOISE_PANEL),
+    ] = 0.3,
     encoder_cpr: Annotated[
-        int, typer.Option(help="Encoder counts per wheel revolution, >= 0 (0: no quantisation).")
+        int,
+        typer.Option(
+            help="Encoder counts per wheel revolution, >= 0 (0: no quantisation).", rich_help_panel=NOISE_PANEL
+        ),
     ] = 0,
     force: Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")] = False,
     gear_ratio: Annotated[float | None, typer.Option(help="URDF robots: gear ratio k_r, > 0.")] = None,
@@ -126,11 +140,9 @@ def simulate_command(
 ) -> None:
     """Simulate the paper's virtual prototype and write a log plus its ground truth (<log>.truth.json).
 
-    The dynamics may change once during the run, the controller keeping the nominal parameters:
-    --payload 25@0.1,-0.05 --load-at 30 loads the payload at 30 s, --payload 25 --drop-at 30 drops it,
-    --friction-fault right:3 --fault-at 30 triples the right wheel's friction.  The truth's "parameters"
-    are those at t = 0; its settings.change holds both parameter sets ("before", "after", base and
-    physical), the requested time t and the switch time t_switch (s).
+    The dynamics may change once during the run (a payload loaded or dropped, a wheel's friction grown), the
+    controller keeping the nominal parameters; the truth's "parameters" are those at t = 0, its settings.change holds
+    both sets and the switch time.
     """
     if output != "-":  # the log and its truth, refused before anything is imported or simulated
         check_outputs((output, output + ".truth.json"), force, (reference,))

@@ -9,6 +9,7 @@ speeds from them (:func:`wmrid.io.signals.speed_from_position`).
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Generator, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -94,20 +95,21 @@ CHUNK_ROWS = 262_144
 #: logs are re-read, so memory never exceeds this cache plus one piece.
 CACHE_ROWS = 4_194_304
 
-#: When set (:func:`stream_limits`): the most samples a stream keeps after its first pass, and a reader's piece holds.
-_cache_limit: int | None = None
-_piece_limit: int | None = None
+#: The limits in force (:func:`stream_limits`): one (cache, piece) entry per block entered and not yet left, in any
+#: thread; the tightest of each applies.  A list, not a saved value: blocks may end in any order (two live runs).
+_limits: list[tuple[int, int]] = []
+_limits_lock = threading.Lock()
 
 
 def cache_rows() -> int:
     """Samples a stream may keep after its first pass now: CACHE_ROWS, or less within :func:`stream_limits`."""
-    return CACHE_ROWS if _cache_limit is None else min(CACHE_ROWS, _cache_limit)
+    return min([CACHE_ROWS, *(cache for cache, _ in _limits)])
 
 
 def piece_rows() -> int:
     """Samples a reader puts in a piece now (:func:`wmrid.io.logs.open_log`'s default): CHUNK_ROWS, or less within
     :func:`stream_limits`."""
-    return CHUNK_ROWS if _piece_limit is None else min(CHUNK_ROWS, _piece_limit)
+    return min([CHUNK_ROWS, *(piece for _, piece in _limits)])
 
 
 @contextmanager
@@ -117,14 +119,18 @@ def stream_limits(cache: int, piece: int | None = None) -> Iterator[None]:
     most ``piece`` samples in a piece (:func:`piece_rows`; None: CHUNK_ROWS).  The passes read the same samples (the
     observer does not depend on where pieces are cut), so the result is the same to rounding; only memory and time
     change.  For a process held to a memory budget (``wmrid live``'s final identify after a long stream).
-    Process-wide, for every thread."""
-    global _cache_limit, _piece_limit
-    saved = _cache_limit, _piece_limit
-    _cache_limit, _piece_limit = int(cache), None if piece is None else int(piece)
+    Process-wide, for every thread; nested or overlapping blocks (in other threads too) apply the tightest of their
+    limits, and each block's end lifts only its own."""
+    if int(cache) < 0 or (piece is not None and int(piece) < 1):
+        raise ValueError(f"stream_limits: cache >= 0 and piece >= 1 samples, got {cache}, {piece}")
+    entry = (int(cache), CHUNK_ROWS if piece is None else int(piece))
+    with _limits_lock:
+        _limits.append(entry)
     try:
         yield
     finally:
-        _cache_limit, _piece_limit = saved
+        with _limits_lock:
+            _limits.remove(entry)
 
 
 class LogStream:
@@ -224,6 +230,8 @@ def shifted_stream(stream: LogStream, delay: float) -> LogStream:
         held: list[WheelLog] = []  # samples not yet out, and before them those their interpolation may still need
         first = 0  # in held's concatenation: the first sample not yet out
         for piece in stream:
+            if len(piece) == 0:
+                continue
             held.append(piece)
             out, held, first = _shift_out(held, first, delay, last=False)
             if out is not None:

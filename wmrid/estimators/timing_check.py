@@ -309,7 +309,8 @@ def apply_delay(
     """(the log with its efforts read ``delay`` s earlier, the record for ``diagnostics.delay``, warnings) for
     :func:`wmrid.pipeline.identify.identify`: in memory, or, for a :class:`wmrid.core.wheel_log.LogStream` longer
     than the timing check's window (TIMING_WINDOW_SAMPLES; its ``samples`` known from a pass), a stream that is
-    never read whole (:func:`_apply_delay_stream`).
+    never read whole (:func:`_apply_delay_stream`).  "auto" on a log longer than that window, in memory or not, is the
+    windows' combined estimate, the figure the timing check (``diagnostics.timing``) shows.
 
     ``delay``: seconds, or "auto" (:func:`estimate_delay`; applied only when significant and not at the edge
     of the search; ``form`` the friction model profiled).  The warnings name the likely cause: two clocks, or a
@@ -324,7 +325,10 @@ def apply_delay(
     eta = np.asarray(whole.eta, dtype=np.float64)
     tau = np.asarray(whole.tau, dtype=np.float64)
     warnings: list[str] = []
-    if delay == "auto":
+    if delay == "auto" and len(t) > TIMING_WINDOW_SAMPLES:  # the timing check's own estimate, window by window
+        wheel, drag, first_t = _windowed(whole, len(t), torque_hold, control_rate, form)
+        applied, record = _decided(wheel, drag, form, first_t, torque_hold, control_rate, warnings)
+    elif delay == "auto":
         common = {
             "span": search_span(t), "torque_hold": torque_hold, "control_rate": control_rate,
             "reference": _reference_of(whole, len(t)),
@@ -358,20 +362,29 @@ def _apply_delay_stream(
     memory).  Memory: a window and a piece, whatever the log's length."""
     warnings: list[str] = []
     if delay == "auto":
-        windows: dict[str, Any] = {}
-
-        def profile(with_form: Any) -> DelayEstimate:
-            est, _, _, t = profile_windows(log, samples, torque_hold, control_rate, with_form)
-            windows.setdefault("first_t", t)
-            return est
-
-        wheel, drag = _wheel_and_drag(profile, form)
-        applied, record = _decided(wheel, drag, form, windows["first_t"], torque_hold, control_rate, warnings)
+        wheel, drag, first_t = _windowed(log, samples, torque_hold, control_rate, form)
+        applied, record = _decided(wheel, drag, form, first_t, torque_hold, control_rate, warnings)
     else:
         applied, record = _given(delay)
     if applied == 0.0:
         return log, record, warnings
     return shifted_stream(log, -applied), record, warnings
+
+
+def _windowed(
+    log: Any, samples: int, torque_hold: str, control_rate: float | None, form: Any
+) -> tuple[DelayEstimate, DelayEstimate | None, np.ndarray]:
+    """(the wheels' profile, the drag's or None, t (m,) s of the first window) window by window
+    (:func:`profile_windows`): the estimate ``diagnostics.timing`` shows, for a log longer than one window."""
+    first: list[np.ndarray] = []
+
+    def profile(with_form: Any) -> DelayEstimate:
+        est, _, _, t = profile_windows(log, samples, torque_hold, control_rate, with_form)
+        first.append(t)
+        return est
+
+    wheel, drag = _wheel_and_drag(profile, form)
+    return wheel, drag, first[0]
 
 
 def _wheel_and_drag(profile: Any, form: Any) -> tuple[DelayEstimate, DelayEstimate | None]:

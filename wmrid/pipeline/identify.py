@@ -4,8 +4,9 @@ The route, each step a function that returns a record and re-enters nothing:
 
 1. the options, checked when made (:class:`wmrid.estimators.options.ObserverOptions`), and what the payload needs;
 2. the efforts' timing decided (:func:`wmrid.pipeline.timing.decide_timing`): split topics, or the timing check;
-   when it finds a significant delay, or the user asks for one (``delay``), the delay is estimated on the whole log
-   and applied (:func:`_delayed`), with a pass at the delay moved by its resolution for the timing term;
+   when it finds a significant delay, or the user asks for one (``delay``), the delay is estimated (on the whole log,
+   or window by window beyond the check's window) and applied (:func:`_delayed`: in memory, or piece by piece for a
+   long stream), with a pass at the delay moved by its resolution for the timing term;
 3. the observer's passes the friction model needs (:func:`wmrid.pipeline.friction.choose_friction`: one to three),
    run while step 2's timing check runs (:mod:`wmrid.pipeline.alongside`) and used unless it applies a delay;
 4. the widenings: the unresolved delay (:func:`wmrid.pipeline.timing.carry_unresolved_delay`), the closed-loop check
@@ -99,7 +100,7 @@ def identify_log(
         timing = alongside(lambda: decide_timing(*check), meanwhile)
         if timing.split or timing.apply:  # time the efforts by default
             try:
-                timed = _settled(_delayed(log, robot, replace(options, delay="auto"), steps, progress), robot)
+                timed = _settled(_delayed(log, robot, replace(options, delay="auto"), steps, progress, sv), robot)
             except WmridError as err:  # e.g. a hole IDIM's filter cannot bridge: as stamped, and say so
                 timing = timing.failed(err)
             else:
@@ -134,21 +135,23 @@ def _delayed(
     options: ObserverOptions,
     steps: Steps,
     progress: Callable[[int, int], None] | None,
+    sv: Any = None,
 ) -> IdentificationResult:
-    """The log's efforts read ``options.delay`` s earlier (the whole log in memory; piece by piece when it is longer
-    than the timing check's window, :func:`wmrid.estimators.timing_check.in_pieces`), then identified.  "auto": the
-    delay estimated on the whole log (:func:`wmrid.estimators.timing_check.apply_delay`, profiled with the richest
-    friction model allowed); applied when significant, with the timing term: a pass at the delay moved by its
-    resolution, whose change the std carries (:func:`wmrid.estimators.widening.with_timing_term`)."""
+    """The log's efforts read ``options.delay`` s earlier (the whole log in memory; piece by piece when it is a
+    stream longer than the timing check's window, :func:`wmrid.estimators.timing_check.in_pieces`), then identified.
+    "auto": the delay estimated on the whole log, or window by window beyond one window (the timing check's figure;
+    :func:`wmrid.estimators.timing_check.apply_delay`, profiled with the richest friction model allowed); applied when
+    significant, with the timing term: a pass at the delay moved by its resolution, whose change the std carries
+    (:func:`wmrid.estimators.widening.with_timing_term`).  ``sv``: the log's survey when it was made."""
     delay = options.delay
     assert delay is not None, "_delayed is called with a delay (seconds or auto)"
-    if isinstance(log, LogStream) and log.samples is None:
-        surveyed(log)  # its length: a log longer than the timing check's window is shifted piece by piece
+    if isinstance(log, LogStream) and sv is None:
+        sv = surveyed(log)[1]  # its length: a log longer than the timing check's window is shifted piece by piece
     # read once when it is shifted in memory
     original = log if in_pieces(log) or not isinstance(log, LogStream) else log.read()
     profile = None
     if delay == "auto":
-        auto_form = surveyed(original)[1].form()
+        auto_form = (sv if sv is not None and original is log else surveyed(original)[1]).form()
         profile = delay_profile_form(auto_form, options.friction, robot, steps.geometry, steps.load_terms)
     shifted, record, warnings = apply_delay(original, delay, options.torque_hold, options.control_rate, profile)
     applied = record.applied_s

@@ -107,7 +107,7 @@ def print_identification(result: IdentificationResult, console: Any, verbose: bo
     if verbose:
         method_text = "" if result.method_settings is None else result.method_settings.before_observer()
         console.print(
-            f"regressor: {result.form.kind} form ({result.form.n_columns} columns), {result.form.friction} friction; "
+            f"regressor: {result.form.kind} form ({result.form.n_columns} columns); "
             f"{method_text}k = {result.observer_settings.k:g} 1/s, alpha = {result.observer_settings.alpha:g}"
         )
     if diag.robot_assumed:
@@ -306,19 +306,21 @@ def print_comparison(comparison: Comparison, console: Any) -> None:
 
 #: The words of a warning that a parameter is poorly determined: compare's table shows each std, so the names suffice.
 _POORLY = " is poorly determined by this log"
+#: The same said of several logs combined (``--given``).
+_POORLY_ALL = " is poorly determined by these logs"
 
 
 def _grouped(warnings: Sequence[str]) -> list[str]:
     """One method's warnings for compare's terminal output: those that a parameter is poorly determined by the log (one
     each, the value and std that the table shows) said in one line naming the parameters, where the first was."""
-    poorly = [w.split(_POORLY, 1)[0] for w in warnings if _POORLY in w]
     out: list[str] = []
-    for w in warnings:
-        if _POORLY not in w:
-            out.append(w)
-        elif w.startswith(poorly[0] + _POORLY):
-            out.append(f"poorly determined by this log (std in the table): {', '.join(poorly)}")
-    return out
+    for words, said in ((_POORLY, "this log"), (_POORLY_ALL, "these logs")):
+        poorly = [w.split(words, 1)[0] for w in warnings if words in w]
+        if poorly:
+            out.append(f"poorly determined by {said} (std in the table): {', '.join(poorly)}")
+    first = next((i for i, w in enumerate(warnings) if _POORLY in w or _POORLY_ALL in w), len(warnings))
+    rest = [w for w in warnings if _POORLY not in w and _POORLY_ALL not in w]
+    return [*rest[:first], *out, *rest[first:]]
 
 
 def said_once(items: Sequence[tuple[str, str]]) -> list[tuple[list[str], str]]:

@@ -106,6 +106,7 @@ def tune_malloc(override_environment: bool = False) -> bool:
     """Apply :data:`MALLOC_SETTINGS` to this process (glibc only); whether they were applied.  Left alone under an
     address-space cap (``ulimit -v``: the heap's larger footprint would count against it) and, unless
     ``override_environment``, when MALLOC_MMAP_THRESHOLD_ or MALLOC_TRIM_THRESHOLD_ says what the user wants."""
+    global _tuned
     try:
         import ctypes  # only to call glibc's mallopt; a platform without it: the ImportError is caught below
         import resource  # Unix only: the ImportError is caught below
@@ -117,9 +118,14 @@ def tune_malloc(override_environment: bool = False) -> bool:
         ):
             return False
         libc = ctypes.CDLL(None)
-        return all(libc.mallopt(param, value) == 1 for param, value in MALLOC_SETTINGS.items())
+        _tuned = all(libc.mallopt(param, value) == 1 for param, value in MALLOC_SETTINGS.items())
+        return _tuned
     except (ImportError, OSError, AttributeError, ValueError):
         return False
+
+
+#: Whether :func:`tune_malloc` tuned this process's malloc.
+_tuned = False
 
 
 #: glibc's own thresholds, fixed (mallopt parameter -> value): every block over 128 KiB mapped and given back when
@@ -128,9 +134,13 @@ LEAN_MALLOC_SETTINGS = {-3: 128 << 10, -1: 128 << 10}
 
 
 def lean_malloc() -> bool:
-    """Give memory back as soon as it is freed (:data:`LEAN_MALLOC_SETTINGS`, then ``malloc_trim``; glibc only): for a
-    process held to a memory budget (``wmrid live``'s final identify after a long stream), where :func:`tune_malloc`'s
-    kept heap would add to the peak (an hour's identify: 336 MB against 415 MB tuned).  Whether it was applied."""
+    """Give memory back as soon as it is freed (:data:`LEAN_MALLOC_SETTINGS`, then ``malloc_trim``; glibc only), in a
+    process whose malloc :func:`tune_malloc` tuned (the command line's): for its last stage when it is held to a
+    memory budget (``wmrid live``'s final identify after a long stream), where the tuned heap's kept memory would add
+    to the peak (an hour's identify: 336 MB against 415 MB tuned).  A process that did not tune malloc (a library
+    caller's) is left as it is.  Whether it was applied."""
+    if not _tuned:
+        return False
     try:
         import ctypes  # only to call glibc's mallopt; a platform without it: the error is caught below
 
@@ -138,7 +148,7 @@ def lean_malloc() -> bool:
         done = all(libc.mallopt(param, value) == 1 for param, value in LEAN_MALLOC_SETTINGS.items())
         libc.malloc_trim(0)
         return done
-    except (ImportError, OSError, AttributeError, ValueError):
+    except Exception:
         return False
 
 

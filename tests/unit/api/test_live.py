@@ -229,8 +229,10 @@ def test_a_long_streams_final_identify_runs_lean(tmp_path, log, monkeypatch):
     peaked at 1,137 MB), with the same result; the process's threading is given back after."""
     import wmrid.api.identification
     import wmrid.api.live
+    from wmrid.core import wheel_log
     from wmrid.core.wheel_log import cache_rows, piece_rows
     from wmrid.estimators.observer.replay import second_thread
+    from wmrid.runtime.limits import lean_malloc
 
     path = tmp_path / "run.mcap"
     write_mcap(path, *log, True, 0, 0.0)
@@ -246,6 +248,8 @@ def test_a_long_streams_final_identify_runs_lean(tmp_path, log, monkeypatch):
     _, final = follow(path, idle=10.0)
     assert seen == [(0, wmrid.api.live.FINAL_PIECE_ROWS, False)]
     assert second_thread()
+    assert (cache_rows(), piece_rows()) == (wheel_log.CACHE_ROWS, wheel_log.CHUNK_ROWS)
+    assert not lean_malloc()  # a library caller's malloc (not tuned by the command line) is left as it is
     monkeypatch.undo()
     same(final.result, wmrid.identify(str(path), "paper"))
 

@@ -517,7 +517,7 @@ def test_efforts_shifted_piece_by_piece_are_those_shifted_in_memory():
         eta, tau, ref = (rng.standard_normal((n, 2)) for _ in range(3))
         delay = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.0, 0.3) * rng.choice([0.001, 0.01, 1.0]))
         cuts = np.sort(rng.choice(np.arange(1, n), size=min(n - 1, int(rng.integers(0, 30))), replace=False))
-        bounds = [0, *cuts.tolist(), n]
+        bounds = [0, 0, *cuts.tolist(), n, n]  # an empty piece first and last
 
         def pieces(bounds=bounds, t=t, eta=eta, tau=tau, ref=ref):
             for a, b in itertools.pairwise(bounds):
@@ -558,10 +558,11 @@ def test_a_log_longer_than_the_window_is_timed_and_shifted_piece_by_piece(monkey
     sim, log = long_late_log
     monkeypatch.setattr(wmrid.estimators.timing_check, "TIMING_WINDOW_SAMPLES", 20_001)
 
-    def whole(self):
+    def read_whole(self):
         raise AssertionError("a stream longer than the window was read whole")
 
-    monkeypatch.setattr(LogStream, "read", whole)
+    original_read = LogStream.read
+    monkeypatch.setattr(LogStream, "read", read_whole)
     result = identify(stream_arrays(log, rows=7_000), AMR, feedback=False)
     timing, delay = result.diagnostics.timing, result.diagnostics.delay
     assert timing.windows == 3
@@ -573,6 +574,11 @@ def test_a_log_longer_than_the_window_is_timed_and_shifted_piece_by_piece(monkey
     for name in ("Fv1", "Fv2", "Fd1", "Fd2"):
         assert abs(result.parameters[name][0] / truth[name] - 1) < 0.05, name
     given = identify(stream_arrays(log, rows=7_000), AMR, delay=0.005, feedback=False)
+    monkeypatch.setattr(LogStream, "read", original_read)
+    # in memory too, a log longer than the window applies the windows' estimate, the one the check shows
+    whole = identify(log, AMR, feedback=False)
+    assert whole.diagnostics.delay.estimate.delay_s == whole.diagnostics.timing.estimate.delay_s
+    assert whole.diagnostics.delay.applied_s == delay.applied_s
     monkeypatch.undo()
     in_memory = identify(log, AMR, delay=0.005, feedback=False)
     for name, (value, std) in in_memory.parameters.items():

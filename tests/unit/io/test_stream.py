@@ -144,8 +144,8 @@ def test_identify_on_a_stream_equals_identify_in_memory(monkeypatch, cache_rows:
 
 def test_stream_limits_read_again_instead_of_keeping(tmp_path: Path) -> None:
     """Within ``stream_limits(0)`` a stream keeps nothing after a pass (each pass reads the file again), the same
-    samples; a log opened within has pieces of at most the limit; nested limits give the outer ones back, and the
-    defaults after."""
+    samples; a log opened within has pieces of at most the limit; nested or overlapping blocks apply the tightest
+    limits, each block's end lifts its own, and the defaults come back after."""
     passes = []
 
     def pieces():
@@ -165,12 +165,22 @@ def test_stream_limits_read_again_instead_of_keeping(tmp_path: Path) -> None:
     with wheel_log.stream_limits(0, piece=1000):
         assert twice() == 2
         assert max(len(p) for p in open_log(path)) == 1000
-        with wheel_log.stream_limits(10):
-            assert (wheel_log.cache_rows(), wheel_log.piece_rows()) == (10, wheel_log.CHUNK_ROWS)
-            assert twice() == 1
+        with wheel_log.stream_limits(10):  # a looser block within keeps the tighter limits
+            assert (wheel_log.cache_rows(), wheel_log.piece_rows()) == (0, 1000)
+            assert twice() == 2
         assert (wheel_log.cache_rows(), wheel_log.piece_rows()) == (0, 1000)
     assert (wheel_log.cache_rows(), wheel_log.piece_rows()) == (wheel_log.CACHE_ROWS, wheel_log.CHUNK_ROWS)
     assert max(len(p) for p in open_log(path)) == len(read_log(path).t)  # 40 001 samples: one piece
+    # blocks that end in another order than they began (two live runs in threads) lift only their own limits
+    first, second = wheel_log.stream_limits(0, piece=500), wheel_log.stream_limits(100, piece=2000)
+    first.__enter__()
+    second.__enter__()
+    first.__exit__(None, None, None)
+    assert (wheel_log.cache_rows(), wheel_log.piece_rows()) == (100, 2000)
+    second.__exit__(None, None, None)
+    assert (wheel_log.cache_rows(), wheel_log.piece_rows()) == (wheel_log.CACHE_ROWS, wheel_log.CHUNK_ROWS)
+    with pytest.raises(ValueError, match="piece >= 1"), wheel_log.stream_limits(0, piece=0):
+        pass
 
 
 def test_identify_without_robot_streams_the_same_start(tmp_path: Path) -> None:

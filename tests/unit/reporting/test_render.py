@@ -60,7 +60,7 @@ def test_the_identification_table_shows_every_parameter_with_its_std_nominal_and
     console, out = _console()
     print_identification(result, console, verbose=True)
     verbose = out.getvalue()
-    assert "regressor: paper form (7 columns), wheel friction" in verbose
+    assert "regressor: paper form (7 columns)" in verbose
     assert "lambda_min(Gamma)" in verbose
     assert "jackknife" in verbose
 

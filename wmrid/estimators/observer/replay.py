@@ -6,8 +6,10 @@ the chunk size (tests check this).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+import threading
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -36,9 +38,28 @@ def one_thread(on: bool = True) -> None:
     _SECOND_THREAD = not on
 
 
+#: Blocks of :func:`one_thread_within` entered and not yet left, in any thread.
+_one_thread_blocks = 0
+_blocks_lock = threading.Lock()
+
+
+@contextmanager
+def one_thread_within() -> Iterator[None]:
+    """Within, identify runs on the caller's thread alone (:func:`one_thread`), whatever the process's setting, which
+    stays; overlapping blocks (other threads) keep it so until the last one ends."""
+    global _one_thread_blocks
+    with _blocks_lock:
+        _one_thread_blocks += 1
+    try:
+        yield
+    finally:
+        with _blocks_lock:
+            _one_thread_blocks -= 1
+
+
 def second_thread() -> bool:
-    """Whether identify may run a second pass on a second thread (:func:`one_thread`)."""
-    return _SECOND_THREAD
+    """Whether identify may run a second pass on a second thread (:func:`one_thread`, :func:`one_thread_within`)."""
+    return _SECOND_THREAD and _one_thread_blocks == 0
 
 
 @dataclass(frozen=True)
