@@ -4,6 +4,7 @@ arrays, whatever the pieces."""
 
 from __future__ import annotations
 
+import itertools
 from types import SimpleNamespace
 
 import numpy as np
@@ -117,3 +118,34 @@ def test_swapped_speed_and_effort_columns_are_named_not_called_an_unsigned_curre
     assert len(warnings) == 2
     assert all("look swapped; check --columns" in w for w in warnings), warnings
     assert not any("magnitude" in w for w in warnings)
+
+
+def test_the_sparse_sample_stays_bounded_and_does_not_depend_on_the_pieces(monkeypatch):
+    """The survey's sparse sample (one sample per START_SPACING_S, for the data-driven start and the slow-speed
+    threshold) held 23 MB for an 8 h log, three times over in identify; past SPARSE_MOST samples its spacing doubles
+    (cut here to 100: a 20 s log of 400 intervals keeps the first sample of each 0.2 s, level 2).  The samples kept are
+    the first of each interval counted from the first sample, however the log is cut into pieces."""
+    from types import SimpleNamespace
+
+    import wmrid.estimators.observer.survey as survey_module
+
+    monkeypatch.setattr(survey_module, "SPARSE_MOST", 100)
+    rng = np.random.default_rng(3)
+    t = np.cumsum(rng.uniform(0.0005, 0.0015, 20_000))
+    eta = 1.0 + rng.standard_normal((len(t), 2)) * 0.1
+    tau = rng.standard_normal((len(t), 2))
+    results = []
+    for cuts in ([], [7], sorted(rng.choice(np.arange(1, len(t)), 50, replace=False).tolist())):
+        bounds = [0, *cuts, len(t)]
+        pieces = [SimpleNamespace(t=t[a:b], eta=eta[a:b], tau=tau[a:b]) for a, b in itertools.pairwise(bounds)]
+        results.append(survey_module.survey(pieces, "s"))
+    first = results[0]
+    assert len(first.sparse_t) <= 100
+    assert first.sparse_spacing == pytest.approx(0.05 * 4)
+    interval = np.floor((t - t[0]) / 0.05).astype(np.int64) >> 2
+    expected = np.flatnonzero(interval != np.concatenate(([-1], interval[:-1])))
+    np.testing.assert_array_equal(first.sparse_t, t[expected])
+    for other in results[1:]:
+        np.testing.assert_array_equal(other.sparse_t, first.sparse_t)
+        np.testing.assert_array_equal(other.sparse_eta, first.sparse_eta)
+        np.testing.assert_array_equal(other.sparse_tau, first.sparse_tau)

@@ -24,6 +24,10 @@ from wmrid.model.kernels import plain
 PLAUSIBLE_LIMIT = 1e12
 #: Spacing (s) of the sparse sample kept for the data-driven start (differences over it give accelerations).
 START_SPACING_S = 0.05
+#: The sparse sample holds at most this many samples (2.6 MB; 54 min of log at START_SPACING_S): beyond, its spacing
+#: doubles as often as needed (the first sample of each interval twice as long), so a survey's memory does not grow
+#: with the log's length (an 8 h log held 23 MB per survey, and identify keeps three).
+SPARSE_MOST = 65_536
 #: The median step is exact while the log has at most this many distinct step values (a regular log has a
 #: handful); beyond, it comes from a histogram of relative bucket width 2**-12 (0.024 %).
 EXACT_STEPS = 4096
@@ -47,7 +51,8 @@ class Survey:
     min_step, max_step : s; max_step_after : s, the time before the largest step.
     positive, negative (properties) : (2,) bool, whether every speed of the wheel is > 0 (< 0).
     sparse_t (m,) s, sparse_eta (m, 2) rad/s, sparse_tau (m, 2): the first sample of each START_SPACING_S
-    interval of time from t_first.
+    interval of time from t_first (of each 2^k times that interval for the least k that keeps m <= SPARSE_MOST:
+    ``sparse_spacing`` s).
     Per wheel (2,): speed_pos, speed_neg, effort_pos, effort_neg counts of samples > 0 and < 0; power,
     abs_power, opposing, driving: sums of tau eta, |tau eta| and the counts of tau eta < 0 and > 0
     (:meth:`signal_warnings`); speed_max, effort_max: the largest |eta| (rad/s) and |tau|; effort_fractional: the
@@ -66,6 +71,7 @@ class Survey:
     sparse_t: np.ndarray = field(default_factory=lambda: np.empty(0))
     sparse_eta: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
     sparse_tau: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
+    sparse_spacing: float = START_SPACING_S
     speed_pos: np.ndarray = field(default_factory=lambda: np.zeros(2))
     speed_neg: np.ndarray = field(default_factory=lambda: np.zeros(2))
     effort_neg: np.ndarray = field(default_factory=lambda: np.zeros(2))
@@ -237,7 +243,7 @@ def survey(pieces: Iterable, source: str, effort_unit: str = "N m") -> Survey:
     hist: dict[int, int] = {}
     prev_t = None
     last_bucket = -1
-    sparse_t, sparse_eta, sparse_tau = [], [], []
+    sparse = _Sparse()
     # per wheel: speeds > 0, < 0; efforts < 0, > 0; power, |power|, opposing, driving samples; max |eta|, max |tau|,
     # efforts that are not whole numbers
     acc = np.zeros(22)
@@ -259,12 +265,10 @@ def survey(pieces: Iterable, source: str, effort_unit: str = "N m") -> Survey:
                 sv.max_step_after = float(t[j] if prev_t is None else (prev_t if j == 0 else t[j - 1]))
             sv.min_step = min(sv.min_step, float(steps.min()))
         # the first sample of each START_SPACING_S of time: the same samples however the log is cut
-        bucket = np.floor((t - sv.t_first) / START_SPACING_S)
+        bucket = np.floor((t - sv.t_first) / START_SPACING_S).astype(np.int64)
         keep = bucket != np.concatenate(([last_bucket], bucket[:-1]))
-        last_bucket = bucket[-1]
-        sparse_t.append(t[keep])  # boolean indexing copies: no view keeps the piece alive
-        sparse_eta.append(eta[keep])
-        sparse_tau.append(tau[keep])
+        last_bucket = int(bucket[-1])
+        sparse.add(bucket[keep], t[keep], eta[keep], tau[keep])  # boolean indexing copies: no view keeps the piece
         sv.n += k
         prev_t = float(t[-1])
         sv.t_last = prev_t
@@ -274,11 +278,47 @@ def survey(pieces: Iterable, source: str, effort_unit: str = "N m") -> Survey:
     sv.driving = acc[14:16].copy()
     sv.speed_max, sv.effort_max, sv.effort_fractional = acc[16:18].copy(), acc[18:20].copy(), acc[20:22].copy()
     sv.median_step = _median_step(exact, hist)
-    if sparse_t:
-        sv.sparse_t = np.concatenate(sparse_t)
-        sv.sparse_eta = np.concatenate(sparse_eta)
-        sv.sparse_tau = np.concatenate(sparse_tau)
+    if sparse.parts:
+        sv.sparse_t, sv.sparse_eta, sv.sparse_tau = sparse.arrays()
+        sv.sparse_spacing = START_SPACING_S * 2**sparse.level
     return sv
+
+
+class _Sparse:
+    """The sparse sample as it is gathered: the first sample of each interval of START_SPACING_S * 2**level s (an
+    interval's index: its START_SPACING_S bucket >> level), at most SPARSE_MOST of them; the level rises when more
+    come.  The same samples however the log is cut (the buckets are counted from t_first)."""
+
+    def __init__(self) -> None:
+        self.level = 0
+        self.parts: list[tuple[np.ndarray, ...]] = []  # (bucket, t, eta, tau) kept, in time order
+        self.count = 0
+        self.last = -1  # the interval of the last sample kept
+
+    def add(self, bucket: np.ndarray, t: np.ndarray, eta: np.ndarray, tau: np.ndarray) -> None:
+        """The first samples of their START_SPACING_S buckets (``bucket``: their indices, increasing)."""
+        part = self._firsts((bucket, t, eta, tau))
+        if len(part[0]):
+            self.parts.append(part)
+            self.count += len(part[0])
+            self.last = int(part[0][-1] >> self.level)
+        while self.count > SPARSE_MOST:
+            self.level += 1
+            whole = tuple(np.concatenate(column) for column in zip(*self.parts, strict=True))
+            self.last = -1
+            self.parts = [self._firsts(whole)]
+            self.count = len(self.parts[0][0])
+            self.last = int(self.parts[0][0][-1] >> self.level)
+
+    def _firsts(self, part: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+        """Of ``part``'s samples, the first of each interval at this level not already kept."""
+        interval = part[0] >> self.level
+        keep = interval != np.concatenate(([self.last], interval[:-1]))
+        return tuple(column[keep] for column in part)
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(t (m,), eta (m, 2), tau (m, 2)) of the samples kept."""
+        return tuple(np.concatenate([part[i] for part in self.parts]) for i in (1, 2, 3))  # type: ignore[return-value]
 
 
 def _count_steps(steps: np.ndarray, exact: dict[float, int] | None, hist: dict[int, int]) -> dict[float, int] | None:
