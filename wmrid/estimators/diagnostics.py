@@ -256,7 +256,11 @@ def diagnose(
         if v <= a or v >= b
     ]
     if at_bound:
-        warnings.append(f"estimate held on the box boundary for {', '.join(at_bound)}")
+        warnings.append(
+            f"the estimator's internal parameters {', '.join(at_bound)} stopped at the edge of the range it allows "
+            "them (the box: the signs physics requires, and with a robot file a wide box around its nominal values; "
+            "--box-width): the log pulls them beyond it"
+        )
     if undetermined:
         names = ", ".join(names0[j] for j in undetermined)
         warnings.insert(
