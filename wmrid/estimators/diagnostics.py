@@ -274,11 +274,11 @@ def diagnose(
     if fit.dof > 0 and fit.p_value < MISMATCH_P and rel_mismatch > MISMATCH_RELEVANT:
         scale = inflation["scale"]
         warnings.append(
-            f"the intermediate parameters are not consistent with one set of base parameters "
-            f"(Hotelling T2 {fit.chi2:.3g} on {fit.dof} directions, p = {fit.p_value:.2g}; largest misfit "
-            f"{100 * rel_mismatch:.2g} % of max |theta|): the log departs from the model (slip, caster drag, other "
-            f"friction, a wrong sign or unit, or the wrong --torque-hold); every std is scaled by {scale:.3g} to "
-            "cover it, and the estimates are only as good as the model"
+            f"the estimator's internal parameters do not fit one set of base parameters, as the model says they must "
+            f"(their misfit is {100 * rel_mismatch:.2g} % of the largest of them, beyond chance: p = "
+            f"{fit.p_value:.2g}; diagnostics.structural_mismatch): the log departs from the model (slip, caster "
+            f"drag, other friction, a wrong sign or unit, or the wrong --torque-hold); every std is scaled by "
+            f"{scale:.3g} to cover it, and the estimates are only as good as the model"
         )
     diagnostics = Diagnostics(
         lambda_min_gamma=float(lam[0]), lambda_max_gamma=float(lam[-1]), condition_number_scaled=cond,
