@@ -6,6 +6,7 @@ carries."""
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -81,15 +82,9 @@ def timing_check(
     if samples < 2:
         return replace(none, why=f"{samples} samples")
     try:
-        wheel, profiled, windows, first_t = profile_windows(log, samples, torque_hold, control_rate, None)
+        wheel, drag, first_t, profiled, windows = _windowed(log, samples, torque_hold, control_rate, form)
     except WmridError as err:
         return replace(none, why=str(err))
-    drag = None
-    if form is not None and consults_drag(wheel):
-        try:
-            drag = profile_windows(log, samples, torque_hold, control_rate, form)[0]
-        except WmridError:
-            drag = None
     est, note = with_drag(wheel, drag, form)
     apply = bool(est.significant and not est.at_edge)
     faster = bool(apply and faster_controller(est, first_t, torque_hold, control_rate))
@@ -112,6 +107,23 @@ def profile_windows(
     :class:`wmrid.core.wheel_log.LogStream` is read piece by piece (one window in memory).  ``form``: the friction
     model profiled (:func:`estimate_delay`; None: the wheels' friction alone).  Raises :class:`WmridError` when the
     first window cannot be profiled."""
+    memo = _profiles.setdefault(log, {}) if isinstance(log, LogStream) else {}
+    key = (samples, torque_hold, control_rate, form)
+    if key not in memo:
+        memo[key] = _profile_windows(log, samples, torque_hold, control_rate, form)
+    return memo[key]
+
+
+#: The windowed profiles made of a stream, by (samples, hold, control rate, form): a long log whose timing check
+#: finds a delay applies that same estimate (:func:`apply_delay`), and its windows are read and fitted once, not twice.
+_profiles: weakref.WeakKeyDictionary[Any, dict[tuple[Any, ...], tuple[DelayEstimate, int, int, np.ndarray]]] = (
+    weakref.WeakKeyDictionary()
+)
+
+
+def _profile_windows(
+    log: Any, samples: int, torque_hold: str, control_rate: float | None, form: Any
+) -> tuple[DelayEstimate, int, int, np.ndarray]:
     count = math.ceil(samples / TIMING_WINDOW_SAMPLES)
     size = math.ceil(samples / count)
     estimates: list[DelayEstimate] = []
@@ -326,7 +338,7 @@ def apply_delay(
     tau = np.asarray(whole.tau, dtype=np.float64)
     warnings: list[str] = []
     if delay == "auto" and len(t) > TIMING_WINDOW_SAMPLES:  # the timing check's own estimate, window by window
-        wheel, drag, first_t = _windowed(whole, len(t), torque_hold, control_rate, form)
+        wheel, drag, first_t, _, _ = _windowed(whole, len(t), torque_hold, control_rate, form)
         applied, record = _decided(wheel, drag, form, first_t, torque_hold, control_rate, warnings)
     elif delay == "auto":
         common = {
@@ -362,7 +374,7 @@ def _apply_delay_stream(
     memory).  Memory: a window and a piece, whatever the log's length."""
     warnings: list[str] = []
     if delay == "auto":
-        wheel, drag, first_t = _windowed(log, samples, torque_hold, control_rate, form)
+        wheel, drag, first_t, _, _ = _windowed(log, samples, torque_hold, control_rate, form)
         applied, record = _decided(wheel, drag, form, first_t, torque_hold, control_rate, warnings)
     else:
         applied, record = _given(delay)
@@ -373,18 +385,19 @@ def _apply_delay_stream(
 
 def _windowed(
     log: Any, samples: int, torque_hold: str, control_rate: float | None, form: Any
-) -> tuple[DelayEstimate, DelayEstimate | None, np.ndarray]:
-    """(the wheels' profile, the drag's or None, t (m,) s of the first window) window by window
-    (:func:`profile_windows`): the estimate ``diagnostics.timing`` shows, for a log longer than one window."""
-    first: list[np.ndarray] = []
+) -> tuple[DelayEstimate, DelayEstimate | None, np.ndarray, int, int]:
+    """(the wheels' profile, the drag's or None, t (m,) s of the first window, samples profiled, windows) window by
+    window (:func:`profile_windows`): the estimate ``diagnostics.timing`` shows.  Raises :class:`WmridError` when the
+    wheels' profile cannot be made."""
+    runs: list[tuple[DelayEstimate, int, int, np.ndarray]] = []
 
     def profile(with_form: Any) -> DelayEstimate:
-        est, _, _, t = profile_windows(log, samples, torque_hold, control_rate, with_form)
-        first.append(t)
-        return est
+        runs.append(profile_windows(log, samples, torque_hold, control_rate, with_form))
+        return runs[-1][0]
 
     wheel, drag = _wheel_and_drag(profile, form)
-    return wheel, drag, first[0]
+    _, profiled, windows, first_t = runs[0]
+    return wheel, drag, first_t, profiled, windows
 
 
 def _wheel_and_drag(profile: Any, form: Any) -> tuple[DelayEstimate, DelayEstimate | None]:

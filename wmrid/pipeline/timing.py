@@ -21,7 +21,7 @@ from wmrid.estimators.observer.observe import delay_profile_form, observe
 from wmrid.estimators.observer.survey import Survey, survey
 from wmrid.estimators.options import ObserverOptions
 from wmrid.estimators.result import IdentificationResult
-from wmrid.estimators.timing_check import apply_delay, in_pieces, timing_check, unresolved_delay, unresolved_text
+from wmrid.estimators.timing_check import apply_delay, timing_check, unresolved_delay, unresolved_text
 from wmrid.estimators.widening import with_unresolved_timing
 from wmrid.model.robot import Robot
 
@@ -93,8 +93,7 @@ def observe_at(
     if options.delay is not None:
         if options.delay == "auto":
             raise ValueError("observe_at reads the log at a given delay, not 'auto'")
-        original = log.read() if isinstance(log, LogStream) and not in_pieces(log) else log
-        log, _, _ = apply_delay(original, options.delay, options.torque_hold, options.control_rate, None)
+        log, _, _ = apply_delay(log, options.delay, options.torque_hold, options.control_rate, None)
     stream, sv = surveyed(log)
     return observe(stream, sv, robot, replace(options, payload=False), geometry)
 
