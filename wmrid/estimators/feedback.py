@@ -205,8 +205,9 @@ def check(result: Any, log: Any, robot: Any = None, switch: bool = True) -> Any:
         )
         text = (
             f"closed-loop bias: the observer's {', '.join(big)} differ from the {label[matched.method]} estimate by up "
-            f"to {test['largest_ratio']:.1f} std of the difference (gate {test['gate']:g}), the mark of a controller "
-            f"answering a disturbance through the efforts; {why}, its std widened by that difference"
+            f"to {test['largest_ratio']:.1f} std of their difference (noise explains up to {test['gate']:.1f}), the "
+            f"mark of a controller answering a disturbance through the efforts; {why}, its std widened by that "
+            "difference"
         )
         if impossible:
             kept = out.diagnostics.feedback or record
@@ -217,15 +218,15 @@ def check(result: Any, log: Any, robot: Any = None, switch: bool = True) -> Any:
     big = [n for n, r in test["ratio"].items() if r > test["gate"]]
     text = (
         f"closed-loop bias: the observer's {', '.join(big)} differ from the {label[other.method]} estimate by up to "
-        f"{test['largest_ratio']:.1f} std of the difference (gate {test['gate']:g}), the mark of a controller "
-        "answering a disturbance (a caster, the floor) through the efforts; reporting the "
+        f"{test['largest_ratio']:.1f} std of their difference (noise explains up to {test['gate']:.1f}), the mark of "
+        "a controller answering a disturbance (a caster, the floor) through the efforts; reporting the "
         f"{other.method.upper() if other.method == 'iv' else 'IDIM'} estimate instead of the observer's "
         "(--method observer keeps the observer's)"
     )
     if other.method == "idim":
         text += (
-            ", whose regressor the feedback reaches only through the tracking error; for the consistent "
-            "instrumental-variable estimate log the wheel-speed reference (columns eta_ref_r, eta_ref_l)"
+            ", which the controller's answer biases less; logging the wheel-speed reference (columns eta_ref_r, "
+            "eta_ref_l) gives the IV estimate, which it does not bias"
         )
     return replace(_with_record(out, record), warnings=(text, *out.warnings))
 

@@ -277,9 +277,9 @@ def _statements(rl: IdentificationResult, *, inflated: bool, warned: bool, flagg
     friction = diag.friction
     mismatch = diag.structural_mismatch or StructuralMismatch()
     statements = [
-        f"Standard errors: {unc.method or 'jackknife'}"
-        + (f", {unc.segments} segments" if unc.segments else "")
-        + f" ({unc.dof} degrees of "
+        "Standard errors: how much each estimate varies along the log"
+        + (f" ({unc.method}, {unc.segments} segments" if unc.segments else f" ({unc.method or 'jackknife'}")
+        + f", {unc.dof} degrees of "
         f"freedom); estimate ± {(unc.interval_factor or {})['95%']:.2f} std covers the truth with 95 % probability "
         "when disturbances do not feed back into the efforts. " + (f"Caveat: {unc.caveat}." if unc.caveat else ""),
         *(
@@ -302,19 +302,20 @@ def _statements(rl: IdentificationResult, *, inflated: bool, warned: bool, flagg
             if friction is not None
             else []
         ),
-        f"Structural consistency (Eqs. 23-24): p = {mismatch.p_value:.2g} on "
-        f"{mismatch.dof} directions"
+        "Model check: "
         + (
-            " — the intermediate parameters are not of the model's form."
+            "the intermediate parameters do not fit one set of base parameters as the model says they must"
             if mismatch.p_value is not None and mismatch.p_value < 1e-3
-            else " — consistent with the model."
-        ),
-        f"Excitation: λ_min(Γ) = {diag.lambda_min_gamma:.3g} (α = {rl.observer_settings.alpha:g}); "
+            else "the intermediate parameters fit one set of base parameters, as the model says they must"
+        )
+        + f" (structural consistency, Eqs. 23-24: p = {mismatch.p_value:.2g} on {mismatch.dof} directions).",
+        "Excitation: "
         + (
-            f"not determined by this log: {', '.join(diag.undetermined)}."
+            f"not determined by this log: {', '.join(diag.undetermined)}"
             if diag.undetermined
-            else "the data, not the start value, set every parameter."
-        ),
+            else "the data, not the start value, set every parameter"
+        )
+        + f" (λ_min(Γ) = {diag.lambda_min_gamma:.3g}, α = {rl.observer_settings.alpha:g}).",
         *flagged,
         *(["Robot file: assumed " + "; ".join(diag.robot_assumed) + "."] if diag.robot_assumed else []),
         *rl.warnings,

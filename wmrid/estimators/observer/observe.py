@@ -59,11 +59,9 @@ GAP_MIN_S = 1.0
 #: What the standard errors do not cover, with the coverage measured in simulation (bench/accuracy/bench_coverage.py).
 CLOSED_LOOP_CAVEAT = (
     "in closed loop a coloured disturbance (a caster, the floor) reaches the efforts through the controller and "
-    "biases the observer's inertia entries and Vc; the closed-loop check (diagnostics.feedback, "
-    "wmrid.feedback) compares it with IDIM (IDIM-IV when the log has the reference) and reports that "
-    "one when they differ beyond "
-    "noise, else widens the std by the difference when a disturbance shows (light 14 kg AMR, 0.02 N m disturbance: "
-    "m11, m22, Vc within 3 std in 97 % of 40 s logs and 100 % of 160 s logs, was 70-82 %)"
+    "biases the observer's inertia entries and Vc; the closed-loop check compares the observer with IDIM (IDIM-IV "
+    "when the log has the reference), reports that one when they differ beyond noise, and otherwise widens the std "
+    "by their difference (diagnostics.feedback; measured in docs/explanation/checks.md)"
 )
 
 
