@@ -241,7 +241,8 @@ def build_report(
         residuals["torque"] = torque_residual(log, theta0, form)
 
     verdict = rl.verdict
-    said_verdict = [] if verdict is None else [*verdict.first, verdict.summary]
+    # the verdict heads the summary box; a method note (verdict.first, said first in the terminal) follows it
+    said_verdict = [] if verdict is None else [verdict.summary, *(f[0].upper() + f[1:] + "." for f in verdict.first)]
     groups = [] if verdict is None else list(verdict.lines or [g.text for g in verdict.groups])
     said_verdict += [line[0].upper() + line[1:] + "." for line in groups]
     said_verdict += [f"Check: {line}." for line in verdict.check] if verdict is not None else []

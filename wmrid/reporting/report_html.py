@@ -33,7 +33,17 @@ background:#f8faf8}
 .summary .next{font-weight:700;margin:0.8em 0 0.2em}
 .numbers{display:grid;grid-template-columns:repeat(auto-fill,minmax(19em,1fr));gap:0.2em 1.2em;margin:0.6em 0}
 .numbers div{display:flex;gap:0.6em}.numbers dt{font-weight:600;min-width:3.2em}.numbers dd{margin:0;white-space:nowrap}
+.nb{white-space:nowrap}
 """
+
+
+#: A command-line option in running text (``--format``, ``-o``): kept on one line, the browser breaks after a hyphen.
+_OPTION = re.compile(r"(?<![\w-])(--?[A-Za-z][\w-]*)")
+
+
+def _prose(text: str) -> str:
+    """``text`` escaped for HTML, its command-line options unbreakable (``<span class='nb'>``)."""
+    return _OPTION.sub(r"<span class='nb'>\1</span>", html.escape(text))
 
 
 def _html_table(table: ReportTable) -> str:
@@ -62,15 +72,15 @@ def _html_summary(report: Report) -> list[str]:
     )  # fmt: skip
     out = [f"<section class='summary {tone}'>"]
     if lines:
-        out.append(f"<p class='headline'>{html.escape(lines[0])}</p>")
-        out += ["<ul>", *[f"<li>{html.escape(line)}</li>" for line in lines[1:]], "</ul>"] if lines[1:] else []
+        out.append(f"<p class='headline'>{_prose(lines[0])}</p>")
+        out += ["<ul>", *[f"<li>{_prose(line)}</li>" for line in lines[1:]], "</ul>"] if lines[1:] else []
     if report.key_numbers:
         out.append("<dl class='numbers'>" + "".join(
             f"<div><dt>{html.escape(k)}</dt><dd>{html.escape(v)}</dd></div>" for k, v in report.key_numbers
         ) + "</dl>")  # fmt: skip
     if report.next_steps:
         out += ["<p class='next'>What to do next</p><ul>"]
-        out += [f"<li>{html.escape(step)}</li>" for step in report.next_steps] + ["</ul>"]
+        out += [f"<li>{_prose(step)}</li>" for step in report.next_steps] + ["</ul>"]
     out.append("</section>")
     return ["".join(out)]
 
@@ -92,10 +102,10 @@ def to_html(report: Report) -> str:
     if report.payload:
         parts += [
             "<h2>Payload</h2>",
-            f"<p>{html.escape(report.payload.statement or '')}</p>",
+            f"<p>{_prose(report.payload.statement or '')}</p>",
             _html_table(report.payload),
         ]
-    parts += ["<h2>Diagnostics</h2><ul>", *[f"<li>{html.escape(s)}</li>" for s in report.diagnostics], "</ul>"]
+    parts += ["<h2>Diagnostics</h2><ul>", *[f"<li>{_prose(s)}</li>" for s in report.diagnostics], "</ul>"]
     if report.residuals:
         parts.append(
             "<h2>Residuals</h2><ul>" + "".join(f"<li>{html.escape(s)}</li>" for s in residual_lines(report)) + "</ul>"
@@ -111,7 +121,7 @@ def to_html(report: Report) -> str:
         parts.append(f"<figure><figcaption>{caption}</figcaption>{text}</figure>")
     parts += ["<h2>Intermediate parameters (paper Table 2)</h2>", _html_table(report.intermediate)]
     if report.notes:
-        parts += ["<h2>Notes on the log</h2><ul>", *[f"<li>{html.escape(n)}</li>" for n in report.notes], "</ul>"]
+        parts += ["<h2>Notes on the log</h2><ul>", *[f"<li>{_prose(n)}</li>" for n in report.notes], "</ul>"]
     parts += _html_provenance(report.provenance)
     parts.append("</body></html>")
     return "\n".join(parts)

@@ -103,3 +103,24 @@ def test_a_urdf_robots_unknown_friction_is_a_dash_and_no_payload_is_said(tmp_pat
     assert "no payload detected: the mass estimate" in unloaded.stdout
     assert wmrid("report", str(SAMPLE), "--robot", "paper", "--payload", "-o", str(out), "--force").returncode == 0
     assert json.loads(out.read_text())["payload"]["statement"].startswith("No payload detected: the mass estimate")
+
+
+def test_the_summary_box_says_the_verdict_first_and_keeps_command_options_whole(tmp_path):
+    """A result whose method is not the observer's (ME169: the closed-loop check reported IDIM) heads its summary box
+    with the verdict, then the method note (in the terminal the note comes first); a command-line option in the
+    report's prose is never broken after its hyphen (Chromium broke "(--format" into "(--" and "format" at 1280 px)."""
+    golden = json.loads((ROOT / "tests" / "data" / "golden" / "me169_wheel.json").read_text())["result"]
+    saved = tmp_path / "run.json"
+    saved.write_text(json.dumps(golden))
+    out = tmp_path / "r.html"
+    assert wmrid("report", str(saved), "-o", str(out)).returncode == 0
+    page = out.read_text(encoding="utf-8")
+    box = page[page.index("<section class='summary") : page.index("</section>")]
+    headline = html.unescape(re.sub("<[^>]+>", "", re.search("<p class='headline'>(.*?)</p>", box).group(1)))
+    assert headline == golden["verdict"]["summary"]
+    first = re.search("<li>(.*?)</li>", box).group(1)
+    assert html.unescape(re.sub("<[^>]+>", "", first)).startswith("Method: IDIM, not the observer")
+    assert "<span class='nb'>--method</span> observer" in box
+    assert "(<span class='nb'>--format</span> json <span class='nb'>-o</span> run.json)" in box
+    assert ".nb{white-space:nowrap}" in page
+    assert "PWM-based" in page  # a hyphen inside a word is not an option
