@@ -37,8 +37,9 @@ def print_verdict(verdict: Verdict | None, console: Any, prefix: str = "") -> No
     parameter group; a summary that says not to use the numbers in the impossible style."""
     if verdict is None:
         return
-    for line in (*verdict.first, verdict.summary):
-        console.print(f"{prefix}verdict: {line}", style=STYLES["impossible"] if verdict.doubt else "bold")
+    console.print(f"{prefix}verdict: {verdict.summary}", style=STYLES["impossible"] if verdict.doubt else "bold")
+    for line in verdict.first:  # a method note (the closed-loop check reported IDIM): which estimate the numbers are
+        console.print(f"{prefix}  {line}", style="bold")
     for line in verdict.lines or [g.text for g in verdict.groups]:
         console.print(f"{prefix}  {line}")
     for line in verdict.check:
@@ -161,7 +162,7 @@ def print_identification(result: IdentificationResult, console: Any, verbose: bo
         )
     for note in info.notes:
         console.print(f"note: {note}")
-    for warning in result.warnings:
+    for warning in _grouped(result.warnings):
         console.print(warning_line(warning))
 
 
@@ -311,16 +312,26 @@ _POORLY_ALL = " is poorly determined by these logs"
 
 
 def _grouped(warnings: Sequence[str]) -> list[str]:
-    """One method's warnings for compare's terminal output: those that a parameter is poorly determined by the log (one
-    each, the value and std that the table shows) said in one line naming the parameters, where the first was."""
+    """A result's warnings for the terminal: those that a parameter is poorly determined by the log (one each, with the
+    value and std that the table shows) said in one line naming the parameters, where the first was; what a warning
+    adds beyond the table (the parameters it cannot be told apart from) stays with its name.  The JSON keeps each."""
     out: list[str] = []
     for words, said in ((_POORLY, "this log"), (_POORLY_ALL, "these logs")):
-        poorly = [w.split(words, 1)[0] for w in warnings if words in w]
+        poorly = [_poorly_name(w, words) for w in warnings if words in w]
         if poorly:
-            out.append(f"poorly determined by {said} (std in the table): {', '.join(poorly)}")
+            joined = "; ".join(poorly) if any("," in p for p in poorly) else ", ".join(poorly)
+            out.append(f"poorly determined by {said} (std in the table): {joined}")
     first = next((i for i, w in enumerate(warnings) if _POORLY in w or _POORLY_ALL in w), len(warnings))
     rest = [w for w in warnings if _POORLY not in w and _POORLY_ALL not in w]
     return [*rest[:first], *out, *rest[first:]]
+
+
+def _poorly_name(warning: str, words: str) -> str:
+    """ "Fv1, not separable from Fd1 (correlation 0.97)" of "Fv1 is poorly determined by this log: 4.8 +/- 40 PWM s/rad;
+    it is not separable from Fd1 (correlation 0.97)"; the name alone when the warning adds nothing to the table."""
+    name = warning.split(words, 1)[0]
+    _, _, beyond = warning.partition("; it is ")
+    return f"{name}, {beyond}" if beyond else name
 
 
 def said_once(items: Sequence[tuple[str, str]]) -> list[tuple[list[str], str]]:

@@ -241,7 +241,7 @@ def build_report(
         residuals["torque"] = torque_residual(log, theta0, form)
 
     verdict = rl.verdict
-    # the verdict heads the summary box; a method note (verdict.first, said first in the terminal) follows it
+    # the verdict heads the summary box; a method note (verdict.first) follows it, as in the terminal
     said_verdict = [] if verdict is None else [verdict.summary, *(f[0].upper() + f[1:] + "." for f in verdict.first)]
     groups = [] if verdict is None else list(verdict.lines or [g.text for g in verdict.groups])
     said_verdict += [line[0].upper() + line[1:] + "." for line in groups]

@@ -104,3 +104,32 @@ def test_compare_says_each_verdict_and_warning_once():
     poorly = [line for line in lines if "poorly determined" in line]
     assert poorly == ["warning (observer, idim): poorly determined by this log (std in the table): m11, Vc"]
     assert sum(line.startswith("verdict (") for line in lines) == 1
+
+
+def test_identify_says_the_poorly_determined_parameters_in_one_line_keeping_what_the_table_does_not_show():
+    """Issue 33: identify printed one warning per poorly determined parameter (11 lines on ME169), each repeating the
+    value and std of the table; now one line naming them, in the place of the first.  What a warning adds beyond the
+    table (the parameters it cannot be told apart from) stays with its name.  The JSON keeps every warning."""
+    from dataclasses import replace
+
+    from wmrid.reporting.render import _grouped
+
+    warnings = (
+        "the log is short",
+        "m11 is poorly determined by this log (idim): 0.43 +/- 1.1 (rad/s^2)/PWM",
+        "Fv1 is poorly determined by this log: 4.8 +/- 40 PWM s/rad; it is not separable from Fd1 (correlation 0.97)",
+        "to determine m11 and Fv1, drive the robot as wmrid plan designs it",
+    )
+    assert _grouped(warnings) == [
+        "the log is short",
+        "poorly determined by this log (std in the table): m11; Fv1, not separable from Fd1 (correlation 0.97)",
+        "to determine m11 and Fv1, drive the robot as wmrid plan designs it",
+    ]
+    assert _grouped(warnings[:2]) == ["the log is short", "poorly determined by this log (std in the table): m11"]
+    result = wmrid.identify(SAMPLE, "paper")
+    console, out = _console()
+    print_identification(replace(result, warnings=warnings), console)
+    lines = [" ".join(line.split()) for line in out.getvalue().splitlines()]
+    assert [line for line in lines if "poorly determined" in line] == [
+        "warning: poorly determined by this log (std in the table): m11; Fv1, not separable from Fd1 (correlation 0.97)"
+    ]
