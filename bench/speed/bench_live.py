@@ -2,7 +2,7 @@
 message's arrival to the first update that includes it (median, 99th percentile), the CPU the process uses while it
 follows (from /proc, between the first update and the end of the stream), its peak RSS, and the final result against
 ``wmrid identify`` on the same messages.  Written as JSON to bench/results/bench_live.json (``--source csv``:
-bench_live-csv.json).
+bench_live-csv.json; faster than real time, ``--speed 20``: bench_live-x20.json).
 
 Sources: ``ws`` (default) -- the foxglove-sdk WebSocket server (tests/fxserver.py) in this process publishing the
 bundled paper-scenario log as JointState CDR messages, ``wmrid live ws://127.0.0.1:PORT`` in a process of its own;
@@ -221,7 +221,9 @@ def main() -> None:
         "final_vs_identify_largest_relative_difference": worst, "samples": final["samples"],
     }  # fmt: skip
     print(json.dumps(out, indent=2))
-    write_results(out, variant=None if args.source == "ws" else args.source)
+    # a run faster than real time (the long-stream memory run, --speed 20) keeps its own file: bench_live-x20.json
+    faster = None if args.speed == 1 else f"x{args.speed:g}"
+    write_results(out, variant="-".join(v for v in (None if args.source == "ws" else args.source, faster) if v) or None)
 
 
 if __name__ == "__main__":
