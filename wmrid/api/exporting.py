@@ -111,11 +111,58 @@ def export(
     options: Any = None,
     force: bool = False,
 ) -> ExportResult:
-    """Write ``result`` (a saved result's path, or a result) identified with ``robot`` (a robot file, a built-in name,
-    or a URDF with ``gear_ratio``) to ``output`` in the format its suffix names (module docstring); ``check`` a log
-    (path or log, read with ``options``) to drive the exported multibody model with.  Atomic; an existing output is
-    kept unless ``force``.  Raises UsageError (one line) for an unknown suffix, a robot file without physical
-    parameters, an unphysical result, a result whose effort is not a torque."""
+    """Write an identified robot as a model a simulator or a controller loads (``wmrid export``).
+
+    The physical quantities are computed from the result and the robot file (:mod:`wmrid.model.physical`: what the
+    log determines, what the file gives, what stays undetermined; an unphysical result is refused).  The output is
+    written atomically, in the format its suffix names:
+
+    * ``.xml``: MJCF, the multibody prototype with the identified values (:mod:`wmrid.exports.mjcf`);
+    * ``.urdf``: the robot's own URDF with only the base link's inertial and the wheel joints' dynamics changed, or
+      a minimal URDF for a TOML robot (:mod:`wmrid.exports.urdf`);
+    * ``.yaml`` / ``.yml``: the reduced model for a controller; ``.py``: a dependency-free
+      ``wheel_torques(eta, eta_dot)`` (:mod:`wmrid.exports.controller`);
+    * ``.toml``: a wmrid robot file of the identified robot, which ``wmrid simulate`` reads
+      (:mod:`wmrid.exports.robot_file`).
+
+    Parameters
+    ----------
+    result
+        The identification: a saved result's path, or an :class:`IdentificationResult`.
+    robot
+        The robot it was identified with: a robot file, a built-in name, or a URDF with ``gear_ratio``.
+    output
+        The file to write; its suffix names the format (above).
+    check
+        A log (a path, read with ``options``, or a log) whose torques drive the exported multibody model over
+        windows restarted from the logged speeds (:func:`wmrid.sim.open_loop.drive_windows`); the fit % per wheel is
+        reported next to the reduced model's on the same windows (:func:`wmrid.model.predict.simulate_segments`).
+        None: no check.
+    window
+        s, the length of the check's windows, > 0.
+    gear_ratio
+        The gear ratio of a URDF robot (required for one).
+    rotor_inertia
+        kg m^2, a URDF robot's rotor inertia when it has no rotor links.
+    wheel_radius
+        m, overrides a URDF robot's wheel radius.
+    options
+        How to read ``check`` when it is a path (:class:`~wmrid.api.inputs.LogOptions`).
+    force
+        Overwrite an existing output (else it is kept).
+
+    Returns
+    -------
+    ExportResult
+        What was written, with the physical quantities, the provenance and the check's fits; it round-trips through
+        JSON.
+
+    Raises
+    ------
+    UsageError
+        One line, for an unknown suffix, a robot file without physical parameters, an unphysical result, a result
+        whose effort is not a torque.
+    """
     from wmrid.api.inputs import load_robot
     from wmrid.exports.controller import controller_model
     from wmrid.model.robot import PhysicalParameters

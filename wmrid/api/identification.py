@@ -216,11 +216,34 @@ def validate(
     *,
     robot: Robot | None = None,
 ) -> IdentificationResult:
-    """``result`` with ``validation``: the fit % per wheel of its model's simulated wheel speeds on ``log`` (another
-    log of the same robot, read with ``options``; ``robot`` fills in its units as for identify), the effort held as
-    the result's observer held it (the predictor holds each logged effort over its whole step: a controller rate is
-    not modelled, and the command line refuses ``--validate`` with ``--control-rate``, :func:`check_validation`).
-    The estimate is unchanged: validation only adds output."""
+    """Validate ``result`` on another log of the same robot: the fit % per wheel of its model's simulated speeds.
+
+    The model's wheel speeds are simulated open loop from ``log``'s efforts, each effort held as the result's
+    observer held it (the predictor holds each logged effort over its whole step: a controller rate is not
+    modelled, and the command line refuses ``--validate`` with ``--control-rate``, :func:`check_validation`).  The
+    estimate is unchanged: validation only adds output.
+
+    Parameters
+    ----------
+    result
+        The identification to validate.
+    log
+        Another log of the same robot: a path, or a log already read.
+    options
+        How to read ``log`` (:class:`~wmrid.api.inputs.LogOptions`).
+    robot
+        The robot, which fills in the log's units as for :func:`identify`.
+
+    Returns
+    -------
+    IdentificationResult
+        ``result`` with its ``validation`` (:class:`~wmrid.estimators.records.Validation`) set.
+
+    Raises
+    ------
+    UsageError
+        ``log``'s effort is not in the unit of the identified model's.
+    """
     from wmrid.model.predict import unsimulated, validation_fit
 
     other_log = _log(log, options, robot, whole=True)
@@ -261,25 +284,39 @@ def identify(
 ) -> IdentificationResult:
     """The base parameters [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2] of the robot that recorded ``log``.
 
-    log : a path (CSV, Parquet, MCAP, a bag; ``"-"`` standard input), read with ``options``
-        (:class:`~wmrid.api.inputs.LogOptions`), or a log already read.
-    robot : a built-in name, a robot file (TOML; a URDF with ``options.gear_ratio``) or a :class:`Robot`
+    Parameters
+    ----------
+    log
+        A path (CSV, Parquet, MCAP, a bag; ``"-"`` standard input), read with ``options``, or a log already read
+        (:class:`WheelLog`, :class:`LogStream`).
+    robot
+        A built-in name, a robot file (TOML; a URDF with ``options.gear_ratio``) or a :class:`Robot`
         (:func:`wmrid.load_robot`): the start value, the nominal/CAD values to compare with, and the defaults of the
         log's units.  None: a start value from the data.
-    method : "auto" (the observer, or the IDIM/IDIM-IV estimate when the closed-loop check finds the observer's
-        biased by feedback, said in the first warning), "observer" (the paper's, always reported), "idim", "iv",
-        "rls" or "oe" (:data:`wmrid.estimators.methods.METHODS`): a method named is the method reported.
-    observer : the observer's options (:class:`~wmrid.estimators.options.ObserverOptions`: form, gains, box, hold,
-        control rate, delay, friction model, payload); every method starts from the observer's run.
-    fit : the classical methods' options (:class:`~wmrid.estimators.options.MethodOptions`: cutoff, weighting,
+    method
+        "auto" (the observer, or the IDIM/IDIM-IV estimate when the closed-loop check finds the observer's biased by
+        feedback, said in the first warning), "observer" (the paper's, always reported), "idim", "iv", "rls" or "oe"
+        (:data:`wmrid.estimators.methods.METHODS`): a method named is the method reported.
+    options
+        How to read a log given as a path (:class:`~wmrid.api.inputs.LogOptions`; None: the defaults).
+    observer
+        The observer's options (:class:`~wmrid.estimators.options.ObserverOptions`: form, gains, box, hold, control
+        rate, delay, friction model, payload); every method starts from the observer's run.
+    fit
+        The classical methods' options (:class:`~wmrid.estimators.options.MethodOptions`: cutoff, weighting,
         forgetting factor).
-    given : results of earlier logs of the same robot (paths of saved results, ``wmrid identify --format json``, or
+    given
+        Results of earlier logs of the same robot (paths of saved results, ``wmrid identify --format json``, or
         :class:`IdentificationResult` objects; one or several): the result is this log's estimate combined with
         theirs (:mod:`wmrid.estimators.combination`; what ``wmrid plan --given`` predicts).
-    progress : called as progress(done, total) samples while the observer replays the log.
+    progress
+        Called as ``progress(done, total)``, in samples, while the observer replays the log.
 
-    Returns an :class:`IdentificationResult`; ``result.parameters[name]`` is (value, std) in SI units.
-    :func:`validate` predicts another log with it.
+    Returns
+    -------
+    IdentificationResult
+        The result; ``result.parameters[name]`` is (value, std) in SI units.  :func:`validate` predicts another log
+        with it.
     """
     prep = prepare(method, observer, fit, options=options, robot=robot)
     earlier = given_results(given)  # read (and refused) before the log
@@ -396,13 +433,45 @@ def compare(
     truth: dict[str, float] | str | os.PathLike[str] | None = None,
     stage: Callable[[str], None] | None = None,
 ) -> Comparison:
-    """Every method in ``methods`` (default: all of :data:`wmrid.estimators.methods.METHODS`) on the same log:
-    estimates, standard errors, flags, errors against ``truth`` (base parameters by name), fit on ``validate``,
-    run time, as a :class:`~wmrid.estimators.methods.Comparison` (``to_dict``: the document ``wmrid compare
-    --format json`` prints).  Each method identifies the same friction model; the observer's own estimate is shown as
-    it is (no closed-loop substitution).  ``observer``, ``fit``: the options, as for :func:`identify` (every method
-    starts from the observer's run; with ``observer.payload`` each row has its payload).  ``stage``: called with
-    what it does now (reading the log, each method), for a progress display."""
+    """Every method in ``methods`` on the same log: estimates, standard errors, flags, errors, fit, run time.
+
+    Each method identifies the same friction model; the observer's own estimate is shown as it is (no closed-loop
+    substitution).
+
+    Parameters
+    ----------
+    log
+        The log, as for :func:`identify`: a path read with ``options``, or a log already read.
+    robot
+        The robot, as for :func:`identify`.
+    methods
+        The methods to run (None: all of :data:`wmrid.estimators.methods.METHODS`).
+    options
+        How to read ``log`` and ``validate`` when they are paths (:class:`~wmrid.api.inputs.LogOptions`).
+    observer
+        The observer's options, as for :func:`identify` (every method starts from the observer's run; with
+        ``observer.payload`` each row has its payload).
+    fit
+        The classical methods' options, as for :func:`identify`.
+    validate
+        Another log of the same robot, on which each method's fit is computed (None: none).
+    truth
+        The true base parameters by name, or the path of a truth file (the simulator's sidecar ``LOG.truth.json``,
+        whose "parameters" are read): each method's errors are against them (None: no errors).
+    stage
+        Called with what the comparison does now (reading the log, each method), for a progress display.
+
+    Returns
+    -------
+    Comparison
+        Every method's row (:class:`~wmrid.estimators.methods.Comparison`); its ``to_dict`` is the document
+        ``wmrid compare --format json`` prints.
+
+    Raises
+    ------
+    UsageError
+        ``methods`` names no method, or ``validate``'s effort is not in the unit of ``log``'s.
+    """
     from wmrid.estimators.methods import METHODS, check_method, compare as run_compare
     from wmrid.pipeline.identify import Steps, identify_log
 

@@ -28,16 +28,57 @@ __all__ = ["LogOptions", "inspect", "load_robot", "open_log", "read_log"]
 
 @dataclass(frozen=True)
 class LogOptions:
-    """How to read a log: the same fields for every command (the CLI's "Log input" flags).
+    """How to read a log: the same fields for every command.
 
-    columns : canonical name -> the file's column name (``{"t": "time", "eta_r": "vel_right"}``), or the CLI's text
-        form ``"t=time,eta_r=vel_right"``.
-    time_unit : "auto" (float s, integer ns), "s", "ms", "us" or "ns".
-    topic, velocity_topic, effort_topic, right_joint, left_joint, time_source, align, velocity_from : MCAP topics,
-        joints and time (see ``wmrid identify --help``).
-    speed_unit : "rad/s", "rpm", "deg/s" or "m/s" (at the rim: needs ``wheel_radius``, default the robot's r).
-    effort : "torque" (N m), "current" (A: needs ``torque_constant`` N m/A), "pwm" or "voltage".
-    effort_unit, torque_constant, gear_ratio, efficiency, mirror_left, flip_effort : as the flags of those names.
+    The fields are the command line's "Log input" flags, one field each (``--speed-unit rpm`` is
+    ``LogOptions(speed_unit="rpm")``; see ``wmrid identify --help``).  The options are checked when made.
+
+    Attributes
+    ----------
+    columns
+        Canonical name -> the file's column name (``{"t": "time", "eta_r": "vel_right"}``), or the CLI's text form
+        ``"t=time,eta_r=vel_right"``.
+    time_unit
+        Unit of the time column: "auto" (float s, floats past 1e13 us, past 1e16 ns; integer ns), "s", "ms", "us"
+        or "ns".
+    topic
+        Bags (MCAP, ROS 1, db3): the JointState (or JSON) topic holding speed and effort.
+    velocity_topic
+        Bags: the JointState topic with the wheel speeds (or positions).
+    effort_topic
+        Bags: the JointState topic with the wheel efforts.
+    right_joint
+        Bags: name of the right wheel joint.
+    left_joint
+        Bags: name of the left wheel joint.
+    time_source
+        Bags: which clock stamps a sample: "header" (the header stamps), "log" (log time) or "auto" (the header when
+        all stamps are set and in order).
+    align
+        Split topics: how the efforts are brought to the speeds' times: "zoh" (held from the latest message) or
+        "linear" (interpolated).
+    velocity_from
+        Where the wheel speeds come from: "velocity" (the velocity field), "position" (the positions) or "auto"
+        (the positions when there are no speeds).
+    speed_unit
+        Unit of the logged wheel speeds: "rad/s", "rpm", "deg/s" or "m/s" (at the rim: needs ``wheel_radius``).
+    wheel_radius
+        Wheel radius, m, > 0, for speeds in m/s (None: the robot's r).
+    effort
+        What the effort is: "torque" (wheel torque, N m), "current" (motor current, A: needs ``torque_constant``),
+        "pwm" or "voltage" (a command).
+    effort_unit
+        Label of a PWM or voltage effort's unit (None: PWM, V).
+    torque_constant
+        Motor torque constant k_t, N m/A, > 0, for ``effort="current"`` (None: the robot's).
+    gear_ratio
+        Gear ratio k_r, > 0, for ``effort="current"`` (None: the robot's k_r).
+    efficiency
+        Gearbox efficiency in (0, 1], for ``effort="current"`` (None: the robot's, else 1).
+    mirror_left
+        The left motor is mirrored: change the sign of its speed and effort.
+    flip_effort
+        The effort's sign is opposite to the speed's on both wheels: change it.
     """
 
     columns: dict[str, str] | str | None = None
@@ -71,8 +112,19 @@ class LogOptions:
         check_signal_numbers(self.wheel_radius, self.torque_constant, self.gear_ratio, self.efficiency)
 
     def with_robot(self, robot: Robot | None) -> LogOptions:
-        """These options with the robot's values where they are not given (wheel radius for m/s speeds, torque
-        constant and efficiency for currents)."""
+        """These options with the robot's values where they are not given.
+
+        Parameters
+        ----------
+        robot
+            The robot (None: the options as they are).
+
+        Returns
+        -------
+        LogOptions
+            The options, with the robot's wheel radius for m/s speeds, and its torque constant and efficiency for
+            currents, where they are not given.
+        """
         if robot is None:
             return self
         changes: dict[str, Any] = {}
@@ -107,8 +159,28 @@ def load_robot(
 ) -> Robot:
     """A robot from a built-in name (``"paper"``, ``"amr"``), a TOML file, or a URDF.
 
-    A URDF does not give the gear ratio: ``gear_ratio`` is required for one (``rotor_inertia`` kg m^2 when it has no
-    rotor links; ``wheel_radius`` m overrides its wheels').  A :class:`Robot` is returned as it is.
+    Parameters
+    ----------
+    spec
+        A built-in name, the path of a robot file (TOML) or of a URDF, or a :class:`Robot`, which is returned as it
+        is.
+    gear_ratio
+        The gear ratio of a URDF robot: required for one (a URDF does not give it).
+    rotor_inertia
+        kg m^2, the rotor inertia of a URDF robot that has no rotor links; URDF robots only (a robot TOML file gives
+        I_r itself).
+    wheel_radius
+        m, overrides a URDF robot's wheel radius.
+
+    Returns
+    -------
+    Robot
+        The robot.
+
+    Raises
+    ------
+    UsageError
+        A URDF without ``gear_ratio``, or ``rotor_inertia`` for a robot that is not a URDF.
     """
     if isinstance(spec, Robot):
         return spec
@@ -142,9 +214,27 @@ def open_log(
     data: bytes | None = None,
     **overrides: Any,
 ) -> LogStream:
-    """A log read piece by piece (memory: one piece, whatever its length): ``path`` a CSV (plain or compressed),
-    Parquet or MCAP file, a ROS 1 or ROS 2 (.db3) bag, a rosbag2 folder, several files of one recording, or ``"-"``
-    for standard input (``data``: its bytes, when already read).  ``overrides``: :class:`LogOptions` fields.
+    """A log read piece by piece (memory: one piece, whatever the log's length).
+
+    Parameters
+    ----------
+    path
+        A CSV (plain or compressed), Parquet or MCAP file, a ROS 1 or ROS 2 (.db3) bag, a rosbag2 folder, several
+        files of one recording, or ``"-"`` for standard input.
+    options
+        How to read the log (None: the defaults).
+    robot
+        The robot whose values fill in what the options do not give (wheel radius for m/s speeds, torque constant
+        and efficiency for currents, gear ratio).
+    data
+        The bytes of standard input, when already read (``path="-"``).
+    **overrides
+        :class:`LogOptions` fields by name, replacing those of ``options``.
+
+    Returns
+    -------
+    LogStream
+        The log, read a piece at a time each time it is iterated.
     """
     from wmrid.io.logs import open_log as open_file
 
@@ -180,8 +270,27 @@ def read_log(
     data: bytes | None = None,
     **overrides: Any,
 ) -> WheelLog:
-    """A whole log in memory (t (n,) s, eta (n, 2) rad/s, tau (n, 2) N m; see :class:`WheelLog`), read as
-    :func:`open_log` reads it."""
+    """A whole log in memory, read as :func:`open_log` reads it.
+
+    Parameters
+    ----------
+    path
+        A CSV (plain or compressed), Parquet or MCAP file, a ROS 1 or ROS 2 (.db3) bag, a rosbag2 folder, several
+        files of one recording, or ``"-"`` for standard input.
+    options
+        How to read the log (None: the defaults).
+    robot
+        The robot whose values fill in what the options do not give (as for :func:`open_log`).
+    data
+        The bytes of standard input, when already read (``path="-"``).
+    **overrides
+        :class:`LogOptions` fields by name, replacing those of ``options``.
+
+    Returns
+    -------
+    WheelLog
+        The log: t (n,) s, eta (n, 2) rad/s, tau (n, 2) N m.
+    """
     return open_log(path, options, robot=robot, data=data, **overrides).read()
 
 
@@ -190,9 +299,20 @@ def _fspaths(path: Any) -> str | list[str]:
 
 
 def inspect(path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]]) -> Any:
-    """What the log at ``path`` holds, before any identification (``wmrid inspect``): an
-    :class:`~wmrid.io.inspect.McapInventory` (topics, types, rates, joints) or a
-    :class:`~wmrid.io.inspect.TableInventory` (columns, rows, canonical columns found); ``to_dict`` is the JSON."""
+    """What the log at ``path`` holds, before any identification (``wmrid inspect``).
+
+    Parameters
+    ----------
+    path
+        The log: a file, or several files of one recording.
+
+    Returns
+    -------
+    McapInventory or TableInventory
+        An :class:`~wmrid.io.inspect.McapInventory` (topics, types, rates, joints) or a
+        :class:`~wmrid.io.inspect.TableInventory` (columns, rows, canonical columns found); its ``to_dict`` is the
+        JSON.
+    """
     from wmrid.io.inspect import inspect_log
 
     return inspect_log(_fspaths(path))

@@ -64,10 +64,26 @@ FINAL_PIECE_ROWS = 65_536
 
 @dataclass(frozen=True)
 class LiveResult:
-    """How a live run ended: ``result`` (``identify`` on the messages received), ``reason`` (why it ended),
-    ``samples`` and ``log_time_s`` received live, ``read_from`` what the final ``identify`` read, ``stopped`` True when
-    it was stopped (Ctrl-C, SIGTERM) rather than ended, ``failure`` the source's error when it broke off (a lost
-    connection, a malformed frame; the result is then on what came before it)."""
+    """How a live run ended, and its result: the last item a :class:`LiveRun` yields.
+
+    Attributes
+    ----------
+    result
+        ``identify`` on the messages received.
+    reason
+        Why the run ended.
+    samples
+        The samples received live.
+    log_time_s
+        s of log time received live.
+    read_from
+        What the final ``identify`` read.
+    stopped
+        True when the run was stopped (Ctrl-C, SIGTERM) rather than ended.
+    failure
+        The source's error when it broke off (a lost connection, a malformed frame; the result is then on what came
+        before it), else None.
+    """
 
     result: IdentificationResult
     reason: str
@@ -78,7 +94,18 @@ class LiveResult:
     failure: str | None = None
 
     def to_dict(self, history: bool = False) -> dict[str, Any]:
-        """The JSON line ``wmrid live`` prints last in a pipe: the reason and the result (``identify``'s JSON)."""
+        """The JSON line ``wmrid live`` prints last in a pipe: the reason and the result (``identify``'s JSON).
+
+        Parameters
+        ----------
+        history
+            Include the result's estimates over time (as :meth:`IdentificationResult.to_dict`).
+
+        Returns
+        -------
+        dict
+            The line, with ``"event": "result"``.
+        """
         return {
             "event": "result", "reason": self.reason, "samples": self.samples, "log_time_s": self.log_time_s,
             "read_from": self.read_from, "failure": self.failure, "result": self.result.to_dict(history=history),
@@ -91,7 +118,39 @@ def _check(name: str, value: float | None, low: float = 0.0) -> None:
 
 
 class LiveRun:
-    """A live identification (see :func:`live`): iterate it for the updates and the final :class:`LiveResult`."""
+    """A live identification (made by :func:`live`): iterate it for the updates and the final :class:`LiveResult`.
+
+    Iterating follows the source, feeds the samples to the observer as they arrive and yields a :class:`LiveUpdate`
+    every ``every`` seconds (and, with ``monitor``, a :class:`LiveChange` for each change found), then, when the
+    source ends, one :class:`LiveResult`.  :meth:`finish` gives that result at any moment, e.g. after Ctrl-C.
+
+    Parameters
+    ----------
+    source
+        What to follow, as for :func:`live`.
+    robot
+        The robot, as for :func:`live`.
+    observer
+        The observer's options (:class:`~wmrid.estimators.options.ObserverOptions`).
+    rotor_inertia
+        kg m^2, a URDF robot's rotor inertia when it has no rotor links, or None.
+    options
+        How to read the source (:class:`LogOptions`), or None.
+    every
+        s of wall time between updates.
+    idle
+        s without new data that end the run, or None.
+    until
+        s of log time after which the run ends, or None.
+    until_std
+        Percent: the run ends once every parameter in ``params`` has a live relative std below it, or None.
+    params
+        The parameters ``until_std`` watches (None: the eight base parameters).
+    reconnect
+        Retry a lost WebSocket connection with back-off.
+    monitor
+        An identified model to watch the stream against, or None; as for :func:`live`.
+    """
 
     def __init__(self, source: str | os.PathLike[str], robot: Any, observer: ObserverOptions,
                  rotor_inertia: float | None, options: LogOptions | None, every: float, idle: float | None,
@@ -319,14 +378,35 @@ class LiveRun:
         yield self.finish()
 
     def stop(self, reason: str = "stopped") -> None:
-        """End the run at the next poll (or now, for :meth:`finish`); ``reason`` says why."""
+        """End the run at the next poll (or now, for :meth:`finish`).
+
+        Parameters
+        ----------
+        reason
+            Why the run ended.
+        """
         if self.reason is None:
             self.reason = reason
             self.stopped = True
 
     def finish(self, stopped_by: str | None = None) -> LiveResult:
-        """The final result: ``identify`` on the messages received (see the module docstring); ``stopped_by`` names a
-        stop (Ctrl-C, SIGTERM), after which the process is given FINISH_GRACE_S to identify and write."""
+        """The final result: ``identify`` on the messages received.
+
+        ``identify`` runs on the recording itself when it was read to its end, else on a copy of the bytes read
+        (standard input is spilled to a temporary file as it arrives), so its result is the JSON ``wmrid identify``
+        writes for them, with every offline check.
+
+        Parameters
+        ----------
+        stopped_by
+            Names a stop (Ctrl-C, SIGTERM), after which the process is given FINISH_GRACE_S to identify and write;
+            None: the run ended by itself.
+
+        Returns
+        -------
+        LiveResult
+            The result (the same one on every call).
+        """
         from wmrid.api.identification import identify
         from wmrid.core.errors import WmridError
 
@@ -461,23 +541,52 @@ def live(
 ) -> LiveRun:
     """Identify the robot that is writing ``source`` while it writes it.
 
-    source : ``"-"`` (standard input: CSV rows with a header, JSON lines, or an MCAP stream), a CSV file being appended
-        to, an MCAP file being written, a rosbag2 folder being recorded with MCAP storage, or a Foxglove WebSocket
-        server ``"ws://HOST:PORT"`` (foxglove_bridge); read with ``options`` (the same :class:`LogOptions` as
-        :func:`wmrid.identify`: topics, joints, field paths).
-    robot, observer : as for :func:`wmrid.identify` (the final result is ``identify`` with them; a URDF robot's
-        ``rotor_inertia`` kg m^2 when it has no rotor links).
-    every : s of wall time between updates; idle : s without new data that end the run, once samples have come
-        (None: wait); until : s of log
-        time after which the run ends; until_std : percent: the run ends once every parameter in ``params`` (default:
-        all eight base parameters) has a live relative std below it; reconnect : a WebSocket source whose connection
-        is lost is retried with back-off (else the run ends, keeping what came: :attr:`LiveResult.failure`);
-        monitor : an identified model (a saved ``identify`` result: its path or JSON as a dict, or the result) that
-        the stream is watched against with ``wmrid monitor``'s change test: a :class:`LiveChange` is yielded as soon
-        as the test alarms (:class:`wmrid.monitoring.live_monitor.LiveMonitor`).
+    The updates carry what can be computed online: the observer's estimate with its jackknife std (before the
+    offline widening terms).  The final result is :func:`wmrid.identify` run on exactly the messages received.
 
-    Returns a :class:`LiveRun`; iterating it yields :class:`LiveUpdate` objects (and :class:`LiveChange` objects with
-    ``monitor``), then one :class:`LiveResult`.
+    Parameters
+    ----------
+    source
+        ``"-"`` (standard input: CSV rows with a header, JSON lines, or an MCAP stream), a CSV file being appended
+        to, an MCAP file being written, a rosbag2 folder being recorded with MCAP storage, or a Foxglove WebSocket
+        server ``"ws://HOST:PORT"`` (foxglove_bridge); read with ``options``.
+    robot
+        As for :func:`wmrid.identify` (the final result is ``identify`` with it).
+    options
+        How to read ``source``: the same :class:`LogOptions` as :func:`wmrid.identify` (topics, joints, field
+        paths).
+    every
+        s of wall time between updates.
+    idle
+        s without new data that end the run, once samples have come (None: wait).
+    until
+        s of log time after which the run ends (None: no limit).
+    until_std
+        Percent: the run ends once every parameter in ``params`` has a live relative std below it.
+    params
+        The parameters ``until_std`` watches (None: all eight base parameters).
+    observer
+        As for :func:`wmrid.identify` (the final result is ``identify`` with it).
+    rotor_inertia
+        kg m^2, a URDF robot's rotor inertia when it has no rotor links.
+    reconnect
+        A WebSocket source whose connection is lost is retried with back-off (else the run ends, keeping what came:
+        :attr:`LiveResult.failure`).
+    monitor
+        An identified model (a saved ``identify`` result: its path or JSON as a dict, or the result) that the stream
+        is watched against with ``wmrid monitor``'s change test: a :class:`LiveChange` is yielded as soon as the test
+        alarms (:class:`wmrid.monitoring.live_monitor.LiveMonitor`).
+
+    Returns
+    -------
+    LiveRun
+        The run; iterating it yields :class:`LiveUpdate` objects (and :class:`LiveChange` objects with ``monitor``),
+        then one :class:`LiveResult`.
+
+    Raises
+    ------
+    UsageError
+        ``every``, ``idle``, ``until`` or ``until_std`` not a number > 0, or an unknown name in ``params``.
     """
     observer = observer if observer is not None else ObserverOptions()
     return LiveRun(

@@ -50,12 +50,37 @@ def monitor(
 ) -> MonitorResult:
     """Replay ``log`` against ``model`` and report when the dynamics change, and the parameters after each change.
 
-    calibration : s at the start of the log (and after each change) assumed unchanged, to calibrate the test.
-    false_alarm_rate : false alarms per hour the test's threshold allows.  ``settings`` (all of them) overrides both.
-    observer : the observer's settings for the identifications after a change (as ``identify``'s).  Its friction
-    model is the model's (``auto`` or that one); a ``delay`` shifts the efforts of the whole log before the test
-    ("auto": estimated on the calibration span, which is assumed unchanged; recorded in the JSON's ``log.delay``);
-    ``payload`` is refused: a change is identified without a robot file.
+    Parameters
+    ----------
+    log
+        The log: a path, read with ``options``, or a log already read.
+    model
+        The identified model to monitor against: a saved ``identify`` result (its path, or its JSON as a dict), an
+        :class:`IdentificationResult`, or a :class:`~wmrid.monitoring.settings.MonitoredModel`.
+    options
+        How to read ``log`` when it is a path (:class:`~wmrid.api.inputs.LogOptions`).
+    calibration
+        s at the start of the log (and after each change) assumed unchanged, to calibrate the test.
+    false_alarm_rate
+        False alarms per hour the test's threshold allows.
+    settings
+        All the detector's settings (:class:`MonitorSettings`); when given, they override ``calibration`` and
+        ``false_alarm_rate``.
+    observer
+        The observer's settings for the identifications after a change (as :func:`identify`'s).  Its friction model
+        is the model's (``auto`` or that one); a ``delay`` shifts the efforts of the whole log before the test
+        ("auto": estimated on the calibration span, which is assumed unchanged; recorded in the JSON's
+        ``log.delay``); ``payload`` is refused: a change is identified without a robot file.
+
+    Returns
+    -------
+    MonitorResult
+        The changes found, with the parameters identified after each; ``to_dict`` gives the JSON form.
+
+    Raises
+    ------
+    UsageError
+        ``observer`` asks for a payload, or for a friction model other than the model's.
     """
     settings = settings or MonitorSettings(calibration_s=calibration, false_alarm_rate=false_alarm_rate)
     model_obj = monitored_model(model)

@@ -159,16 +159,72 @@ def plan(
 ) -> Plan:
     """Design the drive that identifies ``robot`` best within the limits and predict its precision (``wmrid plan``).
 
-    duration : s, or "auto" with ``target_std`` (percent, e.g. 2 for 2 %): the shortest plan predicted to bring every
-    base parameter's relative std below it.  rate : Hz of the written reference.  Limits (SI; None: the robot file's
-    ``[limits]``, else the defaults of :mod:`wmrid.design.limits`): max_wheel_speed rad/s, max_wheel_accel rad/s^2,
-    max_torque N m per wheel, max_speed m/s, max_turn_rate rad/s, area "WxH" m; margin: the share of each limit kept
-    free.  Noise: eta_noise rad/s, tau_noise N m per sample at log_rate Hz, or measured from ``noise_from``.
-    criterion : "worst" (largest relative std), "d" or "a".  friction : the model identify will fit, which the
-    prediction is for: "auto" (a robot file with [[caster]] tables: "wheel+caster+load", what ``identify --friction
-    auto`` chooses when the casters' drag shows; else "wheel"), "wheel", "wheel+caster" (each caster's drag with
-    their positions, the two-term Cv, Cw without) or "wheel+caster+load".  given : saved results of logs already
-    identified.  k : the estimator's gain the prediction assumes (``identify --k``).
+    The limits are in SI units; a limit left None is the robot file's ``[limits]``, else the default of
+    :mod:`wmrid.design.limits`.  The noise is given (``eta_noise``, ``tau_noise`` per sample at ``log_rate`` Hz),
+    measured from ``noise_from``, or the defaults: :data:`DEFAULT_ETA_NOISE` rad/s, :data:`DEFAULT_TAU_SHARE` of the
+    torque scale, at :data:`DEFAULT_LOG_RATE` Hz.
+
+    Parameters
+    ----------
+    robot
+        A built-in name, a robot file or a :class:`Robot`; its nominal set is planned on.
+    duration
+        s, or "auto" with ``target_std``: the shortest plan predicted to bring every base parameter's relative std
+        below it.
+    target_std
+        Percent (e.g. 2 for 2 %): the largest relative std wanted, with ``duration="auto"``.
+    rate
+        Hz, the rate of the written reference.
+    seed
+        Seed of the search's random starts, >= 0.
+    max_wheel_speed
+        rad/s, the wheel speed limit.
+    max_wheel_accel
+        rad/s^2, the wheel acceleration limit.
+    max_torque
+        N m per wheel, the torque limit (torques from the nominal model).
+    max_speed
+        m/s, the forward speed limit.
+    max_turn_rate
+        rad/s, the turn rate limit.
+    area
+        The floor area, ``"WxH"`` or (W, H), m, centred on the start (the robot at rest facing +x).
+    margin
+        The share of each limit kept free, in [0, 0.9).
+    eta_noise
+        rad/s per sample, the white noise on each wheel speed.
+    tau_noise
+        N m per sample, the white noise on each effort.
+    log_rate
+        Hz, the rate of the log to be recorded (None: ``noise_from``'s, else :data:`DEFAULT_LOG_RATE`).
+    noise_from
+        An earlier log of this robot to measure the noise (and log rate) from, instead of ``eta_noise`` and
+        ``tau_noise``.
+    criterion
+        "worst" (largest relative std), "d" (D-optimal) or "a" (A-optimal).
+    friction
+        The model identify will fit, which the prediction is for: "auto" (a robot file with [[caster]] tables:
+        "wheel+caster+load", what ``identify --friction auto`` chooses when the casters' drag shows; else "wheel"),
+        "wheel", "wheel+caster" (each caster's drag with their positions, the two-term Cv, Cw without) or
+        "wheel+caster+load".
+    given
+        Saved results of logs already identified (``wmrid identify --format json``), whose information is added, so
+        that the plan targets what they leave poorly determined.
+    k
+        The estimator's gain the prediction assumes (``identify --k``).
+    progress
+        Called with a sentence per stage of the design, or None.
+
+    Returns
+    -------
+    Plan
+        The planned drive and its predicted precision.
+
+    Raises
+    ------
+    UsageError
+        A number out of its range, ``duration="auto"`` without ``target_std``, ``noise_from`` with noise levels, both
+        noise levels 0, a robot without r and b, or a friction model the robot cannot have.
     """
     from wmrid.api.inputs import load_robot
     from wmrid.model.dynamics import base_parameters
@@ -256,17 +312,29 @@ def predict_plan(
     friction: str | None = None,
     given: Any = None,
 ) -> Plan:
-    """``plan``'s drive (a :class:`Plan`, or a saved one's path) predicted again, for the model identify will fit to
-    its log and the logs identified since, without searching again: the precision a drive already planned gives.
+    """The precision a drive already planned gives, predicted again without searching again.
 
-    robot : the robot the plan was made for (a built-in name, a robot file or a :class:`Robot`; its casters for a
-    friction model with caster drag).  friction : the model identify will fit, as for :func:`plan` ("auto", "wheel",
-    "wheel+caster", "wheel+caster+load"; None: the plan's own), e.g. "wheel" for a log without caster drag.  given :
-    saved results of logs already identified (paths, or results; one or several), whose information is added as
-    :func:`plan` adds it.
+    ``plan``'s drive is predicted for the model identify will fit to its log and for the logs identified since.
 
-    Returns the plan with ``predicted``, ``criterion``, ``given`` and ``settings.friction`` of the new prediction; the
-    drive, its limits, noise and ``baselines`` are the plan's own.
+    Parameters
+    ----------
+    plan
+        The plan: a :class:`Plan`, or a saved one's path.
+    robot
+        The robot the plan was made for (a built-in name, a robot file or a :class:`Robot`; its casters for a
+        friction model with caster drag).
+    friction
+        The model identify will fit, as for :func:`plan` ("auto", "wheel", "wheel+caster", "wheel+caster+load";
+        None: the plan's own), e.g. "wheel" for a log without caster drag.
+    given
+        Saved results of logs already identified (paths, or results; one or several), whose information is added as
+        :func:`plan` adds it.
+
+    Returns
+    -------
+    Plan
+        The plan with ``predicted``, ``criterion``, ``given`` and ``settings.friction`` of the new prediction; the
+        drive, its limits, noise and ``baselines`` are the plan's own.
     """
     from wmrid.api.inputs import load_robot
     from wmrid.design.plan import FINE_GRID, _problem
@@ -336,7 +404,18 @@ def _friction(friction: str, robot: Robot) -> tuple[str, tuple[float, ...], tupl
 
 
 def read_plan(path: str | os.PathLike[str]) -> Plan:
-    """A plan saved as JSON (``wmrid plan -o plan.json`` or ``--format json``)."""
+    """A plan saved as JSON (``wmrid plan -o plan.json`` or ``--format json``).
+
+    Parameters
+    ----------
+    path
+        The saved plan's path.
+
+    Returns
+    -------
+    Plan
+        The plan.
+    """
     source = os.fspath(path)
     return Plan.from_dict(read_json_input(source, source, "a plan"), source)
 
@@ -355,10 +434,30 @@ def check_plan_output(path: str | os.PathLike[str]) -> None:
 def write_plan(
     result: Plan, path: str | os.PathLike[str], *, topic: str = "/cmd_vel", stamped: bool = False, force: bool = False
 ) -> None:
-    """Write a plan by the suffix of ``path``: ``.json`` the prediction (:meth:`Plan.to_dict`); ``.csv``/``.parquet``
-    the reference at the plan's rate (t, v, omega, eta_r, eta_l, x, y, phi); ``.mcap`` a ROS 2 recording of
-    geometry_msgs/msg/Twist (TwistStamped with ``stamped``) on ``topic``.  Atomic; an existing file is kept unless
-    ``force``."""
+    """Write a plan in the format the suffix of ``path`` names, atomically.
+
+    Parameters
+    ----------
+    result
+        The plan (:func:`plan`).
+    path
+        The output: ``.json`` the prediction (:meth:`Plan.to_dict`); ``.csv`` or ``.parquet`` the reference at the
+        plan's rate (t, v, omega, eta_r, eta_l, x, y, phi); ``.mcap`` a ROS 2 recording of
+        geometry_msgs/msg/Twist on ``topic``.
+    topic
+        The topic of an ``.mcap`` reference.
+    stamped
+        Write TwistStamped instead of Twist (``.mcap``).
+    force
+        Overwrite an existing file (else it is kept).
+
+    Raises
+    ------
+    UsageError
+        ``path`` has none of the suffixes above.
+    OutputExistsError
+        ``path`` exists and ``force`` is not given.
+    """
     from wmrid.runtime.atomic import write_json
 
     target = os.fspath(path)

@@ -82,19 +82,49 @@ def report(
     command: str | None = None,
     identification: Identification | None = None,
 ) -> Report:
-    """The report of an identification.
+    """The report of an identification: what ``wmrid report`` writes.
 
-    result : an :class:`IdentificationResult`; a saved ``identify --format json`` document (a dict, or a path to
-        one; ``"-"`` standard input); or a log (a path, or a log in memory), identified here on ``robot`` as
-        ``identification`` says (:class:`Identification`: the method, the options, a log to validate on, earlier
-        results).  The robot is loaded only for a log (a saved result carries its nominal and CAD values).
-    log : the identified log in memory, for the torque residual and the figures of the signals.
-    truth : true base parameters by name (a simulator's ``truth["parameters"]``), for the error columns.
-    figures : build the figures (matplotlib; each is rendered, the slow part, only in the format an output needs).
-    command : the command line that made the report, for its reproducibility block (the CLI gives it).
+    Tables after the paper's Tables 2 and 3, the comparison with nominal/CAD values and a truth, diagnostics and
+    figures.
 
-    ``report.provenance``: wmrid's version, the time (UTC), the command, the options given, and each input file's
-    size and SHA-256.
+    Parameters
+    ----------
+    result
+        An :class:`IdentificationResult`; a saved ``identify --format json`` document (a dict, or a path to one;
+        ``"-"`` standard input); or a log (a path, or a log in memory), identified here on ``robot`` as
+        ``identification`` says.
+    log
+        The identified log in memory, for the torque residual and the figures of the signals.
+    truth
+        True base parameters by name (a simulator's ``truth["parameters"]``), for the error columns.
+    figures
+        Build the figures (matplotlib; each is rendered, the slow part, only in the format an output needs).
+    options
+        How to read a log given as a path (:class:`~wmrid.api.inputs.LogOptions`).
+    robot
+        The robot a log is identified on, as for :func:`identify`.  It is loaded only for a log (a saved result
+        carries its nominal and CAD values).
+    rotor_inertia
+        kg m^2, a URDF robot's rotor inertia when it has no rotor links (a log only).
+    command
+        The command line that made the report, for its reproducibility block (the CLI gives it).
+    identification
+        How a log is identified (:class:`Identification`: the method, the options, a log to validate on, earlier
+        results; None: the defaults).
+
+    Returns
+    -------
+    Report
+        The report; ``report.provenance`` holds wmrid's version, the time (UTC), the command, the options given, and
+        each input file's size and SHA-256.  :func:`write_report` writes it.
+
+    Raises
+    ------
+    UsageError
+        A saved result given with a validation, a method other than the observer, or earlier results (they need a
+        log), or a file that is not valid JSON.
+    LogFormatError
+        A saved result that is not a complete identify result.
     """
     how = identification if identification is not None else Identification()
     rep, inputs, data = _report(result, log, truth, figures, options, robot, rotor_inertia, how)
@@ -103,8 +133,21 @@ def report(
 
 @dataclass(frozen=True)
 class Identification:
-    """How :func:`report` identifies a log it is given: ``method`` and the options as for
-    :func:`wmrid.api.identification.identify`, ``validate`` another log to predict, ``given`` earlier results."""
+    """How :func:`report` identifies a log it is given.
+
+    Attributes
+    ----------
+    method
+        The method, as for :func:`wmrid.api.identification.identify`.
+    observer
+        The observer's options, as for :func:`wmrid.api.identification.identify`.
+    fit
+        The classical methods' options, as for :func:`wmrid.api.identification.identify`.
+    validate
+        Another log to predict (:func:`wmrid.api.identification.validate`), or None.
+    given
+        Earlier results to combine with, as ``identify``'s ``given``, or None.
+    """
 
     method: str = "auto"
     observer: ObserverOptions = field(default_factory=ObserverOptions)
@@ -238,7 +281,24 @@ def residual_frame(rep: Report) -> Any:
 
 
 def write_report(rep: Report, output: str | os.PathLike[str], *, force: bool = False) -> None:
-    """Write ``rep`` as a self-contained HTML page (.html, .htm), Markdown (.md) or JSON (.json), atomically."""
+    """Write a report as a self-contained HTML page, Markdown or JSON, atomically.
+
+    Parameters
+    ----------
+    rep
+        The report (:func:`report`).
+    output
+        The output's path; its suffix names the format: .html or .htm, .md, or .json.
+    force
+        Overwrite an existing file.
+
+    Raises
+    ------
+    UsageError
+        ``output`` has none of the suffixes above.
+    OutputExistsError
+        ``output`` exists and ``force`` is not given.
+    """
     from wmrid.reporting.report import to_json_dict
     from wmrid.reporting.report_html import to_html
     from wmrid.reporting.report_markdown import to_markdown

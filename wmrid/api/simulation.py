@@ -27,9 +27,17 @@ __all__ = ["Change", "NoiseSettings", "Payload", "SimulationRun", "load_referenc
 
 @dataclass(frozen=True)
 class SimulationRun:
-    """A simulated run: ``log`` the simulator's output (t (n,) s, eta (n, 2) rad/s, tau (n, 2) N m, pose,
-    ``to_frame()``), ``truth`` its ground truth (JSON-ready: "parameters" at t = 0, settings, robot, payload) and
-    ``change`` the change of the dynamics during the run, if any (:class:`wmrid.sim.scenario.PlantChange`)."""
+    """A simulated run: the simulator's log, its ground truth and the change of the dynamics during the run.
+
+    Attributes
+    ----------
+    log
+        The simulator's output: t (n,) s, eta (n, 2) rad/s, tau (n, 2) N m, pose; ``to_frame()``.
+    truth
+        Its ground truth, JSON-ready: "parameters" at t = 0, settings, robot, payload.
+    change
+        The change of the dynamics during the run (:class:`wmrid.sim.scenario.PlantChange`), or None.
+    """
 
     log: Any
     truth: dict[str, Any]
@@ -46,10 +54,28 @@ class SimulationRun:
 
 
 def load_reference(reference: Any, *, topic: str | None = None) -> Any:
-    """The :class:`wmrid.sim.reference.Reference` of ``reference``: a file (.csv, .parquet or .mcap, read by
-    :func:`wmrid.io.reference_files.read_reference`, recorded with its SHA-256), a mapping with ``t`` (s), ``v``
-    (m/s), ``omega`` (rad/s), a tuple (t, v, omega) of (n,) arrays, or a Reference.  ``topic``: an MCAP file's
-    Twist topic (default: the only one)."""
+    """The reference to track that ``reference`` gives, for :func:`simulate`.
+
+    Parameters
+    ----------
+    reference
+        A file (.csv, .parquet or .mcap, read by :func:`wmrid.io.reference_files.read_reference`, recorded with its
+        SHA-256), a mapping with ``t`` (s), ``v`` (m/s), ``omega`` (rad/s), a tuple (t, v, omega) of (n,) arrays, or
+        a :class:`~wmrid.sim.reference.Reference` (returned as it is).
+    topic
+        An MCAP file's Twist topic (None: the only one); for an MCAP file only.
+
+    Returns
+    -------
+    Reference
+        The :class:`wmrid.sim.reference.Reference`.
+
+    Raises
+    ------
+    UsageError
+        A ``topic`` for a reference that is not a file, a mapping without ``t``, ``v`` or ``omega``, or a value of
+        another kind.
+    """
     from wmrid.sim.reference import Reference
 
     if isinstance(reference, Reference):
@@ -87,20 +113,47 @@ def simulate(
     change: Change | PlantChange | None = None,
     engine: str | MultibodySettings = "reduced",
 ) -> SimulationRun:
-    """Simulate ``robot`` (a name, a robot file or a :class:`Robot`; its CAD set is the truth, the controller uses its
-    nominal set) tracking ``trajectory`` for ``duration`` s, logged at ``rate`` Hz (control at 1 kHz).
+    """Simulate ``robot`` tracking ``trajectory`` for ``duration`` s, logged at ``rate`` Hz (control at 1 kHz).
 
-    trajectory : a built-in trajectory's name (None: "sinusoid"; "reversing"), or a reference to track: a file, arrays
-        or a :class:`~wmrid.sim.reference.Reference` (:func:`load_reference`, which also takes an MCAP file's topic);
-        duration None: 40 s, or the whole reference.
-    noise : the sensors' noise, the caster disturbance, the encoder and the seed (:class:`NoiseSettings`; None:
-        none, seed 0).  Seeded: the same arguments give the same log bit for bit.
-    payload : a rigid :class:`Payload` carried throughout, or loaded or dropped by ``change``.
-    change : at most one change during the run: a :class:`Change` (the payload loaded or dropped, a wheel's friction
+    Seeded: the same arguments give the same log bit for bit.
+
+    Parameters
+    ----------
+    robot
+        A built-in name, a robot file or a :class:`Robot` with physical parameters: its CAD set is the truth, the
+        controller uses its nominal set.
+    trajectory
+        A built-in trajectory's name (None: "sinusoid"; "reversing"), or a reference to track: a file, arrays or a
+        :class:`~wmrid.sim.reference.Reference` (:func:`load_reference`, which also takes an MCAP file's topic).
+    duration
+        s, the run's length (None: 40 s, or the whole reference).
+    rate
+        Hz, the log's rate.
+    noise
+        The sensors' noise, the caster disturbance, the encoder and the seed (:class:`NoiseSettings`; None: none,
+        seed 0).
+    payload
+        A rigid :class:`Payload` carried throughout, or loaded or dropped by ``change``.
+    change
+        At most one change during the run: a :class:`Change` (the payload loaded or dropped, a wheel's friction
         multiplied, at a time) or a :class:`PlantChange` (its own before and after).
-    engine : "reduced" (the paper's model), "mujoco" (multibody, default settings) or a
-        :class:`~wmrid.sim.multibody_model.MultibodySettings` (mujoco with its floor friction, caster resistance, torque
-        limit)."""
+    engine
+        "reduced" (the paper's model), "mujoco" (multibody, default settings) or a
+        :class:`~wmrid.sim.multibody_model.MultibodySettings` (mujoco with its floor friction, caster resistance,
+        torque limit).
+
+    Returns
+    -------
+    SimulationRun
+        The log, its ground truth and the change.
+
+    Raises
+    ------
+    UsageError
+        A robot of base parameters only, an unknown trajectory or engine, a ``noise``, ``payload`` or ``change`` of
+        the wrong kind, a change at or after the run's end, or a ``payload`` that does not fit a
+        :class:`PlantChange`.
+    """
     from wmrid.sim.simulate import plan_duration, simulate as run_reduced
 
     robot_obj = load_robot(robot)
@@ -188,9 +241,30 @@ def _engine(engine: Any) -> Any:
 
 
 def write_simulation(run: SimulationRun, output: str | os.PathLike[str], *, force: bool = False) -> str | None:
-    """Write the log (CSV, Parquet or MCAP by suffix; ``"-"``: CSV on standard output) and its truth
-    (``OUTPUT.truth.json``, also inside the log's metadata) together: both appear or neither.  Returns the truth
-    file's path (None for standard output)."""
+    """Write a simulated run's log and its truth together: both appear or neither.
+
+    Parameters
+    ----------
+    run
+        The run (:func:`simulate`).
+    output
+        The log's path: CSV, Parquet or MCAP by its suffix; ``"-"``: CSV on standard output.  The truth goes to
+        ``OUTPUT.truth.json``, and inside the log's metadata.
+    force
+        Overwrite existing files.
+
+    Returns
+    -------
+    str or None
+        The truth file's path (None for standard output).
+
+    Raises
+    ------
+    UsageError
+        The truth file exists and ``force`` is not given.
+    OutputExistsError
+        The log exists and ``force`` is not given.
+    """
     from wmrid.io.logs import write_log
     from wmrid.runtime.atomic import output_group, to_json_text, write_json
 

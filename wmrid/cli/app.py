@@ -17,10 +17,12 @@ from typing import Annotated, Any
 import typer
 
 from wmrid import __version__
+from wmrid.cli.help import Group
 from wmrid.core.errors import ExitStatus, ReaderGone, WmridError, option_style
 
 app = typer.Typer(
     name="wmrid",
+    cls=Group,
     help="Identify the dynamic parameters of differential-drive wheeled mobile robots from their logs "
     "(Hoang & Kang 2015).",
     no_args_is_help=True,

@@ -36,7 +36,9 @@ if TYPE_CHECKING:
 )
 @takes(LOG_FLAGS.adapted(panel=CHECK_LOG_PANEL))
 def export_command(
-    result: Annotated[str, typer.Argument(help="A saved result (wmrid identify --format json -o run.json).")],
+    result: Annotated[
+        str, typer.Argument(metavar="RESULT", help="A saved result (wmrid identify --format json -o run.json).")
+    ],
     output: Annotated[
         str,
         typer.Option(

@@ -70,7 +70,7 @@ def fleet_command(
     logs: Annotated[
         list[str] | None,
         typer.Argument(
-            metavar="LOGS...",
+            metavar="LOG",
             help="Logs: files, globs (quoted, ** recursive) or folders (searched for logs; a rosbag2 folder is one "
             "log).  Or give --manifest.",
             show_default=False,

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from typer.core import TyperCommand, TyperOption
+from typer.core import TyperCommand, TyperGroup, TyperOption
 
 try:
     from typer import _click as click  # Typer 0.29 and later: its own copy of click
@@ -64,6 +64,8 @@ class Command(TyperCommand):
         return [*params[:-1], self._help_all, params[-1]]  # before --help, which click puts last
 
     def format_help(self, ctx: Any, formatter: Any) -> None:
+        for p in self.get_params(ctx):
+            _plain_type(p)
         folded = [] if ctx.meta.get(_ALL) else self._folded()
         if not folded:
             super().format_help(ctx, formatter)
@@ -85,3 +87,44 @@ class Command(TyperCommand):
                 p.hidden = False
             self._folding = ()
             self.epilog = saved
+
+
+def _plain_type(param: Any) -> None:
+    """``param``'s type label in the help as a user needs it: none for a flag (Typer writes ``<bool>`` beside
+    ``--force``, which takes no value) nor for an argument that repeats (``<list[str]>`` beside ``LOG``: the usage line
+    says ``{LOG}...``).  Set once on the parameter; a Typer without the type column is left as it is."""
+    shown = getattr(param, "display_type_rich", None)
+    if shown is None or getattr(param, "_wmrid_plain_type", False):
+        return
+
+    def plain(ctx: Any) -> str | None:
+        if getattr(param, "is_flag", False):
+            return None
+        label = shown(ctx)
+        return None if label is not None and label.startswith("<list[") else label
+
+    param.display_type_rich = plain
+    param._wmrid_plain_type = True
+
+
+class Group(TyperGroup):
+    """The ``wmrid`` group: its ``--help`` lists the commands in the order a user meets them
+    (:data:`COMMAND_ORDER`: identify first, the fleet last), with :func:`_plain_type`'s labels."""
+
+    def list_commands(self, ctx: Any) -> list[str]:
+        names = super().list_commands(ctx)
+        rank = {name: i for i, name in enumerate(COMMAND_ORDER)}
+        return sorted(names, key=lambda n: (rank.get(n, len(rank)), names.index(n)))
+
+    def format_help(self, ctx: Any, formatter: Any) -> None:
+        for p in self.get_params(ctx):
+            _plain_type(p)
+        super().format_help(ctx, formatter)
+
+
+#: The commands in the order ``wmrid --help`` and the reference list them: the main job, then reading, comparing,
+#: simulating and designing a drive, following a robot, handing the model on, fleets.
+COMMAND_ORDER = (
+    "identify", "inspect", "report", "compare", "simulate", "plan", "live", "monitor", "export", "fleet",
+    "fleet-report",
+)  # fmt: skip

@@ -65,7 +65,7 @@ def one_or_many(paths: list[str]) -> str | list[str]:
 )
 @takes(LOG_FLAGS, OBSERVER_FLAGS, FIT_FLAGS)
 def identify_command(
-    log: Annotated[list[str], typer.Argument(metavar="LOG...", help=LOG_HELP)],
+    log: Annotated[list[str], typer.Argument(metavar="LOG", help=LOG_HELP)],
     robot: Annotated[
         str | None,
         typer.Option(
@@ -151,7 +151,7 @@ def identify_command(
     epilog="Examples:\n\nwmrid inspect run.mcap\n\nwmrid inspect rosbag2_folder/ --format json",
 )
 def inspect_command(
-    log: Annotated[list[str], typer.Argument(metavar="LOG...", help=LOG_HELP)],
+    log: Annotated[list[str], typer.Argument(metavar="LOG", help=LOG_HELP)],
     output_format: Annotated[
         OutputFormat, typer.Option("--format", help="table, json, or auto (table on a terminal, json in a pipe).")
     ] = OutputFormat.auto,
@@ -265,7 +265,7 @@ def report_command(
 )
 @takes(LOG_FLAGS, OBSERVER_FLAGS, FIT_FLAGS)
 def compare_command(
-    log: Annotated[list[str], typer.Argument(metavar="LOG...", help=LOG_HELP)],
+    log: Annotated[list[str], typer.Argument(metavar="LOG", help=LOG_HELP)],
     robot: Annotated[
         str | None, typer.Option(help="Robot (name, TOML or URDF): starts the observer and gives nominal/CAD values.")
     ] = None,

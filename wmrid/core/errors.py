@@ -21,7 +21,17 @@ class ExitStatus(IntEnum):
 
 
 class WmridError(Exception):
-    """Base class of every error wmrid reports to a user."""
+    """Base class of every error wmrid reports to a user.
+
+    The command line maps the class to an exit code in one place (``wmrid.cli.app``) and prints the message as one
+    line on stderr.
+
+    Attributes
+    ----------
+    exit_status
+        The exit code of the command line for this error: 2 (bad usage or unreadable input); 1 for
+        :class:`NotIdentifiableError`, :class:`StreamError` and :class:`OutputWriteError`.
+    """
 
     exit_status = ExitStatus.USAGE
 

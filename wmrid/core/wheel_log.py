@@ -43,19 +43,34 @@ MIN_SAMPLES = 10
 
 @dataclass(frozen=True)
 class WheelLog:
-    """One wheel log in SI units.
+    """One wheel log in SI units, in memory (:func:`wmrid.read_log`).
 
-    t : (n,) float64, s, strictly increasing (as in the file; relative to the first stamp only when
-        the notes say so).
-    eta : (n, 2) float64, rad/s, columns [right, left].
-    tau : (n, 2) float64, N m, columns [right, left].
-    source : the file name as the user gave it (``"<stdin>"`` for ``-``).
-    notes : plain-English statements of what was assumed while reading.
-    pose : (n, 3) float64 [x m, y m, phi rad] when the log has x, y, phi; else None.
-    reference : (n, 2) float64 rad/s, the wheel-speed reference (set-points) [right, left] when the log has
-        eta_ref_r, eta_ref_l; else None.
-    effort_unit : "N m" for a torque; else the unit of a PWM or voltage effort that could not be
-        converted (tau then holds that effort, and the parameters come out in its units).
+    Attributes
+    ----------
+    t
+        (n,) float64, s, strictly increasing (as in the file; relative to the first stamp only when the notes say
+        so).
+    eta
+        (n, 2) float64, rad/s, columns [right, left].
+    tau
+        (n, 2) float64, N m, columns [right, left].
+    source
+        The file name as the user gave it (``"<stdin>"`` for ``-``).
+    notes
+        Plain-English statements of what was assumed while reading.
+    pose
+        (n, 3) float64 [x m, y m, phi rad] when the log has x, y, phi; else None.
+    effort_unit
+        "N m" for a torque; else the unit of a PWM or voltage effort that could not be converted (tau then holds
+        that effort, and the parameters come out in its units).
+    reference
+        (n, 2) float64 rad/s, the wheel-speed reference (set-points) [right, left] when the log has eta_ref_r,
+        eta_ref_l; else None.
+
+    Raises
+    ------
+    ValueError
+        ``t`` is not 1-D, or an array's shape does not match ``t``'s length.
     """
 
     t: np.ndarray
@@ -136,12 +151,26 @@ def stream_limits(cache: int, piece: int | None = None) -> Iterator[None]:
 class LogStream:
     """A wheel log that yields :class:`WheelLog` pieces in time order and can be iterated again.
 
-    source : the file name for messages.  effort_unit : as in :class:`WheelLog`.
-    Iterating reads the file (or, for a log of at most CACHE_ROWS samples, the pieces kept from the first
-    pass).  A pass raises :class:`LogFormatError` at the first unusable row, as :func:`read_log` does, and
-    checks across pieces what :func:`read_log` checks across rows (time strictly increasing, one time
-    unit).  ``notes`` (what was assumed while reading) and ``samples`` are set when a pass ends.
-    Memory: one piece (at most CHUNK_ROWS samples) at a time, whatever the log's length.
+    :func:`wmrid.open_log` makes one.  Iterating reads the file (or, for a log of at most CACHE_ROWS samples, the
+    pieces kept from the first pass).  A pass raises :class:`LogFormatError` at the first unusable row, as
+    :func:`read_log` does, and checks across pieces what :func:`read_log` checks across rows (time strictly
+    increasing, one time unit).  Memory: one piece (at most CHUNK_ROWS samples) at a time, whatever the log's length.
+
+    Parameters
+    ----------
+    source
+        The file name for messages.
+    effort_unit
+        As in :class:`WheelLog`.
+    pieces
+        Called at the start of each pass: a generator of the pieces, which returns the notes when it ends.
+
+    Attributes
+    ----------
+    notes
+        What was assumed while reading; set when a pass ends.
+    samples
+        The log's samples; set when a pass ends (None before).
     """
 
     def __init__(self, source: str, effort_unit: str, pieces: Callable[[], Generator[WheelLog, None, tuple[str, ...]]]):

@@ -55,16 +55,41 @@ BASELINES = ("sinusoid", "reversing")
 
 @dataclass(frozen=True)
 class Plan:
-    """A planned drive and what it predicts (all SI; the parts are the records of :mod:`wmrid.design.plan_records`).
+    """A planned drive and what it predicts (:func:`wmrid.plan`).
 
-    robot : its name; r, b : m (nominal).  limits : :class:`Limits`.  noise : :class:`SensorNoise`.  excitation : the
-    reference (:class:`Excitation`).  settings : :class:`PlanSettings` (duration, period, harmonics, rate of the
-    written reference, seed, criterion, friction, k, the search's statistics).  predicted : base parameter name ->
-    :class:`PredictedStd` (std in the parameter's unit; relative = std / scale).  criterion : :class:`Criterion`
-    (its value and the worst parameter).  limits_used : limit name -> :class:`LimitUse` (share = peak / limit).
-    baselines : name -> :class:`BaselineForecast`.  margins : :class:`Separability` (time each wheel spends in each
-    direction, its speed spread, the correlation of v and w).  given : :class:`GivenResults`, the logs already
-    identified whose information was added (None).  warnings : sentences.
+    All in SI units; the parts are the records of :mod:`wmrid.design.plan_records`.
+
+    Attributes
+    ----------
+    robot
+        The robot's name.
+    r
+        m, the nominal wheel radius.
+    b
+        m, the nominal half track.
+    limits
+        The limits the drive keeps (:class:`Limits`).
+    noise
+        The sensor noise the prediction assumes (:class:`SensorNoise`).
+    excitation
+        The reference (:class:`Excitation`).
+    settings
+        :class:`PlanSettings`: duration, period, harmonics, rate of the written reference, seed, criterion, friction,
+        k, the search's statistics.
+    predicted
+        Base parameter name -> :class:`PredictedStd` (std in the parameter's unit; relative = std / scale).
+    criterion
+        :class:`Criterion`: its value and the worst parameter.
+    limits_used
+        Limit name -> :class:`LimitUse` (share = peak / limit).
+    baselines
+        Name -> :class:`BaselineForecast`.
+    margins
+        :class:`Separability`: time each wheel spends in each direction, its speed spread, the correlation of v and w.
+    given
+        :class:`GivenResults`: the logs already identified whose information was added (None: none).
+    warnings
+        Sentences.
     """
 
     robot: str
@@ -99,7 +124,18 @@ class Plan:
         return str(self.criterion.worst)
 
     def samples(self, rate: float | None = None) -> ReferenceSamples:
-        """The reference at ``rate`` Hz (default: the plan's ``settings.rate``) and its predicted pose."""
+        """The reference at ``rate`` Hz and its predicted pose.
+
+        Parameters
+        ----------
+        rate
+            Hz (None: the plan's ``settings.rate``).
+
+        Returns
+        -------
+        ReferenceSamples
+            t, v, omega, eta_r, eta_l, x, y, phi.
+        """
         rate = float(rate or self.settings.rate)  # type: ignore[arg-type]
         n = round(self.excitation.duration * rate) + 1
         t = np.linspace(0.0, self.excitation.duration, n)

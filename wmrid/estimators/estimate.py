@@ -40,20 +40,31 @@ class SegmentEstimates:
 class BaseEstimate:
     """Base parameters theta0 = [m11 m12 m22 Vc Fv1 Fv2 Fd1 Fd2 (Cv Cw)] found by one method.
 
-    method : the method's name ("observer", "idim", "rls", "oe").
-    theta0 : (8,), or longer with the caster drag (Cv, Cw or D_1..D_K), in the model's units (SI for torque logs; see
+    Attributes
+    ----------
+    method
+        The method's name ("observer", "idim", "iv", "rls", "oe").
+    theta0
+        (8,), or longer with the caster drag (Cv, Cw or D_1..D_K), in the model's units (SI for torque logs; see
         :func:`wmrid.model.dynamics.base_units`).
-    cov : (n0, n0) covariance of theta0; a row/column of NaN with +inf on the diagonal marks a parameter
-        the log does not determine.
-    dof : degrees of freedom of the standard errors (Student t intervals), or None for normal ones.
-    seconds : wall time the method took, s.
-    diagnostics : method-specific figures (JSON-ready).
-    warnings : plain-English warnings about this estimate.
-    segments : the leave-one-segment-out estimates behind the jackknife std, when the method keeps them.
-    weight_cov : (n0, n0) the covariance the method's own weighting implies (the observer's Newey-West sandwich
-        through the minimum-distance fit), estimated from every block of the log and so far steadier than ``cov``:
-        what another log's estimate is combined with this one by (:mod:`wmrid.estimators.combination`); None when
-        the method has none.  Not a std to report (it leaves out what the jackknife covers).
+    cov
+        (n0, n0) covariance of theta0; a row/column of NaN with +inf on the diagonal marks a parameter the log does
+        not determine.
+    dof
+        Degrees of freedom of the standard errors (Student t intervals), or None for normal ones.
+    seconds
+        s, the wall time the method took.
+    diagnostics
+        Method-specific figures (JSON-ready).
+    warnings
+        Plain-English warnings about this estimate.
+    segments
+        The leave-one-segment-out estimates behind the jackknife std, when the method keeps them.
+    weight_cov
+        (n0, n0) the covariance the method's own weighting implies (the observer's Newey-West sandwich through the
+        minimum-distance fit), estimated from every block of the log and so far steadier than ``cov``: what another
+        log's estimate is combined with this one by (:mod:`wmrid.estimators.combination`); None when the method has
+        none.  Not a std to report (it leaves out what the jackknife covers).
     """
 
     method: str
@@ -80,8 +91,18 @@ class BaseEstimate:
         return std
 
     def named(self, names: tuple[str, ...] | None = None) -> dict[str, tuple[float, float]]:
-        """name -> (value, std) for the base parameters; ``names`` default: the eight, then Cv, Cw (give a form's
-        ``base_names`` for a geometric caster model)."""
+        """The base parameters by name.
+
+        Parameters
+        ----------
+        names
+            Their names (None: the eight, then Cv, Cw; give a form's ``base_names`` for a geometric caster model).
+
+        Returns
+        -------
+        dict
+            Name -> (value, std).
+        """
         if names is None:
             names = default_base_names(len(self.theta0))
         return {n: (float(v), float(s)) for n, v, s in zip(names, self.theta0, self.std, strict=True)}

@@ -369,14 +369,63 @@ class Combination(JsonRecord):
 class Diagnostics(JsonRecord):
     """What the log and the method showed, beside the numbers (a result's ``diagnostics``).
 
-    lambda_min_gamma, lambda_max_gamma : Gamma's extreme eigenvalues.  condition_number_scaled : of the column-scaled
-    information.  weakest_directions : its two weakest directions.  undetermined : the base parameters the log does
-    not determine.  at_box_boundary : the intermediate parameters held on the box.  start_sensitivity : name ->
-    how much the start value sets it, in its unit.  inflated : the parameters whose std a term widened.  flagged :
-    those whose std is not to be trusted.  poorly_determined, not_separable, impossible : the verdict's statements.
-    observer_parameters : the observer's estimate (name -> {"value", "std"}) when another method is reported, and
-    from_observer : the diagnostics that are the observer's.  robot_assumed : what the robot file left out.
-    robot_values : the robot's values in the log's effort units (ratios only).
+    Attributes
+    ----------
+    lambda_min_gamma
+        Gamma's smallest eigenvalue.
+    lambda_max_gamma
+        Gamma's largest eigenvalue.
+    condition_number_scaled
+        The condition number of the column-scaled information.
+    weakest_directions
+        Its two weakest directions (:class:`WeakDirection`).
+    undetermined
+        The base parameters the log does not determine.
+    at_box_boundary
+        The intermediate parameters held on the box.
+    start_sensitivity
+        Name -> how much the start value sets it, in its unit.
+    structural_mismatch
+        The misfit of theta to the model's form (:class:`StructuralMismatch`).
+    uncertainty
+        What the std is (:class:`Uncertainty`).
+    inflated
+        The parameters whose std a term widened.
+    flagged
+        Those whose std is not to be trusted.
+    prediction_error_rms
+        The observer's prior prediction error, rms per wheel (:class:`PredictionErrorRms`).
+    friction
+        The friction model, who chose it and why (:class:`FrictionChoice`).
+    timing
+        The timing check of the efforts against the speeds (:class:`TimingCheck`).
+    delay
+        The delay the efforts were read earlier by (:class:`DelayApplied`).
+    feedback
+        The closed-loop check (:class:`FeedbackCheck`).
+    units
+        The units check (:class:`UnitsCheck`).
+    poorly_determined
+        The verdict's statement: the parameters poorly determined.
+    not_separable
+        The verdict's statement: the pairs of parameters that are not separable, with their correlation
+        ([name, other, correlation]).
+    impossible
+        The verdict's statement: the parameters whose values are impossible for a physical robot.
+    observer_parameters
+        The observer's estimate (name -> {"value", "std"}) when another method is reported.
+    method
+        Another method's run (:class:`MethodFigures`).
+    from_observer
+        When another method is reported: the diagnostics that are the observer's.
+    combined
+        Earlier results combined with this log's (:class:`Combination`, ``--given``).
+    robot_assumed
+        What the robot file left out.
+    robot_values
+        The robot's values in the log's effort units (ratios only).
+    other
+        The keys the record does not know, in their order.
     """
 
     lambda_min_gamma: float | None = None

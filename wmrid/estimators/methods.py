@@ -187,9 +187,20 @@ class MethodRow:
 
 @dataclass(frozen=True)
 class ValidationLog:
-    """The second log every method's model was validated on in a comparison (``wmrid compare --validate``; each
-    row's fit % is its :attr:`MethodRow.fit_percent`).  log : that log.  samples : its samples.  predictor : how the
-    wheel speeds were simulated open loop from its efforts (None: no method's model could be simulated)."""
+    """The second log every method's model was validated on in a comparison (``wmrid compare --validate``).
+
+    Each row's fit % is its :attr:`MethodRow.fit_percent`.
+
+    Attributes
+    ----------
+    log
+        That log.
+    samples
+        Its samples.
+    predictor
+        How the wheel speeds were simulated open loop from its efforts (None: no method's model could be
+        simulated).
+    """
 
     log: str
     samples: int
@@ -208,11 +219,18 @@ class ValidationLog:
 
 @dataclass(frozen=True)
 class Comparison:
-    """Every method's estimate on one log (:func:`compare`); ``to_dict`` is the ``wmrid compare`` JSON.
+    """Every method's estimate on one log (:func:`wmrid.compare`); ``to_dict`` is the ``wmrid compare`` JSON.
 
-    methods : name -> :class:`MethodRow`, in the order run.
-    validation : the second log each model was validated on (:class:`ValidationLog`), or None.
-    truth : the true base parameters the errors are against, or None.
+    Attributes
+    ----------
+    source
+        The log.
+    methods
+        Name -> :class:`MethodRow`, in the order run.
+    validation
+        The second log each model was validated on (:class:`ValidationLog`), or None.
+    truth
+        The true base parameters the errors are against, or None.
     """
 
     source: str

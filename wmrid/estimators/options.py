@@ -48,17 +48,36 @@ def delay_value(delay: float | str | None) -> float | str | None:
 class ObserverOptions:
     """How the observer reads a log (Eqs. 26-37), checked when made.
 
-    form : "auto" (the paper's 7 columns when each wheel keeps one sign, else the general 8), "paper" or "general".
-    k : 1/s, the state predictor's and filter's gain, in (0, MAX_K].  alpha : the start value's weight, Gamma(0) =
-    alpha I, > 0.  box_width : the parameter box's half-width in units of the start value (inf: no box;
-    :func:`wmrid.estimators.observer.observe.default_box`).  torque_hold : "zoh" (each effort held over its step) or
-    "foh" (linear between samples).  control_rate : Hz, the rate of a controller faster than the log that held the
-    effort (None: the log's own).  delay : s, how late the efforts are stamped against the speeds: read that much
-    earlier; "auto": estimated and applied when significant; None: as stamped unless the timing check finds
-    otherwise.  friction : "wheel" (Eqs. 15-17), "wheel+caster", "wheel+caster+load" or "auto" (the log decides).
-    payload : also estimate the payload the robot carries, from the estimate against the robot's unloaded parameters
-    (:mod:`wmrid.model.payload`; needs a robot with physical parameters).  max_history : the history kept for
-    figures, samples.
+    Attributes
+    ----------
+    form
+        "auto" (the paper's 7 columns when each wheel keeps one sign, else the general 8), "paper" or "general".
+    k
+        1/s, the state predictor's and filter's gain, in (0, MAX_K].
+    alpha
+        The start value's weight, Gamma(0) = alpha I, > 0.
+    box_width
+        The parameter box's half-width in units of the start value (inf: no box;
+        :func:`wmrid.estimators.observer.observe.default_box`).
+    torque_hold
+        "zoh" (each effort held over its step) or "foh" (linear between samples).
+    control_rate
+        Hz, the rate of a controller faster than the log that held the effort (None: the log's own).
+    delay
+        s, how late the efforts are stamped against the speeds: they are read that much earlier; "auto": estimated
+        and applied when significant; None: as stamped unless the timing check finds otherwise.
+    friction
+        "wheel" (Eqs. 15-17), "wheel+caster", "wheel+caster+load" or "auto" (the log decides).
+    payload
+        Also estimate the payload the robot carries, from the estimate against the robot's unloaded parameters
+        (:mod:`wmrid.model.payload`; needs a robot with physical parameters).
+    max_history
+        Samples: the history kept for figures, at most (>= 2).
+
+    Raises
+    ------
+    UsageError
+        An option out of its range or not one of its choices.
     """
 
     form: str = "auto"
@@ -120,14 +139,26 @@ MIN_FORGETTING = 0.98
 
 @dataclass(frozen=True)
 class MethodOptions:
-    """Options of the classical methods.
+    """Options of the classical methods (IDIM, IDIM-IV, RLS, OE), checked when made.
 
-    cutoff_hz : IDIM/RLS low-pass cutoff, Hz (None: from the log, see
-    :func:`wmrid.estimators.regression.idim_rows.default_cutoff`).
-    weighted : IDIM two-step weighted least squares.  forgetting : RLS forgetting factor in (0, 1].
     How the effort was held between samples is the observer's (its ``torque_hold`` and ``control_rate``,
     :class:`wmrid.estimators.options.ObserverOptions`): OE simulates it, IDIM and RLS read the efforts half a hold
     period earlier under "zoh" (:func:`wmrid.estimators.regression.idim_rows.effort_delay`).
+
+    Attributes
+    ----------
+    cutoff_hz
+        Hz, the IDIM/RLS low-pass cutoff, > 0 (None: from the log, see
+        :func:`wmrid.estimators.regression.idim_rows.default_cutoff`).
+    weighted
+        IDIM two-step weighted least squares.
+    forgetting
+        The RLS forgetting factor, in [MIN_FORGETTING, 1] (MIN_FORGETTING = 0.98: a memory of 50 samples).
+
+    Raises
+    ------
+    UsageError
+        An option out of its range.
     """
 
     cutoff_hz: float | None = None

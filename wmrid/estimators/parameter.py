@@ -27,8 +27,23 @@ FLAGS = ("inflated", "flagged", "impossible")
 
 @dataclass(frozen=True)
 class Parameter:
-    """A reported parameter.  value : in ``unit`` (SI; the effort's unit for a PWM log).  std : its standard error
-    (inf: not determined).  flags : a subset of :data:`FLAGS`, in that order."""
+    """A reported parameter: its value, its standard error and what the estimator said of it.
+
+    Attributes
+    ----------
+    name
+        The parameter's name (``"m11"``, ``"Fv1"``, ...).
+    value
+        In ``unit``.
+    std
+        Its standard error (inf: not determined).
+    unit
+        SI; the effort's unit for a PWM log.
+    flags
+        A subset of :data:`FLAGS`, in that order: ``inflated`` (mark "†": the std was widened to cover an error the
+        log shows beyond its noise, and is to be trusted), ``flagged`` (mark "!": do not trust this std),
+        ``impossible`` (mark "✗" after the value: a value no physical robot has; always flagged too).
+    """
 
     name: str
     value: float
@@ -63,8 +78,23 @@ class Parameter:
 
     @classmethod
     def from_dict(cls, name: str, data: dict[str, Any]) -> Parameter:
-        """The parameter a :meth:`to_dict` entry describes (value null read as NaN, std null as inf; no "flags", as
-        documents before they were written: none)."""
+        """Read back a parameter from an entry that :meth:`to_dict` wrote.
+
+        A value null is read as NaN, a std null as inf; an entry without "flags" (documents before they were
+        written) has none.
+
+        Parameters
+        ----------
+        name
+            The parameter's name.
+        data
+            The entry: {"value", "std", "unit"[, "flags"]}.
+
+        Returns
+        -------
+        Parameter
+            The parameter.
+        """
         value = math.nan if data["value"] is None else float(data["value"])
         std = math.inf if data["std"] is None else float(data["std"])
         return cls(name, value, std, str(data["unit"]), tuple(data.get("flags") or ()))

@@ -23,13 +23,29 @@ _LOG_KEYS = ("samples", "duration_s", "rate_hz", "uneven_steps", "notes", "effor
 class LogInfo:
     """What the log was, as the identification read it.
 
-    samples : samples read.  duration_s : s, last time minus first.  rate_hz : Hz, 1 / the median step.
-    uneven_steps : the steps differ by more than 1e-6 of the median.  notes : what reading it changed or found
-    (a derivative taken, rows dropped, ...).  effort_unit : "N m", or the unit of currents/PWM read as efforts.
-    scales : the largest speeds and efforts and the duration (the units check reads them): {"speed_max": [r, l]
-    rad/s, "effort_max": [r, l], "duration_s"}.  delay : the efforts' delay ``wmrid monitor`` applied to the whole
-    log (its record), else None.  other : keys of other versions' documents, kept as read.  None: not recorded (a
-    document of an older version).
+    A field that is None was not recorded (a document of an older version).
+
+    Attributes
+    ----------
+    samples
+        Samples read.
+    duration_s
+        s, last time minus first.
+    rate_hz
+        Hz, 1 / the median step.
+    uneven_steps
+        The steps differ by more than 1e-6 of the median.
+    notes
+        What reading it changed or found (a derivative taken, rows dropped, ...).
+    effort_unit
+        "N m", or the unit of currents/PWM read as efforts.
+    scales
+        The largest speeds and efforts and the duration (the units check reads them): {"speed_max": [r, l] rad/s,
+        "effort_max": [r, l], "duration_s"}.
+    delay
+        The efforts' delay ``wmrid monitor`` applied to the whole log (its record), else None.
+    other
+        Keys of other versions' documents, kept as read.
     """
 
     samples: int | None = None
@@ -67,11 +83,24 @@ class LogInfo:
 class GroupVerdict:
     """What the log determines of one parameter group (:func:`wmrid.estimators.verdict.verdict`).
 
-    group : "inertia", "Coriolis coefficient", "friction" or "casters".  parameters : the group's parameters judged.
-    worst : the one of largest relative std.  relative_std : its std / |value| (None: unbounded).  status :
-    "determined", "poorly determined", "not determined" or "in doubt".  reason : why, when not determined (None
-    when it is).  negligible : {name: bound} of parameters determined as negligible, their bound in the
-    parameter's unit (None: none).  text : the sentence printed.
+    Attributes
+    ----------
+    group
+        "inertia", "Coriolis coefficient", "friction" or "casters".
+    parameters
+        The group's parameters judged.
+    worst
+        The one of largest relative std.
+    relative_std
+        Its std / |value| (None: unbounded).
+    status
+        "determined", "poorly determined", "not determined" or "in doubt".
+    reason
+        Why, when not determined (None when it is).
+    text
+        The sentence printed.
+    negligible
+        {name: bound} of parameters determined as negligible, their bound in the parameter's unit (None: none).
     """
 
     group: str
@@ -106,10 +135,20 @@ class GroupVerdict:
 class Verdict:
     """The result's last word (:func:`wmrid.estimators.verdict.verdict`), said before any number.
 
-    summary : one sentence: what the log determines, or "Do not use these numbers: ..." when its units are in
-    doubt.  groups : one :class:`GroupVerdict` per group.  lines : the groups' sentences to print (one for all when
-    they say the same).  first : said before the summary (a method switched).  check : unit findings that are
-    warnings, not doubts.  units : what units were assumed when no robot file could check them (None: checked).
+    Attributes
+    ----------
+    summary
+        One sentence: what the log determines, or "Do not use these numbers: ..." when its units are in doubt.
+    groups
+        One :class:`GroupVerdict` per group.
+    lines
+        The groups' sentences to print (one for all when they say the same).
+    first
+        Said before the summary (a method switched).
+    check
+        Unit findings that are warnings, not doubts.
+    units
+        What units were assumed when no robot file could check them (None: checked).
     """
 
     summary: str
@@ -147,12 +186,24 @@ class Verdict:
 
 @dataclass(frozen=True)
 class Validation:
-    """How the result's model predicts another log of the same robot (``--validate``,
-    :func:`wmrid.api.identification.validate`): the wheel speeds simulated open loop from that log's efforts.
+    """How the result's model predicts another log of the same robot (``--validate``).
 
-    log : that log.  samples : its samples.  definition : the fit's formula.  fit_percent : {"eta_r", "eta_l"} %,
-    100 a perfect prediction (None: not simulated, or not finite).  predictor : how the speeds were simulated (None:
-    not simulated).  not_simulated : why the model could not be simulated (None: it was).
+    The wheel speeds are simulated open loop from that log's efforts (:func:`wmrid.api.identification.validate`).
+
+    Attributes
+    ----------
+    log
+        That log.
+    samples
+        Its samples.
+    definition
+        The fit's formula.
+    fit_percent
+        {"eta_r", "eta_l"} %, 100 a perfect prediction (None: not simulated, or not finite).
+    predictor
+        How the speeds were simulated (None: not simulated).
+    not_simulated
+        Why the model could not be simulated (None: it was).
     """
 
     log: str

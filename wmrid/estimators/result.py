@@ -77,10 +77,20 @@ class History:
 class ObserverRun:
     """The paper's observer run on the log (Eqs. 26-36): what it was given and what it found in its own terms.
 
-    settings : gain, start and box (:class:`ObserverSettings`).  start_source : where the start came from.
-    theta, theta_unconstrained : (2, p) intermediate parameters, projected onto the box and not.
-    theta_cov : (2p, 2p) their covariance.  history : the decimated per-sample record, or None (a result read
-    back from a document without one).
+    Attributes
+    ----------
+    settings
+        Gain, start and box (:class:`ObserverSettings`).
+    start_source
+        Where the start came from.
+    theta
+        (2, p) intermediate parameters, projected onto the box.
+    theta_unconstrained
+        (2, p) intermediate parameters, not projected onto the box.
+    theta_cov
+        (2p, 2p) their covariance.
+    history
+        The decimated per-sample record, or None (a result read back from a document without one).
     """
 
     settings: ObserverSettings
@@ -138,20 +148,49 @@ class MethodSettings:
 
 @dataclass(frozen=True)
 class IdentificationResult:
-    """Everything an identification found, whichever the method, immutable.  ``to_dict`` gives the JSON form.
+    """Everything an identification found, whichever the method, immutable.
 
-    source : the log.  form : the regressor (friction model included).  method : the method whose estimate is
-    reported.  parameters : name -> (value, std), REPORTED names, SI units (the effort's units for a PWM log).
-    theta0_cov : (n0, n0) covariance of the base parameters.  estimate : the method's
-    :class:`~wmrid.estimators.estimate.BaseEstimate`.  diagnostics : what the log and the method
-    showed (:class:`~wmrid.estimators.findings.Diagnostics`).  warnings : said to the user.
-    log_info : what the log was (:class:`~wmrid.estimators.records.LogInfo`).  nominal, reference : the robot's
-    nominal and CAD base parameters.  payload : the payload's mass, position and inertia
-    (:class:`~wmrid.model.payload.PayloadEstimate`, ``--payload``).  verdict : what the log determines, per
-    parameter group (:class:`~wmrid.estimators.records.Verdict`).  validation : the fit on another log
-    (:class:`~wmrid.estimators.records.Validation`).  observer : the observer's run on the log (every method runs it
-    first: its excitation figures and history describe the log), or None.
-    method_settings : what another method's estimate was made with (None for the observer's): :attr:`settings`.
+    ``to_dict`` gives the JSON form; :meth:`from_dict` reads it back.
+
+    Attributes
+    ----------
+    source
+        The log.
+    form
+        The regressor (friction model included).
+    parameters
+        Name -> (value, std), REPORTED names, SI units (the effort's units for a PWM log).
+    theta0_cov
+        (n0, n0) covariance of the base parameters.
+    diagnostics
+        What the log and the method showed (:class:`~wmrid.estimators.findings.Diagnostics`).
+    warnings
+        Said to the user.
+    log_info
+        What the log was (:class:`~wmrid.estimators.records.LogInfo`).
+    observer
+        The observer's run on the log (every method runs it first: its excitation figures and history describe the
+        log), or None.
+    nominal
+        The robot's nominal base parameters, or None.
+    reference
+        The robot's CAD base parameters, or None.
+    units
+        Parameter name -> its unit (default: the SI units, ``THETA0_UNITS``).
+    payload
+        The payload's mass, position and inertia (:class:`~wmrid.model.payload.PayloadEstimate`, ``--payload``), or
+        None.
+    method
+        The method whose estimate is reported.
+    estimate
+        The method's :class:`~wmrid.estimators.estimate.BaseEstimate`: the reported theta0 and its covariance
+        (undetermined: NaN/inf).
+    validation
+        The fit on another log (:class:`~wmrid.estimators.records.Validation`), or None.
+    verdict
+        What the log determines, per parameter group (:class:`~wmrid.estimators.records.Verdict`).
+    method_settings
+        What another method's estimate was made with (None for the observer's): :attr:`settings`.
     """
 
     source: str
@@ -164,7 +203,7 @@ class IdentificationResult:
     observer: ObserverRun | None = None
     nominal: dict[str, float] | None = None
     reference: dict[str, float] | None = None
-    units: dict[str, str] = field(default_factory=lambda: dict(THETA0_UNITS))
+    units: dict[str, str] = field(default_factory=THETA0_UNITS.copy)
     payload: PayloadEstimate | None = None
     method: str = "observer"
     estimate: BaseEstimate | None = None  # the reported theta0 and its covariance (undetermined: NaN/inf)
@@ -215,7 +254,25 @@ class IdentificationResult:
 
     @classmethod
     def from_dict(cls, data: Any, source: str = "result") -> IdentificationResult:
-        """The result a document of :meth:`to_dict` describes (:func:`from_dict`)."""
+        """Read back the result that :meth:`to_dict` wrote as a document (:func:`from_dict`).
+
+        Parameters
+        ----------
+        data
+            The document (``identify --format json``).
+        source
+            Where it came from, named in error messages.
+
+        Returns
+        -------
+        IdentificationResult
+            The result the document describes.
+
+        Raises
+        ------
+        LogFormatError
+            ``data`` is not a complete result, or is one of a newer schema (the message names ``source``).
+        """
         return from_dict(data, source)
 
     def theta_dict(self) -> dict[str, Any]:
@@ -236,7 +293,18 @@ class IdentificationResult:
         }
 
     def to_dict(self, history: bool = True) -> dict[str, Any]:
-        """The result as JSON-ready data; ``history``: include the estimates over time (most of its size)."""
+        """The result as JSON-ready data: the document ``identify --format json`` prints.
+
+        Parameters
+        ----------
+        history
+            Include the estimates over time (most of its size).
+
+        Returns
+        -------
+        dict
+            The document, with its ``schema_version``.
+        """
         params = {name: parameter.to_dict() for name, parameter in self.table.items()}
         out: dict[str, Any] = {
             "schema_version": SCHEMA_VERSION,
@@ -322,7 +390,7 @@ def _box(values: dict[str, Any], names: Sequence[str], p: int, missing: float) -
 
 
 def from_dict(data: Any, source: str = "result") -> IdentificationResult:
-    """The result a document of :meth:`IdentificationResult.to_dict` describes (``identify --format json``).
+    """Read back the result that :meth:`IdentificationResult.to_dict` wrote (``identify --format json``).
 
     Exact for everything the document holds: ``from_dict(d).to_dict() == d`` for a document ``to_dict`` wrote.
     A document saved before results carried a verdict gets one, made from its numbers (its warnings and flags

@@ -26,8 +26,24 @@ MAX_ROBOT_FIGURES = 60
 
 @dataclass
 class FleetReport:
-    """A fleet review with its table's summary, the figures to draw (name -> matplotlib Figure, rendered when an
-    output needs them) and the provenance."""
+    """A fleet review with its table's summary, the figures to draw and the provenance (:func:`fleet_report`).
+
+    Attributes
+    ----------
+    review
+        The review of the table.
+    table
+        The table reviewed (its path, or "rows").
+    summary
+        The table's summary, a sentence each.
+    provenance
+        How the review was made: wmrid's version, the time (UTC), the command, the options, the table's size and
+        SHA-256.
+    figure_objects
+        The figures to draw: name -> matplotlib Figure, rendered when an output needs them.
+    figure_notes
+        Name -> a sentence about the figure.
+    """
 
     review: FleetReview
     table: str

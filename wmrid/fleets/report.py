@@ -67,15 +67,37 @@ def fleet_report(
     figures: bool = True,
     command: str | None = None,
 ) -> FleetReport:
-    """The review of a fleet table (a path to a ``wmrid fleet`` Parquet table, or its rows).
+    """The review of a fleet table: changes across each robot's logs, robots that stand out, a ranking.
 
-    robot : the robot (file or built-in name) of the rows without one: its r and b turn a change of M and V_c into a
+    Parameters
+    ----------
+    table
+        A path to a ``wmrid fleet`` Parquet table, or its rows.
+    robot
+        The robot (file or built-in name) of the rows without one: its r and b turn a change of M and V_c into a
         payload estimate.
-    baseline, window, alpha : each robot's first ``baseline`` logs are its own reference; a step or ramp starting
-        within the last ``window`` logs is tested; ``alpha`` is the probability of flagging a robot whose parameters
-        do not change, over its whole history.
-    outlier_alpha : the probability that any robot of a model with Gaussian unit-to-unit spread is said to stand out.
-    figures : build the figures (what HTML and Markdown show).
+    baseline
+        Each robot's first ``baseline`` logs are its own reference.
+    window
+        A step or ramp starting within the last ``window`` logs is tested.
+    alpha
+        The probability of flagging a robot whose parameters do not change, over its whole history.
+    outlier_alpha
+        The probability that any robot of a model with Gaussian unit-to-unit spread is said to stand out.
+    figures
+        Build the figures (what HTML and Markdown show).
+    command
+        The command line that made the review, for its reproducibility block (None: ``wmrid.fleet_report(...)``).
+
+    Returns
+    -------
+    FleetReport
+        The review; :func:`write_fleet_report` writes it.
+
+    Raises
+    ------
+    UsageError
+        A setting out of its range, or a table without rows.
     """
     from wmrid.fleets.changes import MONITORED
     from wmrid.fleets.review import review_fleet
@@ -104,7 +126,24 @@ def fleet_report(
 
 
 def write_fleet_report(rep: FleetReport, output: str | os.PathLike[str], *, force: bool = False) -> None:
-    """Write ``rep`` as a self-contained HTML page (.html, .htm), Markdown (.md) or JSON (.json), atomically."""
+    """Write a fleet review as a self-contained HTML page, Markdown or JSON, atomically.
+
+    Parameters
+    ----------
+    rep
+        The review (:func:`fleet_report`).
+    output
+        The output's path; its suffix names the format: .html or .htm, .md, or .json.
+    force
+        Overwrite an existing file.
+
+    Raises
+    ------
+    UsageError
+        ``output`` has none of the suffixes above.
+    OutputExistsError
+        ``output`` exists and ``force`` is not given.
+    """
     from wmrid.api.reporting import write_by_suffix
     from wmrid.fleets.rendering import to_html, to_json_dict, to_markdown
 

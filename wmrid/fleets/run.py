@@ -58,10 +58,34 @@ def option_columns() -> tuple[str, ...]:
 
 @dataclass
 class FleetRun:
-    """What :func:`fleet` did: ``table`` the table written (a pyarrow Table; old rows kept by ``resume`` included;
-    ``rows`` the same as dicts), ``identified`` the logs identified in this run, ``skipped`` those resumed from the
-    table, ``failed`` the rows of this run with an error, ``wall_s`` the run's wall time, ``workers`` the cluster's
-    worker count, ``scheduler`` its address."""
+    """What :func:`fleet` did.
+
+    Attributes
+    ----------
+    table
+        The table written (a pyarrow Table; old rows kept by ``resume`` included); :attr:`rows` gives the same as
+        dicts.
+    identified
+        The logs identified in this run.
+    skipped
+        The logs resumed from the table.
+    failed
+        The rows of this run with an error.
+    wall_s
+        s, the run's wall time.
+    startup_s
+        s to start (or reach) the cluster and its workers.
+    processing_s
+        s from then to the last result.
+    client_cpu_s
+        CPU seconds of this process (the client, and the scheduler of a LocalCluster) while processing.
+    workers
+        The cluster's worker count.
+    scheduler
+        The cluster's address.
+    notes
+        What the run said about itself, a sentence each (e.g. a table to resume that did not exist yet).
+    """
 
     table: Any = None
     identified: int = 0
@@ -255,22 +279,68 @@ def fleet(
 ) -> FleetRun:
     """Identify every log of a fleet on Dask and write the table (Parquet) to ``output``.
 
-    logs : paths, globs or folders (:func:`~wmrid.fleets.table.find_logs`); or ``manifest``: a CSV/Parquet file,
-        one row per log (:func:`~wmrid.fleets.manifest.read_manifest`).  Robot id and time of a log without them
-        come from ``id_pattern`` or the path's folder and date (:func:`~wmrid.fleets.table.id_and_time_from_path`),
-        else the log's own first stamp when it is an epoch time.
-    manifest_root : the folder every log of the manifest must resolve into (default: the manifest's own folder); a
-        row outside it, or naming a device or a FIFO, is refused (UsageError naming the row).
-    robot : the robot file or built-in name of every log whose manifest row names none.
-    scheduler : "local" (a LocalCluster of ``workers`` processes, default one per core) or a scheduler address.
-    resume : keep the rows of an existing table whose log, content hash and options are unchanged (not identified
-        again); ``retry_failed`` also re-runs its error rows.  Without ``resume`` an existing table needs ``force``.
-    fit : also compute each log's fit % (fit_r, fit_l): the model's simulated speeds on the log itself.
-    window : tasks in flight at most (default 8 per worker); batch : logs per task (default :func:`auto_batch`:
-        the scheduler's and client's work per task is shared by ``batch`` logs); checkpoint : seconds between table
-        writes.
-    progress : called as progress(done, total, failed).
-    defaults : identify's keywords and LogOptions fields for every log (a manifest row's own options win).
+    One task identifies a batch of logs; a log that fails is a row with its error.  The table is written atomically
+    every ``checkpoint`` seconds and at the end (also on Ctrl-C), so that ``resume=True`` continues an interrupted
+    run.
+
+    Parameters
+    ----------
+    logs
+        Paths, globs or folders (:func:`~wmrid.fleets.table.find_logs`); give these or ``manifest``.  Robot id and
+        time of a log without them come from ``id_pattern`` or the path's folder and date
+        (:func:`~wmrid.fleets.table.id_and_time_from_path`), else the log's own first stamp when it is an epoch
+        time.
+    output
+        The Parquet table to write (required; named ``.parquet``).
+    manifest
+        A CSV or Parquet file, one row per log (:func:`~wmrid.fleets.manifest.read_manifest`), instead of ``logs``.
+    manifest_root
+        The folder every log of the manifest must resolve into (default: the manifest's own folder); a row outside
+        it, or naming a device or a FIFO, is refused (UsageError naming the row).
+    robot
+        The robot file or built-in name of every log whose manifest row names none.
+    id_pattern
+        A regular expression searched in a log's path, with a named group ``robot`` and optionally ``time``: the
+        robot id and time of a log without them (None: the path's folder and date).
+    scheduler
+        "local" (a LocalCluster of ``workers`` processes) or a scheduler address (``"tcp://host:8786"``, whose
+        workers have wmrid installed).
+    workers
+        The LocalCluster's worker processes, >= 1 (None: one per core).
+    resume
+        Keep the rows of an existing table whose log, content hash and options are unchanged (not identified
+        again).
+    retry_failed
+        With ``resume``, also re-run the table's error rows.
+    force
+        Overwrite an existing table (needed without ``resume``).
+    fit
+        Also compute each log's fit % (fit_r, fit_l): the model's simulated speeds on the log itself.
+    window
+        Tasks in flight at most (None: 8 per worker).
+    batch
+        Logs per task, >= 1 (None: :func:`auto_batch`: the scheduler's and client's work per task is shared by
+        ``batch`` logs).
+    checkpoint
+        s between table writes, > 0.
+    progress
+        Called as ``progress(done, total, failed)``.
+    **defaults
+        identify's keywords and :class:`~wmrid.api.inputs.LogOptions` fields for every log (a manifest row's own
+        options win).
+
+    Returns
+    -------
+    FleetRun
+        What the run did, with the table written.
+
+    Raises
+    ------
+    UsageError
+        No ``output`` or one not named .parquet, a setting out of range, both or neither of ``logs`` and
+        ``manifest``, ``manifest_root`` without ``manifest``, or no Dask scheduler at ``scheduler``.
+    OutputExistsError
+        The table exists and neither ``resume`` nor ``force`` is given.
     """
     from wmrid.core.extras import require_installed
     from wmrid.runtime.atomic import register_input

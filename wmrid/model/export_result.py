@@ -18,13 +18,31 @@ from wmrid.model.physical import PhysicalEstimate
 
 @dataclass(frozen=True)
 class ExportCheck:
-    """The exported models driven by a check log's torques (``wmrid export --check``,
-    :func:`wmrid.api.exporting.check_fit`): over windows of ``window_s`` s, each restarted from the logged speeds.
+    """The exported models driven by a check log's torques (``wmrid export --check``).
 
-    log : the check log.  samples : its samples.  window_s : s, each window's length.  windows : how many.
-    definition : the fit's formula.  multibody, reduced : {"eta_r", "eta_l"} fit %, 100 a perfect prediction, of the
-    exported multibody model and of the reduced model (None: not simulated, or not finite).
-    reduced_not_simulated : why the reduced model could not be simulated (None: it was).
+    The models run over windows of ``window_s`` s, each restarted from the logged speeds
+    (:func:`wmrid.api.exporting.check_fit`).
+
+    Attributes
+    ----------
+    log
+        The check log.
+    samples
+        Its samples.
+    window_s
+        s, each window's length.
+    windows
+        How many windows.
+    definition
+        The fit's formula.
+    multibody
+        {"eta_r", "eta_l"} fit %, 100 a perfect prediction, of the exported multibody model (None: not simulated,
+        or not finite).
+    reduced
+        {"eta_r", "eta_l"} fit %, 100 a perfect prediction, of the reduced model (None: not simulated, or not
+        finite).
+    reduced_not_simulated
+        Why the reduced model could not be simulated (None: it was).
     """
 
     log: str
@@ -61,10 +79,20 @@ class ExportCheck:
 class ExportResult:
     """What :func:`wmrid.api.exporting.export` wrote.
 
-    path : the output file.  format : what it is ("MJCF (MuJoCo)", "URDF", ...).  physical : the physical quantities
-    (None: a result in PWM/voltage units, or a robot given as base parameters).  provenance : {what: where from} (the
-    wmrid version, the result, the log, the method, the robot).  check : the fit of the exported models on a check log
-    (None: no check log).  notes : what the export changed or left out, a sentence each.
+    Attributes
+    ----------
+    path
+        The output file.
+    format
+        What it is ("MJCF (MuJoCo)", "URDF", ...).
+    physical
+        The physical quantities (None: a result in PWM/voltage units, or a robot given as base parameters).
+    provenance
+        {what: where from} (the wmrid version, the result, the log, the method, the robot).
+    check
+        The fit of the exported models on a check log (None: no check log).
+    notes
+        What the export changed or left out, a sentence each.
     """
 
     path: str

@@ -39,8 +39,21 @@ PAYLOAD_UNITS = {"mass": "kg", "x": "m", "y": "m", "inertia": "kg m^2"}
 
 @dataclass(frozen=True)
 class PayloadEstimate:
-    """A payload estimated from a log: each of mass kg, x m, y m (its centre of mass in the platform frame) and
-    inertia kg m^2 (yaw, about its own centre of mass) as (value, std), std +inf when the log does not bound it."""
+    """A payload estimated from a log (a result's ``payload``, ``--payload``).
+
+    Each quantity is (value, std), std +inf when the log does not bound it.
+
+    Attributes
+    ----------
+    mass
+        kg, the payload's mass.
+    x
+        m, its centre of mass in the platform frame.
+    y
+        m, its centre of mass in the platform frame.
+    inertia
+        kg m^2, its yaw inertia about its own centre of mass.
+    """
 
     mass: tuple[float, float]
     x: tuple[float, float]

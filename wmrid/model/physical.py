@@ -97,14 +97,28 @@ class Quantity:
 
 @dataclass(frozen=True)
 class PhysicalEstimate:
-    """The physical quantities of an identified robot (module docstring).
+    """The physical quantities of an identified robot.
 
-    quantities : name -> :class:`Quantity`, in the order m, I, mp_dy, mp_dx, m_p, d_x, d_y, I_p, F_v1, F_v2, F_d1,
-        F_d2, the caster drags D_k (N) when the result has them, then the robot file's values.
-    names, cov : the log-determined quantities' names (the four mass-distribution ones, the platform's four, the
-        friction and the drags) and their covariance (n, n), SI.
-    parameters : the identified robot as Table 1 (the platform's values and friction identified, the rest from the
-        file), what a simulator is built from.
+    What the log determines, what the robot file gives and what stays undetermined (:mod:`wmrid.model.physical`
+    derives them).
+
+    Attributes
+    ----------
+    quantities
+        Name -> :class:`Quantity`, in the order m, I, mp_dy, mp_dx, m_p, d_x, d_y, I_p, F_v1, F_v2, F_d1, F_d2, the
+        caster drags D_k (N) when the result has them, then the robot file's values.
+    names
+        The log-determined quantities' names (the four mass-distribution ones, the platform's four, the friction and
+        the drags).
+    cov
+        (n, n) their covariance, SI.
+    parameters
+        The identified robot as Table 1 (the platform's values and friction identified, the rest from the file),
+        what a simulator is built from.
+    undetermined
+        What no wheel log determines, a phrase each.
+    clipped
+        Friction entries identified below 0 and written as 0 in ``parameters`` (a simulator's friction is >= 0).
     """
 
     quantities: dict[str, Quantity]

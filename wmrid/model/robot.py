@@ -125,7 +125,19 @@ class PhysicalParameters:
 
 @dataclass(frozen=True)
 class Payload:
-    """A rigid payload on the platform: mass (kg) at (x, y) (m, platform frame), own yaw inertia (kg m^2)."""
+    """A rigid payload on the platform.
+
+    Attributes
+    ----------
+    mass
+        kg, > 0.
+    x
+        m, the position of its centre of mass in the platform frame.
+    y
+        m, the position of its centre of mass in the platform frame.
+    inertia
+        kg m^2, its own yaw inertia (about its centre of mass), >= 0.
+    """
 
     mass: float
     x: float = 0.0
@@ -143,7 +155,20 @@ class Payload:
 
     @classmethod
     def parse(cls, text: str, inertia: float = 0.0) -> Payload:
-        """Parse ``MASS[@X,Y]`` (kg, m), e.g. ``25`` or ``25@0.1,-0.05``."""
+        """Parse the command line's ``MASS[@X,Y]`` (kg, m), e.g. ``25`` or ``25@0.1,-0.05``.
+
+        Parameters
+        ----------
+        text
+            ``MASS[@X,Y]``: the mass in kg, and the position in m (default 0, 0).
+        inertia
+            kg m^2, the payload's own yaw inertia.
+
+        Returns
+        -------
+        Payload
+            The payload.
+        """
         mass_text, at, where = text.partition("@")
         try:
             if at and not where.strip():
@@ -216,7 +241,35 @@ _TOO_MANY_CASTERS = f"wmrid takes at most {MAX_CASTERS} casters (a mobile robot 
 
 @dataclass(frozen=True)
 class Robot:
-    """A named robot: nominal parameters and, when known, CAD (reference) parameters."""
+    """A named robot: nominal parameters and, when known, CAD (reference) parameters.
+
+    Made by :func:`wmrid.load_robot` from a built-in name, a robot file or a URDF.
+
+    Attributes
+    ----------
+    name
+        The robot's name.
+    nominal
+        The nominal parameters: physical ones (Table 1) or base parameters given directly (:class:`BaseSet`).
+    cad
+        The CAD (reference) parameters, when known.
+    torque_constant
+        N m/A, of each motor (``[motor]`` table), or None.
+    efficiency
+        Of the gearbox (``[motor]`` table), or None.
+    casters
+        The ``[[caster]]`` tables; None: default casters (multibody only).
+    unknown_cad
+        Base parameters whose CAD value the source does not give (a URDF's friction): compared as "—", not 0.
+    assumed
+        What the robot file left out and was assumed (sentences, said in every result that uses the robot).
+    gear_ratio_known
+        False when the file gave no gear ratio (no rotors): a current log then needs ``--gear-ratio``.
+    limits
+        The ``[limits]`` table (``wmrid plan``): name -> value, SI (max_wheel_speed rad/s, max_wheel_accel
+        rad/s^2, max_torque N m, max_speed m/s, max_turn_rate rad/s, area [W, H] m); checked by
+        :mod:`wmrid.design.limits`.
+    """
 
     name: str
     nominal: PhysicalParameters | BaseSet

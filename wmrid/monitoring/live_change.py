@@ -15,7 +15,15 @@ from typing import Any
 
 @dataclass(frozen=True)
 class PayloadMass:
-    """The mass of a payload change, estimated from the inertia terms' change alone: mass and its std, kg."""
+    """The mass of a payload change, estimated from the inertia terms' change alone.
+
+    Attributes
+    ----------
+    mass
+        kg, the payload's mass.
+    std
+        kg, its std.
+    """
 
     mass: float
     std: float
@@ -31,15 +39,39 @@ class PayloadMass:
 
 @dataclass(frozen=True)
 class LiveChange:
-    """A change found along the stream.  Times in s of log time from the stream's first sample: ``t`` the located
-    change, ``t_alarm`` the time of the last sample the alarming test used (as offline), ``t_raised`` the time of the
-    last sample received when the alarm was raised (``fit_s`` after the change, for the estimates).  ``statistic``
-    the alarming window's test statistic, ``threshold`` the threshold it crossed, ``window_s`` that window's length, s.
-    ``kind``: "payload" when the inertia terms alone explain the change, "friction" when the friction terms alone do,
-    else "other" (all terms fitted).  ``moved``: {parameter: (before, after, std of the change)} for the parameters of
-    p = [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2 ...] that moved by more than 3 std (SI units: kg m^2, kg m, N m s/rad, N m);
-    ``payload``: a payload change's mass (:class:`PayloadMass`; the inertia terms alone fitted), or None when the
-    change is not a payload's or the robot's geometry is unknown; ``fit_s`` the span the estimates used, s."""
+    """A change found along the stream (``wmrid live --monitor``).
+
+    Times are in s of log time from the stream's first sample.
+
+    Attributes
+    ----------
+    t
+        s, the located change.
+    t_alarm
+        s, the time of the last sample the alarming test used (as offline).
+    t_raised
+        s, the time of the last sample received when the alarm was raised (``fit_s`` after the change, for the
+        estimates).
+    statistic
+        The alarming window's test statistic.
+    threshold
+        The threshold it crossed.
+    window_s
+        s, that window's length.
+    kind
+        "payload" when the inertia terms alone explain the change, "friction" when the friction terms alone do, else
+        "other" (all terms fitted).
+    moved
+        {parameter: (before, after, std of the change)} for the parameters of p = [M11 M12 M22 Vc Fv1 Fv2 Fd1 Fd2
+        ...] that moved by more than 3 std (SI units: kg m^2, kg m, N m s/rad, N m).
+    payload
+        A payload change's mass (:class:`PayloadMass`; the inertia terms alone fitted), or None when the change is
+        not a payload's or the robot's geometry is unknown.
+    fit_s
+        s, the span the estimates used.
+    notes
+        Notes on the change, a sentence each (the JSON line's "notes").
+    """
 
     t: float
     t_alarm: float
@@ -71,7 +103,7 @@ class LiveChange:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> LiveChange:
-        """The change a JSON line of :meth:`to_dict` describes ("delay_s" is derived: not read)."""
+        """Read back the change from a JSON line that :meth:`to_dict` wrote ("delay_s" is derived: not read)."""
         payload = data.get("payload")
         return cls(
             t=float(data["t"]), t_alarm=float(data["t_alarm"]), t_raised=float(data["t_raised"]),

@@ -60,7 +60,38 @@ class Change:
 
 @dataclass
 class MonitorResult:
-    """What :func:`monitor` found; ``to_dict`` gives the JSON form."""
+    """What :func:`wmrid.monitor` found; ``to_dict`` gives the JSON form.
+
+    Attributes
+    ----------
+    source
+        The log.
+    model
+        The model monitored against (:class:`~wmrid.monitoring.settings.MonitoredModel`).
+    settings
+        The detector's settings (:class:`MonitorSettings`).
+    grid
+        The tests: windows and steps, per-test false-alarm probability, margin
+        (:class:`~wmrid.monitoring.glr.WindowGrid`).
+    noise_lags
+        Lags of the noise model's autoregression.
+    calibration_samples
+        Samples of the first calibration span.
+    changes
+        The changes detected, in time order (:class:`wmrid.monitoring.monitor_result.Change`: when, which
+        parameters moved and by how much).
+    segments
+        Each segment between changes as the JSON records it (t_start, t_end, its model, its calibrations).
+    log_info
+        What the log was (:class:`~wmrid.estimators.records.LogInfo`).
+    warnings
+        Said to the user.
+    seconds
+        s, the run's wall time.
+    identification
+        The observer's settings of the identifications after a change (form, k, alpha, box_width, torque_hold,
+        control_rate), as the JSON's "identification".
+    """
 
     source: str
     model: MonitoredModel

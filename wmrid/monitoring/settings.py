@@ -68,17 +68,33 @@ _OPTIONS = ("calibration_s", "false_alarm_rate")
 
 @dataclass(frozen=True)
 class MonitorSettings:
-    """The detector's settings (see the module docstring for each one's role).
+    """The change detector's settings (``wmrid monitor``), checked when made.
 
-    calibration_s : s, span at the start of the log (and after each change) assumed unchanged, on which the
-        noise model (and, after a change, the model) is first fitted.
-    false_alarm_rate : stated false alarms per hour of log (> 0): the Bonferroni bound the threshold keeps.
-    windows_s : s, lengths of the test windows; each is tested every 1/steps_per_window of its length.
-    rate_hz : Hz, rate of the residual (the log's rate when lower).
-    accel_window_s, regressor_window_s : s, Savitzky-Golay windows of the residual and of the regressor.
-    noise_memory_s : s, span of the lags of the noise model's autoregression.
-    locate_s : s, data past an alarm used to locate the change.
-    margin : factor on the threshold for what the F law leaves out (chosen in bench/accuracy/bench_monitor.py).
+    :mod:`wmrid.monitoring.monitor` explains each one's role.
+
+    Attributes
+    ----------
+    calibration_s
+        s, span at the start of the log (and after each change) assumed unchanged, on which the noise model (and,
+        after a change, the model) is first fitted.
+    false_alarm_rate
+        Stated false alarms per hour of log (> 0): the Bonferroni bound the threshold keeps.
+    windows_s
+        s, lengths of the test windows.
+    steps_per_window
+        Each window is tested every 1/steps_per_window of its length.
+    rate_hz
+        Hz, rate of the residual (the log's rate when lower).
+    accel_window_s
+        s, the Savitzky-Golay window of the residual.
+    regressor_window_s
+        s, the Savitzky-Golay window of the regressor.
+    noise_memory_s
+        s, span of the lags of the noise model's autoregression.
+    locate_s
+        s, data past an alarm used to locate the change.
+    margin
+        Factor on the threshold for what the F law leaves out (chosen in bench/accuracy/bench_monitor.py).
     """
 
     calibration_s: float = 10.0

@@ -76,20 +76,28 @@ def import_mujoco() -> Any:
 
 @dataclass(frozen=True)
 class MultibodySettings:
-    """Options of the multibody prototype (SI units).
+    """Options of the multibody (MuJoCo) prototype, in SI units.
 
-    floor_friction : Coulomb coefficient of the wheels on the floor (> 0); low values let them slip.
-    caster_resistance : when not None, the rolling-resistance coefficient of every caster (>= 0), overriding
-        the robot's; 0: frictionless casters.
-    torque_limit : N m, the wheel torque is clipped to +-torque_limit (None: no limit).
-    substeps : MuJoCo steps per control period.
-    cg_height : m, height of the platform's centre of mass above the axle (it sets the load transfer).
-    tyre_time_constant : s, time constant of the tyres' contact with the floor (None: ``CONTACT_SOLREF_STEPS``
-        MuJoCo steps, as stiff as the engine allows; a larger value lets the tyres creep, as real ones do).
-
-    ``MultibodySettings.physics_version`` (a class attribute, not a setting): the version of the prototype's
-    physics, raised with every change that alters the simulated motion; with MuJoCo's version it keys a cache of
-    simulated logs (the same settings, seed and version give the same log).
+    Attributes
+    ----------
+    physics_version
+        A class attribute, not a setting: the version of the prototype's physics, raised with every change that
+        alters the simulated motion; with MuJoCo's version it keys a cache of simulated logs (the same settings, seed
+        and version give the same log).
+    floor_friction
+        Coulomb coefficient of the wheels on the floor (> 0); low values let them slip.
+    caster_resistance
+        When not None, the rolling-resistance coefficient of every caster (>= 0), overriding the robot's; 0:
+        frictionless casters.
+    torque_limit
+        N m, the wheel torque is clipped to +-torque_limit (None: no limit).
+    substeps
+        MuJoCo steps per control period.
+    cg_height
+        m, height of the platform's centre of mass above the axle (it sets the load transfer).
+    tyre_time_constant
+        s, time constant of the tyres' contact with the floor (None: ``CONTACT_SOLREF_STEPS`` MuJoCo steps, as stiff
+        as the engine allows; a larger value lets the tyres creep, as real ones do).
     """
 
     physics_version: ClassVar[int] = PHYSICS_VERSION
@@ -128,7 +136,18 @@ class MultibodySettings:
         }  # fmt: skip
 
     def tyre_solref(self, timestep: float) -> tuple[float, float]:
-        """MuJoCo's ``solref`` (time constant s, damping ratio) of the tyres' floor contact at ``timestep`` s."""
+        """MuJoCo's ``solref`` of the tyres' floor contact.
+
+        Parameters
+        ----------
+        timestep
+            s, MuJoCo's time step.
+
+        Returns
+        -------
+        tuple of float
+            (time constant s, damping ratio).
+        """
         if self.tyre_time_constant is not None:
             return (self.tyre_time_constant, 1.0)
         return (CONTACT_SOLREF_STEPS * timestep, 1.0)

@@ -32,17 +32,25 @@ _CHANGE_KEYS = ("kind", "t", "t_switch", "switch_period", "before", "after", "ph
 
 @dataclass(frozen=True)
 class NoiseSettings:
-    """Measurement noise, encoder quantisation and the unmodelled caster disturbance.
+    """Measurement noise, encoder quantisation and the unmodelled caster disturbance of a simulated run.
 
-    eta_std : rad/s, std of white Gaussian noise added to the logged wheel velocities.
-    tau_std : N m, std of white Gaussian noise added to the logged torques.
-    caster_std : N m, stationary std of the coloured disturbance torque tau_d on each wheel (the paper's
-        ball caster): an Ornstein-Uhlenbeck process per wheel, exactly discretised on the control grid.
-    caster_time : s, correlation time of that process.
-    encoder_cpr : counts per wheel revolution; when > 0 the logged velocity is the finite difference of
-        the quantised wheel angle over one log period (then eta_std, if any, is added on top); 0: off.
-    seed : the seed (a whole number >= 0) of ``numpy.random.PCG64``, which draws every random number of a run:
-        the same seed, the same log bit for bit.
+    Attributes
+    ----------
+    eta_std
+        rad/s, std of white Gaussian noise added to the logged wheel velocities (>= 0).
+    tau_std
+        N m, std of white Gaussian noise added to the logged torques (>= 0).
+    caster_std
+        N m, stationary std of the coloured disturbance torque tau_d on each wheel (the paper's ball caster): an
+        Ornstein-Uhlenbeck process per wheel, exactly discretised on the control grid (>= 0).
+    caster_time
+        s, correlation time of that process (> 0).
+    encoder_cpr
+        Counts per wheel revolution; when > 0 the logged velocity is the finite difference of the quantised wheel
+        angle over one log period (then eta_std, if any, is added on top); 0: off.
+    seed
+        The seed (a whole number >= 0) of ``numpy.random.PCG64``, which draws every random number of a run: the same
+        seed, the same log bit for bit.
     """
 
     eta_std: float = 0.0
@@ -88,12 +96,23 @@ CHANGE_SPECS = ("load", "drop", "fault")
 
 @dataclass(frozen=True)
 class Change:
-    """One change of the plant during a run, said against the robot and its payload (what :func:`wmrid.simulate`
-    takes; :meth:`plant` makes the :class:`PlantChange`).
+    """One change of the plant during a run, said against the robot and its payload.
 
-    at : s, when (> 0; before the run's end).  kind : "load" (the run's payload is loaded at ``at``), "drop" (it is
-    carried until ``at``, then dropped) or "fault" (``wheel``'s friction multiplied by ``factor``, >= 0 and not 1;
-    ``terms``: "both", "viscous" or "coulomb").
+    What :func:`wmrid.simulate` takes; :meth:`plant` makes the :class:`PlantChange`.
+
+    Attributes
+    ----------
+    at
+        s, when (> 0; before the run's end).
+    kind
+        "load" (the run's payload is loaded at ``at``), "drop" (it is carried until ``at``, then dropped) or
+        "fault" (``wheel``'s friction multiplied by ``factor``).
+    wheel
+        A fault's wheel: "right" (F_v1, F_d1) or "left" (F_v2, F_d2); None for a load or drop.
+    factor
+        A fault's factor on the wheel's friction, >= 0 and not 1; None for a load or drop.
+    terms
+        The friction terms a fault multiplies: "both", "viscous" (F_v only) or "coulomb" (F_d only).
     """
 
     at: float
@@ -125,7 +144,20 @@ class Change:
                 )
 
     def plant(self, robot: PhysicalParameters, payload: Payload | None) -> PlantChange:
-        """The change of ``robot`` (its parameters without the payload) that carries ``payload`` as this says."""
+        """The change of ``robot`` that carries ``payload`` as this says.
+
+        Parameters
+        ----------
+        robot
+            The robot's physical parameters without the payload.
+        payload
+            The run's payload (needed for a load or drop), or None.
+
+        Returns
+        -------
+        PlantChange
+            The change of the plant.
+        """
         if self.kind in ("load", "drop"):
             if payload is None:
                 raise UsageError(f"a change of kind {self.kind!r} needs the payload (loaded or dropped)")
@@ -148,11 +180,22 @@ def _time(name: str, value: object) -> float:
 class PlantChange:
     """One change of the plant during a run: ``before`` until time t (s), ``after`` from then on.
 
-    The switch happens at the first control period starting at or after t (see the module docstring and
-    :meth:`switch_period`).  kind : one of :data:`CHANGE_KINDS`; detail : a JSON-serialisable description
-    (the payload, or the wheel and factor of a friction fault), copied into ``settings["change"]``.
-    Build one with :meth:`payload_load`, :meth:`payload_drop` or :meth:`friction_fault`, or directly
-    (kind ``custom``).
+    The switch happens at the first control period starting at or after t (:meth:`switch_period`).  Build one with
+    :meth:`payload_load`, :meth:`payload_drop` or :meth:`friction_fault`, or directly (kind ``custom``).
+
+    Attributes
+    ----------
+    t
+        s, the time of the change (> 0).
+    before
+        The plant's physical parameters until t.
+    after
+        The plant's physical parameters from t on (not the same as ``before``).
+    kind
+        One of :data:`CHANGE_KINDS`.
+    detail
+        A JSON-serialisable description (the payload, or the wheel and factor of a friction fault), copied into
+        ``settings["change"]``.
     """
 
     t: float
@@ -174,14 +217,44 @@ class PlantChange:
 
     @classmethod
     def payload_load(cls, t: float, robot: PhysicalParameters, payload: Payload) -> PlantChange:
-        """``robot`` until t, then ``robot`` carrying ``payload``."""
+        """``robot`` until t, then ``robot`` carrying ``payload``.
+
+        Parameters
+        ----------
+        t
+            s, the time of the change.
+        robot
+            The robot's physical parameters without the payload.
+        payload
+            The payload loaded at t.
+
+        Returns
+        -------
+        PlantChange
+            The change, of kind "payload-load".
+        """
         if not isinstance(payload, Payload):
             raise UsageError(f"payload must be a Payload, got {type(payload).__name__}")
         return cls(t, robot, robot.with_payload(payload), "payload-load", {"payload": dataclasses.asdict(payload)})
 
     @classmethod
     def payload_drop(cls, t: float, robot: PhysicalParameters, payload: Payload) -> PlantChange:
-        """``robot`` carrying ``payload`` until t, then ``robot`` alone."""
+        """``robot`` carrying ``payload`` until t, then ``robot`` alone.
+
+        Parameters
+        ----------
+        t
+            s, the time of the change.
+        robot
+            The robot's physical parameters without the payload.
+        payload
+            The payload dropped at t.
+
+        Returns
+        -------
+        PlantChange
+            The change, of kind "payload-drop".
+        """
         if not isinstance(payload, Payload):
             raise UsageError(f"payload must be a Payload, got {type(payload).__name__}")
         return cls(t, robot.with_payload(payload), robot, "payload-drop", {"payload": dataclasses.asdict(payload)})
@@ -190,10 +263,25 @@ class PlantChange:
     def friction_fault(
         cls, t: float, robot: PhysicalParameters, wheel: str, factor: float, terms: str = "both"
     ) -> PlantChange:
-        """``robot`` until t, then with one wheel's friction multiplied by ``factor`` (>= 0, != 1).
+        """``robot`` until t, then with one wheel's friction multiplied by ``factor``.
 
-        wheel : ``right`` (F_v1, F_d1) or ``left`` (F_v2, F_d2); terms : ``both``, ``viscous`` (F_v only)
-        or ``coulomb`` (F_d only).
+        Parameters
+        ----------
+        t
+            s, the time of the change.
+        robot
+            The plant's physical parameters before the change.
+        wheel
+            ``right`` (F_v1, F_d1) or ``left`` (F_v2, F_d2).
+        factor
+            The factor on the wheel's friction, >= 0 and not 1.
+        terms
+            ``both``, ``viscous`` (F_v only) or ``coulomb`` (F_d only).
+
+        Returns
+        -------
+        PlantChange
+            The change, of kind "friction-fault".
         """
         if wheel not in WHEELS:
             raise UsageError(f"friction fault: unknown wheel {wheel!r}; choose one of {', '.join(WHEELS)}")
@@ -215,8 +303,20 @@ class PlantChange:
         return cls(t, robot, after, "friction-fault", detail)
 
     def switch_period(self, period: float) -> int:
-        """k_s: the first control period whose start k_s T is >= t, i.e. ceil(t / T), with t / T within 1e-9
-        (relative) of a whole number taken as that number."""
+        """k_s: the first control period whose start k_s T is >= t.
+
+        That is ceil(t / T), with t / T within 1e-9 (relative) of a whole number taken as that number.
+
+        Parameters
+        ----------
+        period
+            s, the control period T.
+
+        Returns
+        -------
+        int
+            k_s.
+        """
         ratio = self.t / period
         near = round(ratio)
         if abs(ratio - near) <= 1e-9 * max(1.0, ratio):
@@ -224,7 +324,19 @@ class PlantChange:
         return math.ceil(ratio)
 
     def to_dict(self, period: float) -> dict:
-        """The change as recorded in ``settings["change"]`` for control period T = ``period`` (s)."""
+        """The change as recorded in ``settings["change"]``.
+
+        Parameters
+        ----------
+        period
+            s, the control period T.
+
+        Returns
+        -------
+        dict
+            The record: kind, t, the switch's time and period, the base and physical parameters before and after,
+            then ``detail``.
+        """
         k = self.switch_period(period)
         return {
             "kind": self.kind,

@@ -24,15 +24,35 @@ ONLINE_STD = (
 
 @dataclass(frozen=True)
 class LiveUpdate:
-    """One refresh of a live run.
+    """One refresh of a live run: the online estimate with the stream's state.
 
-    parameters : {name: (value, std)} in SI units (empty until the samples determine an estimate); std: ONLINE_STD,
-    inf when not determined.  samples : received so far; log_time_s : s of log time they span; rate_hz : samples
-    received per second of wall time since the last update; log_rate_hz : samples per second of log time (None before
-    any log time has passed); since_last_data_s : s of wall time since the last bytes arrived; elapsed_s : s since
-    the run started; form : the regressor ("paper", "general", "general+caster"; None before the observer started);
-    segments : the jackknife's; notes : what the estimate assumes (e.g. the friction model); events : what happened to
-    the source since the last update (a connection lost or regained, a server's warning).
+    Attributes
+    ----------
+    source
+        The name of the source followed.
+    elapsed_s
+        s since the run started.
+    samples
+        Samples received so far.
+    log_time_s
+        s of log time they span.
+    rate_hz
+        Samples received per second of wall time since the last update.
+    log_rate_hz
+        Samples per second of log time (None before any log time has passed).
+    since_last_data_s
+        s of wall time since the last bytes arrived.
+    form
+        The regressor ("paper", "general", "general+caster"; None before the observer started).
+    parameters
+        {name: (value, std)} in SI units (empty until the samples determine an estimate); the std is what
+        :data:`ONLINE_STD` says (a jackknife over the samples received so far), inf when not determined.
+    segments
+        How many segments the jackknife has.
+    notes
+        What the estimate assumes (e.g. the friction model).
+    events
+        What happened to the source since the last update (a connection lost or regained, a server's warning).
     """
 
     source: str
@@ -49,7 +69,18 @@ class LiveUpdate:
     events: tuple[str, ...] = ()
 
     def relative_std(self, name: str) -> float:
-        """std / |value| of parameter ``name`` (inf when unknown or zero)."""
+        """std / |value| of a parameter.
+
+        Parameters
+        ----------
+        name
+            The parameter's name.
+
+        Returns
+        -------
+        float
+            Its relative std (inf when unknown or zero).
+        """
         value, std = self.parameters.get(name, (0.0, math.inf))
         return std / abs(value) if value != 0 and math.isfinite(std) else math.inf
 
@@ -67,7 +98,10 @@ class LiveUpdate:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> LiveUpdate:
-        """The update a JSON line of :meth:`to_dict` describes (a std null read as inf, a value null as NaN)."""
+        """Read back an update from a JSON line that :meth:`to_dict` wrote.
+
+        A std null is read as inf, a value null as NaN.
+        """
 
         def pair(entry: Mapping[str, Any]) -> tuple[float, float]:
             value, std = entry["value"], entry["std"]
