@@ -94,7 +94,8 @@ def command_records(root: Any) -> list[tuple[str, Any, Any]]:
 
     root_ctx = click.Context(root, info_name="wmrid")
     out = [("wmrid", root, root_ctx)]
-    for name, cmd in root.commands.items():
+    for name in root.list_commands(root_ctx):  # wmrid --help's order (wmrid.cli.help.COMMAND_ORDER)
+        cmd = root.commands[name]
         if not getattr(cmd, "hidden", False):
             out.append((f"wmrid {name}", cmd, click.Context(cmd, info_name=name, parent=root_ctx)))
     return out

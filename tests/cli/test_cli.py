@@ -362,7 +362,7 @@ def test_fleet_records_no_options_when_none_are_given():
     [
         (["identify", "--nope"], ["No such option: --nope", "see wmrid identify --help"]),
         (["identify", "run.csv", "--k", "abc"], ["Invalid value for '--k'", "see wmrid identify --help"]),
-        (["identify"], ["Missing argument 'LOG...'; see wmrid identify --help"]),
+        (["identify"], ["Missing argument 'LOG'; see wmrid identify --help"]),
         (["idnetify", "x"], ["No such command 'idnetify'. Did you mean 'identify'?", "see wmrid --help"]),
     ],
 )
