@@ -452,6 +452,30 @@ def print_case_table(cases: list[Case], summaries: dict, clean: bool) -> None:
             )
 
 
+def page_table(summaries: list[dict[str, Any]]) -> str:
+    """The noisy logs' table as the validation page shows it (docs/validation/index.md renders it from the results
+    file): per case and method, the median error over seeds in % of the truth of the worst inertia entry, Vc and the
+    worst friction term; the share of seeds whose truth lies within 3 std for the worst group, with that group's worst
+    |z|; the (log, parameter) pairs beyond 3 std that the output did not flag."""
+    lines = [
+        "| robot | trajectory | Hz | caster | floor | method | err % M / Vc / friction "
+        "| within 3 std, worst group (worst \\|z\\|) | unflagged > 3 std |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for s in summaries:
+        if s["clean"] or not s["logs"]:
+            continue
+        c, err, cov, z = s["case"], s["error_percent"], s["coverage"], s["worst_z"]
+        friction = max(err["viscous"], err["Coulomb"])
+        worst = min(GROUPS, key=lambda g: (cov[g], -z[g]))
+        lines.append(
+            f"| {c['robot']} | {c['trajectory']} | {c['rate']:g} | {c['caster']:g} | {c['floor']:g} | {s['method']} | "
+            f"{fmt(err['inertia'])} / {fmt(err['Vc'])} / {fmt(friction)} | "
+            f"{cov[worst]:.2f} {worst} ({fmt(z[worst])}) | {len(s['offenders'])} |"
+        )
+    return "\n".join(lines)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=None, help="noisy seeds per case (default 20; 3 with --quick)")
@@ -676,7 +700,15 @@ def main() -> int:
     # methods' median seconds; every log's row only in --json
     summary = [{**entry, "offenders": len(entry["offenders"])} for entry in dump["summaries"]]
     timing = {**dump["timing"], "estimate_seconds": {m: statistics.median(v) for m, v in est.items() if v}}
-    write_results({**{k: v for k, v in dump.items() if k != "logs"}, "summaries": summary, "timing": timing})
+    # a run of part of the set keeps a file of its own: the validation page renders the full run's (bench_physics.json)
+    variant = "quick" if args.quick else (("only-" + args.only.replace(":", "-")) if args.only else None)
+    if variant and tuple(args.robots) != ROBOTS:
+        variant += "-" + "-".join(args.robots)
+    write_results(
+        {**{k: v for k, v in dump.items() if k != "logs"}, "summaries": summary, "timing": timing,
+         "page_table": page_table(dump["summaries"])},
+        variant=variant,
+    )  # fmt: skip
     if args.json:
         Path(args.json).write_text(json.dumps(jsonable(dump), indent=1))
         print(f"JSON written to {args.json}")

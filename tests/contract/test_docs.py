@@ -56,8 +56,10 @@ def test_the_cli_reference_lists_every_command_and_option_of_the_app():
         assert [p.name for p in root.commands[name].params] == [p.name for p in cmd.params]
     markdown = HOOK.cli_markdown(root)
     sections = _sections(markdown)
-    commands = ["wmrid", *(f"wmrid {n}" for n, c in root.commands.items() if not getattr(c, "hidden", False))]
+    listed = root.list_commands(click.Context(root, info_name="wmrid"))  # wmrid --help's order: identify first
+    commands = ["wmrid", *(f"wmrid {n}" for n in listed if not getattr(root.commands[n], "hidden", False))]
     assert list(sections) == commands
+    assert commands[1] == "wmrid identify"
     assert {"wmrid identify", "wmrid report", "wmrid live", "wmrid export", "wmrid fleet"} <= set(sections)
     root_ctx = click.Context(root, info_name="wmrid")
     for name in commands:
@@ -192,3 +194,88 @@ def test_the_readme_python_example_runs(tmp_path, monkeypatch):
     exec(compile(code, "README.md", "exec"), scope)
     assert scope["value"] == pytest.approx(0.7872544, rel=1e-6)
     assert (tmp_path / "report.html").read_text(encoding="utf-8").startswith("<!DOCTYPE html>")
+
+
+# ---- figures rendered from the benchmarks' result files (docs/hooks/figures.py)
+
+
+def _figures_hook():
+    spec = importlib.util.spec_from_file_location("wmrid_docs_figures", DOCS / "hooks" / "figures.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+FIGURES = _figures_hook()
+
+
+@pytest.mark.parametrize("page", sorted(DOCS.rglob("*.md")), ids=lambda p: str(p.relative_to(DOCS)))
+def test_every_figure_a_page_quotes_from_a_results_file_is_in_that_file(page):
+    """Issue 33: the site's figures are rendered from ``bench/results/*.json`` at build time; a placeholder whose file
+    or value is missing (a renamed figure, a results file not committed) fails here and in ``mkdocs build --strict``."""
+    text = page.read_text(encoding="utf-8")
+    rendered = FIGURES.render_page(text, str(page.relative_to(DOCS)))  # raises, naming the page, what does not resolve
+    assert not re.search(r"\{\{\s*[\w-]+:", rendered), "a placeholder the hook's pattern does not read"
+
+
+def _table_rows(markdown: str, heading: str) -> list[str]:
+    section = markdown.split(f"\n## {heading}\n", 1)[1].split("\n## ", 1)[0]
+    return [line for line in section.splitlines() if line.startswith("| ") and not line.startswith("| ---")][1:]
+
+
+@pytest.mark.parametrize("heading", ["Accuracy", "Speed"])
+def test_the_validation_tables_are_rendered_from_the_run_each_row_names(heading):
+    """Each row of the validation page's accuracy and speed tables shows the command that wrote its results file
+    (``{{ FILE:command }}``) and takes every figure from that one file, so that a figure cannot come from another run
+    than the command beside it (the files of short check runs are named by their own command)."""
+    rows = _table_rows((DOCS / "validation" / "index.md").read_text(encoding="utf-8"), heading)
+    assert rows
+    for row in rows:
+        files = {m.group(1) for m in FIGURES.PLACEHOLDER.finditer(row)}
+        assert len(files) == 1, row
+        (name,) = files
+        assert f"{{{{ {name}:command }}}}" in row, row
+        command = FIGURES.render(name, "command")
+        assert command.startswith("python3 bench/"), command
+        assert "python3 bench/" not in FIGURES.PLACEHOLDER.sub("", row), f"a command typed by hand: {row}"
+
+
+def test_the_figure_placeholders_mini_language(tmp_path, monkeypatch):
+    """Paths into a results file (keys with spaces, list indices, ``*``, ``A+B``, ``[key=value]``), the steps (min, max,
+    median, len, xK, date, a format spec), and one plain sentence for what does not resolve."""
+    (tmp_path / "demo.json").write_text(json.dumps({
+        "command": "python3 bench/speed/demo.py --fast",
+        "date_utc": "2026-12-06T09:00:00+00:00",
+        "figures": {"wall s": [2.0, 1.0, 3.0], "rows": [{"level": "low", "m": "a", "e": {"M": 1.0, "V": 5.0}},
+                                                       {"level": "bench", "m": "a", "e": {"M": 2.0, "V": 7.0}},
+                                                       {"level": "bench", "m": "b", "e": {"M": 4.0, "V": 9.0}}],
+                    "ratio": 0.1234, "none": None,
+                    "cases": [{"case": {"caster": 0.0}, "clean": False, "e": 1.5},
+                              {"case": {"caster": 0.015}, "clean": False, "e": 2.5},
+                              {"case": {"caster": 0.0}, "clean": True, "e": 9.0}]},
+    }))  # fmt: skip
+    monkeypatch.setattr(FIGURES, "RESULTS", tmp_path)
+    FIGURES.results.cache_clear()
+    try:
+        page = (
+            "{{ demo:command }} on {{ demo:date_utc|date }}: {{ demo:figures.wall s|median;.3g }} s of "
+            "{{ demo:figures.wall s|len }}, max {{ demo:figures.wall s.2 }}, {{ demo:figures.ratio|x100;.1f }} %, "
+            "{{ demo:figures.rows.[level=bench].e.M+V|min }}..{{ demo:figures.rows.[level=bench].e.*|max;.0f }}, "
+            "{{ demo:figures.rows.[level=bench,m=b].e.M|.2f }}, {{demo:figures.rows.0.m}}, "
+            "{{ demo:figures.cases.[case/caster=0,clean=false].e }}"
+        )
+        assert FIGURES.render_page(page) == (
+            "python3 bench/speed/demo.py --fast on 2026-12-06: 2 s of 3, max 3.0, 12.3 %, 2.0..9, 4.00, a, 1.5"
+        )
+        for bad, said in [
+            ("{{ nothing:command }}", "no results file bench/results/nothing.json"),
+            ("{{ demo:figures.missing }}", "no value at 'figures.missing'"),
+            ("{{ demo:figures.wall s }}", "is a list: take min, max, median or len of it"),
+            ("{{ demo:figures.none }}", "is null"),
+            ("{{ demo:figures.rows.[level=high].m }}", "no value at"),
+            ("{{ demo:command|.2f }}", "format '.2f' does not apply"),
+        ]:
+            with pytest.raises(FIGURES.FigureError, match=re.escape(said)):
+                FIGURES.render_page(f"text {bad}", "page.md")
+    finally:
+        FIGURES.results.cache_clear()

@@ -1,0 +1,150 @@
+"""mkdocs hook: figures on the site rendered from the benchmarks' result files, so that a quoted figure and the run
+that measured it cannot disagree.
+
+A page writes ``{{ FILE:PATH|OPS }}`` where it quotes a figure:
+
+* ``FILE`` is a results file of ``bench/results/`` without ``.json`` (``bench_report``, ``bench_live-x20``);
+* ``PATH`` is a dotted path into it (``figures.wall_s_median``, ``command``, ``date_utc``; a key may hold spaces:
+  ``figures.in_one_process.ROS 1 bag.loop_s``); a number indexes a list,
+  ``*`` takes every item of a list or every value of a mapping, ``A+B`` the keys A and B of a mapping,
+  ``[key=value,...]`` the items of a list whose keys hold those values (``a/b=v``: the key b of the item's mapping a;
+  numbers compare as numbers, ``true``/``false`` as JSON's; one item, or a list of several, of which an aggregate
+  below makes one number);
+* ``OPS`` (optional) are ``;``-separated steps applied in order: ``min``, ``max``, ``median``, ``len`` (of a list or
+  a mapping),
+  ``xK`` (multiply by K: ``x1000`` for s -> ms, ``x100`` for a fraction -> %), ``date`` (the ``YYYY-MM-DD`` of a
+  timestamp), and last a Python format spec (``.3g``, ``,.0f``, ``.2f``).  Without a format spec a value is printed as
+  ``str`` gives it.
+
+The command column of a table is itself ``{{ FILE:command }}``, so the command shown is the one that wrote the figures.
+A placeholder that does not resolve fails the build (``mkdocs build --strict`` in CI), and
+``tests/contract/test_docs.py`` renders every page's placeholders.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import statistics
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[2]
+RESULTS = ROOT / "bench" / "results"
+
+#: ``{{ FILE:PATH }}`` or ``{{ FILE:PATH|OPS }}``.
+PLACEHOLDER = re.compile(r"\{\{\s*([\w-]+):([^|}]+?)(?:\|([^}]*))?\s*\}\}")
+
+_AGGREGATES = {"min": min, "max": max, "median": statistics.median, "len": len}
+
+
+class FigureError(ValueError):
+    """A placeholder that names no file, no value, or a step that does not apply."""
+
+
+@cache
+def results(name: str) -> dict[str, Any]:
+    """The results file ``bench/results/<name>.json``."""
+    path = RESULTS / f"{name}.json"
+    if not path.is_file():
+        raise FigureError(f"no results file bench/results/{name}.json")
+    return json.loads(path.read_text(encoding="utf-8"))
+
+
+def value(document: Any, path: str) -> Any:
+    """The value at the dotted ``path`` of ``document`` (see the module docstring)."""
+
+    def walk(node: Any, parts: list[str]) -> Any:
+        if not parts:
+            return node
+        head, rest = parts[0], parts[1:]
+        if head == "*":
+            items = node.values() if isinstance(node, dict) else node
+            return [walk(item, rest) for item in items]
+        if head.startswith("[") and head.endswith("]"):  # the items of a list whose keys hold these values
+            wanted = dict(cond.split("=", 1) for cond in head[1:-1].split(","))
+            chosen = [x for x in node if all(_holds(x, k, v) for k, v in wanted.items())]
+            if not chosen:
+                raise KeyError(f"no item with {head}")
+            return walk(chosen[0], rest) if len(chosen) == 1 else [walk(x, rest) for x in chosen]
+        if "+" in head:  # several keys of a mapping
+            return [walk(node[key], rest) for key in head.split("+")]
+        if isinstance(node, list):
+            return walk(node[int(head)], rest)
+        return walk(node[head], rest)
+
+    try:
+        return walk(document, path.split("."))
+    except (KeyError, IndexError, ValueError, TypeError) as exc:
+        raise FigureError(f"no value at {path!r} ({type(exc).__name__}: {exc})") from None
+
+
+def _holds(item: Any, key: str, wanted: str) -> bool:
+    """Whether ``item``'s ``key`` (``a/b``: the key b of its mapping a) holds ``wanted``: equal as text, or as numbers
+    (``caster=0`` matches 0.0), ``True``/``False`` as JSON's true/false."""
+    for part in key.split("/"):
+        if not isinstance(item, dict) or part not in item:
+            return False
+        item = item[part]
+    if isinstance(item, bool) or item is None:
+        return str(item).lower() == wanted.lower() or str(item) == wanted
+    if str(item) == wanted:
+        return True
+    try:
+        return float(item) == float(wanted)
+    except (TypeError, ValueError):
+        return False
+
+
+def _flat(v: Any) -> list[Any]:
+    return [y for x in v for y in _flat(x)] if isinstance(v, list) else [v]
+
+
+def render(name: str, path: str, ops: str | None = None) -> str:
+    """The text of ``{{ name:path|ops }}``."""
+    v = value(results(name), path)
+    spec = ""
+    for op in [o.strip() for o in (ops or "").split(";") if o.strip()]:
+        if op == "len" and isinstance(v, dict):  # the keys of a mapping
+            v = len(v)
+        elif op in _AGGREGATES:
+            if not isinstance(v, list):
+                raise FigureError(f"{op} of {path!r}, which is not a list")
+            v = _AGGREGATES[op](_flat(v))
+        elif re.fullmatch(r"x[-+0-9.e]+", op):
+            v = [x * float(op[1:]) for x in _flat(v)] if isinstance(v, list) else v * float(op[1:])
+        elif op == "date":
+            v = str(v)[:10]
+        else:
+            spec = op
+    if isinstance(v, list):
+        raise FigureError(f"{path!r} is a list: take min, max, median or len of it")
+    if v is None:
+        raise FigureError(f"{path!r} is null (not measured in that run)")
+    try:
+        return format(v, spec) if spec else str(v)
+    except (ValueError, TypeError) as exc:
+        raise FigureError(f"format {spec!r} does not apply to {v!r}: {exc}") from None
+
+
+def render_page(markdown: str, where: str = "page") -> str:
+    """``markdown`` with every placeholder replaced by its figure; raises :class:`FigureError` naming the first that
+    does not resolve."""
+
+    def one(m: re.Match[str]) -> str:
+        try:
+            return render(m.group(1), m.group(2), m.group(3))
+        except FigureError as exc:
+            raise FigureError(f"{where}: {m.group(0)}: {exc}") from None
+
+    return PLACEHOLDER.sub(one, markdown)
+
+
+def on_page_markdown(markdown: str, page: Any, config: Any, files: Any) -> str:
+    from mkdocs.exceptions import PluginError
+
+    try:
+        return render_page(markdown, page.file.src_path)
+    except FigureError as exc:
+        raise PluginError(str(exc)) from None
