@@ -27,6 +27,9 @@ short at the log's two ends (the mean of the samples there is).
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from typing import Any
+
 import numba
 import numpy as np
 
@@ -120,3 +123,20 @@ class SignSpeeds:
         means = _window_means(x, self.h, len(self._ctx), 0)
         self._held = (np.empty(0), np.empty((0, 2)), np.empty((0, 2)))
         return ht, he, hu, means
+
+
+def mean_sign_counts(pieces: Iterable[Any], h: int) -> tuple[np.ndarray, np.ndarray]:
+    """(2,) counts of samples whose centred mean speed over 2h + 1 samples is > 0 and < 0 (a second pass over
+    ``pieces``; :class:`wmrid.estimators.sign_speed.SignSpeeds`, as the sign columns are made).  h = 0: zeros (the
+    mean is the measured speed, already counted)."""
+    pos, neg = np.zeros(2), np.zeros(2)
+    if h == 0:
+        return pos, neg
+    signs = SignSpeeds(h)
+    for piece in pieces:
+        if len(piece.t):
+            *_, mean = signs.feed(piece.t, np.asarray(piece.eta, dtype=np.float64), piece.tau)
+            pos += (mean > 0).sum(axis=0)
+            neg += (mean < 0).sum(axis=0)
+    *_, mean = signs.finish()
+    return pos + (mean > 0).sum(axis=0), neg + (mean < 0).sum(axis=0)

@@ -71,16 +71,39 @@ def test_the_median_of_many_distinct_steps_comes_from_the_histogram_to_its_state
     ("signs", "kind"), [((1, 1), "paper"), ((-1, 1), "paper"), ((-1, -1), "paper"), ((1, 0), "general")]
 )
 def test_the_form_follows_the_wheels_signs(signs, kind):
-    """The paper's form when each wheel keeps one strict sign (as model.choose_form on the whole log)."""
+    """The paper's form when each wheel keeps one strict sign (as model.choose_form on the whole log); a wheel that
+    turns the other way for 0.2 s (longer than the sign columns' 20 ms mean) needs the general form."""
     t, _, tau = _log(reversing=False)
     eta = np.abs(np.random.default_rng(1).normal(5.0, 1.0, (len(t), 2))) + 0.1
     eta = eta * np.array([s if s else 1 for s in signs])
     if signs[1] == 0:
-        eta[100, 1] = -eta[100, 1]  # one sample the other way
+        eta[100:300, 1] = -eta[100:300, 1]  # 0.2 s the other way
     form = survey(_pieces(t, eta, tau, 999), "log").form()
     assert form.kind == kind
     if kind == "paper":
         assert form.signs == signs
+
+
+@pytest.mark.parametrize("size", [1, 999, 5000])
+def test_a_speed_that_dips_across_zero_within_the_sign_mean_keeps_the_paper_form(size):
+    """Samples the other way that the 20 ms centred mean of the sign columns does not follow (a coarse encoder's
+    derived speed where the true speed is slow): the columns keep one sign, so the form is the paper's, whatever the
+    pieces; the mean's counts are made only when the measured speed does not keep one sign.  A one-shot iterator
+    cannot be read twice: its survey keeps the measured signs' answer (general)."""
+    t, _, tau = _log(reversing=False)
+    eta = np.abs(np.random.default_rng(1).normal(5.0, 1.0, (len(t), 2))) + 0.1
+    eta[100, 1] = -eta[100, 1]  # one sample the other way
+    eta[2000:2004, 0] = -0.5  # four
+    sv = survey(_pieces(t, eta, tau, size), "log")
+    assert not any(sv.positive)
+    assert (sv.sign_pos == len(t)).all()
+    assert not sv.sign_neg.any()
+    assert sv.form().kind == "paper"
+    assert sv.form().signs == (1, 1)
+    clean = survey(_pieces(t, np.abs(eta), tau, size), "log")
+    assert clean.form().kind == "paper"
+    assert not clean.sign_pos.any()
+    assert survey(iter(_pieces(t, eta, tau, size)), "log").form().kind == "general"
 
 
 def test_an_implausible_value_stops_the_survey_naming_its_time():
