@@ -12,7 +12,7 @@ A page writes ``{{ FILE:PATH|OPS }}`` where it quotes a figure:
   below makes one number);
 * ``OPS`` (optional) are ``;``-separated steps applied in order: ``min``, ``max``, ``median``, ``len`` (of a list or
   a mapping),
-  ``xK`` (multiply by K: ``x1000`` for s -> ms, ``x100`` for a fraction -> %), ``date`` (the ``YYYY-MM-DD`` of a
+  ``xK`` (multiply by K: ``x1000`` for s -> ms, ``x100`` for a fraction -> %), ``abs``, ``date`` (the ``YYYY-MM-DD`` of a
   timestamp), and last a Python format spec (``.3g``, ``,.0f``, ``.2f``).  Without a format spec a value is printed as
   ``str`` gives it.
 
@@ -114,6 +114,8 @@ def render(name: str, path: str, ops: str | None = None) -> str:
             v = _AGGREGATES[op](_flat(v))
         elif re.fullmatch(r"x[-+0-9.e]+", op):
             v = [x * float(op[1:]) for x in _flat(v)] if isinstance(v, list) else v * float(op[1:])
+        elif op == "abs":
+            v = [abs(x) for x in _flat(v)] if isinstance(v, list) else abs(v)
         elif op == "date":
             v = str(v)[:10]
         else:
