@@ -27,16 +27,16 @@ import math
 import os
 import time
 from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from wmrid.api.identification import prepare
 from wmrid.api.inputs import LogOptions, reader_arguments
+from wmrid.api.live_final import FINAL_PIECE_ROWS as FINAL_PIECE_ROWS, lean, renamed
+from wmrid.api.live_observers import fed, first_observers, warm_up
 from wmrid.core.errors import UsageError, option
-from wmrid.core.wheel_log import stream_limits
 from wmrid.estimators.observer.live_update import LiveUpdate
 from wmrid.estimators.options import ObserverOptions
 from wmrid.estimators.result import IdentificationResult
@@ -53,13 +53,12 @@ POLL_S = 0.05
 START_SAMPLES = 50
 #: s: how long the process may take, after Ctrl-C or SIGTERM, to identify what it received and write it.
 FINISH_GRACE_S = 600.0
-#: Samples (about 17 min at 1 kHz) beyond which the final identify runs lean (:func:`_lean`): its memory then does not
-#: grow with the stream's length, for about 2.4 times the time (an hour at 1 kHz: 9.0 s instead of 3.7 s).  Except
-#: where identify itself holds a log: the closed-loop check reads a log of up to 2 M samples whole when its prediction
-#: error shows a disturbance (wmrid.estimators.feedback.MAX_SAMPLES; 30 min at 1 kHz: 461 MB), as offline.
+#: Samples (about 17 min at 1 kHz) beyond which the final identify runs lean (:func:`wmrid.api.live_final.lean`): its
+#: memory then does not grow with the stream's length, for about 2.4 times the time (an hour at 1 kHz: 9.0 s instead
+#: of 3.7 s).  Except where identify itself holds a log: the closed-loop check reads a log of up to 2 M samples whole
+#: when its prediction error shows a disturbance (wmrid.estimators.feedback.MAX_SAMPLES; 30 min at 1 kHz: 461 MB), as
+#: offline.  Samples in a piece of the lean identify's log: FINAL_PIECE_ROWS (wmrid.api.live_final).
 FINAL_CACHE_ROWS = 1_048_576
-#: Samples in a piece of the final identify's log when it runs lean (CHUNK_ROWS otherwise): 65 s at 1 kHz, 2.6 MB.
-FINAL_PIECE_ROWS = 65_536
 
 
 @dataclass(frozen=True)
@@ -176,7 +175,7 @@ class LiveRun:
         self.monitor = self._monitor(monitor, ReaderSettings(**args))
         self.changes: list[LiveChange] = []  # found and not yet handed out
         self.source = open_live(os.fspath(source), ReaderSettings(**args), reconnect)
-        _warm_up(self.source.tables)
+        warm_up(self.source.tables)
         self.observers: list[tuple[Any, Any]] = []  # (form, OnlineObserver), the one shown first
         self.buffer: list[Any] = []
         self.samples = 0
@@ -208,66 +207,18 @@ class LiveRun:
 
     # -- the observer ---------------------------------------------------------------------------------------------
     def _start_observers(self) -> None:
-        from wmrid.core.wheel_log import WheelLog
-        from wmrid.estimators.observer.observe import caster_geometry
-        from wmrid.estimators.observer.survey import survey
-        from wmrid.model.dynamics import RegressorForm
-
         t = np.concatenate([p.t for p in self.buffer])
         eta = np.concatenate([p.eta for p in self.buffer])
         tau = np.concatenate([p.tau for p in self.buffer])
         self.effort_unit = self.buffer[0].effort_unit
-        sv = survey([WheelLog(t=t, eta=eta, tau=tau, source=self.source.name)], self.source.name, self.effort_unit)
-        choice = self.settings.form
-        robot = self.prep.robot
-        if self.prep.friction == "wheel+caster":
-            geometry = caster_geometry(robot) if robot is not None and robot.casters else ()
-            forms = [RegressorForm("general", caster=True, geometry=geometry)]
-        else:
-            first = sv.form()
-            forms = [first] if first.kind == "paper" and choice != "general" else []
-            if choice != "paper" or not forms:
-                forms.append(RegressorForm("general"))
-            if self.prep.friction == "auto":
-                self.notes.append("friction: wheel live; the final result chooses between wheel and wheel+caster")
-        if choice == "paper" and forms[0].kind != "paper":
-            self.notes.append("--form paper: a wheel stops or reverses, so the general form is shown live")
-        self.observers = [(f, self._observer(f, sv)) for f in forms]
+        self.observers = first_observers(
+            t, eta, tau, self.effort_unit, self.source.name, self.prep, self.settings, self.notes
+        )
         self.buffer = []
         self._feed_observers(t, eta, tau)
 
-    def _observer(self, form: Any, sv: Any) -> Any:
-        from wmrid.estimators.observer.observe import default_box
-        from wmrid.estimators.observer.online import OnlineObserver
-        from wmrid.estimators.observer.settings import ObserverSettings
-        from wmrid.estimators.sign_speed import sign_half_window
-        from wmrid.model import dynamics as model
-
-        robot = self.prep.robot if self.effort_unit == "N m" else None
-        s = self.settings
-        if robot is not None:
-            start0 = np.concatenate([model.base_parameters(robot.nominal), np.zeros(form.n_base - 8)])
-            theta_init = model.intermediate_parameters(start0, form)
-        else:
-            theta_init = sv.data_start(form)
-        lo, hi = default_box(theta_init, form, s.box_width, robot is not None)
-        settings = ObserverSettings(
-            form=form, theta_init=theta_init, theta_min=lo, theta_max=hi, k=s.k, alpha=s.alpha,
-            torque_hold=s.torque_hold, control_rate=s.control_rate,
-        )  # fmt: skip
-        return OnlineObserver(settings, sign_half_window=sign_half_window(sv.n, sv.duration))
-
     def _feed_observers(self, t: np.ndarray, eta: np.ndarray, tau: np.ndarray) -> None:
-        kept = []
-        for form, obs in self.observers:
-            if form.kind == "paper" and len(self.observers) > 1:
-                signs = np.array(form.signs, dtype=float)
-                if not np.all(eta * signs > 0):  # a wheel stopped or reversed: the paper form no longer holds
-                    continue
-            with np.errstate(over="ignore", invalid="ignore"):
-                obs.feed(t, eta, tau)
-            kept.append((form, obs))
-        self.observers = kept
+        self.observers = fed(self.observers, t, eta, tau)
 
     def _feed(self, piece: Any) -> None:
         if len(piece) == 0:
@@ -421,7 +372,7 @@ class LiveRun:
         natural = not self.stopped and (self.source.ended is not None or self.reason.startswith("no data"))
         final = self.source.final_input(natural)
         try:
-            with _lean(self.samples > FINAL_CACHE_ROWS):
+            with lean(self.samples > FINAL_CACHE_ROWS):
                 result = identify(final.path, self.prep.robot, options=self.options, observer=self.settings)
         except WmridError as err:
             # what was received is not lost with the result (a stream with a gap, messages dropped on the way, is
@@ -434,7 +385,7 @@ class LiveRun:
         finally:
             self.source.close()
         if final.copied:
-            result = _renamed(result, final.path, final.name)
+            result = renamed(result, final.path, final.name)
             read_from = f"a copy of the {self.source.bytes_read:,} bytes read" if final.name != "<stdin>" else (
                 f"the {self.source.bytes_read:,} bytes read from standard input")  # fmt: skip
             read_from = final.what or read_from
@@ -450,59 +401,6 @@ class LiveRun:
         self.source.close()
 
 
-@contextmanager
-def _lean(on: bool) -> Iterator[None]:
-    """Within, when ``on``: identify reads its log again on each pass instead of keeping it, in pieces of
-    FINAL_PIECE_ROWS (:func:`wmrid.core.wheel_log.stream_limits`), runs its passes one after the other on this thread
-    (:func:`wmrid.estimators.observer.replay.one_thread_within`: two passes at once hold two pieces and a timing
-    window), and, in the command-line process, malloc gives freed memory back at once
-    (:func:`wmrid.runtime.limits.lean_malloc`; left so: the command ends with this identify).  The result is the same
-    to rounding; the final identify of an hour's stream at 1 kHz peaks 265 MB lower (in a fresh process: 512 ->
-    247 MB; caches 415, one thread 309, malloc 272, pieces 247), in 9.1 s instead of 3.7 s."""
-    if not on:
-        yield
-        return
-    # the observer's replay (numba kernels): loaded by the identify that follows anyway, not before it
-    from wmrid.estimators.observer.replay import one_thread_within
-    from wmrid.runtime.limits import lean_malloc  # glibc's mallopt through ctypes: only here
-
-    lean_malloc()
-    with one_thread_within(), stream_limits(cache=0, piece=FINAL_PIECE_ROWS):
-        yield
-
-
-def _warm_up(tables: bool) -> None:
-    """Load what the first estimate needs before the first message arrives: the readers' libraries and the compiled
-    kernels (numba loads them from its cache on first use, about 1.5 s), run once on a few synthetic samples.
-    ``tables``: the source may bring CSV rows (pandas and pyarrow's CSV; 63 MB of memory, not loaded for a recording or
-    a WebSocket server, whose final identify does not need them either)."""
-    import importlib
-
-    from wmrid.core.extras import available
-    from wmrid.core.wheel_log import WheelLog
-    from wmrid.estimators.observer.observe import default_box
-    from wmrid.estimators.observer.online import OnlineObserver, online_estimate
-    from wmrid.estimators.observer.settings import ObserverSettings
-    from wmrid.estimators.observer.survey import survey
-    from wmrid.model.dynamics import RegressorForm
-
-    names = ("pandas", "pyarrow.csv", "wmrid.io.table.csv_log") if tables else ()
-    for name in (*names, "wmrid.io.mcap.reader", "wmrid.io.ros.joints"):
-        if name != "pyarrow.csv" or available(name):  # pyarrow: the parquet extra
-            importlib.import_module(name)
-    t = np.arange(200) * 1e-3
-    eta = np.column_stack([2.0 + np.sin(40 * t), 2.0 + np.cos(30 * t)])
-    tau = np.column_stack([np.cos(40 * t), np.sin(30 * t)])
-    sv = survey([WheelLog(t=t, eta=eta, tau=tau, source="warm-up")], "warm-up")
-    for form in (RegressorForm("paper"), RegressorForm("general")):
-        theta = sv.data_start(form)
-        lo, hi = default_box(theta, form, 10.0, False)
-        obs = OnlineObserver(ObserverSettings(form=form, theta_init=theta, theta_min=lo, theta_max=hi, k=10.0))
-        with np.errstate(all="ignore"):
-            obs.feed(t, eta, tau)
-            online_estimate(obs)
-
-
 def check_output(path: str | os.PathLike[str], force: bool = False) -> None:
     """Refuse, before a run that may take hours, an output file that could not be written at its end (an existing file
     without ``force``, a missing folder); standard output and other streams pass."""
@@ -512,16 +410,6 @@ def check_output(path: str | os.PathLike[str], force: bool = False) -> None:
 
     if stream_fd(str(path)) is None:
         _check_target(Path(path), force)
-
-
-def _renamed(result: IdentificationResult, path: str, name: str) -> IdentificationResult:
-    """``result`` of the copy at ``path`` naming the source as the user named it."""
-
-    def fix(text: Any) -> Any:
-        return text.replace(path, name) if isinstance(text, str) else text
-
-    log_info = replace(result.log_info, notes=tuple(fix(n) for n in result.log_info.notes))
-    return replace(result, source=name, warnings=tuple(fix(w) for w in result.warnings), log_info=log_info)
 
 
 def live(

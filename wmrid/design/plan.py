@@ -3,9 +3,9 @@
 :func:`make_plan` sets up the design problem (:mod:`wmrid.design.problem`) from the robot's nominal base parameters,
 the limits and the sensor noise, searches it (:mod:`wmrid.design.search`) on a coarse grid, and predicts the
 precision of the result on the log's own grid (its rate, at most :data:`FINE_GRID` Hz), together with the same
-prediction for two baselines of the same duration within the same limits: the paper's sinusoid and the back-and-forth
-``reversing`` drive of ``wmrid simulate`` (each slowed down uniformly when it would break a limit; the area is not
-imposed on them, and whether they leave it is said).
+prediction for two baselines of the same duration within the same limits (:mod:`wmrid.design.baselines`): the paper's
+sinusoid and the back-and-forth ``reversing`` drive of ``wmrid simulate`` (each slowed down uniformly when it would
+break a limit; the area is not imposed on them, and whether they leave it is said).
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import UsageError, option
+from wmrid.design.baselines import baseline_forecast, baseline_motion as baseline_motion
 from wmrid.design.excitation import RAMP_SECONDS, Excitation, pose_along
 from wmrid.design.information import DEFAULT_K, GivenLogs, SensorNoise
 from wmrid.design.limits import LIMIT_NAMES, Limits
@@ -26,7 +27,6 @@ from wmrid.design.plan_records import (
     Criterion,
     GivenResults,
     LimitUse,
-    OpenFloorForecast,
     PlanSettings,
     PredictedStd,
     ReferenceSamples,
@@ -35,7 +35,7 @@ from wmrid.design.plan_records import (
 )
 from wmrid.design.problem import CORRELATION, CRITERIA, DIRECTION_SHARE, FLOOR_SHARE, Motion, Problem
 from wmrid.design.search import SearchResult, search
-from wmrid.model.dynamics import RegressorForm, choose_form, load_signals
+from wmrid.model.dynamics import RegressorForm, load_signals
 
 SCHEMA = 1
 #: Hz of the grid the search runs on (the plan's signals stay under 1 Hz) and the finest grid of the final prediction.
@@ -271,34 +271,6 @@ def separability(motion: Motion, wheel_speed_limit: float, interior: np.ndarray)
     )  # fmt: skip
 
 
-def baseline_motion(problem: Problem, name: str, area: bool = True) -> tuple[Motion, float]:
-    """(motion, factor): the ``wmrid simulate`` trajectory ``name`` over the plan's duration on ``problem``'s grid,
-    slowed down uniformly (speeds times factor <= 1) until it keeps every limit (``area``: the area too)."""
-    from wmrid.sim.closed_loop import KIND  # the simulator's built-in trajectories: only a plan's baselines
-    from wmrid.sim.simulate import TRAJECTORY_PARAMETERS  # the simulator (~30 ms): only a plan's baselines
-
-    traj = np.array(list(TRAJECTORY_PARAMETERS[name].values()), dtype=np.float64)
-    v, w, dv, dw = _reference_signals(KIND[name], traj, problem.t).T
-    ratios = problem.ratios(problem.motion_from(problem.t, v, w, dv, dw))
-    factor = 1.0
-    for _ in range(40):
-        worst = max(r for n, r in ratios.items() if area or not n.startswith("area"))
-        if worst <= 1.0 + 1e-9:
-            break
-        factor *= 0.999 / worst if worst > 1.0 else 1.0
-        ratios = problem.ratios(problem.motion_from(problem.t, factor * v, factor * w, factor * dv, factor * dw))
-    return problem.motion_from(problem.t, factor * v, factor * w, factor * dv, factor * dw), factor
-
-
-def _reference_signals(kind: int, traj: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """(n, 4): v, w, v', w' of a built-in trajectory at times t (compiled: a 1 kHz minute is 60,000 calls)."""
-    # the simulator's reference (its numba kernels, cached on disk with them): only a plan's baselines
-    from wmrid.sim.closed_loop import reference_signals
-
-    out: np.ndarray = reference_signals(kind, traj, np.ascontiguousarray(t, dtype=np.float64))
-    return out
-
-
 def _problem(
     theta0: np.ndarray, form: RegressorForm, r: float, b: float, limits: Limits, noise: SensorNoise, duration: float,
     grid: float, criterion: str, given_info: GivenLogs | None, k: float,
@@ -393,7 +365,7 @@ def make_plan(
 
     predicted = predicted_std(fine, theta0, cov, form.base_names)
     say("baselines")
-    baselines = {name: _baseline(fine, name, theta0, form, value) for name in BASELINES}
+    baselines = {name: baseline_forecast(fine, name, theta0, form, value) for name in BASELINES}
     warnings = []
     if limits.max_torque is None:
         warnings.append(
@@ -435,52 +407,6 @@ def make_plan(
         margins=separability(motion, limits.max_wheel_speed, interior), given=None if given is None else given[1],
         warnings=tuple(warnings),
     )  # fmt: skip
-
-
-def _baseline(fine: Problem, name: str, theta0: np.ndarray, form: RegressorForm, value: float) -> BaselineForecast:
-    """The prediction for baseline ``name`` within every limit (the area included: that is the comparison), and
-    with the area ignored (how it would do on an open floor), on the plan's fine grid.  Each is predicted under the
-    model identify fits to that log: the plan's, except that wheels that never reverse get the paper's form and no
-    caster drag (it cannot be told from F_d there), so the drag's parameters are then undetermined (inf) and not
-    counted."""
-    within, _ = _forecast(fine, name, theta0, form, value, area=True)
-    open_floor, motion = _forecast(fine, name, theta0, form, value, area=False)
-    ratios = fine.ratios(motion)
-    leaves = bool(max(ratios["area_x"], ratios["area_y"]) > 1.0 / (1.0 - fine.limits.margin))
-    return BaselineForecast(**within, area_ignored=OpenFloorForecast(**open_floor, leaves_area=leaves))
-
-
-def _forecast(
-    fine: Problem, name: str, theta0: np.ndarray, form: RegressorForm, value: float, area: bool
-) -> tuple[dict[str, Any], Motion]:
-    """(the figures of a :class:`~wmrid.design.plan_records.DriveForecast`, the motion) of baseline ``name`` slowed
-    down for the limits (``area``: the area too) (:func:`_baseline`)."""
-    motion, factor = baseline_motion(fine, name, area=area)
-    base_form = choose_form(motion.eta)
-    if base_form.kind == "general":
-        base_form = form
-    n = base_form.n_base
-    given = fine.given_info
-    if given is not None and n < len(theta0):
-        given = GivenLogs(given.weight[:n, :n], given.spread[:n, :n])
-    problem = Problem(
-        theta0[:n], base_form, fine.r, fine.b, fine.limits, fine.noise, duration=fine.duration,
-        period=fine.period, harmonics=fine.harmonics, ramp=fine.ramp, grid=fine.t.size / fine.duration, k=fine.k,
-        criterion=fine.criterion, given_info=given,
-    )  # fmt: skip
-    rel = np.full(len(theta0), math.inf)
-    try:
-        cov = problem.covariance(motion)
-        rel[:n], crit = problem.relative_std(cov), problem.criterion_value(cov)
-    except np.linalg.LinAlgError:
-        crit = math.inf
-    counted = rel[: min(n, fine.judged)]
-    figures = {
-        "value": crit, "relative": dict(zip(form.base_names, map(float, rel), strict=True)),
-        "worst": form.base_names[int(np.argmax(counted))], "slowed_by": factor, "peaks": motion.peaks(),
-        "improvement": crit / value if value > 0 else math.inf, "friction": base_form.friction,
-    }  # fmt: skip
-    return figures, motion
 
 
 def _inseparable(duration: float) -> str:

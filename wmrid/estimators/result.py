@@ -4,14 +4,14 @@
 one back (``report``, ``monitor`` and ``compare`` read saved results through it), so that
 ``from_dict(r.to_dict()).to_dict() == r.to_dict()``.  The JSON keeps the history decimated to at most
 ``JSON_HISTORY_POINTS`` samples and the intermediate parameters' standard errors, not their covariance: a result
-read back carries those, and the base parameters' full covariance under ``estimate``.
+read back carries those, and the base parameters' full covariance under ``estimate``.  The pieces of the JSON (null
+for NaN and inf, the estimate, the decimated history) are :mod:`wmrid.estimators.result_json`'s.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -23,6 +23,14 @@ from wmrid.estimators.findings import Diagnostics
 from wmrid.estimators.observer.settings import ObserverSettings
 from wmrid.estimators.parameter import Parameter, parameter_table
 from wmrid.estimators.records import LogInfo, Validation, Verdict
+from wmrid.estimators.result_json import (
+    JSON_HISTORY_POINTS as JSON_HISTORY_POINTS,
+    box,
+    estimate_dict,
+    finite_or_none as finite_or_none,
+    floats,
+    history_dict,
+)
 from wmrid.model.dynamics import THETA0_UNITS, RegressorForm
 from wmrid.model.payload import PayloadEstimate
 
@@ -41,9 +49,6 @@ def reported_names(form: RegressorForm) -> tuple[str, ...]:
 #: than the observer has that method's ``settings`` (:class:`MethodSettings`) and the observer's run's under
 #: ``observer_settings`` (version 1 put the observer's in ``settings`` whatever the method; both are read).
 SCHEMA_VERSION = 2
-
-#: Points of the history kept in a JSON result (enough for the report's figures).
-JSON_HISTORY_POINTS = 300
 
 
 class LogLike(Protocol):
@@ -345,50 +350,6 @@ class IdentificationResult:
         return out
 
 
-def history_dict(result: Any, max_points: int = JSON_HISTORY_POINTS) -> dict[str, Any]:
-    """A compact history for JSON: t, theta (p names -> list), e_r, e_l, lambda_min, at most ``max_points``."""
-    hist = result.history
-    idx = np.unique(np.linspace(0, len(hist.t) - 1, min(max_points, len(hist.t))).round().astype(int))
-    names = result.form.theta_names()
-    flat = hist.theta[idx].reshape(len(idx), -1)
-    return {
-        "t": hist.t[idx].tolist(),
-        "theta": {name: flat[:, j].tolist() for j, name in enumerate(names)},
-        "e_r": hist.e[idx, 0].tolist(),
-        "e_l": hist.e[idx, 1].tolist(),
-        "lambda_min": hist.lambda_min[idx].tolist(),
-    }
-
-
-def finite_or_none(x: float) -> float | None:
-    return float(x) if math.isfinite(x) else None
-
-
-def estimate_dict(est: BaseEstimate, names: tuple[str, ...]) -> dict[str, Any]:
-    """The method-neutral estimate as JSON: theta0 in ``names`` order with its full covariance (null where the log
-    does not determine a parameter), the method and its degrees of freedom; the weighting covariance when the method
-    has one (:attr:`BaseEstimate.weight_cov`)."""
-    out = {
-        "method": est.method,
-        "names": list(names[: len(est.theta0)]),
-        "theta0": [finite_or_none(v) for v in est.theta0],
-        "covariance": [[finite_or_none(v) for v in row] for row in est.cov],
-        "dof": est.dof,
-    }
-    if est.weight_cov is not None:
-        out["weight_covariance"] = [[finite_or_none(v) for v in row] for row in est.weight_cov]
-    return out
-
-
-def _floats(values: Any) -> np.ndarray:
-    """A float array from JSON numbers, null read as NaN."""
-    return np.array([math.nan if v is None else float(v) for v in values], dtype=float)
-
-
-def _box(values: dict[str, Any], names: Sequence[str], p: int, missing: float) -> np.ndarray:
-    return np.array([missing if values[n] is None else float(values[n]) for n in names], dtype=float).reshape(2, p)
-
-
 def from_dict(data: Any, source: str = "result") -> IdentificationResult:
     """Read back the result that :meth:`IdentificationResult.to_dict` wrote (``identify --format json``).
 
@@ -435,17 +396,17 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
     method_settings = MethodSettings.from_dict(data["settings"]) if "observer_settings" in data else None
     settings = ObserverSettings(
         form=form,
-        theta_init=_box(theta_d["start"], names, p, math.nan),
-        theta_min=_box(theta_d.get("box_min", dict.fromkeys(names)), names, p, -math.inf),
-        theta_max=_box(theta_d.get("box_max", dict.fromkeys(names)), names, p, math.inf),
+        theta_init=box(theta_d["start"], names, p, math.nan),
+        theta_min=box(theta_d.get("box_min", dict.fromkeys(names)), names, p, -math.inf),
+        theta_max=box(theta_d.get("box_max", dict.fromkeys(names)), names, p, math.inf),
         k=float(settings_d["k"]),
         alpha=float(settings_d["alpha"]),
         torque_hold=settings_d.get("torque_hold", "zoh"),
         control_rate=settings_d.get("control_rate"),
     )
-    theta = _box(theta_d["values"], names, p, math.nan)
-    unconstrained = _box(theta_d.get("unconstrained", theta_d["values"]), names, p, math.nan)
-    theta_std = _box(theta_d.get("std", dict.fromkeys(names)), names, p, math.inf).ravel()
+    theta = box(theta_d["values"], names, p, math.nan)
+    unconstrained = box(theta_d.get("unconstrained", theta_d["values"]), names, p, math.nan)
+    theta_std = box(theta_d.get("std", dict.fromkeys(names)), names, p, math.inf).ravel()
     params_d = data["parameters"]
     parameters = {
         name: (math.nan if e["value"] is None else float(e["value"]), math.inf if e["std"] is None else float(e["std"]))
@@ -457,16 +418,16 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
     est_d = data.get("estimate")
     base = form.base_names
     if est_d is not None:
-        cov = np.array([_floats(row) for row in est_d["covariance"]], dtype=float).reshape(len(est_d["theta0"]), -1)
+        cov = np.array([floats(row) for row in est_d["covariance"]], dtype=float).reshape(len(est_d["theta0"]), -1)
         cov[~np.isfinite(cov)] = math.nan
         undetermined = np.isnan(np.diag(cov))
         cov[np.diag_indices_from(cov)] = np.where(undetermined, math.inf, np.diag(cov))
         weight_cov = None
         if est_d.get("weight_covariance") is not None:
-            weight_cov = np.array([_floats(row) for row in est_d["weight_covariance"]], dtype=float).reshape(cov.shape)
+            weight_cov = np.array([floats(row) for row in est_d["weight_covariance"]], dtype=float).reshape(cov.shape)
             unset = np.isnan(np.diag(weight_cov))  # undetermined: NaN row and column, +inf on the diagonal
             weight_cov[np.diag_indices_from(weight_cov)] = np.where(unset, math.inf, np.diag(weight_cov))
-        estimate = BaseEstimate(method=est_d["method"], theta0=_floats(est_d["theta0"]), cov=cov, dof=est_d.get("dof"),
+        estimate = BaseEstimate(method=est_d["method"], theta0=floats(est_d["theta0"]), cov=cov, dof=est_d.get("dof"),
                                 weight_cov=weight_cov)  # fmt: skip
         theta0_cov = cov
     else:
@@ -475,12 +436,12 @@ def _from_dict(data: dict[str, Any], source: str) -> IdentificationResult:
     hist_d = data.get("history")
     history = None
     if hist_d is not None:
-        t = _floats(hist_d["t"])
+        t = floats(hist_d["t"])
         history = History(
             t=t,
-            theta=np.column_stack([_floats(hist_d["theta"][n]) for n in names]).reshape(len(t), 2, p),
-            e=np.column_stack([_floats(hist_d["e_r"]), _floats(hist_d["e_l"])]),
-            lambda_min=_floats(hist_d["lambda_min"]),
+            theta=np.column_stack([floats(hist_d["theta"][n]) for n in names]).reshape(len(t), 2, p),
+            e=np.column_stack([floats(hist_d["e_r"]), floats(hist_d["e_l"])]),
+            lambda_min=floats(hist_d["lambda_min"]),
         )
     payload_d = data.get("payload")
     validation_d = data.get("validation")

@@ -27,16 +27,12 @@ from typing import Any
 from wmrid.core.errors import UsageError, option
 from wmrid.estimators.options import SETTING_NAMES
 from wmrid.fleets.manifest import read_manifest
+from wmrid.fleets.run_table import NewRows, failed_row, merged, missing_row, resume_table, row_keys
 from wmrid.fleets.table import (
     LogEntry,
-    canonical_options,
     content_digest,
-    empty_row,
     entries_from_paths,
     options_key,
-    read_arrow,
-    sort_table,
-    to_arrow,
     write_table,
 )
 from wmrid.fleets.worker import _one_line, _split_options, identify_batch, warm_up
@@ -105,54 +101,6 @@ class FleetRun:
     def rows(self) -> list[dict[str, Any]]:
         """The table's rows as dicts (as :func:`~wmrid.fleets.table.read_table` gives them)."""
         return [] if self.table is None else self.table.to_pylist()
-
-
-class _NewRows:
-    """This run's rows, kept as Arrow tables of :data:`CHUNK` rows: about half a kilobyte a row in the client, not
-    the few kilobytes of a dict, so a million logs fit."""
-
-    CHUNK = 2048
-
-    def __init__(self) -> None:
-        self.chunks: list[Any] = []
-        self.pending: list[dict[str, Any]] = []
-
-    def add(self, row: dict[str, Any]) -> None:
-        self.pending.append(row)
-        if len(self.pending) >= self.CHUNK:
-            self.chunks.append(to_arrow(self.pending))
-            self.pending = []
-
-    def table(self) -> Any:
-        import pyarrow as pa
-
-        return pa.concat_tables([*self.chunks, to_arrow(self.pending)])
-
-
-def _keys(table: Any) -> Any:
-    """Each row's (log's real path, options key) as one string column: the same log named two ways is one log."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
-
-    real = pa.array([os.path.realpath(log) for log in table["log"].to_pylist()], pa.string())
-    return pc.binary_join_element_wise(real, table["options_key"], "\x00")
-
-
-def _merged(old: Any, new: _NewRows, old_keys: Any = None) -> Any:
-    """The old table's rows that this run did not redo, and this run's, sorted (robot, time, log); ``old_keys``: the
-    old table's :func:`_keys`, computed once per run."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
-
-    fresh = new.table()
-    if old is None:
-        return sort_table(fresh)
-    keep = pc.invert(pc.is_in(_keys(old) if old_keys is None else old_keys, value_set=_keys(fresh)))
-    return sort_table(pa.concat_tables([old.filter(keep), fresh]))
-
-
-# ------------------------------------------------------------------------------------------------------------------
-# One log, on a worker
 
 
 # ------------------------------------------------------------------------------------------------------------------
@@ -382,12 +330,12 @@ def fleet(
 
         load_robot(robot, gear_ratio=given.get("gear_ratio"))  # a bad robot file is one error, not a row per log
     specs = plan(entries, given, robot, fit)
-    old, specs, notes = _resume(out, specs, resume, retry_failed, force)
+    old, specs, notes = resume_table(out, specs, resume, retry_failed, force)
     _check_payload_robots(specs)
     run = FleetRun(notes=notes, scheduler=scheduler)
     started = time.perf_counter()
-    new_rows = _NewRows()
-    old_keys = None if old is None else _keys(old)
+    new_rows = NewRows()
+    old_keys = None if old is None else row_keys(old)
     running = False
     # A log that is not there is its row's error at once, as a worker would write it, but without a task: 10^5 rows
     # of a manifest naming no log took 49 s of the cluster's time (issue 30).
@@ -396,7 +344,7 @@ def fleet(
     if missing:
         specs = [spec for spec, ok in zip(specs, there, strict=True) if ok]
         for spec in missing:
-            new_rows.add(_missing_row(spec))
+            new_rows.add(missing_row(spec))
         run.identified += len(missing)
         run.failed += len(missing)
         if progress is not None:
@@ -421,12 +369,12 @@ def fleet(
                     run.identified += 1
                     run.failed += row["error"] is not None
                     if time.perf_counter() - last_write >= checkpoint:
-                        write_table(_merged(old, new_rows, old_keys), out, force=True)
+                        write_table(merged(old, new_rows, old_keys), out, force=True)
                         last_write = time.perf_counter()
                 run.processing_s = time.perf_counter() - ready
                 run.client_cpu_s = time.process_time() - cpu
     finally:  # Ctrl-C, a lost scheduler: what is done is kept, and --resume continues from it
-        run.table = _merged(old, new_rows, old_keys)
+        run.table = merged(old, new_rows, old_keys)
         if running or not specs:
             write_table(run.table, out, force=True)  # an existing table without --resume/--force was refused above
     run.wall_s = time.perf_counter() - started
@@ -452,40 +400,6 @@ def _worker_count(client: Any) -> int:
             ) from None
         count = len(client.scheduler_info().get("workers", {}))
     return count
-
-
-def _resume(
-    out: str, specs: list[dict[str, Any]], resume: bool, retry_failed: bool, force: bool
-) -> tuple[Any, list[dict[str, Any]], list[str]]:
-    """(the old table or None, the specs, each with the content hash of its old row when that row is kept unless the
-    log changed: ``known_sha256``, notes)."""
-    exists = os.path.exists(out)
-    if not resume:
-        if exists and not force:
-            from wmrid.core.errors import OutputExistsError
-
-            raise OutputExistsError(
-                f"{out} exists; give --resume to continue it (logs already in it are not run again) or --force to "
-                "replace it"
-            )
-        return None, specs, []
-    if not exists:
-        return None, specs, [f"{out} does not exist yet: every log is identified"]
-    old = read_arrow(out, as_input=False)  # read, then rewritten: not an input the output must differ from
-    columns = old.select(["log", "options_key", "sha256", "error", "robot_id", "start_time", "time_source"])
-    known = {}
-    for log, key, sha, err, robot_id, start, source in zip(*columns.to_pydict().values(), strict=True):
-        if sha and not (retry_failed and err is not None):
-            known[(os.path.realpath(log), key)] = (sha, robot_id, start, source)
-    for spec in specs:
-        prev = known.get((os.path.realpath(spec["log"]), spec["options_key"]))
-        if prev is None:
-            continue
-        sha, robot_id, start, source = prev
-        renamed = robot_id != spec["robot_id"] or (spec["time"] is not None and start != spec["time"])
-        if not renamed:  # a manifest that now says another robot or time: identified again, to carry them
-            spec["known_sha256"] = sha  # the worker hashes; the same content is not identified again
-    return old, specs, []
 
 
 def _run_tasks(
@@ -518,7 +432,7 @@ def _run_tasks(
                 err = future.exception()
             except Exception as lost:  # a cancelled future has no exception to give: the cancellation is it
                 err = lost
-            rows = [_failed_row(spec, err) for spec in group]
+            rows = [failed_row(spec, err) for spec in group]
         future.release()
         nxt = next(groups, None)
         if nxt is not None:
@@ -530,24 +444,3 @@ def _run_tasks(
             if progress is not None:
                 progress(done, total, failed)
             yield row
-
-
-def _missing_row(spec: dict[str, Any]) -> dict[str, Any]:
-    """The row of a log that does not exist: its error as :func:`identify_entry` would say it."""
-    from wmrid import __version__
-
-    return empty_row(
-        robot_id=spec["robot_id"], log=spec["log"], robot=spec.get("robot"), start_time=spec.get("time"),
-        time_source=spec.get("time_source"), options=canonical_options(spec["options"]),
-        options_key=spec["options_key"], error=f"{spec['log']}: cannot be read (No such file or directory)",
-        run_time_s=0.0, wmrid_version=__version__,
-    )  # fmt: skip
-
-
-def _failed_row(spec: dict[str, Any], err: BaseException) -> dict[str, Any]:
-    return empty_row(
-        robot_id=spec["robot_id"], log=spec["log"], robot=spec.get("robot"), start_time=spec.get("time"),
-        time_source=spec.get("time_source"), options=canonical_options(spec["options"]),
-        options_key=spec["options_key"],
-        error=f"{spec['log']}: the task failed on the cluster ({type(err).__name__}: {_one_line(err)})",
-    )  # fmt: skip
