@@ -10,11 +10,10 @@ A page writes ``{{ FILE:PATH|OPS }}`` where it quotes a figure:
   ``[key=value,...]`` the items of a list whose keys hold those values (``a/b=v``: the key b of the item's mapping a;
   numbers compare as numbers, ``true``/``false`` as JSON's; one item, or a list of several, of which an aggregate
   below makes one number);
-* ``OPS`` (optional) are ``;``-separated steps applied in order: ``min``, ``max``, ``median``, ``len`` (of a list or
-  a mapping),
-  ``xK`` (multiply by K: ``x1000`` for s -> ms, ``x100`` for a fraction -> %), ``abs``, ``date`` (the ``YYYY-MM-DD`` of a
-  timestamp), and last a Python format spec (``.3g``, ``,.0f``, ``.2f``).  Without a format spec a value is printed as
-  ``str`` gives it.
+* ``OPS`` (optional) are ``;``-separated steps applied in order: ``min``, ``max``, ``median``, ``sum``, ``len``
+  (of a list, or of a mapping's keys), ``xK`` (multiply by K: ``x1000`` for s -> ms, ``x100`` for a fraction -> %),
+  ``abs``, ``date`` (the ``YYYY-MM-DD`` of a timestamp), and last a Python format spec (``.3g``, ``,.0f``, ``.2f``).
+  Without a format spec a value is printed as ``str`` gives it.
 
 The command column of a table is itself ``{{ FILE:command }}``, so the command shown is the one that wrote the figures.
 A placeholder that does not resolve fails the build (``mkdocs build --strict`` in CI), and
@@ -36,7 +35,7 @@ RESULTS = ROOT / "bench" / "results"
 #: ``{{ FILE:PATH }}`` or ``{{ FILE:PATH|OPS }}``.
 PLACEHOLDER = re.compile(r"\{\{\s*([\w-]+):([^|}]+?)(?:\|([^}]*))?\s*\}\}")
 
-_AGGREGATES = {"min": min, "max": max, "median": statistics.median, "len": len}
+_AGGREGATES = {"min": min, "max": max, "median": statistics.median, "len": len, "sum": sum}
 
 
 class FigureError(ValueError):

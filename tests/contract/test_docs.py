@@ -279,3 +279,11 @@ def test_the_figure_placeholders_mini_language(tmp_path, monkeypatch):
                 FIGURES.render_page(f"text {bad}", "page.md")
     finally:
         FIGURES.results.cache_clear()
+
+
+def test_the_readmes_accuracy_figure_is_the_paper_tables_run():
+    """The README cannot render placeholders (it is read on the forge as written): its one accuracy figure is checked
+    against the results file of the run it comes from instead."""
+    worst = FIGURES.value(FIGURES.results("paper_tables"), "figures.largest_error_percent.default")
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert f"every base parameter comes out within {worst:#.2g} % of the truth" in _normal(readme)
