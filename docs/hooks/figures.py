@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results"
 
 #: ``{{ FILE:PATH }}`` or ``{{ FILE:PATH|OPS }}``.
-PLACEHOLDER = re.compile(r"\{\{\s*([\w-]+):([^|}]+?)(?:\|([^}]*))?\s*\}\}")
+PLACEHOLDER = re.compile(r"\{\{\s*([\w.-]+):([^|}]+?)(?:\|([^}]*))?\s*\}\}")
 
 _AGGREGATES = {"min": min, "max": max, "median": statistics.median, "len": len, "sum": sum}
 
@@ -74,9 +74,20 @@ def value(document: Any, path: str) -> Any:
         return walk(node[head], rest)
 
     try:
-        return walk(document, path.split("."))
+        return walk(document, _parts(path))
     except (KeyError, IndexError, ValueError, TypeError) as exc:
         raise FigureError(f"no value at {path!r} ({type(exc).__name__}: {exc})") from None
+
+
+def _parts(path: str) -> list[str]:
+    """``path`` split at its dots, those inside a ``[...]`` filter kept (``[case/caster=0.015].error``)."""
+    parts, depth, start = [], 0, 0
+    for i, ch in enumerate(path):
+        depth += (ch == "[") - (ch == "]")
+        if ch == "." and depth == 0:
+            parts.append(path[start:i])
+            start = i + 1
+    return [*parts, path[start:]]
 
 
 def _holds(item: Any, key: str, wanted: str) -> bool:
@@ -110,7 +121,10 @@ def render(name: str, path: str, ops: str | None = None) -> str:
         elif op in _AGGREGATES:
             if not isinstance(v, list):
                 raise FigureError(f"{op} of {path!r}, which is not a list")
-            v = _AGGREGATES[op](_flat(v))
+            known = [x for x in _flat(v) if x is not None]  # null: not measured there (a case with no such group)
+            if not known and op != "len":
+                raise FigureError(f"{op} of {path!r}: every value is null")
+            v = len(_flat(v)) if op == "len" else _AGGREGATES[op](known)
         elif re.fullmatch(r"x[-+0-9.e]+", op):
             v = [x * float(op[1:]) for x in _flat(v)] if isinstance(v, list) else v * float(op[1:])
         elif op == "abs":

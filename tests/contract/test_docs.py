@@ -262,10 +262,12 @@ def test_the_figure_placeholders_mini_language(tmp_path, monkeypatch):
             "{{ demo:figures.wall s|len }}, max {{ demo:figures.wall s.2 }}, {{ demo:figures.ratio|x100;.1f }} %, "
             "{{ demo:figures.rows.[level=bench].e.M+V|min }}..{{ demo:figures.rows.[level=bench].e.*|max;.0f }}, "
             "{{ demo:figures.rows.[level=bench,m=b].e.M|.2f }}, {{demo:figures.rows.0.m}}, "
-            "{{ demo:figures.cases.[case/caster=0,clean=false].e }}"
+            "{{ demo:figures.cases.[case/caster=0,clean=false].e }}, {{ demo:figures.cases.[case/caster=0.015].e }}, "
+            "{{ demo:figures.cases.*.e|sum }}"
         )
         assert FIGURES.render_page(page) == (
-            "python3 bench/speed/demo.py --fast on 2026-12-06: 2 s of 3, max 3.0, 12.3 %, 2.0..9, 4.00, a, 1.5"
+            "python3 bench/speed/demo.py --fast on 2026-12-06: 2 s of 3, max 3.0, 12.3 %, 2.0..9, 4.00, a, 1.5, 2.5, "
+            "13.0"
         )
         for bad, said in [
             ("{{ nothing:command }}", "no results file bench/results/nothing.json"),
