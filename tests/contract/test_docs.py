@@ -19,14 +19,15 @@ REAL_LOGS = ROOT.parent / "shared" / "real_logs"
 SCHEMA = DOCS / "reference" / "result.schema.json"
 
 
-def _hook():
-    spec = importlib.util.spec_from_file_location("wmrid_docs_hook", DOCS / "hooks" / "reference.py")
+def _hook(name: str):
+    """A mkdocs hook of docs/hooks/ as a module (the build loads it by path, not as a package)."""
+    spec = importlib.util.spec_from_file_location(f"wmrid_docs_{name}", DOCS / "hooks" / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
 
 
-HOOK = _hook()
+HOOK = _hook("reference")
 
 
 # ---- the command-line reference
@@ -199,14 +200,7 @@ def test_the_readme_python_example_runs(tmp_path, monkeypatch):
 # ---- figures rendered from the benchmarks' result files (docs/hooks/figures.py)
 
 
-def _figures_hook():
-    spec = importlib.util.spec_from_file_location("wmrid_docs_figures", DOCS / "hooks" / "figures.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-FIGURES = _figures_hook()
+FIGURES = _hook("figures")
 
 
 @pytest.mark.parametrize("page", sorted(DOCS.rglob("*.md")), ids=lambda p: str(p.relative_to(DOCS)))
