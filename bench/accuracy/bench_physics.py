@@ -698,12 +698,19 @@ def main() -> int:
     }
     # the results file: the summaries with their offenders counted (every offender is listed once, below them), the
     # methods' median seconds; every log's row only in --json
-    summary = [{**entry, "offenders": len(entry["offenders"])} for entry in dump["summaries"]]
+    # a method not run on a case (the caster model on a sinusoid) has no summary: its NaN would read as null
+    summary = [{**entry, "offenders": len(entry["offenders"])} for entry in dump["summaries"] if entry["logs"]]
     timing = {**dump["timing"], "estimate_seconds": {m: statistics.median(v) for m, v in est.items() if v}}
-    # a run of part of the set keeps a file of its own: the validation page renders the full run's (bench_physics.json)
-    variant = "quick" if args.quick else (("only-" + args.only.replace(":", "-")) if args.only else None)
-    if variant and tuple(args.robots) != ROBOTS:
-        variant += "-" + "-".join(args.robots)
+    # a run other than the full one keeps a file of its own: the validation page renders the full run's
+    # (bench_physics.json); the variant names what differs (bench_physics-only-reversing-200-0.015-amr.json)
+    parts = [
+        *(["quick"] if args.quick else []),
+        *([f"only-{args.only.replace(':', '-')}"] if args.only else []),
+        *(["-".join(args.robots)] if tuple(args.robots) != ROBOTS else []),
+        *([f"seeds{args.seeds}"] if args.seeds is not None and args.seeds != 20 else []),
+        *([f"{args.duration:g}s"] if args.duration != 40.0 else []),
+    ]
+    variant = "-".join(parts) or None
     write_results(
         {**{k: v for k, v in dump.items() if k != "logs"}, "summaries": summary, "timing": timing,
          "page_table": page_table(dump["summaries"])},

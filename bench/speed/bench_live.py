@@ -222,7 +222,7 @@ def main() -> None:
     }  # fmt: skip
     print(json.dumps(out, indent=2))
     # a run faster than real time (the long-stream memory run, --speed 20) keeps its own file: bench_live-x20.json
-    faster = None if args.speed == 1 else f"x{args.speed:g}"
+    faster = None if args.speed == 1 else ("asap" if args.speed == 0 else f"x{args.speed:g}")
     write_results(out, variant="-".join(v for v in (None if args.source == "ws" else args.source, faster) if v) or None)
 
 

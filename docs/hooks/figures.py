@@ -12,7 +12,8 @@ A page writes ``{{ FILE:PATH|OPS }}`` where it quotes a figure:
   below makes one number);
 * ``OPS`` (optional) are ``;``-separated steps applied in order: ``min``, ``max``, ``median``, ``sum``, ``len``
   (of a list, or of a mapping's keys), ``xK`` (multiply by K: ``x1000`` for s -> ms, ``x100`` for a fraction -> %),
-  ``abs``, ``date`` (the ``YYYY-MM-DD`` of a timestamp), and last a Python format spec (``.3g``, ``,.0f``, ``.2f``).
+  ``abs``, ``date`` (the ``YYYY-MM-DD`` of a timestamp), ``known`` (drop the nulls: a bench writes NaN and inf as
+  null, and an aggregate refuses them unless told), and last a Python format spec (``.3g``, ``,.0f``, ``.2f``).
   Without a format spec a value is printed as ``str`` gives it.
 
 The command column of a table is itself ``{{ FILE:command }}``, so the command shown is the one that wrote the figures.
@@ -42,12 +43,16 @@ class FigureError(ValueError):
     """A placeholder that names no file, no value, or a step that does not apply."""
 
 
-@cache
 def results(name: str) -> dict[str, Any]:
-    """The results file ``bench/results/<name>.json``."""
+    """The results file ``bench/results/<name>.json`` (read again when it changed: ``mkdocs serve`` after a run)."""
     path = RESULTS / f"{name}.json"
     if not path.is_file():
         raise FigureError(f"no results file bench/results/{name}.json")
+    return _read(path, path.stat().st_mtime_ns)
+
+
+@cache
+def _read(path: Path, mtime_ns: int) -> dict[str, Any]:
     return json.loads(path.read_text(encoding="utf-8"))
 
 
@@ -59,6 +64,8 @@ def value(document: Any, path: str) -> Any:
             return node
         head, rest = parts[0], parts[1:]
         if head == "*":
+            if not isinstance(node, (dict, list)):
+                raise TypeError(f"* of a {type(node).__name__}")
             items = node.values() if isinstance(node, dict) else node
             return [walk(item, rest) for item in items]
         if head.startswith("[") and head.endswith("]"):  # the items of a list whose keys hold these values
@@ -97,8 +104,10 @@ def _holds(item: Any, key: str, wanted: str) -> bool:
         if not isinstance(item, dict) or part not in item:
             return False
         item = item[part]
-    if isinstance(item, bool) or item is None:
-        return str(item).lower() == wanted.lower() or str(item) == wanted
+    if item is None:
+        return wanted in ("null", "None")
+    if isinstance(item, bool):
+        return str(item).lower() == wanted.lower()
     if str(item) == wanted:
         return True
     try:
@@ -112,35 +121,62 @@ def _flat(v: Any) -> list[Any]:
 
 
 def render(name: str, path: str, ops: str | None = None) -> str:
-    """The text of ``{{ name:path|ops }}``."""
+    """The text of ``{{ name:path|ops }}``; :class:`FigureError` for anything that does not apply."""
     v = value(results(name), path)
-    spec = ""
+    spec = None
     for op in [o.strip() for o in (ops or "").split(";") if o.strip()]:
-        if op == "len" and isinstance(v, dict):  # the keys of a mapping
-            v = len(v)
-        elif op in _AGGREGATES:
-            if not isinstance(v, list):
-                raise FigureError(f"{op} of {path!r}, which is not a list")
-            known = [x for x in _flat(v) if x is not None]  # null: not measured there (a case with no such group)
-            if not known and op != "len":
-                raise FigureError(f"{op} of {path!r}: every value is null")
-            v = len(_flat(v)) if op == "len" else _AGGREGATES[op](known)
-        elif re.fullmatch(r"x[-+0-9.e]+", op):
-            v = [x * float(op[1:]) for x in _flat(v)] if isinstance(v, list) else v * float(op[1:])
-        elif op == "abs":
-            v = [abs(x) for x in _flat(v)] if isinstance(v, list) else abs(v)
-        elif op == "date":
-            v = str(v)[:10]
-        else:
+        if spec is not None:
+            raise FigureError(f"the format {spec!r} must be the last step, not before {op!r}")
+        try:
+            v = _step(v, op, path)
+        except FigureError:
+            raise
+        except (TypeError, ValueError, ArithmeticError) as exc:
+            raise FigureError(f"{op!r} does not apply to {path!r}: {exc}") from None
+        if op not in _AGGREGATES and op not in ("known", "abs", "date") and not re.fullmatch(_SCALE, op):
             spec = op
     if isinstance(v, list):
-        raise FigureError(f"{path!r} is a list: take min, max, median or len of it")
+        raise FigureError(f"{path!r} is a list: take min, max, median, sum or len of it")
     if v is None:
-        raise FigureError(f"{path!r} is null (not measured in that run)")
+        raise FigureError(f"{path!r} is null (not measured in that run, or not finite)")
     try:
         return format(v, spec) if spec else str(v)
     except (ValueError, TypeError) as exc:
         raise FigureError(f"format {spec!r} does not apply to {v!r}: {exc}") from None
+
+
+#: ``xK``: multiply by K.
+_SCALE = r"x[-+]?[0-9.]+(?:e[-+]?[0-9]+)?"
+
+
+def _step(v: Any, op: str, path: str) -> Any:
+    """``v`` after the step ``op`` (a format spec is returned unchanged: :func:`render` applies it last)."""
+    if op == "known":  # drop the nulls, explicitly: a figure never silently leaves a case out
+        if not isinstance(v, list):
+            raise FigureError(f"known of {path!r}, which is not a list")
+        return [x for x in _flat(v) if x is not None]
+    if op == "len":
+        if not isinstance(v, (list, dict)):
+            raise FigureError(f"len of {path!r}, which is neither a list nor a mapping")
+        return len(v)
+    if op in _AGGREGATES:
+        if not isinstance(v, list):
+            raise FigureError(f"{op} of {path!r}, which is not a list")
+        flat = _flat(v)
+        if not flat:
+            raise FigureError(f"{op} of {path!r}: the list is empty")
+        if any(x is None for x in flat):
+            raise FigureError(f"{op} of {path!r}: a value is null (not measured, or not finite); 'known' drops them")
+        return _AGGREGATES[op](flat)
+    if re.fullmatch(_SCALE, op):
+        return [x * float(op[1:]) for x in _flat(v)] if isinstance(v, list) else v * float(op[1:])
+    if op == "abs":
+        return [abs(x) for x in _flat(v)] if isinstance(v, list) else abs(v)
+    if op == "date":
+        if not isinstance(v, str) or not re.match(r"\d{4}-\d\d-\d\d", v):
+            raise FigureError(f"date of {path!r}, which is not a timestamp")
+        return v[:10]
+    return v  # a format spec
 
 
 def render_page(markdown: str, where: str = "page") -> str:
@@ -153,7 +189,11 @@ def render_page(markdown: str, where: str = "page") -> str:
         except FigureError as exc:
             raise FigureError(f"{where}: {m.group(0)}: {exc}") from None
 
-    return PLACEHOLDER.sub(one, markdown)
+    out = PLACEHOLDER.sub(one, markdown)
+    left = re.search(r"\{\{[^}]*\}\}", out)
+    if left:
+        raise FigureError(f"{where}: {left.group(0)}: not a placeholder this hook reads ({{{{ FILE:PATH|OPS }}}})")
+    return out
 
 
 def on_page_markdown(markdown: str, page: Any, config: Any, files: Any) -> str:

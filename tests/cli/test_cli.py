@@ -204,6 +204,27 @@ def test_every_commands_help_fits_an_80_column_terminal():
     assert len(every.splitlines()) > len(short.splitlines())
 
 
+def test_the_help_shows_a_value_only_for_options_that_take_one():
+    """Typer 0.29 writes a type beside every option: ``<bool>`` beside a flag such as ``--force``, which takes no value,
+    and ``<list[str]>`` beside a repeated argument or option.  The help shows none for a flag or a repeated argument
+    (the usage line says ``{LOG}...``) and the element's type, repeated, for a repeatable option; ``wmrid --help``
+    lists identify first."""
+    from wmrid.cli.app import command
+
+    for name, cmd in command().commands.items():
+        if getattr(cmd, "hidden", False):
+            continue
+        every = text(wmrid(name, "--help-all", columns="200")).stdout
+        assert "<bool>" not in every, name
+        assert "<list[" not in every, name
+    plan = text(wmrid("plan", "--help", columns="200")).stdout
+    assert any(line.split()[1:3] == ["--given", "<str>..."] for line in plan.splitlines() if "--given" in line)
+    assert "Usage: wmrid identify [OPTIONS] {LOG}..." in text(wmrid("identify", "--help", columns="200")).stdout
+    root = text(wmrid("--help", columns="200")).stdout
+    commands = [line.split()[1] for line in root.splitlines() if line.startswith("│ ") and line.split()[1].isalpha()]
+    assert commands[0] == "identify", commands
+
+
 def test_an_error_on_a_terminal_is_wrapped_at_word_boundaries(tmp_path):
     """Issue 33: an error line is one line in a pipe (scripts, logs) and, on an 80-column terminal, wrapped at its
     width between words (the terminal broke it mid-word), the lines after the first indented: the same words."""

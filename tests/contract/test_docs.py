@@ -243,13 +243,13 @@ def test_the_figure_placeholders_mini_language(tmp_path, monkeypatch):
         "figures": {"wall s": [2.0, 1.0, 3.0], "rows": [{"level": "low", "m": "a", "e": {"M": 1.0, "V": 5.0}},
                                                        {"level": "bench", "m": "a", "e": {"M": 2.0, "V": 7.0}},
                                                        {"level": "bench", "m": "b", "e": {"M": 4.0, "V": 9.0}}],
-                    "ratio": 0.1234, "none": None,
-                    "cases": [{"case": {"caster": 0.0}, "clean": False, "e": 1.5},
+                    "ratio": 0.1234, "none": None, "nulls": [1.0, None, 3.0],
+                    "cases": [{"case": {"caster": 0.0}, "clean": False, "e": 1.5, "tag": None},
                               {"case": {"caster": 0.015}, "clean": False, "e": 2.5},
                               {"case": {"caster": 0.0}, "clean": True, "e": 9.0}]},
     }))  # fmt: skip
     monkeypatch.setattr(FIGURES, "RESULTS", tmp_path)
-    FIGURES.results.cache_clear()
+    FIGURES._read.cache_clear()
     try:
         page = (
             "{{ demo:command }} on {{ demo:date_utc|date }}: {{ demo:figures.wall s|median;.3g }} s of "
@@ -257,16 +257,23 @@ def test_the_figure_placeholders_mini_language(tmp_path, monkeypatch):
             "{{ demo:figures.rows.[level=bench].e.M+V|min }}..{{ demo:figures.rows.[level=bench].e.*|max;.0f }}, "
             "{{ demo:figures.rows.[level=bench,m=b].e.M|.2f }}, {{demo:figures.rows.0.m}}, "
             "{{ demo:figures.cases.[case/caster=0,clean=false].e }}, {{ demo:figures.cases.[case/caster=0.015].e }}, "
-            "{{ demo:figures.cases.*.e|sum }}"
+            "{{ demo:figures.cases.*.e|sum }}, {{ demo:figures.nulls|known;max }}, {{ demo:figures.nulls|len }}, "
+            "{{ demo:figures.cases.[tag=null].e }}"
         )
         assert FIGURES.render_page(page) == (
             "python3 bench/speed/demo.py --fast on 2026-12-06: 2 s of 3, max 3.0, 12.3 %, 2.0..9, 4.00, a, 1.5, 2.5, "
-            "13.0"
+            "13.0, 3.0, 3, 1.5"
         )
         for bad, said in [
             ("{{ nothing:command }}", "no results file bench/results/nothing.json"),
             ("{{ demo:figures.missing }}", "no value at 'figures.missing'"),
-            ("{{ demo:figures.wall s }}", "is a list: take min, max, median or len of it"),
+            ("{{ demo:figures.wall s }}", "is a list: take min, max, median, sum or len of it"),
+            ("{{ demo:figures.nulls|max }}", "a value is null (not measured, or not finite); 'known' drops them"),
+            ("{{ demo:figures.wall s|.2f;max }}", "the format '.2f' must be the last step"),
+            ("{{ demo:figures.wall s|date }}", "date of 'figures.wall s', which is not a timestamp"),
+            ("{{ demo:command.*|len }}", "no value at 'command.*'"),
+            ("{{ demo:figures.ratio|abs;xq }}", "format 'xq' does not apply"),
+            ("{{ demo figures.ratio }}", "not a placeholder this hook reads"),
             ("{{ demo:figures.none }}", "is null"),
             ("{{ demo:figures.rows.[level=high].m }}", "no value at"),
             ("{{ demo:command|.2f }}", "format '.2f' does not apply"),
@@ -274,7 +281,7 @@ def test_the_figure_placeholders_mini_language(tmp_path, monkeypatch):
             with pytest.raises(FIGURES.FigureError, match=re.escape(said)):
                 FIGURES.render_page(f"text {bad}", "page.md")
     finally:
-        FIGURES.results.cache_clear()
+        FIGURES._read.cache_clear()
 
 
 def test_the_readmes_accuracy_figure_is_the_paper_tables_run():

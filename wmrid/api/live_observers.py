@@ -69,15 +69,18 @@ def _observer(form: Any, sv: Any, robot: Any, s: ObserverOptions) -> Any:
 
 def fed(observers: list[tuple[Any, Any]], t: np.ndarray, eta: np.ndarray, tau: np.ndarray) -> list[tuple[Any, Any]]:
     """``observers`` after a piece of samples: each fed it, the paper form's dropped (while another is left) once a
-    wheel stops or reverses."""
+    wheel stops or reverses in the speed its sign columns take (the centred mean of
+    :mod:`wmrid.estimators.sign_speed`, as the final identify's survey decides the form: a coarse encoder's speed that
+    dips across zero while its mean does not keeps the paper form)."""
     kept = []
     for form, obs in observers:
-        if form.kind == "paper" and len(observers) > 1:
-            signs = np.array(form.signs, dtype=float)
-            if not np.all(eta * signs > 0):  # a wheel stopped or reversed: the paper form no longer holds
-                continue
         with np.errstate(over="ignore", invalid="ignore"):
             obs.feed(t, eta, tau)
+        if form.kind == "paper" and len(observers) > 1:
+            signs = np.array(form.signs, dtype=float)
+            least = np.where(signs > 0, obs.sign_low, -obs.sign_high)  # each wheel's mean in its sign's direction
+            if np.any(least <= 0):  # a wheel stopped or reversed: the paper form no longer holds
+                continue
         kept.append((form, obs))
     return kept
 

@@ -92,7 +92,8 @@ class Command(TyperCommand):
 def _plain_type(param: Any) -> None:
     """``param``'s type label in the help as a user needs it: none for a flag (Typer writes ``<bool>`` beside
     ``--force``, which takes no value) nor for an argument that repeats (``<list[str]>`` beside ``LOG``: the usage line
-    says ``{LOG}...``).  Set once on the parameter; a Typer without the type column is left as it is."""
+    says ``{LOG}...``); a repeatable option's element type, repeated (``<str>...``).  Set once on the parameter; a
+    Typer without the type column is left as it is."""
     shown = getattr(param, "display_type_rich", None)
     if shown is None or getattr(param, "_wmrid_plain_type", False):
         return
@@ -101,7 +102,11 @@ def _plain_type(param: Any) -> None:
         if getattr(param, "is_flag", False):
             return None
         label = shown(ctx)
-        return None if label is not None and label.startswith("<list[") else label
+        if label is None or not label.startswith("<list["):
+            return label
+        if param.param_type_name == "argument":
+            return None  # the usage line says {LOG}...
+        return "<" + label[len("<list[") : -2] + ">..."  # a repeatable option: its element's type, repeated
 
     param.display_type_rich = plain
     param._wmrid_plain_type = True

@@ -125,18 +125,26 @@ class SignSpeeds:
         return ht, he, hu, means
 
 
-def mean_sign_counts(pieces: Iterable[Any], h: int) -> tuple[np.ndarray, np.ndarray]:
-    """(2,) counts of samples whose centred mean speed over 2h + 1 samples is > 0 and < 0 (a second pass over
-    ``pieces``; :class:`wmrid.estimators.sign_speed.SignSpeeds`, as the sign columns are made).  h = 0: zeros (the
-    mean is the measured speed, already counted)."""
-    pos, neg = np.zeros(2), np.zeros(2)
+def mean_keeps_sign(pieces: Iterable[Any], h: int) -> tuple[np.ndarray, np.ndarray]:
+    """(2,) bool, per wheel: every centred mean speed over 2h + 1 samples is > 0; every one is < 0 (a second pass over
+    ``pieces``, the means made as the sign columns make them: :class:`SignSpeeds`).  The pass stops as soon as each
+    wheel has had a mean <= 0 and a mean >= 0 (then neither holds): a wheel that reverses settles it at its first
+    reversal, so only a log whose means keep their sign is read to its end.  h = 0: both False (the mean is the
+    measured speed, which the survey counted)."""
+    positive, negative = np.zeros(2, dtype=bool), np.zeros(2, dtype=bool)
     if h == 0:
-        return pos, neg
+        return positive, negative
+    not_pos, not_neg = np.zeros(2, dtype=bool), np.zeros(2, dtype=bool)  # some mean <= 0; some mean >= 0
     signs = SignSpeeds(h)
+
+    def seen(mean: np.ndarray) -> None:
+        not_pos[:] |= (mean <= 0).any(axis=0)
+        not_neg[:] |= (mean >= 0).any(axis=0)
+
     for piece in pieces:
         if len(piece.t):
-            *_, mean = signs.feed(piece.t, np.asarray(piece.eta, dtype=np.float64), piece.tau)
-            pos += (mean > 0).sum(axis=0)
-            neg += (mean < 0).sum(axis=0)
-    *_, mean = signs.finish()
-    return pos + (mean > 0).sum(axis=0), neg + (mean < 0).sum(axis=0)
+            seen(signs.feed(piece.t, np.asarray(piece.eta, dtype=np.float64), piece.tau)[3])
+            if (not_pos & not_neg).all():
+                return positive, negative
+    seen(signs.finish()[3])
+    return ~not_pos, ~not_neg

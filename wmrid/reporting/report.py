@@ -279,7 +279,8 @@ def _statements(rl: IdentificationResult, *, inflated: bool, warned: bool, flagg
     mismatch = diag.structural_mismatch or StructuralMismatch()
     statements = [
         "Standard errors: how much each estimate varies along the log"
-        + (f" ({unc.method}, {unc.segments} segments" if unc.segments else f" ({unc.method or 'jackknife'}")
+        + f" ({unc.method or 'jackknife'}"
+        + (f", {unc.segments} segments" if unc.segments else "")
         + f", {unc.dof} degrees of "
         f"freedom); estimate ± {(unc.interval_factor or {})['95%']:.2f} std covers the truth with 95 % probability "
         "when disturbances do not feed back into the efforts. " + (f"Caveat: {unc.caveat}." if unc.caveat else ""),

@@ -437,3 +437,33 @@ def test_bad_input_is_one_line(tmp_path):
         assert "Traceback" not in err
         assert len(err.strip().splitlines()) == 1, err
         assert needle in err, err
+
+
+def test_live_drops_the_paper_form_when_the_sign_columns_speed_reverses_not_the_measured_one():
+    """Live keeps a paper-form observer beside the general one until a wheel stops or reverses; it judged that by the
+    measured speed, so a coarse encoder's derived speed dipping across zero for a sample dropped the paper form that
+    the final identify (whose survey follows the sign columns' 20 ms mean) reports.  Now by the mean, as the final."""
+    import numpy as np
+
+    from wmrid.api.live_observers import _observer, fed
+    from wmrid.estimators.observer.survey import survey
+    from wmrid.estimators.options import ObserverOptions
+    from wmrid.model.dynamics import RegressorForm
+    from wmrid.model.robot import BUILTIN_ROBOTS
+
+    rng = np.random.default_rng(3)
+    t = np.arange(3000) * 1e-3
+    eta = 5.0 + np.sin(t)[:, None] + rng.normal(0.0, 0.01, (3000, 2))
+    tau = rng.normal(0.0, 1.0, (3000, 2))
+    sv = survey([wmrid.WheelLog(t=t, eta=eta, tau=tau, source="x")], "x")
+    robot = BUILTIN_ROBOTS["paper"]
+    forms = (RegressorForm("paper", (1, 1)), RegressorForm("general"))
+    observers = [(f, _observer(f, sv, robot, ObserverOptions())) for f in forms]
+    dip = eta.copy()
+    dip[1500, 0] = -0.5  # one sample the other way: the 21-sample mean stays > 0
+    observers = fed(observers, t[:2000], dip[:2000], tau[:2000])
+    assert [f.kind for f, _ in observers] == ["paper", "general"]
+    back = eta[2000:].copy()
+    back[200:400, 1] *= -1  # 0.2 s the other way: the mean follows
+    observers = fed(observers, t[2000:], back, tau[2000:])
+    assert [f.kind for f, _ in observers] == ["general"]

@@ -108,7 +108,7 @@ def test_a_coarse_encoders_speed_that_dips_below_zero_keeps_the_paper_form(tmp_p
     assert not all(sv.positive | sv.negative)
     assert sv.form().kind == "paper"
     assert sv.form().signs == (1, 1)
-    assert (sv.sign_pos == sv.n).all()
+    assert sv.sign_pos.all()
     result = wmrid.identify(str(path), "paper")
     assert result.form.kind == "paper"
     assert all(g.status == "determined" for g in result.verdict.groups), result.verdict

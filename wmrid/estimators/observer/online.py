@@ -67,6 +67,9 @@ class OnlineObserver:
         self._hist_idx = np.array([-1], dtype=np.int64)
         # the sign columns' centred mean (wmrid.estimators.sign_speed): samples reach the kernel that many late
         self._signs = SignSpeeds(sign_half_window)
+        #: (2,) the smallest and largest centred mean speed the sign columns have taken so far, rad/s
+        self.sign_low = np.full(2, np.inf)
+        self.sign_high = np.full(2, -np.inf)
         self._hist = (np.empty((1, 2, p)), np.empty((1, 2)), np.empty((1, p, p)))
 
     @property
@@ -100,6 +103,8 @@ class OnlineObserver:
         eta = np.ascontiguousarray(eta, dtype=np.float64)
         tau = np.ascontiguousarray(tau, dtype=np.float64)
         eta_sign = np.ascontiguousarray(eta_sign, dtype=np.float64)
+        np.minimum(self.sign_low, eta_sign.min(axis=0), out=self.sign_low)
+        np.maximum(self.sign_high, eta_sign.max(axis=0), out=self.sign_high)
         ks = self.ks
         skip = 0
         if self.n == 0:  # the first sample starts the predictor and the filter, as in replay_pieces

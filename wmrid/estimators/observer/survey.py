@@ -17,7 +17,7 @@ import numba
 import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError
-from wmrid.estimators.sign_speed import mean_sign_counts, sign_half_window
+from wmrid.estimators.sign_speed import mean_keeps_sign, sign_half_window
 from wmrid.model.dynamics import RegressorForm
 from wmrid.model.kernels import plain
 
@@ -75,13 +75,13 @@ class Survey:
     sparse_spacing: float = START_SPACING_S
     speed_pos: np.ndarray = field(default_factory=lambda: np.zeros(2))
     speed_neg: np.ndarray = field(default_factory=lambda: np.zeros(2))
-    #: (2,) samples whose centred mean speed (:mod:`wmrid.estimators.sign_speed`, the speed the sign columns take) is
-    #: > 0 and < 0; counted only when the measured speed of some wheel does not keep one strict sign (else zeros).
+    #: (2,) bool: every centred mean speed of the wheel (:mod:`wmrid.estimators.sign_speed`, the speed the sign columns
+    #: take) is > 0; is < 0.  Found only when the measured speed of some wheel does not keep one strict sign.
     #: Speeds derived from a coarse encoder dip across zero where the true speed is slow but never reverses (512
     #: counts/rev at 1 kHz: to -0.49 rad/s where the true speed is 0.7): the mean keeps its sign, so the sign columns
     #: of the general form are two constants, the same column twice, and the log's direction is the paper form's.
-    sign_pos: np.ndarray = field(default_factory=lambda: np.zeros(2))
-    sign_neg: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    sign_pos: np.ndarray = field(default_factory=lambda: np.zeros(2, dtype=bool))
+    sign_neg: np.ndarray = field(default_factory=lambda: np.zeros(2, dtype=bool))
     effort_neg: np.ndarray = field(default_factory=lambda: np.zeros(2))
     effort_pos: np.ndarray = field(default_factory=lambda: np.zeros(2))
     power: np.ndarray = field(default_factory=lambda: np.zeros(2))
@@ -111,8 +111,8 @@ class Survey:
     def form(self) -> RegressorForm:
         """The paper's form when each wheel keeps one strict sign (as :func:`wmrid.model.dynamics.choose_form`): the
         measured speed's, or that of the short centred mean the sign columns take (:attr:`sign_pos`)."""
-        positive = self.positive | (self.sign_pos == self.n)
-        negative = self.negative | (self.sign_neg == self.n)
+        positive = self.positive | self.sign_pos
+        negative = self.negative | self.sign_neg
         if self.n and all(positive | negative):
             return RegressorForm("paper", tuple(1 if p else -1 for p in positive))  # type: ignore[arg-type]
         return RegressorForm("general")
@@ -290,7 +290,7 @@ def survey(pieces: Iterable, source: str, effort_unit: str = "N m") -> Survey:
     sv.speed_max, sv.effort_max, sv.effort_fractional = acc[16:18].copy(), acc[18:20].copy(), acc[20:22].copy()
     sv.median_step = _median_step(exact, hist)
     if sv.n and not all(sv.positive | sv.negative) and iter(pieces) is not pieces:  # a log that can be read again
-        sv.sign_pos, sv.sign_neg = mean_sign_counts(pieces, sign_half_window(sv.n, sv.duration))
+        sv.sign_pos, sv.sign_neg = mean_keeps_sign(pieces, sign_half_window(sv.n, sv.duration))
     if sparse.parts:
         sv.sparse_t, sv.sparse_eta, sv.sparse_tau = sparse.arrays()
         sv.sparse_spacing = START_SPACING_S * 2**sparse.level
