@@ -405,7 +405,7 @@ KOpt = Annotated[
     float,
     typer.Option(
         "--k",
-        help="Observer/filter gain k of Eqs. 26-30, 1/s, in (0, 100000] (paper: 1; see the docs).",
+        help="Observer/filter gain k of Eqs. 26-30, 1/s, in (0, 100000] (paper: 1; the docs' page on the observer).",
         rich_help_panel=_OBSERVER_PANEL,
     ),
 ]

@@ -49,8 +49,11 @@ def choose_friction(
     choice = caster_drag_test(caster)
     significant = choice["p_value"] < AUTO_P
     chosen = caster if significant and not choice["negative"] else wheel
-    reason = f"the caster drag ({choice['text']}) differs from zero at p = {choice['p_value']:.2g}" + (
-        f" < {AUTO_P:g}" if significant else f" >= {AUTO_P:g}: not shown by this log"
+    reason = (
+        f"the caster drag ({choice['text']}) differs from zero (p = {choice['p_value']:.2g} < {AUTO_P:g})"
+        if significant
+        else f"this log shows no caster drag ({choice['text']}: indistinguishable from zero, p = "
+        f"{choice['p_value']:.2g}, where {AUTO_P:g} is needed)"
     )
     if significant and choice["negative"]:
         reason += (
@@ -85,8 +88,11 @@ def _with_load(
     scale = [_model_error_scale(r) for r in (caster, loaded)]
     shown = test["p_value"] < AUTO_P
     taken = shown and scale[1] <= scale[0]
-    reason = f"the drag's load terms ({test['text']}) differ from zero at p = {test['p_value']:.2g}" + (
-        f" < {AUTO_P:g}" if shown else f" >= {AUTO_P:g}: not shown by this log"
+    reason = (
+        f"the drag's load terms ({test['text']}) differ from zero (p = {test['p_value']:.2g} < {AUTO_P:g})"
+        if shown
+        else f"this log shows no load terms of the drag ({test['text']}: indistinguishable from zero, p = "
+        f"{test['p_value']:.2g}, where {AUTO_P:g} is needed)"
     )
     if shown and not taken:
         reason += (
