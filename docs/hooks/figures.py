@@ -190,9 +190,9 @@ def render_page(markdown: str, where: str = "page") -> str:
             raise FigureError(f"{where}: {m.group(0)}: {exc}") from None
 
     out = PLACEHOLDER.sub(one, markdown)
-    left = re.search(r"\{\{[^}]*\}\}", out)
+    left = re.search(r"\{\{.{0,80}", out)
     if left:
-        raise FigureError(f"{where}: {left.group(0)}: not a placeholder this hook reads ({{{{ FILE:PATH|OPS }}}})")
+        raise FigureError(f"{where}: {left.group(0)!r}: not a placeholder this hook reads ({{{{ FILE:PATH|OPS }}}})")
     return out
 
 
