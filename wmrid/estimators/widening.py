@@ -135,7 +135,7 @@ def with_unresolved_timing(
     diagnostics = replace(
         widened.diagnostics, timing=replace(widened.diagnostics.timing or TimingCheck(), timing_term=term)
     )
-    warnings = (warning, *widened.warnings) if grown else tuple(widened.warnings)
+    warnings = (warning, *widened.warnings) if grown and warning else tuple(widened.warnings)
     return replace(widened, diagnostics=diagnostics, warnings=warnings)
 
 

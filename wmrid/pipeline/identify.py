@@ -88,7 +88,10 @@ def identify_log(
     ``progress(samples_done, samples)`` during the observer's passes."""
     _check_payload(robot, options.payload)
     if options.delay is not None:
-        return _settled(_delayed(log, robot, options, steps, progress), robot)
+        try:
+            return _settled(_delayed(log, robot, options, steps, progress), robot)
+        except _WithinMisfit:  # --delay auto found one within the misfit: as the default decides it
+            return identify_log(log, robot, replace(options, delay=None), replace(steps, timing=True), progress)
     stream, sv = surveyed(log)
     chosen = Once(lambda: _choose(stream, sv, robot, options, steps, progress))
     timing = Timing()
@@ -101,14 +104,13 @@ def identify_log(
         if timing.split or timing.apply:  # time the efforts by default
             try:
                 timed = _settled(_delayed(log, robot, replace(options, delay="auto"), steps, progress, sv), robot)
+            except _WithinMisfit as within:  # as stamped; the std carries the delay the log cannot rule out
+                timing = timing.within_misfit(str(within))
             except WmridError as err:  # e.g. a hole IDIM's filter cannot bridge: as stamped, and say so
                 timing = timing.failed(err)
             else:
                 if timing.record is not None:  # the window's record, with what the timed run found (its hold term)
                     merged = timing.record.merged(timed.diagnostics.timing)
-                    delay = timed.diagnostics.delay
-                    if delay is not None and delay.applied_s == 0.0 and not split_topics(stream.notes):
-                        merged = replace(merged, apply=False)  # within the log's misfit (_misfit_delay): not applied
                     timed = replace(timed, diagnostics=replace(timed.diagnostics, timing=merged))
                 return _settled(timed, robot)
     return _settled(_friction_and_terms(log, chosen(), robot, options, steps, timing), robot)
@@ -170,13 +172,11 @@ def _delayed(
         )
         base = _settled(base, robot)
         misfit = _misfit_delay(base, record)
-        if misfit is None:
-            at = replace(options, friction=base.form.friction, delay=applied + step)
-            moved = observe_at(original, robot, at, steps.geometry)
-            return _checked(with_timing_term(base, moved, record, warnings, step, robot), shifted, robot, steps)
-        # the delay is no larger than the log's misfit can make one appear: the efforts as stamped, said once
-        shifted, record, warnings = original, replace(record, applied_s=0.0), [misfit]
-        steps = replace(steps, timing=False)
+        if misfit is not None:  # no larger than the log's misfit can make a delay appear: the caller keeps the efforts
+            raise _WithinMisfit(misfit)
+        at = replace(options, friction=base.form.friction, delay=applied + step)
+        moved = observe_at(original, robot, at, steps.geometry)
+        return _checked(with_timing_term(base, moved, record, warnings, step, robot), shifted, robot, steps)
     stream, sv = surveyed(shifted)
     chosen = Once(lambda: _choose(stream, sv, robot, options, steps, progress))
     timing = Timing(delay_record=record, delay_warnings=tuple(warnings))
@@ -189,6 +189,12 @@ def _delayed(
 
         timing = alongside(decided, chosen.run)  # the friction models' passes meanwhile
     return _friction_and_terms(shifted, chosen(), robot, options, steps, timing)
+
+
+class _WithinMisfit(Exception):
+    """:func:`_delayed` found the delay it was to apply within the log's misfit (:func:`_misfit_delay`; the message):
+    its caller identifies the log as stamped, with the timing check's record, whose delay the std then carries
+    (:func:`wmrid.pipeline.timing.carry_unresolved_delay`)."""
 
 
 def _misfit_delay(result: IdentificationResult, record: Any) -> str | None:

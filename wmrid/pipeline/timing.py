@@ -25,6 +25,9 @@ from wmrid.estimators.timing_check import apply_delay, timing_check, unresolved_
 from wmrid.estimators.widening import with_unresolved_timing
 from wmrid.model.robot import Robot
 
+#: ``diagnostics.timing.why`` of a delay not applied because the log's misfit can make it appear.
+WITHIN_MISFIT = "within the log's misfit: a delay that large can appear where the log departs from the model"
+
 
 @dataclass(frozen=True)
 class Timing:
@@ -46,6 +49,12 @@ class Timing:
     def apply(self) -> bool:
         """The check found a significant delay: time the efforts."""
         return self.record is not None and bool(self.record.apply)
+
+    def within_misfit(self, text: str) -> Timing:
+        """This timing, the check's delay not applied because the log's misfit can make it appear (``text`` says so):
+        its record says apply false, so the std carries the delay as one the check did not resolve."""
+        record = None if self.record is None else replace(self.record, apply=False, why=WITHIN_MISFIT)
+        return replace(self, record=record, warnings=(*self.warnings, text))
 
     def failed(self, err: WmridError) -> Timing:
         """This timing, the efforts left as stamped because timing them failed with ``err``."""
@@ -122,7 +131,8 @@ def carry_unresolved_delay(
     if moved_delay is None:
         return result
     theta0 = np.asarray(est.theta0, dtype=float)
-    text = unresolved_text(record, moved_delay)
+    # a delay within the log's misfit was said when it was not applied (Timing.within_misfit): the std carries it
+    text = "" if record.why == WITHIN_MISFIT else unresolved_text(record, moved_delay)
     if (record.samples_profiled or 0) < (record.of or 0) or (record.windows or 1) > 1:
         slope = np.zeros_like(theta0)
         slope[:8] = record.theta0_slope_per_s
