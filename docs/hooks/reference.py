@@ -80,6 +80,9 @@ def option_record(param: Any, ctx: Any) -> dict[str, str]:
     for name in sorted([*param.opts, *getattr(param, "secondary_opts", [])], key=len, reverse=True):
         value = value.replace(name, "")
     value = value.strip(" ,/")
+    if param.param_type_name == "argument":  # its name is the option column; the usage line says {LOG}...
+        value = "repeatable" if param.nargs != 1 else ""
+    value = re.sub(r"<list\[([^\]]*)\]>", r"<\1>...", value)  # a repeatable option, as --help shows it
     return {"flags": flags, "value": value, "default": default, "required": required, "help": help_text.strip()}
 
 
