@@ -133,7 +133,7 @@ def render(name: str, path: str, ops: str | None = None) -> str:
             raise
         except (TypeError, ValueError, ArithmeticError) as exc:
             raise FigureError(f"{op!r} does not apply to {path!r}: {exc}") from None
-        if op not in _AGGREGATES and op not in ("known", "abs", "date") and not re.fullmatch(_SCALE, op):
+        if not _is_step(op):
             spec = op
     if isinstance(v, list):
         raise FigureError(f"{path!r} is a list: take min, max, median, sum or len of it")
@@ -147,6 +147,11 @@ def render(name: str, path: str, ops: str | None = None) -> str:
 
 #: ``xK``: multiply by K.
 _SCALE = r"x[-+]?[0-9.]+(?:e[-+]?[0-9]+)?"
+
+
+def _is_step(op: str) -> bool:
+    """Whether ``op`` is a step of :func:`_step` (else a format spec)."""
+    return op in _AGGREGATES or op in ("known", "abs", "date") or re.fullmatch(_SCALE, op) is not None
 
 
 def _step(v: Any, op: str, path: str) -> Any:

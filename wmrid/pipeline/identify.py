@@ -90,8 +90,22 @@ def identify_log(
     if options.delay is not None:
         try:
             return _settled(_delayed(log, robot, options, steps, progress), robot)
-        except _WithinMisfit:  # --delay auto found one within the misfit: as the default decides it
-            return identify_log(log, robot, replace(options, delay=None), replace(steps, timing=True), progress)
+        except _WithinMisfit as within:  # --delay auto found one within the misfit: as stamped, as the default does
+            undelayed, checked = replace(options, delay=None), replace(steps, timing=True)
+            return _identified(log, robot, undelayed, checked, progress, within=str(within))
+    return _identified(log, robot, options, steps, progress)
+
+
+def _identified(
+    log: LogLike | LogStream,
+    robot: Robot | None,
+    options: ObserverOptions,
+    steps: Steps,
+    progress: Callable[[int, int], None] | None,
+    within: str | None = None,
+) -> IdentificationResult:
+    """:func:`identify_log` on the efforts as stamped, their timing checked (``steps.timing``).  ``within``: the
+    warning of a delay already found within the log's misfit (``--delay auto``'s pass), not looked for again."""
     stream, sv = surveyed(log)
     chosen = Once(lambda: _choose(stream, sv, robot, options, steps, progress))
     timing = Timing()
@@ -101,7 +115,9 @@ def identify_log(
         meanwhile = None if split_topics(stream.notes) else chosen.run
         check = (log, stream, sv, robot, options, steps.geometry, steps.load_terms)
         timing = alongside(lambda: decide_timing(*check), meanwhile)
-        if timing.split or timing.apply:  # time the efforts by default
+        if within is not None and (timing.split or timing.apply):
+            timing = timing.within_misfit(within)
+        elif timing.split or timing.apply:  # time the efforts by default
             try:
                 timed = _settled(_delayed(log, robot, replace(options, delay="auto"), steps, progress, sv), robot)
             except _WithinMisfit as within:  # as stamped; the std carries the delay the log cannot rule out
