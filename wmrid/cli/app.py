@@ -12,6 +12,8 @@ import functools
 import os
 import signal
 import sys
+import warnings
+from collections.abc import Callable
 from typing import Annotated, Any
 
 import typer
@@ -57,6 +59,19 @@ def _root(
     ] = False,
 ) -> None:
     """wmrid: observer-based dynamic parameter identification for wheeled mobile robots."""
+
+
+def _notes_in_one_line(show: Callable[..., None]) -> Callable[..., None]:
+    """``warnings.showwarning`` that says wmrid's :class:`~wmrid.core.jit.PerformanceWarning` as "wmrid: note: ..."
+    on stderr (Python's own form names a file and a line of wmrid's), and leaves any other warning to ``show``."""
+
+    def shown(message: Any, category: type[Warning], *args: Any, **kwargs: Any) -> None:
+        if category.__name__ == "PerformanceWarning" and category.__module__ == "wmrid.core.jit":
+            sys.stderr.write(_said(f"wmrid: note: {_one_line(str(message))}"))
+        else:
+            show(message, category, *args, **kwargs)
+
+    return shown
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -105,7 +120,8 @@ def main(argv: list[str] | None = None) -> None:
 
             if not {"--help", "-h", "--version"} & set(args):
                 memory_budget()  # a malformed WMRID_MEMORY_BUDGET is a usage error whatever the command reads
-            with option_style("flag"):  # library messages name options as the flags the user typed
+            with option_style("flag"), warnings.catch_warnings():  # flags as typed; notes in one line
+                warnings.showwarning = _notes_in_one_line(warnings.showwarning)
                 rv = command().main(args=args, prog_name="wmrid", standalone_mode=False)
             finish_output()
         finally:

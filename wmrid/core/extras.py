@@ -1,9 +1,11 @@
 """The optional parts of wmrid and the extras that install them.
 
 ``pip install wmrid`` gives identify, simulate, report, compare, monitor, inspect, plan and export on CSV, MCAP and
-ROS bag logs.  Three extras add what only some commands or formats need (the sizes measured in a fresh Python 3.11
-environment; README "Install"):
+ROS bag logs.  One extra makes every command faster, three add what only some commands or formats need (the sizes
+measured in a fresh Python 3.11 environment; README "Install"):
 
+* ``fast``: numba, which compiles the estimator's loops (:mod:`wmrid.core.jit`; without it they run as plain Python,
+  with the same results, about 10 times slower);
 * ``fleet``: ``wmrid fleet`` (dask.distributed, and pyarrow for its Parquet table);
 * ``parquet``: Parquet logs, in and out (pyarrow; it also reads plain CSV logs about 3x faster);
 * ``physics``: ``wmrid simulate --engine mujoco`` (MuJoCo).
@@ -21,6 +23,7 @@ from wmrid.core.errors import WmridError
 
 #: extra -> (what it adds, the modules it installs).
 EXTRAS = {
+    "fast": ("compiled estimator loops", ("numba",)),
     "fleet": ("wmrid fleet", ("distributed", "pyarrow")),
     "parquet": ("Parquet logs", ("pyarrow",)),
     "physics": ("wmrid simulate --engine mujoco", ("mujoco",)),

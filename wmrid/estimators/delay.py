@@ -25,10 +25,10 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-import numba
 import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError, UsageError, WmridError
+from wmrid.core.jit import kernel
 from wmrid.estimators.findings import EstimatedDelay
 from wmrid.estimators.uncertainty import interval_factor
 
@@ -357,7 +357,7 @@ def combine(estimates: list[DelayEstimate]) -> DelayEstimate:
     )  # fmt: skip
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def interp_columns(at: np.ndarray, d: float, xp: np.ndarray, fp: np.ndarray) -> np.ndarray:  # pragma: no cover
     """The columns of fp (m, 2), sampled at xp (m,) increasing, read at at + d (at (n,) increasing): numpy.interp's
     value bit for bit (its slope times the step from the knot below, the end values outside, the knot's own value on

@@ -14,9 +14,9 @@ buckets (BUCKETS_PER_OCTAVE per factor of 2 in variance, 1.1 % in sigma): memory
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
+from wmrid.core.jit import kernel
 from wmrid.core.wheel_log import DERIVED_NOTE
 from wmrid.model.kernels import plain
 
@@ -40,7 +40,7 @@ BUCKETS_PER_OCTAVE = 32
 MIN_WINDOWS = 4
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _window_variances(eta, prev, state, out):
     """One pass over a piece eta (k, 2): second differences at lag L = len(prev) // 2, d_i = eta_i - 2 eta_(i-L) +
     eta_(i-2L), continued from ``prev`` (2L, 2), a ring of the last 2L samples before the piece (``state[0]`` of them

@@ -30,8 +30,9 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
-import numba
 import numpy as np
+
+from wmrid.core.jit import kernel
 
 #: s: the full width of the centred mean.
 SIGN_WINDOW_S = 0.02
@@ -57,7 +58,7 @@ def _window_means(x: np.ndarray, h: int, left: int, right: int) -> np.ndarray:
     return _window_means_kernel(x, int(h), int(left), int(right))
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _window_means_kernel(x: np.ndarray, h: int, left: int, right: int) -> np.ndarray:  # pragma: no cover - compiled
     # the sums numpy's loop over the offsets -h .. h made (0.0 + x[i - h] + ... + x[i + h], in that order, cut at
     # the ends), at about a twentieth of its time on a 1 kHz log (2.7 s for an hour before)

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-import numba
 import numpy as np
+
+from wmrid.core.jit import kernel
 
 
 def plain(a: object, dtype: type = np.float64) -> np.ndarray:
@@ -14,7 +15,7 @@ def plain(a: object, dtype: type = np.float64) -> np.ndarray:
     return np.require(a, dtype=dtype, requirements=("C", "W"))
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def sign(x):
     """sgn(x) of Eqs. 15-17: +1, -1, or 0 at exactly 0 (a wheel at rest has no Coulomb friction term)."""
     if x > 0.0:

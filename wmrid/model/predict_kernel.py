@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
+from wmrid.core.jit import kernel
 from wmrid.model.dynamics import DRAG_SPEED as DRAG_SPEED_MODEL
 
 #: Zero crossings / mode changes handled within one substep before the rest of it is taken as is.
@@ -19,7 +19,7 @@ _MAX_EVENTS = 8
 DRAG_SPEED = DRAG_SPEED_MODEL
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _drag(e1, e2, cas):
     """The casters' drag torques (d_1, d_2) N m at the wheels (in the model as friction: subtracted from tau).
 
@@ -47,7 +47,7 @@ def _drag(e1, e2, cas):
 #: Inlined where it is called (numba's own inlining: the 16 % of a simulation that the calls cost, for 0.4 s more of
 #: compiling once; inlining the RK4 step as well doubled the compile for 5 % more, everything made it 22 s).  The same
 #: arithmetic: the simulated speeds are bit-identical.
-@numba.njit(cache=True, nogil=True, inline="always")
+@kernel(inline=True)
 def _accel(e1, e2, t1, t2, th, s1, s2, cas):
     """(eta_1', eta_2') rad/s^2 at speeds e, torques t, in mode (s1, s2); cas: caster drag (empty: none)."""
     m11, m12, m22, vc = th[0], th[1], th[2], th[3]
@@ -66,7 +66,7 @@ def _accel(e1, e2, t1, t2, th, s1, s2, cas):
     return (m11 - m12 * m12 / m22) * g1, 0.0
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _mode(e1, e2, t1, t2, th, cas):
     """The consistent mode (s1, s2) at speeds e and torques t (see the module docstring)."""
     s1 = 1.0 if e1 > 0.0 else (-1.0 if e1 < 0.0 else 0.0)
@@ -113,7 +113,7 @@ def _mode(e1, e2, t1, t2, th, cas):
     return s1, s2
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _rk4(e1, e2, s1, s2, ta1, ta2, tm1, tm2, tb1, tb2, h, th, cas):
     """One RK4 step of length h in mode (s1, s2); torques at the start (ta), middle (tm) and end (tb)."""
     k11, k12 = _accel(e1, e2, ta1, ta2, th, s1, s2, cas)
@@ -126,7 +126,7 @@ def _rk4(e1, e2, s1, s2, ta1, ta2, tm1, tm2, tb1, tb2, h, th, cas):
     )
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _crossing(e1, e2, s1, s2, x0, x1, slope1, slope2, u1, u2, w0, dw, th, cas, wheel):
     """Fraction in (0, 1] of a step at which wheel ``wheel`` (0/1) reaches zero speed (regula falsi, Illinois).
 
@@ -163,7 +163,7 @@ def _crossing(e1, e2, s1, s2, x0, x1, slope1, slope2, u1, u2, w0, dw, th, cas, w
     return alpha
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _advance(e1, e2, u1, u2, slope1, slope2, w0, dw, th, cas):
     """Speeds after one substep covering the fraction [w0, w0 + dw] of a sample interval.
 
@@ -213,7 +213,7 @@ def _advance(e1, e2, u1, u2, slope1, slope2, w0, dw, th, cas):
     return e1, e2
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def simulate_kernel(t, tau, theta0, starts, eta_start, foh, max_step, cas):
     """Simulated speeds (n, 2) rad/s; the state is reset to eta_start[g] at sample starts[g].
 

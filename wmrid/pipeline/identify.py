@@ -25,6 +25,7 @@ from dataclasses import dataclass, fields, replace
 from typing import Any
 
 from wmrid.core.errors import UsageError, WmridError, option
+from wmrid.core.jit import warn_if_slow
 from wmrid.core.wheel_log import LogStream, split_topics
 from wmrid.estimators.delay import DELAY_RESOLUTION_S, SIGNIFICANT_S, significance_factor
 from wmrid.estimators.feedback import check as feedback_check
@@ -107,6 +108,7 @@ def _identified(
     """:func:`identify_log` on the efforts as stamped, their timing checked (``steps.timing``).  ``within``: the
     warning of a delay already found within the log's misfit (``--delay auto``'s pass), not looked for again."""
     stream, sv = surveyed(log)
+    warn_if_slow(sv.n)  # a long log without numba: the user hears how long it will take, and how to shorten it
     chosen = Once(lambda: _choose(stream, sv, robot, options, steps, progress))
     timing = Timing()
     if steps.timing:

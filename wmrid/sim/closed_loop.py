@@ -5,16 +5,16 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
+from wmrid.core.jit import kernel
 from wmrid.model.kernels import sign
 
 #: Trajectory kinds of the kernels: the built-ins in closed form, and a table (:mod:`wmrid.sim.reference`).
 KIND = {"sinusoid": 0, "reversing": 1, "reference": 2}
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def table_state(traj, t):
     """The state of a tabulated reference (kind 2) at time t s: its row when t is on the table's grid (within 1e-6
     of a step), else the linear interpolation of the two rows around t; before the first row the first, after the
@@ -44,7 +44,7 @@ def table_state(traj, t):
             g * traj[a + 6] + frac * traj[a + 13])  # fmt: skip
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def reference_state(kind, traj, t, xr_int, yr_int):
     """Reference at time t: (x_r m, y_r m, phi_r rad, v_r m/s, w_r rad/s, v_r' m/s^2, w_r' rad/s^2).
 
@@ -85,7 +85,7 @@ def reference_state(kind, traj, t, xr_int, yr_int):
     return xr_int, yr_int, phi, v, w, vdot, wdot
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def reference_wheel_speeds(kind, traj, t, r, b):
     """(n, 2) rad/s: the reference's wheel speeds [(v_r + b w_r) / r, (v_r - b w_r) / r] at times t (n,) s."""
     out = np.empty((t.shape[0], 2))
@@ -96,7 +96,7 @@ def reference_wheel_speeds(kind, traj, t, r, b):
     return out
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def reference_signals(kind, traj, t):
     """(n, 4): the reference's v m/s, w rad/s, v' m/s^2, w' rad/s^2 at times t (n,) s (a plan's baselines: a 1 kHz
     minute is 60,000 calls of :func:`reference_state`)."""
@@ -107,7 +107,7 @@ def reference_signals(kind, traj, t):
     return out
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _reversing_velocity(traj, t):
     """(x_r', y_r') m/s of the reversing reference at time t."""
     vamp, vper, wamp, wper = traj[0], traj[1], traj[2], traj[3]
@@ -117,7 +117,7 @@ def _reversing_velocity(traj, t):
     return v * math.cos(phi), v * math.sin(phi)
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def reversing_advance(traj, t, h):
     """(dx_r, dy_r) m: the reversing reference's advance from t to t + h s, by Simpson's rule (RK4 on x_r' = f(t))."""
     fa = _reversing_velocity(traj, t)
@@ -126,7 +126,7 @@ def reversing_advance(traj, t, h):
     return h / 6.0 * (fa[0] + 4.0 * fm[0] + fb[0]), h / 6.0 * (fa[1] + 4.0 * fm[1] + fb[1])
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _plant_rhs(s, tau1, tau2, d1, d2, plant, out):
     """out (7,) = s' for state s (7,) under wheel torques tau and caster disturbance d (N m)."""
     m11, m12, m22, vc = plant[0], plant[1], plant[2], plant[3]
@@ -144,7 +144,7 @@ def _plant_rhs(s, tau1, tau2, d1, d2, plant, out):
     out[6] = m12 * f1 + m22 * f2
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def control_torque(s, ref, ctrl, gains):
     """Computed-torque backstepping law: (tau_1, tau_2) N m from the state s (7,) and reference tuple."""
     xr, yr, phir, vr, wr, vrd, wrd = ref
@@ -181,7 +181,7 @@ def control_torque(s, ref, ctrl, gains):
     return tau1, tau2
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def closed_loop_kernel(kind, traj, plant, ctrl, gains, period, substeps, n_log, every, caster_z, caster_std,
                        caster_time, plant_after=None, switch=-1):  # fmt: skip
     """Run the closed loop; all arguments plain scalars / float64 arrays.

@@ -52,7 +52,7 @@ def test_require_names_the_extra_and_the_command_that_installs_it(monkeypatch):
     assert str(exc.value) == "wmrid fleet needs the fleet extra: pip install 'wmrid[fleet]'"
     assert isinstance(exc.value, ImportError)
     assert require("json", "fleet") is json
-    assert set(EXTRAS) == {"fleet", "parquet", "physics"}
+    assert set(EXTRAS) == {"fast", "fleet", "parquet", "physics"}
     with pytest.raises(ValueError, match="unknown extra"):
         install_hint("gpu")
 
@@ -69,7 +69,7 @@ def test_the_test_extra_pulls_every_extra():
     assert "wmrid[all]" in extras["test"]
     assert extras["all"] == [f"wmrid[{','.join(sorted(EXTRAS))}]"]
     core = " ".join(project["dependencies"])
-    for name in ("distributed", "pyarrow", "mujoco"):
+    for name in ("numba", "distributed", "pyarrow", "mujoco"):
         assert name not in core
 
 

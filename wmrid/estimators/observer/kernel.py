@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
+from wmrid.core.jit import kernel
 from wmrid.model.dynamics import DRAG_SPEED
 from wmrid.model.kernels import sign
 
@@ -27,7 +27,7 @@ STEP_CACHE = 8
 REGRESSOR_ROWS = 512
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _regressor_rows(out, eta, eta_sign, tau, start, kind, geom, load):
     """The filters' per-sample inputs g (:func:`wmrid.model.dynamics.filter_regressor`) of the samples start ..
     start + m - 1 into ``out`` (m, p), a row each.
@@ -84,7 +84,7 @@ def _regressor_rows(out, eta, eta_sign, tau, start, kind, geom, load):
                     out[row, col + 1] = -cw * s
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _derivative_inputs(gin, g_prev, g, row, b0, b1, h, de1, de2, geom, load):
     """Overwrite the filter input of the columns c(eta) phi' (load codes 0: phi = v, 3: phi = w) over a step of h s
     with phi' (b0 c_a + b1 c_b) / h, c_a in g_prev (p,), c_b in g[row] (g (m, p): :func:`_regressor_rows`).  de1, de2:
@@ -106,7 +106,7 @@ def _derivative_inputs(gin, g_prev, g, row, b0, b1, h, de1, de2, geom, load):
                 gin[col + 1] = d * (b0 * g_prev[col + 1] + b1 * g[row, col + 1])
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def foh(x):
     a = math.exp(-x)
     if x < 0.1:
@@ -126,7 +126,7 @@ def foh(x):
     return a, phi0, e1 - phi0
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _substep_weights(x, h, m):
     """(c0, c1): the filter input over a step of h s (x = k h) of a torque held over m equal sub-steps at
     values interpolated linearly from tau_n (sub-step 0) towards tau_{n+1}: sum_j (1 - j/m, j/m) W_j,
@@ -141,7 +141,7 @@ def _substep_weights(x, h, m):
     return c0, c1
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def observer_chunk(
     t,
     eta,
@@ -322,7 +322,7 @@ def observer_chunk(
     cursor[1] = bj
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _solve_in_place(a, b):
     """Solve a x = b (a (n, n), b (n,)) by Gaussian elimination with partial pivoting, as LAPACK's gesv does;
     ``a`` and ``b`` are overwritten (x in ``b``).
@@ -354,7 +354,7 @@ def _solve_in_place(a, b):
         b[i] = s / a[i, i]
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def project_row_box(x0, gamma, lo, hi, out):
     """argmin over lo <= x <= hi of (x - x0)^T gamma (x - x0) into ``out`` (p,); gamma SPD (p, p).
 
@@ -463,7 +463,7 @@ def project_row_box(x0, gamma, lo, hi, out):
     return -1
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def project_history_box(theta, gamma, lo, hi, out):
     """Project each history entry theta (m, 2, p) with its gamma (m, p, p) onto the box, into ``out``."""
     worst = 0

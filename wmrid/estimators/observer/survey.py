@@ -13,10 +13,10 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
-import numba
 import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError
+from wmrid.core.jit import kernel
 from wmrid.estimators.sign_speed import mean_keeps_sign, sign_half_window
 from wmrid.model.dynamics import RegressorForm
 from wmrid.model.kernels import plain
@@ -388,7 +388,7 @@ def _raise_implausible(t: np.ndarray, eta: np.ndarray, tau: np.ndarray, source: 
             )
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _piece_stats(eta, tau, limit, acc):
     """One pass over a piece, eta and tau (k, 2): adds to acc (22,) the counts, sums and maxima of :class:`Survey`
     (see survey()); returns the first row holding a non-finite or implausible value, or -1."""

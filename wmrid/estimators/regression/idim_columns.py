@@ -4,12 +4,11 @@ writing one column at a time into that layout took as long as the filter itself)
 
 from __future__ import annotations
 
-import numba
-
+from wmrid.core.jit import kernel
 from wmrid.model.kernels import sign
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def raw_columns_into(eta, tau, out):  # pragma: no cover - compiled; tests/unit/estimators/test_idim.py compares it
     """out (n, >= 8): per sample eta_1, eta_2, eta_1 eta_2 - eta_2^2, eta_1 eta_2 - eta_1^2 (rad/s, rad^2/s^2),
     sgn eta_1, sgn eta_2 (0 at a speed of 0, as numpy's sign), tau_1, tau_2, from eta (n, 2) rad/s and tau (n, 2)

@@ -24,8 +24,9 @@ scipy.signal:
 
 from __future__ import annotations
 
-import numba
 import numpy as np
+
+from wmrid.core.jit import kernel
 
 #: Blackman-Harris 4-term window coefficients (minimum 4-term, sidelobes below -92 dB), as scipy's.
 BLACKMAN_HARRIS = (0.35875, 0.48829, 0.14128, 0.01168)
@@ -181,7 +182,7 @@ def steady_state(sos: np.ndarray) -> np.ndarray:
     return zi
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _filtfilt_columns(
     sos, zi, y
 ):  # pragma: no cover - compiled; tests/unit/estimators/test_lowpass.py compares it with scipy.signal

@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
+from wmrid.core.jit import kernel
 from wmrid.estimators.regression.idim_rows import ROW_LAYOUT
 
 #: The recursion starts when every Cholesky pivot^2 of the equilibrated information exceeds this.
@@ -20,7 +20,7 @@ INIT_PIVOT = 1e-4
 _ROW_COL_FEAT = np.array(ROW_LAYOUT, dtype=np.int64)
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _cholesky_min_pivot(r, work):
     """Cholesky of the diagonally equilibrated r (p, p) into work; smallest pivot^2, or -1 on failure."""
     n = r.shape[0]
@@ -48,7 +48,7 @@ def _cholesky_min_pivot(r, work):
     return smallest
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _invert_equilibrated(rinfo, work, pm):
     """pm = rinfo^-1 from the Cholesky factor L (in work) of D^-1 rinfo D^-1, D = sqrt(diag rinfo)."""
     p = rinfo.shape[0]
@@ -68,7 +68,7 @@ def _invert_equilibrated(rinfo, work, pm):
             pm[a, b] = s / math.sqrt(rinfo[a, a] * rinfo[b, b])
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def rls_kernel(
     features,
     tau,

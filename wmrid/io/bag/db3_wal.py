@@ -23,9 +23,9 @@ import os
 from dataclasses import dataclass
 from typing import Any
 
-import numba
 import numpy as np
 
+from wmrid.core.jit import kernel
 from wmrid.runtime.side_files import NotRegularFile, open_regular
 
 WAL_MAGIC = (0x377F0682, 0x377F0683)
@@ -64,14 +64,14 @@ class WalView:
         )
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _u32(buf, p, big):
     if big:
         return (np.int64(buf[p]) << 24) | (np.int64(buf[p + 1]) << 16) | (np.int64(buf[p + 2]) << 8) | buf[p + 3]
     return (np.int64(buf[p + 3]) << 24) | (np.int64(buf[p + 2]) << 16) | (np.int64(buf[p + 1]) << 8) | buf[p]
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _checksum(buf, start, n, big, s0, s1):
     """SQLite's WAL checksum over buf[start : start + n] (n a multiple of 8), from (s0, s1)."""
     mask = np.int64(0xFFFFFFFF)
@@ -81,7 +81,7 @@ def _checksum(buf, start, n, big, s0, s1):
     return s0, s1
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def wal_frames(buf, page_size, big, salt1, salt2, s0, s1, pages, sizes):
     """Walk the frames of a WAL file (uint8 ``buf``): fills ``pages[i]`` (page number) and ``sizes[i]`` (database
     size after a commit frame, else 0).  Returns (valid, current): the frames that are valid (salts, page number and

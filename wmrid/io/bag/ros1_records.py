@@ -12,16 +12,16 @@ against rosbags' ROS 1 deserialiser, on messages written by rosbags and on trunc
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
+from wmrid.core.jit import kernel
 from wmrid.io.mcap.records import STATUS_MALFORMED, STATUS_OK, _f64, _u32
 
 #: seq, stamp.sec, stamp.nsec and frame_id's length: the bytes every message has.
 _FIXED = 16
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def ros1_joint_states(buf, starts, lengths, ref, ref_off, stamp, pos, vel, eff, status):
     """Decode ROS 1 JointState payloads buf[starts[i] : starts[i] + lengths[i]] into per-joint arrays.
 
@@ -113,7 +113,7 @@ OP_CHUNK_INFO = 0x06
 OP_CONNECTION = 0x07
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def ros1_records(buf, p, end, ops, conns, times, hstart, hlen, dstart, dlen):
     """Walk ROS 1 bag records in buf[p:end] (each: uint32 header length, header fields, uint32 data length, data).
 

@@ -7,13 +7,12 @@ code, never by reading out of bounds."""
 from __future__ import annotations
 
 import io
+import struct
 
-import numba
 import numpy as np
-from numba.core import types
-from numba.extending import intrinsic
 
 from wmrid.core.errors import LogFormatError
+from wmrid.core.jit import COMPILED, kernel
 
 #: A JointState topic whose first message names more joints than this is skipped (a wheel log names a few; 50,000
 #: names in a 500 KB file made the per-joint arrays need 14 GB).
@@ -75,19 +74,19 @@ STATUS_MALFORMED = 1
 STATUS_NOT_LE_CDR = 2
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _u32(buf, p):
     return np.int64(buf[p]) | (np.int64(buf[p + 1]) << 8) | (np.int64(buf[p + 2]) << 16) | (np.int64(buf[p + 3]) << 24)
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _u64(buf, p):
     lo = _u32(buf, p)
     hi = _u32(buf, p + 4)
     return lo | (hi << 32)
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def scan(buf, start, end, ops, starts, lengths):
     """Walk records (opcode u8, length u64, body) in buf[start:end].
 
@@ -110,24 +109,34 @@ def scan(buf, start, end, ops, starts, lengths):
     return n, p
 
 
-@intrinsic
-def _as_float64(typingctx, bits):  # pragma: no cover - compiled
-    """The float64 whose IEEE 754 bits are the int64 ``bits``: a move between registers."""
+if COMPILED:
+    from numba.core import types
+    from numba.extending import intrinsic
 
-    def codegen(context, builder, signature, args):
-        return builder.bitcast(args[0], context.get_value_type(types.float64))
+    @intrinsic
+    def _as_float64(typingctx, bits):  # pragma: no cover - compiled
+        """The float64 whose IEEE 754 bits are the int64 ``bits``: a move between registers."""
 
-    return types.float64(types.int64), codegen
+        def codegen(context, builder, signature, args):
+            return builder.bitcast(args[0], context.get_value_type(types.float64))
+
+        return types.float64(types.int64), codegen
+
+else:
+
+    def _as_float64(bits):
+        """The float64 whose IEEE 754 bits are the int64 ``bits`` (plain Python: numba is not installed)."""
+        return struct.unpack("<d", struct.pack("<q", int(bits)))[0]
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def _f64(buf, p):
     """The little-endian float64 at buf[p] (its bytes as an integer, read as a float: a view of the bytes made an array
     per value, whose reference counting took a sixth of the decode's time)."""
     return _as_float64(_u64(buf, p))
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def joint_states(buf, starts, lengths, ref, ref_off, stamp, pos, vel, eff, status):
     """Decode JointState CDR payloads buf[starts[i] : starts[i] + lengths[i]] into per-joint arrays.
 
@@ -294,7 +303,7 @@ def _joint_names(body: memoryview, p: int, *, align: bool) -> list[str] | None:
     return names if end - p <= (3 if align else 0) else None
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel
 def field_stats(values, has_value, has_nonzero, has_nan, has_inf, max_abs):
     """Per column of values (n, K): any non-NaN, any non-NaN non-zero, any NaN, any inf, largest finite |v|."""
     n, k = values.shape

@@ -1,0 +1,167 @@
+"""The core install without numba (``pip install wmrid``; numba comes with the ``fast`` extra): every kernel runs as
+the plain Python function it is written as (wmrid.core.jit), and gives what the compiled kernel gives.
+
+A real interpreter in which numba cannot be imported (a ``sitecustomize`` on its path refuses numba and llvmlite, as
+an environment without them would) reads a CSV log, a ROS 1 bag and a rosbag2 folder of MCAP storage (the binary
+scanners), identifies the log, compares every method on it (the observer, IDIM, IDIM-IV, RLS and output error:
+their filters and recursions), and simulates (the closed-loop simulator); this process does the same with numba.
+
+Tolerance: decoded logs equal exactly (integer and bit operations); estimates and simulations to 1e-12 relative.  The
+kernels are the same operations in the same order (numba compiles without fast-math, so LLVM neither reorders nor
+contracts them); what may differ is the last bit of a libm function (exp, expm1) and what follows from it: measured
+1e-15 relative on a 40 s simulation, identical estimates on the bundled sample.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.bagutil import recording, write_ros1, write_rosbag2
+from tests.locations import ROOT_DIR as REPO
+
+BLOCKER = '''
+import sys
+
+
+class _NoNumba:
+    """numba and llvmlite cannot be imported here, as where they are not installed."""
+
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in ("numba", "llvmlite"):
+            raise ImportError(f"No module named {name!r} (blocked: wmrid is tested without numba)")
+        return None
+
+
+sys.meta_path.insert(0, _NoNumba())
+'''
+
+#: What both interpreters run: argv = [CSV log, ROS 1 bag, rosbag2 folder, simulated log to write]; prints JSON.
+SCRIPT = textwrap.dedent(
+    """
+    import json, sys
+    import numpy as np
+    import wmrid
+    from wmrid.core import jit
+
+    csv, bag, folder, simulated = sys.argv[1:5]
+    out = {"compiled": jit.COMPILED}
+    for name, path in (("csv", csv), ("ros1", bag), ("rosbag2", folder)):
+        log = wmrid.read_log(path)
+        out[name] = [np.asarray(log.t).tolist(), np.asarray(log.eta).tolist(), np.asarray(log.tau).tolist()]
+    out["identify"] = wmrid.identify(csv, "paper").to_dict(history=False)["parameters"]
+    methods = wmrid.compare(csv, "paper").to_dict()["methods"]
+    out["compare"] = {m: r.get("parameters") for m, r in methods.items()}
+    run = wmrid.simulate(duration=0.5)
+    out["simulate"] = [np.asarray(run.log.eta).tolist(), np.asarray(run.log.tau).tolist()]
+    out["numba_loaded"] = "numba" in sys.modules
+    print(json.dumps(out))
+    """
+)
+
+
+def _run(env_path: str | None, args: list[str], tmp_path: Path) -> dict:
+    env = dict(os.environ)
+    if env_path is not None:
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (env_path, str(REPO), env.get("PYTHONPATH")) if p)
+    done = subprocess.run(
+        [sys.executable, "-c", SCRIPT, *args], capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    return json.loads(done.stdout)
+
+
+def _close(a, b, where: str = "") -> None:
+    """``a`` and ``b`` (nested JSON) equal, floats to 1e-12 relative (NaN equal to NaN)."""
+    if isinstance(a, dict):
+        assert a.keys() == b.keys(), where
+        for k in a:
+            _close(a[k], b[k], f"{where}/{k}")
+    elif isinstance(a, list):
+        assert len(a) == len(b), where
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            _close(x, y, f"{where}[{i}]")
+    elif isinstance(a, float) and isinstance(b, float):
+        if math.isnan(a) or math.isnan(b):
+            assert math.isnan(a), where
+            assert math.isnan(b), where
+        else:
+            assert a == pytest.approx(b, rel=1e-12, abs=1e-300), where
+    else:
+        assert a == b, where
+
+
+@pytest.fixture(scope="module")
+def both(tmp_path_factory):
+    """(without numba, with numba): what :data:`SCRIPT` printed in each interpreter, on the same files."""
+    tmp = tmp_path_factory.mktemp("no_numba")
+    (tmp / "blocker").mkdir()
+    (tmp / "blocker" / "sitecustomize.py").write_text(BLOCKER)
+    # 1.5 s of a simulated drive with its set-points (IDIM-IV needs them), and 300 messages of the bundled MCAP
+    simulated = tmp / "drive.csv"
+    subprocess.run(
+        [sys.executable, "-m", "wmrid", "simulate", "-o", str(simulated), "--duration", "1.5"],
+        check=True, capture_output=True, cwd=tmp,
+    )  # fmt: skip
+    messages = recording(REPO / "sample_logs" / "paper_sinusoid.mcap")[:300]
+    bag = write_ros1(tmp / "drive.bag", messages)
+    folder = write_rosbag2(tmp / "drive_mcap", messages, storage="mcap")
+    args = [str(simulated), str(bag), str(folder), str(tmp / "out.csv")]
+    return _run(str(tmp / "blocker"), args, tmp), _run(None, args, tmp)
+
+
+def test_the_core_runs_without_numba(both):
+    plain, compiled = both
+    assert plain["compiled"] is False
+    assert plain["numba_loaded"] is False
+    assert compiled["compiled"] is True
+    assert compiled["numba_loaded"] is True
+
+
+@pytest.mark.parametrize("fmt", ["csv", "ros1", "rosbag2"])
+def test_logs_decode_the_same_without_numba(both, fmt):
+    plain, compiled = both
+    assert len(plain[fmt][0]) > 100
+    assert plain[fmt] == compiled[fmt]  # exactly: the scanners do integer and bit operations
+
+
+@pytest.mark.parametrize("what", ["identify", "compare", "simulate"])
+def test_estimates_and_simulations_are_the_same_without_numba(both, what):
+    plain, compiled = both
+    _close(plain[what], compiled[what], what)
+    if what == "compare":
+        assert set(plain[what]) >= {"observer", "idim", "iv", "rls", "oe"}
+        assert all(plain[what][m] for m in ("observer", "idim", "iv", "rls", "oe"))
+    if what == "simulate":
+        assert np.isfinite(np.asarray(plain[what][0])).all()
+
+
+def test_a_long_log_without_numba_says_once_how_long_and_how_to_shorten_it(monkeypatch, tmp_path):
+    """The note a user of a long log sees without numba: one line on stderr, before the work, with the estimated time
+    and the extra's install command; nothing on stdout but the result.  (The threshold is lowered to the bundled
+    sample's 40,001 samples, and numba counted as absent; the plain-Python run itself is tested above.)"""
+    from tests.cliutil import wmrid as run
+    from wmrid.core import jit
+
+    monkeypatch.setattr(jit, "COMPILED", False)
+    monkeypatch.setattr(jit, "SLOW_FROM_SAMPLES", 40_000)
+    sample = REPO / "sample_logs" / "paper_sinusoid.csv"
+    done = run("identify", sample, "--robot", "paper", "--format", "json", cwd=tmp_path)
+    assert done.returncode == 0
+    assert json.loads(done.stdout)["parameters"]
+    assert done.stderr.decode() == (
+        "wmrid: note: numba is not installed, so the estimator runs as plain Python: about 12 s for these 40,001 "
+        "samples, seconds with it (pip install 'wmrid[fast]')\n"
+    )
+    monkeypatch.setattr(jit, "COMPILED", True)
+    done = run("identify", sample, "--robot", "paper", "--format", "json", cwd=tmp_path)
+    assert done.returncode == 0
+    assert done.stderr == b""
