@@ -9,10 +9,14 @@ blocks), and each installed distribution's share (the files its RECORD lists, th
 pip's own cache is kept (a second run downloads nothing), so the time is that of an install whose wheels are at
 hand, not of a first download; the size does not depend on it.
 
-    python3 bench/speed/bench_install.py                  # the core
-    python3 bench/speed/bench_install.py --extras parquet fleet physics
+Then the quick start's main job in that environment, twice: ``wmrid identify sample_logs/paper_sinusoid.csv --robot
+paper`` (JSON to a file), its wall time the first time (with numba, the kernels compiled and cached) and the second.
 
-Figures: printed, and written to bench/results/bench_install.json (per install: seconds, megabytes, distributions).
+    python3 bench/speed/bench_install.py                  # the core
+    python3 bench/speed/bench_install.py --extras fast parquet fleet physics
+
+Figures: printed, and written to bench/results/bench_install.json (per install: seconds, megabytes, distributions,
+identify_sample_seconds).
 """
 
 from __future__ import annotations
@@ -84,8 +88,18 @@ def install(extra: str | None) -> dict:
         if proc.returncode != 0:
             raise SystemExit(f"pip install {target} failed ({proc.returncode}):\n{proc.stderr[-3000:]}")
         site = next((venv / "lib").glob("python3*/site-packages"))
-        return {"target": target, "seconds": seconds, "megabytes": tree_bytes(venv) / MB,
-                "distributions": distributions(site)}  # fmt: skip
+        megabytes, shares = tree_bytes(venv) / MB, distributions(site)  # before the quick start caches kernels
+        runs = []
+        for _ in range(2):
+            t0 = time.perf_counter()
+            subprocess.run(
+                [str(venv / "bin" / "wmrid"), "identify", "sample_logs/paper_sinusoid.csv", "--robot", "paper",
+                 "--format", "json", "-o", str(Path(tmp) / "result.json"), "--force"],
+                cwd=ROOT, check=True, capture_output=True, stdin=subprocess.DEVNULL,
+            )  # fmt: skip
+            runs.append(time.perf_counter() - t0)
+        return {"target": target, "seconds": seconds, "megabytes": megabytes, "distributions": shares,
+                "identify_sample_seconds": {"first": runs[0], "second": runs[1]}}  # fmt: skip
 
 
 def main() -> None:
@@ -98,6 +112,8 @@ def main() -> None:
         print(f"installing {name} ...", flush=True)
         installs[name] = got = install(extra)
         print(f"  pip install {got['target']}: {got['seconds']:.1f} s, {got['megabytes']:.0f} MB on disk")
+        runs = got["identify_sample_seconds"]
+        print(f"  the quick start's identify: {runs['first']:.1f} s the first time, {runs['second']:.1f} s the second")
         for dist, mb in list(got["distributions"].items())[:12]:
             print(f"    {dist:28s} {mb:7.1f} MB")
     write_results({"installs": installs, "python": sys.version.split()[0]})

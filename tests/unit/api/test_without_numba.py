@@ -44,36 +44,39 @@ class _NoNumba:
 sys.meta_path.insert(0, _NoNumba())
 '''
 
-#: What both interpreters run: argv = [CSV log, ROS 1 bag, rosbag2 folder, simulated log to write]; prints JSON.
-SCRIPT = textwrap.dedent(
+#: What both interpreters run: ``results(csv, bag, folder)`` of a CSV log, a ROS 1 bag and a rosbag2 folder, as JSON.
+BODY = textwrap.dedent(
     """
     import json, sys
     import numpy as np
     import wmrid
     from wmrid.core import jit
 
-    csv, bag, folder, simulated = sys.argv[1:5]
-    out = {"compiled": jit.COMPILED}
-    for name, path in (("csv", csv), ("ros1", bag), ("rosbag2", folder)):
-        log = wmrid.read_log(path)
-        out[name] = [np.asarray(log.t).tolist(), np.asarray(log.eta).tolist(), np.asarray(log.tau).tolist()]
-    out["identify"] = wmrid.identify(csv, "paper").to_dict(history=False)["parameters"]
-    methods = wmrid.compare(csv, "paper").to_dict()["methods"]
-    out["compare"] = {m: r.get("parameters") for m, r in methods.items()}
-    run = wmrid.simulate(duration=0.5)
-    out["simulate"] = [np.asarray(run.log.eta).tolist(), np.asarray(run.log.tau).tolist()]
-    out["numba_loaded"] = "numba" in sys.modules
-    print(json.dumps(out))
+
+    def results(csv, bag, folder):
+        out = {"compiled": jit.COMPILED}
+        for name, path in (("csv", csv), ("ros1", bag), ("rosbag2", folder)):
+            log = wmrid.read_log(path)
+            out[name] = [np.asarray(log.t).tolist(), np.asarray(log.eta).tolist(), np.asarray(log.tau).tolist()]
+        out["identify"] = wmrid.identify(csv, "paper").to_dict(history=False)["parameters"]
+        methods = wmrid.compare(csv, "paper").to_dict()["methods"]
+        out["compare"] = {m: r.get("parameters") for m, r in methods.items()}
+        run = wmrid.simulate(duration=0.5)
+        out["simulate"] = [np.asarray(run.log.eta).tolist(), np.asarray(run.log.tau).tolist()]
+        out["numba_loaded"] = "numba" in sys.modules
+        return json.loads(json.dumps(out))
     """
 )
 
 
-def _run(env_path: str | None, args: list[str], tmp_path: Path) -> dict:
+def _without_numba(blocker: Path, args: list[str], tmp_path: Path) -> dict:
+    """:data:`BODY`'s results in a new interpreter where numba cannot be imported (``blocker`` holds the
+    ``sitecustomize`` that refuses it)."""
     env = dict(os.environ)
-    if env_path is not None:
-        env["PYTHONPATH"] = os.pathsep.join(p for p in (env_path, str(REPO), env.get("PYTHONPATH")) if p)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(blocker), str(REPO), env.get("PYTHONPATH")) if p)
+    code = f"{BODY}\nprint(json.dumps(results(*sys.argv[1:4])))"
     done = subprocess.run(
-        [sys.executable, "-c", SCRIPT, *args], capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300
+        [sys.executable, "-c", code, *args], capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300
     )
     assert done.returncode == 0, done.stderr[-3000:]
     return json.loads(done.stdout)
@@ -101,21 +104,22 @@ def _close(a, b, where: str = "") -> None:
 
 @pytest.fixture(scope="module")
 def both(tmp_path_factory):
-    """(without numba, with numba): what :data:`SCRIPT` printed in each interpreter, on the same files."""
+    """(without numba, with numba): :data:`BODY`'s results in a new interpreter and in this one, on the same files."""
+    import wmrid
+
     tmp = tmp_path_factory.mktemp("no_numba")
     (tmp / "blocker").mkdir()
     (tmp / "blocker" / "sitecustomize.py").write_text(BLOCKER)
     # 1.5 s of a simulated drive with its set-points (IDIM-IV needs them), and 300 messages of the bundled MCAP
     simulated = tmp / "drive.csv"
-    subprocess.run(
-        [sys.executable, "-m", "wmrid", "simulate", "-o", str(simulated), "--duration", "1.5"],
-        check=True, capture_output=True, cwd=tmp,
-    )  # fmt: skip
+    wmrid.write_simulation(wmrid.simulate(duration=1.5), simulated)
     messages = recording(REPO / "sample_logs" / "paper_sinusoid.mcap")[:300]
     bag = write_ros1(tmp / "drive.bag", messages)
     folder = write_rosbag2(tmp / "drive_mcap", messages, storage="mcap")
-    args = [str(simulated), str(bag), str(folder), str(tmp / "out.csv")]
-    return _run(str(tmp / "blocker"), args, tmp), _run(None, args, tmp)
+    args = [str(simulated), str(bag), str(folder)]
+    namespace: dict = {}
+    exec(BODY, namespace)  # the same code as the other interpreter runs
+    return _without_numba(tmp / "blocker", args, tmp), namespace["results"](*args)
 
 
 def test_the_core_runs_without_numba(both):
