@@ -1,0 +1,473 @@
+"""What a panel of an SVG figure (:mod:`wmrid.reporting.svg`) draws: lines, markers, horizontal and vertical lines,
+spans, bands, bars, cells and text, each turned into SVG elements by the panel's coordinate mapping.
+
+Every number written is rounded to 2 decimals (px), so files stay small and the same data give the same bytes.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+#: The Tableau 10 palette, named C0 ... C9 as the figures have always called them: right wheel C0 (blue), left
+#: wheel C1 (orange).
+TAB10 = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf")
+_NAMED = {"k": "#000000", "black": "#000000", "white": "#ffffff", "w": "#ffffff", "none": "none"}
+#: Dash patterns (dash, gap, ...), in units of the line's width.
+_DASHES = {"--": (3.7, 1.6), ":": (1.0, 1.65), "-.": (6.4, 1.6, 1.0, 1.6)}
+#: Font sizes, px: tick labels and axis labels, legends and small labels, panel titles.
+FONT, SMALL, TITLE = 13.0, 11.5, 14.5
+#: Tick length and the padding between a panel's parts, px.
+TICK, PAD = 4.0, 3.0
+#: Stands for the id prefix of a figure's elements until the figure's content gives it (never in escaped text).
+ID_PLACEHOLDER = "<id>"
+#: Draw order: patches (spans, bands, bars, cells) under lines and markers, text on top.
+Z_PATCH, Z_LINE, Z_TEXT = 1, 2, 3
+
+#: A mapping of data values (n,) to px (n,) along one axis (NaN where a value cannot be drawn: <= 0 on a log axis).
+Mapping = Callable[[np.ndarray], np.ndarray]
+
+
+def colour(name: str) -> str:
+    """An SVG colour from a short name: ``C0`` .. ``C9`` (:data:`TAB10`), ``k``, ``white``, a grey level
+    ``"0.45"`` (0 black .. 1 white) or ``#rrggbb`` (kept)."""
+    if name.startswith("#") or name in ("none",):
+        return name
+    if len(name) == 2 and name[0] == "C" and name[1].isdigit():
+        return TAB10[int(name[1])]
+    if name in _NAMED:
+        return _NAMED[name]
+    level = round(255 * float(name))
+    return f"#{level:02x}{level:02x}{level:02x}"
+
+
+#: ColorBrewer's diverging red-blue, reversed (RdBu_r): -1 dark blue, 0 near white, +1 dark red; 11 stops.
+RDBU_R = ("#053061", "#2166ac", "#4393c3", "#92c5de", "#d1e5f0", "#f7f7f7", "#fddbc7", "#f4a582", "#d6604d",
+          "#b2182b", "#67001f")  # fmt: skip
+#: The colour of a cell without a value (a grey, 75 % white).
+MISSING = "#bfbfbf"
+
+
+def diverging(value: float, lo: float = -1.0, hi: float = 1.0) -> str:
+    """The colour of ``value`` on :data:`RDBU_R` from ``lo`` (blue) to ``hi`` (red), interpolated linearly between
+    its stops and clipped at the ends; :data:`MISSING` when ``value`` is not finite."""
+    if not math.isfinite(value):
+        return MISSING
+    s = min(max((value - lo) / (hi - lo), 0.0), 1.0) * (len(RDBU_R) - 1)
+    k = min(int(s), len(RDBU_R) - 2)
+    a, b = RDBU_R[k], RDBU_R[k + 1]
+    mix = [round(int(a[i : i + 2], 16) * (k + 1 - s) + int(b[i : i + 2], 16) * (s - k)) for i in (1, 3, 5)]
+    return "#" + "".join(f"{c:02x}" for c in mix)
+
+
+def luminance(hex_colour: str) -> float:
+    """Perceived brightness (0 black .. 1 white) of ``#rrggbb``: 0.299 r + 0.587 g + 0.114 b."""
+    r, g, b = (int(hex_colour[i : i + 2], 16) / 255.0 for i in (1, 3, 5))
+    return 0.299 * r + 0.587 * g + 0.114 * b
+
+
+def num(value: float) -> str:
+    """A coordinate rounded to 2 decimals, without trailing zeros (``12.5``, ``3``, never ``-0``)."""
+    text = f"{round(float(value), 2) + 0.0:.2f}".rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text
+
+
+def points(xs: np.ndarray, ys: np.ndarray) -> str:
+    """``x,y x,y ...`` of px coordinates, 2 decimals, consecutive repeats (after rounding) dropped."""
+    xs = np.round(np.asarray(xs, dtype=np.float64), 2) + 0.0
+    ys = np.round(np.asarray(ys, dtype=np.float64), 2) + 0.0
+    if len(xs) > 1:
+        keep = np.ones(len(xs), dtype=bool)
+        keep[1:] = (np.diff(xs) != 0) | (np.diff(ys) != 0)
+        xs, ys = xs[keep], ys[keep]
+    return " ".join(f"{x:.10g},{y:.10g}" for x, y in zip(xs.tolist(), ys.tolist(), strict=True))
+
+
+def escape(text: str) -> str:
+    """``text`` for an XML text node or attribute (``&``, ``<``, ``>``, quotes escaped; control characters dropped)."""
+    text = "".join(c for c in text if c >= " " or c in "\n\t")
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;").replace('"', "&quot;")
+
+
+def stroke(color: str, width: float, dash: str | None = None, opacity: float = 1.0) -> str:
+    """The stroke attributes of a line: colour, width (px), dash (``--``, ``:``, ``-.``) and opacity."""
+    out = f'stroke="{colour(color)}" stroke-width="{num(width)}"'
+    if dash in _DASHES:
+        out += f' stroke-dasharray="{",".join(num(d * width) for d in _DASHES[dash])}"'
+    return out + (f' stroke-opacity="{num(opacity)}"' if opacity < 1.0 else "")
+
+
+def segments(px: np.ndarray, py: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The runs of finite points of a line (a NaN, or a value a log axis cannot show, breaks it), each of 2+ points."""
+    ok = np.isfinite(px) & np.isfinite(py)
+    if ok.all():
+        return [(px, py)] if len(px) > 1 else []
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
+    return [(px[a:b], py[a:b]) for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a > 1]
+
+
+def simplify(px: np.ndarray, py: np.ndarray, tolerance: float = 0.1) -> np.ndarray:
+    """Indices of the points of a polyline (px (n,), px) that draw it to within ``tolerance`` px (Douglas-Peucker:
+    every point left out lies within ``tolerance`` of the segment drawn past it), the ends always kept."""
+    n = len(px)
+    keep = np.zeros(n, dtype=bool)
+    keep[[0, n - 1]] = True
+    stack = [(0, n - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j - i < 2:
+            continue
+        dx, dy = px[j] - px[i], py[j] - py[i]
+        ox, oy = px[i + 1 : j] - px[i], py[i + 1 : j] - py[i]
+        length2 = dx * dx + dy * dy
+        along = np.clip((ox * dx + oy * dy) / length2, 0.0, 1.0) if length2 > 0 else 0.0
+        dist2 = (ox - along * dx) ** 2 + (oy - along * dy) ** 2  # to the segment: a spike back along it counts
+        k = int(np.argmax(dist2))
+        if dist2[k] > tolerance * tolerance:
+            m = i + 1 + k
+            keep[m] = True
+            stack += [(i, m), (m, j)]
+    return np.flatnonzero(keep)
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A panel's mapping from data to px: ``fx``, ``fy``, its box in px (left, top, right, bottom), and the prefix
+    of the ids its elements may define (unique in the page)."""
+
+    fx: Mapping
+    fy: Mapping
+    box: tuple[float, float, float, float]
+    ident: str = ""
+
+
+@dataclass
+class Artist:
+    """Something a panel draws; ``label`` puts it in a legend (None: not listed)."""
+
+    label: str | None = field(default=None, kw_only=True)
+    zorder: int = field(default=Z_LINE, kw_only=True)
+
+    def extent(self) -> tuple[np.ndarray, np.ndarray]:
+        """Its data values along x and along y (for the axes' automatic limits; empty when it has none)."""
+        return np.array([]), np.array([])
+
+    def draw(self, frame: Frame) -> str:
+        """Its SVG elements in ``frame``."""
+        raise NotImplementedError
+
+    def handle(self) -> tuple[str, dict[str, Any]]:
+        """What its legend entry shows: ("line", style), ("patch", style), ("marker", style) or ("text", {})."""
+        return "text", {}
+
+
+@dataclass
+class Line(Artist):
+    """A polyline through (x, y) (n,); NaN breaks it."""
+
+    x: np.ndarray
+    y: np.ndarray
+    color: str = "C0"
+    width: float = 1.5
+    dash: str | None = None
+    opacity: float = 1.0
+
+    def extent(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.x, self.y
+
+    def draw(self, frame: Frame) -> str:
+        style = f'fill="none" {stroke(self.color, self.width, self.dash, self.opacity)}'
+        out = []
+        for sx, sy in segments(frame.fx(self.x), frame.fy(self.y)):
+            kept = simplify(sx, sy)
+            out.append(f'<polyline points="{points(sx[kept], sy[kept])}" {style}/>')
+        return "".join(out)
+
+    def handle(self) -> tuple[str, dict[str, Any]]:
+        return "line", {"color": self.color, "width": self.width, "dash": self.dash, "opacity": self.opacity}
+
+
+def marker_path(shape: str, xs: Sequence[float], ys: Sequence[float], size: float) -> str:
+    """The ``d`` of one path drawing a marker (``o`` circle, ``.`` dot, ``s`` square, ``^``/``v`` triangle, ``x``
+    cross) of ``size`` px at every (x, y) px."""
+    r = size / 2.0
+    out = []
+    for x, y in zip(xs, ys, strict=True):
+        if shape in ("o", "."):
+            out.append(f"M{num(x - r)},{num(y)}a{num(r)},{num(r)} 0 1,0 {num(2 * r)},0a{num(r)},{num(r)} 0 1,0 "
+                       f"{num(-2 * r)},0z")  # fmt: skip
+        elif shape == "s":
+            out.append(f"M{num(x - r)},{num(y - r)}h{num(2 * r)}v{num(2 * r)}h{num(-2 * r)}z")
+        elif shape in ("^", "v"):
+            tip = -r if shape == "^" else r
+            out.append(f"M{num(x)},{num(y + tip)}L{num(x + r)},{num(y - tip)}H{num(x - r)}z")
+        else:  # "x"
+            out.append(f"M{num(x - r)},{num(y - r)}L{num(x + r)},{num(y + r)}M{num(x - r)},{num(y + r)}"
+                       f"L{num(x + r)},{num(y - r)}")  # fmt: skip
+    return "".join(out)
+
+
+@dataclass
+class Markers(Artist):
+    """A marker at each (x, y) (n,); ``size`` px across; ``clip``: False lets them show on the panel's edge."""
+
+    x: np.ndarray
+    y: np.ndarray
+    shape: str = "o"
+    color: str = "C0"
+    size: float = 8.0
+    clip: bool = True
+
+    def extent(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.x, self.y
+
+    def draw(self, frame: Frame) -> str:
+        px, py = frame.fx(self.x), frame.fy(self.y)
+        ok = np.isfinite(px) & np.isfinite(py)
+        if not ok.any():
+            return ""
+        d = marker_path(self.shape, px[ok].tolist(), py[ok].tolist(), self.size)
+        paint = f'fill="none" {stroke(self.color, 1.3)}' if self.shape == "x" else f'fill="{colour(self.color)}"'
+        return f'<path d="{d}" {paint}/>'
+
+    def handle(self) -> tuple[str, dict[str, Any]]:
+        return "marker", {"shape": self.shape, "color": self.color, "size": min(self.size, 9.0)}
+
+
+@dataclass
+class Rule(Artist):
+    """A horizontal (``axis`` "y": at y = value) or vertical (``axis`` "x") line across the panel."""
+
+    value: float
+    axis: str = "y"
+    color: str = "k"
+    width: float = 1.0
+    dash: str | None = None
+
+    def extent(self) -> tuple[np.ndarray, np.ndarray]:
+        v = np.array([self.value], dtype=np.float64)
+        return (v, np.array([])) if self.axis == "x" else (np.array([]), v)
+
+    def draw(self, frame: Frame) -> str:
+        left, top, right, bottom = frame.box
+        style = stroke(self.color, self.width, self.dash)
+        if self.axis == "y":
+            y = float(frame.fy(np.array([self.value]))[0])
+            return f'<path d="M{num(left)},{num(y)}H{num(right)}" {style}/>' if math.isfinite(y) else ""
+        x = float(frame.fx(np.array([self.value]))[0])
+        return f'<path d="M{num(x)},{num(top)}V{num(bottom)}" {style}/>' if math.isfinite(x) else ""
+
+    def handle(self) -> tuple[str, dict[str, Any]]:
+        return "line", {"color": self.color, "width": self.width, "dash": self.dash, "opacity": 1.0}
+
+
+@dataclass
+class Span(Artist):
+    """A band across the panel from y = lo to y = hi."""
+
+    lo: float
+    hi: float
+    color: str = "C3"
+    opacity: float = 0.2
+    zorder: int = field(default=Z_PATCH, kw_only=True)
+
+    def extent(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.array([]), np.array([self.lo, self.hi], dtype=np.float64)
+
+    def draw(self, frame: Frame) -> str:
+        left, _, right, _ = frame.box
+        y0, y1 = frame.fy(np.array([self.lo, self.hi], dtype=np.float64))
+        if not (math.isfinite(y0) and math.isfinite(y1)):
+            return ""
+        y, h = min(y0, y1), abs(y1 - y0)
+        return (f'<rect x="{num(left)}" y="{num(y)}" width="{num(right - left)}" height="{num(h)}" '
+                f'fill="{colour(self.color)}" fill-opacity="{num(self.opacity)}"/>')  # fmt: skip
+
+    def handle(self) -> tuple[str, dict[str, Any]]:
+        return "patch", {"color": self.color, "opacity": self.opacity}
+
+
+@dataclass
+class Band(Artist):
+    """The area between lo (n,) and hi (n,) over x (n,); NaN breaks it."""
+
+    x: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    color: str = "C0"
+    opacity: float = 0.25
+    zorder: int = field(default=Z_PATCH, kw_only=True)
+
+    def extent(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.x, np.concatenate([self.lo, self.hi])
+
+    def draw(self, frame: Frame) -> str:
+        px, plo, phi = frame.fx(self.x), frame.fy(self.lo), frame.fy(self.hi)
+        ok = (np.isfinite(px) & np.isfinite(plo) & np.isfinite(phi)).astype(np.int8)
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], ok, [0]])))
+        out = []
+        for a, b in zip(edges[::2], edges[1::2], strict=True):
+            xs = np.concatenate([px[a:b], px[a:b][::-1]])
+            ys = np.concatenate([phi[a:b], plo[a:b][::-1]])
+            out.append(f'<polygon points="{points(xs, ys)}" fill="{colour(self.color)}" '
+                       f'fill-opacity="{num(self.opacity)}"/>')  # fmt: skip
+        return "".join(out)
+
+    def handle(self) -> tuple[str, dict[str, Any]]:
+        return "patch", {"color": self.color, "opacity": self.opacity}
+
+
+@dataclass
+class Bars(Artist):
+    """Bars at positions (n,) with values (n,), ``width`` in data units, from 0 (from the axis' edge on a log
+    axis); ``horizontal``: the values run along x.  NaN: no bar."""
+
+    positions: np.ndarray
+    values: np.ndarray
+    width: float = 0.8
+    colors: tuple[str, ...] = ("C0",)
+    horizontal: bool = False
+    zorder: int = field(default=Z_PATCH, kw_only=True)
+
+    def extent(self) -> tuple[np.ndarray, np.ndarray]:
+        along = np.concatenate([self.positions - self.width / 2, self.positions + self.width / 2])
+        return (self.values, along) if self.horizontal else (along, self.values)
+
+    def draw(self, frame: Frame) -> str:
+        left, _, _, bottom = frame.box
+        f_along, f_value = (frame.fy, frame.fx) if self.horizontal else (frame.fx, frame.fy)
+        a0 = f_along(self.positions - self.width / 2)
+        a1 = f_along(self.positions + self.width / 2)
+        v = f_value(self.values)
+        base = float(f_value(np.array([0.0]))[0])
+        if not math.isfinite(base):  # a log axis: from its edge
+            base = left if self.horizontal else bottom
+        out = []
+        for k in range(len(v)):
+            if not (math.isfinite(v[k]) and math.isfinite(a0[k]) and math.isfinite(a1[k])):
+                continue
+            lo_a, hi_a, lo_v, hi_v = min(a0[k], a1[k]), max(a0[k], a1[k]), min(base, v[k]), max(base, v[k])
+            x, y, w, h = (lo_v, lo_a, hi_v - lo_v, hi_a - lo_a) if self.horizontal else (lo_a, lo_v, hi_a - lo_a,
+                                                                                        hi_v - lo_v)  # fmt: skip
+            fill = colour(self.colors[k % len(self.colors)])
+            out.append(f'<rect x="{num(x)}" y="{num(y)}" width="{num(w)}" height="{num(h)}" fill="{fill}"/>')
+        return "".join(out)
+
+    def handle(self) -> tuple[str, dict[str, Any]]:
+        return "patch", {"color": self.colors[0], "opacity": 1.0}
+
+
+@dataclass
+class Cells(Artist):
+    """A grid of unit cells centred on (column j, row i) of ``fills`` (rows, columns) colours, with thin white
+    gaps between them."""
+
+    fills: list[list[str]]
+    zorder: int = field(default=Z_PATCH, kw_only=True)
+
+    def extent(self) -> tuple[np.ndarray, np.ndarray]:
+        rows, cols = len(self.fills), len(self.fills[0]) if self.fills else 0
+        return np.array([-0.5, cols - 0.5]), np.array([-0.5, rows - 0.5])
+
+    def draw(self, frame: Frame) -> str:
+        out = []
+        for i, row in enumerate(self.fills):
+            y0, y1 = frame.fy(np.array([i - 0.5, i + 0.5]))
+            for j, fill in enumerate(row):
+                x0, x1 = frame.fx(np.array([j - 0.5, j + 0.5]))
+                out.append(f'<rect x="{num(min(x0, x1))}" y="{num(min(y0, y1))}" width="{num(abs(x1 - x0))}" '
+                           f'height="{num(abs(y1 - y0))}" fill="{fill}"/>')  # fmt: skip
+        return f'<g stroke="#ffffff" stroke-width="0.5">{"".join(out)}</g>'
+
+
+@dataclass
+class Gradient(Artist):
+    """The panel filled with a colour scale running from its bottom to its top: ``stops`` (offset 0..1, colour)."""
+
+    stops: tuple[tuple[float, str], ...]
+    zorder: int = field(default=Z_PATCH, kw_only=True)
+
+    def draw(self, frame: Frame) -> str:
+        left, top, right, bottom = frame.box
+        ident = f"{frame.ident}g"
+        stops = "".join(f'<stop offset="{num(o)}" stop-color="{c}"/>' for o, c in self.stops)
+        return (f'<defs><linearGradient id="{ident}" x1="0" y1="1" x2="0" y2="0">{stops}</linearGradient></defs>'
+                f'<rect x="{num(left)}" y="{num(top)}" width="{num(right - left)}" height="{num(bottom - top)}" '
+                f'fill="url(#{ident})"/>')  # fmt: skip
+
+
+@dataclass
+class Text(Artist):
+    """Text at (x, y) in data units, centred on it (``anchor`` "start"/"middle"/"end" horizontally)."""
+
+    x: float
+    y: float
+    text: str
+    color: str = "k"
+    size: float = FONT
+    anchor: str = "middle"
+    zorder: int = field(default=Z_TEXT, kw_only=True)
+
+    def draw(self, frame: Frame) -> str:
+        x = float(frame.fx(np.array([self.x]))[0])
+        y = float(frame.fy(np.array([self.y]))[0])
+        if not (math.isfinite(x) and math.isfinite(y)):
+            return ""
+        return text_element(x, y, self.text, self.size, anchor=self.anchor, valign="center", color=self.color)
+
+
+def text_element(
+    x: float,
+    y: float,
+    text: str,
+    size: float,
+    *,
+    anchor: str = "middle",
+    valign: str = "baseline",
+    color: str = "k",
+    rotate: bool = False,
+    weight: str | None = None,
+) -> str:
+    """A ``<text>`` at (x, y) px: ``anchor`` start/middle/end; ``valign`` baseline (of the last line), center or
+    top (of the first line); lines split at ``\\n``; ``rotate``: read upwards (a y label)."""
+    lines = text.split("\n")
+    step = 1.2 * size
+    if valign == "center":
+        first = y + 0.35 * size - (len(lines) - 1) * step / 2
+    elif valign == "top":
+        first = y + 0.8 * size
+    else:
+        first = y - (len(lines) - 1) * step
+    attrs = f'font-size="{num(size)}"' + ("" if anchor == "start" else f' text-anchor="{anchor}"')
+    attrs += "" if colour(color) == "#000000" else f' fill="{colour(color)}"'
+    attrs += f' font-weight="{weight}"' if weight else ""
+    if rotate:
+        attrs += f' transform="rotate(-90 {num(x)} {num(y)})"'  # about (x, y): laid out as if unrotated
+    if len(lines) == 1:
+        return f'<text x="{num(x)}" y="{num(first)}" {attrs}>{escape(text)}</text>'
+    spans = "".join(
+        f'<tspan x="{num(x)}" y="{num(first + k * step)}">{escape(line)}</tspan>' for k, line in enumerate(lines)
+    )
+    return f"<text {attrs}>{spans}</text>"
+
+
+def legend_handle(kind: str, style: dict[str, Any], x: float, y: float, length: float = 24.0) -> str:
+    """The sample a legend shows for an entry of ``kind`` (:meth:`Artist.handle`), from (x, y) px over ``length``."""
+    if kind == "line":
+        dash = style.get("dash")
+        return (f'<path d="M{num(x)},{num(y)}h{num(length)}" fill="none" '
+                f'{stroke(style["color"], max(style["width"], 1.2), dash, style.get("opacity", 1.0))}/>')  # fmt: skip
+    if kind == "patch":
+        opacity = style.get("opacity", 1.0)
+        fill = f'fill="{colour(style["color"])}"' + (f' fill-opacity="{num(opacity)}"' if opacity < 1.0 else "")
+        return f'<rect x="{num(x)}" y="{num(y - 5)}" width="{num(length)}" height="10" {fill}/>'
+    if kind == "marker":
+        shape = style["shape"]
+        d = marker_path(shape, [x + length / 2], [y], style["size"])
+        paint = f'fill="none" {stroke(style["color"], 1.3)}' if shape == "x" else f'fill="{colour(style["color"])}"'
+        return f'<path d="{d}" {paint}/>'
+    return ""
