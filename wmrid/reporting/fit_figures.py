@@ -29,7 +29,7 @@ from wmrid.reporting.figures import (
     render,
 )
 from wmrid.reporting.svg import PX_PER_INCH, Figure
-from wmrid.reporting.svg_artists import RDBU_R, diverging, luminance
+from wmrid.reporting.svg_style import RDBU_R, diverging, luminance
 
 if TYPE_CHECKING:
     from wmrid.estimators.result import IdentificationResult

@@ -1,71 +1,69 @@
-"""A :class:`wmrid.reporting.svg.Figure` drawn: each panel's grid, clipped artists, frame, ticks, labels, title and
+"""A figure of :mod:`wmrid.reporting.svg` drawn: each panel's grid, clipped artists, frame, ticks, labels, title and
 legend, then the legend rows below the panels (:func:`draw_figure`)."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from wmrid.reporting.svg_artists import (
-    ID_PLACEHOLDER as _ID,
-    PAD as _PAD,
-    SMALL,
-    Bars,
-    Frame,
-    Line,
-    Markers,
-    Rule,
-    legend_handle,
-    num,
-    text_element,
-)
+from wmrid.reporting.svg_artists import Bars, Entry, Frame, Line, Markers, Rule, legend_handle, text_element
 from wmrid.reporting.svg_axes import DATE_RANGE, date_ticks, linear_labels, linear_ticks, log_ticks, text_width
-
-if TYPE_CHECKING:
-    from wmrid.reporting.svg import Axis, Figure, Panel
-
-#: A legend entry: (kind, style, label) as :meth:`wmrid.reporting.svg_artists.Artist.handle` gives them.
-Entry = tuple[str, dict[str, Any], str]
+from wmrid.reporting.svg_panel import Axis, Panel
+from wmrid.reporting.svg_style import ID_PLACEHOLDER as _ID, PAD as _PAD, SMALL, num
 
 _GRID = 'stroke="#b0b0b0" stroke-opacity="0.35" stroke-width="0.8"'
 _HANDLE = 24.0  # legend sample length, px
 
 
-def draw_figure(fig: Figure) -> tuple[str, float]:
-    """The SVG body of ``fig`` (ids prefixed by the placeholder the figure replaces) and its height (px; taller than
-    its size when the legend below needs more than one row)."""
-    panels = fig.visible
-    shared_x = data_limits(panels, "x") if fig.sharex and panels else None
-    shared_y = data_limits(panels, "y") if fig.sharey and panels else None
-    defs, parts = [], []
-    for k, panel in enumerate(panels):
+def limits(
+    panels: Sequence[Panel], sharex: bool = False, sharey: bool = False
+) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+    """The (x, y) limits each of ``panels`` (a figure's panels shown) is drawn with: set, shared (``sharex``,
+    ``sharey``: every panel the same), or from the data (:func:`data_limits`), then widened for an equal aspect."""
+    shared_x = data_limits(panels, "x") if sharex and panels else None
+    shared_y = data_limits(panels, "y") if sharey and panels else None
+    out = []
+    for panel in panels:
         xlim = shared_x or data_limits([panel], "x")
         ylim = shared_y or data_limits([panel], "y")
-        if panel.equal:
-            xlim, ylim = _equal(panel, xlim, ylim)
-        if fig.sharex and panel.cell is not None:
-            panel.x.labels_visible = not any(
-                q.cell is not None and q.cell[1] == panel.cell[1] and q.cell[0] > panel.cell[0] for q in panels
-            )
-        if fig.sharey and panel.cell is not None:
-            panel.y.labels_visible = not any(
-                q.cell is not None and q.cell[0] == panel.cell[0] and q.cell[1] < panel.cell[1] for q in panels
-            )
+        out.append(_equal(panel, xlim, ylim) if panel.equal else (xlim, ylim))
+    return out
+
+
+def draw_figure(
+    panels: Sequence[Panel], *, sharex: bool, sharey: bool, below: Sequence[Entry], size: tuple[float, float]
+) -> tuple[str, float]:
+    """The SVG body of a figure of ``size`` (width, height) px with ``panels`` (those shown; ``sharex``, ``sharey``:
+    one x, one y for all, tick labels only at the bottom of a column, at the left of a row) and the legend entries
+    ``below`` them; ids prefixed by the placeholder the figure replaces.  Also the figure's height (px; taller than
+    ``size`` when the legend below needs more than one row).  Each panel is a ``<g class="panel">``, its data in a
+    ``<g>`` clipped to its box; a legend is a ``<g class="legend">``."""
+    defs, parts = [], []
+    for k, (panel, (xlim, ylim)) in enumerate(zip(panels, limits(panels, sharex, sharey), strict=True)):
+        x_labels = panel.x.labels_visible and not (
+            sharex and panel.cell is not None
+            and any(q.cell is not None and q.cell[1] == panel.cell[1] and q.cell[0] > panel.cell[0] for q in panels)
+        )  # fmt: skip
+        y_labels = panel.y.labels_visible and not (
+            sharey and panel.cell is not None
+            and any(q.cell is not None and q.cell[0] == panel.cell[0] and q.cell[1] < panel.cell[1] for q in panels)
+        )  # fmt: skip
         left, top, w, h = panel.box
         defs.append(f'<clipPath id="{_ID}c{k}"><rect x="{num(left)}" y="{num(top)}" width="{num(w)}" '
                     f'height="{num(h)}"/></clipPath>')  # fmt: skip
-        parts.append(_draw_panel(panel, xlim, ylim, f"{_ID}p{k}", f"{_ID}c{k}"))
-    body, height = "".join(parts), fig.height
-    if fig.below:
-        legend, height = _legend_rows(fig.below, fig.width, fig.height)
+        parts.append(_draw_panel(panel, xlim, ylim, f"{_ID}p{k}", f"{_ID}c{k}", (x_labels, y_labels)))
+    body, height = "".join(parts), size[1]
+    if below:
+        legend, height = _legend_rows(list(below), size[0], size[1])
         body += legend
     return f"<defs>{''.join(defs)}</defs>\n{body}", height
 
 
-def _equal(panel: Panel, xlim: tuple[float, float], ylim: tuple[float, float]) -> tuple[tuple[float, float], ...]:
+def _equal(
+    panel: Panel, xlim: tuple[float, float], ylim: tuple[float, float]
+) -> tuple[tuple[float, float], tuple[float, float]]:
     """Limits widened so that a unit of x and of y take the same px (the panel's box kept)."""
     _, _, w, h = panel.box
     (x0, x1), (y0, y1) = xlim, ylim
@@ -74,7 +72,11 @@ def _equal(panel: Panel, xlim: tuple[float, float], ylim: tuple[float, float]) -
     return (cx - per_px * w / 2, cx + per_px * w / 2), (cy - per_px * h / 2, cy + per_px * h / 2)
 
 
-def _draw_panel(panel: Panel, xlim: tuple[float, float], ylim: tuple[float, float], ident: str, clip: str) -> str:
+def _draw_panel(
+    panel: Panel, xlim: tuple[float, float], ylim: tuple[float, float], ident: str, clip: str,
+    show: tuple[bool, bool],
+) -> str:  # fmt: skip
+    """One panel: grid, clipped artists, frame, ticks, tick labels (``show``: of x, of y), labels, title, legend."""
     left, top, w, h = panel.box
     right, bottom = left + w, top + h
     fx = panel.x.mapping(xlim[0], xlim[1], left, right)
@@ -83,7 +85,7 @@ def _draw_panel(panel: Panel, xlim: tuple[float, float], ylim: tuple[float, floa
     xt, xl, xminor, xnote = axis_ticks(panel.x, xlim[0], xlim[1], w, True)
     yt, yl, yminor, ynote = axis_ticks(panel.y, ylim[0], ylim[1], h, False)
     px, py = fx(xt), fy(yt)
-    out = ["<g>"]
+    out = ['<g class="panel">']
     grid = ""
     if "x" in panel.grid:
         grid += "".join(f"M{num(x)},{num(top)}V{num(bottom)}" for x in px)
@@ -100,7 +102,7 @@ def _draw_panel(panel: Panel, xlim: tuple[float, float], ylim: tuple[float, floa
                    'stroke="#000000" stroke-width="0.8"/>')  # fmt: skip
     out.append(_ticks(panel, px, py, fx(xminor), fy(yminor)))
     x_room = _PAD
-    if panel.x.labels_visible:
+    if show[0]:
         for x, label in zip(px, xl, strict=True):
             out.append(text_element(x, bottom + panel.x.tick_length + _PAD, label, panel.x.size, valign="top"))
         lines = max((label.count("\n") + 1 for label in xl), default=1)
@@ -110,7 +112,7 @@ def _draw_panel(panel: Panel, xlim: tuple[float, float], ylim: tuple[float, floa
     widest = 0.0
     right_side = panel.y.side == "right"
     edge, outward = (right, 1.0) if right_side else (left, -1.0)
-    if panel.y.labels_visible:
+    if show[1]:
         for y, label in zip(py, yl, strict=True):
             out.append(text_element(edge + outward * (panel.y.tick_length + _PAD), y, label, panel.y.size,
                                     anchor="start" if right_side else "end", valign="center"))  # fmt: skip
@@ -191,7 +193,7 @@ def _legend_rows(entries: list[Entry], width: float, height: float) -> tuple[str
         for e in row:
             out.append(_entry(e, x, y, SMALL))
             x += _entry_width(e, SMALL) + gap
-    return f"<g>{''.join(out)}</g>\n", height
+    return f'<g class="legend">{"".join(out)}</g>\n', height
 
 
 _CORNERS = ("upper right", "upper left", "lower left", "lower right")
@@ -222,11 +224,11 @@ def _corner_legend(panel: Panel, frame: Frame) -> str:
             counts.append(int(np.count_nonzero((xs >= x0) & (xs <= x0 + box_w) & (ys >= y0) & (ys <= y0 + box_h))))
         loc = _CORNERS[int(np.argmin(counts))]
     x0, y0 = corner(loc)
-    out = [f'<rect x="{num(x0)}" y="{num(y0)}" width="{num(box_w)}" height="{num(box_h)}" rx="2" fill="#ffffff" '
-           'fill-opacity="0.85" stroke="#cccccc" stroke-width="0.8"/>']  # fmt: skip
+    out = [f'<g class="legend"><rect x="{num(x0)}" y="{num(y0)}" width="{num(box_w)}" height="{num(box_h)}" rx="2" '
+           'fill="#ffffff" fill-opacity="0.85" stroke="#cccccc" stroke-width="0.8"/>']  # fmt: skip
     for k, e in enumerate(entries):
         out.append(_entry(e, x0 + 8.0, y0 + 4.0 + (k + 0.5) * row_h, size))
-    return "".join(out)
+    return "".join(out) + "</g>"
 
 
 def _drawn_points(panel: Panel, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
@@ -269,9 +271,9 @@ def _drawn_points(panel: Panel, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
 def data_limits(panels: Sequence[Panel], axis: str) -> tuple[float, float]:
     """Limits of ``axis`` ("x" or "y") over ``panels``: the first set explicitly, else the data's range with 5 %
     margins (in log10 on a log axis; within years 1..9999 on a date axis)."""
-    first = getattr(panels[0], axis)
+    first = panels[0].x if axis == "x" else panels[0].y
     for p in panels:
-        lim = getattr(p, axis).lim
+        lim = (p.x if axis == "x" else p.y).lim
         if lim is not None:
             return lim
     values = [a.extent()[0 if axis == "x" else 1] for p in panels for a in p.artists]
