@@ -77,25 +77,8 @@ class Report:
 
 
 def rendered(report: Report, fmt: str = "svg") -> dict[str, bytes]:
-    """The report's figures as ``fmt`` bytes by name, in order, each rendered once (kept in ``report.figures``).
-
-    Parameters
-    ----------
-    report
-        A report with its figures built.
-    fmt
-        "svg", the only format.
-
-    Returns
-    -------
-    dict of str to bytes
-        Figure name -> SVG document.
-
-    Raises
-    ------
-    UsageError
-        Any other format.
-    """
+    """The report's figures as ``fmt`` bytes ("svg", the only format; else UsageError) by name, in order, each
+    rendered once (kept in ``report.figures``)."""
     check_format(fmt)
     cache = report.figures
     for name, fig in report.figure_objects.items():

@@ -245,6 +245,8 @@ class Band(Artist):
         edges = np.flatnonzero(np.diff(np.concatenate([[0], ok, [0]])))
         out = []
         for a, b in zip(edges[::2], edges[1::2], strict=True):
+            if b - a < 2:  # a lone point: no area
+                continue
             xs = np.concatenate([px[a:b], px[a:b][::-1]])
             ys = np.concatenate([phi[a:b], plo[a:b][::-1]])
             out.append(f'<polygon points="{points(xs, ys)}" fill="{colour(self.color)}" '

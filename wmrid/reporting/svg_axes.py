@@ -242,13 +242,13 @@ def _day(when: dt.datetime) -> str:
     return f"{when.year:04d}-{when.month:02d}-{when.day:02d}"
 
 
-def _date_label(when: dt.datetime, unit: str) -> str:
+def _date_label(when: dt.datetime, unit: str, short: bool = False) -> str:
     if unit == "year":
         return f"{when.year:04d}"
     if unit == "month":
         return _day(when)[:7]
     if unit in ("halfmonth", "week", "day"):
-        return _day(when)
+        return _day(when)[5:] if short else _day(when)
     clock = f"{when.hour:02d}:{when.minute:02d}" + (f":{when.second:02d}" if unit == "second" else "")
     return clock
 
@@ -269,32 +269,48 @@ def date_ticks(lo: float, hi: float, length: float, size: float) -> tuple[np.nda
         Date numbers of the ticks (two or more when the axis spans a second or more; one when only the coarsest
         step fits).
     labels : list of str
-        ``2026``, ``2026-12`` or ``2026-12-06`` by the step; ``14:30`` (or ``14:30:05``) within a day, the date added
-        on a second line under the first tick and wherever the day changes.
+        ``2026``, ``2026-12`` or ``2026-12-06`` by the step.  Where whole dates would leave fewer than two ticks,
+        ``12-06`` with the year on a second line under the first tick and wherever the year changes; within a day,
+        ``14:30`` (or ``14:30:05``) with the date on a second line under the first tick and wherever the day changes.
     """
     lo, hi = max(min(lo, hi), DATE_RANGE[0]), min(max(lo, hi), DATE_RANGE[1] - 1e-6)
     span = max(hi - lo, 1.0 / 86400)
     start, end = number_date(lo), number_date(hi)
-    samples = {"year": "0000", "month": "0000-00", "second": "00:00:00", "minute": "00:00", "hour": "00:00"}
-    fallback: tuple[str, list[dt.datetime]] | None = None
+    found = _date_step(start, end, span, length, size, short=False)
+    if found is None or len(found[2]) < 2:
+        found = _date_step(start, end, span, length, size, short=True) or found
+    if found is None:
+        return np.array([]), []
+    unit, short, dates = found
+    short = short and unit in ("halfmonth", "week", "day")
+    labels = [_date_label(d, unit, short) for d in dates]
+    for i, d in enumerate(dates):
+        if unit in ("second", "minute", "hour") and (i == 0 or d.date() != dates[i - 1].date()):
+            labels[i] += "\n" + _day(d)
+        if short and (i == 0 or d.year != dates[i - 1].year):
+            labels[i] += f"\n{d.year:04d}"
+    return np.array([date_number(d) for d in dates]), labels
+
+
+_SAMPLES = {"year": "0000", "month": "0000-00", "second": "00:00:00", "minute": "00:00", "hour": "00:00"}
+
+
+def _date_step(
+    start: dt.datetime, end: dt.datetime, span: float, length: float, size: float, *, short: bool
+) -> tuple[str, bool, list[dt.datetime]] | None:
+    """(unit, ``short``, dates) of the finest calendar step whose labels (``short``: days as ``12-06``) fit
+    ``length`` px with two ticks or more; else the finest that fits with one; None when nothing fits."""
+    fallback: tuple[str, bool, list[dt.datetime]] | None = None
     for unit, n, days in _DATE_STEPS:
         if span / days > 60:  # far too many: not even listed
             continue
-        room = text_width(samples.get(unit, "0000-00-00"), size) + 1.2 * size
+        sample = _SAMPLES.get(unit, "00-00" if short else "0000-00-00")
+        room = text_width(sample, size) + 1.2 * size
         dates = _calendar_ticks(unit, n, start, end)
         gaps = np.diff([date_number(d) for d in dates]) * length / span if len(dates) > 1 else np.array([length])
         if len(dates) <= max(2, int(length // room)) and gaps.min() >= room:
             if len(dates) >= 2:
-                fallback = (unit, dates)
-                break
+                return unit, short, dates
             if dates and fallback is None:
-                fallback = (unit, dates)
-    if fallback is None:
-        return np.array([]), []
-    unit, dates = fallback
-    labels = [_date_label(d, unit) for d in dates]
-    if unit in ("second", "minute", "hour"):
-        for i, d in enumerate(dates):
-            if i == 0 or d.date() != dates[i - 1].date():
-                labels[i] += "\n" + _day(d)
-    return np.array([date_number(d) for d in dates]), labels
+                fallback = (unit, short, dates)
+    return fallback

@@ -288,7 +288,7 @@ def data_limits(panels: Sequence[Panel], axis: str) -> tuple[float, float]:
     if len(v) == 0:
         return 0.0, 1.0
     lo, hi = float(v.min()), float(v.max())
-    pad = 0.05 * (hi - lo) if hi > lo else max(0.05 * abs(hi), 0.5 if first.scale == "linear" else 1.0)
+    pad = 0.05 * (hi - lo) if hi > lo else 1.0 if first.scale == "date" else max(0.05 * abs(hi), 0.5)
     lo, hi = lo - pad, hi + pad
     if first.scale == "date":
         lo, hi = max(lo, DATE_RANGE[0]), min(hi, DATE_RANGE[1])
