@@ -308,6 +308,8 @@ def _date_step(
         room = text_width(sample, size) + 1.2 * size
         dates = _calendar_ticks(unit, n, start, end)
         gaps = np.diff([date_number(d) for d in dates]) * length / span if len(dates) > 1 else np.array([length])
+        if unit in ("second", "minute", "hour"):  # the date under the ticks where the day changes: once a day
+            room = max(room, (text_width("0000-00-00", size) + 1.2 * size) * days)
         if len(dates) <= max(2, int(length // room)) and gaps.min() >= room:
             if len(dates) >= 2:
                 return unit, short, dates

@@ -313,7 +313,7 @@ def axis_ticks(
         room = text_width("10⁻¹⁰", size) + size if horizontal else 2.2 * size
         major, labels, minor = log_ticks(a, b, max(2, int(length // room)))
         return major, labels, minor, ""
-    most = max(3, int(length // (4.5 * size)) + 1) if horizontal else max(2, int(length // (3.0 * size)) + 1)
+    most = max(3, int(length // (4.5 * size)) + 1) if horizontal else max(2, int(length // (2.5 * size)) + 1)
     while True:
         ticks, step = linear_ticks(a, b, most)
         labels, note = linear_labels(ticks, step)
