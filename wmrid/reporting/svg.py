@@ -30,11 +30,25 @@ PX_PER_INCH = 96.0
 
 
 class Figure:
-    """A figure of ``size`` (width, height) inches with panels on a ``grid`` (rows, columns) at fixed margins,
-    inches: ``left`` (tick labels and the y label), ``right``, ``top`` (titles), ``bottom`` (the x label, and a legend
-    row below it), ``gaps`` (between columns, between rows); ``width_ratios`` of the columns; ``sharex`` /
-    ``sharey``: every panel has the same x (y) limits, and only the panels at the bottom of their column (at the left
-    of their row) label those ticks.  ``panels``: row by row; :meth:`add_panel` places one at a box of its own.
+    """A figure of fixed size with panels on a grid at fixed margins (no layout pass: the margins fit the labels).
+
+    Parameters
+    ----------
+    size
+        (width, height), inches (at :data:`PX_PER_INCH`).
+    grid
+        (rows, columns) of panels; ``panels`` lists them row by row (:meth:`add_panel` places one at a box of its
+        own).
+    left, right, top, bottom
+        Margins, inches: ``left`` holds the tick labels and the y label, ``top`` the titles, ``bottom`` the x label
+        and a legend row below it.
+    gaps
+        (between columns, between rows), inches.
+    width_ratios
+        The columns' relative widths (default: equal).
+    sharex, sharey
+        Every panel has the same x (y) limits, and only the panels at the bottom of their column (at the left of
+        their row) label those ticks.
     """
 
     def __init__(
@@ -74,6 +88,7 @@ class Figure:
 
     @property
     def visible(self) -> list[Panel]:
+        """The panels drawn (those not removed), in order."""
         return [p for p in self.panels if not p.hidden]
 
     def legend_below(self, entries: Sequence[Entry]) -> None:
@@ -90,7 +105,15 @@ class Figure:
         return list(out.values())
 
     def to_svg(self) -> bytes:
-        """The figure as a standalone SVG document (UTF-8 bytes): the same figure, the same bytes."""
+        """The figure drawn.
+
+        Returns
+        -------
+        bytes
+            A standalone SVG document, UTF-8: an XML declaration, then ``<svg>`` with width, height and a
+            ``viewBox`` (px) so that it scales to the page's width.  The same figure gives the same bytes; its
+            ids are derived from its content (no two figures of a page share one).
+        """
         body, height = draw_figure(
             self.visible, sharex=self.sharex, sharey=self.sharey, below=self.below, size=(self.width, self.height)
         )

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.reporting.svg_style import FONT, colour, escape, num, stroke
+from wmrid.reporting.svg_style import FONT, colour, escape, num, points, segments, simplify, stroke
 
 #: Draw order: patches (spans, bands, bars, cells) under lines and markers, text on top.
 Z_PATCH, Z_LINE, Z_TEXT = 1, 2, 3
@@ -22,50 +22,6 @@ Z_PATCH, Z_LINE, Z_TEXT = 1, 2, 3
 Entry = tuple[str, dict[str, Any], str]
 #: A mapping of data values (n,) to px (n,) along one axis (NaN where a value cannot be drawn: <= 0 on a log axis).
 Mapping = Callable[[np.ndarray], np.ndarray]
-
-
-def points(xs: np.ndarray, ys: np.ndarray) -> str:
-    """``x,y x,y ...`` of px coordinates, 2 decimals, consecutive repeats (after rounding) dropped."""
-    xs = np.round(np.asarray(xs, dtype=np.float64), 2) + 0.0
-    ys = np.round(np.asarray(ys, dtype=np.float64), 2) + 0.0
-    if len(xs) > 1:
-        keep = np.ones(len(xs), dtype=bool)
-        keep[1:] = (np.diff(xs) != 0) | (np.diff(ys) != 0)
-        xs, ys = xs[keep], ys[keep]
-    return " ".join(f"{x:.10g},{y:.10g}" for x, y in zip(xs.tolist(), ys.tolist(), strict=True))
-
-
-def segments(px: np.ndarray, py: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The runs of finite points of a line (a NaN, or a value a log axis cannot show, breaks it), each of 2+ points."""
-    ok = np.isfinite(px) & np.isfinite(py)
-    if ok.all():
-        return [(px, py)] if len(px) > 1 else []
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
-    return [(px[a:b], py[a:b]) for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a > 1]
-
-
-def simplify(px: np.ndarray, py: np.ndarray, tolerance: float = 0.1) -> np.ndarray:
-    """Indices of the points of a polyline (px (n,), px) that draw it to within ``tolerance`` px (Douglas-Peucker:
-    every point left out lies within ``tolerance`` of the segment drawn past it), the ends always kept."""
-    n = len(px)
-    keep = np.zeros(n, dtype=bool)
-    keep[[0, n - 1]] = True
-    stack = [(0, n - 1)]
-    while stack:
-        i, j = stack.pop()
-        if j - i < 2:
-            continue
-        dx, dy = px[j] - px[i], py[j] - py[i]
-        ox, oy = px[i + 1 : j] - px[i], py[i + 1 : j] - py[i]
-        length2 = dx * dx + dy * dy
-        along = np.clip((ox * dx + oy * dy) / length2, 0.0, 1.0) if length2 > 0 else 0.0
-        dist2 = (ox - along * dx) ** 2 + (oy - along * dy) ** 2  # to the segment: a spike back along it counts
-        k = int(np.argmax(dist2))
-        if dist2[k] > tolerance * tolerance:
-            m = i + 1 + k
-            keep[m] = True
-            stack += [(i, m), (m, j)]
-    return np.flatnonzero(keep)
 
 
 @dataclass(frozen=True)
@@ -126,8 +82,22 @@ class Line(Artist):
 
 
 def marker_path(shape: str, xs: Sequence[float], ys: Sequence[float], size: float) -> str:
-    """The ``d`` of one path drawing a marker (``o`` circle, ``.`` dot, ``s`` square, ``^``/``v`` triangle, ``x``
-    cross) of ``size`` px at every (x, y) px."""
+    """One path drawing a marker at every point.
+
+    Parameters
+    ----------
+    shape
+        ``o`` circle, ``.`` dot, ``s`` square, ``^``/``v`` triangle, ``x`` cross.
+    xs, ys
+        (n,) px each.
+    size
+        The marker's size across, px.
+
+    Returns
+    -------
+    str
+        The path's ``d`` (a cross is stroked, the others filled).
+    """
     r = size / 2.0
     out = []
     for x, y in zip(xs, ys, strict=True):
@@ -368,8 +338,30 @@ def text_element(
     rotate: bool = False,
     weight: str | None = None,
 ) -> str:
-    """A ``<text>`` at (x, y) px: ``anchor`` start/middle/end; ``valign`` baseline (of the last line), center or
-    top (of the first line); lines split at ``\\n``; ``rotate``: read upwards (a y label)."""
+    """A ``<text>`` element, escaped.
+
+    Parameters
+    ----------
+    x, y
+        Where it stands, px.
+    text
+        Its text; lines split at ``\\n`` (``<tspan>`` each).
+    size
+        Font size, px.
+    anchor
+        "start", "middle" or "end" at x.
+    valign
+        y is the "baseline" of the last line, the "center" of the block, or the "top" of the first line.
+    color, weight
+        Fill colour (:func:`~wmrid.reporting.svg_style.colour`) and font weight (None: normal).
+    rotate
+        Read upwards (a y label), turned about (x, y).
+
+    Returns
+    -------
+    str
+        The element.
+    """
     lines = text.split("\n")
     step = 1.2 * size
     if valign == "center":
@@ -392,7 +384,22 @@ def text_element(
 
 
 def legend_handle(kind: str, style: dict[str, Any], x: float, y: float, length: float = 24.0) -> str:
-    """The sample a legend shows for an entry of ``kind`` (:meth:`Artist.handle`), from (x, y) px over ``length``."""
+    """The sample a legend shows for an entry.
+
+    Parameters
+    ----------
+    kind, style
+        As :meth:`Artist.handle` gives them ("line", "patch", "marker"; "text": nothing).
+    x, y
+        Its left end and middle, px.
+    length
+        Its length, px.
+
+    Returns
+    -------
+    str
+        The element ("" for a text entry).
+    """
     if kind == "line":
         dash = style.get("dash")
         return (f'<path d="M{num(x)},{num(y)}h{num(length)}" fill="none" '

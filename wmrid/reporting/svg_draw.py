@@ -8,6 +8,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from wmrid.core.errors import UsageError
 from wmrid.reporting.svg_artists import Bars, Entry, Frame, Line, Markers, Rule, legend_handle, text_element
 from wmrid.reporting.svg_axes import DATE_RANGE, date_ticks, linear_labels, linear_ticks, log_ticks, text_width
 from wmrid.reporting.svg_panel import Axis, Panel
@@ -20,8 +21,21 @@ _HANDLE = 24.0  # legend sample length, px
 def limits(
     panels: Sequence[Panel], sharex: bool = False, sharey: bool = False
 ) -> list[tuple[tuple[float, float], tuple[float, float]]]:
-    """The (x, y) limits each of ``panels`` (a figure's panels shown) is drawn with: set, shared (``sharex``,
-    ``sharey``: every panel the same), or from the data (:func:`data_limits`), then widened for an equal aspect."""
+    """The limits each panel is drawn with.
+
+    Parameters
+    ----------
+    panels
+        A figure's panels shown (:attr:`wmrid.reporting.svg.Figure.visible`).
+    sharex, sharey
+        One x (y) range for every panel: the first set, else the data's of them all.
+
+    Returns
+    -------
+    list of ((x0, x1), (y0, y1))
+        Per panel, in the axes' units: set, shared, or from the data (:func:`data_limits`), then widened for an equal
+        aspect where the panel asks for one.
+    """
     shared_x = data_limits(panels, "x") if sharex and panels else None
     shared_y = data_limits(panels, "y") if sharey and panels else None
     out = []
@@ -35,11 +49,28 @@ def limits(
 def draw_figure(
     panels: Sequence[Panel], *, sharex: bool, sharey: bool, below: Sequence[Entry], size: tuple[float, float]
 ) -> tuple[str, float]:
-    """The SVG body of a figure of ``size`` (width, height) px with ``panels`` (those shown; ``sharex``, ``sharey``:
-    one x, one y for all, tick labels only at the bottom of a column, at the left of a row) and the legend entries
-    ``below`` them; ids prefixed by the placeholder the figure replaces.  Also the figure's height (px; taller than
-    ``size`` when the legend below needs more than one row).  Each panel is a ``<g class="panel">``, its data in a
-    ``<g>`` clipped to its box; a legend is a ``<g class="legend">``."""
+    """A figure's SVG body.
+
+    Parameters
+    ----------
+    panels
+        The panels shown.
+    sharex, sharey
+        One x (y) range for all, its tick labels only at the bottom of a column (at the left of a row).
+    below
+        Legend entries drawn in rows below the panels.
+    size
+        The figure's (width, height), px.
+
+    Returns
+    -------
+    body : str
+        Its elements (ids prefixed by :data:`~wmrid.reporting.svg_style.ID_PLACEHOLDER`, which the figure replaces):
+        each panel a ``<g class="panel">`` with its data in a ``<g>`` clipped to its box, a legend a
+        ``<g class="legend">``.
+    height : float
+        The figure's height, px: taller than ``size`` when the legend below needs more than one row.
+    """
     defs, parts = [], []
     for k, (panel, (xlim, ylim)) in enumerate(zip(panels, limits(panels, sharex, sharey), strict=True)):
         x_labels = panel.x.labels_visible and not (
@@ -269,14 +300,38 @@ def _drawn_points(panel: Panel, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
 
 
 def data_limits(panels: Sequence[Panel], axis: str) -> tuple[float, float]:
-    """Limits of ``axis`` ("x" or "y") over ``panels``: the first set explicitly, else the data's range with 5 %
-    margins (in log10 on a log axis; within years 1..9999 on a date axis)."""
+    """The limits of one axis over some panels.
+
+    Parameters
+    ----------
+    panels
+        One panel, or the panels sharing the axis (their scale is the first's).
+    axis
+        "x" or "y".
+
+    Returns
+    -------
+    (lo, hi)
+        The first limits set explicitly, else the data's range with 5 % margins (in log10 on a log axis; within
+        years 1..9999 on a date axis); a single value is widened (by a day on a date axis).
+
+    Raises
+    ------
+    UsageError
+        Limits set on a log axis that are not both positive.
+    """
     first = panels[0].x if axis == "x" else panels[0].y
+    pinned: list[np.ndarray] = []
     for p in panels:
         lim = (p.x if axis == "x" else p.y).lim
         if lim is not None:
-            return lim
-    values = [a.extent()[0 if axis == "x" else 1] for p in panels for a in p.artists]
+            if first.scale == "log" and min(lim) <= 0:
+                raise UsageError(f"a log axis' limits must be positive, got {lim}")
+            if lim[0] != lim[1]:
+                return lim
+            pinned = [np.asarray(lim, dtype=np.float64)]  # nothing between them: widened as a single value is
+            break
+    values = [a.extent()[0 if axis == "x" else 1] for p in panels for a in p.artists] + pinned
     v = np.concatenate([np.asarray(x, dtype=np.float64).ravel() for x in values]) if values else np.array([])
     v = v[np.isfinite(v) & ((v > 0) if first.scale == "log" else True)]
     if first.scale == "log":
@@ -298,8 +353,31 @@ def data_limits(panels: Sequence[Panel], axis: str) -> tuple[float, float]:
 def axis_ticks(
     axis: Axis, lo: float, hi: float, length: float, horizontal: bool
 ) -> tuple[np.ndarray, list[str], np.ndarray, str]:
-    """(major ticks, their labels, minor ticks, note) of ``axis`` from ``lo`` to ``hi`` over ``length`` px: explicit
-    ticks, decades, calendar units, or nice linear steps whose labels do not touch."""
+    """The ticks of one axis.
+
+    Parameters
+    ----------
+    axis
+        The axis (its scale, explicit ticks, label size).
+    lo, hi
+        Its limits, in its units.
+    length
+        Its length, px.
+    horizontal
+        An x axis (labels side by side: their widths set the spacing), else a y axis (one label height and a gap).
+
+    Returns
+    -------
+    major : (n,) float
+        Ticks labelled: the explicit ones within the limits, decades (:func:`~wmrid.reporting.svg_axes.log_ticks`),
+        calendar units (:func:`~wmrid.reporting.svg_axes.date_ticks`), or nice linear steps whose labels do not touch.
+    labels : list of str
+        Their labels.
+    minor : (m,) float
+        Unlabelled ticks (a log axis' 2..9 x 10^k).
+    note : str
+        What completes the labels (a power of ten, an offset), or "".
+    """
     a, b = min(lo, hi), max(lo, hi)
     if axis.ticks is not None:
         pos, labels = axis.ticks

@@ -225,3 +225,50 @@ def test_colours():
     assert diverging(float("nan")) == MISSING
     assert luminance("#67001f") < 0.5 < luminance("#f7f7f7")
     assert (num(1.0), num(-0.001), num(2.345), num(1056.0)) == ("1", "0", "2.35", "1056")
+
+
+@pytest.mark.parametrize(
+    ("x", "y", "lim"),
+    [
+        ([], [], None),  # nothing to draw
+        ([0.0, 1.0, 2.0], [np.nan] * 3, None),  # nothing finite
+        ([0.0, 1.0, 2.0], [3.0, 3.0, 3.0], None),  # a constant
+        ([5.0], [2.0], None),  # a single sample
+        ([0.0, 1.0], [1.0, 2.0], (4.0, 4.0)),  # limits that are one value
+        ([1e300, 1.0000001e300], [-1e-300, 1e-300], None),  # huge and tiny
+    ],
+)
+def test_degenerate_data_draw(x, y, lim):
+    fig, ax = _one(sharex=True)
+    ax.line(x, y, label="x")
+    ax.markers(x, y)
+    if lim:
+        ax.set_xlim(*lim)
+        ax.set_ylim(*lim)
+    ax.legend()
+    root = parse(fig.to_svg())
+    (panel,) = panels(root)
+    assert tick_labels(panel, "x")
+    assert tick_labels(panel, "y")
+    assert not any(s in fig.to_svg() for s in (b"nan", b"inf"))
+
+
+def test_bad_styles_are_usage_errors():
+    from wmrid.core.errors import UsageError
+
+    fig, ax = _one()
+    with pytest.raises(UsageError, match="shape"):
+        ax.markers([0], [0], shape="*")
+    with pytest.raises(UsageError, match="dash"):
+        ax.line([0, 1], [0, 1], dash="..")
+    with pytest.raises(UsageError, match="one length"):
+        ax.line([0, 1], [0, 1, 2])
+    with pytest.raises(UsageError, match="corner"):
+        ax.legend("middle")
+    with pytest.raises(UsageError, match="colour"):
+        colour("reddish")
+    ax.line([1, 2], [1, 2])
+    ax.y.scale = "log"
+    ax.set_ylim(-1.0, 10.0)
+    with pytest.raises(UsageError, match="positive"):
+        fig.to_svg()
