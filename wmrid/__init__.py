@@ -71,34 +71,6 @@ def _private_temp_folder(name: str) -> str | None:
         return None
 
 
-def _could_make(folder: str) -> bool:
-    """Whether ``folder`` is, or could be made, a writable folder (nothing is made: the nearest existing folder on
-    its path is asked); False for a relative path (no HOME: "~" is never a folder in the working directory)."""
-    if not _os.path.isabs(folder):
-        return False
-    path = folder
-    while not _os.path.exists(path):
-        parent = _os.path.dirname(path)
-        if parent == path:
-            return False
-        path = parent
-    return _os.path.isdir(path) and _os.access(path, _os.W_OK | _os.X_OK)
-
-
-def _matplotlib_config_fallback() -> None:
-    """Give matplotlib a writable configuration and cache folder when it would have none (HOME missing or read-only:
-    it made a temporary one itself, and said so in two lines of its own on stderr on every run)."""
-    if _os.environ.get("MPLCONFIGDIR"):
-        return
-    config = _os.environ.get("XDG_CONFIG_HOME") or _os.path.join(_os.path.expanduser("~"), ".config")
-    cache = _os.environ.get("XDG_CACHE_HOME") or _os.path.join(_os.path.expanduser("~"), ".cache")
-    usable = all(_could_make(_os.path.join(base, "matplotlib")) for base in (config, cache))
-    if not usable:
-        folder = _private_temp_folder("wmrid-matplotlib")
-        if folder is not None:
-            _os.environ["MPLCONFIGDIR"] = folder
-
-
 def _under_an_address_space_cap() -> None:
     """Keep the address space small when the process runs under a cap (``ulimit -v``, ``prlimit --as``).
 
@@ -129,7 +101,6 @@ def _under_an_address_space_cap() -> None:
 
 
 _numba_cache_fallback()
-_matplotlib_config_fallback()
 _under_an_address_space_cap()
 
 

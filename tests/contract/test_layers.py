@@ -287,8 +287,8 @@ def test_a_function_imports_a_module_only_to_put_off_loading_it() -> None:
     * in ``wmrid.cli``: ``wmrid --help`` and each command load only what that command runs;
     * in ``wmrid.api``, the fleet's front doors (``wmrid.fleets.run``, ``wmrid.fleets.report``) and the package's
       front: ``import wmrid`` and each function load only what they use;
-    * elsewhere: the module imported is one its importer does not load otherwise (numba's kernels, scipy,
-      matplotlib, an optional package behind it), checked here: a function-local import of a module the importer
+    * elsewhere: the module imported is one its importer does not load otherwise (numba's kernels, scipy, the
+      figure builders, an optional package behind it), checked here: a function-local import of a module the importer
       loads anyway at import time puts nothing off and belongs at the top.
     """
     at_import, local = _import_time_and_local_imports()

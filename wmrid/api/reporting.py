@@ -98,7 +98,7 @@ def report(
     truth
         True base parameters by name (a simulator's ``truth["parameters"]``), for the error columns.
     figures
-        Build the figures (matplotlib; each is rendered, the slow part, only in the format an output needs).
+        Build the figures (:mod:`wmrid.reporting.svg`; each is rendered once, when an output needs it).
     options
         How to read a log given as a path (:class:`~wmrid.api.inputs.LogOptions`).
     robot

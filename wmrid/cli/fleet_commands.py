@@ -328,7 +328,6 @@ def fleet_report_command(
     from wmrid.core.extras import require_installed
 
     require_installed("pyarrow", "fleet", "wmrid fleet-report")  # imported by the review, after the checks below
-    require_installed("matplotlib", "fleet", "wmrid fleet-report")
     from wmrid.cli.helpers import check_outputs
 
     check_outputs((output,), force, (table,))  # before anything is imported or read

@@ -5,19 +5,17 @@ findings and figure, then the other robots, the statements of what a flag means,
 
 from __future__ import annotations
 
-import base64
 import html
 import math
-import re
 from dataclasses import dataclass, field
 from typing import Any
 
 from wmrid.fleets.figures import build_evidence_figure, build_robot_figure
 from wmrid.fleets.review import FleetReview, RobotReview
-from wmrid.reporting.figures import render
+from wmrid.reporting.figures import check_format, render
 from wmrid.reporting.markdown import text
 from wmrid.reporting.report_html import _CSS, _html_provenance, _html_table
-from wmrid.reporting.report_markdown import _md_table, md_provenance
+from wmrid.reporting.report_markdown import _md_table, md_provenance, svg_data_uri
 from wmrid.reporting.report_table import ReportTable
 
 #: Robots drawn at most (flagged robots always; the others in rank order up to this count).
@@ -40,7 +38,7 @@ class FleetReport:
         How the review was made: wmrid's version, the time (UTC), the command, the options, the table's size and
         SHA-256.
     figure_objects
-        The figures to draw: name -> matplotlib Figure, rendered when an output needs them.
+        The figures to draw: name -> :class:`wmrid.reporting.svg.Figure`, rendered once when an output needs them.
     figure_notes
         Name -> a sentence about the figure.
     """
@@ -51,13 +49,14 @@ class FleetReport:
     provenance: dict[str, Any] = field(default_factory=dict)
     figure_objects: dict[str, Any] = field(default_factory=dict, repr=False)
     figure_notes: dict[str, str] = field(default_factory=dict)
-    _rendered: dict[tuple[str, str], bytes] = field(default_factory=dict, repr=False)
+    _rendered: dict[str, bytes] = field(default_factory=dict, repr=False)
 
-    def rendered(self, name: str, fmt: str) -> bytes:
-        key = (name, fmt)
-        if key not in self._rendered:
-            self._rendered[key] = render(self.figure_objects[name], fmt)
-        return self._rendered[key]
+    def rendered(self, name: str, fmt: str = "svg") -> bytes:
+        """The figure ``name`` as ``fmt`` bytes ("svg", the only format), rendered once."""
+        check_format(fmt)
+        if name not in self._rendered:
+            self._rendered[name] = render(self.figure_objects[name], fmt)
+        return self._rendered[name]
 
 
 def _date(review: RobotReview, index: int | None) -> str:
@@ -120,8 +119,7 @@ def build_fleet_report(
 
 def _svg(rep: FleetReport, name: str) -> str:
     text = rep.rendered(name, "svg").decode("utf-8")
-    text = text[text.index("<svg") :] if "<svg" in text else text
-    return re.sub(r"<metadata>.*?</metadata>", "", text, flags=re.S)
+    return text[text.index("<svg") :] if "<svg" in text else text  # the XML declaration: not inside HTML
 
 
 def _robot_html(rep: FleetReport, rv: RobotReview) -> list[str]:
@@ -174,7 +172,7 @@ def to_html(rep: FleetReport) -> str:
 
 
 def to_markdown(rep: FleetReport) -> str:
-    """Markdown: the ranked table, findings, PNG figures as data URIs (one file); the table's path, robot ids and
+    """Markdown: the ranked table, findings, SVG figures as data URIs (one file); the table's path, robot ids and
     every other string from the table escaped (:mod:`wmrid.reporting.markdown`)."""
     review = rep.review
     parts = [f"# wmrid fleet report: {text(rep.table, False)}", "", *[text(s) for s in rep.summary], "",
@@ -190,8 +188,7 @@ def to_markdown(rep: FleetReport) -> str:
                 parts += ["", f"*{text(rv.sensitivity_text, False)}*"]
             name = f"robot {rv.robot_id}"
             if name in rep.figure_objects:
-                png = base64.b64encode(rep.rendered(name, "png")).decode()
-                parts += ["", f"![{text(name, False)}](data:image/png;base64,{png})"]
+                parts += ["", f"![{text(name, False)}]({svg_data_uri(rep.rendered(name, 'svg'))})"]
     parts += ["", "## What a flag means", "", *[f"- {text(s)}" for s in review.statements]]
     parts += md_provenance(rep.provenance)
     return "\n".join(parts) + "\n"

@@ -14,11 +14,11 @@ from wmrid.core.errors import UsageError
 from wmrid.model.base_params import recover_history
 from wmrid.model.dynamics import THETA0_NAMES, RegressorForm, intermediate_parameters
 from wmrid.reporting.decimate import MAX_POINTS
-from wmrid.reporting.figures import FIGSIZE, _legend_below, _new_figure, _plot, _styled, render
+from wmrid.reporting.figures import _LINE, _MEDIUM, _THICK, FIGSIZE, _legend_below, _new_figure, render
+from wmrid.reporting.svg import SMALL, Figure
+from wmrid.reporting.svg_axes import superscript
 
 if TYPE_CHECKING:
-    from matplotlib.figure import Figure
-
     from wmrid.estimators.result import IdentificationResult
 
 
@@ -53,13 +53,7 @@ def _display_scale(values: np.ndarray) -> tuple[float, str]:
     exp = math.floor(math.log10(top))
     if -2 <= exp <= 3:
         return 1.0, ""
-    return 10.0**exp, f"10{_superscript(exp)} "
-
-
-def _superscript(n: int) -> str:
-    """``n`` in superscript digits (``-6`` -> ``⁻⁶``): plain text, not matplotlib's mathtext (parsing it was a third
-    of the report's drawing time)."""
-    return str(n).translate(str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹"))
+    return 10.0**exp, f"10{superscript(exp)} "
 
 
 def _subscript(text: str) -> str:
@@ -86,7 +80,6 @@ def _settled_limits(t: np.ndarray, est: np.ndarray, marks: np.ndarray) -> tuple[
     return lo - pad, hi + pad
 
 
-@_styled
 def build_estimates_figure(
     result: IdentificationResult, truth: Mapping[str, Any] | None = None, *, error_mode: bool = False
 ) -> Figure:
@@ -95,14 +88,24 @@ def build_estimates_figure(
     The start value (``result.observer_settings.theta_init``) is dashed; with ``truth`` (see :func:`true_theta`)
     the true theta is dotted.  A panel whose early excursions would flatten the rest is zoomed on the
     start, the truth and the last 80 % of the estimate (its title says "zoomed"; :func:`_settled_limits`).
-    ``error_mode``: the estimation error theta_hat - theta_true instead
-    (needs ``truth``), with the start's error dashed and zero dotted.
+
+    Parameters
+    ----------
+    result
+        An identification with its history (t (n,) s, theta (n, 2, p)).
+    truth
+        The true base parameters by name (or a truth file with a "parameters" table); None: no truth drawn.
+    error_mode
+        Draw the estimation error theta_hat - theta_true instead (needs ``truth``), with the start's error dashed
+        and zero dotted.
+
+    Returns
+    -------
+    Figure
+        2 x p panels sharing the time axis, the legend below.
     """
     if error_mode and truth is None:
         raise UsageError("the estimation-error figure needs the true parameters (truth)")
-    from matplotlib.lines import Line2D  # matplotlib (~0.1 s): only figures
-    from matplotlib.ticker import MaxNLocator  # matplotlib: only figures
-
     h = result.history
     form = result.form
     p = form.n_columns
@@ -111,43 +114,36 @@ def build_estimates_figure(
     units = theta_units(form, result.log_info.effort_unit)
     t = np.asarray(h.t, dtype=np.float64)
     fig = _new_figure(
-        (max(FIGSIZE[0], 1.75 * p), 5.6), left=0.75, right=0.1, top=0.3, bottom=0.85, gaps=(0.8, 0.45), grid=(2, p)
-    )
-    axes = fig.subplots(2, p, sharex=True, squeeze=False)
+        (max(FIGSIZE[0], 1.75 * p), 5.6), left=0.75, right=0.1, top=0.3, bottom=0.85, gaps=(0.8, 0.45), grid=(2, p),
+        sharex=True,
+    )  # fmt: skip
     symbol = "θ̃" if error_mode else "θ̂"
     for i in range(2):
         for k in range(p):
-            ax = axes[i, k]
+            ax = fig.panels[i * p + k]
+            ax.x.size = ax.y.size = SMALL
             ref = theta_true[i, k] if error_mode and theta_true is not None else 0.0
             est = h.theta[:, i, k] - ref
             lines = [start[i, k] - ref] + ([0.0] if error_mode else [] if theta_true is None else [theta_true[i, k]])
             limits = _settled_limits(t, est, np.array(lines))
             scale, prefix = _display_scale(np.array(limits) if limits else np.concatenate([est, lines]))
             if error_mode:
-                ax.axhline(0.0, color="k", ls=":", lw=1.4, label="zero error")
-            _plot(ax, t, est / scale, color="C0", lw=1.1, label="error of estimate" if error_mode else "estimate")
+                ax.hline(0.0, color="k", dash=":", width=_THICK, label="zero error")
+            ax.line(t, est / scale, color="C0", width=_LINE, label="error of estimate" if error_mode else "estimate")
             label = "error of the start value" if error_mode else "start value"
-            ax.axhline((start[i, k] - ref) / scale, color="0.45", ls="--", lw=1.0, label=label)
+            ax.hline((start[i, k] - ref) / scale, color="0.45", dash="--", width=1.33, label=label)
             if theta_true is not None and not error_mode:
-                ax.axhline(theta_true[i, k] / scale, color="k", ls=":", lw=1.4, label="true value")
-            ax.set_title(
-                f"{symbol}{_subscript(f'{i + 1}{k + 1}')}" + (" (zoomed)" if limits else ""), fontsize="medium"
-            )
+                ax.hline(theta_true[i, k] / scale, color="k", dash=":", width=_THICK, label="true value")
+            ax.set_title(f"{symbol}{_subscript(f'{i + 1}{k + 1}')}" + (" (zoomed)" if limits else ""), size=13.0)
             if limits:
                 ax.set_ylim(limits[0] / scale, limits[1] / scale)
-            ax.set_ylabel(f"{prefix}{units[k]}", fontsize="small", labelpad=2)
-            ax.grid(alpha=0.3)
-            ax.tick_params(labelsize="small")
-            ax.ticklabel_format(axis="y", style="plain", useOffset=False)
+            ax.set_ylabel(f"{prefix}{units[k]}", size=SMALL)
+            ax.grid = "xy"
             if i == 1:
                 ax.set_xlabel("time (s)")
-    axes[0, 0].xaxis.set_major_locator(MaxNLocator(nbins=4, steps=[1, 2, 5, 10]))
     if len(t) > 1:
-        axes[0, 0].set_xlim(t[0], t[-1])
-    handles, labels = axes[0, 0].get_legend_handles_labels()
-    handles.append(Line2D([], [], ls="none"))  # a text-only entry: what the rows are
-    labels.append("row i: wheel i (1 = right, 2 = left)")
-    _legend_below(fig, handles, labels, len(labels))
+        fig.panels[0].set_xlim(t[0], t[-1])
+    _legend_below(fig, [fig.panels[0]], texts=["row i: wheel i (1 = right, 2 = left)"])
     return fig
 
 
@@ -210,7 +206,6 @@ def _finite(x: Any) -> float:
     return v if math.isfinite(v) else math.nan
 
 
-@_styled
 def build_base_convergence_figure(
     result: IdentificationResult, truth: Mapping[str, float] | None = None
 ) -> Figure | None:
@@ -219,14 +214,23 @@ def build_base_convergence_figure(
     Each point of the recorded history theta(t) is turned into base parameters by the closed form
     :func:`wmrid.model.base_params.direct_recovery` (the start of the reported fit).  Each panel shows how far the
     estimate is from the final one in units of its std, (estimate - final) / std: the final estimate is the zero line,
-    its +-2 std band runs from -2 to 2, the truth (``truth``: {name: value}, or a truth file with a "parameters"
-    table) is a dotted black line, and the panel's title gives the final value and std.  Where the std is undefined
-    the distance is in % of the final value (a y label says which).  A panel whose early transient would flatten the
-    rest is zoomed on the band, the truth and the last 70 % of the estimate (its title says "zoomed";
-    :func:`_zoom_limits`).  None when the result has no history.
-    """
-    from matplotlib.ticker import MaxNLocator  # matplotlib (~0.1 s): only figures
+    its +-2 std band runs from -2 to 2, the truth is a dotted black line, and the panel's title gives the final value
+    and std.  Where the std is undefined the distance is in % of the final value (a y label says which).  A panel
+    whose early transient would flatten the rest is zoomed on the band, the truth and the last 70 % of the estimate
+    (its title says "zoomed"; :func:`_zoom_limits`).
 
+    Parameters
+    ----------
+    result
+        An identification; its history (t (n,) s, theta (n, 2, p)) is drawn.
+    truth
+        The true base parameters ({name: value}, or a truth file with a "parameters" table); None: none drawn.
+
+    Returns
+    -------
+    Figure or None
+        2 rows of at least 4 panels sharing the time axis, the legend below; None when the result has no history.
+    """
     h = result.history
     if h is None:
         return None
@@ -242,13 +246,12 @@ def build_base_convergence_figure(
     ncols = max(4, -(-len(names) // 2))
     fig = _new_figure(
         (max(FIGSIZE[0], 2.3 * ncols), 5.8), left=0.75, right=0.1, top=0.5, bottom=0.85, gaps=(0.75, 0.6),
-        grid=(2, ncols),
+        grid=(2, ncols), sharex=True,
     )  # fmt: skip
-    axes = fig.subplots(2, ncols, sharex=True, squeeze=False)
-    for ax in axes.flat[len(names) :]:  # unused panels
-        ax.remove()
+    for ax in fig.panels[len(names) :]:  # unused panels
+        fig.remove(ax)
     for j, name in enumerate(names):
-        ax = axes.flat[j]
+        ax = fig.panels[j]
         value, std = result.parameters.get(name, (math.nan, math.nan))
         value, std = _finite(value), _finite(std)
         true = _finite(table.get(name))
@@ -264,31 +267,25 @@ def build_base_convergence_figure(
         true_z = (true - ref) / scale if math.isfinite(true) else math.nan
         marks = ([0.0] if math.isfinite(value) else []) + ([-2.0, 2.0] if band else []) + [true_z]
         limits = _zoom_limits(t, est, np.array(marks))
-        _plot(ax, t, est, color="C0", lw=1.2, label="estimate (closed form)")
+        ax.line(t, est, color="C0", width=_MEDIUM, label="estimate (closed form)")
         if band:
-            ax.axhspan(-2.0, 2.0, color="C3", alpha=0.18, lw=0, label="final ± 2σ")
+            ax.hspan(-2.0, 2.0, color="C3", opacity=0.18, label="final ± 2σ")
         if math.isfinite(value):
-            ax.axhline(0.0, color="C3", lw=1.2, label="final estimate")
+            ax.hline(0.0, color="C3", width=_MEDIUM, label="final estimate")
         if math.isfinite(true_z):
-            ax.axhline(true_z, color="k", ls=":", lw=1.4, label="true value")
+            ax.hline(true_z, color="k", dash=":", width=_THICK, label="true value")
         zoomed = bool(limits and limits[2])
         final = f"{value:.6g} ± {std:.2g}" if band else f"{value:.6g}"
-        ax.set_title(f"{name}" + (" (zoomed)" if zoomed else "") + f"\n{final} {unit}", fontsize="small")
+        ax.set_title(f"{name}" + (" (zoomed)" if zoomed else "") + f"\n{final} {unit}", size=SMALL)
         if limits:
             ax.set_ylim(limits[0], limits[1])
-        ax.set_ylabel(ylabel, labelpad=2)
-        ax.yaxis.set_major_locator(MaxNLocator(nbins=5))  # fewer ticks: each costs time to draw
-        ax.grid(alpha=0.3)
+        ax.set_ylabel(ylabel)
+        ax.grid = "xy"
         if j >= len(names) - ncols:  # no panel below: this one shows the time axis
-            ax.xaxis.set_tick_params(labelbottom=True)
             ax.set_xlabel("time (s)")
     if len(t) > 1:
-        axes[0, 0].set_xlim(t[0], t[-1])
-    entries: dict[str, Any] = {}
-    for ax in fig.axes:
-        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
-            entries.setdefault(label, handle)
-    _legend_below(fig, list(entries.values()), list(entries), len(entries))
+        fig.panels[0].set_xlim(t[0], t[-1])
+    _legend_below(fig)
     return fig
 
 

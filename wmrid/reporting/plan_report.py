@@ -5,7 +5,6 @@ of each parameter next to the baselines'.  Self-contained HTML (inline SVG), or 
 from __future__ import annotations
 
 import html
-import re
 from typing import Any
 
 import numpy as np
@@ -14,14 +13,27 @@ from wmrid.design.excitation import wheel_motion
 from wmrid.design.plan import Plan
 from wmrid.model.torques import wheel_torque
 from wmrid.reporting import markdown as md
-from wmrid.reporting.figures import FIGSIZE, FIGSIZE_STACKED, _new_figure, render
+from wmrid.reporting.decimate import MAX_POINTS, envelope_indices
+from wmrid.reporting.figures import _LINE, _MEDIUM, FIGSIZE, FIGSIZE_STACKED, _legend_below, _new_figure, render
 from wmrid.reporting.plan_view import BASELINE_TEXT, summary
 from wmrid.reporting.report_table import ReportTable
+from wmrid.reporting.svg import Figure
 
 
-def plan_figures(plan: Plan) -> dict[str, Any]:
-    """caption -> matplotlib Figure: the path, the reference (v, w), the wheel speeds, accelerations and torques with
-    their limits (dashed: the limit; dotted: the plan's bound after the margin), the predicted relative std."""
+def plan_figures(plan: Plan) -> dict[str, Figure]:
+    """The plan's figures by caption: the path, the reference (v, w), the wheel speeds, accelerations and torques
+    with their limits (dashed: the limit; dotted: the plan's bound after the margin), the predicted relative std.
+
+    Parameters
+    ----------
+    plan
+        A designed plan (:func:`wmrid.design.plan.design_plan`).
+
+    Returns
+    -------
+    dict of str to Figure
+        Caption -> figure (:mod:`wmrid.reporting.svg`), in the page's order.
+    """
     s = plan.samples(max(plan.settings.rate, 50.0))
     t = s.t
     v, w, dv, dw = plan.excitation.evaluate(t)
@@ -30,35 +42,39 @@ def plan_figures(plan: Plan) -> dict[str, Any]:
     tau = wheel_torque(eta, deta, theta0, plan.form) if plan.form.geometry else wheel_torque(eta, deta, theta0[:8])
     lim = plan.limits
     keep = 1.0 - lim.margin
-    out: dict[str, Any] = {}
+    out: dict[str, Figure] = {}
 
     fig = _new_figure(FIGSIZE)
-    ax = fig.subplots()
+    (ax,) = fig.panels
     wx, wy = lim.area[0] / 2.0, lim.area[1] / 2.0
-    ax.plot([-wx, wx, wx, -wx, -wx], [-wy, -wy, wy, wy, -wy], "k--", lw=1, label="area")
+    ax.line([-wx, wx, wx, -wx, -wx], [-wy, -wy, wy, wy, -wy], color="k", dash="--", width=1.33, label="area")
     bx, by = wx - lim.footprint, wy - lim.footprint
-    ax.plot([-bx, bx, bx, -bx, -bx], [-by, -by, by, by, -by], "k:", lw=1, label="axle midpoint's room (robot's reach)")
-    ax.plot(s.x, s.y, color="C0", lw=1.2, label="planned path")
-    ax.plot(0.0, 0.0, "o", color="C2", ms=8, label="start (facing +x)")
-    ax.plot(s.x[-1], s.y[-1], "s", color="C3", ms=7, label="end")
-    ax.set_aspect("equal", adjustable="datalim")
+    ax.line([-bx, bx, bx, -bx, -bx], [-by, -by, by, by, -by], color="k", dash=":", width=1.33,
+            label="axle midpoint's room (robot's reach)")  # fmt: skip
+    half = MAX_POINTS // 2
+    idx = np.union1d(envelope_indices(np.asarray(s.x), half), envelope_indices(np.asarray(s.y), half))
+    ax.line(np.asarray(s.x)[idx], np.asarray(s.y)[idx], color="C0", width=_MEDIUM, label="planned path",
+            decimate=False)  # fmt: skip
+    ax.markers(0.0, 0.0, shape="o", color="C2", size=10.0, label="start (facing +x)")
+    ax.markers(s.x[-1], s.y[-1], shape="s", color="C3", size=9.0, label="end")
+    ax.equal = True
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.grid(alpha=0.3)
-    ax.legend(loc="upper right", fontsize="small")
+    ax.grid = "xy"
+    ax.legend("best")
     out["Planned path inside the area"] = fig
 
-    fig = _new_figure(FIGSIZE_STACKED)
-    ax1, ax2 = fig.subplots(2, 1, sharex=True)
-    ax1.plot(t, v, color="C0")
+    fig = _new_figure(FIGSIZE_STACKED, gaps=(0.0, 0.15), grid=(2, 1), sharex=True)
+    ax1, ax2 = fig.panels
+    ax1.line(t, v, color="C0", width=_LINE)
     ax1.set_ylabel("v (m/s)")
-    ax2.plot(t, w, color="C4")
+    ax2.line(t, w, color="C4", width=_LINE)
     ax2.set_ylabel("omega (rad/s)")
     for ax, value in ((ax1, lim.max_speed), (ax2, lim.max_turn_rate)):
         if value is not None:
             for sign in (1, -1):
-                ax.axhline(sign * value, color="k", ls="--", lw=0.8)
-        ax.grid(alpha=0.3)
+                ax.hline(sign * value, color="k", dash="--", width=1.1)
+        ax.grid = "xy"
     ax2.set_xlabel("t (s)")
     out["Reference: forward speed and turn rate"] = fig
 
@@ -67,36 +83,36 @@ def plan_figures(plan: Plan) -> dict[str, Any]:
         ("Wheel accelerations against their limit", deta, lim.max_wheel_accel, "rad/s^2"),
         ("Wheel torques (nominal model) against their limit", tau, lim.max_torque, "N m"),
     ):
-        fig = _new_figure(FIGSIZE)
-        ax = fig.subplots()
-        ax.plot(t, data[:, 0], color="C0", lw=1, label="right")
-        ax.plot(t, data[:, 1], color="C1", lw=1, label="left")
+        fig = _new_figure(FIGSIZE, bottom=0.85)
+        (ax,) = fig.panels
+        ax.line(t, data[:, 0], color="C0", width=1.33, label="right")
+        ax.line(t, data[:, 1], color="C1", width=1.33, label="left")
         if value is not None:
             for sign in (1, -1):
-                ax.axhline(sign * value, color="k", ls="--", lw=0.8, label="limit" if sign > 0 else None)
-                ax.axhline(sign * keep * value, color="k", ls=":", lw=0.8, label="planned bound" if sign > 0 else None)
+                ax.hline(sign * value, color="k", dash="--", width=1.1, label="limit")
+                ax.hline(sign * keep * value, color="k", dash=":", width=1.1, label="planned bound")
         ax.set_xlabel("t (s)")
         ax.set_ylabel(unit)
-        ax.grid(alpha=0.3)
-        ax.legend(loc="upper right", fontsize="small")
+        ax.grid = "xy"
+        _legend_below(fig)
         out[caption] = fig
 
-    fig = _new_figure(FIGSIZE)
-    ax = fig.subplots()
+    fig = _new_figure(FIGSIZE, bottom=0.85)
+    (ax,) = fig.panels
     names = list(plan.predicted)
     x = np.arange(len(names))
     width = 0.8 / (1 + len(plan.baselines))
-    ax.bar(x, [100 * plan.predicted[n].relative for n in names], width, label="this plan", color="C2")
+    ax.bars(x, [100 * plan.predicted[n].relative for n in names], width=width, colors="C2", label="this plan")
     for i, (name, base) in enumerate(plan.baselines.items()):
         # a parameter the baseline's log cannot determine (None, or inf in memory) has no bar
         relative = base.relative or {}
         values = [100 * v if v is not None and np.isfinite(v) else np.nan for v in map(relative.get, names)]
-        ax.bar(x + (i + 1) * width, values, width, label=BASELINE_TEXT.get(name, name), color=f"C{i}")
-    ax.set_yscale("log")
-    ax.set_xticks(x + 0.4 - width / 2, names)
+        ax.bars(x + (i + 1) * width, values, width=width, colors=f"C{i}", label=BASELINE_TEXT.get(name, name))
+    ax.y.scale = "log"
+    ax.x.ticks = ((x + 0.4 - width / 2).tolist(), names)
     ax.set_ylabel("predicted std, % of scale")
-    ax.grid(alpha=0.3, axis="y")
-    ax.legend(loc="upper left", fontsize="small")
+    ax.grid = "y"
+    _legend_below(fig)
     out["Predicted relative std: this plan and the baselines (same duration and limits)"] = fig
     return out
 
@@ -105,7 +121,7 @@ _CSS = (
     "body{font-family:system-ui,sans-serif;max-width:1100px;margin:1em auto;padding:0 1em;color:#222}"
     "table{border-collapse:collapse;margin:.5em 0}td,th{padding:.2em .6em;border-bottom:1px solid #ddd;"
     "text-align:right;white-space:nowrap}td:first-child,th:first-child{text-align:left}"
-    ".scroll{overflow-x:auto}figure{margin:1em 0}figure svg{max-width:100%;height:auto}"
+    ".scroll{overflow-x:auto}figure{margin:1em 0}figure svg{width:100%;height:auto}"
     "figcaption{font-weight:600;margin-bottom:.3em}.small{color:#555}"
 )
 
@@ -156,7 +172,6 @@ def to_html(plan: Plan) -> str:
     for caption, fig in plan_figures(plan).items():
         text = render(fig, "svg").decode("utf-8")
         text = text[text.index("<svg") :]
-        text = re.sub(r"<metadata>.*?</metadata>", "", text, flags=re.S)
         parts.append(f"<figure><figcaption>{html.escape(caption)}</figcaption>{text}</figure>")
     notes = [*plan.warnings]
     noise = plan.noise

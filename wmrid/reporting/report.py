@@ -5,7 +5,7 @@ result) into a :class:`Report`: the paper's tables (Table 2: intermediate parame
 parameters), a comparison with the robot's nominal and CAD values in units of the standard error,
 error columns when a truth file is given, the diagnostics in plain words, residual statistics, and
 figures (:mod:`wmrid.reporting.figures`).  :func:`to_html` (one self-contained file: inline SVG, no external
-resources), :func:`to_markdown` (PNG figures as data URIs) and :func:`to_json_dict` render it.
+resources), :func:`to_markdown` (SVG figures as data URIs) and :func:`to_json_dict` render it.
 
 Residuals: (1) the estimator's prior prediction error e (rad/s) of each wheel, RMS over the decimated
 history; (2) when the log itself is at hand, the torque residual of the identified model,
@@ -35,7 +35,7 @@ from wmrid.model import dynamics as model, torques
 from wmrid.model.dynamics import RegressorForm
 from wmrid.model.payload import PAYLOAD_UNITS, payload_statement
 from wmrid.reporting import figures as fg
-from wmrid.reporting.figures import render
+from wmrid.reporting.figures import check_format, render
 from wmrid.reporting.report_table import ReportTable
 
 #: A difference from the CAD value beyond this many standard errors is flagged.
@@ -59,7 +59,6 @@ class Report:
     figures: dict[str, bytes] = field(default_factory=dict)  # name -> SVG bytes, rendered when first needed
     #: What the log determines (the result's verdict): its summary first, then one line per parameter group.
     verdict: list[str] = field(default_factory=list)
-    figures_png: dict[str, bytes] = field(default_factory=dict)
     figure_notes: dict[str, str] = field(default_factory=dict)  # name -> one sentence under its title
     result: dict[str, Any] = field(default_factory=dict)
     #: The verdict's parameter groups (their status colours the summary box).
@@ -67,7 +66,7 @@ class Report:
     #: How the report was made: wmrid's version, time, command, options, inputs with their SHA-256
     #: (:func:`wmrid.api.reporting.report`).
     provenance: dict[str, Any] = field(default_factory=dict)
-    #: name -> matplotlib Figure, rendered by :meth:`rendered` in the format an output needs.
+    #: name -> :class:`wmrid.reporting.svg.Figure`, rendered once when an output needs it (:func:`rendered`).
     figure_objects: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
     #: The summary box at the top: the key numbers (label, value text) and what to do next (:func:`summary_box`).
     key_numbers: list[tuple[str, str]] = field(default_factory=list)
@@ -77,10 +76,11 @@ class Report:
     log: Any = field(default=None, repr=False, compare=False)
 
 
-def rendered(report: Report, fmt: str) -> dict[str, bytes]:
-    """The report's figures as ``fmt`` ("svg" or "png") bytes by name, in order, each rendered once (matplotlib's
-    rendering is most of a report's time: an HTML file needs only SVG, Markdown only PNG)."""
-    cache = report.figures if fmt == "svg" else report.figures_png
+def rendered(report: Report, fmt: str = "svg") -> dict[str, bytes]:
+    """The report's figures as ``fmt`` bytes ("svg", the only format; else UsageError) by name, in order, each
+    rendered once (kept in ``report.figures``)."""
+    check_format(fmt)
+    cache = report.figures
     for name, fig in report.figure_objects.items():
         if name not in cache:
             cache[name] = render(fig, fmt)

@@ -114,8 +114,7 @@ def to_html(report: Report) -> str:
         parts.append("<h2>Figures</h2>")
     for name, svg in rendered(report, "svg").items():
         text = svg.decode("utf-8")
-        text = text[text.index("<svg") :] if "<svg" in text else text
-        text = re.sub(r"<metadata>.*?</metadata>", "", text, flags=re.S)  # RDF/creator block: not needed inline
+        text = text[text.index("<svg") :] if "<svg" in text else text  # the XML declaration: not inside HTML
         note = report.figure_notes.get(name, "")
         caption = html.escape(name) + (f" <span class='note'>— {html.escape(note)}</span>" if note else "")
         parts.append(f"<figure><figcaption>{caption}</figcaption>{text}</figure>")

@@ -1,4 +1,4 @@
-"""A report as Markdown (:func:`to_markdown`), its figures as PNG files beside it."""
+"""A report as Markdown (:func:`to_markdown`), its figures inline as SVG data URIs."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ def _md_table(table: ReportTable) -> str:
 
 
 def to_markdown(report: Report) -> str:
-    """Markdown with the tables, statements and PNG figures as data URIs (one file); every string that came from an
+    """Markdown with the tables, statements and SVG figures as data URIs (one file); every string that came from an
     input (names, a saved result's source, notes, warnings) escaped (:mod:`wmrid.reporting.markdown`)."""
     verdict = []
     if report.verdict:
@@ -43,14 +43,19 @@ def to_markdown(report: Report) -> str:
     parts += ["", "## Diagnostics", "", *[f"- {text(s)}" for s in report.diagnostics]]
     if report.residuals:
         parts += ["", "## Residuals", "", *[f"- {text(s)}" for s in residual_lines(report)]]
-    for name, png in rendered(report, "png").items():
+    for name, svg in rendered(report, "svg").items():
         note = report.figure_notes.get(name)
         parts += ["", f"### {text(name)}", "", *([text(note), ""] if note else []),
-                  f"![{text(name, False)}](data:image/png;base64,{base64.b64encode(png).decode()})"]  # fmt: skip
+                  f"![{text(name, False)}]({svg_data_uri(svg)})"]  # fmt: skip
     if report.notes:
         parts += ["", "## Notes on the log", "", *[f"- {text(n)}" for n in report.notes]]
     parts += md_provenance(report.provenance)
     return "\n".join(parts) + "\n"
+
+
+def svg_data_uri(svg: bytes) -> str:
+    """``svg`` (an SVG document) as a ``data:image/svg+xml;base64,...`` URI, for an image in Markdown."""
+    return f"data:image/svg+xml;base64,{base64.b64encode(svg).decode()}"
 
 
 def md_provenance(prov: dict[str, Any]) -> list[str]:

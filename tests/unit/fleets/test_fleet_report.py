@@ -4,12 +4,14 @@ line's outputs and errors."""
 
 from __future__ import annotations
 
+import base64
 import datetime as dt
 import json
 import re
 
 import numpy as np
 import pytest
+import svgutil
 
 from tests.cliutil import assert_clean_error, wmrid
 from tests.fleetutil import START, synthetic_rows, write_fleet
@@ -139,7 +141,9 @@ def test_html_report_is_self_contained(rows, tmp_path):
     assert not re.search(r"<script|<link|<iframe|<object|<embed|@import|(src|href)=['\"]?https?:", page)
     write_fleet_report(rep, tmp_path / "r.md")
     md = (tmp_path / "r.md").read_text()
-    assert md.count("data:image/png;base64,") == 5
+    assert md.count("data:image/svg+xml;base64,") == 5
+    first = re.search(r"data:image/svg\+xml;base64,([A-Za-z0-9+/=]+)\)", md).group(1)
+    assert svgutil.panels(svgutil.parse(base64.b64decode(first)))  # an SVG figure, whole
     write_fleet_report(rep, tmp_path / "r.json")
     data = json.loads((tmp_path / "r.json").read_text())
     assert {r["robot_id"] for r in data["robots"] if r["flagged"]} == {"R02", "R05"}
@@ -274,12 +278,66 @@ def test_the_robot_figure_shows_the_friction_at_typical_speed():
 
     rows = synthetic_rows(2, 20, changes={1: _wear(8, 0.02)}, trade=True, seed=4)
     robots = _by_id(fleet_report(rows, figures=False))
-    titles = [ax.get_title() for ax in build_robot_figure(robots["R02"]).axes]
+    titles = [ax.title for ax in build_robot_figure(robots["R02"]).visible]
     assert len(titles) == 10
     assert re.fullmatch(r"Fw1 at (3\.9\d|4\.0\d) rad/s \(N m\)", titles[4]), titles
     assert re.fullmatch(r"Fw2 at (3\.9\d|4\.0\d) rad/s \(N m\)", titles[9]), titles
     blind = [{**r, "speed_r": None, "speed_l": None} for r in rows]
-    assert len(build_robot_figure(_by_id(fleet_report(blind, figures=False))["R02"]).axes) == 8
+    assert len(build_robot_figure(_by_id(fleet_report(blind, figures=False))["R02"]).visible) == 8
+
+
+def test_the_robot_figure_draws_bands_dates_and_the_change(report):
+    """R02 (right-wheel wear from day 15): ten panels on a date axis, its changed parameters' titles in red, each
+    log's band and estimate, the onset dotted and the first flag red; the drawing read back from its SVG."""
+    from wmrid.fleets.figures import build_robot_figure
+
+    rv = _by_id(report)["R02"]
+    fig = build_robot_figure(rv)
+    changed = {ax.title.split()[0] for ax in fig.visible if ax.title_color == "C3"}
+    assert changed == {"Fv1", "Fd1"}
+    root = svgutil.parse(fig.to_svg())
+    drawn = svgutil.panels(root)
+    assert len(drawn) == 8
+    for panel in drawn:
+        inside = svgutil.data(panel)
+        assert len(inside.findall(f"{svgutil.NS}polygon")) == 1  # the ±2σ band
+        assert len(svgutil.polylines(inside)) == 1  # the estimates, log to log
+        rules = [p for p in inside.iter(f"{svgutil.NS}path") if p.get("d", "").count("V") == 1]
+        assert {(p.get("stroke"), p.get("stroke-dasharray") is not None) for p in rules} == {
+            ("#4c4c4c", True), ("#d62728", False)
+        }  # fmt: skip
+    labels = [label for panel in drawn[4:] for label in svgutil.tick_labels(panel, "x")]
+    assert labels
+    assert all(re.fullmatch(r"2026-\d\d(-\d\d)?", label) for label in labels), labels
+    assert all(not svgutil.tick_labels(panel, "x") for panel in drawn[:4])  # one date axis per column
+
+
+@pytest.mark.parametrize("start", [dt.datetime(1, 1, 1), dt.datetime(9999, 12, 1)], ids=["year 1", "year 9999"])
+def test_the_robot_figure_on_forged_dates(start):
+    from wmrid.fleets.figures import build_robot_figure
+
+    rows = [dict(r, start_time=start + dt.timedelta(days=i // 2)) for i, r in enumerate(synthetic_rows(2, 20))]
+    rv = _by_id(fleet_report(rows, figures=False))["R01"]
+    drawn = svgutil.panels(svgutil.parse(build_robot_figure(rv).to_svg()))
+    labels = svgutil.tick_labels(drawn[-1], "x")
+    assert labels
+    assert all(label.startswith(f"{start.year:04d}") for label in labels), labels
+
+
+def test_the_evidence_figure_ranks_on_a_log_axis_and_escapes_names():
+    from wmrid.fleets.figures import build_evidence_figure
+
+    rows = synthetic_rows(3, 20, changes={1: _wear(5, 0.05)})
+    for r in rows:
+        r["robot_id"] = {"R01": "R<1>", "R02": "R&2", "R03": 'R"3'}[r["robot_id"]]
+    review = fleet_report(rows, figures=False).review
+    root = svgutil.parse(build_evidence_figure(review).to_svg())
+    (panel,) = svgutil.panels(root)
+    assert svgutil.tick_labels(panel, "y")[::-1] == [rv.robot_id for rv in review.robots]  # ranked, first on top
+    assert "1" in svgutil.tick_labels(panel, "x") or "10⁰" in svgutil.tick_labels(panel, "x")  # the flag line
+    bars = [r for r in svgutil.data(panel).findall(f"{svgutil.NS}rect") if r.get("fill") in ("#d62728", "#1f77b4")]
+    assert [b.get("fill") == "#d62728" for b in bars][::-1] == [rv.flagged for rv in review.robots]
+    assert any(rv.flagged for rv in review.robots)
 
 
 def test_a_fleet_row_carries_the_mean_wheel_speeds_and_the_friction_correlations(tmp_path):

@@ -1,0 +1,274 @@
+"""wmrid's SVG layer (wmrid.reporting.svg): well-formed, escaped, deterministic documents; lines broken by NaN,
+reduced for display and simplified within 0.1 px; legends, shared axes, equal aspect, log and date axes, colours."""
+
+from __future__ import annotations
+
+import datetime as dt
+import itertools
+import re
+
+import numpy as np
+import pytest
+from svgutil import NS, data, frame, legend_texts, panels, parse, points, polylines, texts, tick_labels
+
+from wmrid.reporting.decimate import MAX_POINTS
+from wmrid.reporting.svg import PX_PER_INCH, Figure
+from wmrid.reporting.svg_artists import simplify
+from wmrid.reporting.svg_axes import date_number
+from wmrid.reporting.svg_draw import limits
+from wmrid.reporting.svg_style import MISSING, RDBU_R, TAB10, colour, diverging, escape, luminance, num
+
+
+def _one(**kwargs):
+    fig = Figure((6.0, 3.0), **kwargs)
+    return fig, fig.panels[0]
+
+
+def test_a_document_with_its_size_and_text_as_text():
+    fig, ax = _one()
+    ax.line([0, 1, 2], [0, 1, 0], label="a line")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("speed (rad/s)")
+    ax.set_title("a title")
+    svg = fig.to_svg()
+    assert svg.startswith(b'<?xml version="1.0" encoding="utf-8"?>\n<svg xmlns="http://www.w3.org/2000/svg"')
+    root = parse(svg)
+    assert (root.get("width"), root.get("height"), root.get("viewBox")) == ("576", "288", "0 0 576 288")
+    assert root.get("font-family") == "sans-serif"
+    assert {"time (s)", "speed (rad/s)", "a title"} <= set(texts(root))
+    assert len(panels(root)) == 1
+    assert b"<path id=" not in svg  # no glyph outlines
+
+
+def test_special_characters_are_escaped():
+    fig, ax = _one()
+    name = 'R<1> & "co" \x07'
+    ax.line([0, 1], [0, 1], label=name)
+    ax.legend("upper left")
+    ax.set_title(name)
+    ax.x.ticks = ([0.0, 1.0], [name, "<b>"])
+    svg = fig.to_svg()
+    root = parse(svg)  # well-formed
+    assert texts(root).count('R<1> & "co" ') == 3  # title, legend, tick label; the control character dropped
+    assert "<b>" in texts(root)
+    assert b"R&lt;1&gt; &amp; &quot;co&quot;" in svg
+    assert escape("a<b&c") == "a&lt;b&amp;c"
+
+
+def test_same_figure_same_bytes_and_ids_unique_across_figures():
+    def build(shift):
+        fig, ax = _one()
+        ax.line(np.arange(50.0), np.sin(np.arange(50.0)) + shift)
+        return fig
+
+    one, two, other = build(0.0).to_svg(), build(0.0).to_svg(), build(1.0).to_svg()
+    assert one == two  # no date, no random id
+    ids = set(re.findall(rb'id="([^"]+)"', one))
+    assert ids
+    assert ids.isdisjoint(re.findall(rb'id="([^"]+)"', other))  # two figures in one page never share an id
+    for ref in re.findall(rb"url\(#([^)]+)\)", one):
+        assert ref in ids
+
+
+def test_nan_breaks_a_line_and_a_lone_point_is_not_drawn():
+    fig, ax = _one()
+    y = np.array([0.0, 1.0, 0.0, np.nan, 3.0, 2.0, np.nan, 5.0, np.nan, 1.0, 2.0])
+    ax.line(np.arange(len(y)), y)
+    lines = polylines(data(panels(parse(fig.to_svg()))[0]))
+    assert [len(points(p)) for p in lines] == [3, 2, 2]  # the lone 5.0 has no neighbour to join
+
+
+def test_a_long_line_is_reduced_for_display_its_extremes_kept():
+    fig, ax = _one()
+    t = np.arange(200_000) * 1e-3
+    y = np.sin(t) + 0.01 * np.random.default_rng(1).standard_normal(len(t))
+    y[123_456] = 40.0
+    line = ax.line(t, y)
+    assert len(line.x) <= min(MAX_POINTS, 4 * ax.box[2])  # 4 points per px of the panel's width
+    assert line.y.max() == 40.0
+    (drawn,) = polylines(data(panels(parse(fig.to_svg()))[0]))
+    assert len(points(drawn)) <= MAX_POINTS
+    _, top, _, _ = frame(panels(parse(fig.to_svg()))[0])
+    assert points(drawn)[:, 1].min() == pytest.approx(top + 0.05 * (ax.box[3] / 1.1), abs=0.6)  # the spike drawn
+    wide = Figure((40.0, 3.0)).panels[0].line(t, y)
+    assert len(wide.x) <= MAX_POINTS  # however wide the panel
+    assert len(Figure((6.0, 3.0)).panels[0].line(t, y, decimate=False).x) <= MAX_POINTS
+
+
+def test_simplify_keeps_the_drawing_within_a_tenth_of_a_pixel():
+    x = np.linspace(0.0, 500.0, 2001)
+    straight = simplify(x, 2 * x + 1)
+    assert straight.tolist() == [0, 2000]
+    y = 100 + 80 * np.sin(x / 40)
+    y[700] += 30  # a spike
+    kept = simplify(x, y)
+    assert 700 in kept
+    assert len(kept) < 400
+    for a, b in itertools.pairwise(kept):  # every point left out: within 0.1 px of the segment drawn
+        d = np.array([x[b] - x[a], y[b] - y[a]])
+        o = np.stack([x[a + 1 : b] - x[a], y[a + 1 : b] - y[a]], axis=1)
+        along = np.clip(o @ d / (d @ d), 0.0, 1.0)
+        assert np.all(np.hypot(*(o - along[:, None] * d).T) <= 0.1 + 1e-9)
+
+
+def test_rules_spans_bands_bars_markers():
+    fig, ax = _one()
+    ax.hline(1.0, color="0.45", dash="--", label="dashed")
+    ax.vline(2.0, color="C2", dash=":")
+    ax.hspan(-2.0, 2.0, color="C3", opacity=0.18, label="band")
+    ax.band([0, 1, 2, 3], [0, 0, np.nan, 0], [1, 1, np.nan, 1])
+    ax.bars([0, 1, 2], [1.0, np.nan, 3.0], colors=["C0", "C1", "C3"])
+    ax.markers([1.0], [1.0], shape="s", color="C3")
+    ax.markers([0.5], [4.0], shape="^", color="C1", clip=False)
+    root = parse(fig.to_svg())
+    (panel,) = panels(root)
+    inside = data(panel)
+    dashes = [p for p in inside.iter(f"{NS}path") if p.get("stroke-dasharray")]
+    assert {p.get("stroke") for p in dashes} == {"#737373", TAB10[2]}
+    assert len(inside.findall(f"{NS}polygon")) == 1  # the band's NaN leaves one piece, and a lone point
+    bars = [r for r in inside.findall(f"{NS}rect") if r.get("fill") in TAB10 and not r.get("fill-opacity")]
+    assert sorted(r.get("fill") for r in bars) == sorted([TAB10[0], TAB10[3]])  # NaN: no bar
+    assert any(r.get("fill-opacity") == "0.18" for r in inside.findall(f"{NS}rect"))
+    unclipped = [p for p in panel.findall(f"{NS}path") if p.get("fill") == TAB10[1]]
+    assert len(unclipped) == 1  # the marker outside the clip
+    assert legend_texts(root) == []  # no legend asked for
+
+
+def test_corner_legend_goes_where_the_data_are_not():
+    fig, ax = _one()
+    t = np.linspace(0, 1, 200)
+    ax.line(t, t, label="rising")  # lower left to upper right: the upper left and lower right are empty
+    ax.line(t, np.where(t < 0.5, 1.0, np.nan), label="high early")  # fills the upper left
+    ax.legend("best")
+    root = parse(fig.to_svg())
+    (panel,) = panels(root)
+    legend = next(g for g in panel.iter(f"{NS}g") if g.get("class") == "legend")
+    box = legend.find(f"{NS}rect")
+    left, top, right, bottom = frame(panel)
+    assert float(box.get("x")) > (left + right) / 2  # right ...
+    assert float(box.get("y")) > (top + bottom) / 2  # ... and below: the lower right
+    assert legend_texts(root) == ["rising", "high early"]
+
+
+def test_legend_below_wraps_into_rows_and_the_figure_grows():
+    fig, ax = _one()
+    for k in range(12):
+        ax.line([0, 1], [k, k], color=f"C{k % 10}", label=f"a rather long legend entry number {k}")
+    fig.legend_below(fig.entries())
+    root = parse(fig.to_svg())
+    assert float(root.get("height")) > 3.0 * PX_PER_INCH  # more than one row: taller
+    assert len(legend_texts(root)) == 12
+    rows = {round(float(t.get("y"))) for g in root.findall(f"{NS}g[@class='legend']") for t in g.iter(f"{NS}text")}
+    assert len(rows) > 1
+    assert max(float(t.get("x")) for t in root.iter(f"{NS}text")) < 6.0 * PX_PER_INCH
+
+
+def test_shared_axes_label_the_outer_ticks_only():
+    fig = Figure((6.0, 5.0), grid=(2, 2), gaps=(0.5, 0.4), sharex=True, sharey=True)
+    for k, ax in enumerate(fig.panels):
+        ax.line([0, 10 + k], [0, 5 - k])
+    fig.remove(fig.panels[3])  # an unused cell: the panel above it shows the x ticks
+    root = parse(fig.to_svg())
+    shown = panels(root)
+    assert len(shown) == 3
+    assert [bool(tick_labels(p, "x")) for p in shown] == [False, True, True]
+    assert [bool(tick_labels(p, "y")) for p in shown] == [True, False, True]
+    assert len({lim for lim in limits(fig.visible, True, True)}) == 1
+
+
+def test_equal_aspect():
+    fig, ax = _one()
+    ax.line([0, 4], [0, 1])
+    ax.equal = True
+    ((xlim, ylim),) = limits(fig.visible)
+    _, _, w, h = ax.box
+    assert (xlim[1] - xlim[0]) / w == pytest.approx((ylim[1] - ylim[0]) / h)
+    assert xlim[0] < 0 < 4 < xlim[1]
+    assert ylim[0] < 0 < 1 < ylim[1]
+
+
+def test_log_axis_labels_decades():
+    fig, ax = _one()
+    ax.line(np.linspace(0, 1, 50), np.logspace(-6, 2, 50))
+    ax.y.scale = "log"
+    labels = tick_labels(panels(parse(fig.to_svg()))[0], "y")
+    assert "10⁻⁶" in labels or "10⁻⁵" in labels
+    assert "10²" in labels or "10¹" in labels
+    assert all(re.fullmatch("10[⁻⁰¹²³⁴⁵⁶⁷⁸⁹]+", label) for label in labels)
+    fig, ax = _one()
+    ax.line([0.0, 1.0, 2.0], [-1.0, 0.0, 1.0])  # nothing but one positive value on a log axis: no error
+    ax.y.scale = "log"
+    parse(fig.to_svg())
+
+
+@pytest.mark.parametrize(
+    "start", [dt.datetime(1, 1, 1), dt.datetime(2026, 12, 6), dt.datetime(9999, 11, 20)], ids=["year 1", "now", "9999"]
+)
+def test_date_axis_at_any_date(start):
+    fig, ax = _one()
+    x = [date_number(start + dt.timedelta(days=d)) for d in range(40)]
+    ax.line(x, np.arange(40.0))
+    ax.x.scale = "date"
+    labels = tick_labels(panels(parse(fig.to_svg()))[0], "x")
+    assert len(labels) >= 2
+    assert all(re.fullmatch(r"\d{4}(-\d{2}){0,2}", label) for label in labels), labels
+    assert all(label[:4] == f"{start.year:04d}" or label[:4] == f"{start.year + 1:04d}" for label in labels)
+
+
+def test_colours():
+    assert colour("C0") == "#1f77b4"
+    assert colour("C1") == "#ff7f0e"
+    assert colour("k") == "#000000"
+    assert colour("0.75") == "#bfbfbf"
+    assert (diverging(1.0), diverging(-1.0), diverging(0.0)) == ("#67001f", "#053061", "#f7f7f7")
+    assert diverging(5.0) == RDBU_R[-1]  # clipped
+    assert diverging(float("nan")) == MISSING
+    assert luminance("#67001f") < 0.5 < luminance("#f7f7f7")
+    assert (num(1.0), num(-0.001), num(2.345), num(1056.0)) == ("1", "0", "2.35", "1056")
+
+
+@pytest.mark.parametrize(
+    ("x", "y", "lim"),
+    [
+        ([], [], None),  # nothing to draw
+        ([0.0, 1.0, 2.0], [np.nan] * 3, None),  # nothing finite
+        ([0.0, 1.0, 2.0], [3.0, 3.0, 3.0], None),  # a constant
+        ([5.0], [2.0], None),  # a single sample
+        ([0.0, 1.0], [1.0, 2.0], (4.0, 4.0)),  # limits that are one value
+        ([1e300, 1.0000001e300], [-1e-300, 1e-300], None),  # huge and tiny
+    ],
+)
+def test_degenerate_data_draw(x, y, lim):
+    fig, ax = _one(sharex=True)
+    ax.line(x, y, label="x")
+    ax.markers(x, y)
+    if lim:
+        ax.set_xlim(*lim)
+        ax.set_ylim(*lim)
+    ax.legend()
+    root = parse(fig.to_svg())
+    (panel,) = panels(root)
+    assert tick_labels(panel, "x")
+    assert tick_labels(panel, "y")
+    assert not any(s in fig.to_svg() for s in (b"nan", b"inf"))
+
+
+def test_bad_styles_are_usage_errors():
+    from wmrid.core.errors import UsageError
+
+    fig, ax = _one()
+    with pytest.raises(UsageError, match="shape"):
+        ax.markers([0], [0], shape="*")
+    with pytest.raises(UsageError, match="dash"):
+        ax.line([0, 1], [0, 1], dash="..")
+    with pytest.raises(UsageError, match="one length"):
+        ax.line([0, 1], [0, 1, 2])
+    with pytest.raises(UsageError, match="corner"):
+        ax.legend("middle")
+    with pytest.raises(UsageError, match="colour"):
+        colour("reddish")
+    ax.line([1, 2], [1, 2])
+    ax.y.scale = "log"
+    ax.set_ylim(-1.0, 10.0)
+    with pytest.raises(UsageError, match="positive"):
+        fig.to_svg()

@@ -1,0 +1,249 @@
+"""The style of wmrid's SVG figures (:mod:`wmrid.reporting.svg`): font sizes, colours (the Tableau 10 palette
+C0..C9, greys, a diverging red-blue scale), dash patterns, and how numbers, text and polylines are written into SVG
+(2 decimals; escaped; split where a value is missing, simplified to within 0.1 px)."""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+
+from wmrid.core.errors import UsageError
+
+#: The Tableau 10 palette, named C0 ... C9 as the figures have always called them: right wheel C0 (blue), left
+#: wheel C1 (orange).
+TAB10 = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf")
+_NAMED = {"k": "#000000", "black": "#000000", "white": "#ffffff", "w": "#ffffff", "none": "none"}
+#: Dash patterns (dash, gap, ...), in units of the line's width.
+_DASHES = {"--": (3.7, 1.6), ":": (1.0, 1.65), "-.": (6.4, 1.6, 1.0, 1.6)}
+#: Font sizes, px: tick labels and axis labels, legends and small labels, panel titles.
+FONT, SMALL, TITLE = 13.0, 11.5, 14.5
+#: Tick length and the padding between a panel's parts, px.
+TICK, PAD = 4.0, 3.0
+#: Stands for the id prefix of a figure's elements until the figure's content gives it (never in escaped text).
+ID_PLACEHOLDER = "<id>"
+
+
+def colour(name: str) -> str:
+    """An SVG colour from a short name.
+
+    Parameters
+    ----------
+    name
+        ``C0`` .. ``C9`` (:data:`TAB10`), ``k``/``black``, ``w``/``white``, ``none``, a grey level ``"0.45"``
+        (0 black .. 1 white), or ``#rrggbb`` (kept).
+
+    Returns
+    -------
+    str
+        ``#rrggbb`` (or ``none``).
+
+    Raises
+    ------
+    UsageError
+        A name that is none of these.
+    """
+    if re.fullmatch(r"#[0-9a-fA-F]{6}", name) or name == "none":
+        return name
+    if re.fullmatch(r"C\d", name):
+        return TAB10[int(name[1])]
+    if name in _NAMED:
+        return _NAMED[name]
+    try:
+        grey = float(name)
+    except ValueError:
+        grey = math.nan
+    if not 0.0 <= grey <= 1.0:
+        raise UsageError(f"a colour is C0..C9, k, white, a grey level 0..1 or #rrggbb, got {name!r}")
+    level = round(255 * grey)
+    return f"#{level:02x}{level:02x}{level:02x}"
+
+
+#: ColorBrewer's diverging red-blue, reversed (RdBu_r): -1 dark blue, 0 near white, +1 dark red; 11 stops.
+RDBU_R = ("#053061", "#2166ac", "#4393c3", "#92c5de", "#d1e5f0", "#f7f7f7", "#fddbc7", "#f4a582", "#d6604d",
+          "#b2182b", "#67001f")  # fmt: skip
+#: The colour of a cell without a value (a grey, 75 % white).
+MISSING = "#bfbfbf"
+
+
+def diverging(value: float, lo: float = -1.0, hi: float = 1.0) -> str:
+    """The colour of a value on a diverging scale.
+
+    Parameters
+    ----------
+    value
+        The value (a correlation: -1 .. 1).
+    lo, hi
+        The values at the scale's blue and red ends.
+
+    Returns
+    -------
+    str
+        ``#rrggbb`` on :data:`RDBU_R`, interpolated linearly between its stops and clipped at its ends;
+        :data:`MISSING` when ``value`` is not finite.
+    """
+    if not math.isfinite(value):
+        return MISSING
+    s = min(max((value - lo) / (hi - lo), 0.0), 1.0) * (len(RDBU_R) - 1)
+    k = min(int(s), len(RDBU_R) - 2)
+    a, b = RDBU_R[k], RDBU_R[k + 1]
+    mix = [round(int(a[i : i + 2], 16) * (k + 1 - s) + int(b[i : i + 2], 16) * (s - k)) for i in (1, 3, 5)]
+    return "#" + "".join(f"{c:02x}" for c in mix)
+
+
+def luminance(hex_colour: str) -> float:
+    """Perceived brightness of a colour (text on it is white below 0.5).
+
+    Parameters
+    ----------
+    hex_colour
+        ``#rrggbb``.
+
+    Returns
+    -------
+    float
+        0.299 r + 0.587 g + 0.114 b, from 0 (black) to 1 (white).
+    """
+    r, g, b = (int(hex_colour[i : i + 2], 16) / 255.0 for i in (1, 3, 5))
+    return 0.299 * r + 0.587 * g + 0.114 * b
+
+
+def num(value: float) -> str:
+    """A number as SVG writes it.
+
+    Parameters
+    ----------
+    value
+        A coordinate or size, px.
+
+    Returns
+    -------
+    str
+        Rounded to 2 decimals, without trailing zeros: ``12.5``, ``3``, never ``-0``.
+    """
+    text = f"{round(float(value), 2) + 0.0:.2f}".rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text
+
+
+def escape(text: str) -> str:
+    """Text made safe for XML.
+
+    Parameters
+    ----------
+    text
+        Any text (a robot's name, a log's path, a label).
+
+    Returns
+    -------
+    str
+        The text for an XML text node or a double-quoted attribute: ``&``, ``<``, ``>`` and ``"`` escaped, control
+        characters (not allowed in XML 1.0) dropped, newlines and tabs kept.
+    """
+    text = "".join(c for c in text if c >= " " or c in "\n\t")
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;").replace('"', "&quot;")
+
+
+def stroke(color: str, width: float, dash: str | None = None, opacity: float = 1.0) -> str:
+    """The stroke attributes of a line.
+
+    Parameters
+    ----------
+    color
+        A colour name (:func:`colour`).
+    width
+        px.
+    dash
+        None (solid), ``--``, ``:`` or ``-.``: :data:`_DASHES`, scaled by the width.
+    opacity
+        0 .. 1.
+
+    Returns
+    -------
+    str
+        ``stroke="..." stroke-width="..."`` and, when needed, ``stroke-dasharray`` and ``stroke-opacity``.
+    """
+    out = f'stroke="{colour(color)}" stroke-width="{num(width)}"'
+    if dash in _DASHES:
+        out += f' stroke-dasharray="{",".join(num(d * width) for d in _DASHES[dash])}"'
+    return out + (f' stroke-opacity="{num(opacity)}"' if opacity < 1.0 else "")
+
+
+def points(xs: np.ndarray, ys: np.ndarray) -> str:
+    """A polyline's ``points`` attribute.
+
+    Parameters
+    ----------
+    xs, ys
+        (n,) px each, finite.
+
+    Returns
+    -------
+    str
+        ``x,y x,y ...``, 2 decimals, a point that repeats the one before (after rounding) left out.
+    """
+    xs = np.round(np.asarray(xs, dtype=np.float64), 2) + 0.0
+    ys = np.round(np.asarray(ys, dtype=np.float64), 2) + 0.0
+    if len(xs) > 1:
+        keep = np.ones(len(xs), dtype=bool)
+        keep[1:] = (np.diff(xs) != 0) | (np.diff(ys) != 0)
+        xs, ys = xs[keep], ys[keep]
+    return " ".join(f"{x:.10g},{y:.10g}" for x, y in zip(xs.tolist(), ys.tolist(), strict=True))
+
+
+def segments(px: np.ndarray, py: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The pieces of a line between its missing points.
+
+    Parameters
+    ----------
+    px, py
+        (n,) px each; NaN where a value is missing (or one a log axis cannot show).
+
+    Returns
+    -------
+    list of (px, py)
+        The runs of finite points, in order, each of 2 points or more (a lone point joins nothing).
+    """
+    ok = np.isfinite(px) & np.isfinite(py)
+    if ok.all():
+        return [(px, py)] if len(px) > 1 else []
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
+    return [(px[a:b], py[a:b]) for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a > 1]
+
+
+def simplify(px: np.ndarray, py: np.ndarray, tolerance: float = 0.1) -> np.ndarray:
+    """The points that draw a polyline to within a tolerance (Douglas-Peucker).
+
+    Parameters
+    ----------
+    px, py
+        (n,) px each, finite.
+    tolerance
+        px: every point left out lies within this distance of the segment drawn past it (0.1 px: invisible).
+
+    Returns
+    -------
+    (m,) int
+        Indices of the points kept, increasing, the ends always among them.
+    """
+    n = len(px)
+    if n < 3:
+        return np.arange(n)
+    keep = np.zeros(n, dtype=bool)
+    keep[[0, n - 1]] = True
+    stack = [(0, n - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j - i < 2:
+            continue
+        dx, dy = px[j] - px[i], py[j] - py[i]
+        ox, oy = px[i + 1 : j] - px[i], py[i + 1 : j] - py[i]
+        length2 = dx * dx + dy * dy
+        along = np.clip((ox * dx + oy * dy) / length2, 0.0, 1.0) if length2 > 0 else 0.0
+        dist2 = (ox - along * dx) ** 2 + (oy - along * dy) ** 2  # to the segment: a spike back along it counts
+        k = int(np.argmax(dist2))
+        if dist2[k] > tolerance * tolerance:
+            m = i + 1 + k
+            keep[m] = True
+            stack += [(i, m), (m, j)]
+    return np.flatnonzero(keep)
