@@ -23,6 +23,7 @@ class PerformanceWarning(UserWarning):
     one line on stderr, "wmrid: note: ..."; a library user can filter it as any warning)."""
 
 
+numba: Any
 try:
     import numba  # numba (~0.3 s): imported by the modules that define kernels, when they are first needed
 except ImportError:
