@@ -14,6 +14,7 @@ from wmrid.estimators.verdict import LEGEND
 from wmrid.io.inspect import McapInventory, TableInventory
 from wmrid.model.payload import PAYLOAD_UNITS, payload_statement
 from wmrid.reporting.terminal import STYLES, print_table, styled, warning as warning_line
+from wmrid.reporting.warning_groups import grouped_warnings
 from wmrid.runtime.atomic import to_json_text
 
 
@@ -162,7 +163,7 @@ def print_identification(result: IdentificationResult, console: Any, verbose: bo
         )
     for note in info.notes:
         console.print(f"note: {note}")
-    for warning in _grouped(result.warnings):
+    for warning in grouped_warnings(result.warnings):
         console.print(warning_line(warning))
 
 
@@ -301,37 +302,8 @@ def print_comparison(comparison: Comparison, console: Any) -> None:
         console.print(LEGEND["!"])
     if any(p.impossible for m in methods.values() for p in m.parameters.values()):
         console.print(LEGEND["✗"], style=STYLES["impossible"])
-    for names, warning in said_once([(name, w) for name, m in methods.items() for w in _grouped(m.warnings)]):
+    for names, warning in said_once([(name, w) for name, m in methods.items() for w in grouped_warnings(m.warnings)]):
         console.print(warning_line(warning, f"warning ({', '.join(names)})"))
-
-
-#: The words of a warning that a parameter is poorly determined: compare's table shows each std, so the names suffice.
-_POORLY = " is poorly determined by this log"
-#: The same said of several logs combined (``--given``).
-_POORLY_ALL = " is poorly determined by these logs"
-
-
-def _grouped(warnings: Sequence[str]) -> list[str]:
-    """A result's warnings for the terminal: those that a parameter is poorly determined by the log (one each, with the
-    value and std that the table shows) said in one line naming the parameters, where the first was; what a warning
-    adds beyond the table (the parameters it cannot be told apart from) stays with its name.  The JSON keeps each."""
-    out: list[str] = []
-    for words, said in ((_POORLY, "this log"), (_POORLY_ALL, "these logs")):
-        poorly = [_poorly_name(w, words) for w in warnings if words in w]
-        if poorly:
-            joined = "; ".join(poorly) if any("," in p for p in poorly) else ", ".join(poorly)
-            out.append(f"poorly determined by {said} (std in the table): {joined}")
-    first = next((i for i, w in enumerate(warnings) if _POORLY in w or _POORLY_ALL in w), len(warnings))
-    rest = [w for w in warnings if _POORLY not in w and _POORLY_ALL not in w]
-    return [*rest[:first], *out, *rest[first:]]
-
-
-def _poorly_name(warning: str, words: str) -> str:
-    """ "Fv1, not separable from Fd1 (correlation 0.97)" of "Fv1 is poorly determined by this log: 4.8 +/- 40 PWM s/rad;
-    it is not separable from Fd1 (correlation 0.97)"; the name alone when the warning adds nothing to the table."""
-    name = warning.split(words, 1)[0]
-    _, _, beyond = warning.partition("; it is ")
-    return f"{name}, {beyond}" if beyond else name
 
 
 def said_once(items: Sequence[tuple[str, str]]) -> list[tuple[list[str], str]]:

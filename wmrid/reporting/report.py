@@ -37,6 +37,7 @@ from wmrid.model.payload import PAYLOAD_UNITS, payload_statement
 from wmrid.reporting import figures as fg
 from wmrid.reporting.figures import check_format, render
 from wmrid.reporting.report_table import ReportTable
+from wmrid.reporting.warning_groups import grouped_warnings
 
 #: A difference from the CAD value beyond this many standard errors is flagged.
 SIGNIFICANT = 3.0
@@ -320,7 +321,7 @@ def _statements(rl: IdentificationResult, *, inflated: bool, warned: bool, flagg
         + f" (λ_min(Γ) = {diag.lambda_min_gamma:.3g}, α = {rl.observer_settings.alpha:g}).",
         *flagged,
         *(["Robot file: assumed " + "; ".join(diag.robot_assumed) + "."] if diag.robot_assumed else []),
-        *rl.warnings,
+        *grouped_warnings(rl.warnings),
     ]
     effort_unit = rl.log_info.effort_unit
     if effort_unit != "N m":

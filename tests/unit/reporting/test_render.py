@@ -112,7 +112,7 @@ def test_identify_says_the_poorly_determined_parameters_in_one_line_keeping_what
     table (the parameters it cannot be told apart from) stays with its name.  The JSON keeps every warning."""
     from dataclasses import replace
 
-    from wmrid.reporting.render import _grouped
+    from wmrid.reporting.warning_groups import grouped_warnings as _grouped
 
     warnings = (
         "the log is short",
