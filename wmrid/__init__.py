@@ -28,7 +28,7 @@ def _numba_cache_fallback() -> None:
     writable (installed read-only, run as a service account whose HOME does not exist) every command failed with
     "cannot cache function".  Then NUMBA_CACHE_DIR (read when numba is imported) points to a per-user folder under
     the system's temporary directory.  A NUMBA_CACHE_DIR already set is left alone."""
-    if _os.environ.get("NUMBA_CACHE_DIR"):
+    if _os.environ.get("NUMBA_CACHE_DIR") or not _numba_installed():
         return
     here = _os.path.dirname(_os.path.abspath(__file__))
     candidates = [_os.path.join(here, "__pycache__")]
@@ -45,6 +45,16 @@ def _numba_cache_fallback() -> None:
     fallback = _private_temp_folder("wmrid-numba-cache")
     if fallback is not None:
         _os.environ["NUMBA_CACHE_DIR"] = fallback
+
+
+def _numba_installed() -> bool:
+    """Whether numba (the ``fast`` extra) is installed, without importing it: without it there is nothing to cache."""
+    import importlib.util
+
+    try:
+        return importlib.util.find_spec("numba") is not None
+    except (ImportError, ValueError):
+        return False
 
 
 def _private_temp_folder(name: str) -> str | None:

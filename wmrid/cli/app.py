@@ -63,11 +63,16 @@ def _root(
 
 def _notes_in_one_line(show: Callable[..., None]) -> Callable[..., None]:
     """``warnings.showwarning`` that says wmrid's :class:`~wmrid.core.jit.PerformanceWarning` as "wmrid: note: ..."
-    on stderr (Python's own form names a file and a line of wmrid's), and leaves any other warning to ``show``."""
+    on stderr, the first one only (Python's own form names a file and a line of wmrid's), and leaves any other warning
+    to ``show``."""
+
+    said = []
 
     def shown(message: Any, category: type[Warning], *args: Any, **kwargs: Any) -> None:
         if category.__name__ == "PerformanceWarning" and category.__module__ == "wmrid.core.jit":
-            sys.stderr.write(_said(f"wmrid: note: {_one_line(str(message))}"))
+            if not said:  # once per command: compare's methods, monitor's windows would each say it again
+                said.append(message)
+                sys.stderr.write(_said(f"wmrid: note: {_one_line(str(message))}"))
         else:
             show(message, category, *args, **kwargs)
 

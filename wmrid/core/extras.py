@@ -5,7 +5,7 @@ ROS bag logs.  One extra makes every command faster, three add what only some co
 measured in a fresh Python 3.11 environment; README "Install"):
 
 * ``fast``: numba, which compiles the estimator's loops (:mod:`wmrid.core.jit`; without it they run as plain Python,
-  with the same results, about 10 times slower);
+  with the same results to rounding, about 10 times slower);
 * ``fleet``: ``wmrid fleet`` (dask.distributed, and pyarrow for its Parquet table);
 * ``parquet``: Parquet logs, in and out (pyarrow; it also reads plain CSV logs about 3x faster);
 * ``physics``: ``wmrid simulate --engine mujoco`` (MuJoCo).

@@ -11,9 +11,13 @@ a user of a long log.
 
 from __future__ import annotations
 
+import functools
+import importlib.util
 import warnings
 from collections.abc import Callable
 from typing import Any, overload
+
+import numpy as np
 
 from wmrid.core.extras import install_hint
 
@@ -24,10 +28,18 @@ class PerformanceWarning(UserWarning):
 
 
 numba: Any
+#: Why numba is installed but cannot be imported (its ImportError: e.g. a NumPy newer than it supports), or None.
+BROKEN: str | None = None
 try:
     import numba  # numba (~0.3 s): imported by the modules that define kernels, when they are first needed
-except ImportError:
+except ImportError as _err:
     numba = None
+    try:
+        _installed = importlib.util.find_spec("numba") is not None
+    except (ImportError, ValueError):
+        _installed = False
+    if _installed:
+        BROKEN = " ".join(str(_err).split()) or type(_err).__name__
 
 #: Whether the kernels are compiled (numba importable).  Decided once, when wmrid first needs a kernel.
 COMPILED: bool = numba is not None
@@ -57,13 +69,30 @@ def kernel(fn: Any = None, *, inline: bool = False) -> Any:
 
     def wrap(f: Callable[..., Any]) -> Any:
         if numba is None:
-            return f
+            return _as_compiled(f)
         options: dict[str, Any] = {"cache": True, "nogil": True}
         if inline:
             options["inline"] = "always"
         return numba.njit(**options)(f)
 
     return wrap if fn is None else wrap(fn)
+
+
+def _as_compiled(f: Callable[..., Any]) -> Callable[..., Any]:
+    """``f`` run as plain Python with numba's arithmetic as far as numpy can give it: a division by zero raises
+    ZeroDivisionError (numba's error model, where numpy's scalars would give inf and a warning); an overflow, an
+    invalid operation (inf - inf) or an underflow gives inf, NaN or 0 silently, as compiled code does (numpy would
+    print a RuntimeWarning per code line)."""
+
+    @functools.wraps(f)
+    def run(*args: Any) -> Any:
+        with np.errstate(divide="raise", over="ignore", under="ignore", invalid="ignore"):
+            try:
+                return f(*args)
+            except FloatingPointError as err:  # numpy's "divide by zero encountered in scalar divide"
+                raise ZeroDivisionError(str(err)) from None
+
+    return run
 
 
 def slow_note(samples: int) -> str | None:
@@ -73,10 +102,18 @@ def slow_note(samples: int) -> str | None:
         return None
     seconds = samples * PYTHON_SECONDS_PER_SAMPLE
     took = f"about {seconds / 60.0:.0f} min" if seconds >= 90.0 else f"about {seconds:.0f} s"
-    return (
-        f"numba is not installed, so the estimator runs as plain Python: {took} for these {samples:,} samples, "
-        f"seconds with it ({install_hint('fast')})"
-    )
+    plain = f"{_why_plain()}, so the estimator runs as plain Python"
+    return f"{plain}: {took} for these {samples:,} samples, {_remedy('seconds')}"
+
+
+def _why_plain() -> str:
+    return "numba is not installed" if BROKEN is None else f"numba is installed but cannot be imported ({BROKEN})"
+
+
+def _remedy(fast: str) -> str:
+    """``fast`` ("seconds"), said of the compiled kernels: with the extra to install, or once the numba that is there
+    imports."""
+    return f"{fast} with it ({install_hint('fast')})" if BROKEN is None else f"{fast} once numba imports"
 
 
 def warn_if_slow(samples: int) -> None:
@@ -84,3 +121,14 @@ def warn_if_slow(samples: int) -> None:
     note = slow_note(samples)
     if note is not None:
         warnings.warn(note, PerformanceWarning, stacklevel=3)
+
+
+def warn_plain_python(what: str) -> None:
+    """A :class:`PerformanceWarning` that ``what`` ("every log is identified") runs as plain Python, when numba is not
+    installed: for a command of many logs, whose lengths are not known at its start."""
+    if not COMPILED:
+        warnings.warn(
+            f"{_why_plain()}, so {what} as plain Python, {_remedy('about ten times faster')}",
+            PerformanceWarning,
+            stacklevel=2,
+        )

@@ -291,10 +291,12 @@ def fleet(
         The table exists and neither ``resume`` nor ``force`` is given.
     """
     from wmrid.core.extras import require_installed
+    from wmrid.core.jit import warn_plain_python
     from wmrid.runtime.atomic import register_input
 
     require_installed("distributed", "fleet")  # imported only when the cluster starts: a bad manifest is said first
     require_installed("pyarrow", "fleet")
+    warn_plain_python("every log is identified")  # once here: the workers keep theirs to themselves
     if output is None:
         raise UsageError(f"{option('output')} is required: the Parquet table to write (e.g. fleet.parquet)")
     out = os.fspath(output)

@@ -10,6 +10,7 @@ import math
 import os
 import socket
 import time
+import warnings
 from collections.abc import Generator
 from dataclasses import dataclass, field
 from typing import Any
@@ -164,7 +165,10 @@ def prepare_worker() -> bool:
     global _worker_prepared, _malloc_tuned
     if not _worker_prepared:
         # the observer's kernels (numba): only a worker's set-up, not wmrid.fleets.run
+        from wmrid.core.jit import PerformanceWarning
         from wmrid.estimators.observer.replay import one_thread
+
+        warnings.filterwarnings("ignore", category=PerformanceWarning)  # `wmrid fleet` says it once, not per log
 
         one_thread()
         _worker_prepared = True
@@ -231,10 +235,13 @@ def warm_up() -> float:
     """Load wmrid's compiled kernels in this process (numba's cache: about a second once per process), so that a
     worker's first log does not pay for it; returns the seconds it took.  Run on every worker at the start."""
     from wmrid.api.identification import identify  # the identification (numba, ~0.3 s): warm_up loads it on a worker
+    from wmrid.core.jit import COMPILED
     from wmrid.model.predict import validation_fit  # the predictor's numba kernel: warm_up loads it on a worker
 
     start = time.perf_counter()
     prepare_worker()
+    if not COMPILED:  # no kernels to load: a warm-up identify would only cost a second of plain Python
+        return time.perf_counter() - start
     t = np.arange(2001) * 1e-3
     eta = np.column_stack([2 + np.sin(3 * t), 2 + np.cos(2 * t)])
     tau = np.column_stack([np.cos(3 * t), -np.sin(2 * t)]) + 0.1

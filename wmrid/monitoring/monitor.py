@@ -89,6 +89,7 @@ from typing import Any
 import numpy as np
 
 from wmrid.core.errors import NotIdentifiableError, UsageError, option
+from wmrid.core.jit import warn_if_slow
 from wmrid.estimators.options import ObserverOptions
 from wmrid.estimators.records import LogInfo
 from wmrid.model import dynamics as model
@@ -348,6 +349,7 @@ def monitor(
     and report the changes of its dynamics (see the module docstring); ``observer``: the settings of the
     re-identifications after a change (see :func:`_identify_span`)."""
     started = time.perf_counter()
+    warn_if_slow(len(log.t))  # the whole log, before the windows' identifications (each shorter than the threshold)
     settings = settings or MonitorSettings()
     source = getattr(log, "source", "log")
     unit = getattr(log, "effort_unit", "N m")

@@ -88,6 +88,8 @@ def identify_log(
     robot : the nominal values that start the estimate and centre the box (None: from the data and physics).
     ``progress(samples_done, samples)`` during the observer's passes."""
     _check_payload(robot, options.payload)
+    if not isinstance(log, LogStream):  # a stream's length is known after its survey (_identified, _delayed)
+        warn_if_slow(len(log.t))  # a long log without numba: how long it will take, and how to shorten it
     if options.delay is not None:
         try:
             return _settled(_delayed(log, robot, options, steps, progress), robot)
@@ -108,7 +110,8 @@ def _identified(
     """:func:`identify_log` on the efforts as stamped, their timing checked (``steps.timing``).  ``within``: the
     warning of a delay already found within the log's misfit (``--delay auto``'s pass), not looked for again."""
     stream, sv = surveyed(log)
-    warn_if_slow(sv.n)  # a long log without numba: the user hears how long it will take, and how to shorten it
+    if isinstance(log, LogStream):  # a log in memory was said at the start (identify_log)
+        warn_if_slow(sv.n)
     chosen = Once(lambda: _choose(stream, sv, robot, options, steps, progress))
     timing = Timing()
     if steps.timing:
@@ -170,6 +173,7 @@ def _delayed(
     assert delay is not None, "_delayed is called with a delay (seconds or auto)"
     if isinstance(log, LogStream) and sv is None:
         sv = surveyed(log)[1]  # its length: a log longer than the timing check's window is shifted piece by piece
+        warn_if_slow(sv.n)
     # read once when it is shifted in memory
     original = log if in_pieces(log) or not isinstance(log, LogStream) else log.read()
     profile = None

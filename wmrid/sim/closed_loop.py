@@ -157,7 +157,8 @@ def control_torque(s, ref, ctrl, gains):
     err1 = cp * dx + sp * dy
     err2 = -sp * dx + cp * dy
     err3 = phir - phi
-    err3 -= 2.0 * math.pi * math.floor((err3 + math.pi) / (2.0 * math.pi))  # wrap to [-pi, pi)
+    if math.isfinite(err3):  # a diverged state stays NaN (math.floor of NaN raises in Python; numba's is undefined)
+        err3 -= 2.0 * math.pi * math.floor((err3 + math.pi) / (2.0 * math.pi))  # wrap to [-pi, pi)
     v = 0.5 * r * (eta1 + eta2)
     w = r / (2.0 * b) * (eta1 - eta2)
     c3, s3 = math.cos(err3), math.sin(err3)

@@ -63,6 +63,11 @@ BODY = textwrap.dedent(
         out["compare"] = {m: r.get("parameters") for m, r in methods.items()}
         run = wmrid.simulate(duration=0.5)
         out["simulate"] = [np.asarray(run.log.eta).tolist(), np.asarray(run.log.tau).tolist()]
+        try:  # a closed loop that diverges: one clear error either way (not a log of NaNs, not a crash)
+            wmrid.simulate(duration=0.3, noise=wmrid.NoiseSettings(caster_std=1e200))
+            out["diverged"] = "no error"
+        except wmrid.WmridError as err:
+            out["diverged"] = str(err)
         out["numba_loaded"] = "numba" in sys.modules
         return json.loads(json.dumps(out))
     """
@@ -137,7 +142,7 @@ def test_logs_decode_the_same_without_numba(both, fmt):
     assert plain[fmt] == compiled[fmt]  # exactly: the scanners do integer and bit operations
 
 
-@pytest.mark.parametrize("what", ["identify", "compare", "simulate"])
+@pytest.mark.parametrize("what", ["identify", "compare", "simulate", "diverged"])
 def test_estimates_and_simulations_are_the_same_without_numba(both, what):
     plain, compiled = both
     _close(plain[what], compiled[what], what)
@@ -146,6 +151,8 @@ def test_estimates_and_simulations_are_the_same_without_numba(both, what):
         assert all(plain[what][m] for m in ("observer", "idim", "iv", "rls", "oe"))
     if what == "simulate":
         assert np.isfinite(np.asarray(plain[what][0])).all()
+    if what == "diverged":
+        assert plain[what].startswith("the simulation diverged at t = ")
 
 
 def test_a_long_log_without_numba_says_once_how_long_and_how_to_shorten_it(monkeypatch, tmp_path):
@@ -169,3 +176,73 @@ def test_a_long_log_without_numba_says_once_how_long_and_how_to_shorten_it(monke
     done = run("identify", sample, "--robot", "paper", "--format", "json", cwd=tmp_path)
     assert done.returncode == 0
     assert done.stderr == b""
+
+
+def _note_runs(monkeypatch, tmp_path, *commands, broken=None):
+    """stderr of each of ``commands`` (wmrid arguments), numba counted as absent (``broken``: installed but not
+    importable, with that error) and the note's threshold lowered to 10,000 samples."""
+    from tests.cliutil import wmrid as run
+    from wmrid.core import jit
+
+    monkeypatch.setattr(jit, "COMPILED", False)
+    monkeypatch.setattr(jit, "BROKEN", broken)
+    monkeypatch.setattr(jit, "SLOW_FROM_SAMPLES", 10_000)
+    errs = []
+    for argv in commands:
+        done = run(*argv, cwd=tmp_path)
+        assert done.returncode == 0, done.stderr.decode()
+        errs.append(done.stderr.decode())
+    return errs
+
+
+def test_the_note_is_said_once_per_command_whatever_the_route(monkeypatch, tmp_path):
+    """compare (five methods), an applied delay (identify's other route) and monitor (its windows each shorter than
+    the threshold) each say the note once, with the whole log's samples."""
+    sample = REPO / "sample_logs" / "paper_sinusoid.csv"
+    model = tmp_path / "model.json"
+    errs = _note_runs(
+        monkeypatch, tmp_path,
+        ["identify", sample, "--robot", "paper", "-o", model],
+        ["compare", sample, "--robot", "paper", "--format", "json"],
+        ["identify", sample, "--robot", "paper", "--delay", "0.001", "--format", "json"],
+        ["monitor", sample, "--model", model, "--format", "json"],
+    )  # fmt: skip
+    for err in errs:
+        notes = [line for line in err.splitlines() if line.startswith("wmrid: note: ")]
+        assert len(notes) == 1, err
+        assert "for these 40,001 samples" in notes[0]
+
+
+def test_a_numba_that_cannot_be_imported_is_said_as_such(monkeypatch, tmp_path):
+    """numba installed but not importable (e.g. a NumPy newer than it supports) is not "not installed": installing
+    the extra again would change nothing."""
+    sample = REPO / "sample_logs" / "paper_sinusoid.csv"
+    (err,) = _note_runs(
+        monkeypatch, tmp_path, ["identify", sample, "--robot", "paper", "--format", "json"],
+        broken="Numba needs NumPy 2.2 or less. Got NumPy 2.4.",
+    )  # fmt: skip
+    assert err == (
+        "wmrid: note: numba is installed but cannot be imported (Numba needs NumPy 2.2 or less. Got NumPy 2.4.), so "
+        "the estimator runs as plain Python: about 12 s for these 40,001 samples, seconds once numba imports\n"
+    )
+
+
+def test_plain_kernels_do_numbas_arithmetic():
+    """A kernel run as plain Python: a division by zero raises ZeroDivisionError, as compiled with numba's error
+    model (numpy's scalars would give inf and a warning); an overflow gives inf silently, as compiled code does."""
+    import warnings
+
+    from wmrid.core.jit import _as_compiled
+
+    def divide(a, b):
+        return a[0] / b[0]
+
+    def overflow(a):
+        return a[0] * a[0]
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # any RuntimeWarning fails the test
+        with pytest.raises(ZeroDivisionError):
+            _as_compiled(divide)(np.ones(1), np.zeros(1))
+        assert _as_compiled(overflow)(np.array([1e200])) == np.inf
+        assert _as_compiled(divide)(np.array([3.0]), np.array([2.0])) == 1.5
