@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import re
 
-#: Characters XML 1.0 does not allow anywhere (controls other than tab, newline, carriage return; surrogates; FFFE/F).
-_FORBIDDEN = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
+from wmrid.core.xml_chars import XML_FORBIDDEN
 
 
 def xml_comment(text: str) -> str:
     """An XML comment holding ``text``: characters XML forbids dropped, no "--" inside (every "-" followed by another
     gets a space after it, so "---" stays legal too) and none at the end (it would make "--->")."""
-    clean = _FORBIDDEN.sub("", text)
+    clean = XML_FORBIDDEN.sub("", text)
     clean = re.sub(r"-(?=-)", "- ", clean)
     if clean.endswith("-"):
         clean += " "
@@ -20,5 +19,5 @@ def xml_comment(text: str) -> str:
 
 def xml_attribute(text: str) -> str:
     """``text`` for a double-quoted XML attribute value."""
-    clean = _FORBIDDEN.sub("", text)
+    clean = XML_FORBIDDEN.sub("", text)
     return clean.replace("&", "&amp;").replace('"', "&quot;").replace("<", "&lt;").replace(">", "&gt;")

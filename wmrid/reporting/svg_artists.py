@@ -286,7 +286,7 @@ class Cells(Artist):
             for j, fill in enumerate(row):
                 x0, x1 = frame.fx(np.array([j - 0.5, j + 0.5]))
                 out.append(f'<rect x="{num(min(x0, x1))}" y="{num(min(y0, y1))}" width="{num(abs(x1 - x0))}" '
-                           f'height="{num(abs(y1 - y0))}" fill="{fill}"/>')  # fmt: skip
+                           f'height="{num(abs(y1 - y0))}" fill="{colour(fill)}"/>')  # fmt: skip
         return f'<g stroke="#ffffff" stroke-width="0.5">{"".join(out)}</g>'
 
 
@@ -300,7 +300,7 @@ class Gradient(Artist):
     def draw(self, frame: Frame) -> str:
         left, top, right, bottom = frame.box
         ident = f"{frame.ident}g"
-        stops = "".join(f'<stop offset="{num(o)}" stop-color="{c}"/>' for o, c in self.stops)
+        stops = "".join(f'<stop offset="{num(o)}" stop-color="{colour(c)}"/>' for o, c in self.stops)
         return (f'<defs><linearGradient id="{ident}" x1="0" y1="1" x2="0" y2="0">{stops}</linearGradient></defs>'
                 f'<rect x="{num(left)}" y="{num(top)}" width="{num(right - left)}" height="{num(bottom - top)}" '
                 f'fill="url(#{ident})"/>')  # fmt: skip

@@ -10,6 +10,7 @@ import re
 import numpy as np
 
 from wmrid.core.errors import UsageError
+from wmrid.core.xml_chars import XML_FORBIDDEN
 
 #: The Tableau 10 palette, named C0 ... C9 as the figures have always called them: right wheel C0 (blue), left
 #: wheel C1 (orange).
@@ -137,10 +138,11 @@ def escape(text: str) -> str:
     Returns
     -------
     str
-        The text for an XML text node or a double-quoted attribute: ``&``, ``<``, ``>`` and ``"`` escaped, control
-        characters (not allowed in XML 1.0) dropped, newlines and tabs kept.
+        The text for an XML text node or a double-quoted attribute: ``&``, ``<``, ``>`` and ``"`` escaped; what
+        XML 1.0 forbids (:data:`wmrid.core.xml_chars.XML_FORBIDDEN`: control characters, lone surrogates, which
+        UTF-8 cannot encode either, U+FFFE and U+FFFF) and carriage returns dropped; newlines and tabs kept.
     """
-    text = "".join(c for c in text if c >= " " or c in "\n\t")
+    text = XML_FORBIDDEN.sub("", text).replace("\r", "")
     return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;").replace('"', "&quot;")
 
 

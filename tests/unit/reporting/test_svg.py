@@ -55,6 +55,37 @@ def test_special_characters_are_escaped():
     assert escape("a<b&c") == "a&lt;b&amp;c"
 
 
+def test_characters_xml_forbids_are_dropped_everywhere_text_goes():
+    """U+FFFE, U+FFFF, lone surrogates (which UTF-8 cannot encode either) and controls, in a title, a legend and a
+    tick label: the document encodes and parses, the rest of the text kept."""
+    fig, ax = _one()
+    name = "nc\uffff\ufffe\ud800\udfff\x00\x1b\r<é>\U0001f600"
+    ax.line([0, 1], [0, 1], label=name)
+    ax.legend("upper left")
+    ax.set_title(name)
+    ax.x.ticks = ([0.0], [name])
+    svg = fig.to_svg()  # no UnicodeEncodeError
+    assert texts(parse(svg)).count("nc<é>\U0001f600") == 3  # well-formed: title, legend, tick label
+    assert escape("a\ufffeb\udc80c\td\ne") == "abc\td\ne"
+
+
+def test_cell_and_gradient_colours_are_checked():
+    from wmrid.core.errors import UsageError
+
+    for draw in (lambda ax: ax.cells([["#00ff00", '"/><script/>']]), lambda ax: ax.gradient([(0.0, 'red"')])):
+        fig, ax = _one()
+        draw(ax)
+        with pytest.raises(UsageError, match="colour"):
+            fig.to_svg()
+    fig, ax = _one()
+    ax.cells([["C3", "0.5"]])
+    ax.gradient([(0.0, "#053061"), (1.0, "C1")])
+    root = parse(fig.to_svg())
+    fills = [r.get("fill") for r in data(panels(root)[0]).iter(f"{NS}rect")]
+    assert {TAB10[3], "#808080"} <= set(fills)
+    assert [s.get("stop-color") for s in root.iter(f"{NS}stop")] == ["#053061", TAB10[1]]
+
+
 def test_same_figure_same_bytes_and_ids_unique_across_figures():
     def build(shift):
         fig, ax = _one()
