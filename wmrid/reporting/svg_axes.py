@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import datetime as dt
 import math
+import sys
 
 import numpy as np
 
@@ -35,6 +36,23 @@ _SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
 _EPOCH = dt.date(1970, 1, 1).toordinal() - 1
 #: The date numbers an axis may show: 0001-01-01 00:00 to 9999-12-31 24:00.
 DATE_RANGE = (0.0, float(dt.date(9999, 12, 31).toordinal()))
+#: The largest finite float: limits stay within ±this, and spans are taken as ``hi / 2 - lo / 2`` (always finite).
+FLOAT_MAX = sys.float_info.max
+#: The smallest positive float (a subnormal): a log axis' limits stay within [this, :data:`FLOAT_MAX`].
+FLOAT_TINY = math.ulp(0.0)
+
+
+def pow10(k: float) -> float:
+    """10^k as a float: inf beyond :data:`FLOAT_MAX` and 0 below the smallest subnormal (no OverflowError)."""
+    try:
+        return float(10.0**k)
+    except OverflowError:
+        return math.inf
+
+
+def degenerate(lo: float, hi: float) -> bool:
+    """Limits (lo <= hi) so close that no tick step separates them: within 1e-12 of their magnitude."""
+    return hi / 2 - lo / 2 <= 0.5e-12 * max(abs(lo), abs(hi), 1e-300)
 
 
 def text_width(text: str, size: float) -> float:
@@ -57,35 +75,40 @@ def _minus(text: str) -> str:
 # Linear axes
 
 
-def linear_ticks(lo: float, hi: float, max_ticks: int) -> tuple[np.ndarray, float]:
+def linear_ticks(lo: float, hi: float, max_ticks: int, min_step: float = 0.0) -> tuple[np.ndarray, float]:
     """Ticks within [lo, hi] at the smallest step 1, 2 or 5 x 10^k that gives at most ``max_ticks`` of them.
 
     Parameters
     ----------
     lo, hi
-        The axis limits (any order; equal limits are widened by one unit of their magnitude).
+        The axis limits (any order, any finite floats; limits closer than :func:`degenerate` are widened by one
+        unit of their magnitude).
     max_ticks
         The most ticks wanted (at least 2).
+    min_step
+        The finest step allowed (1: integers only, a count's axis).
 
     Returns
     -------
     ticks : (n,) float
         Multiples of the step within the limits, increasing; at least two, even when that takes more than
-        ``max_ticks`` (a span of 1.2 from 0.9 with at most 2: 1.0, 1.5, 2.0).
+        ``max_ticks`` (a span of 1.2 from 0.9 with at most 2: 1.0, 1.5, 2.0), unless ``min_step`` leaves fewer (one
+        integer between -0.5 and 0.5; none within the limits: none).
     step : float
         Their spacing.
     """
     lo, hi = min(lo, hi), max(lo, hi)
     if not (math.isfinite(lo) and math.isfinite(hi)):
         return np.array([]), 1.0
-    if hi - lo <= 1e-12 * max(abs(lo), abs(hi), 1e-300):
+    if degenerate(lo, hi):
         half = max(abs(lo), 1.0) * 0.5
-        lo, hi = lo - half, hi + half
-    span = hi - lo
+        lo, hi = max(lo - half, -FLOAT_MAX), min(hi + half, FLOAT_MAX)
+    half_span = hi / 2 - lo / 2  # finite even from -FLOAT_MAX to FLOAT_MAX
     max_ticks = max(2, int(max_ticks))
-    exponent = math.floor(math.log10(span / max_ticks))
-    candidates = [m * 10.0**k for k in range(exponent - 1, exponent + 3) for m in (1.0, 2.0, 5.0)]
-    best = candidates[-1]
+    exponent = math.floor(math.log10(half_span / max_ticks) + math.log10(2.0))
+    steps = (m * pow10(k) for k in range(exponent - 1, exponent + 3) for m in (1.0, 2.0, 5.0))
+    candidates = [c for c in steps if 0.0 < c < math.inf and c >= min_step] or [min_step]
+    best = candidates[0]
     for step in candidates:  # finest first: the first that fits, or the coarsest that still gives two ticks
         n = math.floor(hi / step + 1e-9) - math.ceil(lo / step - 1e-9) + 1
         if n >= 2:
@@ -109,13 +132,13 @@ def linear_labels(ticks: np.ndarray, step: float) -> tuple[list[str], str]:
     top = float(np.max(np.abs(ticks)))
     offset = 0.0
     if top / step >= 1e5:  # 1.4100000, 1.4100002, ...: relative to 1.41
-        unit = 10.0 ** math.ceil(math.log10(step * max(len(ticks) - 1, 1)) - 1e-9)
+        unit = pow10(math.ceil(math.log10(step * max(len(ticks) - 1, 1)) - 1e-9))
         offset = float(f"{math.floor(float(ticks[0]) / unit + 1e-6) * unit:.12g}")
     rel = np.where(np.abs(ticks - offset) < 1e-6 * step, 0.0, ticks - offset)
     top = float(np.max(np.abs(rel)))
     exponent = math.floor(math.log10(top)) if top > 0 else 0
     power = exponent if (exponent >= 6 or exponent <= -4) else 0
-    scale = 10.0**power
+    scale = pow10(power)
     decimals = max(0, -math.floor(math.log10(step / scale) + 1e-9))
     labels = [_minus(f"{v / scale:.{decimals}f}") for v in rel]
     note = f"×10{superscript(power)}" if power else ""
@@ -156,16 +179,20 @@ def log_ticks(lo: float, hi: float, max_ticks: int) -> tuple[np.ndarray, list[st
     if k1 - k0 + 1 >= 2:
         every = max(1, math.ceil((k1 - k0 + 1) / max_ticks))
         ks = [k for k in range(k0, k1 + 1) if k % every == 0]
-        major = np.array([10.0**k for k in ks])
+        major = np.array([pow10(k) for k in ks])
         labels = [f"10{superscript(k)}" for k in ks]
         minor = np.array([]) if every > 1 else _log_minor(lo, hi)
         return major, labels, minor
-    values = [m * 10.0**k for k in range(k0 - 1, k1 + 2) for m in (1.0, 2.0, 5.0)]
-    major = np.array([v for v in values if lo * (1 - 1e-9) <= v <= hi * (1 + 1e-9)])
+    values = [m * pow10(k) for k in range(k0 - 1, k1 + 2) for m in (1.0, 2.0, 5.0)]
+    major = np.array([v for v in values if lo * (1 - 1e-9) <= v <= hi * (1 + 1e-9) and v < math.inf])
     if len(major) < 2:  # less than a factor of 2.5: linear ticks on the log axis
         ticks, step = linear_ticks(lo, hi, max_ticks)
-        ticks = ticks[ticks > 0]
-        return ticks, linear_labels(ticks, step)[0], np.array([])
+        ticks = ticks[(ticks > 0) & (ticks >= lo * (1 - 1e-9)) & (ticks <= hi * (1 + 1e-9))]
+        if len(ticks) or not len(major):  # (none among the few subnormals near 1e-323: the 1-2-5 tick)
+            labels, note = linear_labels(ticks, step)
+            if note:  # no room for a note on a log axis: each value in full, 1.15×10⁸
+                labels = [_scientific(v, step) for v in ticks]
+            return ticks, labels, np.array([])
     return major, [_log_value(v) for v in major], _log_minor(lo, hi, one=False)
 
 
@@ -174,8 +201,20 @@ def _log_value(v: float) -> str:
     if 1e-3 <= v < 1e5:
         return f"{v:.10g}"
     k = math.floor(math.log10(v) + 1e-9)
-    m = round(v / 10.0**k)
+    m = round(pow10(math.log10(v) - k))  # (not v / 10^k: 10^-324 is 0)
+    if m == 10:  # 1e-323, a subnormal, is 9.88e-324
+        m, k = 1, k + 1
     return (f"{m}×" if m != 1 else "") + f"10{superscript(k)}"
+
+
+def _scientific(v: float, step: float) -> str:
+    """A positive value with the decimals that ``step`` needs, plainly between 0.001 and 10^5 (1.4100002), else as
+    m×10ⁿ (1.15×10⁸ in steps of 5×10⁶)."""
+    if 1e-3 <= v < 1e5:
+        return f"{v:.{max(0, -math.floor(math.log10(step) + 1e-9))}f}"
+    k = math.floor(math.log10(v) + 1e-12)
+    decimals = max(0, -math.floor(math.log10(step) - k + 1e-9))
+    return f"{pow10(math.log10(v) - k):.{decimals}f}×10{superscript(k)}"
 
 
 def _log_minor(lo: float, hi: float, one: bool = True) -> np.ndarray:
@@ -183,7 +222,7 @@ def _log_minor(lo: float, hi: float, one: bool = True) -> np.ndarray:
     k0, k1 = math.floor(math.log10(lo)), math.ceil(math.log10(hi))
     if k1 - k0 > 12:
         return np.array([])
-    values = np.array([m * 10.0**k for k in range(k0, k1 + 1) for m in (3, 4, 6, 7, 8, 9, *((2, 5) if one else ()))])
+    values = np.array([m * pow10(k) for k in range(k0, k1 + 1) for m in (3, 4, 6, 7, 8, 9, *((2, 5) if one else ()))])
     return np.sort(values[(values >= lo) & (values <= hi)])
 
 

@@ -10,7 +10,18 @@ import numpy as np
 
 from wmrid.core.errors import UsageError
 from wmrid.reporting.svg_artists import Bars, Entry, Frame, Line, Markers, Rule, legend_handle, text_element
-from wmrid.reporting.svg_axes import DATE_RANGE, date_ticks, linear_labels, linear_ticks, log_ticks, text_width
+from wmrid.reporting.svg_axes import (
+    DATE_RANGE,
+    FLOAT_MAX,
+    FLOAT_TINY,
+    date_ticks,
+    degenerate,
+    linear_labels,
+    linear_ticks,
+    log_ticks,
+    pow10,
+    text_width,
+)
 from wmrid.reporting.svg_panel import Axis, Panel
 from wmrid.reporting.svg_style import ID_PLACEHOLDER as _ID, PAD as _PAD, SMALL, num
 
@@ -95,12 +106,16 @@ def draw_figure(
 def _equal(
     panel: Panel, xlim: tuple[float, float], ylim: tuple[float, float]
 ) -> tuple[tuple[float, float], tuple[float, float]]:
-    """Limits widened so that a unit of x and of y take the same px (the panel's box kept)."""
+    """Limits widened so that a unit of x and of y take the same px (the panel's box kept; within ±FLOAT_MAX)."""
     _, _, w, h = panel.box
     (x0, x1), (y0, y1) = xlim, ylim
-    per_px = max((x1 - x0) / w, (y1 - y0) / h)
-    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
-    return (cx - per_px * w / 2, cx + per_px * w / 2), (cy - per_px * h / 2, cy + per_px * h / 2)
+    half_per_px = max((x1 / 2 - x0 / 2) / w, (y1 / 2 - y0 / 2) / h)  # halves: no overflow
+    cx, cy = x0 / 2 + x1 / 2, y0 / 2 + y1 / 2
+
+    def around(c: float, px: float) -> tuple[float, float]:
+        return max(c - half_per_px * px, -FLOAT_MAX), min(c + half_per_px * px, FLOAT_MAX)
+
+    return around(cx, w), around(cy, h)
 
 
 def _draw_panel(
@@ -312,8 +327,10 @@ def data_limits(panels: Sequence[Panel], axis: str) -> tuple[float, float]:
     Returns
     -------
     (lo, hi)
-        The first limits set explicitly, else the data's range with 5 % margins (in log10 on a log axis; within
-        years 1..9999 on a date axis); a single value is widened (by a day on a date axis).
+        The first limits set explicitly, else the data's range with 5 % margins (in log10 on a log axis, within the
+        positive floats; within years 1..9999 on a date axis); a single value, or values as close as
+        :func:`~wmrid.reporting.svg_axes.degenerate` says, widened (by a day on a date axis).  Finite for any finite
+        data.
 
     Raises
     ------
@@ -339,12 +356,15 @@ def data_limits(panels: Sequence[Panel], axis: str) -> tuple[float, float]:
             return 1.0, 10.0
         a, b = math.log10(float(v.min())), math.log10(float(v.max()))
         pad = 0.05 * (b - a) if b > a else 0.5
-        return 10.0 ** (a - pad), 10.0 ** (b + pad)
+        return max(pow10(a - pad), FLOAT_TINY), min(pow10(b + pad), FLOAT_MAX)
     if len(v) == 0:
         return 0.0, 1.0
     lo, hi = float(v.min()), float(v.max())
-    pad = 0.05 * (hi - lo) if hi > lo else 1.0 if first.scale == "date" else max(0.05 * abs(hi), 0.5)
-    lo, hi = lo - pad, hi + pad
+    if degenerate(lo, hi):
+        pad = 1.0 if first.scale == "date" else max(0.05 * abs(lo / 2 + hi / 2), 0.5)
+    else:
+        pad = 0.1 * (hi / 2 - lo / 2)  # 5 % of the span, which may be beyond FLOAT_MAX
+    lo, hi = max(lo - pad, -FLOAT_MAX), min(hi + pad, FLOAT_MAX)
     if first.scale == "date":
         lo, hi = max(lo, DATE_RANGE[0]), min(hi, DATE_RANGE[1])
     return lo, hi
@@ -381,7 +401,8 @@ def axis_ticks(
     a, b = min(lo, hi), max(lo, hi)
     if axis.ticks is not None:
         pos, labels = axis.ticks
-        keep = [k for k, v in enumerate(pos) if a - 1e-9 * (b - a) <= v <= b + 1e-9 * (b - a)]
+        tol = 2e-9 * (b / 2 - a / 2)
+        keep = [k for k, v in enumerate(pos) if a - tol <= v <= b + tol]
         return np.array([pos[k] for k in keep]), [labels[k] for k in keep], np.array([]), ""
     size = axis.size
     if axis.scale == "date":
@@ -394,8 +415,9 @@ def axis_ticks(
     most = max(3, int(length // (4.5 * size)) + 1) if horizontal else max(2, int(length // (2.5 * size)) + 1)
     while True:
         ticks, step = linear_ticks(a, b, most)
+        ticks = ticks[(ticks >= a - 1e-9 * step) & (ticks <= b + 1e-9 * step)]  # limits set closer than a step
         labels, note = linear_labels(ticks, step)
-        spacing = step / (b - a) * length if b > a else length
+        spacing = (step / 2) / (b / 2 - a / 2) * length if b > a else length
         need = max(text_width(t, size) for t in labels) + 0.8 * size if horizontal and labels else 1.6 * size
         if spacing >= need or most <= 2 or len(ticks) <= 2:
             return ticks, labels, np.array([]), note

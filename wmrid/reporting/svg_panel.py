@@ -26,7 +26,7 @@ from wmrid.reporting.svg_artists import (
     Span,
     Text,
 )
-from wmrid.reporting.svg_style import FONT, SMALL, TICK, TITLE
+from wmrid.reporting.svg_style import FAR, FONT, SMALL, TICK, TITLE
 
 _A = TypeVar("_A", bound=Artist)
 
@@ -75,18 +75,25 @@ class Axis:
         Returns
         -------
         Mapping
-            values (n,) -> px (n,), linear in the value (in its log10 on a log axis; NaN for values <= 0 there).
+            values (n,) -> px (n,), linear in the value (in its log10 on a log axis), for any finite limits: NaN for
+            values that are not finite (and <= 0 on a log axis); px beyond ±:data:`~wmrid.reporting.svg_style.FAR`
+            (a value 10^290 spans past the limits) held there, so that no px overflows.
         """
-        if self.scale == "log":
-            a, b = math.log10(lo), math.log10(hi)
+        log = self.scale == "log"
+        if log:
+            lo, hi = math.log10(lo), math.log10(hi)
+        halves = not math.isfinite(hi - lo)  # limits ±1e308 apart: in halves, which cannot overflow
 
-            def log_px(v: np.ndarray) -> np.ndarray:
-                v = np.asarray(v, dtype=np.float64)
-                with np.errstate(all="ignore"):
-                    return p0 + (np.log10(np.where(v > 0, v, np.nan)) - a) / (b - a) * (p1 - p0)
+        def to_px(values: np.ndarray) -> np.ndarray:
+            v = np.asarray(values, dtype=np.float64)
+            with np.errstate(all="ignore"):
+                if log:
+                    v = np.log10(np.where(v > 0, v, np.nan))
+                share = (v / 2 - lo / 2) / (hi / 2 - lo / 2) if halves else (v - lo) / (hi - lo)
+                px = p0 + share * (p1 - p0)
+                return np.where(np.isfinite(v), np.clip(px, -FAR, FAR), np.nan)
 
-            return log_px
-        return lambda v: p0 + (np.asarray(v, dtype=np.float64) - lo) / (hi - lo) * (p1 - p0)
+        return to_px
 
 
 class Panel:

@@ -24,6 +24,9 @@ FONT, SMALL, TITLE = 13.0, 11.5, 14.5
 TICK, PAD = 4.0, 3.0
 #: Stands for the id prefix of a figure's elements until the figure's content gives it (never in escaped text).
 ID_PLACEHOLDER = "<id>"
+#: px as far as a panel's mapping goes (:meth:`wmrid.reporting.svg_panel.Axis.mapping`): a value beyond is held here,
+#: so that px stay finite (and differences of px too) whatever the data.
+FAR = 1e300
 
 
 def colour(name: str) -> str:

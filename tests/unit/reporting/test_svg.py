@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import datetime as dt
 import itertools
+import math
 import re
 
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 from svgutil import NS, data, frame, legend_texts, panels, parse, points, polylines, texts, tick_labels
 
 from wmrid.reporting.decimate import MAX_POINTS
@@ -282,6 +284,65 @@ def test_degenerate_data_draw(x, y, lim):
     assert tick_labels(panel, "x")
     assert tick_labels(panel, "y")
     assert not any(s in fig.to_svg() for s in (b"nan", b"inf"))
+
+
+TINY, HUGE = 5e-324, 1.7976931348623157e308  # the smallest positive float (subnormal) and the largest
+
+
+@pytest.mark.parametrize(
+    ("y", "scale"),
+    [
+        ([1e-300, 1e300], "log"),  # 10^(300 + pad) overflowed
+        ([TINY, 1.0], "log"),  # 10^(-323 - pad) underflowed to 0: log10(0)
+        ([TINY, HUGE], "log"),
+        ([HUGE, HUGE], "log"),
+        ([TINY, TINY], "log"),
+        ([-8.5e307, 8.5e307], "linear"),  # floor(log10(inf))
+        ([-1e308, 1e308], "linear"),  # the limits' span inf: NaN px, nothing drawn
+        ([-HUGE, HUGE], "linear"),
+        ([HUGE, HUGE], "linear"),
+        ([-HUGE, -HUGE], "linear"),
+        ([0.0, TINY], "linear"),
+        ([1.0, 1.0 + 2.0**-52], "linear"),  # closer than a tick step tells apart: widened
+    ],
+)
+def test_any_finite_data_draw_with_ticks(y, scale):
+    """Limits, ticks and px for the extremes of the floats: no exception, every point drawn inside the panel, ticks
+    labelled within the limits."""
+    fig, ax = _one()
+    ax.line([0.0, 1.0], y, decimate=False)
+    ax.markers([0.0, 1.0], y, shape="s")
+    ax.y.scale = scale
+    (((_, _), (lo, hi)),) = limits(fig.panels)
+    assert 0 < lo < hi < math.inf if scale == "log" else -math.inf < lo < hi < math.inf
+    svg = fig.to_svg()
+    assert not any(s in svg for s in (b"nan", b"inf"))
+    (panel,) = panels(parse(svg))
+    left, top, right, bottom = frame(panel)
+    (line,) = polylines(data(panel))
+    xy = points(line)
+    assert len(xy) == 2
+    assert np.all((xy[:, 0] >= left) & (xy[:, 0] <= right) & (xy[:, 1] >= top) & (xy[:, 1] <= bottom))
+    assert tick_labels(panel, "y")
+    ticks = [float(y) for _, y in re.findall(r"M([\d.]+),([\d.]+)h-4", svg.decode())]
+    assert ticks
+    assert all(top - 0.01 <= t <= bottom + 0.01 for t in ticks)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    y=st.lists(st.floats(allow_nan=False, allow_infinity=False), min_size=1, max_size=4),
+    scale=st.sampled_from(["linear", "log"]),
+)
+def test_any_finite_data_draw(y, scale):
+    fig, ax = _one()
+    ax.line(np.arange(len(y)), y, decimate=False)
+    ax.markers(np.arange(len(y)), y)
+    ax.y.scale = scale
+    svg = fig.to_svg()
+    assert not any(s in svg for s in (b"nan", b"inf"))
+    if scale == "linear" or max(y) > 0:
+        assert tick_labels(panels(parse(svg))[0], "y")
 
 
 def test_bad_styles_are_usage_errors():

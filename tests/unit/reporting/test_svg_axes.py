@@ -67,6 +67,34 @@ def test_linear_ticks_are_nice_and_cover_the_range(lo, span, most):
     np.testing.assert_allclose(ticks / step, np.round(ticks / step), atol=1e-6)
 
 
+HUGE = 1.7976931348623157e308
+
+
+@pytest.mark.parametrize(
+    ("lo", "hi", "labels", "note"),
+    [
+        (-HUGE, HUGE, ["−1", "0", "1"], "×10³⁰⁸"),  # the span is beyond the floats
+        (-8.5e307, 8.5e307, ["−5", "0", "5"], "×10³⁰⁷"),
+        (HUGE / 2, HUGE, ["1.0", "1.2", "1.4", "1.6"], "×10³⁰⁸"),
+    ],
+)
+def test_linear_ticks_at_the_ends_of_the_floats(lo, hi, labels, note):
+    ticks, step = linear_ticks(lo, hi, 4)
+    assert np.all(np.isfinite(ticks))
+    assert np.all((ticks >= lo) & (ticks <= hi))
+    assert linear_labels(ticks, step) == (labels, note)
+
+
+@settings(max_examples=200, deadline=None)
+@given(lo=st.floats(allow_nan=False, allow_infinity=False), hi=st.floats(allow_nan=False, allow_infinity=False))
+def test_linear_ticks_of_any_finite_limits(lo, hi):
+    ticks, step = linear_ticks(lo, hi, 5)
+    assert len(ticks) >= 2
+    assert np.all(np.isfinite(ticks))
+    assert 0 < step < np.inf
+    linear_labels(ticks, step)
+
+
 @pytest.mark.parametrize(
     ("lo", "hi", "most", "labels", "note"),
     [
@@ -96,6 +124,25 @@ def test_log_ticks_thin_out_dense_decades():
     assert labels == ["10⁻¹²", "10⁻⁹", "10⁻⁶", "10⁻³", "10⁰"]
     assert len(major) == 5
     assert len(minor) == 0
+
+
+@pytest.mark.parametrize(
+    ("lo", "hi", "labels"),
+    [
+        (1e-300, 1e300, ["10⁻²⁵⁸", "10⁻¹⁷²", "10⁻⁸⁶", "10⁰", "10⁸⁶", "10¹⁷²", "10²⁵⁸"]),  # 10^300: OverflowError
+        (5e-324, 1.0, ["10⁻²⁸²", "10⁻²³⁵", "10⁻¹⁸⁸", "10⁻¹⁴¹", "10⁻⁹⁴", "10⁻⁴⁷", "10⁰"]),  # from the least subnormal
+        (1.1e308, HUGE, [f"1.{d}×10³⁰⁸" for d in range(1, 8)]),  # 2×10³⁰⁸ is inf: linear steps, each in full
+        (1.1e-7, 1.9e-7, ["1.2×10⁻⁷", "1.4×10⁻⁷", "1.6×10⁻⁷", "1.8×10⁻⁷"]),  # (were 1.2 ... without the ×10⁻⁷)
+        (1.41, 1.4100012, [f"1.41000{d:02d}" for d in range(0, 13, 2)]),  # (were 0 ... 12 without the + 1.41)
+        (5e-324, 1.5e-323, ["10⁻³²³"]),  # three floats: 5e-324, 1e-323 (which is 9.88e-324), 1.5e-323
+    ],
+)
+def test_log_ticks_at_the_ends_of_the_floats(lo, hi, labels):
+    major, got, minor = log_ticks(lo, hi, 7)
+    assert got == labels
+    assert np.all(np.isfinite(major))
+    assert np.all((major >= lo * (1 - 1e-9)) & (major <= hi))
+    assert np.all(np.isfinite(minor))
 
 
 def test_log_ticks_within_a_decade():
