@@ -2,6 +2,8 @@
 spans, bands, bars, cells and text, each turned into SVG elements by the panel's coordinate mapping.
 
 Every number written is rounded to 2 decimals (px), so files stay small and the same data give the same bytes.
+What lies beyond a panel's box is cut at :data:`~wmrid.reporting.svg_style.CLIP_MARGIN` px from it (the panel clips at
+its box): a value far out (1e40, 1e300) draws the line, band, span or bar up to there, as a browser could not.
 """
 
 from __future__ import annotations
@@ -13,7 +15,21 @@ from typing import Any
 
 import numpy as np
 
-from wmrid.reporting.svg_style import FONT, colour, escape, num, points, segments, simplify, stroke
+from wmrid.reporting.svg_style import (
+    CLIP_MARGIN,
+    FONT,
+    Window,
+    clip_line,
+    clip_polygon,
+    colour,
+    escape,
+    num,
+    points,
+    segments,
+    simplify,
+    stroke,
+    window,
+)
 
 #: Draw order: patches (spans, bands, bars, cells) under lines and markers, text on top.
 Z_PATCH, Z_LINE, Z_TEXT = 1, 2, 3
@@ -72,7 +88,8 @@ class Line(Artist):
     def draw(self, frame: Frame) -> str:
         style = f'fill="none" {stroke(self.color, self.width, self.dash, self.opacity)}'
         out = []
-        for sx, sy in segments(frame.fx(self.x), frame.fy(self.y)):
+        win = window(frame.box)
+        for sx, sy in (run for piece in segments(frame.fx(self.x), frame.fy(self.y)) for run in clip_line(*piece, win)):
             kept = simplify(sx, sy)
             out.append(f'<polyline points="{points(sx[kept], sy[kept])}" {style}/>')
         return "".join(out)
@@ -131,7 +148,8 @@ class Markers(Artist):
 
     def draw(self, frame: Frame) -> str:
         px, py = frame.fx(self.x), frame.fy(self.y)
-        ok = np.isfinite(px) & np.isfinite(py)
+        left, top, right, bottom = window(frame.box, CLIP_MARGIN + self.size)
+        ok = (px >= left) & (px <= right) & (py >= top) & (py <= bottom)  # (NaN: False)
         if not ok.any():
             return ""
         d = marker_path(self.shape, px[ok].tolist(), py[ok].tolist(), self.size)
@@ -161,9 +179,9 @@ class Rule(Artist):
         style = stroke(self.color, self.width, self.dash)
         if self.axis == "y":
             y = float(frame.fy(np.array([self.value]))[0])
-            return f'<path d="M{num(left)},{num(y)}H{num(right)}" {style}/>' if math.isfinite(y) else ""
+            return f'<path d="M{num(left)},{num(y)}H{num(right)}" {style}/>' if _within(y, top, bottom) else ""
         x = float(frame.fx(np.array([self.value]))[0])
-        return f'<path d="M{num(x)},{num(top)}V{num(bottom)}" {style}/>' if math.isfinite(x) else ""
+        return f'<path d="M{num(x)},{num(top)}V{num(bottom)}" {style}/>' if _within(x, left, right) else ""
 
     def handle(self) -> tuple[str, dict[str, Any]]:
         return "line", {"color": self.color, "width": self.width, "dash": self.dash, "opacity": 1.0}
@@ -187,9 +205,8 @@ class Span(Artist):
         y0, y1 = frame.fy(np.array([self.lo, self.hi], dtype=np.float64))
         if not (math.isfinite(y0) and math.isfinite(y1)):
             return ""
-        y, h = min(y0, y1), abs(y1 - y0)
-        return (f'<rect x="{num(left)}" y="{num(y)}" width="{num(right - left)}" height="{num(h)}" '
-                f'fill="{colour(self.color)}" fill-opacity="{num(self.opacity)}"/>')  # fmt: skip
+        return rect(left, right, y0, y1, window(frame.box), f'fill="{colour(self.color)}" '
+                    f'fill-opacity="{num(self.opacity)}"')  # fmt: skip
 
     def handle(self) -> tuple[str, dict[str, Any]]:
         return "patch", {"color": self.color, "opacity": self.opacity}
@@ -214,11 +231,15 @@ class Band(Artist):
         ok = (np.isfinite(px) & np.isfinite(plo) & np.isfinite(phi)).astype(np.int8)
         edges = np.flatnonzero(np.diff(np.concatenate([[0], ok, [0]])))
         out = []
+        win = window(frame.box)
         for a, b in zip(edges[::2], edges[1::2], strict=True):
             if b - a < 2:  # a lone point: no area
                 continue
             xs = np.concatenate([px[a:b], px[a:b][::-1]])
             ys = np.concatenate([phi[a:b], plo[a:b][::-1]])
+            xs, ys = clip_polygon(xs, ys, win)
+            if len(xs) < 3:
+                continue
             out.append(f'<polygon points="{points(xs, ys)}" fill="{colour(self.color)}" '
                        f'fill-opacity="{num(self.opacity)}"/>')  # fmt: skip
         return "".join(out)
@@ -253,14 +274,13 @@ class Bars(Artist):
         if not math.isfinite(base):  # a log axis: from its edge
             base = left if self.horizontal else bottom
         out = []
+        win = window(frame.box)
         for k in range(len(v)):
             if not (math.isfinite(v[k]) and math.isfinite(a0[k]) and math.isfinite(a1[k])):
                 continue
-            lo_a, hi_a, lo_v, hi_v = min(a0[k], a1[k]), max(a0[k], a1[k]), min(base, v[k]), max(base, v[k])
-            x, y, w, h = (lo_v, lo_a, hi_v - lo_v, hi_a - lo_a) if self.horizontal else (lo_a, lo_v, hi_a - lo_a,
-                                                                                        hi_v - lo_v)  # fmt: skip
-            fill = colour(self.colors[k % len(self.colors)])
-            out.append(f'<rect x="{num(x)}" y="{num(y)}" width="{num(w)}" height="{num(h)}" fill="{fill}"/>')
+            value, along = (base, float(v[k])), (float(a0[k]), float(a1[k]))
+            (x0, x1), (y0, y1) = (value, along) if self.horizontal else (along, value)
+            out.append(rect(x0, x1, y0, y1, win, f'fill="{colour(self.colors[k % len(self.colors)])}"'))
         return "".join(out)
 
     def handle(self) -> tuple[str, dict[str, Any]]:
@@ -285,8 +305,7 @@ class Cells(Artist):
             y0, y1 = frame.fy(np.array([i - 0.5, i + 0.5]))
             for j, fill in enumerate(row):
                 x0, x1 = frame.fx(np.array([j - 0.5, j + 0.5]))
-                out.append(f'<rect x="{num(min(x0, x1))}" y="{num(min(y0, y1))}" width="{num(abs(x1 - x0))}" '
-                           f'height="{num(abs(y1 - y0))}" fill="{colour(fill)}"/>')  # fmt: skip
+                out.append(rect(x0, x1, y0, y1, window(frame.box), f'fill="{colour(fill)}"'))
         return f'<g stroke="#ffffff" stroke-width="0.5">{"".join(out)}</g>'
 
 
@@ -321,9 +340,24 @@ class Text(Artist):
     def draw(self, frame: Frame) -> str:
         x = float(frame.fx(np.array([self.x]))[0])
         y = float(frame.fy(np.array([self.y]))[0])
-        if not (math.isfinite(x) and math.isfinite(y)):
+        left, top, right, bottom = window(frame.box)
+        if not (_within(x, left, right) and _within(y, top, bottom)):
             return ""
         return text_element(x, y, self.text, self.size, anchor=self.anchor, valign="center", color=self.color)
+
+
+def _within(v: float, lo: float, hi: float) -> bool:
+    """``v`` between ``lo`` and ``hi`` (a line at v shows in the panel; False for NaN)."""
+    return lo <= v <= hi
+
+
+def rect(x0: float, x1: float, y0: float, y1: float, win: Window, paint: str) -> str:
+    """A ``<rect>`` from x0 to x1 and y0 to y1 px (either order), cut to ``win`` (so no coordinate is far out: a
+    rectangle stays one when cut), with ``paint`` (its fill attributes)."""
+    left, top, right, bottom = win
+    xa, xb = (min(max(v, left), right) for v in sorted((x0, x1)))
+    ya, yb = (min(max(v, top), bottom) for v in sorted((y0, y1)))
+    return f'<rect x="{num(xa)}" y="{num(ya)}" width="{num(xb - xa)}" height="{num(yb - ya)}" {paint}/>'
 
 
 def text_element(

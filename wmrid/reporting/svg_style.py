@@ -1,6 +1,7 @@
 """The style of wmrid's SVG figures (:mod:`wmrid.reporting.svg`): font sizes, colours (the Tableau 10 palette
-C0..C9, greys, a diverging red-blue scale), dash patterns, and how numbers, text and polylines are written into SVG
-(2 decimals; escaped; split where a value is missing, simplified to within 0.1 px)."""
+C0..C9, greys, a diverging red-blue scale), dash patterns, and how numbers, text, polylines and polygons are written
+into SVG (2 decimals; escaped; split where a value is missing, cut at a window around the panel, simplified to within
+0.1 px)."""
 
 from __future__ import annotations
 
@@ -27,6 +28,14 @@ ID_PLACEHOLDER = "<id>"
 #: px as far as a panel's mapping goes (:meth:`wmrid.reporting.svg_panel.Axis.mapping`): a value beyond is held here,
 #: so that px stay finite (and differences of px too) whatever the data.
 FAR = 1e300
+#: How far beyond its panel's box a line, band, span, bar or cell is drawn, px: cut there (:func:`window`), so that
+#: every coordinate written lies within about this of the figure.  Browsers hold SVG coordinates as 32-bit floats and
+#: drop a whole polyline with a point at 1e40; near 1000 px a 32-bit float still resolves 1e-4 px.  Far more than a
+#: stroke's half width: the cut never shows (the panel clips its data at its box).
+CLIP_MARGIN = 1000.0
+
+#: A drawing window: (left, top, right, bottom) px.
+Window = tuple[float, float, float, float]
 
 
 def colour(name: str) -> str:
@@ -252,3 +261,105 @@ def simplify(px: np.ndarray, py: np.ndarray, tolerance: float = 0.1) -> np.ndarr
             keep[m] = True
             stack += [(i, m), (m, j)]
     return np.flatnonzero(keep)
+
+
+def window(box: Window, margin: float = CLIP_MARGIN) -> Window:
+    """A panel's box (left, top, right, bottom) px widened by ``margin`` px on every side."""
+    left, top, right, bottom = box
+    return left - margin, top - margin, right + margin, bottom + margin
+
+
+def clip_line(px: np.ndarray, py: np.ndarray, win: Window) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The parts of a polyline within a window (Liang-Barsky, segment by segment).
+
+    Parameters
+    ----------
+    px, py
+        (n,) px each, finite (within ±:data:`FAR`).
+    win
+        (left, top, right, bottom) px.
+
+    Returns
+    -------
+    list of (px, py)
+        Its runs within the window, in order: the points inside kept as they are; a segment that crosses the
+        window's edge cut there, the cut point on the edge exactly and, along it, computed from the segment's
+        nearer end (so off by about 1e-16 of the segment's extent along the edge: 1e-13 px for a spike of 1e40 px
+        from a point in the panel); a segment outside left out, the line broken there.  The visible part of every
+        segment is unchanged; each run has 2 points or more, and some length.
+    """
+    left, top, right, bottom = win
+    inside = (px >= left) & (px <= right) & (py >= top) & (py <= bottom)
+    if inside.all():
+        return [(px, py)] if len(px) > 1 else []
+    x0, y0, x1, y1 = px[:-1], py[:-1], px[1:], py[1:]
+    dx, dy = x1 - x0, y1 - y0
+    t0, t1 = np.zeros(len(dx)), np.ones(len(dx))
+    e0, e1 = np.full(len(dx), -1), np.full(len(dx), -1)  # the edge each end was cut at (-1: not cut)
+    hidden = np.zeros(len(dx), dtype=bool)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for k, (p, q) in enumerate(((-dx, x0 - left), (dx, right - x0), (-dy, y0 - top), (dy, bottom - y0))):
+            ratio = q / p  # p t <= q along the segment x0 + t dx, y0 + t dy
+            hidden |= (p == 0) & (q < 0)
+            enter, leave = (p < 0) & (ratio > t0), (p > 0) & (ratio < t1)
+            t0, e0 = np.where(enter, ratio, t0), np.where(enter, k, e0)
+            t1, e1 = np.where(leave, ratio, t1), np.where(leave, k, e1)
+    shown = ~hidden & (t0 <= t1)
+    ends = []
+    for t, e in ((t0, e0), (t1, e1)):
+        near = t <= 0.5
+        ex = np.where(near, x0 + t * dx, x1 - (1.0 - t) * dx)
+        ey = np.where(near, y0 + t * dy, y1 - (1.0 - t) * dy)
+        ex = np.where(e == 0, left, np.where(e == 1, right, np.clip(ex, left, right)))
+        ey = np.where(e == 2, top, np.where(e == 3, bottom, np.clip(ey, top, bottom)))
+        ends.append((ex, ey))
+    (ax, ay), (bx, by) = ends
+    starts = shown & ((np.arange(len(dx)) == 0) | ~inside[:-1])  # a run starts where the line enters
+    emit = np.stack([starts, shown], axis=1).ravel()
+    xs, ys = np.stack([ax, bx], axis=1).ravel()[emit], np.stack([ay, by], axis=1).ravel()[emit]
+    run = np.cumsum(np.stack([starts, np.zeros_like(starts)], axis=1).ravel())[emit]
+    cuts = np.flatnonzero(np.diff(run)) + 1
+    return [
+        (x, y)
+        for x, y in zip(np.split(xs, cuts), np.split(ys, cuts), strict=True)
+        if len(x) > 1 and (np.ptp(x) > 0 or np.ptp(y) > 0)
+    ]
+
+
+def clip_polygon(px: np.ndarray, py: np.ndarray, win: Window) -> tuple[np.ndarray, np.ndarray]:
+    """A polygon cut to a window (Sutherland-Hodgman, one edge of the window at a time).
+
+    Parameters
+    ----------
+    px, py
+        (n,) px each, finite (within ±:data:`FAR`): the polygon's corners, closed implicitly.
+    win
+        (left, top, right, bottom) px.
+
+    Returns
+    -------
+    (px, py)
+        The corners of the part within the window (the cut points computed as in :func:`clip_line`; none when the
+        polygon lies outside).  Inside the window every point is covered as many times as before (the fill is the
+        same, whatever the fill rule); where the polygon left the window it runs along the window's edge instead.
+    """
+    x, y = px, py
+    for axis, bound, low in ((0, win[0], True), (0, win[2], False), (1, win[1], True), (1, win[3], False)):
+        c = x if axis == 0 else y
+        inside = c >= bound if low else c <= bound
+        if inside.all() or len(c) == 0:
+            continue
+        nx, ny, nc = np.roll(x, -1), np.roll(y, -1), np.roll(c, -1)
+        cross = inside != np.roll(inside, -1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(cross, (bound - c) / (nc - c), 0.0)
+        near = t <= 0.5
+        ix = np.where(near, x + t * (nx - x), nx - (1.0 - t) * (nx - x))
+        iy = np.where(near, y + t * (ny - y), ny - (1.0 - t) * (ny - y))
+        if axis == 0:
+            ix = np.full_like(ix, bound)
+        else:
+            iy = np.full_like(iy, bound)
+        emit = np.stack([inside, cross], axis=1).ravel()
+        x, y = np.stack([x, ix], axis=1).ravel()[emit], np.stack([y, iy], axis=1).ravel()[emit]
+    return x, y

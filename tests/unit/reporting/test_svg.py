@@ -18,7 +18,19 @@ from wmrid.reporting.svg import PX_PER_INCH, Figure
 from wmrid.reporting.svg_artists import simplify
 from wmrid.reporting.svg_axes import date_number
 from wmrid.reporting.svg_draw import limits
-from wmrid.reporting.svg_style import MISSING, RDBU_R, TAB10, colour, diverging, escape, luminance, num
+from wmrid.reporting.svg_style import (
+    CLIP_MARGIN,
+    MISSING,
+    RDBU_R,
+    TAB10,
+    clip_line,
+    clip_polygon,
+    colour,
+    diverging,
+    escape,
+    luminance,
+    num,
+)
 
 
 def _one(**kwargs):
@@ -142,6 +154,160 @@ def test_simplify_keeps_the_drawing_within_a_tenth_of_a_pixel():
         o = np.stack([x[a + 1 : b] - x[a], y[a + 1 : b] - y[a]], axis=1)
         along = np.clip(o @ d / (d @ d), 0.0, 1.0)
         assert np.all(np.hypot(*(o - along[:, None] * d).T) <= 0.1 + 1e-9)
+
+
+def _coordinates(svg: bytes) -> np.ndarray:
+    """Every number in the figure's points, d, x, y, width and height attributes."""
+    values = re.findall(rb' (?:points|d|x|y|width|height)="([^"]*)"', svg)
+    return np.array([float(v) for attr in values for v in re.findall(rb"-?[\d.]+(?:e[-+]?\d+)?", attr)])
+
+
+@pytest.mark.parametrize("spike", [1e40, -1e40, 1e200, -1e300, 1.7e308])
+def test_a_far_out_value_draws_the_line_up_to_the_panel_edge(spike):
+    """A browser holds coordinates as 32-bit floats: a polyline through y = 1e40 px vanished whole, and at 1e200 the
+    simplification overflowed and dropped points inside the panel.  Cut at CLIP_MARGIN px beyond the panel, every
+    coordinate is small, every point inside the panel drawn where it was, the spike drawn up to the panel's edge."""
+    fig, ax = _one()
+    x = np.arange(20.0)
+    y = np.sin(x)
+    y[10] = spike
+    ax.line(x, y, decimate=False)
+    ax.set_ylim(-1.5, 1.5)
+    svg = fig.to_svg()
+    assert np.abs(_coordinates(svg)).max() < max(fig.size) + CLIP_MARGIN
+    (panel,) = panels(parse(svg))
+    left, top, right, bottom = frame(panel)
+    drawn = np.concatenate([points(p) for p in polylines(data(panel))])
+    (((x0, x1), _),) = limits(fig.panels)
+    for k in np.flatnonzero(np.arange(20) != 10):  # every point within the panel drawn, to 0.01 px
+        px = left + (x[k] - x0) / (x1 - x0) * (right - left)
+        py = bottom - (y[k] + 1.5) / 3.0 * (bottom - top)
+        assert np.hypot(drawn[:, 0] - px, drawn[:, 1] - py).min() < 0.01
+    edge = top - CLIP_MARGIN if spike > 0 else bottom + CLIP_MARGIN
+    assert np.sum(np.abs(drawn[:, 1] - edge) < 0.01) == 2  # up to the window's edge and back: the spike
+
+
+def test_a_line_at_1e200_keeps_its_points_inside_the_panel():
+    fig, ax = _one()
+    ax.line(np.arange(6.0), [0.0, 1e200, 0.0, 1.0, 2.0, 1.0], decimate=False)  # kept 3 points of 6
+    ax.set_ylim(0.0, 2.0)
+    (panel,) = panels(parse(fig.to_svg()))
+    left, top, right, bottom = frame(panel)
+    first, rest = (points(p) for p in polylines(data(panel)))
+    (((x0, x1), _),) = limits(fig.panels)
+    fx, fy = (lambda v: left + (v - x0) / (x1 - x0) * (right - left)), (lambda v: bottom - v / 2 * (bottom - top))
+    # (0, 0) to (1, 1e200) rises straight up at x = 0 as drawn; (1, 1e200) to (2, 0) comes down at x = 2
+    np.testing.assert_allclose(first, [[fx(0), bottom], [fx(0), top - CLIP_MARGIN]], atol=0.01)
+    np.testing.assert_allclose(rest[0], [fx(2), top - CLIP_MARGIN], atol=0.01)
+    # down to (2, 0), up through (3, 1) (on the way: left out) to (4, 2), down to (5, 1)
+    np.testing.assert_allclose(rest[1:], [[fx(2), fy(0)], [fx(4), fy(2)], [fx(5), fy(1)]], atol=0.01)
+
+
+def test_nan_still_breaks_a_line_cut_at_the_window():
+    fig, ax = _one()
+    ax.line(np.arange(7.0), [0.0, 1.0, np.nan, 1.0, 1e40, 1.0, 0.0], decimate=False)
+    ax.set_ylim(0.0, 2.0)
+    lines = polylines(data(panels(parse(fig.to_svg()))[0]))
+    assert [len(points(p)) for p in lines] == [2, 2, 3]  # the NaN; out through the top and back
+
+
+def _exact_cut(p, q, win):
+    """The part of segment p-q within win, exactly (Fractions), or None."""
+    from fractions import Fraction as F
+
+    (x0, y0), (x1, y1) = (tuple(map(F, p)), tuple(map(F, q)))
+    left, top, right, bottom = map(F, win)
+    dx, dy = x1 - x0, y1 - y0
+    t0, t1 = F(0), F(1)
+    for a, b in ((-dx, x0 - left), (dx, right - x0), (-dy, y0 - top), (dy, bottom - y0)):
+        if a == 0:
+            if b < 0:
+                return None
+        elif a < 0:
+            t0 = max(t0, b / a)
+        else:
+            t1 = min(t1, b / a)
+    if t0 > t1:
+        return None
+    return [(float(x0 + t * dx), float(y0 + t * dy)) for t in (t0, t1)]
+
+
+def test_clip_line_keeps_every_visible_part_exactly():
+    """Random polylines with points far out along x or along y (1e12 .. 1e300 px): the runs drawn are the segments'
+    parts within the window, exactly (to 1e-9 px against Fractions), broken where the line leaves it."""
+    rng = np.random.default_rng(7)
+    win = (0.0, 0.0, 600.0, 400.0)
+    for _ in range(40):
+        n = int(rng.integers(2, 30))
+        px, py = rng.uniform(-300.0, 900.0, n), rng.uniform(-300.0, 700.0, n)
+        far = rng.random(n) < 0.3
+        axis = rng.random(n) < 0.5
+        big = rng.choice([1e12, 1e40, 1e200, 1e300], n) * rng.choice([-1.0, 1.0], n)
+        px, py = np.where(far & axis, big, px), np.where(far & ~axis, big, py)
+        runs = clip_line(px, py, win)
+        drawn = [(a, b) for x, y in runs for a, b in itertools.pairwise(zip(x.tolist(), y.tolist(), strict=True))]
+        exact = [c for c in (_exact_cut(*pair, win) for pair in itertools.pairwise(zip(px, py, strict=True))) if c]
+        exact = [c for c in exact if c[0] != c[1]]
+        assert len(drawn) == len(exact)
+        for (a, b), (ea, eb) in zip(drawn, exact, strict=True):
+            assert np.hypot(a[0] - ea[0], a[1] - ea[1]) < 1e-9
+            assert np.hypot(b[0] - eb[0], b[1] - eb[1]) < 1e-9
+        cuts = [(x[-1], y[-1]) for x, y in runs[:-1]] + [(x[0], y[0]) for x, y in runs[1:]]
+        assert all(x in (0.0, 600.0) or y in (0.0, 400.0) for x, y in cuts)  # broken only at the window's edge
+
+
+def _winding(xs, ys, point):
+    """How many times the polygon (xs, ys) winds round ``point``, exactly (Fractions)."""
+    from fractions import Fraction as F
+
+    px, py = map(F, point)
+    total = 0
+    for (x0, y0), (x1, y1) in itertools.pairwise([*zip(xs, ys, strict=True), (xs[0], ys[0])]):
+        x0, y0, x1, y1 = F(x0), F(y0), F(x1), F(y1)
+        side = (x1 - x0) * (py - y0) - (px - x0) * (y1 - y0)
+        if y0 <= py < y1 and side > 0:
+            total += 1
+        elif y1 <= py < y0 and side < 0:
+            total -= 1
+    return total
+
+
+def test_clip_polygon_covers_the_window_as_before():
+    """A band with a spike to 1e40 and one to -1e300 (crossing itself): cut to the window, it covers every point of
+    the window as often as before (exact winding numbers on a grid), and has no coordinate outside it."""
+    x = np.array([0.0, 100.0, 200.0, 300.0, 400.0, 500.0, 600.0])
+    hi = np.array([50.0, 80.0, 1e40, 120.0, 90.0, -1e300, 60.0])
+    lo = np.array([150.0, 200.0, 180.0, 220.0, 200.0, 250.0, 30.0])
+    xs, ys = np.concatenate([x, x[::-1]]), np.concatenate([hi, lo[::-1]])
+    win = (50.0, 20.0, 550.0, 380.0)
+    cx, cy = clip_polygon(xs, ys, win)
+    assert np.all((cx >= 50) & (cx <= 550) & (cy >= 20) & (cy <= 380))
+    grid = [(gx + 0.37, gy + 0.61) for gx in range(50, 550, 23) for gy in range(20, 380, 17)]
+    assert [_winding(cx, cy, g) for g in grid] == [_winding(xs, ys, g) for g in grid]
+    assert len(clip_polygon(xs + 1e4, ys, win)[0]) == 0  # outside: nothing
+
+
+def test_far_out_spans_bars_markers_and_text_stay_near_the_panel():
+    fig, ax = _one()
+    ax.line([0.0, 1.0], [0.0, 1.0])
+    ax.hspan(0.5, 1e300)
+    ax.bars([0.5], [-1e40], width=0.2, colors="C2")
+    ax.band([0.0, 1.0], [-1e40, 0.0], [1e40, 1.0])
+    ax.markers([0.2, 0.4], [1e40, 0.5])
+    ax.text(0.5, 1e40, "far")
+    ax.set_ylim(0.0, 1.0)
+    svg = fig.to_svg()
+    assert np.abs(_coordinates(svg)).max() < max(fig.size) + CLIP_MARGIN
+    (panel,) = panels(parse(svg))
+    _, top, _, bottom = frame(panel)
+    span = next(r for r in data(panel).iter(f"{NS}rect") if r.get("fill-opacity") == "0.2")
+    assert float(span.get("y")) == pytest.approx(top - CLIP_MARGIN)  # up past the panel's top
+    assert float(span.get("y")) + float(span.get("height")) == pytest.approx((top + bottom) / 2)
+    bar = next(r for r in data(panel).iter(f"{NS}rect") if r.get("fill") == TAB10[2])
+    assert (float(bar.get("y")), float(bar.get("height"))) == (pytest.approx(bottom), pytest.approx(CLIP_MARGIN))
+    (marker,) = [p for p in data(panel).iter(f"{NS}path") if p.get("fill") == TAB10[0]]
+    assert marker.get("d").count("M") == 1  # the one within reach
+    assert "far" not in texts(panel)
 
 
 def test_rules_spans_bands_bars_markers():
