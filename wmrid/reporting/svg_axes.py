@@ -253,7 +253,7 @@ _DATE_STEPS = (
     *[("hour", n, n / 24) for n in (1, 2, 3, 6, 12)],
     ("day", 1, 1.0), ("day", 2, 2.0), ("week", 1, 7.0), ("halfmonth", 1, 15.0),
     *[("month", n, 30.4 * n) for n in (1, 2, 3, 4, 6)],
-    *[("year", n, 365.25 * n) for n in (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000)],
+    *[("year", n, 365.25 * n) for n in (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 2500, 5000)],
 )  # fmt: skip
 
 
@@ -298,26 +298,38 @@ def date_ticks(lo: float, hi: float, length: float, size: float) -> tuple[np.nda
     Parameters
     ----------
     lo, hi
-        The axis limits, date numbers (:func:`date_number`); clipped to years 1 to 9999.
+        The axis limits, date numbers (:func:`date_number`); the ticks are within years 1 to 9999 (the axis may
+        reach beyond: its margins).
     length, size
         The axis' length and the labels' font size, px.
 
     Returns
     -------
     ticks : (n,) float
-        Date numbers of the ticks (two or more when the axis spans a second or more; one when only the coarsest
-        step fits).
+        Date numbers of the ticks: on a calendar step, two or more when the axis spans a second or more; where no
+        step fits two, the first and last dates of the axis (within the calendar), when their labels fit; else one
+        tick, when only the coarsest step fits; else none.
     labels : list of str
         ``2026``, ``2026-12`` or ``2026-12-06`` by the step.  Where whole dates would leave fewer than two ticks,
         ``12-06`` with the year on a second line under the first tick and wherever the year changes; within a day,
         ``14:30`` (or ``14:30:05``) with the date on a second line under the first tick and wherever the day changes.
+        The first and last dates as days, months or years, the finest whose two labels fit.
     """
-    lo, hi = max(min(lo, hi), DATE_RANGE[0]), min(max(lo, hi), DATE_RANGE[1] - 1e-6)
+    lo, hi = min(lo, hi), max(lo, hi)
+    px_per_day = length / max(hi - lo, 1.0 / 86400)
+    lo, hi = max(lo, DATE_RANGE[0]), min(hi, DATE_RANGE[1] - 1e-6)
+    if hi < lo:  # the axis lies beyond the calendar
+        return np.array([]), []
     span = max(hi - lo, 1.0 / 86400)
+    length = span * px_per_day  # the calendar's part of the axis
     start, end = number_date(lo), number_date(hi)
     found = _date_step(start, end, span, length, size, short=False)
     if found is None or len(found[2]) < 2:
         found = _date_step(start, end, span, length, size, short=True) or found
+    if found is None or len(found[2]) < 2:
+        ends = _end_labels(start, end, (hi - lo) * px_per_day, size)
+        if ends is not None:
+            return np.array([lo, hi]), ends
     if found is None:
         return np.array([]), []
     unit, short, dates = found
@@ -329,6 +341,16 @@ def date_ticks(lo: float, hi: float, length: float, size: float) -> tuple[np.nda
         if short and (i == 0 or d.year != dates[i - 1].year):
             labels[i] += f"\n{d.year:04d}"
     return np.array([date_number(d) for d in dates]), labels
+
+
+def _end_labels(start: dt.datetime, end: dt.datetime, gap: float, size: float) -> list[str] | None:
+    """The labels of the first and last dates of an axis, ``gap`` px apart: as days, months or years, the finest that
+    tells them apart and fits; None when none does."""
+    for unit in ("day", "month", "year"):
+        first, last = _date_label(start, unit), _date_label(end, unit)
+        if first != last and gap >= max(text_width(first, size), text_width(last, size)) + 1.2 * size:
+            return [first, last]
+    return None
 
 
 _SAMPLES = {"year": "0000", "month": "0000-00", "second": "00:00:00", "minute": "00:00", "hour": "00:00"}

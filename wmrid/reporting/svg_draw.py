@@ -95,7 +95,7 @@ def draw_figure(
         left, top, w, h = panel.box
         defs.append(f'<clipPath id="{_ID}c{k}"><rect x="{num(left)}" y="{num(top)}" width="{num(w)}" '
                     f'height="{num(h)}"/></clipPath>')  # fmt: skip
-        parts.append(_draw_panel(panel, xlim, ylim, f"{_ID}p{k}", f"{_ID}c{k}", (x_labels, y_labels)))
+        parts.append(_draw_panel(panel, xlim, ylim, f"{_ID}p{k}", f"{_ID}c{k}", (x_labels, y_labels), size[0]))
     body, height = "".join(parts), size[1]
     if below:
         legend, height = _legend_rows(list(below), size[0], size[1])
@@ -120,9 +120,10 @@ def _equal(
 
 def _draw_panel(
     panel: Panel, xlim: tuple[float, float], ylim: tuple[float, float], ident: str, clip: str,
-    show: tuple[bool, bool],
+    show: tuple[bool, bool], width: float,
 ) -> str:  # fmt: skip
-    """One panel: grid, clipped artists, frame, ticks, tick labels (``show``: of x, of y), labels, title, legend."""
+    """One panel: grid, clipped artists, frame, ticks, tick labels (``show``: of x, of y; an x label that would
+    cross the edge of the figure, ``width`` px wide, moved in), labels, title, legend."""
     left, top, w, h = panel.box
     right, bottom = left + w, top + h
     fx = panel.x.mapping(xlim[0], xlim[1], left, right)
@@ -150,6 +151,8 @@ def _draw_panel(
     x_room = _PAD
     if show[0]:
         for x, label in zip(px, xl, strict=True):
+            half = text_width(label, panel.x.size) / 2 + 1.0
+            x = min(max(x, half), width - half) if width > 2 * half else width / 2  # within the figure
             out.append(text_element(x, bottom + panel.x.tick_length + _PAD, label, panel.x.size, valign="top"))
         lines = max((label.count("\n") + 1 for label in xl), default=1)
         x_room += panel.x.tick_length + lines * 1.2 * panel.x.size
@@ -328,7 +331,8 @@ def data_limits(panels: Sequence[Panel], axis: str) -> tuple[float, float]:
     -------
     (lo, hi)
         The first limits set explicitly, else the data's range with 5 % margins (in log10 on a log axis, within the
-        positive floats; within years 1..9999 on a date axis); a single value, or values as close as
+        positive floats; of the data within years 1..9999 on a date axis, the margins beyond them too, so that a
+        point on the calendar's first or last day stands clear of the edge); a single value, or values as close as
         :func:`~wmrid.reporting.svg_axes.degenerate` says, widened (by a day on a date axis).  Finite for any finite
         data.
 
@@ -359,15 +363,14 @@ def data_limits(panels: Sequence[Panel], axis: str) -> tuple[float, float]:
         return max(pow10(a - pad), FLOAT_TINY), min(pow10(b + pad), FLOAT_MAX)
     if len(v) == 0:
         return 0.0, 1.0
+    if first.scale == "date":
+        v = np.clip(v, *DATE_RANGE)
     lo, hi = float(v.min()), float(v.max())
     if degenerate(lo, hi):
         pad = 1.0 if first.scale == "date" else max(0.05 * abs(lo / 2 + hi / 2), 0.5)
     else:
         pad = 0.1 * (hi / 2 - lo / 2)  # 5 % of the span, which may be beyond FLOAT_MAX
-    lo, hi = max(lo - pad, -FLOAT_MAX), min(hi + pad, FLOAT_MAX)
-    if first.scale == "date":
-        lo, hi = max(lo, DATE_RANGE[0]), min(hi, DATE_RANGE[1])
-    return lo, hi
+    return max(lo - pad, -FLOAT_MAX), min(hi + pad, FLOAT_MAX)
 
 
 def axis_ticks(

@@ -5,12 +5,15 @@ from __future__ import annotations
 
 import datetime as dt
 import math
+import re
 
+import numpy as np
 import svgutil
 
 from wmrid.fleets.changes import MONITORED, RobotHistory
-from wmrid.fleets.figures import build_evidence_figure
+from wmrid.fleets.figures import build_evidence_figure, build_robot_figure
 from wmrid.fleets.review import FleetReview, RobotReview
+from wmrid.reporting.svg_axes import text_width
 
 NS = svgutil.NS
 
@@ -33,3 +36,48 @@ def test_the_evidence_figure_of_robots_named_with_characters_xml_forbids():
     root = svgutil.parse(build_evidence_figure(review).to_svg())  # encodes, and is well-formed XML
     (panel,) = svgutil.panels(root)
     assert svgutil.tick_labels(panel, "y")[::-1] == ["nc", "R2", "R3", "R4"]
+
+
+def _with_wheels(robot: RobotReview) -> RobotReview:
+    """The robot with each wheel's friction at its typical speed: a fifth column of panels, narrower ones."""
+    n = len(robot.rows)
+    robot.wheel_friction = {f"Fw{k}": (4.0, np.linspace(0.1, 0.2, n), np.full(n, 0.01)) for k in (1, 2)}
+    return robot
+
+
+def _x_labels(root) -> list[list[str]]:
+    """The x tick labels of the bottom row's panels (the figure's panels share x: only those label it)."""
+    drawn = svgutil.panels(root)
+    return [svgutil.tick_labels(p, "x") for p in drawn[len(drawn) // 2 :]]
+
+
+def _inside_the_figure(root) -> None:
+    """Every text (its estimated width, centred or anchored) within the figure's width."""
+    width = float(root.get("width"))
+    for t in root.iter(f"{NS}text"):
+        if t.get("transform"):
+            continue
+        x = float(t.get("x") or t.find(f"{NS}tspan").get("x"))
+        w = text_width(svgutil.text_of(t), float(t.get("font-size")))
+        anchor = t.get("text-anchor", "start")
+        lo = x - (w / 2 if anchor == "middle" else w if anchor == "end" else 0.0)
+        assert lo >= -0.5, svgutil.text_of(t)
+        assert lo + w <= width + 0.5, svgutil.text_of(t)
+
+
+def test_a_robot_with_logs_dated_years_1_and_9999_has_ticks():
+    """Two logs 9999 years apart in panels 1.5 inches wide: the largest step (2000 years) gave four ticks where
+    three fit, and there was no fallback, so no x tick at all; the points sat on the limits, half clipped."""
+    robot = _with_wheels(_robot("R1", [dt.datetime(1, 1, 1), dt.datetime(9999, 12, 31)]))
+    fig = build_robot_figure(robot)
+    root = svgutil.parse(fig.to_svg())
+    for labels in _x_labels(root):
+        assert len(labels) >= 2
+        assert all(re.fullmatch(r"\d{4}(-\d\d-\d\d)?", label) for label in labels), labels
+    _inside_the_figure(root)
+    for panel in svgutil.panels(root):  # the points (dots) stand clear of the panel's left and right edges
+        left, _, right, _ = svgutil.frame(panel)
+        dots = [p for p in svgutil.data(panel).iter(f"{NS}path") if p.get("d", "").count("a") == 4]
+        starts = [float(v) for d in dots for v in re.findall(r"M(-?[\d.]+),", d.get("d"))]  # each dot's left
+        assert len(starts) == 2
+        assert all(left + 2.0 <= x and x + 4.0 <= right - 2.0 for x in starts)  # 4 px across: whole, and clear

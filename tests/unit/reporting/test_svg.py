@@ -16,7 +16,7 @@ from svgutil import NS, data, frame, legend_texts, panels, parse, points, polyli
 from wmrid.reporting.decimate import MAX_POINTS
 from wmrid.reporting.svg import PX_PER_INCH, Figure
 from wmrid.reporting.svg_artists import simplify
-from wmrid.reporting.svg_axes import date_number
+from wmrid.reporting.svg_axes import date_number, text_width
 from wmrid.reporting.svg_draw import limits
 from wmrid.reporting.svg_style import (
     CLIP_MARGIN,
@@ -412,6 +412,26 @@ def test_date_axis_at_any_date(start):
     assert len(labels) >= 2
     assert all(re.fullmatch(r"\d{4}(-\d{2}){0,2}", label) for label in labels), labels
     assert all(label[:4] == f"{start.year:04d}" or label[:4] == f"{start.year + 1:04d}" for label in labels)
+
+
+def test_date_labels_stay_inside_the_figure_and_points_clear_of_the_edges():
+    """A 2.2-inch panel of three days from year 1: "0001-01-03" was centred on its tick near the right edge and cut
+    by the figure's edge; points on the calendar's first day sat on the panel's edge, half clipped."""
+    fig = Figure((3.2, 2.0))  # margins 0.8 and 0.2 inch: a panel 2.2 inches wide
+    ax = fig.panels[0]
+    ax.markers([date_number(dt.datetime(1, 1, 1 + d)) for d in range(3)], [0.0, 1.0, 2.0])
+    ax.x.scale = "date"
+    (panel,) = panels(parse(fig.to_svg()))
+    labels = [t for t in panel.findall(f"{NS}text") if t.get("y") and float(t.get("y")) > frame(panel)[3]]
+    assert [t.text for t in labels] == ["0001-01-01", "0001-01-03"]
+    for t in labels:
+        half = text_width(t.text, float(t.get("font-size"))) / 2
+        assert half <= float(t.get("x")) <= fig.width - half
+    left, _, right, _ = frame(panel)
+    (dots,) = data(panel).findall(f"{NS}path")
+    starts = [float(v) for v in re.findall(r"M([\d.]+),", dots.get("d"))]  # each circle's left, 8 px across
+    assert left < min(starts)
+    assert max(starts) + 8.0 < right
 
 
 def test_colours():

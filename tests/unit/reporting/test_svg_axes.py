@@ -189,7 +189,7 @@ def test_date_ticks_shorten_days_in_a_narrow_panel():
     ("lo", "hi", "expected"),
     [
         (_days(1, 1, 1), _days(1, 1, 4), "0001-01-01"),  # year 1 written with four digits
-        (_days(9999, 12, 1), DATE_RANGE[1] + 30.0, "9999-12-01"),  # beyond the last date: clipped
+        (_days(9999, 12, 1), DATE_RANGE[1] + 30.0, "12-01\n9999"),  # beyond the last date: no ticks (half the axis)
         (DATE_RANGE[0] - 5.0, DATE_RANGE[1] + 5.0, "2000"),  # the whole range: millennia
     ],
 )
@@ -198,6 +198,36 @@ def test_date_ticks_at_the_ends_of_the_calendar(lo, hi, expected):
     assert expected in labels
     assert len(ticks) >= 2
     assert np.all((ticks >= DATE_RANGE[0]) & (ticks <= DATE_RANGE[1]))
+
+
+@pytest.mark.parametrize(
+    ("length", "labels"),
+    [
+        (300.0, ["2000", "4000", "6000", "8000"]),
+        (200.0, ["2000", "4000", "6000", "8000"]),
+        (125.0, ["0001-01-01", "9999-12-31"]),  # 2000-year steps: four ticks where three fit; no fallback: none
+        (70.0, ["0001-01-01", "9999-12-31"]),
+        (40.0, ["0001", "9999"]),
+        (20.0, []),  # not even two years fit
+    ],
+)
+def test_date_ticks_over_the_whole_calendar(length, labels):
+    ticks, got = date_ticks(DATE_RANGE[0], DATE_RANGE[1], length, 9.5)
+    assert got == labels
+    if labels and len(labels[0]) > 4:  # the first and last dates
+        np.testing.assert_allclose(ticks, [DATE_RANGE[0], DATE_RANGE[1]], atol=1e-5)
+
+
+def test_date_ticks_of_an_axis_reaching_beyond_the_calendar():
+    """The margins of logs dated 0001-01-01 and 9999-12-31 reach beyond the calendar: the ticks stay within it, and
+    the labels are spaced by the px of the whole axis."""
+    margin = 0.05 * DATE_RANGE[1]
+    ticks, labels = date_ticks(-margin, DATE_RANGE[1] + margin, 138.0, 9.5)
+    assert labels == ["0001-01-01", "9999-12-31"]
+    ticks, labels = date_ticks(-margin, DATE_RANGE[1] + margin, 180.0, 9.5)
+    assert labels == ["2500", "5000", "7500"]  # 2000 years: 33 px apart, where a label takes 36
+    assert np.all((ticks >= 0) & (ticks <= DATE_RANGE[1]))
+    assert date_ticks(-100.0, -10.0, 300.0, 12.0)[1] == []  # before year 1: no ticks
 
 
 def test_date_numbers_round_trip():
