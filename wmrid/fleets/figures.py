@@ -46,8 +46,9 @@ def build_robot_figure(review: RobotReview) -> Figure | None:
     """One robot's watched parameters over its logs.
 
     Eight panels (M11 M12 M22 Vc / Fv1 Fv2 Fd1 Fd2), and Fw1 / Fw2 in a fifth column when the review has the
-    wheels' friction at their typical speeds: each log's estimate with its ±2σ band, the mean of the logs before
-    the change (dashed), the change's onset (dotted) and the log that first flagged it (red); odd logs as crosses.
+    wheels' friction at their typical speeds: each log's estimate with its ±2σ band (a narrow bar for a robot with
+    a single log), the mean of the logs before the change (dashed), the change's onset (dotted) and the log that
+    first flagged it (red); odd logs as crosses.
 
     Parameters
     ----------
@@ -57,8 +58,8 @@ def build_robot_figure(review: RobotReview) -> Figure | None:
     Returns
     -------
     Figure or None
-        The panels sharing a date axis (the logs' order when a log has no start time); None for a robot without
-        usable logs.
+        The panels sharing a date axis (the logs' order, 0, 1, 2 ..., when a log has no start time); None for a
+        robot without usable logs.
     """
     if not review.rows:
         return None
@@ -72,6 +73,7 @@ def build_robot_figure(review: RobotReview) -> Figure | None:
     for ax, name in zip(fig.panels, [n for row in panels for n in row], strict=True):
         ax.x.size = ax.y.size = _TICKS
         ax.x.scale = "date" if kind == "date" else "linear"
+        ax.x.integer = kind == "log"  # logs 0, 1, 2 ...: never a tick at 0.5
         y, s = review.series(name)
         s = np.where(np.isfinite(s), s, 0.0)
         changed = change is not None and name in change.parameters

@@ -212,9 +212,14 @@ class Span(Artist):
         return "patch", {"color": self.color, "opacity": self.opacity}
 
 
+#: The width (px) of a band at a lone point (a single sample, or one between missing ones): a narrow bar.
+LONE_WIDTH = 6.0
+
+
 @dataclass
 class Band(Artist):
-    """The area between lo (n,) and hi (n,) over x (n,); NaN breaks it."""
+    """The area between lo (n,) and hi (n,) over x (n,); NaN breaks it; at a lone point, a bar :data:`LONE_WIDTH` px
+    wide from lo to hi."""
 
     x: np.ndarray
     lo: np.ndarray
@@ -232,16 +237,18 @@ class Band(Artist):
         edges = np.flatnonzero(np.diff(np.concatenate([[0], ok, [0]])))
         out = []
         win = window(frame.box)
+        paint = f'fill="{colour(self.color)}" fill-opacity="{num(self.opacity)}"'
         for a, b in zip(edges[::2], edges[1::2], strict=True):
-            if b - a < 2:  # a lone point: no area
+            if b - a < 2:  # a lone point: no area between points, a narrow bar
+                x = float(px[a])
+                out.append(rect(x - LONE_WIDTH / 2, x + LONE_WIDTH / 2, float(plo[a]), float(phi[a]), win, paint))
                 continue
             xs = np.concatenate([px[a:b], px[a:b][::-1]])
             ys = np.concatenate([phi[a:b], plo[a:b][::-1]])
             xs, ys = clip_polygon(xs, ys, win)
             if len(xs) < 3:
                 continue
-            out.append(f'<polygon points="{points(xs, ys)}" fill="{colour(self.color)}" '
-                       f'fill-opacity="{num(self.opacity)}"/>')  # fmt: skip
+            out.append(f'<polygon points="{points(xs, ys)}" {paint}/>')
         return "".join(out)
 
     def handle(self) -> tuple[str, dict[str, Any]]:

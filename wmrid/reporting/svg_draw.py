@@ -417,7 +417,7 @@ def axis_ticks(
         return major, labels, minor, ""
     most = max(3, int(length // (4.5 * size)) + 1) if horizontal else max(2, int(length // (2.5 * size)) + 1)
     while True:
-        ticks, step = linear_ticks(a, b, most)
+        ticks, step = linear_ticks(a, b, most, 1.0 if axis.integer else 0.0)
         ticks = ticks[(ticks >= a - 1e-9 * step) & (ticks <= b + 1e-9 * step)]  # limits set closer than a step
         labels, note = linear_labels(ticks, step)
         spacing = (step / 2) / (b / 2 - a / 2) * length if b > a else length

@@ -49,6 +49,8 @@ class Axis:
         Whether its tick labels show, their font size and the ticks' length, px.
     side
         A y axis' ticks on the left ("") or the "right" (a colour bar).
+    integer
+        A linear axis of counts (logs in order): ticks on whole numbers only.
     """
 
     def __init__(self) -> None:
@@ -61,6 +63,7 @@ class Axis:
         self.size = FONT
         self.tick_length = TICK
         self.side = ""  # a y axis' ticks on the "left" ("") or the "right"
+        self.integer = False
 
     def mapping(self, lo: float, hi: float, p0: float, p1: float) -> Mapping:
         """The mapping from the axis' units to px.
@@ -213,8 +216,8 @@ class Panel:
 
     def band(self, x: ArrayLike, lo: ArrayLike, hi: ArrayLike, *, color: str = "C0", opacity: float = 0.25,
              label: str | None = None) -> Band:  # fmt: skip
-        """The area between the curves ``lo`` and ``hi`` over ``x`` ((n,) each; a NaN breaks it), filled with
-        ``color`` at ``opacity``, under the lines.  Returns the artist added."""
+        """The area between the curves ``lo`` and ``hi`` over ``x`` ((n,) each; a NaN breaks it; a lone point is a
+        narrow bar), filled with ``color`` at ``opacity``, under the lines.  Returns the artist added."""
         xs, los, his = (np.asarray(a, dtype=np.float64).ravel() for a in (x, lo, hi))
         if not xs.shape == los.shape == his.shape:
             raise UsageError(f"a band needs x, lo and hi of one length, got {xs.shape}, {los.shape}, {his.shape}")

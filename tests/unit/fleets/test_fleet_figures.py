@@ -8,6 +8,7 @@ import math
 import re
 
 import numpy as np
+import pytest
 import svgutil
 
 from wmrid.fleets.changes import MONITORED, RobotHistory
@@ -81,3 +82,22 @@ def test_a_robot_with_logs_dated_years_1_and_9999_has_ticks():
         starts = [float(v) for d in dots for v in re.findall(r"M(-?[\d.]+),", d.get("d"))]  # each dot's left
         assert len(starts) == 2
         assert all(left + 2.0 <= x and x + 4.0 <= right - 2.0 for x in starts)  # 4 px across: whole, and clear
+
+
+def test_a_robot_with_a_single_log_has_its_band_and_whole_log_numbers():
+    """One log without a start time: the ±2σ band the caption promises (a band needs two points: none was drawn),
+    and the logs' axis labelled 0 (it was −0.4 ... 0.4)."""
+    fig = build_robot_figure(_robot("R1", [None]))
+    root = svgutil.parse(fig.to_svg())
+    drawn = svgutil.panels(root)
+    for panel in drawn:
+        (bar,) = [r for r in svgutil.data(panel).iter(f"{NS}rect") if r.get("fill-opacity") == "0.25"]
+        dot = next(p for p in svgutil.data(panel).iter(f"{NS}path") if p.get("d", "").count("a") == 2)
+        x, y = (float(v) for v in re.match(r"M(-?[\d.]+),(-?[\d.]+)", dot.get("d")).groups())
+        assert float(bar.get("x")) + float(bar.get("width")) / 2 == pytest.approx(x + 2.0, abs=0.01)  # the dot's
+        assert float(bar.get("y")) + float(bar.get("height")) / 2 == pytest.approx(y, abs=0.01)  # centre: ±2σ
+        assert float(bar.get("width")) == 6.0
+        assert float(bar.get("height")) > 0
+    assert _x_labels(root) == [["0", "log"]] * 4  # the tick labels, then the axis' label
+    fig = build_robot_figure(_robot("R1", [None] * 3))
+    assert _x_labels(svgutil.parse(fig.to_svg())) == [["0", "1", "2", "log"]] * 4

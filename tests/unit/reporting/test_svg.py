@@ -324,7 +324,10 @@ def test_rules_spans_bands_bars_markers():
     inside = data(panel)
     dashes = [p for p in inside.iter(f"{NS}path") if p.get("stroke-dasharray")]
     assert {p.get("stroke") for p in dashes} == {"#737373", TAB10[2]}
-    assert len(inside.findall(f"{NS}polygon")) == 1  # the band's NaN leaves one piece, and a lone point
+    assert len(inside.findall(f"{NS}polygon")) == 1  # the band's NaN leaves one piece, and a lone point:
+    (lone,) = [r for r in inside.findall(f"{NS}rect") if r.get("fill-opacity") == "0.25"]  # a bar 6 px wide
+    assert float(lone.get("width")) == 6.0
+    assert float(lone.get("height")) > 0
     bars = [r for r in inside.findall(f"{NS}rect") if r.get("fill") in TAB10 and not r.get("fill-opacity")]
     assert sorted(r.get("fill") for r in bars) == sorted([TAB10[0], TAB10[3]])  # NaN: no bar
     assert any(r.get("fill-opacity") == "0.18" for r in inside.findall(f"{NS}rect"))
@@ -432,6 +435,18 @@ def test_date_labels_stay_inside_the_figure_and_points_clear_of_the_edges():
     starts = [float(v) for v in re.findall(r"M([\d.]+),", dots.get("d"))]  # each circle's left, 8 px across
     assert left < min(starts)
     assert max(starts) + 8.0 < right
+
+
+@pytest.mark.parametrize(("lim", "labels"), [((-0.5, 0.5), ["0"]), ((-0.5, 1.5), ["0", "1"]), ((0.0, 3.0), None)])
+def test_an_integer_axis_has_whole_numbers_only(lim, labels):
+    fig, ax = _one()
+    ax.markers([0.0], [0.0])
+    ax.x.integer = True
+    ax.set_xlim(*lim)
+    got = tick_labels(panels(parse(fig.to_svg()))[0], "x")
+    assert got == (labels or ["0", "1", "2", "3"])
+    ax.x.integer = False
+    assert len(tick_labels(panels(parse(fig.to_svg()))[0], "x")) > len(got)  # (0.5 steps and finer otherwise)
 
 
 def test_colours():
