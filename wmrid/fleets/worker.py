@@ -164,9 +164,8 @@ def prepare_worker() -> bool:
     tuned."""
     global _worker_prepared, _malloc_tuned
     if not _worker_prepared:
-        # the observer's kernels (numba): only a worker's set-up, not wmrid.fleets.run
-        from wmrid.core.jit import PerformanceWarning
-        from wmrid.estimators.observer.replay import one_thread
+        from wmrid.core.jit import PerformanceWarning  # numba with it (~0.3 s): only a worker's set-up
+        from wmrid.estimators.observer.replay import one_thread  # the observer's kernels: not wmrid.fleets.run
 
         warnings.filterwarnings("ignore", category=PerformanceWarning)  # `wmrid fleet` says it once, not per log
 
@@ -235,7 +234,7 @@ def warm_up() -> float:
     """Load wmrid's compiled kernels in this process (numba's cache: about a second once per process), so that a
     worker's first log does not pay for it; returns the seconds it took.  Run on every worker at the start."""
     from wmrid.api.identification import identify  # the identification (numba, ~0.3 s): warm_up loads it on a worker
-    from wmrid.core.jit import COMPILED
+    from wmrid.core.jit import COMPILED  # numba with it (~0.3 s): warm_up loads it on a worker
     from wmrid.model.predict import validation_fit  # the predictor's numba kernel: warm_up loads it on a worker
 
     start = time.perf_counter()

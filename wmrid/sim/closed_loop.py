@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from wmrid.core.errors import UsageError
 from wmrid.core.jit import kernel
 from wmrid.model.kernels import sign
 
@@ -263,3 +264,15 @@ def closed_loop_kernel(kind, traj, plant, ctrl, gains, period, substeps, n_log, 
         d1 = a_ou * d1 + q_ou * caster_z[k + 1, 0]
         d2 = a_ou * d2 + q_ou * caster_z[k + 1, 1]
     return pose, angle, eta, tau, refpose, dist
+
+
+def check_finite(eta: np.ndarray, tau: np.ndarray, step: float) -> None:
+    """A :class:`UsageError` when the simulated wheel speeds or torques (n, 2) stop being finite: the parameters,
+    the payload, the casters or a fault made the closed loop diverge, and a log of NaNs would be written."""
+    bad = ~(np.isfinite(eta).all(axis=1) & np.isfinite(tau).all(axis=1))
+    if bad.any():
+        first = int(np.argmax(bad))
+        raise UsageError(
+            f"the simulation diverged at t = {first * step:.4g} s (the wheel speeds or torques are no longer finite): "
+            "the robot's parameters, payload, casters or fault make the closed loop unstable; make them smaller"
+        )

@@ -98,7 +98,7 @@ from wmrid.model.robot import PhysicalParameters
 if TYPE_CHECKING:
     import pandas
 from wmrid.runtime.limits import ENV, describe, memory_budget
-from wmrid.sim.closed_loop import KIND, closed_loop_kernel, reference_wheel_speeds
+from wmrid.sim.closed_loop import KIND, check_finite, closed_loop_kernel, reference_wheel_speeds
 from wmrid.sim.reference import TABLE_BYTES_PER_CONTROL_STEP, Reference, pack_table, reference_table
 from wmrid.sim.scenario import NoiseSettings, PlantChange, check_seed, positive_number
 
@@ -317,21 +317,8 @@ def simulate(
             *args, _plant_vector(change.after), switch
         )
 
-    _check_finite(eta_true, tau_applied, period * every)
-    settings = {"substeps": int(substeps)}
-    return run.log(true, pose, angle, eta_true, tau_applied, refpose, dist, settings, change)
-
-
-def _check_finite(eta: np.ndarray, tau: np.ndarray, step: float) -> None:
-    """A :class:`UsageError` when the simulated wheel speeds or torques (n, 2) stop being finite: the parameters,
-    the payload, the casters or a fault made the closed loop diverge, and a log of NaNs would be written."""
-    bad = ~(np.isfinite(eta).all(axis=1) & np.isfinite(tau).all(axis=1))
-    if bad.any():
-        first = int(np.argmax(bad))
-        raise UsageError(
-            f"the simulation diverged at t = {first * step:.4g} s (the wheel speeds or torques are no longer finite): "
-            "the robot's parameters, payload, casters or fault make the closed loop unstable; make them smaller"
-        )
+    check_finite(eta_true, tau_applied, period * every)
+    return run.log(true, pose, angle, eta_true, tau_applied, refpose, dist, {"substeps": int(substeps)}, change)
 
 
 @dataclass(frozen=True, eq=False)
