@@ -25,6 +25,13 @@ if "PYTEST_XDIST_WORKER" in os.environ and not {"OPENBLAS_NUM_THREADS", "OMP_NUM
 from tests.open_loop import open_loop_log
 
 
+def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
+    """``-n auto``: one worker more than the cores (3 on the 2-core CI machine).  Part of the suite waits rather than
+    computes (real-time streams, the processes and servers it starts, signals it waits for), and a worker that waits
+    leaves its core idle: the extra worker fills it (the default run 162 -> 150 s here, 2,393 tests)."""
+    return (os.cpu_count() or 1) + 1
+
+
 def _ignored(signum: int, frame: object) -> None:
     """A signal this test process was started ignoring: still ignored here (see below)."""
 
