@@ -144,14 +144,15 @@ def build_excitation_figure(result: IdentificationResult) -> Figure:
     Returns
     -------
     Figure
-        One panel, log10 y axis (linear when nothing is positive), the legend in its emptiest corner.
+        One panel, log10 y axis (linear when nothing is positive), the legend below it (in a corner it covered the
+        line of α, which runs the panel's width).
     """
     h = result.history
     t = np.asarray(h.t, dtype=np.float64)
     lam = np.asarray(h.lambda_min, dtype=np.float64)
     lam = np.where(np.isfinite(lam) & (lam > 0), lam, np.nan)
     alpha = float(result.observer_settings.alpha)
-    fig = _new_figure(left=0.9, top=0.35)
+    fig = _new_figure(left=0.9, top=0.35, bottom=0.85)
     (ax,) = fig.panels
     ax.line(t, lam, color="C0", width=1.75, label="λ_min(Γ)")
     ax.hline(alpha, color="0.45", dash="--", width=1.33, label=f"α = {alpha:g} (weight of the start value)")
@@ -170,7 +171,7 @@ def build_excitation_figure(result: IdentificationResult) -> Figure:
     if len(t) > 1:
         ax.set_xlim(t[0], t[-1])
     ax.grid = "xy"
-    ax.legend("best", texts=texts)
+    _legend_below(fig, texts=texts)
     ax.set_title("smallest eigenvalue of the information matrix Γ")
     return fig
 
