@@ -9,6 +9,7 @@ its box): a value far out (1e40, 1e300) draws the line, band, span or bar up to 
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -52,8 +53,8 @@ class Frame:
 
 
 @dataclass
-class Artist:
-    """Something a panel draws; ``label`` puts it in a legend (None: not listed)."""
+class Artist(ABC):
+    """Something a panel draws (each kind defines :meth:`draw`); ``label`` puts it in a legend (None: not listed)."""
 
     label: str | None = field(default=None, kw_only=True)
     zorder: int = field(default=Z_LINE, kw_only=True)
@@ -62,9 +63,9 @@ class Artist:
         """Its data values along x and along y (for the axes' automatic limits; empty when it has none)."""
         return np.array([]), np.array([])
 
+    @abstractmethod
     def draw(self, frame: Frame) -> str:
         """Its SVG elements in ``frame``."""
-        raise NotImplementedError
 
     def handle(self) -> tuple[str, dict[str, Any]]:
         """What its legend entry shows: ("line", style), ("patch", style), ("marker", style) or ("text", {})."""
