@@ -28,7 +28,9 @@ def _numba_cache_fallback() -> None:
     writable (installed read-only, run as a service account whose HOME does not exist) every command failed with
     "cannot cache function".  Then NUMBA_CACHE_DIR (read when numba is imported) points to a per-user folder under
     the system's temporary directory.  A NUMBA_CACHE_DIR already set is left alone."""
-    if _os.environ.get("NUMBA_CACHE_DIR") or not _numba_installed():
+    from wmrid.core.extras import installed  # the extras' table, light: only this set-up, not the public names
+
+    if _os.environ.get("NUMBA_CACHE_DIR") or not installed("numba"):  # without numba there is nothing to cache
         return
     here = _os.path.dirname(_os.path.abspath(__file__))
     candidates = [_os.path.join(here, "__pycache__")]
@@ -45,16 +47,6 @@ def _numba_cache_fallback() -> None:
     fallback = _private_temp_folder("wmrid-numba-cache")
     if fallback is not None:
         _os.environ["NUMBA_CACHE_DIR"] = fallback
-
-
-def _numba_installed() -> bool:
-    """Whether numba (the ``fast`` extra) is installed, without importing it: without it there is nothing to cache."""
-    import importlib.util
-
-    try:
-        return importlib.util.find_spec("numba") is not None
-    except (ImportError, ValueError):
-        return False
 
 
 def _private_temp_folder(name: str) -> str | None:

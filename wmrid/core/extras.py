@@ -54,12 +54,16 @@ def require(module: str, extra: str, what: str | None = None) -> ModuleType:
 def require_installed(module: str, extra: str, what: str | None = None) -> None:
     """As :func:`require`, without importing ``module`` (distributed takes ~0.5 s): the one-line error when it is not
     installed, checked before a command's work, whose own imports come later."""
-    try:
-        found = importlib.util.find_spec(module) is not None
-    except (ImportError, ValueError):
-        found = False
-    if not found:
+    if not installed(module):
         require(module, extra, what)  # the same error, raised by the import
+
+
+def installed(module: str) -> bool:
+    """Whether ``module`` is installed, found without importing it (an installed module may still fail to import)."""
+    try:
+        return importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):
+        return False
 
 
 def available(module: str) -> bool:

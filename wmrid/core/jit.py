@@ -12,14 +12,13 @@ a user of a long log.
 from __future__ import annotations
 
 import functools
-import importlib.util
 import warnings
 from collections.abc import Callable
 from typing import Any, overload
 
 import numpy as np
 
-from wmrid.core.extras import install_hint
+from wmrid.core.extras import install_hint, installed
 
 
 class PerformanceWarning(UserWarning):
@@ -34,11 +33,7 @@ try:
     import numba  # numba (~0.3 s): imported by the modules that define kernels, when they are first needed
 except ImportError as _err:
     numba = None
-    try:
-        _installed = importlib.util.find_spec("numba") is not None
-    except (ImportError, ValueError):
-        _installed = False
-    if _installed:
+    if installed("numba"):
         BROKEN = " ".join(str(_err).split()) or type(_err).__name__
 
 #: Whether the kernels are compiled (numba importable).  Decided once, when wmrid first needs a kernel.
